@@ -1,0 +1,1 @@
+//! The rpkm node set: command line, nodes, reports. Physics lives in `rpkm_core`.

@@ -1,0 +1,1 @@
+//! Transport and bag I/O.
