@@ -1,3 +1,5 @@
 //! rpkm-core: the physics of the Scissors-Kinematics (geometry, elastic model, calibration,
 //! analysis, diagnosis). Pure: no I/O, no async, no transport. Lengths in mm, angles in rad,
 //! forces in N, as in the thesis.
+
+pub mod campaign;
