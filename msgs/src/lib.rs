@@ -5,9 +5,44 @@
 //! transport and the MCAP recorder (schema encoding `ros2msg`) describe it the same way.
 //! Units on every topic are SI (m, rad, N, s) per REP 103; the core's mm are converted at
 //! this boundary only.
+//!
+//! The Rust field order of every type is the `.msg` field order, so that serde through
+//! [`to_cdr`] / [`from_cdr`] (or ros2-client) produces exactly the ROS 2 (XCDR1, little
+//! endian) wire layout. The hot-path types ([`ActuatorState`], [`TcpEstimate`] and their
+//! [`Time`]) are also fixed-size `#[repr(C)]`; with the cargo feature `zero-copy` they derive
+//! iceoryx2's `ZeroCopySend` and can be moved through shared memory without copies.
+
+pub mod actuator_state;
+pub mod builtin_interfaces;
+pub mod cdr;
+pub mod diagnosis;
+pub mod diagnosis_candidate;
+pub mod diagnostic_msgs;
+pub mod parameters;
+pub mod preload_status;
+pub mod std_msgs;
+pub mod tcp_estimate;
+pub mod tcp_measurement;
+
+pub use actuator_state::ActuatorState;
+pub use builtin_interfaces::Time;
+pub use cdr::{from_cdr, to_cdr, CdrError, CDR_LE_HEADER};
+pub use diagnosis::Diagnosis;
+pub use diagnosis_candidate::DiagnosisCandidate;
+pub use diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
+pub use parameters::Parameters;
+pub use preload_status::{PreloadLevel, PreloadStatus};
+pub use std_msgs::Header;
+pub use tcp_estimate::TcpEstimate;
+pub use tcp_measurement::{Instrument, TcpMeasurement, UnknownInstrument};
+
+/// Package name of the project's own messages.
+pub const PACKAGE: &str = "rpkm_msgs";
 
 /// A ROS 2 message: serde (CDR) serialisable, with its ROS type name and definition.
-pub trait RosMessage: serde::Serialize + serde::de::DeserializeOwned + Clone + Send + 'static {
+pub trait RosMessage:
+    serde::Serialize + serde::de::DeserializeOwned + Clone + Send + 'static
+{
     /// Package name, e.g. `rpkm_msgs`.
     const PACKAGE: &'static str;
     /// Message name, e.g. `ActuatorState`.
@@ -18,5 +53,96 @@ pub trait RosMessage: serde::Serialize + serde::de::DeserializeOwned + Clone + S
     /// `pkg/msg/Name`, the ROS 2 type name.
     fn type_name() -> String {
         format!("{}/msg/{}", Self::PACKAGE, Self::NAME)
+    }
+    /// `pkg::msg::dds_::Name_`, the type name ROS 2 registers with DDS.
+    fn dds_type_name() -> String {
+        format!("{}::msg::dds_::{}_", Self::PACKAGE, Self::NAME)
+    }
+}
+
+/// The `.msg` text of one type, without its dependencies.
+pub trait MsgText {
+    /// `pkg/msg/Name`.
+    const FULL_NAME: &'static str;
+    /// The `.msg` file content.
+    const TEXT: &'static str;
+}
+
+/// Builds a rosbag2-style definition: `own` followed by every dependency as
+/// `"=" * 80`, `MSG: pkg/msg/Type`, text. `deps` lists (full name, text) of all transitive
+/// dependencies, each once.
+pub fn compose_definition(own: &str, deps: &[(&str, &str)]) -> String {
+    let mut out = String::from(own.trim_end());
+    out.push('\n');
+    for (name, text) in deps {
+        out.push_str(&"=".repeat(80));
+        out.push_str("\nMSG: ");
+        out.push_str(name);
+        out.push('\n');
+        out.push_str(text.trim_end());
+        out.push('\n');
+    }
+    out
+}
+
+/// Implements [`MsgText`] and [`RosMessage`] for a type; `deps` are the [`MsgText`] types of
+/// all transitive dependencies, each once.
+macro_rules! ros_message {
+    ($ty:ty, $pkg:literal, $name:literal, $text:expr, [$($dep:ty),* $(,)?]) => {
+        impl $crate::MsgText for $ty {
+            const FULL_NAME: &'static str = concat!($pkg, "/msg/", $name);
+            const TEXT: &'static str = $text;
+        }
+        impl $crate::RosMessage for $ty {
+            const PACKAGE: &'static str = $pkg;
+            const NAME: &'static str = $name;
+            fn definition() -> String {
+                $crate::compose_definition(
+                    <$ty as $crate::MsgText>::TEXT,
+                    &[$((<$dep as $crate::MsgText>::FULL_NAME, <$dep as $crate::MsgText>::TEXT)),*],
+                )
+            }
+        }
+    };
+}
+pub(crate) use ros_message;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names() {
+        assert_eq!(ActuatorState::type_name(), "rpkm_msgs/msg/ActuatorState");
+        assert_eq!(
+            ActuatorState::dds_type_name(),
+            "rpkm_msgs::msg::dds_::ActuatorState_"
+        );
+        assert_eq!(
+            DiagnosticArray::type_name(),
+            "diagnostic_msgs/msg/DiagnosticArray"
+        );
+    }
+
+    #[test]
+    fn definitions_list_their_dependencies() {
+        let def = Diagnosis::definition();
+        assert!(def.starts_with("# Result of the model diagnosis"));
+        assert!(def.contains(&format!(
+            "{}\nMSG: rpkm_msgs/msg/DiagnosisCandidate\n",
+            "=".repeat(80)
+        )));
+        let def = DiagnosticArray::definition();
+        for dep in [
+            "std_msgs/msg/Header",
+            "builtin_interfaces/msg/Time",
+            "diagnostic_msgs/msg/DiagnosticStatus",
+            "diagnostic_msgs/msg/KeyValue",
+        ] {
+            assert!(def.contains(&format!("MSG: {dep}\n")), "{dep} missing");
+        }
+        assert!(ActuatorState::definition()
+            .contains("MSG: builtin_interfaces/msg/Time\n# This message communicates ROS Time"));
+        assert!(!Time::definition().contains("MSG:"));
     }
 }

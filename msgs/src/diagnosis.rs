@@ -1,0 +1,35 @@
+//! `rpkm_msgs/msg/Diagnosis` (msgs/msg/Diagnosis.msg).
+
+use serde::{Deserialize, Serialize};
+
+use crate::diagnosis_candidate::DiagnosisCandidate;
+
+/// Result of the model diagnosis.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Diagnosis {
+    /// `string missing_effect`: the missing effect; empty if none.
+    pub missing_effect: String,
+    /// `DiagnosisCandidate[] candidates`: every tested candidate.
+    pub candidates: Vec<DiagnosisCandidate>,
+    /// `float64 baseline_cal_rms`: calibration RMS of the baseline model (m).
+    pub baseline_cal_rms: f64,
+    /// `float64 baseline_val_rms`: validation RMS of the baseline model (m).
+    pub baseline_val_rms: f64,
+    /// `float64 noise_floor`: noise floor of the measurements (m).
+    pub noise_floor: f64,
+}
+
+impl Diagnosis {
+    /// The missing effect, `None` if the field is empty.
+    pub fn missing_effect(&self) -> Option<&str> {
+        (!self.missing_effect.is_empty()).then_some(self.missing_effect.as_str())
+    }
+}
+
+crate::ros_message!(
+    Diagnosis,
+    "rpkm_msgs",
+    "Diagnosis",
+    include_str!("../msg/Diagnosis.msg"),
+    [DiagnosisCandidate]
+);
