@@ -3,3 +3,5 @@
 //! forces in N, as in the thesis.
 
 pub mod campaign;
+pub mod geometry;
+pub mod params;

@@ -1,0 +1,520 @@
+//! Loop-closure geometry of the Scissors-Kinematics: igm, fgm of every viable subsystem, rgm.
+//!
+//! Every geometric model of the thesis is one square system. The configuration has seven
+//! variables c = (x, y, ψ, q1, q2, q3, q4); the model imposes five equations: the loop
+//! closures of rods 1-4 plus, for model 29, rod 5 or, for model 24, the perfect-parallel-holder
+//! constraint ψ = γ2. Knowing two configuration variables fixes the other five:
+//! - igm: (x, y) known,
+//! - fgm of a non-redundant subsystem: two actuators known ((q1,q4), (q3,q4), (q2,q3), (q1,q2)),
+//! - rgm: (q1, q4) known, (q2, q3) read off the same solution.
+//!
+//! The solve starts from the analytic model-24 answer (seed eq. 4.6 and annex A) and polishes
+//! with Newton; its sensitivities to the parameters and to the known variables come from the
+//! implicit function theorem, dc_u = −E_u⁻¹ (E_p dp + E_k dc_k), so calibration Jacobians are
+//! analytic and exact (they are checked against finite differences in the tests).
+
+use crate::params::{Guide, Model, Params, Rod, GAMMA2, N_PARAMS, RODS};
+use nalgebra::{SMatrix, SVector, Vector2};
+
+/// Configuration variable indexes.
+pub const X: usize = 0;
+pub const Y: usize = 1;
+pub const PSI: usize = 2;
+/// Index of actuator `i` (0..=3 for q1..q4) in the configuration.
+pub const fn q_var(i: usize) -> usize {
+    3 + i
+}
+
+/// Configuration (x, y, ψ, q1, q2, q3, q4), mm and rad.
+pub type Config = SVector<f64, 7>;
+/// Sensitivity of the configuration to the 29 parameters.
+pub type ParamJacobian = SMatrix<f64, 7, N_PARAMS>;
+
+/// Residual tolerance of the Newton solves on the loop closures |A−B|² − l², in mm²
+/// (the thesis stops at |F| < 1e-8 mm²; that is 5e-12 mm on a 950 mm rod).
+pub const TOL_MM2: f64 = 1e-8;
+/// Iteration cap of the Newton solves (the thesis reports 4-5 iterations).
+pub const MAX_ITER: usize = 20;
+/// Below this ratio |det| / Π‖rows‖ the system counts as singular.
+const SINGULAR_RATIO: f64 = 1e-7;
+
+/// A geometric solve that failed: typed, never a NaN.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum GeometryError {
+    #[error("rod {rod} cannot reach its carrier guide at this pose (discriminant {discriminant:.3e} mm²)")]
+    Unreachable { rod: usize, discriminant: f64 },
+    #[error("rods {a} and {b} do not intersect for these actuator positions (circles {gap:.3e} mm apart)")]
+    NoIntersection { a: usize, b: usize, gap: f64 },
+    #[error("the subsystem {subsystem} is singular at this pose (conditioning ratio {ratio:.2e})")]
+    Singular { subsystem: Subsystem, ratio: f64 },
+    #[error("{what} did not converge in {iterations} iterations (residual {residual:.3e} mm²)")]
+    NotConverged {
+        what: &'static str,
+        iterations: usize,
+        residual: f64,
+    },
+    #[error("the solution leaves the assembly mode of rod {rod}")]
+    AssemblyMode { rod: usize },
+    #[error("non-finite input")]
+    NonFinite,
+}
+
+/// A pair of known configuration variables: the inputs of a geometric model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Subsystem {
+    /// (x, y) known: the inverse geometric model.
+    Tcp,
+    /// Two actuators known: a forward model of a non-redundant subsystem (0-based indexes, a < b).
+    Actuators(usize, usize),
+}
+
+impl Subsystem {
+    /// The non-redundant subsystem the thesis uses for fgm and rgm: (q1, q4).
+    pub const NR: Subsystem = Subsystem::Actuators(0, 3);
+    /// The viable forward subsystems ((q2,q4) and (q1,q3) are singular at x = 0).
+    pub const VIABLE: [Subsystem; 4] = [
+        Subsystem::Actuators(0, 3),
+        Subsystem::Actuators(2, 3),
+        Subsystem::Actuators(1, 2),
+        Subsystem::Actuators(0, 1),
+    ];
+
+    fn known(self) -> [usize; 2] {
+        match self {
+            Subsystem::Tcp => [X, Y],
+            Subsystem::Actuators(a, b) => [q_var(a), q_var(b)],
+        }
+    }
+
+    fn unknown(self) -> [usize; 5] {
+        let k = self.known();
+        let mut out = [0; 5];
+        let mut n = 0;
+        for v in 0..7 {
+            if !k.contains(&v) {
+                out[n] = v;
+                n += 1;
+            }
+        }
+        out
+    }
+}
+
+impl std::fmt::Display for Subsystem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Subsystem::Tcp => write!(f, "(x, y)"),
+            Subsystem::Actuators(a, b) => write!(f, "(q{}, q{})", a + 1, b + 1),
+        }
+    }
+}
+
+/// Guide frame of guide `g`: origin, direction e (along the guide), n (across).
+#[inline]
+pub fn guide_frame(p: &Params, g: Guide) -> (Vector2<f64>, Vector2<f64>, Vector2<f64>) {
+    let (s, c) = p[g.gamma_index()].sin_cos();
+    (
+        Vector2::new(p[g.d_index()], 0.0),
+        Vector2::new(-s, c),
+        Vector2::new(c, s),
+    )
+}
+
+/// Carrier joint B of `rod` for actuator position q.
+#[inline]
+pub fn carrier_joint(p: &Params, rod: &Rod, q: f64) -> Vector2<f64> {
+    let (o, e, n) = guide_frame(p, rod.guide);
+    o + n * p[rod.xb] + e * (q + p[rod.yb])
+}
+
+/// Platform joint A of `rod` for pose (x, y, ψ).
+#[inline]
+pub fn platform_joint(p: &Params, rod: &Rod, x: f64, y: f64, psi: f64) -> Vector2<f64> {
+    let (s, c) = psi.sin_cos();
+    let (xa, ya) = (p[rod.xa], p[rod.ya]);
+    Vector2::new(x + c * xa - s * ya, y + s * xa + c * ya)
+}
+
+/// The five equations of a model on a configuration, and their derivatives.
+#[derive(Clone, Copy, Debug)]
+pub struct Closure {
+    /// Residuals (mm² for rods, rad for the model-24 angle constraint).
+    pub e: SVector<f64, 5>,
+    /// ∂e/∂c.
+    pub e_c: SMatrix<f64, 5, 7>,
+}
+
+/// Rods whose closure is an equation of the model: 1-4, then 5 for model 29.
+fn equation_rods(model: Model) -> &'static [Rod] {
+    match model {
+        Model::M24 => &RODS[..4],
+        Model::M29 => &RODS[..5],
+    }
+}
+
+/// Residual of one rod's closure: |A − B|² − l², and the vector r = A − B.
+#[inline]
+fn rod_residual(p: &Params, rod: &Rod, c: &Config) -> (f64, Vector2<f64>) {
+    let a = platform_joint(p, rod, c[X], c[Y], c[PSI]);
+    let b = carrier_joint(p, rod, c[q_var(rod.actuator)]);
+    let r = a - b;
+    (r.norm_squared() - p[rod.l] * p[rod.l], r)
+}
+
+/// Evaluate the model's equations and their configuration derivatives.
+pub fn closure(p: &Params, model: Model, c: &Config) -> Closure {
+    let mut e = SVector::<f64, 5>::zeros();
+    let mut e_c = SMatrix::<f64, 5, 7>::zeros();
+    let (s, co) = c[PSI].sin_cos();
+    for (row, rod) in equation_rods(model).iter().enumerate() {
+        let (f, r) = rod_residual(p, rod, c);
+        let (_, dir, _) = guide_frame(p, rod.guide);
+        // dA/dψ = R'(ψ) a
+        let da_dpsi = Vector2::new(
+            -s * p[rod.xa] - co * p[rod.ya],
+            co * p[rod.xa] - s * p[rod.ya],
+        );
+        e[row] = f;
+        e_c[(row, X)] = 2.0 * r.x;
+        e_c[(row, Y)] = 2.0 * r.y;
+        e_c[(row, PSI)] = 2.0 * r.dot(&da_dpsi);
+        e_c[(row, q_var(rod.actuator))] = -2.0 * r.dot(&dir);
+    }
+    if model == Model::M24 {
+        e[4] = c[PSI] - p[GAMMA2];
+        e_c[(4, PSI)] = 1.0;
+    }
+    Closure { e, e_c }
+}
+
+/// ∂e/∂p: derivatives of the model's equations with respect to the 29 parameters.
+pub fn closure_params(p: &Params, model: Model, c: &Config) -> SMatrix<f64, 5, N_PARAMS> {
+    let mut e_p = SMatrix::<f64, 5, N_PARAMS>::zeros();
+    let (s, co) = c[PSI].sin_cos();
+    for (row, rod) in equation_rods(model).iter().enumerate() {
+        let (_, r) = rod_residual(p, rod, c);
+        let (_, dir, across) = guide_frame(p, rod.guide);
+        let along = c[q_var(rod.actuator)] + p[rod.yb];
+        e_p[(row, rod.l)] = -2.0 * p[rod.l];
+        e_p[(row, rod.xa)] = 2.0 * r.dot(&Vector2::new(co, s));
+        e_p[(row, rod.ya)] = 2.0 * r.dot(&Vector2::new(-s, co));
+        e_p[(row, rod.xb)] = -2.0 * r.dot(&across);
+        e_p[(row, rod.yb)] = -2.0 * r.dot(&dir);
+        e_p[(row, rod.guide.d_index())] = -2.0 * r.x;
+        // dB/dγ = xb·e − (q + yb)·n, since dn/dγ = e and de/dγ = −n.
+        let db_dgamma = dir * p[rod.xb] - across * along;
+        e_p[(row, rod.guide.gamma_index())] = -2.0 * r.dot(&db_dgamma);
+    }
+    if model == Model::M24 {
+        e_p[(4, GAMMA2)] = -1.0;
+    }
+    e_p
+}
+
+/// A solved configuration and how it was reached.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Solution {
+    pub c: Config,
+    /// Newton iterations after the analytic start.
+    pub iterations: usize,
+    /// Largest closure residual at the end, mm².
+    pub residual: f64,
+}
+
+impl Solution {
+    pub fn x(&self) -> f64 {
+        self.c[X]
+    }
+    pub fn y(&self) -> f64 {
+        self.c[Y]
+    }
+    pub fn psi(&self) -> f64 {
+        self.c[PSI]
+    }
+    /// Actuator positions q1..q4.
+    pub fn q(&self) -> [f64; 4] {
+        [self.c[3], self.c[4], self.c[5], self.c[6]]
+    }
+}
+
+/// Actuator position of one rod for a platform pose (seed eq. 4.6 with the assembly mode k).
+pub fn rod_igm(p: &Params, rod: &Rod, x: f64, y: f64, psi: f64) -> Result<f64, GeometryError> {
+    let (o, e, n) = guide_frame(p, rod.guide);
+    let w = platform_joint(p, rod, x, y, psi) - o - n * p[rod.xb];
+    let we = w.dot(&e);
+    let l = p[rod.l];
+    let disc = we * we - w.norm_squared() + l * l;
+    if !(disc >= 0.0) {
+        return Err(GeometryError::Unreachable {
+            rod: rod.number,
+            discriminant: disc,
+        });
+    }
+    Ok(we + rod.k * disc.sqrt() - p[rod.yb])
+}
+
+/// Analytic model-24 start for the inverse model: ψ = γ2, each rod by eq. 4.6.
+fn igm_start(p: &Params, x: f64, y: f64) -> Result<Config, GeometryError> {
+    let psi = p[GAMMA2];
+    let mut c = Config::zeros();
+    c[X] = x;
+    c[Y] = y;
+    c[PSI] = psi;
+    for rod in &RODS[..4] {
+        c[q_var(rod.actuator)] = rod_igm(p, rod, x, y, psi)?;
+    }
+    Ok(c)
+}
+
+/// The rod (1..=4) whose carrier is actuator `i`.
+fn rod_of_actuator(i: usize) -> &'static Rod {
+    &RODS[[0, 1, 2, 3][i]]
+}
+
+/// Analytic model-24 start for a forward model: intersection of the two rods' circles
+/// (annex A) with ψ = γ2, keeping the assembly mode, then the other actuators by eq. 4.6.
+fn fgm_start(p: &Params, a: usize, b: usize, qa: f64, qb: f64) -> Result<Config, GeometryError> {
+    let psi = p[GAMMA2];
+    let (ra, rb) = (rod_of_actuator(a), rod_of_actuator(b));
+    // Centre of the TCP circle of a rod: B − R(ψ)·a.
+    let centre =
+        |rod: &Rod, q: f64| carrier_joint(p, rod, q) - (platform_joint(p, rod, 0.0, 0.0, psi));
+    let (ca, cb) = (centre(ra, qa), centre(rb, qb));
+    let (la, lb) = (p[ra.l], p[rb.l]);
+    let d_vec = cb - ca;
+    let d = d_vec.norm();
+    let along = (la * la - lb * lb + d * d) / (2.0 * d);
+    let h2 = la * la - along * along;
+    if !(h2 >= 0.0) || d == 0.0 {
+        return Err(GeometryError::NoIntersection {
+            a: ra.number,
+            b: rb.number,
+            gap: -h2,
+        });
+    }
+    let u = d_vec / d;
+    let perp = Vector2::new(-u.y, u.x);
+    let base = ca + u * along;
+    let h = h2.sqrt();
+    for cand in [base + perp * h, base - perp * h] {
+        if in_assembly_mode(p, ra, cand, psi, qa) && in_assembly_mode(p, rb, cand, psi, qb) {
+            let mut c = Config::zeros();
+            c[X] = cand.x;
+            c[Y] = cand.y;
+            c[PSI] = psi;
+            for rod in &RODS[..4] {
+                let i = rod.actuator;
+                c[q_var(i)] = if i == a {
+                    qa
+                } else if i == b {
+                    qb
+                } else {
+                    rod_igm(p, rod, cand.x, cand.y, psi)?
+                };
+            }
+            return Ok(c);
+        }
+    }
+    Err(GeometryError::AssemblyMode { rod: ra.number })
+}
+
+/// Assembly mode of the Scissors-Kinematics: carriers 1, 2 above their platform joints and
+/// 3, 4, 5 below (along the guide), and every carrier on the outer side of its platform joint
+/// (across the guide: guide 2 to the right, guide 1 to the left).
+fn in_assembly_mode(p: &Params, rod: &Rod, tcp: Vector2<f64>, psi: f64, q: f64) -> bool {
+    let (_, e, n) = guide_frame(p, rod.guide);
+    let r = carrier_joint(p, rod, q) - platform_joint(p, rod, tcp.x, tcp.y, psi);
+    let side = match rod.guide {
+        Guide::G1 => -1.0,
+        Guide::G2 => 1.0,
+    };
+    rod.k * r.dot(&e) > 0.0 && side * r.dot(&n) > 0.0
+}
+
+/// Solve the model's five equations for the five unknowns of `sub`, from `start`.
+fn newton(
+    p: &Params,
+    model: Model,
+    sub: Subsystem,
+    mut c: Config,
+) -> Result<Solution, GeometryError> {
+    let unknown = sub.unknown();
+    for it in 0..=MAX_ITER {
+        let cl = closure(p, model, &c);
+        let residual = cl.e.amax();
+        if !residual.is_finite() {
+            return Err(GeometryError::NonFinite);
+        }
+        let e_u = select_columns(&cl.e_c, &unknown);
+        check_conditioning(&e_u, sub)?;
+        if residual < TOL_MM2 {
+            return Ok(Solution {
+                c,
+                iterations: it,
+                residual,
+            });
+        }
+        if it == MAX_ITER {
+            return Err(GeometryError::NotConverged {
+                what: "newton",
+                iterations: it,
+                residual,
+            });
+        }
+        let step = e_u.lu().solve(&cl.e).ok_or(GeometryError::Singular {
+            subsystem: sub,
+            ratio: 0.0,
+        })?;
+        for (k, &v) in unknown.iter().enumerate() {
+            c[v] -= step[k];
+        }
+    }
+    unreachable!("loop returns on its last iteration")
+}
+
+fn select_columns(m: &SMatrix<f64, 5, 7>, cols: &[usize; 5]) -> SMatrix<f64, 5, 5> {
+    SMatrix::<f64, 5, 5>::from_fn(|r, k| m[(r, cols[k])])
+}
+
+/// Singularity test free of the units of rows and columns: with every column scaled to unit
+/// norm, |det| / Π ‖row‖ (1 for orthogonal rows, 0 when singular).
+fn check_conditioning(e_u: &SMatrix<f64, 5, 5>, sub: Subsystem) -> Result<(), GeometryError> {
+    let mut m = *e_u;
+    for mut col in m.column_iter_mut() {
+        let n = col.norm();
+        if n > 0.0 {
+            col /= n;
+        }
+    }
+    let norms: f64 = (0..5).map(|r| m.row(r).norm()).product();
+    let ratio = m.determinant().abs() / norms;
+    if !(ratio > SINGULAR_RATIO) {
+        return Err(GeometryError::Singular {
+            subsystem: sub,
+            ratio,
+        });
+    }
+    Ok(())
+}
+
+/// Solve a geometric model: the configuration that closes every loop given two known
+/// variables. `known` holds (x, y) for [`Subsystem::Tcp`] or the two actuator positions.
+pub fn solve(
+    p: &Params,
+    model: Model,
+    sub: Subsystem,
+    known: [f64; 2],
+) -> Result<Solution, GeometryError> {
+    if !known.iter().all(|v| v.is_finite()) {
+        return Err(GeometryError::NonFinite);
+    }
+    let start = match sub {
+        Subsystem::Tcp => igm_start(p, known[0], known[1])?,
+        Subsystem::Actuators(a, b) => fgm_start(p, a, b, known[0], known[1])?,
+    };
+    let sol = newton(p, model, sub, start)?;
+    for rod in equation_rods(model) {
+        let tcp = Vector2::new(sol.c[X], sol.c[Y]);
+        if !in_assembly_mode(p, rod, tcp, sol.c[PSI], sol.c[q_var(rod.actuator)]) {
+            return Err(GeometryError::AssemblyMode { rod: rod.number });
+        }
+    }
+    Ok(sol)
+}
+
+/// Inverse geometric model: actuator positions (and ψ) of the TCP position (x, y).
+pub fn igm(p: &Params, model: Model, x: f64, y: f64) -> Result<Solution, GeometryError> {
+    solve(p, model, Subsystem::Tcp, [x, y])
+}
+
+/// Forward geometric model of the non-redundant subsystem (q1, q4).
+pub fn fgm(p: &Params, model: Model, q1: f64, q4: f64) -> Result<Solution, GeometryError> {
+    solve(p, model, Subsystem::NR, [q1, q4])
+}
+
+/// Redundant geometric model: (q2, q3) from (q1, q4).
+pub fn rgm(p: &Params, model: Model, q1: f64, q4: f64) -> Result<[f64; 2], GeometryError> {
+    let s = fgm(p, model, q1, q4)?;
+    Ok([s.c[q_var(1)], s.c[q_var(2)]])
+}
+
+/// Sensitivities of a solved configuration: to the parameters (7×29) and to the two known
+/// variables (7×2). Rows of known variables are zero (parameters) or unit (knowns).
+#[derive(Clone, Copy, Debug)]
+pub struct Sensitivity {
+    pub dc_dp: ParamJacobian,
+    pub dc_dk: SMatrix<f64, 7, 2>,
+}
+
+/// Implicit-function sensitivities of `sol` (solved for `sub`).
+pub fn sensitivity(
+    p: &Params,
+    model: Model,
+    sub: Subsystem,
+    sol: &Solution,
+) -> Result<Sensitivity, GeometryError> {
+    let unknown = sub.unknown();
+    let known = sub.known();
+    let cl = closure(p, model, &sol.c);
+    let e_u = select_columns(&cl.e_c, &unknown);
+    check_conditioning(&e_u, sub)?;
+    let lu = e_u.lu();
+    let e_p = closure_params(p, model, &sol.c);
+    let du_dp = lu.solve(&e_p).ok_or(GeometryError::Singular {
+        subsystem: sub,
+        ratio: 0.0,
+    })?;
+    let e_k = SMatrix::<f64, 5, 2>::from_fn(|r, k| cl.e_c[(r, known[k])]);
+    let du_dk = lu.solve(&e_k).ok_or(GeometryError::Singular {
+        subsystem: sub,
+        ratio: 0.0,
+    })?;
+    let mut dc_dp = ParamJacobian::zeros();
+    let mut dc_dk = SMatrix::<f64, 7, 2>::zeros();
+    for (k, &v) in unknown.iter().enumerate() {
+        dc_dp.set_row(v, &(-du_dp.row(k)));
+        dc_dk.set_row(v, &(-du_dk.row(k)));
+    }
+    dc_dk[(known[0], 0)] = 1.0;
+    dc_dk[(known[1], 1)] = 1.0;
+    Ok(Sensitivity { dc_dp, dc_dk })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spec_check_values() {
+        let p = Params::nominal();
+        for model in [Model::M24, Model::M29] {
+            let s = igm(&p, model, 0.0, 1700.0).expect("igm");
+            let q = s.q();
+            let want = [2611.0556, 2611.0556, 788.9444, 788.9444];
+            for i in 0..4 {
+                assert!(
+                    (q[i] - want[i]).abs() < 1e-4,
+                    "{model} q{} = {}",
+                    i + 1,
+                    q[i]
+                );
+            }
+            assert!(s.psi().abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn q2_q4_subsystem_is_singular_at_x0() {
+        let p = Params::nominal();
+        let s = igm(&p, Model::M24, 0.0, 1700.0).expect("igm");
+        let q = s.q();
+        let r = solve(&p, Model::M24, Subsystem::Actuators(1, 3), [q[1], q[3]]);
+        assert!(
+            matches!(
+                r,
+                Err(GeometryError::Singular { .. }) | Err(GeometryError::NoIntersection { .. })
+            ),
+            "{r:?}"
+        );
+    }
+}
