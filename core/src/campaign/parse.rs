@@ -182,13 +182,15 @@ pub(super) fn parse_follower(text: &str) -> Option<[bool; 4]> {
     Some(follower)
 }
 
-/// The header: its line, the layout of the required columns and the covariates
-/// (field index, name), in header order.
-fn header(
-    fields: &[&str],
-    file: &str,
+/// The header line of a file.
+struct Header {
     line: usize,
-) -> Result<(Layout, Vec<(usize, String)>), CampaignError> {
+    layout: Layout,
+    /// The covariates (field index, name), in header order.
+    covariates: Vec<(usize, String)>,
+}
+
+fn header(fields: &[&str], file: &str, line: usize) -> Result<Header, CampaignError> {
     let mut seen: HashMap<&str, usize> = HashMap::new();
     let mut field = [usize::MAX; REQUIRED_COLUMNS.len()];
     let mut covariates = Vec::new();
@@ -227,12 +229,16 @@ fn header(
             });
         }
     }
-    Ok((Layout { field }, covariates))
+    Ok(Header {
+        line,
+        layout: Layout { field },
+        covariates,
+    })
 }
 
 pub(super) fn parse(text: &str, source: &str) -> Result<Campaign, CampaignError> {
     let mut comments = Vec::new();
-    let mut head: Option<(usize, Layout, Vec<(usize, String)>)> = None;
+    let mut head: Option<Header> = None;
     let mut poses: Vec<Pose> = Vec::new();
     let mut checker = Checker::new(source);
     for (n, raw) in text.lines().enumerate() {
@@ -250,12 +256,11 @@ pub(super) fn parse(text: &str, source: &str) -> Result<Campaign, CampaignError>
         }
         let fields: Vec<&str> = raw.split(',').map(str::trim).collect();
         match &head {
-            None => {
-                let (layout, covariates) = header(&fields, source, line)?;
-                head = Some((line, layout, covariates));
-            }
-            Some((_, layout, covariates)) => {
-                let expected = layout_width(layout, covariates);
+            None => head = Some(header(&fields, source, line)?),
+            Some(Header {
+                layout, covariates, ..
+            }) => {
+                let expected = layout.field.len() + covariates.len();
                 if fields.len() != expected {
                     return Err(CampaignError::WrongFieldCount {
                         file: source.to_owned(),
@@ -275,7 +280,12 @@ pub(super) fn parse(text: &str, source: &str) -> Result<Campaign, CampaignError>
             }
         }
     }
-    let Some((header_line, _, covariates)) = head else {
+    let Some(Header {
+        line: header_line,
+        covariates,
+        ..
+    }) = head
+    else {
         return Err(CampaignError::Empty {
             file: source.to_owned(),
         });
@@ -293,11 +303,6 @@ pub(super) fn parse(text: &str, source: &str) -> Result<Campaign, CampaignError>
         covariate_names: covariates.into_iter().map(|(_, n)| n).collect(),
         poses,
     })
-}
-
-/// Number of fields of the header.
-fn layout_width(layout: &Layout, covariates: &[(usize, String)]) -> usize {
-    layout.field.len() + covariates.len()
 }
 
 pub(super) fn validate(campaign: &Campaign) -> Result<(), CampaignError> {
