@@ -1,1 +1,2 @@
 //! Transport and bag I/O.
+pub mod bag;

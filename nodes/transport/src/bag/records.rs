@@ -1,0 +1,223 @@
+//! A linear walk over an MCAP data section that tolerates a missing end.
+//!
+//! Shared by the reader (which insists on a complete file) and the recovery (which keeps what is
+//! complete). Top-level records are framed here (opcode, u64 length, body), so every record's
+//! byte offset is known and a record cut short by the end of the file is detected before anything
+//! is allocated for it. Chunks are all-or-nothing: their records are visited only after the whole
+//! chunk was decompressed and its CRC checked.
+
+use std::io::{self, Read};
+
+use mcap::records::{op, Channel, MessageHeader, Record};
+
+/// A schema, channel or message from the data section.
+pub(crate) enum DataItem<'a> {
+    Schema {
+        id: u16,
+        name: &'a str,
+        encoding: &'a str,
+        data: &'a [u8],
+    },
+    Channel(&'a Channel),
+    Message {
+        /// Byte offset of the top-level record holding the message (a chunk or the message).
+        record_offset: u64,
+        header: &'a MessageHeader,
+        data: &'a [u8],
+    },
+}
+
+/// How the data section ended.
+#[derive(Debug)]
+pub(crate) enum SectionEnd {
+    /// A `DataEnd` record: the writer finished the data section.
+    DataEnd,
+    /// The file ends at a record boundary without `DataEnd`.
+    Eof,
+    /// The file ends inside the record at `offset`, `missing` bytes short.
+    Truncated { offset: u64, missing: u64 },
+    /// The record at `offset` is complete but cannot be parsed (or a chunk fails its CRC).
+    Corrupt {
+        offset: u64,
+        source: mcap::McapError,
+    },
+}
+
+/// Outcome of a walk.
+#[derive(Debug)]
+pub(crate) struct SectionSummary {
+    pub end: SectionEnd,
+    /// Offset just after the last complete, valid record.
+    pub valid_bytes: u64,
+    pub chunks: u64,
+    pub messages: u64,
+}
+
+/// Errors that stop a walk before its end: bad magic, I/O, or the visitor's own error.
+pub(crate) enum WalkError<E> {
+    BadMagic,
+    Io(io::Error),
+    Visit(E),
+}
+
+/// Reads as many bytes as are left, up to `buf.len()`; returns how many.
+fn read_full(reader: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
+    let mut filled = 0;
+    while filled < buf.len() {
+        match reader.read(&mut buf[filled..]) {
+            Ok(0) => break,
+            Ok(n) => filled += n,
+            Err(err) if err.kind() == io::ErrorKind::Interrupted => {}
+            Err(err) => return Err(err),
+        }
+    }
+    Ok(filled)
+}
+
+/// Walks the data section of an MCAP stream of `file_len` bytes, calling `visit` for every
+/// schema, channel and message in file order, until `DataEnd`, the end of the file, a truncated
+/// or a corrupt record.
+pub(crate) fn walk_data_section<R: Read, E>(
+    mut reader: R,
+    file_len: u64,
+    mut visit: impl FnMut(DataItem<'_>) -> Result<(), E>,
+) -> Result<SectionSummary, WalkError<E>> {
+    let mut magic = [0u8; 8];
+    let n = read_full(&mut reader, &mut magic).map_err(WalkError::Io)?;
+    if n < magic.len() || magic != mcap::MAGIC {
+        return Err(WalkError::BadMagic);
+    }
+    let mut offset = magic.len() as u64;
+    let mut body = Vec::new();
+    let mut summary = SectionSummary {
+        end: SectionEnd::Eof,
+        valid_bytes: offset,
+        chunks: 0,
+        messages: 0,
+    };
+    loop {
+        let mut frame = [0u8; 9];
+        let got = read_full(&mut reader, &mut frame).map_err(WalkError::Io)?;
+        if got == 0 {
+            summary.end = SectionEnd::Eof;
+            return Ok(summary);
+        }
+        if got < frame.len() {
+            summary.end = SectionEnd::Truncated {
+                offset,
+                missing: (frame.len() - got) as u64,
+            };
+            return Ok(summary);
+        }
+        let opcode = frame[0];
+        let mut len_bytes = [0u8; 8];
+        len_bytes.copy_from_slice(&frame[1..]);
+        let len = u64::from_le_bytes(len_bytes);
+        let available = file_len.saturating_sub(offset + frame.len() as u64);
+        if len > available {
+            // Do not trust the length (nor allocate for it) beyond what the file holds.
+            summary.end = SectionEnd::Truncated {
+                offset,
+                missing: len - available,
+            };
+            return Ok(summary);
+        }
+        // `len <= available <= file_len`, which fits in memory only if it fits in usize.
+        let Ok(len_usize) = usize::try_from(len) else {
+            summary.end = SectionEnd::Truncated {
+                offset,
+                missing: len - available,
+            };
+            return Ok(summary);
+        };
+        body.resize(len_usize, 0);
+        let got = read_full(&mut reader, &mut body).map_err(WalkError::Io)?;
+        if got < len_usize {
+            // The file shrank or grew differently than its length said.
+            summary.end = SectionEnd::Truncated {
+                offset,
+                missing: (len_usize - got) as u64,
+            };
+            return Ok(summary);
+        }
+        let record_offset = offset;
+        let next_offset = offset + frame.len() as u64 + len;
+        match opcode {
+            op::DATA_END => {
+                summary.valid_bytes = next_offset;
+                summary.end = SectionEnd::DataEnd;
+                return Ok(summary);
+            }
+            op::SCHEMA | op::CHANNEL | op::MESSAGE | op::CHUNK => {
+                let record = match mcap::parse_record(opcode, &body) {
+                    Ok(record) => record,
+                    Err(source) => {
+                        summary.end = SectionEnd::Corrupt {
+                            offset: record_offset,
+                            source,
+                        };
+                        return Ok(summary);
+                    }
+                };
+                if let Record::Chunk { header, data } = record {
+                    let inner: Result<Vec<Record<'_>>, mcap::McapError> =
+                        match mcap::read::ChunkReader::new(header, &data) {
+                            Ok(chunk) => chunk.collect(),
+                            Err(err) => Err(err),
+                        };
+                    let inner = match inner {
+                        Ok(inner) => inner,
+                        Err(source) => {
+                            summary.end = SectionEnd::Corrupt {
+                                offset: record_offset,
+                                source,
+                            };
+                            return Ok(summary);
+                        }
+                    };
+                    for record in &inner {
+                        summary.messages += visit_record(record, record_offset, &mut visit)?;
+                    }
+                    summary.chunks += 1;
+                } else {
+                    summary.messages += visit_record(&record, record_offset, &mut visit)?;
+                }
+            }
+            // Header, message indexes, attachments, metadata, private records: not needed.
+            _ => {}
+        }
+        summary.valid_bytes = next_offset;
+        offset = next_offset;
+    }
+}
+
+/// Visits one schema, channel or message record; returns 1 for a message, else 0.
+fn visit_record<E>(
+    record: &Record<'_>,
+    record_offset: u64,
+    visit: &mut impl FnMut(DataItem<'_>) -> Result<(), E>,
+) -> Result<u64, WalkError<E>> {
+    let (item, is_message) = match record {
+        Record::Schema { header, data } => (
+            DataItem::Schema {
+                id: header.id,
+                name: &header.name,
+                encoding: &header.encoding,
+                data,
+            },
+            0,
+        ),
+        Record::Channel(channel) => (DataItem::Channel(channel), 0),
+        Record::Message { header, data } => (
+            DataItem::Message {
+                record_offset,
+                header,
+                data,
+            },
+            1,
+        ),
+        _ => return Ok(0),
+    };
+    visit(item).map_err(WalkError::Visit)?;
+    Ok(is_message)
+}
