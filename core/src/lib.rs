@@ -4,4 +4,5 @@
 
 pub mod campaign;
 pub mod geometry;
+pub mod noise;
 pub mod params;
