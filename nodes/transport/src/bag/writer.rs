@@ -121,6 +121,9 @@ struct Inner {
     /// Approximate uncompressed bytes of the open chunk (message records only).
     open_chunk_bytes: u64,
     chunk_count: u64,
+    /// Messages written so far, and those of them in closed (written and flushed) chunks.
+    message_count: u64,
+    flushed_message_count: u64,
     time_bounds: Option<(u64, u64)>,
     /// Reused serialisation buffer.
     scratch: Vec<u8>,
@@ -211,6 +214,8 @@ impl BagWriter {
                 topics: Vec::new(),
                 open_chunk_bytes: 0,
                 chunk_count: 0,
+                message_count: 0,
+                flushed_message_count: 0,
                 time_bounds: None,
                 scratch: Vec::new(),
             }),
@@ -375,6 +380,7 @@ impl BagWriter {
         };
         topic.next_sequence = sequence.wrapping_add(1);
         topic.count += 1;
+        inner.message_count += 1;
         inner.time_bounds = Some(match inner.time_bounds {
             None => (log_time, log_time),
             Some((lo, hi)) => (lo.min(log_time), hi.max(log_time)),
@@ -400,11 +406,28 @@ impl BagWriter {
 
     fn close_chunk(&mut self) -> Result<(), BagWriteError> {
         let inner = self.inner_mut()?;
-        if inner.open_chunk_bytes > 0 {
-            inner.chunk_count += 1;
-            inner.open_chunk_bytes = 0;
+        let closing = inner.open_chunk_bytes > 0;
+        let messages = inner.message_count;
+        self.flush_file()?;
+        if let Some(inner) = self.inner.as_mut() {
+            if closing {
+                inner.chunk_count += 1;
+                inner.open_chunk_bytes = 0;
+            }
+            inner.flushed_message_count = messages;
         }
-        self.flush_file()
+        Ok(())
+    }
+
+    /// Messages written so far (including the open chunk's).
+    pub fn message_count(&self) -> u64 {
+        self.inner.as_ref().map_or(0, |i| i.message_count)
+    }
+
+    /// Messages in chunks already handed to the operating system: what survives if this
+    /// process is killed now.
+    pub fn flushed_message_count(&self) -> u64 {
+        self.inner.as_ref().map_or(0, |i| i.flushed_message_count)
     }
 
     /// `mcap::Writer::flush` closes the open chunk and flushes the `BufWriter` into the file.
