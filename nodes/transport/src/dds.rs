@@ -1,0 +1,213 @@
+//! DDS backend through ros2-client (RustDDS): interoperates with every ROS 2 vendor.
+//!
+//! Topic `/rpkm/x` is the DDS topic `rt/rpkm/x`, type `rpkm_msgs::msg::dds_::Name_`, CDR
+//! (XCDR1) payload. The domain id comes from [`domain_id_from_env`] (`ROS_DOMAIN_ID`,
+//! default 0) unless the configuration names one.
+
+use std::sync::{Arc, Mutex};
+
+use ros2_client::{
+    qos::{Durability as RDurability, History, Reliability as RReliability, WhenFull},
+    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile,
+};
+use rpkm_msgs::RosMessage;
+use serde::{Deserialize, Serialize};
+
+use crate::error::TransportError;
+use crate::topic::{Durability, Qos, Reliability, Topic};
+
+const BACKEND: &str = "dds";
+/// Largest DDS domain id ROS 2 allows with the default port mapping.
+const MAX_DOMAIN_ID: u16 = 232;
+
+/// Reads `ROS_DOMAIN_ID`: unset or empty gives 0; anything but an integer in 0..=232 is an
+/// error.
+pub fn domain_id_from_env() -> Result<u16, TransportError> {
+    match std::env::var("ROS_DOMAIN_ID") {
+        Err(_) => Ok(0),
+        Ok(v) if v.trim().is_empty() => Ok(0),
+        Ok(v) => match v.trim().parse::<u16>() {
+            Ok(d) if d <= MAX_DOMAIN_ID => Ok(d),
+            _ => Err(TransportError::DomainId { value: v }),
+        },
+    }
+}
+
+/// A message as ros2-client sees it: the same serde form, with ros2-client's marker trait.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(transparent)]
+struct Wire<T>(T);
+
+impl<T: RosMessage> ros2_client::Message for Wire<T> {}
+
+/// The ros2-client QoS of a topic QoS.
+pub fn qos_profile(qos: Qos) -> QosProfile {
+    let reliability = match qos.reliability {
+        Reliability::BestEffort => RReliability::BestEffort,
+        Reliability::Reliable => RReliability::Reliable {
+            when_full: WhenFull::DEFAULT,
+        },
+    };
+    let durability = match qos.durability {
+        Durability::Volatile => RDurability::Volatile,
+        Durability::TransientLocal => RDurability::TransientLocal,
+    };
+    QosProfile::publisher_default()
+        .reliability(reliability)
+        .durability(durability)
+        .history(History::KeepLast {
+            depth: qos.depth.max(1),
+        })
+}
+
+/// A DDS participant with one ROS 2 node.
+pub struct DdsNode {
+    node: Mutex<Node>,
+    domain: u16,
+}
+
+impl std::fmt::Debug for DdsNode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DdsNode")
+            .field("domain", &self.domain)
+            .finish_non_exhaustive()
+    }
+}
+
+impl DdsNode {
+    /// Joins `domain` with a node `/rpkm/<name>` (no rosout, no parameter services).
+    pub fn new(name: &str, domain: u16) -> Result<Arc<Self>, TransportError> {
+        let err = |reason: String| TransportError::DdsNode {
+            node: name.to_owned(),
+            domain,
+            reason,
+        };
+        let context = Context::with_options(ContextOptions::new().domain_id(domain))
+            .map_err(|e| err(e.to_string()))?;
+        let node_name = NodeName::new("/rpkm", name).map_err(|e| err(format!("{e:?}")))?;
+        let node = context
+            .new_node(
+                node_name,
+                NodeOptions::new()
+                    .enable_rosout(false)
+                    .start_parameter_services(false),
+            )
+            .map_err(|e| err(format!("{e:?}")))?;
+        Ok(Arc::new(Self {
+            node: Mutex::new(node),
+            domain,
+        }))
+    }
+
+    /// The DDS domain id.
+    pub fn domain(&self) -> u16 {
+        self.domain
+    }
+
+    fn topic<T: RosMessage>(
+        &self,
+        node: &mut Node,
+        topic: &Topic<T>,
+    ) -> Result<ros2_client::dds::rustdds::Topic, TransportError> {
+        let name = Name::parse(topic.name()).map_err(|e| TransportError::TopicName {
+            topic: topic.name().to_owned(),
+            reason: format!("{e:?}"),
+        })?;
+        node.create_topic(
+            &name,
+            MessageTypeName::new(T::PACKAGE, T::NAME),
+            &qos_profile(topic.qos()),
+        )
+        .map_err(|e| create_err(topic.name(), "topic", e))
+    }
+
+    pub(crate) fn publisher<T: RosMessage>(
+        self: &Arc<Self>,
+        topic: &Topic<T>,
+    ) -> Result<DdsPublisher<T>, TransportError> {
+        let mut node = self.lock(topic.name())?;
+        let dds_topic = self.topic(&mut node, topic)?;
+        let publisher = node
+            .create_publisher::<Wire<T>>(&dds_topic, Some(qos_profile(topic.qos())))
+            .map_err(|e| create_err(topic.name(), "publisher", e))?;
+        Ok(DdsPublisher {
+            topic: topic.name(),
+            publisher,
+            _node: Arc::clone(self),
+        })
+    }
+
+    pub(crate) fn subscriber<T: RosMessage>(
+        self: &Arc<Self>,
+        topic: &Topic<T>,
+    ) -> Result<DdsSubscriber<T>, TransportError> {
+        let mut node = self.lock(topic.name())?;
+        let dds_topic = self.topic(&mut node, topic)?;
+        let subscription = node
+            .create_subscription::<Wire<T>>(&dds_topic, Some(qos_profile(topic.qos())))
+            .map_err(|e| create_err(topic.name(), "subscriber", e))?;
+        Ok(DdsSubscriber {
+            topic: topic.name(),
+            subscription,
+            _node: Arc::clone(self),
+        })
+    }
+
+    fn lock(&self, topic: &str) -> Result<std::sync::MutexGuard<'_, Node>, TransportError> {
+        self.node.lock().map_err(|_| TransportError::CreatePort {
+            topic: topic.to_owned(),
+            backend: BACKEND,
+            port: "node",
+            reason: "the DDS node mutex is poisoned".into(),
+        })
+    }
+}
+
+fn create_err(topic: &str, port: &'static str, e: impl std::fmt::Display) -> TransportError {
+    TransportError::CreatePort {
+        topic: topic.to_owned(),
+        backend: BACKEND,
+        port,
+        reason: e.to_string(),
+    }
+}
+
+/// DDS half of a [`crate::Publisher`].
+pub(crate) struct DdsPublisher<T: RosMessage> {
+    topic: &'static str,
+    publisher: ros2_client::Publisher<Wire<T>>,
+    _node: Arc<DdsNode>,
+}
+
+impl<T: RosMessage> DdsPublisher<T> {
+    pub(crate) fn send(&self, msg: &T) -> Result<(), TransportError> {
+        self.publisher
+            .publish(Wire(msg.clone()))
+            .map_err(|e| TransportError::Publish {
+                topic: self.topic.to_owned(),
+                backend: BACKEND,
+                reason: e.to_string(),
+            })
+    }
+}
+
+/// DDS half of a [`crate::Subscriber`].
+pub(crate) struct DdsSubscriber<T: RosMessage> {
+    topic: &'static str,
+    subscription: ros2_client::Subscription<Wire<T>>,
+    _node: Arc<DdsNode>,
+}
+
+impl<T: RosMessage> DdsSubscriber<T> {
+    pub(crate) fn try_recv(&self) -> Result<Option<T>, TransportError> {
+        match self.subscription.take() {
+            Ok(Some((Wire(msg), _info))) => Ok(Some(msg)),
+            Ok(None) => Ok(None),
+            Err(e) => Err(TransportError::Receive {
+                topic: self.topic.to_owned(),
+                backend: BACKEND,
+                reason: e.to_string(),
+            }),
+        }
+    }
+}

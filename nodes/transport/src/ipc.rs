@@ -1,0 +1,442 @@
+//! iceoryx2 backend: shared-memory publish/subscribe between processes of one host.
+//!
+//! Fixed-size `#[repr(C)]` messages ([`ActuatorState`], [`TcpEstimate`]) travel as
+//! themselves: the publisher writes the value straight into a loaned shared-memory sample
+//! and the subscriber reads it in place, without serialisation. All other messages travel as
+//! their CDR bytes (with encapsulation header) in a `[u8]` slice service.
+//!
+//! Service names are the ROS 2 topic name without its leading `/`, under an optional
+//! prefix: prefix `test_42` and topic `/rpkm/actuator_state` give service
+//! `test_42/rpkm/actuator_state`. iceoryx2 services are global to the machine, so tests use
+//! unique prefixes.
+
+use std::fmt::Debug;
+
+use iceoryx2::port::publisher::Publisher as IoxPublisher;
+use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use rpkm_msgs::{
+    from_cdr, to_cdr, ActuatorState, Diagnosis, DiagnosticArray, Parameters, PreloadStatus,
+    RosMessage, TcpEstimate, TcpMeasurement,
+};
+
+use crate::error::TransportError;
+use crate::topic::{Durability, Qos, Reliability, Topic};
+
+/// The iceoryx2 service flavour used: inter-process, ports usable from any thread.
+pub type IpcService = ipc_threadsafe::Service;
+
+const BACKEND: &str = "iceoryx2";
+/// Limits every process must agree on when opening a service.
+const MAX_PUBLISHERS: usize = 8;
+const MAX_SUBSCRIBERS: usize = 16;
+const MAX_NODES: usize = 32;
+/// Initial slice length of CDR services; grows by powers of two when needed.
+const INITIAL_CDR_LEN: usize = 1024;
+
+/// An iceoryx2 node and the service-name prefix.
+#[derive(Debug)]
+pub struct IpcNode {
+    node: Node<IpcService>,
+    prefix: String,
+}
+
+impl IpcNode {
+    /// Creates the node (signal handling left to the application) and removes the stale
+    /// shared-memory resources of dead nodes (e.g. processes killed with SIGKILL).
+    pub fn new(name: &str, prefix: &str) -> Result<Self, TransportError> {
+        let err = |reason: String| TransportError::IpcNode {
+            node: name.to_owned(),
+            reason,
+        };
+        let node_name = NodeName::new(name).map_err(|e| err(format!("{e:?}")))?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<IpcService>()
+            .map_err(|e| err(format!("{e:?}")))?;
+        let state = node.try_cleanup_dead_nodes();
+        if state.cleanups > 0 || state.failed_cleanups > 0 {
+            log::info!(
+                "iceoryx2: removed the resources of {} dead nodes ({} failed)",
+                state.cleanups,
+                state.failed_cleanups
+            );
+        }
+        Ok(Self {
+            node,
+            prefix: prefix.to_owned(),
+        })
+    }
+
+    /// Removes the resources of dead nodes again; returns (cleaned, failed).
+    pub fn cleanup_dead_nodes(&self) -> (u64, u64) {
+        let s = self.node.try_cleanup_dead_nodes();
+        (s.cleanups, s.failed_cleanups)
+    }
+
+    /// The iceoryx2 service name of a ROS 2 topic name.
+    pub fn service_name(&self, topic: &str) -> String {
+        service_name(&self.prefix, topic)
+    }
+
+    fn service(&self, topic: &str) -> Result<ServiceName, TransportError> {
+        let name = self.service_name(topic);
+        ServiceName::new(&name).map_err(|e| TransportError::TopicName {
+            topic: topic.to_owned(),
+            reason: format!("iceoryx2 service name {name:?}: {e:?}"),
+        })
+    }
+}
+
+/// `prefix/topic-without-leading-slash`, or the bare topic without prefix.
+pub fn service_name(prefix: &str, topic: &str) -> String {
+    let topic = topic.trim_start_matches('/');
+    let prefix = prefix.trim_matches('/');
+    if prefix.is_empty() {
+        topic.to_owned()
+    } else {
+        format!("{prefix}/{topic}")
+    }
+}
+
+fn create_err(topic: &str, port: &'static str, e: impl Debug) -> TransportError {
+    TransportError::CreatePort {
+        topic: topic.to_owned(),
+        backend: BACKEND,
+        port,
+        reason: format!("{e:?}"),
+    }
+}
+
+/// Publisher half of the iceoryx2 backend for one message type.
+#[doc(hidden)]
+pub trait IpcSend<T>: Send + Sync {
+    fn send(&self, msg: &T) -> Result<(), TransportError>;
+}
+
+/// Subscriber half of the iceoryx2 backend for one message type.
+#[doc(hidden)]
+pub trait IpcRecv<T>: Send + Sync {
+    fn try_recv(&self) -> Result<Option<T>, TransportError>;
+    fn update_connections(&self) -> Result<(), TransportError>;
+}
+
+fn connection_err(topic: &str, e: impl Debug) -> TransportError {
+    TransportError::Receive {
+        topic: topic.to_owned(),
+        backend: BACKEND,
+        reason: format!("connecting to the publishers: {e:?}"),
+    }
+}
+
+/// A message type the iceoryx2 backend can carry: zero-copy or as CDR bytes.
+pub trait IpcMessage: RosMessage + Sync {
+    /// Opens a publisher on `topic`.
+    #[doc(hidden)]
+    fn ipc_publisher(
+        node: &IpcNode,
+        topic: &Topic<Self>,
+    ) -> Result<Box<dyn IpcSend<Self>>, TransportError>;
+    /// Opens a subscriber on `topic`.
+    #[doc(hidden)]
+    fn ipc_subscriber(
+        node: &IpcNode,
+        topic: &Topic<Self>,
+    ) -> Result<Box<dyn IpcRecv<Self>>, TransportError>;
+}
+
+/// Service-level settings derived from the QoS; identical in every process.
+macro_rules! configure_service {
+    ($builder:expr, $qos:expr) => {{
+        let qos: Qos = $qos;
+        let depth = qos.depth.max(1);
+        let history = match qos.durability {
+            Durability::TransientLocal => depth,
+            Durability::Volatile => 0,
+        };
+        $builder
+            .enable_safe_overflow(qos.reliability == Reliability::BestEffort)
+            .subscriber_max_buffer_size(depth)
+            .history_size(history)
+            .max_publishers(MAX_PUBLISHERS)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+    }};
+}
+
+fn backpressure(qos: Qos) -> BackpressureStrategy {
+    match qos.reliability {
+        Reliability::Reliable => BackpressureStrategy::RetryUntilDelivered,
+        Reliability::BestEffort => BackpressureStrategy::DiscardData,
+    }
+}
+
+fn history_request(qos: Qos) -> usize {
+    match qos.durability {
+        Durability::TransientLocal => qos.depth.max(1),
+        Durability::Volatile => 0,
+    }
+}
+
+// ---- zero-copy: the value itself in shared memory ----
+
+struct ZcPub<T: ZeroCopySend + Debug + 'static> {
+    topic: &'static str,
+    publisher: IoxPublisher<IpcService, T, ()>,
+}
+
+struct ZcSub<T: ZeroCopySend + Debug + 'static> {
+    topic: &'static str,
+    subscriber: IoxSubscriber<IpcService, T, ()>,
+}
+
+fn zc_publisher<T>(node: &IpcNode, topic: &Topic<T>) -> Result<Box<dyn IpcSend<T>>, TransportError>
+where
+    T: ZeroCopySend + Debug + Copy + Send + Sync + 'static,
+{
+    let service = configure_service!(
+        node.node
+            .service_builder(&node.service(topic.name())?)
+            .publish_subscribe::<T>(),
+        topic.qos()
+    )
+    .open_or_create()
+    .map_err(|e| create_err(topic.name(), "service", e))?;
+    let publisher = service
+        .publisher_builder()
+        .backpressure_strategy(backpressure(topic.qos()))
+        .create()
+        .map_err(|e| create_err(topic.name(), "publisher", e))?;
+    publisher
+        .update_connections()
+        .map_err(|e| create_err(topic.name(), "publisher", e))?;
+    Ok(Box::new(ZcPub {
+        topic: topic.name(),
+        publisher,
+    }))
+}
+
+fn zc_subscriber<T>(node: &IpcNode, topic: &Topic<T>) -> Result<Box<dyn IpcRecv<T>>, TransportError>
+where
+    T: ZeroCopySend + Debug + Copy + Send + Sync + 'static,
+{
+    let service = configure_service!(
+        node.node
+            .service_builder(&node.service(topic.name())?)
+            .publish_subscribe::<T>(),
+        topic.qos()
+    )
+    .open_or_create()
+    .map_err(|e| create_err(topic.name(), "service", e))?;
+    let subscriber = service
+        .subscriber_builder()
+        .buffer_size(topic.qos().depth.max(1))
+        .history_request(history_request(topic.qos()))
+        .create()
+        .map_err(|e| create_err(topic.name(), "subscriber", e))?;
+    Ok(Box::new(ZcSub {
+        topic: topic.name(),
+        subscriber,
+    }))
+}
+
+impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcSend<T> for ZcPub<T> {
+    fn send(&self, msg: &T) -> Result<(), TransportError> {
+        let err = |e: &dyn Debug| TransportError::Publish {
+            topic: self.topic.to_owned(),
+            backend: BACKEND,
+            reason: format!("{e:?}"),
+        };
+        let sample = self.publisher.loan_uninit().map_err(|e| err(&e))?;
+        sample.write_payload(*msg).send().map_err(|e| err(&e))?;
+        Ok(())
+    }
+}
+
+impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcRecv<T> for ZcSub<T> {
+    fn try_recv(&self) -> Result<Option<T>, TransportError> {
+        match self.subscriber.receive() {
+            Ok(sample) => Ok(sample.map(|s| *s.payload())),
+            Err(e) => Err(TransportError::Receive {
+                topic: self.topic.to_owned(),
+                backend: BACKEND,
+                reason: format!("{e:?}"),
+            }),
+        }
+    }
+    fn update_connections(&self) -> Result<(), TransportError> {
+        self.subscriber
+            .update_connections()
+            .map_err(|e| connection_err(self.topic, e))
+    }
+}
+
+// ---- CDR bytes in a [u8] slice ----
+
+struct CdrPub {
+    topic: &'static str,
+    publisher: IoxPublisher<IpcService, [u8], ()>,
+}
+
+struct CdrSub {
+    topic: &'static str,
+    subscriber: IoxSubscriber<IpcService, [u8], ()>,
+}
+
+fn cdr_publisher<T: RosMessage>(
+    node: &IpcNode,
+    topic: &Topic<T>,
+) -> Result<Box<dyn IpcSend<T>>, TransportError> {
+    let service = configure_service!(
+        node.node
+            .service_builder(&node.service(topic.name())?)
+            .publish_subscribe::<[u8]>(),
+        topic.qos()
+    )
+    .open_or_create()
+    .map_err(|e| create_err(topic.name(), "service", e))?;
+    let publisher = service
+        .publisher_builder()
+        .initial_max_slice_len(INITIAL_CDR_LEN)
+        .allocation_strategy(AllocationStrategy::PowerOfTwo)
+        .backpressure_strategy(backpressure(topic.qos()))
+        .create()
+        .map_err(|e| create_err(topic.name(), "publisher", e))?;
+    publisher
+        .update_connections()
+        .map_err(|e| create_err(topic.name(), "publisher", e))?;
+    Ok(Box::new(CdrPub {
+        topic: topic.name(),
+        publisher,
+    }))
+}
+
+fn cdr_subscriber<T: RosMessage>(
+    node: &IpcNode,
+    topic: &Topic<T>,
+) -> Result<Box<dyn IpcRecv<T>>, TransportError> {
+    let service = configure_service!(
+        node.node
+            .service_builder(&node.service(topic.name())?)
+            .publish_subscribe::<[u8]>(),
+        topic.qos()
+    )
+    .open_or_create()
+    .map_err(|e| create_err(topic.name(), "service", e))?;
+    let subscriber = service
+        .subscriber_builder()
+        .buffer_size(topic.qos().depth.max(1))
+        .history_request(history_request(topic.qos()))
+        .create()
+        .map_err(|e| create_err(topic.name(), "subscriber", e))?;
+    Ok(Box::new(CdrSub {
+        topic: topic.name(),
+        subscriber,
+    }))
+}
+
+impl<T: RosMessage> IpcSend<T> for CdrPub {
+    fn send(&self, msg: &T) -> Result<(), TransportError> {
+        let bytes = to_cdr(msg).map_err(|source| TransportError::Cdr {
+            topic: self.topic.to_owned(),
+            source,
+        })?;
+        let err = |e: &dyn Debug| TransportError::Publish {
+            topic: self.topic.to_owned(),
+            backend: BACKEND,
+            reason: format!("{e:?}"),
+        };
+        let sample = self
+            .publisher
+            .loan_slice_uninit(bytes.len())
+            .map_err(|e| err(&e))?;
+        sample
+            .write_from_slice(&bytes)
+            .send()
+            .map_err(|e| err(&e))?;
+        Ok(())
+    }
+}
+
+impl<T: RosMessage> IpcRecv<T> for CdrSub {
+    fn try_recv(&self) -> Result<Option<T>, TransportError> {
+        let sample = self
+            .subscriber
+            .receive()
+            .map_err(|e| TransportError::Receive {
+                topic: self.topic.to_owned(),
+                backend: BACKEND,
+                reason: format!("{e:?}"),
+            })?;
+        match sample {
+            None => Ok(None),
+            Some(s) => from_cdr(s.payload())
+                .map(Some)
+                .map_err(|source| TransportError::Cdr {
+                    topic: self.topic.to_owned(),
+                    source,
+                }),
+        }
+    }
+    fn update_connections(&self) -> Result<(), TransportError> {
+        self.subscriber
+            .update_connections()
+            .map_err(|e| connection_err(self.topic, e))
+    }
+}
+
+macro_rules! zero_copy {
+    ($($ty:ty),*) => {$(
+        impl IpcMessage for $ty {
+            fn ipc_publisher(node: &IpcNode, topic: &Topic<Self>)
+                -> Result<Box<dyn IpcSend<Self>>, TransportError> {
+                zc_publisher(node, topic)
+            }
+            fn ipc_subscriber(node: &IpcNode, topic: &Topic<Self>)
+                -> Result<Box<dyn IpcRecv<Self>>, TransportError> {
+                zc_subscriber(node, topic)
+            }
+        }
+    )*};
+}
+
+macro_rules! as_cdr {
+    ($($ty:ty),*) => {$(
+        impl IpcMessage for $ty {
+            fn ipc_publisher(node: &IpcNode, topic: &Topic<Self>)
+                -> Result<Box<dyn IpcSend<Self>>, TransportError> {
+                cdr_publisher(node, topic)
+            }
+            fn ipc_subscriber(node: &IpcNode, topic: &Topic<Self>)
+                -> Result<Box<dyn IpcRecv<Self>>, TransportError> {
+                cdr_subscriber(node, topic)
+            }
+        }
+    )*};
+}
+
+zero_copy!(ActuatorState, TcpEstimate);
+as_cdr!(
+    TcpMeasurement,
+    Parameters,
+    Diagnosis,
+    PreloadStatus,
+    DiagnosticArray
+);
+
+#[cfg(test)]
+mod tests {
+    use super::service_name;
+
+    #[test]
+    fn service_names() {
+        assert_eq!(
+            service_name("", "/rpkm/actuator_state"),
+            "rpkm/actuator_state"
+        );
+        assert_eq!(service_name("t1/", "/rpkm/x"), "t1/rpkm/x");
+        assert_eq!(service_name("/a/b", "/rpkm/x"), "a/b/rpkm/x");
+    }
+}

@@ -1,0 +1,304 @@
+//! The publish/subscribe abstraction over the iceoryx2 and DDS backends.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use crate::dds::{domain_id_from_env, DdsNode, DdsPublisher, DdsSubscriber};
+use crate::error::TransportError;
+use crate::ipc::{IpcMessage, IpcNode, IpcRecv, IpcSend};
+use crate::topic::Topic;
+
+/// Which middleware a port uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    /// iceoryx2 shared memory: between rpkm processes on one host.
+    Ipc,
+    /// DDS (ros2-client): to ROS 2 tools and other hosts.
+    Dds,
+    /// Publishers send on both; subscribers receive from iceoryx2.
+    Both,
+}
+
+impl Backend {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Ipc => "iceoryx2",
+            Self::Dds => "dds",
+            Self::Both => "both",
+        }
+    }
+    fn uses_ipc(self) -> bool {
+        matches!(self, Self::Ipc | Self::Both)
+    }
+    fn uses_dds(self) -> bool {
+        matches!(self, Self::Dds | Self::Both)
+    }
+}
+
+/// Configuration of a [`Transport`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TransportConfig {
+    /// Node name (iceoryx2 node name; DDS node `/rpkm/<node_name>`).
+    pub node_name: String,
+    /// Backends this transport opens; also the default of [`Transport::publisher`].
+    pub backend: Backend,
+    /// Prefix of the iceoryx2 service names (`<prefix>/rpkm/...`); empty for none.
+    pub ipc_prefix: String,
+    /// DDS domain id; `None` reads `ROS_DOMAIN_ID` (default 0).
+    pub dds_domain: Option<u16>,
+}
+
+impl TransportConfig {
+    /// Defaults: iceoryx2 only, no prefix, domain from the environment.
+    pub fn new(node_name: impl Into<String>) -> Self {
+        Self {
+            node_name: node_name.into(),
+            backend: Backend::Ipc,
+            ipc_prefix: String::new(),
+            dds_domain: None,
+        }
+    }
+    /// Sets the backend.
+    pub fn backend(mut self, backend: Backend) -> Self {
+        self.backend = backend;
+        self
+    }
+    /// Sets the iceoryx2 service-name prefix.
+    pub fn ipc_prefix(mut self, prefix: impl Into<String>) -> Self {
+        self.ipc_prefix = prefix.into();
+        self
+    }
+    /// Sets the DDS domain id instead of reading `ROS_DOMAIN_ID`.
+    pub fn dds_domain(mut self, domain: u16) -> Self {
+        self.dds_domain = Some(domain);
+        self
+    }
+}
+
+/// The nodes of the configured backends; creates [`Publisher`]s and [`Subscriber`]s.
+#[derive(Debug)]
+pub struct Transport {
+    backend: Backend,
+    ipc: Option<IpcNode>,
+    dds: Option<Arc<DdsNode>>,
+}
+
+impl Transport {
+    /// Opens the configured backends. The iceoryx2 node removes the stale resources of dead
+    /// nodes on creation.
+    pub fn new(config: &TransportConfig) -> Result<Self, TransportError> {
+        let ipc = if config.backend.uses_ipc() {
+            Some(IpcNode::new(&config.node_name, &config.ipc_prefix)?)
+        } else {
+            None
+        };
+        let dds = if config.backend.uses_dds() {
+            let domain = match config.dds_domain {
+                Some(d) => d,
+                None => domain_id_from_env()?,
+            };
+            Some(DdsNode::new(&config.node_name, domain)?)
+        } else {
+            None
+        };
+        Ok(Self {
+            backend: config.backend,
+            ipc,
+            dds,
+        })
+    }
+
+    /// The configured backend.
+    pub fn backend(&self) -> Backend {
+        self.backend
+    }
+
+    /// The iceoryx2 node, if configured.
+    pub fn ipc_node(&self) -> Option<&IpcNode> {
+        self.ipc.as_ref()
+    }
+
+    /// The DDS domain id, if DDS is configured.
+    pub fn dds_domain(&self) -> Option<u16> {
+        self.dds.as_ref().map(|d| d.domain())
+    }
+
+    /// A publisher on the configured backend(s).
+    pub fn publisher<T: IpcMessage>(
+        &self,
+        topic: &Topic<T>,
+    ) -> Result<Publisher<T>, TransportError> {
+        self.publisher_on(topic, self.backend)
+    }
+
+    /// A publisher on `backend`, which this transport must have opened.
+    pub fn publisher_on<T: IpcMessage>(
+        &self,
+        topic: &Topic<T>,
+        backend: Backend,
+    ) -> Result<Publisher<T>, TransportError> {
+        let ipc = if backend.uses_ipc() {
+            Some(T::ipc_publisher(
+                self.ipc_for(topic.name(), backend)?,
+                topic,
+            )?)
+        } else {
+            None
+        };
+        let dds = if backend.uses_dds() {
+            Some(self.dds_for(topic.name(), backend)?.publisher(topic)?)
+        } else {
+            None
+        };
+        Ok(Publisher {
+            topic: topic.name(),
+            ipc,
+            dds,
+        })
+    }
+
+    /// A subscriber on the configured backend (iceoryx2 for [`Backend::Both`]).
+    pub fn subscriber<T: IpcMessage>(
+        &self,
+        topic: &Topic<T>,
+    ) -> Result<Subscriber<T>, TransportError> {
+        self.subscriber_on(topic, self.backend)
+    }
+
+    /// A subscriber on `backend` ([`Backend::Both`] receives from iceoryx2).
+    pub fn subscriber_on<T: IpcMessage>(
+        &self,
+        topic: &Topic<T>,
+        backend: Backend,
+    ) -> Result<Subscriber<T>, TransportError> {
+        let inner = match backend {
+            Backend::Ipc | Backend::Both => SubInner::Ipc(T::ipc_subscriber(
+                self.ipc_for(topic.name(), backend)?,
+                topic,
+            )?),
+            Backend::Dds => SubInner::Dds(self.dds_for(topic.name(), backend)?.subscriber(topic)?),
+        };
+        Ok(Subscriber {
+            topic: topic.name(),
+            inner,
+        })
+    }
+
+    fn ipc_for(&self, topic: &str, backend: Backend) -> Result<&IpcNode, TransportError> {
+        self.ipc
+            .as_ref()
+            .ok_or_else(|| self.disabled(topic, backend))
+    }
+
+    fn dds_for(&self, topic: &str, backend: Backend) -> Result<&Arc<DdsNode>, TransportError> {
+        self.dds
+            .as_ref()
+            .ok_or_else(|| self.disabled(topic, backend))
+    }
+
+    fn disabled(&self, topic: &str, backend: Backend) -> TransportError {
+        TransportError::BackendDisabled {
+            topic: topic.to_owned(),
+            backend: backend.name(),
+            configured: self.backend.name(),
+        }
+    }
+}
+
+/// Publishes `T` on one topic, on iceoryx2, DDS or both.
+pub struct Publisher<T: IpcMessage> {
+    topic: &'static str,
+    ipc: Option<Box<dyn IpcSend<T>>>,
+    dds: Option<DdsPublisher<T>>,
+}
+
+impl<T: IpcMessage> Publisher<T> {
+    /// Sends `msg` on every backend of this publisher. With both, DDS is tried even if
+    /// iceoryx2 failed; the first error is returned.
+    pub fn publish(&self, msg: &T) -> Result<(), TransportError> {
+        let ipc = self.ipc.as_ref().map(|p| p.send(msg)).unwrap_or(Ok(()));
+        let dds = self.dds.as_ref().map(|p| p.send(msg)).unwrap_or(Ok(()));
+        ipc.and(dds)
+    }
+
+    /// The ROS 2 topic name.
+    pub fn topic(&self) -> &'static str {
+        self.topic
+    }
+}
+
+enum SubInner<T: IpcMessage> {
+    Ipc(Box<dyn IpcRecv<T>>),
+    Dds(DdsSubscriber<T>),
+}
+
+/// Receives `T` from one topic.
+pub struct Subscriber<T: IpcMessage> {
+    topic: &'static str,
+    inner: SubInner<T>,
+}
+
+/// Busy-polls this long before [`Subscriber::recv_timeout`] starts sleeping between polls.
+const SPIN: Duration = Duration::from_micros(200);
+/// Sleep between polls after the spin phase.
+const POLL_SLEEP: Duration = Duration::from_micros(100);
+
+impl<T: IpcMessage> Subscriber<T> {
+    /// The next sample if one is queued.
+    pub fn try_recv(&self) -> Result<Option<T>, TransportError> {
+        match &self.inner {
+            SubInner::Ipc(s) => s.try_recv(),
+            SubInner::Dds(s) => s.try_recv(),
+        }
+    }
+
+    /// Connects to publishers that appeared since the last call (iceoryx2; a no-op on DDS).
+    /// `try_recv` does this too. Reliable iceoryx2 delivery (the publisher waits for queue
+    /// space) holds once the subscriber has connected to the publisher; before that a
+    /// publisher overwrites samples the subscriber has not yet taken.
+    pub fn update_connections(&self) -> Result<(), TransportError> {
+        match &self.inner {
+            SubInner::Ipc(s) => s.update_connections(),
+            SubInner::Dds(_) => Ok(()),
+        }
+    }
+
+    /// Waits up to `timeout` for the next sample; `Ok(None)` on timeout. Busy-polls for the
+    /// first 200 µs, then polls every 100 µs.
+    pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<T>, TransportError> {
+        let start = Instant::now();
+        loop {
+            if let Some(msg) = self.try_recv()? {
+                return Ok(Some(msg));
+            }
+            let elapsed = start.elapsed();
+            if elapsed >= timeout {
+                return Ok(None);
+            }
+            if elapsed < SPIN {
+                std::hint::spin_loop();
+            } else {
+                std::thread::sleep(POLL_SLEEP.min(timeout - elapsed));
+            }
+        }
+    }
+
+    /// Busy-polls (no sleep) up to `timeout`: lowest latency, one core spinning.
+    pub fn recv_spin(&self, timeout: Duration) -> Result<Option<T>, TransportError> {
+        let start = Instant::now();
+        loop {
+            if let Some(msg) = self.try_recv()? {
+                return Ok(Some(msg));
+            }
+            if start.elapsed() >= timeout {
+                return Ok(None);
+            }
+            std::hint::spin_loop();
+        }
+    }
+
+    /// The ROS 2 topic name.
+    pub fn topic(&self) -> &'static str {
+        self.topic
+    }
+}
