@@ -3,6 +3,9 @@
 //! forces in N, as in the thesis.
 
 pub mod campaign;
+pub mod calib;
 pub mod geometry;
 pub mod noise;
+pub mod obs;
+pub mod observability;
 pub mod params;

@@ -1,0 +1,691 @@
+//! Geometric calibration (thesis chapter 3, 4.2-4.3): Levenberg-Marquardt on the weighted
+//! model-minus-measurement rows of `obs`, with parameter scaling, the dependency matrix D,
+//! outlier elimination per measurement direction, parameter uncertainties, and the two-step
+//! procedure of the forward instruments.
+
+use crate::campaign::{Campaign, Instrument};
+use crate::obs::{self, Direction, PoseError, Residual, Step};
+use crate::observability::{condition_number, normalize_columns, qr_pivot_order};
+use crate::params::{self, variation_range, Model, Params, NAMES, N_PARAMS};
+use nalgebra::{DMatrix, DVector};
+use std::collections::{BTreeMap, HashSet};
+
+/// Which parameters the calibration identifies.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Selection {
+    /// From the observability analysis of the campaign: parameters in QR-pivot order while
+    /// the condition number stays below `max_condition` (100 after Schröer).
+    Auto { max_condition: f64 },
+    /// An explicit list of parameter indexes.
+    List(Vec<usize>),
+}
+
+/// Parameter scaling (eq. 3.23-3.25).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Scaling {
+    /// h_k = 1 / ‖J_k‖: column norms of the weighted Jacobian.
+    #[default]
+    ColumnNorm,
+    /// h_k = the parameter's plausible variation (0.1 mm, 1°), after Schröer.
+    Range,
+}
+
+/// A linked parameter (a row of the dependency matrix D, eq. 3.35): Δp_param = Σ a·Δp_j.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Link {
+    pub param: usize,
+    pub terms: Vec<(usize, f64)>,
+}
+
+impl Link {
+    /// The perfect parallel-holder as links: rod 5 follows rod 4 (l5 = l4, xa5r = xa4r, ...).
+    pub fn perfect_parallelogram() -> Vec<Link> {
+        use params::*;
+        [
+            (L5, L4),
+            (XA5R, XA4R),
+            (YA5R, YA4R),
+            (XB5R, XB4R),
+            (YB5R, YB4R),
+        ]
+        .into_iter()
+        .map(|(p, j)| Link {
+            param: p,
+            terms: vec![(j, 1.0)],
+        })
+        .collect()
+    }
+}
+
+/// Options of a calibration.
+#[derive(Clone, Debug)]
+pub struct Options {
+    pub model: Model,
+    pub selection: Selection,
+    pub links: Vec<Link>,
+    pub scaling: Scaling,
+    /// Rows further than this many standard deviations from their direction's mean are
+    /// eliminated (eq. 3.31-3.32); None keeps every row.
+    pub outlier_sigma: Option<f64>,
+    pub max_iterations: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            model: Model::M29,
+            selection: Selection::Auto {
+                max_condition: 100.0,
+            },
+            links: Vec::new(),
+            scaling: Scaling::ColumnNorm,
+            outlier_sigma: Some(3.0),
+            max_iterations: 100,
+        }
+    }
+}
+
+/// Why a calibration failed.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrationError {
+    #[error(transparent)]
+    Pose(#[from] PoseError),
+    #[error("{0}: the campaign has no calibration measurements (only circle/none rows or resets)")]
+    NoMeasurements(String),
+    #[error("parameter {0} does not belong to {1}")]
+    NotInModel(&'static str, Model),
+    #[error("parameter {0} has no influence on these measurements (zero Jacobian column)")]
+    Unobservable(&'static str),
+    #[error("no parameter is observable with this campaign")]
+    NothingToIdentify,
+    #[error("more parameters ({params}) than measurement rows ({rows})")]
+    Underdetermined { params: usize, rows: usize },
+    #[error("Levenberg-Marquardt did not converge in {iterations} iterations (cost {cost:.4e}, gradient {gradient:.3e})")]
+    NotConverged {
+        iterations: usize,
+        cost: f64,
+        gradient: f64,
+    },
+    #[error(
+        "the normal equations are singular: identified parameters are linearly dependent ({0})"
+    )]
+    Singular(String),
+}
+
+/// A row removed as an outlier.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Outlier {
+    /// Source line of the pose.
+    pub line: usize,
+    pub instrument: String,
+    pub direction: String,
+    /// Residual at removal, mm (rad for ψ).
+    pub residual: f64,
+    /// Its distance from the direction's mean in standard deviations.
+    pub deviations: f64,
+}
+
+/// RMS of one instrument and direction.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct DirectionRms {
+    pub instrument: String,
+    pub direction: String,
+    pub rows: usize,
+    /// mm, or rad for ψ.
+    pub rms_before: f64,
+    pub rms_after: f64,
+    pub is_angle: bool,
+}
+
+/// One identified parameter.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Identified {
+    pub name: &'static str,
+    pub index: usize,
+    pub nominal: f64,
+    pub value: f64,
+    pub sigma: f64,
+    /// Which step identified it: 1 (direct rows) or 2 (virtual q2 rows of forward instruments).
+    pub step: u8,
+}
+
+/// The result of a calibration.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    pub model: Model,
+    pub start: Params,
+    pub params: Params,
+    pub identified: Vec<Identified>,
+    pub iterations: usize,
+    /// Condition number of the column-normalised weighted Jacobian of the identified
+    /// parameters (step 1).
+    pub condition_number: f64,
+    pub outliers: Vec<Outlier>,
+    pub rms: Vec<DirectionRms>,
+    /// Weighted cost ½ Σ (r/σ)² before and after; the chi-square per degree of freedom after.
+    pub cost_before: f64,
+    pub cost_after: f64,
+    pub chi2_per_dof: f64,
+    pub rows: usize,
+}
+
+/// The dependency matrix D (29 × n) for the identified `ids` with `links`.
+fn dependency(ids: &[usize], links: &[Link]) -> DMatrix<f64> {
+    let mut d = DMatrix::zeros(N_PARAMS, ids.len());
+    for (k, &i) in ids.iter().enumerate() {
+        d[(i, k)] = 1.0;
+    }
+    for link in links {
+        for &(j, a) in &link.terms {
+            if let Some(k) = ids.iter().position(|&i| i == j) {
+                d[(link.param, k)] += a;
+            }
+        }
+    }
+    d
+}
+
+/// Weighted residual vector and weighted Jacobian (m × 29) of rows.
+fn weighted(rows: &[Residual]) -> (DVector<f64>, DMatrix<f64>) {
+    let r = DVector::from_iterator(rows.len(), rows.iter().map(|row| row.value / row.sigma));
+    let j = DMatrix::from_fn(rows.len(), N_PARAMS, |i, k| {
+        rows[i].jacobian[k] / rows[i].sigma
+    });
+    (r, j)
+}
+
+type Key = (usize, Direction);
+
+fn rows_at(
+    c: &Campaign,
+    p: &Params,
+    model: Model,
+    step: Step,
+    p_cal: &Params,
+    drop: &HashSet<Key>,
+) -> Result<Vec<Residual>, PoseError> {
+    let mut rows = obs::residuals(c, p, model, step, p_cal)?;
+    rows.retain(|r| !drop.contains(&(r.pose, r.direction)));
+    Ok(rows)
+}
+
+/// Levenberg-Marquardt with Nielsen's damping update (Madsen, Nielsen, Tingleff 2004), on the
+/// scaled variables δ = H⁻¹ Δp_red (eq. 3.24).
+struct Lm<'a> {
+    campaign: &'a Campaign,
+    model: Model,
+    step: Step,
+    p_cal: Params,
+    drop: &'a HashSet<Key>,
+    d: DMatrix<f64>,
+    h: DVector<f64>,
+    max_iterations: usize,
+}
+
+struct LmResult {
+    params: Params,
+    iterations: usize,
+    cost: f64,
+}
+
+impl Lm<'_> {
+    fn eval(&self, p: &Params) -> Result<(DVector<f64>, DMatrix<f64>), PoseError> {
+        let rows = rows_at(
+            self.campaign,
+            p,
+            self.model,
+            self.step,
+            &self.p_cal,
+            self.drop,
+        )?;
+        let (r, j) = weighted(&rows);
+        let js = j * &self.d * DMatrix::from_diagonal(&self.h);
+        Ok((r, js))
+    }
+
+    fn apply(&self, p: &Params, delta: &DVector<f64>) -> Params {
+        let dp = &self.d * delta.component_mul(&self.h);
+        let mut out = *p;
+        for i in 0..N_PARAMS {
+            out[i] += dp[i];
+        }
+        out
+    }
+
+    fn run(&self, start: &Params) -> Result<LmResult, CalibrationError> {
+        let mut p = *start;
+        let (mut r, mut js) = self.eval(&p)?;
+        let mut cost = 0.5 * r.norm_squared();
+        let mut a = js.transpose() * &js;
+        let mut g = js.transpose() * &r;
+        let mut mu = 1e-3 * a.diagonal().max();
+        let mut nu = 2.0;
+        for it in 0..self.max_iterations {
+            if g.amax() < 1e-9 * (1.0 + cost) {
+                return Ok(LmResult {
+                    params: p,
+                    iterations: it,
+                    cost,
+                });
+            }
+            let mut damped = a.clone();
+            for k in 0..damped.nrows() {
+                damped[(k, k)] += mu;
+            }
+            let Some(chol) = damped.cholesky() else {
+                mu *= nu;
+                nu *= 2.0;
+                continue;
+            };
+            let step = -chol.solve(&g);
+            let candidate = self.apply(&p, &step);
+            let predicted = 0.5 * step.dot(&(step.scale(mu) - &g));
+            let trial = self
+                .eval(&candidate)
+                .ok()
+                .map(|(r2, j2)| (0.5 * r2.norm_squared(), r2, j2));
+            match trial {
+                Some((cost2, r2, j2)) if cost2 < cost && predicted > 0.0 => {
+                    let rho = (cost - cost2) / predicted;
+                    let small = cost - cost2 <= 1e-12 * cost;
+                    p = candidate;
+                    r = r2;
+                    js = j2;
+                    cost = cost2;
+                    a = js.transpose() * &js;
+                    g = js.transpose() * &r;
+                    mu *= f64::max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0).powi(3));
+                    nu = 2.0;
+                    if small || step.norm() < 1e-12 {
+                        return Ok(LmResult {
+                            params: p,
+                            iterations: it + 1,
+                            cost,
+                        });
+                    }
+                }
+                _ => {
+                    // a step that raises the cost or leaves the assembly mode is refused
+                    mu *= nu;
+                    nu *= 2.0;
+                    if mu > 1e30 {
+                        return Ok(LmResult {
+                            params: p,
+                            iterations: it + 1,
+                            cost,
+                        });
+                    }
+                }
+            }
+        }
+        Err(CalibrationError::NotConverged {
+            iterations: self.max_iterations,
+            cost,
+            gradient: g.amax(),
+        })
+    }
+}
+
+/// Weighted Jacobian columns (m × n) for parameters `ids` under links, at `p`.
+fn reduced_jacobian(rows: &[Residual], ids: &[usize], links: &[Link]) -> DMatrix<f64> {
+    let (_, j) = weighted(rows);
+    j * dependency(ids, links)
+}
+
+/// Parameters of `candidates` in observability order, kept while the condition number of
+/// the column-normalised Jacobian stays below `max_condition`.
+pub fn auto_select(
+    rows: &[Residual],
+    candidates: &[usize],
+    links: &[Link],
+    max_condition: f64,
+) -> Vec<usize> {
+    let jr = reduced_jacobian(rows, candidates, links);
+    let range = DVector::from_iterator(
+        candidates.len(),
+        candidates.iter().map(|&i| variation_range(i)),
+    );
+    let scaled = jr * DMatrix::from_diagonal(&range);
+    let mut chosen = Vec::new();
+    for ranked in qr_pivot_order(&scaled) {
+        if !(ranked.condition_number < max_condition) {
+            break;
+        }
+        chosen.push(candidates[ranked.column]);
+    }
+    chosen
+}
+
+fn scaling_vector(
+    jr: &DMatrix<f64>,
+    ids: &[usize],
+    scaling: Scaling,
+) -> Result<DVector<f64>, CalibrationError> {
+    let mut h = DVector::zeros(ids.len());
+    for (k, &i) in ids.iter().enumerate() {
+        let n = jr.column(k).norm();
+        if !(n > 0.0) {
+            return Err(CalibrationError::Unobservable(NAMES[i]));
+        }
+        h[k] = match scaling {
+            Scaling::ColumnNorm => 1.0 / n,
+            Scaling::Range => variation_range(i),
+        };
+    }
+    Ok(h)
+}
+
+/// Rows further than `k` standard deviations from the mean of their instrument and direction.
+fn find_outliers(rows: &[Residual], campaign: &Campaign, k: f64) -> Vec<(Key, Outlier)> {
+    let mut groups: BTreeMap<(&str, Direction), Vec<&Residual>> = BTreeMap::new();
+    for r in rows {
+        groups
+            .entry((r.instrument.as_str(), r.direction))
+            .or_default()
+            .push(r);
+    }
+    let mut out = Vec::new();
+    for ((inst, dir), g) in groups {
+        if g.len() < 8 {
+            continue; // too few rows for a trustworthy standard deviation
+        }
+        let n = g.len() as f64;
+        let mean = g.iter().map(|r| r.value).sum::<f64>() / n;
+        let sd = (g.iter().map(|r| (r.value - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+        for r in g {
+            let dev = (r.value - mean).abs() / sd;
+            if sd > 0.0 && dev > k {
+                out.push((
+                    (r.pose, r.direction),
+                    Outlier {
+                        line: campaign.poses[r.pose].line,
+                        instrument: inst.to_string(),
+                        direction: dir.to_string(),
+                        residual: r.value,
+                        deviations: dev,
+                    },
+                ));
+            }
+        }
+    }
+    out
+}
+
+/// Rod-2 parameters: identified by the virtual q2 step of forward instruments.
+fn rod2_params() -> [usize; 5] {
+    use params::*;
+    [L2, XA2R, YA2R, XB2R, YB2R]
+}
+
+/// RMS per instrument and direction of two row sets (same rows, two parameter sets).
+fn rms_table(before: &[Residual], after: &[Residual]) -> Vec<DirectionRms> {
+    let mut acc: BTreeMap<(Instrument, Direction), (usize, f64, f64)> = BTreeMap::new();
+    let key = |r: &Residual| (r.instrument, r.direction);
+    for r in before {
+        let e = acc.entry(key(r)).or_default();
+        e.0 += 1;
+        e.1 += r.value * r.value;
+    }
+    for r in after {
+        acc.entry(key(r)).or_default().2 += r.value * r.value;
+    }
+    acc.into_iter()
+        .map(|((inst, dir), (n, b, a))| DirectionRms {
+            instrument: inst.as_str().to_string(),
+            direction: dir.to_string(),
+            rows: n,
+            rms_before: (b / n.max(1) as f64).sqrt(),
+            rms_after: (a / n.max(1) as f64).sqrt(),
+            is_angle: dir.is_angle(),
+        })
+        .collect()
+}
+
+/// Identified parameters of one LM step, with uncertainties from the a-posteriori covariance
+/// s² (JᵀJ)⁻¹ of the weighted problem.
+fn uncertainties(
+    rows: &[Residual],
+    ids: &[usize],
+    links: &[Link],
+    cost: f64,
+) -> Result<Vec<f64>, CalibrationError> {
+    let jr = reduced_jacobian(rows, ids, links);
+    let dof = rows.len().saturating_sub(ids.len()).max(1) as f64;
+    let s2 = 2.0 * cost / dof;
+    let a = jr.transpose() * &jr;
+    let inv = a.try_inverse().ok_or_else(|| {
+        CalibrationError::Singular(ids.iter().map(|&i| NAMES[i]).collect::<Vec<_>>().join(", "))
+    })?;
+    Ok(ids
+        .iter()
+        .enumerate()
+        .map(|(k, _)| (inv[(k, k)] * s2).max(0.0).sqrt())
+        .collect())
+}
+
+/// Calibrate `campaign` starting from `start`.
+pub fn calibrate(
+    campaign: &Campaign,
+    start: &Params,
+    opts: &Options,
+) -> Result<Calibration, CalibrationError> {
+    let model = opts.model;
+    if let Selection::List(list) = &opts.selection {
+        if let Some(&i) = list.iter().find(|&&i| !model.has_param(i)) {
+            return Err(CalibrationError::NotInModel(NAMES[i], model));
+        }
+    }
+    let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();
+    let no_drop = HashSet::new();
+    let rows0 = rows_at(campaign, start, model, Step::Direct, start, &no_drop)?;
+    if rows0.is_empty() {
+        return Err(CalibrationError::NoMeasurements(campaign.source.clone()));
+    }
+    // Candidates of step 1: the model's free parameters with an influence on the direct rows.
+    let (_, j0) = weighted(&rows0);
+    let influences = |i: usize| {
+        j0.column(i).norm() > 0.0
+            || opts
+                .links
+                .iter()
+                .any(|l| l.terms.iter().any(|t| t.0 == i) && j0.column(l.param).norm() > 0.0)
+    };
+    let free: Vec<usize> = model
+        .params()
+        .into_iter()
+        .filter(|i| !linked.contains(i))
+        .collect();
+    let step1_ids: Vec<usize> = match &opts.selection {
+        Selection::Auto { max_condition } => {
+            let cands: Vec<usize> = free.iter().copied().filter(|&i| influences(i)).collect();
+            auto_select(&rows0, &cands, &opts.links, *max_condition)
+        }
+        Selection::List(list) => list.iter().copied().filter(|&i| influences(i)).collect(),
+    };
+    let forward_two_step = obs::has_forward_instruments(campaign);
+    let step2_wanted: Vec<usize> = if forward_two_step {
+        let r2 = rod2_params();
+        match &opts.selection {
+            Selection::Auto { .. } => r2
+                .iter()
+                .copied()
+                .filter(|i| !step1_ids.contains(i))
+                .collect(),
+            Selection::List(list) => list
+                .iter()
+                .copied()
+                .filter(|i| r2.contains(i) && !step1_ids.contains(i))
+                .collect(),
+        }
+    } else {
+        Vec::new()
+    };
+    if let Selection::List(list) = &opts.selection {
+        if let Some(&i) = list
+            .iter()
+            .find(|i| !step1_ids.contains(i) && !step2_wanted.contains(i))
+        {
+            return Err(CalibrationError::Unobservable(NAMES[i]));
+        }
+    }
+    if step1_ids.is_empty() {
+        return Err(CalibrationError::NothingToIdentify);
+    }
+    if rows0.len() < step1_ids.len() {
+        return Err(CalibrationError::Underdetermined {
+            params: step1_ids.len(),
+            rows: rows0.len(),
+        });
+    }
+
+    // Step 1 with outlier elimination rounds.
+    let jr0 = reduced_jacobian(&rows0, &step1_ids, &opts.links);
+    let h = scaling_vector(&jr0, &step1_ids, opts.scaling)?;
+    let condition = condition_number(&normalize_columns(&jr0));
+    let mut drop: HashSet<Key> = HashSet::new();
+    let mut outliers = Vec::new();
+    let mut p = *start;
+    let mut iterations = 0;
+    let mut cost;
+    loop {
+        let lm = Lm {
+            campaign,
+            model,
+            step: Step::Direct,
+            p_cal: *start,
+            drop: &drop,
+            d: dependency(&step1_ids, &opts.links),
+            h: h.clone(),
+            max_iterations: opts.max_iterations,
+        };
+        let res = lm.run(&p)?;
+        p = res.params;
+        iterations += res.iterations;
+        cost = res.cost;
+        let Some(k) = opts.outlier_sigma else { break };
+        let rows = rows_at(campaign, &p, model, Step::Direct, start, &drop)?;
+        let found = find_outliers(&rows, campaign, k);
+        if found.is_empty() || outliers.len() > rows0.len() / 20 {
+            break;
+        }
+        for (key, o) in found {
+            drop.insert(key);
+            outliers.push(o);
+        }
+    }
+    let rows_final = rows_at(campaign, &p, model, Step::Direct, start, &drop)?;
+    let sig1 = uncertainties(&rows_final, &step1_ids, &opts.links, cost)?;
+    let mut identified: Vec<Identified> = step1_ids
+        .iter()
+        .zip(&sig1)
+        .map(|(&i, &s)| Identified {
+            name: NAMES[i],
+            index: i,
+            nominal: start[i],
+            value: p[i],
+            sigma: s,
+            step: 1,
+        })
+        .collect();
+    let mut before_rows: Vec<Residual> =
+        rows_at(campaign, start, model, Step::Direct, start, &drop)?;
+    let mut after_rows = rows_final;
+
+    // Step 2: rod 2 from virtual measurements of the forward instruments (eq. 4.32).
+    if !step2_wanted.is_empty() {
+        let p1 = p;
+        let rows2 = rows_at(campaign, &p1, model, Step::VirtualQ2, &p1, &drop)?;
+        let ids2 = match &opts.selection {
+            Selection::Auto { max_condition } => {
+                auto_select(&rows2, &step2_wanted, &[], *max_condition)
+            }
+            Selection::List(_) => step2_wanted.clone(),
+        };
+        if !ids2.is_empty() {
+            let jr2 = reduced_jacobian(&rows2, &ids2, &[]);
+            let h2 = scaling_vector(&jr2, &ids2, opts.scaling)?;
+            let lm = Lm {
+                campaign,
+                model,
+                step: Step::VirtualQ2,
+                p_cal: p1,
+                drop: &drop,
+                d: dependency(&ids2, &[]),
+                h: h2,
+                max_iterations: opts.max_iterations,
+            };
+            let res = lm.run(&p1)?;
+            p = res.params;
+            iterations += res.iterations;
+            let rows2_after = rows_at(campaign, &p, model, Step::VirtualQ2, &p1, &drop)?;
+            let sig2 = uncertainties(&rows2_after, &ids2, &[], res.cost)?;
+            identified.extend(ids2.iter().zip(&sig2).map(|(&i, &s)| Identified {
+                name: NAMES[i],
+                index: i,
+                nominal: start[i],
+                value: p[i],
+                sigma: s,
+                step: 2,
+            }));
+            before_rows.extend(rows_at(
+                campaign,
+                start,
+                model,
+                Step::VirtualQ2,
+                start,
+                &drop,
+            )?);
+            after_rows.extend(rows2_after);
+        }
+    }
+    // Linked parameters follow their masters in the final set.
+    let cost_before = 0.5
+        * before_rows
+            .iter()
+            .map(|r| (r.value / r.sigma).powi(2))
+            .sum::<f64>();
+    let cost_after = 0.5
+        * after_rows
+            .iter()
+            .map(|r| (r.value / r.sigma).powi(2))
+            .sum::<f64>();
+    let dof = after_rows.len().saturating_sub(identified.len()).max(1) as f64;
+    Ok(Calibration {
+        model,
+        start: *start,
+        params: p,
+        identified,
+        iterations,
+        condition_number: condition,
+        outliers,
+        rms: rms_table(&before_rows, &after_rows),
+        cost_before,
+        cost_after,
+        chi2_per_dof: 2.0 * cost_after / dof,
+        rows: after_rows.len(),
+    })
+}
+
+/// Calibration gain on held-out measurement errors (eq. 3.33-3.34): the mean over values of
+/// (|ΔW_nc| − |ΔW_cal|) / |ΔW_nc|.
+pub fn gain(before: &[f64], after: &[f64]) -> f64 {
+    let terms: Vec<f64> = before
+        .iter()
+        .zip(after)
+        .filter(|(b, _)| b.abs() > 0.0)
+        .map(|(b, a)| (b.abs() - a.abs()) / b.abs())
+        .collect();
+    if terms.is_empty() {
+        0.0
+    } else {
+        terms.iter().sum::<f64>() / terms.len() as f64
+    }
+}
+
+/// RMS of a set of values.
+pub fn rms(values: &[f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt()
+}
