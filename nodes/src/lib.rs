@@ -1,1 +1,3 @@
 //! The rpkm node set: command line, nodes, reports. Physics lives in `rpkm_core`.
+
+pub mod plot;
