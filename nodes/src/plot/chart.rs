@@ -192,6 +192,19 @@ pub fn bar_chart(
                 Some(top) => (top.min(base), (top - base).abs(), "bar"),
                 None => (base, 0.0, "bar missing"),
             };
+            if top.is_none() {
+                // Mark values that cannot be shown, so that a gap is not read as 0.
+                let label_y = base - 4.0;
+                svg.text_markup(
+                    x + bar_w / 2.0 + 3.0,
+                    label_y,
+                    9.0,
+                    Anchor::Start,
+                    "n/a",
+                    -90.0,
+                    r##"fill-opacity="0.6""##,
+                );
+            }
             svg.raw(&format!(
                 r#"<rect class="{class}" x="{}" y="{}" width="{}" height="{}" fill="{}"><title>{}</title></rect>"#,
                 num(x),

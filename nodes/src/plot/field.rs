@@ -96,7 +96,7 @@ pub fn heat_map(title_text: &str, points: &[(f64, f64, f64)], value_label: &str)
     } else {
         1.0
     };
-    let step = nice_step(2.0 * peak, 4);
+    let step = nice_step(2.0 * peak, 6);
     let m = ((peak / step).ceil() * step).max(step);
 
     let mut svg = Svg::new(width, height);
@@ -189,7 +189,7 @@ pub fn quiver(title_text: &str, points: &[(f64, f64, f64, f64)], scale_label: &s
     .clamp(12.0, 60.0);
     let longest = shown.iter().map(|p| p.2.hypot(p.3)).fold(0.0f64, f64::max);
     let gain = if longest > 0.0 {
-        cell * 0.95 / longest
+        cell * 1.1 / longest
     } else {
         0.0
     };

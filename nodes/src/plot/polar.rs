@@ -2,7 +2,7 @@
 
 use super::chart::{title, TICK_SIZE};
 use super::scale::{label, nice_step};
-use super::svg::{Anchor, Svg};
+use super::svg::{escape, Anchor, Svg};
 
 /// Circular test (ball-bar) plot: the measured radial deviation `deviation_um[i]` (µm, positive
 /// outward) at angle `angles_rad[i]` (rad, counter-clockwise from +x), drawn around the
@@ -18,9 +18,9 @@ pub fn polar_deviation(
     nominal_radius_mm: f64,
 ) -> String {
     let width = 600.0;
-    let height = 640.0;
-    let (cx, cy) = (width / 2.0, 350.0);
-    let r_px = 200.0;
+    let height = 660.0;
+    let (cx, cy) = (width / 2.0, 345.0);
+    let r_px = 180.0;
     let data: Vec<(f64, f64)> = angles_rad
         .iter()
         .zip(deviation_um)
@@ -68,7 +68,7 @@ pub fn polar_deviation(
                     (a.min(p.1), b.max(p.1))
                 });
             s.push_str(&format!(
-                "; mean {:.1} µm, circularity {:.1} µm",
+                "; mean deviation {:.1} µm, circularity {:.1} µm",
                 mean,
                 hi - lo
             ));
@@ -88,7 +88,7 @@ pub fn polar_deviation(
     for k in 0..8 {
         let a = k as f64 * std::f64::consts::FRAC_PI_4;
         let (c, s) = (a.cos(), a.sin());
-        let outer = r_px + ring * gain + 18.0;
+        let outer = r_px * 1.25 + 16.0;
         svg.line(cx, cy, cx + c * outer, cy - s * outer, "#e6e6e6", 1.0);
         svg.text(
             cx + c * (outer + 14.0),
@@ -122,13 +122,14 @@ pub fn polar_deviation(
             label(ring, ring)
         );
         let a = 0.35f64; // label position, rad
-        svg.text(
+        svg.text_markup(
             cx + rr * a.cos() + 4.0,
             cy - rr * a.sin(),
             TICK_SIZE - 1.0,
             Anchor::Start,
-            &text,
+            &escape(&text),
             0.0,
+            r##"stroke="#ffffff" stroke-width="3" paint-order="stroke""##,
         );
     }
     // The measured profile (closed).
@@ -151,7 +152,7 @@ pub fn polar_deviation(
     }
     svg.circle(cx, cy, 2.5, "#444444", "");
     // Legend.
-    let ly = height - 30.0;
+    let ly = height - 22.0;
     svg.line(40.0, ly, 64.0, ly, "#888888", 1.2);
     svg.text(
         70.0,

@@ -13,9 +13,9 @@ pub struct Scale {
 }
 
 impl Scale {
-    /// A linear scale over the finite `values` (with `pad` fraction of margin on each side
-    /// and, where `include_zero`, 0 in the range), onto pixels `p0..p1`. Empty or
-    /// degenerate data give a unit interval.
+    /// A linear scale over the finite `values` (with `pad` fraction of margin on each side,
+    /// but none below or above a 0 that `include_zero` brought in), onto pixels `p0..p1`.
+    /// Empty or degenerate data give a unit interval.
     pub fn linear(
         values: impl IntoIterator<Item = f64>,
         include_zero: bool,
@@ -43,15 +43,6 @@ impl Scale {
         }
         if !(include_zero && hi == 0.0) {
             hi += pad * span;
-        }
-        // Extend to tick boundaries so that the axis ends on a labelled value.
-        let step = nice_step(hi - lo, 6);
-        if step.is_finite() && step > 0.0 {
-            let (a, b) = ((lo / step).floor() * step, (hi / step).ceil() * step);
-            if a.is_finite() && b.is_finite() && b > a {
-                lo = a;
-                hi = b;
-            }
         }
         Scale {
             lo,
@@ -159,11 +150,12 @@ pub fn nice_step(span: f64, n: usize) -> f64 {
     let raw = span / n.max(1) as f64;
     let mag = 10f64.powf(raw.log10().floor());
     let f = raw / mag;
-    let nice = if f <= 1.0 {
+    // Tolerance: 0.3 / 6 is 0.04999…, which must give 0.05.
+    let nice = if f <= 1.0 + 1e-9 {
         1.0
-    } else if f <= 2.0 {
+    } else if f <= 2.0 + 1e-9 {
         2.0
-    } else if f <= 5.0 {
+    } else if f <= 5.0 + 1e-9 {
         5.0
     } else {
         10.0
