@@ -4,6 +4,8 @@
 
 pub mod campaign;
 pub mod calib;
+pub mod design;
+pub mod elastic;
 pub mod geometry;
 pub mod noise;
 pub mod obs;

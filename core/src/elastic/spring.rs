@@ -1,0 +1,479 @@
+//! The spring (lumped) elasto-geometric forward model: rods as axial springs, optional
+//! carrier compliance along the guides, drives that hold their positions exactly.
+//!
+//! Unknowns z = (x, y, ψ, s1, s2, s3, s4): the platform pose and the four carrier positions
+//! along their guides (same coordinate as the actuator positions q). The potential energy is
+//!
+//! V(z) = Σ_rods ½ k_i (|A_i − B_i(s)| − l_i)² + Σ_{active, compliant} ½ c_j (s_j − q_j)²
+//!
+//! and static equilibrium is ∇V = 0, except for an active drive with a rigid carrier, whose
+//! equation is s_j = q_j (integral action: the encoder reads exactly its command). A drive in
+//! follower mode exerts no force; its carrier slides freely and s_j is solved for. Newton with
+//! the analytic Hessian (tangent stiffness, geometric-stiffness terms included) converges
+//! quadratically from the rigid forward model of a pair of active drives.
+
+use crate::geometry::{self, guide_frame, Subsystem};
+use crate::params::{Model, Params, N_PARAMS, RODS};
+use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
+
+/// Nominal drive force: 100 % redundancy current, N.
+pub const NOMINAL_DRIVE_FORCE_N: f64 = 8600.0;
+/// Newton stops when the largest step falls below this, mm (or rad).
+pub const STEP_TOL: f64 = 1e-11;
+/// Iteration cap of the equilibrium Newton.
+pub const MAX_ITER: usize = 30;
+
+/// Default effective axial stiffness of each rod, N/mm (rod, its two joints and the carrier in
+/// series). Chosen so that an incompatibility of 0.4 mm on one redundant drive (q3 offset by
+/// 0.4 mm at the workspace centre, nominal parameters, rigid carriers) drives the most loaded
+/// drive to about 100 % redundancy current, as the thesis reports (section 4.4): the model is
+/// linear in the stiffness for small incompatibilities, so the value is the one that gives
+/// 8,600 N there (see `tests/elastic_spring.rs::default_stiffness_gives_100_percent_for_0_4_mm`).
+pub const DEFAULT_ROD_STIFFNESS_N_PER_MM: f64 = 15_575.0;
+
+/// Stiffness of the spring model.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Stiffness {
+    /// Effective axial stiffness of rods 1..=5, N/mm.
+    pub rod: [f64; 5],
+    /// Stiffness of carriers 1..=4 along their guides (drive, ball screw/linear motor
+    /// servo-stiffness and carrier in series), N/mm; `None` = rigid (the carrier sits exactly
+    /// at its commanded position).
+    pub carrier: [Option<f64>; 4],
+}
+
+impl Default for Stiffness {
+    fn default() -> Self {
+        Stiffness {
+            rod: [DEFAULT_ROD_STIFFNESS_N_PER_MM; 5],
+            carrier: [None; 4],
+        }
+    }
+}
+
+impl Stiffness {
+    /// Every stiffness multiplied by `factor` (a compliance study: `factor` < 1 is softer).
+    pub fn scaled(mut self, factor: f64) -> Self {
+        for k in &mut self.rod {
+            *k *= factor;
+        }
+        for c in self.carrier.iter_mut().flatten() {
+            *c *= factor;
+        }
+        self
+    }
+}
+
+/// Which drives are in follower mode (controller off, carrier free): `follower[i]` for q(i+1).
+pub type Followers = [bool; 4];
+/// All four drives position-controlled.
+pub const ALL_ACTIVE: Followers = [false; 4];
+/// q2, q3 followers (compatibility test, self-calibration).
+pub const FOLLOWERS_23: Followers = [false, true, true, false];
+
+/// An elasto-geometric solve that failed.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ElasticError {
+    #[error("no pair of active drives among the viable subsystems: the platform is not held")]
+    NotHeld,
+    #[error("rigid start failed: {0}")]
+    Start(#[from] geometry::GeometryError),
+    #[error("equilibrium did not converge in {iterations} iterations (last step {step:.3e}, gradient {gradient:.3e} N)")]
+    NotConverged {
+        iterations: usize,
+        step: f64,
+        gradient: f64,
+    },
+    #[error("singular tangent stiffness at iteration {iteration}")]
+    Singular { iteration: usize },
+    #[error("non-finite input or state")]
+    NonFinite,
+    #[error("a rod length collapsed to zero")]
+    Degenerate,
+}
+
+/// Static equilibrium of the mechanism.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Equilibrium {
+    /// Platform pose: TCP x, y (mm), angle ψ (rad).
+    pub x: f64,
+    pub y: f64,
+    pub psi: f64,
+    /// Carrier positions along their guides, mm (the commanded q for rigid active drives; the
+    /// free position for followers).
+    pub carrier: [f64; 4],
+    /// Axial force of rods 1..=5, N, positive in tension.
+    pub rod_force: [f64; 5],
+    /// Drive forces f1..f4, N, positive when the drive pushes its carrier towards larger q; 0
+    /// for a follower.
+    pub drive_force: [f64; 4],
+    /// Newton iterations.
+    pub iterations: usize,
+}
+
+impl Equilibrium {
+    /// Redundancy currents, % of the nominal 8,600 N, signed like the drive forces.
+    pub fn current(&self) -> [f64; 4] {
+        self.drive_force.map(|f| f / NOMINAL_DRIVE_FORCE_N * 100.0)
+    }
+    /// Largest |current| over the drives, %.
+    pub fn max_current(&self) -> f64 {
+        self.current().iter().fold(0.0, |m, c| m.max(c.abs()))
+    }
+    /// The unknown vector z = (x, y, ψ, s1..s4).
+    pub fn z(&self) -> SVector<f64, 7> {
+        SVector::<f64, 7>::from([
+            self.x,
+            self.y,
+            self.psi,
+            self.carrier[0],
+            self.carrier[1],
+            self.carrier[2],
+            self.carrier[3],
+        ])
+    }
+}
+
+type V7 = SVector<f64, 7>;
+type M7 = SMatrix<f64, 7, 7>;
+
+/// Per-rod kinematic quantities at a state z.
+struct RodState {
+    /// Carrier index 0..=3 (unknown index 3 + carrier).
+    carrier: usize,
+    rho: f64,
+    u: Vector2<f64>,
+    delta: f64,
+    /// A − P (platform joint relative to the TCP, rotated): ∂r/∂ψ = perp(A − P).
+    arm: Vector2<f64>,
+    e: Vector2<f64>,
+    n: Vector2<f64>,
+}
+
+#[inline]
+fn rod_state(p: &Params, i: usize, z: &V7) -> RodState {
+    let rod = &RODS[i];
+    let (sn, cs) = z[2].sin_cos();
+    let (xa, ya) = (p[rod.xa], p[rod.ya]);
+    let arm = Vector2::new(cs * xa - sn * ya, sn * xa + cs * ya);
+    let a = Vector2::new(z[0], z[1]) + arm;
+    let (o, e, n) = guide_frame(p, rod.guide);
+    let s = z[3 + rod.actuator];
+    let b = o + n * p[rod.xb] + e * (s + p[rod.yb]);
+    let r = a - b;
+    let rho = r.norm();
+    let u = r / rho;
+    RodState {
+        carrier: rod.actuator,
+        rho,
+        u,
+        delta: rho - p[rod.l],
+        arm,
+        e,
+        n,
+    }
+}
+
+/// Column vector Jᵀu for the rod: ∂ρ/∂z.
+#[inline]
+fn drho_dz(st: &RodState) -> V7 {
+    let mut g = V7::zeros();
+    g[0] = st.u.x;
+    g[1] = st.u.y;
+    // ∂r/∂ψ = R'(ψ)a = perp(arm) = (−arm.y, arm.x)
+    g[2] = st.u.x * (-st.arm.y) + st.u.y * st.arm.x;
+    g[3 + st.carrier] = -st.u.dot(&st.e);
+    g
+}
+
+/// ∂r/∂z as a 2×7 matrix.
+#[inline]
+fn dr_dz(st: &RodState) -> SMatrix<f64, 2, 7> {
+    let mut j = SMatrix::<f64, 2, 7>::zeros();
+    j[(0, 0)] = 1.0;
+    j[(1, 1)] = 1.0;
+    j[(0, 2)] = -st.arm.y;
+    j[(1, 2)] = st.arm.x;
+    j[(0, 3 + st.carrier)] = -st.e.x;
+    j[(1, 3 + st.carrier)] = -st.e.y;
+    j
+}
+
+/// Gradient (generalised forces) and Hessian (tangent stiffness) of the system, with the rows of
+/// rigid active carriers replaced by s_j − q_j = 0.
+fn system(p: &Params, k: &Stiffness, q: &[f64; 4], fol: &Followers, z: &V7) -> (V7, M7, bool) {
+    let mut g = V7::zeros();
+    let mut h = M7::zeros();
+    let mut ok = true;
+    for i in 0..5 {
+        let st = rod_state(p, i, z);
+        if !(st.rho > 1e-9) {
+            ok = false;
+            continue;
+        }
+        let ki = k.rod[i];
+        let t = ki * st.delta;
+        let d = drho_dz(&st);
+        g += d * t;
+        let j = dr_dz(&st);
+        let proj = Matrix2::identity() - st.u * st.u.transpose();
+        h += d * d.transpose() * ki;
+        h += j.transpose() * proj * j * (t / st.rho);
+        // ∂²r/∂ψ² = −arm
+        h[(2, 2)] += t * (-st.u.dot(&st.arm));
+    }
+    for j in 0..4 {
+        if fol[j] {
+            continue;
+        }
+        let v = 3 + j;
+        match k.carrier[j] {
+            Some(c) => {
+                g[v] += c * (z[v] - q[j]);
+                h[(v, v)] += c;
+            }
+            None => {
+                g[v] = z[v] - q[j];
+                for col in 0..7 {
+                    h[(v, col)] = 0.0;
+                }
+                h[(v, v)] = 1.0;
+            }
+        }
+    }
+    (g, h, ok)
+}
+
+/// Rigid start: the model-29 forward model of the first viable subsystem whose two drives are
+/// active, at the commanded positions.
+fn rigid_start(p: &Params, q: &[f64; 4], fol: &Followers) -> Result<V7, ElasticError> {
+    for sub in Subsystem::VIABLE {
+        if let Subsystem::Actuators(a, b) = sub {
+            if fol[a] || fol[b] {
+                continue;
+            }
+            let s = geometry::solve(p, Model::M29, sub, [q[a], q[b]])?;
+            let c = s.c;
+            return Ok(V7::from([c[0], c[1], c[2], c[3], c[4], c[5], c[6]]));
+        }
+    }
+    Err(ElasticError::NotHeld)
+}
+
+/// Elasto-geometric forward model: the static equilibrium for commanded actuator positions
+/// `q` (mm), parameters `p` and stiffness `k`, with drives in `followers` free. Starts from the
+/// rigid forward model of an active pair.
+pub fn fegm(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    followers: Followers,
+) -> Result<Equilibrium, ElasticError> {
+    if !q.iter().all(|v| v.is_finite()) {
+        return Err(ElasticError::NonFinite);
+    }
+    let z0 = rigid_start(p, &q, &followers)?;
+    solve_from(p, k, q, followers, z0)
+}
+
+/// [`fegm`] from a previous equilibrium (servo-rate use: the last sample is an excellent
+/// start, and no rigid model is solved).
+pub fn fegm_from(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    followers: Followers,
+    previous: &Equilibrium,
+) -> Result<Equilibrium, ElasticError> {
+    if !q.iter().all(|v| v.is_finite()) {
+        return Err(ElasticError::NonFinite);
+    }
+    let mut z0 = previous.z();
+    for j in 0..4 {
+        if !followers[j] {
+            z0[3 + j] = q[j];
+        }
+    }
+    solve_from(p, k, q, followers, z0)
+}
+
+fn solve_from(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    followers: Followers,
+    mut z: V7,
+) -> Result<Equilibrium, ElasticError> {
+    let mut last_step = f64::INFINITY;
+    let mut gnorm = f64::INFINITY;
+    for it in 0..MAX_ITER {
+        let (g, h, ok) = system(p, k, &q, &followers, &z);
+        if !ok {
+            return Err(ElasticError::Degenerate);
+        }
+        gnorm = g.amax();
+        if !gnorm.is_finite() {
+            return Err(ElasticError::NonFinite);
+        }
+        let step = h
+            .lu()
+            .solve(&g)
+            .ok_or(ElasticError::Singular { iteration: it })?;
+        z -= step;
+        last_step = step.amax();
+        if !last_step.is_finite() {
+            return Err(ElasticError::NonFinite);
+        }
+        if last_step < STEP_TOL {
+            return Ok(finish(p, k, &followers, &z, it + 1));
+        }
+    }
+    Err(ElasticError::NotConverged {
+        iterations: MAX_ITER,
+        step: last_step,
+        gradient: gnorm,
+    })
+}
+
+fn finish(p: &Params, k: &Stiffness, fol: &Followers, z: &V7, iterations: usize) -> Equilibrium {
+    let mut rod_force = [0.0; 5];
+    let mut drive_force = [0.0; 4];
+    for (i, f) in rod_force.iter_mut().enumerate() {
+        let st = rod_state(p, i, z);
+        *f = k.rod[i] * st.delta;
+        // Force of the drive on its carrier balances the rod's pull T·u along the guide.
+        drive_force[st.carrier] -= *f * st.u.dot(&st.e);
+    }
+    for j in 0..4 {
+        if fol[j] {
+            drive_force[j] = 0.0;
+        }
+    }
+    Equilibrium {
+        x: z[0],
+        y: z[1],
+        psi: z[2],
+        carrier: [z[3], z[4], z[5], z[6]],
+        rod_force,
+        drive_force,
+        iterations,
+    }
+}
+
+/// Force and moment balance of the platform at an equilibrium: (Σ F_x, Σ F_y, Σ M_z about the
+/// TCP), N and N·mm, from the rod forces alone (no external load).
+pub fn platform_balance(p: &Params, eq: &Equilibrium) -> [f64; 3] {
+    let z = eq.z();
+    let mut out = [0.0; 3];
+    for i in 0..5 {
+        let st = rod_state(p, i, &z);
+        // A rod in tension pulls the platform joint towards its carrier: force −T·u.
+        let f = -st.u * eq.rod_force[i];
+        out[0] += f.x;
+        out[1] += f.y;
+        out[2] += st.arm.x * f.y - st.arm.y * f.x;
+    }
+    out
+}
+
+/// Sensitivities of an equilibrium (implicit-function theorem on ∇V = 0).
+#[derive(Clone, Copy, Debug)]
+pub struct ElasticSensitivity {
+    /// ∂(x, y, ψ)/∂(q1..q4).
+    pub dpose_dq: SMatrix<f64, 3, 4>,
+    /// ∂(x, y, ψ)/∂p (29 parameters).
+    pub dpose_dp: SMatrix<f64, 3, N_PARAMS>,
+    /// ∂(s1..s4)/∂(q1..q4): how followers' carriers move.
+    pub dcarrier_dq: SMatrix<f64, 4, 4>,
+}
+
+/// Analytic sensitivities of `eq` (solved for `q`, `followers`).
+pub fn sensitivity(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    followers: Followers,
+    eq: &Equilibrium,
+) -> Result<ElasticSensitivity, ElasticError> {
+    let z = eq.z();
+    let (_, h, _) = system(p, k, &q, &followers, &z);
+    let lu = h.lu();
+    // ∂G/∂q: only the rows of active carriers depend on q.
+    let mut g_q = SMatrix::<f64, 7, 4>::zeros();
+    for j in 0..4 {
+        if !followers[j] {
+            g_q[(3 + j, j)] = match k.carrier[j] {
+                Some(c) => -c,
+                None => -1.0,
+            };
+        }
+    }
+    // ∂G/∂p: rod terms, only in rows that are not replaced by rigid constraints.
+    let mut g_p = SMatrix::<f64, 7, N_PARAMS>::zeros();
+    let (sn, cs) = z[2].sin_cos();
+    for i in 0..5 {
+        let rod = &RODS[i];
+        let st = rod_state(p, i, &z);
+        let ki = k.rod[i];
+        let t = ki * st.delta;
+        let d = drho_dz(&st);
+        let j = dr_dz(&st);
+        let proj = Matrix2::identity() - st.u * st.u.transpose();
+        let s = z[3 + rod.actuator];
+        let along = s + p[rod.yb];
+        // (parameter index, ∂r/∂p, ∂J/∂p as (column, vector) or none, ∂l/∂p)
+        let dr: [(usize, Vector2<f64>, Option<(usize, Vector2<f64>)>, f64); 7] = [
+            (rod.l, Vector2::zeros(), None, 1.0),
+            (
+                rod.xa,
+                Vector2::new(cs, sn),
+                Some((2, Vector2::new(-sn, cs))),
+                0.0,
+            ),
+            (
+                rod.ya,
+                Vector2::new(-sn, cs),
+                Some((2, Vector2::new(-cs, -sn))),
+                0.0,
+            ),
+            (rod.xb, -st.n, None, 0.0),
+            (rod.yb, -st.e, None, 0.0),
+            (rod.guide.d_index(), Vector2::new(-1.0, 0.0), None, 0.0),
+            (
+                rod.guide.gamma_index(),
+                -(st.e * p[rod.xb] - st.n * along),
+                Some((3 + rod.actuator, st.n)),
+                0.0,
+            ),
+        ];
+        for (pi, drp, djp, dl) in dr {
+            let ddelta = st.u.dot(&drp) - dl;
+            let mut col = d * (ki * ddelta);
+            col += j.transpose() * (proj * drp) * (t / st.rho);
+            if let Some((c, v)) = djp {
+                col[c] += t * st.u.dot(&v);
+            }
+            for row in 0..7 {
+                g_p[(row, pi)] += col[row];
+            }
+        }
+    }
+    for j in 0..4 {
+        if !followers[j] && k.carrier[j].is_none() {
+            for c in 0..N_PARAMS {
+                g_p[(3 + j, c)] = 0.0;
+            }
+        }
+    }
+    let dz_dq = lu
+        .solve(&g_q)
+        .ok_or(ElasticError::Singular { iteration: 0 })?;
+    let dz_dp = lu
+        .solve(&g_p)
+        .ok_or(ElasticError::Singular { iteration: 0 })?;
+    Ok(ElasticSensitivity {
+        dpose_dq: -dz_dq.fixed_rows::<3>(0).into_owned(),
+        dpose_dp: -dz_dp.fixed_rows::<3>(0).into_owned(),
+        dcarrier_dq: -dz_dq.fixed_rows::<4>(3).into_owned(),
+    })
+}
