@@ -8,7 +8,8 @@
 //!
 //! Rules the reader enforces, beyond the spec's table (each breach is a typed
 //! [`CampaignError`] naming file, line and column; nothing is dropped or guessed):
-//! - fields are plain: no quoting, surrounding white space is trimmed;
+//! - fields are plain: no quoting, surrounding white space is trimmed; a leading UTF-8 byte
+//!   order mark (as spreadsheets write) is ignored;
 //! - `t`, `q1..q4`, `f1..f4` must be finite numbers; `x`, `y`, `r`, `psi` and covariates are
 //!   finite numbers or empty (absent). NaN and infinities are rejected everywhere;
 //! - `t` is monotonic: non-decreasing (equal times are accepted);
@@ -19,6 +20,23 @@
 //!   column the instrument measures (`lt`, `kgm`: x, y; `dbb`, `circle`: r; `li_x`: x;
 //!   `li_y`: y; `li_psi`: psi) and nothing in the others; `self` rows have q2 and q3 in
 //!   follower mode (their measured values are those encoders).
+//!
+//! ```
+//! use rpkm_core::campaign::{Campaign, Instrument};
+//! let text = "# laser tracker, one setup\n\
+//!             t,setup,instrument,reset,q1,q2,q3,q4,f1,f2,f3,f4,follower,x,y,r,psi,temp\n\
+//!             0,A,lt,1,2611,2611,789,789,0,0,0,0,,0,0,,,20.5\n\
+//!             1,A,lt,0,2600,2600,780,780,0,0,0,0,,-10.5,12.25,,,20.6\n";
+//! let c = Campaign::parse(text, "campaign.csv")?;
+//! assert_eq!(c.poses_of(Instrument::Lt).count(), 2);
+//! assert_eq!(c.covariate("temp"), Some(vec![Some(20.5), Some(20.6)]));
+//! assert_eq!(Campaign::parse(&c.to_csv(), "campaign.csv")?, c);
+//!
+//! let bad = text.replace("2600,2600", "2600,abc");
+//! let e = Campaign::parse(&bad, "campaign.csv").expect_err("not a number");
+//! assert_eq!(e.to_string(), r#"campaign.csv:4:6 (q2): expected a number, found "abc""#);
+//! # Ok::<(), rpkm_core::campaign::CampaignError>(())
+//! ```
 //!
 //! Reachability of the poses is not checked here (that needs the geometry); every [`Pose`]
 //! keeps its source `line` so that the caller can name `file:line`.
@@ -170,17 +188,17 @@ impl fmt::Display for Instrument {
 /// An instrument name that is not one of the spec's spellings.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("unknown instrument {0:?}, expected one of lt, kgm, dbb, li_x, li_y, li_psi, self, circle, none")]
-pub struct UnknownInstrument(pub String);
+pub struct ParseInstrumentError(pub String);
 
 impl FromStr for Instrument {
-    type Err = UnknownInstrument;
+    type Err = ParseInstrumentError;
 
     /// Exact spelling, case-sensitive (`lt`, not `LT`).
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         Instrument::ALL
             .into_iter()
             .find(|i| i.as_str() == s)
-            .ok_or_else(|| UnknownInstrument(s.to_owned()))
+            .ok_or_else(|| ParseInstrumentError(s.to_owned()))
     }
 }
 

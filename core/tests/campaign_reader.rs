@@ -521,3 +521,9 @@ fn validate_checks_campaigns_built_in_code() {
         Err(CampaignError::MissingReset { line: 4, .. })
     ));
 }
+
+#[test]
+fn a_byte_order_mark_is_ignored() {
+    let c = parse(&format!("\u{feff}{VALID}")).expect("valid with a BOM");
+    assert_eq!(c, parse(VALID).expect("valid"));
+}

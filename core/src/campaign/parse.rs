@@ -241,6 +241,7 @@ pub(super) fn parse(text: &str, source: &str) -> Result<Campaign, CampaignError>
     let mut head: Option<Header> = None;
     let mut poses: Vec<Pose> = Vec::new();
     let mut checker = Checker::new(source);
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     for (n, raw) in text.lines().enumerate() {
         let line = n + 1;
         let trimmed = raw.trim();
