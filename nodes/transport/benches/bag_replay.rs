@@ -23,7 +23,7 @@ fn sample(i: u64) -> (u64, ActuatorState) {
         seq: i,
         position: [x * 1e-6, -x * 2e-6, x * 3e-6, 0.5],
         force: [x, -x, 0.5 * x, 1.0],
-        follower: [false, i % 2 == 0, false, true],
+        follower: [false, i.is_multiple_of(2), false, true],
         ..Default::default()
     };
     let _ = state.set_covariates(&[20.0 + x * 1e-4, 21.5]);

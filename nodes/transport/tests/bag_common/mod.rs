@@ -97,7 +97,7 @@ pub fn event(i: u64) -> (u64, Event) {
             stamp: Stamp::from_ns(stamp_ns),
             level: (i % 3) as u8,
             code: -(i as i16) * 3,
-            ok: i % 2 == 0,
+            ok: i.is_multiple_of(2),
             gain: 0.5 + i as f32 * 0.25,
             samples: (0..(i % 4) as u32)
                 .map(|k| Stamp {
