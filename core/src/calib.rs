@@ -309,10 +309,19 @@ impl Lm<'_> {
                     mu *= nu;
                     nu *= 2.0;
                     if mu > 1e30 {
-                        return Ok(LmResult {
-                            params: p,
+                        // no step lowers the cost: a minimum to machine precision, unless
+                        // the gradient says otherwise
+                        if g.amax() < 1e-3 * (1.0 + cost) {
+                            return Ok(LmResult {
+                                params: p,
+                                iterations: it + 1,
+                                cost,
+                            });
+                        }
+                        return Err(CalibrationError::NotConverged {
                             iterations: it + 1,
                             cost,
+                            gradient: g.amax(),
                         });
                     }
                 }
@@ -443,23 +452,44 @@ fn rms_table(before: &[Residual], after: &[Residual]) -> Vec<DirectionRms> {
 
 /// Identified parameters of one LM step, with uncertainties from the a-posteriori covariance
 /// s² (JᵀJ)⁻¹ of the weighted problem.
-fn uncertainties(
+/// A-posteriori covariance s² (JᵀJ)⁻¹ of the identified parameters of a weighted problem.
+fn covariance(
     rows: &[Residual],
     ids: &[usize],
     links: &[Link],
     cost: f64,
-) -> Result<Vec<f64>, CalibrationError> {
+) -> Result<DMatrix<f64>, CalibrationError> {
     let jr = reduced_jacobian(rows, ids, links);
     let dof = rows.len().saturating_sub(ids.len()).max(1) as f64;
-    let s2 = 2.0 * cost / dof;
-    let a = jr.transpose() * &jr;
-    let inv = a.try_inverse().ok_or_else(|| {
+    let s2 = (2.0 * cost / dof).max(1.0);
+    let inv = normal_inverse(&jr, ids)?;
+    Ok(inv * s2)
+}
+
+fn normal_inverse(jr: &DMatrix<f64>, ids: &[usize]) -> Result<DMatrix<f64>, CalibrationError> {
+    (jr.transpose() * jr).try_inverse().ok_or_else(|| {
         CalibrationError::Singular(ids.iter().map(|&i| NAMES[i]).collect::<Vec<_>>().join(", "))
-    })?;
-    Ok(ids
-        .iter()
-        .enumerate()
-        .map(|(k, _)| (inv[(k, k)] * s2).max(0.0).sqrt())
+    })
+}
+
+/// Uncertainty of the second step's parameters: the noise of its virtual rows plus the first
+/// step's parameter uncertainty (`cov_p1`, 29 × 29), propagated linearly through the virtual
+/// measurements (which share it, so it does not average out).
+fn step2_uncertainties(
+    rows: &[Residual],
+    ids: &[usize],
+    cov_p1: &DMatrix<f64>,
+) -> Result<Vec<f64>, CalibrationError> {
+    let jr = reduced_jacobian(rows, ids, &[]);
+    let inv = normal_inverse(&jr, ids)?;
+    let m = &inv * jr.transpose();
+    let g = DMatrix::from_fn(rows.len(), N_PARAMS, |i, k| {
+        rows[i].d_pcal.map_or(0.0, |d| d[k]) / rows[i].sigma
+    });
+    let mg = &m * g;
+    let cov = inv + &mg * cov_p1 * mg.transpose();
+    Ok((0..ids.len())
+        .map(|k| cov[(k, k)].max(0.0).sqrt())
         .collect())
 }
 
@@ -483,12 +513,17 @@ pub fn calibrate(
     }
     // Candidates of step 1: the model's free parameters with an influence on the direct rows.
     let (_, j0) = weighted(&rows0);
+    // (relative threshold: the subsystem solves carry round-off derivatives of ~1e-17)
+    let col_max = (0..N_PARAMS)
+        .map(|i| j0.column(i).norm() * variation_range(i))
+        .fold(0.0, f64::max);
+    let visible = |i: usize| j0.column(i).norm() * variation_range(i) > 1e-9 * col_max;
     let influences = |i: usize| {
-        j0.column(i).norm() > 0.0
+        visible(i)
             || opts
                 .links
                 .iter()
-                .any(|l| l.terms.iter().any(|t| t.0 == i) && j0.column(l.param).norm() > 0.0)
+                .any(|l| l.terms.iter().any(|t| t.0 == i) && visible(l.param))
     };
     let free: Vec<usize> = model
         .params()
@@ -574,7 +609,14 @@ pub fn calibrate(
         }
     }
     let rows_final = rows_at(campaign, &p, model, Step::Direct, start, &drop)?;
-    let sig1 = uncertainties(&rows_final, &step1_ids, &opts.links, cost)?;
+    // chi-square of the measurements themselves (the virtual rows of step 2 are not).
+    let chi2_per_dof = 2.0 * cost / rows_final.len().saturating_sub(step1_ids.len()).max(1) as f64;
+    let cov1 = covariance(&rows_final, &step1_ids, &opts.links, cost)?;
+    let sig1: Vec<f64> = (0..step1_ids.len())
+        .map(|k| cov1[(k, k)].max(0.0).sqrt())
+        .collect();
+    let d1 = dependency(&step1_ids, &opts.links);
+    let cov_p1 = &d1 * &cov1 * d1.transpose();
     let mut identified: Vec<Identified> = step1_ids
         .iter()
         .zip(&sig1)
@@ -618,7 +660,7 @@ pub fn calibrate(
             p = res.params;
             iterations += res.iterations;
             let rows2_after = rows_at(campaign, &p, model, Step::VirtualQ2, &p1, &drop)?;
-            let sig2 = uncertainties(&rows2_after, &ids2, &[], res.cost)?;
+            let sig2 = step2_uncertainties(&rows2_after, &ids2, &cov_p1)?;
             identified.extend(ids2.iter().zip(&sig2).map(|(&i, &s)| Identified {
                 name: NAMES[i],
                 index: i,
@@ -649,7 +691,6 @@ pub fn calibrate(
             .iter()
             .map(|r| (r.value / r.sigma).powi(2))
             .sum::<f64>();
-    let dof = after_rows.len().saturating_sub(identified.len()).max(1) as f64;
     Ok(Calibration {
         model,
         start: *start,
@@ -661,7 +702,7 @@ pub fn calibrate(
         rms: rms_table(&before_rows, &after_rows),
         cost_before,
         cost_after,
-        chi2_per_dof: 2.0 * cost_after / dof,
+        chi2_per_dof,
         rows: after_rows.len(),
     })
 }

@@ -71,6 +71,10 @@ pub struct Residual {
     pub sigma: f64,
     /// d value / d p over the 29 parameters.
     pub jacobian: Row,
+    /// For virtual rows of the second step: d value / d p_cal, the sensitivity to the
+    /// first step's parameters that made the virtual measurement (to propagate their
+    /// uncertainty); None for measured rows.
+    pub d_pcal: Option<Row>,
 }
 
 /// A pose the model could not evaluate, with its source line.
@@ -220,6 +224,7 @@ fn inverse_rows(
             value: inv.c[v] - pose.q[a],
             sigma,
             jacobian: jac,
+            d_pcal: None,
         });
     }
     Ok(())
@@ -300,6 +305,7 @@ fn forward_rows(
             value,
             sigma,
             jacobian: jac,
+            d_pcal: None,
         });
     }
     Ok(())
@@ -324,6 +330,7 @@ fn self_rows(
             value: f.sol.c[v] - pose.q[a],
             sigma,
             jacobian: f.sens.dc_dp.row(v).transpose(),
+            d_pcal: None,
         });
     }
     Ok(())
@@ -343,9 +350,13 @@ fn virtual_q2_row(
         return Ok(());
     }
     let xe = geometry::fgm(p_cal, model, pose.q[0], pose.q[3])?;
+    let xe_sens = geometry::sensitivity(p_cal, model, Subsystem::NR, &xe)?;
     let inv = geometry::igm(p, model, xe.x(), xe.y())?;
     let s = geometry::sensitivity(p, model, Subsystem::Tcp, &inv)?;
     let v = q_var(1);
+    let d_pcal: Row = (xe_sens.dc_dp.row(X) * s.dc_dk[(v, 0)]
+        + xe_sens.dc_dp.row(Y) * s.dc_dk[(v, 1)])
+        .transpose();
     out.push(Residual {
         pose: i,
         instrument: pose.instrument,
@@ -353,6 +364,7 @@ fn virtual_q2_row(
         value: inv.c[v] - pose.q[1],
         sigma: noise::ENCODER_MM * 2f64.sqrt(),
         jacobian: s.dc_dp.row(v).transpose(),
+        d_pcal: Some(d_pcal),
     });
     Ok(())
 }
