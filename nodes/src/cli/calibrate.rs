@@ -1,0 +1,265 @@
+//! `rpkm calibrate`: identify the geometric parameters from a campaign file.
+
+use super::{bad_input, read_campaign, write_json};
+use rpkm_core::calib::{self, Calibration, Options, Scaling, Selection};
+use rpkm_core::campaign::Campaign;
+use rpkm_core::obs;
+use rpkm_core::params::{self, Model, Params, NAMES};
+use serde_json::json;
+use std::path::PathBuf;
+
+/// Identify the parameters of the Scissors-Kinematics from a measurement campaign.
+///
+/// Every method of the thesis: laser tracker and grid encoder (inverse calibration with the
+/// setups' reset poses), double ball-bar and laser interferometer (forward calibration, then
+/// the q2 branch from virtual measurements), platform angle, self-calibration with q2, q3 as
+/// followers. A campaign mixing instruments calibrates them together, each row weighted by its
+/// instrument's noise.
+///
+/// Example:
+///   rpkm calibrate campaign.csv --model 29 --params auto --validate held_out.csv --json cal.json
+#[derive(clap::Args, Debug)]
+pub struct CalibrateArgs {
+    /// Campaign CSV (spec format: t, setup, instrument, reset, q1..q4, f1..f4, follower, x, y, r, psi, covariates).
+    pub campaign: PathBuf,
+    /// Geometric model: 24 (perfect parallel-holder, ψ ≡ γ2) or 29 (complete).
+    #[arg(long, default_value_t = 29)]
+    pub model: u32,
+    /// Parameters to identify: `auto` (observability analysis: QR-pivot order while the
+    /// condition number stays below --max-condition) or a comma-separated list (l1,gamma2,...).
+    #[arg(long, default_value = "auto")]
+    pub params: String,
+    /// Condition number limit of the automatic selection (Schröer: 100 for real calibrations).
+    #[arg(long, default_value_t = 100.0)]
+    pub max_condition: f64,
+    /// Held-out campaign: reports the TCP RMS with nominal and identified parameters, and the gain.
+    #[arg(long)]
+    pub validate: Option<PathBuf>,
+    /// Write the result as JSON (parameters by spec name, RMS, condition number, gain ...).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Starting parameters: JSON object of name → value (mm, rad); default the nominal set.
+    #[arg(long)]
+    pub start: Option<PathBuf>,
+    /// Parameter scaling: `column` (column norms, eq. 3.25) or `range` (0.1 mm, 1°; Schröer).
+    #[arg(long, default_value = "column")]
+    pub scaling: String,
+    /// Outlier elimination threshold in standard deviations per direction (0 = keep all).
+    #[arg(long, default_value_t = 3.0)]
+    pub outlier_sigma: f64,
+    /// Tie rod 5 to rod 4 in the dependency matrix (perfect parallel-holder in model 29).
+    #[arg(long)]
+    pub perfect_parallelogram: bool,
+}
+
+/// Parse a parameter list of spec names.
+pub fn parse_param_list(list: &str, model: Model) -> anyhow::Result<Vec<usize>> {
+    let mut out = Vec::new();
+    for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let i = params::index_of(name).ok_or_else(|| {
+            bad_input(format!(
+                "--params: unknown parameter `{name}` (expected one of {})",
+                NAMES.join(", ")
+            ))
+        })?;
+        if !model.has_param(i) {
+            return Err(bad_input(format!(
+                "--params: `{name}` is not a parameter of {model}"
+            )));
+        }
+        out.push(i);
+    }
+    if out.is_empty() {
+        return Err(bad_input("--params: empty list".into()));
+    }
+    Ok(out)
+}
+
+pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    let model = Model::from_number(args.model)
+        .ok_or_else(|| bad_input(format!("--model {}: expected 24 or 29", args.model)))?;
+    let campaign = read_campaign(&args.campaign)?;
+    let validation = args.validate.as_deref().map(read_campaign).transpose()?;
+    let start = match &args.start {
+        Some(path) => super::read_params(path)?,
+        None => Params::nominal(),
+    };
+    let selection = match args.params.as_str() {
+        "auto" => Selection::Auto {
+            max_condition: args.max_condition,
+        },
+        list => Selection::List(parse_param_list(list, model)?),
+    };
+    let scaling = match args.scaling.as_str() {
+        "column" => Scaling::ColumnNorm,
+        "range" => Scaling::Range,
+        other => {
+            return Err(bad_input(format!(
+                "--scaling {other}: expected `column` or `range`"
+            )))
+        }
+    };
+    let links = if args.perfect_parallelogram {
+        calib::Link::perfect_parallelogram()
+    } else {
+        Vec::new()
+    };
+    let opts = Options {
+        model,
+        selection,
+        links,
+        scaling,
+        outlier_sigma: (args.outlier_sigma > 0.0).then_some(args.outlier_sigma),
+        ..Default::default()
+    };
+    let cal = calib::calibrate(&campaign, &start, &opts).map_err(|e| match e {
+        calib::CalibrationError::Pose(_) => bad_input(format!("{e}")),
+        other => anyhow::anyhow!("calibrating {}: {other}", args.campaign.display()),
+    })?;
+    let val = validation
+        .as_ref()
+        .map(|v| validate(v, &start, &cal.params, model))
+        .transpose()?;
+    print_report(&campaign, &cal, val.as_ref());
+    if let Some(path) = &args.json {
+        write_json(path, &report_json(&cal, val.as_ref()))?;
+        println!("\nwrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// Held-out TCP errors with the starting and the identified parameters.
+pub struct Validation {
+    pub rms_before_um: f64,
+    pub rms_after_um: f64,
+    pub gain: f64,
+    pub values: usize,
+}
+
+pub fn validate(
+    val: &Campaign,
+    start: &Params,
+    identified: &Params,
+    model: Model,
+) -> anyhow::Result<Validation> {
+    let err = |p: &Params| -> anyhow::Result<Vec<f64>> {
+        Ok(obs::tcp_errors(val, p, model)
+            .map_err(|e| bad_input(format!("{e}")))?
+            .iter()
+            .map(|e| e.2)
+            .collect())
+    };
+    let (before, after) = (err(start)?, err(identified)?);
+    if before.is_empty() {
+        return Err(bad_input(format!(
+            "{}: no held-out TCP measurement (lt, kgm, dbb, li_x, li_y rows)",
+            val.source
+        )));
+    }
+    Ok(Validation {
+        rms_before_um: 1e3 * calib::rms(&before),
+        rms_after_um: 1e3 * calib::rms(&after),
+        gain: calib::gain(&before, &after),
+        values: before.len(),
+    })
+}
+
+fn unit_scale(is_angle: bool) -> (f64, &'static str) {
+    if is_angle {
+        (1e6, "µrad")
+    } else {
+        (1e3, "µm")
+    }
+}
+
+fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>) {
+    println!(
+        "Calibration of {} with {} ({} rows, {} LM iterations)",
+        campaign.source, cal.model, cal.rows, cal.iterations
+    );
+    println!(
+        "\n{:<8} {:>14} {:>14} {:>11} {:>6}",
+        "param", "nominal", "identified", "sigma", "step"
+    );
+    for id in &cal.identified {
+        let (s, u) = if params::unit(id.index) == params::Unit::Rad {
+            (1e3, "mrad")
+        } else {
+            (1.0, "mm")
+        };
+        println!(
+            "{:<8} {:>14.6} {:>14.6} {:>11.2e} {:>6}   {u}",
+            id.name,
+            id.nominal * s,
+            id.value * s,
+            id.sigma * s,
+            id.step
+        );
+    }
+    println!(
+        "\n{:<8} {:<14} {:>6} {:>12} {:>12}",
+        "instr.", "direction", "rows", "RMS before", "RMS after"
+    );
+    for r in &cal.rms {
+        let (s, u) = unit_scale(r.is_angle);
+        println!(
+            "{:<8} {:<14} {:>6} {:>9.2} {u} {:>9.3} {u}",
+            r.instrument,
+            r.direction,
+            r.rows,
+            r.rms_before * s,
+            r.rms_after * s
+        );
+    }
+    println!(
+        "\ncondition number of the identification: {:.1}",
+        cal.condition_number
+    );
+    println!(
+        "chi-square per degree of freedom: {:.2} (1 = residual at the instruments' noise)",
+        cal.chi2_per_dof
+    );
+    if cal.outliers.is_empty() {
+        println!("outliers: none beyond the threshold");
+    } else {
+        println!("outliers eliminated ({}):", cal.outliers.len());
+        for o in &cal.outliers {
+            println!(
+                "  line {:>5}  {:<6} {:<14} residual {:>10.4} ({:.1} sigma)",
+                o.line, o.instrument, o.direction, o.residual, o.deviations
+            );
+        }
+    }
+    if let Some(v) = val {
+        println!(
+            "\nheld-out TCP RMS ({} values): {:.2} µm before, {:.2} µm after; gain {:.3}",
+            v.values, v.rms_before_um, v.rms_after_um, v.gain
+        );
+    }
+}
+
+fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value {
+    let parameters: serde_json::Map<String, serde_json::Value> = cal
+        .model
+        .params()
+        .into_iter()
+        .map(|i| (NAMES[i].to_string(), json!(cal.params[i])))
+        .collect();
+    let mut out = json!({
+        "model": cal.model.number(),
+        "parameters": parameters,
+        "identified": cal.identified,
+        "rms": cal.rms,
+        "condition_number": cal.condition_number,
+        "chi2_per_dof": cal.chi2_per_dof,
+        "iterations": cal.iterations,
+        "rows": cal.rows,
+        "outliers": cal.outliers,
+    });
+    if let Some(v) = val {
+        out["val_rms_before_um"] = json!(v.rms_before_um);
+        out["val_rms_after_um"] = json!(v.rms_after_um);
+        out["gain"] = json!(v.gain);
+    }
+    out
+}

@@ -1,0 +1,79 @@
+//! Subcommands of the `rpkm` command line. Thin: parsing, files, printing; physics in rpkm_core.
+
+pub mod calibrate;
+
+use anyhow::Context;
+use rpkm_core::campaign::Campaign;
+use rpkm_core::params::{self, Params};
+use std::path::Path;
+
+/// Bad input from the user (a file, an argument): the command exits with code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct BadInput(pub String);
+
+/// An error that makes the command exit with code 2.
+pub fn bad_input(msg: String) -> anyhow::Error {
+    anyhow::Error::new(BadInput(msg))
+}
+
+/// Exit code of an error: 2 for bad input, 1 otherwise.
+pub fn exit_code(e: &anyhow::Error) -> i32 {
+    if e.chain()
+        .any(|c| c.is::<BadInput>() || c.is::<rpkm_core::campaign::CampaignError>())
+    {
+        2
+    } else {
+        1
+    }
+}
+
+/// Read and parse a campaign file; errors name the file, line and column.
+pub fn read_campaign(path: &Path) -> anyhow::Result<Campaign> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| bad_input(format!("{}: cannot read campaign: {e}", path.display())))?;
+    Campaign::parse(&text, &path.display().to_string()).map_err(anyhow::Error::new)
+}
+
+/// Read a parameter file: a JSON object mapping spec names to values (mm, rad), or the JSON
+/// written by `rpkm calibrate` (its `parameters` object). Unnamed parameters stay nominal.
+pub fn read_params(path: &Path) -> anyhow::Result<Params> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| bad_input(format!("{}: cannot read parameters: {e}", path.display())))?;
+    let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+        bad_input(format!(
+            "{}:{}:{}: not JSON: {e}",
+            path.display(),
+            e.line(),
+            e.column()
+        ))
+    })?;
+    let obj = value
+        .get("parameters")
+        .unwrap_or(&value)
+        .as_object()
+        .ok_or_else(|| {
+            bad_input(format!(
+                "{}: expected a JSON object of parameter names to values",
+                path.display()
+            ))
+        })?;
+    let mut p = Params::nominal();
+    for (name, v) in obj {
+        let i = params::index_of(name)
+            .ok_or_else(|| bad_input(format!("{}: unknown parameter `{name}`", path.display())))?;
+        p[i] = v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
+            bad_input(format!(
+                "{}: parameter `{name}`: expected a finite number, found {v}",
+                path.display()
+            ))
+        })?;
+    }
+    Ok(p)
+}
+
+/// Write pretty JSON to a file.
+pub fn write_json(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
