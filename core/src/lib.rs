@@ -11,3 +11,4 @@ pub mod noise;
 pub mod obs;
 pub mod observability;
 pub mod params;
+pub mod twin;

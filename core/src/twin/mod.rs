@@ -1,0 +1,547 @@
+//! The digital twin of the Scissors-Kinematics: a simulated machine and measurement cell that
+//! produces campaigns in the spec's CSV model, deterministically from a seed.
+//!
+//! - True machine: nominal parameters + seeded errors (σ 0.1 mm on lengths, 0.2 mrad on
+//!   angles), with a perfect parallel-holder ([`Params::with_perfect_parallelogram`]) unless the
+//!   `parallelogram` effect is on, so model 24 describes effect-free data exactly.
+//! - Controller: commands igm of its own parameters (the nominal ones by default).
+//! - Drives: q1, q4 position-controlled, q2, q3 followers (rigid geometry: the pose is the true
+//!   fgm(q1, q4), followers read the true rgm); under `preload_elastic` all four are
+//!   position-controlled and pose and drive forces come from the elasto-geometric model.
+//!   `self` poses always switch q2, q3 to followers.
+//! - Encoders with [`noise::ENCODER_MM`], instruments with the noise of [`crate::noise`].
+//! - Relative setups: the reset pose measures exactly 0, the others true TCP − true reset TCP
+//!   (+ noise); ball-bar r is the distance to the pivot (the reset pose's TCP).
+//! - Covariate `temp_machine` (°C) and time `t` (s): 3 s per pose, 120 s between setups; the
+//!   clock runs on across campaigns, so a later validation campaign is later in time.
+//!
+//! Every effect is applied per pose as effective parameters (temperature, bow) and a map from
+//! encoder reading to carrier position (thermal expansion of the scale, scale error).
+
+pub mod effects;
+
+pub use effects::{EffectKind, UnknownEffect};
+
+use crate::campaign::{Campaign, Instrument, Pose};
+use crate::design::{self, PlannedPose};
+use crate::elastic::{self, ElasticError, Stiffness, ALL_ACTIVE};
+use crate::geometry::{self, GeometryError};
+use crate::noise;
+use crate::params::{self, Model, Params, NAMES, N_PARAMS, RODS};
+use effects::{bow, ALPHA_PER_K, REFERENCE_TEMP_C, THERMAL_PERIOD_S};
+use nalgebra::{Cholesky, Rotation2, Vector2};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use std::collections::BTreeMap;
+
+/// Time per pose, s.
+pub const SECONDS_PER_POSE: f64 = 3.0;
+/// Time between setups, s.
+pub const SECONDS_BETWEEN_SETUPS: f64 = 120.0;
+/// Noise of the machine temperature sensor, K.
+pub const TEMP_SENSOR_K: f64 = 0.01;
+
+/// Configuration of a twin.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TwinConfig {
+    /// Seed of every random draw (parameter errors, noise, alignment angles).
+    pub seed: u64,
+    /// Hidden effects and their magnitudes (units: [`EffectKind::unit`]).
+    pub effects: Vec<(EffectKind, f64)>,
+    /// σ of the true parameters' length errors, mm.
+    pub length_sigma_mm: f64,
+    /// σ of the true parameters' angle errors, rad.
+    pub angle_sigma_rad: f64,
+    /// Parameters the controller commands igm with (nominal by default).
+    pub controller: Params,
+    /// Stiffness of the true machine (used under `preload_elastic`).
+    pub stiffness: Stiffness,
+    /// Whether instruments and encoders are noisy.
+    pub noise: bool,
+}
+
+impl Default for TwinConfig {
+    fn default() -> Self {
+        TwinConfig {
+            seed: 1,
+            effects: Vec::new(),
+            length_sigma_mm: 0.1,
+            angle_sigma_rad: 2e-4,
+            controller: Params::nominal(),
+            stiffness: Stiffness::default(),
+            noise: true,
+        }
+    }
+}
+
+/// A twin that could not be built or could not drive a pose.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TwinError {
+    #[error("effect {0} given twice")]
+    DuplicateEffect(EffectKind),
+    #[error("effect {effect}: magnitude {magnitude} is not a finite number{extra}")]
+    BadMagnitude {
+        effect: EffectKind,
+        magnitude: f64,
+        extra: &'static str,
+    },
+    #[error("setup {setup}, target ({x}, {y}) mm: controller igm: {source}")]
+    Controller {
+        setup: String,
+        x: f64,
+        y: f64,
+        source: GeometryError,
+    },
+    #[error("setup {setup}, target ({x}, {y}) mm: true machine: {source}")]
+    Machine {
+        setup: String,
+        x: f64,
+        y: f64,
+        source: GeometryError,
+    },
+    #[error("setup {setup}, target ({x}, {y}) mm: elastic model: {source}")]
+    Elastic {
+        setup: String,
+        x: f64,
+        y: f64,
+        source: ElasticError,
+    },
+    #[error("setup {setup}: pose before its reset pose")]
+    NoReset { setup: String },
+    #[error("unknown campaign {0:?}, expected lt, kgm, dbb, li_x, li_y, li_psi, self, circle or validation")]
+    UnknownCampaign(String),
+}
+
+/// Everything the twin hid, for a report or a test (serde: JSON with parameter names).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Truth {
+    pub seed: u64,
+    /// True parameters at 20 °C, by name (mm, rad).
+    pub params: BTreeMap<String, f64>,
+    /// Parameters of the controller, by name.
+    pub controller: BTreeMap<String, f64>,
+    pub stiffness: Stiffness,
+    /// Effects with their magnitudes.
+    pub effects: Vec<EffectTruth>,
+    pub length_sigma_mm: f64,
+    pub angle_sigma_rad: f64,
+    /// Instrument rotation of each setup measured so far, rad (`instrument_alignment`).
+    pub alignment_rad: BTreeMap<String, f64>,
+    /// Thermal model: α (1/K), reference °C, swing period s.
+    pub alpha_per_k: f64,
+    pub reference_temp_c: f64,
+    pub thermal_period_s: f64,
+}
+
+/// One effect of a [`Truth`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EffectTruth {
+    pub effect: EffectKind,
+    pub magnitude: f64,
+    pub unit: String,
+}
+
+/// The true state of the machine at one pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MachineState {
+    /// TCP (mm) and platform angle (rad).
+    pub tcp: Vector2<f64>,
+    pub psi: f64,
+    /// Encoder readings q1..q4 (without noise), mm.
+    pub q: [f64; 4],
+    /// Drive forces, N.
+    pub f: [f64; 4],
+    /// Followers.
+    pub follower: [bool; 4],
+}
+
+/// The digital twin.
+#[derive(Clone, Debug)]
+pub struct Twin {
+    config: TwinConfig,
+    truth_params: Params,
+    rng: StdRng,
+    t: f64,
+    alignment: BTreeMap<String, f64>,
+}
+
+fn gauss(rng: &mut StdRng) -> f64 {
+    StandardNormal.sample(rng)
+}
+
+fn by_name(p: &Params) -> BTreeMap<String, f64> {
+    NAMES
+        .iter()
+        .enumerate()
+        .map(|(i, n)| ((*n).to_owned(), p[i]))
+        .collect()
+}
+
+/// FNV-1a of a string, to seed per-setup draws independently of the order of campaigns.
+fn fnv(s: &str) -> u64 {
+    s.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+impl Twin {
+    /// Build a twin: draws the true machine from the seed.
+    pub fn new(config: TwinConfig) -> Result<Twin, TwinError> {
+        for (k, (e, m)) in config.effects.iter().enumerate() {
+            if config.effects[..k].iter().any(|(o, _)| o == e) {
+                return Err(TwinError::DuplicateEffect(*e));
+            }
+            if !m.is_finite() {
+                return Err(TwinError::BadMagnitude {
+                    effect: *e,
+                    magnitude: *m,
+                    extra: "",
+                });
+            }
+            if *e == EffectKind::PreloadElastic && !(*m > 0.0) {
+                return Err(TwinError::BadMagnitude {
+                    effect: *e,
+                    magnitude: *m,
+                    extra: " > 0",
+                });
+            }
+        }
+        let mut rng = StdRng::seed_from_u64(config.seed);
+        let mut p = Params::nominal();
+        for i in 0..N_PARAMS {
+            let sigma = match params::unit(i) {
+                params::Unit::Mm => config.length_sigma_mm,
+                params::Unit::Rad => config.angle_sigma_rad,
+            };
+            p[i] += sigma * gauss(&mut rng);
+        }
+        p = p.with_perfect_parallelogram();
+        let twin = Twin {
+            rng: StdRng::seed_from_u64(config.seed ^ 0x9e37_79b9_7f4a_7c15),
+            t: 0.0,
+            alignment: BTreeMap::new(),
+            truth_params: p,
+            config,
+        };
+        let mut twin = twin;
+        if let Some(m) = twin.magnitude(EffectKind::Parallelogram) {
+            twin.truth_params[params::L5] += m;
+        }
+        Ok(twin)
+    }
+
+    /// Magnitude of an effect, if on.
+    pub fn magnitude(&self, e: EffectKind) -> Option<f64> {
+        self.config
+            .effects
+            .iter()
+            .find(|(k, _)| *k == e)
+            .map(|(_, m)| *m)
+    }
+
+    /// The true parameters at the reference temperature.
+    pub fn true_params(&self) -> &Params {
+        &self.truth_params
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &TwinConfig {
+        &self.config
+    }
+
+    /// Current time of the twin's clock, s.
+    pub fn time(&self) -> f64 {
+        self.t
+    }
+
+    /// The true machine temperature at time t, °C.
+    pub fn temperature(&self, t: f64) -> f64 {
+        match self.magnitude(EffectKind::Thermal) {
+            Some(a) => REFERENCE_TEMP_C - a * (std::f64::consts::TAU * t / THERMAL_PERIOD_S).cos(),
+            None => REFERENCE_TEMP_C,
+        }
+    }
+
+    /// Stiffness of the true machine (default / compliance factor under `preload_elastic`).
+    pub fn stiffness(&self) -> Stiffness {
+        match self.magnitude(EffectKind::PreloadElastic) {
+            Some(m) => self.config.stiffness.scaled(1.0 / m),
+            None => self.config.stiffness,
+        }
+    }
+
+    /// Everything hidden.
+    pub fn truth(&self) -> Truth {
+        Truth {
+            seed: self.config.seed,
+            params: by_name(&self.truth_params),
+            controller: by_name(&self.config.controller),
+            stiffness: self.stiffness(),
+            effects: self
+                .config
+                .effects
+                .iter()
+                .map(|(e, m)| EffectTruth {
+                    effect: *e,
+                    magnitude: *m,
+                    unit: e.unit().to_owned(),
+                })
+                .collect(),
+            length_sigma_mm: self.config.length_sigma_mm,
+            angle_sigma_rad: self.config.angle_sigma_rad,
+            alignment_rad: self.alignment.clone(),
+            alpha_per_k: ALPHA_PER_K,
+            reference_temp_c: REFERENCE_TEMP_C,
+            thermal_period_s: THERMAL_PERIOD_S,
+        }
+    }
+
+    /// Effective parameters at temperature `temp` with guide-2 carriers at s1, s4 (bow), and
+    /// the factor from encoder reading to carrier position on each guide.
+    fn effective(&self, temp: f64, s1: f64, s4: f64) -> Params {
+        let mut p = self.truth_params;
+        let dt = temp - REFERENCE_TEMP_C;
+        if dt != 0.0 {
+            let f = 1.0 + ALPHA_PER_K * dt;
+            for rod in &RODS {
+                p[rod.l] *= f;
+            }
+            p[params::D1] *= f;
+            p[params::D2] *= f;
+        }
+        if let Some(m) = self.magnitude(EffectKind::GuideStraightness) {
+            p[params::XB1R] += bow(m, s1);
+            p[params::XB4R] += bow(m, s4);
+            p[params::XB5R] += bow(m, s4);
+        }
+        p
+    }
+
+    /// Factors carrier position / encoder reading of the four drives at temperature `temp`.
+    fn scale(&self, temp: f64) -> [f64; 4] {
+        let th = 1.0 + ALPHA_PER_K * (temp - REFERENCE_TEMP_C);
+        let g2 = 1.0 + self.magnitude(EffectKind::EncoderScale).unwrap_or(0.0) * 1e-6;
+        [th * g2, th, th, th * g2]
+    }
+
+    /// Drive the true machine to the controller's command for target (x, y) at time t, with
+    /// encoder reading errors `enc` (mm) on the active drives. `followers_23` switches q2, q3
+    /// to followers (self-calibration) even under `preload_elastic`.
+    pub fn machine_state(
+        &self,
+        setup: &str,
+        x: f64,
+        y: f64,
+        t: f64,
+        enc: [f64; 4],
+        followers_23: bool,
+    ) -> Result<MachineState, TwinError> {
+        let cmd = geometry::igm(&self.config.controller, Model::M29, x, y)
+            .map_err(|source| TwinError::Controller {
+                setup: setup.to_owned(),
+                x,
+                y,
+                source,
+            })?
+            .q();
+        let temp = self.temperature(t);
+        let sc = self.scale(temp);
+        let elastic_on = self.magnitude(EffectKind::PreloadElastic).is_some() && !followers_23;
+        // True carrier positions of the active drives.
+        let s = [0, 1, 2, 3].map(|i| (cmd[i] + enc[i]) * sc[i]);
+        let p = self.effective(temp, s[0], s[3]);
+        if elastic_on {
+            let eq = elastic::fegm(&p, &self.stiffness(), s, ALL_ACTIVE).map_err(|source| {
+                TwinError::Elastic {
+                    setup: setup.to_owned(),
+                    x,
+                    y,
+                    source,
+                }
+            })?;
+            return Ok(MachineState {
+                tcp: Vector2::new(eq.x, eq.y),
+                psi: eq.psi,
+                q: cmd,
+                f: eq.drive_force,
+                follower: [false; 4],
+            });
+        }
+        let sol =
+            geometry::fgm(&p, Model::M29, s[0], s[3]).map_err(|source| TwinError::Machine {
+                setup: setup.to_owned(),
+                x,
+                y,
+                source,
+            })?;
+        let c = sol.q();
+        Ok(MachineState {
+            tcp: Vector2::new(sol.x(), sol.y()),
+            psi: sol.psi(),
+            q: [cmd[0], c[1] / sc[1], c[2] / sc[2], cmd[3]],
+            f: [0.0; 4],
+            follower: [false, true, true, false],
+        })
+    }
+
+    fn alignment_angle(&mut self, setup: &str) -> f64 {
+        let Some(m) = self.magnitude(EffectKind::InstrumentAlignment) else {
+            return 0.0;
+        };
+        let seed = self.config.seed;
+        *self.alignment.entry(setup.to_owned()).or_insert_with(|| {
+            let mut r = StdRng::seed_from_u64(seed ^ fnv(setup));
+            m * 1e-3 * gauss(&mut r)
+        })
+    }
+
+    /// Measure a design on the twin: one campaign, `source` labelling it.
+    pub fn run(&mut self, design: &[PlannedPose], source: &str) -> Result<Campaign, TwinError> {
+        let k = if self.config.noise { 1.0 } else { 0.0 };
+        let mut poses = Vec::with_capacity(design.len());
+        let mut reset: Option<(String, Vector2<f64>, f64)> = None;
+        let mut last_setup: Option<&str> = None;
+        for (n, plan) in design.iter().enumerate() {
+            if last_setup.is_some_and(|s| s != plan.setup) {
+                self.t += SECONDS_BETWEEN_SETUPS;
+            }
+            last_setup = Some(&plan.setup);
+            self.t += SECONDS_PER_POSE;
+            let t = self.t;
+            let self_cal = plan.instrument == Instrument::SelfCal;
+            let enc = [0; 4].map(|_| k * noise::ENCODER_MM * gauss(&mut self.rng));
+            let st = self.machine_state(&plan.setup, plan.x, plan.y, t, enc, self_cal)?;
+            let mut q = st.q;
+            for i in 0..4 {
+                if st.follower[i] {
+                    q[i] += k * noise::ENCODER_MM * gauss(&mut self.rng);
+                }
+            }
+            let temp = self.temperature(t) + k * TEMP_SENSOR_K * gauss(&mut self.rng);
+            let mut pose = Pose {
+                t,
+                setup: plan.setup.clone(),
+                instrument: plan.instrument,
+                reset: plan.reset,
+                q,
+                f: st.f,
+                follower: st.follower,
+                x: None,
+                y: None,
+                r: None,
+                psi: None,
+                covariates: vec![Some(temp)],
+                line: n + 2,
+            };
+            if plan.reset {
+                reset = Some((plan.setup.clone(), st.tcp, st.psi));
+            }
+            if plan.instrument.takes_reset() {
+                let Some((_, tcp0, psi0)) = reset.as_ref().filter(|r| r.0 == plan.setup) else {
+                    return Err(TwinError::NoReset {
+                        setup: plan.setup.clone(),
+                    });
+                };
+                let theta = self.alignment_angle(&plan.setup);
+                let d = Rotation2::new(theta) * (st.tcp - tcp0);
+                let dpsi = st.psi - psi0;
+                let m = plan.instrument.measures();
+                if plan.reset {
+                    pose.x = m.x.then_some(0.0);
+                    pose.y = m.y.then_some(0.0);
+                    pose.r = m.r.then_some(0.0);
+                    pose.psi = m.psi.then_some(0.0);
+                } else {
+                    match plan.instrument {
+                        Instrument::Lt | Instrument::Kgm => {
+                            let cov = noise::xy_covariance(plan.instrument, st.tcp);
+                            let e = match Cholesky::new(cov) {
+                                Some(c) => {
+                                    c.l() * Vector2::new(gauss(&mut self.rng), gauss(&mut self.rng))
+                                }
+                                None => Vector2::zeros(),
+                            };
+                            pose.x = Some(d.x + k * e.x);
+                            pose.y = Some(d.y + k * e.y);
+                        }
+                        Instrument::LiX
+                        | Instrument::LiY
+                        | Instrument::Dbb
+                        | Instrument::Circle
+                        | Instrument::LiPsi => {
+                            let e = k * noise::scalar_sigma(plan.instrument) * gauss(&mut self.rng);
+                            match plan.instrument {
+                                Instrument::LiX => pose.x = Some(d.x + e),
+                                Instrument::LiY => pose.y = Some(d.y + e),
+                                Instrument::LiPsi => pose.psi = Some(dpsi + e),
+                                _ => pose.r = Some(d.norm() + e),
+                            }
+                        }
+                        Instrument::SelfCal | Instrument::None => {}
+                    }
+                }
+            }
+            poses.push(pose);
+        }
+        let effects: Vec<String> = self
+            .config
+            .effects
+            .iter()
+            .map(|(e, m)| format!("{e}={m}"))
+            .collect();
+        Ok(Campaign {
+            source: source.to_owned(),
+            comments: vec![format!(
+                "rpkm digital twin: seed {}, effects [{}]",
+                self.config.seed,
+                effects.join(", ")
+            )],
+            covariate_names: vec!["temp_machine".to_owned()],
+            poses,
+        })
+    }
+
+    /// Measure the designs of `instruments` one after the other, in one campaign.
+    pub fn campaign(&mut self, instruments: &[Instrument]) -> Result<Campaign, TwinError> {
+        let design: Vec<PlannedPose> = instruments
+            .iter()
+            .flat_map(|&i| design::for_instrument(i))
+            .collect();
+        let names: Vec<&str> = instruments.iter().map(|i| i.as_str()).collect();
+        self.run(&design, &names.join("+"))
+    }
+
+    /// Measure campaigns by name (`lt`, `kgm`, `dbb`, `li_x`, `li_y`, `li_psi`, `self`,
+    /// `circle`); `validation` is [`Twin::validation`] with `n_validation` poses.
+    pub fn campaign_by_names(
+        &mut self,
+        names: &[&str],
+        n_validation: usize,
+    ) -> Result<Campaign, TwinError> {
+        let mut design = Vec::new();
+        for n in names {
+            if *n == "validation" {
+                design.extend(self.validation_design(n_validation));
+                continue;
+            }
+            let i: Instrument = n
+                .parse()
+                .ok()
+                .filter(|i| *i != Instrument::None)
+                .ok_or_else(|| TwinError::UnknownCampaign((*n).to_owned()))?;
+            design.extend(design::for_instrument(i));
+        }
+        self.run(&design, &names.join("+"))
+    }
+
+    fn validation_design(&self, n: usize) -> Vec<PlannedPose> {
+        design::validation(n, self.config.seed.wrapping_add(0x7a1d))
+    }
+
+    /// Held-out validation: `n` random poses measured with the laser tracker in one setup.
+    pub fn validation(&mut self, n: usize) -> Result<Campaign, TwinError> {
+        let d = self.validation_design(n);
+        self.run(&d, "validation")
+    }
+}
