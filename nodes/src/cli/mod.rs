@@ -1,6 +1,8 @@
 //! Subcommands of the `rpkm` command line. Thin: parsing, files, printing; physics in rpkm_core.
 
 pub mod calibrate;
+pub mod preload;
+pub mod simulate;
 
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
