@@ -2,6 +2,7 @@
 //! analysis, diagnosis). Pure: no I/O, no async, no transport. Lengths in mm, angles in rad,
 //! forces in N, as in the thesis.
 
+pub mod analysis;
 pub mod campaign;
 pub mod calib;
 pub mod design;
