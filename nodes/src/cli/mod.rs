@@ -1,5 +1,6 @@
 //! Subcommands of the `rpkm` command line. Thin: parsing, files, printing; physics in rpkm_core.
 
+pub mod analyze;
 pub mod calibrate;
 pub mod preload;
 pub mod simulate;
