@@ -13,13 +13,14 @@
 //! quadratically from the rigid forward model of a pair of active drives.
 
 use crate::geometry::{self, guide_frame, Subsystem};
-use crate::params::{Model, Params, N_PARAMS, RODS};
+use crate::params::{Guide, Model, Params, N_PARAMS, RODS};
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
 /// Nominal drive force: 100 % redundancy current, N.
 pub const NOMINAL_DRIVE_FORCE_N: f64 = 8600.0;
-/// Newton stops when the largest step falls below this, mm (or rad).
-pub const STEP_TOL: f64 = 1e-11;
+/// Newton stops after a step whose largest component falls below this, mm (or rad): with
+/// quadratic convergence the error left is of the order of its square (< 1e-12 mm).
+pub const STEP_TOL: f64 = 1e-7;
 /// Iteration cap of the equilibrium Newton.
 pub const MAX_ITER: usize = 30;
 
@@ -150,14 +151,28 @@ struct RodState {
     n: Vector2<f64>,
 }
 
-#[inline]
+/// Guide frames (origin, e, n) of guides 1 and 2, computed once per solve.
+type Frames = [(Vector2<f64>, Vector2<f64>, Vector2<f64>); 2];
+
+fn frames(p: &Params) -> Frames {
+    [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)]
+}
+
 fn rod_state(p: &Params, i: usize, z: &V7) -> RodState {
+    rod_state_with(p, &frames(p), z[2].sin_cos(), i, z)
+}
+
+#[inline]
+fn rod_state_with(p: &Params, fr: &Frames, sc: (f64, f64), i: usize, z: &V7) -> RodState {
     let rod = &RODS[i];
-    let (sn, cs) = z[2].sin_cos();
+    let (sn, cs) = sc;
     let (xa, ya) = (p[rod.xa], p[rod.ya]);
     let arm = Vector2::new(cs * xa - sn * ya, sn * xa + cs * ya);
     let a = Vector2::new(z[0], z[1]) + arm;
-    let (o, e, n) = guide_frame(p, rod.guide);
+    let (o, e, n) = match rod.guide {
+        Guide::G1 => fr[0],
+        Guide::G2 => fr[1],
+    };
     let s = z[3 + rod.actuator];
     let b = o + n * p[rod.xb] + e * (s + p[rod.yb]);
     let r = a - b;
@@ -200,13 +215,25 @@ fn dr_dz(st: &RodState) -> SMatrix<f64, 2, 7> {
 }
 
 /// Gradient (generalised forces) and Hessian (tangent stiffness) of the system, with the rows of
-/// rigid active carriers replaced by s_j − q_j = 0.
-fn system(p: &Params, k: &Stiffness, q: &[f64; 4], fol: &Followers, z: &V7) -> (V7, M7, bool) {
+/// rigid active carriers replaced by s_j − q_j = 0. With `symmetric`, their columns are zeroed
+/// too, which keeps the matrix symmetric for the Newton step (valid because the solver keeps
+/// s_j = q_j exactly, so those components of the step are 0); the sensitivities need the
+/// unsymmetric form.
+fn system(
+    p: &Params,
+    fr: &Frames,
+    k: &Stiffness,
+    q: &[f64; 4],
+    fol: &Followers,
+    z: &V7,
+    symmetric: bool,
+) -> (V7, M7, bool) {
     let mut g = V7::zeros();
     let mut h = M7::zeros();
     let mut ok = true;
+    let sc = z[2].sin_cos();
     for i in 0..5 {
-        let st = rod_state(p, i, z);
+        let st = rod_state_with(p, fr, sc, i, z);
         if !(st.rho > 1e-9) {
             ok = false;
             continue;
@@ -236,6 +263,9 @@ fn system(p: &Params, k: &Stiffness, q: &[f64; 4], fol: &Followers, z: &V7) -> (
                 g[v] = z[v] - q[j];
                 for col in 0..7 {
                     h[(v, col)] = 0.0;
+                    if symmetric {
+                        h[(col, v)] = 0.0;
+                    }
                 }
                 h[(v, v)] = 1.0;
             }
@@ -304,10 +334,16 @@ fn solve_from(
     followers: Followers,
     mut z: V7,
 ) -> Result<Equilibrium, ElasticError> {
+    for j in 0..4 {
+        if !followers[j] && k.carrier[j].is_none() {
+            z[3 + j] = q[j];
+        }
+    }
     let mut last_step = f64::INFINITY;
     let mut gnorm = f64::INFINITY;
+    let fr = frames(p);
     for it in 0..MAX_ITER {
-        let (g, h, ok) = system(p, k, &q, &followers, &z);
+        let (g, h, ok) = system(p, &fr, k, &q, &followers, &z, true);
         if !ok {
             return Err(ElasticError::Degenerate);
         }
@@ -315,10 +351,15 @@ fn solve_from(
         if !gnorm.is_finite() {
             return Err(ElasticError::NonFinite);
         }
-        let step = h
-            .lu()
-            .solve(&g)
-            .ok_or(ElasticError::Singular { iteration: it })?;
+        // The tangent stiffness is symmetric and, near a stable equilibrium, positive definite:
+        // Cholesky, with LU as the fallback.
+        let step = match h.cholesky() {
+            Some(c) => c.solve(&g),
+            _ => h
+                .lu()
+                .solve(&g)
+                .ok_or(ElasticError::Singular { iteration: it })?,
+        };
         z -= step;
         last_step = step.amax();
         if !last_step.is_finite() {
@@ -396,7 +437,7 @@ pub fn sensitivity(
     eq: &Equilibrium,
 ) -> Result<ElasticSensitivity, ElasticError> {
     let z = eq.z();
-    let (_, h, _) = system(p, k, &q, &followers, &z);
+    let (_, h, _) = system(p, &frames(p), k, &q, &followers, &z, false);
     let lu = h.lu();
     // ∂G/∂q: only the rows of active carriers depend on q.
     let mut g_q = SMatrix::<f64, 7, 4>::zeros();
