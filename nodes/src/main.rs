@@ -18,12 +18,22 @@ struct Cli {
 enum Command {
     /// Identify the geometric parameters from a campaign CSV (see `rpkm calibrate --help`).
     Calibrate(cli::calibrate::CalibrateArgs),
+    /// Simulate measurement campaigns on the digital twin, with hidden effects.
+    Simulate(cli::simulate::SimulateArgs),
+    /// Predicted rod and drive forces and redundancy current at a pose.
+    Preload(cli::preload::PreloadArgs),
+    /// The whole story on the embedded default data: model vs measurements, where it fails,
+    /// the missing effect, the held-out error falling; writes an HTML report.
+    Demo(cli::demo::DemoArgs),
 }
 
 fn main() {
     let args = Cli::parse();
     let result = match &args.command {
         Command::Calibrate(a) => cli::calibrate::run(a),
+        Command::Simulate(a) => cli::simulate::run(a),
+        Command::Preload(a) => cli::preload::run(a),
+        Command::Demo(a) => cli::demo::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

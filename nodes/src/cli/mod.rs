@@ -2,6 +2,7 @@
 
 pub mod analyze;
 pub mod calibrate;
+pub mod demo;
 pub mod preload;
 pub mod simulate;
 

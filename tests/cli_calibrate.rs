@@ -1,0 +1,139 @@
+//! `rpkm calibrate` end to end: twin data in, the JSON contract out, against the twin's truth;
+//! bad campaign files exit with code 2 and name file, line and column.
+
+use rpkm_core::campaign::Instrument;
+use rpkm_core::twin::{Twin, TwinConfig};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn rpkm() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_rpkm"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rpkm-cli-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+fn write_twin_campaigns(dir: &Path, seed: u64) -> (PathBuf, PathBuf) {
+    let mut twin = Twin::new(TwinConfig {
+        seed,
+        ..Default::default()
+    })
+    .expect("twin");
+    let cal = twin
+        .campaign(&[Instrument::Lt, Instrument::SelfCal])
+        .expect("campaign");
+    let val = twin.validation(60).expect("validation");
+    let (c, v) = (dir.join("campaign.csv"), dir.join("validation.csv"));
+    std::fs::write(&c, cal.to_csv()).expect("write");
+    std::fs::write(&v, val.to_csv()).expect("write");
+    (c, v)
+}
+
+#[test]
+fn calibrate_twin_campaign_reaches_the_held_out_noise_floor() {
+    let dir = scratch("e2e");
+    let (c, v) = write_twin_campaigns(&dir, 5);
+    let json = dir.join("cal.json");
+    let out = rpkm()
+        .arg("calibrate")
+        .arg(&c)
+        .args([
+            "--model",
+            "29",
+            "--params",
+            "auto",
+            "--max-condition",
+            "1e5",
+        ])
+        .arg("--validate")
+        .arg(&v)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("run rpkm");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("held-out TCP RMS"), "{stdout}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("valid json");
+    let before = j["val_rms_before_um"].as_f64().expect("val_rms_before_um");
+    let after = j["val_rms_after_um"].as_f64().expect("val_rms_after_um");
+    assert_eq!(j["parameters"].as_object().expect("parameters").len(), 29);
+    assert!(j["parameters"]["gamma2"].is_f64());
+    // noise floor: the true parameters on the same held-out file
+    let twin = Twin::new(TwinConfig {
+        seed: 5,
+        ..Default::default()
+    })
+    .expect("twin");
+    let val =
+        rpkm_core::campaign::Campaign::parse(&std::fs::read_to_string(&v).expect("read"), "v")
+            .expect("parse");
+    let e: Vec<f64> =
+        rpkm_core::obs::tcp_errors(&val, twin.true_params(), rpkm_core::params::Model::M29)
+            .expect("errors")
+            .iter()
+            .map(|e| e.2)
+            .collect();
+    let floor = 1e3 * rpkm_core::calib::rms(&e);
+    assert!(
+        after <= 1.2 * floor,
+        "held-out {after:.2} um vs floor {floor:.2} um"
+    );
+    assert!(
+        before > 2.0 * after,
+        "calibration must matter: {before:.2} -> {after:.2} um"
+    );
+    assert!(j["gain"].as_f64().expect("gain") > 0.3);
+}
+
+#[test]
+fn bad_campaign_files_exit_2_with_file_line_and_column() {
+    let dir = scratch("bad");
+    let (c, _) = write_twin_campaigns(&dir, 6);
+    let text = std::fs::read_to_string(&c).expect("read");
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let h = lines
+        .iter()
+        .position(|l| !l.starts_with('#'))
+        .expect("header line");
+    let header: Vec<&str> = lines[h].split(',').collect();
+    let q2_col = header.iter().position(|c| *c == "q2").expect("q2 column") + 1;
+    let row = h + 3; // 0-based index of the line that gets the bad value
+    let mut fields: Vec<String> = lines[row].split(',').map(str::to_owned).collect();
+    fields[q2_col - 1] = "abc".into();
+    lines[row] = fields.join(",");
+    let bad = dir.join("bad.csv");
+    std::fs::write(&bad, lines.join("\n")).expect("write");
+    let out = rpkm().arg("calibrate").arg(&bad).output().expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains(&format!("bad.csv:{}:{q2_col}", row + 1)),
+        "{err}"
+    );
+
+    let out = rpkm()
+        .arg("calibrate")
+        .arg(dir.join("missing.csv"))
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("missing.csv"));
+
+    let out = rpkm()
+        .arg("calibrate")
+        .arg(&c)
+        .args(["--params", "l9"])
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("l9"));
+}
