@@ -25,6 +25,12 @@ fn python() -> Option<PathBuf> {
         return Some(PathBuf::from(p));
     }
     let venv = repo_root().join(".venv/bin/python");
+    // CI (.ci/run) installs the venv and sets RPKM_REQUIRE_PYTHON: there a skip is a failure.
+    assert!(
+        venv.is_file() || std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
+        "RPKM_REQUIRE_PYTHON is set but {} is missing",
+        venv.display()
+    );
     venv.is_file().then_some(venv)
 }
 

@@ -28,6 +28,12 @@ fn python() -> Option<PathBuf> {
     if py.exists() {
         Some(py)
     } else {
+        // CI (.ci/run) installs the venv and sets RPKM_REQUIRE_PYTHON: there a skip is a failure.
+        assert!(
+            std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
+            "RPKM_REQUIRE_PYTHON is set but {} is missing",
+            py.display()
+        );
         eprintln!(
             "SKIPPED: {} not found; create it with `python3 -m venv .venv && \
              .venv/bin/pip install cyclonedds` in the repository root",
