@@ -27,8 +27,13 @@ fn per_call_ns(n: usize, mut f: impl FnMut(usize)) -> f64 {
 
 fn main() {
     let p = support::true_params(3, false);
-    let poses: Vec<(f64, f64)> = (0..1000).map(|i| (-150.0 + 0.3 * i as f64, 700.0 + 2.0 * i as f64)).collect();
-    let qs: Vec<[f64; 4]> = poses.iter().map(|&(x, y)| geometry::igm(&p, Model::M29, x, y).expect("igm").q()).collect();
+    let poses: Vec<(f64, f64)> = (0..1000)
+        .map(|i| (-150.0 + 0.3 * i as f64, 700.0 + 2.0 * i as f64))
+        .collect();
+    let qs: Vec<[f64; 4]> = poses
+        .iter()
+        .map(|&(x, y)| geometry::igm(&p, Model::M29, x, y).expect("igm").q())
+        .collect();
     let n = 200_000;
     println!("{:<28} {:>10}", "operation", "ns/call");
     let mut rows = Vec::new();
@@ -45,12 +50,20 @@ fn main() {
         println!("{:<28} {:>10.0}", format!("fgm (q1,q4), {model}"), fgm);
         rows.push((igm, fgm));
     }
-    println!("model 29 / model 24: igm {:.2}x, fgm {:.2}x", rows[1].0 / rows[0].0, rows[1].1 / rows[0].1);
+    println!(
+        "model 29 / model 24: igm {:.2}x, fgm {:.2}x",
+        rows[1].0 / rows[0].0,
+        rows[1].1 / rows[0].1
+    );
 
     let plan: Vec<_> = [design::validation(250, 5), design::self_cal()].concat();
     let plan = &plan[..plan.len().min(400)];
     let campaign = support::measure(plan, &p, 9, true, "bench");
-    let opts = Options { model: Model::M29, selection: Selection::Auto { max_condition: 1e6 }, ..Default::default() };
+    let opts = Options {
+        model: Model::M29,
+        selection: Selection::Auto { max_condition: 1e6 },
+        ..Default::default()
+    };
     let runs = 5;
     let t = Instant::now();
     let mut identified = 0;
@@ -59,5 +72,8 @@ fn main() {
         identified = cal.identified.len();
     }
     let ms = t.elapsed().as_secs_f64() * 1e3 / runs as f64;
-    println!("calibration, model 29, {} poses, {identified} parameters identified: {ms:.1} ms", campaign.poses.len());
+    println!(
+        "calibration, model 29, {} poses, {identified} parameters identified: {ms:.1} ms",
+        campaign.poses.len()
+    );
 }

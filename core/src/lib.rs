@@ -3,8 +3,8 @@
 //! forces in N, as in the thesis.
 
 pub mod analysis;
-pub mod campaign;
 pub mod calib;
+pub mod campaign;
 pub mod design;
 pub mod elastic;
 pub mod geometry;
