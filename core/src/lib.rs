@@ -5,6 +5,7 @@
 pub mod analysis;
 pub mod calib;
 pub mod campaign;
+pub mod circular;
 pub mod design;
 pub mod elastic;
 pub mod geometry;

@@ -190,3 +190,46 @@ fn outliers_are_eliminated_and_reported() {
         cal.outliers
     );
 }
+
+/// The dependency matrix D (eq. 3.35): with the perfect parallel-holder as links, model 29
+/// identifies l4 and carries l5 along, so rod 5 stays rod 4 shifted, as on the true machine.
+#[test]
+fn linked_parameters_follow_their_masters() {
+    use rpkm_core::params::{L4, L5, XB4R, XB5R};
+    let mut truth = Params::nominal();
+    truth[L4] += 0.2;
+    truth[XB4R] -= 0.15;
+    let truth = truth.with_perfect_parallelogram();
+    let c = support::measure(
+        &[design::lt(), design::self_cal()].concat(),
+        &truth,
+        51,
+        true,
+        "lt+self",
+    );
+    let opts = Options {
+        model: Model::M29,
+        selection: Selection::List(vec![L4, XB4R, rpkm_core::params::GAMMA2]),
+        links: calib::Link::perfect_parallelogram(),
+        ..Default::default()
+    };
+    let cal = calib::calibrate(&c, &Params::nominal(), &opts).expect("calibration");
+    assert!(
+        (cal.params[L4] - truth[L4]).abs() < 0.01,
+        "l4 {} vs {}",
+        cal.params[L4],
+        truth[L4]
+    );
+    assert!(
+        (cal.params[L5] - cal.params[L4]).abs() < 1e-9,
+        "l5 follows l4"
+    );
+    assert!(
+        (cal.params[XB5R] - cal.params[XB4R]).abs() < 1e-9,
+        "xb5r follows xb4r"
+    );
+    assert!(
+        cal.identified.iter().all(|i| i.index != L5),
+        "l5 is linked, not identified"
+    );
+}
