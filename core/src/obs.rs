@@ -269,33 +269,16 @@ fn forward_rows(
                     (sig * sig + var_enc).sqrt(),
                 )
             }
-            Instrument::LiX => match pose.x {
-                Some(m) => (
-                    Direction::X(a, b),
-                    d(X) - m,
-                    dj(X),
-                    (sig * sig + var(X)).sqrt(),
-                ),
-                None => return Ok(()),
-            },
-            Instrument::LiY => match pose.y {
-                Some(m) => (
-                    Direction::Y(a, b),
-                    d(Y) - m,
-                    dj(Y),
-                    (sig * sig + var(Y)).sqrt(),
-                ),
-                None => return Ok(()),
-            },
-            Instrument::LiPsi => match pose.psi {
-                Some(m) => (
-                    Direction::Psi(a, b),
-                    d(PSI) - m,
-                    dj(PSI),
-                    (sig * sig + var(PSI)).sqrt(),
-                ),
-                None => return Ok(()),
-            },
+            // one coordinate relative to the reset pose: x, y or ψ
+            Instrument::LiX | Instrument::LiY | Instrument::LiPsi => {
+                let (v, measured, direction) = match inst {
+                    Instrument::LiX => (X, pose.x, Direction::X(a, b)),
+                    Instrument::LiY => (Y, pose.y, Direction::Y(a, b)),
+                    _ => (PSI, pose.psi, Direction::Psi(a, b)),
+                };
+                let Some(m) = measured else { return Ok(()) };
+                (direction, d(v) - m, dj(v), (sig * sig + var(v)).sqrt())
+            }
             _ => return Ok(()),
         };
         out.push(Residual {
