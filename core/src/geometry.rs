@@ -266,16 +266,12 @@ fn igm_start(p: &Params, x: f64, y: f64) -> Result<Config, GeometryError> {
     Ok(c)
 }
 
-/// The rod (1..=4) whose carrier is actuator `i`.
-fn rod_of_actuator(i: usize) -> &'static Rod {
-    &RODS[[0, 1, 2, 3][i]]
-}
-
 /// Analytic model-24 start for a forward model: intersection of the two rods' circles
 /// (annex A) with ψ = γ2, keeping the assembly mode, then the other actuators by eq. 4.6.
 fn fgm_start(p: &Params, a: usize, b: usize, qa: f64, qb: f64) -> Result<Config, GeometryError> {
     let psi = p[GAMMA2];
-    let (ra, rb) = (rod_of_actuator(a), rod_of_actuator(b));
+    // rods 1-4 hang on actuators q1-q4 in order
+    let (ra, rb) = (&RODS[a], &RODS[b]);
     // Centre of the TCP circle of a rod: B − R(ψ)·a.
     let centre =
         |rod: &Rod, q: f64| carrier_joint(p, rod, q) - (platform_joint(p, rod, 0.0, 0.0, psi));

@@ -88,6 +88,18 @@ pub struct PoseError {
     pub error: GeometryError,
 }
 
+impl PoseError {
+    /// The error `error` of `pose` in `campaign`, located by its file and line.
+    pub fn at(campaign: &Campaign, pose: &Pose, error: GeometryError) -> PoseError {
+        PoseError {
+            source: campaign.source.clone(),
+            line: pose.line,
+            instrument: pose.instrument.as_str(),
+            error,
+        }
+    }
+}
+
 /// The forward subsystems used by forward calibration rows (thesis 4.2.1).
 pub const FORWARD_SUBSYSTEMS: [Subsystem; 2] =
     [Subsystem::Actuators(0, 3), Subsystem::Actuators(2, 3)];
@@ -144,12 +156,7 @@ pub fn residuals(
             if pose.reset && pose.instrument.is_relative() {
                 continue;
             }
-            let err = |error| PoseError {
-                source: campaign.source.clone(),
-                line: pose.line,
-                instrument: pose.instrument.as_str(),
-                error,
-            };
+            let err = |error| PoseError::at(campaign, pose, error);
             match step {
                 Step::Direct => {
                     pose_rows(i, pose, reset.map(|r| r.1), p, model, &mut out).map_err(err)?
@@ -162,12 +169,7 @@ pub fn residuals(
         // the reset pose of a forward instrument still yields a virtual q2 measurement
         if step == Step::VirtualQ2 {
             if let Some((i, pose)) = reset {
-                let err = |error| PoseError {
-                    source: campaign.source.clone(),
-                    line: pose.line,
-                    instrument: pose.instrument.as_str(),
-                    error,
-                };
+                let err = |error| PoseError::at(campaign, pose, error);
                 virtual_q2_row(i, pose, p, model, p_cal, &mut out).map_err(err)?;
             }
         }
@@ -380,12 +382,7 @@ pub fn tcp_errors(
             if pose.reset || !pose.instrument.is_relative() {
                 continue;
             }
-            let err = |error| PoseError {
-                source: campaign.source.clone(),
-                line: pose.line,
-                instrument: pose.instrument.as_str(),
-                error,
-            };
+            let err = |error| PoseError::at(campaign, pose, error);
             let now = geometry::fgm(p, model, pose.q[0], pose.q[3]).map_err(err)?;
             let zero = geometry::fgm(p, model, reset.q[0], reset.q[3]).map_err(err)?;
             let (dx, dy) = (now.x() - zero.x(), now.y() - zero.y());

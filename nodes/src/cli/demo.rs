@@ -30,22 +30,22 @@ pub struct DemoArgs {
 }
 
 /// Expected RMS (mm) of the held-out TCP errors if the model were perfect: the laser
-/// tracker's noise at the held-out poses.
-fn noise_floor_mm(val: &Campaign) -> f64 {
+/// tracker's noise at the held-out poses (located by the nominal fgm of their actuators).
+fn noise_floor_mm(val: &Campaign) -> anyhow::Result<f64> {
+    let nominal = Params::nominal();
     let mut var = Vec::new();
     for p in val
         .poses
         .iter()
         .filter(|p| p.instrument == Instrument::Lt && !p.reset)
     {
-        let (Some(x), Some(y)) = (p.x, p.y) else {
-            continue;
-        };
-        let cov = noise::lt_covariance(nalgebra::Vector2::new(x, y + 1700.0));
+        let tcp = rpkm_core::geometry::fgm(&nominal, Model::M29, p.q[0], p.q[3])
+            .map_err(|e| anyhow::anyhow!("{}:{}: {e}", val.source, p.line))?;
+        let cov = noise::lt_covariance(nalgebra::Vector2::new(tcp.x(), tcp.y()));
         var.push(cov[(0, 0)]);
         var.push(cov[(1, 1)]);
     }
-    (var.iter().sum::<f64>() / var.len().max(1) as f64).sqrt()
+    Ok((var.iter().sum::<f64>() / var.len().max(1) as f64).sqrt())
 }
 
 fn calibrate(c: &Campaign, model: Model) -> anyhow::Result<Calibration> {
@@ -87,7 +87,7 @@ fn residual_field(
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let campaign = Campaign::parse(CAMPAIGN, "bags/demo/campaign.csv")?;
     let val = Campaign::parse(VALIDATION, "bags/demo/campaign.val.csv")?;
-    let floor_um = 1e3 * noise_floor_mm(&val);
+    let floor_um = 1e3 * noise_floor_mm(&val)?;
     println!(
         "rpkm demo: {} poses (laser tracker + self-calibration), {} held-out poses",
         campaign.poses.len(),
