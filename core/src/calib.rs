@@ -4,6 +4,7 @@
 //! procedure of the forward instruments.
 
 use crate::campaign::{Campaign, Instrument};
+use crate::effects::{Corrections, EffectSet};
 use crate::obs::{self, Direction, PoseError, Residual, Step};
 use crate::observability::{condition_number, normalize_columns, qr_pivot_order};
 use crate::params::{self, variation_range, Model, Params, NAMES, N_PARAMS};
@@ -149,6 +150,22 @@ pub struct Identified {
     pub step: u8,
 }
 
+/// One parameter of an effect in the model.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct EffectEstimate {
+    pub effect: &'static str,
+    pub name: String,
+    pub unit: &'static str,
+    pub value: f64,
+    pub sigma: f64,
+    /// Fraction (0..1) of the parameter's signature in the measurements that the geometric
+    /// parameters (and the effect parameters before it) cannot mimic: near 0, the campaign
+    /// cannot tell it from a geometric error and it is held at its start value.
+    pub observability: f64,
+    /// Whether it was identified (false: held, unobservable with this campaign).
+    pub identified: bool,
+}
+
 /// The result of a calibration.
 #[derive(Clone, Debug)]
 pub struct Calibration {
@@ -167,6 +184,11 @@ pub struct Calibration {
     pub cost_after: f64,
     pub chi2_per_dof: f64,
     pub rows: usize,
+    /// Effect parameters θ (all of them, in [`EffectSet::layout`] order) and their estimates.
+    pub theta: Vec<f64>,
+    pub effects: Vec<EffectEstimate>,
+    /// Degrees of freedom used: identified geometric and effect parameters.
+    pub n_identified: usize,
 }
 
 /// The dependency matrix D (29 × n) for the identified `ids` with `links`.
@@ -194,6 +216,13 @@ fn weighted(rows: &[Residual]) -> (DVector<f64>, DMatrix<f64>) {
     (r, j)
 }
 
+/// Weighted Jacobian columns (m × k) of the effect parameters `free`.
+fn weighted_theta(rows: &[Residual], free: &[usize]) -> DMatrix<f64> {
+    DMatrix::from_fn(rows.len(), free.len(), |i, k| {
+        rows[i].d_theta.get(free[k]).copied().unwrap_or(0.0) / rows[i].sigma
+    })
+}
+
 type Key = (usize, Direction);
 
 fn rows_at(
@@ -202,9 +231,10 @@ fn rows_at(
     model: Model,
     step: Step,
     p_cal: &Params,
+    corr: &Corrections,
     drop: &HashSet<Key>,
 ) -> Result<Vec<Residual>, PoseError> {
-    let mut rows = obs::residuals(c, p, model, step, p_cal)?;
+    let mut rows = obs::residuals_with(c, p, model, step, p_cal, corr)?;
     rows.retain(|r| !drop.contains(&(r.pose, r.direction)));
     Ok(rows)
 }
@@ -219,41 +249,65 @@ struct Lm<'a> {
     drop: &'a HashSet<Key>,
     d: DMatrix<f64>,
     h: DVector<f64>,
+    /// Effects, the identified effect parameters and their scaling.
+    effects: &'a EffectSet,
+    free_theta: &'a [usize],
+    h_theta: DVector<f64>,
     max_iterations: usize,
 }
 
+/// The unknowns of a calibration: geometric parameters and effect parameters.
+#[derive(Clone, Debug)]
+struct State {
+    p: Params,
+    theta: Vec<f64>,
+}
+
 struct LmResult {
-    params: Params,
+    state: State,
     iterations: usize,
     cost: f64,
 }
 
 impl Lm<'_> {
-    fn eval(&self, p: &Params) -> Result<(DVector<f64>, DMatrix<f64>), PoseError> {
+    fn eval(&self, x: &State) -> Result<(DVector<f64>, DMatrix<f64>), PoseError> {
+        let corr = self.effects.corrections(&x.theta);
         let rows = rows_at(
             self.campaign,
-            p,
+            &x.p,
             self.model,
             self.step,
             &self.p_cal,
+            &corr,
             self.drop,
         )?;
         let (r, j) = weighted(&rows);
-        let js = j * &self.d * DMatrix::from_diagonal(&self.h);
+        let jg = j * &self.d * DMatrix::from_diagonal(&self.h);
+        if self.free_theta.is_empty() {
+            return Ok((r, jg));
+        }
+        let jt = weighted_theta(&rows, self.free_theta) * DMatrix::from_diagonal(&self.h_theta);
+        let mut js = DMatrix::zeros(jg.nrows(), jg.ncols() + jt.ncols());
+        js.columns_mut(0, jg.ncols()).copy_from(&jg);
+        js.columns_mut(jg.ncols(), jt.ncols()).copy_from(&jt);
         Ok((r, js))
     }
 
-    fn apply(&self, p: &Params, delta: &DVector<f64>) -> Params {
-        let dp = &self.d * delta.component_mul(&self.h);
-        let mut out = *p;
+    fn apply(&self, x: &State, delta: &DVector<f64>) -> State {
+        let n = self.h.len();
+        let dp = &self.d * delta.rows(0, n).component_mul(&self.h);
+        let mut out = x.clone();
         for i in 0..N_PARAMS {
-            out[i] += dp[i];
+            out.p[i] += dp[i];
+        }
+        for (k, &t) in self.free_theta.iter().enumerate() {
+            out.theta[t] += delta[n + k] * self.h_theta[k];
         }
         out
     }
 
-    fn run(&self, start: &Params) -> Result<LmResult, CalibrationError> {
-        let mut p = *start;
+    fn run(&self, start: &State) -> Result<LmResult, CalibrationError> {
+        let mut p = start.clone();
         let (mut r, mut js) = self.eval(&p)?;
         let mut cost = 0.5 * r.norm_squared();
         let mut a = js.transpose() * &js;
@@ -263,7 +317,7 @@ impl Lm<'_> {
         for it in 0..self.max_iterations {
             if g.amax() < 1e-9 * (1.0 + cost) {
                 return Ok(LmResult {
-                    params: p,
+                    state: p,
                     iterations: it,
                     cost,
                 });
@@ -298,7 +352,7 @@ impl Lm<'_> {
                     nu = 2.0;
                     if small || step.norm() < 1e-12 {
                         return Ok(LmResult {
-                            params: p,
+                            state: p,
                             iterations: it + 1,
                             cost,
                         });
@@ -313,7 +367,7 @@ impl Lm<'_> {
                         // the gradient says otherwise
                         if g.amax() < 1e-3 * (1.0 + cost) {
                             return Ok(LmResult {
-                                params: p,
+                                state: p,
                                 iterations: it + 1,
                                 cost,
                             });
@@ -450,20 +504,28 @@ fn rms_table(before: &[Residual], after: &[Residual]) -> Vec<DirectionRms> {
         .collect()
 }
 
-/// Identified parameters of one LM step, with uncertainties from the a-posteriori covariance
-/// s² (JᵀJ)⁻¹ of the weighted problem.
-/// A-posteriori covariance s² (JᵀJ)⁻¹ of the identified parameters of a weighted problem.
+/// A-posteriori covariance s² (JᵀJ)⁻¹ of a weighted problem: that of the identified geometric
+/// parameters, and the standard deviations of the identified effect parameters `free`.
 fn covariance(
     rows: &[Residual],
     ids: &[usize],
     links: &[Link],
+    free: &[usize],
     cost: f64,
-) -> Result<DMatrix<f64>, CalibrationError> {
-    let jr = reduced_jacobian(rows, ids, links);
-    let dof = rows.len().saturating_sub(ids.len()).max(1) as f64;
+) -> Result<(DMatrix<f64>, Vec<f64>), CalibrationError> {
+    let jg = reduced_jacobian(rows, ids, links);
+    let jt = weighted_theta(rows, free);
+    let n = ids.len();
+    let mut jr = DMatrix::zeros(rows.len(), n + free.len());
+    jr.columns_mut(0, n).copy_from(&jg);
+    jr.columns_mut(n, free.len()).copy_from(&jt);
+    let dof = rows.len().saturating_sub(n + free.len()).max(1) as f64;
     let s2 = (2.0 * cost / dof).max(1.0);
-    let inv = normal_inverse(&jr, ids)?;
-    Ok(inv * s2)
+    let inv = normal_inverse(&jr, ids)? * s2;
+    let sig_theta = (0..free.len())
+        .map(|k| inv[(n + k, n + k)].max(0.0).sqrt())
+        .collect();
+    Ok((inv.view((0, 0), (n, n)).into_owned(), sig_theta))
 }
 
 fn normal_inverse(jr: &DMatrix<f64>, ids: &[usize]) -> Result<DMatrix<f64>, CalibrationError> {
@@ -499,20 +561,244 @@ pub fn calibrate(
     start: &Params,
     opts: &Options,
 ) -> Result<Calibration, CalibrationError> {
+    calibrate_with(campaign, start, opts, &EffectSet::empty(), &[])
+}
+
+/// Effect parameters whose signature the geometric columns (and the effect columns before
+/// them) cannot mimic, below which a parameter is held: 1 % of its column.
+pub const MIN_EFFECT_OBSERVABILITY: f64 = 0.01;
+
+/// Calibrate `campaign` with the physical `effects` (bound to it) in the model, starting from
+/// `start` and effect parameters `theta0` (empty: all zero). The geometric parameters are
+/// selected as without effects; every effect parameter the campaign can tell from the
+/// geometry (see [`EffectEstimate::observability`]) is identified with them.
+pub fn calibrate_with(
+    campaign: &Campaign,
+    start: &Params,
+    opts: &Options,
+    effects: &EffectSet,
+    theta0: &[f64],
+) -> Result<Calibration, CalibrationError> {
     let model = opts.model;
     if let Selection::List(list) = &opts.selection {
         if let Some(&i) = list.iter().find(|&&i| !model.has_param(i)) {
             return Err(CalibrationError::NotInModel(NAMES[i], model));
         }
     }
+    let n_theta = effects.n_params();
+    let theta0: Vec<f64> = if theta0.len() == n_theta {
+        theta0.to_vec()
+    } else {
+        vec![0.0; n_theta]
+    };
+    let corr0 = effects.corrections(&theta0);
     let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();
     let no_drop = HashSet::new();
-    let rows0 = rows_at(campaign, start, model, Step::Direct, start, &no_drop)?;
+    let rows0 = rows_at(
+        campaign,
+        start,
+        model,
+        Step::Direct,
+        start,
+        &corr0,
+        &no_drop,
+    )?;
     if rows0.is_empty() {
         return Err(CalibrationError::NoMeasurements(campaign.source.clone()));
     }
+    let (step1_ids, step2_wanted) = select_geometric(campaign, &rows0, opts, &linked)?;
+    if rows0.len() < step1_ids.len() {
+        return Err(CalibrationError::Underdetermined {
+            params: step1_ids.len(),
+            rows: rows0.len(),
+        });
+    }
+    let layout = effects.layout();
+    let observability = effect_observability(&rows0, &step1_ids, &opts.links, effects);
+    let free_theta: Vec<usize> = (0..n_theta)
+        .filter(|&k| observability[k] >= MIN_EFFECT_OBSERVABILITY)
+        .collect();
+    let h_theta = DVector::from_iterator(
+        free_theta.len(),
+        free_theta.iter().map(|&k| layout[k].1.prior),
+    );
+
+    // Step 1 with outlier elimination rounds.
+    let jr0 = reduced_jacobian(&rows0, &step1_ids, &opts.links);
+    let h = scaling_vector(&jr0, &step1_ids, opts.scaling)?;
+    let condition = condition_number(&normalize_columns(&jr0));
+    let mut drop: HashSet<Key> = HashSet::new();
+    let mut outliers = Vec::new();
+    let mut x = State {
+        p: *start,
+        theta: theta0.clone(),
+    };
+    let mut iterations = 0;
+    let mut cost;
+    loop {
+        let lm = Lm {
+            campaign,
+            model,
+            step: Step::Direct,
+            p_cal: *start,
+            drop: &drop,
+            d: dependency(&step1_ids, &opts.links),
+            h: h.clone(),
+            effects,
+            free_theta: &free_theta,
+            h_theta: h_theta.clone(),
+            max_iterations: opts.max_iterations,
+        };
+        let res = lm.run(&x)?;
+        x = res.state;
+        iterations += res.iterations;
+        cost = res.cost;
+        let Some(k) = opts.outlier_sigma else { break };
+        let corr = effects.corrections(&x.theta);
+        let rows = rows_at(campaign, &x.p, model, Step::Direct, start, &corr, &drop)?;
+        let found = find_outliers(&rows, campaign, k);
+        if found.is_empty() || outliers.len() > rows0.len() / 20 {
+            break;
+        }
+        for (key, o) in found {
+            drop.insert(key);
+            outliers.push(o);
+        }
+    }
+    let corr = effects.corrections(&x.theta);
+    let rows_final = rows_at(campaign, &x.p, model, Step::Direct, start, &corr, &drop)?;
+    let n_identified = step1_ids.len() + free_theta.len();
+    // chi-square of the measurements themselves (the virtual rows of step 2 are not).
+    let chi2_per_dof = 2.0 * cost / rows_final.len().saturating_sub(n_identified).max(1) as f64;
+    let (cov1, cov_theta) = covariance(&rows_final, &step1_ids, &opts.links, &free_theta, cost)?;
+    let sig1: Vec<f64> = (0..step1_ids.len())
+        .map(|k| cov1[(k, k)].max(0.0).sqrt())
+        .collect();
+    let d1 = dependency(&step1_ids, &opts.links);
+    let cov_p1 = &d1 * &cov1 * d1.transpose();
+    let mut identified: Vec<Identified> = step1_ids
+        .iter()
+        .zip(&sig1)
+        .map(|(&i, &s)| Identified {
+            name: NAMES[i],
+            index: i,
+            nominal: start[i],
+            value: x.p[i],
+            sigma: s,
+            step: 1,
+        })
+        .collect();
+    let effect_estimates = layout
+        .iter()
+        .enumerate()
+        .map(|(k, (effect, prm, _, _))| {
+            let free = free_theta.iter().position(|&f| f == k);
+            EffectEstimate {
+                effect,
+                name: prm.name.clone(),
+                unit: prm.unit,
+                value: x.theta[k],
+                sigma: free.map_or(0.0, |f| cov_theta[f]),
+                observability: observability[k],
+                identified: free.is_some(),
+            }
+        })
+        .collect();
+    let mut before_rows: Vec<Residual> =
+        rows_at(campaign, start, model, Step::Direct, start, &corr0, &drop)?;
+    let mut after_rows = rows_final;
+
+    // Step 2: rod 2 from virtual measurements of the forward instruments (eq. 4.32).
+    let mut p = x.p;
+    if !step2_wanted.is_empty() {
+        let p1 = p;
+        let rows2 = rows_at(campaign, &p1, model, Step::VirtualQ2, &p1, &corr, &drop)?;
+        let ids2 = match &opts.selection {
+            Selection::Auto { max_condition } => {
+                auto_select(&rows2, &step2_wanted, &[], *max_condition)
+            }
+            Selection::List(_) => step2_wanted.clone(),
+        };
+        if !ids2.is_empty() {
+            let jr2 = reduced_jacobian(&rows2, &ids2, &[]);
+            let h2 = scaling_vector(&jr2, &ids2, opts.scaling)?;
+            let lm = Lm {
+                campaign,
+                model,
+                step: Step::VirtualQ2,
+                p_cal: p1,
+                drop: &drop,
+                d: dependency(&ids2, &[]),
+                h: h2,
+                // the effects stay in the rows at their identified values
+                effects,
+                free_theta: &[],
+                h_theta: DVector::zeros(0),
+                max_iterations: opts.max_iterations,
+            };
+            let res = lm.run(&State {
+                p: p1,
+                theta: x.theta.clone(),
+            })?;
+            p = res.state.p;
+            iterations += res.iterations;
+            let rows2_after = rows_at(campaign, &p, model, Step::VirtualQ2, &p1, &corr, &drop)?;
+            let sig2 = step2_uncertainties(&rows2_after, &ids2, &cov_p1)?;
+            identified.extend(ids2.iter().zip(&sig2).map(|(&i, &s)| Identified {
+                name: NAMES[i],
+                index: i,
+                nominal: start[i],
+                value: p[i],
+                sigma: s,
+                step: 2,
+            }));
+            before_rows.extend(rows_at(
+                campaign,
+                start,
+                model,
+                Step::VirtualQ2,
+                start,
+                &corr0,
+                &drop,
+            )?);
+            after_rows.extend(rows2_after);
+        }
+    }
+    let cost_of = |rows: &[Residual]| {
+        0.5 * rows
+            .iter()
+            .map(|r| (r.value / r.sigma).powi(2))
+            .sum::<f64>()
+    };
+    Ok(Calibration {
+        model,
+        start: *start,
+        params: p,
+        identified,
+        iterations,
+        condition_number: condition,
+        outliers,
+        rms: rms_table(&before_rows, &after_rows),
+        cost_before: cost_of(&before_rows),
+        cost_after: cost_of(&after_rows),
+        chi2_per_dof,
+        rows: after_rows.len(),
+        theta: x.theta,
+        effects: effect_estimates,
+        n_identified,
+    })
+}
+
+/// Step 1's identified geometric parameters, and the rod-2 parameters wanted from step 2.
+fn select_geometric(
+    campaign: &Campaign,
+    rows0: &[Residual],
+    opts: &Options,
+    linked: &HashSet<usize>,
+) -> Result<(Vec<usize>, Vec<usize>), CalibrationError> {
+    let model = opts.model;
     // Candidates of step 1: the model's free parameters with an influence on the direct rows.
-    let (_, j0) = weighted(&rows0);
+    let (_, j0) = weighted(rows0);
     // (relative threshold: the subsystem solves carry round-off derivatives of ~1e-17)
     let col_max = (0..N_PARAMS)
         .map(|i| j0.column(i).norm() * variation_range(i))
@@ -533,12 +819,11 @@ pub fn calibrate(
     let step1_ids: Vec<usize> = match &opts.selection {
         Selection::Auto { max_condition } => {
             let cands: Vec<usize> = free.iter().copied().filter(|&i| influences(i)).collect();
-            auto_select(&rows0, &cands, &opts.links, *max_condition)
+            auto_select(rows0, &cands, &opts.links, *max_condition)
         }
         Selection::List(list) => list.iter().copied().filter(|&i| influences(i)).collect(),
     };
-    let forward_two_step = obs::has_forward_instruments(campaign);
-    let step2_wanted: Vec<usize> = if forward_two_step {
+    let step2_wanted: Vec<usize> = if obs::has_forward_instruments(campaign) {
         let r2 = rod2_params();
         match &opts.selection {
             Selection::Auto { .. } => r2
@@ -566,145 +851,51 @@ pub fn calibrate(
     if step1_ids.is_empty() {
         return Err(CalibrationError::NothingToIdentify);
     }
-    if rows0.len() < step1_ids.len() {
-        return Err(CalibrationError::Underdetermined {
-            params: step1_ids.len(),
-            rows: rows0.len(),
-        });
-    }
+    Ok((step1_ids, step2_wanted))
+}
 
-    // Step 1 with outlier elimination rounds.
-    let jr0 = reduced_jacobian(&rows0, &step1_ids, &opts.links);
-    let h = scaling_vector(&jr0, &step1_ids, opts.scaling)?;
-    let condition = condition_number(&normalize_columns(&jr0));
-    let mut drop: HashSet<Key> = HashSet::new();
-    let mut outliers = Vec::new();
-    let mut p = *start;
-    let mut iterations = 0;
-    let mut cost;
-    loop {
-        let lm = Lm {
-            campaign,
-            model,
-            step: Step::Direct,
-            p_cal: *start,
-            drop: &drop,
-            d: dependency(&step1_ids, &opts.links),
-            h: h.clone(),
-            max_iterations: opts.max_iterations,
-        };
-        let res = lm.run(&p)?;
-        p = res.params;
-        iterations += res.iterations;
-        cost = res.cost;
-        let Some(k) = opts.outlier_sigma else { break };
-        let rows = rows_at(campaign, &p, model, Step::Direct, start, &drop)?;
-        let found = find_outliers(&rows, campaign, k);
-        if found.is_empty() || outliers.len() > rows0.len() / 20 {
-            break;
-        }
-        for (key, o) in found {
-            drop.insert(key);
-            outliers.push(o);
-        }
+/// For each effect parameter, the fraction of its prior-scaled column that lies outside the
+/// span of the identified geometric columns and of the effect columns before it (Gram-Schmidt
+/// in layout order): 1 = fully distinct, 0 = a geometric error in disguise.
+fn effect_observability(
+    rows: &[Residual],
+    ids: &[usize],
+    links: &[Link],
+    effects: &EffectSet,
+) -> Vec<f64> {
+    let n = effects.n_params();
+    if n == 0 {
+        return Vec::new();
     }
-    let rows_final = rows_at(campaign, &p, model, Step::Direct, start, &drop)?;
-    // chi-square of the measurements themselves (the virtual rows of step 2 are not).
-    let chi2_per_dof = 2.0 * cost / rows_final.len().saturating_sub(step1_ids.len()).max(1) as f64;
-    let cov1 = covariance(&rows_final, &step1_ids, &opts.links, cost)?;
-    let sig1: Vec<f64> = (0..step1_ids.len())
-        .map(|k| cov1[(k, k)].max(0.0).sqrt())
-        .collect();
-    let d1 = dependency(&step1_ids, &opts.links);
-    let cov_p1 = &d1 * &cov1 * d1.transpose();
-    let mut identified: Vec<Identified> = step1_ids
-        .iter()
-        .zip(&sig1)
-        .map(|(&i, &s)| Identified {
-            name: NAMES[i],
-            index: i,
-            nominal: start[i],
-            value: p[i],
-            sigma: s,
-            step: 1,
-        })
-        .collect();
-    let mut before_rows: Vec<Residual> =
-        rows_at(campaign, start, model, Step::Direct, start, &drop)?;
-    let mut after_rows = rows_final;
-
-    // Step 2: rod 2 from virtual measurements of the forward instruments (eq. 4.32).
-    if !step2_wanted.is_empty() {
-        let p1 = p;
-        let rows2 = rows_at(campaign, &p1, model, Step::VirtualQ2, &p1, &drop)?;
-        let ids2 = match &opts.selection {
-            Selection::Auto { max_condition } => {
-                auto_select(&rows2, &step2_wanted, &[], *max_condition)
+    let jg = normalize_columns(&reduced_jacobian(rows, ids, links));
+    let all: Vec<usize> = (0..n).collect();
+    let jt = weighted_theta(rows, &all);
+    // orthonormal basis of the geometric columns
+    let mut basis: Vec<DVector<f64>> = Vec::new();
+    let add = |v: DVector<f64>, basis: &mut Vec<DVector<f64>>| -> f64 {
+        let norm0 = v.norm();
+        if !(norm0 > 0.0) {
+            return 0.0;
+        }
+        let mut w = v;
+        for _ in 0..2 {
+            for b in basis.iter() {
+                let c = b.dot(&w);
+                w -= b * c;
             }
-            Selection::List(_) => step2_wanted.clone(),
-        };
-        if !ids2.is_empty() {
-            let jr2 = reduced_jacobian(&rows2, &ids2, &[]);
-            let h2 = scaling_vector(&jr2, &ids2, opts.scaling)?;
-            let lm = Lm {
-                campaign,
-                model,
-                step: Step::VirtualQ2,
-                p_cal: p1,
-                drop: &drop,
-                d: dependency(&ids2, &[]),
-                h: h2,
-                max_iterations: opts.max_iterations,
-            };
-            let res = lm.run(&p1)?;
-            p = res.params;
-            iterations += res.iterations;
-            let rows2_after = rows_at(campaign, &p, model, Step::VirtualQ2, &p1, &drop)?;
-            let sig2 = step2_uncertainties(&rows2_after, &ids2, &cov_p1)?;
-            identified.extend(ids2.iter().zip(&sig2).map(|(&i, &s)| Identified {
-                name: NAMES[i],
-                index: i,
-                nominal: start[i],
-                value: p[i],
-                sigma: s,
-                step: 2,
-            }));
-            before_rows.extend(rows_at(
-                campaign,
-                start,
-                model,
-                Step::VirtualQ2,
-                start,
-                &drop,
-            )?);
-            after_rows.extend(rows2_after);
         }
+        let frac = w.norm() / norm0;
+        if frac > 1e-12 {
+            basis.push(w.unscale(w.norm()));
+        }
+        frac
+    };
+    for k in 0..jg.ncols() {
+        add(jg.column(k).into_owned(), &mut basis);
     }
-    // Linked parameters follow their masters in the final set.
-    let cost_before = 0.5
-        * before_rows
-            .iter()
-            .map(|r| (r.value / r.sigma).powi(2))
-            .sum::<f64>();
-    let cost_after = 0.5
-        * after_rows
-            .iter()
-            .map(|r| (r.value / r.sigma).powi(2))
-            .sum::<f64>();
-    Ok(Calibration {
-        model,
-        start: *start,
-        params: p,
-        identified,
-        iterations,
-        condition_number: condition,
-        outliers,
-        rms: rms_table(&before_rows, &after_rows),
-        cost_before,
-        cost_after,
-        chi2_per_dof,
-        rows: after_rows.len(),
-    })
+    (0..n)
+        .map(|k| add(jt.column(k).into_owned(), &mut basis))
+        .collect()
 }
 
 /// Calibration gain on held-out measurement errors (eq. 3.33-3.34): the mean over values of

@@ -11,8 +11,14 @@
 //!
 //! Each row carries its own standard deviation: the instrument noise of `noise` propagated
 //! through the model's local derivatives (task-variable scaling, eq. 3.22).
+//!
+//! Physical effects ([`crate::effects`]) enter as per-pose corrections of the model's inputs
+//! (parameters, carrier positions, recorded x/y); each row keeps its sensitivity to those
+//! inputs so that the Jacobian over the effects' parameters is one chain rule
+//! ([`Corrections::theta_row`]).
 
 use crate::campaign::{Campaign, Instrument, Pose};
+use crate::effects::{Corrections, Delta, InputSensitivity};
 use crate::geometry::{self, q_var, GeometryError, Solution, Subsystem, PSI, X, Y};
 use crate::noise;
 use crate::params::{Model, Params, N_PARAMS};
@@ -75,6 +81,9 @@ pub struct Residual {
     /// first step's parameters that made the virtual measurement (to propagate their
     /// uncertainty); None for measured rows.
     pub d_pcal: Option<Row>,
+    /// d value / d θ over the effects' parameters (empty without effects; zero for the
+    /// virtual rows of the second step, which hold the effects fixed).
+    pub d_theta: Vec<f64>,
 }
 
 /// A pose the model could not evaluate, with its source line.
@@ -124,6 +133,37 @@ fn forward(
     Ok(Forward { sol, sens })
 }
 
+/// Parameters and carrier positions of a pose under its effect correction.
+fn corrected(p: &Params, q: &[f64; 4], d: &Delta) -> (Params, [f64; 4]) {
+    let mut pc = *p;
+    for k in 0..N_PARAMS {
+        pc[k] += d.dp[k];
+    }
+    (pc, [0, 1, 2, 3].map(|a| q[a] + d.dq[a]))
+}
+
+/// Sensitivity to the pose's inputs of Σ g_v · c_v of a forward solve through `sub`.
+fn input_sensitivity(f: &Forward, sub: Subsystem, g: &[(usize, f64)]) -> InputSensitivity {
+    let mut s = InputSensitivity::default();
+    let Subsystem::Actuators(a, b) = sub else {
+        return s;
+    };
+    for &(v, w) in g {
+        s.dp += f.sens.dc_dp.row(v).transpose() * w;
+        s.dq[a] += f.sens.dc_dk[(v, 0)] * w;
+        s.dq[b] += f.sens.dc_dk[(v, 1)] * w;
+    }
+    s
+}
+
+/// The same sensitivity with the opposite sign (the reset pose of a relative value).
+fn negated(mut s: InputSensitivity) -> InputSensitivity {
+    s.dp = -s.dp;
+    s.dq = s.dq.map(|v| -v);
+    s.dm = -s.dm;
+    s
+}
+
 /// Variance (mm² or rad²) that noise on the known actuators adds to configuration variable `v`.
 fn encoder_variance(f: &Forward, v: usize) -> f64 {
     (f.sens.dc_dk[(v, 0)].powi(2) + f.sens.dc_dk[(v, 1)].powi(2)) * noise::ENCODER_MM.powi(2)
@@ -148,9 +188,22 @@ pub fn residuals(
     step: Step,
     p_cal: &Params,
 ) -> Result<Vec<Residual>, PoseError> {
+    residuals_with(campaign, p, model, step, p_cal, &Corrections::default())
+}
+
+/// [`residuals`] with the effects' corrections `corr` of every pose.
+pub fn residuals_with(
+    campaign: &Campaign,
+    p: &Params,
+    model: Model,
+    step: Step,
+    p_cal: &Params,
+    corr: &Corrections,
+) -> Result<Vec<Residual>, PoseError> {
     let mut out = Vec::with_capacity(campaign.poses.len() * 4);
     for setup in campaign.setups() {
         let reset = setup.reset.map(|i| (i, &campaign.poses[i]));
+        let ctx = Ctx { p, model, corr };
         for &i in &setup.poses {
             let pose = &campaign.poses[i];
             if pose.reset && pose.instrument.is_relative() {
@@ -158,75 +211,84 @@ pub fn residuals(
             }
             let err = |error| PoseError::at(campaign, pose, error);
             match step {
-                Step::Direct => {
-                    pose_rows(i, pose, reset.map(|r| r.1), p, model, &mut out).map_err(err)?
-                }
-                Step::VirtualQ2 => {
-                    virtual_q2_row(i, pose, p, model, p_cal, &mut out).map_err(err)?
-                }
+                Step::Direct => pose_rows(&ctx, i, pose, reset, &mut out).map_err(err)?,
+                Step::VirtualQ2 => virtual_q2_row(&ctx, i, pose, p_cal, &mut out).map_err(err)?,
             }
         }
         // the reset pose of a forward instrument still yields a virtual q2 measurement
         if step == Step::VirtualQ2 {
             if let Some((i, pose)) = reset {
                 let err = |error| PoseError::at(campaign, pose, error);
-                virtual_q2_row(i, pose, p, model, p_cal, &mut out).map_err(err)?;
+                virtual_q2_row(&ctx, i, pose, p_cal, &mut out).map_err(err)?;
             }
         }
     }
     Ok(out)
 }
 
+/// What every row of one evaluation shares.
+struct Ctx<'a> {
+    p: &'a Params,
+    model: Model,
+    corr: &'a Corrections,
+}
+
 fn pose_rows(
+    ctx: &Ctx,
     i: usize,
     pose: &Pose,
-    reset: Option<&Pose>,
-    p: &Params,
-    model: Model,
+    reset: Option<(usize, &Pose)>,
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
     use Instrument::*;
     match (pose.instrument, reset) {
-        (Lt | Kgm, Some(reset)) => inverse_rows(i, pose, reset, p, model, out),
-        (Dbb | LiX | LiY | LiPsi, Some(reset)) => forward_rows(i, pose, reset, p, model, out),
-        (SelfCal, _) => self_rows(i, pose, p, model, out),
+        (Lt | Kgm, Some(reset)) => inverse_rows(ctx, i, pose, reset, out),
+        (Dbb | LiX | LiY | LiPsi, Some(reset)) => forward_rows(ctx, i, pose, reset, out),
+        (SelfCal, _) => self_rows(ctx, i, pose, out),
         _ => Ok(()),
     }
 }
 
 /// Inverse calibration rows (eq. 4.30) of a laser-tracker or grid-encoder pose.
 fn inverse_rows(
+    ctx: &Ctx,
     i: usize,
     pose: &Pose,
-    reset: &Pose,
-    p: &Params,
-    model: Model,
+    (ri, reset): (usize, &Pose),
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
     let (Some(mx), Some(my)) = (pose.x, pose.y) else {
         return Ok(());
     };
-    let r = forward(p, model, Subsystem::NR, &reset.q)?;
-    let (x, y) = (mx + r.sol.c[X], my + r.sol.c[Y]);
-    let inv = geometry::solve(p, model, Subsystem::Tcp, [x, y])?;
-    let s = geometry::sensitivity(p, model, Subsystem::Tcp, &inv)?;
+    let (dpose, dreset) = (ctx.corr.delta(i), ctx.corr.delta(ri));
+    let (p_r, q_r) = corrected(ctx.p, &reset.q, &dreset);
+    let r = forward(&p_r, ctx.model, Subsystem::NR, &q_r)?;
+    let (x, y) = (mx + dpose.dm.x + r.sol.c[X], my + dpose.dm.y + r.sol.c[Y]);
+    let (p_i, q_i) = corrected(ctx.p, &pose.q, &dpose);
+    let inv = geometry::solve(&p_i, ctx.model, Subsystem::Tcp, [x, y])?;
+    let s = geometry::sensitivity(&p_i, ctx.model, Subsystem::Tcp, &inv)?;
     let cov = noise::xy_covariance(pose.instrument, Vector2::new(x, y));
     for a in 0..4 {
         let v = q_var(a);
-        // dq/dp = ∂igm/∂p + ∂igm/∂X · d fgm(Q_reset)/dp
-        let mut jac: Row = s.dc_dp.row(v).transpose();
-        jac += r.sens.dc_dp.row(X).transpose() * s.dc_dk[(v, 0)]
-            + r.sens.dc_dp.row(Y).transpose() * s.dc_dk[(v, 1)];
         let g = Vector2::new(s.dc_dk[(v, 0)], s.dc_dk[(v, 1)]);
+        // dq/dp = ∂igm/∂p + ∂igm/∂X · d fgm(Q_reset)/dp
+        let at_reset = input_sensitivity(&r, Subsystem::NR, &[(X, g.x), (Y, g.y)]);
+        let mut at_pose = InputSensitivity {
+            dp: s.dc_dp.row(v).transpose(),
+            dm: g,
+            ..Default::default()
+        };
+        at_pose.dq[a] = -1.0;
         let sigma = ((g.transpose() * cov * g)[0] + noise::ENCODER_MM.powi(2)).sqrt();
         out.push(Residual {
             pose: i,
             instrument: pose.instrument,
             direction: Direction::Q(a),
-            value: inv.c[v] - pose.q[a],
+            value: inv.c[v] - q_i[a],
             sigma,
-            jacobian: jac,
+            jacobian: at_pose.dp + at_reset.dp,
             d_pcal: None,
+            d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
         });
     }
     Ok(())
@@ -235,25 +297,24 @@ fn inverse_rows(
 /// Forward calibration rows (eq. 4.31): relative distance, coordinate or angle through each
 /// forward subsystem.
 fn forward_rows(
+    ctx: &Ctx,
     i: usize,
     pose: &Pose,
-    reset: &Pose,
-    p: &Params,
-    model: Model,
+    (ri, reset): (usize, &Pose),
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
+    let (dpose, dreset) = (ctx.corr.delta(i), ctx.corr.delta(ri));
+    let (p_i, q_i) = corrected(ctx.p, &pose.q, &dpose);
+    let (p_r, q_r) = corrected(ctx.p, &reset.q, &dreset);
     for sub in FORWARD_SUBSYSTEMS {
-        let Subsystem::Actuators(a, b) = sub else {
-            continue;
-        };
-        let now = forward(p, model, sub, &pose.q)?;
-        let zero = forward(p, model, sub, &reset.q)?;
+        let now = forward(&p_i, ctx.model, sub, &q_i)?;
+        let zero = forward(&p_r, ctx.model, sub, &q_r)?;
         let d = |v: usize| now.sol.c[v] - zero.sol.c[v];
-        let dj = |v: usize| -> Row { (now.sens.dc_dp.row(v) - zero.sens.dc_dp.row(v)).transpose() };
         let var = |v: usize| encoder_variance(&now, v) + encoder_variance(&zero, v);
         let inst = pose.instrument;
         let sig = noise::scalar_sigma(inst);
-        let (direction, value, jac, sigma) = match inst {
+        // the value as Σ g_v · Δc_v − (measured + dm·w)
+        let (direction, value, g, w, var_enc) = match inst {
             Instrument::Dbb => {
                 let Some(r) = pose.r else { return Ok(()) };
                 let (dx, dy) = (d(X), d(Y));
@@ -262,71 +323,97 @@ fn forward_rows(
                     continue;
                 }
                 let (ux, uy) = (dx / dist, dy / dist);
-                let jac = dj(X) * ux + dj(Y) * uy;
                 let var_enc = ux * ux * var(X) + uy * uy * var(Y);
+                let g = [(X, ux), (Y, uy)];
                 (
-                    Direction::R(a, b),
+                    Direction::R(a_of(sub), b_of(sub)),
                     dist - r,
-                    jac,
-                    (sig * sig + var_enc).sqrt(),
+                    g,
+                    None,
+                    var_enc,
                 )
             }
             // one coordinate relative to the reset pose: x, y or ψ
             Instrument::LiX | Instrument::LiY | Instrument::LiPsi => {
-                let (v, measured, direction) = match inst {
-                    Instrument::LiX => (X, pose.x, Direction::X(a, b)),
-                    Instrument::LiY => (Y, pose.y, Direction::Y(a, b)),
-                    _ => (PSI, pose.psi, Direction::Psi(a, b)),
+                let (v, measured, direction, w) = match inst {
+                    Instrument::LiX => (X, pose.x, Direction::X(a_of(sub), b_of(sub)), Some(0)),
+                    Instrument::LiY => (Y, pose.y, Direction::Y(a_of(sub), b_of(sub)), Some(1)),
+                    _ => (PSI, pose.psi, Direction::Psi(a_of(sub), b_of(sub)), None),
                 };
                 let Some(m) = measured else { return Ok(()) };
-                (direction, d(v) - m, dj(v), (sig * sig + var(v)).sqrt())
+                let dm = w.map_or(0.0, |k| dpose.dm[k]);
+                (direction, d(v) - m - dm, [(v, 1.0), (v, 0.0)], w, var(v))
             }
             _ => return Ok(()),
         };
+        let mut at_pose = input_sensitivity(&now, sub, &g);
+        if let Some(k) = w {
+            at_pose.dm[k] = -1.0;
+        }
+        let at_reset = negated(input_sensitivity(&zero, sub, &g));
         out.push(Residual {
             pose: i,
             instrument: inst,
             direction,
             value,
-            sigma,
-            jacobian: jac,
+            sigma: (sig * sig + var_enc).sqrt(),
+            jacobian: at_pose.dp + at_reset.dp,
             d_pcal: None,
+            d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
         });
     }
     Ok(())
 }
 
+fn a_of(sub: Subsystem) -> usize {
+    match sub {
+        Subsystem::Actuators(a, _) => a,
+        Subsystem::Tcp => 0,
+    }
+}
+
+fn b_of(sub: Subsystem) -> usize {
+    match sub {
+        Subsystem::Actuators(_, b) => b,
+        Subsystem::Tcp => 0,
+    }
+}
+
 /// Self-calibration rows (eq. 4.37): followers q2, q3 against rgm(q1, q4).
 fn self_rows(
+    ctx: &Ctx,
     i: usize,
     pose: &Pose,
-    p: &Params,
-    model: Model,
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
-    let f = forward(p, model, Subsystem::NR, &pose.q)?;
+    let d = ctx.corr.delta(i);
+    let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
+    let f = forward(&p_i, ctx.model, Subsystem::NR, &q_i)?;
     for a in [1, 2] {
         let v = q_var(a);
         let sigma = (noise::ENCODER_MM.powi(2) + encoder_variance(&f, v)).sqrt();
+        let mut at_pose = input_sensitivity(&f, Subsystem::NR, &[(v, 1.0)]);
+        at_pose.dq[a] -= 1.0;
         out.push(Residual {
             pose: i,
             instrument: pose.instrument,
             direction: Direction::Q(a),
-            value: f.sol.c[v] - pose.q[a],
+            value: f.sol.c[v] - q_i[a],
             sigma,
-            jacobian: f.sens.dc_dp.row(v).transpose(),
+            jacobian: at_pose.dp,
             d_pcal: None,
+            d_theta: ctx.corr.theta_row(&[(i, at_pose)]),
         });
     }
     Ok(())
 }
 
 /// Second step of the forward instruments (eq. 4.32): X_e = fgm(Q_nr, P_cal), q2 = igm(X_e, P).
+/// The effects' corrections apply to both models, with their parameters held fixed.
 fn virtual_q2_row(
+    ctx: &Ctx,
     i: usize,
     pose: &Pose,
-    p: &Params,
-    model: Model,
     p_cal: &Params,
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
@@ -334,10 +421,14 @@ fn virtual_q2_row(
     if !matches!(pose.instrument, Dbb | LiX | LiY | LiPsi) {
         return Ok(());
     }
-    let xe = geometry::fgm(p_cal, model, pose.q[0], pose.q[3])?;
-    let xe_sens = geometry::sensitivity(p_cal, model, Subsystem::NR, &xe)?;
-    let inv = geometry::igm(p, model, xe.x(), xe.y())?;
-    let s = geometry::sensitivity(p, model, Subsystem::Tcp, &inv)?;
+    let d = ctx.corr.delta(i);
+    let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
+    let (p_cal_i, _) = corrected(p_cal, &pose.q, &d);
+    let model = ctx.model;
+    let xe = geometry::fgm(&p_cal_i, model, q_i[0], q_i[3])?;
+    let xe_sens = geometry::sensitivity(&p_cal_i, model, Subsystem::NR, &xe)?;
+    let inv = geometry::igm(&p_i, model, xe.x(), xe.y())?;
+    let s = geometry::sensitivity(&p_i, model, Subsystem::Tcp, &inv)?;
     let v = q_var(1);
     let d_pcal: Row = (xe_sens.dc_dp.row(X) * s.dc_dk[(v, 0)]
         + xe_sens.dc_dp.row(Y) * s.dc_dk[(v, 1)])
@@ -346,10 +437,11 @@ fn virtual_q2_row(
         pose: i,
         instrument: pose.instrument,
         direction: Direction::VirtualQ2,
-        value: inv.c[v] - pose.q[1],
+        value: inv.c[v] - q_i[1],
         sigma: noise::ENCODER_MM * 2f64.sqrt(),
         jacobian: s.dc_dp.row(v).transpose(),
         d_pcal: Some(d_pcal),
+        d_theta: vec![0.0; ctx.corr.n_params],
     });
     Ok(())
 }
@@ -364,6 +456,20 @@ pub fn has_forward_instruments(campaign: &Campaign) -> bool {
     })
 }
 
+/// One held-out TCP error: the model's relative TCP from the recorded actuators minus the
+/// instrument's reading, in one coordinate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TcpError {
+    /// Index of the pose in the campaign.
+    pub pose: usize,
+    /// `x`, `y` or `r` (ball-bar distance).
+    pub coordinate: &'static str,
+    /// Error, mm.
+    pub value: f64,
+    /// d value / d θ over the effects' parameters (empty without effects).
+    pub d_theta: Vec<f64>,
+}
+
 /// TCP position error of held-out poses (µm-ready, mm here): for every non-reset pose of a
 /// relative TCP instrument, the model's TCP from the recorded actuators (fgm of (q1, q4),
 /// relative to the setup's reset pose) minus the instrument's reading, per measured coordinate
@@ -373,27 +479,69 @@ pub fn tcp_errors(
     p: &Params,
     model: Model,
 ) -> Result<Vec<(usize, &'static str, f64)>, PoseError> {
+    Ok(
+        tcp_errors_with(campaign, p, model, &Corrections::default())?
+            .into_iter()
+            .map(|e| (e.pose, e.coordinate, e.value))
+            .collect(),
+    )
+}
+
+/// [`tcp_errors`] under the effects' corrections, with the errors' sensitivities to the
+/// effects' parameters (to re-fit setup-local ones on held-out setups).
+pub fn tcp_errors_with(
+    campaign: &Campaign,
+    p: &Params,
+    model: Model,
+    corr: &Corrections,
+) -> Result<Vec<TcpError>, PoseError> {
     let mut out = Vec::new();
     for setup in campaign.setups() {
-        let Some(reset_i) = setup.reset else { continue };
-        let reset = &campaign.poses[reset_i];
+        let Some(ri) = setup.reset else { continue };
+        let reset = &campaign.poses[ri];
         for &i in &setup.poses {
             let pose = &campaign.poses[i];
             if pose.reset || !pose.instrument.is_relative() {
                 continue;
             }
             let err = |error| PoseError::at(campaign, pose, error);
-            let now = geometry::fgm(p, model, pose.q[0], pose.q[3]).map_err(err)?;
-            let zero = geometry::fgm(p, model, reset.q[0], reset.q[3]).map_err(err)?;
-            let (dx, dy) = (now.x() - zero.x(), now.y() - zero.y());
+            let (dpose, dreset) = (corr.delta(i), corr.delta(ri));
+            let (p_i, q_i) = corrected(p, &pose.q, &dpose);
+            let (p_r, q_r) = corrected(p, &reset.q, &dreset);
+            let now = forward(&p_i, model, Subsystem::NR, &q_i).map_err(err)?;
+            let zero = forward(&p_r, model, Subsystem::NR, &q_r).map_err(err)?;
+            let (dx, dy) = (now.sol.c[X] - zero.sol.c[X], now.sol.c[Y] - zero.sol.c[Y]);
+            let mut push = |coordinate, value, g: &[(usize, f64)], dm: Vector2<f64>| {
+                let mut at_pose = input_sensitivity(&now, Subsystem::NR, g);
+                at_pose.dm = dm;
+                let at_reset = negated(input_sensitivity(&zero, Subsystem::NR, g));
+                out.push(TcpError {
+                    pose: i,
+                    coordinate,
+                    value,
+                    d_theta: corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
+                });
+            };
             if let Some(m) = pose.x {
-                out.push((i, "x", dx - m));
+                push(
+                    "x",
+                    dx - m - dpose.dm.x,
+                    &[(X, 1.0)],
+                    Vector2::new(-1.0, 0.0),
+                );
             }
             if let Some(m) = pose.y {
-                out.push((i, "y", dy - m));
+                push(
+                    "y",
+                    dy - m - dpose.dm.y,
+                    &[(Y, 1.0)],
+                    Vector2::new(0.0, -1.0),
+                );
             }
             if let Some(m) = pose.r {
-                out.push((i, "r", dx.hypot(dy) - m));
+                let dist = dx.hypot(dy).max(1e-12);
+                let g = [(X, dx / dist), (Y, dy / dist)];
+                push("r", dx.hypot(dy) - m, &g, Vector2::zeros());
             }
         }
     }

@@ -1,0 +1,56 @@
+//! `encoder_scale`: a scale error of a guide's linear encoders (ppm per guide): the carrier
+//! is at q · (1 + s · 1e-6) where the encoder reads q. Guide 2 carries q1 and q4, guide 1 q2
+//! and q3. A common scale of all four is close to a change of every rod length and is mostly
+//! absorbed by the geometry; a scale that differs between the guides is not.
+
+use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use crate::campaign::Campaign;
+use crate::params::Params;
+
+/// See the module documentation.
+pub struct EncoderScale;
+
+/// Actuators of guide 1 and of guide 2 (0-based).
+const GUIDES: [[usize; 2]; 2] = [[1, 2], [0, 3]];
+
+impl Effect for EncoderScale {
+    fn name(&self) -> &'static str {
+        "encoder_scale"
+    }
+    fn summary(&self) -> &'static str {
+        "scale error of each guide's linear encoders"
+    }
+    fn bind(&self, campaign: &Campaign, _: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
+        Ok(Box::new(BoundScale {
+            params: ["guide1", "guide2"]
+                .iter()
+                .map(|g| EffectParam {
+                    name: format!("scale_{g}"),
+                    unit: "ppm",
+                    prior: 50.0,
+                })
+                .collect(),
+            q: campaign.poses.iter().map(|p| p.q).collect(),
+        }))
+    }
+}
+
+struct BoundScale {
+    params: Vec<EffectParam>,
+    q: Vec<[f64; 4]>,
+}
+
+impl Bound for BoundScale {
+    fn params(&self) -> &[EffectParam] {
+        &self.params
+    }
+    fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
+        for (k, guide) in GUIDES.iter().enumerate() {
+            for &a in guide {
+                let q = self.q[pose][a] * 1e-6;
+                value.dq[a] += theta[k] * q;
+                partials[k].dq[a] += q;
+            }
+        }
+    }
+}

@@ -1,0 +1,57 @@
+//! `guide_straightness`: a bowed guide. The carrier joints of a guide are offset across it by
+//! a low-order bow of the carrier position, b · 4 (q/L)(1 − q/L) over the span L = 4,000 mm
+//! (b: the sagitta, one per guide). The constant and linear parts of a bow are a shift and a
+//! rotation of the guide, which the geometric parameters d and γ already describe; the
+//! curvature is what they cannot.
+
+use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use crate::campaign::Campaign;
+use crate::params::{Guide, Params, RODS};
+use crate::twin::effects::bow;
+
+/// See the module documentation.
+pub struct GuideStraightness;
+
+impl Effect for GuideStraightness {
+    fn name(&self) -> &'static str {
+        "guide_straightness"
+    }
+    fn summary(&self) -> &'static str {
+        "bowed guides: carrier joints offset across the guide by a parabola of q"
+    }
+    fn bind(&self, campaign: &Campaign, _: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
+        Ok(Box::new(BoundBow {
+            params: ["guide1", "guide2"]
+                .iter()
+                .map(|g| EffectParam {
+                    name: format!("sagitta_{g}"),
+                    unit: "mm",
+                    prior: 0.05,
+                })
+                .collect(),
+            q: campaign.poses.iter().map(|p| p.q).collect(),
+        }))
+    }
+}
+
+struct BoundBow {
+    params: Vec<EffectParam>,
+    q: Vec<[f64; 4]>,
+}
+
+impl Bound for BoundBow {
+    fn params(&self) -> &[EffectParam] {
+        &self.params
+    }
+    fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
+        for rod in &RODS {
+            let k = match rod.guide {
+                Guide::G1 => 0,
+                Guide::G2 => 1,
+            };
+            let shape = bow(1.0, self.q[pose][rod.actuator]);
+            value.dp[rod.xb] += theta[k] * shape;
+            partials[k].dp[rod.xb] += shape;
+        }
+    }
+}

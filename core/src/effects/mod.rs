@@ -1,0 +1,318 @@
+//! Physical effects as plug-ins of the model: what the geometric model of chapter 4 does not
+//! describe (an imperfect parallel-holder, elastic preload, thermal expansion, an encoder scale
+//! error, a bowed guide, a rotated instrument).
+//!
+//! An [`Effect`] is bound to a campaign ([`Effect::bind`]): it reads the covariates it needs
+//! (temperatures, drive forces, setups) once, declares its parameters (name, unit, prior
+//! magnitude) and then, for any values θ of them, says how each pose's model inputs change:
+//!
+//! - `dp`: the 29 geometric parameters at this pose (a temperature-dependent rod length, a
+//!   carrier joint offset that follows a bowed guide, a rod stretched by its force);
+//! - `dq`: carrier position minus encoder reading (a scale error);
+//! - `dm`: the true minus the recorded (x, y) of the instrument (a rotated instrument frame).
+//!
+//! with their derivatives ∂/∂θ. The model values (`obs`) are evaluated at the corrected inputs
+//! and carry their own sensitivities to p, q and m, so a Jacobian column of θ is the chain rule
+//! `∂value/∂p · ∂dp/∂θ + ∂value/∂q · ∂dq/∂θ + ∂value/∂m · ∂dm/∂θ`, computed in one place
+//! ([`Delta::chain`]) for every effect: adding an effect never touches the calibration.
+//!
+//! Adding an effect is one new file with a type implementing [`Effect`] and one line in
+//! [`library`] (docs/effects.md walks through one).
+
+mod encoder_scale;
+mod guide_straightness;
+mod instrument_alignment;
+mod parallelogram;
+mod preload_elastic;
+mod thermal;
+
+pub use encoder_scale::EncoderScale;
+pub use guide_straightness::GuideStraightness;
+pub use instrument_alignment::InstrumentAlignment;
+pub use parallelogram::Parallelogram;
+pub use preload_elastic::PreloadElastic;
+pub use thermal::Thermal;
+
+use crate::campaign::Campaign;
+use crate::params::{Params, N_PARAMS};
+use nalgebra::{SVector, Vector2};
+
+/// A Jacobian row over the 29 parameters.
+pub type Row = SVector<f64, N_PARAMS>;
+
+/// The effects the diagnosis knows, in the order it tries them.
+pub fn library() -> Vec<Box<dyn Effect>> {
+    vec![
+        Box::new(Parallelogram),
+        Box::new(PreloadElastic),
+        Box::new(Thermal),
+        Box::new(EncoderScale),
+        Box::new(GuideStraightness),
+        Box::new(InstrumentAlignment),
+    ]
+}
+
+/// Names of the effects of [`library`].
+pub fn names() -> Vec<&'static str> {
+    library().iter().map(|e| e.name()).collect()
+}
+
+/// The library's effect called `name`.
+pub fn by_name(name: &str) -> Result<Box<dyn Effect>, UnknownEffect> {
+    library()
+        .into_iter()
+        .find(|e| e.name() == name.trim())
+        .ok_or_else(|| UnknownEffect {
+            name: name.to_owned(),
+            known: names().join(", "),
+        })
+}
+
+/// A list `a,b,c` of effect names.
+pub fn parse_list(list: &str) -> Result<Vec<Box<dyn Effect>>, UnknownEffect> {
+    list.split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(by_name)
+        .collect()
+}
+
+/// An effect name the library does not have.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown effect {name:?}, expected one of {known}")]
+pub struct UnknownEffect {
+    pub name: String,
+    pub known: String,
+}
+
+/// Why an effect cannot be added to a model with this campaign.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{effect}: {reason}")]
+pub struct NotApplicable {
+    pub effect: &'static str,
+    pub reason: String,
+}
+
+/// One parameter of an effect.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct EffectParam {
+    /// Name, prefixed by nothing: the effect's name goes with it in reports (`thermal.alpha`).
+    pub name: String,
+    /// Unit of the value (`ppm/K`, `mm`, `mrad`...).
+    pub unit: &'static str,
+    /// Plausible magnitude (prior range), in `unit`: the scaling of the parameter in the
+    /// least squares and the size a report compares the estimate with.
+    pub prior: f64,
+}
+
+/// A physical effect of the library (see the module documentation).
+pub trait Effect: Send + Sync {
+    /// Name on the command line and in reports (`thermal`).
+    fn name(&self) -> &'static str;
+    /// One sentence on what the effect models.
+    fn summary(&self) -> &'static str;
+    /// Campaign covariate columns the effect needs (`temp_machine`).
+    fn covariates(&self) -> &'static [&'static str] {
+        &[]
+    }
+    /// Bind the effect to a campaign, with parameters `p` for the geometry it needs to read
+    /// its covariates (rod directions for forces): per-pose data are computed once here.
+    fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable>;
+}
+
+/// An effect bound to one campaign.
+pub trait Bound: Send + Sync {
+    /// Its parameters for this campaign (e.g. one angle per instrument setup).
+    fn params(&self) -> &[EffectParam];
+    /// Whether the parameters belong to the campaign's setups rather than to the machine (an
+    /// instrument's alignment): held-out data re-fit them on their own setups instead of
+    /// reusing the calibration's values.
+    fn setup_local(&self) -> bool {
+        false
+    }
+    /// Add the correction of pose `pose` for parameter values `theta` (this effect's, in the
+    /// order of [`Bound::params`]) to `value`, and its derivatives to `partials[k]` = ∂/∂θ_k.
+    fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]);
+}
+
+/// A change of one pose's model inputs (or its derivative with respect to one effect
+/// parameter).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Delta {
+    /// Geometric parameters, mm and rad.
+    pub dp: Row,
+    /// Carrier position − encoder reading, mm, q1..q4.
+    pub dq: [f64; 4],
+    /// True − recorded instrument (x, y), mm.
+    pub dm: Vector2<f64>,
+}
+
+impl Default for Delta {
+    fn default() -> Self {
+        Delta {
+            dp: Row::zeros(),
+            dq: [0.0; 4],
+            dm: Vector2::zeros(),
+        }
+    }
+}
+
+impl Delta {
+    /// The chain rule: the change of a model value with sensitivities `s` for this change.
+    pub fn chain(&self, s: &InputSensitivity) -> f64 {
+        s.dp.dot(&self.dp) + (0..4).map(|a| s.dq[a] * self.dq[a]).sum::<f64>() + s.dm.dot(&self.dm)
+    }
+}
+
+/// Sensitivity of a model value to one pose's inputs: the 29 parameters used at the pose, its
+/// carrier positions and its recorded (x, y).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InputSensitivity {
+    pub dp: Row,
+    pub dq: [f64; 4],
+    pub dm: Vector2<f64>,
+}
+
+impl Default for InputSensitivity {
+    fn default() -> Self {
+        InputSensitivity {
+            dp: Row::zeros(),
+            dq: [0.0; 4],
+            dm: Vector2::zeros(),
+        }
+    }
+}
+
+/// The corrections of every pose of a campaign for given effect parameters.
+#[derive(Clone, Debug, Default)]
+pub struct Corrections {
+    /// Per pose: the change, and its derivative per effect parameter (all effects' parameters
+    /// in one vector, see [`EffectSet::layout`]). Empty when there is no effect.
+    pub poses: Vec<(Delta, Vec<Delta>)>,
+    pub n_params: usize,
+}
+
+impl Corrections {
+    /// The change at pose `i` (none without effects).
+    pub fn delta(&self, i: usize) -> Delta {
+        self.poses.get(i).map(|d| d.0).unwrap_or_default()
+    }
+
+    /// ∂value/∂θ over every effect parameter of a value with input sensitivities `at`
+    /// (pairs of pose index and sensitivity: the pose and, for relative instruments, its
+    /// setup's reset pose).
+    pub fn theta_row(&self, at: &[(usize, InputSensitivity)]) -> Vec<f64> {
+        let mut out = vec![0.0; self.n_params];
+        for (i, s) in at {
+            if let Some((_, partials)) = self.poses.get(*i) {
+                for (k, d) in partials.iter().enumerate() {
+                    out[k] += d.chain(s);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Effects bound to one campaign, with one parameter vector θ for all of them.
+pub struct EffectSet {
+    bound: Vec<(&'static str, Box<dyn Bound>)>,
+    n_poses: usize,
+}
+
+impl std::fmt::Debug for EffectSet {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list()
+            .entries(self.bound.iter().map(|b| b.0))
+            .finish()
+    }
+}
+
+impl EffectSet {
+    /// No effect.
+    pub fn empty() -> EffectSet {
+        EffectSet {
+            bound: Vec::new(),
+            n_poses: 0,
+        }
+    }
+
+    /// Bind `effects` to `campaign`.
+    pub fn bind(
+        effects: &[&dyn Effect],
+        campaign: &Campaign,
+        p: &Params,
+    ) -> Result<EffectSet, NotApplicable> {
+        let bound = effects
+            .iter()
+            .map(|e| Ok((e.name(), e.bind(campaign, p)?)))
+            .collect::<Result<Vec<_>, NotApplicable>>()?;
+        Ok(EffectSet {
+            bound,
+            n_poses: campaign.poses.len(),
+        })
+    }
+
+    /// Whether there is no effect.
+    pub fn is_empty(&self) -> bool {
+        self.bound.is_empty()
+    }
+
+    /// Number of effect parameters.
+    pub fn n_params(&self) -> usize {
+        self.bound.iter().map(|b| b.1.params().len()).sum()
+    }
+
+    /// Effect names in order.
+    pub fn names(&self) -> Vec<&'static str> {
+        self.bound.iter().map(|b| b.0).collect()
+    }
+
+    /// (effect name, parameter, offset in θ, setup-local) of every parameter, in θ order.
+    pub fn layout(&self) -> Vec<(&'static str, EffectParam, usize, bool)> {
+        let mut out = Vec::new();
+        let mut k = 0;
+        for (name, b) in &self.bound {
+            for prm in b.params() {
+                out.push((*name, prm.clone(), k, b.setup_local()));
+                k += 1;
+            }
+        }
+        out
+    }
+
+    /// The corrections of every pose for θ.
+    pub fn corrections(&self, theta: &[f64]) -> Corrections {
+        let n = self.n_params();
+        if self.bound.is_empty() {
+            return Corrections::default();
+        }
+        let mut poses = Vec::with_capacity(self.n_poses);
+        for i in 0..self.n_poses {
+            let mut value = Delta::default();
+            let mut partials = vec![Delta::default(); n];
+            let mut k = 0;
+            for (_, b) in &self.bound {
+                let m = b.params().len();
+                b.correct(i, &theta[k..k + m], &mut value, &mut partials[k..k + m]);
+                k += m;
+            }
+            poses.push((value, partials));
+        }
+        Corrections { poses, n_params: n }
+    }
+}
+
+/// Value of covariate `name` at every pose, or why the effect cannot use it.
+pub(crate) fn covariate_column(
+    campaign: &Campaign,
+    effect: &'static str,
+    name: &str,
+) -> Result<Vec<Option<f64>>, NotApplicable> {
+    campaign.covariate(name).ok_or_else(|| NotApplicable {
+        effect,
+        reason: format!(
+            "the campaign {} has no covariate column `{name}`",
+            campaign.source
+        ),
+    })
+}

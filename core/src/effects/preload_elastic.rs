@@ -1,0 +1,116 @@
+//! `preload_elastic`: the elasto-geometric model with the measured drive forces (the thesis's
+//! third approach, 4.5). With all four drives position-controlled, a geometric error turns
+//! into internal preload and the rods stretch; the geometric model then sees rods of length
+//! l + T/k. From the drive forces f1..f4 recorded at each pose the rod forces T follow from the
+//! carriers' and the platform's static balance (7 equations, 5 rod forces, least squares), and
+//! the effect's one parameter, the compliance factor c (1 = the default rod stiffness of
+//! [`crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM`]), scales the stretch: dl = c · T / k.
+//! The stiffness is identified with the geometry.
+
+use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use crate::campaign::{Campaign, Pose};
+use crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM;
+use crate::geometry::{self, carrier_joint, guide_frame, platform_joint};
+use crate::params::{Model, Params, RODS};
+use nalgebra::{SMatrix, SVector};
+
+/// Lever that turns the platform's moment balance (N·mm) into N, so its row weighs like the
+/// force rows: about the platform's joint spacing.
+const MOMENT_ARM_MM: f64 = 100.0;
+
+/// See the module documentation.
+pub struct PreloadElastic;
+
+impl Effect for PreloadElastic {
+    fn name(&self) -> &'static str {
+        "preload_elastic"
+    }
+    fn summary(&self) -> &'static str {
+        "elastic deformation under internal preload, from the measured drive forces"
+    }
+    fn covariates(&self) -> &'static [&'static str] {
+        &["f1", "f2", "f3", "f4"]
+    }
+    fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
+        let mut stretch = Vec::with_capacity(campaign.poses.len());
+        let mut loaded = 0;
+        for pose in &campaign.poses {
+            let active = pose.follower.iter().all(|f| !f) && pose.f.iter().any(|f| *f != 0.0);
+            if !active {
+                stretch.push([0.0; 5]);
+                continue;
+            }
+            loaded += 1;
+            let t = rod_forces(p, pose).map_err(|reason| NotApplicable {
+                effect: "preload_elastic",
+                reason: format!("{}:{}: {reason}", campaign.source, pose.line),
+            })?;
+            stretch.push(t.map(|t| t / DEFAULT_ROD_STIFFNESS_N_PER_MM));
+        }
+        if loaded == 0 {
+            return Err(NotApplicable {
+                effect: "preload_elastic",
+                reason: "no pose with all four drives active and drive forces recorded".to_owned(),
+            });
+        }
+        Ok(Box::new(BoundPreload {
+            params: vec![EffectParam {
+                name: "compliance".to_owned(),
+                unit: "x default",
+                prior: 1.0,
+            }],
+            stretch,
+        }))
+    }
+}
+
+/// Rod forces (N, tension positive) that balance the recorded drive forces at the rigid pose
+/// of the pose's (q1, q4).
+fn rod_forces(p: &Params, pose: &Pose) -> Result<[f64; 5], String> {
+    let sol = geometry::fgm(p, Model::M29, pose.q[0], pose.q[3])
+        .map_err(|e| format!("rigid pose: {e}"))?;
+    let (x, y, psi) = (sol.x(), sol.y(), sol.psi());
+    let mut a = SMatrix::<f64, 7, 5>::zeros();
+    let mut b = SVector::<f64, 7>::zeros();
+    for (i, rod) in RODS.iter().enumerate() {
+        let pa = platform_joint(p, rod, x, y, psi);
+        let pb = carrier_joint(p, rod, sol.q()[rod.actuator]);
+        let u = (pa - pb).normalize();
+        let (_, e, _) = guide_frame(p, rod.guide);
+        // carrier balance: drive force = Σ T (−u·e) (elastic::spring's convention)
+        a[(rod.actuator, i)] = -u.dot(&e);
+        // platform balance: Σ −T u = 0 and Σ arm × (−T u) = 0
+        let arm = pa - nalgebra::Vector2::new(x, y);
+        a[(4, i)] = -u.x;
+        a[(5, i)] = -u.y;
+        a[(6, i)] = -(arm.x * u.y - arm.y * u.x) / MOMENT_ARM_MM;
+    }
+    for j in 0..4 {
+        b[j] = pose.f[j];
+    }
+    let n = a.transpose() * a;
+    let t = n
+        .cholesky()
+        .ok_or("the rod forces are not determined by the drive forces at this pose")?
+        .solve(&(a.transpose() * b));
+    Ok([t[0], t[1], t[2], t[3], t[4]])
+}
+
+struct BoundPreload {
+    params: Vec<EffectParam>,
+    /// Rod stretch at the default stiffness, mm, per pose.
+    stretch: Vec<[f64; 5]>,
+}
+
+impl Bound for BoundPreload {
+    fn params(&self) -> &[EffectParam] {
+        &self.params
+    }
+    fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
+        for (i, rod) in RODS.iter().enumerate() {
+            let s = self.stretch[pose][i];
+            value.dp[rod.l] += theta[0] * s;
+            partials[0].dp[rod.l] += s;
+        }
+    }
+}
