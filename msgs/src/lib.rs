@@ -14,6 +14,7 @@
 
 pub mod actuator_state;
 pub mod builtin_interfaces;
+pub mod campaign_info;
 pub mod cdr;
 pub mod diagnosis;
 pub mod diagnosis_candidate;
@@ -26,6 +27,7 @@ pub mod tcp_measurement;
 
 pub use actuator_state::ActuatorState;
 pub use builtin_interfaces::Time;
+pub use campaign_info::CampaignInfo;
 pub use cdr::{from_cdr, to_cdr, CdrError, CDR_LE_HEADER};
 pub use diagnosis::Diagnosis;
 pub use diagnosis_candidate::DiagnosisCandidate;

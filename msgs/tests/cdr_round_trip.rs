@@ -65,6 +65,11 @@ fn every_type_round_trips() {
         psi_valid: false,
         sigma: 1e-6,
     });
+    round_trip(&CampaignInfo {
+        source: "bags/demo/campaign.csv".into(),
+        comments: vec!["rpkm digital twin: seed 7".into(), String::new()],
+        covariate_names: vec!["temp_machine".into(), "temp_guide1".into()],
+    });
     round_trip(&Parameters {
         model: 24,
         names: vec!["l1".into(), "gamma1".into()],

@@ -1,4 +1,6 @@
 //! The rpkm node set: command line, nodes, reports. Physics lives in `rpkm_core`.
 
+pub mod campaign_bag;
 pub mod cli;
 pub mod plot;
+pub mod topics;

@@ -27,6 +27,14 @@ enum Command {
     /// The whole story on the embedded default data: model vs measurements, where it fails,
     /// the missing effect, the held-out error falling; writes an HTML report.
     Demo(cli::demo::DemoArgs),
+    /// Record rpkm topics into a rosbag2 MCAP bag; survives SIGKILL (see `rpkm bag recover`).
+    Record(cli::record::RecordArgs),
+    /// Publish a bag's rpkm topics with the recorded timing, scaled, or as fast as possible.
+    Replay(cli::replay::ReplayArgs),
+    /// Inspect (info), repair (recover) and convert back (campaign) rosbag2 MCAP bags.
+    Bag(cli::bag::BagArgs),
+    /// Convert a campaign CSV into a bag of ActuatorState and TcpMeasurement messages (SI).
+    Ingest(cli::ingest::IngestArgs),
 }
 
 fn main() {
@@ -37,6 +45,10 @@ fn main() {
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Preload(a) => cli::preload::run(a),
         Command::Demo(a) => cli::demo::run(a),
+        Command::Record(a) => cli::record::run(a),
+        Command::Replay(a) => cli::replay::run(a),
+        Command::Bag(a) => cli::bag::run(a),
+        Command::Ingest(a) => cli::ingest::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

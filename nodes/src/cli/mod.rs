@@ -1,9 +1,13 @@
 //! Subcommands of the `rpkm` command line. Thin: parsing, files, printing; physics in rpkm_core.
 
 pub mod analyze;
+pub mod bag;
 pub mod calibrate;
 pub mod demo;
+pub mod ingest;
 pub mod preload;
+pub mod record;
+pub mod replay;
 pub mod simulate;
 
 use anyhow::Context;

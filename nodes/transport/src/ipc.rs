@@ -17,8 +17,8 @@ use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
 use rpkm_msgs::{
-    from_cdr, to_cdr, ActuatorState, Diagnosis, DiagnosticArray, Parameters, PreloadStatus,
-    RosMessage, TcpEstimate, TcpMeasurement,
+    from_cdr, to_cdr, ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, Parameters,
+    PreloadStatus, RosMessage, TcpEstimate, TcpMeasurement,
 };
 
 use crate::error::TransportError;
@@ -423,7 +423,8 @@ as_cdr!(
     Parameters,
     Diagnosis,
     PreloadStatus,
-    DiagnosticArray
+    DiagnosticArray,
+    CampaignInfo
 );
 
 #[cfg(test)]

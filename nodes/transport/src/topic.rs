@@ -3,8 +3,8 @@
 use std::marker::PhantomData;
 
 use rpkm_msgs::{
-    ActuatorState, Diagnosis, DiagnosticArray, Parameters, PreloadStatus, TcpEstimate,
-    TcpMeasurement,
+    ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, Parameters, PreloadStatus,
+    TcpEstimate, TcpMeasurement,
 };
 
 /// Delivery guarantee.
@@ -118,3 +118,7 @@ pub const PRELOAD_STATUS: Topic<PreloadStatus> =
     Topic::new("/rpkm/preload_status", Qos::reliable(16));
 /// `/diagnostics`: the standard ROS 2 diagnostics topic; reliable keep-last 16.
 pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new("/diagnostics", Qos::reliable(16));
+/// `/rpkm/campaign_info`: source, comments and covariate names of the campaign whose poses
+/// follow on `/rpkm/actuator_state` and `/rpkm/tcp_measurement`; reliable transient-local
+/// keep-last 1.
+pub const CAMPAIGN_INFO: Topic<CampaignInfo> = Topic::new("/rpkm/campaign_info", Qos::latched(1));

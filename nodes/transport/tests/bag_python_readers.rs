@@ -154,6 +154,7 @@ fn python_readers_see_the_values_written() {
         add_all::<rpkm_msgs::KeyValue>(&mut bag, &mut expected, "/key_value", t0 + 10);
         add_all::<rpkm_msgs::Header>(&mut bag, &mut expected, "/header", t0 + 11);
         add_all::<rpkm_msgs::Time>(&mut bag, &mut expected, "/time", t0 + 12);
+        add_all::<rpkm_msgs::CampaignInfo>(&mut bag, &mut expected, "/campaign_info", t0 + 13);
         bag.finish().expect("finish");
 
         let output = Command::new(&python)

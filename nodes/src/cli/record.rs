@@ -1,0 +1,196 @@
+//! `rpkm record`: subscribe to rpkm topics and write what arrives into a rosbag2 MCAP bag.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use rpkm_transport::bag::{BagWriter, BagWriterOptions};
+use rpkm_transport::{Transport, TransportConfig};
+
+use crate::topics::{self, RecordPort};
+
+/// Record rpkm topics into a rosbag2 folder (metadata.yaml + one .mcap; profile ros2, CDR,
+/// schemas with their dependencies), readable by `ros2 bag`, Foxglove, mcap_ros2 and rosbags.
+///
+/// Each message is logged with its receive time. The file is written in chunks; every full
+/// chunk (and at least every --flush-every seconds, the open one) is handed to the operating
+/// system, so a recorder killed with SIGKILL loses at most that much: `rpkm bag recover` gets
+/// the rest back. SIGINT (Ctrl-C) or SIGTERM stop it cleanly: the queued samples are written,
+/// then the summary and metadata.yaml.
+#[derive(clap::Args, Debug, Clone)]
+#[command(
+    after_help = "Examples:\n  rpkm record --out run1                       # every rpkm topic, \
+until Ctrl-C\n  rpkm record --out drives --topics /rpkm/actuator_state --duration 10\n  \
+rpkm record --out run2 --backend dds          # what ROS 2 tools publish\n\n\
+Topics: /rpkm/campaign_info, /rpkm/actuator_state, /rpkm/tcp_measurement, \
+/rpkm/tcp_estimate, /rpkm/parameters, /rpkm/diagnosis, /rpkm/preload_status, /diagnostics."
+)]
+pub struct RecordArgs {
+    /// Output bag folder; must not exist.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Comma-separated topics to record (default: every rpkm topic).
+    #[arg(long, value_delimiter = ',')]
+    pub topics: Vec<String>,
+    #[command(flatten)]
+    pub transport: TransportArgs,
+    /// Stop after this many seconds (default: until SIGINT/SIGTERM).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Chunk size in KiB: a full chunk is written at once; a SIGKILL loses at most one.
+    #[arg(long, default_value_t = 1024)]
+    pub chunk_kib: u64,
+    /// Also write the open chunk after this many seconds without a full one, so that slow
+    /// topics are safe on disk too (0: only full chunks).
+    #[arg(long, default_value_t = 1.0)]
+    pub flush_every: f64,
+    /// Print a line to stderr each time a chunk is written: `flushed N messages`.
+    #[arg(long)]
+    pub progress: bool,
+}
+
+/// Transport options shared by `rpkm record` and `rpkm replay`.
+#[derive(clap::Args, Debug, Clone)]
+pub struct TransportArgs {
+    /// Middleware: ipc (iceoryx2, rpkm processes on this host), dds (ROS 2 tools, other
+    /// hosts) or both (recording receives from iceoryx2 then, like every rpkm subscriber).
+    #[arg(long, default_value = "ipc", value_parser = parse_backend)]
+    pub backend: rpkm_transport::Backend,
+    /// Prefix of the iceoryx2 service names: processes talk only with the same prefix.
+    #[arg(long, default_value = "")]
+    pub ipc_prefix: String,
+    /// Open every topic reliable: iceoryx2 publishers then wait for slow subscribers instead
+    /// of overwriting, so nothing is dropped even at `rpkm replay --rate max`. Every process
+    /// on those topics must use it (the replayer and the recorder), not nodes started without.
+    #[arg(long)]
+    pub reliable: bool,
+}
+
+/// `ipc`, `dds` or `both`.
+pub fn parse_backend(s: &str) -> Result<rpkm_transport::Backend, String> {
+    match s {
+        "ipc" => Ok(rpkm_transport::Backend::Ipc),
+        "dds" => Ok(rpkm_transport::Backend::Dds),
+        "both" => Ok(rpkm_transport::Backend::Both),
+        other => Err(format!("{other:?}: expected ipc, dds or both")),
+    }
+}
+
+impl TransportArgs {
+    /// Opens the transport as node `name`.
+    pub fn open(&self, name: &str) -> Result<Transport> {
+        let config = TransportConfig::new(name)
+            .backend(self.backend)
+            .ipc_prefix(self.ipc_prefix.clone());
+        Transport::new(&config).with_context(|| format!("opening the transport of {name}"))
+    }
+}
+
+/// A flag that SIGINT and SIGTERM set.
+pub fn stop_flag() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, Arc::clone(&stop))
+            .with_context(|| format!("installing the handler of signal {signal}"))?;
+    }
+    Ok(stop)
+}
+
+/// Samples taken from one subscriber before the next gets its turn: fair between topics.
+const BATCH: usize = 256;
+/// Sleep when a sweep over all subscribers found nothing: at 8 kHz about one sample waits per
+/// sweep, far below the queue depth (64).
+const IDLE_SLEEP: Duration = Duration::from_micros(100);
+
+pub fn run(args: &RecordArgs) -> Result<()> {
+    let names: Vec<String> = if args.topics.is_empty() {
+        topics::ALL.iter().map(|s| (*s).to_owned()).collect()
+    } else {
+        args.topics.iter().map(|s| s.trim().to_owned()).collect()
+    };
+    topics::check_names(&names).map_err(|e| super::bad_input(e.to_string()))?;
+    if args.chunk_kib == 0 {
+        return Err(super::bad_input("--chunk-kib must be at least 1".into()));
+    }
+    if let Some(d) = args.duration {
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(super::bad_input(format!(
+                "--duration {d}: expected a positive number of seconds"
+            )));
+        }
+    }
+    let stop = stop_flag()?;
+    let transport = args.transport.open("rpkm_record")?;
+    let mut bag = BagWriter::create(
+        &args.out,
+        BagWriterOptions {
+            chunk_size: args.chunk_kib * 1024,
+            ..BagWriterOptions::default()
+        },
+    )?;
+    let mut ports: Vec<Box<dyn RecordPort>> = Vec::with_capacity(names.len());
+    for name in &names {
+        ports.push(topics::recorder(
+            name,
+            &transport,
+            &mut bag,
+            args.transport.reliable,
+        )?);
+    }
+    // Tests and scripts wait for this line before they start publishing.
+    eprintln!(
+        "rpkm record: recording {} topics to {}",
+        ports.len(),
+        args.out.display()
+    );
+    let start = Instant::now();
+    let deadline = args.duration.map(|d| start + Duration::from_secs_f64(d));
+    let flush_every = (args.flush_every > 0.0).then(|| Duration::from_secs_f64(args.flush_every));
+    let mut last_flush = Instant::now();
+    let mut flushed = 0;
+    loop {
+        if stop.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
+            break;
+        }
+        let mut taken = 0;
+        for port in &mut ports {
+            taken += port.drain(&mut bag, BATCH)?;
+        }
+        if flush_every.is_some_and(|every| last_flush.elapsed() >= every)
+            && bag.message_count() > bag.flushed_message_count()
+        {
+            bag.flush()?;
+        }
+        if bag.flushed_message_count() != flushed {
+            flushed = bag.flushed_message_count();
+            last_flush = Instant::now();
+            if args.progress {
+                eprintln!("rpkm record: flushed {flushed} messages");
+            }
+        }
+        if taken == 0 {
+            std::thread::sleep(IDLE_SLEEP);
+        }
+    }
+    // Write what is still queued, then close the bag.
+    while ports
+        .iter_mut()
+        .map(|p| p.drain(&mut bag, BATCH))
+        .sum::<Result<usize>>()?
+        > 0
+    {}
+    let summary = bag.finish()?;
+    let seconds = start.elapsed().as_secs_f64();
+    eprintln!(
+        "rpkm record: {} messages in {} chunks, {seconds:.3} s, into {}",
+        summary.message_count,
+        summary.chunk_count,
+        summary.dir.display()
+    );
+    for port in &ports {
+        eprintln!("  {}: {}", port.topic(), port.count());
+    }
+    Ok(())
+}

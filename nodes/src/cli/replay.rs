@@ -1,0 +1,189 @@
+//! `rpkm replay BAG`: publish a bag's rpkm topics through the transport.
+
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use anyhow::Result;
+
+use super::record::{stop_flag, TransportArgs};
+use crate::topics::{self, ReplayPort};
+
+/// Publish the rpkm topics of a bag through the transport, in the bag's log-time order
+/// (ties in file order), with the recorded timing scaled by --rate, or as fast as possible
+/// (--rate max). Messages are published as recorded (stamps included), so the same bag gives
+/// the same sequence on the topics every time.
+///
+/// Topics of the bag that rpkm does not know are skipped (and named on stderr).
+#[derive(clap::Args, Debug, Clone)]
+#[command(
+    after_help = "Examples:\n  rpkm replay bags/stream_8khz                 # real time\n  \
+rpkm replay bags/calibration --rate 100       # 100 times faster\n  \
+rpkm replay bags/stream_8khz --rate max --reliable   # lossless into `rpkm record --reliable`\n  \
+rpkm replay run1 --topics /rpkm/actuator_state --backend dds"
+)]
+pub struct ReplayArgs {
+    /// Bag folder or bare .mcap file (an unfinished one: `rpkm bag recover` first).
+    pub bag: PathBuf,
+    /// Speed: 1 is the recorded timing, N is N times faster (0.5: half speed), `max` is as
+    /// fast as possible.
+    #[arg(long, default_value = "1", value_parser = parse_rate)]
+    pub rate: Rate,
+    /// Comma-separated topics to publish (default: every rpkm topic of the bag).
+    #[arg(long, value_delimiter = ',')]
+    pub topics: Vec<String>,
+    #[command(flatten)]
+    pub transport: TransportArgs,
+    /// Seconds to wait after creating the publishers before the first message, so that
+    /// subscribers (and DDS discovery, about 0.2 s) can connect.
+    #[arg(long, default_value_t = 0.0)]
+    pub wait: f64,
+}
+
+/// Replay speed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Rate {
+    /// Recorded time divided by this factor.
+    Scaled(f64),
+    /// No waiting.
+    Max,
+}
+
+/// `max` or a positive factor.
+pub fn parse_rate(s: &str) -> Result<Rate, String> {
+    if s == "max" {
+        return Ok(Rate::Max);
+    }
+    match s.parse::<f64>() {
+        Ok(r) if r > 0.0 && r.is_finite() => Ok(Rate::Scaled(r)),
+        _ => Err(format!(
+            "{s:?}: expected a positive factor (1, 10, 0.5) or max"
+        )),
+    }
+}
+
+/// Sleep until this close to a message's due time, then spin: sleeps overshoot by 50-100 µs.
+const SPIN_BEFORE: Duration = Duration::from_micros(300);
+
+pub fn run(args: &ReplayArgs) -> Result<()> {
+    if !(args.wait >= 0.0 && args.wait.is_finite()) {
+        return Err(super::bad_input(format!(
+            "--wait {}: expected seconds >= 0",
+            args.wait
+        )));
+    }
+    let wanted: Vec<String> = args.topics.iter().map(|s| s.trim().to_owned()).collect();
+    topics::check_names(&wanted).map_err(|e| super::bad_input(e.to_string()))?;
+    let bag = super::bag::open(&args.bag)?;
+    for name in &wanted {
+        if bag.topic(name).is_none() {
+            return Err(super::bad_input(format!(
+                "{}: no topic {name} in the bag (it has {})",
+                args.bag.display(),
+                bag.topics()
+                    .iter()
+                    .map(|t| t.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+    }
+    // Which bag topics to publish, after checking that their types are rpkm's.
+    let mut selected: Vec<&str> = Vec::new();
+    for t in bag.topics() {
+        let Some(expected) = topics::type_name(&t.name) else {
+            eprintln!(
+                "rpkm replay: skipping {} ({}): not an rpkm topic",
+                t.name, t.type_name
+            );
+            continue;
+        };
+        if !wanted.is_empty() && !wanted.contains(&t.name) {
+            continue;
+        }
+        if t.type_name != expected {
+            return Err(super::bad_input(format!(
+                "{}: topic {} has type {}, rpkm publishes {expected} there",
+                args.bag.display(),
+                t.name,
+                t.type_name
+            )));
+        }
+        selected.push(&t.name);
+    }
+    let stop = stop_flag()?;
+    let transport = args.transport.open("rpkm_replay")?;
+    let mut ports: Vec<Box<dyn ReplayPort>> = Vec::with_capacity(selected.len());
+    for name in &selected {
+        ports.push(topics::publisher(
+            name,
+            &transport,
+            args.transport.reliable,
+        )?);
+    }
+    // Per message its port, once, so that the timed loop neither hashes nor allocates.
+    let plan: Vec<Option<usize>> = bag
+        .messages()
+        .map(|m| selected.iter().position(|s| *s == m.topic))
+        .collect();
+    let total = plan.iter().filter(|p| p.is_some()).count();
+    eprintln!(
+        "rpkm replay: {} messages on {} topics from {}",
+        total,
+        ports.len(),
+        args.bag.display()
+    );
+    if args.wait > 0.0 {
+        std::thread::sleep(Duration::from_secs_f64(args.wait));
+    }
+    let mut counts = vec![0u64; ports.len()];
+    let mut t0: Option<u64> = None;
+    let start = Instant::now();
+    for (message, port) in bag.messages().zip(&plan) {
+        let Some(port) = *port else { continue };
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        if let Rate::Scaled(rate) = args.rate {
+            let first = *t0.get_or_insert(message.log_time);
+            let offset_ns = message.log_time.saturating_sub(first) as f64 / rate;
+            let due = start + Duration::from_nanos(offset_ns as u64);
+            wait_until(due);
+        }
+        ports[port].publish(message.data).map_err(|e| {
+            anyhow::anyhow!(
+                "message {} (log time {} ns) of {}: {e}",
+                message.index,
+                message.log_time,
+                args.bag.display()
+            )
+        })?;
+        counts[port] += 1;
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let published: u64 = counts.iter().sum();
+    eprintln!(
+        "rpkm replay: published {published} messages in {seconds:.3} s ({:.0} msg/s)",
+        published as f64 / seconds.max(1e-9)
+    );
+    for (port, count) in ports.iter().zip(&counts) {
+        eprintln!("  {}: {count}", port.topic());
+    }
+    Ok(())
+}
+
+/// Sleeps, then spins, until `due`.
+fn wait_until(due: Instant) {
+    loop {
+        let now = Instant::now();
+        if now >= due {
+            return;
+        }
+        let left = due - now;
+        if left > SPIN_BEFORE {
+            std::thread::sleep(left - SPIN_BEFORE);
+        } else {
+            std::hint::spin_loop();
+        }
+    }
+}
