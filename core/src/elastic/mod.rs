@@ -7,15 +7,20 @@
 //! - [`preload`]: the compatibility test (seed 4.4), predicted redundancy current, and the
 //!   thesis's "first approach" (offsets on q2, q3 that create a requested preload, and the TCP
 //!   displacement they cause);
-//! - [`baseline`]: the statistical (5.1) and least-squares (5.2) redundant forward models.
+//! - [`baseline`]: the statistical (5.1) and least-squares (5.2) redundant forward models;
+//! - [`fe`]: the finite-element model (5.4: planar beams for rods, platform and carriers,
+//!   revolute joints), thermo-mechanical and actuator-displacements methods, and the
+//!   comparison of all methods.
 //!
 //! Conventions: rod force positive in tension; drive force positive when the drive pushes its
 //! carrier towards larger q; redundancy current = drive force / 8,600 N · 100 %.
 
 pub mod baseline;
+pub mod fe;
 pub mod preload;
 pub mod spring;
 
+pub use fe::{fe_solve, FeEquilibrium, FeError, FeModel, FeStiffness, Method};
 pub use preload::{compatibility, offset_effect, preload_offsets, Compatibility, PreloadPlan};
 pub use spring::{
     fegm, fegm_from, platform_balance, sensitivity, ElasticError, ElasticSensitivity, Equilibrium,
