@@ -9,13 +9,17 @@
 //!   (setup, instrument, reset, x/y/r in m, ψ in rad, each with its `_valid` flag), both
 //!   stamped with the pose's time `t`.
 //!
-//! Back, [`CampaignAssembler`] makes one pose of every `TcpMeasurement` with the latest
-//! `ActuatorState` received before it: exactly the pairs written above, and for a live
-//! stream the drive state at the measurement. The round trip is exact but for the unit
+//! Back, [`CampaignAssembler`] makes one pose of every `TcpMeasurement` with the
+//! `ActuatorState` of the same stamp (the first one not yet used: two poses may share a time),
+//! or else the latest state stamped before it (a live stream: the drive state at the
+//! measurement). Pairing goes by stamp, not by arrival, because a recorder receives each topic
+//! from its own queue. The round trip is exact but for the unit
 //! conversions (q/1000·1000 may differ from q in the last bit) and time stamps, which hold
 //! `t` to the nanosecond.
 //!
 //! No physics here: units and field mapping only.
+
+use std::collections::{BTreeMap, VecDeque};
 
 use rpkm_core::campaign::{Campaign, CampaignError, Instrument, Pose};
 use rpkm_msgs::actuator_state::MAX_COVARIATES;
@@ -56,8 +60,8 @@ pub enum ToMessagesError {
 pub enum FromMessagesError {
     /// A measurement with no drive state before it.
     #[error(
-        "TcpMeasurement {index} (stamp {stamp_s} s, setup {setup:?}) comes before any \
-         ActuatorState: expected the drive state of its pose first"
+        "TcpMeasurement {index} (stamp {stamp_s} s, setup {setup:?}) has no ActuatorState \
+         stamped at or before it: expected the drive state of its pose first"
     )]
     NoState {
         index: usize,
@@ -251,16 +255,44 @@ pub fn pose_messages(
 /// assert_eq!(rebuilt.poses[1].covariates, vec![None]);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct CampaignAssembler {
     info: Option<CampaignInfo>,
-    state: Option<ActuatorState>,
+    /// Drive states not yet paired, by stamp (ns), in arrival order per stamp.
+    states: BTreeMap<i64, VecDeque<ActuatorState>>,
+    state_count: usize,
+    /// Most states kept (see [`STATE_HISTORY`]).
+    history: usize,
     poses: Vec<Pose>,
 }
 
+impl Default for CampaignAssembler {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Drive states kept for pairing: 8 s of an 8 kHz stream. Older ones are dropped.
+pub const STATE_HISTORY: usize = 1 << 16;
+
 impl CampaignAssembler {
+    /// For a live stream: keeps the latest [`STATE_HISTORY`] drive states.
     pub fn new() -> Self {
-        Self::default()
+        Self {
+            info: None,
+            states: BTreeMap::new(),
+            state_count: 0,
+            history: STATE_HISTORY,
+            poses: Vec::new(),
+        }
+    }
+
+    /// For a whole recording read at once: keeps every drive state.
+    pub fn unbounded() -> Self {
+        Self {
+            history: usize::MAX,
+            ..Self::new()
+        }
     }
 
     /// Takes the campaign's description. A repeated identical one (latched topics are sent
@@ -293,18 +325,49 @@ impl CampaignAssembler {
                 });
             }
         }
-        self.state = Some(*state);
+        self.states
+            .entry(stamp_ns(state.stamp))
+            .or_default()
+            .push_back(*state);
+        self.state_count += 1;
+        if self.state_count > self.history {
+            if let Some(mut oldest) = self.states.first_entry() {
+                oldest.get_mut().pop_front();
+                if oldest.get().is_empty() {
+                    oldest.remove();
+                }
+                self.state_count -= 1;
+            }
+        }
         Ok(())
     }
 
-    /// Makes a pose of `measurement` and the latest drive state.
+    /// The state of a measurement stamped `ns`: the first unused one of the same stamp
+    /// (taken), else the latest one before (kept: a stream state may serve several).
+    fn state_for(&mut self, ns: i64) -> Option<ActuatorState> {
+        if let Some(same) = self.states.get_mut(&ns) {
+            if let Some(state) = same.pop_front() {
+                self.state_count -= 1;
+                if same.is_empty() {
+                    self.states.remove(&ns);
+                }
+                return Some(state);
+            }
+        }
+        self.states
+            .range(..ns)
+            .next_back()
+            .and_then(|(_, states)| states.back().copied())
+    }
+
+    /// Makes a pose of `measurement` and its drive state (see the type's documentation).
     pub fn push_measurement(
         &mut self,
         measurement: &TcpMeasurement,
     ) -> Result<(), FromMessagesError> {
         let index = self.poses.len();
         let stamp_s = seconds_from_stamp(measurement.stamp);
-        let Some(state) = &self.state else {
+        let Some(state) = self.state_for(stamp_ns(measurement.stamp)) else {
             return Err(FromMessagesError::NoState {
                 index,
                 stamp_s,
@@ -452,21 +515,29 @@ pub fn write_campaign(
     Ok(1 + 2 * m.poses.len() as u64)
 }
 
-/// Rebuilds the campaign held by a bag's campaign topics (other topics are ignored). The
-/// messages are taken in log-time order, ties in file order: the order they were written.
+/// Rebuilds the campaign held by a bag's campaign topics (other topics are ignored): every
+/// measurement, in the bag's order, with its drive state (see [`CampaignAssembler`]).
 pub fn read_campaign(bag: &BagReader) -> anyhow::Result<Campaign> {
-    let mut assembler = CampaignAssembler::new();
+    let mut assembler = CampaignAssembler::unbounded();
     let (info, state, measurement) = (
         topic::CAMPAIGN_INFO.name(),
         topic::ACTUATOR_STATE.name(),
         topic::TCP_MEASUREMENT.name(),
     );
+    // Info and states first: pairing goes by stamp, and a recording made live may hold a
+    // measurement before its state (each topic arrives through its own queue).
     for m in bag.messages() {
         if m.topic == info {
             assembler.push_info(&m.decode::<CampaignInfo>()?)?;
-        } else if m.topic == state {
+        }
+    }
+    for m in bag.messages() {
+        if m.topic == state {
             assembler.push_state(&m.decode::<ActuatorState>()?)?;
-        } else if m.topic == measurement {
+        }
+    }
+    for m in bag.messages() {
+        if m.topic == measurement {
             assembler.push_measurement(&m.decode::<TcpMeasurement>()?)?;
         }
     }
@@ -517,6 +588,6 @@ mod tests {
         let e = a
             .push_measurement(&TcpMeasurement::default())
             .expect_err("no state");
-        assert!(e.to_string().contains("before any ActuatorState"), "{e}");
+        assert!(e.to_string().contains("has no ActuatorState"), "{e}");
     }
 }

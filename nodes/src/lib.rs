@@ -3,4 +3,5 @@
 pub mod campaign_bag;
 pub mod cli;
 pub mod plot;
+pub mod stream;
 pub mod topics;

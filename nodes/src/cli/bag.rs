@@ -85,8 +85,9 @@ fn info(path: &Path) -> Result<()> {
     println!("topics:");
     let width = bag.topics().iter().map(|t| t.name.len()).max().unwrap_or(0);
     for t in bag.topics() {
+        // Intervals over the bag's span: exact for a steady stream that fills the bag.
         let rate = if duration_s > 0.0 && t.message_count > 1 {
-            format!("{:.1} Hz", t.message_count as f64 / duration_s)
+            format!("{:.1} Hz", (t.message_count - 1) as f64 / duration_s)
         } else {
             "-".to_owned()
         };

@@ -9,6 +9,7 @@ pub mod preload;
 pub mod record;
 pub mod replay;
 pub mod simulate;
+pub mod simulate_bag;
 
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;

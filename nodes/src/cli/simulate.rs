@@ -5,7 +5,9 @@ use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
 use std::path::{Path, PathBuf};
 
 /// Simulate measurement campaigns on the digital twin (a seeded true machine with hidden
-/// effects) and write them in the campaign CSV format.
+/// effects) and write them in the campaign CSV format, or as a rosbag2 MCAP bag (--out not
+/// ending in .csv) holding the same messages as `rpkm ingest` and, with --stream-hz, an
+/// ActuatorState stream at the control rate.
 ///
 /// Example:
 ///   rpkm simulate --campaign lt,self --effect thermal=2,encoder_scale --seed 7 \
@@ -19,11 +21,18 @@ Effects (default magnitude, unit): parallelogram (0.15 mm), preload_elastic (1, 
 factor), thermal (2 K), encoder_scale (40 ppm), guide_straightness (0.05 mm), \
 instrument_alignment (0.05 mrad).\n\n\
 Example:\n  rpkm simulate --campaign lt,self --effect thermal=2,encoder_scale --seed 7 \
---out lt_self.csv --truth truth.json --validation 100"
+--out lt_self.csv --truth truth.json --validation 100\n\n\
+Bags (--out not ending in .csv; validation poses go to the bag OUT_val):\n  \
+rpkm simulate --campaign lt,self --effect parallelogram=1.0 --seed 7 --out calibration \
+--validation 0\n  \
+rpkm simulate --stream-hz 8000 --stream-seconds 0.5 --seed 3 --out stream_8khz\n  \
+rpkm simulate --stream-hz 1000 --stream-seconds 2 --stream-motion hold --fault q3=0.8 \
+--effect preload_elastic=1 --seed 5 --out preload_fault --truth preload_fault.truth.json"
 )]
 pub struct SimulateArgs {
-    /// Comma-separated campaigns, measured one after the other into one file.
-    #[arg(long, value_delimiter = ',', required = true)]
+    /// Comma-separated campaigns, measured one after the other into one file (optional for
+    /// a bag with --stream-hz).
+    #[arg(long, value_delimiter = ',', required_unless_present = "stream_hz")]
     pub campaign: Vec<String>,
     /// Hidden effects, NAME or NAME=MAGNITUDE, comma-separated (default magnitude if none).
     #[arg(long, value_delimiter = ',')]
@@ -31,7 +40,7 @@ pub struct SimulateArgs {
     /// Seed of the true machine, the noise and the validation poses.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Output campaign CSV.
+    /// Output: a campaign CSV if it ends in .csv, else a new bag folder.
     #[arg(long)]
     pub out: PathBuf,
     /// Where to write the hidden truth as JSON.
@@ -44,6 +53,30 @@ pub struct SimulateArgs {
     /// Noise-free instruments and encoders.
     #[arg(long)]
     pub no_noise: bool,
+    /// Bag only: also write an ActuatorState stream at this rate (Hz) on
+    /// /rpkm/actuator_state, after the campaign (if any) on the twin's clock.
+    #[arg(long)]
+    pub stream_hz: Option<f64>,
+    /// Length of the stream, s.
+    #[arg(long, default_value_t = 1.0)]
+    pub stream_seconds: f64,
+    /// Commanded path during the stream.
+    #[arg(long, value_enum, default_value_t = crate::stream::Motion::Circle)]
+    pub stream_motion: crate::stream::Motion,
+    /// A drive whose carrier drifts from its encoder during the stream, qN=MM, ramped from 0
+    /// to MM (e.g. q3=0.8: with preload_elastic the drives then fight, the redundancy
+    /// current grows; 0.4 mm on q3 is about 100 %).
+    #[arg(long)]
+    pub fault: Option<crate::stream::Fault>,
+    /// Bag only: compress chunks with zstd.
+    #[arg(long)]
+    pub zstd: bool,
+}
+
+/// Whether `--out` names a campaign CSV (else a bag folder).
+pub fn is_csv(out: &Path) -> bool {
+    out.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
 }
 
 /// Parse `NAME[=MAGNITUDE]`.
@@ -88,6 +121,15 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         ..TwinConfig::default()
     })?;
     let names: Vec<&str> = args.campaign.iter().map(|s| s.trim()).collect();
+    if !is_csv(&args.out) {
+        return super::simulate_bag::run(args, &mut twin, &names);
+    }
+    if args.stream_hz.is_some() || args.fault.is_some() {
+        return Err(super::bad_input(format!(
+            "--stream-hz and --fault need a bag: --out {} ends in .csv",
+            args.out.display()
+        )));
+    }
     if names.is_empty() {
         bail!("--campaign needs at least one campaign");
     }
