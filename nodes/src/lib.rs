@@ -2,6 +2,8 @@
 
 pub mod campaign_bag;
 pub mod cli;
+pub mod launch;
+pub mod node;
 pub mod plot;
 pub mod stream;
 pub mod topics;

@@ -35,6 +35,10 @@ enum Command {
     Bag(cli::bag::BagArgs),
     /// Convert a campaign CSV into a bag of ActuatorState and TcpMeasurement messages (SI).
     Ingest(cli::ingest::IngestArgs),
+    /// Run one ROS 2 node: ingest, tcp_estimator, calibrator or preload_monitor.
+    Node(rpkm::node::NodeArgs),
+    /// Start and supervise the nodes of a launch description (ROS 2 launch YAML).
+    Launch(rpkm::launch::LaunchArgs),
 }
 
 fn main() {
@@ -49,6 +53,8 @@ fn main() {
         Command::Replay(a) => cli::replay::run(a),
         Command::Bag(a) => cli::bag::run(a),
         Command::Ingest(a) => cli::ingest::run(a),
+        Command::Node(a) => rpkm::node::run(a),
+        Command::Launch(a) => rpkm::launch::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -1,0 +1,432 @@
+//! `rpkm launch FILE [name:=value ...]`: launch descriptions in the ROS 2 launch YAML dialect,
+//! started and supervised by [`supervisor`].
+//!
+//! ```yaml
+//! launch:
+//!   - arg: {name: backend, default: ipc}
+//!   - node:
+//!       pkg: rpkm
+//!       exec: tcp_estimator          # ingest | tcp_estimator | calibrator | preload_monitor
+//!       name: tcp_estimator          # parameter section, iceoryx2/DDS node name
+//!       param:
+//!         - from: params.yaml        # relative to this file's folder
+//!         - {name: model, value: 29}
+//!       args: --backend $(var backend)
+//!       respawn: true                # default true: restarted with backoff when it crashes
+//!       respawn_delay: 0.2           # s, doubled per quick crash, at most 5 s
+//!   - set_env: {name: ROS_DOMAIN_ID, value: "7"}
+//! ```
+//!
+//! Substitutions in every string: `$(var NAME)` (an `arg`, overridden by `NAME:=VALUE` on the
+//! command line), `$(env NAME)` / `$(env NAME DEFAULT)`, `$(dirname)` (this file's folder).
+
+pub mod supervisor;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde_yaml::Value;
+
+use crate::node::EXECUTABLES;
+
+/// `rpkm launch`.
+#[derive(clap::Args, Debug, Clone)]
+#[command(
+    after_help = "Example:\n  rpkm launch launch_scripts/rpkm.launch.yaml backend:=both\n\
+Ctrl-C (or SIGTERM) stops every node; a node that crashes is restarted with backoff."
+)]
+pub struct LaunchArgs {
+    /// Launch description (ROS 2 launch YAML).
+    pub file: PathBuf,
+    /// Launch arguments as NAME:=VALUE.
+    pub args: Vec<String>,
+}
+
+/// A launch description that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum LaunchError {
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        file: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{file}:{line}:{column}: not YAML: {message}")]
+    Yaml {
+        file: String,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    #[error("{file}: {what}")]
+    Invalid { file: String, what: String },
+}
+
+/// One node process to run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeSpec {
+    /// Executable: one of [`EXECUTABLES`].
+    pub exec: String,
+    /// Node name.
+    pub name: String,
+    /// Parameter files, in order.
+    pub param_files: Vec<PathBuf>,
+    /// Inline parameters as `key=value`.
+    pub params: Vec<String>,
+    /// Extra command-line arguments.
+    pub args: Vec<String>,
+    /// Restart when it crashes.
+    pub respawn: bool,
+    /// First restart delay, s.
+    pub respawn_delay: f64,
+}
+
+/// A parsed launch description.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LaunchDescription {
+    /// The nodes, in file order.
+    pub nodes: Vec<NodeSpec>,
+    /// Environment set for the nodes (`set_env`).
+    pub env: Vec<(String, String)>,
+}
+
+struct Ctx<'a> {
+    file: String,
+    dir: &'a Path,
+    vars: BTreeMap<String, String>,
+}
+
+impl Ctx<'_> {
+    fn err(&self, what: String) -> LaunchError {
+        LaunchError::Invalid {
+            file: self.file.clone(),
+            what,
+        }
+    }
+
+    /// Applies `$(var ..)`, `$(env ..)`, `$(dirname)`.
+    fn subst(&self, s: &str) -> Result<String, LaunchError> {
+        let mut out = String::new();
+        let mut rest = s;
+        while let Some(start) = rest.find("$(") {
+            out.push_str(&rest[..start]);
+            let after = &rest[start + 2..];
+            let end = after
+                .find(')')
+                .ok_or_else(|| self.err(format!("unclosed substitution in {s:?}")))?;
+            let words: Vec<&str> = after[..end].split_whitespace().collect();
+            let value =
+                match words.as_slice() {
+                    ["var", name] => self.vars.get(*name).cloned().ok_or_else(|| {
+                        self.err(format!("$(var {name}): no such launch argument"))
+                    })?,
+                    ["env", name] => std::env::var(name).map_err(|_| {
+                        self.err(format!(
+                            "$(env {name}): not set (give a default: $(env {name} x))"
+                        ))
+                    })?,
+                    ["env", name, default] => {
+                        std::env::var(name).unwrap_or_else(|_| (*default).to_owned())
+                    }
+                    ["dirname"] => self.dir.display().to_string(),
+                    other => {
+                        return Err(self.err(format!(
+                            "unknown substitution $({}) (var, env, dirname)",
+                            other.join(" ")
+                        )))
+                    }
+                };
+            out.push_str(&value);
+            rest = &after[end + 1..];
+        }
+        out.push_str(rest);
+        Ok(out)
+    }
+
+    fn string(&self, v: &Value, what: &str) -> Result<String, LaunchError> {
+        let s = match v {
+            Value::String(s) => s.clone(),
+            Value::Number(n) => n.to_string(),
+            Value::Bool(b) => b.to_string(),
+            _ => return Err(self.err(format!("{what}: expected a string"))),
+        };
+        self.subst(&s)
+    }
+}
+
+fn get<'a>(m: &'a serde_yaml::Mapping, key: &str) -> Option<&'a Value> {
+    m.get(key)
+}
+
+impl LaunchDescription {
+    /// Reads `file` with the launch arguments `overrides` (`NAME:=VALUE`).
+    pub fn load(file: &Path, overrides: &[String]) -> Result<Self, LaunchError> {
+        let text = std::fs::read_to_string(file).map_err(|source| LaunchError::Read {
+            file: file.display().to_string(),
+            source,
+        })?;
+        let dir = file.parent().unwrap_or(Path::new("."));
+        let dir = if dir.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            dir
+        };
+        Self::parse(&text, &file.display().to_string(), dir, overrides)
+    }
+
+    /// Parses launch YAML; `dir` resolves relative parameter files and `$(dirname)`.
+    pub fn parse(
+        text: &str,
+        file: &str,
+        dir: &Path,
+        overrides: &[String],
+    ) -> Result<Self, LaunchError> {
+        let doc: Value = serde_yaml::from_str(text).map_err(|e| {
+            let (line, column) = e
+                .location()
+                .map(|l| (l.line(), l.column()))
+                .unwrap_or((0, 0));
+            LaunchError::Yaml {
+                file: file.to_owned(),
+                line,
+                column,
+                message: e.to_string(),
+            }
+        })?;
+        let mut ctx = Ctx {
+            file: file.to_owned(),
+            dir,
+            vars: BTreeMap::new(),
+        };
+        let mut given = BTreeMap::new();
+        for o in overrides {
+            let (k, v) = o
+                .split_once(":=")
+                .ok_or_else(|| ctx.err(format!("launch argument {o:?}: expected NAME:=VALUE")))?;
+            given.insert(k.to_owned(), v.to_owned());
+        }
+        let items = doc
+            .get("launch")
+            .and_then(Value::as_sequence)
+            .ok_or_else(|| ctx.err("expected a top-level `launch:` list".into()))?;
+        let mut out = Self {
+            nodes: Vec::new(),
+            env: Vec::new(),
+        };
+        for (k, item) in items.iter().enumerate() {
+            let map = item.as_mapping().filter(|m| m.len() == 1).ok_or_else(|| {
+                ctx.err(format!(
+                    "launch item {k}: expected one of arg, node, set_env"
+                ))
+            })?;
+            let (kind, body) = map
+                .iter()
+                .next()
+                .ok_or_else(|| ctx.err(format!("launch item {k}: empty")))?;
+            let body = body
+                .as_mapping()
+                .ok_or_else(|| ctx.err(format!("launch item {k}: expected a map")))?;
+            match kind.as_str() {
+                Some("arg") => {
+                    let name = ctx.string(
+                        get(body, "name").ok_or_else(|| ctx.err(format!("arg {k}: no name")))?,
+                        "arg name",
+                    )?;
+                    let value = match (given.get(&name), get(body, "default")) {
+                        (Some(v), _) => v.clone(),
+                        (None, Some(d)) => ctx.string(d, &format!("arg {name} default"))?,
+                        (None, None) => {
+                            return Err(ctx.err(format!(
+                                "launch argument {name} has no default: give {name}:=VALUE"
+                            )))
+                        }
+                    };
+                    ctx.vars.insert(name, value);
+                }
+                Some("set_env") => {
+                    let name = ctx.string(
+                        get(body, "name").ok_or_else(|| ctx.err("set_env: no name".into()))?,
+                        "set_env name",
+                    )?;
+                    let value = ctx.string(
+                        get(body, "value").ok_or_else(|| ctx.err("set_env: no value".into()))?,
+                        "set_env value",
+                    )?;
+                    out.env.push((name, value));
+                }
+                Some("node") => out.nodes.push(node(&ctx, body)?),
+                _ => {
+                    return Err(ctx.err(format!(
+                        "launch item {k}: unknown kind {:?} (arg, node, set_env)",
+                        kind
+                    )))
+                }
+            }
+        }
+        if let Some(unused) = given.keys().find(|k| !ctx.vars.contains_key(*k)) {
+            return Err(ctx.err(format!("launch argument {unused}:= is not declared")));
+        }
+        Ok(out)
+    }
+}
+
+fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchError> {
+    let field = |key: &str| -> Result<Option<String>, LaunchError> {
+        get(body, key)
+            .map(|v| ctx.string(v, &format!("node {key}")))
+            .transpose()
+    };
+    let pkg = field("pkg")?.unwrap_or_default();
+    if pkg != "rpkm" {
+        return Err(ctx.err(format!("node pkg {pkg:?}: only rpkm nodes can be launched")));
+    }
+    let exec = field("exec")?.ok_or_else(|| ctx.err("node without exec".into()))?;
+    if !EXECUTABLES.contains(&exec.as_str()) {
+        return Err(ctx.err(format!(
+            "node exec {exec:?}: expected one of {}",
+            EXECUTABLES.join(", ")
+        )));
+    }
+    let name = field("name")?.unwrap_or_else(|| exec.clone());
+    let mut param_files = Vec::new();
+    let mut params = Vec::new();
+    if let Some(list) = get(body, "param") {
+        let list = list
+            .as_sequence()
+            .ok_or_else(|| ctx.err(format!("node {name}: param: expected a list")))?;
+        for p in list {
+            let m = p
+                .as_mapping()
+                .ok_or_else(|| ctx.err(format!("node {name}: param entry: expected a map")))?;
+            if let Some(from) = get(m, "from") {
+                let f = PathBuf::from(ctx.string(from, "param from")?);
+                param_files.push(if f.is_relative() { ctx.dir.join(f) } else { f });
+            } else {
+                let key = get(m, "name")
+                    .ok_or_else(|| ctx.err(format!("node {name}: param without from or name")))?;
+                let key = ctx.string(key, "param name")?;
+                let value = get(m, "value")
+                    .ok_or_else(|| ctx.err(format!("node {name}: param {key} without value")))?;
+                let value = match value {
+                    Value::String(s) => ctx.subst(s)?,
+                    other => serde_yaml::to_string(other)
+                        .map(|s| s.trim().to_owned())
+                        .map_err(|e| ctx.err(format!("node {name}: param {key}: {e}")))?,
+                };
+                params.push(format!("{key}={value}"));
+            }
+        }
+    }
+    let args = field("args")?
+        .map(|a| a.split_whitespace().map(str::to_owned).collect())
+        .unwrap_or_default();
+    let respawn = match field("respawn")?.as_deref() {
+        None | Some("true") | Some("True") => true,
+        Some("false") | Some("False") => false,
+        Some(other) => {
+            return Err(ctx.err(format!(
+                "node {name}: respawn {other:?}: expected true or false"
+            )))
+        }
+    };
+    let respawn_delay = match field("respawn_delay")? {
+        None => 0.2,
+        Some(s) => s
+            .parse::<f64>()
+            .ok()
+            .filter(|d| d.is_finite() && *d >= 0.0)
+            .ok_or_else(|| {
+                ctx.err(format!(
+                    "node {name}: respawn_delay {s:?}: expected seconds >= 0"
+                ))
+            })?,
+    };
+    Ok(NodeSpec {
+        exec,
+        name,
+        param_files,
+        params,
+        args,
+        respawn,
+        respawn_delay,
+    })
+}
+
+/// Runs `rpkm launch`.
+pub fn run(args: &LaunchArgs) -> anyhow::Result<()> {
+    let desc = LaunchDescription::load(&args.file, &args.args)
+        .map_err(|e| crate::cli::bad_input(e.to_string()))?;
+    supervisor::run(&desc)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FILE: &str = "\
+launch:
+  - arg: {name: backend, default: ipc}
+  - arg: {name: rate}
+  - set_env: {name: ROS_DOMAIN_ID, value: \"7\"}
+  - node:
+      pkg: rpkm
+      exec: tcp_estimator
+      name: estimator_a
+      param:
+        - from: params.yaml
+        - {name: model, value: 24}
+        - {name: source, value: $(dirname)/c.csv}
+      args: --backend $(var backend) --param rate_hz=$(var rate)
+      respawn: \"false\"
+  - node: {pkg: rpkm, exec: ingest}
+";
+
+    #[test]
+    fn parses_nodes_args_and_substitutions() -> Result<(), LaunchError> {
+        let d = LaunchDescription::parse(
+            FILE,
+            "x.launch.yaml",
+            Path::new("/l"),
+            &["rate:=500".into()],
+        )?;
+        assert_eq!(d.env, vec![("ROS_DOMAIN_ID".into(), "7".into())]);
+        let a = &d.nodes[0];
+        assert_eq!(a.name, "estimator_a");
+        assert_eq!(a.param_files, vec![PathBuf::from("/l/params.yaml")]);
+        assert_eq!(a.params, vec!["model=24", "source=/l/c.csv"]);
+        assert_eq!(a.args, ["--backend", "ipc", "--param", "rate_hz=500"]);
+        assert!(!a.respawn);
+        let b = &d.nodes[1];
+        assert_eq!(
+            (b.name.as_str(), b.respawn, b.respawn_delay),
+            ("ingest", true, 0.2)
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn errors_name_the_problem() {
+        let e = LaunchDescription::parse(FILE, "x.launch.yaml", Path::new("/l"), &[])
+            .expect_err("rate has no default");
+        assert!(e.to_string().contains("rate has no default"), "{e}");
+        let e = LaunchDescription::parse(
+            "launch:\n  - node: {pkg: rpkm, exec: talker}\n",
+            "y.yaml",
+            Path::new("."),
+            &[],
+        )
+        .expect_err("unknown exec");
+        assert!(
+            e.to_string().starts_with("y.yaml: node exec \"talker\""),
+            "{e}"
+        );
+        let e = LaunchDescription::parse(
+            FILE,
+            "x",
+            Path::new("."),
+            &["rate:=1".into(), "nope:=2".into()],
+        )
+        .expect_err("undeclared");
+        assert!(e.to_string().contains("nope"), "{e}");
+    }
+}

@@ -1,0 +1,400 @@
+//! `calibrator`: accumulates TcpMeasurements with the ActuatorState of the same stamp, per
+//! setup, into a campaign (`crate::campaign_bag::CampaignAssembler`, the same mapping as the
+//! bag tools) and runs `rpkm_core::calib::calibrate` when the campaign ends:
+//! - an end-of-campaign marker (a TcpMeasurement with setup
+//!   [`super::ingest::END_OF_CAMPAIGN`]: ingest sends it at the end of a file; any publisher
+//!   may send it to request a calibration),
+//! - `calibrate_every` measurements (0: off),
+//! - `idle_end_s` seconds without a measurement (0: off).
+//!
+//! Setups whose name starts with `validation_prefix` are held out: they give `val_rms`. The
+//! result goes out as Parameters (reliable, transient-local: late joiners get it) and, once
+//! the core's diagnosis exists, Diagnosis ([`diagnose`]).
+
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+use rpkm_core::calib::{self, Calibration, Options, Selection};
+use rpkm_core::campaign::Campaign;
+use rpkm_core::obs;
+use rpkm_core::params::N_PARAMS;
+use rpkm_msgs::{
+    ActuatorState, CampaignInfo, Diagnosis, DiagnosticStatus, Parameters, TcpMeasurement,
+};
+use rpkm_transport::topic;
+
+use super::ingest::END_OF_CAMPAIGN;
+use super::{
+    bad_param, diagnostic_array, parameters_msg, status, CommonArgs, Every, Geometry, Idle,
+    NodeContext, MM_PER_M,
+};
+use crate::campaign_bag::CampaignAssembler;
+
+/// Parameter keys of the node.
+pub const KEYS: [&str; 9] = [
+    "model",
+    "geometry_file",
+    "geometry.",
+    "calibrate_every",
+    "idle_end_s",
+    "validation_prefix",
+    "max_condition",
+    "outlier_sigma",
+    "state_buffer",
+];
+
+/// Where `rpkm_core`'s model diagnosis plugs in: given the calibrated campaign, the held-out
+/// part and the calibration, the ranked candidate effects. Returns `None` (no Diagnosis is
+/// published) until the core's `diagnose` module lands; then this function calls it and maps
+/// its result onto the message, and nothing else in the node changes.
+pub fn diagnose(
+    _campaign: &Campaign,
+    _validation: Option<&Campaign>,
+    _calibration: &Calibration,
+) -> Option<Diagnosis> {
+    None
+}
+
+/// A finished calibration as messages.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// The identified parameters with campaign statistics.
+    pub parameters: Parameters,
+    /// The diagnosis, when the core provides one.
+    pub diagnosis: Option<Diagnosis>,
+}
+
+/// Options of the calibrator.
+#[derive(Debug, Clone)]
+pub struct CalibratorOptions {
+    /// Starting parameters and model.
+    pub start: Geometry,
+    /// Setups held out for validation start with this.
+    pub validation_prefix: String,
+    /// Condition-number limit of the automatic selection.
+    pub max_condition: f64,
+    /// Outlier threshold in σ (0: keep all).
+    pub outlier_sigma: f64,
+}
+
+/// Splits a campaign into its calibration and validation parts.
+fn split(c: &Campaign, prefix: &str) -> (Campaign, Option<Campaign>) {
+    let is_val = |setup: &str| !prefix.is_empty() && setup.starts_with(prefix);
+    let part = |val: bool| Campaign {
+        poses: c
+            .poses
+            .iter()
+            .filter(|p| is_val(&p.setup) == val)
+            .cloned()
+            .collect(),
+        ..c.clone()
+    };
+    let val = part(true);
+    (part(false), (!val.poses.is_empty()).then_some(val))
+}
+
+/// Calibrates `campaign` (mm, rad) and builds the messages.
+pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow::Result<Outcome> {
+    let (cal_part, val_part) = split(campaign, &o.validation_prefix);
+    let opts = Options {
+        model: o.start.model,
+        selection: Selection::Auto {
+            max_condition: o.max_condition,
+        },
+        outlier_sigma: (o.outlier_sigma > 0.0).then_some(o.outlier_sigma),
+        ..Default::default()
+    };
+    let cal = calib::calibrate(&cal_part, &o.start.params, &opts)?;
+    let mut sigmas = [0.0; N_PARAMS];
+    for id in &cal.identified {
+        sigmas[id.index] = id.sigma;
+    }
+    let mut msg = parameters_msg(&cal.params, cal.model, &sigmas);
+    msg.measurement_count = u32::try_from(cal.rows).unwrap_or(u32::MAX);
+    // RMS over the length directions, weighted by their rows (angles have another unit).
+    let (sum, rows) = cal
+        .rms
+        .iter()
+        .filter(|r| !r.is_angle)
+        .fold((0.0, 0usize), |(s, n), r| {
+            (s + r.rms_after.powi(2) * r.rows as f64, n + r.rows)
+        });
+    msg.cal_rms = if rows > 0 {
+        (sum / rows as f64).sqrt() / MM_PER_M
+    } else {
+        f64::NAN
+    };
+    let tcp = |c: &Campaign| -> Vec<f64> {
+        obs::tcp_errors(c, &cal.params, cal.model)
+            .map(|e| e.iter().map(|e| e.2).collect())
+            .unwrap_or_default()
+    };
+    let cal_errors = tcp(&cal_part);
+    msg.max_abs_residual = if cal_errors.is_empty() {
+        f64::NAN
+    } else {
+        cal_errors.iter().fold(0.0, |m: f64, e| m.max(e.abs())) / MM_PER_M
+    };
+    msg.val_rms = match &val_part {
+        Some(v) => {
+            let e = tcp(v);
+            if e.is_empty() {
+                f64::NAN
+            } else {
+                calib::rms(&e) / MM_PER_M
+            }
+        }
+        None => f64::NAN,
+    };
+    msg.condition_number = cal.condition_number;
+    let diagnosis = diagnose(&cal_part, val_part.as_ref(), &cal);
+    Ok(Outcome {
+        parameters: msg,
+        diagnosis,
+    })
+}
+
+/// Accumulates the campaign from the two streams.
+#[derive(Debug)]
+pub struct Accumulator {
+    states: VecDeque<ActuatorState>,
+    capacity: usize,
+    assembler: CampaignAssembler,
+    info: Option<CampaignInfo>,
+    /// Measurements with no drive state of the same stamp (dropped).
+    pub unpaired: u64,
+    /// Measurements accumulated since the last calibration.
+    pub measurements: u64,
+}
+
+impl Accumulator {
+    /// Keeps the last `capacity` drive states for the pairing.
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            states: VecDeque::with_capacity(capacity.max(1)),
+            capacity: capacity.max(1),
+            assembler: CampaignAssembler::new(),
+            info: None,
+            unpaired: 0,
+            measurements: 0,
+        }
+    }
+
+    /// Takes a drive state (no allocation: the ring is preallocated).
+    pub fn state(&mut self, s: &ActuatorState) {
+        if self.states.len() == self.capacity {
+            self.states.pop_front();
+        }
+        self.states.push_back(*s);
+    }
+
+    /// Takes the campaign description.
+    pub fn info(&mut self, info: &CampaignInfo) -> anyhow::Result<()> {
+        self.assembler.push_info(info)?;
+        self.info = Some(info.clone());
+        Ok(())
+    }
+
+    /// Takes a measurement; `Ok(false)` when no state of its stamp is buffered.
+    pub fn measurement(&mut self, m: &TcpMeasurement) -> anyhow::Result<bool> {
+        let Some(state) = self.states.iter().rev().find(|s| s.stamp == m.stamp) else {
+            self.unpaired += 1;
+            return Ok(false);
+        };
+        self.assembler.push_state(state)?;
+        self.assembler.push_measurement(m)?;
+        self.measurements += 1;
+        Ok(true)
+    }
+
+    /// The campaign so far; the accumulator starts a new one (keeping the description).
+    pub fn take(&mut self) -> anyhow::Result<Campaign> {
+        let mut next = CampaignAssembler::new();
+        if let Some(info) = &self.info {
+            next.push_info(info)?;
+        }
+        let done = std::mem::replace(&mut self.assembler, next);
+        self.measurements = 0;
+        Ok(done.finish()?)
+    }
+}
+
+/// Runs the node until SIGINT/SIGTERM.
+pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
+    let ctx = NodeContext::open("calibrator", args, &KEYS, None)?;
+    let p = &ctx.params;
+    let options = CalibratorOptions {
+        start: Geometry::from_params(p)?,
+        validation_prefix: p.string("validation_prefix", "val").map_err(bad_param)?,
+        max_condition: p.positive("max_condition", 100.0).map_err(bad_param)?,
+        outlier_sigma: p.f64("outlier_sigma", 3.0).map_err(bad_param)?,
+    };
+    let every = p.u64("calibrate_every", 0).map_err(bad_param)?;
+    let idle_end = p.f64("idle_end_s", 0.0).map_err(bad_param)?;
+    let capacity = p.u64("state_buffer", 4096).map_err(bad_param)? as usize;
+    let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
+    let measurements = ctx.subscriber(&topic::TCP_MEASUREMENT)?;
+    let infos = ctx.subscriber(&topic::CAMPAIGN_INFO)?;
+    let parameters = ctx.publisher(&topic::PARAMETERS)?;
+    let diagnosis = ctx.publisher(&topic::DIAGNOSIS)?;
+    let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
+    ctx.log(format!(
+        "calibrating {} from {}",
+        options.start.model, options.start.source
+    ));
+    let mut acc = Accumulator::new(capacity);
+    let mut idle = Idle::new(Duration::from_millis(50), Duration::from_millis(1));
+    let mut report = Every::new(ctx.diagnostics_period()?);
+    let mut last_measurement: Option<Instant> = None;
+    let mut calibrations = 0u64;
+    let mut last: (u8, String) = (DiagnosticStatus::OK, "waiting for measurements".into());
+    while !super::shutdown::requested() {
+        let mut worked = false;
+        while let Some(info) = infos.try_recv()? {
+            if let Err(e) = acc.info(&info) {
+                last = (DiagnosticStatus::WARN, format!("campaign info: {e:#}"));
+            }
+        }
+        // States first: ingest publishes a pose's state before its measurement.
+        while let Some(s) = states.try_recv()? {
+            acc.state(&s);
+            worked = true;
+        }
+        let mut end = false;
+        while let Some(m) = measurements.try_recv()? {
+            worked = true;
+            if m.setup == END_OF_CAMPAIGN {
+                end = true;
+                break;
+            }
+            match acc.measurement(&m) {
+                Ok(_) => last_measurement = Some(Instant::now()),
+                Err(e) => last = (DiagnosticStatus::WARN, format!("measurement: {e:#}")),
+            }
+            if every > 0 && acc.measurements >= every {
+                end = true;
+                break;
+            }
+        }
+        if idle_end > 0.0
+            && acc.measurements > 0
+            && last_measurement.is_some_and(|t| t.elapsed().as_secs_f64() >= idle_end)
+        {
+            end = true;
+        }
+        if end && acc.measurements > 0 {
+            let n = acc.measurements;
+            let result = acc.take().and_then(|c| calibrate_campaign(&c, &options));
+            match result {
+                Ok(out) => {
+                    calibrations += 1;
+                    parameters.publish(&out.parameters)?;
+                    if let Some(d) = &out.diagnosis {
+                        diagnosis.publish(d)?;
+                    }
+                    last = (
+                        DiagnosticStatus::OK,
+                        format!(
+                            "calibration {calibrations}: {n} measurements, RMS {:.2} µm, \
+                             condition {:.1}",
+                            out.parameters.cal_rms * 1e6,
+                            out.parameters.condition_number
+                        ),
+                    );
+                }
+                Err(e) => {
+                    last = (
+                        DiagnosticStatus::ERROR,
+                        format!("calibration of {n} measurements failed: {e:#}"),
+                    )
+                }
+            }
+            ctx.log(&last.1);
+            diagnostics.publish(&diagnostic_array(status(
+                last.0,
+                &ctx.name,
+                last.1.clone(),
+                vec![("calibrations", calibrations.to_string())],
+            )))?;
+        }
+        if report.due() {
+            diagnostics.publish(&diagnostic_array(status(
+                last.0,
+                &ctx.name,
+                last.1.clone(),
+                vec![
+                    ("calibrations", calibrations.to_string()),
+                    ("pending_measurements", acc.measurements.to_string()),
+                    ("unpaired_measurements", acc.unpaired.to_string()),
+                ],
+            )))?;
+        }
+        if worked {
+            idle.worked();
+        } else {
+            idle.wait();
+        }
+    }
+    ctx.log("stopping");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::campaign_bag::pose_messages;
+    use rpkm_core::params::{Model, Params};
+    use rpkm_core::twin::{Twin, TwinConfig};
+
+    #[test]
+    fn messages_rebuild_the_campaign_and_calibrate_like_the_core() -> anyhow::Result<()> {
+        let mut twin = Twin::new(TwinConfig {
+            noise: false,
+            ..TwinConfig::default()
+        })?;
+        let c = twin.campaign_by_names(&["lt", "validation"], 20)?;
+        let mut acc = Accumulator::new(8);
+        for (i, pose) in c.poses.iter().enumerate() {
+            let (s, m) = pose_messages(&c, i, pose)?;
+            acc.state(&s);
+            assert!(acc.measurement(&m)?);
+        }
+        let rebuilt = acc.take()?;
+        let o = CalibratorOptions {
+            start: Geometry {
+                params: Params::nominal(),
+                model: Model::M29,
+                stiffness: Default::default(),
+                source: "nominal".into(),
+            },
+            validation_prefix: "val".into(),
+            max_condition: 100.0,
+            outlier_sigma: 3.0,
+        };
+        let out = calibrate_campaign(&rebuilt, &o)?;
+        // Independent truth: the core on the original campaign without its held-out setup.
+        let (cal_part, _) = split(&c, "val");
+        let direct = calib::calibrate(&cal_part, &Params::nominal(), &Options::default())?;
+        for (name, v) in out.parameters.names.iter().zip(&out.parameters.values) {
+            let i = rpkm_core::params::index_of(name)
+                .ok_or("name")
+                .map_err(anyhow::Error::msg)?;
+            let expect = direct.params[i]
+                / if rpkm_core::params::unit(i) == rpkm_core::params::Unit::Mm {
+                    MM_PER_M
+                } else {
+                    1.0
+                };
+            assert!((v - expect).abs() < 1e-9, "{name}: {v} vs {expect}");
+        }
+        assert_eq!(out.parameters.model, 29);
+        assert!(out.parameters.val_rms.is_finite());
+        assert!(
+            out.parameters.val_rms < 5e-6,
+            "noise-free twin: {}",
+            out.parameters.val_rms
+        );
+        assert!(out.diagnosis.is_none());
+        Ok(())
+    }
+}

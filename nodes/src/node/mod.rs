@@ -1,0 +1,512 @@
+//! The ROS 2 node set, one subcommand each: `rpkm node ingest|tcp_estimator|calibrator|
+//! preload_monitor`. Thin: topics, parameters, validation and bookkeeping here; every model
+//! evaluation is a call into `rpkm_core`. Units: SI on topics and in parameter YAML (m, rad,
+//! N, s), mm inside the core; the conversion happens in [`Geometry`] and at each message.
+//!
+//! Every node reads ROS 2 parameter YAML ([`params`]), publishes on the configured backend
+//! (`--backend ipc|dds|both`) and subscribes on one (`--input-backend`), stops cleanly on
+//! SIGINT/SIGTERM ([`shutdown`]) and reports on `/diagnostics`.
+
+pub mod calibrator;
+pub mod ingest;
+pub mod params;
+pub mod preload_monitor;
+pub mod shutdown;
+pub mod tcp_estimator;
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use rpkm_core::elastic::Stiffness;
+use rpkm_core::params::{self as core_params, Model, Params, NAMES};
+use rpkm_msgs::{DiagnosticArray, DiagnosticStatus, Header, KeyValue, Parameters, Time};
+use rpkm_transport::{
+    Backend, IpcMessage, Publisher, Subscriber, Topic, Transport, TransportConfig,
+};
+
+pub use params::{NodeParams, ParamError};
+
+/// Millimetres per metre: the core works in mm, topics in m.
+pub const MM_PER_M: f64 = 1e3;
+
+/// `rpkm node <kind>`: run one node of the set.
+#[derive(clap::Args, Debug, Clone)]
+#[command(after_help = "Examples:\n  \
+rpkm node ingest --source campaign.csv --params launch_scripts/params.yaml\n  \
+rpkm node tcp_estimator --params launch_scripts/params.yaml --backend both\n  \
+rpkm node preload_monitor --param warn_percent=20 --param error_percent=50")]
+pub struct NodeArgs {
+    #[command(subcommand)]
+    pub kind: NodeKind,
+}
+
+/// The four nodes.
+#[derive(clap::Subcommand, Debug, Clone)]
+pub enum NodeKind {
+    /// Validates and republishes ActuatorState/TcpMeasurement from DDS, a CSV stream on stdin
+    /// or a campaign CSV file; rejects are counted on /diagnostics.
+    #[command(name = "ingest")]
+    Ingest(ingest::IngestArgs),
+    /// Elasto-geometric TCP estimate for every ActuatorState.
+    #[command(name = "tcp_estimator")]
+    TcpEstimator(CommonArgs),
+    /// Calibrates when a campaign ends; publishes Parameters (transient-local).
+    #[command(name = "calibrator")]
+    Calibrator(CommonArgs),
+    /// Predicted vs measured drive forces: OK/WARN/ERROR on /diagnostics and PreloadStatus.
+    #[command(name = "preload_monitor")]
+    PreloadMonitor(CommonArgs),
+}
+
+impl NodeKind {
+    /// The executable name as launch files spell it.
+    pub fn exec_name(&self) -> &'static str {
+        match self {
+            Self::Ingest(_) => "ingest",
+            Self::TcpEstimator(_) => "tcp_estimator",
+            Self::Calibrator(_) => "calibrator",
+            Self::PreloadMonitor(_) => "preload_monitor",
+        }
+    }
+}
+
+/// The node executables `rpkm launch` accepts.
+pub const EXECUTABLES: [&str; 4] = ["ingest", "tcp_estimator", "calibrator", "preload_monitor"];
+
+/// A backend on the command line.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BackendArg {
+    /// iceoryx2 shared memory (same host).
+    Ipc,
+    /// DDS (ROS 2 tools, other hosts).
+    Dds,
+    /// Publish on both (subscriptions use iceoryx2).
+    Both,
+}
+
+impl BackendArg {
+    fn backend(self) -> Backend {
+        match self {
+            Self::Ipc => Backend::Ipc,
+            Self::Dds => Backend::Dds,
+            Self::Both => Backend::Both,
+        }
+    }
+    fn parse(s: &str) -> Option<Self> {
+        match s {
+            "ipc" | "iceoryx2" => Some(Self::Ipc),
+            "dds" => Some(Self::Dds),
+            "both" => Some(Self::Both),
+            _ => None,
+        }
+    }
+}
+
+/// Options every node takes.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct CommonArgs {
+    /// ROS 2 parameter YAML file; repeat for several (later files override earlier ones).
+    #[arg(long = "params", value_name = "FILE.yaml")]
+    pub params: Vec<PathBuf>,
+    /// One parameter as key=value (value read as YAML), applied after the files.
+    #[arg(long = "param", value_name = "KEY=VALUE")]
+    pub param: Vec<String>,
+    /// Node name: its section in the parameter files and its iceoryx2/DDS name
+    /// (default: the executable name).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Where the node publishes (default: parameter `backend`, else ipc).
+    #[arg(long, value_enum)]
+    pub backend: Option<BackendArg>,
+    /// Where the node subscribes: ipc or dds (default: parameter `input_backend`, else dds
+    /// when publishing on dds only, ipc otherwise).
+    #[arg(long, value_enum)]
+    pub input_backend: Option<BackendArg>,
+    /// Prefix of the iceoryx2 service names (default: env RPKM_IPC_PREFIX, else none).
+    #[arg(long)]
+    pub ipc_prefix: Option<String>,
+    /// DDS domain id (default: env ROS_DOMAIN_ID, else 0).
+    #[arg(long)]
+    pub domain: Option<u16>,
+}
+
+/// Parameter keys every node declares.
+pub const COMMON_KEYS: [&str; 3] = ["backend", "input_backend", "diagnostics_period_s"];
+/// Parameter keys of the nodes that evaluate the model ([`Geometry::from_params`]).
+pub const GEOMETRY_KEYS: [&str; 5] = [
+    "model",
+    "stiffness_factor",
+    "geometry_file",
+    "geometry.",
+    "follow_parameters",
+];
+
+/// An opened node: its name, parameters and transport.
+pub struct NodeContext {
+    /// Node name.
+    pub name: String,
+    /// Merged parameters.
+    pub params: NodeParams,
+    /// The transport (iceoryx2, DDS or both, as the ports need).
+    pub transport: Transport,
+    /// Backend of the publishers.
+    pub output: Backend,
+    /// Backend of the subscribers (iceoryx2 or DDS).
+    pub input: Backend,
+}
+
+fn union(a: Backend, b: Backend) -> Backend {
+    match (a, b) {
+        (Backend::Ipc, Backend::Ipc) => Backend::Ipc,
+        (Backend::Dds, Backend::Dds) => Backend::Dds,
+        _ => Backend::Both,
+    }
+}
+
+impl NodeContext {
+    /// Loads the parameters, checks them against `declared` and opens the transport;
+    /// `extra_input` is a backend the node subscribes on besides its input (ingest's DDS
+    /// source).
+    pub fn open(
+        kind: &str,
+        args: &CommonArgs,
+        declared: &[&str],
+        extra_input: Option<Backend>,
+    ) -> anyhow::Result<Self> {
+        let name = args.name.clone().unwrap_or_else(|| kind.to_owned());
+        let params = NodeParams::load(&name, &args.params, &args.param).map_err(bad_param)?;
+        let mut all: Vec<&str> = declared.to_vec();
+        all.extend(COMMON_KEYS);
+        params.check_declared(&all).map_err(bad_param)?;
+        let from_param = |key: &str| -> anyhow::Result<Option<BackendArg>> {
+            if !params.has(key) {
+                return Ok(None);
+            }
+            let s = params.string(key, "").map_err(bad_param)?;
+            BackendArg::parse(&s).map(Some).ok_or_else(|| {
+                crate::cli::bad_input(format!(
+                    "{}/{key}: expected ipc, dds or both, found {s:?}",
+                    params
+                        .origin(key)
+                        .map(|o| o.to_string())
+                        .unwrap_or_default()
+                ))
+            })
+        };
+        let output = match args.backend {
+            Some(b) => b,
+            None => from_param("backend")?.unwrap_or(BackendArg::Ipc),
+        }
+        .backend();
+        let input = match args.input_backend {
+            Some(b) => Some(b),
+            None => from_param("input_backend")?,
+        };
+        let input = match input {
+            Some(BackendArg::Both) => {
+                return Err(crate::cli::bad_input(
+                    "input backend: a node subscribes on ipc or dds, not both".into(),
+                ))
+            }
+            Some(b) => b.backend(),
+            None if output == Backend::Dds => Backend::Dds,
+            None => Backend::Ipc,
+        };
+        let mut backend = union(output, input);
+        if let Some(extra) = extra_input {
+            backend = union(backend, extra);
+        }
+        let prefix = match &args.ipc_prefix {
+            Some(p) => p.clone(),
+            None => std::env::var("RPKM_IPC_PREFIX").unwrap_or_default(),
+        };
+        let mut config = TransportConfig::new(&name)
+            .backend(backend)
+            .ipc_prefix(prefix);
+        if let Some(d) = args.domain {
+            config = config.dds_domain(d);
+        }
+        let transport = Transport::new(&config)
+            .with_context(|| format!("node {name}: opening the transport"))?;
+        Ok(Self {
+            name,
+            params,
+            transport,
+            output,
+            input,
+        })
+    }
+
+    /// A publisher on the output backend.
+    pub fn publisher<T: IpcMessage>(&self, topic: &Topic<T>) -> anyhow::Result<Publisher<T>> {
+        self.transport
+            .publisher_on(topic, self.output)
+            .with_context(|| format!("node {}", self.name))
+    }
+
+    /// A subscriber on the input backend.
+    pub fn subscriber<T: IpcMessage>(&self, topic: &Topic<T>) -> anyhow::Result<Subscriber<T>> {
+        self.transport
+            .subscriber_on(topic, self.input)
+            .with_context(|| format!("node {}", self.name))
+    }
+
+    /// Logs one line to stderr, prefixed with the node name (launch output interleaves).
+    pub fn log(&self, msg: impl std::fmt::Display) {
+        eprintln!("[{}] {msg}", self.name);
+    }
+
+    /// Period of the regular /diagnostics report.
+    pub fn diagnostics_period(&self) -> anyhow::Result<Duration> {
+        let s = self
+            .params
+            .positive("diagnostics_period_s", 1.0)
+            .map_err(bad_param)?;
+        Ok(Duration::from_secs_f64(s))
+    }
+}
+
+/// A parameter error as bad input (exit code 2: `rpkm launch` does not restart the node).
+pub fn bad_param(e: ParamError) -> anyhow::Error {
+    crate::cli::bad_input(e.to_string())
+}
+
+/// Runs the node `args` names until SIGINT/SIGTERM (or, for ingest, its end of input).
+pub fn run(args: &NodeArgs) -> anyhow::Result<()> {
+    shutdown::install();
+    match &args.kind {
+        NodeKind::Ingest(a) => ingest::run(a),
+        NodeKind::TcpEstimator(a) => tcp_estimator::run(a),
+        NodeKind::Calibrator(a) => calibrator::run(a),
+        NodeKind::PreloadMonitor(a) => preload_monitor::run(a),
+    }
+}
+
+/// The model a node evaluates: parameters (mm, rad), model, stiffness.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Geometry {
+    /// The 29 parameters, mm and rad.
+    pub params: Params,
+    /// Model 24 or 29.
+    pub model: Model,
+    /// Stiffness of the spring model.
+    pub stiffness: Stiffness,
+    /// Where the parameters came from, for messages.
+    pub source: String,
+}
+
+/// A Parameters message that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ParametersMsgError {
+    #[error("/rpkm/parameters: model {0} is not 24 or 29")]
+    Model(u8),
+    #[error("/rpkm/parameters: {names} names but {values} values")]
+    Lengths { names: usize, values: usize },
+    #[error("/rpkm/parameters: unknown parameter name {0:?}")]
+    Name(String),
+    #[error("/rpkm/parameters: parameter {name}: {value} is not finite")]
+    NonFinite { name: String, value: f64 },
+}
+
+/// Length parameters: mm in the core, m on topics and in YAML.
+fn si_factor(i: usize) -> f64 {
+    match core_params::unit(i) {
+        core_params::Unit::Mm => MM_PER_M,
+        core_params::Unit::Rad => 1.0,
+    }
+}
+
+impl Geometry {
+    /// From the node parameters: `geometry_file` (JSON of name -> value in mm/rad, as
+    /// `rpkm calibrate --json` writes), then `geometry.<name>` overrides in SI (m, rad),
+    /// `model` (24|29), `stiffness_factor`.
+    pub fn from_params(p: &NodeParams) -> anyhow::Result<Self> {
+        let model_n = p.u64("model", 29).map_err(bad_param)?;
+        let model = Model::from_number(model_n as u32).ok_or_else(|| {
+            crate::cli::bad_input(format!(
+                "{}/model: expected 24 or 29, found {model_n}",
+                p.origin("model").map(|o| o.to_string()).unwrap_or_default()
+            ))
+        })?;
+        let factor = p.positive("stiffness_factor", 1.0).map_err(bad_param)?;
+        let file = p.string("geometry_file", "").map_err(bad_param)?;
+        let (mut params, mut source) = if file.is_empty() {
+            (Params::nominal(), "nominal parameters".to_owned())
+        } else {
+            (
+                crate::cli::read_params(std::path::Path::new(&file))?,
+                file.clone(),
+            )
+        };
+        let overrides = p.group("geometry.").map_err(bad_param)?;
+        for (name, value, origin) in &overrides {
+            let i = core_params::index_of(name).ok_or_else(|| {
+                crate::cli::bad_input(format!(
+                    "{origin}/geometry.{name}: unknown parameter (expected one of {})",
+                    NAMES.join(", ")
+                ))
+            })?;
+            params[i] = value * si_factor(i);
+        }
+        if !overrides.is_empty() {
+            source.push_str(&format!(" with {} YAML overrides", overrides.len()));
+        }
+        if model == Model::M24 {
+            params = params.with_perfect_parallelogram();
+        }
+        Ok(Self {
+            params,
+            model,
+            stiffness: Stiffness::default().scaled(factor),
+            source,
+        })
+    }
+
+    /// From a Parameters message (SI); parameters it does not name stay as in `self`.
+    pub fn updated(&self, msg: &Parameters) -> Result<Self, ParametersMsgError> {
+        let model =
+            Model::from_number(u32::from(msg.model)).ok_or(ParametersMsgError::Model(msg.model))?;
+        if msg.names.len() != msg.values.len() {
+            return Err(ParametersMsgError::Lengths {
+                names: msg.names.len(),
+                values: msg.values.len(),
+            });
+        }
+        let mut params = self.params;
+        for (name, &value) in msg.names.iter().zip(&msg.values) {
+            let i = core_params::index_of(name)
+                .ok_or_else(|| ParametersMsgError::Name(name.clone()))?;
+            if !value.is_finite() {
+                return Err(ParametersMsgError::NonFinite {
+                    name: name.clone(),
+                    value,
+                });
+            }
+            params[i] = value * si_factor(i);
+        }
+        if model == Model::M24 {
+            params = params.with_perfect_parallelogram();
+        }
+        Ok(Self {
+            params,
+            model,
+            stiffness: self.stiffness,
+            source: format!(
+                "/rpkm/parameters (model {}, {} measurements)",
+                model.number(),
+                msg.measurement_count
+            ),
+        })
+    }
+}
+
+/// A Parameters message of `p` (the model's parameters, SI), with `sigmas` in mm/rad by index
+/// (0 for parameters not identified).
+pub fn parameters_msg(
+    p: &Params,
+    model: Model,
+    sigmas: &[f64; core_params::N_PARAMS],
+) -> Parameters {
+    let ids = model.params();
+    Parameters {
+        model: model.number() as u8,
+        names: ids.iter().map(|&i| NAMES[i].to_owned()).collect(),
+        values: ids.iter().map(|&i| p[i] / si_factor(i)).collect(),
+        sigmas: ids.iter().map(|&i| sigmas[i] / si_factor(i)).collect(),
+        ..Default::default()
+    }
+}
+
+/// One `diagnostic_msgs/DiagnosticStatus` of an rpkm node.
+pub fn status(
+    level: u8,
+    node: &str,
+    message: String,
+    values: Vec<(&str, String)>,
+) -> DiagnosticStatus {
+    DiagnosticStatus {
+        level,
+        name: format!("rpkm/{node}"),
+        message,
+        hardware_id: "scissors_kinematics".into(),
+        values: values
+            .into_iter()
+            .map(|(k, v)| KeyValue {
+                key: k.to_owned(),
+                value: v,
+            })
+            .collect(),
+    }
+}
+
+/// A DiagnosticArray stamped now with one status.
+pub fn diagnostic_array(s: DiagnosticStatus) -> DiagnosticArray {
+    DiagnosticArray {
+        header: Header {
+            stamp: Time::now(),
+            frame_id: String::new(),
+        },
+        status: vec![s],
+    }
+}
+
+/// How a node waits when its inputs are empty: `yield` for `busy` after the last sample (the
+/// next one of a servo stream is due within a millisecond, and a sleep would cost the
+/// latency), then sleeps `idle_sleep` between polls so that an idle node costs no core.
+#[derive(Debug, Clone, Copy)]
+pub struct Idle {
+    last_work: Instant,
+    busy: Duration,
+    idle_sleep: Duration,
+}
+
+impl Idle {
+    /// A waiter that yields for `busy` after work, then sleeps `idle_sleep`.
+    pub fn new(busy: Duration, idle_sleep: Duration) -> Self {
+        Self {
+            last_work: Instant::now(),
+            busy,
+            idle_sleep,
+        }
+    }
+    /// Records that a sample was processed.
+    pub fn worked(&mut self) {
+        self.last_work = Instant::now();
+    }
+    /// Waits a little before the next poll.
+    pub fn wait(&self) {
+        if self.last_work.elapsed() < self.busy {
+            std::thread::yield_now();
+        } else {
+            std::thread::sleep(self.idle_sleep);
+        }
+    }
+}
+
+/// A regular timer: `due()` is true once per period.
+#[derive(Debug, Clone, Copy)]
+pub struct Every {
+    next: Instant,
+    period: Duration,
+}
+
+impl Every {
+    /// First due one period from now.
+    pub fn new(period: Duration) -> Self {
+        Self {
+            next: Instant::now() + period,
+            period,
+        }
+    }
+    /// True (and re-armed) when the period has passed.
+    pub fn due(&mut self) -> bool {
+        let now = Instant::now();
+        if now >= self.next {
+            self.next = now + self.period;
+            true
+        } else {
+            false
+        }
+    }
+}

@@ -1,0 +1,429 @@
+//! ROS 2 parameter YAML: the files `ros2 run ... --ros-args --params-file F` reads.
+//!
+//! ```yaml
+//! /**:                      # every node
+//!   ros__parameters:
+//!     model: 29
+//! preload_monitor:          # one node, also spelled /preload_monitor or /ns/preload_monitor
+//!   ros__parameters:
+//!     warn_percent: 20.0
+//!     geometry:             # nested maps flatten with '.': geometry.l1
+//!       l1: 0.9503          # SI on the ROS side: m, rad, N, s
+//! ```
+//!
+//! Sections apply in file order, files in command-line order, `--param key=value` last; a
+//! later value replaces an earlier one. Keys set in a section that names the node itself must
+//! be keys the node declares ([`NodeParams::check_declared`]): a typo is an error, not a
+//! silently ignored setting. Wildcard sections may carry keys for other nodes.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde_yaml::Value;
+
+/// Where a parameter value came from, for messages: `file.yaml: /node/ros__parameters/key`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Origin {
+    /// The file, or `--param` for the command line.
+    pub file: String,
+    /// The node section (`/**`, `tcp_estimator`, ...).
+    pub section: String,
+    /// Whether the section names this node (not a wildcard).
+    pub specific: bool,
+}
+
+impl std::fmt::Display for Origin {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}/ros__parameters", self.file, self.section)
+    }
+}
+
+/// A parameter file or value that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ParamError {
+    /// The file cannot be read.
+    #[error("{file}: cannot read parameters: {source}")]
+    Read {
+        file: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file is not YAML.
+    #[error("{file}:{line}:{column}: not YAML: {message}")]
+    Yaml {
+        file: String,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    /// The YAML does not have the ROS 2 layout.
+    #[error("{file}: {what}")]
+    Layout { file: String, what: String },
+    /// A value has the wrong type or is out of its range.
+    #[error("{origin}/{key}: expected {expected}, found {found}")]
+    Type {
+        origin: Origin,
+        key: String,
+        expected: &'static str,
+        found: String,
+    },
+    /// A key the node does not declare.
+    #[error("{origin}/{key}: unknown parameter of node {node} (known: {known})")]
+    Unknown {
+        origin: Origin,
+        key: String,
+        node: String,
+        known: String,
+    },
+    /// `--param` without `=`.
+    #[error("--param {0:?}: expected key=value")]
+    Override(String),
+}
+
+/// The parameters of one node, merged from its files and overrides.
+#[derive(Debug, Clone, Default)]
+pub struct NodeParams {
+    node: String,
+    values: BTreeMap<String, (Value, Origin)>,
+}
+
+/// Whether a section name addresses the node `node` (`/**`, `node`, `/node`, `/ns/node`,
+/// `/**/node`).
+fn section_matches(section: &str, node: &str) -> Option<bool> {
+    let s = section.trim();
+    if s == "/**" || s == "**" {
+        return Some(false);
+    }
+    let last = s.rsplit('/').next().unwrap_or(s);
+    (last == node).then_some(true)
+}
+
+fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Value)>) {
+    match v {
+        Value::Mapping(m) => {
+            for (k, v) in m {
+                let key = match k {
+                    Value::String(s) => s.clone(),
+                    other => yaml_text(other),
+                };
+                let full = if prefix.is_empty() {
+                    key
+                } else {
+                    format!("{prefix}.{key}")
+                };
+                flatten(&full, v, out);
+            }
+        }
+        other => out.push((prefix.to_owned(), other.clone())),
+    }
+}
+
+fn yaml_text(v: &Value) -> String {
+    match v {
+        Value::String(s) => format!("{s:?}"),
+        other => serde_yaml::to_string(other)
+            .map(|s| s.trim().to_owned())
+            .unwrap_or_else(|_| format!("{other:?}")),
+    }
+}
+
+impl NodeParams {
+    /// No parameters (every getter returns its default).
+    pub fn empty(node: &str) -> Self {
+        Self {
+            node: node.to_owned(),
+            values: BTreeMap::new(),
+        }
+    }
+
+    /// Reads `files` in order, then applies `overrides` (`key=value`, value as YAML).
+    pub fn load(node: &str, files: &[PathBuf], overrides: &[String]) -> Result<Self, ParamError> {
+        let mut out = Self::empty(node);
+        for f in files {
+            let text = std::fs::read_to_string(f).map_err(|source| ParamError::Read {
+                file: f.display().to_string(),
+                source,
+            })?;
+            out.merge_text(&text, f)?;
+        }
+        for o in overrides {
+            let (k, v) = o
+                .split_once('=')
+                .ok_or_else(|| ParamError::Override(o.clone()))?;
+            let value: Value =
+                serde_yaml::from_str(v).unwrap_or_else(|_| Value::String(v.to_owned()));
+            out.values.insert(
+                k.trim().to_owned(),
+                (
+                    value,
+                    Origin {
+                        file: "--param".into(),
+                        section: format!("/{node}"),
+                        specific: true,
+                    },
+                ),
+            );
+        }
+        Ok(out)
+    }
+
+    /// Merges the sections of one file's text that address this node.
+    pub fn merge_text(&mut self, text: &str, file: &Path) -> Result<(), ParamError> {
+        let fname = file.display().to_string();
+        let doc: Value = serde_yaml::from_str(text).map_err(|e| {
+            let (line, column) = e
+                .location()
+                .map(|l| (l.line(), l.column()))
+                .unwrap_or((0, 0));
+            ParamError::Yaml {
+                file: fname.clone(),
+                line,
+                column,
+                message: e.to_string(),
+            }
+        })?;
+        let layout = |what: String| ParamError::Layout {
+            file: fname.clone(),
+            what,
+        };
+        let top = match doc {
+            Value::Mapping(m) => m,
+            Value::Null => return Ok(()),
+            _ => return Err(layout("expected a map of node names".into())),
+        };
+        for (section, body) in &top {
+            let Value::String(section) = section else {
+                return Err(layout(format!(
+                    "node name {} is not a string",
+                    yaml_text(section)
+                )));
+            };
+            let Some(specific) = section_matches(section, &self.node) else {
+                continue;
+            };
+            let params = match body {
+                Value::Mapping(m) => m.get("ros__parameters"),
+                _ => None,
+            }
+            .ok_or_else(|| layout(format!("{section}: expected a `ros__parameters` map")))?;
+            let mut flat = Vec::new();
+            flatten("", params, &mut flat);
+            for (key, value) in flat {
+                if key.is_empty() {
+                    continue;
+                }
+                self.values.insert(
+                    key,
+                    (
+                        value,
+                        Origin {
+                            file: fname.clone(),
+                            section: section.clone(),
+                            specific,
+                        },
+                    ),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// Errors on a key set for this node by name (or `--param`) that is not in `declared`.
+    /// A declared key ending in `.` declares a whole group (`geometry.`).
+    pub fn check_declared(&self, declared: &[&str]) -> Result<(), ParamError> {
+        for (key, (_, origin)) in &self.values {
+            let known = declared
+                .iter()
+                .any(|d| d == key || (d.ends_with('.') && key.starts_with(d)));
+            if origin.specific && !known {
+                return Err(ParamError::Unknown {
+                    origin: origin.clone(),
+                    key: key.clone(),
+                    node: self.node.clone(),
+                    known: declared.join(", "),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn type_err(&self, key: &str, expected: &'static str) -> ParamError {
+        let (v, origin) = &self.values[key];
+        ParamError::Type {
+            origin: origin.clone(),
+            key: key.to_owned(),
+            expected,
+            found: yaml_text(v),
+        }
+    }
+
+    /// Whether the key is set.
+    pub fn has(&self, key: &str) -> bool {
+        self.values.contains_key(key)
+    }
+
+    /// A finite double (an integer is accepted), or `default`.
+    pub fn f64(&self, key: &str, default: f64) -> Result<f64, ParamError> {
+        match self.values.get(key) {
+            None => Ok(default),
+            Some((v, _)) => v
+                .as_f64()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| self.type_err(key, "a finite number")),
+        }
+    }
+
+    /// A finite double > 0, or `default`.
+    pub fn positive(&self, key: &str, default: f64) -> Result<f64, ParamError> {
+        let v = self.f64(key, default)?;
+        if v > 0.0 {
+            Ok(v)
+        } else {
+            Err(self.type_err(key, "a number > 0"))
+        }
+    }
+
+    /// A non-negative integer, or `default`.
+    pub fn u64(&self, key: &str, default: u64) -> Result<u64, ParamError> {
+        match self.values.get(key) {
+            None => Ok(default),
+            Some((v, _)) => v
+                .as_u64()
+                .ok_or_else(|| self.type_err(key, "a non-negative integer")),
+        }
+    }
+
+    /// A boolean, or `default`.
+    pub fn bool(&self, key: &str, default: bool) -> Result<bool, ParamError> {
+        match self.values.get(key) {
+            None => Ok(default),
+            Some((v, _)) => v
+                .as_bool()
+                .ok_or_else(|| self.type_err(key, "true or false")),
+        }
+    }
+
+    /// A string, or `default`.
+    pub fn string(&self, key: &str, default: &str) -> Result<String, ParamError> {
+        match self.values.get(key) {
+            None => Ok(default.to_owned()),
+            Some((Value::String(s), _)) => Ok(s.clone()),
+            Some((v @ (Value::Number(_) | Value::Bool(_)), _)) => Ok(yaml_text(v)),
+            Some(_) => Err(self.type_err(key, "a string")),
+        }
+    }
+
+    /// A list of strings, or `default`.
+    pub fn strings(&self, key: &str, default: &[&str]) -> Result<Vec<String>, ParamError> {
+        match self.values.get(key) {
+            None => Ok(default.iter().map(|s| (*s).to_owned()).collect()),
+            Some((Value::Sequence(items), _)) => items
+                .iter()
+                .map(|i| match i {
+                    Value::String(s) => Ok(s.clone()),
+                    _ => Err(self.type_err(key, "a list of strings")),
+                })
+                .collect(),
+            Some(_) => Err(self.type_err(key, "a list of strings")),
+        }
+    }
+
+    /// The finite doubles of the group `prefix.` (e.g. `geometry.` gives `l1 -> 0.95`), with
+    /// their origins.
+    pub fn group(&self, prefix: &str) -> Result<Vec<(String, f64, Origin)>, ParamError> {
+        let mut out = Vec::new();
+        for (key, (v, origin)) in self.values.range(prefix.to_owned()..) {
+            let Some(name) = key.strip_prefix(prefix) else {
+                break;
+            };
+            let x = v
+                .as_f64()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| self.type_err(key, "a finite number"))?;
+            out.push((name.to_owned(), x, origin.clone()));
+        }
+        Ok(out)
+    }
+
+    /// The origin of a key, for messages.
+    pub fn origin(&self, key: &str) -> Option<&Origin> {
+        self.values.get(key).map(|(_, o)| o)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FILE: &str = "\
+/**:
+  ros__parameters:
+    model: 24
+    other_node_key: 1
+preload_monitor:
+  ros__parameters:
+    warn_percent: 20
+    error_percent: 50.5
+    geometry:
+      l1: 0.9501
+      gamma1: -0.0002
+tcp_estimator:
+  ros__parameters:
+    model: 29
+";
+
+    fn load(text: &str, node: &str) -> Result<NodeParams, ParamError> {
+        let mut p = NodeParams::empty(node);
+        p.merge_text(text, Path::new("p.yaml"))?;
+        Ok(p)
+    }
+
+    #[test]
+    fn sections_merge_in_order_and_flatten() -> Result<(), ParamError> {
+        let p = load(FILE, "preload_monitor")?;
+        assert_eq!(p.u64("model", 29)?, 24);
+        assert_eq!(p.f64("warn_percent", 0.0)?, 20.0);
+        assert_eq!(p.f64("error_percent", 0.0)?, 50.5);
+        assert_eq!(p.f64("absent", 7.5)?, 7.5);
+        let g = p.group("geometry.")?;
+        let names: Vec<&str> = g.iter().map(|(n, _, _)| n.as_str()).collect();
+        assert_eq!(names, ["gamma1", "l1"]);
+        assert_eq!(g[1].1, 0.9501);
+        let e = load(FILE, "tcp_estimator")?;
+        assert_eq!(e.u64("model", 0)?, 29, "the node's own section comes later");
+        Ok(())
+    }
+
+    #[test]
+    fn undeclared_keys_of_the_own_section_are_errors() -> Result<(), ParamError> {
+        let p = load(FILE, "preload_monitor")?;
+        p.check_declared(&["model", "warn_percent", "error_percent", "geometry."])?;
+        let err = p
+            .check_declared(&["model", "warn_percent", "geometry."])
+            .expect_err("error_percent undeclared");
+        assert!(
+            err.to_string()
+                .starts_with("p.yaml: preload_monitor/ros__parameters/error_percent: unknown"),
+            "{err}"
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn wrong_types_name_file_section_and_key() -> Result<(), ParamError> {
+        let p = load(
+            "/ns/ingest:\n  ros__parameters:\n    rate_hz: fast\n",
+            "ingest",
+        )?;
+        let err = p.f64("rate_hz", 1.0).expect_err("not a number");
+        assert_eq!(
+            err.to_string(),
+            "p.yaml: /ns/ingest/ros__parameters/rate_hz: expected a finite number, found \"fast\""
+        );
+        let bad = load("ingest: [1, 2\n", "ingest").expect_err("not YAML");
+        assert!(matches!(bad, ParamError::Yaml { line: 2, .. }), "{bad}");
+        let layout = load("ingest:\n  rate_hz: 3\n", "ingest").expect_err("no ros__parameters");
+        assert!(layout.to_string().contains("ros__parameters"), "{layout}");
+        Ok(())
+    }
+}

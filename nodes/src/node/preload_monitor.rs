@@ -1,0 +1,456 @@
+//! `preload_monitor`: for every ActuatorState, the drive forces the elasto-geometric model
+//! predicts with the current parameters (`rpkm_core::elastic::fegm`, followers as flagged)
+//! against the measured ones, as redundancy currents (% of 8,600 N). The largest
+//! |measured − predicted| over the drives sets the level: WARN from `warn_percent`, ERROR from
+//! `error_percent`; with q2 and q3 in follower mode the compatibility test adds
+//! Δq = rgm(q1, q4) − q_measured for q2 and q3 against `dq_warn_m` / `dq_error_m`. A level
+//! holds after `debounce_samples` consecutive samples agree. Published: PreloadStatus every
+//! `status_every` samples and at each level change, /diagnostics every period and at each
+//! level change, naming the drive.
+
+use std::time::Duration;
+
+use rpkm_core::elastic::{fegm, fegm_from, Equilibrium, NOMINAL_DRIVE_FORCE_N};
+use rpkm_core::geometry::rgm;
+use rpkm_msgs::{ActuatorState, DiagnosticStatus, PreloadLevel, PreloadStatus};
+use rpkm_transport::topic;
+
+use super::{
+    bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext,
+    GEOMETRY_KEYS, MM_PER_M,
+};
+
+/// Parameter keys of the node.
+pub const KEYS: [&str; 7] = [
+    "warn_percent",
+    "error_percent",
+    "dq_warn_m",
+    "dq_error_m",
+    "debounce_samples",
+    "status_every",
+    "busy_poll_ms",
+];
+
+/// Levels and hold time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Thresholds {
+    /// |deviation| of a drive's redundancy current for WARN, %.
+    pub warn_percent: f64,
+    /// ... for ERROR, %.
+    pub error_percent: f64,
+    /// |Δq2|, |Δq3| in follower mode for WARN, m.
+    pub dq_warn_m: f64,
+    /// ... for ERROR, m.
+    pub dq_error_m: f64,
+    /// Consecutive samples before a level is taken (>= 1).
+    pub debounce_samples: u32,
+}
+
+impl Default for Thresholds {
+    fn default() -> Self {
+        Self {
+            warn_percent: 20.0,
+            error_percent: 50.0,
+            dq_warn_m: 50e-6,
+            dq_error_m: 200e-6,
+            debounce_samples: 3,
+        }
+    }
+}
+
+fn level_u8(l: PreloadLevel) -> u8 {
+    match l {
+        PreloadLevel::Ok => PreloadStatus::OK,
+        PreloadLevel::Warn => PreloadStatus::WARN,
+        PreloadLevel::Error => PreloadStatus::ERROR,
+    }
+}
+
+/// One evaluated sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Evaluation {
+    /// The message (its `level` is the held level).
+    pub status: PreloadStatus,
+    /// Level of this sample alone.
+    pub sample_level: PreloadLevel,
+    /// Index 0..=3 of the drive with the largest |deviation|.
+    pub worst_drive: usize,
+    /// Whether the held level changed with this sample.
+    pub changed: bool,
+}
+
+/// The monitor's state.
+#[derive(Debug, Clone)]
+pub struct Monitor {
+    geometry: Geometry,
+    thresholds: Thresholds,
+    previous: Option<Equilibrium>,
+    level: PreloadLevel,
+    run_warn: u32,
+    run_error: u32,
+    run_ok: u32,
+    /// States evaluated.
+    pub samples: u64,
+    /// States the model could not solve.
+    pub unsolved: u64,
+    /// The last evaluation.
+    pub last: Option<Evaluation>,
+}
+
+impl Monitor {
+    /// A monitor at level OK.
+    pub fn new(geometry: Geometry, thresholds: Thresholds) -> Self {
+        Self {
+            geometry,
+            thresholds,
+            previous: None,
+            level: PreloadLevel::Ok,
+            run_warn: 0,
+            run_error: 0,
+            run_ok: 0,
+            samples: 0,
+            unsolved: 0,
+            last: None,
+        }
+    }
+
+    /// The current geometry.
+    pub fn geometry(&self) -> &Geometry {
+        &self.geometry
+    }
+
+    /// Replaces the geometry (new Parameters).
+    pub fn set_geometry(&mut self, g: Geometry) {
+        self.geometry = g;
+        self.previous = None;
+    }
+
+    /// The held level.
+    pub fn level(&self) -> PreloadLevel {
+        self.level
+    }
+
+    /// Evaluates one state; `None` when the model cannot solve it (counted).
+    pub fn evaluate(&mut self, s: &ActuatorState) -> Option<Evaluation> {
+        let g = &self.geometry;
+        let q = s.position.map(|p| p * MM_PER_M);
+        let warm = self
+            .previous
+            .as_ref()
+            .and_then(|prev| fegm_from(&g.params, &g.stiffness, q, s.follower, prev).ok());
+        let eq = match warm {
+            Some(eq) => eq,
+            None => match fegm(&g.params, &g.stiffness, q, s.follower) {
+                Ok(eq) => eq,
+                Err(_) => {
+                    self.previous = None;
+                    self.unsolved += 1;
+                    return None;
+                }
+            },
+        };
+        self.previous = Some(eq);
+        self.samples += 1;
+        let to_percent = |f: f64| f / NOMINAL_DRIVE_FORCE_N * 100.0;
+        let mut st = PreloadStatus {
+            stamp: s.stamp,
+            ..Default::default()
+        };
+        for i in 0..4 {
+            st.measured_current[i] = if s.follower[i] {
+                0.0
+            } else {
+                to_percent(s.force[i])
+            };
+            st.predicted_current[i] = to_percent(eq.drive_force[i]);
+            st.deviation[i] = st.measured_current[i] - st.predicted_current[i];
+        }
+        let worst_drive = (0..4)
+            .max_by(|&a, &b| st.deviation[a].abs().total_cmp(&st.deviation[b].abs()))
+            .unwrap_or(0);
+        let worst = st.deviation[worst_drive].abs();
+        let t = self.thresholds;
+        let mut sample_level = if worst >= t.error_percent {
+            PreloadLevel::Error
+        } else if worst >= t.warn_percent {
+            PreloadLevel::Warn
+        } else {
+            PreloadLevel::Ok
+        };
+        if s.follower[1] && s.follower[2] {
+            if let Ok([q2, q3]) = rgm(&g.params, g.model, q[0], q[3]) {
+                st.dq2 = (q2 - q[1]) / MM_PER_M;
+                st.dq3 = (q3 - q[2]) / MM_PER_M;
+                let dq = st.dq2.abs().max(st.dq3.abs());
+                let dq_level = if dq >= t.dq_error_m {
+                    PreloadLevel::Error
+                } else if dq >= t.dq_warn_m {
+                    PreloadLevel::Warn
+                } else {
+                    PreloadLevel::Ok
+                };
+                sample_level = sample_level.max(dq_level);
+            }
+        }
+        let bump = |run: &mut u32, on: bool| *run = if on { run.saturating_add(1) } else { 0 };
+        bump(&mut self.run_error, sample_level >= PreloadLevel::Error);
+        bump(&mut self.run_warn, sample_level >= PreloadLevel::Warn);
+        bump(&mut self.run_ok, sample_level == PreloadLevel::Ok);
+        let d = t.debounce_samples.max(1);
+        let held = if self.run_error >= d {
+            PreloadLevel::Error
+        } else if self.run_warn >= d {
+            PreloadLevel::Warn
+        } else if self.run_ok >= d {
+            PreloadLevel::Ok
+        } else {
+            self.level
+        };
+        let changed = held != self.level;
+        self.level = held;
+        st.level = level_u8(held);
+        let e = Evaluation {
+            status: st,
+            sample_level,
+            worst_drive,
+            changed,
+        };
+        self.last = Some(e);
+        Some(e)
+    }
+
+    /// The /diagnostics status: the held level, naming the worst drive.
+    pub fn status(&self, node: &str) -> DiagnosticStatus {
+        let t = self.thresholds;
+        let level = match self.level {
+            PreloadLevel::Ok => DiagnosticStatus::OK,
+            PreloadLevel::Warn => DiagnosticStatus::WARN,
+            PreloadLevel::Error => DiagnosticStatus::ERROR,
+        };
+        let Some(e) = self.last else {
+            return status(
+                level,
+                node,
+                format!("no drive state evaluated yet ({} unsolved)", self.unsolved),
+                vec![("unsolved", self.unsolved.to_string())],
+            );
+        };
+        let st = &e.status;
+        let k = e.worst_drive;
+        let name = ["OK", "WARN", "ERROR"][usize::from(st.level.min(2))];
+        let message = format!(
+            "{name}: drive q{} deviates {:+.1} % (measured {:.1} %, predicted {:.1} %); \
+             thresholds {} / {} %",
+            k + 1,
+            st.deviation[k],
+            st.measured_current[k],
+            st.predicted_current[k],
+            t.warn_percent,
+            t.error_percent
+        );
+        let mut values = vec![
+            ("worst_drive", format!("q{}", k + 1)),
+            ("samples", self.samples.to_string()),
+            ("unsolved", self.unsolved.to_string()),
+            ("dq2_m", format!("{:e}", st.dq2)),
+            ("dq3_m", format!("{:e}", st.dq3)),
+            ("parameters", self.geometry.source.clone()),
+        ];
+        const KEYS: [[&str; 3]; 4] = [
+            [
+                "q1_measured_percent",
+                "q1_predicted_percent",
+                "q1_deviation_percent",
+            ],
+            [
+                "q2_measured_percent",
+                "q2_predicted_percent",
+                "q2_deviation_percent",
+            ],
+            [
+                "q3_measured_percent",
+                "q3_predicted_percent",
+                "q3_deviation_percent",
+            ],
+            [
+                "q4_measured_percent",
+                "q4_predicted_percent",
+                "q4_deviation_percent",
+            ],
+        ];
+        for (i, keys) in KEYS.iter().enumerate() {
+            values.push((keys[0], format!("{:.3}", st.measured_current[i])));
+            values.push((keys[1], format!("{:.3}", st.predicted_current[i])));
+            values.push((keys[2], format!("{:.3}", st.deviation[i])));
+        }
+        status(level, node, message, values)
+    }
+}
+
+/// Runs the node until SIGINT/SIGTERM.
+pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
+    let mut declared: Vec<&str> = KEYS.to_vec();
+    declared.extend(GEOMETRY_KEYS);
+    let ctx = NodeContext::open("preload_monitor", args, &declared, None)?;
+    let p = &ctx.params;
+    let d = Thresholds::default();
+    let thresholds = Thresholds {
+        warn_percent: p
+            .positive("warn_percent", d.warn_percent)
+            .map_err(bad_param)?,
+        error_percent: p
+            .positive("error_percent", d.error_percent)
+            .map_err(bad_param)?,
+        dq_warn_m: p.positive("dq_warn_m", d.dq_warn_m).map_err(bad_param)?,
+        dq_error_m: p.positive("dq_error_m", d.dq_error_m).map_err(bad_param)?,
+        debounce_samples: p
+            .u64("debounce_samples", u64::from(d.debounce_samples))
+            .map_err(bad_param)?
+            .clamp(1, u64::from(u32::MAX)) as u32,
+    };
+    if thresholds.error_percent < thresholds.warn_percent {
+        return Err(crate::cli::bad_input(format!(
+            "preload_monitor: error_percent {} below warn_percent {}",
+            thresholds.error_percent, thresholds.warn_percent
+        )));
+    }
+    let status_every = p.u64("status_every", 1).map_err(bad_param)?.max(1);
+    let busy = p.positive("busy_poll_ms", 50.0).map_err(bad_param)?;
+    let follow = p.bool("follow_parameters", true).map_err(bad_param)?;
+    let geometry = Geometry::from_params(p)?;
+    let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
+    let parameters = if follow {
+        Some(ctx.subscriber(&topic::PARAMETERS)?)
+    } else {
+        None
+    };
+    let statuses = ctx.publisher(&topic::PRELOAD_STATUS)?;
+    let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
+    ctx.log(format!(
+        "monitoring with {}; WARN from {} %, ERROR from {} %",
+        geometry.source, thresholds.warn_percent, thresholds.error_percent
+    ));
+    let mut monitor = Monitor::new(geometry, thresholds);
+    let mut idle = Idle::new(
+        Duration::from_secs_f64(busy * 1e-3),
+        Duration::from_micros(500),
+    );
+    let mut report = Every::new(ctx.diagnostics_period()?);
+    let mut check_parameters = Every::new(Duration::from_millis(20));
+    let mut n = 0u64;
+    while !super::shutdown::requested() {
+        if let Some(sub) = &parameters {
+            if check_parameters.due() {
+                if let Some(msg) = sub.try_recv()? {
+                    match monitor.geometry().updated(&msg) {
+                        Ok(g) => {
+                            ctx.log(format!("parameters updated from {}", g.source));
+                            monitor.set_geometry(g);
+                        }
+                        Err(e) => ctx.log(format!("ignoring parameters: {e}")),
+                    }
+                }
+            }
+        }
+        match states.try_recv()? {
+            Some(s) => {
+                idle.worked();
+                if let Some(e) = monitor.evaluate(&s) {
+                    n += 1;
+                    if e.changed || n % status_every == 0 {
+                        statuses.publish(&e.status)?;
+                    }
+                    if e.changed {
+                        ctx.log(monitor.status(&ctx.name).message);
+                        diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
+                    }
+                }
+            }
+            None => {
+                if report.due() {
+                    diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
+                }
+                idle.wait();
+            }
+        }
+    }
+    ctx.log("stopping");
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rpkm_core::elastic::{Stiffness, ALL_ACTIVE};
+    use rpkm_core::geometry::igm;
+    use rpkm_core::params::{Model, Params};
+
+    fn monitor(debounce: u32) -> Monitor {
+        Monitor::new(
+            Geometry {
+                params: Params::nominal(),
+                model: Model::M29,
+                stiffness: Stiffness::default(),
+                source: "test".into(),
+            },
+            Thresholds {
+                debounce_samples: debounce,
+                ..Thresholds::default()
+            },
+        )
+    }
+
+    /// A state at (0, 1700) mm whose drive forces are those of q3 offset by `dq3` mm.
+    fn state(dq3: f64) -> Result<ActuatorState, Box<dyn std::error::Error>> {
+        let p = Params::nominal();
+        let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
+        let mut s = q;
+        s[2] += dq3;
+        let eq = fegm(&p, &Stiffness::default(), s, ALL_ACTIVE)?;
+        Ok(ActuatorState {
+            position: q.map(|v| v / MM_PER_M),
+            force: eq.drive_force,
+            ..Default::default()
+        })
+    }
+
+    #[test]
+    fn levels_follow_the_deviation_with_debounce() -> Result<(), Box<dyn std::error::Error>> {
+        let mut m = monitor(2);
+        let ok = m.evaluate(&state(0.0)?).ok_or("unsolved")?;
+        assert_eq!(ok.sample_level, PreloadLevel::Ok);
+        assert!(ok.status.deviation.iter().all(|d| d.abs() < 1e-6));
+        // 0.4 mm on q3 is about 100 % on the most loaded drive (core default stiffness).
+        let big = state(0.4)?;
+        let first = m.evaluate(&big).ok_or("unsolved")?;
+        assert_eq!(first.sample_level, PreloadLevel::Error);
+        assert_eq!(first.status.level, PreloadStatus::OK, "held for debounce");
+        let second = m.evaluate(&big).ok_or("unsolved")?;
+        assert!(second.changed);
+        assert_eq!(second.status.level, PreloadStatus::ERROR);
+        let f = big.force;
+        let worst = (0..4)
+            .max_by(|&a, &b| f[a].abs().total_cmp(&f[b].abs()))
+            .ok_or("no drive")?;
+        assert_eq!(second.worst_drive, worst);
+        assert!(m.status("m").message.contains(&format!("q{}", worst + 1)));
+        Ok(())
+    }
+
+    #[test]
+    fn follower_mode_reports_the_compatibility_offsets() -> Result<(), Box<dyn std::error::Error>> {
+        let p = Params::nominal();
+        let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
+        let mut m = monitor(1);
+        let s = ActuatorState {
+            position: [q[0], q[1] + 0.1, q[2] - 0.3, q[3]].map(|v| v / MM_PER_M),
+            follower: [false, true, true, false],
+            ..Default::default()
+        };
+        let e = m.evaluate(&s).ok_or("unsolved")?;
+        assert!((e.status.dq2 + 0.1e-3).abs() < 1e-9, "{}", e.status.dq2);
+        assert!((e.status.dq3 - 0.3e-3).abs() < 1e-9, "{}", e.status.dq3);
+        assert_eq!(e.sample_level, PreloadLevel::Error, "0.3 mm > 200 µm");
+        Ok(())
+    }
+}
