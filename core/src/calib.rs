@@ -564,9 +564,13 @@ pub fn calibrate(
     calibrate_with(campaign, start, opts, &EffectSet::empty(), &[])
 }
 
-/// Effect parameters whose signature the geometric columns (and the effect columns before
-/// them) cannot mimic, below which a parameter is held: 1 % of its column.
-pub const MIN_EFFECT_OBSERVABILITY: f64 = 0.01;
+/// Fraction of an effect parameter's signature that the geometric columns (and the effect
+/// columns before it) cannot mimic, below which it is held: numerically absorbed.
+pub const MIN_EFFECT_OBSERVABILITY: f64 = 1e-6;
+/// Size of that unmimicked signature for a parameter at its prior magnitude, in units of the
+/// measurements' σ (root of its χ² contribution), below which it is held: a prior-sized value
+/// would not move the fit by one standard deviation.
+pub const MIN_EFFECT_SIGNAL: f64 = 1.0;
 
 /// Calibrate `campaign` with the physical `effects` (bound to it) in the model, starting from
 /// `start` and effect parameters `theta0` (empty: all zero). The geometric parameters are
@@ -616,8 +620,12 @@ pub fn calibrate_with(
     let layout = effects.layout();
     let observability = effect_observability(&rows0, &step1_ids, &opts.links, effects);
     let free_theta: Vec<usize> = (0..n_theta)
-        .filter(|&k| observability[k] >= MIN_EFFECT_OBSERVABILITY)
+        .filter(|&k| {
+            let (frac, signal) = observability[k];
+            frac >= MIN_EFFECT_OBSERVABILITY && signal * layout[k].1.prior >= MIN_EFFECT_SIGNAL
+        })
         .collect();
+    let observability: Vec<f64> = observability.iter().map(|o| o.0).collect();
     let h_theta = DVector::from_iterator(
         free_theta.len(),
         free_theta.iter().map(|&k| layout[k].1.prior),
@@ -854,15 +862,16 @@ fn select_geometric(
     Ok((step1_ids, step2_wanted))
 }
 
-/// For each effect parameter, the fraction of its prior-scaled column that lies outside the
-/// span of the identified geometric columns and of the effect columns before it (Gram-Schmidt
-/// in layout order): 1 = fully distinct, 0 = a geometric error in disguise.
+/// For each effect parameter, the fraction of its weighted column that lies outside the span
+/// of the identified geometric columns and of the effect columns before it (Gram-Schmidt in
+/// layout order: 1 = fully distinct, 0 = a geometric error in disguise), and the norm of that
+/// outside part (σ units per unit of the parameter).
 fn effect_observability(
     rows: &[Residual],
     ids: &[usize],
     links: &[Link],
     effects: &EffectSet,
-) -> Vec<f64> {
+) -> Vec<(f64, f64)> {
     let n = effects.n_params();
     if n == 0 {
         return Vec::new();
@@ -870,25 +879,25 @@ fn effect_observability(
     let jg = normalize_columns(&reduced_jacobian(rows, ids, links));
     let all: Vec<usize> = (0..n).collect();
     let jt = weighted_theta(rows, &all);
-    // orthonormal basis of the geometric columns
     let mut basis: Vec<DVector<f64>> = Vec::new();
-    let add = |v: DVector<f64>, basis: &mut Vec<DVector<f64>>| -> f64 {
+    let add = |v: DVector<f64>, basis: &mut Vec<DVector<f64>>| -> (f64, f64) {
         let norm0 = v.norm();
         if !(norm0 > 0.0) {
-            return 0.0;
+            return (0.0, 0.0);
         }
         let mut w = v;
+        // twice: classical Gram-Schmidt loses orthogonality on near-dependent columns
         for _ in 0..2 {
             for b in basis.iter() {
                 let c = b.dot(&w);
                 w -= b * c;
             }
         }
-        let frac = w.norm() / norm0;
-        if frac > 1e-12 {
-            basis.push(w.unscale(w.norm()));
+        let rest = w.norm();
+        if rest / norm0 > 1e-12 {
+            basis.push(w.unscale(rest));
         }
-        frac
+        (rest / norm0, rest)
     };
     for k in 0..jg.ncols() {
         add(jg.column(k).into_owned(), &mut basis);

@@ -7,6 +7,7 @@ pub mod calib;
 pub mod campaign;
 pub mod circular;
 pub mod design;
+pub mod diagnose;
 pub mod effects;
 pub mod elastic;
 pub mod geometry;

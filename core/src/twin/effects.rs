@@ -23,7 +23,12 @@ pub enum EffectKind {
     /// ψ varies over the workspace and model 24 cannot describe the data.
     Parallelogram,
     /// All four drives position-controlled: pose and drive forces from the elasto-geometric
-    /// model; the magnitude is the compliance factor (stiffness = default / magnitude).
+    /// model (default stiffness). The magnitude scales the controller's parameter error, the
+    /// source of the incompatibility: the controller commands igm with true + magnitude ·
+    /// (its parameters − true), so 0 is a compatible controller (no preload) and 1 one that
+    /// uses its own (nominal) parameters. (The deformation of uniformly scaled springs does not
+    /// depend on their stiffness, only the forces do: a stiffness factor would not change what
+    /// the instruments see.)
     PreloadElastic,
     /// Rods and guides (with their scales) expand with a machine temperature
     /// 20 °C − magnitude · cos(2π t / 2 h) (magnitude in K): it starts cold and warms up over
@@ -38,16 +43,22 @@ pub enum EffectKind {
     /// The instrument frame rotated about z by an angle drawn per setup, N(0, magnitude)
     /// (magnitude in mrad).
     InstrumentAlignment,
+    /// Lost motion of the drives on guide 2 (q1, q4): the carrier lags its command by half the
+    /// magnitude (mm) against the direction it last moved in; the approach directions (±1) are
+    /// recorded in the covariates `approach_q1`, `approach_q4`. Outside the model library on
+    /// purpose: the diagnosis must point at it without naming a wrong effect.
+    Backlash,
 }
 
 impl EffectKind {
-    pub const ALL: [EffectKind; 6] = [
+    pub const ALL: [EffectKind; 7] = [
         EffectKind::Parallelogram,
         EffectKind::PreloadElastic,
         EffectKind::Thermal,
         EffectKind::EncoderScale,
         EffectKind::GuideStraightness,
         EffectKind::InstrumentAlignment,
+        EffectKind::Backlash,
     ];
 
     /// Spelling on the command line and in truth files.
@@ -59,14 +70,17 @@ impl EffectKind {
             EffectKind::EncoderScale => "encoder_scale",
             EffectKind::GuideStraightness => "guide_straightness",
             EffectKind::InstrumentAlignment => "instrument_alignment",
+            EffectKind::Backlash => "backlash",
         }
     }
 
     /// Unit of the magnitude.
     pub fn unit(self) -> &'static str {
         match self {
-            EffectKind::Parallelogram | EffectKind::GuideStraightness => "mm",
-            EffectKind::PreloadElastic => "compliance factor",
+            EffectKind::Parallelogram | EffectKind::GuideStraightness | EffectKind::Backlash => {
+                "mm"
+            }
+            EffectKind::PreloadElastic => "x controller error",
             EffectKind::Thermal => "K",
             EffectKind::EncoderScale => "ppm",
             EffectKind::InstrumentAlignment => "mrad",
@@ -76,12 +90,13 @@ impl EffectKind {
     /// Default magnitude.
     pub fn default_magnitude(self) -> f64 {
         match self {
-            EffectKind::Parallelogram => 0.15,
-            EffectKind::PreloadElastic => 1.0,
-            EffectKind::Thermal => 2.0,
-            EffectKind::EncoderScale => 40.0,
-            EffectKind::GuideStraightness => 0.05,
+            EffectKind::Parallelogram => 1.5,
+            EffectKind::PreloadElastic => 0.5,
+            EffectKind::Thermal => 5.0,
+            EffectKind::EncoderScale => 15.0,
+            EffectKind::GuideStraightness => 0.03,
             EffectKind::InstrumentAlignment => 0.05,
+            EffectKind::Backlash => 0.03,
         }
     }
 }
@@ -94,7 +109,7 @@ impl fmt::Display for EffectKind {
 
 /// An effect name that is not one of [`EffectKind::ALL`].
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown effect {0:?}, expected one of parallelogram, preload_elastic, thermal, encoder_scale, guide_straightness, instrument_alignment")]
+#[error("unknown effect {0:?}, expected one of parallelogram, preload_elastic, thermal, encoder_scale, guide_straightness, instrument_alignment, backlash")]
 pub struct UnknownEffect(pub String);
 
 impl FromStr for EffectKind {

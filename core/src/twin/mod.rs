@@ -263,11 +263,24 @@ impl Twin {
         }
     }
 
-    /// Stiffness of the true machine (default / compliance factor under `preload_elastic`).
+    /// Stiffness of the true machine.
     pub fn stiffness(&self) -> Stiffness {
+        self.config.stiffness
+    }
+
+    /// The parameters the controller commands igm with: its own, or under `preload_elastic`
+    /// the true ones plus the magnitude times its error.
+    fn controller(&self) -> Params {
+        let c = self.config.controller;
         match self.magnitude(EffectKind::PreloadElastic) {
-            Some(m) => self.config.stiffness.scaled(1.0 / m),
-            None => self.config.stiffness,
+            Some(m) => {
+                let mut p = self.truth_params;
+                for i in 0..N_PARAMS {
+                    p[i] += m * (c[i] - p[i]);
+                }
+                p
+            }
+            None => c,
         }
     }
 
@@ -276,7 +289,7 @@ impl Twin {
         Truth {
             seed: self.config.seed,
             params: by_name(&self.truth_params),
-            controller: by_name(&self.config.controller),
+            controller: by_name(&self.controller()),
             stiffness: self.stiffness(),
             effects: self
                 .config
@@ -337,7 +350,7 @@ impl Twin {
         enc: [f64; 4],
         followers_23: bool,
     ) -> Result<MachineState, TwinError> {
-        let cmd = geometry::igm(&self.config.controller, Model::M29, x, y)
+        let cmd = geometry::igm(&self.controller(), Model::M29, x, y)
             .map_err(|source| TwinError::Controller {
                 setup: setup.to_owned(),
                 x,
@@ -402,6 +415,9 @@ impl Twin {
         let mut poses = Vec::with_capacity(design.len());
         let mut reset: Option<(String, Vector2<f64>, f64)> = None;
         let mut last_setup: Option<&str> = None;
+        let backlash = self.magnitude(EffectKind::Backlash);
+        // last command and approach direction of q1, q4 (backlash)
+        let mut approach: Option<([f64; 2], [f64; 2])> = None;
         for (n, plan) in design.iter().enumerate() {
             if last_setup.is_some_and(|s| s != plan.setup) {
                 self.t += SECONDS_BETWEEN_SETUPS;
@@ -410,7 +426,30 @@ impl Twin {
             self.t += SECONDS_PER_POSE;
             let t = self.t;
             let self_cal = plan.instrument == Instrument::SelfCal;
-            let enc = [0; 4].map(|_| k * noise::ENCODER_MM * gauss(&mut self.rng));
+            let mut enc = [0; 4].map(|_| k * noise::ENCODER_MM * gauss(&mut self.rng));
+            let mut covariates = Vec::with_capacity(3);
+            if let Some(m) = backlash {
+                let cmd = geometry::igm(&self.controller(), Model::M29, plan.x, plan.y)
+                    .map_err(|source| TwinError::Controller {
+                        setup: plan.setup.clone(),
+                        x: plan.x,
+                        y: plan.y,
+                        source,
+                    })?
+                    .q();
+                let now = [cmd[0], cmd[3]];
+                let (last, mut dir) = approach.unwrap_or((now, [1.0, 1.0]));
+                for j in 0..2 {
+                    if (now[j] - last[j]).abs() > 1e-9 {
+                        dir[j] = (now[j] - last[j]).signum();
+                    }
+                }
+                approach = Some((now, dir));
+                // the carrier lags its command against the direction of travel
+                enc[0] -= 0.5 * m * dir[0];
+                enc[3] -= 0.5 * m * dir[1];
+                covariates.extend([Some(dir[0]), Some(dir[1])]);
+            }
             let st = self.machine_state(&plan.setup, plan.x, plan.y, t, enc, self_cal)?;
             let mut q = st.q;
             for i in 0..4 {
@@ -431,7 +470,10 @@ impl Twin {
                 y: None,
                 r: None,
                 psi: None,
-                covariates: vec![Some(temp)],
+                covariates: {
+                    covariates.insert(0, Some(temp));
+                    covariates
+                },
                 line: n + 2,
             };
             if plan.reset {
@@ -497,7 +539,13 @@ impl Twin {
                 self.config.seed,
                 effects.join(", ")
             )],
-            covariate_names: vec!["temp_machine".to_owned()],
+            covariate_names: if backlash.is_some() {
+                ["temp_machine", "approach_q1", "approach_q4"]
+                    .map(str::to_owned)
+                    .to_vec()
+            } else {
+                vec!["temp_machine".to_owned()]
+            },
             poses,
         })
     }

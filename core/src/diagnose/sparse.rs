@@ -1,0 +1,188 @@
+//! What a residual follows: the residual of each instrument direction (weighted by its σ)
+//! against a dictionary of candidate explanations, the campaign's covariate columns, the drive
+//! forces, time and low-order workspace polynomials of the TCP. The best single term (the
+//! first step of orthogonal matching pursuit) is the pointer an engineer gets when no effect of
+//! the library explains the residual: "the lt q1 residual follows approach_q1, r = 0.93".
+
+use crate::campaign::Campaign;
+use crate::geometry;
+use crate::obs::Residual;
+use crate::params::{Model, Params};
+use std::collections::BTreeMap;
+
+/// Fewest rows of a direction worth a correlation.
+const MIN_ROWS: usize = 8;
+
+/// A term of the dictionary that the residual follows.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Pointer {
+    /// The term: a covariate name, `f1`..`f4`, `t`, or a polynomial (`x`, `y`, `x^2`, `x*y`,
+    /// `y^2`, TCP in mm).
+    pub feature: String,
+    /// The instrument and direction whose residual follows it.
+    pub instrument: String,
+    pub direction: String,
+    /// Pearson correlation of the weighted residual with the term.
+    pub r: f64,
+    /// Fraction of that direction's χ² a linear fit of the term removes (r²).
+    pub explained: f64,
+    pub sentence: String,
+    /// The next best terms (feature, instrument, direction, r).
+    pub also: Vec<(String, String, String, f64)>,
+}
+
+/// The dictionary's terms at every pose of a campaign: (name, values).
+fn dictionary(campaign: &Campaign) -> Vec<(String, Vec<f64>)> {
+    let mut out = Vec::new();
+    for (k, name) in campaign.covariate_names.iter().enumerate() {
+        let v: Vec<f64> = campaign
+            .poses
+            .iter()
+            .map(|p| p.covariates.get(k).copied().flatten().unwrap_or(f64::NAN))
+            .collect();
+        out.push((name.clone(), v));
+    }
+    for j in 0..4 {
+        out.push((
+            format!("f{}", j + 1),
+            campaign.poses.iter().map(|p| p.f[j]).collect(),
+        ));
+    }
+    out.push(("t".to_owned(), campaign.poses.iter().map(|p| p.t).collect()));
+    let nominal = Params::nominal();
+    let tcp: Vec<(f64, f64)> = campaign
+        .poses
+        .iter()
+        .map(|p| {
+            geometry::fgm(&nominal, Model::M29, p.q[0], p.q[3])
+                .map_or((f64::NAN, f64::NAN), |s| (s.x(), s.y()))
+        })
+        .collect();
+    let poly: [(&str, fn(f64, f64) -> f64); 5] = [
+        ("x", |x, _| x),
+        ("y", |_, y| y),
+        ("x^2", |x, _| x * x),
+        ("x*y", |x, y| x * y),
+        ("y^2", |_, y| y * y),
+    ];
+    for (name, f) in poly {
+        out.push((name.to_owned(), tcp.iter().map(|&(x, y)| f(x, y)).collect()));
+    }
+    out
+}
+
+/// Pearson correlation over the pairs where both are finite; None if either is constant.
+fn correlation(a: &[f64], b: &[f64]) -> Option<f64> {
+    let pairs: Vec<(f64, f64)> = a
+        .iter()
+        .zip(b)
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .map(|(x, y)| (*x, *y))
+        .collect();
+    if pairs.len() < MIN_ROWS {
+        return None;
+    }
+    let n = pairs.len() as f64;
+    let (ma, mb) = pairs
+        .iter()
+        .fold((0.0, 0.0), |(sa, sb), (x, y)| (sa + x / n, sb + y / n));
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in &pairs {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma).powi(2);
+        sbb += (y - mb).powi(2);
+    }
+    let scale_a = pairs.iter().map(|p| p.0.abs()).fold(0.0, f64::max);
+    // a term constant to round-off is no explanation
+    if !(saa > 1e-18 * scale_a * scale_a * n) || !(sbb > 0.0) {
+        return None;
+    }
+    Some(sab / (saa * sbb).sqrt())
+}
+
+/// Every (term, instrument, direction) correlation, scored by the χ² it would explain.
+fn scores(campaign: &Campaign, rows: &[Residual], only: Option<&[&str]>) -> Vec<Scored> {
+    let dict = dictionary(campaign);
+    let mut groups: BTreeMap<(String, String), Vec<&Residual>> = BTreeMap::new();
+    for r in rows {
+        groups
+            .entry((r.instrument.as_str().to_owned(), r.direction.to_string()))
+            .or_default()
+            .push(r);
+    }
+    let mut out = Vec::new();
+    for ((inst, dir), g) in &groups {
+        if g.len() < MIN_ROWS {
+            continue;
+        }
+        let z: Vec<f64> = g.iter().map(|r| r.value / r.sigma).collect();
+        let chi2: f64 = z.iter().map(|v| v * v).sum();
+        for (name, values) in &dict {
+            if only.is_some_and(|o| !o.contains(&name.as_str())) {
+                continue;
+            }
+            let v: Vec<f64> = g.iter().map(|r| values[r.pose]).collect();
+            if let Some(r) = correlation(&v, &z) {
+                out.push(Scored {
+                    feature: name.clone(),
+                    instrument: inst.clone(),
+                    direction: dir.clone(),
+                    r,
+                    explained_chi2: r * r * chi2,
+                });
+            }
+        }
+    }
+    out.sort_by(|a, b| b.explained_chi2.total_cmp(&a.explained_chi2));
+    out
+}
+
+struct Scored {
+    feature: String,
+    instrument: String,
+    direction: String,
+    r: f64,
+    explained_chi2: f64,
+}
+
+fn pointer(s: &[Scored]) -> Option<Pointer> {
+    let best = s.first()?;
+    Some(Pointer {
+        feature: best.feature.clone(),
+        instrument: best.instrument.clone(),
+        direction: best.direction.clone(),
+        r: best.r,
+        explained: best.r * best.r,
+        sentence: format!(
+            "the {} {} residual follows {} (r = {:.2})",
+            best.instrument, best.direction, best.feature, best.r
+        ),
+        also: s
+            .iter()
+            .skip(1)
+            .take(4)
+            .map(|x| {
+                (
+                    x.feature.clone(),
+                    x.instrument.clone(),
+                    x.direction.clone(),
+                    x.r,
+                )
+            })
+            .collect(),
+    })
+}
+
+/// The term of the whole dictionary the residual `rows` follows most.
+pub fn point_at(campaign: &Campaign, rows: &[Residual]) -> Option<Pointer> {
+    pointer(&scores(campaign, rows, None))
+}
+
+/// The covariate among `names` the residual follows most (None if `names` is empty or none
+/// varies).
+pub fn follows(campaign: &Campaign, rows: &[Residual], names: &[&str]) -> Option<Pointer> {
+    if names.is_empty() {
+        return None;
+    }
+    pointer(&scores(campaign, rows, Some(names)))
+}
