@@ -3,11 +3,16 @@
 //! - rigid fgm(q1, q4) (model 29),
 //! - spring fegm, cold (rigid start + Newton), all four drives active,
 //! - spring fegm, warm (from the previous sample: the servo-rate use),
-//! on a slow trajectory through the workspace with a 0.1 mm incompatibility on q3.
+//! - finite-element model (rigid reference + assembly + dense Cholesky), by the
+//!   actuator-displacements and the thermo-mechanical method, one `FeModel` reused so that its
+//!   buffers are allocated once,
+//! on a slow trajectory through the workspace with a 0.1 mm incompatibility on q3, and the
+//! ratios to the rigid fgm and to the warm spring fegm.
 //!
 //! Run: `cargo bench -p rpkm-core --bench fegm` (needs `[[bench]] name = "fegm"
 //! harness = false` in core/Cargo.toml), or build it as an example.
 
+use rpkm_core::elastic::fe::{FeModel, FeStiffness, Method};
 use rpkm_core::elastic::{fegm, fegm_from, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::{fgm, igm};
 use rpkm_core::params::{Model, Params};
@@ -54,9 +59,29 @@ fn main() {
         prev = fegm_from(&p, &k, *q, ALL_ACTIVE, &prev).expect("fegm");
         prev.x
     });
+    let mut model = FeModel::new(FeStiffness::default()).expect("FE stiffness");
+    let fe_ad = time("FE model, actuator-displacements", &mut |q| {
+        model
+            .solve(&p, *q, ALL_ACTIVE, Method::ActuatorDisplacements)
+            .expect("fe")
+            .x
+    });
+    let fe_th = time("FE model, thermo-mechanical", &mut |q| {
+        model
+            .solve(&p, *q, ALL_ACTIVE, Method::ThermoMechanical)
+            .expect("fe")
+            .x
+    });
     println!(
         "ratio cold / rigid {:.2}, warm / rigid {:.2}",
         cold / rigid,
         warm / rigid
+    );
+    println!(
+        "ratio FE actuator-displacements / rigid {:.1}, / spring warm {:.1}; FE thermo-mechanical / rigid {:.1}, / spring warm {:.1}",
+        fe_ad / rigid,
+        fe_ad / warm,
+        fe_th / rigid,
+        fe_th / warm
     );
 }
