@@ -224,12 +224,17 @@ impl Structure {
     }
 
     /// Element dofs of a beam and the map G from those dofs to the element's global
-    /// (x, y, θ) displacements: blockdiag(R(φ_a) ⊕ 1, R(φ_b) ⊕ 1).
-    fn beam_map(&self, beam: &Beam) -> ([DofId; 6], M6) {
+    /// (x, y, θ) displacements: blockdiag(R(φ_a) ⊕ 1, R(φ_b) ⊕ 1); `None` when both nodal
+    /// frames are the global one (G = I: most beams, every beam for straight guides), which
+    /// spares two 6×6 products per beam.
+    fn beam_map(&self, beam: &Beam) -> ([DofId; 6], Option<M6>) {
         let (na, nb) = (&self.nodes[beam.a], &self.nodes[beam.b]);
         let dofs = [
             na.dofs[0], na.dofs[1], na.dofs[2], nb.dofs[0], nb.dofs[1], nb.dofs[2],
         ];
+        if na.frame == 0.0 && nb.frame == 0.0 {
+            return (dofs, None);
+        }
         let mut g = M6::zeros();
         for (o, node) in [(0, na), (3, nb)] {
             let (s, c) = node.frame.sin_cos();
@@ -239,7 +244,7 @@ impl Structure {
             g[(o + 1, o + 1)] = c;
             g[(o + 2, o + 2)] = 1.0;
         }
-        (dofs, g)
+        (dofs, Some(g))
     }
 }
 
@@ -320,8 +325,12 @@ impl Solver {
         for b in &s.beams {
             let axis = s.beam_axis(b)?;
             let (dofs, g) = s.beam_map(b);
-            let ke = g.transpose() * beam::global_stiffness(&b.section, &axis) * g;
-            let fe = g.transpose() * beam::initial_elongation_load(&b.section, &axis, b.elongation);
+            let mut ke = beam::global_stiffness(&b.section, &axis);
+            let mut fe = beam::initial_elongation_load(&b.section, &axis, b.elongation);
+            if let Some(g) = g {
+                ke = g.transpose() * ke * g;
+                fe = g.transpose() * fe;
+            }
             for (r, &dr) in dofs.iter().enumerate() {
                 self.f[dr] += fe[r];
                 for (c, &dc) in dofs.iter().enumerate() {
@@ -387,7 +396,11 @@ impl Solver {
     /// A beam's global end displacements (u_xa, u_ya, θ_a, u_xb, u_yb, θ_b).
     fn beam_displacements(&self, s: &Structure, b: &Beam) -> V6 {
         let (dofs, g) = s.beam_map(b);
-        g * V6::from(dofs.map(|d| self.u[d]))
+        let u = V6::from(dofs.map(|d| self.u[d]));
+        match g {
+            Some(g) => g * u,
+            None => u,
+        }
     }
 
     /// Axial force of a beam, N, positive in tension.
@@ -417,23 +430,27 @@ fn cholesky_in_place(m: &mut DMatrix<f64>, diag: &[f64]) -> Result<(), (usize, f
     let n = m.nrows();
     let a = m.as_mut_slice();
     for j in 0..n {
-        let d = a[j + j * n];
+        // Columns j and beyond as separate slices, so the updates below run on zipped column
+        // slices without bounds checks (and vectorise).
+        let (col_j, rest) = a[j * n..].split_at_mut(n);
+        let d = col_j[j];
         let ratio = d / diag[j];
         if !(ratio > PIVOT_RATIO_MIN) {
             return Err((j, ratio));
         }
         let ljj = d.sqrt();
-        a[j + j * n] = ljj;
-        for i in j + 1..n {
-            a[i + j * n] /= ljj;
+        col_j[j] = ljj;
+        for v in &mut col_j[j + 1..] {
+            *v /= ljj;
         }
-        for c in j + 1..n {
-            let lcj = a[c + j * n];
+        for (k, col_c) in rest.chunks_exact_mut(n).enumerate() {
+            let c = j + 1 + k;
+            let lcj = col_j[c];
             if lcj == 0.0 {
                 continue;
             }
-            for i in c..n {
-                a[i + c * n] -= a[i + j * n] * lcj;
+            for (t, l) in col_c[c..].iter_mut().zip(&col_j[c..]) {
+                *t -= l * lcj;
             }
         }
     }
