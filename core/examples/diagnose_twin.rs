@@ -28,7 +28,7 @@ fn main() {
             })
             .expect("twin");
             let cal = twin
-                .campaign(&[Instrument::Lt, Instrument::SelfCal])
+                .campaign(&[Instrument::Lt, Instrument::Kgm, Instrument::SelfCal])
                 .expect("campaign");
             let val = twin.validation(100).expect("validation");
             let t0 = std::time::Instant::now();

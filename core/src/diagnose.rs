@@ -46,7 +46,7 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             model: Model::M24,
-            alpha: 0.01,
+            alpha: 0.001,
             min_explained: 0.35,
             max_condition: 1e5,
         }

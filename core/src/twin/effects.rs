@@ -90,11 +90,11 @@ impl EffectKind {
     /// Default magnitude.
     pub fn default_magnitude(self) -> f64 {
         match self {
-            EffectKind::Parallelogram => 1.5,
-            EffectKind::PreloadElastic => 0.5,
+            EffectKind::Parallelogram => 2.0,
+            EffectKind::PreloadElastic => 0.3,
             EffectKind::Thermal => 5.0,
-            EffectKind::EncoderScale => 15.0,
-            EffectKind::GuideStraightness => 0.03,
+            EffectKind::EncoderScale => 40.0,
+            EffectKind::GuideStraightness => 0.08,
             EffectKind::InstrumentAlignment => 0.05,
             EffectKind::Backlash => 0.03,
         }
