@@ -269,18 +269,19 @@ impl Twin {
     }
 
     /// The parameters the controller commands igm with: its own, or under `preload_elastic`
-    /// the true ones plus the magnitude times its error.
-    fn controller(&self) -> Params {
+    /// (all drives active, so not for self-calibration poses) the true ones plus the magnitude
+    /// times its error.
+    fn controller(&self, followers_23: bool) -> Params {
         let c = self.config.controller;
         match self.magnitude(EffectKind::PreloadElastic) {
-            Some(m) => {
+            Some(m) if !followers_23 => {
                 let mut p = self.truth_params;
                 for i in 0..N_PARAMS {
                     p[i] += m * (c[i] - p[i]);
                 }
                 p
             }
-            None => c,
+            _ => c,
         }
     }
 
@@ -289,7 +290,7 @@ impl Twin {
         Truth {
             seed: self.config.seed,
             params: by_name(&self.truth_params),
-            controller: by_name(&self.controller()),
+            controller: by_name(&self.controller(false)),
             stiffness: self.stiffness(),
             effects: self
                 .config
@@ -350,7 +351,7 @@ impl Twin {
         enc: [f64; 4],
         followers_23: bool,
     ) -> Result<MachineState, TwinError> {
-        let cmd = geometry::igm(&self.controller(), Model::M29, x, y)
+        let cmd = geometry::igm(&self.controller(followers_23), Model::M29, x, y)
             .map_err(|source| TwinError::Controller {
                 setup: setup.to_owned(),
                 x,
@@ -429,7 +430,7 @@ impl Twin {
             let mut enc = [0; 4].map(|_| k * noise::ENCODER_MM * gauss(&mut self.rng));
             let mut covariates = Vec::with_capacity(3);
             if let Some(m) = backlash {
-                let cmd = geometry::igm(&self.controller(), Model::M29, plan.x, plan.y)
+                let cmd = geometry::igm(&self.controller(self_cal), Model::M29, plan.x, plan.y)
                     .map_err(|source| TwinError::Controller {
                         setup: plan.setup.clone(),
                         x: plan.x,
