@@ -101,8 +101,8 @@ pub enum FromMessagesError {
 /// ROS stamp of a time in seconds, rounded to the nanosecond.
 pub fn stamp_from_seconds(t: f64) -> Option<Time> {
     let ns = (t * NS_PER_S as f64).round();
-    // i32 seconds: |t| < 2^31 s; the range check also rejects NaN.
-    if !(ns.abs() < 2f64.powi(31) * NS_PER_S as f64) {
+    // i32 seconds: |t| < 2^31 s.
+    if ns.is_nan() || ns.abs() >= 2f64.powi(31) * NS_PER_S as f64 {
         return None;
     }
     let ns = ns as i64;

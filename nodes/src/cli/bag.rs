@@ -126,9 +126,10 @@ fn recover_cmd(src: &Path, out: Option<&Path>) -> Result<()> {
     for f in &report.files {
         let stop = match &f.stop {
             StopReason::Complete => "complete: the writer had finished, nothing lost".to_owned(),
-            StopReason::EndOfFile => {
-                "ends between records: the writer was killed between chunks".to_owned()
-            }
+            StopReason::EndOfFile => "ends after its last complete chunk: the writer was \
+                 killed; the messages of the chunk it still held in memory are lost (not \
+                 countable from the file)"
+                .to_owned(),
             StopReason::TruncatedRecord { offset, missing } => format!(
                 "the record at byte {offset} is cut short ({missing} bytes missing): the chunk \
                  being written was lost"
@@ -149,7 +150,8 @@ fn recover_cmd(src: &Path, out: Option<&Path>) -> Result<()> {
     }
     let chunks: u64 = report.files.iter().map(|f| f.chunks).sum();
     println!(
-        "recovered {} messages in {chunks} chunks into {}; lost {} bytes (the unfinished tail)",
+        "recovered {} messages in {chunks} chunks into {}; lost {} bytes of unfinished records \
+         in the file",
         report.messages_recovered,
         report.destination.display(),
         report.bytes_lost
