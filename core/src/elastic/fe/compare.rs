@@ -20,9 +20,10 @@ pub enum RedundantModel {
     LeastSquares,
     /// Lumped spring model (5.3; the servo-rate fegm).
     Spring,
-    /// Finite elements, incompatibility as initial strain (5.4, thermo-mechanical).
+    /// Finite elements (5.4), incompatibility as initial strain (5.8, thermo-mechanical).
     FeThermoMechanical,
-    /// Finite elements, incompatibility as drive displacement (5.5, actuator-displacements).
+    /// Finite elements (5.4), incompatibility as drive displacement (5.5,
+    /// actuator-displacements).
     FeActuatorDisplacements,
 }
 
