@@ -155,7 +155,12 @@ impl Launch {
             .lock()
             .map(|l| {
                 l.iter()
-                    .filter_map(|s| s.strip_prefix(&prefix)?.trim().parse().ok())
+                    .filter_map(|s| {
+                        let at = s.find(&prefix)? + prefix.len();
+                        let digits: String =
+                            s[at..].chars().take_while(char::is_ascii_digit).collect();
+                        digits.parse().ok()
+                    })
                     .collect()
             })
             .unwrap_or_default()

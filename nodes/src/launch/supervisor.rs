@@ -41,8 +41,10 @@ struct Supervised<'a> {
     quick_crashes: u32,
 }
 
+/// One `[launch]` line in one write: the nodes share this stderr, and a line written in
+/// pieces would interleave with theirs.
 fn log(msg: impl std::fmt::Display) {
-    eprintln!("[launch] {msg}");
+    crate::node::log_line("launch", msg);
 }
 
 fn describe(status: ExitStatus) -> String {

@@ -254,7 +254,7 @@ impl NodeContext {
 
     /// Logs one line to stderr, prefixed with the node name (launch output interleaves).
     pub fn log(&self, msg: impl std::fmt::Display) {
-        eprintln!("[{}] {msg}", self.name);
+        log_line(&self.name, msg);
     }
 
     /// Period of the regular /diagnostics report.
@@ -265,6 +265,14 @@ impl NodeContext {
             .map_err(bad_param)?;
         Ok(Duration::from_secs_f64(s))
     }
+}
+
+/// Writes `[who] msg` to stderr in one `write`: the processes of a launch share one stderr,
+/// and a line written in pieces would interleave with the others'.
+pub fn log_line(who: &str, msg: impl std::fmt::Display) {
+    use std::io::Write;
+    let line = format!("[{who}] {msg}\n");
+    let _ = std::io::stderr().lock().write_all(line.as_bytes());
 }
 
 /// A parameter error as bad input (exit code 2: `rpkm launch` does not restart the node).

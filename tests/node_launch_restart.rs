@@ -1,0 +1,154 @@
+//! `rpkm launch` supervision: tcp_estimator is killed with SIGKILL mid-stream. The launcher
+//! must restart it (new pid) without restarting ingest or preload_monitor; the restarted
+//! estimator rejoins the stream (its estimates match the twin's true TCP again), and the
+//! stream of the other nodes goes on without a gap: every ActuatorState reaches this test and
+//! the monitor answers every sample.
+
+mod node_support;
+
+use std::collections::{BTreeSet, HashMap};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use node_support::{twin_stream, unique, write_truth_json, Launch, TempDir};
+use rpkm::campaign_bag::stamp_from_seconds;
+use rpkm_transport::{topic, Transport, TransportConfig};
+
+const N: usize = 1200;
+const RATE_HZ: f64 = 200.0;
+/// Estimates received before the kill.
+const KILL_AFTER: usize = 200;
+
+#[test]
+fn sigkilled_estimator_is_restarted_and_rejoins_while_the_stream_goes_on() {
+    let dir = TempDir::new("restart");
+    let stream = twin_stream(N, RATE_HZ, |_| 0.0);
+    let csv = dir.path("stream.csv");
+    std::fs::write(&csv, stream.campaign.to_csv()).expect("write stream");
+    let truth = dir.path("truth.json");
+    write_truth_json(stream.twin.true_params(), &truth);
+    std::fs::write(
+        dir.path("params.yaml"),
+        format!(
+            "/**:\n  ros__parameters:\n    geometry_file: {}\n\
+             ingest:\n  ros__parameters:\n    rate_hz: {RATE_HZ}\n    start_delay_s: 1.5\n\
+             tcp_estimator:\n  ros__parameters:\n    busy_poll_ms: 2.0\n\
+             preload_monitor:\n  ros__parameters:\n    status_every: 1\n    busy_poll_ms: 2.0\n",
+            truth.display()
+        ),
+    )
+    .expect("params");
+    let launch = dir.path("restart.launch.yaml");
+    std::fs::write(
+        &launch,
+        format!(
+            "launch:\n  - node: {{pkg: rpkm, exec: ingest, param: [{{from: params.yaml}}], args: --source {}}}\n  \
+             - node: {{pkg: rpkm, exec: tcp_estimator, param: [{{from: params.yaml}}], respawn: true, respawn_delay: 0.1}}\n  \
+             - node: {{pkg: rpkm, exec: preload_monitor, param: [{{from: params.yaml}}]}}\n",
+            csv.display()
+        ),
+    )
+    .expect("launch file");
+
+    let prefix = unique("restart");
+    let t = Transport::new(&TransportConfig::new(unique("obs")).ipc_prefix(&prefix))
+        .expect("transport");
+    let states = t.subscriber(&topic::ACTUATOR_STATE).expect("sub");
+    let estimates = t.subscriber(&topic::TCP_ESTIMATE).expect("sub");
+    let statuses = t.subscriber(&topic::PRELOAD_STATUS).expect("sub");
+    let by_stamp: HashMap<_, _> = stream
+        .campaign
+        .poses
+        .iter()
+        .enumerate()
+        .filter_map(|(k, p)| Some((stamp_from_seconds(p.t)?, k)))
+        .collect();
+
+    let mut launched = Launch::start(&launch, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
+    let mut state_seqs = Vec::new();
+    let mut estimate_seqs = Vec::new();
+    let mut status_samples = BTreeSet::new();
+    let mut killed: Option<(u32, u64)> = None;
+    let mut worst_error_m = 0.0f64;
+    let deadline = Instant::now() + Duration::from_secs(90);
+    while Instant::now() < deadline {
+        let mut idle = true;
+        while let Some(s) = states.try_recv().expect("recv") {
+            idle = false;
+            state_seqs.push(s.seq);
+        }
+        while let Some(s) = statuses.try_recv().expect("recv") {
+            idle = false;
+            status_samples.insert(*by_stamp.get(&s.stamp).expect("a stream stamp"));
+        }
+        while let Some(e) = estimates.try_recv().expect("recv") {
+            idle = false;
+            let k = *by_stamp.get(&e.stamp).expect("a stream stamp");
+            assert_eq!(e.seq, k as u64 + 1, "seq echoes the state's");
+            assert!(e.converged, "sample {k}");
+            // Independent truth: the twin's true TCP (mm) of this sample.
+            let tcp = stream.truth[k].tcp;
+            let err = (e.x - tcp.x / 1e3).abs().max((e.y - tcp.y / 1e3).abs());
+            worst_error_m = worst_error_m.max(err);
+            estimate_seqs.push(e.seq);
+        }
+        if killed.is_none() && estimate_seqs.len() >= KILL_AFTER {
+            let pids = launched.started("tcp_estimator");
+            let pid = *pids.first().expect("estimator started");
+            let ok = Command::new("kill")
+                .args(["-KILL", &pid.to_string()])
+                .status()
+                .expect("kill");
+            assert!(ok.success(), "SIGKILL {pid}");
+            killed = Some((pid, *estimate_seqs.last().unwrap_or(&0)));
+        }
+        let done = state_seqs.last() == Some(&(N as u64))
+            && status_samples.contains(&(N - 1))
+            && estimate_seqs.last() == Some(&(N as u64));
+        if done {
+            break;
+        }
+        if idle {
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    }
+    launched.stop();
+    let (killed_pid, killed_at) = killed.expect("the estimator was killed");
+    let estimators = launched.started("tcp_estimator");
+    assert_eq!(estimators.len(), 2, "restarted once: {estimators:?}");
+    assert_ne!(estimators[1], killed_pid);
+    assert_eq!(launched.started("ingest").len(), 1, "ingest not restarted");
+    assert_eq!(
+        launched.started("preload_monitor").len(),
+        1,
+        "monitor not restarted"
+    );
+    assert_eq!(
+        state_seqs,
+        (1..=N as u64).collect::<Vec<_>>(),
+        "the actuator stream went on without a gap"
+    );
+    assert_eq!(
+        status_samples.len(),
+        N,
+        "the monitor answered every sample, also while the estimator was down"
+    );
+    let after: Vec<u64> = estimate_seqs
+        .iter()
+        .copied()
+        .filter(|&s| s > killed_at)
+        .collect();
+    assert!(
+        after.len() > N - killed_at as usize - (2.0 * RATE_HZ) as usize,
+        "the restarted estimator rejoined within 2 s: {} estimates after seq {killed_at}",
+        after.len()
+    );
+    assert!(
+        after.windows(2).all(|w| w[1] == w[0] + 1),
+        "contiguous once rejoined"
+    );
+    assert!(
+        worst_error_m < 1e-9,
+        "estimates match the twin's truth: {worst_error_m} m"
+    );
+}
