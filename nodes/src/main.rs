@@ -18,6 +18,8 @@ struct Cli {
 enum Command {
     /// Identify the geometric parameters from a campaign CSV (see `rpkm calibrate --help`).
     Calibrate(cli::calibrate::CalibrateArgs),
+    /// Find the physical effect the model is missing (see `rpkm diagnose --help`).
+    Diagnose(cli::diagnose::DiagnoseArgs),
     /// Sensitivity and observability of the parameters for a calibration method (thesis 4.2.3-4.3.4).
     Analyze(cli::analyze::AnalyzeArgs),
     /// Simulate measurement campaigns on the digital twin, with hidden effects.
@@ -45,6 +47,7 @@ fn main() {
     let args = Cli::parse();
     let result = match &args.command {
         Command::Calibrate(a) => cli::calibrate::run(a),
+        Command::Diagnose(a) => cli::diagnose::run(a),
         Command::Analyze(a) => cli::analyze::run(a),
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Preload(a) => cli::preload::run(a),

@@ -4,6 +4,7 @@ pub mod analyze;
 pub mod bag;
 pub mod calibrate;
 pub mod demo;
+pub mod diagnose;
 pub mod ingest;
 pub mod preload;
 pub mod record;
