@@ -58,9 +58,10 @@ pub struct TransportArgs {
     /// hosts) or both (recording receives from iceoryx2 then, like every rpkm subscriber).
     #[arg(long, default_value = "ipc", value_parser = parse_backend)]
     pub backend: rpkm_transport::Backend,
-    /// Prefix of the iceoryx2 service names: processes talk only with the same prefix.
-    #[arg(long, default_value = "")]
-    pub ipc_prefix: String,
+    /// Prefix of the iceoryx2 service names: processes talk only with the same prefix
+    /// (default: env RPKM_IPC_PREFIX, as the nodes, else none).
+    #[arg(long)]
+    pub ipc_prefix: Option<String>,
     /// Open every topic reliable: iceoryx2 publishers then wait for slow subscribers instead
     /// of overwriting, so nothing is dropped even at `rpkm replay --rate max`. Every process
     /// on those topics must use it (the replayer and the recorder), not nodes started without.
@@ -81,9 +82,13 @@ pub fn parse_backend(s: &str) -> Result<rpkm_transport::Backend, String> {
 impl TransportArgs {
     /// Opens the transport as node `name`.
     pub fn open(&self, name: &str) -> Result<Transport> {
+        let prefix = match &self.ipc_prefix {
+            Some(p) => p.clone(),
+            None => std::env::var("RPKM_IPC_PREFIX").unwrap_or_default(),
+        };
         let config = TransportConfig::new(name)
             .backend(self.backend)
-            .ipc_prefix(self.ipc_prefix.clone());
+            .ipc_prefix(prefix);
         Transport::new(&config).with_context(|| format!("opening the transport of {name}"))
     }
 }
