@@ -9,9 +9,10 @@ XCDR1 little-endian):
       expected_estimate(seq), prints one JSON line per first-seen seq, then "DONE".
       Exit 0 when all N were seen and correct, 1 on a wrong value, 2 on timeout.
 
-  pub_actuator  --domain D --count N --timeout S
+  pub_actuator  --domain D --count N --timeout S [--topic T] [--bad]
       Publishes ActuatorState seq 1..N (values from expected_actuator(seq)) on
-      /rpkm/actuator_state, the whole set every 50 ms until killed or timeout (exit 0).
+      /rpkm/actuator_state (or T), the whole set every 50 ms until killed or timeout (exit 0);
+      with --bad also seq N+1 (a NaN position) and N+2 (a position out of range).
 
 Run with the venv made by `python3 -m venv .venv && .venv/bin/pip install cyclonedds`.
 Discovery is restricted to loopback (interface lo, no multicast, peer 127.0.0.1): without it
@@ -158,9 +159,19 @@ def sub_estimate(args):
     return 2
 
 
+def bad_actuators(count):
+    """Samples ingest must reject: a NaN position (seq count+1), a position 10 km out of
+    range (count+2); both after the good ones, so only their own fault rejects them."""
+    nan = expected_actuator(count + 1)
+    nan.position = [nan.position[0], float("nan"), nan.position[2], nan.position[3]]
+    far = expected_actuator(count + 2)
+    far.position = [1.0e4, far.position[1], far.position[2], far.position[3]]
+    return [nan, far]
+
+
 def pub_actuator(args):
     dp = DomainParticipant(args.domain)
-    topic = Topic(dp, "rt/rpkm/actuator_state", ActuatorState)
+    topic = Topic(dp, "rt/" + args.topic.lstrip("/"), ActuatorState)
     qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(64))
     writer = DataWriter(dp, topic, qos=qos)
     print("READY", flush=True)
@@ -168,6 +179,9 @@ def pub_actuator(args):
     while time.monotonic() < deadline:
         for seq in range(1, args.count + 1):
             writer.write(expected_actuator(seq))
+        if args.bad:
+            for msg in bad_actuators(args.count):
+                writer.write(msg)
         time.sleep(0.05)
     return 0
 
@@ -178,6 +192,10 @@ def main():
     p.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
     p.add_argument("--count", type=int, default=10)
     p.add_argument("--timeout", type=float, default=20.0)
+    p.add_argument("--topic", default="/rpkm/actuator_state",
+                   help="ROS topic of pub_actuator (ingest listens on /rpkm/controller/actuator_state)")
+    p.add_argument("--bad", action="store_true",
+                   help="pub_actuator: also publish a NaN and an out-of-range sample after the good ones")
     args = p.parse_args()
     return sub_estimate(args) if args.mode == "sub_estimate" else pub_actuator(args)
 
