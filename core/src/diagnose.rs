@@ -77,6 +77,9 @@ pub struct Fit {
     pub val_rms_um: Option<f64>,
     /// Effect parameters identified.
     pub effect_params: Vec<EffectEstimate>,
+    /// The identified geometric parameters.
+    #[serde(skip)]
+    pub params: Params,
 }
 
 /// The current model's fit and its test against noise (the JSON's `baseline`).
@@ -330,10 +333,10 @@ fn verdict(
     }
     match best {
         Some(c) => format!(
-            "missing effect: {} ({}); {}",
+            "missing effect: {} ({}){}",
             c.effect,
             c.evidence,
-            unexplained.map_or(String::new(), |u| format!("what remains: {}", u.sentence))
+            unexplained.map_or(String::new(), |u| format!("; what remains: {}", u.sentence))
         ),
         None => {
             let why = candidates.first().map_or(String::new(), |c| {
@@ -365,6 +368,27 @@ enum FitError {
     Effect(#[from] NotApplicable),
     #[error(transparent)]
     Validation(#[from] PoseError),
+}
+
+/// Calibrate `campaign` with `effects` in the model and evaluate it on the held-out data: the
+/// statistics of one model, as the diagnosis compares them (`rpkm calibrate --effects`).
+pub fn evaluate(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    effects: &[&dyn Effect],
+    opts: &Options,
+) -> Result<Fit, DiagnoseError> {
+    let val = validation
+        .map(|v| validation_noise(v).map(|sigma| Validation { campaign: v, sigma }))
+        .transpose()
+        .map_err(DiagnoseError::Validation)?;
+    fit(campaign, val.as_ref(), effects, &Params::nominal(), opts)
+        .map(|f| f.fit)
+        .map_err(|e| match e {
+            FitError::Calibration(c) => DiagnoseError::Baseline(c),
+            FitError::Effect(n) => DiagnoseError::Effect(n),
+            FitError::Validation(v) => DiagnoseError::Validation(v),
+        })
 }
 
 /// Calibrate with `effects` and evaluate on the held-out data.
@@ -399,6 +423,7 @@ fn fit(
         cal_rms_um: rms(&length_values(&rows)) * 1e3,
         val_rms_um,
         effect_params: cal.effects.clone(),
+        params: cal.params,
     };
     Ok(Fitted { rows, fit })
 }

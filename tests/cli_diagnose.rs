@@ -1,0 +1,152 @@
+//! `rpkm diagnose`, `rpkm calibrate --effects` and `rpkm demo` end to end: campaigns made by
+//! `rpkm simulate` with a hidden effect, the diagnosis's JSON contract read back and checked
+//! against the truth file the twin wrote.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn rpkm() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_rpkm"))
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rpkm-diag-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+fn run_ok(cmd: &mut Command) -> String {
+    let out = cmd.output().expect("run rpkm");
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn json(path: &PathBuf) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("read json")).expect("json")
+}
+
+#[test]
+fn diagnose_names_the_hidden_effect_of_the_truth_file_and_calibrate_adds_it() {
+    let dir = scratch("thermal");
+    let (c, truth) = (dir.join("c.csv"), dir.join("truth.json"));
+    run_ok(
+        rpkm()
+            .args([
+                "simulate",
+                "--campaign",
+                "lt,kgm,self",
+                "--effect",
+                "thermal",
+            ])
+            .args([
+                "--seed".as_ref(),
+                "9".as_ref(),
+                "--out".as_ref(),
+                c.as_os_str(),
+                "--truth".as_ref(),
+                truth.as_os_str(),
+            ]),
+    );
+    let hidden = json(&truth)["effects"][0]["effect"]
+        .as_str()
+        .expect("effect in truth")
+        .to_owned();
+    let (d, report) = (dir.join("d.json"), dir.join("report"));
+    let stdout = run_ok(
+        rpkm()
+            .arg("diagnose")
+            .arg(&c)
+            .arg("--validate")
+            .arg(dir.join("c.val.csv"))
+            .arg("--json")
+            .arg(&d)
+            .arg("--report")
+            .arg(&report),
+    );
+    assert!(
+        stdout.contains("Verdict: missing effect: thermal"),
+        "{stdout}"
+    );
+    let d = json(&d);
+    assert_eq!(d["missing_effect"].as_str(), Some(hidden.as_str()));
+    let b = &d["baseline"];
+    let floor = b["noise_floor_um"].as_f64().expect("noise_floor_um");
+    assert!(b["cal_rms_um"].as_f64().expect("cal_rms_um") > 0.0);
+    assert!(b["val_rms_um"].as_f64().expect("val_rms_um") > 1.3 * floor);
+    let first = &d["candidates"][0];
+    assert_eq!(first["effect"].as_str(), Some("thermal"));
+    assert_eq!(first["significant"].as_bool(), Some(true));
+    assert!(first["explained_fraction"].as_f64().expect("fraction") > 0.9);
+    assert!(first["val_rms_after_um"].as_f64().expect("after") < 1.5 * floor);
+    assert!(first["val_rms_before_um"].as_f64().is_some());
+    let page = std::fs::read_to_string(report.join("report.html")).expect("report page");
+    assert!(page.contains("residual_map_0.svg") && report.join("held_out_rms.svg").exists());
+
+    // adding it with calibrate --effects: the table falls to the floor
+    let cj = dir.join("cal.json");
+    let chart = dir.join("stages.svg");
+    run_ok(
+        rpkm()
+            .arg("calibrate")
+            .arg(&c)
+            .args(["--model", "24", "--effects", "thermal", "--validate"])
+            .arg(dir.join("c.val.csv"))
+            .arg("--json")
+            .arg(&cj)
+            .arg("--chart")
+            .arg(&chart),
+    );
+    let stages = json(&cj)["effect_stages"].clone();
+    let v0 = stages[0]["val_rms_um"].as_f64().expect("stage 0");
+    let v1 = stages[1]["val_rms_um"].as_f64().expect("stage 1");
+    assert!(v1 < 1.5 * floor && v0 > 1.3 * floor, "{v0} -> {v1}");
+    let alpha = stages[1]["effect_params"][0]["value"]
+        .as_f64()
+        .expect("alpha");
+    let truth_alpha = json(&truth)["alpha_per_k"].as_f64().expect("alpha truth") * 1e6;
+    assert!(
+        (alpha - truth_alpha).abs() < 0.05 * truth_alpha,
+        "{alpha} vs {truth_alpha}"
+    );
+    assert!(chart.exists());
+}
+
+#[test]
+fn unknown_effect_is_bad_input() {
+    let out = rpkm()
+        .args([
+            "diagnose",
+            "bags/demo/campaign.csv",
+            "--effects",
+            "thermal,backlash",
+        ])
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--effects") && err.contains("\"backlash\""),
+        "{err}"
+    );
+}
+
+#[test]
+fn demo_names_the_effect_hidden_in_its_embedded_data() {
+    let dir = scratch("demo");
+    let stdout = run_ok(rpkm().arg("demo").arg("--out").arg(&dir));
+    let truth = json(&PathBuf::from("bags/demo/truth.json"));
+    let hidden = truth["effects"][0]["effect"].as_str().expect("effect");
+    assert!(
+        stdout.contains(&format!("Verdict: missing effect: {hidden}")),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("verdict now: nothing is missing"),
+        "{stdout}"
+    );
+    assert!(dir.join("report.html").exists());
+}
