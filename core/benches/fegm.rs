@@ -5,7 +5,8 @@
 //! - spring fegm, warm (from the previous sample: the servo-rate use),
 //! - finite-element model (rigid reference + assembly + dense Cholesky), by the
 //!   actuator-displacements and the thermo-mechanical method, one `FeModel` reused so that its
-//!   buffers are allocated once,
+//!   buffers are allocated once;
+//!
 //! on a slow trajectory through the workspace with a 0.1 mm incompatibility on q3, and the
 //! ratios to the rigid fgm and to the warm spring fegm.
 //!

@@ -435,7 +435,8 @@ fn cholesky_in_place(m: &mut DMatrix<f64>, diag: &[f64]) -> Result<(), (usize, f
         let (col_j, rest) = a[j * n..].split_at_mut(n);
         let d = col_j[j];
         let ratio = d / diag[j];
-        if !(ratio > PIVOT_RATIO_MIN) {
+        // NaN (a zero diagonal over zero) is a failed pivot too.
+        if ratio.is_nan() || ratio <= PIVOT_RATIO_MIN {
             return Err((j, ratio));
         }
         let ljj = d.sqrt();

@@ -118,11 +118,15 @@ impl FeModel {
         let tcp = s.node(layout.tcp).position;
         let mut rod_force = [0.0; 5];
         let mut balance = [0.0; 3];
-        for i in 0..5 {
-            rod_force[i] = sol.axial_force(s, layout.rod[i])?;
+        for ((force, &rod), &joint) in rod_force
+            .iter_mut()
+            .zip(&layout.rod)
+            .zip(&layout.platform_joint)
+        {
+            *force = sol.axial_force(s, rod)?;
             // The rod's beam runs from its platform end (node a) to its carrier end.
-            let load = sol.beam_loads_on_nodes(s, layout.rod[i])?;
-            let arm = s.node(layout.platform_joint[i]).position - tcp;
+            let load = sol.beam_loads_on_nodes(s, rod)?;
+            let arm = s.node(joint).position - tcp;
             balance[0] += load[0];
             balance[1] += load[1];
             balance[2] += arm.x * load[1] - arm.y * load[0] + load[2];
