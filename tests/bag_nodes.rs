@@ -175,13 +175,11 @@ fn preload_fault_bag_through_the_monitor_matches_the_core() {
         .enumerate()
     {
         let (Some(s), Some(e)) = (s, e) else { continue };
-        for d in 0..4 {
+        for (d, (got, want)) in s.deviation.iter().zip(dev).enumerate() {
             assert!(
-                (s.deviation[d] - dev[d]).abs() < 1e-6,
-                "sample {i}, q{}: deviation {} vs core {}",
-                d + 1,
-                s.deviation[d],
-                dev[d]
+                (got - want).abs() < 1e-6,
+                "sample {i}, q{}: deviation {got} vs core {want}",
+                d + 1
             );
         }
         assert!(
