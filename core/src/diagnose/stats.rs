@@ -188,7 +188,7 @@ mod tests {
         // F(1, ∞-ish) ~ χ²_1: the 95 % quantile 3.84 for a large d2
         assert!((f_upper_tail(3.841_458_820_694_124, 1.0, 1e7) - 0.05).abs() < 1e-4);
         // F_{2,d2}: P(F ≥ f) = (1 + 2f/d2)^(−d2/2)
-        for (f, d2) in [(1.0, 10.0), (4.0, 30.0), (0.3, 7.0)] {
+        for (f, d2) in [(1.0f64, 10.0f64), (4.0, 30.0), (0.3, 7.0)] {
             let exact = (1.0 + 2.0 * f / d2).powf(-d2 / 2.0);
             assert!((f_upper_tail(f, 2.0, d2) - exact).abs() < 1e-12, "{f} {d2}");
         }
