@@ -17,9 +17,10 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Args, Debug, Clone)]
 #[command(
     after_help = "Campaigns: lt, kgm, dbb, li_x, li_y, li_psi, self, circle, validation.\n\
-Effects (default magnitude, unit): parallelogram (0.15 mm), preload_elastic (1, compliance \
-factor), thermal (2 K), encoder_scale (40 ppm), guide_straightness (0.05 mm), \
-instrument_alignment (0.05 mrad).\n\n\
+Effects (default magnitude, unit): parallelogram (2 mm), preload_elastic (0.3, scale of the \
+controller's parameter error: all drives active), thermal (5 K), encoder_scale (40 ppm), \
+guide_straightness (0.08 mm), instrument_alignment (0.05 mrad), backlash (0.03 mm, with \
+approach_q1/approach_q4 covariates; not in the diagnosis library).\n\n\
 Example:\n  rpkm simulate --campaign lt,self --effect thermal=2,encoder_scale --seed 7 \
 --out lt_self.csv --truth truth.json --validation 100\n\n\
 Bags (--out not ending in .csv; validation poses go to the bag OUT_val):\n  \
