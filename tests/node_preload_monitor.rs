@@ -181,13 +181,11 @@ fn incompatible_stream_raises_warn_then_error_on_the_right_drive() {
     assert_eq!(kw, k_warn, "WARN at the sample the core gives");
     assert_eq!(ke, k_error, "ERROR at the sample the core gives");
     for (k, s) in [(kw, sw), (ke, se)] {
-        for i in 0..4 {
+        for (i, (got, core)) in s.deviation.iter().zip(&dev[k]).enumerate() {
             assert!(
-                (s.deviation[i] - dev[k][i]).abs() < 1e-6,
-                "sample {k} drive q{}: {} vs core {}",
-                i + 1,
-                s.deviation[i],
-                dev[k][i]
+                (got - core).abs() < 1e-6,
+                "sample {k} drive q{}: {got} vs core {core}",
+                i + 1
             );
         }
     }

@@ -339,13 +339,16 @@ impl Tally {
     }
 }
 
+/// Field index of each required column, and (field index, name) of the covariates.
+type Columns = (HashMap<&'static str, usize>, Vec<(usize, String)>);
+
 /// Reads campaign-format CSV rows one at a time: the row-level rules of the format (number
 /// syntax, names, follower spelling); campaign-level rules (resets per setup) need the whole
 /// file and are `Campaign::parse`'s.
 #[derive(Debug, Clone)]
 pub struct CsvRows {
     label: String,
-    columns: Option<(HashMap<&'static str, usize>, Vec<(usize, String)>)>,
+    columns: Option<Columns>,
     field_count: usize,
 }
 

@@ -62,7 +62,7 @@ pub enum ParamError {
     /// A value has the wrong type or is out of its range.
     #[error("{origin}/{key}: expected {expected}, found {found}")]
     Type {
-        origin: Origin,
+        origin: Box<Origin>,
         key: String,
         expected: &'static str,
         found: String,
@@ -70,7 +70,7 @@ pub enum ParamError {
     /// A key the node does not declare.
     #[error("{origin}/{key}: unknown parameter of node {node} (known: {known})")]
     Unknown {
-        origin: Origin,
+        origin: Box<Origin>,
         key: String,
         node: String,
         known: String,
@@ -237,7 +237,7 @@ impl NodeParams {
                 .any(|d| d == key || (d.ends_with('.') && key.starts_with(d)));
             if origin.specific && !known {
                 return Err(ParamError::Unknown {
-                    origin: origin.clone(),
+                    origin: Box::new(origin.clone()),
                     key: key.clone(),
                     node: self.node.clone(),
                     known: declared.join(", "),
@@ -250,7 +250,7 @@ impl NodeParams {
     fn type_err(&self, key: &str, expected: &'static str) -> ParamError {
         let (v, origin) = &self.values[key];
         ParamError::Type {
-            origin: origin.clone(),
+            origin: Box::new(origin.clone()),
             key: key.to_owned(),
             expected,
             found: yaml_text(v),

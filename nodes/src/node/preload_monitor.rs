@@ -357,7 +357,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 idle.worked();
                 if let Some(e) = monitor.evaluate(&s) {
                     n += 1;
-                    if e.changed || n % status_every == 0 {
+                    if e.changed || n.is_multiple_of(status_every) {
                         statuses.publish(&e.status)?;
                     }
                     if e.changed {
