@@ -9,7 +9,7 @@
 //!
 //! Setups whose name starts with `validation_prefix` are held out: they give `val_rms`. The
 //! result goes out as Parameters (reliable, transient-local: late joiners get it) and, once
-//! the core's diagnosis exists, Diagnosis ([`diagnose`]).
+//! Diagnosis (`rpkm_core::diagnose`, [`diagnose`]).
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -19,7 +19,8 @@ use rpkm_core::campaign::Campaign;
 use rpkm_core::obs;
 use rpkm_core::params::N_PARAMS;
 use rpkm_msgs::{
-    ActuatorState, CampaignInfo, Diagnosis, DiagnosticStatus, Parameters, TcpMeasurement,
+    ActuatorState, CampaignInfo, Diagnosis, DiagnosisCandidate, DiagnosticStatus, Parameters,
+    TcpMeasurement,
 };
 use rpkm_transport::topic;
 
@@ -43,16 +44,37 @@ pub const KEYS: [&str; 9] = [
     "state_buffer",
 ];
 
-/// Where `rpkm_core`'s model diagnosis plugs in: given the calibrated campaign, the held-out
-/// part and the calibration, the ranked candidate effects. Returns `None` (no Diagnosis is
-/// published) until the core's `diagnose` module lands; then this function calls it and maps
-/// its result onto the message, and nothing else in the node changes.
+/// The model diagnosis of `rpkm_core::diagnose` on the calibrated campaign (the held-out part
+/// for its validation), as the Diagnosis message (SI: µm become m; a validation RMS that
+/// does not exist is NaN).
 pub fn diagnose(
-    _campaign: &Campaign,
-    _validation: Option<&Campaign>,
-    _calibration: &Calibration,
-) -> Option<Diagnosis> {
-    None
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    calibration: &Calibration,
+) -> Result<Diagnosis, rpkm_core::diagnose::DiagnoseError> {
+    let opts = rpkm_core::diagnose::Options {
+        model: calibration.model,
+        ..Default::default()
+    };
+    let d = rpkm_core::diagnose::diagnose(campaign, validation, &[], &opts)?;
+    let m = |um: Option<f64>| um.map_or(f64::NAN, |v| v * 1e-6);
+    Ok(Diagnosis {
+        missing_effect: d.missing_effect.unwrap_or_default(),
+        candidates: d
+            .candidates
+            .iter()
+            .map(|c| DiagnosisCandidate {
+                effect: c.effect.clone(),
+                significant: c.significant,
+                explained_fraction: c.explained_fraction,
+                val_rms_before: m(c.val_rms_before_um),
+                val_rms_after: m(c.val_rms_after_um),
+            })
+            .collect(),
+        baseline_cal_rms: d.baseline.cal_rms_um * 1e-6,
+        baseline_val_rms: m(d.baseline.val_rms_um),
+        noise_floor: d.baseline.noise_floor_um * 1e-6,
+    })
 }
 
 /// A finished calibration as messages.
@@ -60,8 +82,8 @@ pub fn diagnose(
 pub struct Outcome {
     /// The identified parameters with campaign statistics.
     pub parameters: Parameters,
-    /// The diagnosis, when the core provides one.
-    pub diagnosis: Option<Diagnosis>,
+    /// The diagnosis, or why there is none.
+    pub diagnosis: Result<Diagnosis, String>,
 }
 
 /// Options of the calibrator.
@@ -147,7 +169,7 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
         None => f64::NAN,
     };
     msg.condition_number = cal.condition_number;
-    let diagnosis = diagnose(&cal_part, val_part.as_ref(), &cal);
+    let diagnosis = diagnose(&cal_part, val_part.as_ref(), &cal).map_err(|e| e.to_string());
     Ok(Outcome {
         parameters: msg,
         diagnosis,
@@ -193,6 +215,11 @@ impl Accumulator {
         self.assembler.push_info(info)?;
         self.info = Some(info.clone());
         Ok(())
+    }
+
+    /// Whether a drive state with the stamp of `m` is buffered.
+    pub fn has_state_for(&self, m: &TcpMeasurement) -> bool {
+        self.states.iter().rev().any(|s| s.stamp == m.stamp)
     }
 
     /// Takes a measurement; `Ok(false)` when no state of its stamp is buffered.
@@ -267,6 +294,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 end = true;
                 break;
             }
+            // Its state may have arrived after the drain above (a fast publisher interleaves
+            // state, measurement, state, ...): drain the states again before pairing.
+            if !acc.has_state_for(&m) {
+                while let Some(s) = states.try_recv()? {
+                    acc.state(&s);
+                }
+            }
             match acc.measurement(&m) {
                 Ok(_) => last_measurement = Some(Instant::now()),
                 Err(e) => last = (DiagnosticStatus::WARN, format!("measurement: {e:#}")),
@@ -289,8 +323,9 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 Ok(out) => {
                     calibrations += 1;
                     parameters.publish(&out.parameters)?;
-                    if let Some(d) = &out.diagnosis {
-                        diagnosis.publish(d)?;
+                    match &out.diagnosis {
+                        Ok(d) => diagnosis.publish(d)?,
+                        Err(e) => ctx.log(format!("no diagnosis: {e}")),
                     }
                     last = (
                         DiagnosticStatus::OK,
@@ -394,7 +429,9 @@ mod tests {
             "noise-free twin: {}",
             out.parameters.val_rms
         );
-        assert!(out.diagnosis.is_none());
+        let d = out.diagnosis.map_err(anyhow::Error::msg)?;
+        assert_eq!(d.missing_effect, "", "an effect-free twin misses no effect");
+        assert!(!d.candidates.is_empty());
         Ok(())
     }
 }
