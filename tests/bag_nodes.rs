@@ -225,11 +225,9 @@ fn preload_fault_bag_through_the_monitor_matches_the_core() {
 }
 
 /// Known failure (calibrator, nodes/src/node/calibrator.rs): each poll drains the states,
-/// then the measurements; a pose whose state arrives between the two drains has its
-/// measurement dropped as unpaired (1 to 12 of the 194 poses in our runs), so the campaign it
-/// calibrates depends on timing. Run with `--ignored` once the calibrator retries unpaired measurements.
+/// then the measurements; the calibrator pairs them by stamp whatever order they arrive in
+/// (it keeps an unpaired measurement until its state has come).
 #[test]
-#[ignore = "calibrator drops measurements whose state arrives in the same poll"]
 fn calibration_bag_through_the_calibrator_gives_rpkm_calibrate_s_parameters() {
     check_calibrator(false);
 }
