@@ -196,21 +196,14 @@ pub fn diagnose(
     opts: &Options,
 ) -> Result<Diagnosis, DiagnoseError> {
     let start = Params::nominal();
-    let val = validation
-        .map(|v| validation_noise(v).map(|sigma| Validation { campaign: v, sigma }))
-        .transpose()
-        .map_err(DiagnoseError::Validation)?;
-    let base = fit(campaign, val.as_ref(), in_model, &start, opts).map_err(|e| match e {
-        FitError::Calibration(c) => DiagnoseError::Baseline(c),
-        FitError::Effect(n) => DiagnoseError::Effect(n),
-        FitError::Validation(v) => DiagnoseError::Validation(v),
-    })?;
+    let val = held_out(validation)?;
+    let base = fit(campaign, val.as_ref(), in_model, &start, opts)?;
     let n_rows = base.rows.len();
     let p_value = stats::chi2_upper_tail(base.fit.chi2, base.fit.dof as f64);
     let consistent = p_value > opts.alpha;
     let noise_floor_um = match &val {
-        Some(v) => rms(&v.sigma) * 1e3,
-        None => rms(&length_sigmas(&base.rows)) * 1e3,
+        Some(v) => calib::rms(&v.sigma) * 1e3,
+        None => calib::rms(&length_sigmas(&base.rows)) * 1e3,
     };
     let baseline = Baseline {
         cal_rms_um: base.fit.cal_rms_um,
@@ -378,17 +371,27 @@ pub fn evaluate(
     effects: &[&dyn Effect],
     opts: &Options,
 ) -> Result<Fit, DiagnoseError> {
-    let val = validation
+    let val = held_out(validation)?;
+    Ok(fit(campaign, val.as_ref(), effects, &Params::nominal(), opts)?.fit)
+}
+
+/// The held-out campaign with the noise of each of its TCP errors.
+fn held_out(validation: Option<&Campaign>) -> Result<Option<Validation<'_>>, DiagnoseError> {
+    validation
         .map(|v| validation_noise(v).map(|sigma| Validation { campaign: v, sigma }))
         .transpose()
-        .map_err(DiagnoseError::Validation)?;
-    fit(campaign, val.as_ref(), effects, &Params::nominal(), opts)
-        .map(|f| f.fit)
-        .map_err(|e| match e {
+        .map_err(DiagnoseError::Validation)
+}
+
+impl From<FitError> for DiagnoseError {
+    /// A failed fit of the model being diagnosed.
+    fn from(e: FitError) -> Self {
+        match e {
             FitError::Calibration(c) => DiagnoseError::Baseline(c),
             FitError::Effect(n) => DiagnoseError::Effect(n),
             FitError::Validation(v) => DiagnoseError::Validation(v),
-        })
+        }
+    }
 }
 
 /// Calibrate with `effects` and evaluate on the held-out data.
@@ -420,7 +423,7 @@ fn fit(
         chi2,
         dof,
         chi2_per_dof: chi2 / dof as f64,
-        cal_rms_um: rms(&length_values(&rows)) * 1e3,
+        cal_rms_um: calib::rms(&length_values(&rows)) * 1e3,
         val_rms_um,
         effect_params: cal.effects.clone(),
         params: cal.params,
@@ -494,7 +497,7 @@ fn held_out_rms(
     }
     let errs = obs::tcp_errors_with(val.campaign, &cal.params, model, &set.corrections(&theta))?;
     let v: Vec<f64> = errs.iter().map(|e| e.value).collect();
-    Ok(rms(&v) * 1e3)
+    Ok(calib::rms(&v) * 1e3)
 }
 
 /// σ of every held-out TCP error, in [`obs::tcp_errors`] order: the instrument's noise at the
@@ -548,9 +551,7 @@ fn compare(
         .filter(|e| e.effect == effect)
         .cloned()
         .collect();
-    let evidence = evidence(
-        base, with, effect, covariates, campaign, &params, f, p_value,
-    );
+    let evidence = evidence(base, with, covariates, campaign, &params, f, p_value);
     Some(Candidate {
         effect: effect.to_owned(),
         significant: p_value < level,
@@ -567,11 +568,9 @@ fn compare(
     })
 }
 
-#[allow(clippy::too_many_arguments)]
 fn evidence(
     base: &Fitted,
     with: &Fitted,
-    effect: &str,
     covariates: &[&str],
     campaign: &Campaign,
     params: &[EffectEstimate],
@@ -598,12 +597,7 @@ fn evidence(
     if let (Some(b), Some(a)) = (base.fit.val_rms_um, with.fit.val_rms_um) {
         s.push_str(&format!("; held-out RMS {b:.1} -> {a:.1} um"));
     }
-    let _ = effect;
     s
-}
-
-fn rms(v: &[f64]) -> f64 {
-    calib::rms(v)
 }
 
 /// Values (mm) of the length rows (not ψ).
@@ -646,13 +640,12 @@ fn groups(rows: &[Residual]) -> Vec<GroupRms> {
 }
 
 fn points(campaign: &Campaign, rows: &[Residual]) -> Vec<Point> {
-    let nominal = Params::nominal();
+    let tcp = sparse::nominal_tcp(campaign);
     let mut out: Vec<Point> = rows
         .iter()
         .map(|r| {
             let pose = &campaign.poses[r.pose];
-            let (x, y) = geometry::fgm(&nominal, Model::M29, pose.q[0], pose.q[3])
-                .map_or((f64::NAN, f64::NAN), |s| (s.x(), s.y()));
+            let (x, y) = tcp[r.pose];
             Point {
                 pose: r.pose,
                 line: pose.line,

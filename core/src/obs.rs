@@ -313,7 +313,8 @@ fn forward_rows(
         let var = |v: usize| encoder_variance(&now, v) + encoder_variance(&zero, v);
         let inst = pose.instrument;
         let sig = noise::scalar_sigma(inst);
-        // the value as Σ g_v · Δc_v − (measured + dm·w)
+        // the value as Σ g_v · Δc_v − (measured + dm_w): g has two terms (x, y of the
+        // ball-bar's direction); a single coordinate pads it with a zero-weight term
         let (direction, value, g, w, var_enc) = match inst {
             Instrument::Dbb => {
                 let Some(r) = pose.r else { return Ok(()) };

@@ -31,6 +31,20 @@ pub struct Pointer {
     pub also: Vec<(String, String, String, f64)>,
 }
 
+/// Where each pose of a campaign is, for maps and workspace terms: the nominal forward model
+/// of its (q1, q4), mm (NaN where it cannot be solved: such a pose is left off a plot).
+pub fn nominal_tcp(campaign: &Campaign) -> Vec<(f64, f64)> {
+    let nominal = Params::nominal();
+    campaign
+        .poses
+        .iter()
+        .map(|p| {
+            geometry::fgm(&nominal, Model::M29, p.q[0], p.q[3])
+                .map_or((f64::NAN, f64::NAN), |s| (s.x(), s.y()))
+        })
+        .collect()
+}
+
 /// The dictionary's terms at every pose of a campaign: (name, values).
 fn dictionary(campaign: &Campaign) -> Vec<(String, Vec<f64>)> {
     let mut out = Vec::new();
@@ -49,15 +63,7 @@ fn dictionary(campaign: &Campaign) -> Vec<(String, Vec<f64>)> {
         ));
     }
     out.push(("t".to_owned(), campaign.poses.iter().map(|p| p.t).collect()));
-    let nominal = Params::nominal();
-    let tcp: Vec<(f64, f64)> = campaign
-        .poses
-        .iter()
-        .map(|p| {
-            geometry::fgm(&nominal, Model::M29, p.q[0], p.q[3])
-                .map_or((f64::NAN, f64::NAN), |s| (s.x(), s.y()))
-        })
-        .collect();
+    let tcp = nominal_tcp(campaign);
     let poly: [(&str, fn(f64, f64) -> f64); 5] = [
         ("x", |x, _| x),
         ("y", |_, y| y),

@@ -34,11 +34,10 @@ pub use preload_elastic::PreloadElastic;
 pub use thermal::Thermal;
 
 use crate::campaign::Campaign;
-use crate::params::{Params, N_PARAMS};
-use nalgebra::{SVector, Vector2};
+use crate::params::Params;
+use nalgebra::Vector2;
 
-/// A Jacobian row over the 29 parameters.
-pub type Row = SVector<f64, N_PARAMS>;
+pub use crate::obs::Row;
 
 /// The effects the diagnosis knows, in the order it tries them.
 pub fn library() -> Vec<Box<dyn Effect>> {

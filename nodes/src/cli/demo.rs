@@ -2,7 +2,7 @@
 //! hidden effect): the thesis's simple model against the measurements, where it fails, the
 //! test that says something is missing, the effect added, the held-out error falling.
 
-use super::diagnose::{print_summary, write_report};
+use super::diagnose::{print_summary, um, write_report};
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::{self, Options};
@@ -58,8 +58,4 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let page = write_report(&args.out, &campaign, &before, Some(&after))?;
     println!("\nreport: {}", page.display());
     Ok(())
-}
-
-fn um(v: Option<f64>) -> String {
-    v.map_or("-".to_owned(), |v| format!("{v:.1}"))
 }

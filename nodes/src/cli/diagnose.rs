@@ -90,7 +90,8 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn um(v: Option<f64>) -> String {
+/// A µm value to one decimal, `-` when absent (no held-out data).
+pub fn um(v: Option<f64>) -> String {
     v.map_or("-".to_owned(), |v| format!("{v:.1}"))
 }
 
