@@ -1,7 +1,8 @@
 //! The bag commands as real processes: `rpkm ingest` and `rpkm bag campaign` round trip a
 //! campaign; `rpkm record` killed with SIGKILL during an 8 kHz stream is rescued by
-//! `rpkm bag recover` with every message of its complete chunks; `rpkm replay --rate max`
-//! into `rpkm record` reproduces a bag message for message.
+//! `rpkm bag recover` with every message of its complete chunks; a reliable replay goes on
+//! when its recorder dies with a full queue; `rpkm replay --rate max` into `rpkm record`
+//! reproduces a bag message for message.
 
 mod bag_support;
 
@@ -177,6 +178,53 @@ fn reference_stream() -> Vec<ActuatorState> {
         decode_all(&reference_bag("stream_8khz"), "/rpkm/actuator_state");
     assert_eq!(states.len(), 4000);
     states
+}
+
+/// A subscriber killed with SIGKILL stays connected to iceoryx2 with its queue full until
+/// someone removes dead nodes' resources; a reliable publisher must notice and go on rather
+/// than wait for it forever.
+#[test]
+fn reliable_replay_goes_on_when_its_recorder_dies_with_a_full_queue() {
+    let dir = scratch("dead_subscriber");
+    let prefix = ipc_prefix("dead");
+    let mut recorder = Watched::spawn(
+        rpkm()
+            .args(["record", "--topics", "/rpkm/actuator_state", "--reliable"])
+            .args(["--chunk-kib", "4", "--flush-every", "0", "--progress"])
+            .args(["--ipc-prefix", &prefix])
+            .arg("--out")
+            .arg(dir.join("rec")),
+    );
+    recorder.wait_line(Duration::from_secs(60), |l| {
+        l.contains("recording 1 topics")
+    });
+    // 4000 states at a quarter of 8 kHz: 2 s, long enough to freeze the recorder mid-stream.
+    let mut replay = Watched::spawn(
+        rpkm()
+            .arg("replay")
+            .arg(reference_bag("stream_8khz"))
+            .args(["--rate", "0.25", "--reliable", "--ipc-prefix", &prefix]),
+    );
+    recorder.wait_line(Duration::from_secs(60), |l| {
+        l.starts_with("rpkm record: flushed ")
+    });
+    // Frozen, the recorder takes nothing: the 64-deep queue fills within 32 ms and the
+    // replayer waits for it, as reliable delivery to a live subscriber must.
+    recorder.signal("STOP");
+    std::thread::sleep(Duration::from_millis(300));
+    recorder.child.kill().expect("SIGKILL the recorder");
+    recorder.child.wait().expect("reap the recorder");
+    let status = replay.wait(Duration::from_secs(60));
+    let stderr = replay.seen.join("\n");
+    assert!(status.success(), "replay: {stderr}");
+    assert!(
+        stderr.contains("/rpkm/actuator_state: a subscriber stopped taking samples; removed"),
+        "the replay says why it went on: {stderr}"
+    );
+    assert!(
+        stderr.contains("/rpkm/actuator_state: 4000"),
+        "every state published: {stderr}"
+    );
 }
 
 #[test]

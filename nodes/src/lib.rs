@@ -3,6 +3,7 @@
 pub mod campaign_bag;
 pub mod cli;
 pub mod launch;
+pub mod logging;
 pub mod node;
 pub mod plot;
 pub mod stream;

@@ -45,6 +45,7 @@ enum Command {
 
 fn main() {
     let args = Cli::parse();
+    rpkm::logging::init();
     let result = match &args.command {
         Command::Calibrate(a) => cli::calibrate::run(a),
         Command::Diagnose(a) => cli::diagnose::run(a),
@@ -60,7 +61,7 @@ fn main() {
         Command::Launch(a) => rpkm::launch::run(a),
     };
     if let Err(e) = result {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", cli::error_chain(&e));
         std::process::exit(cli::exit_code(&e));
     }
 }

@@ -27,6 +27,22 @@ pub fn bad_input(msg: String) -> anyhow::Error {
     anyhow::Error::new(BadInput(msg))
 }
 
+/// The error and its causes joined by ": ", leaving out a cause whose text the message
+/// before it already contains (errors that print their source inline).
+pub fn error_chain(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let line = cause.to_string();
+        if !text.contains(&line) {
+            if !text.is_empty() {
+                text.push_str(": ");
+            }
+            text.push_str(&line);
+        }
+    }
+    text
+}
+
 /// Exit code of an error: 2 for bad input, 1 otherwise.
 pub fn exit_code(e: &anyhow::Error) -> i32 {
     if e.chain()

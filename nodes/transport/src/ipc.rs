@@ -11,10 +11,14 @@
 //! unique prefixes.
 
 use std::fmt::Debug;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
 
 use iceoryx2::port::publisher::Publisher as IoxPublisher;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::port::{BackpressureAction, BackpressureInfo, SendError};
 use iceoryx2::prelude::*;
 use rpkm_msgs::{
     from_cdr, to_cdr, ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, Parameters,
@@ -38,7 +42,8 @@ const INITIAL_CDR_LEN: usize = 1024;
 /// An iceoryx2 node and the service-name prefix.
 #[derive(Debug)]
 pub struct IpcNode {
-    node: Node<IpcService>,
+    // Shared with the reliable publishers, which remove dead subscribers' resources.
+    node: Arc<Node<IpcService>>,
     prefix: String,
 }
 
@@ -65,7 +70,7 @@ impl IpcNode {
             );
         }
         Ok(Self {
-            node,
+            node: Arc::new(node),
             prefix: prefix.to_owned(),
         })
     }
@@ -173,6 +178,88 @@ fn backpressure(qos: Qos) -> BackpressureStrategy {
     }
 }
 
+/// How long a reliable publisher waits on a full subscriber queue before it looks for a
+/// dead subscriber, and how often it looks again.
+const STALL_CHECK: Duration = Duration::from_millis(250);
+
+/// Reliable delivery waits for a live subscriber as long as it takes, but a subscriber
+/// killed with SIGKILL stays connected (its queue full) until someone removes the stale
+/// resources of dead nodes. While it waits, the handler checks every [`STALL_CHECK`]
+/// whether any node on the machine is dead; if one is, delivery to the stalled queue is
+/// abandoned and [`deliver`] removes the dead nodes.
+fn backpressure_handler() -> impl Fn(&BackpressureInfo) -> BackpressureAction + Send {
+    let next_check_ms = AtomicU64::new(STALL_CHECK.as_millis() as u64);
+    move |info: &BackpressureInfo| {
+        let elapsed_ms = info.elapsed_time.as_millis() as u64;
+        if info.retries == 0 {
+            next_check_ms.store(STALL_CHECK.as_millis() as u64, Ordering::Relaxed);
+        }
+        if elapsed_ms < next_check_ms.load(Ordering::Relaxed) {
+            return BackpressureAction::Retry;
+        }
+        next_check_ms.store(
+            elapsed_ms + STALL_CHECK.as_millis() as u64,
+            Ordering::Relaxed,
+        );
+        if any_dead_node() {
+            BackpressureAction::DiscardDataAndFail
+        } else {
+            BackpressureAction::Retry
+        }
+    }
+}
+
+fn any_dead_node() -> bool {
+    let mut dead = false;
+    let listed = Node::<IpcService>::list(Config::global_config(), |state| {
+        if matches!(state, NodeState::Dead(_)) {
+            dead = true;
+            CallbackProgression::Stop
+        } else {
+            CallbackProgression::Continue
+        }
+    });
+    // Unable to list: keep the reliable promise and wait on.
+    listed.is_ok() && dead
+}
+
+/// Maps the result of a send. A reliable send that gave up on a stalled subscriber (the
+/// handler saw a dead node) removes the dead nodes' resources: if that freed any, the
+/// stalled subscriber was the dead one and every live subscriber got the sample.
+fn deliver(
+    node: &Node<IpcService>,
+    topic: &str,
+    sent: Result<usize, SendError>,
+) -> Result<(), TransportError> {
+    match sent {
+        Ok(_) => Ok(()),
+        Err(SendError::UnableToDeliver) => {
+            let cleaned = node.try_cleanup_dead_nodes();
+            if cleaned.cleanups > 0 {
+                log::warn!(
+                    "{topic}: a subscriber stopped taking samples; removed the resources of {} dead \
+                     node(s), the live subscribers have the sample",
+                    cleaned.cleanups
+                );
+                Ok(())
+            } else {
+                Err(TransportError::Publish {
+                    topic: topic.to_owned(),
+                    backend: BACKEND,
+                    reason: "a subscriber's queue stayed full and no dead node could be removed; \
+                             the sample did not reach that subscriber"
+                        .to_owned(),
+                })
+            }
+        }
+        Err(e) => Err(TransportError::Publish {
+            topic: topic.to_owned(),
+            backend: BACKEND,
+            reason: format!("{e:?}"),
+        }),
+    }
+}
+
 fn history_request(qos: Qos) -> usize {
     match qos.durability {
         Durability::TransientLocal => qos.depth.max(1),
@@ -184,6 +271,7 @@ fn history_request(qos: Qos) -> usize {
 
 struct ZcPub<T: ZeroCopySend + Debug + 'static> {
     topic: &'static str,
+    node: Arc<Node<IpcService>>,
     publisher: IoxPublisher<IpcService, T, ()>,
 }
 
@@ -207,6 +295,7 @@ where
     let publisher = service
         .publisher_builder()
         .backpressure_strategy(backpressure(topic.qos()))
+        .set_backpressure_handler(backpressure_handler())
         .create()
         .map_err(|e| create_err(topic.name(), "publisher", e))?;
     publisher
@@ -214,6 +303,7 @@ where
         .map_err(|e| create_err(topic.name(), "publisher", e))?;
     Ok(Box::new(ZcPub {
         topic: topic.name(),
+        node: Arc::clone(&node.node),
         publisher,
     }))
 }
@@ -250,8 +340,7 @@ impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcSend<T> for ZcPu
             reason: format!("{e:?}"),
         };
         let sample = self.publisher.loan_uninit().map_err(|e| err(&e))?;
-        sample.write_payload(*msg).send().map_err(|e| err(&e))?;
-        Ok(())
+        deliver(&self.node, self.topic, sample.write_payload(*msg).send())
     }
 }
 
@@ -277,6 +366,7 @@ impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcRecv<T> for ZcSu
 
 struct CdrPub {
     topic: &'static str,
+    node: Arc<Node<IpcService>>,
     publisher: IoxPublisher<IpcService, [u8], ()>,
 }
 
@@ -302,6 +392,7 @@ fn cdr_publisher<T: RosMessage>(
         .initial_max_slice_len(INITIAL_CDR_LEN)
         .allocation_strategy(AllocationStrategy::PowerOfTwo)
         .backpressure_strategy(backpressure(topic.qos()))
+        .set_backpressure_handler(backpressure_handler())
         .create()
         .map_err(|e| create_err(topic.name(), "publisher", e))?;
     publisher
@@ -309,6 +400,7 @@ fn cdr_publisher<T: RosMessage>(
         .map_err(|e| create_err(topic.name(), "publisher", e))?;
     Ok(Box::new(CdrPub {
         topic: topic.name(),
+        node: Arc::clone(&node.node),
         publisher,
     }))
 }
@@ -352,11 +444,11 @@ impl<T: RosMessage> IpcSend<T> for CdrPub {
             .publisher
             .loan_slice_uninit(bytes.len())
             .map_err(|e| err(&e))?;
-        sample
-            .write_from_slice(&bytes)
-            .send()
-            .map_err(|e| err(&e))?;
-        Ok(())
+        deliver(
+            &self.node,
+            self.topic,
+            sample.write_from_slice(&bytes).send(),
+        )
     }
 }
 

@@ -161,7 +161,8 @@ const FINISHED: BagWriteError = BagWriteError::Limit {
 const MESSAGE_RECORD_OVERHEAD: u64 = 1 + 8 + 2 + 4 + 8 + 8;
 
 impl BagWriter {
-    /// Creates the folder `dir` (which must not exist; its parent must) and the MCAP file.
+    /// Creates the folder `dir` (which must not exist; missing parents are created) and the
+    /// MCAP file.
     pub fn create(dir: impl AsRef<Path>, options: BagWriterOptions) -> Result<Self, BagWriteError> {
         let dir = dir.as_ref().to_path_buf();
         let name = dir
@@ -172,6 +173,12 @@ impl BagWriter {
             .to_owned();
         if dir.exists() {
             return Err(BagWriteError::AlreadyExists { path: dir });
+        }
+        if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
+            std::fs::create_dir_all(parent).map_err(|source| BagWriteError::Io {
+                path: parent.to_path_buf(),
+                source,
+            })?;
         }
         std::fs::create_dir(&dir).map_err(|source| BagWriteError::Io {
             path: dir.clone(),

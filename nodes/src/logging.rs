@@ -1,0 +1,63 @@
+//! The `log` records of rpkm's crates (the transport's warnings about dead subscribers, the
+//! iceoryx2 clean-up of dead nodes) on stderr, so that nothing the libraries report is lost.
+//!
+//! `RPKM_LOG` sets the level for rpkm's own crates (`error`, `warn` (default), `info`,
+//! `debug`, `trace`); other crates (DDS, iceoryx2) report errors only.
+
+use log::{Level, LevelFilter, Log, Metadata, Record};
+
+struct StderrLog {
+    rpkm: LevelFilter,
+}
+
+impl StderrLog {
+    fn limit(&self, target: &str) -> LevelFilter {
+        if target.starts_with("rpkm") {
+            self.rpkm
+        } else {
+            LevelFilter::Error
+        }
+    }
+}
+
+impl Log for StderrLog {
+    fn enabled(&self, m: &Metadata) -> bool {
+        m.level() <= self.limit(m.target())
+    }
+
+    fn log(&self, r: &Record) {
+        if self.enabled(r.metadata()) {
+            let level = match r.level() {
+                Level::Error => "error",
+                Level::Warn => "warning",
+                Level::Info => "info",
+                Level::Debug => "debug",
+                Level::Trace => "trace",
+            };
+            eprintln!("rpkm {level} [{}]: {}", r.target(), r.args());
+        }
+    }
+
+    fn flush(&self) {}
+}
+
+/// Installs the stderr logger; an unknown `RPKM_LOG` value falls back to `warn` and says so.
+pub fn init() {
+    let value = std::env::var("RPKM_LOG").unwrap_or_default();
+    let rpkm = match value.to_ascii_lowercase().as_str() {
+        "" | "warn" => LevelFilter::Warn,
+        "error" => LevelFilter::Error,
+        "info" => LevelFilter::Info,
+        "debug" => LevelFilter::Debug,
+        "trace" => LevelFilter::Trace,
+        "off" => LevelFilter::Off,
+        other => {
+            eprintln!("rpkm: RPKM_LOG={other:?} is not one of error, warn, info, debug, trace, off; using warn");
+            LevelFilter::Warn
+        }
+    };
+    let max = rpkm.max(LevelFilter::Error);
+    if log::set_boxed_logger(Box::new(StderrLog { rpkm })).is_ok() {
+        log::set_max_level(max);
+    }
+}
