@@ -9,7 +9,9 @@
 //!   TcpEstimate per sample, equal to the core's rigid fgm of the holding drives (q2, q3 are
 //!   followers: nothing is preloaded) and on the programmed circle of the truth file;
 //! - `bags/calibration` through the calibrator: the Parameters it publishes are those of
-//!   `rpkm calibrate` on the equivalent CSV (`bags/demo/campaign.csv`), parameter by parameter.
+//!   `rpkm calibrate` on the equivalent CSV (`bags/demo/campaign.csv`), parameter by parameter;
+//! - `bags/calibration` and `bags/calibration_val` through the calibrator: its Diagnosis is
+//!   that of `rpkm diagnose` on the equivalent CSVs and names the effect the twin hid.
 
 mod bag_support;
 mod node_support;
@@ -21,7 +23,9 @@ use bag_support::{decode_all, reference_bag, repo_root, rpkm, run_ok, scratch, W
 use node_support::{unique, Launch};
 use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, NOMINAL_DRIVE_FORCE_N};
 use rpkm_core::params::{self, Params, NAMES};
-use rpkm_msgs::{ActuatorState, Parameters, PreloadStatus, TcpEstimate, TcpMeasurement, Time};
+use rpkm_msgs::{
+    ActuatorState, Diagnosis, Parameters, PreloadStatus, TcpEstimate, TcpMeasurement, Time,
+};
 use rpkm_transport::{topic, Transport, TransportConfig};
 use serde_json::Value;
 
@@ -257,89 +261,20 @@ fn check_calibrator(states_first: bool) {
     );
     let cli: Value =
         serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("JSON");
-    std::fs::write(
-        dir.join("params.yaml"),
-        "/**:\n  ros__parameters:\n    diagnostics_period_s: 0.2\n",
-    )
-    .expect("params.yaml");
-    let launch_file = dir.join("cal.launch.yaml");
-    std::fs::write(
-        &launch_file,
-        "launch:\n  - node: {pkg: rpkm, exec: calibrator, param: [{from: params.yaml}]}\n",
-    )
-    .expect("launch file");
-
-    let prefix = unique("bagcal");
-    let observer = Transport::new(&TransportConfig::new(unique("bagcalobs")).ipc_prefix(&prefix))
-        .expect("transport");
-    let parameters = observer.subscriber(&topic::PARAMETERS).expect("sub");
-    let diagnostics = observer.subscriber(&topic::DIAGNOSTICS).expect("sub");
-    let end = observer.publisher(&topic::TCP_MEASUREMENT).expect("pub");
-    let mut launched = Launch::start(&launch_file, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
-    let deadline = Instant::now() + Duration::from_secs(60);
-    'ready: loop {
-        assert!(Instant::now() < deadline, "calibrator not reporting");
-        while let Some(d) = diagnostics.try_recv().expect("recv") {
-            if d.status.iter().any(|s| s.name == "rpkm/calibrator") {
-                break 'ready;
-            }
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
     // 1059 s of campaign in about a second.
-    let passes: &[Option<&str>] = if states_first {
+    let passes: &[(&str, Option<&str>)] = if states_first {
         &[
-            Some("/rpkm/actuator_state"),
-            Some("/rpkm/campaign_info,/rpkm/tcp_measurement"),
+            ("calibration", Some("/rpkm/actuator_state")),
+            (
+                "calibration",
+                Some("/rpkm/campaign_info,/rpkm/tcp_measurement"),
+            ),
         ]
     } else {
-        &[None]
+        &[("calibration", None)]
     };
-    for topics in passes {
-        let mut cmd = rpkm();
-        cmd.arg("replay").arg(reference_bag("calibration")).args([
-            "--rate",
-            "1000",
-            "--ipc-prefix",
-            &prefix,
-        ]);
-        if let Some(t) = topics {
-            cmd.args(["--topics", t]);
-        }
-        let mut replay = Watched::spawn(&mut cmd);
-        let status = replay.wait(Duration::from_secs(60));
-        assert!(status.success(), "replay: {}", replay.seen.join("\n"));
-    }
-    // The end-of-campaign marker (what ingest sends at the end of a file).
-    let marker = TcpMeasurement {
-        setup: "__end_of_campaign__".into(),
-        instrument: TcpMeasurement::NONE,
-        ..Default::default()
-    };
-    end.publish(&marker).expect("publish the marker");
-    let deadline = Instant::now() + Duration::from_secs(120);
-    let got: Parameters = loop {
-        assert!(
-            Instant::now() < deadline,
-            "no Parameters from the calibrator"
-        );
-        if let Some(p) = parameters.try_recv().expect("recv") {
-            break p;
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    };
-    // The calibrator's own account (unpaired measurements, ...), for a failure message.
-    let mut report = String::new();
-    let settle = Instant::now() + Duration::from_millis(400);
-    while Instant::now() < settle {
-        while let Some(d) = diagnostics.try_recv().expect("recv") {
-            for s in d.status.iter().filter(|s| s.name == "rpkm/calibrator") {
-                report = format!("{}: {:?}", s.message, s.values);
-            }
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    launched.stop();
+    let out = run_calibrator(&dir, "", passes);
+    let (got, report) = (out.parameters, out.report);
 
     assert_eq!(u64::from(got.model), cli["model"].as_u64().expect("model"));
     assert_eq!(
@@ -365,6 +300,226 @@ fn check_calibrator(states_first: bool) {
             (got_native - w).abs() < tol,
             "{name}: calibrator {got_native} vs rpkm calibrate {w}"
         );
+    }
+}
+
+/// The calibration bag and its held-out poses (`bags/calibration_val`, setup `val`) through
+/// the calibrator with the 24-parameter model: the Diagnosis it publishes is the one of
+/// `rpkm diagnose` on the equivalent CSVs (`rpkm bag campaign` of both bags), candidate by
+/// candidate, and it names the effect the twin hid (the truth file's parallelogram).
+#[test]
+fn calibration_bags_through_the_calibrator_give_rpkm_diagnose_s_diagnosis() {
+    let dir = scratch("nodes-calibrator-diagnosis");
+    let csv = |bag: &str| {
+        let path = dir.join(format!("{bag}.csv"));
+        run_ok(
+            rpkm()
+                .args(["bag", "campaign"])
+                .arg(reference_bag(bag))
+                .arg("--out")
+                .arg(&path),
+        );
+        path
+    };
+    let (cal_csv, val_csv) = (csv("calibration"), csv("calibration_val"));
+    let json = dir.join("diagnose.json");
+    run_ok(
+        rpkm()
+            .arg("diagnose")
+            .arg(&cal_csv)
+            .arg("--validate")
+            .arg(&val_csv)
+            .args(["--model", "24", "--json"])
+            .arg(&json),
+    );
+    let cli: Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("JSON");
+
+    let out = run_calibrator(
+        &dir,
+        "    model: 24\n",
+        &[("calibration", None), ("calibration_val", None)],
+    );
+    let got = out.diagnosis.unwrap_or_else(|| {
+        panic!(
+            "no Diagnosis from the calibrator; its report: {}",
+            out.report
+        )
+    });
+
+    let truth: Value = serde_json::from_str(
+        &std::fs::read_to_string(repo_root().join("bags/calibration.truth.json")).expect("truth"),
+    )
+    .expect("truth JSON");
+    let hidden: Vec<&str> = truth["effects"]
+        .as_array()
+        .expect("effects")
+        .iter()
+        .filter_map(|e| e["effect"].as_str())
+        .collect();
+    assert_eq!(hidden, ["parallelogram"], "the effect the twin hid");
+    assert_eq!(got.missing_effect, hidden[0]);
+    assert_eq!(
+        got.missing_effect,
+        cli["missing_effect"].as_str().unwrap_or_default()
+    );
+    // µm in the JSON, m on the topic; both from the same core on the same numbers, up to
+    // the mm -> m -> mm round trip of the CSVs.
+    let close = |m: f64, um: &Value, what: &str| {
+        let um = um.as_f64().unwrap_or_else(|| panic!("{what}: no number"));
+        assert!(
+            (m * 1e6 - um).abs() <= 1e-6 * um.abs().max(1.0),
+            "{what}: calibrator {} um vs rpkm diagnose {um} um",
+            m * 1e6
+        );
+    };
+    let base = &cli["baseline"];
+    close(
+        got.baseline_cal_rms,
+        &base["cal_rms_um"],
+        "baseline cal RMS",
+    );
+    close(
+        got.baseline_val_rms,
+        &base["val_rms_um"],
+        "baseline val RMS",
+    );
+    close(got.noise_floor, &base["noise_floor_um"], "noise floor");
+    let want = cli["candidates"].as_array().expect("candidates");
+    let names = |v: &[String]| v.join(", ");
+    let got_names: Vec<String> = got.candidates.iter().map(|c| c.effect.clone()).collect();
+    let want_names: Vec<String> = want
+        .iter()
+        .map(|c| c["effect"].as_str().expect("effect").to_owned())
+        .collect();
+    assert_eq!(
+        names(&got_names),
+        names(&want_names),
+        "the same candidates in the same order"
+    );
+    for (g, w) in got.candidates.iter().zip(want) {
+        let e = &g.effect;
+        assert_eq!(
+            g.significant,
+            w["significant"].as_bool().expect("bool"),
+            "{e}"
+        );
+        let f = w["explained_fraction"].as_f64().expect("fraction");
+        assert!(
+            (g.explained_fraction - f).abs() < 1e-6,
+            "{e}: explained {} vs {f}",
+            g.explained_fraction
+        );
+        close(
+            g.val_rms_before,
+            &w["val_rms_before_um"],
+            &format!("{e} before"),
+        );
+        close(
+            g.val_rms_after,
+            &w["val_rms_after_um"],
+            &format!("{e} after"),
+        );
+    }
+}
+
+/// What the calibrator published for one campaign.
+struct CalibratorOutput {
+    parameters: Parameters,
+    diagnosis: Option<Diagnosis>,
+    /// The calibrator's last /diagnostics message, for failure messages.
+    report: String,
+}
+
+/// Launches the calibrator (`extra` lines appended to its wildcard parameter section),
+/// replays `passes` (reference bag, optional `--topics`) in order, sends the end-of-campaign
+/// marker and collects what it publishes.
+fn run_calibrator(
+    dir: &std::path::Path,
+    extra: &str,
+    passes: &[(&str, Option<&str>)],
+) -> CalibratorOutput {
+    std::fs::write(
+        dir.join("params.yaml"),
+        format!("/**:\n  ros__parameters:\n    diagnostics_period_s: 0.2\n{extra}"),
+    )
+    .expect("params.yaml");
+    let launch_file = dir.join("cal.launch.yaml");
+    std::fs::write(
+        &launch_file,
+        "launch:\n  - node: {pkg: rpkm, exec: calibrator, param: [{from: params.yaml}]}\n",
+    )
+    .expect("launch file");
+
+    let prefix = unique("bagcal");
+    let observer = Transport::new(&TransportConfig::new(unique("bagcalobs")).ipc_prefix(&prefix))
+        .expect("transport");
+    let parameters = observer.subscriber(&topic::PARAMETERS).expect("sub");
+    let diagnosis = observer.subscriber(&topic::DIAGNOSIS).expect("sub");
+    let diagnostics = observer.subscriber(&topic::DIAGNOSTICS).expect("sub");
+    let end = observer.publisher(&topic::TCP_MEASUREMENT).expect("pub");
+    let mut launched = Launch::start(&launch_file, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    'ready: loop {
+        assert!(Instant::now() < deadline, "calibrator not reporting");
+        while let Some(d) = diagnostics.try_recv().expect("recv") {
+            if d.status.iter().any(|s| s.name == "rpkm/calibrator") {
+                break 'ready;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    for (bag, topics) in passes {
+        let mut cmd = rpkm();
+        cmd.arg("replay")
+            .arg(reference_bag(bag))
+            .args(["--rate", "1000", "--ipc-prefix", &prefix]);
+        if let Some(t) = topics {
+            cmd.args(["--topics", t]);
+        }
+        let mut replay = Watched::spawn(&mut cmd);
+        let status = replay.wait(Duration::from_secs(60));
+        assert!(status.success(), "replay: {}", replay.seen.join("\n"));
+    }
+    // The end-of-campaign marker (what ingest sends at the end of a file).
+    let marker = TcpMeasurement {
+        setup: "__end_of_campaign__".into(),
+        instrument: TcpMeasurement::NONE,
+        ..Default::default()
+    };
+    end.publish(&marker).expect("publish the marker");
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let got: Parameters = loop {
+        assert!(
+            Instant::now() < deadline,
+            "no Parameters from the calibrator"
+        );
+        if let Some(p) = parameters.try_recv().expect("recv") {
+            break p;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    // The Diagnosis follows the Parameters; the calibrator's own account (unpaired
+    // measurements, ...) is kept for failure messages.
+    let mut report = String::new();
+    let mut got_diagnosis = None;
+    let settle = Instant::now() + Duration::from_secs(30);
+    while Instant::now() < settle && (got_diagnosis.is_none() || report.is_empty()) {
+        if let Some(d) = diagnosis.try_recv().expect("recv") {
+            got_diagnosis = Some(d);
+        }
+        while let Some(d) = diagnostics.try_recv().expect("recv") {
+            for s in d.status.iter().filter(|s| s.name == "rpkm/calibrator") {
+                report = format!("{}: {:?}", s.message, s.values);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    launched.stop();
+    CalibratorOutput {
+        parameters: got,
+        diagnosis: got_diagnosis,
+        report,
     }
 }
 
