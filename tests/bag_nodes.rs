@@ -7,7 +7,8 @@
 //!   raised at the samples the core's deviations give;
 //! - `bags/stream_8khz` (at 1 kHz) through tcp_estimator with the true parameters: one
 //!   TcpEstimate per sample, equal to the core's rigid fgm of the holding drives (q2, q3 are
-//!   followers: nothing is preloaded) and on the programmed circle of the truth file;
+//!   followers: nothing is preloaded) and on the programmed circle of the truth file; the
+//!   recorder of the launch (`executable: rpkm record`) closes a bag holding the same;
 //! - `bags/calibration` through the calibrator: the Parameters it publishes are those of
 //!   `rpkm calibrate` on the equivalent CSV (`bags/demo/campaign.csv`), parameter by parameter;
 //! - `bags/calibration` and `bags/calibration_val` through the calibrator: its Diagnosis is
@@ -553,10 +554,17 @@ fn stream_bag_through_the_estimator_matches_the_core_and_the_truth() {
         ),
     )
     .expect("params.yaml");
+    // The estimator and, as an `executable` of the launch, a recorder of its output.
+    let recorded = dir.join("recorded");
     let launch_file = dir.join("est.launch.yaml");
     std::fs::write(
         &launch_file,
-        "launch:\n  - node: {pkg: rpkm, exec: tcp_estimator, param: [{from: params.yaml}]}\n",
+        format!(
+            "launch:\n  - node: {{pkg: rpkm, exec: tcp_estimator, param: [{{from: params.yaml}}]}}\n\
+             \x20 - executable:\n      cmd: rpkm record --topics /rpkm/tcp_estimate --out {}\n\
+             \x20     name: recorder\n",
+            recorded.display()
+        ),
     )
     .expect("launch file");
     let states: Vec<ActuatorState> =
@@ -569,6 +577,7 @@ fn stream_bag_through_the_estimator_matches_the_core_and_the_truth() {
     let estimates = observer.subscriber(&topic::TCP_ESTIMATE).expect("sub");
     let diagnostics = observer.subscriber(&topic::DIAGNOSTICS).expect("sub");
     let mut launched = Launch::start(&launch_file, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
+    launched.wait_for("rpkm record: recording 1 topics", Duration::from_secs(60));
     let deadline = Instant::now() + Duration::from_secs(60);
     'ready: loop {
         assert!(Instant::now() < deadline, "tcp_estimator not reporting");
@@ -603,7 +612,18 @@ fn stream_bag_through_the_estimator_matches_the_core_and_the_truth() {
     }
     let status = replay.wait(Duration::from_secs(60));
     assert!(status.success(), "replay: {}", replay.seen.join("\n"));
+    // Stopping the launch closes the recorder's bag: it holds what the observer received.
     launched.stop();
+    let in_bag: Vec<TcpEstimate> = decode_all(&recorded, "/rpkm/tcp_estimate");
+    let observed: Vec<&TcpEstimate> = got.iter().flatten().collect();
+    assert_eq!(
+        in_bag.len(),
+        observed.len(),
+        "the launch's recorder has every estimate the observer got"
+    );
+    for (r, o) in in_bag.iter().zip(&observed) {
+        assert_eq!(r, *o, "recorded estimate {} as published", r.seq);
+    }
 
     let lost = got.iter().filter(|e| e.is_none()).count();
     assert_eq!(lost, 0, "one TcpEstimate per sample");

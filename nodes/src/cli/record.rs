@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{Context, Result};
 use rpkm_transport::bag::{BagWriter, BagWriterOptions};
@@ -21,16 +21,20 @@ use crate::topics::{self, RecordPort};
 /// then the summary and metadata.yaml.
 #[derive(clap::Args, Debug, Clone)]
 #[command(
-    after_help = "Examples:\n  rpkm record --out run1                       # every rpkm topic, \
-until Ctrl-C\n  rpkm record --out drives --topics /rpkm/actuator_state --duration 10\n  \
+    after_help = "Examples:\n  rpkm record                                  # every rpkm topic, \
+until Ctrl-C, into rpkm_YYYY_MM_DD-HH_MM_SS\n  rpkm record --out run1\n  rpkm record --out drives --topics /rpkm/actuator_state --duration 10\n  \
 rpkm record --out run2 --backend dds          # what ROS 2 tools publish\n\n\
 Topics: /rpkm/campaign_info, /rpkm/actuator_state, /rpkm/tcp_measurement, \
 /rpkm/tcp_estimate, /rpkm/parameters, /rpkm/diagnosis, /rpkm/preload_status, /diagnostics."
 )]
 pub struct RecordArgs {
-    /// Output bag folder; must not exist.
+    /// Output bag folder; must not exist; missing parent folders are created (default:
+    /// rpkm_YYYY_MM_DD-HH_MM_SS, the UTC start time, as `ros2 bag record`, in --out-dir).
     #[arg(long)]
-    pub out: PathBuf,
+    pub out: Option<PathBuf>,
+    /// Folder of the default-named bag when --out is not given (a launch file's recorder).
+    #[arg(long, default_value = ".", conflicts_with = "out")]
+    pub out_dir: PathBuf,
     /// Comma-separated topics to record (default: every rpkm topic).
     #[arg(long, value_delimiter = ',')]
     pub topics: Vec<String>,
@@ -128,8 +132,12 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     }
     let stop = stop_flag()?;
     let transport = args.transport.open("rpkm_record")?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| args.out_dir.join(default_bag_name(SystemTime::now())));
     let mut bag = BagWriter::create(
-        &args.out,
+        &out,
         BagWriterOptions {
             chunk_size: args.chunk_kib * 1024,
             ..BagWriterOptions::default()
@@ -148,7 +156,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
     eprintln!(
         "rpkm record: recording {} topics to {}",
         ports.len(),
-        args.out.display()
+        out.display()
     );
     let start = Instant::now();
     let deadline = args.duration.map(|d| start + Duration::from_secs_f64(d));
@@ -198,4 +206,47 @@ pub fn run(args: &RecordArgs) -> Result<()> {
         eprintln!("  {}: {}", port.topic(), port.count());
     }
     Ok(())
+}
+
+/// `rpkm_YYYY_MM_DD-HH_MM_SS` of `now` in UTC: the bag name when `--out` is not given.
+pub fn default_bag_name(now: SystemTime) -> String {
+    let secs = now.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    let (days, rest) = (secs / 86_400, secs % 86_400);
+    let (y, m, d) = civil_from_days(days);
+    format!(
+        "rpkm_{y:04}_{m:02}_{d:02}-{:02}_{:02}_{:02}",
+        rest / 3600,
+        rest % 3600 / 60,
+        rest % 60
+    )
+}
+
+/// Gregorian (year, month, day) of a day count since 1970-01-01 (H. Hinnant's algorithm).
+fn civil_from_days(days: u64) -> (u64, u64, u64) {
+    let z = days + 719_468;
+    let era = z / 146_097;
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + u64::from(m <= 2);
+    (y, m, d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_bag_name_is_the_utc_start_time() {
+        // 2024-02-29 23:59:59 UTC, a leap day; and the epoch.
+        let t = UNIX_EPOCH + Duration::from_secs(1_709_251_199);
+        assert_eq!(default_bag_name(t), "rpkm_2024_02_29-23_59_59");
+        assert_eq!(default_bag_name(UNIX_EPOCH), "rpkm_1970_01_01-00_00_00");
+        // 2000-03-01 00:00:00 UTC: after the 400-year leap day.
+        let t = UNIX_EPOCH + Duration::from_secs(951_868_800);
+        assert_eq!(default_bag_name(t), "rpkm_2000_03_01-00_00_00");
+    }
 }

@@ -15,7 +15,15 @@
 //!       respawn: true                # default true: restarted with backoff when it crashes
 //!       respawn_delay: 0.2           # s, doubled per quick crash, at most 5 s
 //!   - set_env: {name: ROS_DOMAIN_ID, value: "7"}
+//!   - executable:                    # another rpkm command, e.g. the recorder
+//!       cmd: rpkm record --out $(var bag) --topics /rpkm/tcp_estimate,/diagnostics
+//!       name: recorder               # default: the subcommand
+//!       respawn: false               # default false for executables
+//!       if: $(var record)            # node and executable: started only if true (`unless`)
 //! ```
+//!
+//! The recorder stops with the launch: SIGTERM makes `rpkm record` write what is queued and
+//! close its bag (metadata.yaml and summary).
 //!
 //! Substitutions in every string: `$(var NAME)` (an `arg`, overridden by `NAME:=VALUE` on the
 //! command line), `$(env NAME)` / `$(env NAME DEFAULT)`, `$(dirname)` (this file's folder).
@@ -62,10 +70,24 @@ pub enum LaunchError {
     Invalid { file: String, what: String },
 }
 
-/// One node process to run.
+/// What a launched process runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Program {
+    /// `rpkm node EXEC --name NAME --params ... ARGS`: a node of [`EXECUTABLES`].
+    Node,
+    /// `rpkm EXEC ARGS`: one of [`COMMANDS`] (an `executable` entry).
+    Command,
+}
+
+/// The rpkm commands an `executable` entry may run.
+pub const COMMANDS: [&str; 2] = ["record", "replay"];
+
+/// One process to run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeSpec {
-    /// Executable: one of [`EXECUTABLES`].
+    /// A node or an rpkm command.
+    pub program: Program,
+    /// Node executable (one of [`EXECUTABLES`]) or rpkm command (one of [`COMMANDS`]).
     pub exec: String,
     /// Node name.
     pub name: String,
@@ -216,7 +238,7 @@ impl LaunchDescription {
         for (k, item) in items.iter().enumerate() {
             let map = item.as_mapping().filter(|m| m.len() == 1).ok_or_else(|| {
                 ctx.err(format!(
-                    "launch item {k}: expected one of arg, node, set_env"
+                    "launch item {k}: expected one of arg, node, executable, set_env"
                 ))
             })?;
             let (kind, body) = map
@@ -254,10 +276,19 @@ impl LaunchDescription {
                     )?;
                     out.env.push((name, value));
                 }
-                Some("node") => out.nodes.push(node(&ctx, body)?),
+                Some("node") => {
+                    if condition(&ctx, body, "node")? {
+                        out.nodes.push(node(&ctx, body)?);
+                    }
+                }
+                Some("executable") => {
+                    if condition(&ctx, body, "executable")? {
+                        out.nodes.push(executable(&ctx, body)?);
+                    }
+                }
                 _ => {
                     return Err(ctx.err(format!(
-                        "launch item {k}: unknown kind {:?} (arg, node, set_env)",
+                        "launch item {k}: unknown kind {:?} (arg, node, executable, set_env)",
                         kind
                     )))
                 }
@@ -268,6 +299,95 @@ impl LaunchDescription {
         }
         Ok(out)
     }
+}
+
+/// `if:` / `unless:` of an entry (ROS 2 launch): true, false, 1 or 0 after substitution.
+fn condition(ctx: &Ctx<'_>, body: &serde_yaml::Mapping, what: &str) -> Result<bool, LaunchError> {
+    let flag = |key: &str| -> Result<Option<bool>, LaunchError> {
+        let Some(v) = get(body, key) else {
+            return Ok(None);
+        };
+        let s = ctx.string(v, &format!("{what} {key}"))?;
+        match s.trim().to_ascii_lowercase().as_str() {
+            "true" | "1" => Ok(Some(true)),
+            "false" | "0" => Ok(Some(false)),
+            other => Err(ctx.err(format!(
+                "{what} {key}: {other:?}: expected true, false, 1 or 0"
+            ))),
+        }
+    };
+    Ok(flag("if")?.unwrap_or(true) && !flag("unless")?.unwrap_or(false))
+}
+
+/// `respawn` and `respawn_delay` of an entry named `name`.
+fn respawn(
+    ctx: &Ctx<'_>,
+    body: &serde_yaml::Mapping,
+    name: &str,
+    default: bool,
+) -> Result<(bool, f64), LaunchError> {
+    let field = |key: &str| -> Result<Option<String>, LaunchError> {
+        get(body, key)
+            .map(|v| ctx.string(v, &format!("{name} {key}")))
+            .transpose()
+    };
+    let respawn = match field("respawn")?.as_deref() {
+        None => default,
+        Some("true") | Some("True") => true,
+        Some("false") | Some("False") => false,
+        Some(other) => {
+            return Err(ctx.err(format!("{name}: respawn {other:?}: expected true or false")))
+        }
+    };
+    let delay = match field("respawn_delay")? {
+        None => 0.2,
+        Some(s) => s
+            .parse::<f64>()
+            .ok()
+            .filter(|d| d.is_finite() && *d >= 0.0)
+            .ok_or_else(|| {
+                ctx.err(format!(
+                    "{name}: respawn_delay {s:?}: expected seconds >= 0"
+                ))
+            })?,
+    };
+    Ok((respawn, delay))
+}
+
+/// An `executable` entry: `cmd: rpkm COMMAND ARGS`, run with this rpkm binary.
+fn executable(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchError> {
+    let cmd = get(body, "cmd")
+        .map(|v| ctx.string(v, "executable cmd"))
+        .transpose()?
+        .ok_or_else(|| ctx.err("executable without cmd".into()))?;
+    let mut words = cmd.split_whitespace().map(str::to_owned);
+    if words.next().as_deref() != Some("rpkm") {
+        return Err(ctx.err(format!(
+            "executable cmd {cmd:?}: only rpkm commands can be launched (`rpkm record ...`)"
+        )));
+    }
+    let exec = words.next().unwrap_or_default();
+    if !COMMANDS.contains(&exec.as_str()) {
+        return Err(ctx.err(format!(
+            "executable cmd {cmd:?}: expected `rpkm {}` (nodes go in `node` entries)",
+            COMMANDS.join("` or `rpkm ")
+        )));
+    }
+    let name = get(body, "name")
+        .map(|v| ctx.string(v, "executable name"))
+        .transpose()?
+        .unwrap_or_else(|| exec.clone());
+    let (respawn, respawn_delay) = respawn(ctx, body, &name, false)?;
+    Ok(NodeSpec {
+        program: Program::Command,
+        exec,
+        name,
+        param_files: Vec::new(),
+        params: Vec::new(),
+        args: words.collect(),
+        respawn,
+        respawn_delay,
+    })
 }
 
 fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchError> {
@@ -320,28 +440,9 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
     let args = field("args")?
         .map(|a| a.split_whitespace().map(str::to_owned).collect())
         .unwrap_or_default();
-    let respawn = match field("respawn")?.as_deref() {
-        None | Some("true") | Some("True") => true,
-        Some("false") | Some("False") => false,
-        Some(other) => {
-            return Err(ctx.err(format!(
-                "node {name}: respawn {other:?}: expected true or false"
-            )))
-        }
-    };
-    let respawn_delay = match field("respawn_delay")? {
-        None => 0.2,
-        Some(s) => s
-            .parse::<f64>()
-            .ok()
-            .filter(|d| d.is_finite() && *d >= 0.0)
-            .ok_or_else(|| {
-                ctx.err(format!(
-                    "node {name}: respawn_delay {s:?}: expected seconds >= 0"
-                ))
-            })?,
-    };
+    let (respawn, respawn_delay) = respawn(ctx, body, &format!("node {name}"), true)?;
     Ok(NodeSpec {
+        program: Program::Node,
         exec,
         name,
         param_files,
@@ -379,27 +480,38 @@ launch:
       args: --backend $(var backend) --param rate_hz=$(var rate)
       respawn: \"false\"
   - node: {pkg: rpkm, exec: ingest}
+  - node: {pkg: rpkm, exec: calibrator, unless: \"$(var rate)\"}
+  - executable:
+      cmd: rpkm record --out $(dirname)/bag --topics /rpkm/tcp_estimate
+      if: \"1\"
 ";
 
     #[test]
     fn parses_nodes_args_and_substitutions() -> Result<(), LaunchError> {
-        let d = LaunchDescription::parse(
-            FILE,
-            "x.launch.yaml",
-            Path::new("/l"),
-            &["rate:=500".into()],
-        )?;
+        let d =
+            LaunchDescription::parse(FILE, "x.launch.yaml", Path::new("/l"), &["rate:=1".into()])?;
         assert_eq!(d.env, vec![("ROS_DOMAIN_ID".into(), "7".into())]);
         let a = &d.nodes[0];
         assert_eq!(a.name, "estimator_a");
         assert_eq!(a.param_files, vec![PathBuf::from("/l/params.yaml")]);
         assert_eq!(a.params, vec!["model=24", "source=/l/c.csv"]);
-        assert_eq!(a.args, ["--backend", "ipc", "--param", "rate_hz=500"]);
+        assert_eq!(a.args, ["--backend", "ipc", "--param", "rate_hz=1"]);
         assert!(!a.respawn);
         let b = &d.nodes[1];
         assert_eq!(
             (b.name.as_str(), b.respawn, b.respawn_delay),
             ("ingest", true, 0.2)
+        );
+        // `unless: 1` left the calibrator out; the recorder is an rpkm command.
+        assert_eq!(d.nodes.len(), 3);
+        let r = &d.nodes[2];
+        assert_eq!(
+            (r.program, r.exec.as_str(), r.name.as_str(), r.respawn),
+            (Program::Command, "record", "record", false)
+        );
+        assert_eq!(
+            r.args,
+            ["--out", "/l/bag", "--topics", "/rpkm/tcp_estimate"]
         );
         Ok(())
     }
@@ -428,5 +540,28 @@ launch:
         )
         .expect_err("undeclared");
         assert!(e.to_string().contains("nope"), "{e}");
+        for (entry, says) in [
+            (
+                "executable: {cmd: ros2 bag record -a}",
+                "only rpkm commands",
+            ),
+            (
+                "executable: {cmd: rpkm launch x.yaml}",
+                "expected `rpkm record`",
+            ),
+            (
+                "node: {pkg: rpkm, exec: ingest, if: maybe}",
+                "node if: \"maybe\"",
+            ),
+        ] {
+            let e = LaunchDescription::parse(
+                &format!("launch:\n  - {entry}\n"),
+                "z.yaml",
+                Path::new("."),
+                &[],
+            )
+            .expect_err(entry);
+            assert!(e.to_string().contains(says), "{entry}: {e}");
+        }
     }
 }

@@ -238,9 +238,9 @@ impl Monitor {
         let st = &e.status;
         let k = e.worst_drive;
         let name = ["OK", "WARN", "ERROR"][usize::from(st.level.min(2))];
-        let message = format!(
-            "{name}: drive q{} deviates {:+.1} % (measured {:.1} %, predicted {:.1} %); \
-             thresholds {} / {} %",
+        let force = format!(
+            "drive q{} deviates {:+.1} % (measured {:.1} %, predicted {:.1} %; thresholds \
+             {} / {} %)",
             k + 1,
             st.deviation[k],
             st.measured_current[k],
@@ -248,6 +248,23 @@ impl Monitor {
             t.warn_percent,
             t.error_percent
         );
+        // In follower mode the level may come from the compatibility of q2, q3 instead.
+        let (dq_drive, dq) = if st.dq2.abs() >= st.dq3.abs() {
+            (2, st.dq2)
+        } else {
+            (3, st.dq3)
+        };
+        let message = if dq.abs() >= t.dq_warn_m {
+            format!(
+                "{name}: follower q{dq_drive} is {:+.3} mm off the rigid model (thresholds \
+                 {} / {} mm); {force}",
+                dq * MM_PER_M,
+                t.dq_warn_m * MM_PER_M,
+                t.dq_error_m * MM_PER_M
+            )
+        } else {
+            format!("{name}: {force}")
+        };
         let mut values = vec![
             ("worst_drive", format!("q{}", k + 1)),
             ("samples", self.samples.to_string()),
