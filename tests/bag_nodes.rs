@@ -76,10 +76,10 @@ fn preload_fault_bag_through_the_monitor_matches_the_core() {
         dir.join("params.yaml"),
         format!(
             "/**:\n  ros__parameters:\n    geometry_file: {}\n    diagnostics_period_s: 0.2\n\
-             tcp_estimator:\n  ros__parameters:\n    busy_poll_ms: 2.0\n\
+             tcp_estimator:\n  ros__parameters:\n    busy_poll_ms: 0.0\n\
              preload_monitor:\n  ros__parameters:\n    warn_percent: {WARN}\n    \
              error_percent: {ERROR}\n    debounce_samples: {DEBOUNCE}\n    status_every: 1\n    \
-             busy_poll_ms: 2.0\n",
+             busy_poll_ms: 0.0\n",
             geometry.display()
         ),
     )
@@ -549,7 +549,7 @@ fn stream_bag_through_the_estimator_matches_the_core_and_the_truth() {
         dir.join("params.yaml"),
         format!(
             "/**:\n  ros__parameters:\n    geometry_file: {}\n    diagnostics_period_s: 0.2\n\
-             tcp_estimator:\n  ros__parameters:\n    busy_poll_ms: 2.0\n",
+             tcp_estimator:\n  ros__parameters:\n    busy_poll_ms: 0.0\n",
             geometry.display()
         ),
     )

@@ -32,8 +32,8 @@ fn sigkilled_estimator_is_restarted_and_rejoins_while_the_stream_goes_on() {
         format!(
             "/**:\n  ros__parameters:\n    geometry_file: {}\n\
              ingest:\n  ros__parameters:\n    rate_hz: {RATE_HZ}\n    start_delay_s: 1.5\n\
-             tcp_estimator:\n  ros__parameters:\n    busy_poll_ms: 2.0\n\
-             preload_monitor:\n  ros__parameters:\n    status_every: 1\n    busy_poll_ms: 2.0\n",
+             tcp_estimator:\n  ros__parameters:\n    busy_poll_ms: 0.0\n\
+             preload_monitor:\n  ros__parameters:\n    status_every: 1\n    busy_poll_ms: 0.0\n",
             truth.display()
         ),
     )

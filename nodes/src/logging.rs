@@ -2,12 +2,14 @@
 //! iceoryx2 clean-up of dead nodes) on stderr, so that nothing the libraries report is lost.
 //!
 //! `RPKM_LOG` sets the level for rpkm's own crates (`error`, `warn` (default), `info`,
-//! `debug`, `trace`); other crates (DDS, iceoryx2) report errors only.
+//! `debug`, `trace`, `off`). The other crates (rustdds, ros2-client) are quiet by default:
+//! rustdds reports routine shutdown races as errors. From `info` on they report warnings.
 
 use log::{Level, LevelFilter, Log, Metadata, Record};
 
 struct StderrLog {
     rpkm: LevelFilter,
+    others: LevelFilter,
 }
 
 impl StderrLog {
@@ -15,7 +17,7 @@ impl StderrLog {
         if target.starts_with("rpkm") {
             self.rpkm
         } else {
-            LevelFilter::Error
+            self.others
         }
     }
 }
@@ -56,8 +58,12 @@ pub fn init() {
             LevelFilter::Warn
         }
     };
-    let max = rpkm.max(LevelFilter::Error);
-    if log::set_boxed_logger(Box::new(StderrLog { rpkm })).is_ok() {
-        log::set_max_level(max);
+    let others = if rpkm >= LevelFilter::Info {
+        LevelFilter::Warn
+    } else {
+        LevelFilter::Off
+    };
+    if log::set_boxed_logger(Box::new(StderrLog { rpkm, others })).is_ok() {
+        log::set_max_level(rpkm.max(others));
     }
 }

@@ -11,6 +11,7 @@ pub mod calibrator;
 pub mod ingest;
 pub mod params;
 pub mod preload_monitor;
+pub mod realtime;
 pub mod shutdown;
 pub mod tcp_estimator;
 
@@ -488,6 +489,20 @@ impl Idle {
             std::thread::yield_now();
         } else {
             std::thread::sleep(self.idle_sleep);
+        }
+    }
+    /// Waits for `input`: yields during the busy time after work, then sleeps until a
+    /// publisher's wake-up (iceoryx2) or for at most `idle_sleep` (the caller's other duties,
+    /// reports and parameter checks, need the loop back by then).
+    pub fn wait_for<T: rpkm_transport::IpcMessage>(
+        &self,
+        input: &rpkm_transport::Subscriber<T>,
+    ) -> Result<(), rpkm_transport::TransportError> {
+        if self.last_work.elapsed() < self.busy {
+            std::thread::yield_now();
+            Ok(())
+        } else {
+            input.wait(self.idle_sleep)
         }
     }
 }

@@ -332,7 +332,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         )));
     }
     let status_every = p.u64("status_every", 1).map_err(bad_param)?.max(1);
-    let busy = p.positive("busy_poll_ms", 50.0).map_err(bad_param)?;
+    let busy = p.non_negative("busy_poll_ms", 0.0).map_err(bad_param)?;
     let follow = p.bool("follow_parameters", true).map_err(bad_param)?;
     let geometry = Geometry::from_params(p)?;
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
@@ -348,9 +348,10 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         geometry.source, thresholds.warn_percent, thresholds.error_percent
     ));
     let mut monitor = Monitor::new(geometry, thresholds);
+    // As the estimator: sleep until the publisher's wake-up, back at least every 20 ms.
     let mut idle = Idle::new(
         Duration::from_secs_f64(busy * 1e-3),
-        Duration::from_micros(500),
+        Duration::from_millis(20),
     );
     let mut report = Every::new(ctx.diagnostics_period()?);
     let mut check_parameters = Every::new(Duration::from_millis(20));
@@ -387,7 +388,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 if report.due() {
                     diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
                 }
-                idle.wait();
+                idle.wait_for(&states)?;
             }
         }
     }

@@ -23,7 +23,7 @@ use super::{
 };
 
 /// Parameter keys of the node.
-pub const KEYS: [&str; 1] = ["busy_poll_ms"];
+pub const KEYS: [&str; 2] = ["busy_poll_ms", "rt_priority"];
 
 /// Counters of an [`Estimator`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -191,8 +191,9 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         .map_err(super::bad_param)?;
     let busy = ctx
         .params
-        .positive("busy_poll_ms", 50.0)
+        .non_negative("busy_poll_ms", 0.0)
         .map_err(super::bad_param)?;
+    let rt_priority = ctx.params.u64("rt_priority", 0).map_err(super::bad_param)?;
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
     let parameters = if follow {
         Some(ctx.subscriber(&topic::PARAMETERS)?)
@@ -206,9 +207,20 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         geometry.source, geometry.model, ctx.output, ctx.input
     ));
     let mut est = Estimator::new(geometry);
+    // After the ports exist (their shared memory is mapped, then locked).
+    // Without the privilege the node still estimates, at normal priority, and says so.
+    match super::realtime::set_fifo(rt_priority) {
+        Ok(Some(note)) => ctx.log(format!("real-time: {note}")),
+        Ok(None) => {}
+        Err(e) => ctx.log(format!(
+            "real-time scheduling not set, running at normal priority: {e}"
+        )),
+    }
+    // Between samples the node sleeps until the publisher's wake-up; the 20 ms bound keeps
+    // the parameter checks and reports going when no sample comes.
     let mut idle = Idle::new(
         Duration::from_secs_f64(busy * 1e-3),
-        Duration::from_micros(500),
+        Duration::from_millis(20),
     );
     let mut report = Every::new(ctx.diagnostics_period()?);
     let mut check_parameters = Every::new(Duration::from_millis(20));
@@ -237,7 +249,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 if report.due() {
                     diagnostics.publish(&diagnostic_array(est.status(&ctx.name)))?;
                 }
-                idle.wait();
+                idle.wait_for(&states)?;
             }
         }
     }

@@ -12,9 +12,11 @@
 
 use std::fmt::Debug;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
+use iceoryx2::port::listener::{Listener as IoxListener, ListenerWaitError};
+use iceoryx2::port::notifier::Notifier as IoxNotifier;
 use iceoryx2::port::publisher::Publisher as IoxPublisher;
 use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
@@ -126,6 +128,7 @@ pub trait IpcSend<T>: Send + Sync {
 pub trait IpcRecv<T>: Send + Sync {
     fn try_recv(&self) -> Result<Option<T>, TransportError>;
     fn update_connections(&self) -> Result<(), TransportError>;
+    fn wait(&self, timeout: Duration) -> Result<(), TransportError>;
 }
 
 fn connection_err(topic: &str, e: impl Debug) -> TransportError {
@@ -267,16 +270,101 @@ fn history_request(qos: Qos) -> usize {
     }
 }
 
+// ---- wake-up: an event service next to each topic ----
+
+/// Every iceoryx2 publisher also notifies the event service `<service>/wake` after each
+/// sample, so that a subscriber can sleep in the kernel until data arrives (a servo-rate
+/// node with real-time priority must block, not spin) instead of polling.
+fn wake_service(node: &IpcNode, topic: &str) -> Result<WakeService, TransportError> {
+    let name = format!("{}/wake", node.service_name(topic));
+    let service_name = ServiceName::new(&name).map_err(|e| TransportError::TopicName {
+        topic: topic.to_owned(),
+        reason: format!("iceoryx2 service name {name:?}: {e:?}"),
+    })?;
+    node.node
+        .service_builder(&service_name)
+        .event()
+        .max_notifiers(MAX_PUBLISHERS)
+        .max_listeners(MAX_SUBSCRIBERS)
+        .max_nodes(MAX_NODES)
+        .open_or_create()
+        .map_err(|e| create_err(topic, "wake-up event service", e))
+}
+
+fn wake_notifier(node: &IpcNode, topic: &str) -> Result<IoxNotifier<IpcService>, TransportError> {
+    wake_service(node, topic)?
+        .notifier_builder()
+        .create()
+        .map_err(|e| create_err(topic, "wake-up notifier", e))
+}
+
+/// Wakes the listeners of a topic; a failed wake-up costs a subscriber at most its timeout,
+/// so it is logged, not returned.
+fn wake(topic: &str, notifier: &IoxNotifier<IpcService>) {
+    if let Err(e) = notifier.notify() {
+        log::debug!("{topic}: wake-up notification failed: {e:?}");
+    }
+}
+
+type WakeService = iceoryx2::service::port_factory::event::PortFactory<IpcService>;
+
+/// The listener of a subscriber, made on its first wait (most subscribers only poll, and a
+/// listener nobody waits on would only collect notifications).
+struct Waker {
+    topic: &'static str,
+    service: WakeService,
+    listener: OnceLock<IoxListener<IpcService>>,
+}
+
+impl Waker {
+    fn new(node: &IpcNode, topic: &'static str) -> Result<Self, TransportError> {
+        Ok(Self {
+            topic,
+            service: wake_service(node, topic)?,
+            listener: OnceLock::new(),
+        })
+    }
+
+    /// Blocks until a publisher notifies or `timeout` passes. The first call only creates the
+    /// listener and returns: the caller polls again, and from then on no notification is missed.
+    fn wait(&self, timeout: Duration) -> Result<(), TransportError> {
+        let err = |reason: String| TransportError::Receive {
+            topic: self.topic.to_owned(),
+            backend: BACKEND,
+            reason,
+        };
+        match self.listener.get() {
+            Some(listener) => match listener.timed_wait(|_| {}, timeout) {
+                // A signal (SIGTERM: the node's stop request) ends the wait like a wake-up;
+                // the caller's loop then sees the request.
+                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                Err(e) => return Err(err(format!("waiting for a wake-up: {e:?}"))),
+            },
+            None => {
+                let listener = self
+                    .service
+                    .listener_builder()
+                    .create()
+                    .map_err(|e| err(format!("creating the wake-up listener: {e:?}")))?;
+                let _ = self.listener.set(listener);
+            }
+        }
+        Ok(())
+    }
+}
+
 // ---- zero-copy: the value itself in shared memory ----
 
 struct ZcPub<T: ZeroCopySend + Debug + 'static> {
     topic: &'static str,
     node: Arc<Node<IpcService>>,
+    notifier: IoxNotifier<IpcService>,
     publisher: IoxPublisher<IpcService, T, ()>,
 }
 
 struct ZcSub<T: ZeroCopySend + Debug + 'static> {
     topic: &'static str,
+    waker: Waker,
     subscriber: IoxSubscriber<IpcService, T, ()>,
 }
 
@@ -304,6 +392,7 @@ where
     Ok(Box::new(ZcPub {
         topic: topic.name(),
         node: Arc::clone(&node.node),
+        notifier: wake_notifier(node, topic.name())?,
         publisher,
     }))
 }
@@ -328,6 +417,7 @@ where
         .map_err(|e| create_err(topic.name(), "subscriber", e))?;
     Ok(Box::new(ZcSub {
         topic: topic.name(),
+        waker: Waker::new(node, topic.name())?,
         subscriber,
     }))
 }
@@ -340,7 +430,9 @@ impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcSend<T> for ZcPu
             reason: format!("{e:?}"),
         };
         let sample = self.publisher.loan_uninit().map_err(|e| err(&e))?;
-        deliver(&self.node, self.topic, sample.write_payload(*msg).send())
+        deliver(&self.node, self.topic, sample.write_payload(*msg).send())?;
+        wake(self.topic, &self.notifier);
+        Ok(())
     }
 }
 
@@ -360,6 +452,14 @@ impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcRecv<T> for ZcSu
             .update_connections()
             .map_err(|e| connection_err(self.topic, e))
     }
+    fn wait(&self, timeout: Duration) -> Result<(), TransportError> {
+        // Connected before sleeping: a publisher that appeared since the last poll then
+        // delivers what it sends next.
+        self.subscriber
+            .update_connections()
+            .map_err(|e| connection_err(self.topic, e))?;
+        self.waker.wait(timeout)
+    }
 }
 
 // ---- CDR bytes in a [u8] slice ----
@@ -367,11 +467,13 @@ impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcRecv<T> for ZcSu
 struct CdrPub {
     topic: &'static str,
     node: Arc<Node<IpcService>>,
+    notifier: IoxNotifier<IpcService>,
     publisher: IoxPublisher<IpcService, [u8], ()>,
 }
 
 struct CdrSub {
     topic: &'static str,
+    waker: Waker,
     subscriber: IoxSubscriber<IpcService, [u8], ()>,
 }
 
@@ -401,6 +503,7 @@ fn cdr_publisher<T: RosMessage>(
     Ok(Box::new(CdrPub {
         topic: topic.name(),
         node: Arc::clone(&node.node),
+        notifier: wake_notifier(node, topic.name())?,
         publisher,
     }))
 }
@@ -425,6 +528,7 @@ fn cdr_subscriber<T: RosMessage>(
         .map_err(|e| create_err(topic.name(), "subscriber", e))?;
     Ok(Box::new(CdrSub {
         topic: topic.name(),
+        waker: Waker::new(node, topic.name())?,
         subscriber,
     }))
 }
@@ -448,7 +552,9 @@ impl<T: RosMessage> IpcSend<T> for CdrPub {
             &self.node,
             self.topic,
             sample.write_from_slice(&bytes).send(),
-        )
+        )?;
+        wake(self.topic, &self.notifier);
+        Ok(())
     }
 }
 
@@ -476,6 +582,14 @@ impl<T: RosMessage> IpcRecv<T> for CdrSub {
         self.subscriber
             .update_connections()
             .map_err(|e| connection_err(self.topic, e))
+    }
+    fn wait(&self, timeout: Duration) -> Result<(), TransportError> {
+        // Connected before sleeping: a publisher that appeared since the last poll then
+        // delivers what it sends next.
+        self.subscriber
+            .update_connections()
+            .map_err(|e| connection_err(self.topic, e))?;
+        self.waker.wait(timeout)
     }
 }
 

@@ -263,6 +263,20 @@ impl<T: IpcMessage> Subscriber<T> {
         }
     }
 
+    /// Sleeps until a publisher may have sent something or `timeout` passes, without taking
+    /// a sample: on iceoryx2 in the kernel until a publisher's wake-up (the first call only
+    /// arms it and returns), on DDS for at most [`POLL_SLEEP`]. Poll with
+    /// [`Subscriber::try_recv`] afterwards; a wake-up may be spurious.
+    pub fn wait(&self, timeout: Duration) -> Result<(), TransportError> {
+        match &self.inner {
+            SubInner::Ipc(s) => s.wait(timeout),
+            SubInner::Dds(_) => {
+                std::thread::sleep(POLL_SLEEP.min(timeout));
+                Ok(())
+            }
+        }
+    }
+
     /// Waits up to `timeout` for the next sample; `Ok(None)` on timeout. Busy-polls for the
     /// first 200 µs, then polls every 100 µs.
     pub fn recv_timeout(&self, timeout: Duration) -> Result<Option<T>, TransportError> {
