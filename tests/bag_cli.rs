@@ -180,6 +180,35 @@ fn reference_stream() -> Vec<ActuatorState> {
     states
 }
 
+/// `rpkm record --reliable` of the actuator stream into `out` with `chunk_kib` chunks,
+/// printing each flush, and the reliable replay of the 8 kHz reference bag at `rate`, both
+/// on `prefix`; returns once the recorder listens, with the replay started.
+fn reliable_record_and_replay(
+    prefix: &str,
+    out: &std::path::Path,
+    chunk_kib: &str,
+    rate: &str,
+) -> (Watched, Watched) {
+    let mut recorder = Watched::spawn(
+        rpkm()
+            .args(["record", "--topics", "/rpkm/actuator_state", "--reliable"])
+            .args(["--chunk-kib", chunk_kib, "--flush-every", "0", "--progress"])
+            .args(["--ipc-prefix", prefix])
+            .arg("--out")
+            .arg(out),
+    );
+    recorder.wait_line(Duration::from_secs(60), |l| {
+        l.contains("recording 1 topics")
+    });
+    let replay = Watched::spawn(
+        rpkm()
+            .arg("replay")
+            .arg(reference_bag("stream_8khz"))
+            .args(["--rate", rate, "--reliable", "--ipc-prefix", prefix]),
+    );
+    (recorder, replay)
+}
+
 /// A subscriber killed with SIGKILL stays connected to iceoryx2 with its queue full until
 /// someone removes dead nodes' resources; a reliable publisher must notice and go on rather
 /// than wait for it forever.
@@ -187,24 +216,9 @@ fn reference_stream() -> Vec<ActuatorState> {
 fn reliable_replay_goes_on_when_its_recorder_dies_with_a_full_queue() {
     let dir = scratch("dead_subscriber");
     let prefix = ipc_prefix("dead");
-    let mut recorder = Watched::spawn(
-        rpkm()
-            .args(["record", "--topics", "/rpkm/actuator_state", "--reliable"])
-            .args(["--chunk-kib", "4", "--flush-every", "0", "--progress"])
-            .args(["--ipc-prefix", &prefix])
-            .arg("--out")
-            .arg(dir.join("rec")),
-    );
-    recorder.wait_line(Duration::from_secs(60), |l| {
-        l.contains("recording 1 topics")
-    });
     // 4000 states at a quarter of 8 kHz: 2 s, long enough to freeze the recorder mid-stream.
-    let mut replay = Watched::spawn(
-        rpkm()
-            .arg("replay")
-            .arg(reference_bag("stream_8khz"))
-            .args(["--rate", "0.25", "--reliable", "--ipc-prefix", &prefix]),
-    );
+    let (mut recorder, mut replay) =
+        reliable_record_and_replay(&prefix, &dir.join("rec"), "4", "0.25");
     recorder.wait_line(Duration::from_secs(60), |l| {
         l.starts_with("rpkm record: flushed ")
     });
@@ -233,23 +247,7 @@ fn recorder_killed_during_8khz_stream_is_recovered() {
     let prefix = ipc_prefix("kill");
     let rec = dir.join("rec");
     // Reliable: the replayer waits for the recorder, so the recording is the source's prefix.
-    let mut recorder = Watched::spawn(
-        rpkm()
-            .args(["record", "--topics", "/rpkm/actuator_state", "--reliable"])
-            .args(["--chunk-kib", "16", "--flush-every", "0", "--progress"])
-            .args(["--ipc-prefix", &prefix])
-            .arg("--out")
-            .arg(&rec),
-    );
-    recorder.wait_line(Duration::from_secs(60), |l| {
-        l.contains("recording 1 topics")
-    });
-    let mut replay = Watched::spawn(
-        rpkm()
-            .arg("replay")
-            .arg(reference_bag("stream_8khz"))
-            .args(["--rate", "1", "--reliable", "--ipc-prefix", &prefix]),
-    );
+    let (mut recorder, mut replay) = reliable_record_and_replay(&prefix, &rec, "16", "1");
     // Kill once a good part of the stream is on disk, while the rest is still coming.
     let line = recorder.wait_line(Duration::from_secs(60), |l| {
         l.strip_prefix("rpkm record: flushed ")

@@ -1,22 +1,16 @@
 //! iceoryx2 publish/subscribe between two threads: a burst of 10,000 ActuatorState samples
 //! (zero-copy type) arrives complete, in order and intact; CDR-carried types arrive intact.
 
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+mod ipc_common;
 
+use std::time::Duration;
+
+use ipc_common::unique_prefix;
 use rpkm_msgs::{ActuatorState, Diagnosis, DiagnosisCandidate, Time};
 use rpkm_transport::{topic, Backend, Qos, Topic, Transport, TransportConfig};
 
 const BURST: u64 = 10_000;
 const WAIT: Duration = Duration::from_secs(10);
-
-/// A service prefix no other test run shares (iceoryx2 services are machine-global).
-fn unique_prefix(test: &str) -> String {
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
-    format!("rpkm_test_{test}_{}_{nanos}", std::process::id())
-}
 
 fn sample(seq: u64) -> ActuatorState {
     let s = seq as f64;

@@ -1,18 +1,13 @@
 //! iceoryx2 wake-ups: a subscriber that waits sleeps in the kernel until a publisher of its
 //! topic sends (zero-copy and CDR types alike), and sleeps its whole timeout when none does.
 
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+mod ipc_common;
 
+use std::time::{Duration, Instant};
+
+use ipc_common::unique_prefix;
 use rpkm_msgs::{ActuatorState, Diagnosis};
 use rpkm_transport::{topic, IpcMessage, Topic, Transport, TransportConfig};
-
-fn unique_prefix(test: &str) -> String {
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
-    format!("rpkm_test_{test}_{}_{nanos}", std::process::id())
-}
 
 /// Publishes `msg` from another thread 100 ms after the subscriber started waiting; the wait
 /// (timeout 20 s) returns once it is sent and the sample is there to take.

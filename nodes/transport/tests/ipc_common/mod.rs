@@ -1,0 +1,12 @@
+//! Shared by the iceoryx2 tests.
+
+use std::time::{SystemTime, UNIX_EPOCH};
+
+/// A service prefix no other test run shares (iceoryx2 services are machine-global).
+pub fn unique_prefix(test: &str) -> String {
+    let nanos = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_nanos())
+        .unwrap_or(0);
+    format!("rpkm_test_{test}_{}_{nanos}", std::process::id())
+}
