@@ -143,9 +143,16 @@ fn sigkilled_estimator_is_restarted_and_rejoins_while_the_stream_goes_on() {
         "the restarted estimator rejoined within 2 s: {} estimates after seq {killed_at}",
         after.len()
     );
+    // The killed process may have published a few more after `killed_at` was seen, so
+    // `after` may start with its last ones: one gap (the downtime), then contiguous.
+    let gaps: Vec<(u64, u64)> = after
+        .windows(2)
+        .filter(|w| w[1] != w[0] + 1)
+        .map(|w| (w[0], w[1]))
+        .collect();
     assert!(
-        after.windows(2).all(|w| w[1] == w[0] + 1),
-        "contiguous once rejoined"
+        gaps.len() <= 1,
+        "contiguous once rejoined; gaps after seq {killed_at}: {gaps:?}"
     );
     assert!(
         worst_error_m < 1e-9,
