@@ -40,8 +40,11 @@ use crate::node::EXECUTABLES;
 /// `rpkm launch`.
 #[derive(clap::Args, Debug, Clone)]
 #[command(
-    after_help = "Example:\n  rpkm launch launch_scripts/rpkm.launch.yaml backend:=both\n\
-Ctrl-C (or SIGTERM) stops every node; a node that crashes is restarted with backoff."
+    after_help = "Examples:\n  rpkm launch launch_scripts/rpkm.launch.yaml backend:=both\n  \
+rpkm launch launch_scripts/rpkm.launch.yaml source:=campaign.csv record:=true bag_dir:=runs\n\n\
+Entries: arg, node (rpkm nodes), executable (`cmd: rpkm record ...` or `rpkm replay ...`), \
+set_env; `if:`/`unless:` switch a node or executable. Ctrl-C (or SIGTERM) stops every \
+process (a recorder closes its bag); a node that crashes is restarted with backoff."
 )]
 pub struct LaunchArgs {
     /// Launch description (ROS 2 launch YAML).
