@@ -155,22 +155,29 @@ pub trait IpcMessage: RosMessage + Sync {
     ) -> Result<Box<dyn IpcRecv<Self>>, TransportError>;
 }
 
-/// Service-level settings derived from the QoS; identical in every process.
-macro_rules! configure_service {
-    ($builder:expr, $qos:expr) => {{
-        let qos: Qos = $qos;
+/// Opens (or creates) the publish-subscribe service of `topic` with payload type `$payload`,
+/// its settings derived from the QoS and identical in every process. A macro: iceoryx2 opens
+/// sized and slice payloads through different impls.
+macro_rules! open_service {
+    ($node:expr, $topic:expr, $payload:ty) => {{
+        let qos: Qos = $topic.qos();
         let depth = qos.depth.max(1);
         let history = match qos.durability {
             Durability::TransientLocal => depth,
             Durability::Volatile => 0,
         };
-        $builder
+        $node
+            .node
+            .service_builder(&$node.service($topic.name())?)
+            .publish_subscribe::<$payload>()
             .enable_safe_overflow(qos.reliability == Reliability::BestEffort)
             .subscriber_max_buffer_size(depth)
             .history_size(history)
             .max_publishers(MAX_PUBLISHERS)
             .max_subscribers(MAX_SUBSCRIBERS)
             .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| create_err($topic.name(), "service", e))?
     }};
 }
 
@@ -189,7 +196,7 @@ const STALL_CHECK: Duration = Duration::from_millis(250);
 /// killed with SIGKILL stays connected (its queue full) until someone removes the stale
 /// resources of dead nodes. While it waits, the handler checks every [`STALL_CHECK`]
 /// whether any node on the machine is dead; if one is, delivery to the stalled queue is
-/// abandoned and [`deliver`] removes the dead nodes.
+/// abandoned and [`SendSide::sent`] removes the dead nodes.
 fn backpressure_handler() -> impl Fn(&BackpressureInfo) -> BackpressureAction + Send {
     let next_check_ms = AtomicU64::new(STALL_CHECK.as_millis() as u64);
     move |info: &BackpressureInfo| {
@@ -226,43 +233,6 @@ fn any_dead_node() -> bool {
     listed.is_ok() && dead
 }
 
-/// Maps the result of a send. A reliable send that gave up on a stalled subscriber (the
-/// handler saw a dead node) removes the dead nodes' resources: if that freed any, the
-/// stalled subscriber was the dead one and every live subscriber got the sample.
-fn deliver(
-    node: &Node<IpcService>,
-    topic: &str,
-    sent: Result<usize, SendError>,
-) -> Result<(), TransportError> {
-    match sent {
-        Ok(_) => Ok(()),
-        Err(SendError::UnableToDeliver) => {
-            let cleaned = node.try_cleanup_dead_nodes();
-            if cleaned.cleanups > 0 {
-                log::warn!(
-                    "{topic}: a subscriber stopped taking samples; removed the resources of {} dead \
-                     node(s), the live subscribers have the sample",
-                    cleaned.cleanups
-                );
-                Ok(())
-            } else {
-                Err(TransportError::Publish {
-                    topic: topic.to_owned(),
-                    backend: BACKEND,
-                    reason: "a subscriber's queue stayed full and no dead node could be removed; \
-                             the sample did not reach that subscriber"
-                        .to_owned(),
-                })
-            }
-        }
-        Err(e) => Err(TransportError::Publish {
-            topic: topic.to_owned(),
-            backend: BACKEND,
-            reason: format!("{e:?}"),
-        }),
-    }
-}
-
 fn history_request(qos: Qos) -> usize {
     match qos.durability {
         Durability::TransientLocal => qos.depth.max(1),
@@ -291,18 +261,67 @@ fn wake_service(node: &IpcNode, topic: &str) -> Result<WakeService, TransportErr
         .map_err(|e| create_err(topic, "wake-up event service", e))
 }
 
-fn wake_notifier(node: &IpcNode, topic: &str) -> Result<IoxNotifier<IpcService>, TransportError> {
-    wake_service(node, topic)?
-        .notifier_builder()
-        .create()
-        .map_err(|e| create_err(topic, "wake-up notifier", e))
+/// What both kinds of publisher do around a send: a reliable send that gave up on a stalled
+/// subscriber (the backpressure handler saw a dead node) removes the dead nodes' resources,
+/// and every sample wakes the topic's waiting subscribers.
+struct SendSide {
+    topic: &'static str,
+    node: Arc<Node<IpcService>>,
+    notifier: IoxNotifier<IpcService>,
 }
 
-/// Wakes the listeners of a topic; a failed wake-up costs a subscriber at most its timeout,
-/// so it is logged, not returned.
-fn wake(topic: &str, notifier: &IoxNotifier<IpcService>) {
-    if let Err(e) = notifier.notify() {
-        log::debug!("{topic}: wake-up notification failed: {e:?}");
+impl SendSide {
+    fn new(node: &IpcNode, topic: &'static str) -> Result<Self, TransportError> {
+        let notifier = wake_service(node, topic)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| create_err(topic, "wake-up notifier", e))?;
+        Ok(Self {
+            topic,
+            node: Arc::clone(&node.node),
+            notifier,
+        })
+    }
+
+    fn publish_err(&self, e: impl Debug) -> TransportError {
+        TransportError::Publish {
+            topic: self.topic.to_owned(),
+            backend: BACKEND,
+            reason: format!("{e:?}"),
+        }
+    }
+
+    /// Maps the result of a send, then wakes the listeners. After a dead-node clean-up that
+    /// freed something, the stalled subscriber was the dead one and every live subscriber
+    /// got the sample. A failed wake-up costs a subscriber at most its timeout, so it is
+    /// logged, not returned.
+    fn sent(&self, sent: Result<usize, SendError>) -> Result<(), TransportError> {
+        match sent {
+            Ok(_) => {}
+            Err(SendError::UnableToDeliver) => {
+                let cleaned = self.node.try_cleanup_dead_nodes();
+                if cleaned.cleanups == 0 {
+                    return Err(TransportError::Publish {
+                        topic: self.topic.to_owned(),
+                        backend: BACKEND,
+                        reason: "a subscriber's queue stayed full and no dead node could be \
+                                 removed; the sample did not reach that subscriber"
+                            .to_owned(),
+                    });
+                }
+                log::warn!(
+                    "{}: a subscriber stopped taking samples; removed the resources of {} dead \
+                     node(s), the live subscribers have the sample",
+                    self.topic,
+                    cleaned.cleanups
+                );
+            }
+            Err(e) => return Err(self.publish_err(e)),
+        }
+        if let Err(e) = self.notifier.notify() {
+            log::debug!("{}: wake-up notification failed: {e:?}", self.topic);
+        }
+        Ok(())
     }
 }
 
@@ -356,9 +375,7 @@ impl Waker {
 // ---- zero-copy: the value itself in shared memory ----
 
 struct ZcPub<T: ZeroCopySend + Debug + 'static> {
-    topic: &'static str,
-    node: Arc<Node<IpcService>>,
-    notifier: IoxNotifier<IpcService>,
+    side: SendSide,
     publisher: IoxPublisher<IpcService, T, ()>,
 }
 
@@ -372,14 +389,7 @@ fn zc_publisher<T>(node: &IpcNode, topic: &Topic<T>) -> Result<Box<dyn IpcSend<T
 where
     T: ZeroCopySend + Debug + Copy + Send + Sync + 'static,
 {
-    let service = configure_service!(
-        node.node
-            .service_builder(&node.service(topic.name())?)
-            .publish_subscribe::<T>(),
-        topic.qos()
-    )
-    .open_or_create()
-    .map_err(|e| create_err(topic.name(), "service", e))?;
+    let service = open_service!(node, topic, T);
     let publisher = service
         .publisher_builder()
         .backpressure_strategy(backpressure(topic.qos()))
@@ -390,9 +400,7 @@ where
         .update_connections()
         .map_err(|e| create_err(topic.name(), "publisher", e))?;
     Ok(Box::new(ZcPub {
-        topic: topic.name(),
-        node: Arc::clone(&node.node),
-        notifier: wake_notifier(node, topic.name())?,
+        side: SendSide::new(node, topic.name())?,
         publisher,
     }))
 }
@@ -401,14 +409,7 @@ fn zc_subscriber<T>(node: &IpcNode, topic: &Topic<T>) -> Result<Box<dyn IpcRecv<
 where
     T: ZeroCopySend + Debug + Copy + Send + Sync + 'static,
 {
-    let service = configure_service!(
-        node.node
-            .service_builder(&node.service(topic.name())?)
-            .publish_subscribe::<T>(),
-        topic.qos()
-    )
-    .open_or_create()
-    .map_err(|e| create_err(topic.name(), "service", e))?;
+    let service = open_service!(node, topic, T);
     let subscriber = service
         .subscriber_builder()
         .buffer_size(topic.qos().depth.max(1))
@@ -424,15 +425,11 @@ where
 
 impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcSend<T> for ZcPub<T> {
     fn send(&self, msg: &T) -> Result<(), TransportError> {
-        let err = |e: &dyn Debug| TransportError::Publish {
-            topic: self.topic.to_owned(),
-            backend: BACKEND,
-            reason: format!("{e:?}"),
-        };
-        let sample = self.publisher.loan_uninit().map_err(|e| err(&e))?;
-        deliver(&self.node, self.topic, sample.write_payload(*msg).send())?;
-        wake(self.topic, &self.notifier);
-        Ok(())
+        let sample = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| self.side.publish_err(e))?;
+        self.side.sent(sample.write_payload(*msg).send())
     }
 }
 
@@ -465,9 +462,7 @@ impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcRecv<T> for ZcSu
 // ---- CDR bytes in a [u8] slice ----
 
 struct CdrPub {
-    topic: &'static str,
-    node: Arc<Node<IpcService>>,
-    notifier: IoxNotifier<IpcService>,
+    side: SendSide,
     publisher: IoxPublisher<IpcService, [u8], ()>,
 }
 
@@ -481,14 +476,7 @@ fn cdr_publisher<T: RosMessage>(
     node: &IpcNode,
     topic: &Topic<T>,
 ) -> Result<Box<dyn IpcSend<T>>, TransportError> {
-    let service = configure_service!(
-        node.node
-            .service_builder(&node.service(topic.name())?)
-            .publish_subscribe::<[u8]>(),
-        topic.qos()
-    )
-    .open_or_create()
-    .map_err(|e| create_err(topic.name(), "service", e))?;
+    let service = open_service!(node, topic, [u8]);
     let publisher = service
         .publisher_builder()
         .initial_max_slice_len(INITIAL_CDR_LEN)
@@ -501,9 +489,7 @@ fn cdr_publisher<T: RosMessage>(
         .update_connections()
         .map_err(|e| create_err(topic.name(), "publisher", e))?;
     Ok(Box::new(CdrPub {
-        topic: topic.name(),
-        node: Arc::clone(&node.node),
-        notifier: wake_notifier(node, topic.name())?,
+        side: SendSide::new(node, topic.name())?,
         publisher,
     }))
 }
@@ -512,14 +498,7 @@ fn cdr_subscriber<T: RosMessage>(
     node: &IpcNode,
     topic: &Topic<T>,
 ) -> Result<Box<dyn IpcRecv<T>>, TransportError> {
-    let service = configure_service!(
-        node.node
-            .service_builder(&node.service(topic.name())?)
-            .publish_subscribe::<[u8]>(),
-        topic.qos()
-    )
-    .open_or_create()
-    .map_err(|e| create_err(topic.name(), "service", e))?;
+    let service = open_service!(node, topic, [u8]);
     let subscriber = service
         .subscriber_builder()
         .buffer_size(topic.qos().depth.max(1))
@@ -536,25 +515,14 @@ fn cdr_subscriber<T: RosMessage>(
 impl<T: RosMessage> IpcSend<T> for CdrPub {
     fn send(&self, msg: &T) -> Result<(), TransportError> {
         let bytes = to_cdr(msg).map_err(|source| TransportError::Cdr {
-            topic: self.topic.to_owned(),
+            topic: self.side.topic.to_owned(),
             source,
         })?;
-        let err = |e: &dyn Debug| TransportError::Publish {
-            topic: self.topic.to_owned(),
-            backend: BACKEND,
-            reason: format!("{e:?}"),
-        };
         let sample = self
             .publisher
             .loan_slice_uninit(bytes.len())
-            .map_err(|e| err(&e))?;
-        deliver(
-            &self.node,
-            self.topic,
-            sample.write_from_slice(&bytes).send(),
-        )?;
-        wake(self.topic, &self.notifier);
-        Ok(())
+            .map_err(|e| self.side.publish_err(e))?;
+        self.side.sent(sample.write_from_slice(&bytes).send())
     }
 }
 
