@@ -35,6 +35,7 @@ use std::path::{Path, PathBuf};
 
 use serde_yaml::Value;
 
+use crate::node::params::{parse_yaml, YamlSyntax};
 use crate::node::EXECUTABLES;
 
 /// `rpkm launch`.
@@ -62,13 +63,8 @@ pub enum LaunchError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{file}:{line}:{column}: not YAML: {message}")]
-    Yaml {
-        file: String,
-        line: usize,
-        column: usize,
-        message: String,
-    },
+    #[error(transparent)]
+    Yaml(#[from] YamlSyntax),
     #[error("{file}: {what}")]
     Invalid { file: String, what: String },
 }
@@ -206,18 +202,7 @@ impl LaunchDescription {
         dir: &Path,
         overrides: &[String],
     ) -> Result<Self, LaunchError> {
-        let doc: Value = serde_yaml::from_str(text).map_err(|e| {
-            let (line, column) = e
-                .location()
-                .map(|l| (l.line(), l.column()))
-                .unwrap_or((0, 0));
-            LaunchError::Yaml {
-                file: file.to_owned(),
-                line,
-                column,
-                message: e.to_string(),
-            }
-        })?;
+        let doc = parse_yaml(text, file)?;
         let mut ctx = Ctx {
             file: file.to_owned(),
             dir,

@@ -38,6 +38,32 @@ impl std::fmt::Display for Origin {
     }
 }
 
+/// A YAML text that does not parse, with the place (parameter and launch files).
+#[derive(Debug, thiserror::Error)]
+#[error("{file}:{line}:{column}: not YAML: {message}")]
+pub struct YamlSyntax {
+    pub file: String,
+    pub line: usize,
+    pub column: usize,
+    pub message: String,
+}
+
+/// Parses the YAML `text` of `file`.
+pub fn parse_yaml(text: &str, file: &str) -> Result<Value, YamlSyntax> {
+    serde_yaml::from_str(text).map_err(|e| {
+        let (line, column) = e
+            .location()
+            .map(|l| (l.line(), l.column()))
+            .unwrap_or((0, 0));
+        YamlSyntax {
+            file: file.to_owned(),
+            line,
+            column,
+            message: e.to_string(),
+        }
+    })
+}
+
 /// A parameter file or value that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ParamError {
@@ -49,13 +75,8 @@ pub enum ParamError {
         source: std::io::Error,
     },
     /// The file is not YAML.
-    #[error("{file}:{line}:{column}: not YAML: {message}")]
-    Yaml {
-        file: String,
-        line: usize,
-        column: usize,
-        message: String,
-    },
+    #[error(transparent)]
+    Yaml(#[from] YamlSyntax),
     /// The YAML does not have the ROS 2 layout.
     #[error("{file}: {what}")]
     Layout { file: String, what: String },
@@ -170,18 +191,7 @@ impl NodeParams {
     /// Merges the sections of one file's text that address this node.
     pub fn merge_text(&mut self, text: &str, file: &Path) -> Result<(), ParamError> {
         let fname = file.display().to_string();
-        let doc: Value = serde_yaml::from_str(text).map_err(|e| {
-            let (line, column) = e
-                .location()
-                .map(|l| (l.line(), l.column()))
-                .unwrap_or((0, 0));
-            ParamError::Yaml {
-                file: fname.clone(),
-                line,
-                column,
-                message: e.to_string(),
-            }
-        })?;
+        let doc = parse_yaml(text, &fname)?;
         let layout = |what: String| ParamError::Layout {
             file: fname.clone(),
             what,
@@ -431,7 +441,10 @@ tcp_estimator:
             "p.yaml: /ns/ingest/ros__parameters/rate_hz: expected a finite number, found \"fast\""
         );
         let bad = load("ingest: [1, 2\n", "ingest").expect_err("not YAML");
-        assert!(matches!(bad, ParamError::Yaml { line: 2, .. }), "{bad}");
+        assert!(
+            matches!(bad, ParamError::Yaml(YamlSyntax { line: 2, .. })),
+            "{bad}"
+        );
         let layout = load("ingest:\n  rate_hz: 3\n", "ingest").expect_err("no ros__parameters");
         assert!(layout.to_string().contains("ros__parameters"), "{layout}");
         Ok(())
