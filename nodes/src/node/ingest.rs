@@ -590,18 +590,13 @@ pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
     let ctx = NodeContext::open("ingest", &args.common, &KEYS, extra)?;
     let p = &ctx.params;
     let bp = super::bad_param;
+    let d = Limits::default();
     let limits = Limits {
-        position_min_m: p
-            .f64("position_min_m", Limits::default().position_min_m)
-            .map_err(bp)?,
-        position_max_m: p
-            .f64("position_max_m", Limits::default().position_max_m)
-            .map_err(bp)?,
-        force_max_n: p
-            .positive("force_max_n", Limits::default().force_max_n)
-            .map_err(bp)?,
+        position_min_m: p.f64("position_min_m", d.position_min_m).map_err(bp)?,
+        position_max_m: p.f64("position_max_m", d.position_max_m).map_err(bp)?,
+        force_max_n: p.positive("force_max_n", d.force_max_n).map_err(bp)?,
         measurement_max_m: p
-            .positive("measurement_max_m", Limits::default().measurement_max_m)
+            .positive("measurement_max_m", d.measurement_max_m)
             .map_err(bp)?,
     };
     let rate_hz = p.positive("rate_hz", 1000.0).map_err(bp)?;
