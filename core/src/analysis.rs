@@ -22,6 +22,7 @@
 use crate::campaign::{Campaign, Instrument, Pose};
 use crate::design::{self, PlannedPose, CENTRE};
 use crate::geometry::{self, GeometryError};
+use crate::noise::NoiseModel;
 use crate::obs::{self, Direction, PoseError, Residual, Step};
 use crate::observability::{condition_number, normalize_columns};
 use crate::params::{variation_range, Model, Params, NAMES};
@@ -254,9 +255,9 @@ pub fn design_rows(
     second_step: bool,
 ) -> Result<Vec<Residual>, AnalysisError> {
     let c = nominal_campaign(design, p, model)?;
-    let mut rows = obs::residuals(&c, p, model, Step::Direct, p)?;
+    let mut rows = obs::residuals(&c, p, model, Step::Direct, p, &NoiseModel::default())?;
     if second_step {
-        rows.extend(obs::residuals(&c, p, model, Step::VirtualQ2, p)?);
+        rows.extend(obs::residuals(&c, p, model, Step::VirtualQ2, p, &NoiseModel::default())?);
     }
     if rows.is_empty() {
         return Err(AnalysisError::NoRows);

@@ -5,9 +5,10 @@
 
 use crate::campaign::{Campaign, Instrument};
 use crate::effects::{Corrections, EffectSet};
+use crate::noise::NoiseModel;
 use crate::obs::{self, Direction, PoseError, Residual, Step};
 use crate::observability::{condition_number, normalize_columns, qr_pivot_order};
-use crate::params::{self, variation_range, Model, Params, NAMES, N_PARAMS};
+use crate::params::{self, unit, variation_range, Model, Params, Unit, NAMES, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
 use std::collections::{BTreeMap, HashSet};
 
@@ -19,6 +20,39 @@ pub enum Selection {
     Auto { max_condition: f64 },
     /// An explicit list of parameter indexes.
     List(Vec<usize>),
+    /// Every parameter of the model, each pulled towards its nominal value by its
+    /// manufacturing tolerance (maximum a posteriori): the campaign determines the parameter
+    /// combinations it sees better than the tolerance, the others stay at the prior. No
+    /// condition-number cut to choose, so every command calibrates the same way.
+    Prior(Prior),
+}
+
+/// Manufacturing tolerances of the geometric parameters (one standard deviation): the prior
+/// of a [`Selection::Prior`] calibration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prior {
+    pub length_mm: f64,
+    pub angle_rad: f64,
+}
+
+impl Default for Prior {
+    /// 0.1 mm and 1 mrad: a machined and assembled frame of this size.
+    fn default() -> Self {
+        Prior {
+            length_mm: 0.1,
+            angle_rad: 1e-3,
+        }
+    }
+}
+
+impl Prior {
+    /// The tolerance of parameter `i` (mm or rad).
+    pub fn sigma(&self, i: usize) -> f64 {
+        match unit(i) {
+            Unit::Mm => self.length_mm,
+            Unit::Rad => self.angle_rad,
+        }
+    }
 }
 
 /// Parameter scaling (eq. 3.23-3.25).
@@ -69,19 +103,20 @@ pub struct Options {
     /// eliminated (eq. 3.31-3.32); None keeps every row.
     pub outlier_sigma: Option<f64>,
     pub max_iterations: usize,
+    /// The instruments' and encoders' noise: the rows' weights.
+    pub noise: NoiseModel,
 }
 
 impl Default for Options {
     fn default() -> Self {
         Options {
             model: Model::M29,
-            selection: Selection::Auto {
-                max_condition: 100.0,
-            },
+            selection: Selection::Prior(Prior::default()),
             links: Vec::new(),
             scaling: Scaling::ColumnNorm,
             outlier_sigma: Some(3.0),
             max_iterations: 100,
+            noise: NoiseModel::default(),
         }
     }
 }
@@ -189,6 +224,16 @@ pub struct Calibration {
     pub effects: Vec<EffectEstimate>,
     /// Degrees of freedom used: identified geometric and effect parameters.
     pub n_identified: usize,
+    /// Effective number of parameters the data determine (the trace of the hat matrix):
+    /// `n_identified` without a prior, less where the prior holds a combination.
+    pub dof_model: f64,
+    /// With a prior: how many parameter combinations the campaign determined better than
+    /// their tolerance, out of how many.
+    pub determined: Option<(usize, usize)>,
+    /// The final rows of step 1 (the measurements) and their leverages (diagonal of the
+    /// hat matrix), for the noise estimation.
+    pub residuals: Vec<Residual>,
+    pub leverage: Vec<f64>,
 }
 
 /// The dependency matrix D (29 × n) for the identified `ids` with `links`.
@@ -225,6 +270,7 @@ fn weighted_theta(rows: &[Residual], free: &[usize]) -> DMatrix<f64> {
 
 type Key = (usize, Direction);
 
+#[allow(clippy::too_many_arguments)]
 fn rows_at(
     c: &Campaign,
     p: &Params,
@@ -233,8 +279,9 @@ fn rows_at(
     p_cal: &Params,
     corr: &Corrections,
     drop: &HashSet<Key>,
+    noise: &NoiseModel,
 ) -> Result<Vec<Residual>, PoseError> {
-    let mut rows = obs::residuals_with(c, p, model, step, p_cal, corr)?;
+    let mut rows = obs::residuals_with(c, p, model, step, p_cal, corr, noise)?;
     rows.retain(|r| !drop.contains(&(r.pose, r.direction)));
     Ok(rows)
 }
@@ -254,6 +301,11 @@ struct Lm<'a> {
     free_theta: &'a [usize],
     h_theta: DVector<f64>,
     max_iterations: usize,
+    noise: &'a NoiseModel,
+    /// Per reduced parameter: its index and tolerance (empty: no prior), and the prior's
+    /// centre.
+    prior: Vec<(usize, f64)>,
+    center: Params,
 }
 
 /// The unknowns of a calibration: geometric parameters and effect parameters.
@@ -280,17 +332,24 @@ impl Lm<'_> {
             &self.p_cal,
             &corr,
             self.drop,
+            self.noise,
         )?;
         let (r, j) = weighted(&rows);
         let jg = j * &self.d * DMatrix::from_diagonal(&self.h);
-        if self.free_theta.is_empty() {
-            return Ok((r, jg));
-        }
         let jt = weighted_theta(&rows, self.free_theta) * DMatrix::from_diagonal(&self.h_theta);
-        let mut js = DMatrix::zeros(jg.nrows(), jg.ncols() + jt.ncols());
-        js.columns_mut(0, jg.ncols()).copy_from(&jg);
-        js.columns_mut(jg.ncols(), jt.ncols()).copy_from(&jt);
-        Ok((r, js))
+        let (m, n) = (jg.nrows(), jg.ncols());
+        let np = self.prior.len();
+        // the prior as pseudo-rows (p − centre)/tolerance below the measurements
+        let mut js = DMatrix::zeros(m + np, n + jt.ncols());
+        js.view_mut((0, 0), (m, n)).copy_from(&jg);
+        js.view_mut((0, n), (m, jt.ncols())).copy_from(&jt);
+        let mut rs = DVector::zeros(m + np);
+        rs.rows_mut(0, m).copy_from(&r);
+        for (k, &(i, tol)) in self.prior.iter().enumerate() {
+            rs[m + k] = (x.p[i] - self.center[i]) / tol;
+            js[(m + k, k)] = self.h[k] / tol;
+        }
+        Ok((rs, js))
     }
 
     fn apply(&self, x: &State, delta: &DVector<f64>) -> State {
@@ -504,32 +563,72 @@ fn rms_table(before: &[Residual], after: &[Residual]) -> Vec<DirectionRms> {
         .collect()
 }
 
-/// A-posteriori covariance s² (JᵀJ)⁻¹ of a weighted problem: that of the identified geometric
-/// parameters, and the standard deviations of the identified effect parameters `free`.
-fn covariance(
+/// What the final fit of step 1 tells about its unknowns (scaled by nothing: the caller
+/// multiplies by the variance factor).
+struct Posterior {
+    /// Covariance (JᵀJ + Λ)⁻¹ of the identified geometric parameters (Λ: the prior's
+    /// precision, zero without one).
+    cov1: DMatrix<f64>,
+    /// Standard deviations of the free effect parameters.
+    sig_theta: Vec<f64>,
+    /// tr((JᵀJ + Λ)⁻¹ JᵀJ): the parameters the data determine.
+    dof_model: f64,
+    /// Diagonal of the hat matrix J (JᵀJ + Λ)⁻¹ Jᵀ, one per row.
+    leverage: Vec<f64>,
+    determined: Option<(usize, usize)>,
+}
+
+fn posterior(
     rows: &[Residual],
     ids: &[usize],
     links: &[Link],
     free: &[usize],
-    cost: f64,
-) -> Result<(DMatrix<f64>, Vec<f64>), CalibrationError> {
+    prior: &[(usize, f64)],
+) -> Result<Posterior, CalibrationError> {
     let jg = reduced_jacobian(rows, ids, links);
     let jt = weighted_theta(rows, free);
     let n = ids.len();
     let mut jr = DMatrix::zeros(rows.len(), n + free.len());
     jr.columns_mut(0, n).copy_from(&jg);
     jr.columns_mut(n, free.len()).copy_from(&jt);
-    let dof = rows.len().saturating_sub(n + free.len()).max(1) as f64;
-    let s2 = (2.0 * cost / dof).max(1.0);
-    let inv = normal_inverse(&jr, ids)? * s2;
-    let sig_theta = (0..free.len())
-        .map(|k| inv[(n + k, n + k)].max(0.0).sqrt())
+    let info = jr.transpose() * &jr;
+    let inv = normal_inverse(&jr, ids, prior)?;
+    let dof_model = (&inv * &info).trace();
+    let leverage = (0..jr.nrows())
+        .map(|i| {
+            let j = jr.row(i);
+            (j * &inv * j.transpose())[0]
+        })
         .collect();
-    Ok((inv.view((0, 0), (n, n)).into_owned(), sig_theta))
+    // directions: eigenvalues of the data's information in units of the prior's
+    let determined = (!prior.is_empty()).then(|| {
+        let tol = DVector::from_iterator(n, prior.iter().map(|p| p.1));
+        let g = DMatrix::from_diagonal(&tol) * info.view((0, 0), (n, n)) * DMatrix::from_diagonal(&tol);
+        let ev = g.symmetric_eigenvalues();
+        (ev.iter().filter(|&&v| v > 1.0).count(), n)
+    });
+    Ok(Posterior {
+        cov1: inv.view((0, 0), (n, n)).into_owned(),
+        sig_theta: (0..free.len())
+            .map(|k| inv[(n + k, n + k)].max(0.0).sqrt())
+            .collect(),
+        dof_model,
+        leverage,
+        determined,
+    })
 }
 
-fn normal_inverse(jr: &DMatrix<f64>, ids: &[usize]) -> Result<DMatrix<f64>, CalibrationError> {
-    (jr.transpose() * jr).try_inverse().ok_or_else(|| {
+/// (JᵀJ + Λ)⁻¹ with the prior's precision Λ on the first `prior.len()` columns.
+fn normal_inverse(
+    jr: &DMatrix<f64>,
+    ids: &[usize],
+    prior: &[(usize, f64)],
+) -> Result<DMatrix<f64>, CalibrationError> {
+    let mut n = jr.transpose() * jr;
+    for (k, &(_, tol)) in prior.iter().enumerate() {
+        n[(k, k)] += 1.0 / (tol * tol);
+    }
+    n.try_inverse().ok_or_else(|| {
         CalibrationError::Singular(ids.iter().map(|&i| NAMES[i]).collect::<Vec<_>>().join(", "))
     })
 }
@@ -540,10 +639,11 @@ fn normal_inverse(jr: &DMatrix<f64>, ids: &[usize]) -> Result<DMatrix<f64>, Cali
 fn step2_uncertainties(
     rows: &[Residual],
     ids: &[usize],
+    prior: &[(usize, f64)],
     cov_p1: &DMatrix<f64>,
 ) -> Result<Vec<f64>, CalibrationError> {
     let jr = reduced_jacobian(rows, ids, &[]);
-    let inv = normal_inverse(&jr, ids)?;
+    let inv = normal_inverse(&jr, ids, prior)?;
     let m = &inv * jr.transpose();
     let g = DMatrix::from_fn(rows.len(), N_PARAMS, |i, k| {
         rows[i].d_pcal.map_or(0.0, |d| d[k]) / rows[i].sigma
@@ -598,6 +698,7 @@ pub fn calibrate_with(
     let corr0 = effects.corrections(&theta0);
     let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();
     let no_drop = HashSet::new();
+    let noise = &opts.noise;
     let rows0 = rows_at(
         campaign,
         start,
@@ -606,12 +707,14 @@ pub fn calibrate_with(
         start,
         &corr0,
         &no_drop,
+        noise,
     )?;
     if rows0.is_empty() {
         return Err(CalibrationError::NoMeasurements(campaign.source.clone()));
     }
     let (step1_ids, step2_wanted) = select_geometric(campaign, &rows0, opts, &linked)?;
-    if rows0.len() < step1_ids.len() {
+    let prior1 = prior_of(&opts.selection, &step1_ids);
+    if prior1.is_empty() && rows0.len() < step1_ids.len() {
         return Err(CalibrationError::Underdetermined {
             params: step1_ids.len(),
             rows: rows0.len(),
@@ -620,6 +723,7 @@ pub fn calibrate_with(
     let layout = effects.layout();
     let observability = effect_observability(&rows0, &step1_ids, &opts.links, effects);
     let free_theta: Vec<usize> = (0..n_theta)
+        .filter(|&k| !effects.is_held(k))
         .filter(|&k| {
             let (frac, signal) = observability[k];
             frac >= MIN_EFFECT_OBSERVABILITY && signal * layout[k].1.prior >= MIN_EFFECT_SIGNAL
@@ -656,6 +760,9 @@ pub fn calibrate_with(
             free_theta: &free_theta,
             h_theta: h_theta.clone(),
             max_iterations: opts.max_iterations,
+            noise,
+            prior: prior1.clone(),
+            center: *start,
         };
         let res = lm.run(&x)?;
         x = res.state;
@@ -663,7 +770,7 @@ pub fn calibrate_with(
         cost = res.cost;
         let Some(k) = opts.outlier_sigma else { break };
         let corr = effects.corrections(&x.theta);
-        let rows = rows_at(campaign, &x.p, model, Step::Direct, start, &corr, &drop)?;
+        let rows = rows_at(campaign, &x.p, model, Step::Direct, start, &corr, &drop, noise)?;
         let found = find_outliers(&rows, campaign, k);
         if found.is_empty() || outliers.len() > rows0.len() / 20 {
             break;
@@ -674,11 +781,16 @@ pub fn calibrate_with(
         }
     }
     let corr = effects.corrections(&x.theta);
-    let rows_final = rows_at(campaign, &x.p, model, Step::Direct, start, &corr, &drop)?;
+    let rows_final = rows_at(campaign, &x.p, model, Step::Direct, start, &corr, &drop, noise)?;
     let n_identified = step1_ids.len() + free_theta.len();
-    // chi-square of the measurements themselves (the virtual rows of step 2 are not).
-    let chi2_per_dof = 2.0 * cost / rows_final.len().saturating_sub(n_identified).max(1) as f64;
-    let (cov1, cov_theta) = covariance(&rows_final, &step1_ids, &opts.links, &free_theta, cost)?;
+    let post = posterior(&rows_final, &step1_ids, &opts.links, &free_theta, &prior1)?;
+    // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
+    let chi2 = 2.0 * cost_of(&rows_final);
+    let chi2_per_dof = chi2 / (rows_final.len() as f64 - post.dof_model).max(1.0);
+    let s2 = chi2_per_dof.max(1.0);
+    let cov1 = &post.cov1 * s2;
+    let cov_theta: Vec<f64> = post.sig_theta.iter().map(|s| s * s2.sqrt()).collect();
+    let _ = cost;
     let sig1: Vec<f64> = (0..step1_ids.len())
         .map(|k| cov1[(k, k)].max(0.0).sqrt())
         .collect();
@@ -713,20 +825,21 @@ pub fn calibrate_with(
         })
         .collect();
     let mut before_rows: Vec<Residual> =
-        rows_at(campaign, start, model, Step::Direct, start, &corr0, &drop)?;
-    let mut after_rows = rows_final;
+        rows_at(campaign, start, model, Step::Direct, start, &corr0, &drop, noise)?;
+    let mut after_rows = rows_final.clone();
 
     // Step 2: rod 2 from virtual measurements of the forward instruments (eq. 4.32).
     let mut p = x.p;
     if !step2_wanted.is_empty() {
         let p1 = p;
-        let rows2 = rows_at(campaign, &p1, model, Step::VirtualQ2, &p1, &corr, &drop)?;
+        let rows2 = rows_at(campaign, &p1, model, Step::VirtualQ2, &p1, &corr, &drop, noise)?;
         let ids2 = match &opts.selection {
             Selection::Auto { max_condition } => {
                 auto_select(&rows2, &step2_wanted, &[], *max_condition)
             }
-            Selection::List(_) => step2_wanted.clone(),
+            Selection::List(_) | Selection::Prior(_) => step2_wanted.clone(),
         };
+        let prior2 = prior_of(&opts.selection, &ids2);
         if !ids2.is_empty() {
             let jr2 = reduced_jacobian(&rows2, &ids2, &[]);
             let h2 = scaling_vector(&jr2, &ids2, opts.scaling)?;
@@ -743,6 +856,9 @@ pub fn calibrate_with(
                 free_theta: &[],
                 h_theta: DVector::zeros(0),
                 max_iterations: opts.max_iterations,
+                noise,
+                prior: prior2.clone(),
+                center: *start,
             };
             let res = lm.run(&State {
                 p: p1,
@@ -750,8 +866,9 @@ pub fn calibrate_with(
             })?;
             p = res.state.p;
             iterations += res.iterations;
-            let rows2_after = rows_at(campaign, &p, model, Step::VirtualQ2, &p1, &corr, &drop)?;
-            let sig2 = step2_uncertainties(&rows2_after, &ids2, &cov_p1)?;
+            let rows2_after =
+                rows_at(campaign, &p, model, Step::VirtualQ2, &p1, &corr, &drop, noise)?;
+            let sig2 = step2_uncertainties(&rows2_after, &ids2, &prior2, &cov_p1)?;
             identified.extend(ids2.iter().zip(&sig2).map(|(&i, &s)| Identified {
                 name: NAMES[i],
                 index: i,
@@ -768,16 +885,11 @@ pub fn calibrate_with(
                 start,
                 &corr0,
                 &drop,
+                noise,
             )?);
             after_rows.extend(rows2_after);
         }
     }
-    let cost_of = |rows: &[Residual]| {
-        0.5 * rows
-            .iter()
-            .map(|r| (r.value / r.sigma).powi(2))
-            .sum::<f64>()
-    };
     Ok(Calibration {
         model,
         start: *start,
@@ -794,7 +906,27 @@ pub fn calibrate_with(
         theta: x.theta,
         effects: effect_estimates,
         n_identified,
+        dof_model: post.dof_model,
+        determined: post.determined,
+        residuals: rows_final,
+        leverage: post.leverage,
     })
+}
+
+/// ½ Σ (r/σ)² of rows.
+fn cost_of(rows: &[Residual]) -> f64 {
+    0.5 * rows
+        .iter()
+        .map(|r| (r.value / r.sigma).powi(2))
+        .sum::<f64>()
+}
+
+/// The prior's (parameter, tolerance) of each of `ids`; empty without a prior.
+fn prior_of(selection: &Selection, ids: &[usize]) -> Vec<(usize, f64)> {
+    match selection {
+        Selection::Prior(prior) => ids.iter().map(|&i| (i, prior.sigma(i))).collect(),
+        _ => Vec::new(),
+    }
 }
 
 /// Step 1's identified geometric parameters, and the rod-2 parameters wanted from step 2.
@@ -830,11 +962,12 @@ fn select_geometric(
             auto_select(rows0, &cands, &opts.links, *max_condition)
         }
         Selection::List(list) => list.iter().copied().filter(|&i| influences(i)).collect(),
+        Selection::Prior(_) => free.iter().copied().filter(|&i| influences(i)).collect(),
     };
     let step2_wanted: Vec<usize> = if obs::has_forward_instruments(campaign) {
         let r2 = rod2_params();
         match &opts.selection {
-            Selection::Auto { .. } => r2
+            Selection::Auto { .. } | Selection::Prior(_) => r2
                 .iter()
                 .copied()
                 .filter(|i| !step1_ids.contains(i))

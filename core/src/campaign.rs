@@ -314,13 +314,56 @@ impl Campaign {
     /// One covariate column over all poses (`None` entries where the file's field was empty),
     /// or `None` if there is no covariate of that name.
     pub fn covariate(&self, name: &str) -> Option<Vec<Option<f64>>> {
-        let k = self.covariate_index(name)?;
+        let Some(k) = self.covariate_index(name) else {
+            return self
+                .derived_covariates()
+                .into_iter()
+                .find(|d| d.0 == name)
+                .map(|d| d.1.into_iter().map(Some).collect());
+        };
         Some(
             self.poses
                 .iter()
                 .map(|p| p.covariates.get(k).copied().flatten())
                 .collect(),
         )
+    }
+
+    /// Covariates derived from the pose sequence, in file order: `dir_q1`..`dir_q4` (±1, the
+    /// direction of the last move of each carrier: lost motion and friction depend on it),
+    /// `travel_q1`..`travel_q4` (mm moved since that carrier's last reversal) and `t_run` (s
+    /// since the first pose). [`Campaign::covariate`] offers them under these names when the
+    /// file has no column of that name.
+    pub fn derived_covariates(&self) -> Vec<(String, Vec<f64>)> {
+        let n = self.poses.len();
+        let mut dir = vec![[1.0; 4]; n];
+        let mut travel = vec![[0.0; 4]; n];
+        for i in 1..n {
+            let (prev_q, now_q) = (self.poses[i - 1].q, self.poses[i].q);
+            for a in 0..4 {
+                let dq = now_q[a] - prev_q[a];
+                // a carrier that did not move keeps the direction of its last move
+                let d = if dq.abs() > 1e-9 { dq.signum() } else { dir[i - 1][a] };
+                dir[i][a] = d;
+                travel[i][a] = if d == dir[i - 1][a] {
+                    travel[i - 1][a] + dq.abs()
+                } else {
+                    dq.abs()
+                };
+            }
+        }
+        let t0 = self.poses.first().map_or(0.0, |p| p.t);
+        let mut out: Vec<(String, Vec<f64>)> = (0..4)
+            .map(|a| (format!("dir_q{}", a + 1), dir.iter().map(|d| d[a]).collect()))
+            .collect();
+        out.extend((0..4).map(|a| {
+            (
+                format!("travel_q{}", a + 1),
+                travel.iter().map(|d| d[a]).collect(),
+            )
+        }));
+        out.push(("t_run".to_owned(), self.poses.iter().map(|p| p.t - t0).collect()));
+        out
     }
 
     /// Writes the campaign in the spec format: `# ` comment lines, the header (required columns

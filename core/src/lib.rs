@@ -16,3 +16,4 @@ pub mod obs;
 pub mod observability;
 pub mod params;
 pub mod twin;
+pub mod variance;

@@ -1,56 +1,371 @@
-//! Measurement noise of the instruments and encoders (spec "Workspace and measurement
-//! campaigns"). One place: the twin draws noise from it and the calibration weights by it
-//! (task-variable scaling, thesis eq. 3.21-3.22).
+//! Measurement noise of the instruments and encoders: a value, not a constant. The spec's
+//! figures ("Workspace and measurement campaigns") are only the [`NoiseModel::default`]; a user
+//! states their own (`--noise lt=0.005,encoder=0.0005`), and the calibration estimates each
+//! group's level from the campaign itself ([`crate::variance`]).
+//!
+//! Every calibration row knows how much of its variance comes from each noise [`Group`]
+//! ([`Parts`]), so that the groups' levels can be estimated from the residuals
+//! (variance-component estimation) and the rows re-weighted with the estimates.
 
 use crate::campaign::Instrument;
 use nalgebra::{Matrix2, Vector2};
 
-/// Position of the laser tracker in the machine frame, mm: in front of the machine on its
-/// axis of symmetry, so the beam runs roughly along y and TCP distances are 2.2-4.2 m.
-pub const TRACKER_POSITION: [f64; 2] = [0.0, -1500.0];
-/// Laser tracker noise along the beam, mm.
-pub const LT_ALONG_MM: f64 = 0.005;
-/// Laser tracker noise across the beam: 18 µm + 3 µm per metre of distance, mm.
-pub const LT_ACROSS_MM: f64 = 0.018;
-pub const LT_ACROSS_PER_M_MM: f64 = 0.003;
-/// Grid encoder (KGM 182), double ball-bar, laser interferometer: about 1 µm.
-pub const KGM_MM: f64 = 0.001;
-pub const DBB_MM: f64 = 0.001;
-pub const LI_MM: f64 = 0.001;
-/// Platform angle optics: about 1 µrad.
-pub const PSI_RAD: f64 = 1e-6;
-/// Actuator encoders (linear scales of the direct drives), mm. The spec gives none; a
-/// linear scale of this class reads to a few tenths of a micrometre.
-pub const ENCODER_MM: f64 = 0.0002;
-
-/// Covariance (mm²) of a laser-tracker reading of the TCP at `tcp` (mm).
-pub fn lt_covariance(tcp: Vector2<f64>) -> Matrix2<f64> {
-    let beam = tcp - Vector2::from(TRACKER_POSITION);
-    let dist_m = beam.norm() / 1000.0;
-    let u = beam.normalize();
-    let v = Vector2::new(-u.y, u.x);
-    let across = LT_ACROSS_MM + LT_ACROSS_PER_M_MM * dist_m;
-    u * u.transpose() * LT_ALONG_MM.powi(2) + v * v.transpose() * across.powi(2)
+/// A source of noise whose level is stated and estimated on its own.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
+pub enum Group {
+    /// Laser tracker, along the beam (its interferometer / ADM).
+    Lt,
+    /// Laser tracker, across the beam (its angle encoders: grows with distance).
+    LtAcross,
+    /// Grid encoder (KGM), per coordinate.
+    Kgm,
+    /// Double ball-bar distance.
+    Dbb,
+    /// Laser interferometer, one coordinate.
+    Li,
+    /// Platform angle optics.
+    Psi,
+    /// Actuator encoders (the follower encoders of self-calibration included).
+    Encoder,
 }
 
-/// Covariance (mm²) of an (x, y) reading of a TCP-measuring instrument at `tcp`.
-pub fn xy_covariance(instrument: Instrument, tcp: Vector2<f64>) -> Matrix2<f64> {
-    match instrument {
-        Instrument::Lt => lt_covariance(tcp),
-        Instrument::Kgm => Matrix2::identity() * KGM_MM.powi(2),
-        _ => Matrix2::identity() * LI_MM.powi(2),
+/// Number of noise groups.
+pub const N_GROUPS: usize = 7;
+
+/// Variance (mm² or rad²) a row receives from each group, in [`Group::ALL`] order.
+pub type Parts = [f64; N_GROUPS];
+
+impl Group {
+    /// Every group, in the order of [`Parts`].
+    pub const ALL: [Group; N_GROUPS] = [
+        Group::Lt,
+        Group::LtAcross,
+        Group::Kgm,
+        Group::Dbb,
+        Group::Li,
+        Group::Psi,
+        Group::Encoder,
+    ];
+
+    /// Index in [`Parts`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// Name in reports and in `--noise` (`lt`, `lt_across`, `kgm`, `dbb`, `li`, `psi`,
+    /// `encoder`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Group::Lt => "lt",
+            Group::LtAcross => "lt_across",
+            Group::Kgm => "kgm",
+            Group::Dbb => "dbb",
+            Group::Li => "li",
+            Group::Psi => "psi",
+            Group::Encoder => "encoder",
+        }
+    }
+
+    /// Whether the group's σ is an angle (rad) rather than a length (mm).
+    pub fn is_angle(self) -> bool {
+        self == Group::Psi
+    }
+
+    /// The group of a scalar reading of `instrument` (None: it measures nothing itself).
+    pub fn of_scalar(instrument: Instrument) -> Option<Group> {
+        match instrument {
+            Instrument::Dbb | Instrument::Circle => Some(Group::Dbb),
+            Instrument::LiX | Instrument::LiY => Some(Group::Li),
+            Instrument::LiPsi => Some(Group::Psi),
+            Instrument::SelfCal => Some(Group::Encoder),
+            Instrument::Kgm => Some(Group::Kgm),
+            Instrument::Lt => Some(Group::Lt),
+            Instrument::None => None,
+        }
     }
 }
 
-/// Standard deviation of a scalar reading: r of the ball-bar (mm), one LI coordinate (mm),
-/// ψ (rad), a follower encoder (mm).
-pub fn scalar_sigma(instrument: Instrument) -> f64 {
-    match instrument {
-        Instrument::Dbb | Instrument::Circle => DBB_MM,
-        Instrument::LiX | Instrument::LiY => LI_MM,
-        Instrument::LiPsi => PSI_RAD,
-        Instrument::SelfCal | Instrument::None => ENCODER_MM,
-        Instrument::Kgm => KGM_MM,
-        Instrument::Lt => LT_ALONG_MM,
+/// Noise of every instrument and of the actuator encoders: standard deviations in mm (rad for
+/// ψ), per coordinate.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct NoiseModel {
+    /// Position of the laser tracker in the machine frame, mm (the beam direction at a pose).
+    pub tracker_position: [f64; 2],
+    /// Laser tracker along the beam.
+    pub lt_along_mm: f64,
+    /// Laser tracker across the beam: `lt_across_mm` + `lt_across_per_m_mm` per metre of
+    /// distance.
+    pub lt_across_mm: f64,
+    pub lt_across_per_m_mm: f64,
+    pub kgm_mm: f64,
+    pub dbb_mm: f64,
+    pub li_mm: f64,
+    pub psi_rad: f64,
+    /// Actuator encoders (linear scales of the direct drives).
+    pub encoder_mm: f64,
+}
+
+impl Default for NoiseModel {
+    /// The spec's figures: tracker in front of the machine on its axis (TCP distances
+    /// 2.2-4.2 m), 5 µm along the beam, 18 µm + 3 µm/m across; grid encoder, ball-bar and
+    /// interferometer about 1 µm; angle optics 1 µrad. The spec gives no encoder noise; a
+    /// linear scale of this class reads to a few tenths of a micrometre.
+    fn default() -> Self {
+        NoiseModel {
+            tracker_position: [0.0, -1500.0],
+            lt_along_mm: 0.005,
+            lt_across_mm: 0.018,
+            lt_across_per_m_mm: 0.003,
+            kgm_mm: 0.001,
+            dbb_mm: 0.001,
+            li_mm: 0.001,
+            psi_rad: 1e-6,
+            encoder_mm: 0.0002,
+        }
+    }
+}
+
+/// A `--noise` statement that cannot be read.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum NoiseSpecError {
+    #[error("`{0}`: expected NAME=VALUE (e.g. lt=0.005)")]
+    Syntax(String),
+    #[error("unknown noise name `{name}`, expected one of {known}")]
+    UnknownName { name: String, known: &'static str },
+    #[error("`{name}={value}`: expected a positive finite number (mm, rad for psi)")]
+    Value { name: String, value: String },
+}
+
+const NAMES: &str = "lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, \
+                     psi, encoder, tracker_x, tracker_y";
+
+impl NoiseModel {
+    /// The default with the statements `name=value,...` applied (mm, rad for `psi`):
+    /// `lt` sets an isotropic tracker (along = across, no growth with distance).
+    pub fn parse(spec: &str) -> Result<NoiseModel, NoiseSpecError> {
+        let mut m = NoiseModel::default();
+        for item in spec.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (name, value) = item
+                .split_once('=')
+                .ok_or_else(|| NoiseSpecError::Syntax(item.to_owned()))?;
+            let (name, value) = (name.trim(), value.trim());
+            let bad = || NoiseSpecError::Value {
+                name: name.to_owned(),
+                value: value.to_owned(),
+            };
+            let v: f64 = value.parse().map_err(|_| bad())?;
+            // a position may be anywhere, a growth may be zero, a noise level must be positive
+            let ok = match name {
+                "tracker_x" | "tracker_y" => v.is_finite(),
+                "lt_across_per_m" => v.is_finite() && v >= 0.0,
+                _ => v.is_finite() && v > 0.0,
+            };
+            if !ok {
+                return Err(bad());
+            }
+            m.set(name, v)?;
+        }
+        Ok(m)
+    }
+
+    fn set(&mut self, name: &str, v: f64) -> Result<(), NoiseSpecError> {
+        match name {
+            "lt" => {
+                self.lt_along_mm = v;
+                self.lt_across_mm = v;
+                self.lt_across_per_m_mm = 0.0;
+            }
+            "lt_along" => self.lt_along_mm = v,
+            "lt_across" => self.lt_across_mm = v,
+            "lt_across_per_m" => self.lt_across_per_m_mm = v,
+            "kgm" => self.kgm_mm = v,
+            "dbb" => self.dbb_mm = v,
+            "li" => self.li_mm = v,
+            "psi" => self.psi_rad = v,
+            "encoder" => self.encoder_mm = v,
+            "tracker_x" => self.tracker_position[0] = v,
+            "tracker_y" => self.tracker_position[1] = v,
+            _ => {
+                return Err(NoiseSpecError::UnknownName {
+                    name: name.to_owned(),
+                    known: NAMES,
+                })
+            }
+        }
+        Ok(())
+    }
+
+    /// The model with every group's σ multiplied by `factor[group]`.
+    pub fn scaled(&self, factor: &[f64; N_GROUPS]) -> NoiseModel {
+        let f = |g: Group| factor[g.index()];
+        NoiseModel {
+            tracker_position: self.tracker_position,
+            lt_along_mm: self.lt_along_mm * f(Group::Lt),
+            lt_across_mm: self.lt_across_mm * f(Group::LtAcross),
+            lt_across_per_m_mm: self.lt_across_per_m_mm * f(Group::LtAcross),
+            kgm_mm: self.kgm_mm * f(Group::Kgm),
+            dbb_mm: self.dbb_mm * f(Group::Dbb),
+            li_mm: self.li_mm * f(Group::Li),
+            psi_rad: self.psi_rad * f(Group::Psi),
+            encoder_mm: self.encoder_mm * f(Group::Encoder),
+        }
+    }
+
+    /// σ of `group` (the tracker's across-beam σ at `tracker_distance_mm`).
+    pub fn sigma(&self, group: Group, tracker_distance_mm: f64) -> f64 {
+        match group {
+            Group::Lt => self.lt_along_mm,
+            Group::LtAcross => self.lt_across(tracker_distance_mm),
+            Group::Kgm => self.kgm_mm,
+            Group::Dbb => self.dbb_mm,
+            Group::Li => self.li_mm,
+            Group::Psi => self.psi_rad,
+            Group::Encoder => self.encoder_mm,
+        }
+    }
+
+    fn lt_across(&self, distance_mm: f64) -> f64 {
+        self.lt_across_mm + self.lt_across_per_m_mm * distance_mm / 1000.0
+    }
+
+    /// Distance (mm) from the tracker to `tcp`.
+    pub fn tracker_distance(&self, tcp: Vector2<f64>) -> f64 {
+        (tcp - Vector2::from(self.tracker_position)).norm()
+    }
+
+    /// Beam and cross-beam unit vectors at `tcp`, and the two variances (mm²).
+    fn lt_frame(&self, tcp: Vector2<f64>) -> (Vector2<f64>, Vector2<f64>, f64, f64) {
+        let beam = tcp - Vector2::from(self.tracker_position);
+        let dist = beam.norm();
+        // on the tracker itself the beam has no direction: any frame will do
+        let u = if dist > 0.0 {
+            beam / dist
+        } else {
+            Vector2::new(0.0, 1.0)
+        };
+        let v = Vector2::new(-u.y, u.x);
+        (u, v, self.lt_along_mm.powi(2), self.lt_across(dist).powi(2))
+    }
+
+    /// Covariance (mm²) of an (x, y) reading of a TCP-measuring instrument at `tcp`.
+    pub fn xy_covariance(&self, instrument: Instrument, tcp: Vector2<f64>) -> Matrix2<f64> {
+        match instrument {
+            Instrument::Lt => {
+                let (u, v, along, across) = self.lt_frame(tcp);
+                u * u.transpose() * along + v * v.transpose() * across
+            }
+            Instrument::Kgm => Matrix2::identity() * self.kgm_mm.powi(2),
+            _ => Matrix2::identity() * self.li_mm.powi(2),
+        }
+    }
+
+    /// Variance parts of `g · (x, y)` of a reading of a 2-D instrument at `tcp`.
+    pub fn xy_parts(&self, instrument: Instrument, tcp: Vector2<f64>, g: Vector2<f64>) -> Parts {
+        let mut parts = [0.0; N_GROUPS];
+        match instrument {
+            Instrument::Lt => {
+                let (u, v, along, across) = self.lt_frame(tcp);
+                parts[Group::Lt.index()] = g.dot(&u).powi(2) * along;
+                parts[Group::LtAcross.index()] = g.dot(&v).powi(2) * across;
+            }
+            Instrument::Kgm => parts[Group::Kgm.index()] = g.norm_squared() * self.kgm_mm.powi(2),
+            _ => parts[Group::Li.index()] = g.norm_squared() * self.li_mm.powi(2),
+        }
+        parts
+    }
+
+    /// Standard deviation of a scalar reading: r of the ball-bar (mm), one LI coordinate (mm),
+    /// ψ (rad), a follower encoder (mm); a 2-D instrument's per-coordinate σ (the tracker's
+    /// along the beam). None for `none`, which measures nothing.
+    pub fn scalar_sigma(&self, instrument: Instrument) -> Option<f64> {
+        Group::of_scalar(instrument).map(|g| self.sigma(g, 0.0))
+    }
+
+    /// Variance parts of `gain` times one scalar reading of `instrument`.
+    pub fn scalar_parts(&self, instrument: Instrument, gain: f64) -> Parts {
+        let mut parts = [0.0; N_GROUPS];
+        if let Some(g) = Group::of_scalar(instrument) {
+            parts[g.index()] = (gain * self.sigma(g, 0.0)).powi(2);
+        }
+        parts
+    }
+
+    /// Variance parts of encoder noise entering with total squared gain `gain2`.
+    pub fn encoder_parts(&self, gain2: f64) -> Parts {
+        let mut parts = [0.0; N_GROUPS];
+        parts[Group::Encoder.index()] = gain2 * self.encoder_mm.powi(2);
+        parts
+    }
+}
+
+/// Sum of two variance decompositions.
+pub fn add(a: Parts, b: Parts) -> Parts {
+    std::array::from_fn(|k| a[k] + b[k])
+}
+
+/// σ of a row from its variance parts.
+pub fn sigma_of(parts: &Parts) -> f64 {
+    parts.iter().sum::<f64>().sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_sets_an_isotropic_tracker_and_keeps_the_rest() {
+        let m = NoiseModel::parse("lt=0.004, encoder=0.0005").expect("valid");
+        let d = NoiseModel::default();
+        assert_eq!(m.lt_along_mm, 0.004);
+        assert_eq!(m.lt_across_mm, 0.004);
+        assert_eq!(m.lt_across_per_m_mm, 0.0);
+        assert_eq!(m.encoder_mm, 0.0005);
+        assert_eq!(m.kgm_mm, d.kgm_mm);
+        let c = m.xy_covariance(Instrument::Lt, Vector2::new(300.0, 2000.0));
+        assert!((c[(0, 0)] - 1.6e-5).abs() < 1e-12 && c[(0, 1)].abs() < 1e-12);
+    }
+
+    #[test]
+    fn parse_names_what_is_wrong() {
+        assert!(matches!(
+            NoiseModel::parse("laser=1"),
+            Err(NoiseSpecError::UnknownName { .. })
+        ));
+        assert!(matches!(
+            NoiseModel::parse("kgm=-1"),
+            Err(NoiseSpecError::Value { .. })
+        ));
+        assert!(matches!(
+            NoiseModel::parse("kgm=nan"),
+            Err(NoiseSpecError::Value { .. })
+        ));
+        assert!(matches!(
+            NoiseModel::parse("kgm"),
+            Err(NoiseSpecError::Syntax(_))
+        ));
+    }
+
+    #[test]
+    fn parts_of_a_tracker_reading_add_up_to_its_covariance() {
+        let m = NoiseModel::default();
+        let tcp = Vector2::new(120.0, 1800.0);
+        let g = Vector2::new(0.3, -1.2);
+        let parts = m.xy_parts(Instrument::Lt, tcp, g);
+        let var = (g.transpose() * m.xy_covariance(Instrument::Lt, tcp) * g)[0];
+        assert!((parts.iter().sum::<f64>() - var).abs() < 1e-15);
+        // on the tracker's own position the frame is still defined
+        let on = m.xy_parts(Instrument::Lt, Vector2::from(m.tracker_position), g);
+        assert!(on.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn scaling_multiplies_each_group() {
+        let mut f = [1.0; N_GROUPS];
+        f[Group::Encoder.index()] = 2.5;
+        f[Group::LtAcross.index()] = 0.5;
+        let m = NoiseModel::default().scaled(&f);
+        assert!((m.encoder_mm - 0.0005).abs() < 1e-15);
+        assert!((m.lt_across_mm - 0.009).abs() < 1e-15);
+        assert_eq!(m.lt_along_mm, 0.005);
     }
 }

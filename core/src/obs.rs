@@ -20,7 +20,7 @@
 use crate::campaign::{Campaign, Instrument, Pose};
 use crate::effects::{Corrections, Delta, InputSensitivity};
 use crate::geometry::{self, q_var, GeometryError, Solution, Subsystem, PSI, X, Y};
-use crate::noise;
+use crate::noise::{self, NoiseModel, Parts};
 use crate::params::{Model, Params, N_PARAMS};
 use nalgebra::{SVector, Vector2};
 
@@ -75,6 +75,8 @@ pub struct Residual {
     pub value: f64,
     /// Standard deviation of the row (mm or rad): its weight is 1/sigma.
     pub sigma: f64,
+    /// Its variance (sigma²) split by noise group, to estimate each group's level.
+    pub parts: Parts,
     /// d value / d p over the 29 parameters.
     pub jacobian: Row,
     /// For virtual rows of the second step: d value / d p_cal, the sensitivity to the
@@ -164,9 +166,9 @@ fn negated(mut s: InputSensitivity) -> InputSensitivity {
     s
 }
 
-/// Variance (mm² or rad²) that noise on the known actuators adds to configuration variable `v`.
-fn encoder_variance(f: &Forward, v: usize) -> f64 {
-    (f.sens.dc_dk[(v, 0)].powi(2) + f.sens.dc_dk[(v, 1)].powi(2)) * noise::ENCODER_MM.powi(2)
+/// Squared gain from the known actuators' encoders to configuration variable `v`.
+fn encoder_gain2(f: &Forward, v: usize) -> f64 {
+    f.sens.dc_dk[(v, 0)].powi(2) + f.sens.dc_dk[(v, 1)].powi(2)
 }
 
 /// Which kinds of rows to build.
@@ -187,8 +189,9 @@ pub fn residuals(
     model: Model,
     step: Step,
     p_cal: &Params,
+    noise: &NoiseModel,
 ) -> Result<Vec<Residual>, PoseError> {
-    residuals_with(campaign, p, model, step, p_cal, &Corrections::default())
+    residuals_with(campaign, p, model, step, p_cal, &Corrections::default(), noise)
 }
 
 /// [`residuals`] with the effects' corrections `corr` of every pose.
@@ -199,11 +202,17 @@ pub fn residuals_with(
     step: Step,
     p_cal: &Params,
     corr: &Corrections,
+    noise: &NoiseModel,
 ) -> Result<Vec<Residual>, PoseError> {
     let mut out = Vec::with_capacity(campaign.poses.len() * 4);
     for setup in campaign.setups() {
         let reset = setup.reset.map(|i| (i, &campaign.poses[i]));
-        let ctx = Ctx { p, model, corr };
+        let ctx = Ctx {
+            p,
+            model,
+            corr,
+            noise,
+        };
         for &i in &setup.poses {
             let pose = &campaign.poses[i];
             if pose.reset && pose.instrument.is_relative() {
@@ -231,6 +240,7 @@ struct Ctx<'a> {
     p: &'a Params,
     model: Model,
     corr: &'a Corrections,
+    noise: &'a NoiseModel,
 }
 
 fn pose_rows(
@@ -267,7 +277,6 @@ fn inverse_rows(
     let (p_i, q_i) = corrected(ctx.p, &pose.q, &dpose);
     let inv = geometry::solve(&p_i, ctx.model, Subsystem::Tcp, [x, y])?;
     let s = geometry::sensitivity(&p_i, ctx.model, Subsystem::Tcp, &inv)?;
-    let cov = noise::xy_covariance(pose.instrument, Vector2::new(x, y));
     for a in 0..4 {
         let v = q_var(a);
         let g = Vector2::new(s.dc_dk[(v, 0)], s.dc_dk[(v, 1)]);
@@ -279,13 +288,17 @@ fn inverse_rows(
             ..Default::default()
         };
         at_pose.dq[a] = -1.0;
-        let sigma = ((g.transpose() * cov * g)[0] + noise::ENCODER_MM.powi(2)).sqrt();
+        let parts = noise::add(
+            ctx.noise.xy_parts(pose.instrument, Vector2::new(x, y), g),
+            ctx.noise.encoder_parts(1.0),
+        );
         out.push(Residual {
             pose: i,
             instrument: pose.instrument,
             direction: Direction::Q(a),
             value: inv.c[v] - q_i[a],
-            sigma,
+            sigma: noise::sigma_of(&parts),
+            parts,
             jacobian: at_pose.dp + at_reset.dp,
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
@@ -310,9 +323,8 @@ fn forward_rows(
         let now = forward(&p_i, ctx.model, sub, &q_i)?;
         let zero = forward(&p_r, ctx.model, sub, &q_r)?;
         let d = |v: usize| now.sol.c[v] - zero.sol.c[v];
-        let var = |v: usize| encoder_variance(&now, v) + encoder_variance(&zero, v);
+        let var = |v: usize| encoder_gain2(&now, v) + encoder_gain2(&zero, v);
         let inst = pose.instrument;
-        let sig = noise::scalar_sigma(inst);
         // the value as Σ g_v · Δc_v − (measured + dm_w): g has two terms (x, y of the
         // ball-bar's direction); a single coordinate pads it with a zero-weight term
         let (direction, value, g, w, var_enc) = match inst {
@@ -352,12 +364,17 @@ fn forward_rows(
             at_pose.dm[k] = -1.0;
         }
         let at_reset = negated(input_sensitivity(&zero, sub, &g));
+        let parts = noise::add(
+            ctx.noise.scalar_parts(inst, 1.0),
+            ctx.noise.encoder_parts(var_enc),
+        );
         out.push(Residual {
             pose: i,
             instrument: inst,
             direction,
             value,
-            sigma: (sig * sig + var_enc).sqrt(),
+            sigma: noise::sigma_of(&parts),
+            parts,
             jacobian: at_pose.dp + at_reset.dp,
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
@@ -392,7 +409,8 @@ fn self_rows(
     let f = forward(&p_i, ctx.model, Subsystem::NR, &q_i)?;
     for a in [1, 2] {
         let v = q_var(a);
-        let sigma = (noise::ENCODER_MM.powi(2) + encoder_variance(&f, v)).sqrt();
+        // the follower's own encoder and those of q1, q4 through rgm
+        let parts = ctx.noise.encoder_parts(1.0 + encoder_gain2(&f, v));
         let mut at_pose = input_sensitivity(&f, Subsystem::NR, &[(v, 1.0)]);
         at_pose.dq[a] -= 1.0;
         out.push(Residual {
@@ -400,7 +418,8 @@ fn self_rows(
             instrument: pose.instrument,
             direction: Direction::Q(a),
             value: f.sol.c[v] - q_i[a],
-            sigma,
+            sigma: noise::sigma_of(&parts),
+            parts,
             jacobian: at_pose.dp,
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose)]),
@@ -439,7 +458,8 @@ fn virtual_q2_row(
         instrument: pose.instrument,
         direction: Direction::VirtualQ2,
         value: inv.c[v] - q_i[1],
-        sigma: noise::ENCODER_MM * 2f64.sqrt(),
+        sigma: ctx.noise.encoder_mm * 2f64.sqrt(),
+        parts: ctx.noise.encoder_parts(2.0),
         jacobian: s.dc_dp.row(v).transpose(),
         d_pcal: Some(d_pcal),
         d_theta: vec![0.0; ctx.corr.n_params],

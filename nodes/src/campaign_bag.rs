@@ -155,7 +155,9 @@ fn instrument_of_id(id: u8) -> Option<Instrument> {
 /// `TcpMeasurement::sigma`: the campaign file does not carry it, so this is the spec's value
 /// (`rpkm_core::noise`; the laser tracker's along-beam σ). Not read back into the campaign.
 fn nominal_sigma_si(i: Instrument) -> f64 {
-    let s = rpkm_core::noise::scalar_sigma(i);
+    let s = rpkm_core::noise::NoiseModel::default()
+        .scalar_sigma(i)
+        .unwrap_or(0.0);
     if i == Instrument::LiPsi {
         s
     } else {

@@ -14,7 +14,6 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rpkm_core::design::{CENTRE, CIRCLE_RADIUS_MM};
-use rpkm_core::noise::ENCODER_MM;
 use rpkm_core::twin::{Twin, TEMP_SENSOR_K};
 use rpkm_msgs::ActuatorState;
 
@@ -142,7 +141,9 @@ pub fn run(
             spec.seconds
         );
     }
-    let k_noise = if twin.config().noise { 1.0 } else { 0.0 };
+    // the twin's own encoder noise (none when it is noiseless)
+    let encoder_mm = twin.config().noise.as_ref().map_or(0.0, |n| n.encoder_mm);
+    let k_noise = if twin.config().noise.is_some() { 1.0 } else { 0.0 };
     let mut rng = StdRng::seed_from_u64(stream_seed(twin.config().seed));
     let mut gauss = move || -> f64 { StandardNormal.sample(&mut rng) };
     let n = spec.samples();
@@ -150,7 +151,7 @@ pub fn run(
     for k in 0..n {
         let t = spec.time(k);
         let (x, y) = spec.target(k);
-        let mut enc = [0.0; 4].map(|_: f64| k_noise * ENCODER_MM * gauss());
+        let mut enc = [0.0; 4].map(|_: f64| encoder_mm * gauss());
         if let Some(f) = spec.fault {
             enc[f.drive] += spec.fault_mm(k);
         }
@@ -158,7 +159,7 @@ pub fn run(
         let mut q = st.q;
         for (qi, &follower) in q.iter_mut().zip(&st.follower) {
             if follower {
-                *qi += k_noise * ENCODER_MM * gauss();
+                *qi += encoder_mm * gauss();
             }
         }
         let temp = twin.temperature(t) + k_noise * TEMP_SENSOR_K * gauss();

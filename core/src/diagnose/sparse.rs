@@ -63,6 +63,14 @@ fn dictionary(campaign: &Campaign) -> Vec<(String, Vec<f64>)> {
         ));
     }
     out.push(("t".to_owned(), campaign.poses.iter().map(|p| p.t).collect()));
+    // direction of motion, travel since reversal, time: what lost motion, friction and
+    // drift follow
+    out.extend(
+        campaign
+            .derived_covariates()
+            .into_iter()
+            .filter(|d| d.0 != "t_run" && campaign.covariate_index(&d.0).is_none()),
+    );
     let tcp = nominal_tcp(campaign);
     let poly: [(&str, fn(f64, f64) -> f64); 5] = [
         ("x", |x, _| x),
@@ -130,6 +138,7 @@ fn scores(campaign: &Campaign, rows: &[Residual], only: Option<&[&str]>) -> Vec<
             let v: Vec<f64> = g.iter().map(|r| values[r.pose]).collect();
             if let Some(r) = correlation(&v, &z) {
                 out.push(Scored {
+                    rows: g.len(),
                     feature: name.clone(),
                     instrument: inst.clone(),
                     direction: dir.clone(),
@@ -144,6 +153,7 @@ fn scores(campaign: &Campaign, rows: &[Residual], only: Option<&[&str]>) -> Vec<
 }
 
 struct Scored {
+    rows: usize,
     feature: String,
     instrument: String,
     direction: String,
@@ -177,6 +187,51 @@ fn pointer(s: &[Scored]) -> Option<Pointer> {
             })
             .collect(),
     })
+}
+
+/// The dictionary test of a residual: is any term followed more than noise would?
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Structure {
+    /// The best term and the direction that follows it (None: nothing to correlate).
+    pub pointer: Option<Pointer>,
+    /// F statistic of that term's linear fit, F(1, n − 2), and its p-value corrected for the
+    /// number of (term, direction) pairs tried (Bonferroni).
+    pub f_statistic: f64,
+    pub p_value: f64,
+    pub tests: usize,
+    /// χ² the term removes from its direction (its evidence against an effect's Δχ²).
+    pub explained_chi2: f64,
+    /// Rows of that direction (for its information criterion).
+    pub rows: usize,
+}
+
+/// Test the residual `rows` against the whole dictionary (each term in each instrument
+/// direction): free of the noise's absolute level, since a correlation is.
+pub fn structure(campaign: &Campaign, rows: &[Residual]) -> Structure {
+    let s = scores(campaign, rows, None);
+    let tests = s.len();
+    let Some(best) = s.first() else {
+        return Structure {
+            pointer: None,
+            f_statistic: 0.0,
+            p_value: 1.0,
+            tests: 0,
+            explained_chi2: 0.0,
+            rows: 0,
+        };
+    };
+    let n = best.rows as f64;
+    let r2 = (best.r * best.r).min(1.0 - 1e-15);
+    let f = r2 * (n - 2.0) / (1.0 - r2);
+    let p = super::stats::f_upper_tail(f, 1.0, n - 2.0);
+    Structure {
+        pointer: pointer(&s),
+        f_statistic: f,
+        p_value: (p * tests as f64).min(1.0),
+        tests,
+        explained_chi2: best.explained_chi2,
+        rows: best.rows,
+    }
 }
 
 /// The term of the whole dictionary the residual `rows` follows most.

@@ -216,6 +216,8 @@ impl Corrections {
 pub struct EffectSet {
     bound: Vec<(&'static str, Box<dyn Bound>)>,
     n_poses: usize,
+    /// Parameters held at zero (a part of an effect the data do not support).
+    held: Vec<bool>,
 }
 
 impl std::fmt::Debug for EffectSet {
@@ -232,6 +234,7 @@ impl EffectSet {
         EffectSet {
             bound: Vec::new(),
             n_poses: 0,
+            held: Vec::new(),
         }
     }
 
@@ -245,10 +248,24 @@ impl EffectSet {
             .iter()
             .map(|e| Ok((e.name(), e.bind(campaign, p)?)))
             .collect::<Result<Vec<_>, NotApplicable>>()?;
+        let n: usize = bound.iter().map(|b| b.1.params().len()).sum();
         Ok(EffectSet {
             bound,
             n_poses: campaign.poses.len(),
+            held: vec![false; n],
         })
+    }
+
+    /// Hold parameter `k` (θ order) at zero: the calibration does not identify it.
+    pub fn hold(&mut self, k: usize) {
+        if let Some(h) = self.held.get_mut(k) {
+            *h = true;
+        }
+    }
+
+    /// Whether parameter `k` is held at zero.
+    pub fn is_held(&self, k: usize) -> bool {
+        self.held.get(k).copied().unwrap_or(false)
     }
 
     /// Whether there is no effect.

@@ -7,6 +7,9 @@
 //! - [`preload`]: the compatibility test (seed 4.4), predicted redundancy current, and the
 //!   thesis's "first approach" (offsets on q2, q3 that create a requested preload, and the TCP
 //!   displacement they cause);
+//! - [`plausibility`]: the physical checks every equilibrium passes before it is used (loop
+//!   closure, balance, force limits, ψ near γ2, near the rigid model); [`fegm_checked`] is the
+//!   guarded solve (warm, else cold, else an error the caller answers with the rigid model);
 //! - [`baseline`]: the statistical (5.1) and least-squares (5.2) redundant forward models;
 //! - [`fe`]: the finite-element model (5.4: planar beams for rods, platform and carriers,
 //!   revolute joints), thermo-mechanical and actuator-displacements methods, and the
@@ -17,13 +20,15 @@
 
 pub mod baseline;
 pub mod fe;
+pub mod plausibility;
 pub mod preload;
 pub mod spring;
 
 pub use fe::{fe_solve, FeEquilibrium, FeError, FeModel, FeStiffness, Method};
+pub use plausibility::{wrap_angle, Limits, Reason, RigidPose, Violation};
 pub use preload::{compatibility, offset_effect, preload_offsets, Compatibility, PreloadPlan};
 pub use spring::{
-    fegm, fegm_from, platform_balance, sensitivity, ElasticError, ElasticSensitivity, Equilibrium,
-    Followers, Stiffness, ALL_ACTIVE, DEFAULT_ROD_STIFFNESS_N_PER_MM, FOLLOWERS_23,
+    fegm, fegm_checked, fegm_from, fegm_unchecked, platform_balance, sensitivity, ElasticError, ElasticSensitivity, Equilibrium,
+    Checked, Followers, Stiffness, ALL_ACTIVE, DEFAULT_ROD_STIFFNESS_N_PER_MM, FOLLOWERS_23,
     NOMINAL_DRIVE_FORCE_N,
 };

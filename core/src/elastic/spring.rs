@@ -12,6 +12,7 @@
 //! the analytic Hessian (tangent stiffness, geometric-stiffness terms included) converges
 //! quadratically from the rigid forward model of a pair of active drives.
 
+use super::plausibility::{self, wrap_angle, Limits, Reason, RigidPose, Violation};
 use crate::geometry::{self, guide_frame, Subsystem};
 use crate::params::{Guide, Model, Params, N_PARAMS, RODS};
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
@@ -91,6 +92,8 @@ pub enum ElasticError {
     NonFinite,
     #[error("a rod length collapsed to zero")]
     Degenerate,
+    #[error("implausible equilibrium: {0}")]
+    Implausible(Violation),
 }
 
 /// Static equilibrium of the mechanism.
@@ -292,22 +295,19 @@ fn rigid_start(p: &Params, q: &[f64; 4], fol: &Followers) -> Result<V7, ElasticE
 
 /// Elasto-geometric forward model: the static equilibrium for commanded actuator positions
 /// `q` (mm), parameters `p` and stiffness `k`, with drives in `followers` free. Starts from the
-/// rigid forward model of an active pair.
+/// rigid forward model of an active pair; the result passes the plausibility checks with the
+/// default [`Limits`] (else [`ElasticError::Implausible`]).
 pub fn fegm(
     p: &Params,
     k: &Stiffness,
     q: [f64; 4],
     followers: Followers,
 ) -> Result<Equilibrium, ElasticError> {
-    if !q.iter().all(|v| v.is_finite()) {
-        return Err(ElasticError::NonFinite);
-    }
-    let z0 = rigid_start(p, &q, &followers)?;
-    solve_from(p, k, q, followers, z0)
+    fegm_checked(p, k, q, followers, None, &Limits::default()).map(|s| s.eq)
 }
 
 /// [`fegm`] from a previous equilibrium (servo-rate use: the last sample is an excellent
-/// start, and no rigid model is solved).
+/// start). A warm result that fails the plausibility checks is solved again cold.
 pub fn fegm_from(
     p: &Params,
     k: &Stiffness,
@@ -315,16 +315,116 @@ pub fn fegm_from(
     followers: Followers,
     previous: &Equilibrium,
 ) -> Result<Equilibrium, ElasticError> {
+    fegm_checked(p, k, q, followers, Some(previous), &Limits::default()).map(|s| s.eq)
+}
+
+/// A checked elastic solve and how it was reached.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Checked {
+    /// The equilibrium; it passed every check.
+    pub eq: Equilibrium,
+    /// Solved from the rigid start (no previous equilibrium, or the warm solve was rejected).
+    pub cold: bool,
+    /// Why the warm-started solve was rejected, when it was (a solver failure counts as
+    /// [`Reason::NotConverged`]).
+    pub warm_rejected: Option<Violation>,
+    /// The rigid forward model the result was checked against.
+    pub rigid: RigidPose,
+}
+
+/// The one guarded entry to the elastic model (the CLI, the calibrator and the nodes all come
+/// through here): warm-started from `previous` when given, checked with `limits`; a warm
+/// result that fails is solved again from the rigid start and checked again. An error means
+/// no plausible equilibrium: the caller falls back to the rigid model.
+pub fn fegm_checked(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    followers: Followers,
+    previous: Option<&Equilibrium>,
+    limits: &Limits,
+) -> Result<Checked, ElasticError> {
     if !q.iter().all(|v| v.is_finite()) {
         return Err(ElasticError::NonFinite);
     }
+    // The rigid model is both the reference of the checks and the cold start.
+    let z0 = rigid_start(p, &q, &followers)?;
+    let rigid = RigidPose {
+        x: z0[0],
+        y: z0[1],
+        psi: z0[2],
+    };
+    let check = |eq: &Equilibrium| plausibility::check(p, k, &q, &followers, eq, &rigid, limits);
+    let mut warm_rejected = None;
+    if let Some(prev) = previous {
+        let rejection = match solve_from(p, k, q, followers, warm_start(&q, &followers, prev)) {
+            Ok(eq) => match check(&eq) {
+                Ok(()) => {
+                    return Ok(Checked {
+                        eq,
+                        cold: false,
+                        warm_rejected: None,
+                        rigid,
+                    })
+                }
+                Err(v) => v,
+            },
+            Err(e) => solver_violation(&e),
+        };
+        warm_rejected = Some(rejection);
+    }
+    let eq = solve_from(p, k, q, followers, z0)?;
+    check(&eq).map_err(ElasticError::Implausible)?;
+    Ok(Checked {
+        eq,
+        cold: true,
+        warm_rejected,
+        rigid,
+    })
+}
+
+/// The raw solver without any plausibility check, from `previous` or else from the rigid
+/// start: for studies of the solver and for tests of the checks. Its result may be a
+/// non-physical branch; everything else goes through [`fegm_checked`].
+pub fn fegm_unchecked(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    followers: Followers,
+    previous: Option<&Equilibrium>,
+) -> Result<Equilibrium, ElasticError> {
+    if !q.iter().all(|v| v.is_finite()) {
+        return Err(ElasticError::NonFinite);
+    }
+    let z0 = match previous {
+        Some(prev) => warm_start(&q, &followers, prev),
+        None => rigid_start(p, &q, &followers)?,
+    };
+    solve_from(p, k, q, followers, z0)
+}
+
+/// The previous equilibrium with the active carriers moved to their new commands.
+fn warm_start(q: &[f64; 4], followers: &Followers, previous: &Equilibrium) -> V7 {
     let mut z0 = previous.z();
     for j in 0..4 {
         if !followers[j] {
             z0[3 + j] = q[j];
         }
     }
-    solve_from(p, k, q, followers, z0)
+    z0
+}
+
+/// A solver failure of the warm start, as the reason it was rejected.
+fn solver_violation(e: &ElasticError) -> Violation {
+    match e {
+        ElasticError::Implausible(v) => *v,
+        _ => Violation {
+            reason: Reason::NotConverged,
+            item: 0,
+            value: f64::NAN,
+            limit: 0.0,
+        },
+    }
 }
 
 fn solve_from(
@@ -393,7 +493,8 @@ fn finish(p: &Params, k: &Stiffness, fol: &Followers, z: &V7, iterations: usize)
     Equilibrium {
         x: z[0],
         y: z[1],
-        psi: z[2],
+        // The solver works on sin/cos of ψ only: a warm start may drift by whole turns.
+        psi: wrap_angle(z[2]),
         carrier: [z[3], z[4], z[5], z[6]],
         rod_force,
         drive_force,

@@ -9,7 +9,8 @@
 //!   fgm(q1, q4), followers read the true rgm); under `preload_elastic` all four are
 //!   position-controlled and pose and drive forces come from the elasto-geometric model.
 //!   `self` poses always switch q2, q3 to followers.
-//! - Encoders with [`noise::ENCODER_MM`], instruments with the noise of [`crate::noise`].
+//! - Encoders and instruments with the twin's own noise ([`TwinConfig::noise`]), which a test
+//!   sets apart from what the calibration assumes.
 //! - Relative setups: the reset pose measures exactly 0, the others true TCP − true reset TCP
 //!   (+ noise); ball-bar r is the distance to the pivot (the reset pose's TCP).
 //! - Covariate `temp_machine` (°C) and time `t` (s): 3 s per pose, 120 s between setups; the
@@ -26,7 +27,7 @@ use crate::campaign::{Campaign, Instrument, Pose};
 use crate::design::{self, PlannedPose};
 use crate::elastic::{self, ElasticError, Stiffness, ALL_ACTIVE};
 use crate::geometry::{self, GeometryError};
-use crate::noise;
+use crate::noise::NoiseModel;
 use crate::params::{self, Model, Params, NAMES, N_PARAMS, RODS};
 use effects::{bow, ALPHA_PER_K, REFERENCE_TEMP_C, THERMAL_PERIOD_S};
 use nalgebra::{Cholesky, Rotation2, Vector2};
@@ -57,8 +58,9 @@ pub struct TwinConfig {
     pub controller: Params,
     /// Stiffness of the true machine (used under `preload_elastic`).
     pub stiffness: Stiffness,
-    /// Whether instruments and encoders are noisy.
-    pub noise: bool,
+    /// The noise of the twin's instruments and encoders (None: noiseless). Its own value:
+    /// a test makes the machine noisier, or otherwise noisy, than the calibration assumes.
+    pub noise: Option<NoiseModel>,
 }
 
 impl Default for TwinConfig {
@@ -70,7 +72,7 @@ impl Default for TwinConfig {
             angle_sigma_rad: 2e-4,
             controller: Params::nominal(),
             stiffness: Stiffness::default(),
-            noise: true,
+            noise: Some(NoiseModel::default()),
         }
     }
 }
@@ -412,7 +414,11 @@ impl Twin {
 
     /// Measure a design on the twin: one campaign, `source` labelling it.
     pub fn run(&mut self, design: &[PlannedPose], source: &str) -> Result<Campaign, TwinError> {
-        let k = if self.config.noise { 1.0 } else { 0.0 };
+        // noiseless: the spec's levels times zero, so that the draws stay the same
+        let (k, noise) = match &self.config.noise {
+            Some(n) => (1.0, n.clone()),
+            None => (0.0, NoiseModel::default()),
+        };
         let mut poses = Vec::with_capacity(design.len());
         let mut reset: Option<(String, Vector2<f64>, f64)> = None;
         let mut last_setup: Option<&str> = None;
@@ -427,7 +433,7 @@ impl Twin {
             self.t += SECONDS_PER_POSE;
             let t = self.t;
             let self_cal = plan.instrument == Instrument::SelfCal;
-            let mut enc = [0; 4].map(|_| k * noise::ENCODER_MM * gauss(&mut self.rng));
+            let mut enc = [0; 4].map(|_| k * noise.encoder_mm * gauss(&mut self.rng));
             let mut covariates = Vec::with_capacity(3);
             if let Some(m) = backlash {
                 let cmd = geometry::igm(&self.controller(self_cal), Model::M29, plan.x, plan.y)
@@ -455,7 +461,7 @@ impl Twin {
             let mut q = st.q;
             for i in 0..4 {
                 if st.follower[i] {
-                    q[i] += k * noise::ENCODER_MM * gauss(&mut self.rng);
+                    q[i] += k * noise.encoder_mm * gauss(&mut self.rng);
                 }
             }
             let temp = self.temperature(t) + k * TEMP_SENSOR_K * gauss(&mut self.rng);
@@ -498,7 +504,7 @@ impl Twin {
                 } else {
                     match plan.instrument {
                         Instrument::Lt | Instrument::Kgm => {
-                            let cov = noise::xy_covariance(plan.instrument, st.tcp);
+                            let cov = noise.xy_covariance(plan.instrument, st.tcp);
                             let e = match Cholesky::new(cov) {
                                 Some(c) => {
                                     c.l() * Vector2::new(gauss(&mut self.rng), gauss(&mut self.rng))
@@ -513,7 +519,8 @@ impl Twin {
                         | Instrument::Dbb
                         | Instrument::Circle
                         | Instrument::LiPsi => {
-                            let e = k * noise::scalar_sigma(plan.instrument) * gauss(&mut self.rng);
+                            let sigma = noise.scalar_sigma(plan.instrument).unwrap_or(0.0);
+                            let e = k * sigma * gauss(&mut self.rng);
                             match plan.instrument {
                                 Instrument::LiX => pose.x = Some(d.x + e),
                                 Instrument::LiY => pose.y = Some(d.y + e),

@@ -2,6 +2,7 @@
 
 use super::{bad_input, read_campaign, write_json};
 use rpkm_core::calib::{self, Calibration, Options, Scaling, Selection};
+use rpkm_core::variance::{self, NoiseEstimate};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES};
@@ -25,10 +26,30 @@ pub struct CalibrateArgs {
     /// Geometric model: 24 (perfect parallel-holder, ψ ≡ γ2) or 29 (complete).
     #[arg(long, default_value_t = 29)]
     pub model: u32,
-    /// Parameters to identify: `auto` (observability analysis: QR-pivot order while the
-    /// condition number stays below --max-condition) or a comma-separated list (l1,gamma2,...).
-    #[arg(long, default_value = "auto")]
+    /// Parameters to identify: `map` (every parameter of the model, each held near its
+    /// nominal value by its manufacturing tolerance, --tolerance-mm/--tolerance-mrad: the
+    /// campaign determines what it sees, the rest stays at the prior; the same calibration
+    /// as `rpkm diagnose` and the calibrator node), `auto` (the thesis's observability
+    /// selection: QR-pivot order while the condition number stays below --max-condition) or
+    /// a comma-separated list (l1,gamma2,...).
+    #[arg(long, default_value = "map")]
     pub params: String,
+    /// Manufacturing tolerance of the lengths (mm, one σ) for --params map.
+    #[arg(long, default_value_t = 0.1)]
+    pub tolerance_mm: f64,
+    /// Manufacturing tolerance of the angles (mrad, one σ) for --params map.
+    #[arg(long, default_value_t = 1.0)]
+    pub tolerance_mrad: f64,
+    /// The instruments' stated noise, NAME=VALUE comma-separated or a YAML file (mm, rad for
+    /// psi): lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, psi,
+    /// encoder, tracker_x, tracker_y. Default: the spec's figures. Example:
+    /// --noise lt=0.005,kgm=0.001,encoder=0.0005
+    #[arg(long)]
+    pub noise: Option<String>,
+    /// Weight the rows by the stated noise as it is, instead of estimating each group's level
+    /// from the campaign (variance components).
+    #[arg(long)]
+    pub no_noise_estimation: bool,
     /// Condition number limit of the automatic selection (Schröer: 100 for real calibrations).
     #[arg(long, default_value_t = 100.0)]
     pub max_condition: f64,
@@ -44,8 +65,9 @@ pub struct CalibrateArgs {
     /// Parameter scaling: `column` (column norms, eq. 3.25) or `range` (0.1 mm, 1°; Schröer).
     #[arg(long, default_value = "column")]
     pub scaling: String,
-    /// Outlier elimination threshold in standard deviations per direction (0 = keep all).
-    #[arg(long, default_value_t = 3.0)]
+    /// Outlier elimination threshold in standard deviations per direction (0 = keep all, the
+    /// default: the same rows as `rpkm diagnose`; 3 = the thesis's 3-sigma elimination).
+    #[arg(long, default_value_t = 0.0)]
     pub outlier_sigma: f64,
     /// Tie rod 5 to rod 4 in the dependency matrix (perfect parallel-holder in model 29).
     #[arg(long)]
@@ -93,7 +115,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         Some(path) => super::read_params(path)?,
         None => Params::nominal(),
     };
+    let prior = calib::Prior {
+        length_mm: positive("--tolerance-mm", args.tolerance_mm)?,
+        angle_rad: positive("--tolerance-mrad", args.tolerance_mrad)? * 1e-3,
+    };
     let selection = match args.params.as_str() {
+        "map" => Selection::Prior(prior),
         "auto" => Selection::Auto {
             max_condition: args.max_condition,
         },
@@ -119,17 +146,20 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         links,
         scaling,
         outlier_sigma: (args.outlier_sigma > 0.0).then_some(args.outlier_sigma),
+        noise: super::parse_noise(args.noise.as_deref())?,
         ..Default::default()
     };
-    let cal = calib::calibrate(&campaign, &start, &opts).map_err(|e| match e {
-        calib::CalibrationError::Pose(_) => bad_input(format!("{e}")),
-        other => anyhow::anyhow!("calibrating {}: {other}", args.campaign.display()),
-    })?;
+    let (cal, noise) = calibrate(&campaign, &start, &opts, !args.no_noise_estimation)
+        .map_err(|e| match e {
+            calib::CalibrationError::Pose(_) => bad_input(format!("{e}")),
+            other => anyhow::anyhow!("calibrating {}: {other}", args.campaign.display()),
+        })?;
     let val = validation
         .as_ref()
         .map(|v| validate(v, &start, &cal.params, model))
         .transpose()?;
     print_report(&campaign, &cal, val.as_ref());
+    print_noise(&noise);
     let stages = if args.effects.trim().is_empty() {
         None
     } else {
@@ -137,13 +167,74 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     };
     if let Some(path) = &args.json {
         let mut out = report_json(&cal, val.as_ref());
+        out["noise"] = serde_json::to_value(&noise.groups)?;
+        out["determined"] = serde_json::to_value(cal.determined)?;
         if let Some(st) = &stages {
             out["effect_stages"] = serde_json::to_value(st)?;
+            // the figure of the whole model, effects included, as its table shows it
+            if let Some(last) = st.last().and_then(|s| s.val_rms_um) {
+                out["val_rms_after_um"] = json!(last);
+            }
         }
         write_json(path, &out)?;
         println!("\nwrote {}", path.display());
     }
     Ok(())
+}
+
+fn positive(flag: &str, v: f64) -> anyhow::Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(bad_input(format!("{flag} {v}: expected a positive number")))
+    }
+}
+
+/// Calibrate, estimating each noise group's level from the campaign when `estimate`.
+fn calibrate(
+    campaign: &Campaign,
+    start: &Params,
+    opts: &Options,
+    estimate: bool,
+) -> Result<(Calibration, NoiseEstimate), calib::CalibrationError> {
+    let effects = rpkm_core::effects::EffectSet::empty();
+    if estimate {
+        variance::calibrate_estimating_noise(campaign, start, opts, &effects)
+    } else {
+        calib::calibrate_with(campaign, start, opts, &effects, &[])
+            .map(|c| (c, NoiseEstimate::assumed(&opts.noise)))
+    }
+}
+
+/// The noise table: stated against estimated, per group.
+pub fn print_noise(noise: &NoiseEstimate) {
+    if noise.groups.is_empty() {
+        return;
+    }
+    println!(
+        "
+noise per group (estimated from the campaign's residuals, {} rounds):",
+        noise.rounds
+    );
+    println!(
+        "  {:<10} {:>10} {:>10} {:>8}  unit",
+        "group", "stated", "estimated", "dof"
+    );
+    for g in &noise.groups {
+        println!(
+            "  {:<10} {:>10.3} {:>10.3} {:>8.1}  {}{}",
+            g.group,
+            g.assumed,
+            g.estimated,
+            g.dof,
+            g.unit,
+            if g.estimated_from_data {
+                ""
+            } else {
+                "  (too few degrees of freedom: stated level kept)"
+            }
+        );
+    }
 }
 
 /// One row of the effect-by-effect table.
@@ -166,21 +257,22 @@ fn effect_stages(
 ) -> anyhow::Result<Vec<Stage>> {
     use rpkm_core::diagnose;
     let effects = super::diagnose::parse_effects(&args.effects)?;
-    // the diagnosis's selection (condition limit 1e5): with Schröer's 100 the weakly
-    // observable geometry stays nominal and its error would be pushed onto the effects
+    // the diagnosis's calibration: tolerance prior, noise estimated, no outlier elimination
     let opts = diagnose::Options {
         model: if args.perfect_parallelogram {
             Model::M24
         } else {
             model
         },
+        noise: super::parse_noise(args.noise.as_deref())?,
+        estimate_noise: !args.no_noise_estimation,
         ..Default::default()
     };
     let mut stages = Vec::new();
     for k in 0..=effects.len() {
         let refs: Vec<&dyn rpkm_core::effects::Effect> =
             effects[..k].iter().map(|e| e.as_ref()).collect();
-        let fit = diagnose::evaluate(campaign, validation, &refs, &opts)?;
+        let (fit, _) = diagnose::evaluate(campaign, validation, &refs, &opts)?;
         let name = match k {
             0 => format!("{}", opts.model),
             _ => format!("+ {}", effects[k - 1].name()),

@@ -27,6 +27,25 @@ pub fn bad_input(msg: String) -> anyhow::Error {
     anyhow::Error::new(BadInput(msg))
 }
 
+/// The noise model of `--noise`: `NAME=VALUE,...` or a YAML file of `NAME: VALUE` lines
+/// (`.yaml`/`.yml`); the spec's figures for what it does not name.
+pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<rpkm_core::noise::NoiseModel> {
+    let spec = spec.unwrap_or("").trim();
+    let text = if spec.ends_with(".yaml") || spec.ends_with(".yml") {
+        let raw = std::fs::read_to_string(spec)
+            .map_err(|e| bad_input(format!("--noise {spec}: {e}")))?;
+        let map: std::collections::BTreeMap<String, f64> = serde_yaml::from_str(&raw)
+            .map_err(|e| bad_input(format!("--noise {spec}: expected NAME: VALUE lines: {e}")))?;
+        map.iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect::<Vec<_>>()
+            .join(",")
+    } else {
+        spec.to_owned()
+    };
+    rpkm_core::noise::NoiseModel::parse(&text).map_err(|e| bad_input(format!("--noise: {e}")))
+}
+
 /// The error and its causes joined by ": ", leaving out a cause whose text the message
 /// before it already contains (errors that print their source inline).
 pub fn error_chain(e: &anyhow::Error) -> String {

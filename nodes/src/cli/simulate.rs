@@ -1,6 +1,7 @@
 //! `rpkm simulate`: measurement campaigns from the digital twin.
 
 use anyhow::{bail, Context, Result};
+use rpkm_core::noise::NoiseModel;
 use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
 use std::path::{Path, PathBuf};
 
@@ -52,8 +53,14 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 100)]
     pub validation: usize,
     /// Noise-free instruments and encoders.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "noise")]
     pub no_noise: bool,
+    /// The twin's noise, NAME=VALUE comma-separated (mm, rad for psi; the rest at the spec's
+    /// figures): `lt` (isotropic tracker), `lt_along`, `lt_across`, `lt_across_per_m`, `kgm`,
+    /// `dbb`, `li`, `psi`, `encoder`, `tracker_x`, `tracker_y`. A machine noisier than what
+    /// the calibration assumes: `--noise encoder=0.0005,lt=0.006`.
+    #[arg(long)]
+    pub noise: Option<String>,
     /// Bag only: also write an ActuatorState stream at this rate (Hz) on
     /// /rpkm/actuator_state, after the campaign (if any) on the twin's clock.
     #[arg(long)]
@@ -99,6 +106,17 @@ pub fn parse_effect(s: &str) -> Result<(EffectKind, f64)> {
     Ok((kind, m))
 }
 
+/// The twin's noise from `--noise` / `--no-noise`.
+fn twin_noise(args: &SimulateArgs) -> Result<Option<NoiseModel>> {
+    if args.no_noise {
+        return Ok(None);
+    }
+    let spec = args.noise.as_deref().unwrap_or("");
+    NoiseModel::parse(spec)
+        .map(Some)
+        .map_err(|e| super::bad_input(format!("--noise: {e}")))
+}
+
 /// `dir/name.csv` → `dir/name.val.csv`.
 fn validation_path(out: &Path) -> PathBuf {
     let stem = out
@@ -118,7 +136,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let mut twin = Twin::new(TwinConfig {
         seed: args.seed,
         effects,
-        noise: !args.no_noise,
+        noise: twin_noise(args)?,
         ..TwinConfig::default()
     })?;
     let names: Vec<&str> = args.campaign.iter().map(|s| s.trim()).collect();

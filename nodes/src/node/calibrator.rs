@@ -384,7 +384,7 @@ mod tests {
     #[test]
     fn messages_rebuild_the_campaign_and_calibrate_like_the_core() -> anyhow::Result<()> {
         let mut twin = Twin::new(TwinConfig {
-            noise: false,
+            noise: None,
             ..TwinConfig::default()
         })?;
         let c = twin.campaign_by_names(&["lt", "validation"], 20)?;

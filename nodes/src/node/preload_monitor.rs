@@ -7,10 +7,15 @@
 //! holds after `debounce_samples` consecutive samples agree. Published: PreloadStatus every
 //! `status_every` samples and at each level change, /diagnostics every period and at each
 //! level change, naming the drive.
+//!
+//! The prediction comes from the core's guarded solve (`fegm_checked`: warm, else cold, each
+//! checked against physics). A state without a plausible prediction is skipped and counted
+//! (`implausible` on /diagnostics): it never sets a level, so a non-physical branch of the
+//! solver (10⁸ N "predicted") cannot raise ERROR on a drive.
 
 use std::time::Duration;
 
-use rpkm_core::elastic::{fegm, fegm_from, Equilibrium, NOMINAL_DRIVE_FORCE_N};
+use rpkm_core::elastic::{fegm_checked, ElasticError, Equilibrium, Limits, NOMINAL_DRIVE_FORCE_N};
 use rpkm_core::geometry::rgm;
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, PreloadLevel, PreloadStatus};
 use rpkm_transport::topic;
@@ -93,6 +98,8 @@ pub struct Monitor {
     pub samples: u64,
     /// States the model could not solve.
     pub unsolved: u64,
+    /// States whose only elastic solutions failed the plausibility checks (skipped).
+    pub implausible: u64,
     /// The last evaluation.
     pub last: Option<Evaluation>,
 }
@@ -110,6 +117,7 @@ impl Monitor {
             run_ok: 0,
             samples: 0,
             unsolved: 0,
+            implausible: 0,
             last: None,
         }
     }
@@ -130,24 +138,23 @@ impl Monitor {
         self.level
     }
 
-    /// Evaluates one state; `None` when the model cannot solve it (counted).
+    /// Evaluates one state; `None` when the model has no plausible prediction for it
+    /// (counted as unsolved or implausible; the held level stays as it was).
     pub fn evaluate(&mut self, s: &ActuatorState) -> Option<Evaluation> {
         let g = &self.geometry;
         let q = s.position.map(|p| p * MM_PER_M);
-        let warm = self
-            .previous
-            .as_ref()
-            .and_then(|prev| fegm_from(&g.params, &g.stiffness, q, s.follower, prev).ok());
-        let eq = match warm {
-            Some(eq) => eq,
-            None => match fegm(&g.params, &g.stiffness, q, s.follower) {
-                Ok(eq) => eq,
-                Err(_) => {
-                    self.previous = None;
-                    self.unsolved += 1;
-                    return None;
+        let prev = self.previous.as_ref();
+        let limits = Limits::default();
+        let eq = match fegm_checked(&g.params, &g.stiffness, q, s.follower, prev, &limits) {
+            Ok(solved) => solved.eq,
+            Err(e) => {
+                self.previous = None;
+                match e {
+                    ElasticError::Implausible(_) => self.implausible += 1,
+                    _ => self.unsolved += 1,
                 }
-            },
+                return None;
+            }
         };
         self.previous = Some(eq);
         self.samples += 1;
@@ -231,8 +238,14 @@ impl Monitor {
             return status(
                 level,
                 node,
-                format!("no drive state evaluated yet ({} unsolved)", self.unsolved),
-                vec![("unsolved", self.unsolved.to_string())],
+                format!(
+                    "no drive state evaluated yet ({} unsolved, {} implausible)",
+                    self.unsolved, self.implausible
+                ),
+                vec![
+                    ("unsolved", self.unsolved.to_string()),
+                    ("implausible", self.implausible.to_string()),
+                ],
             );
         };
         let st = &e.status;
@@ -269,6 +282,7 @@ impl Monitor {
             ("worst_drive", format!("q{}", k + 1)),
             ("samples", self.samples.to_string()),
             ("unsolved", self.unsolved.to_string()),
+            ("implausible", self.implausible.to_string()),
             ("dq2_m", format!("{:e}", st.dq2)),
             ("dq3_m", format!("{:e}", st.dq3)),
             ("parameters", self.geometry.source.clone()),
@@ -399,7 +413,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rpkm_core::elastic::{Stiffness, ALL_ACTIVE};
+    use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE};
     use rpkm_core::geometry::igm;
     use rpkm_core::params::{Model, Params};
 
@@ -469,6 +483,24 @@ mod tests {
         assert!((e.status.dq2 + 0.1e-3).abs() < 1e-9, "{}", e.status.dq2);
         assert!((e.status.dq3 - 0.3e-3).abs() < 1e-9, "{}", e.status.dq3);
         assert_eq!(e.sample_level, PreloadLevel::Error, "0.3 mm > 200 µm");
+        Ok(())
+    }
+
+    #[test]
+    fn an_implausible_prediction_is_skipped_not_compared() -> Result<(), Box<dyn std::error::Error>>
+    {
+        // q3 50 mm off: the elastic model's only answer needs 100x the drives' force. The
+        // measured currents are small; comparing with that answer would raise ERROR.
+        let mut m = monitor(1);
+        let mut s = state(0.0)?;
+        s.position[2] += 0.05;
+        assert!(m.evaluate(&s).is_none());
+        assert_eq!((m.implausible, m.samples), (1, 0));
+        assert_eq!(m.level(), PreloadLevel::Ok);
+        assert!(m.status("m").message.contains("1 implausible"));
+        // and a plausible state afterwards is evaluated as usual
+        let ok = m.evaluate(&state(0.0)?).ok_or("unsolved")?;
+        assert_eq!(ok.sample_level, PreloadLevel::Ok);
         Ok(())
     }
 }

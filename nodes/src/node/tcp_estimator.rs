@@ -1,17 +1,22 @@
 //! `tcp_estimator`: for every ActuatorState, the elasto-geometric TCP estimate
-//! (`rpkm_core::elastic::fegm`, warm-started from the previous equilibrium) with the current
-//! parameters, published as TcpEstimate with the state's stamp and seq.
+//! (`rpkm_core::elastic::fegm_checked`, warm-started from the previous equilibrium) with the
+//! current parameters, published as TcpEstimate with the state's stamp and seq.
 //!
-//! When the elastic solve fails (warm and cold start), the pose comes from the rigid forward
-//! model of (q1, q4) and the message says so: `converged = false`, `iterations = 0`, rod and
-//! drive forces 0, loop residuals those of the rigid pose (they show the incompatibility). A
-//! state no model can solve gets no estimate; both cases are counted on /diagnostics.
+//! Every elastic equilibrium passes the core's plausibility checks before it is published
+//! (loop closure, platform balance, forces within 10× the drives, ψ near γ2, TCP within 2 mm
+//! of the rigid model: `rpkm_core::elastic::plausibility`): a warm-started solve can land on a
+//! non-physical branch after a large jump and still converge. A warm result that fails is
+//! solved again cold; when that fails too, the pose comes from the rigid forward model of
+//! (q1, q4) and the message says so: `converged = false`, `iterations = 0`, rod and drive
+//! forces 0, loop residuals those of the rigid pose (they show the incompatibility). The
+//! reason is counted on /diagnostics (WARN; ERROR while it persists). A state no model can
+//! solve gets no estimate. ψ is published wrapped to (−π, π].
 //! Per sample nothing is allocated: static nalgebra types, a `Copy` message, zero-copy
 //! publishing on iceoryx2.
 
 use std::time::Duration;
 
-use rpkm_core::elastic::{fegm, fegm_from, Equilibrium};
+use rpkm_core::elastic::{fegm_checked, wrap_angle, ElasticError, Equilibrium, Limits, Reason};
 use rpkm_core::geometry::{self, carrier_joint, platform_joint};
 use rpkm_core::params::{Model, RODS};
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
@@ -25,6 +30,11 @@ use super::{
 /// Parameter keys of the node.
 pub const KEYS: [&str; 2] = ["busy_poll_ms", "rt_priority"];
 
+/// Consecutive estimates without a plausible elastic equilibrium from which /diagnostics
+/// says ERROR instead of WARN: one odd sample is a warning, a stream of them means the
+/// parameters or the input no longer describe the machine.
+pub const ERROR_AFTER_CONSECUTIVE: u64 = 50;
+
 /// Counters of an [`Estimator`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct EstimatorCounts {
@@ -32,28 +42,53 @@ pub struct EstimatorCounts {
     pub estimates: u64,
     /// Elastic solves that needed a cold start (the warm start failed or there was none).
     pub cold_starts: u64,
-    /// Estimates from the rigid fallback.
+    /// Warm-started solves rejected (solver failure or a failed plausibility check) and
+    /// solved again cold.
+    pub warm_rejected: u64,
+    /// Estimates from the rigid fallback (published with `converged = false`).
     pub rigid_fallbacks: u64,
+    /// Of these, those whose elastic solve converged but failed the checks even cold.
+    pub implausible: u64,
     /// States no model could solve (no estimate).
     pub unsolved: u64,
+    /// Rigid fallbacks and unsolved states in a row, up to now (0 after a plausible one).
+    pub consecutive_failures: u64,
+    /// Rejections (warm and cold) by [`Reason`], indexed by `code − 1`.
+    pub by_reason: [u64; 6],
+}
+
+impl EstimatorCounts {
+    fn reject(&mut self, r: Reason) {
+        self.by_reason[usize::from(r.code() - 1)] += 1;
+    }
 }
 
 /// The estimator's state: the geometry and the previous equilibrium (warm start).
 #[derive(Debug, Clone)]
 pub struct Estimator {
     geometry: Geometry,
+    limits: Limits,
     previous: Option<Equilibrium>,
     /// Counters.
     pub counts: EstimatorCounts,
-    /// The last elastic error, for /diagnostics.
-    pub last_error: Option<String>,
+    /// The last elastic failure (kept typed: formatted only for /diagnostics).
+    pub last_error: Option<ElasticError>,
+}
+
+/// The reason an elastic failure counts under.
+fn reason_of(e: &ElasticError) -> Reason {
+    match e {
+        ElasticError::Implausible(v) => v.reason,
+        _ => Reason::NotConverged,
+    }
 }
 
 impl Estimator {
-    /// An estimator with `geometry`.
+    /// An estimator with `geometry` and the core's default plausibility limits.
     pub fn new(geometry: Geometry) -> Self {
         Self {
             geometry,
+            limits: Limits::default(),
             previous: None,
             counts: EstimatorCounts::default(),
             last_error: None,
@@ -76,17 +111,8 @@ impl Estimator {
     pub fn estimate(&mut self, state: &ActuatorState) -> Option<TcpEstimate> {
         let g = &self.geometry;
         let q = state.position.map(|p| p * MM_PER_M);
-        let warm = self
-            .previous
-            .as_ref()
-            .and_then(|prev| fegm_from(&g.params, &g.stiffness, q, state.follower, prev).ok());
-        let solved = match warm {
-            Some(eq) => Ok(eq),
-            None => {
-                self.counts.cold_starts += 1;
-                fegm(&g.params, &g.stiffness, q, state.follower)
-            }
-        };
+        let prev = self.previous.as_ref();
+        let solved = fegm_checked(&g.params, &g.stiffness, q, state.follower, prev, &self.limits);
         let model = match g.model {
             Model::M24 => TcpEstimate::MODEL_24,
             Model::M29 => TcpEstimate::MODEL_29,
@@ -98,70 +124,131 @@ impl Estimator {
             ..Default::default()
         };
         match solved {
-            Ok(eq) => {
+            Ok(s) => {
+                let c = &mut self.counts;
+                c.cold_starts += u64::from(s.cold);
+                if let Some(v) = s.warm_rejected {
+                    c.warm_rejected += 1;
+                    c.reject(v.reason);
+                }
+                c.consecutive_failures = 0;
+                let eq = s.eq;
                 self.previous = Some(eq);
                 est.x = eq.x / MM_PER_M;
                 est.y = eq.y / MM_PER_M;
-                est.psi = eq.psi;
+                est.psi = wrap_angle(eq.psi);
                 est.rod_forces = eq.rod_force;
                 est.drive_forces = eq.drive_force;
-                est.iterations = eq.iterations as u32;
+                est.iterations = u32::try_from(eq.iterations).unwrap_or(u32::MAX);
                 est.converged = true;
                 est.loop_residuals = loop_residuals(g, &q, eq.x, eq.y, eq.psi);
             }
-            Err(e) => {
-                self.previous = None;
-                self.last_error = Some(e.to_string());
-                let Ok(rigid) = geometry::fgm(&g.params, g.model, q[0], q[3]) else {
-                    self.counts.unsolved += 1;
-                    return None;
-                };
-                self.counts.rigid_fallbacks += 1;
-                est.x = rigid.x() / MM_PER_M;
-                est.y = rigid.y() / MM_PER_M;
-                est.psi = rigid.psi();
-                est.converged = false;
-                est.iterations = 0;
-                est.loop_residuals = loop_residuals(g, &q, rigid.x(), rigid.y(), rigid.psi());
-            }
+            Err(e) => return self.rigid_fallback(e, &q, est),
         }
         self.counts.estimates += 1;
         Some(est)
     }
 
-    /// The /diagnostics status of the estimator.
+    /// No plausible elastic equilibrium: the rigid model of (q1, q4), flagged
+    /// `converged = false`, or no estimate when that fails too.
+    fn rigid_fallback(
+        &mut self,
+        e: ElasticError,
+        q: &[f64; 4],
+        mut est: TcpEstimate,
+    ) -> Option<TcpEstimate> {
+        let c = &mut self.counts;
+        c.cold_starts += 1;
+        c.consecutive_failures = c.consecutive_failures.saturating_add(1);
+        if let ElasticError::Implausible(v) = &e {
+            c.reject(v.reason);
+        }
+        self.previous = None;
+        let g = &self.geometry;
+        let rigid = geometry::fgm(&g.params, g.model, q[0], q[3]);
+        self.last_error = Some(e);
+        let Ok(rigid) = rigid else {
+            self.counts.unsolved += 1;
+            return None;
+        };
+        if matches!(self.last_error, Some(ElasticError::Implausible(_))) {
+            self.counts.implausible += 1;
+        }
+        self.counts.rigid_fallbacks += 1;
+        est.x = rigid.x() / MM_PER_M;
+        est.y = rigid.y() / MM_PER_M;
+        est.psi = wrap_angle(rigid.psi());
+        est.converged = false;
+        est.iterations = 0;
+        est.loop_residuals = loop_residuals(g, q, rigid.x(), rigid.y(), rigid.psi());
+        self.counts.estimates += 1;
+        Some(est)
+    }
+
+    /// The /diagnostics status of the estimator: OK while every estimate is a plausible
+    /// elastic equilibrium, WARN once one was not (rigid fallback or unsolved), ERROR while
+    /// [`ERROR_AFTER_CONSECUTIVE`] or more in a row were not.
     pub fn status(&self, node: &str) -> DiagnosticStatus {
         let c = self.counts;
-        let (level, message) = if c.unsolved > 0 || c.rigid_fallbacks > 0 {
+        let last = self.last_error.as_ref();
+        let last_text = last.map_or_else(|| "none".to_owned(), ToString::to_string);
+        let (level, message) = if c.consecutive_failures >= ERROR_AFTER_CONSECUTIVE {
+            (
+                DiagnosticStatus::ERROR,
+                format!(
+                    "{} estimates in a row without a plausible elastic equilibrium (rigid \
+                     model published, converged false); last: {last_text}",
+                    c.consecutive_failures
+                ),
+            )
+        } else if c.unsolved > 0 || c.rigid_fallbacks > 0 {
             (
                 DiagnosticStatus::WARN,
                 format!(
-                    "{} rigid fallbacks, {} unsolved states; last elastic error: {}",
-                    c.rigid_fallbacks,
-                    c.unsolved,
-                    self.last_error.as_deref().unwrap_or("none")
+                    "{} rigid fallbacks ({} implausible), {} unsolved states; last elastic \
+                     error: {last_text}",
+                    c.rigid_fallbacks, c.implausible, c.unsolved
                 ),
             )
         } else {
             (
                 DiagnosticStatus::OK,
-                format!("{} estimates, all elastic solves converged", c.estimates),
+                format!(
+                    "{} estimates, all plausible elastic equilibria ({} warm starts rejected \
+                     and solved cold)",
+                    c.estimates, c.warm_rejected
+                ),
             )
         };
-        status(
-            level,
-            node,
-            message,
-            vec![
-                ("estimates", c.estimates.to_string()),
-                ("cold_starts", c.cold_starts.to_string()),
-                ("rigid_fallbacks", c.rigid_fallbacks.to_string()),
-                ("unsolved", c.unsolved.to_string()),
-                ("parameters", self.geometry.source.clone()),
-            ],
-        )
+        let mut values = vec![
+            ("estimates", c.estimates.to_string()),
+            ("cold_starts", c.cold_starts.to_string()),
+            ("warm_rejected", c.warm_rejected.to_string()),
+            ("rigid_fallbacks", c.rigid_fallbacks.to_string()),
+            ("implausible", c.implausible.to_string()),
+            ("unsolved", c.unsolved.to_string()),
+            ("consecutive_failures", c.consecutive_failures.to_string()),
+            ("last_reason", last.map_or("none", |e| reason_of(e).as_str()).into()),
+            ("last_reason_code", last.map_or(0, |e| reason_of(e).code()).to_string()),
+        ];
+        for r in Reason::ALL {
+            let key = REJECTION_KEYS[usize::from(r.code() - 1)];
+            values.push((key, c.by_reason[usize::from(r.code() - 1)].to_string()));
+        }
+        values.push(("parameters", self.geometry.source.clone()));
+        status(level, node, message, values)
     }
 }
+
+/// /diagnostics keys of the rejection counts, in [`Reason`] code order.
+const REJECTION_KEYS: [&str; 6] = [
+    "rejected_not_converged",
+    "rejected_loop_closure",
+    "rejected_force_balance",
+    "rejected_force_limit",
+    "rejected_platform_angle",
+    "rejected_far_from_rigid",
+];
 
 /// |A_i − B_i| − l_i of rods 1..5 at pose (x, y, ψ) (mm) and actuator readings `q` (mm), in m;
 /// rod 5 is 0 for model 24.
@@ -260,8 +347,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rpkm_core::elastic::{Stiffness, ALL_ACTIVE};
-    use rpkm_core::geometry::igm;
+    use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, FOLLOWERS_23};
+    use rpkm_core::geometry::{fgm, igm};
     use rpkm_core::params::Params;
 
     fn geometry() -> Geometry {
@@ -322,5 +409,94 @@ mod tests {
         assert!(est.estimate(&state([1e5, 0.0, 0.0, -1e5], 1)).is_none());
         assert_eq!(est.counts.unsolved, 1);
         assert_eq!(est.status("e").level, DiagnosticStatus::WARN);
+    }
+
+    /// Distance of an estimate from the rigid model of its own encoders, mm.
+    fn off_rigid(e: &TcpEstimate, q_mm: [f64; 4]) -> Result<f64, Box<dyn std::error::Error>> {
+        let r = fgm(&Params::nominal(), Model::M29, q_mm[0], q_mm[3])?;
+        Ok((e.x * MM_PER_M - r.x()).hypot(e.y * MM_PER_M - r.y()))
+    }
+
+    #[test]
+    fn a_1_m_jump_is_solved_cold_and_stays_plausible() -> Result<(), Box<dyn std::error::Error>> {
+        // Poses 76 and 77 of bags/demo/campaign.csv: the last laser-tracker pose, then the
+        // first self-calibration pose 1 m away, where the warm solve turns the platform over.
+        let a = [
+            1719.8170527623831,
+            1440.9921488891168,
+            -44.11895240915077,
+            -319.8170527623831,
+        ];
+        let b = [
+            2442.3098745182497,
+            2719.006545410108,
+            678.6435583303341,
+            957.6901254817501,
+        ];
+        let mut est = Estimator::new(geometry());
+        let mut s = state(a, 1);
+        s.follower = FOLLOWERS_23;
+        est.estimate(&s).ok_or("no estimate")?;
+        s = state(b, 2);
+        s.follower = FOLLOWERS_23;
+        let e = est.estimate(&s).ok_or("no estimate")?;
+        assert!(e.converged);
+        assert!(off_rigid(&e, b)? < 1e-6, "{} mm", off_rigid(&e, b)?);
+        assert!(e.psi.abs() < 0.01);
+        assert_eq!(est.counts.warm_rejected, 1, "{:?}", est.counts);
+        assert_eq!(est.counts.rigid_fallbacks, 0);
+        let st = est.status("e");
+        assert_eq!(st.level, DiagnosticStatus::OK, "{}", st.message);
+        Ok(())
+    }
+
+    #[test]
+    fn implausible_states_fall_back_flagged_and_escalate() -> Result<(), Box<dyn std::error::Error>>
+    {
+        // q3 50 mm off its compatible position: the elastic model answers with forces 100x
+        // the drives', which no machine holds; the rigid model of (q1, q4) is published.
+        let p = Params::nominal();
+        let good = igm(&p, Model::M29, 20.0, 1650.0)?.q();
+        let mut bad = good;
+        bad[2] += 50.0;
+        let mut est = Estimator::new(geometry());
+        let e = est.estimate(&state(bad, 1)).ok_or("no estimate")?;
+        assert!(!e.converged);
+        assert_eq!(e.iterations, 0);
+        assert_eq!(e.drive_forces, [0.0; 4]);
+        assert!(off_rigid(&e, bad)? < 1e-9);
+        assert_eq!(est.counts.implausible, 1);
+        assert_eq!(est.counts.by_reason[usize::from(Reason::ForceLimit.code() - 1)], 1);
+        let st = est.status("e");
+        assert_eq!(st.level, DiagnosticStatus::WARN, "{}", st.message);
+        let value = |st: &DiagnosticStatus, k: &str| {
+            st.values.iter().find(|v| v.key == k).map(|v| v.value.clone())
+        };
+        assert_eq!(value(&st, "last_reason").as_deref(), Some("force_limit"));
+        for seq in 2..=ERROR_AFTER_CONSECUTIVE {
+            let e = est.estimate(&state(bad, seq)).ok_or("no estimate")?;
+            assert!(!e.converged);
+        }
+        assert_eq!(est.status("e").level, DiagnosticStatus::ERROR);
+        let e = est.estimate(&state(good, 100)).ok_or("no estimate")?;
+        assert!(e.converged);
+        assert_eq!(est.counts.consecutive_failures, 0);
+        assert_eq!(est.status("e").level, DiagnosticStatus::WARN, "cumulative warning");
+        Ok(())
+    }
+
+    #[test]
+    fn psi_is_published_wrapped() -> Result<(), Box<dyn std::error::Error>> {
+        let p = Params::nominal();
+        let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
+        let mut est = Estimator::new(geometry());
+        est.estimate(&state(q, 1)).ok_or("no estimate")?;
+        // A warm start a whole turn away (what the issue saw as ψ = −6.2832 rad).
+        if let Some(prev) = est.previous.as_mut() {
+            prev.psi -= std::f64::consts::TAU;
+        }
+        let e = est.estimate(&state(q, 2)).ok_or("no estimate")?;
+        assert!(e.psi.abs() < 1e-6, "ψ {}", e.psi);
+        Ok(())
     }
 }
