@@ -246,11 +246,6 @@ pub fn diagnose(
     in_model: &[&dyn Effect],
     opts: &Options,
 ) -> Result<Diagnosis, DiagnoseError> {
-    let start = Params::nominal();
-    let (base, est, copts) = current_model(campaign, in_model, opts)?;
-    let val = held_out(validation, &est.model)?;
-    let base = finish(campaign, val.as_ref(), in_model, base, &copts)?;
-    let baseline = baseline(&base, &est.model, val.as_ref(), opts);
     let in_names: Vec<&str> = in_model.iter().map(|e| e.name()).collect();
     let library = effects::library();
     let tried: Vec<&dyn Effect> = library
@@ -260,30 +255,34 @@ pub fn diagnose(
         .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
         .collect();
     let level = opts.alpha / tried.len().max(1) as f64;
-    let structure = sparse::structure(campaign, &base.rows);
-    let mut candidates = Vec::new();
-    let mut skipped = Vec::new();
-    let mut fits = Vec::new();
-    for effect in &tried {
-        match try_effect(campaign, val.as_ref(), in_model, *effect, &start, &copts) {
-            Ok((full, kept)) => match compare(&base, &full, &kept, *effect, campaign, level) {
-                Some(c) => {
-                    candidates.push(c);
-                    fits.push((effect.name(), kept));
-                }
-                None => skipped.push(Skipped {
-                    effect: effect.name().to_owned(),
-                    reason: "no parameter of it is observable with this campaign (the \
-                             geometry absorbs its signature)"
-                        .to_owned(),
-                }),
-            },
-            Err(e) => skipped.push(Skipped {
-                effect: effect.name().to_owned(),
-                reason: e.to_string(),
-            }),
+    let (cal, mut est, mut copts) = current_model(campaign, in_model, opts)?;
+    let val = held_out(validation, &est.model)?;
+    let mut base = finish(campaign, val.as_ref(), in_model, cal, &copts)?;
+    let mut round = candidates(campaign, val.as_ref(), in_model, &tried, &base, &copts, level);
+    // The current model's misfit inflates the noise estimated under it, which dims the very
+    // effect that would explain it. With a significant candidate, the noise is estimated
+    // again under the model with it, and every model compared with those weights (the
+    // nested tests need one weighting, any fixed one).
+    if let Some(top) = strongest(&round.0) {
+        let effect = tried.iter().find(|e| e.name() == top);
+        if let Some(effect) = effect {
+            let mut with: Vec<&dyn Effect> = in_model.to_vec();
+            with.push(*effect);
+            let (_, est_with, copts_with) = current_model(campaign, &with, opts)?;
+            let set = EffectSet::bind(in_model, campaign, &Params::nominal())?;
+            let cal = calib::calibrate_with(campaign, &Params::nominal(), &copts_with, &set, &[])
+                .map_err(DiagnoseError::Baseline)?;
+            let val_w = held_out(validation, &est_with.model)?;
+            base = finish(campaign, val_w.as_ref(), in_model, cal, &copts_with)?;
+            round = candidates(campaign, val_w.as_ref(), in_model, &tried, &base, &copts_with, level);
+            (est, copts) = (est_with, copts_with);
         }
     }
+    let val = held_out(validation, &est.model)?;
+    let _ = &copts;
+    let baseline = baseline(&base, &est.model, val.as_ref(), opts);
+    let structure = sparse::structure(campaign, &base.rows);
+    let (mut candidates, fits, skipped) = round;
     candidates.sort_by(|a, b| b.bic_gain.total_cmp(&a.bic_gain));
     // a single dictionary term's BIC gain: what an effect must beat to be the explanation
     let term_bic = structure.explained_chi2 - (base.rows.len() as f64).ln();
@@ -339,6 +338,55 @@ pub fn diagnose(
             opts.alpha,
         ),
     })
+}
+
+/// What trying every candidate gave: their comparisons, their fits (the parts kept), and
+/// the effects that could not be tried.
+type Round = (Vec<Candidate>, Vec<(&'static str, Fitted)>, Vec<Skipped>);
+
+/// Fit every effect of `tried` added to the model and compare it with `base`.
+fn candidates(
+    campaign: &Campaign,
+    val: Option<&Validation>,
+    in_model: &[&dyn Effect],
+    tried: &[&dyn Effect],
+    base: &Fitted,
+    copts: &calib::Options,
+    level: f64,
+) -> Round {
+    let start = Params::nominal();
+    let mut out = (Vec::new(), Vec::new(), Vec::new());
+    for effect in tried {
+        let skip = |reason: String| Skipped {
+            effect: effect.name().to_owned(),
+            reason,
+        };
+        match try_effect(campaign, val, in_model, *effect, &start, copts) {
+            Ok((full, kept)) => match compare(base, &full, &kept, *effect, campaign, level) {
+                Some(c) => {
+                    out.0.push(c);
+                    out.1.push((effect.name(), kept));
+                }
+                None => out.2.push(skip(
+                    "no parameter of it is observable with this campaign (the geometry \
+                     absorbs its signature)"
+                        .to_owned(),
+                )),
+            },
+            Err(e) => out.2.push(skip(e.to_string())),
+        }
+    }
+    out
+}
+
+/// The most significant candidate (smallest p-value below the level): under weights the
+/// misfit inflated, its BIC gain may still look small.
+fn strongest(candidates: &[Candidate]) -> Option<&str> {
+    candidates
+        .iter()
+        .filter(|c| c.significant)
+        .min_by(|a, b| a.p_value.total_cmp(&b.p_value))
+        .map(|c| c.effect.as_str())
 }
 
 /// The current model calibrated with the estimated noise, the estimate, and the calibration

@@ -247,6 +247,12 @@ impl NoiseModel {
         (u, v, self.lt_along_mm.powi(2), self.lt_across(dist).powi(2))
     }
 
+    /// The tracker's beam and cross-beam unit vectors at `tcp`.
+    pub fn beam_frame(&self, tcp: Vector2<f64>) -> (Vector2<f64>, Vector2<f64>) {
+        let (u, v, _, _) = self.lt_frame(tcp);
+        (u, v)
+    }
+
     /// Covariance (mm²) of an (x, y) reading of a TCP-measuring instrument at `tcp`.
     pub fn xy_covariance(&self, instrument: Instrument, tcp: Vector2<f64>) -> Matrix2<f64> {
         match instrument {

@@ -42,6 +42,13 @@ pub enum Direction {
     Psi(usize, usize),
     /// q2 from the virtual measurements of the forward step (second step).
     VirtualQ2,
+    /// A 2-D instrument's four q rows of one pose, decorrelated ([`decorrelate`]): the TCP
+    /// misfit along and across the tracker's beam (x and y for the grid encoder), mm ...
+    Along,
+    Across,
+    /// ... and the two combinations of the four drives the TCP cannot move: the
+    /// incompatibility of the recorded drives, which only encoder noise and the geometry set.
+    Compat(usize),
 }
 
 impl std::fmt::Display for Direction {
@@ -53,6 +60,9 @@ impl std::fmt::Display for Direction {
             Direction::Y(a, b) => write!(f, "y(q{},q{})", a + 1, b + 1),
             Direction::Psi(a, b) => write!(f, "psi(q{},q{})", a + 1, b + 1),
             Direction::VirtualQ2 => write!(f, "q2 (virtual)"),
+            Direction::Along => write!(f, "along"),
+            Direction::Across => write!(f, "across"),
+            Direction::Compat(k) => write!(f, "compat{}", k + 1),
         }
     }
 }
@@ -191,7 +201,7 @@ pub fn residuals(
     p_cal: &Params,
     noise: &NoiseModel,
 ) -> Result<Vec<Residual>, PoseError> {
-    residuals_with(campaign, p, model, step, p_cal, &Corrections::default(), noise)
+    rows(campaign, p, model, step, p_cal, &Corrections::default(), noise, false)
 }
 
 /// [`residuals`] with the effects' corrections `corr` of every pose.
@@ -204,6 +214,20 @@ pub fn residuals_with(
     corr: &Corrections,
     noise: &NoiseModel,
 ) -> Result<Vec<Residual>, PoseError> {
+    rows(campaign, p, model, step, p_cal, corr, noise, true)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn rows(
+    campaign: &Campaign,
+    p: &Params,
+    model: Model,
+    step: Step,
+    p_cal: &Params,
+    corr: &Corrections,
+    noise: &NoiseModel,
+    decorrelated: bool,
+) -> Result<Vec<Residual>, PoseError> {
     let mut out = Vec::with_capacity(campaign.poses.len() * 4);
     for setup in campaign.setups() {
         let reset = setup.reset.map(|i| (i, &campaign.poses[i]));
@@ -212,6 +236,7 @@ pub fn residuals_with(
             model,
             corr,
             noise,
+            decorrelated,
         };
         for &i in &setup.poses {
             let pose = &campaign.poses[i];
@@ -241,6 +266,9 @@ struct Ctx<'a> {
     model: Model,
     corr: &'a Corrections,
     noise: &'a NoiseModel,
+    /// Whether a 2-D instrument's q rows are decorrelated (the calibration's form) or kept
+    /// as the thesis writes them (its observability tables).
+    decorrelated: bool,
 }
 
 fn pose_rows(
@@ -277,9 +305,12 @@ fn inverse_rows(
     let (p_i, q_i) = corrected(ctx.p, &pose.q, &dpose);
     let inv = geometry::solve(&p_i, ctx.model, Subsystem::Tcp, [x, y])?;
     let s = geometry::sensitivity(&p_i, ctx.model, Subsystem::Tcp, &inv)?;
+    let first = out.len();
+    let mut g_rows = [Vector2::zeros(); 4];
     for a in 0..4 {
         let v = q_var(a);
         let g = Vector2::new(s.dc_dk[(v, 0)], s.dc_dk[(v, 1)]);
+        g_rows[a] = g;
         // dq/dp = ∂igm/∂p + ∂igm/∂X · d fgm(Q_reset)/dp
         let at_reset = input_sensitivity(&r, Subsystem::NR, &[(X, g.x), (Y, g.y)]);
         let mut at_pose = InputSensitivity {
@@ -304,7 +335,104 @@ fn inverse_rows(
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
         });
     }
+    if ctx.decorrelated {
+        let (ux, uy) = match pose.instrument {
+            Instrument::Lt => ctx.noise.beam_frame(Vector2::new(x, y)),
+            _ => (Vector2::x(), Vector2::y()),
+        };
+        decorrelate(&mut out[first..], &g_rows, ux, uy, ctx.noise, pose.instrument, Vector2::new(x, y));
+    }
     Ok(())
+}
+
+/// Replace the four q rows of one 2-D instrument pose (rows r = G e + n: G the 4 × 2
+/// derivative of the drives by the TCP, e the instrument's error, n the encoders') by four
+/// uncorrelated rows with a meaning: the TCP misfit −(GᵀG)⁻¹Gᵀ r along `u` and `v` (mm;
+/// model minus measured), and the two combinations Uᵀ r orthogonal to G's columns, which the
+/// instrument cannot reach (encoder noise only). Correlated rows counted as independent make
+/// χ² and F-tests overconfident; these are independent up to the encoders' small share in
+/// the misfit rows.
+fn decorrelate(
+    rows: &mut [Residual],
+    g: &[Vector2<f64>; 4],
+    u: Vector2<f64>,
+    v: Vector2<f64>,
+    noise: &NoiseModel,
+    instrument: Instrument,
+    tcp: Vector2<f64>,
+) {
+    if rows.len() != 4 {
+        return;
+    }
+    let gm = nalgebra::Matrix4x2::from_rows(&[g[0].transpose(), g[1].transpose(), g[2].transpose(), g[3].transpose()]);
+    let Some(gtg_inv) = (gm.transpose() * gm).try_inverse() else {
+        return; // a singular pose: keep the q rows
+    };
+    let a = gtg_inv * gm.transpose(); // 2 × 4
+    // orthonormal basis of the complement of G's columns
+    let svd = gm.svd(true, false);
+    let Some(uf) = svd.u else { return };
+    let full = nalgebra::Matrix4::from_fn(|r, c| if c < 2 { uf[(r, c)] } else { 0.0 });
+    let comp = complement(&full);
+    let weights: [(Direction, nalgebra::RowVector4<f64>); 4] = [
+        (Direction::Along, -(u.transpose() * a)),
+        (Direction::Across, -(v.transpose() * a)),
+        (Direction::Compat(0), comp[0]),
+        (Direction::Compat(1), comp[1]),
+    ];
+    let old: Vec<Residual> = rows.to_vec();
+    for (row, (direction, w)) in rows.iter_mut().zip(weights) {
+        let mut value = 0.0;
+        let mut jac = Row::zeros();
+        let mut d_theta = vec![0.0; old[0].d_theta.len()];
+        for (k, o) in old.iter().enumerate() {
+            value += w[k] * o.value;
+            jac += o.jacobian * w[k];
+            for (d, od) in d_theta.iter_mut().zip(&o.d_theta) {
+                *d += w[k] * od;
+            }
+        }
+        // wᵀ G is the row's gain on the instrument's (x, y) error; |w|² on the encoders'
+        let gain = Vector2::new((w * gm.column(0))[0], (w * gm.column(1))[0]);
+        let parts = noise::add(
+            noise.xy_parts(instrument, tcp, gain),
+            noise.encoder_parts(w.norm_squared()),
+        );
+        row.direction = direction;
+        row.value = value;
+        row.jacobian = jac;
+        row.d_theta = d_theta;
+        row.sigma = noise::sigma_of(&parts);
+        row.parts = parts;
+    }
+}
+
+/// Two orthonormal rows spanning the complement of the first two columns of `basis`
+/// (orthonormal): Gram-Schmidt of the unit vector that keeps the most of itself, twice (of
+/// the four, the best keeps at least 1/√2, then 1/2, so none is ever near zero).
+fn complement(basis: &nalgebra::Matrix4<f64>) -> [nalgebra::RowVector4<f64>; 2] {
+    let mut found = [
+        basis.column(0).into_owned(),
+        basis.column(1).into_owned(),
+        nalgebra::Vector4::zeros(),
+        nalgebra::Vector4::zeros(),
+    ];
+    for slot in 2..4 {
+        let rest = |e: usize| {
+            let mut w = nalgebra::Vector4::zeros();
+            w[e] = 1.0;
+            for b in &found[..slot] {
+                w -= b * b.dot(&w);
+            }
+            w
+        };
+        let best = (0..4)
+            .map(rest)
+            .max_by(|a, b| a.norm().total_cmp(&b.norm()))
+            .unwrap_or_default();
+        found[slot] = best.normalize();
+    }
+    [found[2].transpose(), found[3].transpose()]
 }
 
 /// Forward calibration rows (eq. 4.31): relative distance, coordinate or angle through each
