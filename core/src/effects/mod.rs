@@ -44,7 +44,7 @@ pub fn library() -> Vec<Box<dyn Effect>> {
     vec![
         Box::new(Parallelogram),
         Box::new(PreloadElastic),
-        Box::new(Thermal),
+        Box::new(Thermal::default()),
         Box::new(EncoderScale),
         Box::new(GuideStraightness),
         Box::new(InstrumentAlignment),

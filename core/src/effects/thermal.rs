@@ -1,70 +1,124 @@
-//! `thermal`: thermal expansion of rods, guide positions and linear scales with the machine
-//! temperature (covariate `temp_machine`, °C). One parameter, the effective expansion
-//! coefficient α (ppm/K): every rod length l, the guide positions d1, d2 and every carrier
-//! position q grow by α · (T − 20 °C). A geometric calibration at one temperature absorbs the
-//! mean; what it cannot absorb is the drift of the temperature during the campaign.
+//! `thermal`: thermal expansion, as the three parts of a machine that expand on their own:
+//!
+//! - `alpha_rods`: the rod lengths l1..l5 (temperature `temp_rods`);
+//! - `alpha_frame`: the frame that holds the guides apart, d1 and d2 (`temp_frame`);
+//! - `alpha_scales`: the linear scales of the carriers, q grows with the reading (guide 1,
+//!   carriers 2 and 3: `temp_guide1`; guide 2, carriers 1 and 4: `temp_guide2`).
+//!
+//! Each part reads its own temperature column when the campaign has one and `temp_machine`
+//! otherwise; each has its own coefficient (ppm/K), strain α · (T − T_ref) with the reference
+//! temperature an input ([`Thermal::reference_c`], the spec's 20 °C by default). A machine
+//! whose rods alone expand gets `alpha_rods` and two parts the data do not support: the
+//! diagnosis keeps only the parts whose estimate stands out of its uncertainty. A geometric
+//! calibration at one temperature absorbs the mean; what it cannot absorb is the drift of the
+//! temperatures during the campaign.
 
 use super::{covariate_column, Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::Campaign;
 use crate::params::{Params, D1, D2, RODS};
-use crate::twin::effects::REFERENCE_TEMP_C;
 
-/// Covariate the effect reads.
+/// The temperature every part falls back to.
 pub const COVARIATE: &str = "temp_machine";
+/// The spec's reference temperature, °C.
+pub const REFERENCE_C: f64 = 20.0;
 
 /// See the module documentation.
-pub struct Thermal;
+pub struct Thermal {
+    /// Temperature at which the nominal geometry holds, °C.
+    pub reference_c: f64,
+}
+
+impl Default for Thermal {
+    fn default() -> Self {
+        Thermal {
+            reference_c: REFERENCE_C,
+        }
+    }
+}
+
+/// The three parts, in parameter order.
+const PARTS: [(&str, &str); 3] = [
+    ("alpha_rods", "temp_rods"),
+    ("alpha_frame", "temp_frame"),
+    ("alpha_scales", ""),
+];
 
 impl Effect for Thermal {
     fn name(&self) -> &'static str {
         "thermal"
     }
     fn summary(&self) -> &'static str {
-        "thermal expansion of rods, guides and scales with temp_machine"
+        "thermal expansion of rods, frame (guide positions) and scales, each with its own \
+         coefficient and temperature"
     }
     fn covariates(&self) -> &'static [&'static str] {
         &[COVARIATE]
     }
     fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
-        let temps = covariate_column(campaign, self.name(), COVARIATE)?;
-        let dt: Vec<f64> = temps
+        let rods = self.strain_column(campaign, "temp_rods")?;
+        let frame = self.strain_column(campaign, "temp_frame")?;
+        let guide1 = self.strain_column(campaign, "temp_guide1")?;
+        let guide2 = self.strain_column(campaign, "temp_guide2")?;
+        let params = PARTS
+            .iter()
+            .map(|(name, _)| EffectParam {
+                name: (*name).to_owned(),
+                unit: "ppm/K",
+                prior: 10.0,
+            })
+            .collect();
+        Ok(Box::new(BoundThermal {
+            params,
+            rods,
+            frame,
+            // carriers 2, 3 ride on guide 1; 1, 4 on guide 2 (spec, frames)
+            scales: (0..campaign.poses.len())
+                .map(|i| [guide2[i], guide1[i], guide1[i], guide2[i]])
+                .collect(),
+            lengths: RODS.iter().map(|r| (r.l, p[r.l])).collect(),
+            guides: vec![(D1, p[D1]), (D2, p[D2])],
+            q: campaign.poses.iter().map(|p| p.q).collect(),
+        }))
+    }
+}
+
+impl Thermal {
+    /// (T − T_ref) · 1e-6 per pose from column `name`, or `temp_machine` without it: the
+    /// strain per ppm/K.
+    fn strain_column(&self, campaign: &Campaign, name: &str) -> Result<Vec<f64>, NotApplicable> {
+        let column = if campaign.covariate_index(name).is_some() {
+            name
+        } else {
+            COVARIATE
+        };
+        let temps = covariate_column(campaign, "thermal", column)?;
+        temps
             .iter()
             .enumerate()
             .map(|(i, t)| {
-                t.map(|t| t - REFERENCE_TEMP_C)
+                t.map(|t| (t - self.reference_c) * 1e-6)
                     .ok_or_else(|| NotApplicable {
                         effect: "thermal",
                         reason: format!(
-                            "{}:{}: no {COVARIATE} value",
+                            "{}:{}: no {column} value",
                             campaign.source, campaign.poses[i].line
                         ),
                     })
             })
-            .collect::<Result<_, _>>()?;
-        let mut lengths: Vec<(usize, f64)> = RODS.iter().map(|r| (r.l, p[r.l])).collect();
-        lengths.push((D1, p[D1]));
-        lengths.push((D2, p[D2]));
-        let q = campaign.poses.iter().map(|p| p.q).collect();
-        Ok(Box::new(BoundThermal {
-            params: vec![EffectParam {
-                name: "alpha".to_owned(),
-                unit: "ppm/K",
-                prior: 10.0,
-            }],
-            dt,
-            lengths,
-            q,
-        }))
+            .collect()
     }
 }
 
 struct BoundThermal {
     params: Vec<EffectParam>,
-    /// T − 20 °C per pose.
-    dt: Vec<f64>,
-    /// (parameter index, value) of the lengths that expand.
+    /// Strain per ppm/K of each part, per pose.
+    rods: Vec<f64>,
+    frame: Vec<f64>,
+    scales: Vec<[f64; 4]>,
+    /// (parameter index, value) of the rod lengths and guide positions.
     lengths: Vec<(usize, f64)>,
-    /// Encoder readings per pose (the scales expand with the guides).
+    guides: Vec<(usize, f64)>,
+    /// Encoder readings per pose (a scale reads short by its expansion).
     q: Vec<[f64; 4]>,
 }
 
@@ -73,15 +127,19 @@ impl Bound for BoundThermal {
         &self.params
     }
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
-        // strain per ppm/K at this pose
-        let e = self.dt[pose] * 1e-6;
+        let (er, ef) = (self.rods[pose], self.frame[pose]);
         for &(i, l) in &self.lengths {
-            value.dp[i] += theta[0] * e * l;
-            partials[0].dp[i] += e * l;
+            value.dp[i] += theta[0] * er * l;
+            partials[0].dp[i] += er * l;
+        }
+        for &(i, d) in &self.guides {
+            value.dp[i] += theta[1] * ef * d;
+            partials[1].dp[i] += ef * d;
         }
         for a in 0..4 {
-            value.dq[a] += theta[0] * e * self.q[pose][a];
-            partials[0].dq[a] += e * self.q[pose][a];
+            let e = self.scales[pose][a] * self.q[pose][a];
+            value.dq[a] += theta[2] * e;
+            partials[2].dq[a] += e;
         }
     }
 }
