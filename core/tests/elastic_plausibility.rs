@@ -47,8 +47,15 @@ fn replay(p: &Params, c: &Campaign, checked: bool) -> (usize, usize) {
     let (mut prev, mut wrong, mut unsolved) = (None::<Equilibrium>, 0, 0);
     for pose in &c.poses {
         let r = if checked {
-            fegm_checked(p, &k, pose.q, pose.follower, prev.as_ref(), &Limits::default())
-                .map(|s| s.eq)
+            fegm_checked(
+                p,
+                &k,
+                pose.q,
+                pose.follower,
+                prev.as_ref(),
+                &Limits::default(),
+            )
+            .map(|s| s.eq)
         } else {
             fegm_unchecked(p, &k, pose.q, pose.follower, prev.as_ref())
         };
@@ -99,12 +106,21 @@ fn the_wrong_branch_of_the_demo_is_rejected_and_the_cold_solve_accepted() {
     };
     let limits = Limits::default();
     let v = check(&p, &k, &b.q, &b.follower, &raw, &reference, &limits).expect_err("wrong");
-    assert!(off_rigid(&p, &b.q, &raw) > 100.0, "the raw solve is far off");
+    assert!(
+        off_rigid(&p, &b.q, &raw) > 100.0,
+        "the raw solve is far off"
+    );
     assert_eq!(v.reason, Reason::PlatformAngle, "{v}");
     let s = fegm_checked(&p, &k, b.q, b.follower, Some(&prev), &limits).expect("checked");
     assert!(s.cold, "retried cold");
-    assert_eq!(s.warm_rejected.map(|v| v.reason), Some(Reason::PlatformAngle));
-    assert!(off_rigid(&p, &b.q, &s.eq) < 1e-6, "follower mode: the rigid pose");
+    assert_eq!(
+        s.warm_rejected.map(|v| v.reason),
+        Some(Reason::PlatformAngle)
+    );
+    assert!(
+        off_rigid(&p, &b.q, &s.eq) < 1e-6,
+        "follower mode: the rigid pose"
+    );
     assert!(check(&p, &k, &b.q, &b.follower, &s.eq, &reference, &limits).is_ok());
 }
 
@@ -137,7 +153,10 @@ fn checks_accept_a_correct_equilibrium_and_name_each_violation() {
     assert_eq!(reason_of(&p, &q, &eq, &rigid), None);
     // The figures of issue 16: ψ = −9.49 rad, loop residual 1 m, rod forces 9e7 N.
     let turned = Equilibrium { psi: -9.49, ..eq };
-    assert_eq!(reason_of(&p, &q, &turned, &rigid), Some(Reason::PlatformAngle));
+    assert_eq!(
+        reason_of(&p, &q, &turned, &rigid),
+        Some(Reason::PlatformAngle)
+    );
     let mut forces = eq;
     forces.rod_force[0] = 9e7;
     assert_eq!(reason_of(&p, &q, &forces, &rigid), Some(Reason::ForceLimit));
@@ -146,10 +165,16 @@ fn checks_accept_a_correct_equilibrium_and_name_each_violation() {
     assert_eq!(reason_of(&p, &q, &drive, &rigid), Some(Reason::ForceLimit));
     let mut carrier = eq;
     carrier.carrier[1] += 1000.0;
-    assert_eq!(reason_of(&p, &q, &carrier, &rigid), Some(Reason::LoopClosure));
+    assert_eq!(
+        reason_of(&p, &q, &carrier, &rigid),
+        Some(Reason::LoopClosure)
+    );
     let mut stretched = eq;
     stretched.rod_force[2] += 5000.0; // 0.05 mm of stretch the rod does not have
-    assert_eq!(reason_of(&p, &q, &stretched, &rigid), Some(Reason::LoopClosure));
+    assert_eq!(
+        reason_of(&p, &q, &stretched, &rigid),
+        Some(Reason::LoopClosure)
+    );
     let far = RigidPose {
         x: rigid.x + 3.0,
         ..rigid
@@ -182,7 +207,10 @@ fn an_unbalanced_platform_is_rejected() {
 #[test]
 fn psi_is_wrapped() {
     assert_eq!(wrap_angle(PI), PI);
-    assert!((wrap_angle(-PI) - PI).abs() < 1e-15, "(−π, π]: −π maps to π");
+    assert!(
+        (wrap_angle(-PI) - PI).abs() < 1e-15,
+        "(−π, π]: −π maps to π"
+    );
     assert!((wrap_angle(-6.2832) - (-6.2832 + 2.0 * PI)).abs() < 1e-12);
     assert!((wrap_angle(-9.49) - (-9.49 + 4.0 * PI)).abs() < 1e-12);
     assert!((wrap_angle(7.0) - (7.0 - 2.0 * PI)).abs() < 1e-12);
@@ -195,9 +223,12 @@ fn psi_is_wrapped() {
     };
     let again = fegm_from(&p, &Stiffness::default(), q, ALL_ACTIVE, &turned).expect("warm");
     assert!(again.psi.abs() < 0.01 && (again.psi - eq.psi).abs() < 1e-9);
-    let raw = fegm_unchecked(&p, &Stiffness::default(), q, ALL_ACTIVE, Some(&turned))
-        .expect("raw");
-    assert!(raw.psi > -PI && raw.psi <= PI, "the core result is wrapped: {}", raw.psi);
+    let raw = fegm_unchecked(&p, &Stiffness::default(), q, ALL_ACTIVE, Some(&turned)).expect("raw");
+    assert!(
+        raw.psi > -PI && raw.psi <= PI,
+        "the core result is wrapped: {}",
+        raw.psi
+    );
 }
 
 /// Targets alternating between the ends of the workspace: every step a jump of 1 m or more.
@@ -230,7 +261,10 @@ fn twin_campaign_with_1_m_jumps_matches_the_true_poses() {
         assert_eq!(st.follower, FOLLOWERS_23);
         let s = fegm_checked(&p, &k, st.q, st.follower, prev.as_ref(), &limits).expect("solve");
         let d = (s.eq.x - st.tcp.x).hypot(s.eq.y - st.tcp.y);
-        assert!(d < 1e-3, "pose {n} ({x}, {y}): {d} mm from the twin's truth");
+        assert!(
+            d < 1e-3,
+            "pose {n} ({x}, {y}): {d} mm from the twin's truth"
+        );
         assert!((wrap_angle(s.eq.psi - st.psi)).abs() < 1e-6, "pose {n}: ψ");
         prev = Some(s.eq);
     }

@@ -188,7 +188,11 @@ pub fn check(
     limits: &Limits,
 ) -> Result<(), Violation> {
     let pose_finite = [eq.x, eq.y, eq.psi].iter().all(|v| v.is_finite());
-    let forces_finite = eq.rod_force.iter().chain(&eq.drive_force).all(|v| v.is_finite());
+    let forces_finite = eq
+        .rod_force
+        .iter()
+        .chain(&eq.drive_force)
+        .all(|v| v.is_finite());
     if !pose_finite || !forces_finite || !eq.carrier.iter().all(|v| v.is_finite()) {
         return fail(Reason::NotConverged, 0, f64::NAN, 0.0);
     }
