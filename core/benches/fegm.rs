@@ -2,7 +2,9 @@
 //! `harness = false`): ns per sample for
 //! - rigid fgm(q1, q4) (model 29),
 //! - spring fegm, cold (rigid start + Newton), all four drives active,
-//! - spring fegm, warm (from the previous sample: the servo-rate use),
+//! - spring fegm, warm (from the previous sample: the servo-rate use), with its plausibility
+//!   checks (a rigid fgm for the reference, loop closure, balance; the default), and the raw
+//!   solver without them (`fegm_unchecked`: what the checks cost),
 //! - finite-element model (rigid reference + assembly + dense Cholesky), by the
 //!   actuator-displacements and the thermo-mechanical method, one `FeModel` reused so that its
 //!   buffers are allocated once;
@@ -14,7 +16,7 @@
 //! harness = false` in core/Cargo.toml), or build it as an example.
 
 use rpkm_core::elastic::fe::{FeModel, FeStiffness, Method};
-use rpkm_core::elastic::{fegm, fegm_from, Stiffness, ALL_ACTIVE};
+use rpkm_core::elastic::{fegm, fegm_from, fegm_unchecked, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::{fgm, igm};
 use rpkm_core::params::{Model, Params};
 use std::hint::black_box;
@@ -60,6 +62,12 @@ fn main() {
         prev = fegm_from(&p, &k, *q, ALL_ACTIVE, &prev).expect("fegm");
         prev.x
     });
+    let mut raw = prev;
+    let unchecked = time("spring fegm, warm, no checks", &mut |q| {
+        raw = fegm_unchecked(&p, &k, *q, ALL_ACTIVE, Some(&raw)).expect("fegm");
+        raw.x
+    });
+    println!("plausibility checks: {:.0} ns/sample", warm - unchecked);
     let mut model = FeModel::new(FeStiffness::default()).expect("FE stiffness");
     let fe_ad = time("FE model, actuator-displacements", &mut |q| {
         model

@@ -73,6 +73,8 @@ pub struct Estimator {
     pub counts: EstimatorCounts,
     /// The last elastic failure (kept typed: formatted only for /diagnostics).
     pub last_error: Option<ElasticError>,
+    /// Why the last rejected warm start was rejected.
+    pub last_warm_rejection: Option<Reason>,
 }
 
 /// The reason an elastic failure counts under.
@@ -92,6 +94,7 @@ impl Estimator {
             previous: None,
             counts: EstimatorCounts::default(),
             last_error: None,
+            last_warm_rejection: None,
         }
     }
 
@@ -137,6 +140,7 @@ impl Estimator {
                 if let Some(v) = s.warm_rejected {
                     c.warm_rejected += 1;
                     c.reject(v.reason);
+                    self.last_warm_rejection = Some(v.reason);
                 }
                 c.consecutive_failures = 0;
                 let eq = s.eq;
@@ -231,6 +235,12 @@ impl Estimator {
             ("estimates", c.estimates.to_string()),
             ("cold_starts", c.cold_starts.to_string()),
             ("warm_rejected", c.warm_rejected.to_string()),
+            (
+                "last_warm_rejection",
+                self.last_warm_rejection
+                    .map_or("none", Reason::as_str)
+                    .into(),
+            ),
             ("rigid_fallbacks", c.rigid_fallbacks.to_string()),
             ("implausible", c.implausible.to_string()),
             ("unsolved", c.unsolved.to_string()),
@@ -457,6 +467,7 @@ mod tests {
         assert!(off_rigid(&e, b)? < 1e-6, "{} mm", off_rigid(&e, b)?);
         assert!(e.psi.abs() < 0.01);
         assert_eq!(est.counts.warm_rejected, 1, "{:?}", est.counts);
+        assert_eq!(est.last_warm_rejection, Some(Reason::PlatformAngle));
         assert_eq!(est.counts.rigid_fallbacks, 0);
         let st = est.status("e");
         assert_eq!(st.level, DiagnosticStatus::OK, "{}", st.message);
