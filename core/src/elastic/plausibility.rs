@@ -166,6 +166,11 @@ pub struct RigidPose {
     pub psi: f64,
 }
 
+/// `value` within `limit`; false for NaN, so a non-finite value always fails its check.
+fn within(value: f64, limit: f64) -> bool {
+    value <= limit
+}
+
 fn fail(reason: Reason, item: usize, value: f64, limit: f64) -> Result<(), Violation> {
     Err(Violation {
         reason,
@@ -197,14 +202,14 @@ pub fn check(
         return fail(Reason::NotConverged, 0, f64::NAN, 0.0);
     }
     let dpsi = wrap_angle(eq.psi - p[GAMMA2]).abs();
-    if !(dpsi <= limits.psi_rad) {
+    if !within(dpsi, limits.psi_rad) {
         return fail(Reason::PlatformAngle, 0, dpsi, limits.psi_rad);
     }
     check_forces(eq, limits)?;
     check_closure(p, k, q, followers, eq, limits)?;
     check_balance(p, eq, limits)?;
     let d = (eq.x - rigid.x).hypot(eq.y - rigid.y);
-    if !(d <= limits.rigid_mm) {
+    if !within(d, limits.rigid_mm) {
         return fail(Reason::FarFromRigid, 0, d, limits.rigid_mm);
     }
     Ok(())
@@ -213,12 +218,12 @@ pub fn check(
 fn check_forces(eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
     let max = limits.force_factor * NOMINAL_DRIVE_FORCE_N;
     for (i, f) in eq.rod_force.iter().enumerate() {
-        if !(f.abs() <= max) {
+        if !within(f.abs(), max) {
             return fail(Reason::ForceLimit, i + 1, f.abs(), max);
         }
     }
     for (j, f) in eq.drive_force.iter().enumerate() {
-        if !(f.abs() <= max) {
+        if !within(f.abs(), max) {
             return fail(Reason::ForceLimit, j + 1, f.abs(), max);
         }
     }
@@ -240,7 +245,7 @@ fn check_closure(
         let a = platform_joint(p, rod, eq.x, eq.y, eq.psi);
         let b = carrier_joint(p, rod, eq.carrier[rod.actuator]);
         let off = ((a - b).norm() - p[rod.l] - eq.rod_force[i] / k.rod[i]).abs();
-        if !(off <= limits.closure_mm) {
+        if !within(off, limits.closure_mm) {
             return fail(Reason::LoopClosure, i + 1, off, limits.closure_mm);
         }
     }
@@ -252,7 +257,7 @@ fn check_closure(
             let deflection = k.carrier[j].map_or(0.0, |c| -eq.drive_force[j] / c);
             ((s - q[j] - deflection).abs(), limits.closure_mm)
         };
-        if !(off <= limit) {
+        if !within(off, limit) {
             return fail(Reason::LoopClosure, j + 1, off, limit);
         }
     }
@@ -264,12 +269,12 @@ fn check_balance(p: &Params, eq: &Equilibrium, limits: &Limits) -> Result<(), Vi
     let force_tol = 1.0 + limits.balance_rel * largest;
     let [fx, fy, mz] = platform_balance(p, eq);
     let force = fx.hypot(fy);
-    if !(force <= force_tol) {
+    if !within(force, force_tol) {
         return fail(Reason::ForceBalance, 0, force, force_tol);
     }
     // Moment about the TCP, N·mm: the same tolerance on a 1 m lever.
     let moment_tol = force_tol * 1000.0;
-    if !(mz.abs() <= moment_tol) {
+    if !within(mz.abs(), moment_tol) {
         return fail(Reason::ForceBalance, 0, mz.abs(), moment_tol);
     }
     Ok(())
