@@ -257,7 +257,14 @@ pub fn design_rows(
     let c = nominal_campaign(design, p, model)?;
     let mut rows = obs::residuals(&c, p, model, Step::Direct, p, &NoiseModel::default())?;
     if second_step {
-        rows.extend(obs::residuals(&c, p, model, Step::VirtualQ2, p, &NoiseModel::default())?);
+        rows.extend(obs::residuals(
+            &c,
+            p,
+            model,
+            Step::VirtualQ2,
+            p,
+            &NoiseModel::default(),
+        )?);
     }
     if rows.is_empty() {
         return Err(AnalysisError::NoRows);

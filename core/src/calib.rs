@@ -199,6 +199,8 @@ pub struct EffectEstimate {
     pub observability: f64,
     /// Whether it was identified (false: held, unobservable with this campaign).
     pub identified: bool,
+    /// The plausible magnitude the effect declares for it (its unit).
+    pub prior: f64,
 }
 
 /// The result of a calibration.
@@ -603,7 +605,8 @@ fn posterior(
     // directions: eigenvalues of the data's information in units of the prior's
     let determined = (!prior.is_empty()).then(|| {
         let tol = DVector::from_iterator(n, prior.iter().map(|p| p.1));
-        let g = DMatrix::from_diagonal(&tol) * info.view((0, 0), (n, n)) * DMatrix::from_diagonal(&tol);
+        let g =
+            DMatrix::from_diagonal(&tol) * info.view((0, 0), (n, n)) * DMatrix::from_diagonal(&tol);
         let ev = g.symmetric_eigenvalues();
         (ev.iter().filter(|&&v| v > 1.0).count(), n)
     });
@@ -770,7 +773,16 @@ pub fn calibrate_with(
         cost = res.cost;
         let Some(k) = opts.outlier_sigma else { break };
         let corr = effects.corrections(&x.theta);
-        let rows = rows_at(campaign, &x.p, model, Step::Direct, start, &corr, &drop, noise)?;
+        let rows = rows_at(
+            campaign,
+            &x.p,
+            model,
+            Step::Direct,
+            start,
+            &corr,
+            &drop,
+            noise,
+        )?;
         let found = find_outliers(&rows, campaign, k);
         if found.is_empty() || outliers.len() > rows0.len() / 20 {
             break;
@@ -781,7 +793,16 @@ pub fn calibrate_with(
         }
     }
     let corr = effects.corrections(&x.theta);
-    let rows_final = rows_at(campaign, &x.p, model, Step::Direct, start, &corr, &drop, noise)?;
+    let rows_final = rows_at(
+        campaign,
+        &x.p,
+        model,
+        Step::Direct,
+        start,
+        &corr,
+        &drop,
+        noise,
+    )?;
     let n_identified = step1_ids.len() + free_theta.len();
     let post = posterior(&rows_final, &step1_ids, &opts.links, &free_theta, &prior1)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
@@ -821,18 +842,36 @@ pub fn calibrate_with(
                 sigma: free.map_or(0.0, |f| cov_theta[f]),
                 observability: observability[k],
                 identified: free.is_some(),
+                prior: prm.prior,
             }
         })
         .collect();
-    let mut before_rows: Vec<Residual> =
-        rows_at(campaign, start, model, Step::Direct, start, &corr0, &drop, noise)?;
+    let mut before_rows: Vec<Residual> = rows_at(
+        campaign,
+        start,
+        model,
+        Step::Direct,
+        start,
+        &corr0,
+        &drop,
+        noise,
+    )?;
     let mut after_rows = rows_final.clone();
 
     // Step 2: rod 2 from virtual measurements of the forward instruments (eq. 4.32).
     let mut p = x.p;
     if !step2_wanted.is_empty() {
         let p1 = p;
-        let rows2 = rows_at(campaign, &p1, model, Step::VirtualQ2, &p1, &corr, &drop, noise)?;
+        let rows2 = rows_at(
+            campaign,
+            &p1,
+            model,
+            Step::VirtualQ2,
+            &p1,
+            &corr,
+            &drop,
+            noise,
+        )?;
         let ids2 = match &opts.selection {
             Selection::Auto { max_condition } => {
                 auto_select(&rows2, &step2_wanted, &[], *max_condition)
@@ -866,8 +905,16 @@ pub fn calibrate_with(
             })?;
             p = res.state.p;
             iterations += res.iterations;
-            let rows2_after =
-                rows_at(campaign, &p, model, Step::VirtualQ2, &p1, &corr, &drop, noise)?;
+            let rows2_after = rows_at(
+                campaign,
+                &p,
+                model,
+                Step::VirtualQ2,
+                &p1,
+                &corr,
+                &drop,
+                noise,
+            )?;
             let sig2 = step2_uncertainties(&rows2_after, &ids2, &prior2, &cov_p1)?;
             identified.extend(ids2.iter().zip(&sig2).map(|(&i, &s)| Identified {
                 name: NAMES[i],

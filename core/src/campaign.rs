@@ -343,7 +343,11 @@ impl Campaign {
             for a in 0..4 {
                 let dq = now_q[a] - prev_q[a];
                 // a carrier that did not move keeps the direction of its last move
-                let d = if dq.abs() > 1e-9 { dq.signum() } else { dir[i - 1][a] };
+                let d = if dq.abs() > 1e-9 {
+                    dq.signum()
+                } else {
+                    dir[i - 1][a]
+                };
                 dir[i][a] = d;
                 travel[i][a] = if d == dir[i - 1][a] {
                     travel[i - 1][a] + dq.abs()
@@ -354,7 +358,12 @@ impl Campaign {
         }
         let t0 = self.poses.first().map_or(0.0, |p| p.t);
         let mut out: Vec<(String, Vec<f64>)> = (0..4)
-            .map(|a| (format!("dir_q{}", a + 1), dir.iter().map(|d| d[a]).collect()))
+            .map(|a| {
+                (
+                    format!("dir_q{}", a + 1),
+                    dir.iter().map(|d| d[a]).collect(),
+                )
+            })
             .collect();
         out.extend((0..4).map(|a| {
             (
@@ -362,7 +371,10 @@ impl Campaign {
                 travel.iter().map(|d| d[a]).collect(),
             )
         }));
-        out.push(("t_run".to_owned(), self.poses.iter().map(|p| p.t - t0).collect()));
+        out.push((
+            "t_run".to_owned(),
+            self.poses.iter().map(|p| p.t - t0).collect(),
+        ));
         out
     }
 

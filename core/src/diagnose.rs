@@ -37,6 +37,11 @@ use crate::variance::{self, GroupNoise, NoiseEstimate};
 use nalgebra::{DMatrix, DVector, Vector2};
 use std::collections::BTreeMap;
 
+/// Fraction of an effect parameter's plausible magnitude below which a significant estimate
+/// is no missing physics: a model's approximation seen at encoder precision (a bow of
+/// 0.1 µm) is significant on a thousand rows, and irrelevant.
+pub const RELEVANT_FRACTION: f64 = 0.05;
+
 /// Options of a diagnosis.
 #[derive(Clone, Debug)]
 pub struct Options {
@@ -122,6 +127,9 @@ pub struct Baseline {
 pub struct Candidate {
     pub effect: String,
     pub significant: bool,
+    /// Whether its size matters: some identified parameter reaches [`RELEVANT_FRACTION`] of
+    /// the plausible magnitude the effect declares for it.
+    pub relevant: bool,
     /// Fraction of the calibration's χ² above its degrees of freedom that the effect
     /// removes, 0..1.
     pub explained_fraction: f64,
@@ -255,31 +263,42 @@ pub fn diagnose(
         .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
         .collect();
     let level = opts.alpha / tried.len().max(1) as f64;
-    let (cal, mut est, mut copts) = current_model(campaign, in_model, opts)?;
-    let val = held_out(validation, &est.model)?;
-    let mut base = finish(campaign, val.as_ref(), in_model, cal, &copts)?;
-    let mut round = candidates(campaign, val.as_ref(), in_model, &tried, &base, &copts, level);
-    // The current model's misfit inflates the noise estimated under it, which dims the very
-    // effect that would explain it. With a significant candidate, the noise is estimated
-    // again under the model with it, and every model compared with those weights (the
-    // nested tests need one weighting, any fixed one).
-    if let Some(top) = strongest(&round.0) {
-        let effect = tried.iter().find(|e| e.name() == top);
-        if let Some(effect) = effect {
-            let mut with: Vec<&dyn Effect> = in_model.to_vec();
-            with.push(*effect);
-            let (_, est_with, copts_with) = current_model(campaign, &with, opts)?;
-            let set = EffectSet::bind(in_model, campaign, &Params::nominal())?;
-            let cal = calib::calibrate_with(campaign, &Params::nominal(), &copts_with, &set, &[])
-                .map_err(DiagnoseError::Baseline)?;
-            let val_w = held_out(validation, &est_with.model)?;
-            base = finish(campaign, val_w.as_ref(), in_model, cal, &copts_with)?;
-            round = candidates(campaign, val_w.as_ref(), in_model, &tried, &base, &copts_with, level);
-            (est, copts) = (est_with, copts_with);
-        }
+    // Round 1, rows weighted by the stated noise: which effect, if any, stands out. (Under
+    // noise estimated with the current model, its misfit inflates the levels and dims the
+    // very effect that would explain it.)
+    let stated = calib_options(opts);
+    let val = held_out(validation, &opts.noise)?;
+    let cal = fit_model(campaign, in_model, &stated)?;
+    let base = finish(campaign, val.as_ref(), in_model, cal, &stated)?;
+    let first = candidates(
+        campaign,
+        val.as_ref(),
+        in_model,
+        &tried,
+        &base,
+        &stated,
+        level,
+    );
+    // Round 2: the noise estimated under the model with the most significant candidate (or
+    // the current model), and every model compared again with those weights (the nested
+    // tests need one weighting, any fixed one).
+    let mut with: Vec<&dyn Effect> = in_model.to_vec();
+    if let Some(top) = strongest(&first.0).and_then(|t| tried.iter().find(|e| e.name() == t)) {
+        with.push(*top);
     }
+    let (_, est, copts) = current_model(campaign, &with, opts)?;
     let val = held_out(validation, &est.model)?;
-    let _ = &copts;
+    let cal = fit_model(campaign, in_model, &copts)?;
+    let base = finish(campaign, val.as_ref(), in_model, cal, &copts)?;
+    let round = candidates(
+        campaign,
+        val.as_ref(),
+        in_model,
+        &tried,
+        &base,
+        &copts,
+        level,
+    );
     let baseline = baseline(&base, &est.model, val.as_ref(), opts);
     let structure = sparse::structure(campaign, &base.rows);
     let (mut candidates, fits, skipped) = round;
@@ -288,14 +307,16 @@ pub fn diagnose(
     let term_bic = structure.explained_chi2 - (base.rows.len() as f64).ln();
     let best = candidates
         .iter()
-        .find(|c| c.significant && c.bic_gain > 0.0 && c.bic_gain > term_bic);
+        .find(|c| c.significant && c.relevant && c.bic_gain > 0.0 && c.bic_gain > term_bic);
     let missing_effect = best.map(|c| c.effect.clone());
     let remaining: &Fitted = missing_effect
         .as_ref()
         .and_then(|m| fits.iter().find(|f| f.0 == m))
         .map_or(&base, |f| &f.1);
     let left = sparse::structure(campaign, &remaining.rows);
-    let unexplained = (left.p_value < opts.alpha).then(|| left.pointer.clone()).flatten();
+    let unexplained = (left.p_value < opts.alpha)
+        .then(|| left.pointer.clone())
+        .flatten();
     let verdict_kind = match (best, structure.p_value < opts.alpha) {
         (Some(_), _) => VerdictKind::MissingEffect,
         (None, true) => VerdictKind::UnexplainedStructure,
@@ -384,9 +405,20 @@ fn candidates(
 fn strongest(candidates: &[Candidate]) -> Option<&str> {
     candidates
         .iter()
-        .filter(|c| c.significant)
+        .filter(|c| c.significant && c.relevant)
         .min_by(|a, b| a.p_value.total_cmp(&b.p_value))
         .map(|c| c.effect.as_str())
+}
+
+/// The current model (`in_model` effects) calibrated with `copts` as they are.
+fn fit_model(
+    campaign: &Campaign,
+    in_model: &[&dyn Effect],
+    copts: &calib::Options,
+) -> Result<Calibration, DiagnoseError> {
+    let start = Params::nominal();
+    let set = EffectSet::bind(in_model, campaign, &start)?;
+    calib::calibrate_with(campaign, &start, copts, &set, &[]).map_err(DiagnoseError::Baseline)
 }
 
 /// The current model calibrated with the estimated noise, the estimate, and the calibration
@@ -523,7 +555,14 @@ fn weak_parts(cal: &Calibration, set: &EffectSet, effect: &str) -> Vec<usize> {
         .filter(|(_, _, k, _)| cal.effects[*k].identified)
         .map(|(_, _, k, _)| {
             let e = &cal.effects[*k];
-            (*k, if e.sigma > 0.0 { (e.value / e.sigma).abs() } else { 0.0 })
+            (
+                *k,
+                if e.sigma > 0.0 {
+                    (e.value / e.sigma).abs()
+                } else {
+                    0.0
+                },
+            )
         })
         .collect();
     if own.len() < 2 {
@@ -607,7 +646,10 @@ pub fn evaluate(
 ) -> Result<(Fit, NoiseEstimate), DiagnoseError> {
     let (cal, est, copts) = current_model(campaign, effects, opts)?;
     let val = held_out(validation, &est.model)?;
-    Ok((finish(campaign, val.as_ref(), effects, cal, &copts)?.fit, est))
+    Ok((
+        finish(campaign, val.as_ref(), effects, cal, &copts)?.fit,
+        est,
+    ))
 }
 
 /// The held-out campaign with the noise of each of its TCP errors.
@@ -755,8 +797,9 @@ fn validation_noise(val: &Campaign, noise: &NoiseModel) -> Result<Vec<f64>, Pose
             Ok(match (*coordinate, pose.instrument) {
                 ("x", Instrument::Lt | Instrument::Kgm) => (cov[(0, 0)] + enc * enc).sqrt(),
                 ("y", Instrument::Lt | Instrument::Kgm) => (cov[(1, 1)] + enc * enc).sqrt(),
-                _ => (noise.scalar_sigma(pose.instrument).unwrap_or(0.0).powi(2) + enc * enc)
-                    .sqrt(),
+                _ => {
+                    (noise.scalar_sigma(pose.instrument).unwrap_or(0.0).powi(2) + enc * enc).sqrt()
+                }
             })
         })
         .collect()
@@ -796,10 +839,23 @@ fn compare(
         .filter(|e| e.effect == name)
         .cloned()
         .collect();
-    let evidence = evidence(base, kept, effect.covariates(), campaign, &params, f, p_value);
+    let evidence = evidence(
+        base,
+        kept,
+        effect.covariates(),
+        campaign,
+        &params,
+        f,
+        p_value,
+    );
+    let relevant = params
+        .iter()
+        .filter(|p| p.identified && p.prior > 0.0)
+        .any(|p| p.value.abs() >= RELEVANT_FRACTION * p.prior);
     Some(Candidate {
         effect: name.to_owned(),
         significant: p_value < level,
+        relevant,
         explained_fraction,
         val_rms_before_um: base.fit.val_rms_um,
         val_rms_after_um: kept.fit.val_rms_um,

@@ -201,7 +201,26 @@ pub fn residuals(
     p_cal: &Params,
     noise: &NoiseModel,
 ) -> Result<Vec<Residual>, PoseError> {
-    rows(campaign, p, model, step, p_cal, &Corrections::default(), noise, false)
+    residuals_in(
+        campaign,
+        p,
+        model,
+        step,
+        p_cal,
+        &Corrections::default(),
+        noise,
+        Form::Thesis,
+    )
+}
+
+/// How a 2-D instrument's rows are written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Form {
+    /// The four q rows of eq. 4.30, as the thesis writes them (its observability tables).
+    Thesis,
+    /// Decorrelated ([`Direction::Along`], [`Direction::Across`], [`Direction::Compat`]):
+    /// the calibration's rows.
+    Decorrelated,
 }
 
 /// [`residuals`] with the effects' corrections `corr` of every pose.
@@ -214,11 +233,21 @@ pub fn residuals_with(
     corr: &Corrections,
     noise: &NoiseModel,
 ) -> Result<Vec<Residual>, PoseError> {
-    rows(campaign, p, model, step, p_cal, corr, noise, true)
+    residuals_in(
+        campaign,
+        p,
+        model,
+        step,
+        p_cal,
+        corr,
+        noise,
+        Form::Decorrelated,
+    )
 }
 
+/// [`residuals_with`] in either [`Form`].
 #[allow(clippy::too_many_arguments)]
-fn rows(
+pub fn residuals_in(
     campaign: &Campaign,
     p: &Params,
     model: Model,
@@ -226,8 +255,9 @@ fn rows(
     p_cal: &Params,
     corr: &Corrections,
     noise: &NoiseModel,
-    decorrelated: bool,
+    form: Form,
 ) -> Result<Vec<Residual>, PoseError> {
+    let decorrelated = form == Form::Decorrelated;
     let mut out = Vec::with_capacity(campaign.poses.len() * 4);
     for setup in campaign.setups() {
         let reset = setup.reset.map(|i| (i, &campaign.poses[i]));
@@ -340,7 +370,15 @@ fn inverse_rows(
             Instrument::Lt => ctx.noise.beam_frame(Vector2::new(x, y)),
             _ => (Vector2::x(), Vector2::y()),
         };
-        decorrelate(&mut out[first..], &g_rows, ux, uy, ctx.noise, pose.instrument, Vector2::new(x, y));
+        decorrelate(
+            &mut out[first..],
+            &g_rows,
+            ux,
+            uy,
+            ctx.noise,
+            pose.instrument,
+            Vector2::new(x, y),
+        );
     }
     Ok(())
 }
@@ -364,12 +402,17 @@ fn decorrelate(
     if rows.len() != 4 {
         return;
     }
-    let gm = nalgebra::Matrix4x2::from_rows(&[g[0].transpose(), g[1].transpose(), g[2].transpose(), g[3].transpose()]);
+    let gm = nalgebra::Matrix4x2::from_rows(&[
+        g[0].transpose(),
+        g[1].transpose(),
+        g[2].transpose(),
+        g[3].transpose(),
+    ]);
     let Some(gtg_inv) = (gm.transpose() * gm).try_inverse() else {
         return; // a singular pose: keep the q rows
     };
     let a = gtg_inv * gm.transpose(); // 2 × 4
-    // orthonormal basis of the complement of G's columns
+                                      // orthonormal basis of the complement of G's columns
     let svd = gm.svd(true, false);
     let Some(uf) = svd.u else { return };
     let full = nalgebra::Matrix4::from_fn(|r, c| if c < 2 { uf[(r, c)] } else { 0.0 });

@@ -4,25 +4,56 @@
 //! outside the library (backlash) is reported as unexplained residual pointing at its
 //! covariate. The truth is the twin's: which effect it hid, with which magnitude.
 
+use rand::{rngs::StdRng, Rng, SeedableRng};
 use rpkm_core::campaign::{Campaign, Instrument};
-use rpkm_core::diagnose::{self, Diagnosis, Options};
+use rpkm_core::diagnose::{self, Diagnosis, Options, VerdictKind};
 use rpkm_core::effects::{self, Effect};
-use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
+use rpkm_core::noise::{Group, NoiseModel, N_GROUPS};
+use rpkm_core::twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
+
+/// A twin's conventions that the model must not assume: its noise, every group's level drawn
+/// from 0.6x to 2.5x the spec's figures (the diagnosis starts from the spec's).
+fn drawn_noise(seed: u64) -> NoiseModel {
+    let mut rng = StdRng::seed_from_u64(seed ^ 0x0015e);
+    let f: [f64; N_GROUPS] = std::array::from_fn(|_| rng.gen_range(0.6..2.5));
+    NoiseModel::default().scaled(&f)
+}
 
 /// The campaign of these tests: laser tracker (one setup), grid encoder (16 setups) and
-/// self-calibration, and 100 held-out laser-tracker poses.
-fn campaigns(seed: u64, hidden: &[EffectKind]) -> (Campaign, Campaign) {
-    let mut twin = Twin::new(TwinConfig {
+/// self-calibration, and 100 held-out laser-tracker poses; and the held-out noise floor, the
+/// RMS of the instrument's own error (the same twin measured without noise).
+fn campaigns_with(config: TwinConfig) -> (Campaign, Campaign, f64) {
+    let measure = |config: TwinConfig| {
+        let mut twin = Twin::new(config).expect("twin");
+        let cal = twin
+            .campaign(&[Instrument::Lt, Instrument::Kgm, Instrument::SelfCal])
+            .expect("campaign");
+        let val = twin.validation(100).expect("validation");
+        (cal, val)
+    };
+    let (cal, val) = measure(config.clone());
+    let (_, clean) = measure(TwinConfig {
+        noise: None,
+        ..config
+    });
+    let mut e = Vec::new();
+    for (p, q) in val.poses.iter().zip(&clean.poses) {
+        if !p.reset {
+            e.push(p.x.unwrap_or(0.0) - q.x.unwrap_or(0.0));
+            e.push(p.y.unwrap_or(0.0) - q.y.unwrap_or(0.0));
+        }
+    }
+    let floor = 1e3 * (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
+    (cal, val, floor)
+}
+
+fn campaigns(seed: u64, hidden: &[EffectKind]) -> (Campaign, Campaign, f64) {
+    campaigns_with(TwinConfig {
         seed,
         effects: hidden.iter().map(|e| (*e, e.default_magnitude())).collect(),
+        noise: Some(drawn_noise(seed)),
         ..Default::default()
     })
-    .expect("twin");
-    let cal = twin
-        .campaign(&[Instrument::Lt, Instrument::Kgm, Instrument::SelfCal])
-        .expect("campaign");
-    let val = twin.validation(100).expect("validation");
-    (cal, val)
 }
 
 fn run(cal: &Campaign, val: &Campaign, in_model: &[&str]) -> Diagnosis {
@@ -35,33 +66,44 @@ fn run(cal: &Campaign, val: &Campaign, in_model: &[&str]) -> Diagnosis {
 }
 
 fn check_named(effect: EffectKind, seed: u64) {
-    let (cal, val) = campaigns(seed, &[effect]);
+    let (cal, val, floor) = campaigns(seed, &[effect]);
     let d = run(&cal, &val, &[]);
     let name = effect.as_str();
-    let floor = d.baseline.noise_floor_um;
     let before = d.baseline.val_rms_um.expect("held-out RMS");
     eprintln!(
-        "{name} seed {seed}: held-out {before:.1} um (floor {floor:.1}), verdict: {}",
+        "{name} seed {seed}: held-out {before:.1} um (true floor {floor:.1}), verdict: {}",
         d.verdict
     );
-    assert!(
-        (15.0..=60.0).contains(&before) && before > 1.2 * floor,
-        "{name} seed {seed}: the hidden effect should leave 15-60 um above the noise, got {before:.1} (floor {floor:.1})"
-    );
-    assert!(!d.baseline.consistent_with_noise, "{name} seed {seed}");
+    assert_eq!(d.verdict_kind, VerdictKind::MissingEffect, "{}", d.verdict);
     assert_eq!(
         d.missing_effect.as_deref(),
         Some(name),
-        "seed {seed}: {d:#?}"
+        "seed {seed}: {}",
+        d.verdict
     );
-    let first = &d.candidates[0];
-    assert_eq!(first.effect, name);
-    assert!(first.significant);
-    let after = first.val_rms_after_um.expect("held-out after");
+    let named = d
+        .candidates
+        .iter()
+        .find(|c| c.effect == name)
+        .expect("candidate");
+    assert!(named.significant);
+    let after = named.val_rms_after_um.expect("held-out after");
+    assert!(
+        after < before,
+        "{name} seed {seed}: {after:.1} um after, {before:.1} before"
+    );
     assert!(
         after <= 1.5 * floor,
-        "{name} seed {seed}: held-out after adding it {after:.1} um, floor {floor:.1}"
+        "{name} seed {seed}: held-out after adding it {after:.1} um, true floor {floor:.1}"
     );
+    // and with it in the model, no effect is missing any more
+    let d2 = run(&cal, &val, &[name]);
+    assert_eq!(
+        d2.missing_effect, None,
+        "{name} seed {seed}: {}",
+        d2.verdict
+    );
+    eprintln!("  then: {}", d2.verdict);
 }
 
 macro_rules! named_test {
@@ -85,14 +127,122 @@ named_test!(
     EffectKind::InstrumentAlignment
 );
 
+/// A machine noisier than the model's defaults (2.5x every group) with nothing hidden:
+/// nothing is missing, and the noise estimates find the truth.
+#[test]
+fn nothing_missing_on_a_machine_noisier_than_rated() {
+    for seed in 1..=3 {
+        let twin_noise = NoiseModel::default().scaled(&[2.5; N_GROUPS]);
+        let (cal, val, floor) = campaigns_with(TwinConfig {
+            seed,
+            noise: Some(twin_noise),
+            ..Default::default()
+        });
+        let d = run(&cal, &val, &[]);
+        eprintln!("seed {seed}: {}", d.verdict);
+        for c in &d.candidates {
+            eprintln!("  {} p = {:.2e}", c.effect, c.p_value);
+        }
+        assert_eq!(d.verdict_kind, VerdictKind::NothingMissing, "seed {seed}");
+        assert_eq!(d.missing_effect, None);
+        assert!(d.candidates.iter().all(|c| !c.significant), "seed {seed}");
+        for g in &d.noise_groups {
+            let ratio = g.estimated / g.assumed;
+            eprintln!("  noise {}: {ratio:.2}x stated, dof {:.0}", g.group, g.dof);
+            // σ estimated from ν degrees of freedom scatters by 1/√(2ν): 20 % where the
+            // campaign has 100 and more (grid encoder, encoders), 3 scatters below that
+            let tolerance = if g.dof >= 100.0 {
+                0.2
+            } else {
+                3.0 / (2.0 * g.dof).sqrt()
+            };
+            if g.dof >= 20.0 {
+                assert!(
+                    (ratio / 2.5 - 1.0).abs() < tolerance,
+                    "seed {seed}: {} estimated {:.3} for a truth of {:.3}",
+                    g.group,
+                    g.estimated,
+                    2.5 * g.assumed
+                );
+            }
+        }
+        let v = d.baseline.val_rms_um.expect("held-out");
+        assert!(v <= 1.2 * floor, "seed {seed}: {v} um, true floor {floor}");
+        // the floor the diagnosis reports is the estimated one: near the truth
+        assert!(
+            (d.baseline.noise_floor_um / floor - 1.0).abs() < 0.25,
+            "seed {seed}: reported floor {} vs true {floor}",
+            d.baseline.noise_floor_um
+        );
+    }
+}
+
+/// Thermal physics the library's effect does not fix in advance: which parts expand.
+#[test]
+fn thermal_variants_keep_the_parts_that_expand() {
+    let a = 11.5e-6;
+    let variants = [
+        ("rods only", [a, 0.0, 0.0]),
+        ("frame and scales", [0.0, a, a]),
+        ("all", [a, a, a]),
+    ];
+    for (k, (label, [rods, frame, scales])) in variants.into_iter().enumerate() {
+        let seed = 30 + k as u64;
+        let (cal, val, floor) = campaigns_with(TwinConfig {
+            seed,
+            effects: vec![(EffectKind::Thermal, 5.0)],
+            noise: Some(drawn_noise(seed)),
+            thermal: ThermalPhysics {
+                rods_per_k: rods,
+                frame_per_k: frame,
+                scales_per_k: scales,
+                ..Default::default()
+            },
+            ..Default::default()
+        });
+        let d = run(&cal, &val, &[]);
+        eprintln!("{label}: {}", d.verdict);
+        assert_eq!(d.missing_effect.as_deref(), Some("thermal"), "{label}");
+        let c = d
+            .candidates
+            .iter()
+            .find(|c| c.effect == "thermal")
+            .expect("thermal");
+        for (part, truth) in [
+            ("alpha_rods", rods),
+            ("alpha_frame", frame),
+            ("alpha_scales", scales),
+        ] {
+            let p = c.params.iter().find(|p| p.name == part).expect("part");
+            if truth > 0.0 {
+                assert!(p.identified, "{label}: {part} not kept");
+                assert!(
+                    (p.value - truth * 1e6).abs() <= 3.0 * p.sigma,
+                    "{label}: {part} = {} ± {} ppm/K, truth {}",
+                    p.value,
+                    p.sigma,
+                    truth * 1e6
+                );
+            } else {
+                assert!(!p.identified, "{label}: {part} kept: {p:?}");
+            }
+        }
+        let after = c.val_rms_after_um.expect("held-out after");
+        assert!(
+            after <= 1.5 * floor,
+            "{label}: {after} um, true floor {floor}"
+        );
+    }
+}
+
 #[test]
 fn nothing_missing_without_a_hidden_effect() {
     for seed in 1..=4 {
-        let (cal, val) = campaigns(seed, &[]);
+        let (cal, val, floor) = campaigns(seed, &[]);
         let d = run(&cal, &val, &[]);
         eprintln!("seed {seed}: {}", d.verdict);
-        assert_eq!(d.missing_effect, None, "seed {seed}: {d:#?}");
-        assert!(d.baseline.consistent_with_noise, "seed {seed}");
+        assert_eq!(d.missing_effect, None, "seed {seed}: {}", d.verdict);
+        assert_eq!(d.verdict_kind, VerdictKind::NothingMissing, "seed {seed}");
         for c in &d.candidates {
             eprintln!(
                 "  {} p = {:.2e} expl {:.2}",
@@ -102,7 +252,7 @@ fn nothing_missing_without_a_hidden_effect() {
         assert!(d.candidates.iter().all(|c| !c.significant), "seed {seed}");
         // and the model then reaches the noise floor on held-out data
         let v = d.baseline.val_rms_um.expect("held-out");
-        assert!(v <= 1.2 * d.baseline.noise_floor_um, "seed {seed}: {v}");
+        assert!(v <= 1.2 * floor, "seed {seed}: {v} um, true floor {floor}");
     }
 }
 
@@ -110,7 +260,7 @@ fn nothing_missing_without_a_hidden_effect() {
 fn two_hidden_effects_are_found_one_after_the_other() {
     let hidden = [EffectKind::Thermal, EffectKind::GuideStraightness];
     for seed in [5, 6] {
-        let (cal, val) = campaigns(seed, &hidden);
+        let (cal, val, floor) = campaigns(seed, &hidden);
         let d1 = run(&cal, &val, &[]);
         let first = d1.missing_effect.clone().expect("a first effect");
         let names: Vec<&str> = hidden.iter().map(|e| e.as_str()).collect();
@@ -131,21 +281,37 @@ fn two_hidden_effects_are_found_one_after_the_other() {
         eprintln!("seed {seed}: {first}, then {second}, then: {}", d3.verdict);
         assert_eq!(d3.missing_effect, None, "{}", d3.verdict);
         let after = d3.baseline.val_rms_um.expect("held-out");
-        assert!(after <= 1.5 * d3.baseline.noise_floor_um);
+        assert!(after <= 1.5 * floor, "{after} um, true floor {floor}");
     }
 }
 
+/// Lost motion of the carriers q1, q4 against their direction of travel (the twin's
+/// `backlash`, not in the library), with the twin's own approach columns removed: the
+/// diagnosis must find the direction of motion itself (derived covariates dir_q*).
 #[test]
-fn backlash_is_unexplained_and_points_at_the_approach_direction() {
+fn lost_motion_is_unexplained_and_points_at_the_direction_of_motion() {
     for seed in 1..=3 {
-        let (cal, val) = campaigns(seed, &[EffectKind::Backlash]);
+        let (mut cal, val, _) = campaigns(seed, &[EffectKind::Backlash]);
+        cal.covariate_names.truncate(1);
+        for p in &mut cal.poses {
+            p.covariates.truncate(1);
+        }
         let d = run(&cal, &val, &[]);
         eprintln!("seed {seed}: {}", d.verdict);
-        assert!(!d.baseline.consistent_with_noise);
         assert_eq!(d.missing_effect, None, "{}", d.verdict);
+        assert_eq!(
+            d.verdict_kind,
+            VerdictKind::UnexplainedStructure,
+            "{}",
+            d.verdict
+        );
         let u = d.unexplained.as_ref().expect("a pointer at the structure");
+        // in follower mode q2 moves with q4: their directions are one column, named together
+        let named: Vec<&str> = std::iter::once(u.feature.as_str())
+            .chain(u.ties.iter().map(String::as_str))
+            .collect();
         assert!(
-            u.feature.starts_with("approach_q") && u.r.abs() > 0.8,
+            named.iter().any(|f| *f == "dir_q1" || *f == "dir_q4") && u.r.abs() > 0.8,
             "seed {seed}: {u:?}"
         );
     }

@@ -11,7 +11,7 @@ fn twin(seed: u64, effects: Vec<(EffectKind, f64)>, noise: bool) -> Twin {
     Twin::new(TwinConfig {
         seed,
         effects,
-        noise,
+        noise: noise.then(rpkm_core::noise::NoiseModel::default),
         ..TwinConfig::default()
     })
     .expect("twin")
@@ -133,7 +133,10 @@ fn effect_free_data_is_reproduced_by_the_true_parameters() {
         let r = rms(&pos);
         eprintln!("{inst}: residual RMS {:.2} µm", r * 1e3);
         assert!(r > lo && r < hi, "{inst}: {r}");
-        assert!(rms(&fol) < 3.0 * rpkm_core::noise::ENCODER_MM, "{inst}");
+        assert!(
+            rms(&fol) < 3.0 * rpkm_core::noise::NoiseModel::default().encoder_mm,
+            "{inst}"
+        );
     }
 }
 

@@ -143,7 +143,11 @@ pub fn run(
     }
     // the twin's own encoder noise (none when it is noiseless)
     let encoder_mm = twin.config().noise.as_ref().map_or(0.0, |n| n.encoder_mm);
-    let k_noise = if twin.config().noise.is_some() { 1.0 } else { 0.0 };
+    let k_noise = if twin.config().noise.is_some() {
+        1.0
+    } else {
+        0.0
+    };
     let mut rng = StdRng::seed_from_u64(stream_seed(twin.config().seed));
     let mut gauss = move || -> f64 { StandardNormal.sample(&mut rng) };
     let n = spec.samples();

@@ -27,6 +27,9 @@ pub struct Pointer {
     /// Fraction of that direction's χ² a linear fit of the term removes (r²).
     pub explained: f64,
     pub sentence: String,
+    /// Terms the same direction follows exactly as much (one column under two names: a
+    /// follower moves with its drive).
+    pub ties: Vec<String>,
     /// The next best terms (feature, instrument, direction, r).
     pub also: Vec<(String, String, String, f64)>,
 }
@@ -163,14 +166,27 @@ struct Scored {
 
 fn pointer(s: &[Scored]) -> Option<Pointer> {
     let best = s.first()?;
+    let ties: Vec<String> = s
+        .iter()
+        .skip(1)
+        .filter(|x| x.instrument == best.instrument && x.direction == best.direction)
+        .filter(|x| (x.r.abs() - best.r.abs()).abs() < 1e-9)
+        .map(|x| x.feature.clone())
+        .collect();
+    let tied = if ties.is_empty() {
+        String::new()
+    } else {
+        format!(", and equally {}", ties.join(", "))
+    };
     Some(Pointer {
+        ties,
         feature: best.feature.clone(),
         instrument: best.instrument.clone(),
         direction: best.direction.clone(),
         r: best.r,
         explained: best.r * best.r,
         sentence: format!(
-            "the {} {} residual follows {} (r = {:.2})",
+            "the {} {} residual follows {} (r = {:.2}{tied})",
             best.instrument, best.direction, best.feature, best.r
         ),
         also: s

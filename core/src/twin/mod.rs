@@ -58,6 +58,9 @@ pub struct TwinConfig {
     pub controller: Params,
     /// Stiffness of the true machine (used under `preload_elastic`).
     pub stiffness: Stiffness,
+    /// What expands under the `thermal` effect, by how much, from which reference: the
+    /// twin's own physics, which a test varies (a machine whose rods alone expand).
+    pub thermal: ThermalPhysics,
     /// The noise of the twin's instruments and encoders (None: noiseless). Its own value:
     /// a test makes the machine noisier, or otherwise noisy, than the calibration assumes.
     pub noise: Option<NoiseModel>,
@@ -73,6 +76,32 @@ impl Default for TwinConfig {
             controller: Params::nominal(),
             stiffness: Stiffness::default(),
             noise: Some(NoiseModel::default()),
+            thermal: ThermalPhysics::default(),
+        }
+    }
+}
+
+/// Expansion coefficients (1/K) of the parts of the twin under `thermal`, and the temperature
+/// its true parameters hold at.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ThermalPhysics {
+    /// Rod lengths l1..l5.
+    pub rods_per_k: f64,
+    /// Guide positions d1, d2 (the frame).
+    pub frame_per_k: f64,
+    /// Linear scales (carrier position per encoder reading).
+    pub scales_per_k: f64,
+    pub reference_c: f64,
+}
+
+impl Default for ThermalPhysics {
+    /// An all-steel machine: everything expands at 11.5 ppm/K from 20 °C.
+    fn default() -> Self {
+        ThermalPhysics {
+            rods_per_k: ALPHA_PER_K,
+            frame_per_k: ALPHA_PER_K,
+            scales_per_k: ALPHA_PER_K,
+            reference_c: REFERENCE_TEMP_C,
         }
     }
 }
@@ -130,10 +159,11 @@ pub struct Truth {
     pub angle_sigma_rad: f64,
     /// Instrument rotation of each setup measured so far, rad (`instrument_alignment`).
     pub alignment_rad: BTreeMap<String, f64>,
-    /// Thermal model: α (1/K), reference °C, swing period s.
+    /// Thermal model: α of the rods (1/K), reference °C, swing period s, and every part's α.
     pub alpha_per_k: f64,
     pub reference_temp_c: f64,
     pub thermal_period_s: f64,
+    pub thermal: ThermalPhysics,
 }
 
 /// One effect of a [`Truth`].
@@ -260,8 +290,11 @@ impl Twin {
     /// The true machine temperature at time t, °C.
     pub fn temperature(&self, t: f64) -> f64 {
         match self.magnitude(EffectKind::Thermal) {
-            Some(a) => REFERENCE_TEMP_C - a * (std::f64::consts::TAU * t / THERMAL_PERIOD_S).cos(),
-            None => REFERENCE_TEMP_C,
+            Some(a) => {
+                self.config.thermal.reference_c
+                    - a * (std::f64::consts::TAU * t / THERMAL_PERIOD_S).cos()
+            }
+            None => self.config.thermal.reference_c,
         }
     }
 
@@ -307,9 +340,10 @@ impl Twin {
             length_sigma_mm: self.config.length_sigma_mm,
             angle_sigma_rad: self.config.angle_sigma_rad,
             alignment_rad: self.alignment.clone(),
-            alpha_per_k: ALPHA_PER_K,
-            reference_temp_c: REFERENCE_TEMP_C,
+            alpha_per_k: self.config.thermal.rods_per_k,
+            reference_temp_c: self.config.thermal.reference_c,
             thermal_period_s: THERMAL_PERIOD_S,
+            thermal: self.config.thermal,
         }
     }
 
@@ -317,14 +351,14 @@ impl Twin {
     /// the factor from encoder reading to carrier position on each guide.
     fn effective(&self, temp: f64, s1: f64, s4: f64) -> Params {
         let mut p = self.truth_params;
-        let dt = temp - REFERENCE_TEMP_C;
+        let th = self.config.thermal;
+        let dt = temp - th.reference_c;
         if dt != 0.0 {
-            let f = 1.0 + ALPHA_PER_K * dt;
             for rod in &RODS {
-                p[rod.l] *= f;
+                p[rod.l] *= 1.0 + th.rods_per_k * dt;
             }
-            p[params::D1] *= f;
-            p[params::D2] *= f;
+            p[params::D1] *= 1.0 + th.frame_per_k * dt;
+            p[params::D2] *= 1.0 + th.frame_per_k * dt;
         }
         if let Some(m) = self.magnitude(EffectKind::GuideStraightness) {
             p[params::XB1R] += bow(m, s1);
@@ -336,7 +370,7 @@ impl Twin {
 
     /// Factors carrier position / encoder reading of the four drives at temperature `temp`.
     fn scale(&self, temp: f64) -> [f64; 4] {
-        let th = 1.0 + ALPHA_PER_K * (temp - REFERENCE_TEMP_C);
+        let th = 1.0 + self.config.thermal.scales_per_k * (temp - self.config.thermal.reference_c);
         let g2 = 1.0 + self.magnitude(EffectKind::EncoderScale).unwrap_or(0.0) * 1e-6;
         [th * g2, th, th, th * g2]
     }

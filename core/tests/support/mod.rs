@@ -41,6 +41,7 @@ pub fn measure(
     let mut rng = StdRng::seed_from_u64(seed ^ 0x5eed);
     let nominal = Params::nominal();
     let k = if noisy { 1.0 } else { 0.0 };
+    let n_model = noise::NoiseModel::default();
     let mut poses = Vec::new();
     let mut reset_tcp: Option<(String, Vector2<f64>, f64)> = None;
     for (n, plan) in design.iter().enumerate() {
@@ -68,7 +69,7 @@ pub fn measure(
             line: n + 2,
         };
         for i in 0..4 {
-            pose.q[i] = q[i] + k * noise::ENCODER_MM * gauss(&mut rng);
+            pose.q[i] = q[i] + k * n_model.encoder_mm * gauss(&mut rng);
         }
         let rel = reset_tcp
             .as_ref()
@@ -78,7 +79,7 @@ pub fn measure(
         match plan.instrument {
             Instrument::Lt | Instrument::Kgm => {
                 let (d, _) = rel.expect("reset first");
-                let l = Cholesky::new(noise::xy_covariance(plan.instrument, tcp))
+                let l = Cholesky::new(n_model.xy_covariance(plan.instrument, tcp))
                     .expect("covariance")
                     .l();
                 let e = l * Vector2::new(gauss(&mut rng), gauss(&mut rng)) * k;
@@ -91,28 +92,28 @@ pub fn measure(
                 pose.r = Some(if zero {
                     0.0
                 } else {
-                    d.norm() + k * noise::DBB_MM * gauss(&mut rng)
+                    d.norm() + k * n_model.dbb_mm * gauss(&mut rng)
                 });
             }
             Instrument::LiX => {
                 pose.x = Some(if zero {
                     0.0
                 } else {
-                    rel.expect("reset").0.x + k * noise::LI_MM * gauss(&mut rng)
+                    rel.expect("reset").0.x + k * n_model.li_mm * gauss(&mut rng)
                 })
             }
             Instrument::LiY => {
                 pose.y = Some(if zero {
                     0.0
                 } else {
-                    rel.expect("reset").0.y + k * noise::LI_MM * gauss(&mut rng)
+                    rel.expect("reset").0.y + k * n_model.li_mm * gauss(&mut rng)
                 })
             }
             Instrument::LiPsi => {
                 pose.psi = Some(if zero {
                     0.0
                 } else {
-                    rel.expect("reset").1 + k * noise::PSI_RAD * gauss(&mut rng)
+                    rel.expect("reset").1 + k * n_model.psi_rad * gauss(&mut rng)
                 })
             }
             Instrument::SelfCal | Instrument::None => {}

@@ -2,10 +2,10 @@
 
 use super::{bad_input, read_campaign, write_json};
 use rpkm_core::calib::{self, Calibration, Options, Scaling, Selection};
-use rpkm_core::variance::{self, NoiseEstimate};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES};
+use rpkm_core::variance::{self, NoiseEstimate};
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -149,8 +149,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         noise: super::parse_noise(args.noise.as_deref())?,
         ..Default::default()
     };
-    let (cal, noise) = calibrate(&campaign, &start, &opts, !args.no_noise_estimation)
-        .map_err(|e| match e {
+    let (cal, noise) =
+        calibrate(&campaign, &start, &opts, !args.no_noise_estimation).map_err(|e| match e {
             calib::CalibrationError::Pose(_) => bad_input(format!("{e}")),
             other => anyhow::anyhow!("calibrating {}: {other}", args.campaign.display()),
         })?;

@@ -32,8 +32,8 @@ pub fn bad_input(msg: String) -> anyhow::Error {
 pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<rpkm_core::noise::NoiseModel> {
     let spec = spec.unwrap_or("").trim();
     let text = if spec.ends_with(".yaml") || spec.ends_with(".yml") {
-        let raw = std::fs::read_to_string(spec)
-            .map_err(|e| bad_input(format!("--noise {spec}: {e}")))?;
+        let raw =
+            std::fs::read_to_string(spec).map_err(|e| bad_input(format!("--noise {spec}: {e}")))?;
         let map: std::collections::BTreeMap<String, f64> = serde_yaml::from_str(&raw)
             .map_err(|e| bad_input(format!("--noise {spec}: expected NAME: VALUE lines: {e}")))?;
         map.iter()
