@@ -137,3 +137,115 @@ fn bad_campaign_files_exit_2_with_file_line_and_column() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("l9"));
 }
+
+/// A machine with every one of its 29 parameters off (0.08 mm, 0.3 mrad, as a real one is),
+/// measured with every instrument, a twin noisier than the spec's figures: `rpkm calibrate`
+/// with default options reaches the held-out noise floor (the twin's truth: the same
+/// validation measured without noise), and `rpkm diagnose` reports the same held-out figure.
+#[test]
+fn default_calibration_of_a_29_parameter_machine_reaches_the_floor_and_diagnose_agrees() {
+    use rpkm_core::noise::{NoiseModel, N_GROUPS};
+    let dir = scratch("map29");
+    let config = TwinConfig {
+        seed: 29,
+        length_sigma_mm: 0.08,
+        angle_sigma_rad: 3e-4,
+        noise: Some(NoiseModel::default().scaled(&[1.7; N_GROUPS])),
+        ..Default::default()
+    };
+    let instruments = [
+        Instrument::Lt,
+        Instrument::Kgm,
+        Instrument::Dbb,
+        Instrument::LiX,
+        Instrument::LiY,
+        Instrument::LiPsi,
+        Instrument::SelfCal,
+    ];
+    let measure = |config: TwinConfig| {
+        let mut twin = Twin::new(config).expect("twin");
+        let cal = twin.campaign(&instruments).expect("campaign");
+        (cal, twin.validation(100).expect("validation"))
+    };
+    let (cal, val) = measure(config.clone());
+    let (_, clean) = measure(TwinConfig {
+        noise: None,
+        ..config
+    });
+    let mut e = Vec::new();
+    for (p, q) in val.poses.iter().zip(&clean.poses).filter(|(p, _)| !p.reset) {
+        e.push(p.x.unwrap_or(0.0) - q.x.unwrap_or(0.0));
+        e.push(p.y.unwrap_or(0.0) - q.y.unwrap_or(0.0));
+    }
+    let floor = 1e3 * (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
+    let (c, v) = (dir.join("all.csv"), dir.join("val.csv"));
+    std::fs::write(&c, cal.to_csv()).expect("write");
+    std::fs::write(&v, val.to_csv()).expect("write");
+    let (cj, dj) = (dir.join("cal.json"), dir.join("diag.json"));
+    for (cmd, out) in [("calibrate", &cj), ("diagnose", &dj)] {
+        let o = rpkm()
+            .arg(cmd)
+            .arg(&c)
+            .arg("--validate")
+            .arg(&v)
+            .arg("--json")
+            .arg(out)
+            .output()
+            .expect("run rpkm");
+        assert!(
+            o.status.success(),
+            "{cmd}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    let read = |p: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).expect("json")).expect("json")
+    };
+    let (cal_json, diag) = (read(&cj), read(&dj));
+    let after = cal_json["val_rms_after_um"]
+        .as_f64()
+        .expect("val_rms_after_um");
+    let before = cal_json["val_rms_before_um"].as_f64().expect("before");
+    eprintln!("29 parameters: held-out {before:.1} -> {after:.1} um, true floor {floor:.1} um");
+    assert!(before > 2.0 * floor, "the errors must show: {before} um");
+    assert!(
+        after <= 1.2 * floor,
+        "held-out {after} um, true floor {floor} um"
+    );
+    // the model 29 diagnosis of the same data: the same calibration, the same figure
+    let _ = diag;
+    let o = rpkm()
+        .arg("diagnose")
+        .arg(&c)
+        .args(["--model", "29", "--validate"])
+        .arg(&v)
+        .arg("--json")
+        .arg(&dj)
+        .output()
+        .expect("run rpkm");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let d29 = read(&dj);
+    let held = d29["baseline"]["val_rms_um"]
+        .as_f64()
+        .expect("diagnose held-out");
+    assert!(
+        (held - after).abs() <= 0.02 * after,
+        "calibrate {after} um, diagnose {held} um"
+    );
+    assert_eq!(d29["verdict_kind"], "nothing_missing", "{}", d29["verdict"]);
+    // the noise the campaign shows: 1.7x the spec's figures, every group with data enough
+    for (group, g) in d29["noise"].as_object().expect("noise") {
+        let (stated, est, dof) = (
+            g["assumed"].as_f64().expect("a"),
+            g["estimated"].as_f64().expect("e"),
+            g["dof"].as_f64().expect("dof"),
+        );
+        if dof >= 100.0 {
+            assert!(
+                (est / stated / 1.7 - 1.0).abs() < 0.2,
+                "{group}: {est} vs {}",
+                1.7 * stated
+            );
+        }
+    }
+}

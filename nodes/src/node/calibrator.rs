@@ -32,13 +32,14 @@ use super::{
 use crate::campaign_bag::CampaignAssembler;
 
 /// Parameter keys of the node.
-pub const KEYS: [&str; 9] = [
+pub const KEYS: [&str; 10] = [
     "model",
     "geometry_file",
     "geometry.",
     "calibrate_every",
     "idle_end_s",
     "validation_prefix",
+    "selection",
     "max_condition",
     "outlier_sigma",
     "state_buffer",
@@ -93,6 +94,10 @@ pub struct CalibratorOptions {
     pub start: Geometry,
     /// Setups held out for validation start with this.
     pub validation_prefix: String,
+    /// `map`: every parameter under its manufacturing tolerance, noise estimated from the
+    /// campaign (what `rpkm calibrate` and `rpkm diagnose` do); `auto`: the thesis's
+    /// observability selection under `max_condition`.
+    pub selection: String,
     /// Condition-number limit of the automatic selection.
     pub max_condition: f64,
     /// Outlier threshold in σ (0: keep all).
@@ -118,15 +123,26 @@ fn split(c: &Campaign, prefix: &str) -> (Campaign, Option<Campaign>) {
 /// Calibrates `campaign` (mm, rad) and builds the messages.
 pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow::Result<Outcome> {
     let (cal_part, val_part) = split(campaign, &o.validation_prefix);
-    let opts = Options {
+    let auto = match o.selection.as_str() {
+        "map" => false,
+        "auto" => true,
+        other => anyhow::bail!("parameter selection `{other}`: expected `map` or `auto`"),
+    };
+    let mut opts = Options {
         model: o.start.model,
-        selection: Selection::Auto {
-            max_condition: o.max_condition,
-        },
         outlier_sigma: (o.outlier_sigma > 0.0).then_some(o.outlier_sigma),
         ..Default::default()
     };
-    let cal = calib::calibrate(&cal_part, &o.start.params, &opts)?;
+    // the calibration every command shares: tolerance prior, noise estimated from the data
+    let cal = if auto {
+        opts.selection = Selection::Auto {
+            max_condition: o.max_condition,
+        };
+        calib::calibrate(&cal_part, &o.start.params, &opts)?
+    } else {
+        let none = rpkm_core::effects::EffectSet::empty();
+        rpkm_core::variance::calibrate_estimating_noise(&cal_part, &o.start.params, &opts, &none)?.0
+    };
     let mut sigmas = [0.0; N_PARAMS];
     for id in &cal.identified {
         sigmas[id.index] = id.sigma;
@@ -253,8 +269,9 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let options = CalibratorOptions {
         start: Geometry::from_params(p)?,
         validation_prefix: p.string("validation_prefix", "val").map_err(bad_param)?,
+        selection: p.string("selection", "map").map_err(bad_param)?,
         max_condition: p.positive("max_condition", 100.0).map_err(bad_param)?,
-        outlier_sigma: p.f64("outlier_sigma", 3.0).map_err(bad_param)?,
+        outlier_sigma: p.f64("outlier_sigma", 0.0).map_err(bad_param)?,
     };
     let every = p.u64("calibrate_every", 0).map_err(bad_param)?;
     let idle_end = p.f64("idle_end_s", 0.0).map_err(bad_param)?;
@@ -403,13 +420,23 @@ mod tests {
                 source: "nominal".into(),
             },
             validation_prefix: "val".into(),
+            selection: "map".into(),
             max_condition: 100.0,
-            outlier_sigma: 3.0,
+            outlier_sigma: 0.0,
         };
         let out = calibrate_campaign(&rebuilt, &o)?;
         // Independent truth: the core on the original campaign without its held-out setup.
         let (cal_part, _) = split(&c, "val");
-        let direct = calib::calibrate(&cal_part, &Params::nominal(), &Options::default())?;
+        let direct = rpkm_core::variance::calibrate_estimating_noise(
+            &cal_part,
+            &Params::nominal(),
+            &Options {
+                outlier_sigma: None,
+                ..Options::default()
+            },
+            &rpkm_core::effects::EffectSet::empty(),
+        )?
+        .0;
         for (name, v) in out.parameters.names.iter().zip(&out.parameters.values) {
             let i = rpkm_core::params::index_of(name)
                 .ok_or("name")
