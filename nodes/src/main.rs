@@ -41,6 +41,8 @@ enum Command {
     Node(rpkm::node::NodeArgs),
     /// Start and supervise the nodes of a launch description (ROS 2 launch YAML).
     Launch(rpkm::launch::LaunchArgs),
+    /// Benchmarks of the product as a user meets it (`rpkm bench discovery --help`).
+    Bench(cli::bench::BenchArgs),
 }
 
 fn main() {
@@ -59,6 +61,7 @@ fn main() {
         Command::Ingest(a) => cli::ingest::run(a),
         Command::Node(a) => rpkm::node::run(a),
         Command::Launch(a) => rpkm::launch::run(a),
+        Command::Bench(a) => cli::bench::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {}", cli::error_chain(&e));

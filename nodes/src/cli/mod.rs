@@ -2,6 +2,7 @@
 
 pub mod analyze;
 pub mod bag;
+pub mod bench;
 pub mod calibrate;
 pub mod demo;
 pub mod diagnose;
