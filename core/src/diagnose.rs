@@ -254,31 +254,25 @@ pub fn diagnose(
     in_model: &[&dyn Effect],
     opts: &Options,
 ) -> Result<Diagnosis, DiagnoseError> {
-    let in_names: Vec<&str> = in_model.iter().map(|e| e.name()).collect();
     let library = effects::library();
+    let in_names: Vec<&str> = in_model.iter().map(|e| e.name()).collect();
     let tried: Vec<&dyn Effect> = library
         .iter()
         .map(|e| e.as_ref())
         .filter(|e| !in_names.contains(&e.name()))
         .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
         .collect();
-    let level = opts.alpha / tried.len().max(1) as f64;
+    let search = Search {
+        campaign,
+        validation,
+        in_model,
+        tried: &tried,
+        level: opts.alpha / tried.len().max(1) as f64,
+    };
     // Round 1, rows weighted by the stated noise: which effect, if any, stands out. (Under
     // noise estimated with the current model, its misfit inflates the levels and dims the
     // very effect that would explain it.)
-    let stated = calib_options(opts);
-    let val = held_out(validation, &opts.noise)?;
-    let cal = fit_model(campaign, in_model, &stated)?;
-    let base = finish(campaign, val.as_ref(), in_model, cal, &stated)?;
-    let first = candidates(
-        campaign,
-        val.as_ref(),
-        in_model,
-        &tried,
-        &base,
-        &stated,
-        level,
-    );
+    let (_, first) = search.round(&calib_options(opts))?;
     // Round 2: the noise estimated under the model with the most significant candidate (or
     // the current model), and every model compared again with those weights (the nested
     // tests need one weighting, any fixed one).
@@ -287,19 +281,53 @@ pub fn diagnose(
         with.push(*top);
     }
     let (_, est, copts) = current_model(campaign, &with, opts)?;
+    let (base, round) = search.round(&copts)?;
     let val = held_out(validation, &est.model)?;
-    let cal = fit_model(campaign, in_model, &copts)?;
-    let base = finish(campaign, val.as_ref(), in_model, cal, &copts)?;
-    let round = candidates(
-        campaign,
-        val.as_ref(),
-        in_model,
-        &tried,
-        &base,
-        &copts,
-        level,
-    );
     let baseline = baseline(&base, &est.model, val.as_ref(), opts);
+    Ok(conclude(&search, opts, base, baseline, round, &est))
+}
+
+/// What every round of a diagnosis shares.
+struct Search<'a> {
+    campaign: &'a Campaign,
+    validation: Option<&'a Campaign>,
+    in_model: &'a [&'a dyn Effect],
+    tried: &'a [&'a dyn Effect],
+    /// Level of each candidate's test (Bonferroni).
+    level: f64,
+}
+
+impl Search<'_> {
+    /// The current model and every candidate, calibrated with `copts` (its noise weights the
+    /// rows and the held-out errors).
+    fn round(&self, copts: &calib::Options) -> Result<(Fitted, Round), DiagnoseError> {
+        let val = held_out(self.validation, &copts.noise)?;
+        let cal = fit_model(self.campaign, self.in_model, copts)?;
+        let base = finish(self.campaign, val.as_ref(), self.in_model, cal, copts)?;
+        let round = candidates(
+            self.campaign,
+            val.as_ref(),
+            self.in_model,
+            self.tried,
+            &base,
+            copts,
+            self.level,
+        );
+        Ok((base, round))
+    }
+}
+
+/// The verdict from the last round.
+fn conclude(
+    search: &Search,
+    opts: &Options,
+    base: Fitted,
+    baseline: Baseline,
+    round: Round,
+    est: &NoiseEstimate,
+) -> Diagnosis {
+    let campaign = search.campaign;
+    let in_names: Vec<&str> = search.in_model.iter().map(|e| e.name()).collect();
     let structure = sparse::structure(campaign, &base.rows);
     let (mut candidates, fits, skipped) = round;
     candidates.sort_by(|a, b| b.bic_gain.total_cmp(&a.bic_gain));
@@ -322,7 +350,7 @@ pub fn diagnose(
         (None, true) => VerdictKind::UnexplainedStructure,
         (None, false) => VerdictKind::NothingMissing,
     };
-    let noise_words = noise_sentence(&est.groups);
+    let words = noise_sentence(&est.groups);
     let verdict = verdict(
         verdict_kind,
         &base,
@@ -330,10 +358,19 @@ pub fn diagnose(
         &candidates,
         unexplained.as_ref(),
         &in_names,
-        &noise_words,
+        &words,
     );
-    let n_rows = base.rows.len();
-    Ok(Diagnosis {
+    let test = format!(
+        "noise levels estimated per group from the campaign ({} rounds); candidates by nested \
+         F-test at level {:.2e} (Bonferroni over {}), ranked by BIC gain, named when they beat \
+         the best dictionary term; dictionary test at level {} (n = {} rows)",
+        est.rounds,
+        search.level,
+        search.tried.len(),
+        opts.alpha,
+        base.rows.len()
+    );
+    Diagnosis {
         model: format!("{}", opts.model),
         effects_in_model: in_names.iter().map(|s| (*s).to_owned()).collect(),
         verdict_kind,
@@ -349,16 +386,8 @@ pub fn diagnose(
         unexplained,
         groups: groups(&base.rows),
         points: points(campaign, &base.rows),
-        test: format!(
-            "noise levels estimated per group from the campaign ({} rounds); candidates by \
-             nested F-test at level {:.2e} (Bonferroni over {}), ranked by BIC gain, named when \
-             they beat the best dictionary term; dictionary test at level {} (n = {n_rows} rows)",
-            est.rounds,
-            level,
-            tried.len(),
-            opts.alpha,
-        ),
-    })
+        test,
+    }
 }
 
 /// What trying every candidate gave: their comparisons, their fits (the parts kept), and
