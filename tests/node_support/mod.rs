@@ -41,7 +41,7 @@ pub fn twin_stream(n: usize, rate_hz: f64, q3_drift_mm: impl Fn(usize) -> f64) -
     let twin = Twin::new(TwinConfig {
         seed: 11,
         effects: vec![(EffectKind::PreloadElastic, 1.0)],
-        noise: false,
+        noise: None,
         ..TwinConfig::default()
     })
     .expect("twin");

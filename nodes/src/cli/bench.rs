@@ -46,6 +46,10 @@ pub struct DiscoveryArgs {
     /// Write every machine's outcome as JSON.
     #[arg(long)]
     pub json: Option<std::path::PathBuf>,
+    /// Run only machine I of the series and print every verdict of its loop (to look at
+    /// one the table counts wrong).
+    #[arg(long)]
+    pub only: Option<usize>,
 }
 
 /// What one machine was and what the loop said.
@@ -71,6 +75,11 @@ fn discovery(a: &DiscoveryArgs) -> Result<()> {
             "--machines and --threads: expected at least 1".into(),
         ));
     }
+    if let Some(i) = a.only {
+        let o = machine(a.seed, i, true)?;
+        println!("{}", serde_json::to_string_pretty(&o)?);
+        return Ok(());
+    }
     let next = AtomicUsize::new(0);
     let done = Mutex::new(Vec::new());
     std::thread::scope(|s| {
@@ -80,7 +89,7 @@ fn discovery(a: &DiscoveryArgs) -> Result<()> {
                 if i >= a.machines {
                     break;
                 }
-                let out = machine(a.seed, i);
+                let out = machine(a.seed, i, false);
                 if let Ok(mut d) = done.lock() {
                     d.push(out);
                     eprint!("\r  {} of {} machines", d.len(), a.machines);
@@ -186,7 +195,7 @@ fn measure(config: &TwinConfig) -> Result<(Campaign, Campaign, f64)> {
     Ok((cal, val, 1e3 * rpkm_core::calib::rms(&e)))
 }
 
-fn machine(seed: u64, i: usize) -> Result<Outcome> {
+fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
     let (config, hidden) = draw(seed, i);
     let (cal, val, floor) = measure(&config)?;
     let mut named: Vec<String> = Vec::new();
@@ -197,6 +206,9 @@ fn machine(seed: u64, i: usize) -> Result<Outcome> {
             .collect::<Result<_, _>>()?;
         let refs: Vec<&dyn Effect> = boxed.iter().map(|b| b.as_ref()).collect();
         let d = diagnose::diagnose(&cal, Some(&val), &refs, &Options::default())?;
+        if verbose {
+            println!("with {named:?}: {}", d.verdict);
+        }
         match d.missing_effect {
             Some(e) if !named.contains(&e) && named.len() < 3 => named.push(e),
             _ => break (d.verdict_kind, d.baseline.val_rms_um.unwrap_or(f64::NAN)),
