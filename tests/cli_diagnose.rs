@@ -68,7 +68,7 @@ fn diagnose_names_the_hidden_effect_of_the_truth_file_and_calibrate_adds_it() {
             .arg(&report),
     );
     assert!(
-        stdout.contains("Verdict: missing effect: thermal"),
+        stdout.contains("Verdict (missing_effect): missing effect: thermal"),
         "{stdout}"
     );
     let d = json(&d);
@@ -141,7 +141,9 @@ fn demo_names_the_effect_hidden_in_its_embedded_data() {
     let truth = json(&PathBuf::from("bags/demo/truth.json"));
     let hidden = truth["effects"][0]["effect"].as_str().expect("effect");
     assert!(
-        stdout.contains(&format!("Verdict: missing effect: {hidden}")),
+        stdout.contains(&format!(
+            "Verdict (missing_effect): missing effect: {hidden}"
+        )),
         "{stdout}"
     );
     assert!(

@@ -29,6 +29,9 @@ pub const MIN_DOF: f64 = 5.0;
 const MAX_ROUNDS: usize = 8;
 /// A round whose factors all lie within this of 1 ends the iteration.
 const SETTLED: f64 = 0.01;
+/// Bounds of an estimated level relative to the stated one: a noiseless (simulated) campaign
+/// would otherwise drive the weights to infinity.
+const FACTOR_RANGE: (f64, f64) = (1e-2, 1e2);
 
 /// One group's level, as assumed and as estimated.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -106,6 +109,10 @@ pub fn calibrate_estimating_noise(
             if terms[k].1 >= MIN_DOF && terms[k].0 > 0.0 {
                 step[k] = (terms[k].0 / terms[k].1).sqrt().clamp(1e-2, 1e2);
             }
+        }
+        for k in 0..N_GROUPS {
+            let bounded = (total[k] * step[k]).clamp(FACTOR_RANGE.0, FACTOR_RANGE.1);
+            step[k] = bounded / total[k];
         }
         let settled = step.iter().all(|f| (f - 1.0).abs() < SETTLED);
         if settled || rounds >= MAX_ROUNDS {

@@ -8,7 +8,7 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::diagnose::{self, Diagnosis, Options, VerdictKind};
 use rpkm_core::effects::{self, Effect};
-use rpkm_core::noise::{Group, NoiseModel, N_GROUPS};
+use rpkm_core::noise::{NoiseModel, N_GROUPS};
 use rpkm_core::twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
 
 /// A twin's conventions that the model must not assume: its noise, every group's level drawn

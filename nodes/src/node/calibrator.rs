@@ -400,10 +400,8 @@ mod tests {
 
     #[test]
     fn messages_rebuild_the_campaign_and_calibrate_like_the_core() -> anyhow::Result<()> {
-        let mut twin = Twin::new(TwinConfig {
-            noise: None,
-            ..TwinConfig::default()
-        })?;
+        // a noisy twin: the diagnosis estimates its noise and tries every effect
+        let mut twin = Twin::new(TwinConfig::default())?;
         let c = twin.campaign_by_names(&["lt", "validation"], 20)?;
         let mut acc = Accumulator::new(8);
         for (i, pose) in c.poses.iter().enumerate() {
@@ -451,9 +449,10 @@ mod tests {
         }
         assert_eq!(out.parameters.model, 29);
         assert!(out.parameters.val_rms.is_finite());
+        // the tracker's noise (5 µm along the beam, 25-30 µm across) sets the held-out RMS
         assert!(
-            out.parameters.val_rms < 5e-6,
-            "noise-free twin: {}",
+            out.parameters.val_rms < 40e-6,
+            "held-out {} m",
             out.parameters.val_rms
         );
         let d = out.diagnosis.map_err(anyhow::Error::msg)?;
