@@ -172,12 +172,7 @@ fn default_calibration_of_a_29_parameter_machine_reaches_the_floor_and_diagnose_
         noise: None,
         ..config
     });
-    let mut e = Vec::new();
-    for (p, q) in val.poses.iter().zip(&clean.poses).filter(|(p, _)| !p.reset) {
-        e.push(p.x.unwrap_or(0.0) - q.x.unwrap_or(0.0));
-        e.push(p.y.unwrap_or(0.0) - q.y.unwrap_or(0.0));
-    }
-    let floor = 1e3 * (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
+    let floor = rpkm_core::twin::reading_error_rms_um(&val, &clean);
     let (c, v) = (dir.join("all.csv"), dir.join("val.csv"));
     std::fs::write(&c, cal.to_csv()).expect("write");
     std::fs::write(&v, val.to_csv()).expect("write");

@@ -36,14 +36,7 @@ fn campaigns_with(config: TwinConfig) -> (Campaign, Campaign, f64) {
         noise: None,
         ..config
     });
-    let mut e = Vec::new();
-    for (p, q) in val.poses.iter().zip(&clean.poses) {
-        if !p.reset {
-            e.push(p.x.unwrap_or(0.0) - q.x.unwrap_or(0.0));
-            e.push(p.y.unwrap_or(0.0) - q.y.unwrap_or(0.0));
-        }
-    }
-    let floor = 1e3 * (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
+    let floor = rpkm_core::twin::reading_error_rms_um(&val, &clean);
     (cal, val, floor)
 }
 

@@ -635,3 +635,22 @@ impl Twin {
         self.run(&d, "validation")
     }
 }
+
+/// RMS (µm) of the instruments' own error in a campaign: its x, y readings against those of
+/// the same twin measuring the same poses without noise (`clean`). On held-out poses, the
+/// floor no model can go below.
+pub fn reading_error_rms_um(noisy: &Campaign, clean: &Campaign) -> f64 {
+    let e: Vec<f64> = noisy
+        .poses
+        .iter()
+        .zip(&clean.poses)
+        .filter(|(p, _)| !p.reset)
+        .flat_map(|(p, q)| {
+            [
+                p.x.unwrap_or(0.0) - q.x.unwrap_or(0.0),
+                p.y.unwrap_or(0.0) - q.y.unwrap_or(0.0),
+            ]
+        })
+        .collect();
+    1e3 * (e.iter().map(|v| v * v).sum::<f64>() / e.len().max(1) as f64).sqrt()
+}

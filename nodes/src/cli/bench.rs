@@ -180,19 +180,8 @@ fn measure(config: &TwinConfig) -> Result<(Campaign, Campaign, f64)> {
         noise: None,
         ..config.clone()
     })?;
-    let e: Vec<f64> = val
-        .poses
-        .iter()
-        .zip(&clean.poses)
-        .filter(|(p, _)| !p.reset)
-        .flat_map(|(p, q)| {
-            [
-                p.x.unwrap_or(0.0) - q.x.unwrap_or(0.0),
-                p.y.unwrap_or(0.0) - q.y.unwrap_or(0.0),
-            ]
-        })
-        .collect();
-    Ok((cal, val, 1e3 * rpkm_core::calib::rms(&e)))
+    let floor = rpkm_core::twin::reading_error_rms_um(&val, &clean);
+    Ok((cal, val, floor))
 }
 
 fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {

@@ -212,17 +212,21 @@ pub fn print_noise(noise: &NoiseEstimate) {
         return;
     }
     println!(
-        "
-noise per group (estimated from the campaign's residuals, {} rounds):",
+        "\nnoise per group (estimated from the campaign's residuals, {} rounds):",
         noise.rounds
     );
+    print_noise_groups(&noise.groups, "  ");
+}
+
+/// The rows of the noise table, each line starting with `indent`.
+pub fn print_noise_groups(groups: &[variance::GroupNoise], indent: &str) {
     println!(
-        "  {:<10} {:>10} {:>10} {:>8}  unit",
+        "{indent}{:<10} {:>10} {:>10} {:>8}  unit",
         "group", "stated", "estimated", "dof"
     );
-    for g in &noise.groups {
+    for g in groups {
         println!(
-            "  {:<10} {:>10.3} {:>10.3} {:>8.1}  {}{}",
+            "{indent}{:<10} {:>10.3} {:>10.3} {:>8.1}  {}{}",
             g.group,
             g.assumed,
             g.estimated,

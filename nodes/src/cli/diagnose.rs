@@ -150,25 +150,8 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
         );
     }
     if !d.noise_groups.is_empty() {
-        println!(
-            "\n   {:<10} {:>9} {:>10} {:>7}  noise per group, estimated from the residuals",
-            "group", "stated", "estimated", "dof"
-        );
-        for g in &d.noise_groups {
-            println!(
-                "   {:<10} {:>9.3} {:>10.3} {:>7.0}  {}{}",
-                g.group,
-                g.assumed,
-                g.estimated,
-                g.dof,
-                g.unit,
-                if g.estimated_from_data {
-                    ""
-                } else {
-                    " (too few dof: stated kept)"
-                }
-            );
-        }
+        println!("\n   noise per group, estimated from the residuals:");
+        super::calibrate::print_noise_groups(&d.noise_groups, "   ");
     }
     println!(
         "\n   {:<6} {:<14} {:>5} {:>10} {:>10} {:>9}",
