@@ -45,8 +45,34 @@ enum Command {
     Bench(cli::bench::BenchArgs),
 }
 
+impl Command {
+    /// Whether the command is a filter-like report writer (stdout may be `| head`), as
+    /// opposed to the long-running processes on the transports (nodes, launch, record,
+    /// replay), which must report a broken connection instead of vanishing on a signal.
+    fn writes_reports(&self) -> bool {
+        !matches!(
+            self,
+            Command::Node(_) | Command::Launch(_) | Command::Record(_) | Command::Replay(_)
+        )
+    }
+}
+
+/// Restores the default SIGPIPE disposition. Rust ignores SIGPIPE, so output into a closed
+/// pipe (`rpkm calibrate c.csv | head -1`) makes `println!` panic with exit 101; with the
+/// default the process ends quietly on the signal, as every Unix filter does.
+fn quiet_broken_pipe() {
+    // SAFETY: signal(2) with a valid signal number and the default disposition, called
+    // from main before any thread is started.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() {
     let args = Cli::parse();
+    if args.command.writes_reports() {
+        quiet_broken_pipe();
+    }
     rpkm::logging::init();
     let result = match &args.command {
         Command::Calibrate(a) => cli::calibrate::run(a),

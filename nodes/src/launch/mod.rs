@@ -81,6 +81,10 @@ pub enum Program {
 /// The rpkm commands an `executable` entry may run.
 pub const COMMANDS: [&str; 2] = ["record", "replay"];
 
+/// Bounds of `respawn_delay`, s (the supervisor caps the doubled delay at 5 s anyway).
+const MIN_DELAY_S: f64 = 0.0;
+const MAX_DELAY_S: f64 = 3600.0;
+
 /// One process to run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeSpec {
@@ -329,13 +333,14 @@ fn respawn(
     };
     let delay = match field("respawn_delay")? {
         None => 0.2,
+        // Bounded here: the supervisor turns it into a `Duration`, which panics on 1e308.
         Some(s) => s
             .parse::<f64>()
             .ok()
-            .filter(|d| d.is_finite() && *d >= 0.0)
+            .filter(|d| (MIN_DELAY_S..=MAX_DELAY_S).contains(d))
             .ok_or_else(|| {
                 ctx.err(format!(
-                    "{name}: respawn_delay {s:?}: expected seconds >= 0"
+                    "{name}: respawn_delay {s:?}: expected seconds from {MIN_DELAY_S} to {MAX_DELAY_S}"
                 ))
             })?,
     };
@@ -540,6 +545,10 @@ launch:
             (
                 "node: {pkg: rpkm, exec: ingest, if: maybe}",
                 "node if: \"maybe\"",
+            ),
+            (
+                "node: {pkg: rpkm, exec: ingest, respawn_delay: 1e308}",
+                "node ingest: respawn_delay \"1e308\": expected seconds from 0 to 3600",
             ),
         ] {
             let e = LaunchDescription::parse(

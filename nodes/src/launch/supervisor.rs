@@ -147,8 +147,11 @@ pub fn run(desc: &LaunchDescription) -> anyhow::Result<()> {
                         0
                     };
                     let factor = 2f64.powi(n.quick_crashes.saturating_sub(1).min(16) as i32);
-                    let delay =
-                        Duration::from_secs_f64(n.spec.respawn_delay * factor).min(MAX_DELAY);
+                    // Capped in seconds before the `Duration` exists: from_secs_f64 panics on
+                    // values beyond its range.
+                    let delay = Duration::from_secs_f64(
+                        (n.spec.respawn_delay * factor).clamp(0.0, MAX_DELAY.as_secs_f64()),
+                    );
                     log(format!(
                         "restarting {} in {:.2} s",
                         n.spec.name,

@@ -274,8 +274,14 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         outlier_sigma: p.f64("outlier_sigma", 0.0).map_err(bad_param)?,
     };
     let every = p.u64("calibrate_every", 0).map_err(bad_param)?;
-    let idle_end = p.f64("idle_end_s", 0.0).map_err(bad_param)?;
-    let capacity = p.u64("state_buffer", 4096).map_err(bad_param)? as usize;
+    let idle_end = p
+        .f64_in("idle_end_s", 0.0, super::params::DURATION_S, " s")
+        .map_err(bad_param)?;
+    // Bounded before the ring is preallocated from it (4294967296 asked for 650 GB).
+    let capacity = p
+        .u64_in("state_buffer", 4096, super::params::BUFFER_LEN)
+        .map_err(bad_param)?;
+    let capacity = usize::try_from(capacity).unwrap_or(usize::MAX);
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
     let measurements = ctx.subscriber(&topic::TCP_MEASUREMENT)?;
     let infos = ctx.subscriber(&topic::CAMPAIGN_INFO)?;

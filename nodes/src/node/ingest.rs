@@ -599,8 +599,15 @@ pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
             .positive("measurement_max_m", d.measurement_max_m)
             .map_err(bp)?,
     };
-    let rate_hz = p.positive("rate_hz", 1000.0).map_err(bp)?;
-    let start_delay = Duration::from_secs_f64(p.f64("start_delay_s", 1.0).map_err(bp)?.max(0.0));
+    // 1 mHz to 1 MHz: the period 1/rate becomes a `Duration`, which a rate of 1e-300 Hz
+    // would overflow.
+    let rate_hz = p
+        .f64_in("rate_hz", 1000.0, (1e-3, 1e6), " Hz")
+        .map_err(bp)?;
+    let start_delay = p
+        .f64_in("start_delay_s", 1.0, super::params::DURATION_S, " s")
+        .map_err(bp)?;
+    let start_delay = Duration::from_secs_f64(start_delay);
     let end_marker = p.bool("end_marker", true).map_err(bp)?;
     let exit_at_end = p.bool("exit_at_end", false).map_err(bp)?;
     let mut out = Output {

@@ -262,7 +262,12 @@ impl NodeContext {
     pub fn diagnostics_period(&self) -> anyhow::Result<Duration> {
         let s = self
             .params
-            .positive("diagnostics_period_s", 1.0)
+            .f64_in(
+                "diagnostics_period_s",
+                1.0,
+                (1e-3, params::DURATION_S.1),
+                " s",
+            )
             .map_err(bad_param)?;
         Ok(Duration::from_secs_f64(s))
     }
@@ -332,12 +337,16 @@ impl Geometry {
     /// `model` (24|29), `stiffness_factor`.
     pub fn from_params(p: &NodeParams) -> anyhow::Result<Self> {
         let model_n = p.u64("model", 29).map_err(bad_param)?;
-        let model = Model::from_number(model_n as u32).ok_or_else(|| {
-            crate::cli::bad_input(format!(
-                "{}/model: expected 24 or 29, found {model_n}",
-                p.origin("model").map(|o| o.to_string()).unwrap_or_default()
-            ))
-        })?;
+        // try_from, not `as`: 4294967320 must not wrap around to model 24.
+        let model = u32::try_from(model_n)
+            .ok()
+            .and_then(Model::from_number)
+            .ok_or_else(|| {
+                crate::cli::bad_input(format!(
+                    "{}/model: expected 24 or 29, found {model_n}",
+                    p.origin("model").map(|o| o.to_string()).unwrap_or_default()
+                ))
+            })?;
         let factor = p.positive("stiffness_factor", 1.0).map_err(bad_param)?;
         let file = p.string("geometry_file", "").map_err(bad_param)?;
         let (mut params, mut source) = if file.is_empty() {

@@ -21,6 +21,16 @@ use std::path::{Path, PathBuf};
 
 use serde_yaml::Value;
 
+/// Bounds of a duration read from a parameter, s: an hour is beyond any period, delay or
+/// timeout the nodes use, and far inside what a `Duration` holds.
+pub const DURATION_S: (f64, f64) = (0.0, 3600.0);
+/// Bounds of a buffer length read from a parameter: a million entries is minutes of an
+/// 8 kHz stream, and a few tens of MB at most.
+pub const BUFFER_LEN: (u64, u64) = (1, 1_000_000);
+/// Bounds of a busy-poll time, ms: it costs a core while it lasts, and beyond a second it
+/// is no longer a latency measure.
+pub const BUSY_POLL_MS: (f64, f64) = (0.0, 1000.0);
+
 /// Where a parameter value came from, for messages: `file.yaml: /node/ros__parameters/key`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Origin {
@@ -87,6 +97,17 @@ pub enum ParamError {
         key: String,
         expected: &'static str,
         found: String,
+    },
+    /// A number outside the bounds the node can use (a duration, rate or buffer size that
+    /// would overflow a `Duration` or ask for an absurd allocation).
+    #[error("{origin}/{key}: {found} is out of range: expected {lo} to {hi}{unit}")]
+    Range {
+        origin: Box<Origin>,
+        key: String,
+        found: String,
+        lo: String,
+        hi: String,
+        unit: &'static str,
     },
     /// A key the node does not declare.
     #[error("{origin}/{key}: unknown parameter of node {node} (known: {known})")]
@@ -313,6 +334,47 @@ impl NodeParams {
         }
     }
 
+    fn range_err(&self, key: &str, lo: String, hi: String, unit: &'static str) -> ParamError {
+        let (v, origin) = &self.values[key];
+        ParamError::Range {
+            origin: Box::new(origin.clone()),
+            key: key.to_owned(),
+            found: yaml_text(v),
+            lo,
+            hi,
+            unit,
+        }
+    }
+
+    /// A finite double in `lo..=hi` (`unit` for the message, e.g. " s"), or `default`.
+    /// Every duration, period and rate goes through here: `Duration::from_secs_f64` panics
+    /// on values beyond its range, so a number from a file is bounded before it becomes one.
+    pub fn f64_in(
+        &self,
+        key: &str,
+        default: f64,
+        (lo, hi): (f64, f64),
+        unit: &'static str,
+    ) -> Result<f64, ParamError> {
+        let v = self.f64(key, default)?;
+        if !self.has(key) || (lo..=hi).contains(&v) {
+            Ok(v)
+        } else {
+            Err(self.range_err(key, lo.to_string(), hi.to_string(), unit))
+        }
+    }
+
+    /// An integer in `lo..=hi`, or `default`: buffer sizes and counts are bounded before
+    /// anything is allocated from them.
+    pub fn u64_in(&self, key: &str, default: u64, (lo, hi): (u64, u64)) -> Result<u64, ParamError> {
+        let v = self.u64(key, default)?;
+        if !self.has(key) || (lo..=hi).contains(&v) {
+            Ok(v)
+        } else {
+            Err(self.range_err(key, lo.to_string(), hi.to_string(), ""))
+        }
+    }
+
     /// A boolean, or `default`.
     pub fn bool(&self, key: &str, default: bool) -> Result<bool, ParamError> {
         match self.values.get(key) {
@@ -447,6 +509,39 @@ tcp_estimator:
         );
         let layout = load("ingest:\n  rate_hz: 3\n", "ingest").expect_err("no ros__parameters");
         assert!(layout.to_string().contains("ros__parameters"), "{layout}");
+        Ok(())
+    }
+
+    #[test]
+    fn out_of_range_values_name_file_key_and_bounds() -> Result<(), ParamError> {
+        let p = load(
+            "calibrator:\n  ros__parameters:\n    state_buffer: 4294967296\n    idle_end_s: 1e308\n",
+            "calibrator",
+        )?;
+        let err = p
+            .u64_in("state_buffer", 4096, (1, 1_000_000))
+            .expect_err("too large");
+        assert_eq!(
+            err.to_string(),
+            "p.yaml: calibrator/ros__parameters/state_buffer: 4294967296 is out of range: \
+             expected 1 to 1000000"
+        );
+        let err = p
+            .f64_in("idle_end_s", 0.0, (0.0, 3600.0), " s")
+            .expect_err("too long");
+        assert!(
+            err.to_string()
+                .starts_with("p.yaml: calibrator/ros__parameters/idle_end_s: 1e308 is out"),
+            "{err}"
+        );
+        assert!(err.to_string().ends_with("expected 0 to 3600 s"), "{err}");
+        // Absent keys take the default; values at the bounds are accepted.
+        assert_eq!(p.f64_in("absent", 2.0, (0.0, 3600.0), " s")?, 2.0);
+        let q = load(
+            "calibrator:\n  ros__parameters:\n    state_buffer: 1000000\n",
+            "calibrator",
+        )?;
+        assert_eq!(q.u64_in("state_buffer", 4096, (1, 1_000_000))?, 1_000_000);
         Ok(())
     }
 }

@@ -346,7 +346,9 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         )));
     }
     let status_every = p.u64("status_every", 1).map_err(bad_param)?.max(1);
-    let busy = p.non_negative("busy_poll_ms", 0.0).map_err(bad_param)?;
+    let busy = p
+        .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
+        .map_err(bad_param)?;
     let follow = p.bool("follow_parameters", true).map_err(bad_param)?;
     let geometry = Geometry::from_params(p)?;
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;

@@ -301,7 +301,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         .map_err(super::bad_param)?;
     let busy = ctx
         .params
-        .non_negative("busy_poll_ms", 0.0)
+        .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
         .map_err(super::bad_param)?;
     let rt_priority = ctx.params.u64("rt_priority", 0).map_err(super::bad_param)?;
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
