@@ -14,7 +14,7 @@ fn main() {
         .unwrap_or(3);
     let mut cases: Vec<Option<EffectKind>> = vec![None];
     cases.extend(EffectKind::ALL.iter().map(|e| Some(*e)));
-    println!("| hidden effect | seed | cal RMS um | val RMS um | floor um | chi2/dof | named | 1st candidate (expl., signif.) | val after um |");
+    println!("| hidden effect | seed | cal RMS um | val RMS um | floor um | chi2/dof (stated noise) | verdict | 1st candidate (expl., signif.) | val after um |");
     println!("|---|---|---|---|---|---|---|---|---|");
     for case in cases {
         for seed in 1..=seeds {
@@ -36,21 +36,24 @@ fn main() {
                 diagnose::diagnose(&cal, Some(&val), &[], &Options::default()).expect("diagnose");
             let c = d.candidates.first();
             println!(
-                "| {} | {seed} | {:.1} | {:.1} | {:.1} | {:.2} | {} | {} | {} | ({:.1}s)",
+                "| {} | {seed} | {:.1} | {:.1} | {:.1} | {:.2} | {} | {} | {} |",
                 case.map_or("none".to_owned(), |e| e.to_string()),
                 d.baseline.cal_rms_um,
                 d.baseline.val_rms_um.unwrap_or(f64::NAN),
                 d.baseline.noise_floor_um,
                 d.baseline.chi2_per_dof,
-                d.missing_effect.as_deref().unwrap_or("none"),
+                d.missing_effect.as_deref().unwrap_or(match d.verdict_kind {
+                    diagnose::VerdictKind::UnexplainedStructure => "unexplained structure",
+                    _ => "nothing missing",
+                }),
                 c.map_or("-".to_owned(), |c| format!(
                     "{} ({:.2}, {})",
                     c.effect, c.explained_fraction, c.significant
                 )),
                 c.and_then(|c| c.val_rms_after_um)
                     .map_or("-".to_owned(), |v| format!("{v:.1}")),
-                t0.elapsed().as_secs_f64()
             );
+            eprintln!("  {:.1} s", t0.elapsed().as_secs_f64());
             if std::env::var("VERBOSE").is_ok() {
                 for c in &d.candidates {
                     println!(
