@@ -68,6 +68,59 @@ fn respawn_delay_1e308_is_rejected_with_the_key() {
     );
 }
 
+#[test]
+fn launch_rejects_unknown_keys_with_the_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("typo.launch.yaml");
+    std::fs::write(
+        &file,
+        "launch:\n  - executable:\n      cmd: rpkm record\n      If: \"false\"\n",
+    )
+    .expect("write launch file");
+    let (code, stderr) = run(rpkm().arg("launch").arg(&file));
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "{}:4: executable: unknown key \"If\"",
+            file.display()
+        )),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn launch_does_not_respawn_a_node_with_a_bad_configuration_and_exits_2() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    std::fs::write(
+        dir.path().join("params.yaml"),
+        "calibrator:\n  ros__parameters:\n    state_buffer: 4294967296\n",
+    )
+    .expect("write params");
+    let file = dir.path().join("bad.launch.yaml");
+    std::fs::write(
+        &file,
+        "launch:\n  - node: {pkg: rpkm, exec: calibrator, param: [{from: params.yaml}], \
+         args: --backend ipc, respawn: true, respawn_delay: 0.0}\n",
+    )
+    .expect("write launch file");
+    let prefix = format!("rpkm_badcfg_{}_launch", std::process::id());
+    let (code, stderr) = run(rpkm()
+        .arg("launch")
+        .arg(&file)
+        .env("RPKM_IPC_PREFIX", prefix));
+    assert_eq!(code, Some(2), "{stderr}");
+    assert_eq!(
+        stderr.matches("[launch] started calibrator").count(),
+        1,
+        "not restarted: {stderr}"
+    );
+    assert!(stderr.contains("state_buffer"), "{stderr}");
+    assert!(
+        stderr.contains("failed their configuration (exit 2, not restarted): calibrator"),
+        "{stderr}"
+    );
+}
+
 /// Runs `rpkm node EXEC` with the parameter file `yaml`; returns the exit code and stderr.
 fn node_with_params(exec: &str, yaml: &str) -> (Option<i32>, String, String) {
     let dir = tempfile::tempdir().expect("tempdir");

@@ -25,6 +25,9 @@
 //! The recorder stops with the launch: SIGTERM makes `rpkm record` write what is queued and
 //! close its bag (metadata.yaml and summary).
 //!
+//! Keys other than these are errors naming the key and its line (a typo such as `If:` would
+//! otherwise switch a recorder on). `respawn_delay` is bounded to 0..=3600 s.
+//!
 //! Substitutions in every string: `$(var NAME)` (an `arg`, overridden by `NAME:=VALUE` on the
 //! command line), `$(env NAME)` / `$(env NAME DEFAULT)`, `$(dirname)` (this file's folder).
 
@@ -115,8 +118,28 @@ pub struct LaunchDescription {
     pub env: Vec<(String, String)>,
 }
 
+/// The keys each kind of entry takes: anything else is a typo (`If:`, `respwan:`) that
+/// would otherwise silently change what runs.
+const NODE_KEYS: [&str; 9] = [
+    "pkg",
+    "exec",
+    "name",
+    "param",
+    "args",
+    "respawn",
+    "respawn_delay",
+    "if",
+    "unless",
+];
+const EXECUTABLE_KEYS: [&str; 6] = ["cmd", "name", "respawn", "respawn_delay", "if", "unless"];
+const ARG_KEYS: [&str; 3] = ["name", "default", "description"];
+const SET_ENV_KEYS: [&str; 2] = ["name", "value"];
+const PARAM_KEYS: [&str; 3] = ["from", "name", "value"];
+
 struct Ctx<'a> {
     file: String,
+    /// The file's text, to find the line of a key (serde_yaml values carry no positions).
+    text: &'a str,
     dir: &'a Path,
     vars: BTreeMap<String, String>,
 }
@@ -127,6 +150,38 @@ impl Ctx<'_> {
             file: self.file.clone(),
             what,
         }
+    }
+
+    /// Errors on a key of `entry` that is not in `known`, with the line where it first
+    /// appears in the file.
+    fn check_keys(
+        &self,
+        body: &serde_yaml::Mapping,
+        entry: &str,
+        known: &[&str],
+    ) -> Result<(), LaunchError> {
+        for key in body.keys() {
+            let name = match key {
+                Value::String(s) => s.clone(),
+                other => serde_yaml::to_string(other)
+                    .map(|s| s.trim().to_owned())
+                    .unwrap_or_default(),
+            };
+            if known.contains(&name.as_str()) {
+                continue;
+            }
+            let at = key_line(self.text, &name)
+                .map(|l| format!(":{l}"))
+                .unwrap_or_default();
+            return Err(LaunchError::Invalid {
+                file: format!("{}{at}", self.file),
+                what: format!(
+                    "{entry}: unknown key {name:?} (known: {})",
+                    known.join(", ")
+                ),
+            });
+        }
+        Ok(())
     }
 
     /// Applies `$(var ..)`, `$(env ..)`, `$(dirname)`.
@@ -179,6 +234,21 @@ impl Ctx<'_> {
     }
 }
 
+/// The 1-based line where `key:` first appears as a mapping key (block or flow style),
+/// outside comments.
+fn key_line(text: &str, key: &str) -> Option<usize> {
+    let pattern = format!("{key}:");
+    text.lines().enumerate().find_map(|(i, line)| {
+        let code = line.split(" #").next().unwrap_or(line);
+        code.match_indices(&pattern)
+            .any(|(at, _)| {
+                let before = code[..at].chars().next_back();
+                before.is_none_or(|c| c.is_whitespace() || matches!(c, '{' | ',' | '-'))
+            })
+            .then_some(i + 1)
+    })
+}
+
 fn get<'a>(m: &'a serde_yaml::Mapping, key: &str) -> Option<&'a Value> {
     m.get(key)
 }
@@ -209,6 +279,7 @@ impl LaunchDescription {
         let doc = parse_yaml(text, file)?;
         let mut ctx = Ctx {
             file: file.to_owned(),
+            text,
             dir,
             vars: BTreeMap::new(),
         };
@@ -242,38 +313,18 @@ impl LaunchDescription {
                 .ok_or_else(|| ctx.err(format!("launch item {k}: expected a map")))?;
             match kind.as_str() {
                 Some("arg") => {
-                    let name = ctx.string(
-                        get(body, "name").ok_or_else(|| ctx.err(format!("arg {k}: no name")))?,
-                        "arg name",
-                    )?;
-                    let value = match (given.get(&name), get(body, "default")) {
-                        (Some(v), _) => v.clone(),
-                        (None, Some(d)) => ctx.string(d, &format!("arg {name} default"))?,
-                        (None, None) => {
-                            return Err(ctx.err(format!(
-                                "launch argument {name} has no default: give {name}:=VALUE"
-                            )))
-                        }
-                    };
+                    let (name, value) = arg(&ctx, body, k, &given)?;
                     ctx.vars.insert(name, value);
                 }
-                Some("set_env") => {
-                    let name = ctx.string(
-                        get(body, "name").ok_or_else(|| ctx.err("set_env: no name".into()))?,
-                        "set_env name",
-                    )?;
-                    let value = ctx.string(
-                        get(body, "value").ok_or_else(|| ctx.err("set_env: no value".into()))?,
-                        "set_env value",
-                    )?;
-                    out.env.push((name, value));
-                }
+                Some("set_env") => out.env.push(set_env(&ctx, body)?),
                 Some("node") => {
+                    ctx.check_keys(body, "node", &NODE_KEYS)?;
                     if condition(&ctx, body, "node")? {
                         out.nodes.push(node(&ctx, body)?);
                     }
                 }
                 Some("executable") => {
+                    ctx.check_keys(body, "executable", &EXECUTABLE_KEYS)?;
                     if condition(&ctx, body, "executable")? {
                         out.nodes.push(executable(&ctx, body)?);
                     }
@@ -291,6 +342,44 @@ impl LaunchDescription {
         }
         Ok(out)
     }
+}
+
+/// An `arg` entry (item `k`): its name and value, the command line's over the default.
+fn arg(
+    ctx: &Ctx<'_>,
+    body: &serde_yaml::Mapping,
+    k: usize,
+    given: &BTreeMap<String, String>,
+) -> Result<(String, String), LaunchError> {
+    ctx.check_keys(body, "arg", &ARG_KEYS)?;
+    let name = ctx.string(
+        get(body, "name").ok_or_else(|| ctx.err(format!("arg {k}: no name")))?,
+        "arg name",
+    )?;
+    let value = match (given.get(&name), get(body, "default")) {
+        (Some(v), _) => v.clone(),
+        (None, Some(d)) => ctx.string(d, &format!("arg {name} default"))?,
+        (None, None) => {
+            return Err(ctx.err(format!(
+                "launch argument {name} has no default: give {name}:=VALUE"
+            )))
+        }
+    };
+    Ok((name, value))
+}
+
+/// A `set_env` entry: the variable and its value.
+fn set_env(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<(String, String), LaunchError> {
+    ctx.check_keys(body, "set_env", &SET_ENV_KEYS)?;
+    let name = ctx.string(
+        get(body, "name").ok_or_else(|| ctx.err("set_env: no name".into()))?,
+        "set_env name",
+    )?;
+    let value = ctx.string(
+        get(body, "value").ok_or_else(|| ctx.err("set_env: no value".into()))?,
+        "set_env value",
+    )?;
+    Ok((name, value))
 }
 
 /// `if:` / `unless:` of an entry (ROS 2 launch): true, false, 1 or 0 after substitution.
@@ -411,6 +500,7 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
             let m = p
                 .as_mapping()
                 .ok_or_else(|| ctx.err(format!("node {name}: param entry: expected a map")))?;
+            ctx.check_keys(m, &format!("node {name} param entry"), &PARAM_KEYS)?;
             if let Some(from) = get(m, "from") {
                 let f = PathBuf::from(ctx.string(from, "param from")?);
                 param_files.push(if f.is_relative() { ctx.dir.join(f) } else { f });
@@ -507,6 +597,32 @@ launch:
             ["--out", "/l/bag", "--topics", "/rpkm/tcp_estimate"]
         );
         Ok(())
+    }
+
+    #[test]
+    fn unknown_keys_in_a_launch_entry_are_rejected_with_the_line() {
+        for (text, says) in [
+            (
+                "launch:\n  - node:\n      pkg: rpkm\n      exec: ingest\n      If: \"false\"\n",
+                "z.yaml:5: node: unknown key \"If\" (known: pkg, exec,",
+            ),
+            (
+                "launch:\n  - node: {pkg: rpkm, exec: ingest}\n  \
+                 - executable: {cmd: rpkm record, respwan: false}\n",
+                "z.yaml:3: executable: unknown key \"respwan\"",
+            ),
+            (
+                "launch:\n  - arg: {name: a, defualt: 1}\n",
+                "z.yaml:2: arg: unknown key \"defualt\"",
+            ),
+            (
+                "launch:\n  - node: {pkg: rpkm, exec: ingest, param: [{form: p.yaml}]}\n",
+                "z.yaml:2: node ingest param entry: unknown key \"form\"",
+            ),
+        ] {
+            let e = LaunchDescription::parse(text, "z.yaml", Path::new("."), &[]).expect_err(text);
+            assert!(e.to_string().starts_with(says), "{text}: {e}");
+        }
     }
 
     #[test]

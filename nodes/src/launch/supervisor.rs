@@ -2,7 +2,8 @@
 //! (`rpkm node <exec> --name <name> --params ...`) and supervises them:
 //! - a node that dies (non-zero exit or a signal) is restarted when `respawn` is on, after
 //!   `respawn_delay` doubled for every crash within 10 s of its start (at most 5 s); exit
-//!   code 0 (input done) and 2 (bad configuration: restarting cannot help) are final;
+//!   code 0 (input done) and 2 (bad configuration: restarting cannot help) are final, and
+//!   a node that exited 2 makes the launch exit 2 too, naming it;
 //! - before the first start and after every death, the iceoryx2 resources of dead processes
 //!   are removed (a SIGKILLed node leaves its shared memory behind);
 //! - SIGINT/SIGTERM: SIGTERM to every node, SIGKILL after 5 s for those still running.
@@ -106,88 +107,49 @@ fn signal(child: &Child, sig: libc::c_int) {
     }
 }
 
-/// Runs the description until SIGINT/SIGTERM or until every node is done.
-pub fn run(desc: &LaunchDescription) -> anyhow::Result<()> {
-    shutdown::install();
-    let exe = std::env::current_exe().context("locating the rpkm binary")?;
-    cleanup_dead();
-    let mut nodes: Vec<Supervised<'_>> = Vec::new();
-    for spec in &desc.nodes {
-        let child = spawn(&exe, spec, &desc.env)?;
-        nodes.push(Supervised {
-            spec,
-            state: State::Running {
-                child,
-                since: Instant::now(),
-            },
-            quick_crashes: 0,
-        });
+/// What became of a node whose process ended.
+fn reaped(n: &mut Supervised<'_>, status: ExitStatus, lived: Duration, failed: &mut Vec<String>) {
+    // Exit 2 is a configuration error: restarting cannot help, and the launch must say so
+    // in its own exit code.
+    if status.code() == Some(2) {
+        failed.push(n.spec.name.clone());
     }
-    while !shutdown::requested() {
-        let mut any_alive = false;
-        for n in &mut nodes {
-            match &mut n.state {
-                State::Running { child, since } => {
-                    any_alive = true;
-                    let Some(status) = child.try_wait().context("waiting for a node")? else {
-                        continue;
-                    };
-                    let pid = child.id();
-                    let lived = since.elapsed();
-                    log(format!("{} pid {pid} {}", n.spec.name, describe(status)));
-                    cleanup_dead();
-                    let final_exit = matches!(status.code(), Some(0) | Some(2));
-                    if final_exit || !n.spec.respawn {
-                        n.state = State::Done;
-                        continue;
-                    }
-                    n.quick_crashes = if lived < QUICK_CRASH {
-                        n.quick_crashes.saturating_add(1)
-                    } else {
-                        0
-                    };
-                    let factor = 2f64.powi(n.quick_crashes.saturating_sub(1).min(16) as i32);
-                    // Capped in seconds before the `Duration` exists: from_secs_f64 panics on
-                    // values beyond its range.
-                    let delay = Duration::from_secs_f64(
-                        (n.spec.respawn_delay * factor).clamp(0.0, MAX_DELAY.as_secs_f64()),
-                    );
-                    log(format!(
-                        "restarting {} in {:.2} s",
-                        n.spec.name,
-                        delay.as_secs_f64()
-                    ));
-                    n.state = State::Waiting {
-                        until: Instant::now() + delay,
-                    };
-                }
-                State::Waiting { until } => {
-                    any_alive = true;
-                    if Instant::now() >= *until {
-                        let child = spawn(&exe, n.spec, &desc.env)?;
-                        n.state = State::Running {
-                            child,
-                            since: Instant::now(),
-                        };
-                    }
-                }
-                State::Done => {}
-            }
-        }
-        if !any_alive {
-            log("every node has finished");
-            return Ok(());
-        }
-        std::thread::sleep(TICK);
+    let final_exit = matches!(status.code(), Some(0) | Some(2));
+    if final_exit || !n.spec.respawn {
+        n.state = State::Done;
+        return;
     }
+    n.quick_crashes = if lived < QUICK_CRASH {
+        n.quick_crashes.saturating_add(1)
+    } else {
+        0
+    };
+    let factor = 2f64.powi(n.quick_crashes.saturating_sub(1).min(16) as i32);
+    // Capped in seconds before the `Duration` exists: from_secs_f64 panics on values
+    // beyond its range.
+    let delay = Duration::from_secs_f64(
+        (n.spec.respawn_delay * factor).clamp(0.0, MAX_DELAY.as_secs_f64()),
+    );
+    log(format!(
+        "restarting {} in {:.2} s",
+        n.spec.name,
+        delay.as_secs_f64()
+    ));
+    n.state = State::Waiting {
+        until: Instant::now() + delay,
+    };
+}
+
+/// SIGTERM to every running node, SIGKILL to those still running after [`STOP_TIMEOUT`].
+fn stop_all(nodes: &mut [Supervised<'_>]) {
     log("stopping every node");
-    for n in &nodes {
+    for n in nodes.iter() {
         if let State::Running { child, .. } = &n.state {
             signal(child, libc::SIGTERM);
         }
     }
     let deadline = Instant::now() + STOP_TIMEOUT;
-    for n in &mut nodes {
+    for n in nodes.iter_mut() {
         if let State::Running { child, .. } = &mut n.state {
             loop {
                 match child.try_wait() {
@@ -207,5 +169,77 @@ pub fn run(desc: &LaunchDescription) -> anyhow::Result<()> {
         }
     }
     cleanup_dead();
-    Ok(())
+}
+
+/// The launch's outcome: bad input (exit 2) when nodes rejected their configuration.
+fn outcome(failed: &[String]) -> anyhow::Result<()> {
+    if failed.is_empty() {
+        return Ok(());
+    }
+    Err(crate::cli::bad_input(format!(
+        "{} node(s) failed their configuration (exit 2, not restarted): {}",
+        failed.len(),
+        failed.join(", ")
+    )))
+}
+
+/// Runs the description until SIGINT/SIGTERM or until every node is done; an error when a
+/// node rejected its configuration.
+pub fn run(desc: &LaunchDescription) -> anyhow::Result<()> {
+    shutdown::install();
+    let exe = std::env::current_exe().context("locating the rpkm binary")?;
+    cleanup_dead();
+    let mut nodes: Vec<Supervised<'_>> = Vec::new();
+    for spec in &desc.nodes {
+        let child = spawn(&exe, spec, &desc.env)?;
+        nodes.push(Supervised {
+            spec,
+            state: State::Running {
+                child,
+                since: Instant::now(),
+            },
+            quick_crashes: 0,
+        });
+    }
+    let mut failed = Vec::new();
+    while !shutdown::requested() {
+        let mut any_alive = false;
+        for n in &mut nodes {
+            match &mut n.state {
+                State::Running { child, since } => {
+                    any_alive = true;
+                    let Some(status) = child.try_wait().context("waiting for a node")? else {
+                        continue;
+                    };
+                    let lived = since.elapsed();
+                    log(format!(
+                        "{} pid {} {}",
+                        n.spec.name,
+                        child.id(),
+                        describe(status)
+                    ));
+                    cleanup_dead();
+                    reaped(n, status, lived, &mut failed);
+                }
+                State::Waiting { until } => {
+                    any_alive = true;
+                    if Instant::now() >= *until {
+                        let child = spawn(&exe, n.spec, &desc.env)?;
+                        n.state = State::Running {
+                            child,
+                            since: Instant::now(),
+                        };
+                    }
+                }
+                State::Done => {}
+            }
+        }
+        if !any_alive {
+            log("every node has finished");
+            return outcome(&failed);
+        }
+        std::thread::sleep(TICK);
+    }
+    stop_all(&mut nodes);
+    outcome(&failed)
 }
