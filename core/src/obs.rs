@@ -263,6 +263,7 @@ pub fn residuals_in(
         let reset = setup.reset.map(|i| (i, &campaign.poses[i]));
         let ctx = Ctx {
             p,
+            p_cal,
             model,
             corr,
             noise,
@@ -293,6 +294,9 @@ pub fn residuals_in(
 /// What every row of one evaluation shares.
 struct Ctx<'a> {
     p: &'a Params,
+    /// Parameters the rows' fixed combinations are built at (the calibration's start): a
+    /// combination that moved with the parameters would make the Jacobian inexact.
+    p_cal: &'a Params,
     model: Model,
     corr: &'a Corrections,
     noise: &'a NoiseModel,
@@ -336,11 +340,9 @@ fn inverse_rows(
     let inv = geometry::solve(&p_i, ctx.model, Subsystem::Tcp, [x, y])?;
     let s = geometry::sensitivity(&p_i, ctx.model, Subsystem::Tcp, &inv)?;
     let first = out.len();
-    let mut g_rows = [Vector2::zeros(); 4];
     for a in 0..4 {
         let v = q_var(a);
         let g = Vector2::new(s.dc_dk[(v, 0)], s.dc_dk[(v, 1)]);
-        g_rows[a] = g;
         // dq/dp = ∂igm/∂p + ∂igm/∂X · d fgm(Q_reset)/dp
         let at_reset = input_sensitivity(&r, Subsystem::NR, &[(X, g.x), (Y, g.y)]);
         let mut at_pose = InputSensitivity {
@@ -366,21 +368,42 @@ fn inverse_rows(
         });
     }
     if ctx.decorrelated {
+        let (g_fixed, tcp) = fixed_gains(ctx, mx, my, &reset.q)?;
         let (ux, uy) = match pose.instrument {
-            Instrument::Lt => ctx.noise.beam_frame(Vector2::new(x, y)),
+            Instrument::Lt => ctx.noise.beam_frame(tcp),
             _ => (Vector2::x(), Vector2::y()),
         };
         decorrelate(
             &mut out[first..],
-            &g_rows,
+            &g_fixed,
             ux,
             uy,
             ctx.noise,
             pose.instrument,
-            Vector2::new(x, y),
+            tcp,
         );
     }
     Ok(())
+}
+
+/// The gains dq/dX of the four drives at the recorded TCP, under the parameters `p_cal`
+/// (fixed during a calibration) and without effects: the decorrelating combinations stay
+/// the same while the parameters move, so the rows' Jacobian is exact.
+fn fixed_gains(
+    ctx: &Ctx,
+    mx: f64,
+    my: f64,
+    q_reset: &[f64; 4],
+) -> Result<([Vector2<f64>; 4], Vector2<f64>), GeometryError> {
+    let r = geometry::fgm(ctx.p_cal, ctx.model, q_reset[0], q_reset[3])?;
+    let tcp = Vector2::new(mx + r.x(), my + r.y());
+    let inv = geometry::solve(ctx.p_cal, ctx.model, Subsystem::Tcp, [tcp.x, tcp.y])?;
+    let s = geometry::sensitivity(ctx.p_cal, ctx.model, Subsystem::Tcp, &inv)?;
+    let g = [0, 1, 2, 3].map(|a| {
+        let v = q_var(a);
+        Vector2::new(s.dc_dk[(v, 0)], s.dc_dk[(v, 1)])
+    });
+    Ok((g, tcp))
 }
 
 /// Replace the four q rows of one 2-D instrument pose (rows r = G e + n: G the 4 × 2

@@ -186,6 +186,9 @@ fn measure(config: &TwinConfig) -> Result<(Campaign, Campaign, f64)> {
 
 fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
     let (config, hidden) = draw(seed, i);
+    if verbose {
+        println!("machine {i}: hidden {hidden:?}, {:?}", config.thermal);
+    }
     let (cal, val, floor) = measure(&config)?;
     let mut named: Vec<String> = Vec::new();
     let (kind, held) = loop {
