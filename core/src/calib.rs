@@ -702,16 +702,11 @@ pub fn calibrate_with(
     let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();
     let no_drop = HashSet::new();
     let noise = &opts.noise;
-    let rows0 = rows_at(
-        campaign,
-        start,
-        model,
-        Step::Direct,
-        start,
-        &corr0,
-        &no_drop,
-        noise,
-    )?;
+    // the direct rows (step 1) at parameters p with corrections corr, less the rows dropped
+    let direct = |p: &Params, corr: &Corrections, drop: &HashSet<Key>| {
+        rows_at(campaign, p, model, Step::Direct, start, corr, drop, noise)
+    };
+    let rows0 = direct(start, &corr0, &no_drop)?;
     if rows0.is_empty() {
         return Err(CalibrationError::NoMeasurements(campaign.source.clone()));
     }
@@ -773,16 +768,7 @@ pub fn calibrate_with(
         cost = res.cost;
         let Some(k) = opts.outlier_sigma else { break };
         let corr = effects.corrections(&x.theta);
-        let rows = rows_at(
-            campaign,
-            &x.p,
-            model,
-            Step::Direct,
-            start,
-            &corr,
-            &drop,
-            noise,
-        )?;
+        let rows = direct(&x.p, &corr, &drop)?;
         let found = find_outliers(&rows, campaign, k);
         if found.is_empty() || outliers.len() > rows0.len() / 20 {
             break;
@@ -793,16 +779,7 @@ pub fn calibrate_with(
         }
     }
     let corr = effects.corrections(&x.theta);
-    let rows_final = rows_at(
-        campaign,
-        &x.p,
-        model,
-        Step::Direct,
-        start,
-        &corr,
-        &drop,
-        noise,
-    )?;
+    let rows_final = direct(&x.p, &corr, &drop)?;
     let n_identified = step1_ids.len() + free_theta.len();
     let post = posterior(&rows_final, &step1_ids, &opts.links, &free_theta, &prior1)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
@@ -846,16 +823,7 @@ pub fn calibrate_with(
             }
         })
         .collect();
-    let mut before_rows: Vec<Residual> = rows_at(
-        campaign,
-        start,
-        model,
-        Step::Direct,
-        start,
-        &corr0,
-        &drop,
-        noise,
-    )?;
+    let mut before_rows: Vec<Residual> = direct(start, &corr0, &drop)?;
     let mut after_rows = rows_final.clone();
 
     // Step 2: rod 2 from virtual measurements of the forward instruments (eq. 4.32).
