@@ -320,7 +320,6 @@ struct State {
 struct LmResult {
     state: State,
     iterations: usize,
-    cost: f64,
 }
 
 impl Lm<'_> {
@@ -380,7 +379,6 @@ impl Lm<'_> {
                 return Ok(LmResult {
                     state: p,
                     iterations: it,
-                    cost,
                 });
             }
             let mut damped = a.clone();
@@ -415,7 +413,6 @@ impl Lm<'_> {
                         return Ok(LmResult {
                             state: p,
                             iterations: it + 1,
-                            cost,
                         });
                     }
                 }
@@ -430,7 +427,6 @@ impl Lm<'_> {
                             return Ok(LmResult {
                                 state: p,
                                 iterations: it + 1,
-                                cost,
                             });
                         }
                         return Err(CalibrationError::NotConverged {
@@ -744,7 +740,6 @@ pub fn calibrate_with(
         theta: theta0.clone(),
     };
     let mut iterations = 0;
-    let mut cost;
     loop {
         let lm = Lm {
             campaign,
@@ -765,7 +760,6 @@ pub fn calibrate_with(
         let res = lm.run(&x)?;
         x = res.state;
         iterations += res.iterations;
-        cost = res.cost;
         let Some(k) = opts.outlier_sigma else { break };
         let corr = effects.corrections(&x.theta);
         let rows = direct(&x.p, &corr, &drop)?;
@@ -788,7 +782,6 @@ pub fn calibrate_with(
     let s2 = chi2_per_dof.max(1.0);
     let cov1 = &post.cov1 * s2;
     let cov_theta: Vec<f64> = post.sig_theta.iter().map(|s| s * s2.sqrt()).collect();
-    let _ = cost;
     let sig1: Vec<f64> = (0..step1_ids.len())
         .map(|k| cov1[(k, k)].max(0.0).sqrt())
         .collect();
