@@ -89,7 +89,8 @@ fn discovery(a: &DiscoveryArgs) -> Result<()> {
                 if i >= a.machines {
                     break;
                 }
-                let out = machine(a.seed, i, false);
+                // a diagnosis that fails counts as a wrong answer, with its error
+                let out = machine(a.seed, i, false).unwrap_or_else(|e| failed(a.seed, i, &e));
                 if let Ok(mut d) = done.lock() {
                     d.push(out);
                     eprint!("\r  {} of {} machines", d.len(), a.machines);
@@ -100,9 +101,7 @@ fn discovery(a: &DiscoveryArgs) -> Result<()> {
     eprintln!();
     let mut all: Vec<Outcome> = done
         .into_inner()
-        .map_err(|_| anyhow::anyhow!("a worker panicked"))?
-        .into_iter()
-        .collect::<Result<_>>()?;
+        .map_err(|_| anyhow::anyhow!("a worker panicked"))?;
     all.sort_by_key(|o| o.machine);
     print_table(&all);
     if let Some(path) = &a.json {
@@ -232,6 +231,19 @@ fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
         named,
         held_out_over_floor: held / floor,
     })
+}
+
+/// The outcome of a machine whose loop ended in an error.
+fn failed(seed: u64, i: usize, e: &anyhow::Error) -> Outcome {
+    let (_, hidden) = draw(seed, i);
+    Outcome {
+        machine: i,
+        hidden: hidden.iter().map(|e| e.as_str().to_owned()).collect(),
+        named: Vec::new(),
+        final_verdict: format!("error: {}", super::error_chain(e)),
+        correct: false,
+        held_out_over_floor: f64::NAN,
+    }
 }
 
 fn print_table(all: &[Outcome]) {
