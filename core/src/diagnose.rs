@@ -769,6 +769,8 @@ pub fn calib_options(opts: &Options) -> calib::Options {
         },
         outlier_sigma: None,
         noise: opts.noise.clone(),
+        // a model far from the data (a missing effect of 10⁷ χ²) takes the LM longer
+        max_iterations: 400,
         ..Default::default()
     }
 }
