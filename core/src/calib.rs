@@ -823,16 +823,20 @@ pub fn calibrate_with(
     let mut p = x.p;
     if !step2_wanted.is_empty() {
         let p1 = p;
-        let rows2 = rows_at(
-            campaign,
-            &p1,
-            model,
-            Step::VirtualQ2,
-            &p1,
-            &corr,
-            &drop,
-            noise,
-        )?;
+        // the virtual q2 rows at p, their virtual measurements made with step 1's p1
+        let virtual_rows = |p: &Params| {
+            rows_at(
+                campaign,
+                p,
+                model,
+                Step::VirtualQ2,
+                &p1,
+                &corr,
+                &drop,
+                noise,
+            )
+        };
+        let rows2 = virtual_rows(&p1)?;
         let ids2 = match &opts.selection {
             Selection::Auto { max_condition } => {
                 auto_select(&rows2, &step2_wanted, &[], *max_condition)
@@ -866,16 +870,7 @@ pub fn calibrate_with(
             })?;
             p = res.state.p;
             iterations += res.iterations;
-            let rows2_after = rows_at(
-                campaign,
-                &p,
-                model,
-                Step::VirtualQ2,
-                &p1,
-                &corr,
-                &drop,
-                noise,
-            )?;
+            let rows2_after = virtual_rows(&p)?;
             let sig2 = step2_uncertainties(&rows2_after, &ids2, &prior2, &cov_p1)?;
             identified.extend(ids2.iter().zip(&sig2).map(|(&i, &s)| Identified {
                 name: NAMES[i],
