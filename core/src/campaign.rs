@@ -10,8 +10,14 @@
 //! [`CampaignError`] naming file, line and column; nothing is dropped or guessed):
 //! - fields are plain: no quoting, surrounding white space is trimmed; a leading UTF-8 byte
 //!   order mark (as spreadsheets write) is ignored;
+//! - the text is UTF-8 (an error names the line and byte offset of the first byte that is not);
 //! - `t`, `q1..q4`, `f1..f4` must be finite numbers; `x`, `y`, `r`, `psi` and covariates are
-//!   finite numbers or empty (absent). NaN and infinities are rejected everywhere;
+//!   finite numbers or empty (absent). NaN and infinities are rejected everywhere, and so are
+//!   magnitudes no machine has ([`plausible`]: |q|, |x|, |y|, |r| ≤ 1e5 mm, |f| ≤ 8.6e6 N,
+//!   |ψ| ≤ 2π, |t| and covariates ≤ 1e10);
+//! - the actuator positions are a pose of the machine: rods 1 and 4 meet at (q1, q4) and q2,
+//!   q3 are within 100 mm of what rods 2 and 3 need there (nominal geometry; see
+//!   [`plausible::reachable`]), the reset pose of a setup included;
 //! - `t` is monotonic: non-decreasing (equal times are accepted);
 //! - all rows of one setup use one instrument;
 //! - relative instruments (`lt`, `kgm`, `dbb`, `li_x`, `li_y`, `li_psi`) have exactly one reset
@@ -38,11 +44,12 @@
 //! # Ok::<(), rpkm_core::campaign::CampaignError>(())
 //! ```
 //!
-//! Reachability of the poses is not checked here (that needs the geometry); every [`Pose`]
-//! keeps its source `line` so that the caller can name `file:line`.
+//! Every [`Pose`] keeps its source `line` so that the caller can name `file:line`.
+//! [`CampaignReader`] reads a stream line by line with the same rules (the ingest node).
 
 mod error;
 mod parse;
+pub mod plausible;
 mod write;
 
 use std::collections::HashMap;
@@ -50,6 +57,7 @@ use std::fmt;
 use std::str::FromStr;
 
 pub use error::CampaignError;
+pub use parse::CampaignReader;
 
 /// The required columns, in the order [`Campaign::to_csv`] writes them.
 pub const REQUIRED_COLUMNS: [&str; 17] = [
@@ -264,7 +272,13 @@ impl Campaign {
     /// Parses a campaign file's text; `source` labels the file in messages. See the module
     /// documentation for the rules.
     pub fn parse(text: &str, source: &str) -> Result<Campaign, CampaignError> {
-        parse::parse(text, source)
+        parse::parse(text.as_bytes(), source)
+    }
+
+    /// [`Campaign::parse`] of a file's bytes: bytes that are not UTF-8 are an error naming
+    /// their line and byte offset.
+    pub fn parse_bytes(bytes: &[u8], source: &str) -> Result<Campaign, CampaignError> {
+        parse::parse(bytes, source)
     }
 
     /// Checks a campaign built in code against the rules [`Campaign::parse`] enforces (finite

@@ -7,12 +7,33 @@ use rpkm_core::campaign::{Campaign, Instrument, Pose, REQUIRED_COLUMNS};
 
 const FILE: &str = "prop.csv";
 
-fn finite() -> impl Strategy<Value = f64> {
+/// Finite numbers within |v| <= `limit` (the reader refuses larger ones as beyond any machine),
+/// every bit pattern of that range included.
+fn within(limit: f64) -> impl Strategy<Value = f64> {
     prop_oneof![
-        4 => -3000.0..3000.0f64,
-        1 => prop::num::f64::NORMAL | prop::num::f64::SUBNORMAL | prop::num::f64::ZERO,
+        4 => -limit..limit,
+        1 => (prop::num::f64::NORMAL | prop::num::f64::SUBNORMAL | prop::num::f64::ZERO)
+            .prop_map(move |v| v % limit),
         1 => Just(0.0),
     ]
+}
+
+/// Actuator positions of a pose of the nominal machine in the spec's workspace, q2 and q3 off
+/// by up to 50 mm (the reader refuses poses the rods cannot close).
+fn reachable_q() -> impl Strategy<Value = [f64; 4]> {
+    (
+        -150.0..150.0f64,
+        700.0..2700.0f64,
+        -50.0..50.0f64,
+        -50.0..50.0f64,
+    )
+        .prop_map(|(x, y, d2, d3)| {
+            let p = rpkm_core::params::Params::nominal();
+            let s = rpkm_core::geometry::igm(&p, rpkm_core::params::Model::M24, x, y)
+                .expect("the workspace is reachable");
+            let q = s.q();
+            [q[0], q[1] + d2, q[2] + d3, q[3]]
+        })
 }
 
 /// Raw material of one row; the campaign strategy makes it consistent with its setup.
@@ -29,13 +50,14 @@ struct RawRow {
 
 fn raw_row() -> impl Strategy<Value = RawRow> {
     (
-        finite(),
-        prop::array::uniform4(finite()),
-        prop::array::uniform4(finite()),
+        within(1e10),
+        reachable_q(),
+        prop::array::uniform4(within(1e6)),
         0u8..16,
-        prop::array::uniform4(finite()),
+        // measured x, y, r, psi: within psi's bound, a full turn
+        prop::array::uniform4(within(std::f64::consts::TAU)),
         prop::array::uniform4(any::<bool>()),
-        prop::collection::vec(prop::option::of(finite()), 3),
+        prop::collection::vec(prop::option::of(within(1e10)), 3),
     )
         .prop_map(
             |(t, q, f, follower, measured, reset_blank, covariates)| RawRow {

@@ -165,14 +165,14 @@ fn helpers_give_setups_instruments_and_covariates() {
 fn columns_in_any_order_spaces_crlf_and_interleaved_comments() {
     let text = "t , psi,r,y,x,follower,f4,f3,f2,f1,q4,q3,q2,q1,reset,instrument,setup ,temp\r\n\
                 \r\n\
-                0.5, , , 0 , 0 ,,0,0,0,0,4,3,2,1,1,lt, A ,\r\n\
+                0.5, , , 0 , 0 ,,0,0,0,0,789,789,2611,2611,1,lt, A ,\r\n\
                 # a comment between rows\r\n\
-                0.75,,,-1,2,,0,0,0,0,4,3,2,1,0,lt,A,22\r\n";
+                0.75,,,-1,2,,0,0,0,0,789,789,2611,2611,0,lt,A,22\r\n";
     let c = parse(text).expect("valid");
     assert_eq!(c.comments, ["a comment between rows"]);
     assert_eq!(c.covariate_names, ["temp"]);
     assert_eq!(c.poses[0].setup, "A");
-    assert_eq!(c.poses[0].q, [1.0, 2.0, 3.0, 4.0]);
+    assert_eq!(c.poses[0].q, [2611.0, 2611.0, 789.0, 789.0]);
     assert_eq!(c.poses[1].x, Some(2.0));
     assert_eq!(c.poses[1].y, Some(-1.0));
     assert_eq!(c.poses[1].covariates, [Some(22.0)]);
@@ -526,4 +526,106 @@ fn validate_checks_campaigns_built_in_code() {
 fn a_byte_order_mark_is_ignored() {
     let c = parse(&format!("\u{feff}{VALID}")).expect("valid with a BOM");
     assert_eq!(c, parse(VALID).expect("valid"));
+}
+
+#[test]
+fn absurd_numbers_are_refused_and_printed_short() {
+    // Line 16 is the self-calibration row: -1e300 in q2 once calibrated "successfully" with
+    // every σ infinite.
+    let e = error_at(&with_field(VALID, 16, 6, "-1e300"), Some(16), Some(6));
+    assert_eq!(
+        e.to_string(),
+        "campaign.csv:16:6 (q2): -1e300 mm is beyond any machine, expected |q2| <= 100000 mm"
+    );
+    let digits = format!("1{}", "0".repeat(308));
+    let e = error_at(&with_field(VALID, 5, 14, &digits), Some(5), Some(14));
+    assert_eq!(
+        e.to_string(),
+        "campaign.csv:5:14 (x): 1e308 mm is beyond any machine, expected |x| <= 100000 mm"
+    );
+    let e = error_at(&with_field(VALID, 5, 9, "9e6"), Some(5), Some(9));
+    assert!(e.to_string().contains("(f1): 9000000 N is beyond"), "{e}");
+    let e = error_at(&with_field(VALID, 5, 18, "-2e10"), Some(5), Some(18));
+    assert!(
+        e.to_string().contains("(temp_machine): -20000000000 "),
+        "{e}"
+    );
+    // A 400-digit number is infinite as an f64: the message shows the text clipped.
+    let e = error_at(&with_field(VALID, 5, 5, &"9".repeat(400)), Some(5), Some(5));
+    assert!(e.to_string().ends_with("… (400 characters)\""), "{e}");
+    for text in ["nan", "NaN", "inf", "-inf", "infinity"] {
+        let e = error_at(&with_field(VALID, 5, 7, text), Some(5), Some(7));
+        assert!(matches!(e, CampaignError::NonFinite { .. }), "{text}: {e}");
+    }
+}
+
+#[test]
+fn unreachable_poses_are_blamed_on_their_own_line_and_actuator() {
+    // q1 = 9000 mm: rods 1 and 4 do not meet; the reset pose (line 4) is blamed itself.
+    let e = error_at(&with_field(VALID, 4, 5, "9000"), Some(4), Some(5));
+    assert!(
+        e.to_string().starts_with(
+            "campaign.csv:4:5 (q1): unreachable pose, with q1 = 9000 mm and q4 = 788.9444 mm"
+        ),
+        "{e}"
+    );
+    // q4 far off: q4 is blamed.
+    let e = error_at(&with_field(VALID, 5, 8, "-5000"), Some(5), Some(8));
+    assert!(e.to_string().contains("(q4): unreachable pose"), "{e}");
+    // q3 200 mm from what rod 3 needs: q3 is blamed with the figures.
+    let e = error_at(&with_field(VALID, 5, 7, "980"), Some(5), Some(7));
+    assert!(
+        e.to_string().contains(
+            "(q3): unreachable pose, rod 3 needs q3 = 777.893 mm at the pose of q1, q4, \
+             this is 202.107 mm off, expected within 100 mm"
+        ),
+        "{e}"
+    );
+}
+
+#[test]
+fn invalid_utf8_names_line_and_byte() {
+    let mut bytes = VALID.as_bytes().to_vec();
+    let line5 = VALID.lines().take(4).map(|l| l.len() + 1).sum::<usize>();
+    bytes[line5 + 3] = 0xff;
+    let e = Campaign::parse_bytes(&bytes, FILE).expect_err("not UTF-8");
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "campaign.csv:5: invalid UTF-8 at byte {} of the file (byte 4 of the line), \
+             expected UTF-8 text",
+            line5 + 3
+        )
+    );
+    assert_eq!(e.line(), Some(5));
+}
+
+#[test]
+fn the_stream_reader_reads_on_after_a_bad_line() {
+    use rpkm_core::campaign::CampaignReader;
+    let mut reader = CampaignReader::new(FILE);
+    let mut poses = Vec::new();
+    let mut errors = Vec::new();
+    let text = with_field(&with_field(VALID, 5, 4, "true"), 7, 1, "-1");
+    for line in text.lines() {
+        match reader.read_line(line.as_bytes()) {
+            Ok(p) => poses.extend(p),
+            Err(e) => errors.push(e.to_string()),
+        }
+    }
+    assert_eq!(
+        errors,
+        [
+            r#"campaign.csv:5:4 (reset): expected 0 or 1, found "true""#,
+            "campaign.csv:7:1 (t): time -1 s is before 2 s of line 6; t must be monotonic",
+        ]
+    );
+    assert_eq!(poses.len(), 14);
+    assert_eq!(reader.finish(), Ok(()));
+    assert_eq!(reader.covariate_names(), ["temp_machine", "temp_guide1"]);
+    // The whole-file parser stops at the first of them.
+    assert_eq!(
+        parse(&text).map_err(|e| e.to_string()),
+        Err(errors[0].clone())
+    );
 }

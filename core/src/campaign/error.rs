@@ -1,7 +1,17 @@
 //! Errors of [`Campaign::parse`](super::Campaign::parse) and
 //! [`Campaign::validate`](super::Campaign::validate).
 
+use super::write::number;
 use super::Instrument;
+
+/// A field's text for a message: at most 40 characters (a garbage field can be a whole line).
+pub(super) fn clip(text: &str) -> String {
+    const MAX: usize = 40;
+    match text.char_indices().nth(MAX) {
+        Some((end, _)) => format!("{}… ({} characters)", &text[..end], text.chars().count()),
+        None => text.to_owned(),
+    }
+}
 
 /// Why a campaign file was rejected. Every variant names the file (`file`, the label given to
 /// the parser) and, where there is one, the 1-based line and the 1-based field index
@@ -65,6 +75,37 @@ pub enum CampaignError {
         name: String,
         text: String,
     },
+    /// A number past what any machine can measure (see the module `plausible`: |q| ≤ 1e5 mm,
+    /// |f| ≤ 8.6e6 N, |ψ| ≤ 2π, |t| and covariates ≤ 1e10).
+    #[error("{file}:{line}:{column} ({name}): {} {unit} is beyond any machine, expected |{name}| <= {} {unit}", number(*.value), number(*.limit))]
+    OutOfRange {
+        file: String,
+        line: usize,
+        column: usize,
+        name: String,
+        value: f64,
+        limit: f64,
+        unit: &'static str,
+    },
+    /// Actuator positions the machine cannot take: its rods cannot close.
+    #[error("{file}:{line}:{column} ({name}): unreachable pose, {why}")]
+    Unreachable {
+        file: String,
+        line: usize,
+        column: usize,
+        name: &'static str,
+        why: String,
+    },
+    /// Bytes that are not UTF-8.
+    #[error("{file}:{line}: invalid UTF-8 at byte {offset} of the file (byte {in_line} of the line), expected UTF-8 text")]
+    InvalidUtf8 {
+        file: String,
+        line: usize,
+        /// 0-based byte offset in the file.
+        offset: usize,
+        /// 1-based byte in the line.
+        in_line: usize,
+    },
     /// The `instrument` field is not one of the spec's spellings.
     #[error("{file}:{line}:{column} (instrument): expected one of lt, kgm, dbb, li_x, li_y, li_psi, self, circle, none, found {text:?}")]
     UnknownInstrument {
@@ -90,7 +131,7 @@ pub enum CampaignError {
         text: String,
     },
     /// `t` decreases (equal times are accepted).
-    #[error("{file}:{line}:{column} (t): time {t} s is before {previous} s of line {previous_line}; t must be monotonic")]
+    #[error("{file}:{line}:{column} (t): time {} s is before {} s of line {previous_line}; t must be monotonic", number(*.t), number(*.previous))]
     TimeNotMonotonic {
         file: String,
         line: usize,
@@ -136,7 +177,7 @@ pub enum CampaignError {
         instrument: Instrument,
     },
     /// A measured value in a column the row's instrument does not give.
-    #[error("{file}:{line}:{column} ({name}): instrument {instrument} does not measure {name}, expected nothing, found {value}")]
+    #[error("{file}:{line}:{column} ({name}): instrument {instrument} does not measure {name}, expected nothing, found {}", number(*.value))]
     UnexpectedMeasurement {
         file: String,
         line: usize,
@@ -154,7 +195,7 @@ pub enum CampaignError {
         text: String,
     },
     /// A reset pose with a non-zero measured value.
-    #[error("{file}:{line}:{column} ({name}): a reset pose measures 0 by definition, expected 0 or nothing, found {value}")]
+    #[error("{file}:{line}:{column} ({name}): a reset pose measures 0 by definition, expected 0 or nothing, found {}", number(*.value))]
     ResetNotZero {
         file: String,
         line: usize,
@@ -188,6 +229,9 @@ impl CampaignError {
             | E::WrongFieldCount { file, .. }
             | E::BadNumber { file, .. }
             | E::NonFinite { file, .. }
+            | E::OutOfRange { file, .. }
+            | E::Unreachable { file, .. }
+            | E::InvalidUtf8 { file, .. }
             | E::UnknownInstrument { file, .. }
             | E::BadReset { file, .. }
             | E::BadFollower { file, .. }
@@ -215,6 +259,9 @@ impl CampaignError {
             | E::WrongFieldCount { line, .. }
             | E::BadNumber { line, .. }
             | E::NonFinite { line, .. }
+            | E::OutOfRange { line, .. }
+            | E::Unreachable { line, .. }
+            | E::InvalidUtf8 { line, .. }
             | E::UnknownInstrument { line, .. }
             | E::BadReset { line, .. }
             | E::BadFollower { line, .. }
@@ -238,6 +285,8 @@ impl CampaignError {
             | E::EmptyColumnName { column, .. }
             | E::BadNumber { column, .. }
             | E::NonFinite { column, .. }
+            | E::OutOfRange { column, .. }
+            | E::Unreachable { column, .. }
             | E::UnknownInstrument { column, .. }
             | E::BadReset { column, .. }
             | E::BadFollower { column, .. }
@@ -253,6 +302,7 @@ impl CampaignError {
             | E::NoPoses { .. }
             | E::MissingColumn { .. }
             | E::WrongFieldCount { .. }
+            | E::InvalidUtf8 { .. }
             | E::MissingReset { .. } => None,
         }
     }

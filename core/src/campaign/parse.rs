@@ -1,7 +1,10 @@
-//! The reader and the checks shared by [`Campaign::parse`] and [`Campaign::validate`].
+//! The reader ([`CampaignReader`], [`Campaign::parse`]) and the checks it shares with
+//! [`Campaign::validate`].
 
 use std::collections::HashMap;
 
+use super::error::clip;
+use super::plausible;
 use super::{Campaign, CampaignError, Instrument, Pose, REQUIRED_COLUMNS};
 
 // Positions in `REQUIRED_COLUMNS`.
@@ -19,6 +22,7 @@ const PSI: usize = 16;
 
 /// Where the required columns are: `field[k]` is the 0-based field index of
 /// `REQUIRED_COLUMNS[k]`.
+#[derive(Debug)]
 struct Layout {
     field: [usize; REQUIRED_COLUMNS.len()],
 }
@@ -66,17 +70,13 @@ impl<'a> Row<'a> {
             line: self.line,
             column: i + 1,
             name: name.to_owned(),
-            text: text.to_owned(),
+            text: clip(text),
         })?;
-        if !value.is_finite() {
-            return Err(CampaignError::NonFinite {
-                file: self.file.to_owned(),
-                line: self.line,
-                column: i + 1,
-                name: name.to_owned(),
-                text: text.to_owned(),
-            });
-        }
+        let at = At {
+            file: self.file,
+            line: self.line,
+        };
+        at.number(i + 1, name, value, text)?;
         Ok(Some(value))
     }
 
@@ -105,7 +105,7 @@ impl<'a> Row<'a> {
                 file: self.file.to_owned(),
                 line: self.line,
                 column: layout.column(INSTRUMENT),
-                text: text.to_owned(),
+                text: clip(text),
             })?;
         let text = self.text(layout.field[RESET]);
         let reset = match text {
@@ -116,7 +116,7 @@ impl<'a> Row<'a> {
                     file: self.file.to_owned(),
                     line: self.line,
                     column: layout.column(RESET),
-                    text: text.to_owned(),
+                    text: clip(text),
                 })
             }
         };
@@ -133,7 +133,7 @@ impl<'a> Row<'a> {
             file: self.file.to_owned(),
             line: self.line,
             column: layout.column(FOLLOWER),
-            text: text.to_owned(),
+            text: clip(text),
         })?;
         let x = self.optional_number(layout, X)?;
         let y = self.optional_number(layout, Y)?;
@@ -183,6 +183,7 @@ pub(super) fn parse_follower(text: &str) -> Option<[bool; 4]> {
 }
 
 /// The header line of a file.
+#[derive(Debug)]
 struct Header {
     line: usize,
     layout: Layout,
@@ -236,72 +237,164 @@ fn header(fields: &[&str], file: &str, line: usize) -> Result<Header, CampaignEr
     })
 }
 
-pub(super) fn parse(text: &str, source: &str) -> Result<Campaign, CampaignError> {
-    let mut comments = Vec::new();
-    let mut head: Option<Header> = None;
-    let mut poses: Vec<Pose> = Vec::new();
-    let mut checker = Checker::new(source);
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-    for (n, raw) in text.lines().enumerate() {
-        let line = n + 1;
+/// Reads a campaign file one line at a time, with every rule a line and the lines before it
+/// can break: the grammar (header, field count, numbers, names), the values (finite, within
+/// the [`plausible`](super::plausible) bounds, reachable), and across rows monotonic time, one
+/// instrument and at most one reset per setup. [`Campaign::parse`] is this reader over a whole
+/// file, stopping at the first error; a stream (the ingest node) reads on after an error as if
+/// the bad line were absent. [`CampaignReader::finish`] adds the rules only the whole file can
+/// break.
+///
+/// ```
+/// use rpkm_core::campaign::CampaignReader;
+/// let mut reader = CampaignReader::new("stdin");
+/// let header = b"t,setup,instrument,reset,q1,q2,q3,q4,f1,f2,f3,f4,follower,x,y,r,psi";
+/// assert_eq!(reader.read_line(header), Ok(None));
+/// let bad = reader.read_line(b"0,A,none,true,2611,2611,789,789,0,0,0,0,,,,,").unwrap_err();
+/// assert_eq!(bad.to_string(), r#"stdin:2:4 (reset): expected 0 or 1, found "true""#);
+/// let pose = reader.read_line(b"1,A,none,0,2611,2611,789,789,0,0,0,0,,,,,").unwrap();
+/// assert_eq!(pose.map(|p| p.line), Some(3));
+/// ```
+#[derive(Debug)]
+pub struct CampaignReader {
+    source: String,
+    /// Lines read so far (the 1-based number of the last one).
+    line: usize,
+    /// Bytes read so far: the offset of the next line in the file.
+    offset: usize,
+    head: Option<Header>,
+    checker: Checker,
+    comments: Vec<String>,
+    poses: usize,
+}
+
+impl CampaignReader {
+    /// A reader of the source called `source` in messages (a file name, `stdin`).
+    pub fn new(source: &str) -> Self {
+        CampaignReader {
+            source: source.to_owned(),
+            line: 0,
+            offset: 0,
+            head: None,
+            checker: Checker::new(),
+            comments: Vec::new(),
+            poses: 0,
+        }
+    }
+
+    /// Reads the next line, given without its `\n` (a `\r` before it is ignored). `Ok(None)`
+    /// for a comment, a blank line and the header; `Ok(Some(pose))` for a row that keeps
+    /// every rule; `Err` names the line (and column, or byte) and what was expected; the
+    /// reader then goes on as if the line were absent.
+    pub fn read_line(&mut self, bytes: &[u8]) -> Result<Option<Pose>, CampaignError> {
+        self.line += 1;
+        let offset = self.offset;
+        self.offset += bytes.len() + 1;
+        let raw = std::str::from_utf8(bytes).map_err(|e| CampaignError::InvalidUtf8 {
+            file: self.source.clone(),
+            line: self.line,
+            offset: offset + e.valid_up_to(),
+            in_line: e.valid_up_to() + 1,
+        })?;
+        let raw = if self.line == 1 {
+            // A leading byte order mark, as spreadsheets write.
+            raw.strip_prefix('\u{feff}').unwrap_or(raw)
+        } else {
+            raw
+        };
+        let raw = raw.strip_suffix('\r').unwrap_or(raw);
         let trimmed = raw.trim();
-        if let Some(comment) = trimmed.strip_prefix('#') {
-            // Keep the comment's own spacing: strip the `#` and one space after it only.
-            let body = raw.trim_start().strip_prefix('#').unwrap_or(comment);
-            let body = body.strip_prefix(' ').unwrap_or(body);
-            comments.push(body.trim_end_matches(['\r', '\n']).to_owned());
-            continue;
+        if trimmed.starts_with('#') {
+            self.comments.push(comment_body(raw));
+            return Ok(None);
         }
         if trimmed.is_empty() {
-            continue;
+            return Ok(None);
         }
         let fields: Vec<&str> = raw.split(',').map(str::trim).collect();
-        match &head {
-            None => head = Some(header(&fields, source, line)?),
-            Some(Header {
-                layout, covariates, ..
-            }) => {
-                let expected = layout.field.len() + covariates.len();
-                if fields.len() != expected {
-                    return Err(CampaignError::WrongFieldCount {
-                        file: source.to_owned(),
-                        line,
-                        expected,
-                        found: fields.len(),
-                    });
-                }
-                let row = Row {
-                    file: source,
-                    line,
-                    fields,
-                };
-                let pose = row.pose(layout, covariates)?;
-                checker.add(&pose, layout)?;
-                poses.push(pose);
-            }
+        let Some(head) = &self.head else {
+            self.head = Some(header(&fields, &self.source, self.line)?);
+            return Ok(None);
+        };
+        let pose = row(head, &self.source, self.line, fields)?;
+        self.checker.add(&pose, &head.layout, &self.source)?;
+        self.poses += 1;
+        Ok(Some(pose))
+    }
+
+    /// The 1-based number of the last line read.
+    pub fn line(&self) -> usize {
+        self.line
+    }
+
+    /// Whether the header has been read.
+    pub fn has_header(&self) -> bool {
+        self.head.is_some()
+    }
+
+    /// The covariate names of the header, in header order (none before it).
+    pub fn covariate_names(&self) -> Vec<String> {
+        self.head
+            .iter()
+            .flat_map(|h| h.covariates.iter().map(|(_, n)| n.clone()))
+            .collect()
+    }
+
+    /// The comment lines read so far (without the `#` and one following space).
+    pub fn comments(&self) -> &[String] {
+        &self.comments
+    }
+
+    /// The rules only the whole file can break: a header, at least one pose, a reset pose in
+    /// every setup of a relative instrument.
+    pub fn finish(&self) -> Result<(), CampaignError> {
+        let file = self.source.clone();
+        let Some(head) = &self.head else {
+            return Err(CampaignError::Empty { file });
+        };
+        if self.poses == 0 {
+            return Err(CampaignError::NoPoses {
+                file,
+                line: head.line,
+            });
         }
+        self.checker.finish(&self.source)
     }
-    let Some(Header {
-        line: header_line,
-        covariates,
-        ..
-    }) = head
-    else {
-        return Err(CampaignError::Empty {
-            file: source.to_owned(),
-        });
-    };
-    if poses.is_empty() {
-        return Err(CampaignError::NoPoses {
-            file: source.to_owned(),
-            line: header_line,
+}
+
+/// A comment line's text: the `#` and one space after it stripped, its own spacing kept.
+fn comment_body(raw: &str) -> String {
+    let body = raw.trim_start().strip_prefix('#').unwrap_or(raw);
+    let body = body.strip_prefix(' ').unwrap_or(body);
+    body.trim_end_matches(['\r', '\n']).to_owned()
+}
+
+/// One data row of a file whose header is `head`.
+fn row(head: &Header, file: &str, line: usize, fields: Vec<&str>) -> Result<Pose, CampaignError> {
+    let expected = head.layout.field.len() + head.covariates.len();
+    if fields.len() != expected {
+        return Err(CampaignError::WrongFieldCount {
+            file: file.to_owned(),
+            line,
+            expected,
+            found: fields.len(),
         });
     }
-    checker.finish()?;
+    Row { file, line, fields }.pose(&head.layout, &head.covariates)
+}
+
+pub(super) fn parse(bytes: &[u8], source: &str) -> Result<Campaign, CampaignError> {
+    let mut reader = CampaignReader::new(source);
+    let mut poses = Vec::new();
+    for line in bytes.split(|&b| b == b'\n') {
+        poses.extend(reader.read_line(line)?);
+    }
+    reader.finish()?;
+    let covariate_names = reader.covariate_names();
     Ok(Campaign {
         source: source.to_owned(),
-        comments,
-        covariate_names: covariates.into_iter().map(|(_, n)| n).collect(),
+        comments: reader.comments,
+        covariate_names,
         poses,
     })
 }
@@ -309,7 +402,7 @@ pub(super) fn parse(text: &str, source: &str) -> Result<Campaign, CampaignError>
 pub(super) fn validate(campaign: &Campaign) -> Result<(), CampaignError> {
     let file = campaign.source.as_str();
     let layout = Layout::canonical();
-    let mut checker = Checker::new(file);
+    let mut checker = Checker::new();
     for pose in &campaign.poses {
         let numbers = [(T, pose.t)]
             .into_iter()
@@ -326,17 +419,13 @@ pub(super) fn validate(campaign: &Campaign) -> Result<(), CampaignError> {
                 pose.covariates.get(j).copied().flatten(),
             )
         });
+        let at = At {
+            file,
+            line: pose.line,
+        };
         for (column, name, value) in numbers.chain(measured).chain(covariates) {
             if let Some(v) = value {
-                if !v.is_finite() {
-                    return Err(CampaignError::NonFinite {
-                        file: file.to_owned(),
-                        line: pose.line,
-                        column,
-                        name,
-                        text: v.to_string(),
-                    });
-                }
+                at.number(column, &name, v, &super::write::number(v))?;
             }
         }
         if pose.covariates.len() != campaign.covariate_names.len() {
@@ -347,12 +436,54 @@ pub(super) fn validate(campaign: &Campaign) -> Result<(), CampaignError> {
                 found: REQUIRED_COLUMNS.len() + pose.covariates.len(),
             });
         }
-        checker.add(pose, &layout)?;
+        checker.add(pose, &layout, file)?;
     }
-    checker.finish()
+    checker.finish(file)
+}
+
+/// Where a value is: file and line, for the checks of one number.
+struct At<'a> {
+    file: &'a str,
+    line: usize,
+}
+
+impl At<'_> {
+    /// A number of column `column` (1-based) called `name`, read from `text`: finite and
+    /// within its [`plausible::bound`].
+    fn number(
+        &self,
+        column: usize,
+        name: &str,
+        value: f64,
+        text: &str,
+    ) -> Result<(), CampaignError> {
+        if !value.is_finite() {
+            return Err(CampaignError::NonFinite {
+                file: self.file.to_owned(),
+                line: self.line,
+                column,
+                name: name.to_owned(),
+                text: clip(text),
+            });
+        }
+        let (limit, unit) = plausible::bound(name);
+        if value.abs() > limit {
+            return Err(CampaignError::OutOfRange {
+                file: self.file.to_owned(),
+                line: self.line,
+                column,
+                name: name.to_owned(),
+                value,
+                limit,
+                unit,
+            });
+        }
+        Ok(())
+    }
 }
 
 /// What the checker knows about one setup.
+#[derive(Debug)]
 struct SetupState {
     id: String,
     instrument: Instrument,
@@ -361,32 +492,30 @@ struct SetupState {
 }
 
 /// The checks across rows: monotonic time, one instrument and the right resets per setup; and
-/// the per-row checks of resets and measured columns.
-struct Checker<'a> {
-    file: &'a str,
+/// the checks of one row (resets, measured columns, reachability). A row that breaks a rule
+/// leaves the checker as it was.
+#[derive(Debug)]
+struct Checker {
     previous: Option<(f64, usize)>,
     setups: Vec<SetupState>,
     index: HashMap<String, usize>,
 }
 
-impl<'a> Checker<'a> {
-    fn new(file: &'a str) -> Self {
+impl Checker {
+    fn new() -> Self {
         Checker {
-            file,
             previous: None,
             setups: Vec::new(),
             index: HashMap::new(),
         }
     }
 
-    fn add(&mut self, pose: &Pose, layout: &Layout) -> Result<(), CampaignError> {
-        let file = self.file.to_owned();
-        let line = pose.line;
+    fn add(&mut self, pose: &Pose, layout: &Layout, file: &str) -> Result<(), CampaignError> {
         if let Some((previous, previous_line)) = self.previous {
             if pose.t < previous {
                 return Err(CampaignError::TimeNotMonotonic {
-                    file,
-                    line,
+                    file: file.to_owned(),
+                    line: pose.line,
                     column: layout.column(T),
                     t: pose.t,
                     previous,
@@ -394,65 +523,94 @@ impl<'a> Checker<'a> {
                 });
             }
         }
-        self.previous = Some((pose.t, line));
-        check_row(pose, layout, self.file)?;
+        check_row(pose, layout, file)?;
+        check_reachable(pose, layout, file)?;
+        let known = self
+            .index
+            .get(&pose.setup)
+            .and_then(|&k| self.setups.get(k));
+        if let Some(setup) = known {
+            check_setup(setup, pose, layout, file)?;
+        }
+        self.previous = Some((pose.t, pose.line));
         let k = match self.index.get(&pose.setup) {
             Some(&k) => k,
             None => {
                 self.setups.push(SetupState {
                     id: pose.setup.clone(),
                     instrument: pose.instrument,
-                    first_line: line,
+                    first_line: pose.line,
                     reset_line: None,
                 });
                 self.index.insert(pose.setup.clone(), self.setups.len() - 1);
                 self.setups.len() - 1
             }
         };
-        let Some(setup) = self.setups.get_mut(k) else {
-            return Ok(());
-        };
-        if setup.instrument != pose.instrument {
-            return Err(CampaignError::MixedInstrumentsInSetup {
-                file,
-                line,
-                column: layout.column(INSTRUMENT),
-                setup: pose.setup.clone(),
-                instrument: pose.instrument,
-                first: setup.instrument,
-                first_line: setup.first_line,
-            });
-        }
-        if pose.reset {
-            if let Some(first_line) = setup.reset_line {
-                return Err(CampaignError::DuplicateReset {
-                    file,
-                    line,
-                    column: layout.column(RESET),
-                    setup: pose.setup.clone(),
-                    first_line,
-                });
+        if let Some(setup) = self.setups.get_mut(k) {
+            if pose.reset {
+                setup.reset_line = Some(pose.line);
             }
-            setup.reset_line = Some(line);
         }
         Ok(())
     }
 
-    fn finish(self) -> Result<(), CampaignError> {
+    fn finish(&self, file: &str) -> Result<(), CampaignError> {
         match self
             .setups
-            .into_iter()
+            .iter()
             .find(|s| s.instrument.is_relative() && s.reset_line.is_none())
         {
             Some(s) => Err(CampaignError::MissingReset {
-                file: self.file.to_owned(),
+                file: file.to_owned(),
                 line: s.first_line,
-                setup: s.id,
+                setup: s.id.clone(),
                 instrument: s.instrument,
             }),
             None => Ok(()),
         }
     }
+}
+
+/// A further row of a known setup: the same instrument, no second reset pose.
+fn check_setup(
+    setup: &SetupState,
+    pose: &Pose,
+    layout: &Layout,
+    file: &str,
+) -> Result<(), CampaignError> {
+    if setup.instrument != pose.instrument {
+        return Err(CampaignError::MixedInstrumentsInSetup {
+            file: file.to_owned(),
+            line: pose.line,
+            column: layout.column(INSTRUMENT),
+            setup: pose.setup.clone(),
+            instrument: pose.instrument,
+            first: setup.instrument,
+            first_line: setup.first_line,
+        });
+    }
+    match setup.reset_line {
+        Some(first_line) if pose.reset => Err(CampaignError::DuplicateReset {
+            file: file.to_owned(),
+            line: pose.line,
+            column: layout.column(RESET),
+            setup: pose.setup.clone(),
+            first_line,
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// The row's actuator positions are a pose of the machine ([`plausible::reachable`]); the
+/// error names the actuator to blame.
+fn check_reachable(pose: &Pose, layout: &Layout, file: &str) -> Result<(), CampaignError> {
+    plausible::reachable(pose.q).map_err(|u| CampaignError::Unreachable {
+        file: file.to_owned(),
+        line: pose.line,
+        column: layout.column(Q + u.actuator),
+        name: name(Q + u.actuator),
+        why: u.why,
+    })
 }
 
 /// The checks of one row on its own: reset allowed, followers of `self`, measured columns.
