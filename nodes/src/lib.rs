@@ -2,6 +2,8 @@
 
 pub mod campaign_bag;
 pub mod cli;
+pub mod error;
+pub mod input;
 pub mod launch;
 pub mod logging;
 pub mod node;

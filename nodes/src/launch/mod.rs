@@ -539,7 +539,7 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
 /// Runs `rpkm launch`.
 pub fn run(args: &LaunchArgs) -> anyhow::Result<()> {
     let desc = LaunchDescription::load(&args.file, &args.args)
-        .map_err(|e| crate::cli::bad_input(e.to_string()))?;
+        .map_err(|e| crate::error::bad_input(e.to_string()))?;
     supervisor::run(&desc)
 }
 

@@ -176,7 +176,7 @@ fn outcome(failed: &[String]) -> anyhow::Result<()> {
     if failed.is_empty() {
         return Ok(());
     }
-    Err(crate::cli::bad_input(format!(
+    Err(crate::error::bad_input(format!(
         "{} node(s) failed their configuration (exit 2, not restarted): {}",
         failed.len(),
         failed.join(", ")

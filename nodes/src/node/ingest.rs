@@ -643,7 +643,7 @@ pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
                 && (a_name == topic::ACTUATOR_STATE.name()
                     || m_name == topic::TCP_MEASUREMENT.name())
             {
-                return Err(crate::cli::bad_input(format!(
+                return Err(crate::error::bad_input(format!(
                     "ingest: input topics {a_name}, {m_name} would also receive this node's own \
                      DDS output; use other input topics or --backend ipc"
                 )));
@@ -741,7 +741,7 @@ pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
             let text = match std::fs::read_to_string(path) {
                 Ok(t) => t,
                 Err(e) => {
-                    return Err(crate::cli::bad_input(format!(
+                    return Err(crate::error::bad_input(format!(
                         "{file}: cannot read campaign: {e}"
                     )))
                 }

@@ -186,7 +186,7 @@ impl NodeContext {
             }
             let s = params.string(key, "").map_err(bad_param)?;
             BackendArg::parse(&s).map(Some).ok_or_else(|| {
-                crate::cli::bad_input(format!(
+                crate::error::bad_input(format!(
                     "{}/{key}: expected ipc, dds or both, found {s:?}",
                     params
                         .origin(key)
@@ -206,7 +206,7 @@ impl NodeContext {
         };
         let input = match input {
             Some(BackendArg::Both) => {
-                return Err(crate::cli::bad_input(
+                return Err(crate::error::bad_input(
                     "input backend: a node subscribes on ipc or dds, not both".into(),
                 ))
             }
@@ -283,7 +283,7 @@ pub fn log_line(who: &str, msg: impl std::fmt::Display) {
 
 /// A parameter error as bad input (exit code 2: `rpkm launch` does not restart the node).
 pub fn bad_param(e: ParamError) -> anyhow::Error {
-    crate::cli::bad_input(e.to_string())
+    crate::error::bad_input(e.to_string())
 }
 
 /// Runs the node `args` names until SIGINT/SIGTERM (or, for ingest, its end of input).
@@ -342,7 +342,7 @@ impl Geometry {
             .ok()
             .and_then(Model::from_number)
             .ok_or_else(|| {
-                crate::cli::bad_input(format!(
+                crate::error::bad_input(format!(
                     "{}/model: expected 24 or 29, found {model_n}",
                     p.origin("model").map(|o| o.to_string()).unwrap_or_default()
                 ))
@@ -353,14 +353,14 @@ impl Geometry {
             (Params::nominal(), "nominal parameters".to_owned())
         } else {
             (
-                crate::cli::read_params(std::path::Path::new(&file))?,
+                crate::input::read_params(std::path::Path::new(&file))?,
                 file.clone(),
             )
         };
         let overrides = p.group("geometry.").map_err(bad_param)?;
         for (name, value, origin) in &overrides {
             let i = core_params::index_of(name).ok_or_else(|| {
-                crate::cli::bad_input(format!(
+                crate::error::bad_input(format!(
                     "{origin}/geometry.{name}: unknown parameter (expected one of {})",
                     NAMES.join(", ")
                 ))

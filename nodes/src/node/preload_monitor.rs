@@ -340,7 +340,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             .clamp(1, u64::from(u32::MAX)) as u32,
     };
     if thresholds.error_percent < thresholds.warn_percent {
-        return Err(crate::cli::bad_input(format!(
+        return Err(crate::error::bad_input(format!(
             "preload_monitor: error_percent {} below warn_percent {}",
             thresholds.error_percent, thresholds.warn_percent
         )));

@@ -1,0 +1,70 @@
+//! Layers never call upward: the nodes and the launcher (`nodes/src/node`, `nodes/src/launch`)
+//! do not name the command line (`nodes/src/cli`). Errors, exit codes and file readers they
+//! share with it live in `nodes/src/error.rs` and `nodes/src/input.rs`.
+
+use std::path::{Path, PathBuf};
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    for entry in entries.map(|e| e.expect("directory entry")) {
+        let path = entry.path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|x| x == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+/// The places in `text` that name the command-line module from below it.
+fn upward_references(text: &str) -> Vec<(usize, String)> {
+    let mut found = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let code = line.split("//").next().unwrap_or("");
+        let names_cli = code.contains("crate::cli")
+            || code.contains("rpkm::cli")
+            || code.contains("super::super::cli")
+            || (code.contains("crate::{")
+                && code
+                    .split(|c: char| !c.is_alphanumeric() && c != '_')
+                    .any(|w| w == "cli"));
+        if names_cli {
+            found.push((n + 1, line.trim().to_owned()));
+        }
+    }
+    found
+}
+
+#[test]
+fn the_detector_sees_each_spelling() {
+    assert_eq!(upward_references("use crate::cli::bad_input;").len(), 1);
+    assert_eq!(
+        upward_references("    crate::cli::read_params(p)?").len(),
+        1
+    );
+    assert_eq!(upward_references("use crate::{cli, node};").len(), 1);
+    assert!(upward_references("use crate::error::bad_input; // not crate::cli").is_empty());
+    assert!(upward_references("use crate::{client, node};").is_empty());
+}
+
+#[test]
+fn nodes_and_launch_never_name_the_cli() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("nodes/src");
+    let mut files = Vec::new();
+    for layer in ["node", "launch"] {
+        rust_files(&root.join(layer), &mut files);
+    }
+    assert!(files.len() >= 8, "found only {files:?}");
+    let mut offences = Vec::new();
+    for file in &files {
+        let text = std::fs::read_to_string(file).expect("read source");
+        for (line, code) in upward_references(&text) {
+            offences.push(format!("{}:{line}: {code}", file.display()));
+        }
+    }
+    assert!(
+        offences.is_empty(),
+        "the nodes call up into the command line:\n{}",
+        offences.join("\n")
+    );
+}
