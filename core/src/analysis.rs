@@ -24,7 +24,7 @@ use crate::design::{self, PlannedPose, CENTRE};
 use crate::geometry::{self, GeometryError};
 use crate::noise::NoiseModel;
 use crate::obs::{self, Direction, PoseError, Residual, Step};
-use crate::observability::{condition_number, normalize_columns};
+use crate::observability::{condition_number, normalize_columns, pivot_order};
 use crate::params::{variation_range, Model, Params, NAMES};
 use nalgebra::{DMatrix, DVector};
 use std::collections::BTreeMap;
@@ -499,38 +499,6 @@ fn scale_columns(j: &DMatrix<f64>, ids: &[usize], scaling: ParamScaling) -> DMat
         ParamScaling::ColumnNorm => normalize_columns(j),
         ParamScaling::None => j.clone(),
     }
-}
-
-/// Column order of QR with column pivoting (Businger-Golub): at each step the column with the
-/// largest norm orthogonal to the chosen ones; vanishing columns (relative 1e-13) keep their
-/// order at the end.
-pub fn pivot_order(m: &DMatrix<f64>) -> Vec<usize> {
-    let n = m.ncols();
-    let mut work = m.clone();
-    let mut remaining: Vec<usize> = (0..n).collect();
-    let mut order = Vec::with_capacity(n);
-    let scale = (0..n).map(|j| m.column(j).norm()).fold(0.0, f64::max);
-    while !remaining.is_empty() {
-        let mut pos = 0;
-        let mut best_norm = -1.0;
-        for (p, &j) in remaining.iter().enumerate() {
-            let nj = work.column(j).norm();
-            if nj > best_norm * (1.0 + 1e-12) {
-                best_norm = nj;
-                pos = p;
-            }
-        }
-        let best = remaining.remove(pos);
-        if best_norm > 1e-13 * scale {
-            let q = work.column(best) / best_norm;
-            for &j in &remaining {
-                let proj = q.dot(&work.column(j));
-                work.column_mut(j).axpy(-proj, &q, 1.0);
-            }
-        }
-        order.push(best);
-    }
-    order
 }
 
 /// Indexes of the rows of Vᵀ sorted by descending singular value, with Vᵀ.

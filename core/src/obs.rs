@@ -22,10 +22,9 @@ use crate::effects::{Corrections, Delta, InputSensitivity};
 use crate::geometry::{self, q_var, GeometryError, Solution, Subsystem, PSI, X, Y};
 use crate::noise::{self, NoiseModel, Parts};
 use crate::params::{Model, Params, N_PARAMS};
-use nalgebra::{SVector, Vector2};
+use nalgebra::Vector2;
 
-/// A Jacobian row over the 29 parameters.
-pub type Row = SVector<f64, N_PARAMS>;
+pub use crate::params::Row;
 
 /// What a row measures: the instrument's direction and, for forward rows, the subsystem used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -340,7 +339,7 @@ fn inverse_rows(
     let inv = geometry::solve(&p_i, ctx.model, Subsystem::Tcp, [x, y])?;
     let s = geometry::sensitivity(&p_i, ctx.model, Subsystem::Tcp, &inv)?;
     let first = out.len();
-    for a in 0..4 {
+    for (a, &q_a) in q_i.iter().enumerate() {
         let v = q_var(a);
         let g = Vector2::new(s.dc_dk[(v, 0)], s.dc_dk[(v, 1)]);
         // dq/dp = ∂igm/∂p + ∂igm/∂X · d fgm(Q_reset)/dp
@@ -359,7 +358,7 @@ fn inverse_rows(
             pose: i,
             instrument: pose.instrument,
             direction: Direction::Q(a),
-            value: inv.c[v] - q_i[a],
+            value: inv.c[v] - q_a,
             sigma: noise::sigma_of(&parts),
             parts,
             jacobian: at_pose.dp + at_reset.dp,

@@ -45,6 +45,40 @@ pub struct Ranked {
     pub condition_number: f64,
 }
 
+/// Column order of QR with column pivoting (Businger-Golub): at each step the column with the
+/// largest norm orthogonal to the chosen ones. Ties (within 1e-12 relative) go to the earlier
+/// column, so the ranking follows the parameter order where the data cannot tell; vanishing
+/// columns (relative 1e-13) keep their order at the end. The one pivot order of the crate:
+/// `rpkm analyze` and `--params auto` rank alike.
+pub fn pivot_order(m: &DMatrix<f64>) -> Vec<usize> {
+    let n = m.ncols();
+    let mut work = m.clone();
+    let mut remaining: Vec<usize> = (0..n).collect();
+    let mut order = Vec::with_capacity(n);
+    let scale = (0..n).map(|j| m.column(j).norm()).fold(0.0, f64::max);
+    while !remaining.is_empty() {
+        let mut pos = 0;
+        let mut best_norm = -1.0;
+        for (p, &j) in remaining.iter().enumerate() {
+            let nj = work.column(j).norm();
+            if nj > best_norm * (1.0 + 1e-12) {
+                best_norm = nj;
+                pos = p;
+            }
+        }
+        let best = remaining.remove(pos);
+        if best_norm > 1e-13 * scale {
+            let q = work.column(best) / best_norm;
+            for &j in &remaining {
+                let proj = q.dot(&work.column(j));
+                work.column_mut(j).axpy(-proj, &q, 1.0);
+            }
+        }
+        order.push(best);
+    }
+    order
+}
+
 /// Columns in descending order of importance by QR with column pivoting (eq. 3.29-3.30): at
 /// each step the column with the largest norm orthogonal to those already chosen. Columns
 /// whose remaining norm vanishes (exact dependencies) come last with an infinite condition
@@ -52,32 +86,7 @@ pub struct Ranked {
 /// each column is the effect of the parameter's plausible variation).
 pub fn qr_pivot_order(m: &DMatrix<f64>) -> Vec<Ranked> {
     let n = m.ncols();
-    let mut work = m.clone();
-    let mut remaining: Vec<usize> = (0..n).collect();
-    let mut order = Vec::with_capacity(n);
-    let scale = (0..n).map(|j| m.column(j).norm()).fold(0.0, f64::max);
-    while !remaining.is_empty() {
-        let (pos, &best) = remaining
-            .iter()
-            .enumerate()
-            .max_by(|a, b| {
-                work.column(*a.1)
-                    .norm()
-                    .total_cmp(&work.column(*b.1).norm())
-            })
-            .expect("remaining is not empty");
-        remaining.remove(pos);
-        let norm = work.column(best).norm();
-        if norm > 1e-13 * scale {
-            let q = work.column(best) / norm;
-            for &j in &remaining {
-                let proj = q.dot(&work.column(j));
-                let mut col = work.column_mut(j);
-                col.axpy(-proj, &q, 1.0);
-            }
-        }
-        order.push(best);
-    }
+    let order = pivot_order(m);
     let mut ranked = Vec::with_capacity(n);
     for k in 0..n {
         let cols: Vec<usize> = order[..=k].to_vec();
@@ -88,4 +97,28 @@ pub fn qr_pivot_order(m: &DMatrix<f64>) -> Vec<Ranked> {
         });
     }
     ranked
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hand-worked case: column 2 is the longest; once it is chosen, column 0 has nothing left
+    /// orthogonal to it (it is a multiple of column 2). Columns 1 and 3 are equal copies and
+    /// tie, so the earlier (1) goes first; then 0 and 3 are both dependent and keep their
+    /// order at the end, with infinite condition numbers.
+    #[test]
+    fn ties_go_to_the_earlier_column_and_dependencies_come_last() {
+        let m = DMatrix::from_row_slice(
+            3,
+            4,
+            &[1.0, 0.0, 2.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0],
+        );
+        assert_eq!(pivot_order(&m), vec![2, 1, 0, 3]);
+        let ranked = qr_pivot_order(&m);
+        let columns: Vec<usize> = ranked.iter().map(|r| r.column).collect();
+        assert_eq!(columns, vec![2, 1, 0, 3]);
+        assert!((ranked[1].condition_number - 1.0).abs() < 1e-12);
+        assert!(ranked[2].condition_number > 1e12);
+    }
 }

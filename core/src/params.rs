@@ -9,6 +9,9 @@ use std::fmt;
 /// Number of geometric parameters of the complete model.
 pub const N_PARAMS: usize = 29;
 
+/// A row over the 29 parameters: a Jacobian row, or an effect's correction of the parameters.
+pub type Row = nalgebra::SVector<f64, N_PARAMS>;
+
 pub const L1: usize = 0;
 pub const L4: usize = 1;
 pub const L5: usize = 2;

@@ -90,8 +90,8 @@ fn compliant_carriers_balance_their_springs() {
     let q = compatible_q(&p, 0.0, 1700.0);
     let qq = [q[0], q[1], q[2] + 0.4, q[3]];
     let eq = fegm(&p, &k, qq, ALL_ACTIVE).expect("fegm");
-    for j in 0..4 {
-        let spring = -40_000.0 * (eq.carrier[j] - qq[j]);
+    for (j, &qj) in qq.iter().enumerate() {
+        let spring = -40_000.0 * (eq.carrier[j] - qj);
         assert!((spring - eq.drive_force[j]).abs() < 1e-5, "{j}");
     }
     let rigid = fegm(&p, &Stiffness::default(), qq, ALL_ACTIVE).expect("fegm");

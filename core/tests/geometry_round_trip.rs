@@ -41,8 +41,8 @@ fn igm_fgm_round_trips_on_10000_poses() {
                 .unwrap_or_else(|e| panic!("{sub} at ({x:.1}, {y:.1}) {model}: {e}"));
             max_iter = max_iter.max(fwd.iterations);
             worst = worst.max((fwd.x() - x).abs()).max((fwd.y() - y).abs());
-            for i in 0..4 {
-                worst = worst.max((fwd.q()[i] - q[i]).abs());
+            for (fq, qi) in fwd.q().iter().zip(&q) {
+                worst = worst.max((fq - qi).abs());
             }
         }
         let r = geometry::rgm(&p, model, q[0], q[3]).expect("rgm");

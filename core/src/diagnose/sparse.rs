@@ -10,6 +10,9 @@ use crate::obs::Residual;
 use crate::params::{Model, Params};
 use std::collections::BTreeMap;
 
+/// A workspace term of the dictionary: a monomial of the nominal TCP (x, y).
+type Monomial = fn(f64, f64) -> f64;
+
 /// Fewest rows of a direction worth a correlation.
 const MIN_ROWS: usize = 8;
 
@@ -75,7 +78,7 @@ fn dictionary(campaign: &Campaign) -> Vec<(String, Vec<f64>)> {
             .filter(|d| d.0 != "t_run" && campaign.covariate_index(&d.0).is_none()),
     );
     let tcp = nominal_tcp(campaign);
-    let poly: [(&str, fn(f64, f64) -> f64); 5] = [
+    let poly: [(&str, Monomial); 5] = [
         ("x", |x, _| x),
         ("y", |_, y| y),
         ("x^2", |x, _| x * x),

@@ -37,7 +37,7 @@ use crate::campaign::Campaign;
 use crate::params::Params;
 use nalgebra::Vector2;
 
-pub use crate::obs::Row;
+pub use crate::params::Row;
 
 /// The effects the diagnosis knows, in the order it tries them.
 pub fn library() -> Vec<Box<dyn Effect>> {

@@ -529,6 +529,10 @@ pub struct ElasticSensitivity {
     pub dcarrier_dq: SMatrix<f64, 4, 4>,
 }
 
+/// One parameter's share in a rod's terms: (parameter index, ∂r/∂p, ∂J/∂p as (column,
+/// vector) or none, ∂l/∂p).
+type RodPartial = (usize, Vector2<f64>, Option<(usize, Vector2<f64>)>, f64);
+
 /// Analytic sensitivities of `eq` (solved for `q`, `followers`).
 pub fn sensitivity(
     p: &Params,
@@ -553,8 +557,7 @@ pub fn sensitivity(
     // ∂G/∂p: rod terms, only in rows that are not replaced by rigid constraints.
     let mut g_p = SMatrix::<f64, 7, N_PARAMS>::zeros();
     let (sn, cs) = z[2].sin_cos();
-    for i in 0..5 {
-        let rod = &RODS[i];
+    for (i, rod) in RODS.iter().enumerate() {
         let st = rod_state(p, i, &z);
         let ki = k.rod[i];
         let t = ki * st.delta;
@@ -564,7 +567,7 @@ pub fn sensitivity(
         let s = z[3 + rod.actuator];
         let along = s + p[rod.yb];
         // (parameter index, ∂r/∂p, ∂J/∂p as (column, vector) or none, ∂l/∂p)
-        let dr: [(usize, Vector2<f64>, Option<(usize, Vector2<f64>)>, f64); 7] = [
+        let dr: [RodPartial; 7] = [
             (rod.l, Vector2::zeros(), None, 1.0),
             (
                 rod.xa,

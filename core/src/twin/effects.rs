@@ -3,6 +3,10 @@
 use std::fmt;
 use std::str::FromStr;
 
+// One error for an effect name, whichever list it is looked up in (the model's library here
+// lists the simulator's kinds).
+use crate::effects::UnknownEffect;
+
 /// Thermal expansion coefficient of steel, 1/K.
 pub const ALPHA_PER_K: f64 = 11.5e-6;
 /// Reference temperature of the true parameters, °C.
@@ -107,18 +111,16 @@ impl fmt::Display for EffectKind {
     }
 }
 
-/// An effect name that is not one of [`EffectKind::ALL`].
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown effect {0:?}, expected one of parallelogram, preload_elastic, thermal, encoder_scale, guide_straightness, instrument_alignment, backlash")]
-pub struct UnknownEffect(pub String);
-
 impl FromStr for EffectKind {
     type Err = UnknownEffect;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         EffectKind::ALL
             .into_iter()
             .find(|e| e.as_str() == s.trim())
-            .ok_or_else(|| UnknownEffect(s.to_owned()))
+            .ok_or_else(|| UnknownEffect {
+                name: s.to_owned(),
+                known: EffectKind::ALL.map(EffectKind::as_str).join(", "),
+            })
     }
 }
 

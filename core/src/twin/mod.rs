@@ -21,7 +21,7 @@
 
 pub mod effects;
 
-pub use effects::{EffectKind, UnknownEffect};
+pub use effects::EffectKind;
 
 use crate::campaign::{Campaign, Instrument, Pose};
 use crate::design::{self, PlannedPose};
@@ -30,7 +30,7 @@ use crate::geometry::{self, GeometryError};
 use crate::noise::NoiseModel;
 use crate::params::{self, Model, Params, NAMES, N_PARAMS, RODS};
 use effects::{bow, ALPHA_PER_K, REFERENCE_TEMP_C, THERMAL_PERIOD_S};
-use nalgebra::{Cholesky, Rotation2, Vector2};
+use nalgebra::{Cholesky, Matrix2, Rotation2, Vector2};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -172,6 +172,27 @@ pub struct EffectTruth {
     pub effect: EffectKind,
     pub magnitude: f64,
     pub unit: String,
+}
+
+/// How far a pose moved from its setup's reset pose: TCP displacement in the instrument's
+/// frame, platform rotation, and the TCP (where the tracker's beam points).
+struct Moved {
+    d: Vector2<f64>,
+    dpsi: f64,
+    tcp: Vector2<f64>,
+}
+
+/// A square root L (L Lᵀ = cov) of a reading's 2 × 2 covariance: its Cholesky factor, or,
+/// when one direction has no noise at all (a singular covariance, e.g. a tracker rated 0
+/// across the beam), the symmetric square root from its eigen-decomposition, so that the
+/// other direction's noise is still drawn.
+fn xy_factor(cov: Matrix2<f64>) -> Matrix2<f64> {
+    if let Some(c) = Cholesky::new(cov) {
+        return c.l();
+    }
+    let eig = cov.symmetric_eigen();
+    let root = eig.eigenvalues.map(|v| v.max(0.0).sqrt());
+    eig.eigenvectors * Matrix2::from_diagonal(&root) * eig.eigenvectors.transpose()
 }
 
 /// The true state of the machine at one pose.
@@ -446,6 +467,114 @@ impl Twin {
         })
     }
 
+    /// Direction (±1) of the last move of q1 and q4 at `plan`'s command, carried in
+    /// `approach` (last command, direction) from pose to pose.
+    fn approach_direction(
+        &self,
+        plan: &PlannedPose,
+        self_cal: bool,
+        approach: &mut Option<([f64; 2], [f64; 2])>,
+    ) -> Result<[f64; 2], TwinError> {
+        let cmd = geometry::igm(&self.controller(self_cal), Model::M29, plan.x, plan.y)
+            .map_err(|source| TwinError::Controller {
+                setup: plan.setup.clone(),
+                x: plan.x,
+                y: plan.y,
+                source,
+            })?
+            .q();
+        let now = [cmd[0], cmd[3]];
+        let (last, mut dir) = approach.unwrap_or((now, [1.0, 1.0]));
+        for j in 0..2 {
+            if (now[j] - last[j]).abs() > 1e-9 {
+                dir[j] = (now[j] - last[j]).signum();
+            }
+        }
+        *approach = Some((now, dir));
+        Ok(dir)
+    }
+
+    /// The reading of a relative instrument at a pose that moved by `moved` from its setup's
+    /// reset, with noise `noise` scaled by `k` (0: noiseless, the draws still made).
+    fn read_instrument(
+        &mut self,
+        plan: &PlannedPose,
+        moved: &Moved,
+        noise: &NoiseModel,
+        k: f64,
+        pose: &mut Pose,
+    ) {
+        let (d, dpsi) = (moved.d, moved.dpsi);
+        let m = plan.instrument.measures();
+        if plan.reset {
+            pose.x = m.x.then_some(0.0);
+            pose.y = m.y.then_some(0.0);
+            pose.r = m.r.then_some(0.0);
+            pose.psi = m.psi.then_some(0.0);
+            return;
+        }
+        match plan.instrument {
+            Instrument::Lt | Instrument::Kgm => {
+                let cov = noise.xy_covariance(plan.instrument, moved.tcp);
+                let e = xy_factor(cov) * Vector2::new(gauss(&mut self.rng), gauss(&mut self.rng));
+                pose.x = Some(d.x + k * e.x);
+                pose.y = Some(d.y + k * e.y);
+            }
+            Instrument::LiX
+            | Instrument::LiY
+            | Instrument::Dbb
+            | Instrument::Circle
+            | Instrument::LiPsi => {
+                let sigma = noise.scalar_sigma(plan.instrument).unwrap_or(0.0);
+                let e = k * sigma * gauss(&mut self.rng);
+                match plan.instrument {
+                    Instrument::LiX => pose.x = Some(d.x + e),
+                    Instrument::LiY => pose.y = Some(d.y + e),
+                    Instrument::LiPsi => pose.psi = Some(dpsi + e),
+                    _ => pose.r = Some(d.norm() + e),
+                }
+            }
+            Instrument::SelfCal | Instrument::None => {}
+        }
+    }
+
+    /// A pose's drive readings: the commanded positions, the followers' encoders (noise σ
+    /// `encoder_mm`), the drive forces and the temperature sensor, with the approach
+    /// `covariates` after the temperature. `k` scales the noise (0: noiseless, the draws still
+    /// made). No instrument reading yet.
+    fn drive_readings(
+        &mut self,
+        plan: &PlannedPose,
+        t: f64,
+        st: &MachineState,
+        (k, encoder_mm): (f64, f64),
+        mut covariates: Vec<Option<f64>>,
+    ) -> Pose {
+        let mut q = st.q;
+        for (qi, &follower) in q.iter_mut().zip(&st.follower) {
+            if follower {
+                *qi += k * encoder_mm * gauss(&mut self.rng);
+            }
+        }
+        let temp = self.temperature(t) + k * TEMP_SENSOR_K * gauss(&mut self.rng);
+        covariates.insert(0, Some(temp));
+        Pose {
+            t,
+            setup: plan.setup.clone(),
+            instrument: plan.instrument,
+            reset: plan.reset,
+            q,
+            f: st.f,
+            follower: st.follower,
+            x: None,
+            y: None,
+            r: None,
+            psi: None,
+            covariates,
+            line: 0,
+        }
+    }
+
     /// Measure a design on the twin: one campaign, `source` labelling it.
     pub fn run(&mut self, design: &[PlannedPose], source: &str) -> Result<Campaign, TwinError> {
         // noiseless: the spec's levels times zero, so that the draws stay the same
@@ -470,53 +599,15 @@ impl Twin {
             let mut enc = [0; 4].map(|_| k * noise.encoder_mm * gauss(&mut self.rng));
             let mut covariates = Vec::with_capacity(3);
             if let Some(m) = backlash {
-                let cmd = geometry::igm(&self.controller(self_cal), Model::M29, plan.x, plan.y)
-                    .map_err(|source| TwinError::Controller {
-                        setup: plan.setup.clone(),
-                        x: plan.x,
-                        y: plan.y,
-                        source,
-                    })?
-                    .q();
-                let now = [cmd[0], cmd[3]];
-                let (last, mut dir) = approach.unwrap_or((now, [1.0, 1.0]));
-                for j in 0..2 {
-                    if (now[j] - last[j]).abs() > 1e-9 {
-                        dir[j] = (now[j] - last[j]).signum();
-                    }
-                }
-                approach = Some((now, dir));
+                let dir = self.approach_direction(plan, self_cal, &mut approach)?;
                 // the carrier lags its command against the direction of travel
                 enc[0] -= 0.5 * m * dir[0];
                 enc[3] -= 0.5 * m * dir[1];
                 covariates.extend([Some(dir[0]), Some(dir[1])]);
             }
             let st = self.machine_state(&plan.setup, plan.x, plan.y, t, enc, self_cal)?;
-            let mut q = st.q;
-            for i in 0..4 {
-                if st.follower[i] {
-                    q[i] += k * noise.encoder_mm * gauss(&mut self.rng);
-                }
-            }
-            let temp = self.temperature(t) + k * TEMP_SENSOR_K * gauss(&mut self.rng);
-            let mut pose = Pose {
-                t,
-                setup: plan.setup.clone(),
-                instrument: plan.instrument,
-                reset: plan.reset,
-                q,
-                f: st.f,
-                follower: st.follower,
-                x: None,
-                y: None,
-                r: None,
-                psi: None,
-                covariates: {
-                    covariates.insert(0, Some(temp));
-                    covariates
-                },
-                line: n + 2,
-            };
+            let mut pose = self.drive_readings(plan, t, &st, (k, noise.encoder_mm), covariates);
+            pose.line = n + 2;
             if plan.reset {
                 reset = Some((plan.setup.clone(), st.tcp, st.psi));
             }
@@ -527,69 +618,41 @@ impl Twin {
                     });
                 };
                 let theta = self.alignment_angle(&plan.setup);
-                let d = Rotation2::new(theta) * (st.tcp - tcp0);
-                let dpsi = st.psi - psi0;
-                let m = plan.instrument.measures();
-                if plan.reset {
-                    pose.x = m.x.then_some(0.0);
-                    pose.y = m.y.then_some(0.0);
-                    pose.r = m.r.then_some(0.0);
-                    pose.psi = m.psi.then_some(0.0);
-                } else {
-                    match plan.instrument {
-                        Instrument::Lt | Instrument::Kgm => {
-                            let cov = noise.xy_covariance(plan.instrument, st.tcp);
-                            let e = match Cholesky::new(cov) {
-                                Some(c) => {
-                                    c.l() * Vector2::new(gauss(&mut self.rng), gauss(&mut self.rng))
-                                }
-                                None => Vector2::zeros(),
-                            };
-                            pose.x = Some(d.x + k * e.x);
-                            pose.y = Some(d.y + k * e.y);
-                        }
-                        Instrument::LiX
-                        | Instrument::LiY
-                        | Instrument::Dbb
-                        | Instrument::Circle
-                        | Instrument::LiPsi => {
-                            let sigma = noise.scalar_sigma(plan.instrument).unwrap_or(0.0);
-                            let e = k * sigma * gauss(&mut self.rng);
-                            match plan.instrument {
-                                Instrument::LiX => pose.x = Some(d.x + e),
-                                Instrument::LiY => pose.y = Some(d.y + e),
-                                Instrument::LiPsi => pose.psi = Some(dpsi + e),
-                                _ => pose.r = Some(d.norm() + e),
-                            }
-                        }
-                        Instrument::SelfCal | Instrument::None => {}
-                    }
-                }
+                let moved = Moved {
+                    d: Rotation2::new(theta) * (st.tcp - tcp0),
+                    dpsi: st.psi - psi0,
+                    tcp: st.tcp,
+                };
+                self.read_instrument(plan, &moved, &noise, k, &mut pose);
             }
             poses.push(pose);
         }
+        Ok(self.campaign_of(source, poses, backlash.is_some()))
+    }
+
+    /// The campaign of measured `poses`: its comment names the twin's seed and effects, its
+    /// covariates the temperature and, with backlash, the approach directions.
+    fn campaign_of(&self, source: &str, poses: Vec<Pose>, backlash: bool) -> Campaign {
         let effects: Vec<String> = self
             .config
             .effects
             .iter()
             .map(|(e, m)| format!("{e}={m}"))
             .collect();
-        Ok(Campaign {
+        let mut covariate_names = vec!["temp_machine".to_owned()];
+        if backlash {
+            covariate_names.extend(["approach_q1", "approach_q4"].map(str::to_owned));
+        }
+        Campaign {
             source: source.to_owned(),
             comments: vec![format!(
                 "rpkm digital twin: seed {}, effects [{}]",
                 self.config.seed,
                 effects.join(", ")
             )],
-            covariate_names: if backlash.is_some() {
-                ["temp_machine", "approach_q1", "approach_q4"]
-                    .map(str::to_owned)
-                    .to_vec()
-            } else {
-                vec!["temp_machine".to_owned()]
-            },
+            covariate_names,
             poses,
-        })
+        }
     }
 
     /// Measure the designs of `instruments` one after the other, in one campaign.

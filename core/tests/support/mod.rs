@@ -68,8 +68,8 @@ pub fn measure(
             covariates: Vec::new(),
             line: n + 2,
         };
-        for i in 0..4 {
-            pose.q[i] = q[i] + k * n_model.encoder_mm * gauss(&mut rng);
+        for (measured, commanded) in pose.q.iter_mut().zip(&q) {
+            *measured = commanded + k * n_model.encoder_mm * gauss(&mut rng);
         }
         let rel = reset_tcp
             .as_ref()

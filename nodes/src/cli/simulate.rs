@@ -96,7 +96,7 @@ pub fn parse_effect(s: &str) -> Result<(EffectKind, f64)> {
     let kind: EffectKind = name
         .trim()
         .parse()
-        .map_err(|e: rpkm_core::twin::UnknownEffect| super::bad_input(e.to_string()))?;
+        .map_err(|e: rpkm_core::effects::UnknownEffect| super::bad_input(e.to_string()))?;
     let m = match mag {
         Some(m) => m.trim().parse::<f64>().map_err(|_| {
             super::bad_input(format!("magnitude of effect {name}: {m:?} is not a number"))
