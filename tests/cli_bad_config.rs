@@ -171,3 +171,50 @@ fn durations_and_rates_beyond_their_bounds_are_rejected_with_the_key() {
         assert!(stderr.contains("out of range"), "{exec} {key}: {stderr}");
     }
 }
+
+#[test]
+fn counts_and_priorities_beyond_their_bounds_are_rejected_with_the_key() {
+    for (exec, key, value, range) in [
+        // 0 was silently taken as 1, 2^32 silently clamped.
+        (
+            "preload_monitor",
+            "status_every",
+            "0",
+            "expected 1 to 1000000",
+        ),
+        (
+            "preload_monitor",
+            "debounce_samples",
+            "0",
+            "expected 1 to 1000000",
+        ),
+        (
+            "preload_monitor",
+            "debounce_samples",
+            "4294967296",
+            "expected 1 to 1000000",
+        ),
+        (
+            "calibrator",
+            "calibrate_every",
+            "18446744073709551615",
+            "expected 0 to 1000000",
+        ),
+        // A negative threshold silently meant "no outlier removal".
+        ("calibrator", "outlier_sigma", "-3", "expected 0 to 100 σ"),
+        // An invalid priority was logged and the node ran at normal priority.
+        ("tcp_estimator", "rt_priority", "100", "expected 0 to 99"),
+    ] {
+        let (code, stderr, file) = node_with_params(
+            exec,
+            &format!("{exec}:\n  ros__parameters:\n    {key}: {value}\n"),
+        );
+        assert_eq!(code, Some(2), "{exec} {key}: {stderr}");
+        assert!(
+            stderr.contains(&format!(
+                "{file}: {exec}/ros__parameters/{key}: {value} is out of range: {range}"
+            )),
+            "{exec} {key}: {stderr}"
+        );
+    }
+}

@@ -18,6 +18,7 @@ use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::geometry::fgm;
 use rpkm_core::params::{Model, Params};
+use rpkm_msgs::TcpEstimate;
 use rpkm_transport::{topic, Transport, TransportConfig};
 
 const RATE_HZ: f64 = 200.0;
@@ -74,6 +75,7 @@ fn demo_campaign_estimates_stay_on_the_rigid_model_of_their_pose() {
     let mut launched = Launch::start(&launch, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
     let mut seen = vec![false; n];
     let (mut worst_mm, mut worst_current, mut not_converged) = (0.0f64, 0.0f64, 0);
+    let mut cold_after_warm = 0u64;
     let mut estimator_diag = None;
     let deadline = Instant::now() + Duration::from_secs(60);
     while Instant::now() < deadline && !(seen.iter().all(|s| *s) && estimator_diag.is_some()) {
@@ -88,6 +90,16 @@ fn demo_campaign_estimates_stay_on_the_rigid_model_of_their_pose() {
             assert!(e.psi > -PI && e.psi <= PI, "pose {}: ψ {}", k + 1, e.psi);
             worst_mm = worst_mm.max(d);
             not_converged += usize::from(!e.converged);
+            // The message's own flag agrees with converged, and names a check when it says
+            // the warm solve was rejected.
+            match e.outcome {
+                TcpEstimate::OUTCOME_OK => assert_eq!(e.reason, TcpEstimate::REASON_NONE),
+                TcpEstimate::OUTCOME_WARM_REJECTED_COLD_OK => {
+                    assert!((1..=6).contains(&e.reason), "pose {}: {e:?}", k + 1);
+                    cold_after_warm += 1;
+                }
+                other => panic!("pose {}: outcome {other} ({e:?})", k + 1),
+            }
             seen[k] = true;
         }
         while let Some(s) = statuses.try_recv().expect("recv") {
@@ -131,4 +143,8 @@ fn demo_campaign_estimates_stay_on_the_rigid_model_of_their_pose() {
         .and_then(|v| v.parse().ok())
         .expect("warm_rejected");
     assert!(rejected >= 1, "the 1 m jumps were caught: {}", st.message);
+    assert_eq!(
+        cold_after_warm, rejected,
+        "one estimate flagged WARM_REJECTED_COLD_OK per rejected warm start"
+    );
 }

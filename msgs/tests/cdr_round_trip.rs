@@ -49,6 +49,8 @@ fn every_type_round_trips() {
         iterations: 3,
         model: TcpEstimate::MODEL_29,
         converged: true,
+        outcome: TcpEstimate::OUTCOME_WARM_REJECTED_COLD_OK,
+        reason: TcpEstimate::REASON_PLATFORM_ANGLE,
     });
     round_trip(&TcpMeasurement {
         stamp: stamp(),

@@ -78,6 +78,8 @@ class TcpEstimate(IdlStruct, typename="rpkm_msgs::msg::dds_::TcpEstimate_"):
     iterations: t.uint32
     model: t.uint8
     converged: bool
+    outcome: t.uint8
+    reason: t.uint8
 
 
 # The same formulas as in nodes/transport/tests/dds_cyclone_interop.rs.
@@ -95,6 +97,8 @@ def expected_estimate(seq):
         iterations=seq + 2,
         model=29,
         converged=seq % 2 == 0,
+        outcome=seq % 3,
+        reason=seq % 7,
     )
 
 
@@ -130,6 +134,8 @@ def as_dict(msg):
         "iterations": msg.iterations,
         "model": msg.model,
         "converged": bool(msg.converged),
+        "outcome": msg.outcome,
+        "reason": msg.reason,
     }
 
 

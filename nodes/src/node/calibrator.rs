@@ -148,7 +148,9 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
         sigmas[id.index] = id.sigma;
     }
     let mut msg = parameters_msg(&cal.params, cal.model, &sigmas);
-    msg.measurement_count = u32::try_from(cal.rows).unwrap_or(u32::MAX);
+    // Measurements, not the fit's rows: a pose gives one row per measured direction (x and y
+    // of a tracker, ...), so the 194 measurements of the demo campaign made 453 rows.
+    msg.measurement_count = u32::try_from(cal_part.poses.len()).unwrap_or(u32::MAX);
     // RMS over the length directions, weighted by their rows (angles have another unit).
     let (sum, rows) = cal
         .rms
@@ -271,9 +273,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         validation_prefix: p.string("validation_prefix", "val").map_err(bad_param)?,
         selection: p.string("selection", "map").map_err(bad_param)?,
         max_condition: p.positive("max_condition", 100.0).map_err(bad_param)?,
-        outlier_sigma: p.f64("outlier_sigma", 0.0).map_err(bad_param)?,
+        outlier_sigma: p
+            .f64_in("outlier_sigma", 0.0, super::params::OUTLIER_SIGMA, " σ")
+            .map_err(bad_param)?,
     };
-    let every = p.u64("calibrate_every", 0).map_err(bad_param)?;
+    let every = p
+        .u64_in("calibrate_every", 0, super::params::MEASUREMENT_COUNT)
+        .map_err(bad_param)?;
     let idle_end = p
         .f64_in("idle_end_s", 0.0, super::params::DURATION_S, " s")
         .map_err(bad_param)?;
@@ -353,8 +359,10 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                     last = (
                         DiagnosticStatus::OK,
                         format!(
-                            "calibration {calibrations}: {n} measurements, RMS {:.2} µm, \
-                             condition {:.1}",
+                            "calibration {calibrations}: {n} measurements ({} calibrated, {} \
+                             held out), RMS {:.2} µm, condition {:.1}",
+                            out.parameters.measurement_count,
+                            n.saturating_sub(u64::from(out.parameters.measurement_count)),
                             out.parameters.cal_rms * 1e6,
                             out.parameters.condition_number
                         ),
@@ -454,6 +462,13 @@ mod tests {
             assert!((v - expect).abs() < 1e-9, "{name}: {v} vs {expect}");
         }
         assert_eq!(out.parameters.model, 29);
+        // The measurements of the calibration part (the held-out setup excluded), not the
+        // fit's rows (x and y of a tracker pose are two).
+        assert_eq!(
+            out.parameters.measurement_count as usize,
+            cal_part.poses.len()
+        );
+        assert!(direct.rows > cal_part.poses.len(), "rows {}", direct.rows);
         assert!(out.parameters.val_rms.is_finite());
         // the tracker's noise (5 µm along the beam, 25-30 µm across) sets the held-out RMS
         assert!(

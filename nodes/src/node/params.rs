@@ -30,6 +30,16 @@ pub const BUFFER_LEN: (u64, u64) = (1, 1_000_000);
 /// Bounds of a busy-poll time, ms: it costs a core while it lasts, and beyond a second it
 /// is no longer a latency measure.
 pub const BUSY_POLL_MS: (f64, f64) = (0.0, 1000.0);
+/// Bounds of a count of samples (`status_every`, `debounce_samples`): at least one sample,
+/// at most a million (two minutes of an 8 kHz stream; beyond, a level or a report never
+/// comes).
+pub const SAMPLE_COUNT: (u64, u64) = (1, 1_000_000);
+/// Bounds of `calibrate_every`, measurements: 0 (off) or up to a million held in memory.
+pub const MEASUREMENT_COUNT: (u64, u64) = (0, 1_000_000);
+/// Bounds of `rt_priority`: 0 (normal scheduling) or a SCHED_FIFO priority 1..=99.
+pub const RT_PRIORITY: (u64, u64) = (0, 99);
+/// Bounds of `outlier_sigma`, σ: 0 (no outlier removal) up to 100.
+pub const OUTLIER_SIGMA: (f64, f64) = (0.0, 100.0);
 
 /// Where a parameter value came from, for messages: `file.yaml: /node/ros__parameters/key`.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -334,10 +334,16 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             .map_err(bad_param)?,
         dq_warn_m: p.positive("dq_warn_m", d.dq_warn_m).map_err(bad_param)?,
         dq_error_m: p.positive("dq_error_m", d.dq_error_m).map_err(bad_param)?,
+        // Bounded (1 to a million) where read: 0 was silently taken as 1.
         debounce_samples: p
-            .u64("debounce_samples", u64::from(d.debounce_samples))
+            .u64_in(
+                "debounce_samples",
+                u64::from(d.debounce_samples),
+                super::params::SAMPLE_COUNT,
+            )
             .map_err(bad_param)?
-            .clamp(1, u64::from(u32::MAX)) as u32,
+            .try_into()
+            .unwrap_or(u32::MAX),
     };
     if thresholds.error_percent < thresholds.warn_percent {
         return Err(crate::error::bad_input(format!(
@@ -345,7 +351,9 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             thresholds.error_percent, thresholds.warn_percent
         )));
     }
-    let status_every = p.u64("status_every", 1).map_err(bad_param)?.max(1);
+    let status_every = p
+        .u64_in("status_every", 1, super::params::SAMPLE_COUNT)
+        .map_err(bad_param)?;
     let busy = p
         .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
         .map_err(bad_param)?;

@@ -8,8 +8,10 @@
 //! non-physical branch after a large jump and still converge. A warm result that fails is
 //! solved again cold; when that fails too, the pose comes from the rigid forward model of
 //! (q1, q4) and the message says so: `converged = false`, `iterations = 0`, rod and drive
-//! forces 0, loop residuals those of the rigid pose (they show the incompatibility). The
-//! reason is counted on /diagnostics (WARN; ERROR while it persists). A state no model can
+//! forces 0, loop residuals those of the rigid pose (they show the incompatibility). Every
+//! estimate says how it was obtained (`outcome`: OK, WARM_REJECTED_COLD_OK, RIGID_FALLBACK)
+//! and which check rejected the elastic solve (`reason`, the core's [`Reason`] code); the
+//! reasons are also counted on /diagnostics (WARN; ERROR while it persists). A state no model can
 //! solve gets no estimate. ψ is published wrapped to (−π, π].
 //! Per sample nothing is allocated: static nalgebra types, a `Copy` message, zero-copy
 //! publishing on iceoryx2.
@@ -131,6 +133,8 @@ impl Estimator {
             stamp: state.stamp,
             seq: state.seq,
             model,
+            outcome: TcpEstimate::OUTCOME_OK,
+            reason: TcpEstimate::REASON_NONE,
             ..Default::default()
         };
         match solved {
@@ -141,6 +145,8 @@ impl Estimator {
                     c.warm_rejected += 1;
                     c.reject(v.reason);
                     self.last_warm_rejection = Some(v.reason);
+                    est.outcome = TcpEstimate::OUTCOME_WARM_REJECTED_COLD_OK;
+                    est.reason = v.reason.code();
                 }
                 c.consecutive_failures = 0;
                 let eq = s.eq;
@@ -190,6 +196,8 @@ impl Estimator {
         est.y = rigid.y() / MM_PER_M;
         est.psi = wrap_angle(rigid.psi());
         est.converged = false;
+        est.outcome = TcpEstimate::OUTCOME_RIGID_FALLBACK;
+        est.reason = self.last_error.as_ref().map_or(0, |e| reason_of(e).code());
         est.iterations = 0;
         est.loop_residuals = loop_residuals(g, q, rigid.x(), rigid.y(), rigid.psi());
         self.counts.estimates += 1;
@@ -303,7 +311,12 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         .params
         .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
         .map_err(super::bad_param)?;
-    let rt_priority = ctx.params.u64("rt_priority", 0).map_err(super::bad_param)?;
+    // Bounded where read: an invalid priority is bad configuration (exit 2), not a node that
+    // says so in its log and runs at normal priority.
+    let rt_priority = ctx
+        .params
+        .u64_in("rt_priority", 0, super::params::RT_PRIORITY)
+        .map_err(super::bad_param)?;
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
     let parameters = if follow {
         Some(ctx.subscriber(&topic::PARAMETERS)?)
@@ -406,6 +419,10 @@ mod tests {
         )?;
         assert_eq!(first.seq, 7);
         assert!(first.converged);
+        assert_eq!(
+            (first.outcome, first.reason),
+            (TcpEstimate::OUTCOME_OK, TcpEstimate::REASON_NONE)
+        );
         assert!((first.x - truth.x / MM_PER_M).abs() < 1e-12);
         assert!((first.y - truth.y / MM_PER_M).abs() < 1e-12);
         for i in 0..4 {
@@ -464,6 +481,8 @@ mod tests {
         s.follower = FOLLOWERS_23;
         let e = est.estimate(&s).ok_or("no estimate")?;
         assert!(e.converged);
+        assert_eq!(e.outcome, TcpEstimate::OUTCOME_WARM_REJECTED_COLD_OK);
+        assert_eq!(e.reason, TcpEstimate::REASON_PLATFORM_ANGLE);
         assert!(off_rigid(&e, b)? < 1e-6, "{} mm", off_rigid(&e, b)?);
         assert!(e.psi.abs() < 0.01);
         assert_eq!(est.counts.warm_rejected, 1, "{:?}", est.counts);
@@ -486,6 +505,7 @@ mod tests {
         let mut est = Estimator::new(geometry());
         let e = est.estimate(&state(bad, 1)).ok_or("no estimate")?;
         assert!(!e.converged);
+        assert_eq!(e.outcome, TcpEstimate::OUTCOME_RIGID_FALLBACK);
         assert_eq!(e.iterations, 0);
         assert_eq!(e.drive_forces, [0.0; 4]);
         assert!(off_rigid(&e, bad)? < 1e-9);
@@ -509,6 +529,8 @@ mod tests {
                 .map(|v| v.value.clone())
         };
         assert_eq!(value(&st, "last_reason").as_deref(), Some(reason.as_str()));
+        assert_eq!(e.reason, reason.code(), "the message names the same check");
+        assert_ne!(e.reason, TcpEstimate::REASON_NONE);
         for seq in 2..=ERROR_AFTER_CONSECUTIVE {
             let e = est.estimate(&state(bad, seq)).ok_or("no estimate")?;
             assert!(!e.converged);
@@ -523,6 +545,22 @@ mod tests {
             "cumulative warning"
         );
         Ok(())
+    }
+
+    #[test]
+    fn message_reason_codes_are_the_cores() {
+        let msg = [
+            (Reason::NotConverged, TcpEstimate::REASON_NOT_CONVERGED),
+            (Reason::LoopClosure, TcpEstimate::REASON_LOOP_CLOSURE),
+            (Reason::ForceBalance, TcpEstimate::REASON_FORCE_BALANCE),
+            (Reason::ForceLimit, TcpEstimate::REASON_FORCE_LIMIT),
+            (Reason::PlatformAngle, TcpEstimate::REASON_PLATFORM_ANGLE),
+            (Reason::FarFromRigid, TcpEstimate::REASON_FAR_FROM_RIGID),
+        ];
+        assert_eq!(msg.len(), Reason::ALL.len());
+        for (r, code) in msg {
+            assert_eq!(r.code(), code, "{r}");
+        }
     }
 
     #[test]

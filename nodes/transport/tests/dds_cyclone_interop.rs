@@ -105,6 +105,8 @@ fn expected_estimate(seq: u64) -> TcpEstimate {
         iterations: seq as u32 + 2,
         model: 29,
         converged: seq % 2 == 0,
+        outcome: (seq % 3) as u8,
+        reason: (seq % 7) as u8,
     }
 }
 
@@ -145,6 +147,8 @@ fn estimate_json(m: &TcpEstimate) -> serde_json::Value {
         "iterations": m.iterations,
         "model": m.model,
         "converged": m.converged,
+        "outcome": m.outcome,
+        "reason": m.reason,
     })
 }
 

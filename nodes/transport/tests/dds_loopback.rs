@@ -26,6 +26,8 @@ fn estimate(seq: u64) -> TcpEstimate {
         iterations: seq as u32,
         model: TcpEstimate::MODEL_24,
         converged: seq % 2 == 1,
+        outcome: (seq % 3) as u8,
+        reason: (seq % 7) as u8,
     }
 }
 
