@@ -1,0 +1,62 @@
+//! The `dds` source: ActuatorState and TcpMeasurement from a controller over DDS.
+
+use std::time::Duration;
+
+use rpkm_msgs::{ActuatorState, TcpMeasurement};
+use rpkm_transport::{topic, Backend, Qos, Topic};
+
+use super::output::Output;
+use crate::error::bad_input;
+use crate::node::{bad_param, shutdown, Idle, NodeContext};
+
+/// A topic name that lives as long as the node (the transport keeps `&'static str` names).
+fn leak(s: String) -> &'static str {
+    Box::leak(s.into_boxed_str())
+}
+
+/// Republishes what the controller sends until shutdown.
+pub(super) fn run(ctx: &NodeContext, out: &mut Output) -> anyhow::Result<()> {
+    let p = &ctx.params;
+    let a_name = leak(
+        p.string("input_actuator_topic", "/rpkm/controller/actuator_state")
+            .map_err(bad_param)?,
+    );
+    let m_name = leak(
+        p.string(
+            "input_measurement_topic",
+            "/rpkm/controller/tcp_measurement",
+        )
+        .map_err(bad_param)?,
+    );
+    if ctx.output != Backend::Ipc
+        && (a_name == topic::ACTUATOR_STATE.name() || m_name == topic::TCP_MEASUREMENT.name())
+    {
+        return Err(bad_input(format!(
+            "ingest: input topics {a_name}, {m_name} would also receive this node's own \
+             DDS output; use other input topics or --backend ipc"
+        )));
+    }
+    let a_topic: Topic<ActuatorState> = Topic::new(a_name, topic::ACTUATOR_STATE.qos());
+    let m_topic: Topic<TcpMeasurement> = Topic::new(m_name, Qos::reliable(256));
+    let states = ctx.transport.subscriber_on(&a_topic, Backend::Dds)?;
+    let measurements = ctx.transport.subscriber_on(&m_topic, Backend::Dds)?;
+    let mut idle = Idle::new(Duration::from_millis(50), Duration::from_micros(500));
+    while !shutdown::requested() {
+        let mut worked = false;
+        while let Some(s) = states.try_recv()? {
+            worked = true;
+            out.state(&s, a_name)?;
+        }
+        while let Some(m) = measurements.try_recv()? {
+            worked = true;
+            out.measurement(&m, m_name)?;
+        }
+        out.report_if_due()?;
+        if worked {
+            idle.worked();
+        } else {
+            idle.wait();
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,141 @@
+//! Where every source's samples go: the publishers, the validation of the messages, the counts
+//! and the one `/diagnostics` report.
+
+use rpkm_core::campaign::{Campaign, Pose};
+use rpkm_msgs::{ActuatorState, CampaignInfo, DiagnosticArray, TcpMeasurement, Time};
+use rpkm_transport::{topic, Publisher};
+
+use super::report::Tally;
+use super::validate::{reject, Limits, Reject, RejectKind, Validator};
+use super::END_OF_CAMPAIGN;
+use crate::campaign_bag::{campaign_info, pose_messages};
+use crate::node::{diagnostic_array, Every, NodeContext};
+
+/// The publishers and bookkeeping shared by the sources.
+pub(super) struct Output {
+    states: Publisher<ActuatorState>,
+    measurements: Publisher<TcpMeasurement>,
+    info: Publisher<CampaignInfo>,
+    diagnostics: Publisher<DiagnosticArray>,
+    validator: Validator,
+    pub(super) tally: Tally,
+    seq: u64,
+    last_stamp: Time,
+    report: Every,
+    node: String,
+    source: String,
+}
+
+impl Output {
+    /// The publishers of node `ctx`, validating with `limits`; `source` names the input on
+    /// /diagnostics.
+    pub(super) fn open(ctx: &NodeContext, limits: Limits, source: &str) -> anyhow::Result<Self> {
+        Ok(Self {
+            states: ctx.publisher(&topic::ACTUATOR_STATE)?,
+            measurements: ctx.publisher(&topic::TCP_MEASUREMENT)?,
+            info: ctx.publisher(&topic::CAMPAIGN_INFO)?,
+            diagnostics: ctx.publisher(&topic::DIAGNOSTICS)?,
+            validator: Validator::new(limits),
+            tally: Tally::default(),
+            seq: 0,
+            last_stamp: Time::default(),
+            report: Every::new(ctx.diagnostics_period()?),
+            node: ctx.name.clone(),
+            source: source.to_owned(),
+        })
+    }
+
+    /// Counts a reject and logs it: nothing the node drops goes unsaid.
+    pub(super) fn reject(&mut self, r: Reject) {
+        crate::node::log_line(&self.node, format_args!("rejected: {}", r.detail));
+        self.tally.reject(r);
+    }
+
+    /// The campaign's CampaignInfo (source, comments, covariate names); `at` names the header.
+    pub(super) fn info(&mut self, c: &Campaign, at: &str) -> anyhow::Result<()> {
+        match campaign_info(c) {
+            Ok(i) => self.info.publish(&i)?,
+            Err(e) => self.reject(reject(RejectKind::Malformed, format!("{at}: {e}"))),
+        }
+        Ok(())
+    }
+
+    /// Validates and publishes one pose of a campaign (state, then its measurement).
+    pub(super) fn pose(&mut self, c: &Campaign, pose: &Pose) -> anyhow::Result<()> {
+        let label = format!("{}:{}", c.source, pose.line);
+        let (mut state, measurement) = match pose_messages(c, self.seq as usize, pose) {
+            Ok(m) => m,
+            Err(e) => {
+                self.reject(reject(RejectKind::OutOfRange, format!("{label}: {e}")));
+                return Ok(());
+            }
+        };
+        // seq counts the published states over the node's life, so that it increases across
+        // campaigns and the estimates echo a unique number.
+        state.seq = self.seq + 1;
+        if let Err(r) = self.validator.state(&state, &label) {
+            self.reject(r);
+            return Ok(());
+        }
+        self.publish_state(&state)?;
+        // A bad measurement does not hold back its state, which was fine.
+        self.measurement(&measurement, &label)
+    }
+
+    /// Validates and publishes a drive state from a live source.
+    pub(super) fn state(&mut self, s: &ActuatorState, label: &str) -> anyhow::Result<()> {
+        match self.validator.state(s, label) {
+            Ok(()) => self.publish_state(s),
+            Err(r) => {
+                self.reject(r);
+                Ok(())
+            }
+        }
+    }
+
+    /// Validates and publishes a measurement.
+    pub(super) fn measurement(&mut self, m: &TcpMeasurement, label: &str) -> anyhow::Result<()> {
+        match self.validator.measurement(m, label) {
+            Ok(()) => {
+                self.measurements.publish(m)?;
+                self.tally.accepted_measurements += 1;
+            }
+            Err(r) => self.reject(r),
+        }
+        Ok(())
+    }
+
+    fn publish_state(&mut self, state: &ActuatorState) -> anyhow::Result<()> {
+        self.states.publish(state)?;
+        self.seq = state.seq;
+        self.last_stamp = state.stamp;
+        self.tally.accepted_states += 1;
+        Ok(())
+    }
+
+    /// The end-of-campaign marker: the calibrator runs when it receives it.
+    pub(super) fn end_marker(&mut self) -> anyhow::Result<()> {
+        self.measurements.publish(&TcpMeasurement {
+            stamp: self.last_stamp,
+            setup: END_OF_CAMPAIGN.to_owned(),
+            instrument: TcpMeasurement::NONE,
+            ..Default::default()
+        })?;
+        Ok(())
+    }
+
+    /// Publishes the /diagnostics status when its period has passed.
+    pub(super) fn report_if_due(&mut self) -> anyhow::Result<()> {
+        if self.report.due() {
+            self.report_now()?;
+        }
+        Ok(())
+    }
+
+    /// Publishes the /diagnostics status now.
+    pub(super) fn report_now(&mut self) -> anyhow::Result<()> {
+        let status = self.tally.status(&self.node, &self.source);
+        self.diagnostics.publish(&diagnostic_array(status))?;
+        Ok(())
+    }
+}
