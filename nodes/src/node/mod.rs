@@ -9,6 +9,7 @@
 
 pub mod calibrator;
 pub mod ingest;
+pub mod inputs;
 pub mod params;
 pub mod preload_monitor;
 pub mod realtime;
