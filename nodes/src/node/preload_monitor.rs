@@ -20,6 +20,7 @@ use rpkm_core::geometry::rgm;
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, PreloadLevel, PreloadStatus};
 use rpkm_transport::topic;
 
+use super::inputs::{ParameterFollower, SeqGaps};
 use super::{
     bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext,
     GEOMETRY_KEYS, MM_PER_M,
@@ -102,6 +103,8 @@ pub struct Monitor {
     pub implausible: u64,
     /// The last evaluation.
     pub last: Option<Evaluation>,
+    /// Gaps in the input's seq (states lost before they reached the monitor).
+    pub input: SeqGaps,
 }
 
 impl Monitor {
@@ -119,6 +122,7 @@ impl Monitor {
             unsolved: 0,
             implausible: 0,
             last: None,
+            input: SeqGaps::default(),
         }
     }
 
@@ -141,6 +145,7 @@ impl Monitor {
     /// Evaluates one state; `None` when the model has no plausible prediction for it
     /// (counted as unsolved or implausible; the held level stays as it was).
     pub fn evaluate(&mut self, s: &ActuatorState) -> Option<Evaluation> {
+        self.input.next(s.seq);
         let g = &self.geometry;
         let q = s.position.map(|p| p * MM_PER_M);
         let prev = self.previous.as_ref();
@@ -226,7 +231,9 @@ impl Monitor {
         Some(e)
     }
 
-    /// The /diagnostics status: the held level, naming the worst drive.
+    /// The /diagnostics status: the held level, naming the worst drive. Lost input states
+    /// are counted in the values (`input_lost`, ...), not in the level: the level is the
+    /// preload's.
     pub fn status(&self, node: &str) -> DiagnosticStatus {
         let t = self.thresholds;
         let level = match self.level {
@@ -242,10 +249,13 @@ impl Monitor {
                     "no drive state evaluated yet ({} unsolved, {} implausible)",
                     self.unsolved, self.implausible
                 ),
-                vec![
+                [
                     ("unsolved", self.unsolved.to_string()),
                     ("implausible", self.implausible.to_string()),
-                ],
+                ]
+                .into_iter()
+                .chain(self.input.values())
+                .collect(),
             );
         };
         let st = &e.status;
@@ -287,6 +297,7 @@ impl Monitor {
             ("dq3_m", format!("{:e}", st.dq3)),
             ("parameters", self.geometry.source.clone()),
         ];
+        values.extend(self.input.values());
         const KEYS: [[&str; 3]; 4] = [
             [
                 "q1_measured_percent",
@@ -357,14 +368,9 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let busy = p
         .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
         .map_err(bad_param)?;
-    let follow = p.bool("follow_parameters", true).map_err(bad_param)?;
     let geometry = Geometry::from_params(p)?;
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
-    let parameters = if follow {
-        Some(ctx.subscriber(&topic::PARAMETERS)?)
-    } else {
-        None
-    };
+    let mut parameters = ParameterFollower::open(&ctx)?;
     let statuses = ctx.publisher(&topic::PRELOAD_STATUS)?;
     let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
     ctx.log(format!(
@@ -378,21 +384,11 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         Duration::from_millis(20),
     );
     let mut report = Every::new(ctx.diagnostics_period()?);
-    let mut check_parameters = Every::new(Duration::from_millis(20));
     let mut n = 0u64;
+    let mut lost_reported = 0;
     while !super::shutdown::requested() {
-        if let Some(sub) = &parameters {
-            if check_parameters.due() {
-                if let Some(msg) = sub.try_recv()? {
-                    match monitor.geometry().updated(&msg) {
-                        Ok(g) => {
-                            ctx.log(format!("parameters updated from {}", g.source));
-                            monitor.set_geometry(g);
-                        }
-                        Err(e) => ctx.log(format!("ignoring parameters: {e}")),
-                    }
-                }
-            }
+        if let Some(g) = parameters.poll(&ctx, monitor.geometry())? {
+            monitor.set_geometry(g);
         }
         match states.try_recv()? {
             Some(s) => {
@@ -411,6 +407,14 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             None => {
                 if report.due() {
                     diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
+                    // A loss is logged once per report, not per gap (a stall loses in bursts).
+                    if monitor.input.lost > lost_reported {
+                        lost_reported = monitor.input.lost;
+                        ctx.log(format!(
+                            "WARN: {}",
+                            monitor.input.summary().unwrap_or_default()
+                        ));
+                    }
                 }
                 idle.wait_for(&states)?;
             }

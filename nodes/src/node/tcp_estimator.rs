@@ -24,6 +24,7 @@ use rpkm_core::params::{Model, RODS};
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
+use super::inputs::{ParameterFollower, SeqGaps};
 use super::{
     diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext, GEOMETRY_KEYS,
     MM_PER_M,
@@ -77,6 +78,8 @@ pub struct Estimator {
     pub last_error: Option<ElasticError>,
     /// Why the last rejected warm start was rejected.
     pub last_warm_rejection: Option<Reason>,
+    /// Gaps in the input's seq (states lost before they reached the estimator).
+    pub input: SeqGaps,
 }
 
 /// The reason an elastic failure counts under.
@@ -97,6 +100,7 @@ impl Estimator {
             counts: EstimatorCounts::default(),
             last_error: None,
             last_warm_rejection: None,
+            input: SeqGaps::default(),
         }
     }
 
@@ -114,6 +118,7 @@ impl Estimator {
     /// The estimate answering `state`, or `None` when neither the elastic nor the rigid model
     /// solves it.
     pub fn estimate(&mut self, state: &ActuatorState) -> Option<TcpEstimate> {
+        self.input.next(state.seq);
         let g = &self.geometry;
         let q = state.position.map(|p| p * MM_PER_M);
         let prev = self.previous.as_ref();
@@ -205,13 +210,14 @@ impl Estimator {
     }
 
     /// The /diagnostics status of the estimator: OK while every estimate is a plausible
-    /// elastic equilibrium, WARN once one was not (rigid fallback or unsolved), ERROR while
-    /// [`ERROR_AFTER_CONSECUTIVE`] or more in a row were not.
+    /// elastic equilibrium, WARN once one was not (rigid fallback or unsolved) or once input
+    /// states were lost (a gap in their seq), ERROR while [`ERROR_AFTER_CONSECUTIVE`] or more
+    /// in a row had no plausible equilibrium.
     pub fn status(&self, node: &str) -> DiagnosticStatus {
         let c = self.counts;
         let last = self.last_error.as_ref();
         let last_text = last.map_or_else(|| "none".to_owned(), ToString::to_string);
-        let (level, message) = if c.consecutive_failures >= ERROR_AFTER_CONSECUTIVE {
+        let (mut level, mut message) = if c.consecutive_failures >= ERROR_AFTER_CONSECUTIVE {
             (
                 DiagnosticStatus::ERROR,
                 format!(
@@ -239,6 +245,10 @@ impl Estimator {
                 ),
             )
         };
+        if let Some(lost) = self.input.summary() {
+            level = level.max(DiagnosticStatus::WARN);
+            message = format!("{message}; input: {lost}");
+        }
         let mut values = vec![
             ("estimates", c.estimates.to_string()),
             ("cold_starts", c.cold_starts.to_string()),
@@ -266,6 +276,7 @@ impl Estimator {
             let key = REJECTION_KEYS[usize::from(r.code() - 1)];
             values.push((key, c.by_reason[usize::from(r.code() - 1)].to_string()));
         }
+        values.extend(self.input.values());
         values.push(("parameters", self.geometry.source.clone()));
         status(level, node, message, values)
     }
@@ -303,10 +314,6 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     declared.extend(GEOMETRY_KEYS);
     let ctx = NodeContext::open("tcp_estimator", args, &declared, None)?;
     let geometry = Geometry::from_params(&ctx.params)?;
-    let follow = ctx
-        .params
-        .bool("follow_parameters", true)
-        .map_err(super::bad_param)?;
     let busy = ctx
         .params
         .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
@@ -318,11 +325,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         .u64_in("rt_priority", 0, super::params::RT_PRIORITY)
         .map_err(super::bad_param)?;
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
-    let parameters = if follow {
-        Some(ctx.subscriber(&topic::PARAMETERS)?)
-    } else {
-        None
-    };
+    let mut parameters = ParameterFollower::open(&ctx)?;
     let estimates = ctx.publisher(&topic::TCP_ESTIMATE)?;
     let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
     ctx.log(format!(
@@ -346,20 +349,10 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         Duration::from_millis(20),
     );
     let mut report = Every::new(ctx.diagnostics_period()?);
-    let mut check_parameters = Every::new(Duration::from_millis(20));
+    let mut lost_reported = 0;
     while !super::shutdown::requested() {
-        if let Some(sub) = &parameters {
-            if check_parameters.due() {
-                if let Some(msg) = sub.try_recv()? {
-                    match est.geometry().updated(&msg) {
-                        Ok(g) => {
-                            ctx.log(format!("parameters updated from {}", g.source));
-                            est.set_geometry(g);
-                        }
-                        Err(e) => ctx.log(format!("ignoring parameters: {e}")),
-                    }
-                }
-            }
+        if let Some(g) = parameters.poll(&ctx, est.geometry())? {
+            est.set_geometry(g);
         }
         match states.try_recv()? {
             Some(state) => {
@@ -371,6 +364,11 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             None => {
                 if report.due() {
                     diagnostics.publish(&diagnostic_array(est.status(&ctx.name)))?;
+                    // A loss is logged once per report, not per gap (a stall loses in bursts).
+                    if est.input.lost > lost_reported {
+                        lost_reported = est.input.lost;
+                        ctx.log(format!("WARN: {}", est.input.summary().unwrap_or_default()));
+                    }
                 }
                 idle.wait_for(&states)?;
             }
@@ -544,6 +542,26 @@ mod tests {
             DiagnosticStatus::WARN,
             "cumulative warning"
         );
+        Ok(())
+    }
+
+    #[test]
+    fn a_gap_in_the_input_is_a_warning_with_its_size() -> Result<(), Box<dyn std::error::Error>> {
+        let q = igm(&Params::nominal(), Model::M29, 0.0, 1700.0)?.q();
+        let mut est = Estimator::new(geometry());
+        for seq in [1, 2, 767] {
+            est.estimate(&state(q, seq)).ok_or("no estimate")?;
+        }
+        let st = est.status("e");
+        assert_eq!(st.level, DiagnosticStatus::WARN, "{}", st.message);
+        assert!(
+            st.message
+                .ends_with("input: 764 actuator states lost in 1 gaps (largest 764)"),
+            "{}",
+            st.message
+        );
+        let lost = st.values.iter().find(|v| v.key == "input_lost");
+        assert_eq!(lost.map(|v| v.value.as_str()), Some("764"));
         Ok(())
     }
 

@@ -1,0 +1,151 @@
+//! What the servo-rate nodes (`tcp_estimator`, `preload_monitor`) share about their inputs:
+//! gaps in the actuator stream ([`SeqGaps`]) and following new Parameters while they run
+//! ([`ParameterFollower`]).
+
+use std::time::Duration;
+
+use rpkm_msgs::Parameters;
+use rpkm_transport::{topic, Subscriber};
+
+use super::{bad_param, Every, Geometry, NodeContext};
+
+/// Gaps in a stream whose `seq` counts up by one per sample (ingest's ActuatorState): the
+/// actuator topic is best effort, so a subscriber that falls more than its queue behind
+/// loses the oldest samples, and this is where that shows.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SeqGaps {
+    last: Option<u64>,
+    /// Gaps seen (each one or more samples missing).
+    pub gaps: u64,
+    /// Samples missing in all gaps.
+    pub lost: u64,
+    /// The largest gap, samples.
+    pub largest: u64,
+    /// Times `seq` went back or repeated (the publisher restarted): not a gap.
+    pub restarts: u64,
+}
+
+impl SeqGaps {
+    /// Takes the `seq` of the next sample received; returns how many samples are missing
+    /// before it (0: none).
+    pub fn next(&mut self, seq: u64) -> u64 {
+        let missing = match self.last {
+            Some(prev) if seq > prev => seq - prev - 1,
+            Some(_) => {
+                self.restarts += 1;
+                0
+            }
+            None => 0,
+        };
+        self.last = Some(seq);
+        if missing > 0 {
+            self.gaps += 1;
+            self.lost = self.lost.saturating_add(missing);
+            self.largest = self.largest.max(missing);
+        }
+        missing
+    }
+
+    /// The counters as /diagnostics values.
+    pub fn values(&self) -> [(&'static str, String); 4] {
+        [
+            ("input_gaps", self.gaps.to_string()),
+            ("input_lost", self.lost.to_string()),
+            ("largest_input_gap", self.largest.to_string()),
+            ("input_restarts", self.restarts.to_string()),
+        ]
+    }
+
+    /// One line for people, or `None` while nothing was lost.
+    pub fn summary(&self) -> Option<String> {
+        (self.lost > 0).then(|| {
+            format!(
+                "{} actuator states lost in {} gaps (largest {})",
+                self.lost, self.gaps, self.largest
+            )
+        })
+    }
+}
+
+/// How often a following node looks for new Parameters: a calibration result is rare, and
+/// the check must cost the servo loop nothing.
+const PARAMETER_CHECK: Duration = Duration::from_millis(20);
+
+/// Follows `/rpkm/parameters` when the node's `follow_parameters` (default true) says so.
+pub struct ParameterFollower {
+    parameters: Option<Subscriber<Parameters>>,
+    check: Every,
+}
+
+impl ParameterFollower {
+    /// Reads `follow_parameters` and subscribes when it is true.
+    pub fn open(ctx: &NodeContext) -> anyhow::Result<Self> {
+        let follow = ctx
+            .params
+            .bool("follow_parameters", true)
+            .map_err(bad_param)?;
+        let parameters = if follow {
+            Some(ctx.subscriber(&topic::PARAMETERS)?)
+        } else {
+            None
+        };
+        Ok(Self {
+            parameters,
+            check: Every::new(PARAMETER_CHECK),
+        })
+    }
+
+    /// The geometry of a Parameters message received since the last check, built on
+    /// `current` (logged); a message that does not fit the node's model is logged and
+    /// ignored. At most one look per [`PARAMETER_CHECK`].
+    pub fn poll(
+        &mut self,
+        ctx: &NodeContext,
+        current: &Geometry,
+    ) -> anyhow::Result<Option<Geometry>> {
+        let Some(sub) = &self.parameters else {
+            return Ok(None);
+        };
+        if !self.check.due() {
+            return Ok(None);
+        }
+        let Some(msg) = sub.try_recv()? else {
+            return Ok(None);
+        };
+        match current.updated(&msg) {
+            Ok(g) => {
+                ctx.log(format!("parameters updated from {}", g.source));
+                Ok(Some(g))
+            }
+            Err(e) => {
+                ctx.log(format!("ignoring parameters: {e}"));
+                Ok(None)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gaps_are_counted_with_their_size_and_restarts_are_not_gaps() {
+        let mut g = SeqGaps::default();
+        for seq in [1, 2, 3] {
+            assert_eq!(g.next(seq), 0);
+        }
+        assert_eq!(g.next(8), 4, "4, 5, 6, 7 missing");
+        assert_eq!(g.next(9), 0);
+        assert_eq!(g.next(11), 1);
+        assert_eq!((g.gaps, g.lost, g.largest), (2, 5, 4));
+        assert_eq!(g.next(1), 0, "the publisher restarted");
+        assert_eq!(g.next(2), 0);
+        assert_eq!((g.gaps, g.lost, g.restarts), (2, 5, 1));
+        assert_eq!(
+            g.summary().as_deref(),
+            Some("5 actuator states lost in 2 gaps (largest 4)")
+        );
+        assert_eq!(SeqGaps::default().summary(), None);
+    }
+}
