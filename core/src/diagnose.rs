@@ -289,7 +289,9 @@ pub fn diagnose(
     // the current model), and every model compared again with those weights (the nested
     // tests need one weighting, any fixed one).
     let mut with: Vec<&dyn Effect> = in_model.to_vec();
-    if let Some(top) = strongest(&first.0).and_then(|t| tried.iter().find(|e| e.name() == t)) {
+    if let Some(top) =
+        strongest(&first.candidates).and_then(|t| tried.iter().find(|e| e.name() == t))
+    {
         with.push(*top);
     }
     let (_, est, copts) = current_model(campaign, &with, opts)?;
@@ -341,7 +343,11 @@ fn conclude(
     let campaign = search.campaign;
     let in_names: Vec<&str> = search.in_model.iter().map(|e| e.name()).collect();
     let structure = sparse::structure(campaign, &base.rows);
-    let (mut candidates, fits, skipped) = round;
+    let Round {
+        mut candidates,
+        fits,
+        skipped,
+    } = round;
     candidates.sort_by(|a, b| b.bic_gain.total_cmp(&a.bic_gain));
     // a single dictionary term's BIC gain: what an effect must beat to be the explanation
     let term_bic = structure.explained_chi2 - (base.rows.len() as f64).ln();
@@ -351,8 +357,8 @@ fn conclude(
     let missing_effect = best.map(|c| c.effect.clone());
     let remaining: &Fitted = missing_effect
         .as_ref()
-        .and_then(|m| fits.iter().find(|f| f.0 == m))
-        .map_or(&base, |f| &f.1);
+        .and_then(|m| fits.iter().find(|(name, _)| name == m))
+        .map_or(&base, |(_, fit)| fit);
     let left = sparse::structure(campaign, &remaining.rows);
     let unexplained = (left.p_value < opts.alpha)
         .then(|| left.pointer.clone())
@@ -404,9 +410,16 @@ fn conclude(
     }
 }
 
-/// What trying every candidate gave: their comparisons, their fits (the parts kept), and
-/// the effects that could not be tried.
-type Round = (Vec<Candidate>, Vec<(&'static str, Fitted)>, Vec<Skipped>);
+/// What trying every candidate gave.
+#[derive(Default)]
+struct Round {
+    /// Each tried effect compared with the current model.
+    candidates: Vec<Candidate>,
+    /// Each compared effect's fit (with the parts of it kept), by effect name.
+    fits: Vec<(&'static str, Fitted)>,
+    /// The effects that could not be tried, and why.
+    skipped: Vec<Skipped>,
+}
 
 /// Fit every effect of `tried` added to the model and compare it with `base`.
 fn candidates(
@@ -419,7 +432,7 @@ fn candidates(
     level: f64,
 ) -> Round {
     let start = Params::nominal();
-    let mut out = (Vec::new(), Vec::new(), Vec::new());
+    let mut out = Round::default();
     for effect in tried {
         let skip = |reason: String| Skipped {
             effect: effect.name().to_owned(),
@@ -428,16 +441,16 @@ fn candidates(
         match try_effect(campaign, val, in_model, *effect, &start, copts) {
             Ok((full, kept)) => match compare(base, &full, &kept, *effect, campaign, level) {
                 Some(c) => {
-                    out.0.push(c);
-                    out.1.push((effect.name(), kept));
+                    out.candidates.push(c);
+                    out.fits.push((effect.name(), kept));
                 }
-                None => out.2.push(skip(
+                None => out.skipped.push(skip(
                     "no parameter of it is observable with this campaign (the geometry \
                      absorbs its signature)"
                         .to_owned(),
                 )),
             },
-            Err(e) => out.2.push(skip(e.to_string())),
+            Err(e) => out.skipped.push(skip(e.to_string())),
         }
     }
     out
@@ -594,12 +607,12 @@ fn weak_parts(cal: &Calibration, set: &EffectSet, effect: &str) -> Vec<usize> {
     let own: Vec<(usize, f64)> = set
         .layout()
         .iter()
-        .filter(|(e, _, _, local)| *e == effect && !local)
-        .filter(|(_, _, k, _)| cal.effects[*k].identified)
-        .map(|(_, _, k, _)| {
-            let e = &cal.effects[*k];
+        .filter(|slot| slot.effect == effect && !slot.setup_local)
+        .filter(|slot| cal.effects[slot.index].identified)
+        .map(|slot| {
+            let e = &cal.effects[slot.index];
             (
-                *k,
+                slot.index,
                 if e.sigma > 0.0 {
                     (e.value / e.sigma).abs()
                 } else {
@@ -790,17 +803,21 @@ fn held_out_rms(
     // machine parameters carry over by name; setup-local ones start at zero
     let mut theta: Vec<f64> = layout
         .iter()
-        .map(|(e, prm, _, local)| {
-            if *local {
+        .map(|slot| {
+            if slot.setup_local {
                 return 0.0;
             }
             cal_layout
                 .iter()
-                .find(|(ce, cp, _, _)| ce == e && cp.name == prm.name)
-                .map_or(0.0, |(_, _, k, _)| cal.theta[*k])
+                .find(|c| c.effect == slot.effect && c.param.name == slot.param.name)
+                .map_or(0.0, |c| cal.theta[c.index])
         })
         .collect();
-    let local: Vec<usize> = layout.iter().filter(|l| l.3).map(|l| l.2).collect();
+    let local: Vec<usize> = layout
+        .iter()
+        .filter(|slot| slot.setup_local)
+        .map(|slot| slot.index)
+        .collect();
     let weights: Vec<f64> = val.sigma.iter().map(|s| 1.0 / s).collect();
     for _ in 0..if local.is_empty() { 0 } else { 5 } {
         let errs =
@@ -962,25 +979,35 @@ fn length_sigmas(rows: &[Residual]) -> Vec<f64> {
 }
 
 fn groups(rows: &[Residual]) -> Vec<GroupRms> {
-    let mut acc: std::collections::BTreeMap<(String, String), (usize, f64, f64, f64)> =
-        Default::default();
+    /// Sums over the rows of one instrument and direction.
+    #[derive(Default)]
+    struct Sums {
+        rows: usize,
+        value2: f64,
+        sigma2: f64,
+        chi2: f64,
+    }
+    let mut acc: std::collections::BTreeMap<(String, String), Sums> = Default::default();
     for r in rows {
         let e = acc
             .entry((r.instrument.as_str().to_owned(), r.direction.to_string()))
             .or_default();
-        e.0 += 1;
-        e.1 += r.value * r.value;
-        e.2 += r.sigma * r.sigma;
-        e.3 += (r.value / r.sigma).powi(2);
+        e.rows += 1;
+        e.value2 += r.value * r.value;
+        e.sigma2 += r.sigma * r.sigma;
+        e.chi2 += (r.value / r.sigma).powi(2);
     }
     acc.into_iter()
-        .map(|((instrument, direction), (n, v, s, c))| GroupRms {
-            instrument,
-            direction,
-            rows: n,
-            rms: (v / n as f64).sqrt() * 1e3,
-            noise: (s / n as f64).sqrt() * 1e3,
-            chi2_per_row: c / n as f64,
+        .map(|((instrument, direction), sum)| {
+            let n = sum.rows as f64;
+            GroupRms {
+                instrument,
+                direction,
+                rows: sum.rows,
+                rms: (sum.value2 / n).sqrt() * 1e3,
+                noise: (sum.sigma2 / n).sqrt() * 1e3,
+                chi2_per_row: sum.chi2 / n,
+            }
         })
         .collect()
 }

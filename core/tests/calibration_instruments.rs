@@ -272,3 +272,25 @@ fn linked_parameters_follow_their_masters() {
         "l5 is linked, not identified"
     );
 }
+
+/// Effects bound to one campaign read their corrections by pose index: calibrating another
+/// campaign with them is refused, naming both sizes, instead of correcting the wrong poses.
+#[test]
+fn effects_bound_to_another_campaign_are_refused() {
+    let truth = Params::nominal();
+    let lt = support::measure(&design::lt(), &truth, 3, true, "lt.csv");
+    let kgm = support::measure(&design::kgm(), &truth, 4, true, "kgm.csv");
+    assert_ne!(lt.poses.len(), kgm.poses.len());
+    let scale = rpkm_core::effects::by_name("encoder_scale").expect("encoder_scale");
+    let set = rpkm_core::effects::EffectSet::bind(&[scale.as_ref()], &lt, &truth)
+        .expect("encoder_scale binds to the tracker campaign");
+    let err = calib::calibrate_with(&kgm, &truth, &Options::default(), &set, &[])
+        .expect_err("another campaign's effects");
+    let text = err.to_string();
+    assert!(
+        text.contains("kgm.csv")
+            && text.contains(&lt.poses.len().to_string())
+            && text.contains(&kgm.poses.len().to_string()),
+        "{text}"
+    );
+}

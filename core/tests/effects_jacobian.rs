@@ -46,7 +46,7 @@ fn effect_jacobians_match_finite_differences() {
         let set = EffectSet::bind(&[effect.as_ref()], &c, &p).expect("bind");
         let n = set.n_params();
         // a point away from zero, so that nonlinear effects are tested off their origin
-        let theta: Vec<f64> = set.layout().iter().map(|l| 0.7 * l.1.prior).collect();
+        let theta: Vec<f64> = set.layout().iter().map(|l| 0.7 * l.param.prior).collect();
         // the thesis's q rows: the decorrelated ones are fixed combinations of them at a pose
         let rows = obs::residuals_in(
             &c,
@@ -61,7 +61,7 @@ fn effect_jacobians_match_finite_differences() {
         .expect("rows");
         let errs = obs::tcp_errors_with(&c, &p, Model::M29, &set.corrections(&theta)).expect("tcp");
         for k in 0..n {
-            let h = 1e-3 * set.layout()[k].1.prior;
+            let h = 1e-3 * set.layout()[k].param.prior;
             let at = |d: f64| {
                 let mut t = theta.clone();
                 t[k] += d;

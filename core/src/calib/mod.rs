@@ -141,6 +141,12 @@ pub enum CalibrationError {
     Pose(#[from] PoseError),
     #[error("{0}: the campaign has no calibration measurements (only circle/none rows or resets)")]
     NoMeasurements(String),
+    #[error("{campaign}: the effects were bound to a campaign of {bound} poses, not to this one of {poses}")]
+    EffectsOfAnotherCampaign {
+        campaign: String,
+        bound: usize,
+        poses: usize,
+    },
     #[error("parameter {0} does not belong to {1}")]
     NotInModel(&'static str, Model),
     #[error("parameter {0} has no influence on these measurements (zero Jacobian column)")]
@@ -276,6 +282,13 @@ pub fn calibrate_with(
             return Err(CalibrationError::NotInModel(NAMES[i], opts.model));
         }
     }
+    if !effects.fits_campaign_of(campaign.poses.len()) {
+        return Err(CalibrationError::EffectsOfAnotherCampaign {
+            campaign: campaign.source.clone(),
+            bound: effects.n_poses(),
+            poses: campaign.poses.len(),
+        });
+    }
     let theta0: Vec<f64> = if theta0.len() == effects.n_params() {
         theta0.to_vec()
     } else {
@@ -384,12 +397,13 @@ impl Plan {
             .filter(|&k| !pb.effects.is_held(k))
             .filter(|&k| {
                 let (frac, signal) = observability[k];
-                frac >= MIN_EFFECT_OBSERVABILITY && signal * layout[k].1.prior >= MIN_EFFECT_SIGNAL
+                frac >= MIN_EFFECT_OBSERVABILITY
+                    && signal * layout[k].param.prior >= MIN_EFFECT_SIGNAL
             })
             .collect();
         let h_theta = DVector::from_iterator(
             free_theta.len(),
-            free_theta.iter().map(|&k| layout[k].1.prior),
+            free_theta.iter().map(|&k| layout[k].param.prior),
         );
         let jr0 = reduced_jacobian(&rows0, &ids, &opts.links);
         Ok(Plan {
@@ -490,17 +504,17 @@ impl Step1Report {
             .layout()
             .iter()
             .enumerate()
-            .map(|(k, (effect, prm, _, _))| {
+            .map(|(k, slot)| {
                 let free = plan.free_theta.iter().position(|&f| f == k);
                 EffectEstimate {
-                    effect,
-                    name: prm.name.clone(),
-                    unit: prm.unit,
+                    effect: slot.effect,
+                    name: slot.param.name.clone(),
+                    unit: slot.param.unit,
                     value: x.theta[k],
                     sigma: free.map_or(0.0, |f| post.sig_theta[f] * s2.sqrt()),
                     observability: plan.observability[k],
                     identified: free.is_some(),
-                    prior: prm.prior,
+                    prior: slot.param.prior,
                 }
             })
             .collect();

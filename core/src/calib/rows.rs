@@ -103,3 +103,24 @@ pub(super) fn cost_of(rows: &[Residual]) -> f64 {
         .map(|r| (r.value / r.sigma).powi(2))
         .sum::<f64>()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::{L4, L5, XA4R};
+
+    /// D maps the reduced unknowns to the 29 parameters: each identified parameter moves
+    /// itself, and a linked one follows its terms (l5 = l4 + 0.5·xa4r, made up for the test).
+    #[test]
+    fn dependency_moves_linked_parameters_with_their_terms() {
+        let links = [Link {
+            param: L5,
+            terms: vec![(L4, 1.0), (XA4R, 0.5)],
+        }];
+        let d = dependency(&[L4, XA4R], &links);
+        assert_eq!(d.shape(), (N_PARAMS, 2));
+        assert_eq!((d[(L4, 0)], d[(XA4R, 1)]), (1.0, 1.0));
+        assert_eq!((d[(L5, 0)], d[(L5, 1)]), (1.0, 0.5));
+        assert_eq!(d.iter().filter(|&&v| v != 0.0).count(), 4);
+    }
+}

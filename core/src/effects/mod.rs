@@ -212,6 +212,19 @@ impl Corrections {
     }
 }
 
+/// One effect parameter's place in the θ of an [`EffectSet`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Slot {
+    /// The effect's name.
+    pub effect: &'static str,
+    pub param: EffectParam,
+    /// Index in θ.
+    pub index: usize,
+    /// One value per setup (an instrument's alignment), not a property of the machine: it
+    /// does not carry over to another campaign.
+    pub setup_local: bool,
+}
+
 /// Effects bound to one campaign, with one parameter vector θ for all of them.
 pub struct EffectSet {
     bound: Vec<(&'static str, Box<dyn Bound>)>,
@@ -236,6 +249,12 @@ impl EffectSet {
             n_poses: 0,
             held: Vec::new(),
         }
+    }
+
+    /// Whether the set was bound to a campaign of `n_poses` poses (an empty set fits any):
+    /// corrections of another campaign would be read at the wrong poses.
+    pub fn fits_campaign_of(&self, n_poses: usize) -> bool {
+        self.bound.is_empty() || self.n_poses == n_poses
     }
 
     /// Bind `effects` to `campaign`.
@@ -273,6 +292,11 @@ impl EffectSet {
         self.bound.is_empty()
     }
 
+    /// Number of poses of the campaign the set is bound to (0 for an empty set).
+    pub fn n_poses(&self) -> usize {
+        self.n_poses
+    }
+
     /// Number of effect parameters.
     pub fn n_params(&self) -> usize {
         self.bound.iter().map(|b| b.1.params().len()).sum()
@@ -283,14 +307,17 @@ impl EffectSet {
         self.bound.iter().map(|b| b.0).collect()
     }
 
-    /// (effect name, parameter, offset in θ, setup-local) of every parameter, in θ order.
-    pub fn layout(&self) -> Vec<(&'static str, EffectParam, usize, bool)> {
+    /// Every effect parameter's place in θ, in θ order.
+    pub fn layout(&self) -> Vec<Slot> {
         let mut out = Vec::new();
-        let mut k = 0;
-        for (name, b) in &self.bound {
-            for prm in b.params() {
-                out.push((*name, prm.clone(), k, b.setup_local()));
-                k += 1;
+        for (effect, b) in &self.bound {
+            for param in b.params() {
+                out.push(Slot {
+                    effect,
+                    param: param.clone(),
+                    index: out.len(),
+                    setup_local: b.setup_local(),
+                });
             }
         }
         out
