@@ -29,12 +29,23 @@ pub fn error_chain(e: &anyhow::Error) -> String {
     text
 }
 
-/// Exit code of an error: 2 for bad input (a [`BadInput`] or a campaign file's
-/// [`CampaignError`](rpkm_core::campaign::CampaignError) anywhere in the chain), 1 otherwise.
+/// Whether an error in a chain is the input's fault: a [`BadInput`], a campaign file the
+/// reader refuses, or data the model cannot use (a pose it cannot evaluate, a calibration that
+/// the campaign cannot determine or that diverges on it, a diagnosis that fails on it). The
+/// core's solvers converge on every campaign of the spec's machine, so their failure says the
+/// data are not such a campaign.
+fn is_bad_input(c: &(dyn std::error::Error + 'static)) -> bool {
+    c.is::<BadInput>()
+        || c.is::<rpkm_core::campaign::CampaignError>()
+        || c.is::<rpkm_core::obs::PoseError>()
+        || c.is::<rpkm_core::calib::CalibrationError>()
+        || c.is::<rpkm_core::diagnose::DiagnoseError>()
+}
+
+/// Exit code of an error: 2 for bad input anywhere in the chain (see [`is_bad_input`]),
+/// 1 otherwise.
 pub fn exit_code(e: &anyhow::Error) -> i32 {
-    if e.chain()
-        .any(|c| c.is::<BadInput>() || c.is::<rpkm_core::campaign::CampaignError>())
-    {
+    if e.chain().any(is_bad_input) {
         2
     } else {
         1
@@ -54,5 +65,14 @@ mod tests {
             "calibrating: c.csv:3:5 (q1): expected a number"
         );
         assert_eq!(exit_code(&anyhow::anyhow!("disk full")), 1);
+        let diverged = rpkm_core::calib::CalibrationError::NotConverged {
+            iterations: 400,
+            cost: 2.4e10,
+            gradient: 9.5e3,
+        };
+        assert_eq!(
+            exit_code(&anyhow::Error::new(diverged).context("calibrating c.csv")),
+            2
+        );
     }
 }

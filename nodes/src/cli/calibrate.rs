@@ -150,9 +150,9 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     let (cal, noise) =
-        calibrate(&campaign, &start, &opts, !args.no_noise_estimation).map_err(|e| match e {
-            calib::CalibrationError::Pose(_) => bad_input(format!("{e}")),
-            other => anyhow::anyhow!("calibrating {}: {other}", args.campaign.display()),
+        // A calibration error is the campaign's (exit 2, crate::error::exit_code).
+        calibrate(&campaign, &start, &opts, !args.no_noise_estimation).map_err(|e| {
+            anyhow::Error::new(e).context(format!("calibrating {}", args.campaign.display()))
         })?;
     let val = validation
         .as_ref()

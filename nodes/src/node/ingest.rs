@@ -123,25 +123,18 @@ fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
 }
 
 /// Streams a campaign file at `rate_hz`; a file that cannot be read is bad input.
-fn file(ctx: &NodeContext, out: &mut Output, path: &str, rate_hz: f64) -> anyhow::Result<bool> {
+fn file(out: &mut Output, path: &str, rate_hz: f64) -> anyhow::Result<bool> {
     let bytes =
         std::fs::read(path).map_err(|e| bad_input(format!("{path}: cannot read campaign: {e}")))?;
     let comments = csv::FileLines::comments(&bytes, path);
     let mut lines = csv::FileLines::new(&bytes);
-    let ended = csv::stream(
+    csv::stream(
         &mut lines,
         path,
         Some(comments),
         out,
         Some(csv::Pacer::new(rate_hz)),
-    )?;
-    ctx.log(format_args!(
-        "end of {path}: {} states, {} measurements published, {} rejected",
-        out.tally.accepted_states,
-        out.tally.accepted_measurements,
-        out.tally.rejected_total()
-    ));
-    Ok(ended)
+    )
 }
 
 /// Runs the node until its input ends (and `exit_at_end`) or SIGINT/SIGTERM.
@@ -155,14 +148,24 @@ pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
     std::thread::sleep(s.start_delay);
     let ended = match s.source.as_str() {
         "dds" => dds::run(&ctx, &mut out).map(|()| false)?,
-        "stdin" | "-" => {
-            let mut lines = csv::Stdin::spawn(&ctx.name);
-            let ended = csv::stream(&mut lines, "stdin", None, &mut out, None)?;
-            ctx.log("end of stdin");
-            ended
-        }
-        path => file(&ctx, &mut out, path, s.rate_hz)?,
+        "stdin" | "-" => csv::stream(
+            &mut csv::Stdin::spawn(&ctx.name),
+            "stdin",
+            None,
+            &mut out,
+            None,
+        )?,
+        path => file(&mut out, path, s.rate_hz)?,
     };
+    if ended {
+        ctx.log(format_args!(
+            "end of {}: {} states, {} measurements published, {} rejected",
+            s.source,
+            out.tally.accepted_states,
+            out.tally.accepted_measurements,
+            out.tally.rejected_total()
+        ));
+    }
     if ended && s.end_marker {
         out.end_marker()?;
     }
