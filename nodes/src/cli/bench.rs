@@ -1,6 +1,8 @@
 //! `rpkm bench discovery`: the discovery loop on random machines whose conventions are drawn
 //! at random, so that a model that only fits our own choices shows it.
 
+mod soak;
+
 use super::bad_input;
 use anyhow::Result;
 use rand::{rngs::StdRng, Rng, SeedableRng};
@@ -32,6 +34,14 @@ pub enum Bench {
     ///
     /// Example: rpkm bench discovery --machines 200 --seed 1 --threads 2 --json bench.json
     Discovery(DiscoveryArgs),
+    /// The launched node set (launch_scripts/rpkm.launch.yaml, source:=stdin) under an
+    /// actuator stream written into ingest's stdin at the stream rate for SECONDS: counts the
+    /// estimates lost and their gaps (at the observer, and in the estimator's and the
+    /// monitor's input) and prints the resident memory of every process at the start, each
+    /// quarter and the end. Exit 1 when an estimate was lost.
+    ///
+    /// Example: rpkm bench soak --seconds 180 --rate-hz 8000
+    Soak(soak::SoakArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -66,6 +76,7 @@ struct Outcome {
 pub fn run(args: &BenchArgs) -> Result<()> {
     match &args.which {
         Bench::Discovery(a) => discovery(a),
+        Bench::Soak(a) => soak::run(a),
     }
 }
 

@@ -205,6 +205,8 @@ pub struct Accumulator {
     pub unpaired: u64,
     /// Measurements accumulated since the last calibration.
     pub measurements: u64,
+    /// Poses without a measurement (instrument NONE), not kept.
+    pub unmeasured: u64,
 }
 
 impl Accumulator {
@@ -217,6 +219,7 @@ impl Accumulator {
             info: None,
             unpaired: 0,
             measurements: 0,
+            unmeasured: 0,
         }
     }
 
@@ -240,8 +243,15 @@ impl Accumulator {
         self.states.iter().rev().any(|s| s.stamp == m.stamp)
     }
 
-    /// Takes a measurement; `Ok(false)` when no state of its stamp is buffered.
+    /// Takes a measurement; `Ok(false)` when no state of its stamp is buffered. A pose
+    /// without a measurement (instrument NONE: a row of a drive stream) gives the calibration
+    /// no row and is not kept: an 8 kHz stream would otherwise grow the campaign by 8,000
+    /// poses a second.
     pub fn measurement(&mut self, m: &TcpMeasurement) -> anyhow::Result<bool> {
+        if m.instrument == TcpMeasurement::NONE {
+            self.unmeasured += 1;
+            return Ok(true);
+        }
         let Some(state) = self.states.iter().rev().find(|s| s.stamp == m.stamp) else {
             self.unpaired += 1;
             return Ok(false);
@@ -392,6 +402,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                     ("calibrations", calibrations.to_string()),
                     ("pending_measurements", acc.measurements.to_string()),
                     ("unpaired_measurements", acc.unpaired.to_string()),
+                    ("unmeasured_poses", acc.unmeasured.to_string()),
                 ],
             )))?;
         }
@@ -411,6 +422,31 @@ mod tests {
     use crate::campaign_bag::pose_messages;
     use rpkm_core::params::{Model, Params};
     use rpkm_core::twin::{Twin, TwinConfig};
+
+    #[test]
+    fn poses_without_a_measurement_are_not_kept() -> anyhow::Result<()> {
+        let mut acc = Accumulator::new(8);
+        for seq in 1..=1000u64 {
+            let s = ActuatorState {
+                seq,
+                stamp: rpkm_msgs::Time {
+                    sec: 1,
+                    nanosec: seq as u32,
+                },
+                ..Default::default()
+            };
+            acc.state(&s);
+            let m = TcpMeasurement {
+                stamp: s.stamp,
+                setup: "stream".into(),
+                instrument: TcpMeasurement::NONE,
+                ..Default::default()
+            };
+            assert!(acc.measurement(&m)?);
+        }
+        assert_eq!((acc.measurements, acc.unmeasured), (0, 1000));
+        Ok(())
+    }
 
     #[test]
     fn messages_rebuild_the_campaign_and_calibrate_like_the_core() -> anyhow::Result<()> {
