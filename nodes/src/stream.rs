@@ -3,18 +3,15 @@
 //!
 //! Per sample the twin's controller commands its igm of the target, the true machine settles
 //! ([`Twin::machine_state`]: rigid with q2, q3 following, or elastic with all four drives
-//! holding under `preload_elastic`), and the readings get the twin's noise: encoder errors on
-//! the holding drives (their carriers sit off the command by it), reading noise on followers,
-//! the machine thermometer's noise on `temp_machine`. A fault adds a drift between a drive's
+//! holding under `preload_elastic`), and the readings get the twin's noise, drawn by the twin
+//! ([`DriveStream`]): encoder errors on the holding drives (their carriers sit off the command
+//! by it), reading noise on followers, the machine thermometer's noise on `temp_machine`. A fault adds a drift between a drive's
 //! encoder and its carrier, ramped linearly over the stream: the drive believes it holds its
 //! command while its carrier moves, the way a slipping scale or a loose encoder head does.
 
 use anyhow::{bail, Result};
-use rand::rngs::StdRng;
-use rand::SeedableRng;
-use rand_distr::{Distribution, StandardNormal};
 use rpkm_core::design::{CENTRE, CIRCLE_RADIUS_MM};
-use rpkm_core::twin::{Twin, TEMP_SENSOR_K};
+use rpkm_core::twin::{DriveStream, Twin};
 use rpkm_msgs::ActuatorState;
 
 use crate::campaign_bag::{stamp_from_seconds, MM_PER_M};
@@ -119,12 +116,6 @@ impl StreamSpec {
     }
 }
 
-/// Seed of the stream's noise, apart from the twin's own draws so that adding a stream does
-/// not change the campaign before it.
-fn stream_seed(seed: u64) -> u64 {
-    seed ^ 0x5eed_57ea_0000_0001
-}
-
 /// Runs the stream on `twin` and hands every sample to `emit`, in order; the covariates are
 /// `[temp_machine]` as in the twin's campaigns. Returns the number of samples.
 pub fn run(
@@ -141,42 +132,27 @@ pub fn run(
             spec.seconds
         );
     }
-    // the twin's own encoder noise (none when it is noiseless)
-    let encoder_mm = twin.config().noise.as_ref().map_or(0.0, |n| n.encoder_mm);
-    let k_noise = if twin.config().noise.is_some() {
-        1.0
-    } else {
-        0.0
-    };
-    let mut rng = StdRng::seed_from_u64(stream_seed(twin.config().seed));
-    let mut gauss = move || -> f64 { StandardNormal.sample(&mut rng) };
+    let mut drives = DriveStream::new(twin);
     let n = spec.samples();
     let mut msg = ActuatorState::default();
     for k in 0..n {
         let t = spec.time(k);
         let (x, y) = spec.target(k);
-        let mut enc = [0.0; 4].map(|_: f64| encoder_mm * gauss());
+        let mut offset = [0.0; 4];
         if let Some(f) = spec.fault {
-            enc[f.drive] += spec.fault_mm(k);
+            offset[f.drive] = spec.fault_mm(k);
         }
-        let st = twin.machine_state("stream", x, y, t, enc, false)?;
-        let mut q = st.q;
-        for (qi, &follower) in q.iter_mut().zip(&st.follower) {
-            if follower {
-                *qi += encoder_mm * gauss();
-            }
-        }
-        let temp = twin.temperature(t) + k_noise * TEMP_SENSOR_K * gauss();
+        let s = drives.sample(x, y, t, offset)?;
         let Some(stamp) = stamp_from_seconds(t) else {
             bail!("stream time {t} s does not fit a ROS time stamp");
         };
         msg.stamp = stamp;
         msg.seq = spec.first_seq + k;
-        msg.position = q.map(|v| v / MM_PER_M);
-        msg.force = st.f;
-        msg.follower = st.follower;
+        msg.position = s.q.map(|v| v / MM_PER_M);
+        msg.force = s.force;
+        msg.follower = s.follower;
         // One covariate always fits the eight slots.
-        let _ = msg.set_covariates(&[temp]);
+        let _ = msg.set_covariates(&[s.temp_c]);
         emit(k, &msg)?;
     }
     Ok(n)

@@ -20,8 +20,10 @@
 //! encoder reading to carrier position (thermal expansion of the scale, scale error).
 
 pub mod effects;
+mod stream;
 
 pub use effects::EffectKind;
+pub use stream::{DriveSample, DriveStream};
 
 use crate::campaign::{Campaign, Instrument, Pose};
 use crate::design::{self, PlannedPose};
