@@ -289,6 +289,15 @@ fn effect_stages(
             effect_params: fit.effect_params,
         });
     }
+    print_stages(&stages);
+    if let Some(path) = &args.chart {
+        write_stage_chart(path, &stages)?;
+    }
+    Ok(stages)
+}
+
+/// The table of the stages, and the identified effect parameters of the last.
+fn print_stages(stages: &[Stage]) {
     println!("\nThe error effect by effect:");
     println!(
         "  {:<24} {:>10} {:>12} {:>12}",
@@ -298,7 +307,7 @@ fn effect_stages(
         .iter()
         .filter_map(|s| s.val_rms_um)
         .fold(0.0, f64::max);
-    for s in &stages {
+    for s in stages {
         let bar = s
             .val_rms_um
             .map(|v| "#".repeat((40.0 * v / top.max(1e-9)).round() as usize))
@@ -319,31 +328,33 @@ fn effect_stages(
             );
         }
     }
-    if let Some(path) = &args.chart {
-        let cats: Vec<String> = stages.iter().map(|s| s.model.clone()).collect();
-        let svg = crate::plot::bar_chart(
-            "Held-out TCP RMS per added effect",
-            "RMS (µm)",
-            &cats,
-            &[
-                (
-                    "held-out".to_owned(),
-                    stages
-                        .iter()
-                        .map(|s| s.val_rms_um.unwrap_or(f64::NAN))
-                        .collect(),
-                ),
-                (
-                    "calibration".to_owned(),
-                    stages.iter().map(|s| s.cal_rms_um).collect(),
-                ),
-            ],
-            &crate::plot::BarOptions::default(),
-        );
-        std::fs::write(path, svg)?;
-        println!("  chart: {}", path.display());
-    }
-    Ok(stages)
+}
+
+/// The chart of the held-out and calibration RMS per stage (SVG).
+fn write_stage_chart(path: &std::path::Path, stages: &[Stage]) -> anyhow::Result<()> {
+    let cats: Vec<String> = stages.iter().map(|s| s.model.clone()).collect();
+    let svg = crate::plot::bar_chart(
+        "Held-out TCP RMS per added effect",
+        "RMS (µm)",
+        &cats,
+        &[
+            (
+                "held-out".to_owned(),
+                stages
+                    .iter()
+                    .map(|s| s.val_rms_um.unwrap_or(f64::NAN))
+                    .collect(),
+            ),
+            (
+                "calibration".to_owned(),
+                stages.iter().map(|s| s.cal_rms_um).collect(),
+            ),
+        ],
+        &crate::plot::BarOptions::default(),
+    );
+    std::fs::write(path, svg)?;
+    println!("  chart: {}", path.display());
+    Ok(())
 }
 
 /// Held-out TCP errors with the starting and the identified parameters.
