@@ -83,9 +83,8 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let validation = args.validate.as_deref().map(read_campaign).transpose()?;
     let in_model = parse_effects(&args.effects)?;
     let refs: Vec<&dyn Effect> = in_model.iter().map(|e| e.as_ref()).collect();
-    if !(args.tolerance_mm > 0.0 && args.tolerance_mrad > 0.0)
-        || !(args.tolerance_mm.is_finite() && args.tolerance_mrad.is_finite())
-    {
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    if !(positive(args.tolerance_mm) && positive(args.tolerance_mrad)) {
         return Err(bad_input(
             "--tolerance-mm/--tolerance-mrad: expected positive numbers".to_owned(),
         ));
