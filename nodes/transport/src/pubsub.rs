@@ -176,7 +176,9 @@ impl Transport {
                 self.ipc_for(topic.name(), backend)?,
                 topic,
             )?),
-            Backend::Dds => SubInner::Dds(self.dds_for(topic.name(), backend)?.subscriber(topic)?),
+            Backend::Dds => SubInner::Dds(Box::new(
+                self.dds_for(topic.name(), backend)?.subscriber(topic)?,
+            )),
         };
         Ok(Subscriber {
             topic: topic.name(),
@@ -229,7 +231,8 @@ impl<T: IpcMessage> Publisher<T> {
 
 enum SubInner<T: IpcMessage> {
     Ipc(Box<dyn IpcRecv<T>>),
-    Dds(DdsSubscriber<T>),
+    // Boxed: the DDS reader is 30 times the size of the iceoryx2 handle.
+    Dds(Box<DdsSubscriber<T>>),
 }
 
 /// Receives `T` from one topic.

@@ -104,7 +104,7 @@ fn expected_estimate(seq: u64) -> TcpEstimate {
         drive_forces: [1.0, 2.0, -3.0, s],
         iterations: seq as u32 + 2,
         model: 29,
-        converged: seq % 2 == 0,
+        converged: seq.is_multiple_of(2),
         outcome: (seq % 3) as u8,
         reason: (seq % 7) as u8,
     }
@@ -126,7 +126,7 @@ fn expected_actuator(seq: u64) -> ActuatorState {
             0.7889444 - s * 1e-6,
         ],
         force: [s, -2.0 * s, 0.0, 8600.0],
-        follower: [false, seq % 2 == 1, seq % 3 == 0, false],
+        follower: [false, seq % 2 == 1, seq.is_multiple_of(3), false],
         covariate_count: 2,
         covariates: [21.5 + s, 22.25, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     }

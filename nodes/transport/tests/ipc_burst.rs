@@ -22,7 +22,7 @@ fn sample(seq: u64) -> ActuatorState {
         seq,
         position: [s, s + 0.25, -s, 1e-3 * s],
         force: [s * 2.0, -s, 0.5, 8600.0],
-        follower: [seq % 2 == 0, seq % 3 == 0, false, true],
+        follower: [seq.is_multiple_of(2), seq.is_multiple_of(3), false, true],
         ..Default::default()
     };
     m.set_covariates(&[20.0 + s * 1e-4, 21.0])

@@ -49,7 +49,7 @@ const DRAIN: Duration = Duration::from_secs(10);
 
 pub fn run(a: &SoakArgs) -> Result<()> {
     let n = a.seconds * a.rate_hz;
-    if !(a.seconds > 0.0 && a.rate_hz > 0.0 && n >= 1.0 && n <= 1e9) {
+    if !(a.seconds > 0.0 && a.rate_hz > 0.0 && (1.0..=1e9).contains(&n)) {
         return Err(bad_input(format!(
             "--seconds {} --rate-hz {}: expected positive numbers giving 1 to 10^9 samples",
             a.seconds, a.rate_hz
