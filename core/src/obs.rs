@@ -268,6 +268,13 @@ pub fn residuals_in(
             noise,
             decorrelated,
         };
+        // a reset pose that cannot be solved is blamed on its own line, not on the first
+        // pose measured relative to it
+        if let Some((ri, reset)) = reset.filter(|(_, r)| r.instrument.is_relative()) {
+            let (p_r, q_r) = corrected(p, &reset.q, &corr.delta(ri));
+            forward(&p_r, model, Subsystem::NR, &q_r)
+                .map_err(|e| PoseError::at(campaign, reset, e))?;
+        }
         for &i in &setup.poses {
             let pose = &campaign.poses[i];
             if pose.reset && pose.instrument.is_relative() {
@@ -718,12 +725,14 @@ pub fn tcp_errors_with(
             if pose.reset || !pose.instrument.is_relative() {
                 continue;
             }
-            let err = |error| PoseError::at(campaign, pose, error);
             let (dpose, dreset) = (corr.delta(i), corr.delta(ri));
             let (p_i, q_i) = corrected(p, &pose.q, &dpose);
             let (p_r, q_r) = corrected(p, &reset.q, &dreset);
-            let now = forward(&p_i, model, Subsystem::NR, &q_i).map_err(err)?;
-            let zero = forward(&p_r, model, Subsystem::NR, &q_r).map_err(err)?;
+            let now = forward(&p_i, model, Subsystem::NR, &q_i)
+                .map_err(|e| PoseError::at(campaign, pose, e))?;
+            // a reset pose that cannot be solved is blamed on its own line
+            let zero = forward(&p_r, model, Subsystem::NR, &q_r)
+                .map_err(|e| PoseError::at(campaign, reset, e))?;
             let (dx, dy) = (now.sol.c[X] - zero.sol.c[X], now.sol.c[Y] - zero.sol.c[Y]);
             let mut push = |coordinate, value, g: &[(usize, f64)], dm: Vector2<f64>| {
                 let mut at_pose = input_sensitivity(&now, Subsystem::NR, g);

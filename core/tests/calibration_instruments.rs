@@ -294,3 +294,46 @@ fn effects_bound_to_another_campaign_are_refused() {
         "{text}"
     );
 }
+
+/// A reading of −1e300 mm (a campaign built in code, past the CSV reader's checks) must not
+/// calibrate "successfully" with infinite uncertainties: the calibration refuses it.
+#[test]
+fn an_absurd_reading_is_refused_not_calibrated() {
+    let truth = Params::nominal();
+    let mut c = support::measure(&design::self_cal(), &truth, 5, true, "self.csv");
+    c.poses[10].q[1] = -1e300;
+    let opts = Options {
+        model: Model::M24,
+        ..Default::default()
+    };
+    match calib::calibrate(&c, &truth, &opts) {
+        Ok(cal) => panic!(
+            "calibrated: chi2/dof {}, sigmas {:?}",
+            cal.chi2_per_dof,
+            cal.identified.iter().map(|i| i.sigma).collect::<Vec<_>>()
+        ),
+        Err(e) => {
+            let text = e.to_string();
+            let line = format!("self.csv:{}", c.poses[10].line);
+            assert!(
+                text.contains(&line) && text.contains("not finite"),
+                "{text}"
+            );
+        }
+    }
+}
+
+/// A reset pose the model cannot solve is blamed on its own line, not on the first pose
+/// measured relative to it (the model rows and the held-out errors alike).
+#[test]
+fn an_unsolvable_reset_is_blamed_on_its_own_line() {
+    let truth = Params::nominal();
+    let mut c = support::measure(&design::lt(), &truth, 6, true, "lt.csv");
+    let ri = c.poses.iter().position(|p| p.reset).expect("a reset pose");
+    c.poses[ri].q[0] += 5_000.0;
+    let line = format!("lt.csv:{}", c.poses[ri].line);
+    let err = calib::calibrate(&c, &truth, &Options::default()).expect_err("unsolvable reset");
+    assert!(err.to_string().contains(&line), "{err}");
+    let err = obs::tcp_errors(&c, &truth, Model::M29).expect_err("unsolvable reset");
+    assert!(err.to_string().contains(&line), "{err}");
+}

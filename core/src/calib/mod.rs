@@ -165,6 +165,15 @@ pub enum CalibrationError {
         "the normal equations are singular: identified parameters are linearly dependent ({0})"
     )]
     Singular(String),
+    #[error("{campaign}:{line} ({instrument}): the pose's model-minus-measurement is not finite ({value}); its readings are beyond any machine")]
+    NonFiniteRow {
+        campaign: String,
+        line: usize,
+        instrument: &'static str,
+        value: f64,
+    },
+    #[error("the calibration's result is not a number: {0} (the rows carry non-finite values or weights)")]
+    NonFinite(String),
 }
 
 /// A row removed as an outlier.
@@ -329,6 +338,7 @@ pub fn calibrate_with(
         before_rows.extend(s2.before_rows);
         after_rows.extend(s2.after_rows);
     }
+    check_finite(&identified, &s1.effects, chi2_per_dof)?;
     Ok(Calibration {
         model: opts.model,
         start: *start,
@@ -350,6 +360,36 @@ pub fn calibrate_with(
         residuals: rows_final,
         leverage: post.leverage,
     })
+}
+
+/// A calibration whose values, uncertainties or χ² are not finite is refused, naming what:
+/// a solver reports an implausible result instead of returning it.
+fn check_finite(
+    identified: &[Identified],
+    effects: &[EffectEstimate],
+    chi2_per_dof: f64,
+) -> Result<(), CalibrationError> {
+    if !chi2_per_dof.is_finite() {
+        return Err(CalibrationError::NonFinite(format!(
+            "chi2/dof {chi2_per_dof}"
+        )));
+    }
+    let bad = identified
+        .iter()
+        .filter(|i| !(i.value.is_finite() && i.sigma.is_finite()))
+        .map(|i| format!("{} = {} ± {}", i.name, i.value, i.sigma))
+        .chain(
+            effects
+                .iter()
+                .filter(|e| !(e.value.is_finite() && e.sigma.is_finite()))
+                .map(|e| format!("{}.{} = {} ± {}", e.effect, e.name, e.value, e.sigma)),
+        )
+        .collect::<Vec<_>>();
+    if bad.is_empty() {
+        Ok(())
+    } else {
+        Err(CalibrationError::NonFinite(bad.join(", ")))
+    }
 }
 
 /// What step 1 identifies and how, decided once from the rows at the start parameters.
@@ -379,6 +419,16 @@ impl Plan {
         let opts = pb.opts;
         let corr0 = pb.effects.corrections(theta0);
         let rows0 = pb.direct(&pb.start, &corr0, &HashSet::new())?;
+        // a row whose squared weighted value overflows makes the cost infinite
+        if let Some(r) = rows0.iter().find(|r| !(r.value / r.sigma).powi(2).is_finite()) {
+            let pose = &pb.campaign.poses[r.pose];
+            return Err(CalibrationError::NonFiniteRow {
+                campaign: pb.campaign.source.clone(),
+                line: pose.line,
+                instrument: pose.instrument.as_str(),
+                value: r.value,
+            });
+        }
         if rows0.is_empty() {
             return Err(CalibrationError::NoMeasurements(pb.campaign.source.clone()));
         }
