@@ -61,6 +61,9 @@ pub struct Options {
     pub estimate_noise: bool,
     /// Manufacturing tolerances of the geometric parameters.
     pub prior: Prior,
+    /// Threads the candidate effects are fitted on (0: every core). The result does not
+    /// depend on it.
+    pub threads: usize,
 }
 
 impl Default for Options {
@@ -71,6 +74,7 @@ impl Default for Options {
             noise: NoiseModel::default(),
             estimate_noise: true,
             prior: Prior::default(),
+            threads: 0,
         }
     }
 }
@@ -272,6 +276,7 @@ pub fn diagnose(
         in_model,
         tried: &tried,
         level: opts.alpha / tried.len().max(1) as f64,
+        threads: opts.threads,
     };
     // Round 1, rows weighted by the stated noise: which effect, if any, stands out. (Under
     // noise estimated with the current model, its misfit inflates the levels and dims the
@@ -309,6 +314,8 @@ struct Search<'a> {
     tried: &'a [&'a dyn Effect],
     /// Level of each candidate's test (Bonferroni).
     level: f64,
+    /// Threads the candidates are fitted on.
+    threads: usize,
 }
 
 impl Search<'_> {
@@ -318,15 +325,15 @@ impl Search<'_> {
         let val = held_out(self.validation, &copts.noise)?;
         let cal = fit_model(self.campaign, self.in_model, copts)?;
         let base = finish(self.campaign, val.as_ref(), self.in_model, cal, copts)?;
-        let round = candidates(
+        let tries = try_all(
             self.campaign,
             val.as_ref(),
             self.in_model,
             self.tried,
-            &base,
             copts,
-            self.level,
+            self.threads,
         );
+        let round = candidates(self.campaign, self.tried, tries, &base, self.level);
         Ok((base, round))
     }
 }
@@ -421,24 +428,68 @@ struct Round {
     skipped: Vec<Skipped>,
 }
 
-/// Fit every effect of `tried` added to the model and compare it with `base`.
-fn candidates(
+/// A candidate effect's fits: the full effect and the parts of it kept.
+type Tried = Result<(Fitted, Fitted), FitError>;
+
+/// Each effect of `tried` added to the model and fitted, in `tried`'s order, on `threads`
+/// threads (0: every core). Each fit is independent and lands at its own index: the result
+/// does not depend on the number of threads.
+fn try_all(
     campaign: &Campaign,
     val: Option<&Validation>,
     in_model: &[&dyn Effect],
     tried: &[&dyn Effect],
-    base: &Fitted,
     copts: &calib::Options,
+    threads: usize,
+) -> Vec<Tried> {
+    let start = Params::nominal();
+    let one = |effect: &dyn Effect| try_effect(campaign, val, in_model, effect, &start, copts);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = if threads == 0 { cores } else { threads }.clamp(1, tried.len().max(1));
+    if threads == 1 {
+        return tried.iter().map(|e| one(*e)).collect();
+    }
+    let mut out: Vec<Option<Tried>> = (0..tried.len()).map(|_| None).collect();
+    std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads)
+            .map(|t| {
+                let one = &one;
+                scope.spawn(move || {
+                    (t..tried.len())
+                        .step_by(threads)
+                        .map(|i| (i, one(tried[i])))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        for worker in workers {
+            // a panic in a fit is a bug: it goes on in this thread
+            let fits = worker
+                .join()
+                .unwrap_or_else(|p| std::panic::resume_unwind(p));
+            for (i, fit) in fits {
+                out[i] = Some(fit);
+            }
+        }
+    });
+    out.into_iter().flatten().collect()
+}
+
+/// Compare every tried effect's fit with `base`.
+fn candidates(
+    campaign: &Campaign,
+    tried: &[&dyn Effect],
+    tries: Vec<Tried>,
+    base: &Fitted,
     level: f64,
 ) -> Round {
-    let start = Params::nominal();
     let mut out = Round::default();
-    for effect in tried {
+    for (effect, fit) in tried.iter().zip(tries) {
         let skip = |reason: String| Skipped {
             effect: effect.name().to_owned(),
             reason,
         };
-        match try_effect(campaign, val, in_model, *effect, &start, copts) {
+        match fit {
             Ok((full, kept)) => match compare(base, &full, &kept, *effect, campaign, level) {
                 Some(c) => {
                     out.candidates.push(c);

@@ -309,3 +309,21 @@ fn lost_motion_is_unexplained_and_points_at_the_direction_of_motion() {
         );
     }
 }
+
+/// The candidates are fitted in parallel: one thread and two give the same diagnosis, to the
+/// last bit of every number in its JSON.
+#[test]
+fn the_diagnosis_does_not_depend_on_the_thread_count() {
+    let (cal, val, _) = campaigns(41, &[EffectKind::EncoderScale]);
+    let with = |threads| {
+        let opts = Options {
+            threads,
+            ..Options::default()
+        };
+        let d = diagnose::diagnose(&cal, Some(&val), &[], &opts).expect("diagnose");
+        serde_json::to_string(&d).expect("json")
+    };
+    let (one, two) = (with(1), with(2));
+    assert!(one.contains("encoder_scale"), "{one}");
+    assert_eq!(one, two);
+}

@@ -207,7 +207,12 @@ fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
             .map(|n| effects::by_name(n))
             .collect::<Result<_, _>>()?;
         let refs: Vec<&dyn Effect> = boxed.iter().map(|b| b.as_ref()).collect();
-        let d = diagnose::diagnose(&cal, Some(&val), &refs, &Options::default())?;
+        // the bench runs machines in parallel (--threads): each diagnosis on one thread
+        let opts = Options {
+            threads: 1,
+            ..Options::default()
+        };
+        let d = diagnose::diagnose(&cal, Some(&val), &refs, &opts)?;
         if verbose {
             println!("with {named:?}: {}", d.verdict);
         }
