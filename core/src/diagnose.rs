@@ -27,10 +27,10 @@ pub mod sparse;
 pub mod stats;
 
 use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Prior};
-use crate::campaign::{Campaign, Instrument};
+use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::geometry;
-use crate::noise::{Group, NoiseModel, N_GROUPS};
+use crate::noise::{Group, NoiseModel, XyInstrument, N_GROUPS};
 use crate::obs::{self, PoseError, Residual};
 use crate::params::{Model, Params};
 use crate::variance::{self, GroupNoise, NoiseEstimate};
@@ -905,14 +905,13 @@ fn validation_noise(val: &Campaign, noise: &NoiseModel) -> Result<Vec<f64>, Pose
             let pose = &val.poses[*i];
             let tcp = geometry::fgm(&nominal, Model::M29, pose.q[0], pose.q[3])
                 .map_err(|e| PoseError::at(val, pose, e))?;
-            let cov = noise.xy_covariance(pose.instrument, Vector2::new(tcp.x(), tcp.y()));
-            let enc = noise.encoder_mm;
-            Ok(match (*coordinate, pose.instrument) {
-                ("x", Instrument::Lt | Instrument::Kgm) => (cov[(0, 0)] + enc * enc).sqrt(),
-                ("y", Instrument::Lt | Instrument::Kgm) => (cov[(1, 1)] + enc * enc).sqrt(),
-                _ => {
-                    (noise.scalar_sigma(pose.instrument).unwrap_or(0.0).powi(2) + enc * enc).sqrt()
-                }
+            let enc2 = noise.encoder_mm.powi(2);
+            let xy = XyInstrument::of(pose.instrument);
+            let cov = |xy| noise.xy_covariance(xy, Vector2::new(tcp.x(), tcp.y()));
+            Ok(match (*coordinate, xy) {
+                ("x", Some(xy)) => (cov(xy)[(0, 0)] + enc2).sqrt(),
+                ("y", Some(xy)) => (cov(xy)[(1, 1)] + enc2).sqrt(),
+                _ => (noise.scalar_sigma(pose.instrument).unwrap_or(0.0).powi(2) + enc2).sqrt(),
             })
         })
         .collect()

@@ -85,6 +85,32 @@ impl Group {
     }
 }
 
+/// The instruments that read the TCP's (x, y), each with its own noise shape: the tracker
+/// (along and across its beam) and the grid encoder (isotropic). A new 2-D instrument is a
+/// new variant, so that every noise formula must say what it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum XyInstrument {
+    Lt,
+    Kgm,
+}
+
+impl XyInstrument {
+    /// The 2-D instrument `instrument` is, if it is one.
+    pub fn of(instrument: Instrument) -> Option<XyInstrument> {
+        match instrument {
+            Instrument::Lt => Some(XyInstrument::Lt),
+            Instrument::Kgm => Some(XyInstrument::Kgm),
+            Instrument::Dbb
+            | Instrument::LiX
+            | Instrument::LiY
+            | Instrument::LiPsi
+            | Instrument::SelfCal
+            | Instrument::Circle
+            | Instrument::None => None,
+        }
+    }
+}
+
 /// Noise of every instrument and of the actuator encoders: standard deviations in mm (rad for
 /// ψ), per coordinate.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -254,28 +280,28 @@ impl NoiseModel {
     }
 
     /// Covariance (mm²) of an (x, y) reading of a TCP-measuring instrument at `tcp`.
-    pub fn xy_covariance(&self, instrument: Instrument, tcp: Vector2<f64>) -> Matrix2<f64> {
+    pub fn xy_covariance(&self, instrument: XyInstrument, tcp: Vector2<f64>) -> Matrix2<f64> {
         match instrument {
-            Instrument::Lt => {
+            XyInstrument::Lt => {
                 let (u, v, along, across) = self.lt_frame(tcp);
                 u * u.transpose() * along + v * v.transpose() * across
             }
-            Instrument::Kgm => Matrix2::identity() * self.kgm_mm.powi(2),
-            _ => Matrix2::identity() * self.li_mm.powi(2),
+            XyInstrument::Kgm => Matrix2::identity() * self.kgm_mm.powi(2),
         }
     }
 
     /// Variance parts of `g · (x, y)` of a reading of a 2-D instrument at `tcp`.
-    pub fn xy_parts(&self, instrument: Instrument, tcp: Vector2<f64>, g: Vector2<f64>) -> Parts {
+    pub fn xy_parts(&self, instrument: XyInstrument, tcp: Vector2<f64>, g: Vector2<f64>) -> Parts {
         let mut parts = [0.0; N_GROUPS];
         match instrument {
-            Instrument::Lt => {
+            XyInstrument::Lt => {
                 let (u, v, along, across) = self.lt_frame(tcp);
                 parts[Group::Lt.index()] = g.dot(&u).powi(2) * along;
                 parts[Group::LtAcross.index()] = g.dot(&v).powi(2) * across;
             }
-            Instrument::Kgm => parts[Group::Kgm.index()] = g.norm_squared() * self.kgm_mm.powi(2),
-            _ => parts[Group::Li.index()] = g.norm_squared() * self.li_mm.powi(2),
+            XyInstrument::Kgm => {
+                parts[Group::Kgm.index()] = g.norm_squared() * self.kgm_mm.powi(2);
+            }
         }
         parts
     }
@@ -327,7 +353,7 @@ mod tests {
         assert_eq!(m.lt_across_per_m_mm, 0.0);
         assert_eq!(m.encoder_mm, 0.0005);
         assert_eq!(m.kgm_mm, d.kgm_mm);
-        let c = m.xy_covariance(Instrument::Lt, Vector2::new(300.0, 2000.0));
+        let c = m.xy_covariance(XyInstrument::Lt, Vector2::new(300.0, 2000.0));
         assert!((c[(0, 0)] - 1.6e-5).abs() < 1e-12 && c[(0, 1)].abs() < 1e-12);
     }
 
@@ -356,11 +382,11 @@ mod tests {
         let m = NoiseModel::default();
         let tcp = Vector2::new(120.0, 1800.0);
         let g = Vector2::new(0.3, -1.2);
-        let parts = m.xy_parts(Instrument::Lt, tcp, g);
-        let var = (g.transpose() * m.xy_covariance(Instrument::Lt, tcp) * g)[0];
+        let parts = m.xy_parts(XyInstrument::Lt, tcp, g);
+        let var = (g.transpose() * m.xy_covariance(XyInstrument::Lt, tcp) * g)[0];
         assert!((parts.iter().sum::<f64>() - var).abs() < 1e-15);
         // on the tracker's own position the frame is still defined
-        let on = m.xy_parts(Instrument::Lt, Vector2::from(m.tracker_position), g);
+        let on = m.xy_parts(XyInstrument::Lt, Vector2::from(m.tracker_position), g);
         assert!(on.iter().all(|v| v.is_finite()));
     }
 

@@ -20,7 +20,7 @@
 use crate::campaign::{Campaign, Instrument, Pose};
 use crate::effects::{Corrections, Delta, InputSensitivity};
 use crate::geometry::{self, q_var, GeometryError, Solution, Subsystem, PSI, X, Y};
-use crate::noise::{self, NoiseModel, Parts};
+use crate::noise::{self, NoiseModel, Parts, XyInstrument};
 use crate::params::{Model, Params, N_PARAMS};
 use nalgebra::Vector2;
 
@@ -320,7 +320,8 @@ fn pose_rows(
 ) -> Result<(), GeometryError> {
     use Instrument::*;
     match (pose.instrument, reset) {
-        (Lt | Kgm, Some(reset)) => inverse_rows(ctx, i, pose, reset, out),
+        (Lt, Some(reset)) => inverse_rows(ctx, XyInstrument::Lt, (i, pose), reset, out),
+        (Kgm, Some(reset)) => inverse_rows(ctx, XyInstrument::Kgm, (i, pose), reset, out),
         (Dbb | LiX | LiY | LiPsi, Some(reset)) => forward_rows(ctx, i, pose, reset, out),
         (SelfCal, _) => self_rows(ctx, i, pose, out),
         _ => Ok(()),
@@ -330,8 +331,8 @@ fn pose_rows(
 /// Inverse calibration rows (eq. 4.30) of a laser-tracker or grid-encoder pose.
 fn inverse_rows(
     ctx: &Ctx,
-    i: usize,
-    pose: &Pose,
+    xy: XyInstrument,
+    (i, pose): (usize, &Pose),
     (ri, reset): (usize, &Pose),
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
@@ -358,7 +359,7 @@ fn inverse_rows(
         };
         at_pose.dq[a] = -1.0;
         let parts = noise::add(
-            ctx.noise.xy_parts(pose.instrument, Vector2::new(x, y), g),
+            ctx.noise.xy_parts(xy, Vector2::new(x, y), g),
             ctx.noise.encoder_parts(1.0),
         );
         out.push(Residual {
@@ -375,19 +376,11 @@ fn inverse_rows(
     }
     if ctx.decorrelated {
         let (g_fixed, tcp) = fixed_gains(ctx, mx, my, &reset.q)?;
-        let (ux, uy) = match pose.instrument {
-            Instrument::Lt => ctx.noise.beam_frame(tcp),
-            _ => (Vector2::x(), Vector2::y()),
+        let (ux, uy) = match xy {
+            XyInstrument::Lt => ctx.noise.beam_frame(tcp),
+            XyInstrument::Kgm => (Vector2::x(), Vector2::y()),
         };
-        decorrelate(
-            &mut out[first..],
-            &g_fixed,
-            ux,
-            uy,
-            ctx.noise,
-            pose.instrument,
-            tcp,
-        );
+        decorrelate(&mut out[first..], &g_fixed, ux, uy, ctx.noise, xy, tcp);
     }
     Ok(())
 }
@@ -425,7 +418,7 @@ fn decorrelate(
     u: Vector2<f64>,
     v: Vector2<f64>,
     noise: &NoiseModel,
-    instrument: Instrument,
+    instrument: XyInstrument,
     tcp: Vector2<f64>,
 ) {
     if rows.len() != 4 {

@@ -29,7 +29,7 @@ use crate::campaign::{Campaign, Instrument, Pose};
 use crate::design::{self, PlannedPose};
 use crate::elastic::{self, ElasticError, Stiffness, ALL_ACTIVE};
 use crate::geometry::{self, GeometryError};
-use crate::noise::NoiseModel;
+use crate::noise::{NoiseModel, XyInstrument};
 use crate::params::{self, Model, Params, NAMES, N_PARAMS, RODS};
 use effects::{bow, ALPHA_PER_K, REFERENCE_TEMP_C, THERMAL_PERIOD_S};
 use nalgebra::{Cholesky, Matrix2, Rotation2, Vector2};
@@ -517,7 +517,12 @@ impl Twin {
         }
         match plan.instrument {
             Instrument::Lt | Instrument::Kgm => {
-                let cov = noise.xy_covariance(plan.instrument, moved.tcp);
+                let xy = if plan.instrument == Instrument::Lt {
+                    XyInstrument::Lt
+                } else {
+                    XyInstrument::Kgm
+                };
+                let cov = noise.xy_covariance(xy, moved.tcp);
                 let e = xy_factor(cov) * Vector2::new(gauss(&mut self.rng), gauss(&mut self.rng));
                 pose.x = Some(d.x + k * e.x);
                 pose.y = Some(d.y + k * e.y);

@@ -79,7 +79,8 @@ pub fn measure(
         match plan.instrument {
             Instrument::Lt | Instrument::Kgm => {
                 let (d, _) = rel.expect("reset first");
-                let l = Cholesky::new(n_model.xy_covariance(plan.instrument, tcp))
+                let xy = noise::XyInstrument::of(plan.instrument).expect("a 2-D instrument");
+                let l = Cholesky::new(n_model.xy_covariance(xy, tcp))
                     .expect("covariance")
                     .l();
                 let e = l * Vector2::new(gauss(&mut rng), gauss(&mut rng)) * k;
