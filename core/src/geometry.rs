@@ -393,6 +393,68 @@ fn check_conditioning(e_u: &SMatrix<f64, 5, 5>, sub: Subsystem) -> Result<(), Ge
     Ok(())
 }
 
+/// The closed-form inverse model 24: ψ = γ2 and each rod by eq. 4.6 close every equation
+/// already, so Newton would stop before its first step. What it would check is checked here,
+/// without its 5 × 5 algebra: the equations' residual, and the conditioning, which for this
+/// subsystem fails only when a rod is tangent to its guide's circle (the drive's column of
+/// ∂e/∂c vanishes; otherwise the normalised determinant ratio is at least 1/4). None when the
+/// residual is above the tolerance (round-off on extreme parameters): Newton then takes over.
+fn igm24(p: &Params, x: f64, y: f64) -> Result<Option<Solution>, GeometryError> {
+    // the trigonometry once per call, not once per rod and check
+    let psi = p[GAMMA2];
+    let (s, co) = psi.sin_cos();
+    let frames = [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)];
+    let mut c = Config::zeros();
+    c[X] = x;
+    c[Y] = y;
+    c[PSI] = psi;
+    let mut residual: f64 = 0.0;
+    for rod in &RODS[..4] {
+        let (o, e, n, side) = match rod.guide {
+            Guide::G1 => (frames[0].0, frames[0].1, frames[0].2, -1.0),
+            Guide::G2 => (frames[1].0, frames[1].1, frames[1].2, 1.0),
+        };
+        let (xa, ya) = (p[rod.xa], p[rod.ya]);
+        let a = Vector2::new(x + co * xa - s * ya, y + s * xa + co * ya);
+        // eq. 4.6, as rod_igm writes it
+        let w = a - o - n * p[rod.xb];
+        let we = w.dot(&e);
+        let l = p[rod.l];
+        let disc = we * we - w.norm_squared() + l * l;
+        if !(disc >= 0.0) {
+            return Err(GeometryError::Unreachable {
+                rod: rod.number,
+                discriminant: disc,
+            });
+        }
+        if disc == 0.0 {
+            // tangent: the drive's column of ∂e/∂c vanishes
+            return Err(GeometryError::Singular {
+                subsystem: Subsystem::Tcp,
+                ratio: 0.0,
+            });
+        }
+        let q = we + rod.k * disc.sqrt() - p[rod.yb];
+        // B − A: along the guide k·(B − A)·e = √disc > 0 by construction; across, the
+        // carrier must be on the outer side (see in_assembly_mode)
+        let ba = o + n * p[rod.xb] + e * (q + p[rod.yb]) - a;
+        if !(side * ba.dot(&n) > 0.0) {
+            return Err(GeometryError::AssemblyMode { rod: rod.number });
+        }
+        let f = ba.norm_squared() - l * l;
+        if !f.is_finite() {
+            return Err(GeometryError::NonFinite);
+        }
+        residual = residual.max(f.abs());
+        c[q_var(rod.actuator)] = q;
+    }
+    Ok((residual < TOL_MM2).then_some(Solution {
+        c,
+        iterations: 0,
+        residual,
+    }))
+}
+
 /// Solve a geometric model: the configuration that closes every loop given two known
 /// variables. `known` holds (x, y) for [`Subsystem::Tcp`] or the two actuator positions.
 pub fn solve(
@@ -403,6 +465,11 @@ pub fn solve(
 ) -> Result<Solution, GeometryError> {
     if !known.iter().all(|v| v.is_finite()) {
         return Err(GeometryError::NonFinite);
+    }
+    if model == Model::M24 && sub == Subsystem::Tcp {
+        if let Some(sol) = igm24(p, known[0], known[1])? {
+            return Ok(sol);
+        }
     }
     let start = match sub {
         Subsystem::Tcp => igm_start(p, known[0], known[1])?,
@@ -479,6 +546,50 @@ pub fn sensitivity(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The closed-form model-24 igm gives what the general solver gives (Newton from the same
+    /// start), over the workspace and beyond it, on a machine with parameter errors; and
+    /// refuses the same poses.
+    #[test]
+    fn closed_form_igm24_matches_the_general_solver() {
+        let mut p = Params::nominal();
+        for (k, i) in [0, 3, 7, 12, 20].into_iter().enumerate() {
+            p[i] += 0.05 * (k as f64 + 1.0);
+        }
+        let mut solved = 0;
+        for i in 0..41 {
+            for j in 0..41 {
+                let (x, y) = (-400.0 + 20.0 * f64::from(i), 300.0 + 70.0 * f64::from(j));
+                let fast = igm24(&p, x, y);
+                let general = igm_start(&p, x, y)
+                    .and_then(|c| newton(&p, Model::M24, Subsystem::Tcp, c))
+                    .and_then(|sol| {
+                        for rod in &RODS[..4] {
+                            let tcp = Vector2::new(x, y);
+                            if !in_assembly_mode(
+                                &p,
+                                rod,
+                                tcp,
+                                sol.c[PSI],
+                                sol.c[q_var(rod.actuator)],
+                            ) {
+                                return Err(GeometryError::AssemblyMode { rod: rod.number });
+                            }
+                        }
+                        Ok(sol)
+                    });
+                match (fast, general) {
+                    (Ok(Some(f)), Ok(g)) => {
+                        assert_eq!(f.c, g.c, "({x}, {y})");
+                        solved += 1;
+                    }
+                    (Err(_), Err(_)) => {}
+                    (f, g) => panic!("({x}, {y}): closed form {f:?}, general {g:?}"),
+                }
+            }
+        }
+        assert!(solved > 500, "only {solved} poses solved");
+    }
 
     #[test]
     fn spec_check_values() {
