@@ -255,7 +255,11 @@ pub fn rod_igm(p: &Params, rod: &Rod, x: f64, y: f64, psi: f64) -> Result<f64, G
 
 /// Analytic model-24 start for the inverse model: ψ = γ2, each rod by eq. 4.6.
 fn igm_start(p: &Params, x: f64, y: f64) -> Result<Config, GeometryError> {
-    let psi = p[GAMMA2];
+    igm_at_psi(p, x, y, p[GAMMA2])
+}
+
+/// The configuration of TCP (x, y) at platform angle ψ: each rod by eq. 4.6.
+fn igm_at_psi(p: &Params, x: f64, y: f64, psi: f64) -> Result<Config, GeometryError> {
     let mut c = Config::zeros();
     c[X] = x;
     c[Y] = y;
@@ -300,14 +304,7 @@ fn rod5_settled(p: &Params, x: f64, y: f64) -> Result<Config, GeometryError> {
         psi1 = psi2;
         g1 = rod5_closure(psi1)?;
     }
-    let mut c = Config::zeros();
-    c[X] = x;
-    c[Y] = y;
-    c[PSI] = psi1;
-    for rod in &RODS[..4] {
-        c[q_var(rod.actuator)] = rod_igm(p, rod, x, y, psi1)?;
-    }
-    Ok(c)
+    igm_at_psi(p, x, y, psi1)
 }
 
 /// Analytic model-24 start for a forward model: intersection of the two rods' circles
