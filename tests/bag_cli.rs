@@ -180,11 +180,17 @@ fn reference_stream() -> Vec<ActuatorState> {
     states
 }
 
+/// Held by the tests that SIGKILL a recorder: iceoryx2's dead-node clean-up is machine-wide,
+/// so one test's replayer would remove the other's dead recorder before that one's queue
+/// filled, and the second replayer would never have to go on by itself.
+static KILLS_A_RECORDER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// `rpkm record --reliable` of the actuator stream into `out` with `chunk_kib` chunks,
-/// printing each flush, and the reliable replay of the 8 kHz reference bag at `rate`, both
-/// on `prefix`; returns once the recorder listens, with the replay started.
+/// printing each flush, and the reliable replay of `bag` at `rate`, both on `prefix`;
+/// returns once the recorder listens, with the replay started.
 fn reliable_record_and_replay(
     prefix: &str,
+    bag: &std::path::Path,
     out: &std::path::Path,
     chunk_kib: &str,
     rate: &str,
@@ -200,12 +206,13 @@ fn reliable_record_and_replay(
     recorder.wait_line(Duration::from_secs(60), |l| {
         l.contains("recording 1 topics")
     });
-    let replay = Watched::spawn(
-        rpkm()
-            .arg("replay")
-            .arg(reference_bag("stream_8khz"))
-            .args(["--rate", rate, "--reliable", "--ipc-prefix", prefix]),
-    );
+    let replay = Watched::spawn(rpkm().arg("replay").arg(bag).args([
+        "--rate",
+        rate,
+        "--reliable",
+        "--ipc-prefix",
+        prefix,
+    ]));
     (recorder, replay)
 }
 
@@ -214,16 +221,42 @@ fn reliable_record_and_replay(
 /// than wait for it forever.
 #[test]
 fn reliable_replay_goes_on_when_its_recorder_dies_with_a_full_queue() {
+    let _alone = KILLS_A_RECORDER.lock().unwrap_or_else(|e| e.into_inner());
     let dir = scratch("dead_subscriber");
     let prefix = ipc_prefix("dead");
-    // 4000 states at a quarter of 8 kHz: 2 s, long enough to freeze the recorder mid-stream.
+    // A stream five times the subscriber queue: the queue must fill while the recorder is
+    // frozen, whatever depth the topic has and however late the first flush comes (three
+    // times failed once in five runs on a loaded machine).
+    let depth = rpkm_transport::topic::ACTUATOR_STATE.qos().depth;
+    let states = 5 * depth;
+    let bag = dir.join("stream");
+    let made = rpkm()
+        .args([
+            "simulate",
+            "--stream-hz",
+            "8000",
+            "--stream-motion",
+            "circle",
+        ])
+        .arg("--stream-seconds")
+        .arg(format!("{}", states as f64 / 8000.0))
+        .arg("--out")
+        .arg(&bag)
+        .output()
+        .expect("run rpkm simulate");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    // at the recorded speed: 2.6 s at 8 kHz, long enough to freeze the recorder mid-stream
     let (mut recorder, mut replay) =
-        reliable_record_and_replay(&prefix, &dir.join("rec"), "4", "0.25");
+        reliable_record_and_replay(&prefix, &bag, &dir.join("rec"), "4", "1");
     recorder.wait_line(Duration::from_secs(60), |l| {
         l.starts_with("rpkm record: flushed ")
     });
-    // Frozen, the recorder takes nothing: the 64-deep queue fills within 32 ms and the
-    // replayer waits for it, as reliable delivery to a live subscriber must.
+    // Frozen, the recorder takes nothing: its queue fills and the replayer waits for it, as
+    // reliable delivery to a live subscriber must.
     recorder.signal("STOP");
     std::thread::sleep(Duration::from_millis(300));
     recorder.child.kill().expect("SIGKILL the recorder");
@@ -236,18 +269,20 @@ fn reliable_replay_goes_on_when_its_recorder_dies_with_a_full_queue() {
         "the replay says why it went on: {stderr}"
     );
     assert!(
-        stderr.contains("/rpkm/actuator_state: 4000"),
+        stderr.contains(&format!("/rpkm/actuator_state: {states}")),
         "every state published: {stderr}"
     );
 }
 
 #[test]
 fn recorder_killed_during_8khz_stream_is_recovered() {
+    let _alone = KILLS_A_RECORDER.lock().unwrap_or_else(|e| e.into_inner());
     let dir = scratch("sigkill");
     let prefix = ipc_prefix("kill");
     let rec = dir.join("rec");
     // Reliable: the replayer waits for the recorder, so the recording is the source's prefix.
-    let (mut recorder, mut replay) = reliable_record_and_replay(&prefix, &rec, "16", "1");
+    let (mut recorder, mut replay) =
+        reliable_record_and_replay(&prefix, &reference_bag("stream_8khz"), &rec, "16", "1");
     // Kill once a good part of the stream is on disk, while the rest is still coming.
     let line = recorder.wait_line(Duration::from_secs(60), |l| {
         l.strip_prefix("rpkm record: flushed ")
