@@ -30,7 +30,8 @@ pub fn error_chain(e: &anyhow::Error) -> String {
 }
 
 /// Whether an error in a chain is the input's fault: a [`BadInput`], a campaign file the
-/// reader refuses, or data the model cannot use (a pose it cannot evaluate, a calibration that
+/// reader refuses, a bag that cannot be opened or decoded (missing, not a bag, corrupt, a
+/// payload that is not its topic's type), or data the model cannot use (a pose it cannot evaluate, a calibration that
 /// the campaign cannot determine or that diverges on it, a diagnosis that fails on it). The
 /// core's solvers converge on every campaign of the spec's machine, so their failure says the
 /// data are not such a campaign.
@@ -40,6 +41,8 @@ fn is_bad_input(c: &(dyn std::error::Error + 'static)) -> bool {
         || c.is::<rpkm_core::obs::PoseError>()
         || c.is::<rpkm_core::calib::CalibrationError>()
         || c.is::<rpkm_core::diagnose::DiagnoseError>()
+        || c.is::<rpkm_transport::bag::BagOpenError>()
+        || c.is::<rpkm_transport::bag::BagDecodeError>()
 }
 
 /// Exit code of an error: 2 for bad input anywhere in the chain (see [`is_bad_input`]),

@@ -109,6 +109,15 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
                 t.type_name
             )));
         }
+        // the payloads go out as they are: another encoding would reach subscribers as garbage
+        if t.message_encoding != "cdr" {
+            return Err(super::bad_input(format!(
+                "{}: topic {} has message encoding {:?}, expected \"cdr\"",
+                args.bag.display(),
+                t.name,
+                t.message_encoding
+            )));
+        }
         selected.push(&t.name);
     }
     let stop = stop_flag()?;

@@ -144,6 +144,9 @@ pub enum BagDecodeError {
     /// No topic of that name in the bag.
     #[error("no topic {topic} in the bag")]
     NoSuchTopic { topic: String },
+    /// The channel's messages are not CDR, the only encoding of ROS 2 messages rpkm reads.
+    #[error("topic {topic}: message encoding {encoding:?}, expected \"cdr\"")]
+    Encoding { topic: String, encoding: String },
 }
 
 /// Errors of [`recover`](super::recover).

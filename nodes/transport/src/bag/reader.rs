@@ -37,6 +37,8 @@ pub struct BagMessage<'a> {
     pub topic: &'a str,
     /// `pkg/msg/Type`.
     pub type_name: &'a str,
+    /// The channel's message encoding: `cdr` is the only one decoded.
+    pub message_encoding: &'a str,
     /// Log (receive) time, ns.
     pub log_time: u64,
     /// Publish time, ns.
@@ -57,6 +59,13 @@ impl BagMessage<'_> {
     /// Decodes the payload as `T`, after checking that the message's type is `T`'s.
     pub fn decode<T: RosMessage>(&self) -> Result<T, BagDecodeError> {
         let expected = T::type_name();
+        // a payload in another encoding (json, protobuf...) would decode as garbage CDR
+        if self.message_encoding != "cdr" {
+            return Err(BagDecodeError::Encoding {
+                topic: self.topic.to_owned(),
+                encoding: self.message_encoding.to_owned(),
+            });
+        }
         if self.type_name != expected {
             return Err(BagDecodeError::TypeMismatch {
                 topic: self.topic.to_owned(),
@@ -314,6 +323,7 @@ impl BagReader {
         BagMessage {
             topic: topic.map_or("", |t| t.name.as_str()),
             type_name: topic.map_or("", |t| t.type_name.as_str()),
+            message_encoding: topic.map_or("", |t| t.message_encoding.as_str()),
             log_time: entry.log_time,
             publish_time: entry.publish_time,
             sequence: entry.sequence,

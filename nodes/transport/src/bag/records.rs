@@ -4,7 +4,8 @@
 //! complete). Top-level records are framed here (opcode, u64 length, body), so every record's
 //! byte offset is known and a record cut short by the end of the file is detected before anything
 //! is allocated for it. Chunks are all-or-nothing: their records are visited only after the whole
-//! chunk was decompressed and its CRC checked.
+//! chunk was decompressed, its CRC checked (where the writer stored one) and every record in it
+//! parsed. The data section's own CRC, stored in `DataEnd`, is checked over every byte before it.
 
 use std::io::{self, Read};
 
@@ -89,6 +90,9 @@ pub(crate) fn walk_data_section<R: Read, E>(
     }
     let mut offset = magic.len() as u64;
     let mut body = Vec::new();
+    // CRC-32 of everything before DataEnd, magic included (as mcap's writer computes it)
+    let mut crc = crc32fast::Hasher::new();
+    crc.update(&magic);
     let mut summary = SectionSummary {
         end: SectionEnd::Eof,
         valid_bytes: offset,
@@ -144,8 +148,10 @@ pub(crate) fn walk_data_section<R: Read, E>(
         let next_offset = offset + frame.len() as u64 + len;
         match opcode {
             op::DATA_END => {
-                summary.valid_bytes = next_offset;
-                summary.end = SectionEnd::DataEnd;
+                summary.end = data_end(&body, crc.finalize(), record_offset);
+                if matches!(summary.end, SectionEnd::DataEnd) {
+                    summary.valid_bytes = next_offset;
+                }
                 return Ok(summary);
             }
             op::SCHEMA | op::CHANNEL | op::MESSAGE | op::CHUNK => {
@@ -186,8 +192,31 @@ pub(crate) fn walk_data_section<R: Read, E>(
             // Header, message indexes, attachments, metadata, private records: not needed.
             _ => {}
         }
+        crc.update(&frame);
+        crc.update(&body);
         summary.valid_bytes = next_offset;
         offset = next_offset;
+    }
+}
+
+/// The end of a data section at a `DataEnd` record of body `body` at `offset`: complete when
+/// its stored CRC (0: none stored) equals `computed`, the CRC of every byte before it.
+fn data_end(body: &[u8], computed: u32, offset: u64) -> SectionEnd {
+    let saved = match mcap::parse_record(op::DATA_END, body) {
+        Ok(Record::DataEnd(end)) => end.data_section_crc,
+        Ok(_) => return SectionEnd::DataEnd,
+        Err(source) => return SectionEnd::Corrupt { offset, source },
+    };
+    if saved == 0 || saved == computed {
+        SectionEnd::DataEnd
+    } else {
+        SectionEnd::Corrupt {
+            offset,
+            source: mcap::McapError::BadDataCrc {
+                saved,
+                calculated: computed,
+            },
+        }
     }
 }
 
