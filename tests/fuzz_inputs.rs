@@ -1,0 +1,329 @@
+//! Fuzzed input through the real command line, judged against the contract, not the code:
+//! whatever a user hands rpkm, it ends with 0 or 2, never a panic (101), an abort or another
+//! signal, never a hang; and a rejection (2) names its place: the file it read. Three
+//! families, fixed seeds:
+//! - campaign CSV through `rpkm calibrate` (a small tracker campaign, mutated);
+//! - rosbag2 bags through `rpkm bag info` (the reference calibration bag, bytes flipped,
+//!   cut, metadata.yaml edited);
+//! - node parameter YAML through `rpkm node ingest --params` (the shipped file, mutated; the
+//!   source is a missing file, so a node whose parameters pass exits 2 naming that file).
+//!
+//! A failing case is left in `target/fuzz-failures/` with the command that failed.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// xorshift64*: a fixed, dependency-free stream of cases.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+    fn pick<'a>(&mut self, items: &[&'a str]) -> &'a str {
+        items[self.below(items.len())]
+    }
+}
+
+/// Values a field may be mutated to: the ones a careless export, a unit mix-up or a broken
+/// tool produces.
+const ODD_VALUES: [&str; 18] = [
+    "nan",
+    "inf",
+    "-inf",
+    "1e309",
+    "-1e300",
+    "1e15",
+    "0x10",
+    "",
+    " ",
+    "true",
+    "1,5",
+    "-0",
+    "1e-320",
+    "12abc",
+    "\u{feff}3",
+    "999999999999999999999",
+    "١٢",
+    "\"7\"",
+];
+
+/// One mutation of a text file: a field, a line, the bytes.
+fn mutate_text(text: &str, rng: &mut Rng) -> Vec<u8> {
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let n = lines.len();
+    match rng.below(8) {
+        0..=2 => {
+            let i = rng.below(n);
+            let mut fields: Vec<String> = lines[i].split(',').map(str::to_owned).collect();
+            let k = rng.below(fields.len());
+            fields[k] = rng.pick(&ODD_VALUES).to_owned();
+            lines[i] = fields.join(",");
+        }
+        3 => {
+            let i = rng.below(n);
+            lines.remove(i);
+        }
+        4 => {
+            let (i, j) = (rng.below(n), rng.below(n));
+            lines.swap(i, j);
+        }
+        5 => {
+            let i = rng.below(n);
+            let extra = format!("{},{}", lines[i], rng.pick(&ODD_VALUES));
+            lines[i] = extra;
+        }
+        _ => {}
+    }
+    let mut bytes = lines.join("\n").into_bytes();
+    match rng.below(6) {
+        0 => {
+            let at = rng.below(bytes.len());
+            bytes[at] = (rng.next() & 0xff) as u8;
+        }
+        1 => bytes.truncate(rng.below(bytes.len())),
+        2 => {
+            let at = rng.below(bytes.len());
+            bytes.splice(at..at, [0xff, 0xfe, 0xc3]);
+        }
+        _ => {}
+    }
+    bytes
+}
+
+/// What one run did.
+struct Outcome {
+    code: Option<i32>,
+    hung: bool,
+    stderr: String,
+}
+
+/// Runs `cmd` with a time limit, killing it when it hangs.
+fn run(mut cmd: Command, limit: Duration) -> Outcome {
+    let mut child = cmd
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn rpkm");
+    let mut stderr_pipe = child.stderr.take().expect("stderr");
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = std::io::Read::read_to_string(&mut stderr_pipe, &mut s);
+        s
+    });
+    let start = Instant::now();
+    let (code, hung) = loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            break (status.code(), false);
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            break (None, true);
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    Outcome {
+        code,
+        hung,
+        stderr: reader.join().unwrap_or_default(),
+    }
+}
+
+/// A case that broke the contract, or None: exit 0 or 2 in time, and a 2 names one of
+/// `places`.
+fn judge(out: &Outcome, places: &[String]) -> Option<String> {
+    if out.hung {
+        return Some("hung".to_owned());
+    }
+    match out.code {
+        Some(0) => None,
+        Some(2) if places.iter().any(|p| out.stderr.contains(p.as_str())) => None,
+        Some(2) => Some(format!("exit 2 without naming {places:?}")),
+        Some(c) => Some(format!("exit {c}")),
+        None => Some("killed by a signal".to_owned()),
+    }
+}
+
+fn rpkm() -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_rpkm"));
+    cmd.env("RUST_BACKTRACE", "0");
+    cmd
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rpkm-fuzz-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    dir
+}
+
+/// Keeps a failing case for a human: its input and what went wrong.
+fn keep(family: &str, case: usize, input: &Path, why: &str, out: &Outcome) -> String {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fuzz-failures");
+    let _ = std::fs::create_dir_all(&dir);
+    let to = dir.join(format!("{family}-{case}"));
+    let _ = copy_any(input, &to);
+    format!(
+        "{family} case {case} ({}): {why}\n{}",
+        to.display(),
+        out.stderr.lines().take(6).collect::<Vec<_>>().join("\n")
+    )
+}
+
+fn copy_any(from: &Path, to: &Path) -> std::io::Result<()> {
+    if from.is_dir() {
+        std::fs::create_dir_all(to)?;
+        for entry in std::fs::read_dir(from)? {
+            let entry = entry?;
+            std::fs::copy(entry.path(), to.join(entry.file_name()))?;
+        }
+        Ok(())
+    } else {
+        std::fs::copy(from, to).map(|_| ())
+    }
+}
+
+/// Runs `cases` cases of one family on two threads (each returns its broken contract, if
+/// any, and whether the input was rejected); returns the broken ones, after checking that
+/// the mutations bite (a fuzzer whose inputs all pass tests nothing).
+fn family(cases: usize, one: impl Fn(usize) -> (Option<String>, bool) + Sync) -> Vec<String> {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let rejected = std::sync::atomic::AtomicUsize::new(0);
+    let failures = std::sync::Mutex::new(Vec::new());
+    std::thread::scope(|s| {
+        for _ in 0..2 {
+            s.spawn(|| loop {
+                let case = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                if case >= cases {
+                    break;
+                }
+                let (failure, was_rejected) = one(case);
+                if was_rejected {
+                    rejected.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
+                if let Some(f) = failure {
+                    failures.lock().unwrap_or_else(|e| e.into_inner()).push(f);
+                }
+            });
+        }
+    });
+    let rejected = rejected.into_inner();
+    assert!(
+        rejected * 5 >= cases,
+        "only {rejected} of {cases} mutated inputs were rejected"
+    );
+    failures.into_inner().unwrap_or_else(|e| e.into_inner())
+}
+
+#[test]
+fn fuzzed_campaigns_end_in_0_or_2_naming_their_file() {
+    let dir = scratch("csv");
+    let base = dir.join("base.csv");
+    let made = rpkm()
+        .args(["simulate", "--campaign", "lt", "--seed", "3", "--out"])
+        .arg(&base)
+        .output()
+        .expect("rpkm simulate");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let text = std::fs::read_to_string(&base).expect("base campaign");
+    let failures = family(120, |case| {
+        let mut rng = Rng(0x0c5f_0000 + case as u64 * 7919);
+        let file = dir.join(format!("case{case}.csv"));
+        std::fs::write(&file, mutate_text(&text, &mut rng)).expect("write case");
+        let mut cmd = rpkm();
+        cmd.arg("calibrate").arg(&file);
+        let out = run(cmd, Duration::from_secs(60));
+        let places = [format!("case{case}.csv")];
+        let broken = judge(&out, &places).map(|why| keep("csv", case, &file, &why, &out));
+        (broken, out.code == Some(2))
+    });
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+#[test]
+fn fuzzed_bags_end_in_0_or_2_naming_their_file() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("bags/calibration");
+    let dir = scratch("bags");
+    let failures = family(160, |case| {
+        let mut rng = Rng(0xba95_0000 + case as u64 * 104_729);
+        let bag = dir.join(format!("case{case}"));
+        copy_any(&src, &bag).expect("copy the reference bag");
+        if rng.below(5) == 0 {
+            let meta = bag.join("metadata.yaml");
+            let text = std::fs::read_to_string(&meta).expect("metadata");
+            std::fs::write(&meta, mutate_text(&text, &mut rng)).expect("write metadata");
+        } else {
+            let mcap = bag.join("calibration_0.mcap");
+            let mut bytes = std::fs::read(&mcap).expect("mcap");
+            match rng.below(3) {
+                0 => bytes.truncate(rng.below(bytes.len())),
+                _ => {
+                    for _ in 0..1 + rng.below(4) {
+                        let at = rng.below(bytes.len());
+                        bytes[at] ^= 1 << rng.below(8);
+                    }
+                }
+            }
+            std::fs::write(&mcap, bytes).expect("write mcap");
+        }
+        let mut cmd = rpkm();
+        cmd.args(["bag", "info"]).arg(&bag);
+        let out = run(cmd, Duration::from_secs(30));
+        let places = [format!("case{case}")];
+        let broken = judge(&out, &places).map(|why| keep("bag", case, &bag, &why, &out));
+        (broken, out.code == Some(2))
+    });
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+#[test]
+fn fuzzed_parameter_files_end_in_0_or_2_naming_their_place() {
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("launch_scripts/params.yaml");
+    let text = std::fs::read_to_string(shipped).expect("params.yaml");
+    let dir = scratch("params");
+    let failures = family(160, |case| {
+        let mut rng = Rng(0x9a4a_0000 + case as u64 * 15_485_863);
+        let file = dir.join(format!("case{case}.yaml"));
+        // YAML values sit after ": ", so the field mutation is on ':' here
+        let mutated = text
+            .lines()
+            .map(|l| {
+                if rng.below(12) == 0 {
+                    match l.split_once(": ") {
+                        Some((key, _)) => format!("{key}: {}", rng.pick(&ODD_VALUES)),
+                        None => l.to_owned(),
+                    }
+                } else {
+                    l.to_owned()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        std::fs::write(&file, mutate_text(&mutated, &mut rng)).expect("write case");
+        let missing = dir.join(format!("missing{case}.csv"));
+        let mut cmd = rpkm();
+        cmd.args(["node", "ingest", "--params"])
+            .arg(&file)
+            .arg("--source")
+            .arg(&missing)
+            .arg("--ipc-prefix")
+            .arg(format!("fuzz{}_{case}_", std::process::id()));
+        let out = run(cmd, Duration::from_secs(30));
+        let places = [format!("case{case}.yaml"), format!("missing{case}.csv")];
+        let broken = judge(&out, &places).map(|why| keep("params", case, &file, &why, &out));
+        (broken, out.code == Some(2))
+    });
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
