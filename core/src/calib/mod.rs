@@ -420,7 +420,10 @@ impl Plan {
         let corr0 = pb.effects.corrections(theta0);
         let rows0 = pb.direct(&pb.start, &corr0, &HashSet::new())?;
         // a row whose squared weighted value overflows makes the cost infinite
-        if let Some(r) = rows0.iter().find(|r| !(r.value / r.sigma).powi(2).is_finite()) {
+        if let Some(r) = rows0
+            .iter()
+            .find(|r| !(r.value / r.sigma).powi(2).is_finite())
+        {
             let pose = &pb.campaign.poses[r.pose];
             return Err(CalibrationError::NonFiniteRow {
                 campaign: pb.campaign.source.clone(),
