@@ -14,20 +14,8 @@ use rpkm_core::campaign::{Campaign, CampaignReader};
 
 const FILES: usize = 240;
 
-/// xorshift64*: a fixed sequence, no dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
+mod fuzz_support;
+use fuzz_support::Rng;
 
 /// The base: setups of every instrument from the foreign null campaign, 8 rows each.
 fn base() -> Vec<Vec<u8>> {
