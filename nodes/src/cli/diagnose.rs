@@ -63,6 +63,10 @@ pub struct DiagnoseArgs {
     pub tolerance_mm: f64,
     #[arg(long, default_value_t = 1.0)]
     pub tolerance_mrad: f64,
+    /// Threads the candidate effects are fitted on (0: every core). The diagnosis is the
+    /// same, to the bit, whatever the number.
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
 }
 
 /// Effects of a comma-separated list, or a bad-input error naming the option.
@@ -97,6 +101,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             length_mm: args.tolerance_mm,
             angle_rad: args.tolerance_mrad * 1e-3,
         },
+        threads: args.threads,
         ..Default::default()
     };
     let d = diagnose::diagnose(&campaign, validation.as_ref(), &refs, &opts)
