@@ -75,6 +75,21 @@ struct Buffers {
     js_trial: DMatrix<f64>,
 }
 
+impl Buffers {
+    /// Buffers for `cols` unknowns (the rows are sized at the first evaluation).
+    fn new(cols: usize) -> Buffers {
+        Buffers {
+            r: DVector::zeros(0),
+            js: DMatrix::zeros(0, cols),
+            a: DMatrix::zeros(cols, cols),
+            g: DVector::zeros(cols),
+            damped: DMatrix::zeros(cols, cols),
+            r_trial: DVector::zeros(0),
+            js_trial: DMatrix::zeros(0, cols),
+        }
+    }
+}
+
 /// What a converged run found.
 pub(super) struct LmResult {
     pub state: State,
@@ -163,15 +178,7 @@ impl Lm<'_> {
 
     pub fn run(&self, start: &State) -> Result<LmResult, CalibrationError> {
         let cols = self.n_unknowns();
-        let mut b = Buffers {
-            r: DVector::zeros(0),
-            js: DMatrix::zeros(0, cols),
-            a: DMatrix::zeros(cols, cols),
-            g: DVector::zeros(cols),
-            damped: DMatrix::zeros(cols, cols),
-            r_trial: DVector::zeros(0),
-            js_trial: DMatrix::zeros(0, cols),
-        };
+        let mut b = Buffers::new(cols);
         let mut p = start.clone();
         self.eval_into(&p, &mut b.r, &mut b.js)?;
         Self::normal_equations(&mut b);

@@ -286,23 +286,7 @@ pub fn calibrate_with(
     effects: &EffectSet,
     theta0: &[f64],
 ) -> Result<Calibration, CalibrationError> {
-    if let Selection::List(list) = &opts.selection {
-        if let Some(&i) = list.iter().find(|&&i| !opts.model.has_param(i)) {
-            return Err(CalibrationError::NotInModel(NAMES[i], opts.model));
-        }
-    }
-    if !effects.fits_campaign_of(campaign.poses.len()) {
-        return Err(CalibrationError::EffectsOfAnotherCampaign {
-            campaign: campaign.source.clone(),
-            bound: effects.n_poses(),
-            poses: campaign.poses.len(),
-        });
-    }
-    let theta0: Vec<f64> = if theta0.len() == effects.n_params() {
-        theta0.to_vec()
-    } else {
-        vec![0.0; effects.n_params()]
-    };
+    let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem {
         campaign,
         model: opts.model,
@@ -390,6 +374,33 @@ fn check_finite(
     } else {
         Err(CalibrationError::NonFinite(bad.join(", ")))
     }
+}
+
+/// The effect parameters to start from (`theta0`, or all zero when it does not fit the
+/// effects), after checking that the options and the effects fit the campaign.
+fn start_theta(
+    campaign: &Campaign,
+    opts: &Options,
+    effects: &EffectSet,
+    theta0: &[f64],
+) -> Result<Vec<f64>, CalibrationError> {
+    if let Selection::List(list) = &opts.selection {
+        if let Some(&i) = list.iter().find(|&&i| !opts.model.has_param(i)) {
+            return Err(CalibrationError::NotInModel(NAMES[i], opts.model));
+        }
+    }
+    if !effects.fits_campaign_of(campaign.poses.len()) {
+        return Err(CalibrationError::EffectsOfAnotherCampaign {
+            campaign: campaign.source.clone(),
+            bound: effects.n_poses(),
+            poses: campaign.poses.len(),
+        });
+    }
+    Ok(if theta0.len() == effects.n_params() {
+        theta0.to_vec()
+    } else {
+        vec![0.0; effects.n_params()]
+    })
 }
 
 /// What step 1 identifies and how, decided once from the rows at the start parameters.

@@ -533,32 +533,18 @@ pub struct ElasticSensitivity {
 /// vector) or none, ∂l/∂p).
 type RodPartial = (usize, Vector2<f64>, Option<(usize, Vector2<f64>)>, f64);
 
-/// Analytic sensitivities of `eq` (solved for `q`, `followers`).
-pub fn sensitivity(
+/// ∂G/∂p of the equilibrium at `z`: the rod terms, only in the rows that are not replaced by
+/// rigid constraints.
+fn g_params(
     p: &Params,
     k: &Stiffness,
-    q: [f64; 4],
-    followers: Followers,
-    eq: &Equilibrium,
-) -> Result<ElasticSensitivity, ElasticError> {
-    let z = eq.z();
-    let (_, h, _) = system(p, &frames(p), k, &q, &followers, &z, false);
-    let lu = h.lu();
-    // ∂G/∂q: only the rows of active carriers depend on q.
-    let mut g_q = SMatrix::<f64, 7, 4>::zeros();
-    for j in 0..4 {
-        if !followers[j] {
-            g_q[(3 + j, j)] = match k.carrier[j] {
-                Some(c) => -c,
-                None => -1.0,
-            };
-        }
-    }
-    // ∂G/∂p: rod terms, only in rows that are not replaced by rigid constraints.
+    followers: &Followers,
+    z: &SVector<f64, 7>,
+) -> SMatrix<f64, 7, N_PARAMS> {
     let mut g_p = SMatrix::<f64, 7, N_PARAMS>::zeros();
     let (sn, cs) = z[2].sin_cos();
     for (i, rod) in RODS.iter().enumerate() {
-        let st = rod_state(p, i, &z);
+        let st = rod_state(p, i, z);
         let ki = k.rod[i];
         let t = ki * st.delta;
         let d = drho_dz(&st);
@@ -610,6 +596,31 @@ pub fn sensitivity(
             }
         }
     }
+    g_p
+}
+
+/// Analytic sensitivities of `eq` (solved for `q`, `followers`).
+pub fn sensitivity(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    followers: Followers,
+    eq: &Equilibrium,
+) -> Result<ElasticSensitivity, ElasticError> {
+    let z = eq.z();
+    let (_, h, _) = system(p, &frames(p), k, &q, &followers, &z, false);
+    let lu = h.lu();
+    // ∂G/∂q: only the rows of active carriers depend on q.
+    let mut g_q = SMatrix::<f64, 7, 4>::zeros();
+    for j in 0..4 {
+        if !followers[j] {
+            g_q[(3 + j, j)] = match k.carrier[j] {
+                Some(c) => -c,
+                None => -1.0,
+            };
+        }
+    }
+    let g_p = g_params(p, k, &followers, &z);
     let dz_dq = lu
         .solve(&g_q)
         .ok_or(ElasticError::Singular { iteration: 0 })?;
