@@ -99,7 +99,17 @@ fn ingest_accepts_cyclone_actuator_states_and_counts_the_bad_ones() {
     );
     // Let ingest's DDS reader exist before Cyclone writes (a late reader misses the first
     // rounds, which is fine, but a reader joining mid-round would see seq k.. before 1..k).
-    std::thread::sleep(Duration::from_millis(1500));
+    // Its first /diagnostics comes from the loop that reads DDS, after the reader was made:
+    // waiting for it holds on a loaded machine, where a fixed 1.5 s once lost seq 1.
+    let up = Instant::now() + Duration::from_secs(30);
+    let mut ready = false;
+    while !ready && Instant::now() < up {
+        ready = diagnostics
+            .recv_timeout(Duration::from_millis(100))
+            .expect("recv")
+            .is_some_and(|d| d.status.iter().any(|s| s.name == "rpkm/ingest"));
+    }
+    assert!(ready, "ingest did not report on /diagnostics within 30 s");
     let _peer = Proc(
         Command::new(py)
             .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/cyclone_peer.py"))
