@@ -31,7 +31,7 @@ use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::geometry;
 use crate::noise::{Group, NoiseModel, XyInstrument, N_GROUPS};
-use crate::obs::{self, PoseError, Residual};
+use crate::obs::{self, PoseError, RowValue};
 use crate::params::{Model, Params};
 use crate::variance::{self, GroupNoise, NoiseEstimate};
 use nalgebra::{DMatrix, DVector, Vector2};
@@ -244,7 +244,7 @@ pub struct Diagnosis {
 
 /// What one fit produced: its final rows and statistics.
 struct Fitted {
-    rows: Vec<Residual>,
+    rows: Vec<RowValue>,
     fit: Fit,
 }
 
@@ -443,12 +443,20 @@ fn try_all(
     threads: usize,
 ) -> Vec<Tried> {
     let start = Params::nominal();
-    let one = |effect: &dyn Effect| try_effect(campaign, val, in_model, effect, &start, copts);
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = if threads == 0 { cores } else { threads }.clamp(1, tried.len().max(1));
     if threads == 1 {
-        return tried.iter().map(|e| one(*e)).collect();
+        return tried
+            .iter()
+            .map(|e| try_effect(campaign, val, in_model, *e, &start, copts))
+            .collect();
     }
+    // the candidates share the cores: each fit's rows on one thread
+    let copts = &calib::Options {
+        threads: 1,
+        ..copts.clone()
+    };
+    let one = |effect: &dyn Effect| try_effect(campaign, val, in_model, effect, &start, copts);
     let mut out: Vec<Option<Tried>> = (0..tried.len()).map(|_| None).collect();
     std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
@@ -1014,21 +1022,21 @@ fn evidence(
 }
 
 /// Values (mm) of the length rows (not ψ).
-fn length_values(rows: &[Residual]) -> Vec<f64> {
+fn length_values(rows: &[RowValue]) -> Vec<f64> {
     rows.iter()
         .filter(|r| !r.direction.is_angle())
         .map(|r| r.value)
         .collect()
 }
 
-fn length_sigmas(rows: &[Residual]) -> Vec<f64> {
+fn length_sigmas(rows: &[RowValue]) -> Vec<f64> {
     rows.iter()
         .filter(|r| !r.direction.is_angle())
         .map(|r| r.sigma)
         .collect()
 }
 
-fn groups(rows: &[Residual]) -> Vec<GroupRms> {
+fn groups(rows: &[RowValue]) -> Vec<GroupRms> {
     /// Sums over the rows of one instrument and direction.
     #[derive(Default)]
     struct Sums {
@@ -1062,7 +1070,7 @@ fn groups(rows: &[Residual]) -> Vec<GroupRms> {
         .collect()
 }
 
-fn points(campaign: &Campaign, rows: &[Residual]) -> Vec<Point> {
+fn points(campaign: &Campaign, rows: &[RowValue]) -> Vec<Point> {
     let tcp = sparse::nominal_tcp(campaign);
     let mut out: Vec<Point> = rows
         .iter()

@@ -152,11 +152,37 @@ fn equation_rods(model: Model) -> &'static [Rod] {
     }
 }
 
+/// What the equations of one configuration share: sin and cos of ψ, and both guides' frames
+/// (each a sin_cos: computed once per evaluation, not once per rod and use).
+struct Trig {
+    psi: (f64, f64),
+    frames: [(Vector2<f64>, Vector2<f64>, Vector2<f64>); 2],
+}
+
+impl Trig {
+    fn new(p: &Params, c: &Config) -> Trig {
+        Trig {
+            psi: c[PSI].sin_cos(),
+            frames: [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)],
+        }
+    }
+
+    fn frame(&self, g: Guide) -> (Vector2<f64>, Vector2<f64>, Vector2<f64>) {
+        match g {
+            Guide::G1 => self.frames[0],
+            Guide::G2 => self.frames[1],
+        }
+    }
+}
+
 /// Residual of one rod's closure: |A − B|² − l², and the vector r = A − B.
 #[inline]
-fn rod_residual(p: &Params, rod: &Rod, c: &Config) -> (f64, Vector2<f64>) {
-    let a = platform_joint(p, rod, c[X], c[Y], c[PSI]);
-    let b = carrier_joint(p, rod, c[q_var(rod.actuator)]);
+fn rod_residual(p: &Params, rod: &Rod, c: &Config, t: &Trig) -> (f64, Vector2<f64>) {
+    let (s, co) = t.psi;
+    let (xa, ya) = (p[rod.xa], p[rod.ya]);
+    let a = Vector2::new(c[X] + co * xa - s * ya, c[Y] + s * xa + co * ya);
+    let (o, e, n) = t.frame(rod.guide);
+    let b = o + n * p[rod.xb] + e * (c[q_var(rod.actuator)] + p[rod.yb]);
     let r = a - b;
     (r.norm_squared() - p[rod.l] * p[rod.l], r)
 }
@@ -165,10 +191,11 @@ fn rod_residual(p: &Params, rod: &Rod, c: &Config) -> (f64, Vector2<f64>) {
 pub fn closure(p: &Params, model: Model, c: &Config) -> Closure {
     let mut e = SVector::<f64, 5>::zeros();
     let mut e_c = SMatrix::<f64, 5, 7>::zeros();
-    let (s, co) = c[PSI].sin_cos();
+    let t = Trig::new(p, c);
+    let (s, co) = t.psi;
     for (row, rod) in equation_rods(model).iter().enumerate() {
-        let (f, r) = rod_residual(p, rod, c);
-        let (_, dir, _) = guide_frame(p, rod.guide);
+        let (f, r) = rod_residual(p, rod, c, &t);
+        let (_, dir, _) = t.frame(rod.guide);
         // dA/dψ = R'(ψ) a
         let da_dpsi = Vector2::new(
             -s * p[rod.xa] - co * p[rod.ya],
@@ -190,10 +217,11 @@ pub fn closure(p: &Params, model: Model, c: &Config) -> Closure {
 /// ∂e/∂p: derivatives of the model's equations with respect to the 29 parameters.
 pub fn closure_params(p: &Params, model: Model, c: &Config) -> SMatrix<f64, 5, N_PARAMS> {
     let mut e_p = SMatrix::<f64, 5, N_PARAMS>::zeros();
-    let (s, co) = c[PSI].sin_cos();
+    let t = Trig::new(p, c);
+    let (s, co) = t.psi;
     for (row, rod) in equation_rods(model).iter().enumerate() {
-        let (_, r) = rod_residual(p, rod, c);
-        let (_, dir, across) = guide_frame(p, rod.guide);
+        let (_, r) = rod_residual(p, rod, c, &t);
+        let (_, dir, across) = t.frame(rod.guide);
         let along = c[q_var(rod.actuator)] + p[rod.yb];
         e_p[(row, rod.l)] = -2.0 * p[rod.l];
         e_p[(row, rod.xa)] = 2.0 * r.dot(&Vector2::new(co, s));

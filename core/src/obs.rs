@@ -90,11 +90,41 @@ pub struct Residual {
     pub jacobian: Row,
     /// For virtual rows of the second step: d value / d p_cal, the sensitivity to the
     /// first step's parameters that made the virtual measurement (to propagate their
-    /// uncertainty); None for measured rows.
-    pub d_pcal: Option<Row>,
+    /// uncertainty); None for measured rows (boxed: most rows are measured, and a large
+    /// campaign keeps its rows).
+    pub d_pcal: Option<Box<Row>>,
     /// d value / d θ over the effects' parameters (empty without effects; zero for the
     /// virtual rows of the second step, which hold the effects fixed).
     pub d_theta: Vec<f64>,
+}
+
+/// A row's value without its derivatives: what a fit keeps of its rows (the statistics,
+/// the noise estimation and the diagnosis read these; a campaign of 10⁵ poses keeps them in
+/// a fifth of the memory of its [`Residual`]s).
+#[derive(Clone, Debug)]
+pub struct RowValue {
+    pub pose: usize,
+    pub instrument: Instrument,
+    pub direction: Direction,
+    /// W_mod − W_meas (mm or rad).
+    pub value: f64,
+    /// Standard deviation of the row (mm or rad).
+    pub sigma: f64,
+    /// Its variance split by noise group.
+    pub parts: Parts,
+}
+
+impl From<&Residual> for RowValue {
+    fn from(r: &Residual) -> RowValue {
+        RowValue {
+            pose: r.pose,
+            instrument: r.instrument,
+            direction: r.direction,
+            value: r.value,
+            sigma: r.sigma,
+            parts: r.parts,
+        }
+    }
 }
 
 /// A pose the model could not evaluate, with its source line.
@@ -256,45 +286,132 @@ pub fn residuals_in(
     noise: &NoiseModel,
     form: Form,
 ) -> Result<Vec<Residual>, PoseError> {
-    let decorrelated = form == Form::Decorrelated;
+    let eval = Evaluation {
+        campaign,
+        p,
+        model,
+        step,
+        p_cal,
+        corr,
+        noise,
+        form,
+    };
+    let pieces = Pieces::new(campaign, usize::MAX);
     let mut out = Vec::with_capacity(campaign.poses.len() * 4);
-    for setup in campaign.setups() {
-        let reset = setup.reset.map(|i| (i, &campaign.poses[i]));
+    for k in 0..pieces.len() {
+        eval.piece_into(&pieces, k, &mut out)?;
+    }
+    Ok(out)
+}
+
+/// A campaign cut into pieces of at most `size` poses of one setup, in file order within
+/// each setup. Evaluated piece by piece and concatenated, the rows are those of
+/// [`residuals_in`] in the same order; a piece is the unit of parallel work of a large
+/// calibration, and fixed pieces make its sums the same on any number of threads.
+#[derive(Clone, Debug)]
+pub struct Pieces {
+    /// Per setup: its reset pose and its poses.
+    setups: Vec<(Option<usize>, Vec<usize>)>,
+    /// Per piece: its setup and the range of that setup's poses.
+    pieces: Vec<(usize, std::ops::Range<usize>)>,
+}
+
+impl Pieces {
+    pub fn new(campaign: &Campaign, size: usize) -> Pieces {
+        let size = size.max(1);
+        let setups: Vec<(Option<usize>, Vec<usize>)> = campaign
+            .setups()
+            .into_iter()
+            .map(|s| (s.reset, s.poses))
+            .collect();
+        let mut pieces = Vec::new();
+        for (k, (_, poses)) in setups.iter().enumerate() {
+            let mut a = 0usize;
+            loop {
+                let b = poses.len().min(a.saturating_add(size));
+                pieces.push((k, a..b));
+                if b == poses.len() {
+                    break;
+                }
+                a = b;
+            }
+        }
+        Pieces { setups, pieces }
+    }
+
+    pub fn len(&self) -> usize {
+        self.pieces.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.pieces.is_empty()
+    }
+}
+
+/// One evaluation of a campaign's rows: at parameters `p` (virtual measurements made with
+/// `p_cal`), with the effects' corrections `corr`, weighted by `noise`.
+#[derive(Clone, Copy)]
+pub struct Evaluation<'a> {
+    pub campaign: &'a Campaign,
+    pub p: &'a Params,
+    pub model: Model,
+    pub step: Step,
+    pub p_cal: &'a Params,
+    pub corr: &'a Corrections,
+    pub noise: &'a NoiseModel,
+    pub form: Form,
+}
+
+impl Evaluation<'_> {
+    /// Appends the rows of piece `k` to `out`.
+    pub fn piece_into(
+        &self,
+        pieces: &Pieces,
+        k: usize,
+        out: &mut Vec<Residual>,
+    ) -> Result<(), PoseError> {
+        let Some((setup, range)) = pieces.pieces.get(k) else {
+            return Ok(());
+        };
+        let (reset, poses) = &pieces.setups[*setup];
+        let campaign = self.campaign;
+        let reset = reset.map(|i| (i, &campaign.poses[i]));
         let ctx = Ctx {
-            p,
-            p_cal,
-            model,
-            corr,
-            noise,
-            decorrelated,
+            p: self.p,
+            p_cal: self.p_cal,
+            model: self.model,
+            corr: self.corr,
+            noise: self.noise,
+            decorrelated: self.form == Form::Decorrelated,
         };
         // a reset pose that cannot be solved is blamed on its own line, not on the first
         // pose measured relative to it
         if let Some((ri, reset)) = reset.filter(|(_, r)| r.instrument.is_relative()) {
-            let (p_r, q_r) = corrected(p, &reset.q, &corr.delta(ri));
-            forward(&p_r, model, Subsystem::NR, &q_r)
+            let (p_r, q_r) = corrected(self.p, &reset.q, &self.corr.delta(ri));
+            forward(&p_r, self.model, Subsystem::NR, &q_r)
                 .map_err(|e| PoseError::at(campaign, reset, e))?;
         }
-        for &i in &setup.poses {
+        for &i in &poses[range.clone()] {
             let pose = &campaign.poses[i];
             if pose.reset && pose.instrument.is_relative() {
                 continue;
             }
             let err = |error| PoseError::at(campaign, pose, error);
-            match step {
-                Step::Direct => pose_rows(&ctx, i, pose, reset, &mut out).map_err(err)?,
-                Step::VirtualQ2 => virtual_q2_row(&ctx, i, pose, p_cal, &mut out).map_err(err)?,
+            match self.step {
+                Step::Direct => pose_rows(&ctx, i, pose, reset, out).map_err(err)?,
+                Step::VirtualQ2 => virtual_q2_row(&ctx, i, pose, self.p_cal, out).map_err(err)?,
             }
         }
-        // the reset pose of a forward instrument still yields a virtual q2 measurement
-        if step == Step::VirtualQ2 {
+        // the reset pose of a forward instrument still yields a virtual q2 measurement,
+        // after the setup's last pose
+        if self.step == Step::VirtualQ2 && range.end == poses.len() {
             if let Some((i, pose)) = reset {
                 let err = |error| PoseError::at(campaign, pose, error);
-                virtual_q2_row(&ctx, i, pose, p_cal, &mut out).map_err(err)?;
+                virtual_q2_row(&ctx, i, pose, self.p_cal, out).map_err(err)?;
             }
         }
+        Ok(())
     }
-    Ok(out)
 }
 
 /// What every row of one evaluation shares.
@@ -654,7 +771,7 @@ fn virtual_q2_row(
         sigma: ctx.noise.encoder_mm * 2f64.sqrt(),
         parts: ctx.noise.encoder_parts(2.0),
         jacobian: s.dc_dp.row(v).transpose(),
-        d_pcal: Some(d_pcal),
+        d_pcal: Some(Box::new(d_pcal)),
         d_theta: vec![0.0; ctx.corr.n_params],
     });
     Ok(())

@@ -19,7 +19,7 @@ use crate::campaign::{Campaign, Instrument};
 use crate::effects::EffectSet;
 use crate::geometry;
 use crate::noise::{Group, NoiseModel, N_GROUPS};
-use crate::obs::Residual;
+use crate::obs::RowValue;
 use crate::params::{Model, Params};
 use nalgebra::Vector2;
 
@@ -71,7 +71,7 @@ impl NoiseEstimate {
 
 /// Per group: (numerator, degrees of freedom) of the variance factor of the fit `rows` with
 /// leverages `leverage`.
-pub fn factor_terms(rows: &[Residual], leverage: &[f64]) -> [(f64, f64); N_GROUPS] {
+pub fn factor_terms(rows: &[RowValue], leverage: &[f64]) -> [(f64, f64); N_GROUPS] {
     let mut acc = [(0.0, 0.0); N_GROUPS];
     for (r, &h) in rows.iter().zip(leverage) {
         let var = r.sigma * r.sigma;

@@ -10,18 +10,18 @@ mod select;
 mod uncertainty;
 
 pub use report::{gain, rms};
-pub use select::{auto_select, MIN_EFFECT_OBSERVABILITY, MIN_EFFECT_SIGNAL};
+pub use select::{MIN_EFFECT_OBSERVABILITY, MIN_EFFECT_SIGNAL};
 
 use crate::campaign::Campaign;
 use crate::effects::{Corrections, EffectSet};
 use crate::noise::NoiseModel;
-use crate::obs::{PoseError, Residual, Step};
+use crate::obs::{PoseError, Residual, RowValue, Step};
 use crate::observability::{condition_number, normalize_columns};
 use crate::params::{self, unit, Model, Params, Unit, NAMES};
 use lm::{Lm, State};
 use nalgebra::{DMatrix, DVector};
-use rows::{cost_of, dependency, reduced_jacobian, Key, Problem};
-use select::{effect_observability, prior_of, scaling_vector, select_geometric};
+use rows::{dependency, reduced_jacobian, Columns, Key, Problem};
+use select::{auto_select, effect_observability, prior_of, scaling_vector, select_geometric};
 use std::collections::HashSet;
 use uncertainty::{posterior, step2_uncertainties, Posterior};
 
@@ -118,6 +118,9 @@ pub struct Options {
     pub max_iterations: usize,
     /// The instruments' and encoders' noise: the rows' weights.
     pub noise: NoiseModel,
+    /// Threads the rows are evaluated on (0: every core). The result is the same to the bit
+    /// on any number: the rows are summed in fixed pieces, in order.
+    pub threads: usize,
 }
 
 impl Default for Options {
@@ -130,6 +133,7 @@ impl Default for Options {
             outlier_sigma: Some(3.0),
             max_iterations: 100,
             noise: NoiseModel::default(),
+            threads: 0,
         }
     }
 }
@@ -262,7 +266,7 @@ pub struct Calibration {
     pub determined: Option<(usize, usize)>,
     /// The final rows of step 1 (the measurements) and their leverages (diagonal of the
     /// hat matrix), for the noise estimation.
-    pub residuals: Vec<Residual>,
+    pub residuals: Vec<RowValue>,
     pub leverage: Vec<f64>,
 }
 
@@ -287,31 +291,25 @@ pub fn calibrate_with(
     theta0: &[f64],
 ) -> Result<Calibration, CalibrationError> {
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
-    let pb = Problem {
-        campaign,
-        model: opts.model,
-        start: *start,
-        noise: &opts.noise,
-        effects,
-        opts,
-    };
+    let pb = Problem::new(campaign, *start, effects, opts);
     let plan = Plan::new(&pb, &theta0)?;
     let fit = step1(&pb, &plan, &theta0)?;
     let corr = effects.corrections(&fit.state.theta);
-    let rows_final = pb.direct(&fit.state.p, &corr, &fit.drop)?;
-    let post = posterior(
-        &rows_final,
-        &plan.ids,
-        &opts.links,
-        &plan.free_theta,
-        &plan.prior,
-    )?;
+    let (rows_final, post) = posterior(&pb, &plan, &fit.state.p, &corr, &fit.drop)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
-    let chi2 = 2.0 * cost_of(&rows_final);
+    let chi2: f64 = rows_final.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
     let chi2_per_dof = chi2 / (rows_final.len() as f64 - post.dof_model).max(1.0);
     let s1 = Step1Report::new(&pb, &plan, &fit.state, &post, chi2_per_dof.max(1.0));
-    let mut before_rows = pb.direct(start, &plan.corr0, &fit.drop)?;
-    let mut after_rows = rows_final.clone();
+    let mut table = report::RmsTable::default();
+    table.after(rows_final.iter().cloned());
+    let before = pb.map_pieces(Step::Direct, start, start, &plan.corr0, &fit.drop, |rows| {
+        let mut t = report::RmsTable::default();
+        t.before(rows.iter().map(RowValue::from));
+        t
+    })?;
+    for t in before {
+        table.merge(t);
+    }
     let mut identified = s1.identified;
     let mut iterations = fit.iterations;
     let mut p = fit.state.p;
@@ -319,8 +317,8 @@ pub fn calibrate_with(
         p = s2.p;
         iterations += s2.iterations;
         identified.extend(s2.identified);
-        before_rows.extend(s2.before_rows);
-        after_rows.extend(s2.after_rows);
+        table.before(s2.before_rows.iter().map(RowValue::from));
+        table.after(s2.after_rows.iter().map(RowValue::from));
     }
     check_finite(&identified, &s1.effects, chi2_per_dof)?;
     Ok(Calibration {
@@ -331,11 +329,11 @@ pub fn calibrate_with(
         iterations,
         condition_number: plan.condition,
         outliers: fit.outliers,
-        rms: report::rms_table(&before_rows, &after_rows),
-        cost_before: cost_of(&before_rows),
-        cost_after: cost_of(&after_rows),
+        rms: table.finish(),
+        cost_before: table.cost_before,
+        cost_after: table.cost_after,
         chi2_per_dof,
-        rows: after_rows.len(),
+        rows: table.rows,
         effects: s1.effects,
         theta: fit.state.theta,
         n_identified: plan.ids.len() + plan.free_theta.len(),
@@ -429,34 +427,18 @@ impl Plan {
     fn new(pb: &Problem, theta0: &[f64]) -> Result<Plan, CalibrationError> {
         let opts = pb.opts;
         let corr0 = pb.effects.corrections(theta0);
-        let rows0 = pb.direct(&pb.start, &corr0, &HashSet::new())?;
-        // a row whose squared weighted value overflows makes the cost infinite
-        if let Some(r) = rows0
-            .iter()
-            .find(|r| !(r.value / r.sigma).powi(2).is_finite())
-        {
-            let pose = &pb.campaign.poses[r.pose];
-            return Err(CalibrationError::NonFiniteRow {
-                campaign: pb.campaign.source.clone(),
-                line: pose.line,
-                instrument: pose.instrument.as_str(),
-                value: r.value,
-            });
-        }
-        if rows0.is_empty() {
-            return Err(CalibrationError::NoMeasurements(pb.campaign.source.clone()));
-        }
+        let start = StartRows::of(pb, &corr0)?;
         let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();
-        let (ids, step2_wanted) = select_geometric(pb.campaign, &rows0, opts, &linked)?;
+        let (ids, step2_wanted) = select_geometric(pb.campaign, &start.columns, opts, &linked)?;
         let prior = prior_of(&opts.selection, &ids);
-        if prior.is_empty() && rows0.len() < ids.len() {
+        if prior.is_empty() && start.n_rows < ids.len() {
             return Err(CalibrationError::Underdetermined {
                 params: ids.len(),
-                rows: rows0.len(),
+                rows: start.n_rows,
             });
         }
         let layout = pb.effects.layout();
-        let observability = effect_observability(&rows0, &ids, &opts.links, pb.effects);
+        let observability = effect_observability(&start.columns, &ids, &opts.links, pb.effects);
         let free_theta: Vec<usize> = (0..pb.effects.n_params())
             .filter(|&k| !pb.effects.is_held(k))
             .filter(|&k| {
@@ -469,7 +451,7 @@ impl Plan {
             free_theta.len(),
             free_theta.iter().map(|&k| layout[k].param.prior),
         );
-        let jr0 = reduced_jacobian(&rows0, &ids, &opts.links);
+        let jr0 = start.columns.reduced(&ids, &opts.links);
         Ok(Plan {
             corr0,
             h: scaling_vector(&jr0, &ids, opts.scaling)?,
@@ -480,8 +462,51 @@ impl Plan {
             free_theta,
             h_theta,
             observability: observability.iter().map(|o| o.0).collect(),
-            n_rows0: rows0.len(),
+            n_rows0: start.n_rows,
         })
+    }
+}
+
+/// What the plan reads from the rows at the start parameters, piece by piece: how many, and
+/// their columns.
+struct StartRows {
+    n_rows: usize,
+    columns: Columns,
+}
+
+impl StartRows {
+    fn of(pb: &Problem, corr0: &Corrections) -> Result<StartRows, CalibrationError> {
+        let n_theta = pb.effects.n_params();
+        let pieces = pb.map_pieces(
+            Step::Direct,
+            &pb.start,
+            &pb.start,
+            corr0,
+            &HashSet::new(),
+            |rows| {
+                // a row whose squared weighted value overflows makes the cost infinite
+                let bad = rows
+                    .iter()
+                    .find(|r| !(r.value / r.sigma).powi(2).is_finite())
+                    .map(|r| (r.pose, r.value));
+                (rows.len(), bad, Columns::piece(rows, n_theta))
+            },
+        )?;
+        if let Some((pose, value)) = pieces.iter().find_map(|p| p.1) {
+            let pose = &pb.campaign.poses[pose];
+            return Err(CalibrationError::NonFiniteRow {
+                campaign: pb.campaign.source.clone(),
+                line: pose.line,
+                instrument: pose.instrument.as_str(),
+                value,
+            });
+        }
+        let n_rows = pieces.iter().map(|p| p.0).sum();
+        if n_rows == 0 {
+            return Err(CalibrationError::NoMeasurements(pb.campaign.source.clone()));
+        }
+        let columns = Columns::combine(pieces.into_iter().map(|p| p.2).collect(), n_theta);
+        Ok(StartRows { n_rows, columns })
     }
 }
 
@@ -618,9 +643,12 @@ fn step2(
     let virtual_rows = |p: &Params| pb.rows(Step::VirtualQ2, p, &p1, corr, &fit.drop);
     let rows2 = virtual_rows(&p1)?;
     let ids2 = match &opts.selection {
-        Selection::Auto { max_condition } => {
-            auto_select(&rows2, &plan.step2_wanted, &[], *max_condition)
-        }
+        Selection::Auto { max_condition } => auto_select(
+            &Columns::of(&rows2, 0),
+            &plan.step2_wanted,
+            &[],
+            *max_condition,
+        ),
         Selection::List(_) | Selection::Prior(_) => plan.step2_wanted.clone(),
     };
     if ids2.is_empty() {

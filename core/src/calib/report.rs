@@ -4,7 +4,7 @@
 use super::rows::Key;
 use super::{DirectionRms, Outlier};
 use crate::campaign::{Campaign, Instrument};
-use crate::obs::{Direction, Residual};
+use crate::obs::{Direction, Residual, RowValue};
 use std::collections::BTreeMap;
 
 /// Rows further than `k` standard deviations from the mean of their instrument and direction.
@@ -43,28 +43,62 @@ pub(super) fn find_outliers(rows: &[Residual], campaign: &Campaign, k: f64) -> V
     out
 }
 
-/// RMS per instrument and direction of two row sets (same rows, two parameter sets).
-pub(super) fn rms_table(before: &[Residual], after: &[Residual]) -> Vec<DirectionRms> {
-    let mut acc: BTreeMap<(Instrument, Direction), (usize, f64, f64)> = BTreeMap::new();
-    let key = |r: &Residual| (r.instrument, r.direction);
-    for r in before {
-        let e = acc.entry(key(r)).or_default();
-        e.0 += 1;
-        e.1 += r.value * r.value;
+/// RMS per instrument and direction of the same rows at two parameter sets, and their costs,
+/// summed as the rows come (piece by piece: a large campaign's rows are not kept twice).
+#[derive(Default)]
+pub(super) struct RmsTable {
+    acc: BTreeMap<(Instrument, Direction), (usize, f64, f64)>,
+    pub cost_before: f64,
+    pub cost_after: f64,
+    /// Rows of the "after" set.
+    pub rows: usize,
+}
+
+impl RmsTable {
+    pub fn before(&mut self, rows: impl IntoIterator<Item = RowValue>) {
+        for r in rows {
+            let e = self.acc.entry((r.instrument, r.direction)).or_default();
+            e.0 += 1;
+            e.1 += r.value * r.value;
+            self.cost_before += 0.5 * (r.value / r.sigma).powi(2);
+        }
     }
-    for r in after {
-        acc.entry(key(r)).or_default().2 += r.value * r.value;
+
+    pub fn after(&mut self, rows: impl IntoIterator<Item = RowValue>) {
+        for r in rows {
+            self.acc.entry((r.instrument, r.direction)).or_default().2 += r.value * r.value;
+            self.cost_after += 0.5 * (r.value / r.sigma).powi(2);
+            self.rows += 1;
+        }
     }
-    acc.into_iter()
-        .map(|((inst, dir), (n, b, a))| DirectionRms {
-            instrument: inst.as_str().to_string(),
-            direction: dir.to_string(),
-            rows: n,
-            rms_before: (b / n.max(1) as f64).sqrt(),
-            rms_after: (a / n.max(1) as f64).sqrt(),
-            is_angle: dir.is_angle(),
-        })
-        .collect()
+
+    /// Adds another table's sums (tables merged in a fixed order give the same sums on any
+    /// number of threads).
+    pub fn merge(&mut self, other: RmsTable) {
+        for (key, (n, b, a)) in other.acc {
+            let e = self.acc.entry(key).or_default();
+            e.0 += n;
+            e.1 += b;
+            e.2 += a;
+        }
+        self.cost_before += other.cost_before;
+        self.cost_after += other.cost_after;
+        self.rows += other.rows;
+    }
+
+    pub fn finish(&self) -> Vec<DirectionRms> {
+        self.acc
+            .iter()
+            .map(|(&(inst, dir), &(n, b, a))| DirectionRms {
+                instrument: inst.as_str().to_string(),
+                direction: dir.to_string(),
+                rows: n,
+                rms_before: (b / n.max(1) as f64).sqrt(),
+                rms_after: (a / n.max(1) as f64).sqrt(),
+                is_angle: dir.is_angle(),
+            })
+            .collect()
+    }
 }
 
 /// Calibration gain on held-out measurement errors (eq. 3.33-3.34): the mean over values of

@@ -5,7 +5,7 @@ use super::{Link, Options};
 use crate::campaign::Campaign;
 use crate::effects::{Corrections, EffectSet};
 use crate::noise::NoiseModel;
-use crate::obs::{self, Direction, PoseError, Residual, Step};
+use crate::obs::{Direction, Evaluation, Form, Pieces, PoseError, Residual, Step};
 use crate::params::{Model, Params, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
@@ -13,6 +13,11 @@ use std::collections::HashSet;
 /// A row's identity across evaluations: its pose and direction (what outlier elimination
 /// drops).
 pub(super) type Key = (usize, Direction);
+
+/// Poses per piece of an evaluation: the unit of parallel work. Small enough that a piece's
+/// rows stay in cache and two cores share a campaign evenly, large enough that the per-piece
+/// sums cost nothing beside the geometry.
+const PIECE_POSES: usize = 256;
 
 /// What stays fixed through one calibration: the campaign, the model, the start parameters,
 /// the noise that weights the rows and the effects bound to the campaign. Built once; every
@@ -24,9 +29,28 @@ pub(super) struct Problem<'a> {
     pub noise: &'a NoiseModel,
     pub effects: &'a EffectSet,
     pub opts: &'a Options,
+    /// The campaign cut into pieces, once.
+    pub pieces: Pieces,
 }
 
-impl Problem<'_> {
+impl<'a> Problem<'a> {
+    pub fn new(
+        campaign: &'a Campaign,
+        start: Params,
+        effects: &'a EffectSet,
+        opts: &'a Options,
+    ) -> Problem<'a> {
+        Problem {
+            campaign,
+            model: opts.model,
+            start,
+            noise: &opts.noise,
+            effects,
+            opts,
+            pieces: Pieces::new(campaign, PIECE_POSES),
+        }
+    }
+
     /// The rows of `step` at parameters `p` (virtual measurements made with `p_cal`) with the
     /// effects' corrections `corr`, less the rows in `drop`.
     pub fn rows(
@@ -37,10 +61,68 @@ impl Problem<'_> {
         corr: &Corrections,
         drop: &HashSet<Key>,
     ) -> Result<Vec<Residual>, PoseError> {
-        let mut rows =
-            obs::residuals_with(self.campaign, p, self.model, step, p_cal, corr, self.noise)?;
-        rows.retain(|r| !drop.contains(&(r.pose, r.direction)));
-        Ok(rows)
+        let pieces = self.map_pieces(step, p, p_cal, corr, drop, <[Residual]>::to_vec)?;
+        Ok(pieces.concat())
+    }
+
+    /// `each` applied to the rows of every piece (less `drop`), on the options' threads; the
+    /// results in piece order, so that sums over them do not depend on the thread count.
+    /// The first failing piece's error, as a sequential evaluation would report it.
+    pub fn map_pieces<T: Send>(
+        &self,
+        step: Step,
+        p: &Params,
+        p_cal: &Params,
+        corr: &Corrections,
+        drop: &HashSet<Key>,
+        each: impl Fn(&[Residual]) -> T + Sync,
+    ) -> Result<Vec<T>, PoseError> {
+        let eval = Evaluation {
+            campaign: self.campaign,
+            p,
+            model: self.model,
+            step,
+            p_cal,
+            corr,
+            noise: self.noise,
+            form: Form::Decorrelated,
+        };
+        let n = self.pieces.len();
+        // one piece after the other from `first`, every `stride`-th; the row buffer reused
+        let run = |first: usize, stride: usize| {
+            let mut rows = Vec::new();
+            let mut out = Vec::new();
+            for k in (first..n).step_by(stride) {
+                rows.clear();
+                if let Err(e) = eval.piece_into(&self.pieces, k, &mut rows) {
+                    out.push((k, Err(e)));
+                    break;
+                }
+                rows.retain(|r| !drop.contains(&(r.pose, r.direction)));
+                out.push((k, Ok(each(&rows))));
+            }
+            out
+        };
+        let threads = thread_count(self.opts.threads).min(n.max(1));
+        let mut done: Vec<(usize, Result<T, PoseError>)> = if threads == 1 {
+            run(0, 1)
+        } else {
+            std::thread::scope(|scope| {
+                let workers: Vec<_> = (0..threads)
+                    .map(|t| {
+                        let run = &run;
+                        scope.spawn(move || run(t, threads))
+                    })
+                    .collect();
+                workers
+                    .into_iter()
+                    // a panic in a piece is a bug: it goes on in this thread
+                    .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+                    .collect()
+            })
+        };
+        done.sort_by_key(|(k, _)| *k);
+        done.into_iter().map(|(_, r)| r).collect()
     }
 
     /// The direct rows (step 1) at `p` with corrections `corr`.
@@ -51,6 +133,15 @@ impl Problem<'_> {
         drop: &HashSet<Key>,
     ) -> Result<Vec<Residual>, PoseError> {
         self.rows(Step::Direct, p, &self.start, corr, drop)
+    }
+}
+
+/// `threads` resolved: 0 is every core.
+pub(super) fn thread_count(threads: usize) -> usize {
+    if threads == 0 {
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    } else {
+        threads
     }
 }
 
@@ -68,6 +159,63 @@ pub(super) fn dependency(ids: &[usize], links: &[Link]) -> DMatrix<f64> {
         }
     }
     d
+}
+
+/// A campaign's weighted Jacobian over the 29 parameters and then every effect parameter,
+/// compressed to the R factor of its QR decomposition: R has the columns' norms, angles and
+/// singular values of the rows themselves (RᵀR = JᵀJ, without squaring the condition
+/// number), in (29 + k)² numbers whatever the campaign's size. The selection, the scaling
+/// and the effects' observability read it instead of an m × n matrix.
+pub(super) struct Columns {
+    r: DMatrix<f64>,
+}
+
+impl Columns {
+    /// The R factor of one block of rows with `n_theta` effect parameters.
+    pub fn piece(rows: &[Residual], n_theta: usize) -> DMatrix<f64> {
+        let all: Vec<usize> = (0..n_theta).collect();
+        let mut j = DMatrix::zeros(rows.len(), N_PARAMS + n_theta);
+        j.columns_mut(0, N_PARAMS)
+            .copy_from(&weighted_jacobian(rows));
+        j.columns_mut(N_PARAMS, n_theta)
+            .copy_from(&weighted_theta(rows, &all));
+        j.qr().r()
+    }
+
+    /// The pieces' R factors combined in order (each step the QR of two stacked factors).
+    pub fn combine(pieces: Vec<DMatrix<f64>>, n_theta: usize) -> Columns {
+        let cols = N_PARAMS + n_theta;
+        let mut r = DMatrix::zeros(0, cols);
+        for piece in pieces {
+            let mut both = DMatrix::zeros(r.nrows() + piece.nrows(), cols);
+            both.rows_mut(0, r.nrows()).copy_from(&r);
+            both.rows_mut(r.nrows(), piece.nrows()).copy_from(&piece);
+            r = both.qr().r();
+        }
+        Columns { r }
+    }
+
+    /// Columns of `rows` (materialised rows: step 2's virtual ones).
+    pub fn of(rows: &[Residual], n_theta: usize) -> Columns {
+        Columns::combine(vec![Columns::piece(rows, n_theta)], n_theta)
+    }
+
+    /// The 29 geometric columns.
+    pub fn geometric(&self) -> DMatrix<f64> {
+        self.r.columns(0, N_PARAMS).into_owned()
+    }
+
+    /// Columns of the parameters `ids` under links (what [`reduced_jacobian`] is to rows).
+    pub fn reduced(&self, ids: &[usize], links: &[Link]) -> DMatrix<f64> {
+        self.r.columns(0, N_PARAMS) * dependency(ids, links)
+    }
+
+    /// Columns of the effect parameters `free`.
+    pub fn theta(&self, free: &[usize]) -> DMatrix<f64> {
+        DMatrix::from_fn(self.r.nrows(), free.len(), |i, k| {
+            self.r[(i, N_PARAMS + free[k])]
+        })
+    }
 }
 
 /// Weighted residual vector of rows.
@@ -96,18 +244,36 @@ pub(super) fn reduced_jacobian(rows: &[Residual], ids: &[usize], links: &[Link])
     weighted_jacobian(rows) * dependency(ids, links)
 }
 
-/// ½ Σ (r/σ)² of rows.
-pub(super) fn cost_of(rows: &[Residual]) -> f64 {
-    0.5 * rows
-        .iter()
-        .map(|r| (r.value / r.sigma).powi(2))
-        .sum::<f64>()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::params::{L4, L5, XA4R};
+
+    /// R factors of blocks combined in order are the R factor of the whole: RᵀR = JᵀJ (the
+    /// Gram matrix every selection and scaling reads), for blocks with fewer rows than
+    /// columns too.
+    #[test]
+    fn combined_block_factors_keep_the_gram_matrix() {
+        let mut x = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let cols = N_PARAMS + 3;
+        let j = DMatrix::from_fn(700, cols, |_, k| next() * 10f64.powi((k % 7) as i32 - 3));
+        let blocks = [0..5, 5..260, 260..290, 290..700]
+            .map(|r| j.rows(r.start, r.len()).into_owned().qr().r());
+        let columns = Columns::combine(blocks.to_vec(), 3);
+        let (gram, want) = (columns.r.tr_mul(&columns.r), j.tr_mul(&j));
+        let scale = want.amax();
+        assert!((gram - &want).amax() < 1e-12 * scale);
+        let norms = |m: &DMatrix<f64>| (0..cols).map(|k| m.column(k).norm()).collect::<Vec<_>>();
+        for (a, b) in norms(&columns.r).iter().zip(norms(&j)) {
+            assert!((a - b).abs() <= 1e-12 * b, "{a} vs {b}");
+        }
+    }
 
     /// D maps the reduced unknowns to the 29 parameters: each identified parameter moves
     /// itself, and a linked one follows its terms (l5 = l4 + 0.5·xa4r, made up for the test).

@@ -2,11 +2,11 @@
 //! (observability order, explicit list, or all of them under the tolerance prior), their
 //! scaling, and the effect parameters the campaign can tell from the geometry.
 
-use super::rows::{reduced_jacobian, weighted_jacobian, weighted_theta};
+use super::rows::Columns;
 use super::{CalibrationError, Link, Options, Scaling, Selection};
 use crate::campaign::Campaign;
 use crate::effects::EffectSet;
-use crate::obs::{self, Residual};
+use crate::obs;
 use crate::observability::{normalize_columns, qr_pivot_order};
 use crate::params::{self, variation_range, NAMES, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
@@ -22,13 +22,13 @@ pub const MIN_EFFECT_SIGNAL: f64 = 1.0;
 
 /// Parameters of `candidates` in observability order, kept while the condition number of
 /// the column-normalised Jacobian stays below `max_condition`.
-pub fn auto_select(
-    rows: &[Residual],
+pub(super) fn auto_select(
+    columns: &Columns,
     candidates: &[usize],
     links: &[Link],
     max_condition: f64,
 ) -> Vec<usize> {
-    let jr = reduced_jacobian(rows, candidates, links);
+    let jr = columns.reduced(candidates, links);
     let range = DVector::from_iterator(
         candidates.len(),
         candidates.iter().map(|&i| variation_range(i)),
@@ -80,13 +80,13 @@ pub(super) fn prior_of(selection: &Selection, ids: &[usize]) -> Vec<(usize, f64)
 /// Step 1's identified geometric parameters, and the rod-2 parameters wanted from step 2.
 pub(super) fn select_geometric(
     campaign: &Campaign,
-    rows0: &[Residual],
+    columns0: &Columns,
     opts: &Options,
     linked: &HashSet<usize>,
 ) -> Result<(Vec<usize>, Vec<usize>), CalibrationError> {
     let model = opts.model;
     // Candidates of step 1: the model's free parameters with an influence on the direct rows.
-    let j0 = weighted_jacobian(rows0);
+    let j0 = columns0.geometric();
     // (relative threshold: the subsystem solves carry round-off derivatives of ~1e-17)
     let col_max = (0..N_PARAMS)
         .map(|i| j0.column(i).norm() * variation_range(i))
@@ -107,7 +107,7 @@ pub(super) fn select_geometric(
     let step1_ids: Vec<usize> = match &opts.selection {
         Selection::Auto { max_condition } => {
             let cands: Vec<usize> = free.iter().copied().filter(|&i| influences(i)).collect();
-            auto_select(rows0, &cands, &opts.links, *max_condition)
+            auto_select(columns0, &cands, &opts.links, *max_condition)
         }
         Selection::List(list) => list.iter().copied().filter(|&i| influences(i)).collect(),
         Selection::Prior(_) => free.iter().copied().filter(|&i| influences(i)).collect(),
@@ -148,7 +148,7 @@ pub(super) fn select_geometric(
 /// layout order: 1 = fully distinct, 0 = a geometric error in disguise), and the norm of that
 /// outside part (σ units per unit of the parameter).
 pub(super) fn effect_observability(
-    rows: &[Residual],
+    columns: &Columns,
     ids: &[usize],
     links: &[Link],
     effects: &EffectSet,
@@ -157,9 +157,9 @@ pub(super) fn effect_observability(
     if n == 0 {
         return Vec::new();
     }
-    let jg = normalize_columns(&reduced_jacobian(rows, ids, links));
+    let jg = normalize_columns(&columns.reduced(ids, links));
     let all: Vec<usize> = (0..n).collect();
-    let jt = weighted_theta(rows, &all);
+    let jt = columns.theta(&all);
     let mut basis: Vec<DVector<f64>> = Vec::new();
     let add = |v: DVector<f64>, basis: &mut Vec<DVector<f64>>| -> (f64, f64) {
         let norm0 = v.norm();

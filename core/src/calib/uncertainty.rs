@@ -1,11 +1,14 @@
 //! What the data tell about the identified unknowns: posterior covariance under the prior,
 //! the determined combinations, leverages, and step 2's uncertainty with step 1's propagated.
 
-use super::rows::{reduced_jacobian, weighted_theta};
-use super::{CalibrationError, Link};
-use crate::obs::Residual;
+use super::rows::{reduced_jacobian, weighted_theta, Key, Problem};
+use super::{CalibrationError, Link, Plan};
+use crate::effects::Corrections;
+use crate::obs::{Residual, RowValue, Step};
+use crate::params::Params;
 use crate::params::{NAMES, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
+use std::collections::HashSet;
 
 /// What the final fit of step 1 tells about its unknowns (scaled by nothing: the caller
 /// multiplies by the variance factor).
@@ -22,28 +25,60 @@ pub(super) struct Posterior {
     pub determined: Option<(usize, usize)>,
 }
 
-pub(super) fn posterior(
+/// Rows per block of the sums below: the rows' Jacobian is never stored whole.
+const BLOCK: usize = 512;
+
+/// The weighted Jacobian of a block of rows in the unknowns: parameters `ids` under links,
+/// then the effect parameters `free`.
+fn block_jacobian(
     rows: &[Residual],
     ids: &[usize],
     links: &[Link],
     free: &[usize],
-    prior: &[(usize, f64)],
-) -> Result<Posterior, CalibrationError> {
-    let jg = reduced_jacobian(rows, ids, links);
-    let jt = weighted_theta(rows, free);
+) -> DMatrix<f64> {
     let n = ids.len();
     let mut jr = DMatrix::zeros(rows.len(), n + free.len());
-    jr.columns_mut(0, n).copy_from(&jg);
-    jr.columns_mut(n, free.len()).copy_from(&jt);
-    let info = jr.transpose() * &jr;
-    let inv = normal_inverse(&jr, ids, prior)?;
+    jr.columns_mut(0, n)
+        .copy_from(&reduced_jacobian(rows, ids, links));
+    jr.columns_mut(n, free.len())
+        .copy_from(&weighted_theta(rows, free));
+    jr
+}
+
+/// The final rows of step 1 at `p` (their values) and what they tell about the plan's
+/// unknowns: two passes over the pieces, the information first, then each row's leverage.
+pub(super) fn posterior(
+    pb: &Problem,
+    plan: &Plan,
+    p: &Params,
+    corr: &Corrections,
+    drop: &HashSet<Key>,
+) -> Result<(Vec<RowValue>, Posterior), CalibrationError> {
+    let (ids, links, free, prior) = (&plan.ids, &pb.opts.links, &plan.free_theta, &plan.prior);
+    let n = ids.len();
+    let jacobian = |rows: &[Residual]| block_jacobian(rows, ids, links, free);
+    let pieces = pb.map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
+        let jr = jacobian(rows);
+        let values: Vec<RowValue> = rows.iter().map(RowValue::from).collect();
+        (jr.tr_mul(&jr), values)
+    })?;
+    let cols = n + free.len();
+    let mut info = DMatrix::zeros(cols, cols);
+    for (piece, _) in &pieces {
+        info += piece;
+    }
+    let values: Vec<RowValue> = pieces.into_iter().flat_map(|(_, v)| v).collect();
+    let inv = normal_inverse(&info, ids, prior)?;
     let dof_model = (&inv * &info).trace();
-    let leverage = (0..jr.nrows())
-        .map(|i| {
-            let j = jr.row(i);
-            (j * &inv * j.transpose())[0]
-        })
-        .collect();
+    let leverage = pb
+        .map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
+            let jr = jacobian(rows);
+            let ji = &jr * &inv;
+            (0..jr.nrows())
+                .map(|i| ji.row(i).dot(&jr.row(i)))
+                .collect::<Vec<f64>>()
+        })?
+        .concat();
     // directions: eigenvalues of the data's information in units of the prior's
     let determined = (!prior.is_empty()).then(|| {
         let tol = DVector::from_iterator(n, prior.iter().map(|p| p.1));
@@ -52,7 +87,7 @@ pub(super) fn posterior(
         let ev = g.symmetric_eigenvalues();
         (ev.iter().filter(|&&v| v > 1.0).count(), n)
     });
-    Ok(Posterior {
+    let post = Posterior {
         cov1: inv.view((0, 0), (n, n)).into_owned(),
         sig_theta: (0..free.len())
             .map(|k| inv[(n + k, n + k)].max(0.0).sqrt())
@@ -60,16 +95,18 @@ pub(super) fn posterior(
         dof_model,
         leverage,
         determined,
-    })
+    };
+    Ok((values, post))
 }
 
-/// (JᵀJ + Λ)⁻¹ with the prior's precision Λ on the first `prior.len()` columns.
+/// (JᵀJ + Λ)⁻¹ from the information JᵀJ, with the prior's precision Λ on the first
+/// `prior.len()` columns.
 fn normal_inverse(
-    jr: &DMatrix<f64>,
+    info: &DMatrix<f64>,
     ids: &[usize],
     prior: &[(usize, f64)],
 ) -> Result<DMatrix<f64>, CalibrationError> {
-    let mut n = jr.transpose() * jr;
+    let mut n = info.clone();
     for (k, &(_, tol)) in prior.iter().enumerate() {
         n[(k, k)] += 1.0 / (tol * tol);
     }
@@ -87,13 +124,18 @@ pub(super) fn step2_uncertainties(
     prior: &[(usize, f64)],
     cov_p1: &DMatrix<f64>,
 ) -> Result<Vec<f64>, CalibrationError> {
-    let jr = reduced_jacobian(rows, ids, &[]);
-    let inv = normal_inverse(&jr, ids, prior)?;
-    let m = &inv * jr.transpose();
-    let g = DMatrix::from_fn(rows.len(), N_PARAMS, |i, k| {
-        rows[i].d_pcal.map_or(0.0, |d| d[k]) / rows[i].sigma
-    });
-    let mg = &m * g;
+    let n = ids.len();
+    let (mut info, mut jtg) = (DMatrix::zeros(n, n), DMatrix::zeros(n, N_PARAMS));
+    for block in rows.chunks(BLOCK) {
+        let jr = reduced_jacobian(block, ids, &[]);
+        let g = DMatrix::from_fn(block.len(), N_PARAMS, |i, k| {
+            block[i].d_pcal.as_ref().map_or(0.0, |d| d[k]) / block[i].sigma
+        });
+        info += jr.tr_mul(&jr);
+        jtg += jr.tr_mul(&g);
+    }
+    let inv = normal_inverse(&info, ids, prior)?;
+    let mg = &inv * jtg;
     let cov = inv + &mg * cov_p1 * mg.transpose();
     Ok((0..ids.len())
         .map(|k| cov[(k, k)].max(0.0).sqrt())

@@ -6,7 +6,7 @@
 
 use crate::campaign::Campaign;
 use crate::geometry;
-use crate::obs::Residual;
+use crate::obs::RowValue;
 use crate::params::{Model, Params};
 use std::collections::BTreeMap;
 
@@ -121,9 +121,9 @@ fn correlation(a: &[f64], b: &[f64]) -> Option<f64> {
 }
 
 /// Every (term, instrument, direction) correlation, scored by the χ² it would explain.
-fn scores(campaign: &Campaign, rows: &[Residual], only: Option<&[&str]>) -> Vec<Scored> {
+fn scores(campaign: &Campaign, rows: &[RowValue], only: Option<&[&str]>) -> Vec<Scored> {
     let dict = dictionary(campaign);
-    let mut groups: BTreeMap<(String, String), Vec<&Residual>> = BTreeMap::new();
+    let mut groups: BTreeMap<(String, String), Vec<&RowValue>> = BTreeMap::new();
     for r in rows {
         groups
             .entry((r.instrument.as_str().to_owned(), r.direction.to_string()))
@@ -226,7 +226,7 @@ pub struct Structure {
 
 /// Test the residual `rows` against the whole dictionary (each term in each instrument
 /// direction): free of the noise's absolute level, since a correlation is.
-pub fn structure(campaign: &Campaign, rows: &[Residual]) -> Structure {
+pub fn structure(campaign: &Campaign, rows: &[RowValue]) -> Structure {
     let s = scores(campaign, rows, None);
     let tests = s.len();
     let Some(best) = s.first() else {
@@ -254,13 +254,13 @@ pub fn structure(campaign: &Campaign, rows: &[Residual]) -> Structure {
 }
 
 /// The term of the whole dictionary the residual `rows` follows most.
-pub fn point_at(campaign: &Campaign, rows: &[Residual]) -> Option<Pointer> {
+pub fn point_at(campaign: &Campaign, rows: &[RowValue]) -> Option<Pointer> {
     pointer(&scores(campaign, rows, None))
 }
 
 /// The covariate among `names` the residual follows most (None if `names` is empty or none
 /// varies).
-pub fn follows(campaign: &Campaign, rows: &[Residual], names: &[&str]) -> Option<Pointer> {
+pub fn follows(campaign: &Campaign, rows: &[RowValue], names: &[&str]) -> Option<Pointer> {
     if names.is_empty() {
         return None;
     }
