@@ -1,6 +1,7 @@
 //! `rpkm bench discovery`: the discovery loop on random machines whose conventions are drawn
 //! at random, so that a model that only fits our own choices shows it.
 
+mod calibration;
 mod soak;
 
 use super::bad_input;
@@ -42,6 +43,13 @@ pub enum Bench {
     ///
     /// Example: rpkm bench soak --seconds 180 --rate-hz 8000
     Soak(soak::SoakArgs),
+    /// Calibration time, LM iterations and peak memory of `rpkm calibrate` on twin
+    /// self-calibration campaigns of about 10³, 10⁴ and 10⁵ poses (child processes, on every
+    /// core and on one), the diagnosis of a 1,000-pose campaign with every library effect, and
+    /// the ratio to a plain scipy least_squares script when Python with scipy is there.
+    ///
+    /// Example: rpkm bench calibration --repeats 7,67,672
+    Calibration(calibration::CalibrationArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -77,6 +85,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     match &args.which {
         Bench::Discovery(a) => discovery(a),
         Bench::Soak(a) => soak::run(a),
+        Bench::Calibration(a) => calibration::run(a),
     }
 }
 

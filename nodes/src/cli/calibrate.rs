@@ -81,6 +81,10 @@ pub struct CalibrateArgs {
     /// With --effects: write the chart of the held-out RMS per added effect (SVG).
     #[arg(long)]
     pub chart: Option<PathBuf>,
+    /// Threads the rows are evaluated on (0: every core). The result is the same to the bit
+    /// on any number: the rows are summed in fixed pieces of 256 poses, in order.
+    #[arg(long, default_value_t = 0)]
+    pub threads: usize,
 }
 
 /// Parse a parameter list of spec names.
@@ -135,6 +139,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             )))
         }
     };
+    if args.threads > 1024 {
+        return Err(bad_input(format!(
+            "--threads {}: expected 0 (every core) to 1024",
+            args.threads
+        )));
+    }
     let links = if args.perfect_parallelogram {
         calib::Link::perfect_parallelogram()
     } else {
@@ -147,6 +157,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         scaling,
         outlier_sigma: (args.outlier_sigma > 0.0).then_some(args.outlier_sigma),
         noise: super::parse_noise(args.noise.as_deref())?,
+        threads: args.threads,
         ..Default::default()
     };
     let (cal, noise) =
