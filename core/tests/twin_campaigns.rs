@@ -269,3 +269,25 @@ fn deterministic_and_typed_errors() {
     let back: rpkm_core::twin::Truth = serde_json::from_str(&json).expect("back");
     assert_eq!(back, truth);
 }
+
+/// A campaign measured twice is two mountings: every setup of the second run is new
+/// (`lt_2`), with its own reset, so the written file reads back under the spec's rule of one
+/// reset per setup.
+#[test]
+fn a_repeated_campaign_reads_back_as_new_setups() {
+    let mut t = twin(4, vec![], true);
+    let c = t
+        .campaign(&[Instrument::Lt, Instrument::Kgm, Instrument::Lt])
+        .expect("campaign");
+    let back = Campaign::parse(&c.to_csv(), "repeated.csv").expect("the spec's reader takes it");
+    assert_eq!(back.poses.len(), c.poses.len());
+    let setups = back.setups();
+    let lt: Vec<_> = setups
+        .iter()
+        .filter(|s| s.instrument == Instrument::Lt)
+        .collect();
+    assert_eq!(lt.len(), 2);
+    assert!(lt.iter().all(|s| s.reset.is_some()));
+    assert_ne!(lt[0].id, lt[1].id);
+    assert_eq!(setups.len(), 2 + 16);
+}

@@ -664,10 +664,10 @@ impl Twin {
 
     /// Measure the designs of `instruments` one after the other, in one campaign.
     pub fn campaign(&mut self, instruments: &[Instrument]) -> Result<Campaign, TwinError> {
-        let design: Vec<PlannedPose> = instruments
-            .iter()
-            .flat_map(|&i| design::for_instrument(i))
-            .collect();
+        let (mut design, mut taken) = (Vec::new(), Default::default());
+        for &i in instruments {
+            append_design(&mut design, &mut taken, design::for_instrument(i));
+        }
         let names: Vec<&str> = instruments.iter().map(|i| i.as_str()).collect();
         self.run(&design, &names.join("+"))
     }
@@ -679,10 +679,11 @@ impl Twin {
         names: &[&str],
         n_validation: usize,
     ) -> Result<Campaign, TwinError> {
-        let mut design = Vec::new();
+        let (mut design, mut taken) = (Vec::new(), Default::default());
         for n in names {
             if *n == "validation" {
-                design.extend(self.validation_design(n_validation));
+                let more = self.validation_design(n_validation);
+                append_design(&mut design, &mut taken, more);
                 continue;
             }
             let i: Instrument = n
@@ -690,7 +691,7 @@ impl Twin {
                 .ok()
                 .filter(|i| *i != Instrument::None)
                 .ok_or_else(|| TwinError::UnknownCampaign((*n).to_owned()))?;
-            design.extend(design::for_instrument(i));
+            append_design(&mut design, &mut taken, design::for_instrument(i));
         }
         self.run(&design, &names.join("+"))
     }
@@ -704,6 +705,35 @@ impl Twin {
         let d = self.validation_design(n);
         self.run(&d, "validation")
     }
+}
+
+/// Appends `more` to `design`; a repeated campaign's setups get the repetition's number
+/// (`lt`, then `lt_2`, ...): a setup is one mounting of the instrument with one reset, so
+/// the same design measured again is a new setup (the spec allows one reset per setup).
+fn append_design(
+    design: &mut Vec<PlannedPose>,
+    taken: &mut std::collections::HashSet<String>,
+    mut more: Vec<PlannedPose>,
+) {
+    let name = |setup: &str, k: usize| {
+        if k == 1 {
+            setup.to_owned()
+        } else {
+            format!("{setup}_{k}")
+        }
+    };
+    let mut k = 1;
+    while more
+        .iter()
+        .any(|m| taken.contains(name(&m.setup, k).as_str()))
+    {
+        k += 1;
+    }
+    for p in &mut more {
+        p.setup = name(&p.setup, k);
+        taken.insert(p.setup.clone());
+    }
+    design.extend(more);
 }
 
 /// RMS (µm) of the instruments' own error in a campaign: its x, y readings against those of
