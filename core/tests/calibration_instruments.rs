@@ -295,6 +295,26 @@ fn effects_bound_to_another_campaign_are_refused() {
     );
 }
 
+/// Starting effect parameters of the wrong length are refused, naming both lengths, instead
+/// of being replaced by zeros without a word.
+#[test]
+fn starting_effect_parameters_of_the_wrong_length_are_refused() {
+    let truth = Params::nominal();
+    let lt = support::measure(&design::lt(), &truth, 3, true, "lt.csv");
+    let scale = rpkm_core::effects::by_name("encoder_scale").expect("encoder_scale");
+    let set = rpkm_core::effects::EffectSet::bind(&[scale.as_ref()], &lt, &truth)
+        .expect("encoder_scale binds");
+    let n = set.n_params();
+    let err = calib::calibrate_with(&lt, &truth, &Options::default(), &set, &vec![0.0; n + 1])
+        .expect_err("one parameter too many");
+    assert!(
+        matches!(err, calib::CalibrationError::StartThetaLength { given, expected } if given == n + 1 && expected == n),
+        "{err}"
+    );
+    calib::calibrate_with(&lt, &truth, &Options::default(), &set, &vec![0.0; n])
+        .expect("the right length calibrates");
+}
+
 /// A reading of −1e300 mm (a campaign built in code, past the CSV reader's checks) must not
 /// calibrate "successfully" with infinite uncertainties: the calibration refuses it.
 #[test]

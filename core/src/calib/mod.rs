@@ -151,6 +151,8 @@ pub enum CalibrationError {
         bound: usize,
         poses: usize,
     },
+    #[error("{given} starting effect parameters given, the effects have {expected} (or give none: all zero)")]
+    StartThetaLength { given: usize, expected: usize },
     #[error("parameter {0} does not belong to {1}")]
     NotInModel(&'static str, Model),
     #[error("parameter {0} has no influence on these measurements (zero Jacobian column)")]
@@ -374,8 +376,8 @@ fn check_finite(
     }
 }
 
-/// The effect parameters to start from (`theta0`, or all zero when it does not fit the
-/// effects), after checking that the options and the effects fit the campaign.
+/// The effect parameters to start from (`theta0`, all zero when it is empty; any other
+/// length is an error), after checking that the options and the effects fit the campaign.
 fn start_theta(
     campaign: &Campaign,
     opts: &Options,
@@ -394,11 +396,14 @@ fn start_theta(
             poses: campaign.poses.len(),
         });
     }
-    Ok(if theta0.len() == effects.n_params() {
-        theta0.to_vec()
-    } else {
-        vec![0.0; effects.n_params()]
-    })
+    match theta0.len() {
+        0 => Ok(vec![0.0; effects.n_params()]),
+        n if n == effects.n_params() => Ok(theta0.to_vec()),
+        given => Err(CalibrationError::StartThetaLength {
+            given,
+            expected: effects.n_params(),
+        }),
+    }
 }
 
 /// What step 1 identifies and how, decided once from the rows at the start parameters.
