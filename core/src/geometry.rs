@@ -267,8 +267,22 @@ impl Solution {
 
 /// Actuator position of one rod for a platform pose (seed eq. 4.6 with the assembly mode k).
 pub fn rod_igm(p: &Params, rod: &Rod, x: f64, y: f64, psi: f64) -> Result<f64, GeometryError> {
-    let (o, e, n) = guide_frame(p, rod.guide);
-    let w = platform_joint(p, rod, x, y, psi) - o - n * p[rod.xb];
+    rod_igm_at(p, rod, x, y, psi.sin_cos(), guide_frame(p, rod.guide))
+}
+
+/// [`rod_igm`] with sin and cos of ψ and the rod's guide frame given (computed once by a
+/// caller that needs them for several rods or several calls).
+fn rod_igm_at(
+    p: &Params,
+    rod: &Rod,
+    x: f64,
+    y: f64,
+    (s, c): (f64, f64),
+    (o, e, n): (Vector2<f64>, Vector2<f64>, Vector2<f64>),
+) -> Result<f64, GeometryError> {
+    let (xa, ya) = (p[rod.xa], p[rod.ya]);
+    let a = Vector2::new(x + c * xa - s * ya, y + s * xa + c * ya);
+    let w = a - o - n * p[rod.xb];
     let we = w.dot(&e);
     let l = p[rod.l];
     let disc = we * we - w.norm_squared() + l * l;
@@ -292,8 +306,9 @@ fn igm_at_psi(p: &Params, x: f64, y: f64, psi: f64) -> Result<Config, GeometryEr
     c[X] = x;
     c[Y] = y;
     c[PSI] = psi;
+    let t = Trig::new(p, &c);
     for rod in &RODS[..4] {
-        c[q_var(rod.actuator)] = rod_igm(p, rod, x, y, psi)?;
+        c[q_var(rod.actuator)] = rod_igm_at(p, rod, x, y, t.psi, t.frame(rod.guide))?;
     }
     Ok(c)
 }
@@ -314,11 +329,15 @@ fn igm29_start(p: &Params, x: f64, y: f64) -> Result<Config, GeometryError> {
 /// The configuration with ψ settled on rod 5's closure (see [`igm29_start`]).
 fn rod5_settled(p: &Params, x: f64, y: f64) -> Result<Config, GeometryError> {
     let (rod4, rod5) = (&RODS[3], &RODS[4]);
-    let (o, e, n) = guide_frame(p, rod5.guide);
+    // rods 4 and 5 share guide 2: its frame once, one sin_cos per ψ tried
+    let frame = guide_frame(p, rod5.guide);
+    let (o, e, n) = frame;
     let rod5_closure = |psi: f64| -> Result<f64, GeometryError> {
-        let q4 = rod_igm(p, rod4, x, y, psi)?;
+        let (s, c) = psi.sin_cos();
+        let q4 = rod_igm_at(p, rod4, x, y, (s, c), frame)?;
         let b = o + n * p[rod5.xb] + e * (q4 + p[rod5.yb]);
-        let r = platform_joint(p, rod5, x, y, psi) - b;
+        let (xa, ya) = (p[rod5.xa], p[rod5.ya]);
+        let r = Vector2::new(x + c * xa - s * ya, y + s * xa + c * ya) - b;
         Ok(r.norm_squared() - p[rod5.l] * p[rod5.l])
     };
     let (mut psi0, mut psi1) = (p[GAMMA2], p[GAMMA2] + 1e-6);
@@ -387,8 +406,17 @@ fn fgm_start(p: &Params, a: usize, b: usize, qa: f64, qb: f64) -> Result<Config,
 /// 3, 4, 5 below (along the guide), and every carrier on the outer side of its platform joint
 /// (across the guide: guide 2 to the right, guide 1 to the left).
 fn in_assembly_mode(p: &Params, rod: &Rod, tcp: Vector2<f64>, psi: f64, q: f64) -> bool {
-    let (_, e, n) = guide_frame(p, rod.guide);
-    let r = carrier_joint(p, rod, q) - platform_joint(p, rod, tcp.x, tcp.y, psi);
+    let mut c = Config::zeros();
+    (c[X], c[Y], c[PSI], c[q_var(rod.actuator)]) = (tcp.x, tcp.y, psi, q);
+    rod_in_assembly_mode(p, rod, &c, &Trig::new(p, &c))
+}
+
+/// [`in_assembly_mode`] of `rod` in configuration `c`, with its trigonometry given.
+fn rod_in_assembly_mode(p: &Params, rod: &Rod, c: &Config, t: &Trig) -> bool {
+    let (_, e, n) = t.frame(rod.guide);
+    let (_, r) = rod_residual(p, rod, c, t);
+    // r = A − B; the test reads B − A
+    let r = -r;
     let side = match rod.guide {
         Guide::G1 => -1.0,
         Guide::G2 => 1.0,
@@ -452,7 +480,7 @@ fn check_conditioning(e_u: &SMatrix<f64, 5, 5>, sub: Subsystem) -> Result<(), Ge
         }
     }
     let norms: f64 = (0..5).map(|r| m.row(r).norm()).product();
-    let ratio = m.determinant().abs() / norms;
+    let ratio = det5(m).abs() / norms;
     if !(ratio > SINGULAR_RATIO) {
         return Err(GeometryError::Singular {
             subsystem: sub,
@@ -460,6 +488,37 @@ fn check_conditioning(e_u: &SMatrix<f64, 5, 5>, sub: Subsystem) -> Result<(), Ge
         });
     }
     Ok(())
+}
+
+/// Determinant of a 5 × 5 matrix by Gaussian elimination with partial pivoting, in place on
+/// the stack (nalgebra's general LU costs several times more at this size, and every solve
+/// checks its conditioning once per Newton step).
+fn det5(mut m: SMatrix<f64, 5, 5>) -> f64 {
+    let mut det = 1.0;
+    for k in 0..5 {
+        let mut pivot = k;
+        for r in k + 1..5 {
+            if m[(r, k)].abs() > m[(pivot, k)].abs() {
+                pivot = r;
+            }
+        }
+        if m[(pivot, k)] == 0.0 {
+            return 0.0;
+        }
+        if pivot != k {
+            m.swap_rows(k, pivot);
+            det = -det;
+        }
+        let d = m[(k, k)];
+        det *= d;
+        for r in k + 1..5 {
+            let f = m[(r, k)] / d;
+            for c in k + 1..5 {
+                m[(r, c)] -= f * m[(k, c)];
+            }
+        }
+    }
+    det
 }
 
 /// The closed-form inverse model 24: ψ = γ2 and each rod by eq. 4.6 close every equation
@@ -546,9 +605,9 @@ pub fn solve(
         Subsystem::Actuators(a, b) => fgm_start(p, a, b, known[0], known[1])?,
     };
     let sol = newton(p, model, sub, start)?;
+    let t = Trig::new(p, &sol.c);
     for rod in equation_rods(model) {
-        let tcp = Vector2::new(sol.c[X], sol.c[Y]);
-        if !in_assembly_mode(p, rod, tcp, sol.c[PSI], sol.c[q_var(rod.actuator)]) {
+        if !rod_in_assembly_mode(p, rod, &sol.c, &t) {
             return Err(GeometryError::AssemblyMode { rod: rod.number });
         }
     }
@@ -616,6 +675,29 @@ pub fn sensitivity(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// det5 against nalgebra's LU determinant on random matrices, a singular one, and a
+    /// permutation (its sign).
+    #[test]
+    fn det5_matches_the_lu_determinant() {
+        let mut x = 0x2545_f491_4f6c_dd1d_u64;
+        for _ in 0..200 {
+            let m = SMatrix::<f64, 5, 5>::from_fn(|_, _| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            });
+            let (a, b) = (det5(m), m.determinant());
+            assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-3), "{a} vs {b}");
+        }
+        let mut singular = SMatrix::<f64, 5, 5>::identity();
+        singular.set_row(4, &singular.row(3).clone_owned());
+        assert_eq!(det5(singular), 0.0);
+        let mut swap = SMatrix::<f64, 5, 5>::identity();
+        swap.swap_rows(0, 3);
+        assert_eq!(det5(swap), -1.0);
+    }
 
     /// The model-29 igm from the rod-5 start gives what Newton from the model-24 start gives
     /// (to 1e-9 mm, both within the solver's tolerance), with fewer Newton steps.
