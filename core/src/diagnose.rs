@@ -328,7 +328,7 @@ impl Search<'_> {
         let tries = try_all(
             self.campaign,
             val.as_ref(),
-            self.in_model,
+            (self.in_model, &base.fit),
             self.tried,
             copts,
             self.threads,
@@ -437,7 +437,7 @@ type Tried = Result<(Fitted, Fitted), FitError>;
 fn try_all(
     campaign: &Campaign,
     val: Option<&Validation>,
-    in_model: &[&dyn Effect],
+    (in_model, base): (&[&dyn Effect], &Fit),
     tried: &[&dyn Effect],
     copts: &calib::Options,
     threads: usize,
@@ -448,7 +448,7 @@ fn try_all(
     if threads == 1 {
         return tried
             .iter()
-            .map(|e| try_effect(campaign, val, in_model, *e, &start, copts))
+            .map(|e| try_effect(campaign, val, (in_model, base), *e, &start, copts))
             .collect();
     }
     // the candidates share the cores: each fit's rows on one thread
@@ -456,7 +456,8 @@ fn try_all(
         threads: 1,
         ..copts.clone()
     };
-    let one = |effect: &dyn Effect| try_effect(campaign, val, in_model, effect, &start, copts);
+    let one =
+        |effect: &dyn Effect| try_effect(campaign, val, (in_model, base), effect, &start, copts);
     let mut out: Vec<Option<Tried>> = (0..tried.len()).map(|_| None).collect();
     std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
@@ -633,7 +634,7 @@ fn noise_sentence(groups: &[GroupNoise]) -> String {
 fn try_effect(
     campaign: &Campaign,
     val: Option<&Validation>,
-    in_model: &[&dyn Effect],
+    (in_model, base): (&[&dyn Effect], &Fit),
     effect: &dyn Effect,
     start: &Params,
     copts: &calib::Options,
@@ -641,7 +642,13 @@ fn try_effect(
     let mut with: Vec<&dyn Effect> = in_model.to_vec();
     with.push(effect);
     let mut set = EffectSet::bind(&with, campaign, start)?;
-    let cal = calib::calibrate_with(campaign, start, copts, &set, &[])?;
+    // the candidate starts where the current model ended, its own parameters at zero
+    let theta = warm_theta(&set, base);
+    let warm = Some(calib::WarmStart {
+        params: &base.params,
+        theta: &theta,
+    });
+    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm)?;
     // parts of the family the data do not support: held at zero in the kept variant
     let weak = weak_parts(&cal, &set, effect.name());
     let full = finish_with(val, &with, &set, cal, copts)?;
@@ -655,9 +662,24 @@ fn try_effect(
     for k in weak {
         set.hold(k);
     }
-    let cal = calib::calibrate_with(campaign, start, copts, &set, &[])?;
+    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm)?;
     let kept = finish_with(val, &with, &set, cal, copts)?;
     Ok((full, kept))
+}
+
+/// The current model's effect parameters (`base`) laid out for `set` (the same effects and a
+/// candidate): each slot takes the value of the slot of the same effect and name, a slot
+/// the current model does not have starts at zero.
+fn warm_theta(set: &EffectSet, base: &Fit) -> Vec<f64> {
+    set.layout()
+        .iter()
+        .map(|slot| {
+            base.effect_params
+                .iter()
+                .find(|e| e.effect == slot.effect && e.name == slot.param.name)
+                .map_or(0.0, |e| e.value)
+        })
+        .collect()
 }
 
 /// θ indexes of `effect`'s machine parameters below 2σ, when it has several identified (the

@@ -292,10 +292,43 @@ pub fn calibrate_with(
     effects: &EffectSet,
     theta0: &[f64],
 ) -> Result<Calibration, CalibrationError> {
+    calibrate_from(campaign, start, opts, effects, theta0, None)
+}
+
+/// Where the LM starts when not at the start parameters: the fit of a neighbouring model.
+/// The start parameters stay the prior's centre and the "before" of the report; only the
+/// path changes (the diagnosis starts each candidate at the current model's fit, two or
+/// three steps from its own minimum instead of five).
+#[derive(Clone, Copy, Debug)]
+pub struct WarmStart<'a> {
+    pub params: &'a Params,
+    /// The effects' parameters (as many as the effects have).
+    pub theta: &'a [f64],
+}
+
+/// [`calibrate_with`], the LM started at `warm` when given.
+pub fn calibrate_from(
+    campaign: &Campaign,
+    start: &Params,
+    opts: &Options,
+    effects: &EffectSet,
+    theta0: &[f64],
+    warm: Option<WarmStart>,
+) -> Result<Calibration, CalibrationError> {
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
     let plan = Plan::new(&pb, &theta0)?;
-    let fit = step1(&pb, &plan, &theta0)?;
+    let init = match warm {
+        Some(w) => State {
+            p: *w.params,
+            theta: start_theta(campaign, opts, effects, w.theta)?,
+        },
+        None => State {
+            p: *start,
+            theta: theta0.clone(),
+        },
+    };
+    let fit = step1(&pb, &plan, init)?;
     let corr = effects.corrections(&fit.state.theta);
     let (rows_final, post) = posterior(&pb, &plan, &fit.state.p, &corr, &fit.drop)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
@@ -525,13 +558,10 @@ struct Step1Fit {
 
 /// Step 1 with outlier elimination rounds (eq. 3.31-3.32): fit, drop the rows beyond
 /// `outlier_sigma`, fit again, while new outliers appear and fewer than 5 % are dropped.
-fn step1(pb: &Problem, plan: &Plan, theta0: &[f64]) -> Result<Step1Fit, CalibrationError> {
+fn step1(pb: &Problem, plan: &Plan, init: State) -> Result<Step1Fit, CalibrationError> {
     let opts = pb.opts;
     let mut fit = Step1Fit {
-        state: State {
-            p: pb.start,
-            theta: theta0.to_vec(),
-        },
+        state: init,
         iterations: 0,
         drop: HashSet::new(),
         outliers: Vec::new(),
