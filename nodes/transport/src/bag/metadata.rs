@@ -35,7 +35,10 @@ pub struct BagMetadata {
     pub relative_file_paths: Vec<String>,
     #[serde(default)]
     pub files: Vec<FileInformation>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    /// Always written (rosbag2's reader requires the key from version 6 on: without it
+    /// `ros2 bag info` stops at "invalid node; first invalid key: custom_data"); empty is
+    /// written as null, as rosbag2 writes it.
+    #[serde(default)]
     pub custom_data: Option<BTreeMap<String, String>>,
     #[serde(default)]
     pub ros_distro: String,
