@@ -139,15 +139,28 @@ pub struct NodeParams {
     values: BTreeMap<String, (Value, Origin)>,
 }
 
-/// Whether a section name addresses the node `node` (`/**`, `node`, `/node`, `/ns/node`,
-/// `/**/node`).
+/// Whether a section name addresses the node `node` in rpkm's namespace
+/// ([`rpkm_transport::NODE_NAMESPACE`]): `Some(false)` for every node (`/**`), `Some(true)`
+/// for this one (`node`, `/node`, `/rpkm/node`, `/**/node`, `/*/node`), `None` otherwise, a
+/// section of the same node name in another namespace (`/foo/ingest`) included: ROS 2 would
+/// not apply it either.
 fn section_matches(section: &str, node: &str) -> Option<bool> {
     let s = section.trim();
     if s == "/**" || s == "**" {
         return Some(false);
     }
-    let last = s.rsplit('/').next().unwrap_or(s);
-    (last == node).then_some(true)
+    let (namespace, last) = s.rsplit_once('/').unwrap_or(("", s));
+    if last != node {
+        return None;
+    }
+    let ours = rpkm_transport::NODE_NAMESPACE;
+    let one_level = ours.matches('/').count() == 1;
+    let here = match namespace {
+        "" | "/**" => true,
+        "/*" => one_level,
+        ns => ns == ours,
+    };
+    here.then_some(true)
 }
 
 fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Value)>) {
@@ -486,6 +499,30 @@ tcp_estimator:
         Ok(())
     }
 
+    /// A section addresses a node as ROS 2 resolves it: its name alone, its name in rpkm's
+    /// namespace, or under a wildcard; the same name in another namespace is another node.
+    #[test]
+    fn sections_of_another_namespace_are_not_applied() -> Result<(), ParamError> {
+        for (section, applied) in [
+            ("ingest", true),
+            ("/ingest", true),
+            ("/rpkm/ingest", true),
+            ("/**/ingest", true),
+            ("/*/ingest", true),
+            ("/foo/ingest", false),
+            ("/rpkm/sub/ingest", false),
+            ("/rpkm/ingest_2", false),
+        ] {
+            let p = load(
+                &format!("{section}:\n  ros__parameters:\n    rate_hz: 5.0\n"),
+                "ingest",
+            )?;
+            let want = if applied { 5.0 } else { 1.0 };
+            assert_eq!(p.f64("rate_hz", 1.0)?, want, "{section}");
+        }
+        Ok(())
+    }
+
     #[test]
     fn undeclared_keys_of_the_own_section_are_errors() -> Result<(), ParamError> {
         let p = load(FILE, "preload_monitor")?;
@@ -504,13 +541,13 @@ tcp_estimator:
     #[test]
     fn wrong_types_name_file_section_and_key() -> Result<(), ParamError> {
         let p = load(
-            "/ns/ingest:\n  ros__parameters:\n    rate_hz: fast\n",
+            "/rpkm/ingest:\n  ros__parameters:\n    rate_hz: fast\n",
             "ingest",
         )?;
         let err = p.f64("rate_hz", 1.0).expect_err("not a number");
         assert_eq!(
             err.to_string(),
-            "p.yaml: /ns/ingest/ros__parameters/rate_hz: expected a finite number, found \"fast\""
+            "p.yaml: /rpkm/ingest/ros__parameters/rate_hz: expected a finite number, found \"fast\""
         );
         let bad = load("ingest: [1, 2\n", "ingest").expect_err("not YAML");
         assert!(

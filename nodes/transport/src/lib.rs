@@ -19,6 +19,9 @@ pub mod ipc;
 pub mod pubsub;
 pub mod topic;
 
+/// The ROS 2 namespace of every rpkm node (`/rpkm/ingest`, `/rpkm/tcp_estimator`, ...).
+pub const NODE_NAMESPACE: &str = "/rpkm";
+
 pub use error::TransportError;
 pub use ipc::IpcMessage;
 pub use pubsub::{Backend, Publisher, Subscriber, Transport, TransportConfig};
