@@ -224,7 +224,8 @@ fn our_messages(bag: &Path) -> Vec<(String, String, u64, Value)> {
     reader
         .messages()
         .map(|m| {
-            let value = rpkm::topics::decode_json(m.type_name, m.data)
+            let m = m.expect("read");
+            let value = rpkm::topics::decode_json(m.type_name, &m.data)
                 .unwrap_or_else(|| panic!("type {} unknown to rpkm", m.type_name))
                 .unwrap_or_else(|e| panic!("{}: {e}", m.topic));
             (

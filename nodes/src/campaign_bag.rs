@@ -529,16 +529,19 @@ pub fn read_campaign(bag: &BagReader) -> anyhow::Result<Campaign> {
     // Info and states first: pairing goes by stamp, and a recording made live may hold a
     // measurement before its state (each topic arrives through its own queue).
     for m in bag.messages() {
+        let m = m?;
         if m.topic == info {
             assembler.push_info(&m.decode::<CampaignInfo>()?)?;
         }
     }
     for m in bag.messages() {
+        let m = m?;
         if m.topic == state {
             assembler.push_state(&m.decode::<ActuatorState>()?)?;
         }
     }
     for m in bag.messages() {
+        let m = m?;
         if m.topic == measurement {
             assembler.push_measurement(&m.decode::<TcpMeasurement>()?)?;
         }

@@ -5,6 +5,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
+use rpkm_transport::bag::BagReadError;
 
 use super::record::{stop_flag, TransportArgs};
 use crate::topics::{self, ReplayPort};
@@ -90,7 +91,10 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
     }
     // Which bag topics to publish, after checking that their types are rpkm's.
     let mut selected: Vec<&str> = Vec::new();
-    for t in bag.topics() {
+    // Per topic of the bag its port, so that the timed loop neither hashes nor compares names.
+    let mut port_of_topic: Vec<Option<usize>> = vec![None; bag.topics().len()];
+    let mut total = 0;
+    for (topic_index, t) in bag.topics().iter().enumerate() {
         let Some(expected) = topics::type_name(&t.name) else {
             eprintln!(
                 "rpkm replay: skipping {} ({}): not an rpkm topic",
@@ -118,6 +122,8 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
                 t.message_encoding
             )));
         }
+        port_of_topic[topic_index] = Some(selected.len());
+        total += t.message_count;
         selected.push(&t.name);
     }
     let stop = stop_flag()?;
@@ -130,12 +136,6 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
             args.transport.reliable,
         )?);
     }
-    // Per message its port, once, so that the timed loop neither hashes nor allocates.
-    let plan: Vec<Option<usize>> = bag
-        .messages()
-        .map(|m| selected.iter().position(|s| *s == m.topic))
-        .collect();
-    let total = plan.iter().filter(|p| p.is_some()).count();
     eprintln!(
         "rpkm replay: {} messages on {} topics from {}",
         total,
@@ -148,8 +148,15 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
     let mut counts = vec![0u64; ports.len()];
     let mut t0: Option<u64> = None;
     let start = Instant::now();
-    for (message, port) in bag.messages().zip(&plan) {
-        let Some(port) = *port else { continue };
+    // The bag is read as it goes, a chunk at a time (memory: a chunk, not the bag).
+    for message in bag.messages() {
+        let message = message.map_err(|e| match e {
+            BagReadError::Io { .. } => anyhow::Error::new(e),
+            other => super::bad_input(other.to_string()),
+        })?;
+        let Some(port) = port_of_topic.get(message.topic_index).copied().flatten() else {
+            continue;
+        };
         if stop.load(Ordering::Relaxed) {
             break;
         }
@@ -159,7 +166,7 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
             let due = start + Duration::from_nanos(offset_ns as u64);
             wait_until(due);
         }
-        ports[port].publish(message.data).map_err(|e| {
+        ports[port].publish(&message.data).map_err(|e| {
             anyhow::anyhow!(
                 "message {} (log time {} ns) of {}: {e}",
                 message.index,

@@ -52,7 +52,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let reader = BagReader::open(&dir)?;
         let mut checksum = 0.0;
         for message in reader.messages() {
-            let state: ActuatorState = message.decode()?;
+            let state: ActuatorState = message?.decode()?;
             checksum += state.position[0];
         }
         let elapsed = start.elapsed().as_secs_f64();

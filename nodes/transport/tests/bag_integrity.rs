@@ -90,7 +90,7 @@ fn a_channel_in_another_encoding_is_refused_naming_its_topic() {
         w.finish().expect("finish");
     }
     let bag = BagReader::open(&file).expect("a readable MCAP file");
-    let message = bag.messages().next().expect("one message");
+    let message = bag.messages().next().expect("one message").expect("read");
     let err = message
         .decode::<rpkm_msgs::ActuatorState>()
         .expect_err("JSON is not CDR");

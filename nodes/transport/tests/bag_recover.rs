@@ -19,6 +19,7 @@ fn check_prefix(dir: &Path) -> u64 {
     let reader = BagReader::open(dir).expect("recovered bag opens");
     let mut n = 0u64;
     for message in reader.messages() {
+        let message = message.expect("read");
         assert_eq!(message.topic, "/actuators/state");
         assert_eq!(
             u64::from(message.sequence),

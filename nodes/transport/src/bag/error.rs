@@ -109,12 +109,54 @@ pub enum BagOpenError {
         offset: u64,
         channel_id: u16,
     },
+    /// A channel id defined again for another topic (MCAP requires every definition of an id
+    /// to be identical): its messages could not be told apart.
+    #[error(
+        "{path}: record at byte {offset} defines channel {channel_id} as {topic:?}, \
+         which is already channel {channel_id} with another topic or type"
+    )]
+    ChannelRedefined {
+        path: PathBuf,
+        offset: u64,
+        channel_id: u16,
+        topic: String,
+    },
     /// The file ends inside a record or lacks its end: its writer did not finish.
     #[error(
         "{path} ends at byte {offset} without its data end record: the writer did not finish; \
          use bag::recover to copy its complete chunks into a new bag"
     )]
     Truncated { path: PathBuf, offset: u64 },
+}
+
+/// Errors while iterating the messages of an open bag: the chunks are read again when their
+/// turn comes, so a file changed or removed since [`BagReader::open`](super::BagReader::open)
+/// checked it shows here.
+#[derive(Debug, thiserror::Error)]
+pub enum BagReadError {
+    /// File system error.
+    #[error("I/O error reading {path} at byte {offset}: {source}")]
+    Io {
+        path: PathBuf,
+        offset: u64,
+        source: std::io::Error,
+    },
+    /// The record no longer parses, or its chunk fails its CRC.
+    #[error(
+        "{path}: corrupt record at byte {offset} (the file changed since it was opened): {source}"
+    )]
+    Corrupt {
+        path: PathBuf,
+        offset: u64,
+        source: mcap::McapError,
+    },
+    /// The record is not what the bag held when it was opened.
+    #[error("{path}: record at byte {offset} changed since the bag was opened: {what}")]
+    Changed {
+        path: PathBuf,
+        offset: u64,
+        what: String,
+    },
 }
 
 /// Errors of [`BagMessage::decode`](super::BagMessage::decode).
@@ -147,6 +189,9 @@ pub enum BagDecodeError {
     /// The channel's messages are not CDR, the only encoding of ROS 2 messages rpkm reads.
     #[error("topic {topic}: message encoding {encoding:?}, expected \"cdr\"")]
     Encoding { topic: String, encoding: String },
+    /// The bag could not be read while iterating it.
+    #[error(transparent)]
+    Read(#[from] BagReadError),
 }
 
 /// Errors of [`recover`](super::recover).

@@ -4,8 +4,9 @@
 //!   already-serialised CDR payloads (the recorder's raw path). The file is chunked and every
 //!   chunk is handed to the operating system as soon as it is full, so a recorder killed with
 //!   SIGKILL loses at most the open chunk; [`recover`] turns such a folder back into a valid bag.
-//! - [`BagReader`] opens a bag folder or a bare `.mcap`, lists its topics and yields messages in
-//!   log-time order; [`BagMessage::decode`] decodes one into its Rust type.
+//! - [`BagReader`] opens a bag folder or a bare `.mcap`, checks it, lists its topics and yields
+//!   messages in log-time order, reading each chunk when its turn comes (memory: about a chunk,
+//!   not the bag); [`BagMessage::decode`] decodes one into its Rust type.
 //!
 //! What readers outside Rust need and get (see `tests/python/bag_check.py`): MCAP header profile
 //! `ros2`, one schema per type (encoding `ros2msg`, the `.msg` text with its dependencies), one
@@ -15,6 +16,7 @@
 
 mod cdr;
 mod error;
+mod merge;
 mod metadata;
 mod qos;
 mod reader;
@@ -23,7 +25,10 @@ mod recover;
 mod writer;
 
 pub use cdr::{decode_cdr, encode_cdr};
-pub use error::{BagDecodeError, BagOpenError, BagWriteError, CdrError, RecoverError};
+pub use error::{
+    BagDecodeError, BagOpenError, BagReadError, BagWriteError, CdrError, RecoverError,
+};
+pub use merge::Messages;
 pub use metadata::{BagMetadata, METADATA_VERSION};
 pub use qos::{Durability, History, Liveliness, QosProfile, Reliability};
 pub use reader::{BagMessage, BagReader, TopicInfo};

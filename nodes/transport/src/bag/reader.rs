@@ -4,10 +4,12 @@ use std::collections::HashMap;
 use std::fs::File;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use rpkm_msgs::RosMessage;
 
 use super::error::{BagDecodeError, BagOpenError};
+use super::merge::Messages;
 use super::metadata::{BagMetadata, METADATA_FILE};
 use super::records::{walk_data_section, DataItem, SectionEnd, WalkError};
 
@@ -31,10 +33,12 @@ pub struct TopicInfo {
     pub message_count: u64,
 }
 
-/// One message of a bag, borrowed from the [`BagReader`].
-#[derive(Debug, Clone, Copy)]
+/// One message of a bag: its payload, and names borrowed from the [`BagReader`].
+#[derive(Debug, Clone)]
 pub struct BagMessage<'a> {
     pub topic: &'a str,
+    /// Index of the topic in [`BagReader::topics`].
+    pub topic_index: usize,
     /// `pkg/msg/Type`.
     pub type_name: &'a str,
     /// The channel's message encoding: `cdr` is the only one decoded.
@@ -46,7 +50,7 @@ pub struct BagMessage<'a> {
     /// Sequence number written with the message.
     pub sequence: u32,
     /// The CDR payload with its encapsulation header.
-    pub data: &'a [u8],
+    pub data: Vec<u8>,
     /// Position in the bag's log-time order.
     pub index: usize,
     /// File holding the message.
@@ -74,7 +78,7 @@ impl BagMessage<'_> {
                 found: self.type_name.to_owned(),
             });
         }
-        super::cdr::decode_cdr(self.data).map_err(|source| BagDecodeError::Cdr {
+        super::cdr::decode_cdr(&self.data).map_err(|source| BagDecodeError::Cdr {
             topic: self.topic.to_owned(),
             index: self.index,
             log_time: self.log_time,
@@ -85,31 +89,57 @@ impl BagMessage<'_> {
     }
 }
 
-struct Entry {
-    topic: u32,
-    file: u16,
-    sequence: u32,
-    log_time: u64,
-    publish_time: u64,
-    record_offset: u64,
-    start: usize,
-    len: usize,
+/// A run of messages read back together when its turn comes: a chunk, or a message record
+/// outside any chunk.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Segment {
+    /// Index into the bag's files.
+    pub file: usize,
+    /// Byte offset of the top-level record in the file.
+    pub offset: u64,
+    /// Smallest log time of its messages: the segment is read before anything later goes out.
+    pub first_log_time: u64,
+    pub messages: u64,
 }
 
-/// An open bag: all its messages, in log-time order.
+/// Where a bag's messages are: what the merge needs, shared with its reading thread.
+#[derive(Debug, Default)]
+pub(super) struct ChunkIndex {
+    /// The storage files, in order.
+    pub files: Vec<PathBuf>,
+    /// Per file: channel id -> index into the topics.
+    pub channels: Vec<HashMap<u16, usize>>,
+    /// In file order.
+    pub segments: Vec<Segment>,
+    /// Indices into `segments` by first log time, ties in file order: the order of reading.
+    pub schedule: Vec<usize>,
+}
+
+/// An open bag: its topics, counts and an index of its chunks.
 ///
-/// `open` reads every file once, linearly, and keeps the payloads in one buffer, so iteration
-/// and decoding do not touch the disk; memory is about the size of the messages. Files written
+/// `open` reads every file once, linearly, and checks all of it (chunk CRCs, every record, the
+/// data section's CRC), keeping for each chunk only where it is and its first log time.
+/// [`messages`](Self::messages) reads the chunks again, each when its turn in log-time order
+/// comes, so memory stays a few chunks (more only where chunks overlap in time). Files written
 /// by any MCAP writer are accepted (chunked or not, compressed with zstd or lz4 or not); a file
 /// whose writer did not finish is refused with [`BagOpenError::Truncated`] (see
 /// [`recover`](super::recover)).
 pub struct BagReader {
     path: PathBuf,
-    files: Vec<PathBuf>,
     metadata: Option<BagMetadata>,
     topics: Vec<TopicInfo>,
-    entries: Vec<Entry>,
-    payloads: Vec<u8>,
+    index: Arc<ChunkIndex>,
+    message_count: usize,
+    time_bounds: Option<(u64, u64)>,
+}
+
+/// What `open` gathers while it walks the files.
+#[derive(Default)]
+struct Survey {
+    topics: Vec<TopicInfo>,
+    index: ChunkIndex,
+    message_count: usize,
+    time_bounds: Option<(u64, u64)>,
 }
 
 impl BagReader {
@@ -118,39 +148,103 @@ impl BagReader {
     pub fn open(path: impl AsRef<Path>) -> Result<Self, BagOpenError> {
         let path = path.as_ref().to_path_buf();
         let (files, metadata) = storage_files(&path)?;
-        let mut reader = Self {
-            path,
-            files: Vec::new(),
-            metadata,
-            topics: Vec::new(),
-            entries: Vec::new(),
-            payloads: Vec::new(),
-        };
+        let mut survey = Survey::default();
         for (file_index, file) in files.iter().enumerate() {
-            let file_index = u16::try_from(file_index).unwrap_or(u16::MAX);
-            reader.read_file(file, file_index)?;
+            survey.walk_file(file, file_index)?;
         }
-        reader.files = files;
-        if !reader.entries.is_sorted_by_key(|e| e.log_time) {
-            // Stable: equal log times keep their file order.
-            reader.entries.sort_by_key(|e| e.log_time);
-        }
-        Ok(reader)
+        let mut index = survey.index;
+        index.files = files;
+        let mut schedule: Vec<usize> = (0..index.segments.len()).collect();
+        // Stable: equal first log times keep their file order.
+        schedule.sort_by_key(|&i| index.segments[i].first_log_time);
+        index.schedule = schedule;
+        Ok(Self {
+            path,
+            metadata,
+            topics: survey.topics,
+            index: Arc::new(index),
+            message_count: survey.message_count,
+            time_bounds: survey.time_bounds,
+        })
+    }
+    /// What was opened.
+    pub fn path(&self) -> &Path {
+        &self.path
     }
 
-    fn read_file(&mut self, file: &Path, file_index: u16) -> Result<(), BagOpenError> {
+    /// The storage files read, in order.
+    pub fn files(&self) -> &[PathBuf] {
+        &self.index.files
+    }
+
+    /// `metadata.yaml`, when the bag is a folder that has one.
+    pub fn metadata(&self) -> Option<&BagMetadata> {
+        self.metadata.as_ref()
+    }
+
+    /// Topics in the order they first appear in the files.
+    pub fn topics(&self) -> &[TopicInfo] {
+        &self.topics
+    }
+
+    /// The topic called `name` (the first one, if several types share the name).
+    pub fn topic(&self, name: &str) -> Option<&TopicInfo> {
+        self.topics.iter().find(|t| t.name == name)
+    }
+
+    /// Number of messages.
+    pub fn message_count(&self) -> usize {
+        self.message_count
+    }
+
+    /// First and last log time, ns; `None` for an empty bag.
+    pub fn time_bounds(&self) -> Option<(u64, u64)> {
+        self.time_bounds
+    }
+
+    /// All messages in log-time order (ties in file order), read from the files as they go.
+    pub fn messages(&self) -> Messages<'_> {
+        Messages::new(self)
+    }
+
+    /// Decodes every message of `topic` as `T`, with its log time, in log-time order.
+    pub fn decode_topic<T: RosMessage>(
+        &self,
+        topic: &str,
+    ) -> Result<Vec<(u64, T)>, BagDecodeError> {
+        if self.topic(topic).is_none() {
+            return Err(BagDecodeError::NoSuchTopic {
+                topic: topic.to_owned(),
+            });
+        }
+        let mut decoded = Vec::new();
+        for message in self.messages() {
+            let message = message?;
+            // every type under that name: a second type is a mismatch, not skipped
+            if message.topic == topic {
+                decoded.push((message.log_time, message.decode::<T>()?));
+            }
+        }
+        Ok(decoded)
+    }
+
+    pub(super) fn index(&self) -> &Arc<ChunkIndex> {
+        &self.index
+    }
+}
+
+impl Survey {
+    /// Walks one file: checks it and records its topics, channels and segments.
+    fn walk_file(&mut self, file: &Path, file_index: usize) -> Result<(), BagOpenError> {
         let io_err = |source| BagOpenError::Io {
             path: file.to_path_buf(),
             source,
         };
         let handle = File::open(file).map_err(io_err)?;
         let file_len = handle.metadata().map_err(io_err)?.len();
-        // Per file: schema id -> (name, encoding, text); channel id -> topic index.
+        // schema id -> (name, encoding, text)
         let mut schemas: HashMap<u16, (String, String, String)> = HashMap::new();
-        let mut channels: HashMap<u16, u32> = HashMap::new();
-        let topics = &mut self.topics;
-        let entries = &mut self.entries;
-        let payloads = &mut self.payloads;
+        let mut channels: HashMap<u16, usize> = HashMap::new();
         let walked = walk_data_section(
             BufReader::with_capacity(1 << 20, handle),
             file_len,
@@ -165,41 +259,27 @@ impl BagReader {
                         let text = String::from_utf8_lossy(data).into_owned();
                         schemas.insert(id, (name.to_owned(), encoding.to_owned(), text));
                     }
-                    DataItem::Channel(channel) => {
-                        let (type_name, schema_encoding, definition) =
-                            schemas.get(&channel.schema_id).cloned().unwrap_or_default();
-                        let index = match topics
-                            .iter()
-                            .position(|t| t.name == channel.topic && t.type_name == type_name)
+                    DataItem::Channel {
+                        record_offset,
+                        channel,
+                    } => {
+                        let topic = self.topic_of(channel, &schemas);
+                        if channels
+                            .insert(channel.id, topic)
+                            .is_some_and(|t| t != topic)
                         {
-                            Some(index) => index,
-                            None => {
-                                topics.push(TopicInfo {
-                                    name: channel.topic.clone(),
-                                    type_name,
-                                    message_encoding: channel.message_encoding.clone(),
-                                    schema_encoding,
-                                    definition,
-                                    offered_qos_profiles: channel
-                                        .metadata
-                                        .get(super::QOS_METADATA_KEY)
-                                        .cloned()
-                                        .unwrap_or_default(),
-                                    type_hash: channel
-                                        .metadata
-                                        .get(super::TYPE_HASH_METADATA_KEY)
-                                        .cloned(),
-                                    message_count: 0,
-                                });
-                                topics.len() - 1
-                            }
-                        };
-                        channels.insert(channel.id, u32::try_from(index).unwrap_or(u32::MAX));
+                            return Err(BagOpenError::ChannelRedefined {
+                                path: file.to_path_buf(),
+                                offset: record_offset,
+                                channel_id: channel.id,
+                                topic: channel.topic.clone(),
+                            });
+                        }
                     }
                     DataItem::Message {
                         record_offset,
                         header,
-                        data,
+                        ..
                     } => {
                         let Some(&topic) = channels.get(&header.channel_id) else {
                             return Err(BagOpenError::UnknownChannel {
@@ -208,25 +288,13 @@ impl BagReader {
                                 channel_id: header.channel_id,
                             });
                         };
-                        if let Some(info) = topics.get_mut(topic as usize) {
-                            info.message_count += 1;
-                        }
-                        entries.push(Entry {
-                            topic,
-                            file: file_index,
-                            sequence: header.sequence,
-                            log_time: header.log_time,
-                            publish_time: header.publish_time,
-                            record_offset,
-                            start: payloads.len(),
-                            len: data.len(),
-                        });
-                        payloads.extend_from_slice(data);
+                        self.count_message(topic, file_index, record_offset, header.log_time);
                     }
                 }
                 Ok(())
             },
         );
+        self.index.channels.push(channels);
         let summary = match walked {
             Ok(summary) => summary,
             Err(WalkError::BadMagic) => {
@@ -251,92 +319,58 @@ impl BagReader {
         }
     }
 
-    /// What was opened.
-    pub fn path(&self) -> &Path {
-        &self.path
+    /// The index into `topics` of a channel's topic, added if new. A topic is its name, type
+    /// and message encoding: a channel in another encoding is another topic, refused on its
+    /// own when decoded or replayed.
+    fn topic_of(
+        &mut self,
+        channel: &mcap::records::Channel,
+        schemas: &HashMap<u16, (String, String, String)>,
+    ) -> usize {
+        let (type_name, schema_encoding, definition) =
+            schemas.get(&channel.schema_id).cloned().unwrap_or_default();
+        if let Some(index) = self.topics.iter().position(|t| {
+            t.name == channel.topic
+                && t.type_name == type_name
+                && t.message_encoding == channel.message_encoding
+        }) {
+            return index;
+        }
+        let metadata = |key| channel.metadata.get(key).cloned();
+        self.topics.push(TopicInfo {
+            name: channel.topic.clone(),
+            type_name,
+            message_encoding: channel.message_encoding.clone(),
+            schema_encoding,
+            definition,
+            offered_qos_profiles: metadata(super::QOS_METADATA_KEY).unwrap_or_default(),
+            type_hash: metadata(super::TYPE_HASH_METADATA_KEY),
+            message_count: 0,
+        });
+        self.topics.len() - 1
     }
 
-    /// The storage files read, in order.
-    pub fn files(&self) -> &[PathBuf] {
-        &self.files
-    }
-
-    /// `metadata.yaml`, when the bag is a folder that has one.
-    pub fn metadata(&self) -> Option<&BagMetadata> {
-        self.metadata.as_ref()
-    }
-
-    /// Topics in the order they first appear in the files.
-    pub fn topics(&self) -> &[TopicInfo] {
-        &self.topics
-    }
-
-    /// The topic called `name` (the first one, if several types share the name).
-    pub fn topic(&self, name: &str) -> Option<&TopicInfo> {
-        self.topics.iter().find(|t| t.name == name)
-    }
-
-    /// Number of messages.
-    pub fn message_count(&self) -> usize {
-        self.entries.len()
-    }
-
-    /// First and last log time, ns; `None` for an empty bag.
-    pub fn time_bounds(&self) -> Option<(u64, u64)> {
-        Some((
-            self.entries.first()?.log_time,
-            self.entries.last()?.log_time,
-        ))
-    }
-
-    /// All messages in log-time order (ties in file order).
-    pub fn messages(&self) -> impl ExactSizeIterator<Item = BagMessage<'_>> + '_ {
-        self.entries
-            .iter()
-            .enumerate()
-            .map(move |(index, entry)| self.message(index, entry))
-    }
-
-    /// Decodes every message of `topic` as `T`, with its log time, in log-time order.
-    pub fn decode_topic<T: RosMessage>(
-        &self,
-        topic: &str,
-    ) -> Result<Vec<(u64, T)>, BagDecodeError> {
-        let Some(wanted) = self.topics.iter().position(|t| t.name == topic) else {
-            return Err(BagDecodeError::NoSuchTopic {
-                topic: topic.to_owned(),
-            });
-        };
-        self.entries
-            .iter()
-            .enumerate()
-            .filter(|(_, e)| e.topic as usize == wanted)
-            .map(|(index, entry)| {
-                let message = self.message(index, entry);
-                message.decode::<T>().map(|value| (message.log_time, value))
-            })
-            .collect()
-    }
-
-    fn message<'a>(&'a self, index: usize, entry: &Entry) -> BagMessage<'a> {
-        let topic = self.topics.get(entry.topic as usize);
-        BagMessage {
-            topic: topic.map_or("", |t| t.name.as_str()),
-            type_name: topic.map_or("", |t| t.type_name.as_str()),
-            message_encoding: topic.map_or("", |t| t.message_encoding.as_str()),
-            log_time: entry.log_time,
-            publish_time: entry.publish_time,
-            sequence: entry.sequence,
-            data: self
-                .payloads
-                .get(entry.start..entry.start + entry.len)
-                .unwrap_or_default(),
-            index,
-            file: self
-                .files
-                .get(entry.file as usize)
-                .map_or(Path::new(""), |p| p.as_path()),
-            record_offset: entry.record_offset,
+    /// Counts a message of `topic` in the record at `record_offset` of file `file`.
+    fn count_message(&mut self, topic: usize, file: usize, record_offset: u64, log_time: u64) {
+        if let Some(info) = self.topics.get_mut(topic) {
+            info.message_count += 1;
+        }
+        self.message_count += 1;
+        self.time_bounds = Some(match self.time_bounds {
+            Some((first, last)) => (first.min(log_time), last.max(log_time)),
+            None => (log_time, log_time),
+        });
+        match self.index.segments.last_mut() {
+            Some(segment) if segment.file == file && segment.offset == record_offset => {
+                segment.messages += 1;
+                segment.first_log_time = segment.first_log_time.min(log_time);
+            }
+            _ => self.index.segments.push(Segment {
+                file,
+                offset: record_offset,
+                first_log_time: log_time,
+                messages: 1,
+            }),
         }
     }
 }

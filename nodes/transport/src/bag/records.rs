@@ -19,7 +19,11 @@ pub(crate) enum DataItem<'a> {
         encoding: &'a str,
         data: &'a [u8],
     },
-    Channel(&'a Channel),
+    Channel {
+        /// Byte offset of the top-level record holding the channel (a chunk or the channel).
+        record_offset: u64,
+        channel: &'a Channel,
+    },
     Message {
         /// Byte offset of the top-level record holding the message (a chunk or the message).
         record_offset: u64,
@@ -166,12 +170,7 @@ pub(crate) fn walk_data_section<R: Read, E>(
                     }
                 };
                 if let Record::Chunk { header, data } = record {
-                    let inner: Result<Vec<Record<'_>>, mcap::McapError> =
-                        match mcap::read::ChunkReader::new(header, &data) {
-                            Ok(chunk) => chunk.collect(),
-                            Err(err) => Err(err),
-                        };
-                    let inner = match inner {
+                    let inner = match chunk_records(header, &data) {
                         Ok(inner) => inner,
                         Err(source) => {
                             summary.end = SectionEnd::Corrupt {
@@ -197,6 +196,65 @@ pub(crate) fn walk_data_section<R: Read, E>(
         summary.valid_bytes = next_offset;
         offset = next_offset;
     }
+}
+
+/// The records of a chunk: decompressed, its CRC checked where the writer stored one, every
+/// record parsed.
+fn chunk_records(
+    header: mcap::records::ChunkHeader,
+    data: &[u8],
+) -> Result<Vec<Record<'static>>, mcap::McapError> {
+    // the records are owned already; `into_owned` only restates their lifetime
+    mcap::read::ChunkReader::new(header, data)?
+        .map(|record| record.map(Record::into_owned))
+        .collect()
+}
+
+/// Why [`read_segment`] failed.
+#[derive(Debug)]
+pub(crate) enum SegmentError {
+    Io(io::Error),
+    /// The record's length runs `missing` bytes past the end of the file.
+    PastEnd {
+        missing: u64,
+    },
+    /// The record does not parse, or its chunk fails its CRC.
+    Corrupt(mcap::McapError),
+}
+
+/// Reads the top-level record that starts at `reader`'s position, with `available` bytes of the
+/// file left from there: the records of a chunk (decompressed, CRC-checked), or the record
+/// itself. Also returns the bytes consumed. The reader's way back to a chunk whose turn has
+/// come in a merge: [`walk_data_section`] has validated the file before.
+pub(crate) fn read_segment(
+    reader: &mut impl Read,
+    available: u64,
+) -> Result<(u64, Vec<Record<'static>>), SegmentError> {
+    let mut frame = [0u8; 9];
+    reader.read_exact(&mut frame).map_err(SegmentError::Io)?;
+    let mut len_bytes = [0u8; 8];
+    len_bytes.copy_from_slice(&frame[1..]);
+    let len = u64::from_le_bytes(len_bytes);
+    let room = available.saturating_sub(frame.len() as u64);
+    // Never allocate for a length the file cannot hold.
+    let len_usize = match usize::try_from(len) {
+        Ok(n) if len <= room => n,
+        _ => {
+            return Err(SegmentError::PastEnd {
+                missing: len - room,
+            })
+        }
+    };
+    let mut body = vec![0u8; len_usize];
+    reader.read_exact(&mut body).map_err(SegmentError::Io)?;
+    let record = mcap::parse_record(frame[0], &body).map_err(SegmentError::Corrupt)?;
+    let records = match record {
+        Record::Chunk { header, data } => {
+            chunk_records(header, &data).map_err(SegmentError::Corrupt)?
+        }
+        other => vec![other.into_owned()],
+    };
+    Ok((frame.len() as u64 + len, records))
 }
 
 /// The end of a data section at a `DataEnd` record of body `body` at `offset`: complete when
@@ -236,7 +294,13 @@ fn visit_record<E>(
             },
             0,
         ),
-        Record::Channel(channel) => (DataItem::Channel(channel), 0),
+        Record::Channel(channel) => (
+            DataItem::Channel {
+                record_offset,
+                channel,
+            },
+            0,
+        ),
         Record::Message { header, data } => (
             DataItem::Message {
                 record_offset,

@@ -114,7 +114,7 @@ fn recover_file(path: &Path, writer: &mut BagWriter) -> Result<FileRecovery, Rec
                     let text = String::from_utf8_lossy(data).into_owned();
                     schemas.insert(id, (name.to_owned(), text));
                 }
-                DataItem::Channel(channel) => {
+                DataItem::Channel { channel, .. } => {
                     let (type_name, definition) =
                         schemas.get(&channel.schema_id).cloned().unwrap_or_default();
                     let handle = writer.add_topic_raw(RawTopic {
