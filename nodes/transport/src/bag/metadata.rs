@@ -7,8 +7,15 @@ use serde::{Deserialize, Serialize};
 
 use super::error::{BagOpenError, BagWriteError};
 
-/// The `metadata.yaml` version written. Version 8 stores `offered_qos_profiles` as a YAML string
-/// and has `type_description_hash` and `ros_distro`; rosbags 0.11 accepts 4 to 9, not 10.
+/// The `metadata.yaml` version written: 8, the newest one that `ros2 bag` on both Iron and
+/// Jazzy reads (ros2/rosbag2, rosbag2_storage/include/rosbag2_storage/yaml.hpp,
+/// `convert<BagMetadata>::decode` on branches iron and jazzy). Jazzy itself writes 9, where
+/// `offered_qos_profiles` is a YAML sequence with rmw's policy names; Iron reads that key
+/// `as<std::string>()` from version 4 on and refuses the sequence. In version 8 it is a YAML
+/// string whose profiles give the policies as integers (Iron's player decodes nothing else;
+/// Jazzy's decoder accepts both forms). Versions 6 to 8 require `custom_data`, 7 and 8
+/// `type_description_hash`, 8 `ros_distro` (Jazzy). rosbags 0.11 accepts 4 to 9.
+/// tests/bag_rosbag2_metadata.rs holds every bag rpkm writes to these rules.
 pub const METADATA_VERSION: u32 = 8;
 
 /// File name of the metadata in a bag folder.
@@ -37,9 +44,12 @@ pub struct BagMetadata {
     pub files: Vec<FileInformation>,
     /// Always written (rosbag2's reader requires the key from version 6 on: without it
     /// `ros2 bag info` stops at "invalid node; first invalid key: custom_data"); empty is
-    /// written as null, as rosbag2 writes it.
+    /// written as null, as rosbag2 writes it. Absent in versions before 6.
     #[serde(default)]
     pub custom_data: Option<BTreeMap<String, String>>,
+    /// rosbag2 writes `$ROS_DISTRO` of the recording process, empty when unset (`ros2 bag
+    /// info` then shows "unknown"); rpkm runs on no ROS distribution and writes it empty.
+    /// Absent before version 8.
     #[serde(default)]
     pub ros_distro: String,
 }
@@ -71,9 +81,12 @@ pub struct TopicMetadata {
     #[serde(rename = "type")]
     pub type_name: String,
     pub serialization_format: String,
-    /// A YAML string in versions up to 8, a list in version 9.
+    /// The YAML string of [`QosProfile::to_rosbag2_yaml`](super::QosProfile::to_rosbag2_yaml)
+    /// in versions 4 to 8 (written), a sequence of maps in version 9 (read), absent before 4.
     #[serde(default)]
     pub offered_qos_profiles: serde_yaml::Value,
+    /// `RIHS01_...`, or empty where unknown (as rosbag2 writes a topic without one); absent
+    /// before version 7.
     #[serde(default)]
     pub type_description_hash: String,
 }
@@ -199,5 +212,113 @@ mod tests {
         assert_eq!(back, meta);
         let text = std::fs::read_to_string(dir.path().join(METADATA_FILE)).expect("text");
         assert!(text.starts_with("rosbag2_bagfile_information:\n  version: 8\n"));
+        assert!(
+            text.contains("\n  custom_data: null\n  ros_distro: ''\n"),
+            "{text}"
+        );
+    }
+
+    fn parse(text: &str) -> BagMetadata {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::write(dir.path().join(METADATA_FILE), text).expect("write");
+        BagMetadata::read_from(dir.path()).expect("reads")
+    }
+
+    /// A version-9 file in the layout Jazzy's encoder writes (yaml.hpp and qos.cpp encode()).
+    const JAZZY_V9: &str = r#"rosbag2_bagfile_information:
+  version: 9
+  storage_identifier: mcap
+  duration:
+    nanoseconds: 5
+  starting_time:
+    nanoseconds_since_epoch: 7
+  message_count: 2
+  topics_with_message_count:
+    - topic_metadata:
+        name: /chatter
+        type: std_msgs/msg/String
+        serialization_format: cdr
+        offered_qos_profiles:
+          - history: keep_last
+            depth: 7
+            reliability: best_effort
+            durability: transient_local
+            deadline:
+              sec: 9223372036
+              nsec: 854775807
+            lifespan:
+              sec: 9223372036
+              nsec: 854775807
+            liveliness: automatic
+            liveliness_lease_duration:
+              sec: 9223372036
+              nsec: 854775807
+            avoid_ros_namespace_conventions: false
+        type_description_hash: RIHS01_abc
+      message_count: 2
+  compression_format: ""
+  compression_mode: ""
+  relative_file_paths:
+    - b_0.mcap
+  files:
+    - path: b_0.mcap
+      starting_time:
+        nanoseconds_since_epoch: 7
+      duration:
+        nanoseconds: 5
+      message_count: 2
+  custom_data:
+    operator: anna
+  ros_distro: jazzy
+"#;
+
+    #[test]
+    fn reads_the_version_9_layout_of_jazzy() {
+        let meta = parse(JAZZY_V9);
+        assert_eq!(meta.version, 9);
+        let topic = &meta.topics_with_message_count[0].topic_metadata;
+        assert_eq!(
+            topic.offered_qos_profiles[0]["reliability"].as_str(),
+            Some("best_effort")
+        );
+        assert_eq!(topic.offered_qos_profiles[0]["depth"].as_u64(), Some(7));
+        assert_eq!(topic.type_description_hash, "RIHS01_abc");
+        assert_eq!(meta.files[0].duration.nanoseconds, 5);
+        let custom = meta.custom_data.expect("custom_data");
+        assert_eq!(custom.get("operator").map(String::as_str), Some("anna"));
+        assert_eq!(meta.ros_distro, "jazzy");
+    }
+
+    /// Version 4 (Foxy): no files, custom_data, type_description_hash or ros_distro yet.
+    const FOXY_V4: &str = r#"rosbag2_bagfile_information:
+  version: 4
+  storage_identifier: sqlite3
+  relative_file_paths:
+    - b_0.db3
+  duration:
+    nanoseconds: 3
+  starting_time:
+    nanoseconds_since_epoch: 1
+  message_count: 1
+  topics_with_message_count:
+    - topic_metadata:
+        name: /a
+        type: std_msgs/msg/Empty
+        serialization_format: cdr
+        offered_qos_profiles: ""
+      message_count: 1
+  compression_format: ""
+  compression_mode: ""
+"#;
+
+    #[test]
+    fn reads_the_version_4_layout_of_foxy() {
+        let meta = parse(FOXY_V4);
+        assert_eq!(meta.version, 4);
+        assert_eq!(meta.relative_file_paths, ["b_0.db3"]);
+        assert!(meta.files.is_empty() && meta.custom_data.is_none() && meta.ros_distro.is_empty());
+        let topic = &meta.topics_with_message_count[0].topic_metadata;
+        assert_eq!(topic.offered_qos_profiles.as_str(), Some(""));
+        assert!(topic.type_description_hash.is_empty());
     }
 }

@@ -87,9 +87,11 @@ impl QosProfile {
         }
     }
 
-    /// The list holding this one profile, as the YAML string rosbag2 (metadata version 8)
-    /// stores in `offered_qos_profiles`: enum values as integers, infinite durations as
-    /// `9223372036 s 854775807 ns`.
+    /// The list holding this one profile, as the YAML string rosbag2 stores in
+    /// `offered_qos_profiles` for metadata version 8 and in the MCAP channel metadata
+    /// (rosbag2_storage's `serialize_rclcpp_qos_vector` with version 8): enum values as the
+    /// rmw integers (the only form Iron's player decodes; Jazzy's reads these and rmw's
+    /// names), infinite durations as `9223372036 s 854775807 ns` (`RMW_DURATION_INFINITE`).
     pub fn to_rosbag2_yaml(&self) -> String {
         let history = match self.history {
             History::KeepLast => 1,
