@@ -26,7 +26,12 @@
 //! close its bag (metadata.yaml and summary).
 //!
 //! Keys other than these are errors naming the key and its line (a typo such as `If:` would
-//! otherwise switch a recorder on). `respawn_delay` is bounded to 0..=3600 s.
+//! otherwise switch a recorder on). `respawn_delay` is bounded to 0..=3600 s. Every error
+//! names the file and a line: the key's, else its entry's.
+//!
+//! `rpkm launch FILE --check` starts nothing: it reads the file and, for every node, parses its
+//! command line and loads and checks its parameters as the node does before it opens its
+//! transport ([`NodeSetup`] and the geometry); exit 0, or 2 naming the node's line.
 //!
 //! Substitutions in every string: `$(var NAME)` (an `arg`, overridden by `NAME:=VALUE` on the
 //! command line), `$(env NAME)` / `$(env NAME DEFAULT)`, `$(dirname)` (this file's folder).
@@ -34,12 +39,13 @@
 pub mod supervisor;
 
 use std::collections::BTreeMap;
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
 use serde_yaml::Value;
 
 use crate::node::params::{parse_yaml, YamlSyntax};
-use crate::node::EXECUTABLES;
+use crate::node::{declared_keys, Geometry, NodeArgs, NodeKind, NodeSetup, EXECUTABLES};
 
 /// `rpkm launch`.
 #[derive(clap::Args, Debug, Clone)]
@@ -55,6 +61,10 @@ pub struct LaunchArgs {
     pub file: PathBuf,
     /// Launch arguments as NAME:=VALUE.
     pub args: Vec<String>,
+    /// Check the launch file and every node's command line and parameters (files, declared
+    /// keys, backends, geometry), start nothing: exit 0, or 2 naming the file and line.
+    #[arg(long)]
+    pub check: bool,
 }
 
 /// A launch description that cannot be used.
@@ -66,10 +76,24 @@ pub enum LaunchError {
         #[source]
         source: std::io::Error,
     },
+    #[error("{file}:{line}: invalid UTF-8 at byte {offset}, expected UTF-8 text")]
+    Utf8 {
+        file: String,
+        line: usize,
+        offset: usize,
+    },
     #[error(transparent)]
     Yaml(#[from] YamlSyntax),
+    /// An entry that cannot be used, at `line` (its key's, else the entry's first).
+    #[error("{file}:{line}: {what}")]
+    Invalid {
+        file: String,
+        line: usize,
+        what: String,
+    },
+    /// A `NAME:=VALUE` of the command line.
     #[error("{file}: {what}")]
-    Invalid { file: String, what: String },
+    Argument { file: String, what: String },
 }
 
 /// What a launched process runs.
@@ -107,11 +131,15 @@ pub struct NodeSpec {
     pub respawn: bool,
     /// First restart delay, s.
     pub respawn_delay: f64,
+    /// Line of its entry in the launch file.
+    pub line: usize,
 }
 
 /// A parsed launch description.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LaunchDescription {
+    /// The launch file, as messages name it.
+    pub file: String,
     /// The nodes, in file order.
     pub nodes: Vec<NodeSpec>,
     /// Environment set for the nodes (`set_env`).
@@ -142,12 +170,25 @@ struct Ctx<'a> {
     text: &'a str,
     dir: &'a Path,
     vars: BTreeMap<String, String>,
+    /// Lines `[first, end)` (1-based) of the entry being read: errors name its line.
+    entry: (usize, usize),
 }
 
 impl Ctx<'_> {
+    /// An error at the entry being read.
     fn err(&self, what: String) -> LaunchError {
         LaunchError::Invalid {
             file: self.file.clone(),
+            line: self.entry.0,
+            what,
+        }
+    }
+
+    /// An error at `key:` of the entry being read (at the entry when the key is not found).
+    fn err_at(&self, key: &str, what: String) -> LaunchError {
+        LaunchError::Invalid {
+            file: self.file.clone(),
+            line: key_line(self.text, key, self.entry).unwrap_or(self.entry.0),
             what,
         }
     }
@@ -170,16 +211,13 @@ impl Ctx<'_> {
             if known.contains(&name.as_str()) {
                 continue;
             }
-            let at = key_line(self.text, &name)
-                .map(|l| format!(":{l}"))
-                .unwrap_or_default();
-            return Err(LaunchError::Invalid {
-                file: format!("{}{at}", self.file),
-                what: format!(
+            return Err(self.err_at(
+                &name,
+                format!(
                     "{entry}: unknown key {name:?} (known: {})",
                     known.join(", ")
                 ),
-            });
+            ));
         }
         Ok(())
     }
@@ -235,10 +273,14 @@ impl Ctx<'_> {
 }
 
 /// The 1-based line where `key:` first appears as a mapping key (block or flow style),
-/// outside comments.
-fn key_line(text: &str, key: &str) -> Option<usize> {
+/// outside comments, within the lines `[first, end)`.
+fn key_line(text: &str, key: &str, (first, end): (usize, usize)) -> Option<usize> {
     let pattern = format!("{key}:");
-    text.lines().enumerate().find_map(|(i, line)| {
+    let lines = text.lines().enumerate();
+    let mut lines = lines
+        .skip(first.saturating_sub(1))
+        .take(end.saturating_sub(first));
+    lines.find_map(|(i, line)| {
         let code = line.split(" #").next().unwrap_or(line);
         code.match_indices(&pattern)
             .any(|(at, _)| {
@@ -249,6 +291,58 @@ fn key_line(text: &str, key: &str) -> Option<usize> {
     })
 }
 
+/// The 1-based line of the top-level `launch:` key (1 when there is none) and the first
+/// line of each entry of its block list (`- ` at the list's indentation); no entries for a
+/// flow list (`launch: [...]`).
+fn entry_lines(text: &str) -> (usize, Vec<usize>) {
+    let mut lines = text.lines().enumerate();
+    let Some((at, _)) = lines.by_ref().find(|(_, l)| l.starts_with("launch:")) else {
+        return (1, Vec::new());
+    };
+    let mut indent = None;
+    let mut entries = Vec::new();
+    for (i, line) in lines {
+        let code = line.trim_start();
+        if code.is_empty() || code.starts_with('#') {
+            continue;
+        }
+        let this = line.len() - code.len();
+        let item = code == "-" || code.starts_with("- ");
+        match indent {
+            None if item => indent = Some(this),
+            Some(n) if this == n && item => {}
+            Some(n) if this > n => continue,
+            _ => break,
+        }
+        entries.push(i + 1);
+    }
+    (at + 1, entries)
+}
+
+/// The line to blame for a YAML error serde_yaml does not locate (a file of several
+/// documents): the first document marker (`---`, `...`) after content, else the first line
+/// of content, else 1.
+fn unlocated_error_line(text: &str) -> usize {
+    let content = |l: &str| {
+        let t = l.trim_start();
+        !(t.is_empty() || t.starts_with('#') || t.starts_with('%'))
+    };
+    let mut lines = text.lines().enumerate();
+    let Some((first, _)) = lines.by_ref().find(|(_, l)| content(l)) else {
+        return 1;
+    };
+    lines
+        .find(|(_, l)| l.starts_with("---") || l.starts_with("..."))
+        .map_or(first + 1, |(i, _)| i + 1)
+}
+
+/// Where a UTF-8 error lies in `bytes`: the 1-based line and the byte offset.
+fn utf8_error_place(bytes: &[u8], error: &std::str::Utf8Error) -> (usize, usize) {
+    let offset = error.valid_up_to();
+    let line = 1 + bytes[..offset].iter().filter(|&&b| b == b'\n').count();
+    (line, offset)
+}
+
 fn get<'a>(m: &'a serde_yaml::Mapping, key: &str) -> Option<&'a Value> {
     m.get(key)
 }
@@ -256,9 +350,18 @@ fn get<'a>(m: &'a serde_yaml::Mapping, key: &str) -> Option<&'a Value> {
 impl LaunchDescription {
     /// Reads `file` with the launch arguments `overrides` (`NAME:=VALUE`).
     pub fn load(file: &Path, overrides: &[String]) -> Result<Self, LaunchError> {
-        let text = std::fs::read_to_string(file).map_err(|source| LaunchError::Read {
-            file: file.display().to_string(),
+        let name = file.display().to_string();
+        let bytes = std::fs::read(file).map_err(|source| LaunchError::Read {
+            file: name.clone(),
             source,
+        })?;
+        let text = std::str::from_utf8(&bytes).map_err(|e| {
+            let (line, offset) = utf8_error_place(&bytes, &e);
+            LaunchError::Utf8 {
+                file: name.clone(),
+                line,
+                offset,
+            }
         })?;
         let dir = file.parent().unwrap_or(Path::new("."));
         let dir = if dir.as_os_str().is_empty() {
@@ -266,7 +369,7 @@ impl LaunchDescription {
         } else {
             dir
         };
-        Self::parse(&text, &file.display().to_string(), dir, overrides)
+        Self::parse(text, &name, dir, overrides)
     }
 
     /// Parses launch YAML; `dir` resolves relative parameter files and `$(dirname)`.
@@ -276,29 +379,50 @@ impl LaunchDescription {
         dir: &Path,
         overrides: &[String],
     ) -> Result<Self, LaunchError> {
-        let doc = parse_yaml(text, file)?;
+        let doc = parse_yaml(text, file).map_err(|mut e| {
+            // serde_yaml locates most errors, not a second document: name its place
+            if e.line == 0 {
+                (e.line, e.column) = (unlocated_error_line(text), 1);
+            }
+            e
+        })?;
+        let (launch_line, mut starts) = entry_lines(text);
+        let end = text.lines().count() + 1;
         let mut ctx = Ctx {
             file: file.to_owned(),
             text,
             dir,
             vars: BTreeMap::new(),
+            entry: (launch_line, end),
+        };
+        let argument = |what: String| LaunchError::Argument {
+            file: file.to_owned(),
+            what,
         };
         let mut given = BTreeMap::new();
         for o in overrides {
             let (k, v) = o
                 .split_once(":=")
-                .ok_or_else(|| ctx.err(format!("launch argument {o:?}: expected NAME:=VALUE")))?;
+                .ok_or_else(|| argument(format!("launch argument {o:?}: expected NAME:=VALUE")))?;
             given.insert(k.to_owned(), v.to_owned());
         }
         let items = doc
             .get("launch")
             .and_then(Value::as_sequence)
             .ok_or_else(|| ctx.err("expected a top-level `launch:` list".into()))?;
+        if starts.len() != items.len() {
+            // not a block list the scan could follow: errors name the `launch:` line
+            starts = vec![launch_line; items.len()];
+        }
         let mut out = Self {
+            file: file.to_owned(),
             nodes: Vec::new(),
             env: Vec::new(),
         };
         for (k, item) in items.iter().enumerate() {
+            let first = starts[k];
+            let next = starts.get(k + 1).copied().filter(|&n| n > first);
+            ctx.entry = (first, next.unwrap_or(end));
             let map = item.as_mapping().filter(|m| m.len() == 1).ok_or_else(|| {
                 ctx.err(format!(
                     "launch item {k}: expected one of arg, node, executable, set_env"
@@ -338,7 +462,9 @@ impl LaunchDescription {
             }
         }
         if let Some(unused) = given.keys().find(|k| !ctx.vars.contains_key(*k)) {
-            return Err(ctx.err(format!("launch argument {unused}:= is not declared")));
+            return Err(argument(format!(
+                "launch argument {unused}:= is not declared"
+            )));
         }
         Ok(out)
     }
@@ -392,9 +518,10 @@ fn condition(ctx: &Ctx<'_>, body: &serde_yaml::Mapping, what: &str) -> Result<bo
         match s.trim().to_ascii_lowercase().as_str() {
             "true" | "1" => Ok(Some(true)),
             "false" | "0" => Ok(Some(false)),
-            other => Err(ctx.err(format!(
-                "{what} {key}: {other:?}: expected true, false, 1 or 0"
-            ))),
+            other => Err(ctx.err_at(
+                key,
+                format!("{what} {key}: {other:?}: expected true, false, 1 or 0"),
+            )),
         }
     };
     Ok(flag("if")?.unwrap_or(true) && !flag("unless")?.unwrap_or(false))
@@ -417,7 +544,10 @@ fn respawn(
         Some("true") | Some("True") => true,
         Some("false") | Some("False") => false,
         Some(other) => {
-            return Err(ctx.err(format!("{name}: respawn {other:?}: expected true or false")))
+            return Err(ctx.err_at(
+                "respawn",
+                format!("{name}: respawn {other:?}: expected true or false"),
+            ))
         }
     };
     let delay = match field("respawn_delay")? {
@@ -428,9 +558,13 @@ fn respawn(
             .ok()
             .filter(|d| (MIN_DELAY_S..=MAX_DELAY_S).contains(d))
             .ok_or_else(|| {
-                ctx.err(format!(
-                    "{name}: respawn_delay {s:?}: expected seconds from {MIN_DELAY_S} to {MAX_DELAY_S}"
-                ))
+                ctx.err_at(
+                    "respawn_delay",
+                    format!(
+                        "{name}: respawn_delay {s:?}: expected seconds from {MIN_DELAY_S} to \
+                         {MAX_DELAY_S}"
+                    ),
+                )
             })?,
     };
     Ok((respawn, delay))
@@ -444,16 +578,22 @@ fn executable(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, Lau
         .ok_or_else(|| ctx.err("executable without cmd".into()))?;
     let mut words = cmd.split_whitespace().map(str::to_owned);
     if words.next().as_deref() != Some("rpkm") {
-        return Err(ctx.err(format!(
-            "executable cmd {cmd:?}: only rpkm commands can be launched (`rpkm record ...`)"
-        )));
+        return Err(ctx.err_at(
+            "cmd",
+            format!(
+                "executable cmd {cmd:?}: only rpkm commands can be launched (`rpkm record ...`)"
+            ),
+        ));
     }
     let exec = words.next().unwrap_or_default();
     if !COMMANDS.contains(&exec.as_str()) {
-        return Err(ctx.err(format!(
-            "executable cmd {cmd:?}: expected `rpkm {}` (nodes go in `node` entries)",
-            COMMANDS.join("` or `rpkm ")
-        )));
+        return Err(ctx.err_at(
+            "cmd",
+            format!(
+                "executable cmd {cmd:?}: expected `rpkm {}` (nodes go in `node` entries)",
+                COMMANDS.join("` or `rpkm ")
+            ),
+        ));
     }
     let name = get(body, "name")
         .map(|v| ctx.string(v, "executable name"))
@@ -469,6 +609,7 @@ fn executable(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, Lau
         args: words.collect(),
         respawn,
         respawn_delay,
+        line: ctx.entry.0,
     })
 }
 
@@ -480,14 +621,20 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
     };
     let pkg = field("pkg")?.unwrap_or_default();
     if pkg != "rpkm" {
-        return Err(ctx.err(format!("node pkg {pkg:?}: only rpkm nodes can be launched")));
+        return Err(ctx.err_at(
+            "pkg",
+            format!("node pkg {pkg:?}: only rpkm nodes can be launched"),
+        ));
     }
     let exec = field("exec")?.ok_or_else(|| ctx.err("node without exec".into()))?;
     if !EXECUTABLES.contains(&exec.as_str()) {
-        return Err(ctx.err(format!(
-            "node exec {exec:?}: expected one of {}",
-            EXECUTABLES.join(", ")
-        )));
+        return Err(ctx.err_at(
+            "exec",
+            format!(
+                "node exec {exec:?}: expected one of {}",
+                EXECUTABLES.join(", ")
+            ),
+        ));
     }
     let name = field("name")?.unwrap_or_else(|| exec.clone());
     let mut param_files = Vec::new();
@@ -495,7 +642,7 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
     if let Some(list) = get(body, "param") {
         let list = list
             .as_sequence()
-            .ok_or_else(|| ctx.err(format!("node {name}: param: expected a list")))?;
+            .ok_or_else(|| ctx.err_at("param", format!("node {name}: param: expected a list")))?;
         for p in list {
             let m = p
                 .as_mapping()
@@ -533,14 +680,101 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
         args,
         respawn,
         respawn_delay,
+        line: ctx.entry.0,
     })
+}
+
+impl NodeSpec {
+    /// The arguments after the rpkm binary that start it.
+    pub fn argv(&self) -> Vec<OsString> {
+        let mut argv: Vec<OsString> = Vec::new();
+        if self.program == Program::Node {
+            // `--name=`, `--param=`: a value that starts with `-` stays a value
+            let name = format!("--name={}", self.name);
+            argv.extend(["node", &self.exec, &name].map(OsString::from));
+            for f in &self.param_files {
+                let mut arg = OsString::from("--params=");
+                arg.push(f);
+                argv.push(arg);
+            }
+            for p in &self.params {
+                argv.push(OsString::from(format!("--param={p}")));
+            }
+        } else {
+            argv.push(OsString::from(&self.exec));
+        }
+        argv.extend(self.args.iter().map(OsString::from));
+        argv
+    }
 }
 
 /// Runs `rpkm launch`.
 pub fn run(args: &LaunchArgs) -> anyhow::Result<()> {
     let desc = LaunchDescription::load(&args.file, &args.args)
         .map_err(|e| crate::error::bad_input(e.to_string()))?;
+    if args.check {
+        return check(&desc);
+    }
     supervisor::run(&desc)
+}
+
+/// `rpkm launch --check`: every node's command line and configuration as it would start,
+/// nothing started. An `executable` entry's command line is checked when it starts.
+fn check(desc: &LaunchDescription) -> anyhow::Result<()> {
+    for spec in &desc.nodes {
+        let argv: Vec<String> = spec
+            .argv()
+            .iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        if spec.program == Program::Node {
+            check_node(spec).map_err(|e| {
+                crate::error::bad_input(format!(
+                    "{}:{}: node {}: {}",
+                    desc.file,
+                    spec.line,
+                    spec.name,
+                    crate::error::error_chain(&e)
+                ))
+            })?;
+        }
+        println!(
+            "{}:{}: {}: rpkm {}",
+            desc.file,
+            spec.line,
+            spec.name,
+            argv.join(" ")
+        );
+    }
+    Ok(())
+}
+
+/// Parses a node's command line as `rpkm node` would and loads and checks its parameters:
+/// files, declared keys, backends, diagnostics period, geometry.
+fn check_node(spec: &NodeSpec) -> anyhow::Result<()> {
+    use clap::{Args, FromArgMatches};
+    // `node` stands where clap expects the binary's name
+    let args = NodeArgs::augment_args(clap::Command::new("rpkm node"))
+        .try_get_matches_from(spec.argv())
+        .and_then(|m| NodeArgs::from_arg_matches(&m))
+        .map_err(|e| {
+            let text = e.render().to_string();
+            let first = text.lines().next().unwrap_or_default();
+            anyhow::anyhow!("args: {}", first.trim_start_matches("error: "))
+        })?;
+    let kind = args.kind.exec_name();
+    let declared = declared_keys(kind).unwrap_or_default();
+    let (common, geometry) = match &args.kind {
+        NodeKind::Ingest(a) => (&a.common, false),
+        NodeKind::TcpEstimator(c) | NodeKind::Calibrator(c) | NodeKind::PreloadMonitor(c) => {
+            (c, true)
+        }
+    };
+    let setup = NodeSetup::load(kind, common, &declared, None)?;
+    if geometry {
+        Geometry::from_params(&setup.params)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -638,7 +872,7 @@ launch:
         )
         .expect_err("unknown exec");
         assert!(
-            e.to_string().starts_with("y.yaml: node exec \"talker\""),
+            e.to_string().starts_with("y.yaml:2: node exec \"talker\""),
             "{e}"
         );
         let e = LaunchDescription::parse(
@@ -676,5 +910,62 @@ launch:
             .expect_err(entry);
             assert!(e.to_string().contains(says), "{entry}: {e}");
         }
+    }
+
+    #[test]
+    fn every_error_names_the_line_of_its_entry_or_key() {
+        for (text, says) in [
+            (
+                "# c\nlaunch:\n  - arg: {name: a, default: x}\n\n  - node:\n      pkg: rpkm\n      \
+                 exec: talker\n",
+                "z.yaml:7: node exec \"talker\"",
+            ),
+            (
+                "launch:\n- node: {pkg: rpkm, exec: ingest}\n- node:\n    pkg: ros\n",
+                "z.yaml:4: node pkg \"ros\"",
+            ),
+            (
+                "launch:\n  - node:\n      pkg: rpkm\n      exec: ingest\n      respawn: maybe\n",
+                "z.yaml:5: node ingest: respawn \"maybe\"",
+            ),
+            (
+                "launch:\n  - node: {pkg: rpkm, exec: ingest}\n  - node: {pkg: rpkm, exec: ingest}\n  \
+                 - executable:\n      cmd: rpkm record\n      unless: 2\n",
+                "z.yaml:6: executable unless: \"2\"",
+            ),
+            (
+                "launch:\n  - arg: {name: a}\n",
+                "z.yaml:2: launch argument a has no default",
+            ),
+            // a flow list: the `launch:` line
+            (
+                "\nlaunch: [{node: {pkg: rpkm, exec: x}}]\n",
+                "z.yaml:2: node exec \"x\"",
+            ),
+            ("other: 1\n", "z.yaml:1: expected a top-level `launch:` list"),
+            (
+                "# two documents\nlaunch: []\n---\nlaunch: []\n",
+                "z.yaml:3:1: not YAML",
+            ),
+        ] {
+            let e = LaunchDescription::parse(text, "z.yaml", Path::new("."), &[]).expect_err(text);
+            assert!(e.to_string().starts_with(says), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn invalid_utf8_names_line_and_byte() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = dir.path().join("u.yaml");
+        std::fs::write(&file, b"launch:\n  - arg: {name: a, default: \xc3(}\n").expect("write");
+        let e = LaunchDescription::load(&file, &[]).expect_err("not UTF-8");
+        // "launch:\n" is 8 bytes, "  - arg: {name: a, default: " 28
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}:2: invalid UTF-8 at byte 36, expected UTF-8 text",
+                file.display()
+            )
+        );
     }
 }

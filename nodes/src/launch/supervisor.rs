@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 
-use super::{LaunchDescription, NodeSpec, Program};
+use super::{LaunchDescription, NodeSpec};
 use crate::node::shutdown;
 
 /// A node's crash within this time of its start doubles the next restart delay.
@@ -58,21 +58,7 @@ fn describe(status: ExitStatus) -> String {
 
 fn spawn(exe: &Path, spec: &NodeSpec, env: &[(String, String)]) -> anyhow::Result<Child> {
     let mut cmd = Command::new(exe);
-    match spec.program {
-        Program::Node => {
-            cmd.arg("node").arg(&spec.exec).args(["--name", &spec.name]);
-            for f in &spec.param_files {
-                cmd.arg("--params").arg(f);
-            }
-            for p in &spec.params {
-                cmd.args(["--param", p]);
-            }
-        }
-        Program::Command => {
-            cmd.arg(&spec.exec);
-        }
-    }
-    cmd.args(&spec.args);
+    cmd.args(spec.argv());
     cmd.envs(env.iter().map(|(k, v)| (k, v)));
     let child = cmd
         .spawn()

@@ -158,6 +158,21 @@ pub struct NodeContext {
     pub input: Backend,
 }
 
+/// A node's configuration as its command line and parameter files give it, checked, before
+/// anything is opened (`rpkm launch --check` stops here).
+pub struct NodeSetup {
+    /// Node name.
+    pub name: String,
+    /// Merged parameters, every key declared.
+    pub params: NodeParams,
+    /// Backend of the publishers.
+    pub output: Backend,
+    /// Backend of the subscribers (iceoryx2 or DDS).
+    pub input: Backend,
+    /// Every backend the transport needs.
+    pub transport: Backend,
+}
+
 fn union(a: Backend, b: Backend) -> Backend {
     match (a, b) {
         (Backend::Ipc, Backend::Ipc) => Backend::Ipc,
@@ -166,11 +181,28 @@ fn union(a: Backend, b: Backend) -> Backend {
     }
 }
 
-impl NodeContext {
-    /// Loads the parameters, checks them against `declared` and opens the transport;
-    /// `extra_input` is a backend the node subscribes on besides its input (ingest's DDS
-    /// source).
-    pub fn open(
+/// The parameter keys node `exec` declares besides [`COMMON_KEYS`]; `None` for an unknown
+/// executable.
+pub fn declared_keys(exec: &str) -> Option<Vec<&'static str>> {
+    let (own, geometry): (&[&'static str], bool) = match exec {
+        "ingest" => (&ingest::KEYS, false),
+        "tcp_estimator" => (&tcp_estimator::KEYS, true),
+        // its own keys name the geometry ones it takes (no stiffness, no follower)
+        "calibrator" => (&calibrator::KEYS, false),
+        "preload_monitor" => (&preload_monitor::KEYS, true),
+        _ => return None,
+    };
+    let mut keys = own.to_vec();
+    if geometry {
+        keys.extend(GEOMETRY_KEYS);
+    }
+    Some(keys)
+}
+
+impl NodeSetup {
+    /// Loads the parameters and checks them against `declared` and the backends; `extra_input`
+    /// is a backend the node subscribes on besides its input (ingest's DDS source).
+    pub fn load(
         kind: &str,
         args: &CommonArgs,
         declared: &[&str],
@@ -215,16 +247,51 @@ impl NodeContext {
             None if output == Backend::Dds => Backend::Dds,
             None => Backend::Ipc,
         };
-        let mut backend = union(output, input);
+        let mut transport = union(output, input);
         if let Some(extra) = extra_input {
-            backend = union(backend, extra);
+            transport = union(transport, extra);
         }
+        diagnostics_period(&params)?;
+        Ok(Self {
+            name,
+            params,
+            output,
+            input,
+            transport,
+        })
+    }
+}
+
+/// Period of the regular /diagnostics report, parameter `diagnostics_period_s`.
+fn diagnostics_period(params: &NodeParams) -> anyhow::Result<Duration> {
+    let s = params
+        .f64_in(
+            "diagnostics_period_s",
+            1.0,
+            (1e-3, params::DURATION_S.1),
+            " s",
+        )
+        .map_err(bad_param)?;
+    Ok(Duration::from_secs_f64(s))
+}
+
+impl NodeContext {
+    /// Loads the parameters, checks them against `declared` ([`NodeSetup::load`]) and opens
+    /// the transport.
+    pub fn open(
+        kind: &str,
+        args: &CommonArgs,
+        declared: &[&str],
+        extra_input: Option<Backend>,
+    ) -> anyhow::Result<Self> {
+        let setup = NodeSetup::load(kind, args, declared, extra_input)?;
+        let name = setup.name;
         let prefix = match &args.ipc_prefix {
             Some(p) => p.clone(),
             None => std::env::var("RPKM_IPC_PREFIX").unwrap_or_default(),
         };
         let mut config = TransportConfig::new(&name)
-            .backend(backend)
+            .backend(setup.transport)
             .ipc_prefix(prefix);
         if let Some(d) = args.domain {
             config = config.dds_domain(d);
@@ -233,10 +300,10 @@ impl NodeContext {
             .with_context(|| format!("node {name}: opening the transport"))?;
         Ok(Self {
             name,
-            params,
+            params: setup.params,
             transport,
-            output,
-            input,
+            output: setup.output,
+            input: setup.input,
         })
     }
 
@@ -261,16 +328,7 @@ impl NodeContext {
 
     /// Period of the regular /diagnostics report.
     pub fn diagnostics_period(&self) -> anyhow::Result<Duration> {
-        let s = self
-            .params
-            .f64_in(
-                "diagnostics_period_s",
-                1.0,
-                (1e-3, params::DURATION_S.1),
-                " s",
-            )
-            .map_err(bad_param)?;
-        Ok(Duration::from_secs_f64(s))
+        diagnostics_period(&self.params)
     }
 }
 

@@ -22,8 +22,7 @@ use rpkm_transport::topic;
 
 use super::inputs::{ParameterFollower, SeqGaps};
 use super::{
-    bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext,
-    GEOMETRY_KEYS, MM_PER_M,
+    bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext, MM_PER_M,
 };
 
 /// Parameter keys of the node.
@@ -331,8 +330,7 @@ impl Monitor {
 
 /// Runs the node until SIGINT/SIGTERM.
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
-    let mut declared: Vec<&str> = KEYS.to_vec();
-    declared.extend(GEOMETRY_KEYS);
+    let declared = super::declared_keys("preload_monitor").unwrap_or_default();
     let ctx = NodeContext::open("preload_monitor", args, &declared, None)?;
     let p = &ctx.params;
     let d = Thresholds::default();

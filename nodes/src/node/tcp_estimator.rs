@@ -25,10 +25,7 @@ use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
 use super::inputs::{ParameterFollower, SeqGaps};
-use super::{
-    diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext, GEOMETRY_KEYS,
-    MM_PER_M,
-};
+use super::{diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext, MM_PER_M};
 
 /// Parameter keys of the node.
 pub const KEYS: [&str; 2] = ["busy_poll_ms", "rt_priority"];
@@ -310,8 +307,7 @@ fn loop_residuals(g: &Geometry, q: &[f64; 4], x: f64, y: f64, psi: f64) -> [f64;
 
 /// Runs the node until SIGINT/SIGTERM.
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
-    let mut declared: Vec<&str> = KEYS.to_vec();
-    declared.extend(GEOMETRY_KEYS);
+    let declared = super::declared_keys("tcp_estimator").unwrap_or_default();
     let ctx = NodeContext::open("tcp_estimator", args, &declared, None)?;
     let geometry = Geometry::from_params(&ctx.params)?;
     let busy = ctx
