@@ -325,7 +325,13 @@ pub fn sensitivity_of_rows(rows: &[Residual], method: Method, model: Model) -> S
                 _ => dir.to_string(),
             },
             instrument: *inst,
-            unit: if dir.is_angle() { "mrad" } else { "µm" },
+            unit: if dir.is_angle() {
+                "mrad"
+            } else if dir.is_force() {
+                "N"
+            } else {
+                "µm"
+            },
             rows: g.len(),
         })
         .collect();

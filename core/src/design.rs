@@ -268,6 +268,20 @@ pub fn validation(n: usize, seed: u64) -> Vec<PlannedPose> {
     out
 }
 
+/// Production: `n` poses drawn uniformly over the workspace from `seed`, all four drives
+/// position-controlled and no instrument (`none`): what a machine visits while it works. Its
+/// drive forces are its only measurements.
+pub fn production(n: usize, seed: u64) -> Vec<PlannedPose> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    (0..n)
+        .map(|_| {
+            let x = rng.gen_range(X_RANGE.0..=X_RANGE.1);
+            let y = rng.gen_range(Y_RANGE.0..=Y_RANGE.1);
+            pose("production", Instrument::None, false, x, y)
+        })
+        .collect()
+}
+
 /// The 231-point evaluation grid (11 x × 21 y, row-major in y) of sensitivity and
 /// observability studies.
 pub fn grid_231() -> Vec<(f64, f64)> {

@@ -171,7 +171,7 @@ pub struct GroupRms {
     pub instrument: String,
     pub direction: String,
     pub rows: usize,
-    /// µm (µrad for ψ).
+    /// µm (µrad for ψ, N for a drive force).
     pub rms: f64,
     pub noise: f64,
     pub chi2_per_row: f64,
@@ -189,7 +189,7 @@ pub struct Point {
     pub x: f64,
     pub y: f64,
     pub t: f64,
-    /// Residual and its σ: µm (µrad for ψ).
+    /// Residual and its σ: µm (µrad for ψ, N for a drive force).
     pub value: f64,
     pub sigma: f64,
 }
@@ -1043,17 +1043,17 @@ fn evidence(
     s
 }
 
-/// Values (mm) of the length rows (not ψ).
+/// Values (mm) of the length rows (not ψ, not forces).
 fn length_values(rows: &[RowValue]) -> Vec<f64> {
     rows.iter()
-        .filter(|r| !r.direction.is_angle())
+        .filter(|r| r.direction.is_length())
         .map(|r| r.value)
         .collect()
 }
 
 fn length_sigmas(rows: &[RowValue]) -> Vec<f64> {
     rows.iter()
-        .filter(|r| !r.direction.is_angle())
+        .filter(|r| r.direction.is_length())
         .map(|r| r.sigma)
         .collect()
 }
@@ -1067,25 +1067,26 @@ fn groups(rows: &[RowValue]) -> Vec<GroupRms> {
         sigma2: f64,
         chi2: f64,
     }
-    let mut acc: std::collections::BTreeMap<(String, String), Sums> = Default::default();
+    let mut acc: std::collections::BTreeMap<(String, String), (Sums, f64)> = Default::default();
     for r in rows {
-        let e = acc
+        let (e, scale) = acc
             .entry((r.instrument.as_str().to_owned(), r.direction.to_string()))
             .or_default();
+        *scale = r.direction.report_unit().0;
         e.rows += 1;
         e.value2 += r.value * r.value;
         e.sigma2 += r.sigma * r.sigma;
         e.chi2 += (r.value / r.sigma).powi(2);
     }
     acc.into_iter()
-        .map(|((instrument, direction), sum)| {
+        .map(|((instrument, direction), (sum, scale))| {
             let n = sum.rows as f64;
             GroupRms {
                 instrument,
                 direction,
                 rows: sum.rows,
-                rms: (sum.value2 / n).sqrt() * 1e3,
-                noise: (sum.sigma2 / n).sqrt() * 1e3,
+                rms: (sum.value2 / n).sqrt() * scale,
+                noise: (sum.sigma2 / n).sqrt() * scale,
                 chi2_per_row: sum.chi2 / n,
             }
         })
@@ -1107,8 +1108,8 @@ fn points(campaign: &Campaign, rows: &[RowValue]) -> Vec<Point> {
                 x,
                 y,
                 t: pose.t,
-                value: r.value * 1e3,
-                sigma: r.sigma * 1e3,
+                value: r.value * r.direction.report_unit().0,
+                sigma: r.sigma * r.direction.report_unit().0,
             }
         })
         .collect();

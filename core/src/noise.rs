@@ -27,10 +27,12 @@ pub enum Group {
     Psi,
     /// Actuator encoders (the follower encoders of self-calibration included).
     Encoder,
+    /// Drive forces, from the motor currents (N).
+    Force,
 }
 
 /// Number of noise groups.
-pub const N_GROUPS: usize = 7;
+pub const N_GROUPS: usize = 8;
 
 /// Variance (mm² or rad²) a row receives from each group, in [`Group::ALL`] order.
 pub type Parts = [f64; N_GROUPS];
@@ -45,6 +47,7 @@ impl Group {
         Group::Li,
         Group::Psi,
         Group::Encoder,
+        Group::Force,
     ];
 
     /// Index in [`Parts`].
@@ -63,6 +66,17 @@ impl Group {
             Group::Li => "li",
             Group::Psi => "psi",
             Group::Encoder => "encoder",
+            Group::Force => "force",
+        }
+    }
+
+    /// How a σ of the group is reported: the factor from its unit (mm, rad, N) and the
+    /// reported unit.
+    pub fn report_unit(self) -> (f64, &'static str) {
+        match self {
+            Group::Psi => (1e6, "urad"),
+            Group::Force => (1.0, "N"),
+            _ => (1e3, "um"),
         }
     }
 
@@ -129,6 +143,8 @@ pub struct NoiseModel {
     pub psi_rad: f64,
     /// Actuator encoders (linear scales of the direct drives).
     pub encoder_mm: f64,
+    /// Drive forces read from the motor currents, N.
+    pub force_n: f64,
 }
 
 impl Default for NoiseModel {
@@ -147,6 +163,8 @@ impl Default for NoiseModel {
             li_mm: 0.001,
             psi_rad: 1e-6,
             encoder_mm: 0.0002,
+            // the spec gives none: a drive's force from its current, a few N of a 2 kN drive
+            force_n: 5.0,
         }
     }
 }
@@ -163,7 +181,7 @@ pub enum NoiseSpecError {
 }
 
 const NAMES: &str = "lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, \
-                     psi, encoder, tracker_x, tracker_y";
+                     psi, encoder, force (N), tracker_x, tracker_y";
 
 impl NoiseModel {
     /// The default with the statements `name=value,...` applied (mm, rad for `psi`):
@@ -209,6 +227,7 @@ impl NoiseModel {
             "li" => self.li_mm = v,
             "psi" => self.psi_rad = v,
             "encoder" => self.encoder_mm = v,
+            "force" => self.force_n = v,
             "tracker_x" => self.tracker_position[0] = v,
             "tracker_y" => self.tracker_position[1] = v,
             _ => {
@@ -234,6 +253,7 @@ impl NoiseModel {
             li_mm: self.li_mm * f(Group::Li),
             psi_rad: self.psi_rad * f(Group::Psi),
             encoder_mm: self.encoder_mm * f(Group::Encoder),
+            force_n: self.force_n * f(Group::Force),
         }
     }
 
@@ -247,6 +267,7 @@ impl NoiseModel {
             Group::Li => self.li_mm,
             Group::Psi => self.psi_rad,
             Group::Encoder => self.encoder_mm,
+            Group::Force => self.force_n,
         }
     }
 
@@ -319,6 +340,13 @@ impl NoiseModel {
         if let Some(g) = Group::of_scalar(instrument) {
             parts[g.index()] = (gain * self.sigma(g, 0.0)).powi(2);
         }
+        parts
+    }
+
+    /// Variance parts of one drive force reading (N²).
+    pub fn force_parts(&self) -> Parts {
+        let mut parts = [0.0; N_GROUPS];
+        parts[Group::Force.index()] = self.force_n.powi(2);
         parts
     }
 

@@ -19,6 +19,7 @@
 
 use crate::campaign::{Campaign, Instrument, Pose};
 use crate::effects::{Corrections, Delta, InputSensitivity};
+use crate::elastic::{fegm, fegm_from, ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
 use crate::geometry::{self, q_var, GeometryError, Solution, Subsystem, PSI, X, Y};
 use crate::noise::{self, NoiseModel, Parts, XyInstrument};
 use crate::params::{Model, Params, N_PARAMS};
@@ -48,6 +49,9 @@ pub enum Direction {
     /// ... and the two combinations of the four drives the TCP cannot move: the
     /// incompatibility of the recorded drives, which only encoder noise and the geometry set.
     Compat(usize),
+    /// Drive force f1..f4 (index 0..=3, N) with all four drives position-controlled: the
+    /// model's preload at the recorded positions minus the recorded force.
+    F(usize),
 }
 
 impl std::fmt::Display for Direction {
@@ -62,14 +66,37 @@ impl std::fmt::Display for Direction {
             Direction::Along => write!(f, "along"),
             Direction::Across => write!(f, "across"),
             Direction::Compat(k) => write!(f, "compat{}", k + 1),
+            Direction::F(a) => write!(f, "f{}", a + 1),
         }
     }
 }
 
 impl Direction {
-    /// Unit of the row's residual: mm, or rad for ψ.
+    /// Unit of the row's residual: mm, or rad for ψ (or N for a force: see [`Self::is_force`]).
     pub fn is_angle(self) -> bool {
         matches!(self, Direction::Psi(..))
+    }
+
+    /// Whether the row's residual is a drive force (N).
+    pub fn is_force(self) -> bool {
+        matches!(self, Direction::F(..))
+    }
+
+    /// Whether the row's residual is a length (mm).
+    pub fn is_length(self) -> bool {
+        !self.is_angle() && !self.is_force()
+    }
+
+    /// How a residual of this direction is reported: the factor from its unit (mm, rad, N)
+    /// and the reported unit.
+    pub fn report_unit(self) -> (f64, &'static str) {
+        if self.is_angle() {
+            (1e6, "µrad")
+        } else if self.is_force() {
+            (1.0, "N")
+        } else {
+            (1e3, "µm")
+        }
     }
 }
 
@@ -135,17 +162,27 @@ pub struct PoseError {
     pub line: usize,
     pub instrument: &'static str,
     #[source]
-    pub error: GeometryError,
+    pub error: ModelError,
+}
+
+/// Why the model could not evaluate a pose: its geometry, or (for a drive-force row) the
+/// elastic equilibrium.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ModelError {
+    #[error(transparent)]
+    Geometry(#[from] GeometryError),
+    #[error(transparent)]
+    Elastic(#[from] ElasticError),
 }
 
 impl PoseError {
     /// The error `error` of `pose` in `campaign`, located by its file and line.
-    pub fn at(campaign: &Campaign, pose: &Pose, error: GeometryError) -> PoseError {
+    pub fn at(campaign: &Campaign, pose: &Pose, error: impl Into<ModelError>) -> PoseError {
         PoseError {
             source: campaign.source.clone(),
             line: pose.line,
             instrument: pose.instrument.as_str(),
-            error,
+            error: error.into(),
         }
     }
 }
@@ -396,10 +433,12 @@ impl Evaluation<'_> {
             if pose.reset && pose.instrument.is_relative() {
                 continue;
             }
-            let err = |error| PoseError::at(campaign, pose, error);
+            let err = |error: ModelError| PoseError::at(campaign, pose, error);
             match self.step {
                 Step::Direct => pose_rows(&ctx, i, pose, reset, out).map_err(err)?,
-                Step::VirtualQ2 => virtual_q2_row(&ctx, i, pose, self.p_cal, out).map_err(err)?,
+                Step::VirtualQ2 => {
+                    virtual_q2_row(&ctx, i, pose, self.p_cal, out).map_err(|e| err(e.into()))?
+                }
             }
         }
         // the reset pose of a forward instrument still yields a virtual q2 measurement,
@@ -434,15 +473,79 @@ fn pose_rows(
     pose: &Pose,
     reset: Option<(usize, &Pose)>,
     out: &mut Vec<Residual>,
-) -> Result<(), GeometryError> {
+) -> Result<(), ModelError> {
     use Instrument::*;
     match (pose.instrument, reset) {
-        (Lt, Some(reset)) => inverse_rows(ctx, XyInstrument::Lt, (i, pose), reset, out),
-        (Kgm, Some(reset)) => inverse_rows(ctx, XyInstrument::Kgm, (i, pose), reset, out),
-        (Dbb | LiX | LiY | LiPsi, Some(reset)) => forward_rows(ctx, i, pose, reset, out),
-        (SelfCal, _) => self_rows(ctx, i, pose, out),
+        (Lt, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Lt, (i, pose), reset, out)?),
+        (Kgm, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Kgm, (i, pose), reset, out)?),
+        (Dbb | LiX | LiY | LiPsi, Some(reset)) => Ok(forward_rows(ctx, i, pose, reset, out)?),
+        (SelfCal, _) => Ok(self_rows(ctx, i, pose, out)?),
+        (None, _) if drives_loaded(pose) => Ok(force_rows(ctx, i, pose, out)?),
         _ => Ok(()),
     }
+}
+
+/// Whether a pose carries drive forces as measurements: all four drives position-controlled
+/// (no follower) and forces recorded.
+pub fn drives_loaded(pose: &Pose) -> bool {
+    pose.follower.iter().all(|f| !f) && pose.f.iter().any(|f| *f != 0.0)
+}
+
+/// Step of the central differences of the force rows' Jacobian: small against the
+/// tolerances (0.1 mm, 1 mrad), large against the equilibrium's convergence (1e-9 of a
+/// force of ~100 N), on a nearly linear map (forces are stiffness times incompatibility).
+fn force_step(i: usize) -> f64 {
+    if crate::params::unit(i) == crate::params::Unit::Rad {
+        1e-6
+    } else {
+        1e-3
+    }
+}
+
+/// Drive-force rows (thesis 4.4, used as measurements): with all four drives
+/// position-controlled at the recorded positions, the elasto-geometric model's drive forces
+/// minus the recorded ones, f1..f4 (N), with the default stiffness. Their derivatives by
+/// the 29 parameters by central differences of the equilibrium (warm-started from the
+/// pose's own). The effects' corrections enter the value; the force rows carry no
+/// derivative by the effects' parameters (zero), which they leave to the instruments.
+fn force_rows(
+    ctx: &Ctx,
+    i: usize,
+    pose: &Pose,
+    out: &mut Vec<Residual>,
+) -> Result<(), ElasticError> {
+    let d = ctx.corr.delta(i);
+    let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
+    let k = Stiffness::default();
+    let eq: Equilibrium = fegm(&p_i, &k, q_i, ALL_ACTIVE)?;
+    let mut jac = [[0.0; N_PARAMS]; 4];
+    for j in 0..N_PARAMS {
+        let h = force_step(j);
+        let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
+            let mut pj = p_i;
+            pj[j] += sign * h;
+            Ok(fegm_from(&pj, &k, q_i, ALL_ACTIVE, &eq)?.drive_force)
+        };
+        let (plus, minus) = (at(1.0)?, at(-1.0)?);
+        for a in 0..4 {
+            jac[a][j] = (plus[a] - minus[a]) / (2.0 * h);
+        }
+    }
+    let parts = ctx.noise.force_parts();
+    for (a, jac_a) in jac.iter().enumerate() {
+        out.push(Residual {
+            pose: i,
+            instrument: pose.instrument,
+            direction: Direction::F(a),
+            value: eq.drive_force[a] - pose.f[a],
+            sigma: noise::sigma_of(&parts),
+            parts,
+            jacobian: Row::from_row_slice(jac_a),
+            d_pcal: None,
+            d_theta: vec![0.0; ctx.corr.n_params],
+        });
+    }
+    Ok(())
 }
 
 /// Inverse calibration rows (eq. 4.30) of a laser-tracker or grid-encoder pose.

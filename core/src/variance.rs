@@ -129,11 +129,11 @@ pub fn calibrate_estimating_noise(
         .filter(|g| cal.residuals.iter().any(|r| r.parts[g.index()] > 0.0))
         .map(|&g| {
             let k = g.index();
-            let scale = if g.is_angle() { 1e6 } else { 1e3 };
+            let (scale, unit) = g.report_unit();
             let from_data = dof[k] >= MIN_DOF;
             GroupNoise {
                 group: g.name(),
-                unit: if g.is_angle() { "urad" } else { "um" },
+                unit,
                 assumed: assumed.sigma(g, distance) * scale,
                 estimated: o.noise.sigma(g, distance) * scale,
                 dof: dof[k],

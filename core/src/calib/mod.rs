@@ -201,10 +201,12 @@ pub struct DirectionRms {
     pub instrument: String,
     pub direction: String,
     pub rows: usize,
-    /// mm, or rad for ψ.
+    /// mm, or rad for ψ, or N for a drive force.
     pub rms_before: f64,
     pub rms_after: f64,
     pub is_angle: bool,
+    /// A drive force (N).
+    pub is_force: bool,
 }
 
 /// One identified parameter.

@@ -96,6 +96,7 @@ impl RmsTable {
                 rms_before: (b / n.max(1) as f64).sqrt(),
                 rms_after: (a / n.max(1) as f64).sqrt(),
                 is_angle: dir.is_angle(),
+                is_force: dir.is_force(),
             })
             .collect()
     }

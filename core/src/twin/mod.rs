@@ -217,6 +217,9 @@ pub struct Twin {
     config: TwinConfig,
     truth_params: Params,
     rng: StdRng,
+    /// The drive forces' noise: its own stream, so that the other readings draw the same
+    /// numbers whether forces are recorded or not.
+    force_rng: StdRng,
     t: f64,
     alignment: BTreeMap<String, f64>,
 }
@@ -274,6 +277,7 @@ impl Twin {
         p = p.with_perfect_parallelogram();
         let twin = Twin {
             rng: StdRng::seed_from_u64(config.seed ^ 0x9e37_79b9_7f4a_7c15),
+            force_rng: StdRng::seed_from_u64(config.seed ^ 0xf0e5_c0de_0000_0004),
             t: 0.0,
             alignment: BTreeMap::new(),
             truth_params: p,
@@ -614,6 +618,10 @@ impl Twin {
             }
             let st = self.machine_state(&plan.setup, plan.x, plan.y, t, enc, self_cal)?;
             let mut pose = self.drive_readings(plan, t, &st, (k, noise.encoder_mm), covariates);
+            // the drive forces from the motor currents, with their noise
+            for f in pose.f.iter_mut().filter(|f| **f != 0.0) {
+                *f += k * noise.force_n * gauss(&mut self.force_rng);
+            }
             pose.line = n + 2;
             if plan.reset {
                 reset = Some((plan.setup.clone(), st.tcp, st.psi));
@@ -673,7 +681,9 @@ impl Twin {
     }
 
     /// Measure campaigns by name (`lt`, `kgm`, `dbb`, `li_x`, `li_y`, `li_psi`, `self`,
-    /// `circle`); `validation` is [`Twin::validation`] with `n_validation` poses.
+    /// `circle`); `validation` is [`Twin::validation`] with `n_validation` poses;
+    /// `production` is [`PRODUCTION_POSES`] poses of [`design::production`], all drives
+    /// active and no instrument (its drive forces need the `preload_elastic` effect).
     pub fn campaign_by_names(
         &mut self,
         names: &[&str],
@@ -683,6 +693,11 @@ impl Twin {
         for n in names {
             if *n == "validation" {
                 let more = self.validation_design(n_validation);
+                append_design(&mut design, &mut taken, more);
+                continue;
+            }
+            if *n == "production" {
+                let more = design::production(PRODUCTION_POSES, self.config.seed ^ 0x9d0c);
                 append_design(&mut design, &mut taken, more);
                 continue;
             }
@@ -706,6 +721,9 @@ impl Twin {
         self.run(&d, "validation")
     }
 }
+
+/// Poses of the `production` campaign of [`Twin::campaign_by_names`].
+pub const PRODUCTION_POSES: usize = 500;
 
 /// Appends `more` to `design`; a repeated campaign's setups get the repetition's number
 /// (`lt`, then `lt_2`, ...): a setup is one mounting of the instrument with one reset, so

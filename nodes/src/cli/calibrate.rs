@@ -42,7 +42,7 @@ pub struct CalibrateArgs {
     pub tolerance_mrad: f64,
     /// The instruments' stated noise, NAME=VALUE comma-separated or a YAML file (mm, rad for
     /// psi): lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, psi,
-    /// encoder, tracker_x, tracker_y. Default: the spec's figures. Example:
+    /// encoder, force (N, drive forces), tracker_x, tracker_y. Default: the spec's figures. Example:
     /// --noise lt=0.005,kgm=0.001,encoder=0.0005
     #[arg(long)]
     pub noise: Option<String>,
@@ -404,9 +404,11 @@ pub fn validate(
     })
 }
 
-fn unit_scale(is_angle: bool) -> (f64, &'static str) {
-    if is_angle {
+fn unit_scale(r: &calib::DirectionRms) -> (f64, &'static str) {
+    if r.is_angle {
         (1e6, "µrad")
+    } else if r.is_force {
+        (1.0, "N")
     } else {
         (1e3, "µm")
     }
@@ -441,7 +443,7 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
         "instr.", "direction", "rows", "RMS before", "RMS after"
     );
     for r in &cal.rms {
-        let (s, u) = unit_scale(r.is_angle);
+        let (s, u) = unit_scale(r);
         println!(
             "{:<8} {:<14} {:>6} {:>9.2} {u} {:>9.3} {u}",
             r.instrument,

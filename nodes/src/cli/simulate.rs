@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 /// (true parameters, stiffness, effects) to truth.json.
 #[derive(clap::Args, Debug, Clone)]
 #[command(
-    after_help = "Campaigns: lt, kgm, dbb, li_x, li_y, li_psi, self, circle, validation.\n\
+    after_help = "Campaigns: lt, kgm, dbb, li_x, li_y, li_psi, self, circle, validation, production (500 poses all drives active, no instrument: the drive forces are the measurements; with --effect preload_elastic).\n\
 Effects (default magnitude, unit): parallelogram (2 mm), preload_elastic (0.3, scale of the \
 controller's parameter error: all drives active), thermal (5 K), encoder_scale (40 ppm), \
 guide_straightness (0.08 mm), instrument_alignment (0.05 mrad), backlash (0.03 mm, with \
@@ -57,7 +57,7 @@ pub struct SimulateArgs {
     pub no_noise: bool,
     /// The twin's noise, NAME=VALUE comma-separated (mm, rad for psi; the rest at the spec's
     /// figures): `lt` (isotropic tracker), `lt_along`, `lt_across`, `lt_across_per_m`, `kgm`,
-    /// `dbb`, `li`, `psi`, `encoder`, `tracker_x`, `tracker_y`. A machine noisier than what
+    /// `dbb`, `li`, `psi`, `encoder`, `force` (N), `tracker_x`, `tracker_y`. A machine noisier than what
     /// the calibration assumes: `--noise encoder=0.0005,lt=0.006`.
     #[arg(long)]
     pub noise: Option<String>,

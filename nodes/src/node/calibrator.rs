@@ -151,11 +151,12 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
     // Measurements, not the fit's rows: a pose gives one row per measured direction (x and y
     // of a tracker, ...), so the 194 measurements of the demo campaign made 453 rows.
     msg.measurement_count = u32::try_from(cal_part.poses.len()).unwrap_or(u32::MAX);
-    // RMS over the length directions, weighted by their rows (angles have another unit).
+    // RMS over the length directions, weighted by their rows (angles and forces have other
+    // units).
     let (sum, rows) = cal
         .rms
         .iter()
-        .filter(|r| !r.is_angle)
+        .filter(|r| !r.is_angle && !r.is_force)
         .fold((0.0, 0usize), |(s, n), r| {
             (s + r.rms_after.powi(2) * r.rows as f64, n + r.rows)
         });
