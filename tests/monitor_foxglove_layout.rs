@@ -42,7 +42,10 @@ fn parse_msg(text: &str, pkg: &str) -> BTreeMap<String, Field> {
             None => (ty, None),
             Some((b, rest)) => {
                 let n = rest.trim_end_matches(']');
-                (b, Some(n.parse::<usize>().ok().filter(|_| !n.starts_with("<="))))
+                (
+                    b,
+                    Some(n.parse::<usize>().ok().filter(|_| !n.starts_with("<="))),
+                )
             }
         };
         let ty = if PRIMITIVES.contains(&base) || base.contains('/') {
@@ -63,7 +66,11 @@ fn types(root: &Path) -> Types {
     for entry in std::fs::read_dir(&dir).expect("msgs/msg") {
         let path = entry.expect("entry").path();
         if path.extension().is_some_and(|e| e == "msg") {
-            let name = path.file_stem().expect("stem").to_string_lossy().into_owned();
+            let name = path
+                .file_stem()
+                .expect("stem")
+                .to_string_lossy()
+                .into_owned();
             let text = std::fs::read_to_string(&path).expect("read .msg");
             out.insert(format!("rpkm_msgs/{name}"), parse_msg(&text, "rpkm_msgs"));
         }
@@ -147,7 +154,9 @@ fn check_path(path: &str, types: &Types) -> Result<(), String> {
         }
         ty = field.ty.clone();
         while let Some(filter) = rest.strip_prefix('{') {
-            let (inside, after) = filter.split_once('}').ok_or(format!("{path}: unclosed {{"))?;
+            let (inside, after) = filter
+                .split_once('}')
+                .ok_or(format!("{path}: unclosed {{"))?;
             let key = inside.split("==").next().unwrap_or("").trim();
             let element = types.get(&ty).ok_or(format!("{path}: filter on {ty}"))?;
             if !element.contains_key(key) {
@@ -215,7 +224,9 @@ fn layout_errors(layout: &Value, types: &Types) -> Vec<String> {
         .map(|m| m.keys().cloned().collect())
         .unwrap_or_default();
     for id in placed.symmetric_difference(&configured) {
-        errors.push(format!("panel {id:?} configured but not placed, or placed but not configured"));
+        errors.push(format!(
+            "panel {id:?} configured but not placed, or placed but not configured"
+        ));
     }
     errors
 }
@@ -234,7 +245,11 @@ fn shipped() -> Value {
 fn every_path_of_the_layout_exists_in_the_message_definitions() {
     let types = types(root());
     assert!(types.contains_key("rpkm_msgs/PreloadStatus"));
-    assert!(types.contains_key("diagnostic_msgs/DiagnosticStatus"), "{:?}", types.keys());
+    assert!(
+        types.contains_key("diagnostic_msgs/DiagnosticStatus"),
+        "{:?}",
+        types.keys()
+    );
     let layout = shipped();
     let errors = layout_errors(&layout, &types);
     assert!(errors.is_empty(), "{}", errors.join("\n"));
@@ -286,7 +301,10 @@ fn a_layout_naming_a_missing_field_fails() {
         ("/rpkm/tcp_estimate.x", "/rpkm/tcp_estimates.x"),
         ("{name==", "{label=="),
         ("/rpkm/preload_status.dq2", "/rpkm/preload_status.dq2[0]"),
-        ("/rpkm/preload_status.level", "/rpkm/preload_status.level.value"),
+        (
+            "/rpkm/preload_status.level",
+            "/rpkm/preload_status.level.value",
+        ),
     ] {
         assert!(text.contains(from), "{from}");
         let broken: Value = serde_json::from_str(&text.replacen(from, to, 1)).expect("JSON");
@@ -300,7 +318,11 @@ fn a_layout_naming_a_missing_field_fails() {
         .iter()
         .any(|e| e.contains("Plot!orphan")));
     // The checker's grammar on its own.
-    assert!(check_path("/diagnostics.status[:]{name==\"a.b\"}.values[:].key", &types).is_ok());
+    assert!(check_path(
+        "/diagnostics.status[:]{name==\"a.b\"}.values[:].key",
+        &types
+    )
+    .is_ok());
     assert!(check_path("/rpkm/preload_status.stamp.sec", &types).is_ok());
     assert!(check_path("/rpkm/preload_status.stamp.seconds", &types).is_err());
     assert!(check_path("/rpkm/actuator_state.follower[4]", &types).is_err());

@@ -17,7 +17,7 @@ use ratatui::Terminal;
 use rpkm_transport::{topic, IpcMessage, Subscriber, Transport, TransportError};
 
 use super::record::{stop_flag, TransportArgs};
-use crate::monitor::{draw, Thresholds, ThresholdSource, Watch, WatchConfig};
+use crate::monitor::{draw, ThresholdSource, Thresholds, Watch, WatchConfig};
 use crate::node::params::NodeParams;
 
 /// Watch a running node set: per drive the measured and predicted redundancy current as bars
@@ -215,8 +215,10 @@ fn live(
 fn quits(e: &Event) -> bool {
     let Event::Key(k) = e else { return false };
     k.kind == KeyEventKind::Press
-        && (matches!(k.code, KeyCode::Char('q') | KeyCode::Char('Q') | KeyCode::Esc)
-            || (k.code == KeyCode::Char('c') && k.modifiers.contains(KeyModifiers::CONTROL)))
+        && (matches!(
+            k.code,
+            KeyCode::Char('q') | KeyCode::Char('Q') | KeyCode::Esc
+        ) || (k.code == KeyCode::Char('c') && k.modifiers.contains(KeyModifiers::CONTROL)))
 }
 
 /// Starts the thread that opens the transport and drains every topic into `watch`; returns
@@ -234,7 +236,9 @@ fn spawn_receiver(
         .spawn(move || {
             // Unique: several monitors may watch one set.
             let name = format!("rpkm_monitor_{}", std::process::id());
-            let ports = transport_args.open(&name).and_then(|t| Ports::open(t, &transport_args));
+            let ports = transport_args
+                .open(&name)
+                .and_then(|t| Ports::open(t, &transport_args));
             let mut ports = match ports {
                 Ok(p) => {
                     let _ = ready_tx.send(Ok(()));
@@ -256,7 +260,9 @@ fn spawn_receiver(
     match ready_rx.recv() {
         Ok(Ok(())) => Ok(handle),
         Ok(Err(e)) => Err(e),
-        Err(_) => Err(anyhow::anyhow!("the receiving thread ended before it opened the topics")),
+        Err(_) => Err(anyhow::anyhow!(
+            "the receiving thread ended before it opened the topics"
+        )),
     }
 }
 
@@ -314,18 +320,22 @@ impl Ports {
     /// One sweep over every topic, the watch locked once; returns how many messages came.
     fn drain(&mut self, watch: &Mutex<Watch>, start: Instant) -> Result<usize> {
         let mut w = lock(watch);
-        let now = start.elapsed().as_secs_f64();
         let w = &mut *w;
+        // Each message gets its own receive time: the latency is state → estimate received.
+        let t = || start.elapsed().as_secs_f64();
         let mut n = 0;
         let mut errors = Vec::new();
-        n += take(&self.state, &mut errors, |m| w.on_state(&m, now));
-        n += take(&self.estimate, &mut errors, |m| w.on_estimate(&m, now));
-        n += take(&self.preload, &mut errors, |m| w.on_preload(&m, now));
-        n += take(&self.measurement, &mut errors, |m| w.on_measurement(&m, now));
+        n += take(&self.state, &mut errors, |m| w.on_state(&m, t()));
+        n += take(&self.estimate, &mut errors, |m| w.on_estimate(&m, t()));
+        n += take(&self.preload, &mut errors, |m| w.on_preload(&m, t()));
+        n += take(&self.measurement, &mut errors, |m| {
+            w.on_measurement(&m, t())
+        });
         n += take(&self.campaign, &mut errors, |m| w.on_campaign(m));
-        n += take(&self.parameters, &mut errors, |m| w.on_parameters(m, now));
-        n += take(&self.diagnosis, &mut errors, |m| w.on_diagnosis(m, now));
-        n += take(&self.diagnostics, &mut errors, |m| w.on_diagnostics(m, now));
+        n += take(&self.parameters, &mut errors, |m| w.on_parameters(m, t()));
+        n += take(&self.diagnosis, &mut errors, |m| w.on_diagnosis(m, t()));
+        n += take(&self.diagnostics, &mut errors, |m| w.on_diagnostics(m, t()));
+        let now = t();
         for e in errors {
             w.on_receive_error(e, now);
         }

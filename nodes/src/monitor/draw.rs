@@ -50,14 +50,17 @@ pub fn frame(f: &mut Frame, w: &Watch, now: f64, source: &str) {
     let title_text = format!("rpkm monitor · {source} · {now:.1} s · q quits");
     f.render_widget(Paragraph::new(title_text).style(bold(Color::Cyan)), title);
     f.render_widget(Paragraph::new(silence_line(w, now)), alert);
-    draw_preload(f, w, preload);
+    draw_preload(f, w, now, preload);
     f.render_widget(
         Paragraph::new(tcp_lines(w)).block(Block::bordered().title(" TCP estimator ")),
         tcp,
     );
     let nodes_title = match &w.last_receive_error {
         None => " Nodes ".to_owned(),
-        Some((e, t)) => format!(" Nodes · {} receive errors, last at {t:.1} s: {e} ", w.receive_errors),
+        Some((e, t)) => format!(
+            " Nodes · {} receive errors, last at {t:.1} s: {e} ",
+            w.receive_errors
+        ),
     };
     f.render_widget(
         Paragraph::new(node_lines(w, now)).block(Block::bordered().title(nodes_title)),
@@ -129,7 +132,7 @@ fn thresholds_text(t: &Thresholds) -> String {
     }
 }
 
-fn draw_preload(f: &mut Frame, w: &Watch, area: Rect) {
+fn draw_preload(f: &mut Frame, w: &Watch, now: f64, area: Rect) {
     let title = format!(" Preload · {} ", thresholds_text(&w.thresholds));
     let block = Block::bordered().title(title);
     let inner = block.inner(area);
@@ -149,7 +152,7 @@ fn draw_preload(f: &mut Frame, w: &Watch, area: Rect) {
             }
         }
     }
-    lines.push(history_line(w, width));
+    lines.push(history_line(w, now, width));
     lines.push(follower_line(w));
     let message = w
         .nodes
@@ -183,7 +186,10 @@ fn drive_line(i: usize, m: f64, p: f64, d: f64, level: Option<u8>) -> Line<'stat
         None => ("-", Style::new()),
     };
     Line::from(vec![
-        Span::styled(format!("q{} ", i + 1), Style::new().add_modifier(Modifier::BOLD)),
+        Span::styled(
+            format!("q{} ", i + 1),
+            Style::new().add_modifier(Modifier::BOLD),
+        ),
         Span::raw(format!(
             "measured {m:+7.1} %  predicted {p:+7.1} %  deviation {d:+7.1} %  "
         )),
@@ -276,19 +282,29 @@ pub fn axis_cells(width: usize, range: f64, m: f64, p: f64, t: &Thresholds) -> V
     cells
 }
 
-/// `history ▁▁▁▅▅███`: the held level of the last statuses, newest right.
-fn history_line(w: &Watch, width: usize) -> Line<'static> {
-    let room = width.saturating_sub(8);
-    let skip = w.history.len().saturating_sub(room);
-    let mut spans = vec![Span::raw("history ")];
-    spans.extend(w.history.iter().skip(skip).map(|l| {
-        let ch = match *l {
-            PreloadStatus::OK => "▁",
-            PreloadStatus::WARN => "▅",
-            _ => "█",
+/// `history ▁▁▁▅▅███`: the worst held level per time mark up to now, newest right; blank
+/// where no PreloadStatus came.
+fn history_line(w: &Watch, now: f64, width: usize) -> Line<'static> {
+    let label = format!("history ({} s/mark) ", w.config.history_bucket_s);
+    let room = width.saturating_sub(label.chars().count()) as u64;
+    let latest = w.bucket(now);
+    let first = (latest + 1).saturating_sub(room);
+    let mut marks = w.history.iter().filter(|(b, _)| *b >= first).peekable();
+    let mut spans = vec![Span::raw(label)];
+    for b in first..=latest {
+        let (ch, style) = match marks.next_if(|(mb, _)| *mb == b) {
+            Some((_, l)) => (
+                match *l {
+                    PreloadStatus::OK => "▁",
+                    PreloadStatus::WARN => "▅",
+                    _ => "█",
+                },
+                Style::new().fg(level_color(*l)),
+            ),
+            None => (" ", Style::new()),
         };
-        Span::styled(ch, Style::new().fg(level_color(*l)))
-    }));
+        spans.push(Span::styled(ch, style));
+    }
     Line::from(spans)
 }
 
@@ -344,7 +360,10 @@ fn tcp_lines(w: &Watch) -> Vec<Line<'static>> {
             "outcomes: ok {} · warm rejected, cold ok {} · ",
             o.ok, o.warm_rejected_cold_ok
         )),
-        Span::styled(format!("rigid fallback {}", o.rigid_fallback), fallback_style),
+        Span::styled(
+            format!("rigid fallback {}", o.rigid_fallback),
+            fallback_style,
+        ),
         Span::raw(format!(
             " · last reason {}",
             o.last_reason.map_or("-", reason_name)
@@ -355,7 +374,9 @@ fn tcp_lines(w: &Watch) -> Vec<Line<'static>> {
 
 fn node_lines(w: &Watch, now: f64) -> Vec<Line<'static>> {
     if w.nodes.is_empty() {
-        return vec![Line::from("nothing heard on /diagnostics or the node topics yet")];
+        return vec![Line::from(
+            "nothing heard on /diagnostics or the node topics yet",
+        )];
     }
     w.nodes
         .iter()
@@ -364,20 +385,23 @@ fn node_lines(w: &Watch, now: f64) -> Vec<Line<'static>> {
             let state = if quiet > n.patience_s(&w.config) {
                 Span::styled(format!("SILENT {quiet:>5.1} s"), bold(Color::Red))
             } else {
-                Span::styled(format!("live   {quiet:>5.1} s"), Style::new().fg(Color::Green))
+                Span::styled(
+                    format!("live   {quiet:>5.1} s"),
+                    Style::new().fg(Color::Green),
+                )
             };
-            let diag = n.diagnostic.as_ref().map_or(
-                vec![Span::raw("(no /diagnostics yet)")],
-                |(d, _)| {
-                    vec![
-                        Span::styled(
-                            format!("{:<5} ", level_name(d.level)),
-                            bold(level_color(d.level)),
-                        ),
-                        Span::raw(d.message.clone()),
-                    ]
-                },
-            );
+            let diag =
+                n.diagnostic
+                    .as_ref()
+                    .map_or(vec![Span::raw("(no /diagnostics yet)")], |(d, _)| {
+                        vec![
+                            Span::styled(
+                                format!("{:<5} ", level_name(d.level)),
+                                bold(level_color(d.level)),
+                            ),
+                            Span::raw(d.message.clone()),
+                        ]
+                    });
             let mut spans = vec![Span::raw(format!("{name:<16} ")), state, Span::raw("  ")];
             spans.extend(diag);
             Line::from(spans)
@@ -393,16 +417,17 @@ fn calibrator_lines(w: &Watch) -> Vec<Line<'static>> {
             "-".to_owned()
         }
     };
-    let params = w.parameters.as_ref().map_or(
-        "Parameters: none received yet".to_owned(),
-        |(p, t)| {
-            let identified = p.sigmas.iter().filter(|s| **s > 0.0).count();
-            let effects = if p.active_effects.is_empty() {
-                "none".to_owned()
-            } else {
-                p.active_effects.join(", ")
-            };
-            format!(
+    let params =
+        w.parameters
+            .as_ref()
+            .map_or("Parameters: none received yet".to_owned(), |(p, t)| {
+                let identified = p.sigmas.iter().filter(|s| **s > 0.0).count();
+                let effects = if p.active_effects.is_empty() {
+                    "none".to_owned()
+                } else {
+                    p.active_effects.join(", ")
+                };
+                format!(
                 "Parameters (at {t:.1} s): model {}, {} measurements, {identified} identified, \
                  cal RMS {}, val RMS {}, condition {:.1}, effects {effects}",
                 p.model,
@@ -411,25 +436,24 @@ fn calibrator_lines(w: &Watch) -> Vec<Line<'static>> {
                 um(p.val_rms),
                 p.condition_number
             )
-        },
-    );
-    let diagnosis = w.diagnosis.as_ref().map_or(
-        "Diagnosis: none received yet".to_owned(),
-        |(d, t)| {
-            let missing = if d.missing_effect.is_empty() {
-                "nothing missing".to_owned()
-            } else {
-                format!("missing effect {}", d.missing_effect)
-            };
-            format!(
+            });
+    let diagnosis =
+        w.diagnosis
+            .as_ref()
+            .map_or("Diagnosis: none received yet".to_owned(), |(d, t)| {
+                let missing = if d.missing_effect.is_empty() {
+                    "nothing missing".to_owned()
+                } else {
+                    format!("missing effect {}", d.missing_effect)
+                };
+                format!(
                 "Diagnosis (at {t:.1} s): {missing}; {} candidates tested; baseline val RMS {}, \
                  noise floor {}",
                 d.candidates.len(),
                 um(d.baseline_val_rms),
                 um(d.noise_floor)
             )
-        },
-    );
+            });
     vec![Line::from(params), Line::from(diagnosis)]
 }
 

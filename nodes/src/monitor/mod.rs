@@ -6,4 +6,4 @@
 pub mod draw;
 pub mod state;
 
-pub use state::{Thresholds, ThresholdSource, Watch, WatchConfig};
+pub use state::{ThresholdSource, Thresholds, Watch, WatchConfig};

@@ -5,7 +5,7 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use rpkm_msgs::{
-    ActuatorState, CampaignInfo, DiagnosticArray, DiagnosticStatus, Diagnosis, Parameters,
+    ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, DiagnosticStatus, Parameters,
     PreloadStatus, TcpEstimate, TcpMeasurement,
 };
 use serde_json::{json, Value};
@@ -16,7 +16,9 @@ pub struct WatchConfig {
     /// A node is silent when nothing of it (topics or /diagnostics) arrived for this long, s;
     /// longer for a node whose /diagnostics period is longer (1.5 periods).
     pub silent_after_s: f64,
-    /// PreloadStatus levels kept for the history strip.
+    /// Time per mark of the level history, s.
+    pub history_bucket_s: f64,
+    /// Marks kept for the history strip.
     pub history_len: usize,
 }
 
@@ -24,6 +26,7 @@ impl Default for WatchConfig {
     fn default() -> Self {
         Self {
             silent_after_s: 1.0,
+            history_bucket_s: 0.25,
             history_len: 512,
         }
     }
@@ -223,8 +226,11 @@ pub struct Watch {
     /// Last PreloadStatus and when it arrived.
     pub preload: Option<(PreloadStatus, f64)>,
     pub preload_count: u64,
-    /// Held levels of the last PreloadStatus messages, oldest first.
-    pub history: VecDeque<u8>,
+    /// The level history: per time bucket (index = now / history_bucket_s) that had a
+    /// PreloadStatus, the worst held level in it; oldest first.
+    pub history: VecDeque<(u64, u8)>,
+    /// PreloadStatus messages per held level OK, WARN, ERROR (others not counted).
+    pub level_counts: [u64; 3],
     /// When the held level was first WARN and first ERROR, s.
     pub first_warn_s: Option<f64>,
     pub first_error_s: Option<f64>,
@@ -257,6 +263,7 @@ impl Watch {
             preload: None,
             preload_count: 0,
             history: VecDeque::with_capacity(config.history_len),
+            level_counts: [0; 3],
             first_warn_s: None,
             first_error_s: None,
             state: None,
@@ -280,7 +287,10 @@ impl Watch {
 
     fn heard_topic(&mut self, topic: &str, now: f64) {
         if let Some((_, node)) = NODE_TOPICS.iter().find(|(t, _)| *t == topic) {
-            self.nodes.entry((*node).to_owned()).or_default().last_heard_s = now;
+            self.nodes
+                .entry((*node).to_owned())
+                .or_default()
+                .last_heard_s = now;
         }
     }
 
@@ -314,15 +324,34 @@ impl Watch {
         self.heard_topic("/rpkm/preload_status", now);
         self.preload = Some((*s, now));
         self.preload_count += 1;
-        if self.history.len() >= self.config.history_len.max(1) {
-            self.history.pop_front();
+        if let Some(count) = self.level_counts.get_mut(usize::from(s.level)) {
+            *count += 1;
         }
-        self.history.push_back(s.level);
+        let bucket = self.bucket(now);
+        match self.history.back_mut() {
+            Some((b, level)) if *b == bucket => *level = (*level).max(s.level),
+            _ => {
+                if self.history.len() >= self.config.history_len.max(1) {
+                    self.history.pop_front();
+                }
+                self.history.push_back((bucket, s.level));
+            }
+        }
         if s.level >= PreloadStatus::WARN {
             self.first_warn_s.get_or_insert(now);
         }
         if s.level >= PreloadStatus::ERROR {
             self.first_error_s.get_or_insert(now);
+        }
+    }
+
+    /// The history bucket of a time.
+    pub fn bucket(&self, now: f64) -> u64 {
+        let b = now / self.config.history_bucket_s;
+        if b.is_finite() && b > 0.0 {
+            b as u64
+        } else {
+            0
         }
     }
 
@@ -498,7 +527,7 @@ impl Watch {
                 })
             })
             .collect();
-        let count = |l: u8| self.history.iter().filter(|h| **h == l).count();
+        let count = |l: usize| self.level_counts[l];
         json!({
             "count": self.preload_count,
             "level": level_name(s.level),

@@ -21,8 +21,16 @@ fn the_bar_crosses_the_warn_tick_when_the_deviation_crosses_warn() {
     let t = thresholds();
     let cells = axis_cells(41, 100.0, 50.0, 0.0, &t);
     assert_eq!(cells.len(), 41);
-    assert_eq!(cells[20], Cell::Predicted(true), "predicted 0 %, under the bar");
-    assert_eq!(cells[26], Cell::Warn(true), "+30 %: the bar (to +50 %) runs past it");
+    assert_eq!(
+        cells[20],
+        Cell::Predicted(true),
+        "predicted 0 %, under the bar"
+    );
+    assert_eq!(
+        cells[26],
+        Cell::Warn(true),
+        "+30 %: the bar (to +50 %) runs past it"
+    );
     assert_eq!(cells[14], Cell::Warn(false));
     assert_eq!(cells[36], Cell::Error(false), "+80 %: not reached");
     assert_eq!(cells[4], Cell::Error(false));
@@ -35,7 +43,10 @@ fn the_bar_crosses_the_warn_tick_when_the_deviation_crosses_warn() {
     assert_eq!(cells[6], Cell::Warn(true), "-70 %");
     assert_eq!(cells[18], Cell::Warn(true), "-10 %");
     assert_eq!(cells[28], Cell::Error(false), "+40 %");
-    assert!(!cells.contains(&Cell::Error(true)), "-120 % is off the axis");
+    assert!(
+        !cells.contains(&Cell::Error(true)),
+        "-120 % is off the axis"
+    );
     assert_eq!(cells[20], Cell::Zero, "the bar ends at 0 inside");
 }
 
@@ -44,7 +55,13 @@ fn the_axis_range_holds_every_current_and_its_error_band() {
     let d = |m: f64, p: f64| (m, p, m - p, None);
     let t = thresholds();
     assert_eq!(axis_range(&[d(10.0, 5.0); 4], &t), 100.0);
-    assert_eq!(axis_range(&[d(219.0, 19.0), d(37.0, 69.0), d(1.0, 1.0), d(1.0, 1.0)], &t), 250.0);
+    assert_eq!(
+        axis_range(
+            &[d(219.0, 19.0), d(37.0, 69.0), d(1.0, 1.0), d(1.0, 1.0)],
+            &t
+        ),
+        250.0
+    );
     // p + 1.1 * error = 69 + 88 = 157 -> 200.
     assert_eq!(axis_range(&[d(0.0, 69.0); 4], &t), 200.0);
     assert!(axis_cells(2, 100.0, 1.0, 0.0, &t).is_empty());
@@ -61,7 +78,14 @@ fn busy_watch() -> Watch {
         ..Default::default()
     };
     w.on_preload(&s, 1.0);
-    w.on_estimate(&TcpEstimate { y: 1.7, converged: true, ..TcpEstimate::default() }, 1.0);
+    w.on_estimate(
+        &TcpEstimate {
+            y: 1.7,
+            converged: true,
+            ..TcpEstimate::default()
+        },
+        1.0,
+    );
     for name in ["tcp_estimator", "preload_monitor"] {
         let a = DiagnosticArray {
             status: vec![DiagnosticStatus {
@@ -92,7 +116,11 @@ fn every_terminal_size_draws_without_a_panic() {
 fn the_screen_says_which_drive_is_in_error_and_who_is_silent() {
     let w = busy_watch();
     let mut term = Terminal::new(TestBackend::new(120, 48)).expect("terminal");
-    let text = to_text(term.draw(|f| frame(f, &w, 4.5, "test")).expect("draw").buffer);
+    let text = to_text(
+        term.draw(|f| frame(f, &w, 4.5, "test"))
+            .expect("draw")
+            .buffer,
+    );
     let line = |needle: &str| {
         text.lines()
             .find(|l| l.contains(needle))
@@ -100,13 +128,23 @@ fn the_screen_says_which_drive_is_in_error_and_who_is_silent() {
             .to_owned()
     };
     assert!(line("q1 measured").contains("+200.0 %") && line("q1 measured").ends_with("ERROR"));
-    assert!(line("q2 measured").ends_with("WARN"), "|32| between 30 and 80");
+    assert!(
+        line("q2 measured").ends_with("WARN"),
+        "|32| between 30 and 80"
+    );
     assert!(line("SILENT").contains("tcp_estimator (3.5 s)"), "{text}");
     assert!(!line("SILENT").contains("preload_monitor"));
     assert!(line("history").contains('█'));
     assert!(line("Preload").contains("WARN 30 % · ERROR 80 %"));
     // Small: still the level and the silent node.
     let mut term = Terminal::new(TestBackend::new(40, 6)).expect("terminal");
-    let small = to_text(term.draw(|f| frame(f, &w, 4.5, "test")).expect("draw").buffer);
-    assert!(small.contains("preload ERROR") && small.contains("SILENT: tcp_estimator"), "{small}");
+    let small = to_text(
+        term.draw(|f| frame(f, &w, 4.5, "test"))
+            .expect("draw")
+            .buffer,
+    );
+    assert!(
+        small.contains("preload ERROR") && small.contains("SILENT: tcp_estimator"),
+        "{small}"
+    );
 }

@@ -81,21 +81,37 @@ fn thresholds_come_from_the_preload_nodes_own_report() {
         1.0,
     );
     assert_eq!(w.thresholds.source, ThresholdSource::Diagnostics);
-    assert_eq!((w.thresholds.warn_percent, w.thresholds.error_percent), (30.0, 80.0));
+    assert_eq!(
+        (w.thresholds.warn_percent, w.thresholds.error_percent),
+        (30.0, 80.0)
+    );
 }
 
 #[test]
 fn follower_thresholds_come_from_the_follower_message() {
     // Followers q2, q3 with q3 read 0.3 mm off: the node names the Δq thresholds in mm.
     let (st, s) = node_status(0.3, true);
-    assert!((s.dq3 + 0.3e-3).abs() < 1e-6, "rgm gives back the true q3: {}", s.dq3);
+    assert!(
+        (s.dq3 + 0.3e-3).abs() < 1e-6,
+        "rgm gives back the true q3: {}",
+        s.dq3
+    );
     let mut w = watch();
     w.on_diagnostics(diag("preload_monitor", st.level, &st.message), 0.0);
     let (a, b) = w.thresholds.dq_m.expect("dq thresholds in the message");
-    assert!((a - 40e-6).abs() < 1e-12 && (b - 150e-6).abs() < 1e-12, "{a} {b}");
+    assert!(
+        (a - 40e-6).abs() < 1e-12 && (b - 150e-6).abs() < 1e-12,
+        "{a} {b}"
+    );
     assert_eq!(w.thresholds.warn_percent, 30.0);
     assert_eq!(parse_thresholds("ERROR: follower q3 is +0.300 mm off the rigid model (thresholds 0.04 / 0.15 mm); drive q1 deviates +1.0 % (measured 1 %, predicted 0 %; thresholds 30 / 80 %)", "mm"), Some((0.04, 0.15)));
-    assert_eq!(parse_thresholds("no drive state evaluated yet (0 unsolved, 0 implausible)", "%"), None);
+    assert_eq!(
+        parse_thresholds(
+            "no drive state evaluated yet (0 unsolved, 0 implausible)",
+            "%"
+        ),
+        None
+    );
     assert_eq!(parse_thresholds("thresholds nan / 80 %", "%"), None);
 }
 
@@ -110,8 +126,14 @@ fn a_params_file_wins_over_the_report() {
             source: ThresholdSource::ParamsFile("p.yaml".into()),
         },
     );
-    w.on_diagnostics(diag("preload_monitor", 0, "OK: ...; thresholds 30 / 80 %)"), 0.0);
-    assert_eq!((w.thresholds.warn_percent, w.thresholds.error_percent), (20.0, 50.0));
+    w.on_diagnostics(
+        diag("preload_monitor", 0, "OK: ...; thresholds 30 / 80 %)"),
+        0.0,
+    );
+    assert_eq!(
+        (w.thresholds.warn_percent, w.thresholds.error_percent),
+        (20.0, 50.0)
+    );
 }
 
 #[test]
@@ -152,12 +174,18 @@ fn a_node_is_silent_after_its_patience_and_named() {
         w.on_preload(&PreloadStatus::default(), f64::from(k) * 0.01);
     }
     assert!(w.silent(5.9).is_empty(), "1.0 s patience not yet over");
-    assert!(w.silent(6.0).is_empty(), "exactly 1.0 s quiet is not silent yet");
+    assert!(
+        w.silent(6.0).is_empty(),
+        "exactly 1.0 s quiet is not silent yet"
+    );
     let silent = w.silent(6.05);
     assert_eq!(silent.len(), 1);
     assert_eq!(silent[0].0, "tcp_estimator");
     assert!((silent[0].1 - 1.05).abs() < 1e-9);
-    assert!(w.nodes.contains_key("preload_monitor"), "named by its topic");
+    assert!(
+        w.nodes.contains_key("preload_monitor"),
+        "named by its topic"
+    );
     let both: Vec<&str> = w.silent(11.5).iter().map(|(n, _)| *n).collect();
     assert_eq!(both, ["preload_monitor", "tcp_estimator"]);
 }
@@ -181,7 +209,13 @@ fn rates_count_a_second_and_fall_to_zero() {
     let e = TcpEstimate::default();
     for k in 0..=1000 {
         let t = f64::from(k) * 0.002; // 500 Hz for 2 s
-        w.on_state(&ActuatorState { seq: k as u64, ..ActuatorState::default() }, t);
+        w.on_state(
+            &ActuatorState {
+                seq: k as u64,
+                ..ActuatorState::default()
+            },
+            t,
+        );
         w.on_estimate(&TcpEstimate { seq: k as u64, ..e }, t + 0.0004);
     }
     let r = w.estimate_rate.rate_hz();
@@ -198,44 +232,107 @@ fn rates_count_a_second_and_fall_to_zero() {
 #[test]
 fn latency_needs_the_state_of_the_same_seq() {
     let mut w = watch();
-    w.on_state(&ActuatorState { seq: 7, ..ActuatorState::default() }, 1.0);
-    w.on_estimate(&TcpEstimate { seq: 8, ..TcpEstimate::default() }, 1.001);
+    w.on_state(
+        &ActuatorState {
+            seq: 7,
+            ..ActuatorState::default()
+        },
+        1.0,
+    );
+    w.on_estimate(
+        &TcpEstimate {
+            seq: 8,
+            ..TcpEstimate::default()
+        },
+        1.001,
+    );
     assert_eq!(w.latency.last_ms, None);
-    w.on_estimate(&TcpEstimate { seq: 7, ..TcpEstimate::default() }, 1.002);
+    w.on_estimate(
+        &TcpEstimate {
+            seq: 7,
+            ..TcpEstimate::default()
+        },
+        1.002,
+    );
     assert!((w.latency.last_ms.expect("latency") - 2.0).abs() < 1e-9);
 }
 
 #[test]
 fn outcomes_and_fallback_reasons_are_counted() {
     let mut w = watch();
-    let e = |outcome, reason| TcpEstimate { outcome, reason, ..TcpEstimate::default() };
+    let e = |outcome, reason| TcpEstimate {
+        outcome,
+        reason,
+        ..TcpEstimate::default()
+    };
     w.on_estimate(&e(TcpEstimate::OUTCOME_OK, 0), 0.0);
-    w.on_estimate(&e(TcpEstimate::OUTCOME_WARM_REJECTED_COLD_OK, TcpEstimate::REASON_PLATFORM_ANGLE), 0.1);
-    w.on_estimate(&e(TcpEstimate::OUTCOME_RIGID_FALLBACK, TcpEstimate::REASON_FAR_FROM_RIGID), 0.2);
+    w.on_estimate(
+        &e(
+            TcpEstimate::OUTCOME_WARM_REJECTED_COLD_OK,
+            TcpEstimate::REASON_PLATFORM_ANGLE,
+        ),
+        0.1,
+    );
+    w.on_estimate(
+        &e(
+            TcpEstimate::OUTCOME_RIGID_FALLBACK,
+            TcpEstimate::REASON_FAR_FROM_RIGID,
+        ),
+        0.2,
+    );
     w.on_estimate(&e(TcpEstimate::OUTCOME_OK, 0), 0.3);
     let o = &w.outcomes;
     assert_eq!((o.ok, o.warm_rejected_cold_ok, o.rigid_fallback), (2, 1, 1));
     assert_eq!(o.last_reason.map(reason_name), Some("far_from_rigid"));
     let snap = w.snapshot(1.0);
     assert_eq!(snap["tcp_estimate"]["outcomes"]["rigid_fallback"], 1);
-    assert_eq!(snap["tcp_estimate"]["last_fallback_reason"], "far_from_rigid");
+    assert_eq!(
+        snap["tcp_estimate"]["last_fallback_reason"],
+        "far_from_rigid"
+    );
 }
 
 #[test]
 fn level_history_is_bounded_and_remembers_the_first_crossings() {
     let mut w = Watch::new(
-        WatchConfig { history_len: 4, ..WatchConfig::default() },
+        WatchConfig {
+            history_len: 4,
+            history_bucket_s: 0.5,
+            ..WatchConfig::default()
+        },
         Thresholds::unknown(),
     );
-    for (k, level) in [0u8, 0, 1, 1, 2, 2, 1].iter().enumerate() {
-        let s = PreloadStatus { level: *level, ..PreloadStatus::default() };
-        w.on_preload(&s, k as f64);
+    // Two statuses per second: both land in the same half-second mark, the worst kept.
+    for (k, level) in [0u8, 0, 1, 1, 2, 2, 1, 0].iter().enumerate() {
+        let s = PreloadStatus {
+            level: *level,
+            ..PreloadStatus::default()
+        };
+        w.on_preload(&s, k as f64 * 0.5 + if k % 2 == 0 { 0.0 } else { 0.2 });
     }
-    assert_eq!(w.history.iter().copied().collect::<Vec<_>>(), [1, 2, 2, 1]);
-    assert_eq!((w.first_warn_s, w.first_error_s), (Some(2.0), Some(4.0)));
+    // Statuses at 0, 0.7, 1.0, 1.7, 2.0, 2.7, 3.0, 3.7 s: marks 0, 1, 2, 3, 4, 5, 6, 7.
+    assert_eq!(
+        w.history.iter().copied().collect::<Vec<_>>(),
+        [(4, 2), (5, 2), (6, 1), (7, 0)]
+    );
+    w.on_preload(
+        &PreloadStatus {
+            level: 2,
+            ..PreloadStatus::default()
+        },
+        3.9,
+    );
+    assert_eq!(
+        w.history.back(),
+        Some(&(7, 2)),
+        "the worst level of the mark"
+    );
+    assert_eq!((w.first_warn_s, w.first_error_s), (Some(1.0), Some(2.0)));
     let snap = w.snapshot(7.0);
-    assert_eq!(snap["preload"]["level"], "WARN");
-    assert_eq!(snap["preload"]["count"], 7);
+    assert_eq!(snap["preload"]["level"], "ERROR");
+    assert_eq!(snap["preload"]["count"], 9);
+    assert_eq!(snap["preload"]["history"]["WARN"], 3);
+    assert_eq!(snap["preload"]["history"]["ERROR"], 3);
     // Unknown thresholds are null in JSON, never a made-up number.
     assert!(snap["thresholds"]["warn_percent"].is_null());
     assert_eq!(snap["thresholds"]["source"], "unknown");
