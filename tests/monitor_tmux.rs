@@ -290,6 +290,10 @@ fn monitor_in_tmux_shows_the_fault_and_the_silent_estimator() {
             .any(|l| l.contains("SILENT:") && l.contains("tcp_estimator"))
     });
     let took = killed.elapsed();
+    eprintln!(
+        "monitor_tmux: q{faulty} shown WARN at {dev_w:+.1} %, ERROR at {dev_e:+.1} % \
+         ({captures} captures); tcp_estimator named silent {took:?} after SIGKILL"
+    );
     assert!(
         took < Duration::from_secs(2),
         "named silent after {took:?}:\n{silent}"

@@ -47,7 +47,13 @@ fn the_bar_crosses_the_warn_tick_when_the_deviation_crosses_warn() {
         !cells.contains(&Cell::Error(true)),
         "-120 % is off the axis"
     );
-    assert_eq!(cells[20], Cell::Zero, "the bar ends at 0 inside");
+    assert_eq!(cells[20], Cell::Bar, "the bar runs from 0");
+    assert_eq!(cells[21], Cell::Empty);
+    assert_eq!(
+        axis_cells(41, 100.0, 0.0, 50.0, &t)[20],
+        Cell::Zero,
+        "no bar: the zero mark"
+    );
 }
 
 #[test]
@@ -121,10 +127,13 @@ fn the_screen_says_which_drive_is_in_error_and_who_is_silent() {
             .expect("draw")
             .buffer,
     );
+    // A line without the panel's borders.
     let line = |needle: &str| {
         text.lines()
             .find(|l| l.contains(needle))
             .unwrap_or_else(|| panic!("no line with {needle:?} in\n{text}"))
+            .trim_matches('│')
+            .trim_end()
             .to_owned()
     };
     assert!(line("q1 measured").contains("+200.0 %") && line("q1 measured").ends_with("ERROR"));

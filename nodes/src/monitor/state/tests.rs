@@ -63,7 +63,7 @@ fn node_status(dq3: f64, followers: bool) -> (DiagnosticStatus, PreloadStatus) {
         ..ActuatorState::default()
     };
     let e = node.evaluate(&state).expect("evaluated");
-    (node.status("rpkm/preload_monitor"), e.status)
+    (node.status("preload_monitor"), e.status)
 }
 
 #[test]
