@@ -313,9 +313,11 @@ fn monitor_in_tmux_shows_the_fault_and_the_silent_estimator() {
             "-p",
             "-t",
             "mon",
-            "#{pane_dead} #{pane_dead_status}",
+            "#{pane_dead} #{pane_dead_status}#{pane_dead_signal}",
         ]);
-        if d.starts_with('1') || Instant::now() > deadline {
+        // tmux marks the pane dead at the end of its output, and fills in the exit status
+        // once it has reaped the process: wait for both.
+        if d.split_whitespace().count() == 2 || Instant::now() > deadline {
             break d;
         }
         std::thread::sleep(Duration::from_millis(50));
