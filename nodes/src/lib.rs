@@ -6,6 +6,7 @@ pub mod error;
 pub mod input;
 pub mod launch;
 pub mod logging;
+pub mod monitor;
 pub mod node;
 pub mod plot;
 pub mod stream;

@@ -37,6 +37,9 @@ enum Command {
     Bag(cli::bag::BagArgs),
     /// Convert a campaign CSV into a bag of ActuatorState and TcpMeasurement messages (SI).
     Ingest(cli::ingest::IngestArgs),
+    /// Live terminal view of a running node set or a replayed bag: currents against the
+    /// preload thresholds, levels, TCP estimates, silent nodes (see `rpkm monitor --help`).
+    Monitor(cli::monitor::MonitorArgs),
     /// Run one ROS 2 node: ingest, tcp_estimator, calibrator or preload_monitor.
     Node(rpkm::node::NodeArgs),
     /// Start and supervise the nodes of a launch description (ROS 2 launch YAML).
@@ -52,7 +55,11 @@ impl Command {
     fn writes_reports(&self) -> bool {
         !matches!(
             self,
-            Command::Node(_) | Command::Launch(_) | Command::Record(_) | Command::Replay(_)
+            Command::Node(_)
+                | Command::Launch(_)
+                | Command::Record(_)
+                | Command::Replay(_)
+                | Command::Monitor(_)
         )
     }
 }
@@ -85,6 +92,7 @@ fn main() {
         Command::Replay(a) => cli::replay::run(a),
         Command::Bag(a) => cli::bag::run(a),
         Command::Ingest(a) => cli::ingest::run(a),
+        Command::Monitor(a) => cli::monitor::run(a),
         Command::Node(a) => rpkm::node::run(a),
         Command::Launch(a) => rpkm::launch::run(a),
         Command::Bench(a) => cli::bench::run(a),

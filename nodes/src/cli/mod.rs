@@ -7,6 +7,7 @@ pub mod calibrate;
 pub mod demo;
 pub mod diagnose;
 pub mod ingest;
+pub mod monitor;
 pub mod preload;
 pub mod record;
 pub mod replay;

@@ -1,0 +1,624 @@
+//! What the monitor has heard: the last message of every topic, rates, the level history,
+//! and when each node last spoke. Times are seconds since the monitor started (`now`), passed
+//! in by the caller, so that the struct is a plain value the unit tests drive without clocks.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use rpkm_msgs::{
+    ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, DiagnosticStatus, Parameters,
+    PreloadStatus, TcpEstimate, TcpMeasurement,
+};
+use serde_json::{json, Value};
+
+/// How the monitor judges silence and how much history it keeps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WatchConfig {
+    /// A node is silent when nothing of it (topics or /diagnostics) arrived for this long, s;
+    /// longer for a node whose /diagnostics period is longer (1.5 periods).
+    pub silent_after_s: f64,
+    /// Time per mark of the level history, s.
+    pub history_bucket_s: f64,
+    /// Marks kept for the history strip.
+    pub history_len: usize,
+}
+
+impl Default for WatchConfig {
+    fn default() -> Self {
+        Self {
+            silent_after_s: 1.0,
+            history_bucket_s: 0.25,
+            history_len: 512,
+        }
+    }
+}
+
+/// Where the WARN/ERROR thresholds on screen came from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ThresholdSource {
+    /// Not known yet: no parameter file and no report of preload_monitor heard.
+    Unknown,
+    /// `rpkm monitor --params FILE` (preload_monitor's section).
+    ParamsFile(String),
+    /// The thresholds preload_monitor names in its /diagnostics message.
+    Diagnostics,
+}
+
+/// The preload monitor's thresholds on |measured − predicted| current (%) and |Δq| (m).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Thresholds {
+    pub warn_percent: f64,
+    pub error_percent: f64,
+    /// Follower-mode compatibility thresholds, when known.
+    pub dq_m: Option<(f64, f64)>,
+    pub source: ThresholdSource,
+}
+
+impl Thresholds {
+    /// Thresholds not known yet (NaN: no drive is judged against them).
+    pub fn unknown() -> Self {
+        Self {
+            warn_percent: f64::NAN,
+            error_percent: f64::NAN,
+            dq_m: None,
+            source: ThresholdSource::Unknown,
+        }
+    }
+
+    pub fn known(&self) -> bool {
+        self.source != ThresholdSource::Unknown
+    }
+
+    /// The level (PreloadStatus::OK/WARN/ERROR) of one drive's deviation, `None` while the
+    /// thresholds are unknown.
+    pub fn level_of(&self, deviation_percent: f64) -> Option<u8> {
+        if !self.known() {
+            return None;
+        }
+        let d = deviation_percent.abs();
+        Some(if !(d < self.error_percent) {
+            PreloadStatus::ERROR
+        } else if d >= self.warn_percent {
+            PreloadStatus::WARN
+        } else {
+            PreloadStatus::OK
+        })
+    }
+}
+
+/// `(warn, error)` of the first `thresholds A / B UNIT` in a preload_monitor message
+/// (`ERROR: drive q3 deviates +113.2 % (...; thresholds 30 / 80 %)`).
+pub fn parse_thresholds(message: &str, unit: &str) -> Option<(f64, f64)> {
+    message.match_indices("thresholds ").find_map(|(at, key)| {
+        let mut words = message[at + key.len()..].split_whitespace();
+        let warn: f64 = words.next()?.parse().ok()?;
+        (words.next()? == "/").then_some(())?;
+        let error: f64 = words.next()?.parse().ok()?;
+        let u = words.next()?.trim_end_matches([')', ';', ',']);
+        (u == unit && warn.is_finite() && error.is_finite()).then_some((warn, error))
+    })
+}
+
+/// Messages per second over the last full window of 1 s (0 once a window passed empty).
+#[derive(Debug, Clone, Default)]
+pub struct RateMeter {
+    window_start: Option<f64>,
+    in_window: u64,
+    rate_hz: f64,
+}
+
+impl RateMeter {
+    const WINDOW_S: f64 = 1.0;
+
+    pub fn count(&mut self, now: f64) {
+        self.tick(now);
+        self.window_start.get_or_insert(now);
+        self.in_window += 1;
+    }
+
+    /// Closes the window when it is over.
+    pub fn tick(&mut self, now: f64) {
+        if let Some(start) = self.window_start {
+            let span = now - start;
+            if span >= Self::WINDOW_S {
+                self.rate_hz = self.in_window as f64 / span;
+                self.in_window = 0;
+                self.window_start = Some(now);
+            }
+        }
+    }
+
+    pub fn rate_hz(&self) -> f64 {
+        self.rate_hz
+    }
+}
+
+/// What the monitor knows of one node.
+#[derive(Debug, Clone, Default)]
+pub struct NodeHealth {
+    /// Last time any topic of the node or its /diagnostics arrived, s.
+    pub last_heard_s: f64,
+    /// Last /diagnostics status of the node and when it came.
+    pub diagnostic: Option<(DiagnosticStatus, f64)>,
+    /// The last intervals between its /diagnostics reports, s (the longest sets the patience).
+    diag_intervals: [f64; 4],
+    diag_count: usize,
+}
+
+impl NodeHealth {
+    /// How long the node may stay quiet before it is called silent.
+    pub fn patience_s(&self, config: &WatchConfig) -> f64 {
+        let period = self.diag_intervals.iter().fold(0.0f64, |m, v| m.max(*v));
+        config.silent_after_s.max(1.5 * period)
+    }
+}
+
+/// The topics a node publishes, by the node's default name: a message on one of them is a
+/// sign of life of that node. `/rpkm/actuator_state` is not here: a replayed bag publishes
+/// it as well as ingest.
+pub const NODE_TOPICS: [(&str, &str); 4] = [
+    ("/rpkm/tcp_estimate", "tcp_estimator"),
+    ("/rpkm/preload_status", "preload_monitor"),
+    ("/rpkm/parameters", "calibrator"),
+    ("/rpkm/diagnosis", "calibrator"),
+];
+
+/// Outcome counts of TcpEstimate (`outcome` 0, 1, 2) and the last fallback's reason code.
+#[derive(Debug, Clone, Default)]
+pub struct Outcomes {
+    pub ok: u64,
+    pub warm_rejected_cold_ok: u64,
+    pub rigid_fallback: u64,
+    /// `outcome` values outside 0..=2 (a newer publisher).
+    pub unknown: u64,
+    pub last_reason: Option<u8>,
+}
+
+/// Receive-to-receive latency from an ActuatorState to the TcpEstimate of the same seq, as
+/// the monitor sees them (so it includes the monitor's own polling delay).
+#[derive(Debug, Clone)]
+pub struct Latency {
+    /// Receive time of the last states, by seq modulo the ring's length.
+    sent: Box<[(u64, f64)]>,
+    pub last_ms: Option<f64>,
+    window_max_ms: f64,
+    pub max_ms: Option<f64>,
+    window_start: f64,
+}
+
+impl Latency {
+    const RING: usize = 8192;
+
+    fn new() -> Self {
+        Self {
+            sent: vec![(u64::MAX, 0.0); Self::RING].into_boxed_slice(),
+            last_ms: None,
+            window_max_ms: 0.0,
+            max_ms: None,
+            window_start: 0.0,
+        }
+    }
+
+    fn state(&mut self, seq: u64, now: f64) {
+        self.sent[(seq % Self::RING as u64) as usize] = (seq, now);
+    }
+
+    fn estimate(&mut self, seq: u64, now: f64) {
+        let (s, t) = self.sent[(seq % Self::RING as u64) as usize];
+        if s != seq {
+            return;
+        }
+        let ms = (now - t) * 1e3;
+        self.last_ms = Some(ms);
+        self.window_max_ms = self.window_max_ms.max(ms);
+        if now - self.window_start >= 1.0 {
+            self.max_ms = Some(self.window_max_ms);
+            self.window_max_ms = 0.0;
+            self.window_start = now;
+        }
+    }
+}
+
+/// Everything the monitor has heard.
+#[derive(Debug, Clone)]
+pub struct Watch {
+    pub config: WatchConfig,
+    pub thresholds: Thresholds,
+    /// Last PreloadStatus and when it arrived.
+    pub preload: Option<(PreloadStatus, f64)>,
+    pub preload_count: u64,
+    /// The level history: per time bucket (index = now / history_bucket_s) that had a
+    /// PreloadStatus, the worst held level in it; oldest first.
+    pub history: VecDeque<(u64, u8)>,
+    /// PreloadStatus messages per held level OK, WARN, ERROR (others not counted).
+    pub level_counts: [u64; 3],
+    /// When the held level was first WARN and first ERROR, s.
+    pub first_warn_s: Option<f64>,
+    pub first_error_s: Option<f64>,
+    pub state: Option<ActuatorState>,
+    pub state_count: u64,
+    pub state_rate: RateMeter,
+    pub last_state_s: Option<f64>,
+    pub estimate: Option<TcpEstimate>,
+    pub estimate_count: u64,
+    pub estimate_rate: RateMeter,
+    pub outcomes: Outcomes,
+    pub latency: Latency,
+    pub measurement_count: u64,
+    pub campaign: Option<CampaignInfo>,
+    pub parameters: Option<(Parameters, f64)>,
+    pub diagnosis: Option<(Diagnosis, f64)>,
+    /// Nodes heard so far, by name (`rpkm/<name>` on /diagnostics, or the publisher of a
+    /// topic of [`NODE_TOPICS`]).
+    pub nodes: BTreeMap<String, NodeHealth>,
+    /// Samples that could not be received (decode or transport errors), and the last one.
+    pub receive_errors: u64,
+    pub last_receive_error: Option<(String, f64)>,
+}
+
+impl Watch {
+    pub fn new(config: WatchConfig, thresholds: Thresholds) -> Self {
+        Self {
+            config,
+            thresholds,
+            preload: None,
+            preload_count: 0,
+            history: VecDeque::with_capacity(config.history_len),
+            level_counts: [0; 3],
+            first_warn_s: None,
+            first_error_s: None,
+            state: None,
+            state_count: 0,
+            state_rate: RateMeter::default(),
+            last_state_s: None,
+            estimate: None,
+            estimate_count: 0,
+            estimate_rate: RateMeter::default(),
+            outcomes: Outcomes::default(),
+            latency: Latency::new(),
+            measurement_count: 0,
+            campaign: None,
+            parameters: None,
+            diagnosis: None,
+            nodes: BTreeMap::new(),
+            receive_errors: 0,
+            last_receive_error: None,
+        }
+    }
+
+    fn heard_topic(&mut self, topic: &str, now: f64) {
+        if let Some((_, node)) = NODE_TOPICS.iter().find(|(t, _)| *t == topic) {
+            self.nodes
+                .entry((*node).to_owned())
+                .or_default()
+                .last_heard_s = now;
+        }
+    }
+
+    pub fn on_state(&mut self, s: &ActuatorState, now: f64) {
+        self.state = Some(*s);
+        self.state_count += 1;
+        self.state_rate.count(now);
+        self.last_state_s = Some(now);
+        self.latency.state(s.seq, now);
+    }
+
+    pub fn on_estimate(&mut self, e: &TcpEstimate, now: f64) {
+        self.heard_topic("/rpkm/tcp_estimate", now);
+        self.estimate = Some(*e);
+        self.estimate_count += 1;
+        self.estimate_rate.count(now);
+        self.latency.estimate(e.seq, now);
+        let o = &mut self.outcomes;
+        match e.outcome {
+            TcpEstimate::OUTCOME_OK => o.ok += 1,
+            TcpEstimate::OUTCOME_WARM_REJECTED_COLD_OK => o.warm_rejected_cold_ok += 1,
+            TcpEstimate::OUTCOME_RIGID_FALLBACK => o.rigid_fallback += 1,
+            _ => o.unknown += 1,
+        }
+        if e.outcome != TcpEstimate::OUTCOME_OK {
+            o.last_reason = Some(e.reason);
+        }
+    }
+
+    pub fn on_preload(&mut self, s: &PreloadStatus, now: f64) {
+        self.heard_topic("/rpkm/preload_status", now);
+        self.preload = Some((*s, now));
+        self.preload_count += 1;
+        if let Some(count) = self.level_counts.get_mut(usize::from(s.level)) {
+            *count += 1;
+        }
+        let bucket = self.bucket(now);
+        match self.history.back_mut() {
+            Some((b, level)) if *b == bucket => *level = (*level).max(s.level),
+            _ => {
+                if self.history.len() >= self.config.history_len.max(1) {
+                    self.history.pop_front();
+                }
+                self.history.push_back((bucket, s.level));
+            }
+        }
+        if s.level >= PreloadStatus::WARN {
+            self.first_warn_s.get_or_insert(now);
+        }
+        if s.level >= PreloadStatus::ERROR {
+            self.first_error_s.get_or_insert(now);
+        }
+    }
+
+    /// The history bucket of a time.
+    pub fn bucket(&self, now: f64) -> u64 {
+        let b = now / self.config.history_bucket_s;
+        if b.is_finite() && b > 0.0 {
+            b as u64
+        } else {
+            0
+        }
+    }
+
+    pub fn on_measurement(&mut self, _m: &TcpMeasurement, _now: f64) {
+        self.measurement_count += 1;
+    }
+
+    pub fn on_campaign(&mut self, c: CampaignInfo) {
+        self.campaign = Some(c);
+    }
+
+    pub fn on_parameters(&mut self, p: Parameters, now: f64) {
+        self.heard_topic("/rpkm/parameters", now);
+        self.parameters = Some((p, now));
+    }
+
+    pub fn on_diagnosis(&mut self, d: Diagnosis, now: f64) {
+        self.heard_topic("/rpkm/diagnosis", now);
+        self.diagnosis = Some((d, now));
+    }
+
+    /// Every status of the array: the node named `rpkm/<node>` is alive; preload_monitor's
+    /// message gives the thresholds unless a parameter file did.
+    pub fn on_diagnostics(&mut self, a: DiagnosticArray, now: f64) {
+        for st in a.status {
+            let name = st.name.strip_prefix("rpkm/").unwrap_or(&st.name).to_owned();
+            if name == "preload_monitor" {
+                self.thresholds_from_message(&st.message);
+            }
+            let node = self.nodes.entry(name).or_default();
+            if let Some((_, at)) = node.diagnostic {
+                let k = node.diag_count % node.diag_intervals.len();
+                node.diag_intervals[k] = now - at;
+                node.diag_count += 1;
+            }
+            node.last_heard_s = now;
+            node.diagnostic = Some((st, now));
+        }
+    }
+
+    fn thresholds_from_message(&mut self, message: &str) {
+        if matches!(self.thresholds.source, ThresholdSource::ParamsFile(_)) {
+            return;
+        }
+        if let Some((warn, error)) = parse_thresholds(message, "%") {
+            self.thresholds.warn_percent = warn;
+            self.thresholds.error_percent = error;
+            self.thresholds.source = ThresholdSource::Diagnostics;
+        }
+        if let Some((w, e)) = parse_thresholds(message, "mm") {
+            self.thresholds.dq_m = Some((w / 1e3, e / 1e3));
+        }
+    }
+
+    pub fn on_receive_error(&mut self, error: String, now: f64) {
+        self.receive_errors += 1;
+        self.last_receive_error = Some((error, now));
+    }
+
+    /// Closes the rate windows (call at every redraw, so that rates fall to 0 when a stream
+    /// stops).
+    pub fn tick(&mut self, now: f64) {
+        self.state_rate.tick(now);
+        self.estimate_rate.tick(now);
+    }
+
+    /// The nodes heard before that have been quiet past their patience, with how long, s.
+    pub fn silent(&self, now: f64) -> Vec<(&str, f64)> {
+        self.nodes
+            .iter()
+            .filter_map(|(name, n)| {
+                let quiet = now - n.last_heard_s;
+                (quiet > n.patience_s(&self.config)).then_some((name.as_str(), quiet))
+            })
+            .collect()
+    }
+
+    /// Whether the last drive state had q2 and q3 in follower mode (Δq2/Δq3 are meaningful).
+    pub fn follower_mode(&self) -> bool {
+        self.state.is_some_and(|s| s.follower[1] && s.follower[2])
+    }
+
+    /// Per drive (measured %, predicted %, deviation %, level by the thresholds).
+    pub fn drives(&self) -> Option<[(f64, f64, f64, Option<u8>); 4]> {
+        let (s, _) = self.preload?;
+        Some([0, 1, 2, 3].map(|i| {
+            let d = s.deviation[i];
+            (
+                s.measured_current[i],
+                s.predicted_current[i],
+                d,
+                self.thresholds.level_of(d),
+            )
+        }))
+    }
+}
+
+/// `OK`, `WARN`, `ERROR` (PreloadStatus and DiagnosticStatus share the codes), `STALE`.
+pub fn level_name(level: u8) -> &'static str {
+    match level {
+        0 => "OK",
+        1 => "WARN",
+        2 => "ERROR",
+        3 => "STALE",
+        _ => "?",
+    }
+}
+
+/// The name of a TcpEstimate reason code (the REASON_* constants).
+pub fn reason_name(code: u8) -> &'static str {
+    match code {
+        0 => "none",
+        1 => "not_converged",
+        2 => "loop_closure",
+        3 => "force_balance",
+        4 => "force_limit",
+        5 => "platform_angle",
+        6 => "far_from_rigid",
+        _ => "unknown",
+    }
+}
+
+/// A finite number as JSON, else null (JSON has no NaN).
+fn num(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+impl Watch {
+    /// The snapshot `rpkm monitor --once --json` prints (SI units as on the topics, currents
+    /// in %).
+    pub fn snapshot(&self, now: f64) -> Value {
+        json!({
+            "elapsed_s": now,
+            "preload": self.preload_json(),
+            "thresholds": self.thresholds_json(),
+            "follower_mode": self.follower_mode(),
+            "actuator_state": {
+                "count": self.state_count,
+                "rate_hz": self.state_rate.rate_hz(),
+                "last_seq": self.state.map(|s| s.seq),
+            },
+            "tcp_estimate": self.estimate_json(),
+            "tcp_measurement_count": self.measurement_count,
+            "parameters": self.parameters.as_ref().map(|(p, _)| parameters_json(p)),
+            "diagnosis": self.diagnosis.as_ref().map(|(d, _)| diagnosis_json(d)),
+            "nodes": self.nodes_json(now),
+            "receive_errors": self.receive_errors,
+            "last_receive_error": self.last_receive_error.as_ref().map(|(e, _)| e.clone()),
+            "silent": self.silent(now).iter().map(|(n, _)| *n).collect::<Vec<_>>(),
+        })
+    }
+
+    fn preload_json(&self) -> Value {
+        let Some((s, _)) = self.preload else {
+            return Value::Null;
+        };
+        let drives: Vec<Value> = self
+            .drives()
+            .into_iter()
+            .flatten()
+            .enumerate()
+            .map(|(i, (m, p, d, l))| {
+                json!({
+                    "drive": format!("q{}", i + 1),
+                    "measured_percent": num(m),
+                    "predicted_percent": num(p),
+                    "deviation_percent": num(d),
+                    "level": l.map(level_name),
+                })
+            })
+            .collect();
+        let count = |l: usize| self.level_counts[l];
+        json!({
+            "count": self.preload_count,
+            "level": level_name(s.level),
+            "drives": drives,
+            "dq2_m": num(s.dq2),
+            "dq3_m": num(s.dq3),
+            "history": {"OK": count(0), "WARN": count(1), "ERROR": count(2)},
+            "first_warn_s": self.first_warn_s,
+            "first_error_s": self.first_error_s,
+        })
+    }
+
+    fn thresholds_json(&self) -> Value {
+        let t = &self.thresholds;
+        let source = match &t.source {
+            ThresholdSource::Unknown => "unknown".to_owned(),
+            ThresholdSource::ParamsFile(f) => format!("params {f}"),
+            ThresholdSource::Diagnostics => "preload_monitor /diagnostics".to_owned(),
+        };
+        json!({
+            "warn_percent": num(t.warn_percent),
+            "error_percent": num(t.error_percent),
+            "dq_warn_m": t.dq_m.map(|d| d.0),
+            "dq_error_m": t.dq_m.map(|d| d.1),
+            "source": source,
+        })
+    }
+
+    fn estimate_json(&self) -> Value {
+        let o = &self.outcomes;
+        json!({
+            "count": self.estimate_count,
+            "rate_hz": self.estimate_rate.rate_hz(),
+            "last": self.estimate.map(|e| json!({
+                "seq": e.seq, "x_m": num(e.x), "y_m": num(e.y), "psi_rad": num(e.psi),
+                "converged": e.converged, "outcome": e.outcome,
+                "reason": reason_name(e.reason),
+            })),
+            "outcomes": {
+                "ok": o.ok,
+                "warm_rejected_cold_ok": o.warm_rejected_cold_ok,
+                "rigid_fallback": o.rigid_fallback,
+                "unknown": o.unknown,
+            },
+            "last_fallback_reason": o.last_reason.map(reason_name),
+            "latency_ms": {"last": self.latency.last_ms, "max_last_second": self.latency.max_ms},
+        })
+    }
+
+    fn nodes_json(&self, now: f64) -> Value {
+        let nodes: Vec<Value> = self
+            .nodes
+            .iter()
+            .map(|(name, n)| {
+                let quiet = now - n.last_heard_s;
+                json!({
+                    "name": name,
+                    "quiet_s": quiet,
+                    "silent": quiet > n.patience_s(&self.config),
+                    "level": n.diagnostic.as_ref().map(|(d, _)| level_name(d.level)),
+                    "message": n.diagnostic.as_ref().map(|(d, _)| d.message.clone()),
+                })
+            })
+            .collect();
+        Value::Array(nodes)
+    }
+}
+
+fn parameters_json(p: &Parameters) -> Value {
+    json!({
+        "model": p.model,
+        "measurement_count": p.measurement_count,
+        "cal_rms_m": num(p.cal_rms),
+        "val_rms_m": num(p.val_rms),
+        "max_abs_residual_m": num(p.max_abs_residual),
+        "condition_number": num(p.condition_number),
+        "active_effects": p.active_effects,
+        "identified": p.names.iter().zip(&p.sigmas).filter(|(_, s)| **s > 0.0).count(),
+    })
+}
+
+fn diagnosis_json(d: &Diagnosis) -> Value {
+    json!({
+        "missing_effect": d.missing_effect,
+        "significant": d.candidates.iter().filter(|c| c.significant)
+            .map(|c| c.effect.clone()).collect::<Vec<_>>(),
+        "candidates": d.candidates.len(),
+        "baseline_val_rms_m": num(d.baseline_val_rms),
+        "noise_floor_m": num(d.noise_floor),
+    })
+}
+
+#[cfg(test)]
+mod tests;
