@@ -53,7 +53,12 @@ impl Log for StderrLog {
             // its logging, which would come back here.
             if let Some(sink) = FORWARD.get().filter(|_| r.target().starts_with("rpkm")) {
                 let text = format!("[{}] {}", r.target(), r.args());
-                sink(r.level(), &text, r.file().unwrap_or(""), r.line().unwrap_or(0));
+                sink(
+                    r.level(),
+                    &text,
+                    r.file().unwrap_or(""),
+                    r.line().unwrap_or(0),
+                );
             }
         }
     }

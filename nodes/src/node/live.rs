@@ -202,6 +202,9 @@ impl LiveParams {
         }
         let names = changes.iter().map(|(k, _)| k.clone()).collect();
         self.current.extend(changes);
-        Some((with_changes(&self.base, &self.initial, &self.current), names))
+        Some((
+            with_changes(&self.base, &self.initial, &self.current),
+            names,
+        ))
     }
 }

@@ -169,7 +169,7 @@ pub fn geometry_specs() -> [live::Spec; 4] {
             "stiffness_factor",
             Default::F64(1.0),
             "scale of the spring model's stiffnesses (> 0)",
-            rpkm_transport::dds_params::ParamRange::Float(f64::MIN_POSITIVE, f64::MAX),
+            rpkm_transport::dds_params::ParamRange::None,
         ),
         Spec::fixed(
             "geometry_file",

@@ -25,8 +25,8 @@ use rpkm_transport::dds_params::ParamRange;
 use super::inputs::{ParameterFollower, SeqGaps};
 use super::live::{self, LiveParams, Spec};
 use super::{
-    bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext, NodeParams,
-    MM_PER_M,
+    bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext,
+    NodeParams, MM_PER_M,
 };
 
 /// Parameter keys of the node.
@@ -397,23 +397,50 @@ const fn count_range((lo, hi): (u64, u64)) -> ParamRange {
 /// The node's parameters on its ROS 2 parameter services (thresholds and model live).
 fn specs() -> Vec<Spec> {
     let d = Thresholds::default();
-    let positive = ParamRange::Float(f64::MIN_POSITIVE, f64::MAX);
+    // > 0 without an upper bound: no descriptor range, the node's check says it.
+    let positive = ParamRange::None;
     let mut specs = vec![
-        Spec::live("warn_percent", live::Default::F64(d.warn_percent),
-            "WARN from this |measured - predicted| redundancy current, % of 8,600 N (> 0)", positive),
-        Spec::live("error_percent", live::Default::F64(d.error_percent),
-            "ERROR from this deviation, % (>= warn_percent)", positive),
-        Spec::live("dq_warn_m", live::Default::F64(d.dq_warn_m),
-            "WARN from this |dq2|, |dq3| of the followers, m (> 0)", positive),
-        Spec::live("dq_error_m", live::Default::F64(d.dq_error_m),
-            "ERROR from this |dq2|, |dq3|, m (>= dq_warn_m)", positive),
-        Spec::live("debounce_samples", live::Default::U64(u64::from(d.debounce_samples)),
-            "consecutive samples before a level is taken", count_range(super::params::SAMPLE_COUNT)),
-        Spec::live("status_every", live::Default::U64(1),
+        Spec::live(
+            "warn_percent",
+            live::Default::F64(d.warn_percent),
+            "WARN from this |measured - predicted| redundancy current, % of 8,600 N (> 0)",
+            positive,
+        ),
+        Spec::live(
+            "error_percent",
+            live::Default::F64(d.error_percent),
+            "ERROR from this deviation, % (>= warn_percent)",
+            positive,
+        ),
+        Spec::live(
+            "dq_warn_m",
+            live::Default::F64(d.dq_warn_m),
+            "WARN from this |dq2|, |dq3| of the followers, m (> 0)",
+            positive,
+        ),
+        Spec::live(
+            "dq_error_m",
+            live::Default::F64(d.dq_error_m),
+            "ERROR from this |dq2|, |dq3|, m (>= dq_warn_m)",
+            positive,
+        ),
+        Spec::live(
+            "debounce_samples",
+            live::Default::U64(u64::from(d.debounce_samples)),
+            "consecutive samples before a level is taken",
+            count_range(super::params::SAMPLE_COUNT),
+        ),
+        Spec::live(
+            "status_every",
+            live::Default::U64(1),
             "PreloadStatus every this many samples (and at every level change)",
-            count_range(super::params::SAMPLE_COUNT)),
-        Spec::fixed("busy_poll_ms", live::Default::F64(0.0),
-            "yield-polling time after a sample before sleeping, ms (0 to 1000)"),
+            count_range(super::params::SAMPLE_COUNT),
+        ),
+        Spec::fixed(
+            "busy_poll_ms",
+            live::Default::F64(0.0),
+            "yield-polling time after a sample before sleeping, ms (0 to 1000)",
+        ),
     ];
     specs.extend(super::geometry_specs());
     specs

@@ -26,9 +26,8 @@ use futures::{FutureExt, StreamExt};
 use ros2_client::parameters::raw;
 use ros2_client::rcl_interfaces::{
     DescribeParametersRequest, DescribeParametersResponse, GetParameterTypesRequest,
-    GetParameterTypesResponse, GetParametersRequest, GetParametersResponse,
-    ListParametersRequest, ListParametersResponse, ListParametersResult, SetParametersRequest,
-    SetParametersResponse,
+    GetParameterTypesResponse, GetParametersRequest, GetParametersResponse, ListParametersRequest,
+    ListParametersResponse, ListParametersResult, SetParametersRequest, SetParametersResponse,
 };
 use ros2_client::{Name, Node, QosProfile, RmwRequestId, ServiceMapping, ServiceTypeName};
 use serde::{Deserialize, Serialize};
@@ -219,9 +218,8 @@ where
     let fqn = node.fully_qualified_name();
     let name = Name::new(&fqn, service).map_err(|e| format!("{service}: {e:?}"))?;
     // rmw's service QoS: reliable, volatile, keep last 10.
-    let qos = QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast {
-        depth: 10,
-    });
+    let qos =
+        QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth: 10 });
     node.create_server(
         ServiceMapping::Cyclone,
         &name,
@@ -365,8 +363,9 @@ impl Service {
             .iter()
             .map(|n| match self.store.decls.get(n) {
                 Some(d) => d.descriptor(),
-                None => ParamDecl::read_only(n, ParameterValue::NotSet, "not declared")
-                    .descriptor(),
+                None => {
+                    ParamDecl::read_only(n, ParameterValue::NotSet, "not declared").descriptor()
+                }
             })
             .collect()
     }
@@ -387,11 +386,7 @@ fn request_err(service: &str, e: impl std::fmt::Debug) {
     log::warn!("parameter service {service}: bad request: {e:?}");
 }
 
-async fn serve(
-    s: Servers,
-    mut svc: Service,
-    stop: futures::channel::oneshot::Receiver<()>,
-) {
+async fn serve(s: Servers, mut svc: Service, stop: futures::channel::oneshot::Receiver<()>) {
     let mut stop = stop.fuse();
     let list = s.list.receive_request_stream();
     futures::pin_mut!(list);
@@ -473,7 +468,10 @@ impl DdsNode {
             reason,
         };
         let servers = {
-            let mut node = self.node.lock().map_err(|_| err("node mutex poisoned".into()))?;
+            let mut node = self
+                .node
+                .lock()
+                .map_err(|_| err("node mutex poisoned".into()))?;
             servers(&mut node).map_err(err)?
         };
         // The declarations, as rclcpp announces them: one event with every new parameter.
