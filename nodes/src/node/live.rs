@@ -165,6 +165,19 @@ impl LiveParams {
                 }
             });
         }
+        // The backends as the command line may have chosen them, not only the files.
+        let name = |b: rpkm_transport::Backend| match b {
+            rpkm_transport::Backend::Ipc => "ipc",
+            rpkm_transport::Backend::Dds => "dds",
+            rpkm_transport::Backend::Both => "both",
+        };
+        for d in &mut decls {
+            match d.name.as_str() {
+                "backend" => d.value = ParameterValue::String(name(ctx.output).into()),
+                "input_backend" => d.value = ParameterValue::String(name(ctx.input).into()),
+                _ => {}
+            }
+        }
         let initial: BTreeMap<String, ParameterValue> = decls
             .iter()
             .map(|d| (d.name.clone(), d.value.clone()))
