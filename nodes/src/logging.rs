@@ -5,7 +5,19 @@
 //! `debug`, `trace`, `off`). The other crates (rustdds, ros2-client) are quiet by default:
 //! rustdds reports routine shutdown races as errors. From `info` on they report warnings.
 
+use std::sync::OnceLock;
+
 use log::{Level, LevelFilter, Log, Metadata, Record};
+
+/// Where a node sends the records it also writes to stderr: `/rosout`.
+type Sink = Box<dyn Fn(Level, &str, &str, u32) + Send + Sync>;
+static FORWARD: OnceLock<Sink> = OnceLock::new();
+
+/// Sends every record written to stderr from now on to `sink` as well (a node's `/rosout`);
+/// the first sink of the process stays.
+pub fn forward(sink: Sink) {
+    let _ = FORWARD.set(sink);
+}
 
 struct StderrLog {
     rpkm: LevelFilter,
@@ -37,6 +49,17 @@ impl Log for StderrLog {
                 Level::Trace => "trace",
             };
             eprintln!("rpkm {level} [{}]: {}", r.target(), r.args());
+            // rpkm's own records only: ros2-client reports each /rosout record again through
+            // its logging, which would come back here.
+            if let Some(sink) = FORWARD.get().filter(|_| r.target().starts_with("rpkm")) {
+                let text = format!("[{}] {}", r.target(), r.args());
+                sink(
+                    r.level(),
+                    &text,
+                    r.file().unwrap_or(""),
+                    r.line().unwrap_or(0),
+                );
+            }
         }
     }
 

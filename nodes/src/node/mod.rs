@@ -10,6 +10,7 @@
 pub mod calibrator;
 pub mod ingest;
 pub mod inputs;
+pub mod live;
 pub mod params;
 pub mod preload_monitor;
 pub mod realtime;
@@ -23,6 +24,7 @@ use anyhow::Context;
 use rpkm_core::elastic::Stiffness;
 use rpkm_core::params::{self as core_params, Model, Params, NAMES};
 use rpkm_msgs::{DiagnosticArray, DiagnosticStatus, Header, KeyValue, Parameters, Time};
+use rpkm_transport::dds::RosoutLevel;
 use rpkm_transport::{
     Backend, IpcMessage, Publisher, Subscriber, Topic, Transport, TransportConfig,
 };
@@ -143,6 +145,44 @@ pub const GEOMETRY_KEYS: [&str; 5] = [
     "geometry.",
     "follow_parameters",
 ];
+
+/// Whether a parameter key changes the model ([`Geometry::from_params`]).
+pub fn is_geometry_key(key: &str) -> bool {
+    GEOMETRY_KEYS
+        .iter()
+        .any(|g| *g == key || (g.ends_with('.') && key.starts_with(g)))
+}
+
+/// The geometry parameters on the ROS 2 parameter services: model and stiffness live (the
+/// next sample uses them), the file and following read-only. `geometry.<name>` overrides
+/// (SI) are set in the parameter file.
+pub fn geometry_specs() -> [live::Spec; 4] {
+    use live::{Default, Spec};
+    [
+        Spec::live(
+            "model",
+            Default::U64(29),
+            "geometric model: 24 or 29 parameters",
+            rpkm_transport::dds_params::ParamRange::Integer(24, 29),
+        ),
+        Spec::live(
+            "stiffness_factor",
+            Default::F64(1.0),
+            "scale of the spring model's stiffnesses (> 0)",
+            rpkm_transport::dds_params::ParamRange::None,
+        ),
+        Spec::fixed(
+            "geometry_file",
+            Default::Str(""),
+            "JSON of parameter name -> value (mm, rad) as rpkm calibrate --json writes",
+        ),
+        Spec::fixed(
+            "follow_parameters",
+            Default::Bool(true),
+            "replace the geometry by every /rpkm/parameters message",
+        ),
+    ]
+}
 
 /// An opened node: its name, parameters and transport.
 pub struct NodeContext {
@@ -298,6 +338,19 @@ impl NodeContext {
         }
         let transport = Transport::new(&config)
             .with_context(|| format!("node {name}: opening the transport"))?;
+        if let Some(dds) = transport.dds_node() {
+            // The libraries' warnings (a dead subscriber, ...) reach /rosout too.
+            let dds = std::sync::Arc::clone(dds);
+            crate::logging::forward(Box::new(move |level, text, file, line| {
+                let level = match level {
+                    log::Level::Error => RosoutLevel::Error,
+                    log::Level::Warn => RosoutLevel::Warn,
+                    log::Level::Info => RosoutLevel::Info,
+                    _ => RosoutLevel::Debug,
+                };
+                dds.rosout(level, text, file, line);
+            }));
+        }
         Ok(Self {
             name,
             params: setup.params,
@@ -321,14 +374,33 @@ impl NodeContext {
             .with_context(|| format!("node {}", self.name))
     }
 
-    /// Logs one line to stderr, prefixed with the node name (launch output interleaves).
+    /// Logs one line to stderr, prefixed with the node name (launch output interleaves), and
+    /// with DDS on `/rosout` too, at the severity its prefix names (`WARN:`, `ERROR:`; else
+    /// info), with the caller's file and line.
+    #[track_caller]
     pub fn log(&self, msg: impl std::fmt::Display) {
-        log_line(&self.name, msg);
+        let text = msg.to_string();
+        log_line(&self.name, &text);
+        if let Some(dds) = self.transport.dds_node() {
+            let at = std::panic::Location::caller();
+            dds.rosout(severity(&text), &text, at.file(), at.line());
+        }
     }
 
     /// Period of the regular /diagnostics report.
     pub fn diagnostics_period(&self) -> anyhow::Result<Duration> {
         diagnostics_period(&self.params)
+    }
+}
+
+/// The `/rosout` severity of a node's log line: the nodes write levels as a prefix.
+pub fn severity(line: &str) -> RosoutLevel {
+    if line.starts_with("ERROR") {
+        RosoutLevel::Error
+    } else if line.starts_with("WARN") {
+        RosoutLevel::Warn
+    } else {
+        RosoutLevel::Info
     }
 }
 

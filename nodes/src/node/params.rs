@@ -450,6 +450,17 @@ impl NodeParams {
         Ok(out)
     }
 
+    /// Sets `key` as the node's `set_parameters` service accepted it (origin
+    /// `set_parameters: /<node>/ros__parameters`).
+    pub fn set_from_service(&mut self, key: &str, value: Value) {
+        let origin = Origin {
+            file: "set_parameters".into(),
+            section: format!("/{}", self.node),
+            specific: true,
+        };
+        self.values.insert(key.to_owned(), (value, origin));
+    }
+
     /// The origin of a key, for messages.
     pub fn origin(&self, key: &str) -> Option<&Origin> {
         self.values.get(key).map(|(_, o)| o)

@@ -20,9 +20,13 @@ use rpkm_core::geometry::rgm;
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, PreloadLevel, PreloadStatus};
 use rpkm_transport::topic;
 
+use rpkm_transport::dds_params::ParamRange;
+
 use super::inputs::{ParameterFollower, SeqGaps};
+use super::live::{self, LiveParams, Spec};
 use super::{
-    bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext, MM_PER_M,
+    bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext,
+    NodeParams, MM_PER_M,
 };
 
 /// Parameter keys of the node.
@@ -134,6 +138,12 @@ impl Monitor {
     pub fn set_geometry(&mut self, g: Geometry) {
         self.geometry = g;
         self.previous = None;
+    }
+
+    /// Replaces the thresholds (a parameter set); the held level is taken again from the
+    /// next samples.
+    pub fn set_thresholds(&mut self, t: Thresholds) {
+        self.thresholds = t;
     }
 
     /// The held level.
@@ -328,11 +338,15 @@ impl Monitor {
     }
 }
 
-/// Runs the node until SIGINT/SIGTERM.
-pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
-    let declared = super::declared_keys("preload_monitor").unwrap_or_default();
-    let ctx = NodeContext::open("preload_monitor", args, &declared, None)?;
-    let p = &ctx.params;
+/// What the node reads from its parameters; built at start and again for every set through
+/// the parameter services (the same bounds either way).
+struct Config {
+    thresholds: Thresholds,
+    status_every: u64,
+    geometry: Geometry,
+}
+
+fn configure(p: &NodeParams) -> anyhow::Result<Config> {
     let d = Thresholds::default();
     let thresholds = Thresholds {
         warn_percent: p
@@ -360,13 +374,92 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             thresholds.error_percent, thresholds.warn_percent
         )));
     }
+    if thresholds.dq_error_m < thresholds.dq_warn_m {
+        return Err(crate::error::bad_input(format!(
+            "preload_monitor: dq_error_m {} below dq_warn_m {}",
+            thresholds.dq_error_m, thresholds.dq_warn_m
+        )));
+    }
     let status_every = p
         .u64_in("status_every", 1, super::params::SAMPLE_COUNT)
         .map_err(bad_param)?;
+    Ok(Config {
+        thresholds,
+        status_every,
+        geometry: Geometry::from_params(p)?,
+    })
+}
+
+const fn count_range((lo, hi): (u64, u64)) -> ParamRange {
+    ParamRange::Integer(lo as i64, hi as i64)
+}
+
+/// The node's parameters on its ROS 2 parameter services (thresholds and model live).
+fn specs() -> Vec<Spec> {
+    let d = Thresholds::default();
+    // > 0 without an upper bound: no descriptor range, the node's check says it.
+    let positive = ParamRange::None;
+    let mut specs = vec![
+        Spec::live(
+            "warn_percent",
+            live::Default::F64(d.warn_percent),
+            "WARN from this |measured - predicted| redundancy current, % of 8,600 N (> 0)",
+            positive,
+        ),
+        Spec::live(
+            "error_percent",
+            live::Default::F64(d.error_percent),
+            "ERROR from this deviation, % (>= warn_percent)",
+            positive,
+        ),
+        Spec::live(
+            "dq_warn_m",
+            live::Default::F64(d.dq_warn_m),
+            "WARN from this |dq2|, |dq3| of the followers, m (> 0)",
+            positive,
+        ),
+        Spec::live(
+            "dq_error_m",
+            live::Default::F64(d.dq_error_m),
+            "ERROR from this |dq2|, |dq3|, m (>= dq_warn_m)",
+            positive,
+        ),
+        Spec::live(
+            "debounce_samples",
+            live::Default::U64(u64::from(d.debounce_samples)),
+            "consecutive samples before a level is taken",
+            count_range(super::params::SAMPLE_COUNT),
+        ),
+        Spec::live(
+            "status_every",
+            live::Default::U64(1),
+            "PreloadStatus every this many samples (and at every level change)",
+            count_range(super::params::SAMPLE_COUNT),
+        ),
+        Spec::fixed(
+            "busy_poll_ms",
+            live::Default::F64(0.0),
+            "yield-polling time after a sample before sleeping, ms (0 to 1000)",
+        ),
+    ];
+    specs.extend(super::geometry_specs());
+    specs
+}
+
+/// Runs the node until SIGINT/SIGTERM.
+pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
+    let declared = super::declared_keys("preload_monitor").unwrap_or_default();
+    let ctx = NodeContext::open("preload_monitor", args, &declared, None)?;
+    let p = &ctx.params;
+    let Config {
+        thresholds,
+        mut status_every,
+        geometry,
+    } = configure(p)?;
     let busy = p
         .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
         .map_err(bad_param)?;
-    let geometry = Geometry::from_params(p)?;
+    let mut live = LiveParams::start(&ctx, &specs(), |p| configure(p).map(|_| ()))?;
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
     let mut parameters = ParameterFollower::open(&ctx)?;
     let statuses = ctx.publisher(&topic::PRELOAD_STATUS)?;
@@ -403,6 +496,16 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 }
             }
             None => {
+                // Between samples only: a set costs the sample path nothing.
+                if let Some((p, names)) = live.poll() {
+                    let c = configure(&p)?;
+                    monitor.set_thresholds(c.thresholds);
+                    status_every = c.status_every;
+                    if names.iter().any(|k| super::is_geometry_key(k)) {
+                        monitor.set_geometry(c.geometry);
+                    }
+                    ctx.log(format!("parameters set: {}", names.join(", ")));
+                }
                 if report.due() {
                     diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
                     // A loss is logged once per report, not per gap (a stall loses in bursts).

@@ -33,6 +33,19 @@ pub fn domain_id_from_env() -> Result<u16, TransportError> {
     }
 }
 
+/// Severity of a `/rosout` record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RosoutLevel {
+    /// 10.
+    Debug,
+    /// 20.
+    Info,
+    /// 30.
+    Warn,
+    /// 40.
+    Error,
+}
+
 /// A message as ros2-client sees it: the same serde form, with ros2-client's marker trait.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(transparent)]
@@ -62,8 +75,12 @@ pub fn qos_profile(qos: Qos) -> QosProfile {
 
 /// A DDS participant with one ROS 2 node.
 pub struct DdsNode {
-    node: Mutex<Node>,
+    pub(crate) node: Mutex<Node>,
     domain: u16,
+    /// The `/rosout` writer, usable without the node's lock.
+    rosout: ros2_client::rosout::NodeLoggingHandle,
+    /// Logger name as rclcpp names a node's logger: `rpkm.<name>`.
+    logger: String,
 }
 
 impl std::fmt::Debug for DdsNode {
@@ -75,7 +92,9 @@ impl std::fmt::Debug for DdsNode {
 }
 
 impl DdsNode {
-    /// Joins `domain` with a node `/rpkm/<name>` (no rosout, no parameter services).
+    /// Joins `domain` with a node `/rpkm/<name>`, with a `/rosout` writer ([`Self::rosout`])
+    /// and a `/parameter_events` writer. The parameter services are rpkm's own
+    /// ([`crate::dds_params`]), started by [`Self::serve_parameters`].
     pub fn new(name: &str, domain: u16) -> Result<Arc<Self>, TransportError> {
         let err = |reason: String| TransportError::DdsNode {
             node: name.to_owned(),
@@ -89,20 +108,55 @@ impl DdsNode {
         let node = context
             .new_node(
                 node_name,
+                // ros2-client's store is used for the events only: every parameter rpkm
+                // declares goes through it undeclared, checked by rpkm's own services.
                 NodeOptions::new()
-                    .enable_rosout(false)
-                    .start_parameter_services(false),
+                    .enable_rosout(true)
+                    .start_parameter_services(false)
+                    .allow_undeclared_parameters(true),
             )
             .map_err(|e| err(format!("{e:?}")))?;
+        let rosout = node.logging_handle();
         Ok(Arc::new(Self {
             node: Mutex::new(node),
             domain,
+            rosout,
+            logger: format!("{}.{name}", crate::NODE_NAMESPACE.trim_start_matches('/')),
         }))
     }
 
     /// The DDS domain id.
     pub fn domain(&self) -> u16 {
         self.domain
+    }
+
+    /// Publishes one `rcl_interfaces/Log` on `/rosout` (rqt_console, `ros2 topic echo
+    /// /rosout`, bags): `level` as ROS 2 numbers it (10 debug, 20 info, 30 warn, 40 error,
+    /// 50 fatal).
+    pub fn rosout(&self, level: RosoutLevel, msg: &str, file: &str, line: u32) {
+        use ros2_client::rosout::RosoutRaw;
+        let level = match level {
+            RosoutLevel::Debug => ros2_client::ros2::LogLevel::Debug,
+            RosoutLevel::Info => ros2_client::ros2::LogLevel::Info,
+            RosoutLevel::Warn => ros2_client::ros2::LogLevel::Warn,
+            RosoutLevel::Error => ros2_client::ros2::LogLevel::Error,
+        };
+        let stamp = ros2_client::builtin_interfaces::Time::now();
+        self.rosout
+            .rosout_raw(stamp, level, &self.logger, msg, file, "", line);
+    }
+
+    /// Stores `value` in ros2-client's parameter store, which publishes the
+    /// `rcl_interfaces/ParameterEvent` (new or changed) on `/parameter_events`.
+    pub(crate) fn publish_parameter(&self, name: &str, value: ros2_client::ParameterValue) {
+        match self.node.lock() {
+            Ok(node) => {
+                if let Err(e) = node.set_parameter(name, value) {
+                    log::warn!("/parameter_events: {name}: {e}");
+                }
+            }
+            Err(_) => log::warn!("/parameter_events: {name}: the DDS node mutex is poisoned"),
+        }
     }
 
     fn topic<T: RosMessage>(

@@ -14,6 +14,7 @@
 //! # Ok(()) }
 //! ```
 pub mod dds;
+pub mod dds_params;
 pub mod error;
 pub mod ipc;
 pub mod pubsub;

@@ -118,6 +118,11 @@ impl Transport {
         self.ipc.as_ref()
     }
 
+    /// The DDS node, if DDS is configured (parameter services, `/rosout`).
+    pub fn dds_node(&self) -> Option<&Arc<DdsNode>> {
+        self.dds.as_ref()
+    }
+
     /// The DDS domain id, if DDS is configured.
     pub fn dds_domain(&self) -> Option<u16> {
         self.dds.as_ref().map(|d| d.domain())

@@ -1,0 +1,259 @@
+//! `preload_monitor` as a ROS 2 citizen, checked by an independent DDS peer: Eclipse Cyclone
+//! DDS (tests/python/ros2_params_peer.py) calls the node's parameter services as `ros2 param`
+//! on rmw_cyclonedds does (request id header in the payload), and reads `/parameter_events`
+//! and `/rosout`.
+//!
+//! The test feeds the monitor one drive state over iceoryx2, again and again: the nominal
+//! machine at (0, 1700) mm with the drive forces of q3 pushed 0.12 mm (the core's elastic
+//! model gives the deviation, between the default WARN 20 % and ERROR 50 %). The monitor
+//! holds WARN; then the peer sets `warn_percent` above the deviation and the monitor's
+//! PreloadStatus must go to OK while the same state keeps coming. Refused sets (out of range,
+//! read-only, error below warn) must say why and leave the value as it was.
+//!
+//! Needs the venv (`python3 -m venv .venv && .venv/bin/pip install -r
+//! tests/python/requirements.txt`); without it SKIPPED, under RPKM_REQUIRE_PYTHON=1 a failure.
+
+mod node_support;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use node_support::{rpkm, unique, TempDir};
+use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, NOMINAL_DRIVE_FORCE_N};
+use rpkm_core::geometry::igm;
+use rpkm_core::params::{Model, Params};
+use rpkm_msgs::{ActuatorState, PreloadStatus, Time};
+use rpkm_transport::{topic, Transport, TransportConfig};
+use serde_json::Value;
+
+const DOMAIN: &str = "71";
+
+fn python() -> Option<PathBuf> {
+    let py = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
+    if py.exists() {
+        return Some(py);
+    }
+    assert!(
+        std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
+        "RPKM_REQUIRE_PYTHON is set but {} is missing",
+        py.display()
+    );
+    eprintln!("SKIPPED: {} not found", py.display());
+    None
+}
+
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+        let _ = self.0.wait();
+    }
+}
+
+/// The state and its largest |measured − predicted| current, %, from the core.
+fn state_with_deviation() -> (ActuatorState, f64) {
+    let p = Params::nominal();
+    let q = igm(&p, Model::M29, 0.0, 1700.0).expect("igm").q();
+    let predicted = fegm(&p, &Stiffness::default(), q, ALL_ACTIVE).expect("fegm");
+    let mut pushed = q;
+    pushed[2] += 0.12;
+    let measured = fegm(&p, &Stiffness::default(), pushed, ALL_ACTIVE).expect("fegm");
+    let worst = (0..4)
+        .map(|i| (measured.drive_force[i] - predicted.drive_force[i]).abs())
+        .fold(0.0, f64::max)
+        / NOMINAL_DRIVE_FORCE_N
+        * 100.0;
+    let state = ActuatorState {
+        position: q.map(|v| v / 1e3),
+        force: measured.drive_force,
+        ..Default::default()
+    };
+    (state, worst)
+}
+
+/// Publishes `state` (seq counting up) every 2 ms until a PreloadStatus with `level` arrives.
+fn drive_until_level(
+    t: &Transport,
+    state: &mut ActuatorState,
+    statuses: &rpkm_transport::Subscriber<PreloadStatus>,
+    level: u8,
+    what: &str,
+) -> PreloadStatus {
+    let publisher = t.publisher(&topic::ACTUATOR_STATE).expect("pub");
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while Instant::now() < deadline {
+        state.seq += 1;
+        state.stamp = Time {
+            sec: 100,
+            nanosec: state.seq as u32,
+        };
+        publisher.publish(state).expect("publish");
+        while let Some(s) = statuses.try_recv().expect("recv") {
+            if s.level == level {
+                return s;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    panic!("{what}: no PreloadStatus with level {level} within 30 s");
+}
+
+/// Runs the peer on `script`; its JSON lines come back through the channel.
+fn peer(py: &Path, dir: &TempDir, script: Value) -> (Proc, mpsc::Receiver<Value>) {
+    let file = dir.path("script.json");
+    std::fs::write(&file, script.to_string()).expect("script");
+    let mut child = Command::new(py)
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/ros2_params_peer.py"))
+        .args(["--domain", DOMAIN, "--timeout", "60"])
+        .arg(&file)
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("start ros2_params_peer.py");
+    let out = child.stdout.take().expect("stdout");
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            let v: Value = serde_json::from_str(&line).unwrap_or(Value::String(line));
+            if tx.send(v).is_err() {
+                break;
+            }
+        }
+    });
+    (Proc(child), rx)
+}
+
+/// The peer's next line. The monitor's PreloadStatus queue is drained meanwhile: the topic is
+/// reliable, and a full queue of a live subscriber holds the monitor's loop (and with it
+/// the parameter changes it applies) until the subscriber takes.
+fn next(
+    rx: &mpsc::Receiver<Value>,
+    statuses: &rpkm_transport::Subscriber<PreloadStatus>,
+    what: &str,
+) -> Value {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        while statuses.try_recv().expect("recv").is_some() {}
+        match rx.recv_timeout(Duration::from_millis(20)) {
+            Ok(v) => {
+                assert!(v.get("timeout").is_none(), "{what}: {v}");
+                return v;
+            }
+            Err(_) if Instant::now() < deadline => {}
+            Err(_) => panic!("the peer gave no answer for {what} within 60 s"),
+        }
+    }
+}
+
+#[test]
+fn a_cyclone_peer_sets_a_threshold_and_the_monitor_level_follows_live() {
+    let Some(py) = python() else { return };
+    let (mut state, deviation) = state_with_deviation();
+    assert!(
+        (20.0..50.0).contains(&deviation),
+        "the state must be WARN at the defaults: {deviation} %"
+    );
+    let dir = TempDir::new("ros2params");
+    let prefix = unique("r2p");
+    let t = Transport::new(&TransportConfig::new(unique("obs")).ipc_prefix(&prefix))
+        .expect("transport");
+    let statuses = t.subscriber(&topic::PRELOAD_STATUS).expect("sub");
+    let _node = Proc(
+        Command::new(rpkm())
+            .args(["node", "preload_monitor", "--backend", "both"])
+            .args(["--input-backend", "ipc", "--param", "debounce_samples=1"])
+            .args(["--param", "follow_parameters=false"])
+            .env("RPKM_IPC_PREFIX", &prefix)
+            .env("ROS_DOMAIN_ID", DOMAIN)
+            .spawn()
+            .expect("start preload_monitor"),
+    );
+    let warn = drive_until_level(&t, &mut state, &statuses, PreloadStatus::WARN, "defaults");
+    let worst = warn.deviation.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    assert!((worst - deviation).abs() < 1e-6, "{worst} vs {deviation}");
+
+    let above = (deviation + 5.0).round();
+    let script = serde_json::json!([
+        {"get": ["warn_percent", "error_percent", "backend"]},
+        {"describe": ["warn_percent", "debounce_samples", "backend"]},
+        {"set": {"warn_percent": -5.0}},
+        {"set": {"backend": "dds"}},
+        {"set": {"error_percent": 10.0}},
+        {"set": {"debounce_samples": 0}},
+        {"get": ["warn_percent", "error_percent", "debounce_samples"]},
+        {"set": {"warn_percent": above}},
+        {"await_event": "warn_percent"},
+        {"await_rosout": "parameters set: warn_percent"},
+    ]);
+    let (_peer, rx) = peer(&py, &dir, script);
+    let get = next(&rx, &statuses, "get");
+    assert_eq!(get["get"]["warn_percent"], serde_json::json!([3, 20.0]));
+    assert_eq!(get["get"]["error_percent"], serde_json::json!([3, 50.0]));
+    assert_eq!(get["get"]["backend"], serde_json::json!([4, "both"]));
+    let describe = next(&rx, &statuses, "describe");
+    let d = &describe["describe"];
+    assert_eq!(d["warn_percent"]["read_only"], false);
+    assert_eq!(d["backend"]["read_only"], true);
+    assert_eq!(
+        d["debounce_samples"]["integer_range"],
+        serde_json::json!([[1, 1_000_000]])
+    );
+    let refused = |v: &Value, key: &str, why: &str| {
+        let r = &v["set"][key];
+        assert_eq!(r[0], false, "{key} must be refused: {v}");
+        let reason = r[1].as_str().unwrap_or_default();
+        assert!(
+            reason.contains(why),
+            "{key}: reason {reason:?} lacks {why:?}"
+        );
+    };
+    refused(
+        &next(&rx, &statuses, "set -5"),
+        "warn_percent",
+        "a number > 0",
+    );
+    refused(&next(&rx, &statuses, "set backend"), "backend", "read-only");
+    refused(
+        &next(&rx, &statuses, "set error 10"),
+        "error_percent",
+        "below warn_percent",
+    );
+    refused(
+        &next(&rx, &statuses, "set debounce 0"),
+        "debounce_samples",
+        "out of range",
+    );
+    let unchanged = next(&rx, &statuses, "get after refusals");
+    assert_eq!(
+        unchanged["get"],
+        serde_json::json!({"warn_percent": [3, 20.0], "error_percent": [3, 50.0],
+            "debounce_samples": [2, 1]})
+    );
+    let set = next(&rx, &statuses, "set warn_percent");
+    assert_eq!(set["set"]["warn_percent"], serde_json::json!([true, ""]));
+    let event = next(&rx, &statuses, "parameter event");
+    assert_eq!(event["event"]["node"], "/rpkm/preload_monitor");
+    assert_eq!(event["event"]["value"], serde_json::json!([3, above]));
+    let rosout = next(&rx, &statuses, "rosout");
+    assert_eq!(rosout["rosout"]["name"], "rpkm.preload_monitor");
+    assert_eq!(rosout["rosout"]["level"], 20, "INFO");
+
+    // The same state, now below WARN: the held level goes to OK.
+    let ok = drive_until_level(
+        &t,
+        &mut state,
+        &statuses,
+        PreloadStatus::OK,
+        "after the set",
+    );
+    let worst = ok.deviation.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    assert!(
+        (worst - deviation).abs() < 1e-6 && worst < above,
+        "{worst} vs {deviation}"
+    );
+}
