@@ -88,6 +88,8 @@ pub enum DiagnoseError {
     Effect(#[from] NotApplicable),
     #[error("held-out data: {0}")]
     Validation(#[source] PoseError),
+    #[error("TCP error vectors: {0}")]
+    Vectors(#[source] PoseError),
 }
 
 /// The fit of one model (the current one, or with a candidate effect).
@@ -787,6 +789,77 @@ pub fn evaluate(
         finish(campaign, val.as_ref(), effects, cal, &copts)?.fit,
         est,
     ))
+}
+
+/// The TCP error of one pose of a 2-D relative instrument (laser tracker, grid encoder) as a
+/// vector: the model's TCP displacement from the setup's reset pose minus the instrument's
+/// reading (µm), where the pose and its reset pose are (nominal forward model, mm). The
+/// classic picture of a calibration: an arrow per pose over the workspace.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ErrorVector {
+    pub pose: usize,
+    pub line: usize,
+    pub instrument: String,
+    pub setup: String,
+    pub x: f64,
+    pub y: f64,
+    pub reset_x: f64,
+    pub reset_y: f64,
+    pub dx_um: f64,
+    pub dy_um: f64,
+}
+
+/// The error vectors of every 2-D relative pose of `campaign` with `effects` in the model,
+/// calibrated as [`evaluate`] does (noise estimated, tolerance prior, the effects' parameters
+/// identified with the geometry).
+pub fn error_vectors(
+    campaign: &Campaign,
+    effects: &[&dyn Effect],
+    opts: &Options,
+) -> Result<Vec<ErrorVector>, DiagnoseError> {
+    let (cal, _, copts) = current_model(campaign, effects, opts)?;
+    let set = EffectSet::bind(effects, campaign, &cal.start)?;
+    let errs = obs::tcp_errors_with(
+        campaign,
+        &cal.params,
+        copts.model,
+        &set.corrections(&cal.theta),
+    )
+    .map_err(DiagnoseError::Vectors)?;
+    let mut xy: BTreeMap<usize, [Option<f64>; 2]> = BTreeMap::new();
+    for e in &errs {
+        let slot = xy.entry(e.pose).or_default();
+        match e.coordinate {
+            "x" => slot[0] = Some(e.value * 1e3),
+            "y" => slot[1] = Some(e.value * 1e3),
+            _ => {}
+        }
+    }
+    let tcp = sparse::nominal_tcp(campaign);
+    let mut out = Vec::new();
+    for setup in campaign.setups() {
+        let Some(reset) = setup.reset else { continue };
+        for &i in &setup.poses {
+            // a tracker or grid-encoder pose gives both coordinates; a single one is no vector
+            let Some([Some(dx_um), Some(dy_um)]) = xy.get(&i).copied() else {
+                continue;
+            };
+            let pose = &campaign.poses[i];
+            out.push(ErrorVector {
+                pose: i,
+                line: pose.line,
+                instrument: pose.instrument.as_str().to_owned(),
+                setup: setup.id.to_owned(),
+                x: tcp[i].0,
+                y: tcp[i].1,
+                reset_x: tcp[reset].0,
+                reset_y: tcp[reset].1,
+                dx_um,
+                dy_um,
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// The held-out campaign with the noise of each of its TCP errors.

@@ -8,5 +8,6 @@ pub mod launch;
 pub mod logging;
 pub mod node;
 pub mod plot;
+pub mod report;
 pub mod stream;
 pub mod topics;
