@@ -243,6 +243,20 @@ pub fn round_length(v: f64) -> f64 {
         .unwrap_or(p)
 }
 
+/// The smallest round number (1, 1.5, 2, 2.5, 3, 4, 5, 6 or 8 times a power of ten) not
+/// below `v`: the end of a colour scale whose ticks read cleanly.
+pub fn round_up(v: f64) -> f64 {
+    if !(v.is_finite() && v > 0.0) {
+        return 1.0;
+    }
+    let p = 10f64.powf(v.log10().floor());
+    [1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0]
+        .into_iter()
+        .map(|m| m * p)
+        .find(|m| *m >= v * (1.0 - 1e-12))
+        .unwrap_or(10.0 * p)
+}
+
 /// Error-vector map: an arrow per pose, `um_per_px` µm per pixel in both directions (the
 /// pair before/after shares it), the reset poses ringed, a scale arrow of `reference_um`.
 pub fn quiver(

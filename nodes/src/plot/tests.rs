@@ -1,7 +1,7 @@
 //! Checks of the charts against what they must show, independent of how they draw it.
 
 use super::machine::Machine;
-use super::maps::{diverging, round_length};
+use super::maps::{diverging, round_length, round_up};
 use super::*;
 use rpkm_core::params::{Params, RODS};
 
@@ -49,6 +49,9 @@ fn reference_lengths_are_round() {
     assert_eq!(round_length(43.0), 50.0);
     assert_eq!(round_length(14.0), 10.0);
     assert_eq!(round_length(0.018), 0.02);
+    assert_eq!(round_up(2.58), 3.0);
+    assert_eq!(round_up(153.0), 200.0);
+    assert_eq!(round_up(0.04), 0.04);
 }
 
 /// One bar per category and series, each with its value on hover; a NaN is an empty bar.

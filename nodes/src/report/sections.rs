@@ -269,10 +269,10 @@ fn direction_maps(r: &Report, inst: &str, dir: &str, view: View) -> String {
     };
     let before = of(r.before, inst, dir);
     let after = r.after.map(|a| of(a, inst, dir));
-    let vmax = p98(before
+    let vmax = maps::round_up(p98(before
         .clone()
         .chain(after.clone().into_iter().flatten())
-        .map(|p| p.value));
+        .map(|p| p.value)));
     let rms = |pts: &mut dyn Iterator<Item = &Point>| {
         let (n, s) = pts.fold((0usize, 0.0), |(n, s), p| (n + 1, s + p.value * p.value));
         (s / n.max(1) as f64).sqrt()
