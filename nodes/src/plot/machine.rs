@@ -68,6 +68,49 @@ impl Machine {
         (x, y)
     }
 
+    /// The machine as a thumbnail `width` px wide at true scale, thin lines, with the
+    /// rectangle `view` (mm) in red: where a map of the workspace lies in the machine.
+    pub fn thumbnail(&self, width: f64, view: ((f64, f64), (f64, f64))) -> String {
+        let ((x0, x1), (y0, y1)) = self.extent();
+        let height = width * (y1 - y0) / (x1 - x0);
+        let f = Frame {
+            x: (x0, x1),
+            y: (y0, y1),
+            px: (2.0, width - 2.0),
+            py: (height - 2.0, 2.0),
+        };
+        let line = |a: Vector2<f64>, b: Vector2<f64>, colour: &str, w: f64| {
+            let (pa, pb) = (f.at(a.x, a.y), f.at(b.x, b.y));
+            format!(
+                "<line x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"{colour}\" stroke-width=\"{w}\"/>",
+                pa.0, pa.1, pb.0, pb.1
+            )
+        };
+        let mut o = format!(
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{height:.0}\" viewBox=\"0 0 {width:.0} {height:.0}\"><title>the machine at true scale; red: the map's view</title>"
+        );
+        for g in &self.guides {
+            o.push_str(&line(g.0, g.1, "#9aa0a6", 2.5));
+        }
+        for r in &self.rods {
+            o.push_str(&line(r.0, r.1, "#2f3b47", 1.0));
+        }
+        for (k, a) in self.platform.iter().enumerate() {
+            let b = self.platform[(k + 1) % self.platform.len()];
+            o.push_str(&line(*a, b, "#51606f", 1.2));
+        }
+        let (a, b) = (f.at(view.0 .0, view.1 .1), f.at(view.0 .1, view.1 .0));
+        let _ = write!(
+            o,
+            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#b2182b\" fill-opacity=\"0.15\" stroke=\"#b2182b\" stroke-width=\"1.2\"/></svg>",
+            a.0,
+            a.1,
+            (b.0 - a.0).max(1.0),
+            (b.1 - a.1).max(1.0)
+        );
+        o
+    }
+
     /// SVG of the machine in `f`'s pixels: guides grey, carriers as blocks on them, rods dark,
     /// the platform light steel with its TCP; each part names itself on hover.
     pub fn svg(&self, f: &Frame) -> String {

@@ -64,14 +64,15 @@ pub fn scatter(title: &str, x_label: &str, y_label: &str, series: &[Series]) -> 
             );
         }
         o.push_str("</g>");
-        let lx = f.px.0 + 10.0 + 150.0 * k as f64;
+        // legend above the plotting area, right-aligned: it hides no point
+        let lx = f.px.1 - 80.0 * (series.len() - k) as f64;
         let _ = write!(
             o,
             "<circle cx=\"{lx:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"{}\"/><text x=\"{:.1}\" y=\"{:.1}\" font-family=\"sans-serif\" font-size=\"12\">{}</text>",
-            f.py.1 + 10.0,
+            f.py.1 - 10.0,
             color(k),
             lx + 8.0,
-            f.py.1 + 14.0,
+            f.py.1 - 6.0,
             escape(&s.name)
         );
     }

@@ -114,7 +114,7 @@ padding-bottom:.2em;margin-top:1.6em}h3{font-size:1.05em;margin:1.1em 0 .3em}\
 .verdict.ok{border-color:#59a14f;background:#eff7ee}\
 .row{display:flex;flex-wrap:wrap;gap:10px;align-items:flex-start}\
 figure{margin:0;break-inside:avoid}figcaption{font-size:.85em;color:#4a5560;max-width:540px}\
-figure svg{display:block}\
+figure svg{display:block}.side{display:flex;gap:6px;align-items:flex-start}\
 table{border-collapse:collapse;font-size:.9em;margin:.4em 0}\
 td,th{border:1px solid #d6dbe0;padding:3px 8px;text-align:right}\
 th{background:#f1f3f5}td:first-child,th:first-child{text-align:left}\

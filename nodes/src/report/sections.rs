@@ -38,10 +38,11 @@ fn verdict_box(label: &str, d: &Diagnosis) -> String {
     } else {
         ""
     };
+    // the verdict's sentence starts with its kind
     format!(
-        "<div class=\"verdict{ok}\"><b>{} — {}</b>: {}</div>",
-        escape(label),
+        "<div class=\"verdict{ok}\" title=\"{}\"><b>{}</b>: {}</div>",
         kind(d.verdict_kind),
+        escape(label),
         escape(&d.verdict)
     )
 }
@@ -158,9 +159,9 @@ fn noise(d: &Diagnosis) -> String {
     o
 }
 
-/// The machine at the first setup's reset pose, with every pose of the campaign.
-pub fn machine(r: &Report) -> String {
-    let c = r.campaign;
+/// The machine (nominal parameters) at the first setup's reset pose, its guides over the
+/// campaign's travel; the pose.
+fn machine_at_reset(c: &Campaign) -> Option<(Machine, (f64, f64))> {
     let tcp = nominal_tcp(c);
     let at = c
         .setups()
@@ -170,7 +171,16 @@ pub fn machine(r: &Report) -> String {
         .filter(|p| p.0.is_finite() && p.1.is_finite())
         .unwrap_or((0.0, 1700.0));
     let travel = plot::range(c.poses.iter().flat_map(|p| p.q), 0.0);
-    let Ok(m) = Machine::at(&Params::nominal(), at.0, at.1, travel) else {
+    Machine::at(&Params::nominal(), at.0, at.1, travel)
+        .ok()
+        .map(|m| (m, at))
+}
+
+/// The machine at the first setup's reset pose, with every pose of the campaign.
+pub fn machine(r: &Report) -> String {
+    let c = r.campaign;
+    let tcp = nominal_tcp(c);
+    let Some((m, at)) = machine_at_reset(c) else {
         return String::new();
     };
     let poses: Vec<(f64, f64, String)> = c
@@ -258,6 +268,12 @@ pub fn instruments(r: &Report) -> String {
     o
 }
 
+/// The machine as a thumbnail with a map's view in it (empty where the reset pose cannot be
+/// solved).
+fn thumbnail(c: &Campaign, view: View) -> String {
+    machine_at_reset(c).map_or(String::new(), |(m, _)| m.thumbnail(96.0, (view.x, view.y)))
+}
+
 /// Before and after of one direction, one colour scale.
 fn direction_maps(r: &Report, inst: &str, dir: &str, view: View) -> String {
     let unit = if dir.starts_with("psi") {
@@ -293,7 +309,15 @@ fn direction_maps(r: &Report, inst: &str, dir: &str, view: View) -> String {
         let m = maps::heat_map("after", &map_points(a), view, vmax, unit);
         o.push_str(&figure(&m, &super::Report::stage_of(ad).model));
     }
-    o.push_str(&figure(&maps::colour_bar(vmax, unit), "model − measured"));
+    let thumb = thumbnail(r.campaign, view);
+    let side = format!(
+        "<div class=\"side\">{}{thumb}</div>",
+        maps::colour_bar(vmax, unit)
+    );
+    o.push_str(&figure(
+        &side,
+        "model − measured; right: where the maps lie",
+    ));
     o.push_str("</div>");
     o
 }
@@ -331,7 +355,7 @@ fn vector_maps(r: &Report, inst: &str, view: View) -> String {
     let size = p98(before.iter().chain(&after).map(|a| a.dx_um.hypot(a.dy_um)));
     // the largest arrow spans about a grid step of the map
     let um_per_px = size / 32.0;
-    let reference = maps::round_length(size / 2.0);
+    let reference = maps::round_length(0.8 * size);
     let mut resets: Vec<(f64, f64)> = r
         .vectors_before
         .iter()
@@ -339,13 +363,35 @@ fn vector_maps(r: &Report, inst: &str, view: View) -> String {
         .map(|v| (v.reset_x, v.reset_y))
         .collect();
     resets.dedup();
-    let mut o = String::from("<h3>Error vectors: the model's TCP displacement from the reset pose minus the instrument's</h3><div class=\"row pair\">");
+    let rms = |a: &[Arrow]| {
+        let s: f64 = a.iter().map(|a| a.dx_um.powi(2) + a.dy_um.powi(2)).sum();
+        (s / a.len().max(1) as f64).sqrt()
+    };
+    let mut o = format!(
+        "<h3>{} error vectors: the model's TCP displacement from the reset pose minus the instrument's, RMS {:.1} µm",
+        escape(inst),
+        rms(&before)
+    );
+    if r.after.is_some() {
+        let _ = write!(o, " → {:.1} µm", rms(&after));
+    }
+    o.push_str("</h3><div class=\"row pair\">");
     let b = maps::quiver("before", &before, &resets, view, um_per_px, reference);
     o.push_str(&figure(&b, &super::Report::stage_of(r.before).model));
     if let Some(ad) = r.after {
         let a = maps::quiver("after", &after, &resets, view, um_per_px, reference);
-        o.push_str(&figure(&a, &super::Report::stage_of(ad).model));
+        o.push_str(&figure(
+            &a,
+            &format!(
+                "{}: one arrow scale with before",
+                super::Report::stage_of(ad).model
+            ),
+        ));
     }
+    o.push_str(&figure(
+        &thumbnail(r.campaign, view),
+        "where the maps lie in the machine",
+    ));
     o.push_str("</div>");
     o
 }
@@ -373,13 +419,33 @@ fn feature(c: &Campaign, name: &str) -> Option<Vec<f64>> {
     }
 }
 
+/// A term of a few distinct values (a direction of motion: ±1) spread into strips, each
+/// point shifted by a fixed fraction of the span (golden-ratio sequence over the pose index:
+/// the same page every run), so that the points do not hide each other.
+fn spread(values: &[f64]) -> Vec<f64> {
+    let mut distinct: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup();
+    if distinct.len() > 3 {
+        return values.to_vec();
+    }
+    let (lo, hi) = plot::range(distinct.iter().copied(), 0.0);
+    let width = 0.25 * (hi - lo).max(1e-9);
+    values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v + width * ((i as f64 * 0.618_034).fract() - 0.5))
+        .collect()
+}
+
 /// Residual of one direction against a term, before and after.
 fn against_term(r: &Report, inst: &str, dir: &str, term: &str, values: &[f64]) -> String {
+    let at = spread(values);
     let series = |d: &Diagnosis, name: String| Series {
         name,
         markers: of(d, inst, dir)
             .map(|p| Marker {
-                x: values.get(p.pose).copied().unwrap_or(f64::NAN),
+                x: at.get(p.pose).copied().unwrap_or(f64::NAN),
                 y: p.value,
                 hover: format!(
                     "line {}: x {:.1}, y {:.1} mm, {term} {:.4}: {:.2} (σ {:.2})",
@@ -442,7 +508,7 @@ pub fn against(r: &Report) -> String {
 /// The effects tried: the table and what each explains.
 pub fn effects(r: &Report) -> String {
     let d = r.before;
-    let mut o = String::from("<section id=\"effects\"><h2>Effects tried</h2><table><tr><th>effect</th><th>significant</th><th>relevant</th><th>explained</th><th>F</th><th>p</th><th>held-out after µm</th><th>evidence</th></tr>");
+    let mut o = String::from("<section id=\"effects\"><h2>Effects tried</h2><table><tr><th>effect</th><th>significant</th><th>relevant</th><th>explained</th><th>F</th><th>p</th><th>held-out after µm</th><th style=\"text-align:left\">evidence</th></tr>");
     for c in &d.candidates {
         let _ = write!(
             o,
