@@ -241,6 +241,9 @@ pub struct Diagnosis {
     pub groups: Vec<GroupRms>,
     /// Residuals of the current model, worst (largest |r/σ|) first.
     pub points: Vec<Point>,
+    /// The current model's TCP error of every tracker and grid-encoder pose as a vector, from
+    /// the same fit as `points`.
+    pub error_vectors: Vec<ErrorVector>,
     pub test: String,
 }
 
@@ -326,6 +329,7 @@ impl Search<'_> {
     fn round(&self, copts: &calib::Options) -> Result<(Fitted, Round), DiagnoseError> {
         let val = held_out(self.validation, &copts.noise)?;
         let cal = fit_model(self.campaign, self.in_model, copts)?;
+        let vectors = error_vectors(self.campaign, self.in_model, &cal, copts.model)?;
         let base = finish(self.campaign, val.as_ref(), self.in_model, cal, copts)?;
         let tries = try_all(
             self.campaign,
@@ -335,7 +339,10 @@ impl Search<'_> {
             copts,
             self.threads,
         );
-        let round = candidates(self.campaign, self.tried, tries, &base, self.level);
+        let round = Round {
+            vectors,
+            ..candidates(self.campaign, self.tried, tries, &base, self.level)
+        };
         Ok((base, round))
     }
 }
@@ -356,6 +363,7 @@ fn conclude(
         mut candidates,
         fits,
         skipped,
+        vectors,
     } = round;
     candidates.sort_by(|a, b| b.bic_gain.total_cmp(&a.bic_gain));
     // a single dictionary term's BIC gain: what an effect must beat to be the explanation
@@ -415,6 +423,7 @@ fn conclude(
         unexplained,
         groups: groups(&base.rows),
         points: points(campaign, &base.rows),
+        error_vectors: vectors,
         test,
     }
 }
@@ -428,6 +437,8 @@ struct Round {
     fits: Vec<(&'static str, Fitted)>,
     /// The effects that could not be tried, and why.
     skipped: Vec<Skipped>,
+    /// The current model's TCP error vectors (2-D relative instruments).
+    vectors: Vec<ErrorVector>,
 }
 
 /// A candidate effect's fits: the full effect and the parts of it kept.
@@ -809,23 +820,17 @@ pub struct ErrorVector {
     pub dy_um: f64,
 }
 
-/// The error vectors of every 2-D relative pose of `campaign` with `effects` in the model,
-/// calibrated as [`evaluate`] does (noise estimated, tolerance prior, the effects' parameters
-/// identified with the geometry).
-pub fn error_vectors(
+/// The error vectors of every 2-D relative pose of `campaign` under the calibration `cal` of
+/// the model with `effects`.
+fn error_vectors(
     campaign: &Campaign,
     effects: &[&dyn Effect],
-    opts: &Options,
+    cal: &Calibration,
+    model: Model,
 ) -> Result<Vec<ErrorVector>, DiagnoseError> {
-    let (cal, _, copts) = current_model(campaign, effects, opts)?;
     let set = EffectSet::bind(effects, campaign, &cal.start)?;
-    let errs = obs::tcp_errors_with(
-        campaign,
-        &cal.params,
-        copts.model,
-        &set.corrections(&cal.theta),
-    )
-    .map_err(DiagnoseError::Vectors)?;
+    let errs = obs::tcp_errors_with(campaign, &cal.params, model, &set.corrections(&cal.theta))
+        .map_err(DiagnoseError::Vectors)?;
     let mut xy: BTreeMap<usize, [Option<f64>; 2]> = BTreeMap::new();
     for e in &errs {
         let slot = xy.entry(e.pose).or_default();

@@ -331,8 +331,6 @@ fn write_report(
         dir,
         "rpkm calibrate",
         campaign,
-        &[],
-        &opts,
         &before,
         after.as_ref(),
         stages,

@@ -59,8 +59,6 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         &args.out,
         "rpkm demo",
         &campaign,
-        &[],
-        &opts,
         &before,
         Some(&after),
         Vec::new(),

@@ -118,8 +118,6 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             dir,
             "rpkm diagnose",
             &campaign,
-            &refs,
-            &opts,
             &d,
             after.as_ref(),
             Vec::new(),
@@ -248,34 +246,16 @@ pub fn with_named_effect(
 }
 
 /// The HTML report (and the numbers of its error-vector maps as JSON) of `before` and, when
-/// an effect was added, `after`; the error vectors of both models are fitted here. Returns
-/// the page's path.
-#[allow(clippy::too_many_arguments)] // the story's parts: what was measured, both models
+/// an effect was added, `after`; `stages` the models' table (empty: the two diagnoses').
+/// Returns the page's path.
 pub fn write_report(
     dir: &Path,
     command: &str,
     campaign: &Campaign,
-    in_model: &[&dyn Effect],
-    opts: &Options,
     before: &Diagnosis,
     after: Option<&Diagnosis>,
     stages: Vec<Stage>,
 ) -> anyhow::Result<PathBuf> {
-    let vectors_before = diagnose::error_vectors(campaign, in_model, opts)
-        .context("error vectors of the current model")?;
-    let vectors_after = match after {
-        Some(a) => {
-            let boxed = a
-                .effects_in_model
-                .iter()
-                .map(|n| effects::by_name(n))
-                .collect::<Result<Vec<_>, _>>()?;
-            let refs: Vec<&dyn Effect> = boxed.iter().map(|e| e.as_ref()).collect();
-            diagnose::error_vectors(campaign, &refs, opts)
-                .context("error vectors with the effect added")?
-        }
-        None => Vec::new(),
-    };
     let stages = if stages.is_empty() {
         std::iter::once(before)
             .chain(after)
@@ -289,8 +269,6 @@ pub fn write_report(
         campaign,
         before,
         after,
-        vectors_before: &vectors_before,
-        vectors_after: &vectors_after,
         stages,
     }
     .write(dir)

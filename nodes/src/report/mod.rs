@@ -13,7 +13,7 @@ mod sections;
 use crate::plot::escape;
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::{Diagnosis, ErrorVector};
+use rpkm_core::diagnose::Diagnosis;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -27,15 +27,13 @@ pub struct Stage {
 }
 
 /// What the report shows: the diagnosis of the current model and, when an effect was added,
-/// the diagnosis with it ("after"); the error vectors of both.
+/// the diagnosis with it ("after"), each with its residuals and error vectors.
 pub struct Report<'a> {
     /// The command that made it (`rpkm diagnose`, `rpkm demo`, `rpkm calibrate`).
     pub command: &'a str,
     pub campaign: &'a Campaign,
     pub before: &'a Diagnosis,
     pub after: Option<&'a Diagnosis>,
-    pub vectors_before: &'a [ErrorVector],
-    pub vectors_after: &'a [ErrorVector],
     /// The models in the order they were fitted (the first is `before`'s).
     pub stages: Vec<Stage>,
 }
@@ -68,7 +66,10 @@ impl Report<'_> {
             "effects_before": self.before.effects_in_model,
             "effects_after": self.after.map(|a| a.effects_in_model.clone()),
             "stages": self.stages,
-            "error_vectors": {"before": self.vectors_before, "after": self.vectors_after},
+            "error_vectors": {
+                "before": self.before.error_vectors,
+                "after": self.after.map_or(&[][..], |a| &a.error_vectors[..]),
+            },
         });
         let path = dir.join("report.json");
         std::fs::write(&path, serde_json::to_string_pretty(&json)?)

@@ -67,7 +67,7 @@ pub fn summary(r: &Report) -> String {
             a,
         ));
     }
-    o.push_str("<h3>The error, effect by effect</h3><div class=\"row\"><table><tr><th>model</th><th>calibration RMS µm</th><th>held-out RMS µm</th><th>χ²/dof (stated noise)</th></tr>");
+    o.push_str("<h3>The error, effect by effect</h3><div class=\"row\"><table><tr><th>model</th><th>calibration RMS µm</th><th>held-out RMS µm</th><th>χ²/dof</th></tr>");
     for s in &r.stages {
         let _ = write!(
             o,
@@ -347,17 +347,20 @@ fn arrows(vectors: &[ErrorVector], inst: &str) -> Vec<Arrow> {
 
 /// Error vectors of a 2-D instrument before and after, one arrow scale.
 fn vector_maps(r: &Report, inst: &str, view: View) -> String {
-    let before = arrows(r.vectors_before, inst);
+    let before = arrows(&r.before.error_vectors, inst);
     if before.is_empty() {
         return String::new();
     }
-    let after = arrows(r.vectors_after, inst);
+    let after = r
+        .after
+        .map_or(Vec::new(), |a| arrows(&a.error_vectors, inst));
     let size = p98(before.iter().chain(&after).map(|a| a.dx_um.hypot(a.dy_um)));
     // the largest arrow spans about a grid step of the map
     let um_per_px = size / 32.0;
     let reference = maps::round_length(0.8 * size);
     let mut resets: Vec<(f64, f64)> = r
-        .vectors_before
+        .before
+        .error_vectors
         .iter()
         .filter(|v| v.instrument == inst)
         .map(|v| (v.reset_x, v.reset_y))
