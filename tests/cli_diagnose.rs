@@ -102,7 +102,9 @@ fn diagnose_names_the_hidden_effect_of_the_truth_file_and_calibrate_adds_it() {
             .arg("--json")
             .arg(&cj)
             .arg("--chart")
-            .arg(&chart),
+            .arg(&chart)
+            .arg("--report")
+            .arg(dir.join("cal-report")),
     );
     let stages = json(&cj)["effect_stages"].clone();
     let v0 = stages[0]["val_rms_um"].as_f64().expect("stage 0");
@@ -117,6 +119,10 @@ fn diagnose_names_the_hidden_effect_of_the_truth_file_and_calibrate_adds_it() {
         "{alpha} vs {truth_alpha}"
     );
     assert!(chart.exists());
+    // its report: the table's stages, the model with thermal as "after"
+    let r = json(&dir.join("cal-report/report.json"));
+    assert_eq!(r["effects_after"], serde_json::json!(["thermal"]));
+    assert_eq!(r["stages"][1]["val_rms_um"].as_f64(), Some(v1));
 }
 
 #[test]

@@ -21,14 +21,8 @@ fn machine_joints_close_every_rod() {
         );
     }
     let q = [2611.0556, 2611.0556, 788.9444, 788.9444];
-    for k in 0..4 {
-        assert!(
-            (m.q[k] - q[k]).abs() < 1e-3,
-            "q{}: {} vs {}",
-            k + 1,
-            m.q[k],
-            q[k]
-        );
+    for (k, (drawn, spec)) in m.q.iter().zip(q).enumerate() {
+        assert!((drawn - spec).abs() < 1e-3, "q{}: {drawn} vs {spec}", k + 1);
     }
     // guides stand at d1 = -1460 and d2 = 1460 and run along y
     assert!((m.guides[0].0.x + 1460.0).abs() < 1e-9 && (m.guides[1].1.x - 1460.0).abs() < 1e-9);

@@ -6,7 +6,7 @@ use crate::plot::maps::{self, Arrow, MapPoint, View};
 use crate::plot::{self, escape, BarOptions, Marker, Series};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::sparse::nominal_tcp;
-use rpkm_core::diagnose::{Diagnosis, ErrorVector, Point, VerdictKind};
+use rpkm_core::diagnose::{Diagnosis, Point, VerdictKind};
 use rpkm_core::params::Params;
 use std::fmt::Write as _;
 
@@ -322,38 +322,50 @@ fn direction_maps(r: &Report, inst: &str, dir: &str, view: View) -> String {
     o
 }
 
-fn arrows(vectors: &[ErrorVector], inst: &str) -> Vec<Arrow> {
-    vectors
+/// The arrows of one instrument in `d`, each titled with its line, pose, error and the σ of
+/// its rows along and across the beam (x and y for the grid encoder).
+fn arrows(d: &Diagnosis, inst: &str) -> Vec<Arrow> {
+    let mut sigma: std::collections::BTreeMap<usize, [f64; 2]> = Default::default();
+    for p in d.points.iter().filter(|p| p.instrument == inst) {
+        let k = match p.direction.as_str() {
+            "along" => 0,
+            "across" => 1,
+            _ => continue,
+        };
+        sigma.entry(p.pose).or_insert([f64::NAN; 2])[k] = p.sigma;
+    }
+    d.error_vectors
         .iter()
         .filter(|v| v.instrument == inst)
-        .map(|v| Arrow {
-            x: v.x,
-            y: v.y,
-            dx_um: v.dx_um,
-            dy_um: v.dy_um,
-            hover: format!(
-                "line {}: x {:.1}, y {:.1} mm: error ({:.2}, {:.2}) µm, |e| {:.2} µm, setup {}",
-                v.line,
-                v.x,
-                v.y,
-                v.dx_um,
-                v.dy_um,
-                v.dx_um.hypot(v.dy_um),
-                v.setup
-            ),
+        .map(|v| {
+            let [along, across] = sigma.get(&v.pose).copied().unwrap_or([f64::NAN; 2]);
+            Arrow {
+                x: v.x,
+                y: v.y,
+                dx_um: v.dx_um,
+                dy_um: v.dy_um,
+                hover: format!(
+                    "line {}: x {:.1}, y {:.1} mm: error ({:.2}, {:.2}) µm, |e| {:.2} µm (σ {along:.2} along, {across:.2} across), setup {}",
+                    v.line,
+                    v.x,
+                    v.y,
+                    v.dx_um,
+                    v.dy_um,
+                    v.dx_um.hypot(v.dy_um),
+                    v.setup
+                ),
+            }
         })
         .collect()
 }
 
 /// Error vectors of a 2-D instrument before and after, one arrow scale.
 fn vector_maps(r: &Report, inst: &str, view: View) -> String {
-    let before = arrows(&r.before.error_vectors, inst);
+    let before = arrows(r.before, inst);
     if before.is_empty() {
         return String::new();
     }
-    let after = r
-        .after
-        .map_or(Vec::new(), |a| arrows(&a.error_vectors, inst));
+    let after = r.after.map_or(Vec::new(), |a| arrows(a, inst));
     let size = p98(before.iter().chain(&after).map(|a| a.dx_um.hypot(a.dy_um)));
     // the largest arrow spans about a grid step of the map
     let um_per_px = size / 32.0;
