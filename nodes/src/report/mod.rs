@@ -105,7 +105,9 @@ impl Report<'_> {
     }
 }
 
-/// Screen and print: sections start on a new page, figures are never split.
+/// Screen and print: sections start on a new page, figures are never split; in print the
+/// screen's layout is scaled to the A4 width (a pair of maps and its colour bar stay on one
+/// line).
 const CSS: &str = "\
 body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;color:#1d2329;margin:0 auto;\
 max-width:1180px;padding:18px 24px;line-height:1.4}\
@@ -121,5 +123,5 @@ td,th{border:1px solid #d6dbe0;padding:3px 8px;text-align:right}\
 th{background:#f1f3f5}td:first-child,th:first-child{text-align:left}\
 .muted{color:#5f6b76;font-size:.9em}\
 @page{size:A4;margin:12mm}\
-@media print{body{max-width:none;padding:0}section{break-before:page}\
+@media print{body{max-width:1180px;padding:0;zoom:.6}section{break-before:page}\
 section#summary{break-before:auto}h2,h3{break-after:avoid}.pair{break-inside:avoid}}";

@@ -192,10 +192,10 @@ pub fn machine(r: &Report) -> String {
     let view = View::around(tcp.iter().copied().filter(|p| p.0.is_finite()));
     let svg = maps::machine_figure("The machine and the campaign", &m, &poses, view);
     format!(
-        "<section id=\"machine\"><h2>The machine and the campaign</h2><div class=\"row\">{}<p class=\"muted\" style=\"max-width:480px\">Guides, carriers, rods and the platform drawn from the geometry at the reset pose (x {:.0}, y {:.0} mm). The maps that follow zoom into the dashed rectangle, where the campaign's poses are; their x axis is stretched to show the pattern.</p></div></section>",
-        figure(&svg, "True scale, nominal parameters."),
+        "<section id=\"machine\"><h2>The machine and the campaign</h2><p class=\"muted\">Guides, carriers, rods and the platform drawn from the geometry at the reset pose (x {:.0}, y {:.0} mm). The maps that follow zoom into the dashed rectangle, where the campaign's poses are; their x axis is stretched to show the pattern.</p>{}</section>",
         at.0,
-        at.1
+        at.1,
+        figure(&svg, "True scale, nominal parameters.")
     )
 }
 
