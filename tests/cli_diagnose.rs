@@ -83,8 +83,12 @@ fn diagnose_names_the_hidden_effect_of_the_truth_file_and_calibrate_adds_it() {
     assert!(first["explained_fraction"].as_f64().expect("fraction") > 0.9);
     assert!(first["val_rms_after_um"].as_f64().expect("after") < 1.5 * floor);
     assert!(first["val_rms_before_um"].as_f64().is_some());
+    // one self-contained page: the charts inline, the named effect's "after" beside "before"
     let page = std::fs::read_to_string(report.join("report.html")).expect("report page");
-    assert!(page.contains("residual_map_0.svg") && report.join("held_out_rms.svg").exists());
+    assert!(page.matches("<figure class=\"plot\"><svg").count() >= 10);
+    assert!(!page.contains(".svg\"") && page.contains("with thermal"));
+    let r = json(&report.join("report.json"));
+    assert_eq!(r["effects_after"], serde_json::json!(["thermal"]));
 
     // adding it with calibrate --effects: the table falls to the floor
     let cj = dir.join("cal.json");
@@ -98,7 +102,9 @@ fn diagnose_names_the_hidden_effect_of_the_truth_file_and_calibrate_adds_it() {
             .arg("--json")
             .arg(&cj)
             .arg("--chart")
-            .arg(&chart),
+            .arg(&chart)
+            .arg("--report")
+            .arg(dir.join("cal-report")),
     );
     let stages = json(&cj)["effect_stages"].clone();
     let v0 = stages[0]["val_rms_um"].as_f64().expect("stage 0");
@@ -113,6 +119,10 @@ fn diagnose_names_the_hidden_effect_of_the_truth_file_and_calibrate_adds_it() {
         "{alpha} vs {truth_alpha}"
     );
     assert!(chart.exists());
+    // its report: the table's stages, the model with thermal as "after"
+    let r = json(&dir.join("cal-report/report.json"));
+    assert_eq!(r["effects_after"], serde_json::json!(["thermal"]));
+    assert_eq!(r["stages"][1]["val_rms_um"].as_f64(), Some(v1));
 }
 
 #[test]

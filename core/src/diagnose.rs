@@ -88,6 +88,8 @@ pub enum DiagnoseError {
     Effect(#[from] NotApplicable),
     #[error("held-out data: {0}")]
     Validation(#[source] PoseError),
+    #[error("TCP error vectors: {0}")]
+    Vectors(#[source] PoseError),
 }
 
 /// The fit of one model (the current one, or with a candidate effect).
@@ -239,6 +241,9 @@ pub struct Diagnosis {
     pub groups: Vec<GroupRms>,
     /// Residuals of the current model, worst (largest |r/σ|) first.
     pub points: Vec<Point>,
+    /// The current model's TCP error of every tracker and grid-encoder pose as a vector, from
+    /// the same fit as `points`.
+    pub error_vectors: Vec<ErrorVector>,
     pub test: String,
 }
 
@@ -324,6 +329,7 @@ impl Search<'_> {
     fn round(&self, copts: &calib::Options) -> Result<(Fitted, Round), DiagnoseError> {
         let val = held_out(self.validation, &copts.noise)?;
         let cal = fit_model(self.campaign, self.in_model, copts)?;
+        let vectors = error_vectors(self.campaign, self.in_model, &cal, copts.model)?;
         let base = finish(self.campaign, val.as_ref(), self.in_model, cal, copts)?;
         let tries = try_all(
             self.campaign,
@@ -333,7 +339,10 @@ impl Search<'_> {
             copts,
             self.threads,
         );
-        let round = candidates(self.campaign, self.tried, tries, &base, self.level);
+        let round = Round {
+            vectors,
+            ..candidates(self.campaign, self.tried, tries, &base, self.level)
+        };
         Ok((base, round))
     }
 }
@@ -354,6 +363,7 @@ fn conclude(
         mut candidates,
         fits,
         skipped,
+        vectors,
     } = round;
     candidates.sort_by(|a, b| b.bic_gain.total_cmp(&a.bic_gain));
     // a single dictionary term's BIC gain: what an effect must beat to be the explanation
@@ -413,6 +423,7 @@ fn conclude(
         unexplained,
         groups: groups(&base.rows),
         points: points(campaign, &base.rows),
+        error_vectors: vectors,
         test,
     }
 }
@@ -426,6 +437,8 @@ struct Round {
     fits: Vec<(&'static str, Fitted)>,
     /// The effects that could not be tried, and why.
     skipped: Vec<Skipped>,
+    /// The current model's TCP error vectors (2-D relative instruments).
+    vectors: Vec<ErrorVector>,
 }
 
 /// A candidate effect's fits: the full effect and the parts of it kept.
@@ -787,6 +800,71 @@ pub fn evaluate(
         finish(campaign, val.as_ref(), effects, cal, &copts)?.fit,
         est,
     ))
+}
+
+/// The TCP error of one pose of a 2-D relative instrument (laser tracker, grid encoder) as a
+/// vector: the model's TCP displacement from the setup's reset pose minus the instrument's
+/// reading (µm), where the pose and its reset pose are (nominal forward model, mm). The
+/// classic picture of a calibration: an arrow per pose over the workspace.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ErrorVector {
+    pub pose: usize,
+    pub line: usize,
+    pub instrument: String,
+    pub setup: String,
+    pub x: f64,
+    pub y: f64,
+    pub reset_x: f64,
+    pub reset_y: f64,
+    pub dx_um: f64,
+    pub dy_um: f64,
+}
+
+/// The error vectors of every 2-D relative pose of `campaign` under the calibration `cal` of
+/// the model with `effects`.
+fn error_vectors(
+    campaign: &Campaign,
+    effects: &[&dyn Effect],
+    cal: &Calibration,
+    model: Model,
+) -> Result<Vec<ErrorVector>, DiagnoseError> {
+    let set = EffectSet::bind(effects, campaign, &cal.start)?;
+    let errs = obs::tcp_errors_with(campaign, &cal.params, model, &set.corrections(&cal.theta))
+        .map_err(DiagnoseError::Vectors)?;
+    let mut xy: BTreeMap<usize, [Option<f64>; 2]> = BTreeMap::new();
+    for e in &errs {
+        let slot = xy.entry(e.pose).or_default();
+        match e.coordinate {
+            "x" => slot[0] = Some(e.value * 1e3),
+            "y" => slot[1] = Some(e.value * 1e3),
+            _ => {}
+        }
+    }
+    let tcp = sparse::nominal_tcp(campaign);
+    let mut out = Vec::new();
+    for setup in campaign.setups() {
+        let Some(reset) = setup.reset else { continue };
+        for &i in &setup.poses {
+            // a tracker or grid-encoder pose gives both coordinates; a single one is no vector
+            let Some([Some(dx_um), Some(dy_um)]) = xy.get(&i).copied() else {
+                continue;
+            };
+            let pose = &campaign.poses[i];
+            out.push(ErrorVector {
+                pose: i,
+                line: pose.line,
+                instrument: pose.instrument.as_str().to_owned(),
+                setup: setup.id.to_owned(),
+                x: tcp[i].0,
+                y: tcp[i].1,
+                reset_x: tcp[reset].0,
+                reset_y: tcp[reset].1,
+                dx_um,
+                dy_um,
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// The held-out campaign with the noise of each of its TCP errors.

@@ -9,5 +9,6 @@ pub mod logging;
 pub mod monitor;
 pub mod node;
 pub mod plot;
+pub mod report;
 pub mod stream;
 pub mod topics;

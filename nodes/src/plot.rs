@@ -1,76 +1,79 @@
-//! Small SVG charts for the HTML reports, without dependencies.
+//! The charts of the reports, as inline SVG.
 //!
-//! Every function returns a complete, standalone `<svg>` document (white background, title,
-//! axes with ticks and labels, a legend where there are series) that a browser shows inline
-//! in HTML. Output is deterministic: the same data give the same bytes. Text is XML-escaped.
-//! Non-finite data (NaN, ±inf) are never written as coordinates: such points are skipped
-//! (line, polar), drawn as empty bars (bar chart, so that the bar count stays
-//! categories × series) or as grey cells (heat map). Empty data give an empty frame.
+//! plotters (its SVG backend) draws what a plotting library draws: frames, axes, ticks,
+//! grids, captions. What is ours is drawn over its plotting area through [`Frame`]: the
+//! machine from rpkm-core's geometry ([`machine`]), residual maps whose colour scale two panels
+//! share ([`maps`]), error-vector maps, bars and markers that carry a `<title>` (file line,
+//! pose, value, σ) which a browser shows on hover.
 //!
-//! Bars carry `class="bar"` and heat-map cells `class="cell"`, each with a `<title>` tooltip
-//! giving the value, so that a browser shows it on hover.
+//! Output is deterministic (the same data give the same bytes) and text is XML-escaped.
+//! Non-finite values are never written as coordinates: such points are left off.
 
-mod chart;
-mod field;
-mod polar;
-mod scale;
-mod svg;
+mod axes;
+mod bars;
+pub mod machine;
+pub mod maps;
+mod scatter;
 
-pub use chart::{bar_chart, line_chart};
-pub use field::{heat_map, quiver};
-pub use polar::polar_deviation;
-pub use svg::escape;
+pub use axes::{Axes, Frame};
+pub use bars::{bar_chart, BarOptions};
+pub use scatter::{scatter, Marker, Series};
 
-/// Options of [`bar_chart`].
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct BarOptions {
-    /// Logarithmic y axis (for condition numbers); bars start at the bottom decade, values
-    /// ≤ 0 are drawn as empty bars.
-    pub log_y: bool,
-}
-
-/// Options of [`line_chart`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct LineOptions {
-    /// Join the points of a series with lines (broken where a point is not finite).
-    pub lines: bool,
-    /// Draw a marker on each point.
-    pub markers: bool,
-}
-
-impl LineOptions {
-    /// Lines without markers.
-    pub const LINES: LineOptions = LineOptions {
-        lines: true,
-        markers: false,
-    };
-    /// Markers only: a scatter plot (residual against time or a covariate).
-    pub const SCATTER: LineOptions = LineOptions {
-        lines: false,
-        markers: true,
-    };
-    /// Lines and markers.
-    pub const LINES_AND_MARKERS: LineOptions = LineOptions {
-        lines: true,
-        markers: true,
-    };
-}
-
-impl Default for LineOptions {
-    fn default() -> Self {
-        LineOptions::LINES
-    }
-}
-
-/// Colours of the series (Tableau 10: distinct, readable on white).
+/// Colours of the series (Tableau 10: distinct, readable on white and in print).
 const PALETTE: [&str; 10] = [
     "#4e79a7", "#f28e2b", "#e15759", "#76b7b2", "#59a14f", "#edc948", "#b07aa1", "#ff9da7",
     "#9c755f", "#bab0ac",
 ];
 
 /// Colour of series `i`.
-fn color(i: usize) -> &'static str {
+pub fn color(i: usize) -> &'static str {
     PALETTE.get(i % PALETTE.len()).copied().unwrap_or("#4e79a7")
+}
+
+/// Text made safe for XML/HTML content and attribute values; control characters other than
+/// tab and newline (invalid in XML 1.0) are dropped.
+pub fn escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            '\t' | '\n' => out.push(c),
+            c if c.is_control() => {}
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// `svg` (a complete document) with `overlay` inserted just before its closing tag.
+fn with_overlay(mut svg: String, overlay: &str) -> String {
+    match svg.rfind("</svg>") {
+        Some(end) => svg.insert_str(end, overlay),
+        None => svg.push_str(overlay),
+    }
+    svg
+}
+
+/// Lower and upper end of the finite values, widened by `pad` of the span on each side (a
+/// single value or none gives a unit span around it).
+pub fn range(values: impl IntoIterator<Item = f64>, pad: f64) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.into_iter().filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        return (0.0, 1.0);
+    }
+    let span = hi - lo;
+    if span <= f64::EPSILON * hi.abs().max(1.0) {
+        return (lo - 0.5, hi + 0.5);
+    }
+    (lo - pad * span, hi + pad * span)
 }
 
 #[cfg(test)]

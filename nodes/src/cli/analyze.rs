@@ -371,6 +371,6 @@ pub fn observability_svg(o: &Observability) -> String {
         "condition number",
         &cats,
         &[("condition number".to_string(), vals)],
-        &crate::plot::BarOptions { log_y: true },
+        &crate::plot::BarOptions { log: true },
     )
 }

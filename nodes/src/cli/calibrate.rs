@@ -81,6 +81,13 @@ pub struct CalibrateArgs {
     /// With --effects: write the chart of the held-out RMS per added effect (SVG).
     #[arg(long)]
     pub chart: Option<PathBuf>,
+    /// Write the diagnosis report into this folder (report.html, one self-contained page, and
+    /// report.json): the model without effects against the model with --effects (or, without
+    /// --effects, with the effect the diagnosis names): residual maps before and after, error
+    /// vectors, the held-out RMS per stage, the noise. Example:
+    ///   rpkm calibrate c.csv --model 24 --effects thermal --validate v.csv --report cal-report/
+    #[arg(long)]
+    pub report: Option<PathBuf>,
     /// Threads the rows are evaluated on (0: every core). The result is the same to the bit
     /// on any number: the rows are summed in fixed pieces of 256 poses, in order.
     #[arg(long, default_value_t = 0)]
@@ -176,6 +183,17 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         Some(effect_stages(args, model, &campaign, validation.as_ref())?)
     };
+    if let Some(dir) = &args.report {
+        let page = write_report(
+            dir,
+            args,
+            model,
+            &campaign,
+            validation.as_ref(),
+            stages.as_deref(),
+        )?;
+        println!("\nreport: {}", page.display());
+    }
     if let Some(path) = &args.json {
         let mut out = report_json(&cal, val.as_ref());
         out["noise"] = serde_json::to_value(&noise.groups)?;
@@ -262,6 +280,63 @@ struct Stage {
     effect_params: Vec<rpkm_core::calib::EffectEstimate>,
 }
 
+/// The diagnosis's calibration: tolerance prior, noise estimated, no outlier elimination.
+fn diagnosis_options(
+    args: &CalibrateArgs,
+    model: Model,
+) -> anyhow::Result<rpkm_core::diagnose::Options> {
+    Ok(rpkm_core::diagnose::Options {
+        model: if args.perfect_parallelogram {
+            Model::M24
+        } else {
+            model
+        },
+        noise: super::parse_noise(args.noise.as_deref())?,
+        estimate_noise: !args.no_noise_estimation,
+        ..Default::default()
+    })
+}
+
+/// The report of --report: the model without effects diagnosed, against the model with
+/// --effects (or with the effect the diagnosis names); the stages of --effects as its table.
+fn write_report(
+    dir: &std::path::Path,
+    args: &CalibrateArgs,
+    model: Model,
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    stages: Option<&[Stage]>,
+) -> anyhow::Result<std::path::PathBuf> {
+    use rpkm_core::diagnose;
+    let opts = diagnosis_options(args, model)?;
+    let effects = super::diagnose::parse_effects(&args.effects)?;
+    let refs: Vec<&dyn rpkm_core::effects::Effect> = effects.iter().map(|e| e.as_ref()).collect();
+    let before = diagnose::diagnose(campaign, validation, &[], &opts)?;
+    let after = if refs.is_empty() {
+        super::diagnose::with_named_effect(campaign, validation, &[], &opts, &before)?
+    } else {
+        Some(diagnose::diagnose(campaign, validation, &refs, &opts)?)
+    };
+    let stages = stages
+        .unwrap_or_default()
+        .iter()
+        .map(|s| crate::report::Stage {
+            model: s.model.clone(),
+            cal_rms_um: s.cal_rms_um,
+            val_rms_um: s.val_rms_um,
+            chi2_per_dof: s.chi2_per_dof,
+        })
+        .collect();
+    super::diagnose::write_report(
+        dir,
+        "rpkm calibrate",
+        campaign,
+        &before,
+        after.as_ref(),
+        stages,
+    )
+}
+
 /// Calibrate with the effects of --effects added one by one (automatic selection, no outlier
 /// elimination: the same rows in every model), print the table and write the chart.
 fn effect_stages(
@@ -272,17 +347,7 @@ fn effect_stages(
 ) -> anyhow::Result<Vec<Stage>> {
     use rpkm_core::diagnose;
     let effects = super::diagnose::parse_effects(&args.effects)?;
-    // the diagnosis's calibration: tolerance prior, noise estimated, no outlier elimination
-    let opts = diagnose::Options {
-        model: if args.perfect_parallelogram {
-            Model::M24
-        } else {
-            model
-        },
-        noise: super::parse_noise(args.noise.as_deref())?,
-        estimate_noise: !args.no_noise_estimation,
-        ..Default::default()
-    };
+    let opts = diagnosis_options(args, model)?;
     let mut stages = Vec::new();
     for k in 0..=effects.len() {
         let refs: Vec<&dyn rpkm_core::effects::Effect> =

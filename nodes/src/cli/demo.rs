@@ -20,7 +20,7 @@ const VALIDATION: &str = include_str!("../../../bags/demo/campaign.val.csv");
 ///   rpkm demo --out rpkm-demo && xdg-open rpkm-demo/report.html
 #[derive(clap::Args, Debug)]
 pub struct DemoArgs {
-    /// Folder for the report (HTML and SVG plots).
+    /// Folder for the report: report.html (one self-contained page) and report.json.
     #[arg(long, default_value = "rpkm-demo")]
     pub out: PathBuf,
 }
@@ -55,7 +55,14 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         after.baseline.noise_floor_um
     );
     println!("   verdict now: {}", after.verdict);
-    let page = write_report(&args.out, &campaign, &before, Some(&after))?;
+    let page = write_report(
+        &args.out,
+        "rpkm demo",
+        &campaign,
+        &before,
+        Some(&after),
+        Vec::new(),
+    )?;
     println!("\nreport: {}", page.display());
     Ok(())
 }

@@ -3,13 +3,12 @@
 //! JSON and the HTML report.
 
 use super::{bad_input, read_campaign, write_json};
-use crate::plot;
+use crate::report::{Report, Stage};
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::{self, Diagnosis, Options};
 use rpkm_core::effects::{self, Effect};
 use rpkm_core::params::Model;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Find the physical effect the model is missing.
@@ -45,7 +44,9 @@ pub struct DiagnoseArgs {
     /// Write the diagnosis as JSON (`missing_effect`, `baseline`, `candidates`, ...).
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Write an HTML report with the plots into this folder.
+    /// Write the report into this folder: report.html (one self-contained page: verdict,
+    /// residual maps before and after adding the named effect, error vectors, noise) and
+    /// report.json (the numbers behind the error-vector maps).
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Significance level of the tests.
@@ -112,7 +113,15 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         println!("\nwrote {}", path.display());
     }
     if let Some(dir) = &args.report {
-        let page = write_report(dir, &campaign, &d, None)?;
+        let after = with_named_effect(&campaign, validation.as_ref(), &refs, &opts, &d)?;
+        let page = write_report(
+            dir,
+            "rpkm diagnose",
+            &campaign,
+            &d,
+            after.as_ref(),
+            Vec::new(),
+        )?;
         println!("report: {}", page.display());
     }
     Ok(())
@@ -216,159 +225,51 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
     println!("\n({})", d.test);
 }
 
-/// Residual heat maps of the worst directions, residual against time, the candidates'
-/// explained fractions and held-out RMS; `after` adds the diagnosis with the named effect
-/// added (the before/after comparison). Returns the page's path.
+/// The diagnosis with the effect `d` names added to the model (diagnosed again), if it names
+/// one: the "after" of the report.
+pub fn with_named_effect(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    in_model: &[&dyn Effect],
+    opts: &Options,
+    d: &Diagnosis,
+) -> anyhow::Result<Option<Diagnosis>> {
+    let Some(missing) = &d.missing_effect else {
+        return Ok(None);
+    };
+    let effect = effects::by_name(missing)?;
+    let mut with: Vec<&dyn Effect> = in_model.to_vec();
+    with.push(effect.as_ref());
+    let after = diagnose::diagnose(campaign, validation, &with, opts)
+        .with_context(|| format!("diagnosing with {missing} added"))?;
+    Ok(Some(after))
+}
+
+/// The HTML report (and the numbers of its error-vector maps as JSON) of `before` and, when
+/// an effect was added, `after`; `stages` the models' table (empty: the two diagnoses').
+/// Returns the page's path.
 pub fn write_report(
     dir: &Path,
+    command: &str,
     campaign: &Campaign,
-    d: &Diagnosis,
+    before: &Diagnosis,
     after: Option<&Diagnosis>,
+    stages: Vec<Stage>,
 ) -> anyhow::Result<PathBuf> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut html = String::from(
-        "<!doctype html><meta charset=\"utf-8\"><title>rpkm diagnosis</title>\
-         <body style=\"font-family:sans-serif;max-width:1100px\">",
-    );
-    let b = &d.baseline;
-    let _ = write!(
-        html,
-        "<h1>rpkm diagnosis of {}</h1><p><b>{}</b></p>\
-         <h2>1. Where the model fails</h2><p>{}: calibration RMS {:.1} µm, held-out RMS {} µm, \
-         noise floor {:.1} µm; χ²/dof {:.2} (p = {:.1e}).</p>",
-        plot::escape(&campaign.source),
-        plot::escape(&d.verdict),
-        plot::escape(&d.model),
-        b.cal_rms_um,
-        um(b.val_rms_um),
-        b.noise_floor_um,
-        b.chi2_per_dof,
-        b.p_value
-    );
-    let mut groups: Vec<_> = d.groups.iter().filter(|g| g.rows >= 8).collect();
-    groups.sort_by(|a, b| b.chi2_per_row.total_cmp(&a.chi2_per_row));
-    let mut files: Vec<(String, String)> = Vec::new();
-    for (k, g) in groups.iter().take(4).enumerate() {
-        let pts: Vec<(f64, f64, f64)> = d
-            .points
-            .iter()
-            .filter(|p| p.instrument == g.instrument && p.direction == g.direction)
-            .map(|p| (p.x, p.y, p.value))
-            .collect();
-        let unit = if g.direction.starts_with("psi") {
-            "µrad"
-        } else {
-            "µm"
-        };
-        let title = format!(
-            "{} {} residual over the workspace (χ²/row {:.1})",
-            g.instrument, g.direction, g.chi2_per_row
-        );
-        files.push((
-            format!("residual_map_{k}.svg"),
-            plot::heat_map(&title, &pts, unit),
-        ));
-        let series: Vec<(f64, f64)> = d
-            .points
-            .iter()
-            .filter(|p| p.instrument == g.instrument && p.direction == g.direction)
-            .map(|p| (p.t, p.value / p.sigma))
-            .collect();
-        if k == 0 {
-            files.push((
-                "residual_vs_time.svg".to_owned(),
-                plot::line_chart(
-                    &format!("{} {} residual against time", g.instrument, g.direction),
-                    "t (s)",
-                    "residual / σ",
-                    &[("residual".to_owned(), series)],
-                    &plot::LineOptions::SCATTER,
-                ),
-            ));
-        }
+    let stages = if stages.is_empty() {
+        std::iter::once(before)
+            .chain(after)
+            .map(Report::stage_of)
+            .collect()
+    } else {
+        stages
+    };
+    Report {
+        command,
+        campaign,
+        before,
+        after,
+        stages,
     }
-    if !d.candidates.is_empty() {
-        let names: Vec<String> = d.candidates.iter().map(|c| c.effect.clone()).collect();
-        files.push((
-            "candidates.svg".to_owned(),
-            plot::bar_chart(
-                "Residual above noise explained by each effect",
-                "explained (%)",
-                &names,
-                &[(
-                    "explained".to_owned(),
-                    d.candidates
-                        .iter()
-                        .map(|c| 100.0 * c.explained_fraction)
-                        .collect(),
-                )],
-                &plot::BarOptions::default(),
-            ),
-        ));
-        if b.val_rms_um.is_some() {
-            let mut cats = vec!["current model".to_owned()];
-            let mut vals = vec![b.val_rms_um.unwrap_or(f64::NAN)];
-            for c in &d.candidates {
-                cats.push(format!("+ {}", c.effect));
-                vals.push(c.val_rms_after_um.unwrap_or(f64::NAN));
-            }
-            cats.push("noise floor".to_owned());
-            vals.push(b.noise_floor_um);
-            files.push((
-                "held_out_rms.svg".to_owned(),
-                plot::bar_chart(
-                    "Held-out TCP RMS with each effect added",
-                    "RMS (µm)",
-                    &cats,
-                    &[("held-out RMS".to_owned(), vals)],
-                    &plot::BarOptions::default(),
-                ),
-            ));
-        }
-    }
-    for (name, svg) in &files {
-        std::fs::write(dir.join(name), svg).with_context(|| format!("writing {name}"))?;
-        if name == "candidates.svg" {
-            html.push_str("<h2>2. Which effect is missing</h2><table border=1 cellpadding=4><tr><th>effect</th><th>significant</th><th>explained</th><th>held-out after (µm)</th><th>evidence</th></tr>");
-            for c in &d.candidates {
-                let _ = write!(
-                    html,
-                    "<tr><td>{}</td><td>{}</td><td>{:.0} %</td><td>{}</td><td>{}</td></tr>",
-                    c.effect,
-                    c.significant,
-                    100.0 * c.explained_fraction,
-                    um(c.val_rms_after_um),
-                    plot::escape(&c.evidence)
-                );
-            }
-            html.push_str("</table>");
-        }
-        let _ = write!(html, "<p><img src=\"{name}\"></p>");
-    }
-    if let Some(u) = &d.unexplained {
-        let _ = write!(
-            html,
-            "<h2>Unexplained structure</h2><p>{}</p>",
-            plot::escape(&u.sentence)
-        );
-    }
-    if let Some(a) = after {
-        let _ = write!(
-            html,
-            "<h2>3. After adding {}</h2><p>{}</p><p>χ²/dof {:.2}, held-out RMS {} µm (floor {:.1} µm).</p>",
-            plot::escape(&a.effects_in_model.join(", ")),
-            plot::escape(&a.verdict),
-            a.baseline.chi2_per_dof,
-            um(a.baseline.val_rms_um),
-            a.baseline.noise_floor_um
-        );
-    }
-    let _ = write!(
-        html,
-        "<p><small>{}</small></p></body>",
-        plot::escape(&d.test)
-    );
-    let page = dir.join("report.html");
-    std::fs::write(&page, html).with_context(|| format!("writing {}", page.display()))?;
-    Ok(page)
+    .write(dir)
 }
