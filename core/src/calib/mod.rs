@@ -247,6 +247,9 @@ pub struct Calibration {
     pub params: Params,
     pub identified: Vec<Identified>,
     pub iterations: usize,
+    /// Whether the LM stopped after one confirmed screening step from a warm start instead
+    /// of converging ([`WarmStart::screen`]).
+    pub screened: bool,
     /// Condition number of the column-normalised weighted Jacobian of the identified
     /// parameters (step 1).
     pub condition_number: f64,
@@ -306,6 +309,11 @@ pub struct WarmStart<'a> {
     pub params: &'a Params,
     /// The effects' parameters (as many as the effects have).
     pub theta: &'a [f64],
+    /// Stop after the first step if the rows confirm it (the LM's predicted reduction
+    /// realised within 2 %): from the neighbour's minimum that is the Gauss-Newton step of
+    /// the linearised problem, what the diagnosis screens its candidates with. Where the
+    /// step is not confirmed the fit goes on to convergence as without it.
+    pub screen: bool,
 }
 
 /// [`calibrate_with`], the LM started at `warm` when given.
@@ -330,7 +338,7 @@ pub fn calibrate_from(
             theta: theta0.clone(),
         },
     };
-    let fit = step1(&pb, &plan, init)?;
+    let fit = step1(&pb, &plan, init, warm.is_some_and(|w| w.screen))?;
     let corr = effects.corrections(&fit.state.theta);
     let (rows_final, post) = posterior(&pb, &plan, &fit.state.p, &corr, &fit.drop)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
@@ -364,6 +372,7 @@ pub fn calibrate_from(
         params: p,
         identified,
         iterations,
+        screened: fit.screened,
         condition_number: plan.condition,
         outliers: fit.outliers,
         rms: table.finish(),
@@ -554,17 +563,25 @@ impl StartRows {
 struct Step1Fit {
     state: State,
     iterations: usize,
+    /// The LM stopped after a confirmed screening step (see [`WarmStart::screen`]).
+    screened: bool,
     drop: HashSet<Key>,
     outliers: Vec<Outlier>,
 }
 
 /// Step 1 with outlier elimination rounds (eq. 3.31-3.32): fit, drop the rows beyond
 /// `outlier_sigma`, fit again, while new outliers appear and fewer than 5 % are dropped.
-fn step1(pb: &Problem, plan: &Plan, init: State) -> Result<Step1Fit, CalibrationError> {
+fn step1(
+    pb: &Problem,
+    plan: &Plan,
+    init: State,
+    screen: bool,
+) -> Result<Step1Fit, CalibrationError> {
     let opts = pb.opts;
     let mut fit = Step1Fit {
         state: init,
         iterations: 0,
+        screened: false,
         drop: HashSet::new(),
         outliers: Vec::new(),
     };
@@ -579,12 +596,14 @@ fn step1(pb: &Problem, plan: &Plan, init: State) -> Result<Step1Fit, Calibration
             free_theta: &plan.free_theta,
             h_theta: plan.h_theta.clone(),
             max_iterations: opts.max_iterations,
+            screen,
             prior: plan.prior.clone(),
             center: pb.start,
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;
         fit.iterations += res.iterations;
+        fit.screened = res.screened;
         let Some(k) = opts.outlier_sigma else { break };
         let corr = pb.effects.corrections(&fit.state.theta);
         let rows = pb.direct(&fit.state.p, &corr, &fit.drop)?;
@@ -704,6 +723,7 @@ fn step2(
         free_theta: &[],
         h_theta: DVector::zeros(0),
         max_iterations: opts.max_iterations,
+        screen: false,
         prior: prior2.clone(),
         center: pb.start,
     };
