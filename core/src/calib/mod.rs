@@ -327,7 +327,7 @@ pub fn calibrate_from(
 ) -> Result<Calibration, CalibrationError> {
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
-    let plan = Plan::new(&pb, &theta0)?;
+    let mut plan = Plan::new(&pb, &theta0)?;
     let init = match warm {
         Some(w) => State {
             p: *w.params,
@@ -347,11 +347,19 @@ pub fn calibrate_from(
     let s1 = Step1Report::new(&pb, &plan, &fit.state, &post, chi2_per_dof.max(1.0));
     let mut table = report::RmsTable::default();
     table.after(rows_final.iter().cloned());
-    let before = pb.map_pieces(Step::Direct, start, start, &plan.corr0, &fit.drop, |rows| {
-        let mut t = report::RmsTable::default();
-        t.before(rows.iter().map(RowValue::from));
-        t
-    })?;
+    // the rows at the start are the plan's, unless outliers were dropped since
+    let before = if fit.drop.is_empty() {
+        std::mem::take(&mut plan.before)
+    } else {
+        pb.map_pieces(
+            Step::Direct,
+            start,
+            start,
+            &plan.corr0,
+            &fit.drop,
+            before_table,
+        )?
+    };
     for t in before {
         table.merge(t);
     }
@@ -470,6 +478,8 @@ struct Plan {
     observability: Vec<f64>,
     /// Rows at the start (the cap on outliers is a share of them).
     n_rows0: usize,
+    /// Their RMS table per piece: the report's "before" (taken once it is used).
+    before: Vec<report::RmsTable>,
 }
 
 impl Plan {
@@ -512,6 +522,7 @@ impl Plan {
             h_theta,
             observability: observability.iter().map(|o| o.0).collect(),
             n_rows0: start.n_rows,
+            before: start.before,
         })
     }
 }
@@ -521,6 +532,15 @@ impl Plan {
 struct StartRows {
     n_rows: usize,
     columns: Columns,
+    /// Each piece's RMS table (the report's "before": the same rows).
+    before: Vec<report::RmsTable>,
+}
+
+/// The "before" RMS table of one piece's rows.
+fn before_table(rows: &[Residual]) -> report::RmsTable {
+    let mut t = report::RmsTable::default();
+    t.before(rows.iter().map(RowValue::from));
+    t
 }
 
 impl StartRows {
@@ -538,7 +558,12 @@ impl StartRows {
                     .iter()
                     .find(|r| !(r.value / r.sigma).powi(2).is_finite())
                     .map(|r| (r.pose, r.value));
-                (rows.len(), bad, Columns::piece(rows, n_theta))
+                (
+                    rows.len(),
+                    bad,
+                    Columns::piece(rows, n_theta),
+                    before_table(rows),
+                )
             },
         )?;
         if let Some((pose, value)) = pieces.iter().find_map(|p| p.1) {
@@ -554,8 +579,13 @@ impl StartRows {
         if n_rows == 0 {
             return Err(CalibrationError::NoMeasurements(pb.campaign.source.clone()));
         }
-        let columns = Columns::combine(pieces.into_iter().map(|p| p.2).collect(), n_theta);
-        Ok(StartRows { n_rows, columns })
+        let (factors, before) = pieces.into_iter().map(|p| (p.2, p.3)).unzip();
+        let columns = Columns::combine(factors, n_theta);
+        Ok(StartRows {
+            n_rows,
+            columns,
+            before,
+        })
     }
 }
 
