@@ -64,6 +64,11 @@ pub struct Options {
     /// Threads the candidate effects are fitted on (0: every core). The result does not
     /// depend on it.
     pub threads: usize,
+    /// Screen the candidates (default): each first takes one Gauss-Newton step from the
+    /// current model's minimum, and only one that may be significant then (p below
+    /// [`SCREEN_P`]) is fitted to convergence. False: every candidate is fitted to
+    /// convergence (the same verdicts, several times the time; for comparison).
+    pub screen: bool,
 }
 
 impl Default for Options {
@@ -75,6 +80,7 @@ impl Default for Options {
             estimate_noise: true,
             prior: Prior::default(),
             threads: 0,
+            screen: true,
         }
     }
 }
@@ -282,12 +288,13 @@ pub fn diagnose(
         tried: &tried,
         level: opts.alpha / tried.len().max(1) as f64,
         threads: opts.threads,
+        screen: opts.screen,
     };
     // Round 1, rows weighted by the stated noise: which effect, if any, stands out. (Under
     // noise estimated with the current model, its misfit inflates the levels and dims the
     // very effect that would explain it.)
     let stated = calib_options(opts);
-    let (base1, first) = search.round(&stated)?;
+    let (base1, first) = search.round(&stated, None)?;
     // noise-free (simulated) data: no noise to estimate, the stated weights stay
     if calib::rms(&length_values(&base1.rows)) < NUMERICAL_RMS_MM {
         let est = NoiseEstimate::assumed(&opts.noise);
@@ -304,8 +311,10 @@ pub fn diagnose(
     {
         with.push(*top);
     }
-    let (_, est, copts) = current_model(campaign, &with, opts)?;
-    let (base, round) = search.round(&copts)?;
+    let (cal, est, copts) = current_model(campaign, &with, opts)?;
+    // the noise was estimated under the current model itself: its last fit is the base
+    let fitted = (with.len() == in_model.len()).then_some(cal);
+    let (base, round) = search.round(&copts, fitted)?;
     let val = held_out(validation, &est.model)?;
     let baseline = baseline(&base, &est.model, val.as_ref(), opts);
     Ok(conclude(&search, opts, base, baseline, round, &est))
@@ -321,14 +330,24 @@ struct Search<'a> {
     level: f64,
     /// Threads the candidates are fitted on.
     threads: usize,
+    /// Whether candidates are screened first ([`Options::screen`]).
+    screen: bool,
 }
 
 impl Search<'_> {
     /// The current model and every candidate, calibrated with `copts` (its noise weights the
-    /// rows and the held-out errors).
-    fn round(&self, copts: &calib::Options) -> Result<(Fitted, Round), DiagnoseError> {
+    /// rows and the held-out errors); the current model's calibration with `copts` when it
+    /// is at hand (`fitted`).
+    fn round(
+        &self,
+        copts: &calib::Options,
+        fitted: Option<Calibration>,
+    ) -> Result<(Fitted, Round), DiagnoseError> {
         let val = held_out(self.validation, &copts.noise)?;
-        let cal = fit_model(self.campaign, self.in_model, copts)?;
+        let cal = match fitted {
+            Some(cal) => cal,
+            None => fit_model(self.campaign, self.in_model, copts)?,
+        };
         let vectors = error_vectors(self.campaign, self.in_model, &cal, copts.model)?;
         let base = finish(self.campaign, val.as_ref(), self.in_model, cal, copts)?;
         let tries = try_all(
@@ -337,7 +356,7 @@ impl Search<'_> {
             (self.in_model, &base.fit),
             self.tried,
             copts,
-            self.threads,
+            (self.threads, self.screen),
         );
         let round = Round {
             vectors,
@@ -453,7 +472,7 @@ fn try_all(
     (in_model, base): (&[&dyn Effect], &Fit),
     tried: &[&dyn Effect],
     copts: &calib::Options,
-    threads: usize,
+    (threads, screen): (usize, bool),
 ) -> Vec<Tried> {
     let start = Params::nominal();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -461,7 +480,7 @@ fn try_all(
     if threads == 1 {
         return tried
             .iter()
-            .map(|e| try_effect(campaign, val, (in_model, base), *e, &start, copts))
+            .map(|e| try_effect(campaign, val, (in_model, base), *e, (&start, screen), copts))
             .collect();
     }
     // the candidates share the cores: each fit's rows on one thread
@@ -469,8 +488,16 @@ fn try_all(
         threads: 1,
         ..copts.clone()
     };
-    let one =
-        |effect: &dyn Effect| try_effect(campaign, val, (in_model, base), effect, &start, copts);
+    let one = |effect: &dyn Effect| {
+        try_effect(
+            campaign,
+            val,
+            (in_model, base),
+            effect,
+            (&start, screen),
+            copts,
+        )
+    };
     let mut out: Vec<Option<Tried>> = (0..tried.len()).map(|_| None).collect();
     std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
@@ -643,13 +670,26 @@ fn noise_sentence(groups: &[GroupNoise]) -> String {
     off.join(", ")
 }
 
-/// Fit `effect` added to the model: the whole family, and the parts the data support.
+/// A candidate whose screening fit leaves its F-test's p-value above this is no contender:
+/// its figures are the screening fit's. Below it the candidate is fitted to convergence, so
+/// that every candidate that can be significant (level α/m ≤ 1e-3) or can be the verdict is
+/// judged on its converged fit. The screen's Δχ² is a lower bound of the converged one (the
+/// screened point is one the converged fit could have stopped at), so the margin from
+/// 1e-3 to 0.05 is for the linearisation alone: one step from the current model's minimum
+/// moves the χ² within 1e-3 relative of the converged value on the twin's campaigns.
+pub const SCREEN_P: f64 = 0.05;
+
+/// Fit `effect` added to the model: the whole family, and the parts the data support. First
+/// one LM step from the current model's minimum (the candidate's own parameters at zero,
+/// nearly Gauss-Newton's step: the score test of the effect, linearised where the current
+/// model ended); a candidate that is then far from significance ([`SCREEN_P`]) keeps that
+/// fit, any other is fitted to convergence.
 fn try_effect(
     campaign: &Campaign,
     val: Option<&Validation>,
     (in_model, base): (&[&dyn Effect], &Fit),
     effect: &dyn Effect,
-    start: &Params,
+    (start, screen): (&Params, bool),
     copts: &calib::Options,
 ) -> Result<(Fitted, Fitted), FitError> {
     let mut with: Vec<&dyn Effect> = in_model.to_vec();
@@ -657,11 +697,29 @@ fn try_effect(
     let mut set = EffectSet::bind(&with, campaign, start)?;
     // the candidate starts where the current model ended, its own parameters at zero
     let theta = warm_theta(&set, base);
-    let warm = Some(calib::WarmStart {
-        params: &base.params,
-        theta: &theta,
-    });
-    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm)?;
+    let warm = |screen| {
+        Some(calib::WarmStart {
+            params: &base.params,
+            theta: &theta,
+            screen,
+        })
+    };
+    // the screening step; where the rows did not confirm it, this is the converged fit
+    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm(screen))?;
+    let cal = if cal.screened {
+        let screened = finish_with(val, &with, &set, cal, copts)?;
+        if screen_p_value(base, &screened.fit) > SCREEN_P {
+            let kept = Fitted {
+                rows: screened.rows.clone(),
+                fit: screened.fit.clone(),
+            };
+            return Ok((screened, kept));
+        }
+        // a contender: fitted to convergence from the current model, as without the screen
+        calib::calibrate_from(campaign, start, copts, &set, &[], warm(false))?
+    } else {
+        cal
+    };
     // parts of the family the data do not support: held at zero in the kept variant
     let weak = weak_parts(&cal, &set, effect.name());
     let full = finish_with(val, &with, &set, cal, copts)?;
@@ -675,9 +733,21 @@ fn try_effect(
     for k in weak {
         set.hold(k);
     }
-    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm)?;
+    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm(false))?;
     let kept = finish_with(val, &with, &set, cal, copts)?;
     Ok((full, kept))
+}
+
+/// The nested F-test's p-value of a screening fit against the current model (1 when the
+/// effect adds no effective parameter or lowers nothing: no contender).
+fn screen_p_value(base: &Fit, screened: &Fit) -> f64 {
+    let k = base.dof - screened.dof;
+    let dchi2 = base.chi2 - screened.chi2;
+    if k < 0.5 || !(dchi2 > 0.0) {
+        return 1.0;
+    }
+    let f = (dchi2 / k) / (screened.chi2 / screened.dof);
+    stats::f_upper_tail(f, k, screened.dof)
 }
 
 /// The current model's effect parameters (`base`) laid out for `set` (the same effects and a

@@ -328,12 +328,29 @@ fn igm29_start(p: &Params, x: f64, y: f64) -> Result<Config, GeometryError> {
 
 /// The configuration with ψ settled on rod 5's closure (see [`igm29_start`]).
 fn rod5_settled(p: &Params, x: f64, y: f64) -> Result<Config, GeometryError> {
+    let (psi, _) = settled_psi(p, x, y, guide_frame(p, RODS[4].guide))?;
+    igm_at_psi(p, x, y, psi)
+}
+
+/// Where the secant in ψ stops: rod 5's closure |A − B|² − l² within a tenth of the solver's
+/// tolerance. Its round-off is a few ulps of l² ≈ 10⁶ mm² (2e-10 mm²), so a tighter bound
+/// would only be met by chance; ψ is then within 1e-17 rad of the root (the closure moves by
+/// about 1.6e8 mm² per rad).
+const SETTLED_MM2: f64 = 0.1 * TOL_MM2;
+
+/// ψ closing rod 5's loop with q4 from rod 4 (`frame`: their guide's), by a secant iteration
+/// in ψ from γ2; with its sine and cosine.
+fn settled_psi(
+    p: &Params,
+    x: f64,
+    y: f64,
+    frame: (Vector2<f64>, Vector2<f64>, Vector2<f64>),
+) -> Result<(f64, (f64, f64)), GeometryError> {
     let (rod4, rod5) = (&RODS[3], &RODS[4]);
     // rods 4 and 5 share guide 2: its frame once, one sin_cos per ψ tried
-    let frame = guide_frame(p, rod5.guide);
     let (o, e, n) = frame;
-    let rod5_closure = |psi: f64| -> Result<f64, GeometryError> {
-        let (s, c) = psi.sin_cos();
+    let rod5_closure = |sc: (f64, f64)| -> Result<f64, GeometryError> {
+        let (s, c) = sc;
         let q4 = rod_igm_at(p, rod4, x, y, (s, c), frame)?;
         let b = o + n * p[rod5.xb] + e * (q4 + p[rod5.yb]);
         let (xa, ya) = (p[rod5.xa], p[rod5.ya]);
@@ -341,17 +358,88 @@ fn rod5_settled(p: &Params, x: f64, y: f64) -> Result<Config, GeometryError> {
         Ok(r.norm_squared() - p[rod5.l] * p[rod5.l])
     };
     let (mut psi0, mut psi1) = (p[GAMMA2], p[GAMMA2] + 1e-6);
-    let (mut g0, mut g1) = (rod5_closure(psi0)?, rod5_closure(psi1)?);
+    let mut sc1 = psi1.sin_cos();
+    let (mut g0, mut g1) = (rod5_closure(psi0.sin_cos())?, rod5_closure(sc1)?);
     for _ in 0..8 {
-        if !(g1.abs() >= 1e-3 * TOL_MM2) || g1 == g0 {
+        if !(g1.abs() >= SETTLED_MM2) || g1 == g0 {
             break;
         }
         let psi2 = psi1 - g1 * (psi1 - psi0) / (g1 - g0);
         (psi0, g0) = (psi1, g1);
         psi1 = psi2;
-        g1 = rod5_closure(psi1)?;
+        sc1 = psi1.sin_cos();
+        g1 = rod5_closure(sc1)?;
     }
-    igm_at_psi(p, x, y, psi1)
+    Ok((psi1, sc1))
+}
+
+/// The model-29 inverse model without the general solver: ψ settled on rod 5's closure
+/// ([`settled_psi`]), each rod by eq. 4.6 with the trigonometry once, and what Newton and
+/// [`solve`] would then check, checked here in closed form: every loop closed (largest
+/// residual below [`TOL_MM2`]), the assembly mode of the five rods, and the conditioning.
+/// The unknowns (ψ, q1..q4) enter rod i's closure through ψ and its own drive only (rod 5
+/// through q4), so the determinant is d1·d2·d3·(a4·d5 − a5·d4) with a = ∂e/∂ψ and
+/// d = ∂e/∂q, and the normalised ratio of [`check_conditioning`] follows from a and d alone.
+/// None where any check fails or the secant does not settle: the general solver then
+/// decides, with its errors.
+fn igm29(p: &Params, x: f64, y: f64) -> Option<Solution> {
+    let frames = [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)];
+    let (psi, (s, co)) = settled_psi(p, x, y, frames[1]).ok()?;
+    let mut c = Config::zeros();
+    (c[X], c[Y], c[PSI]) = (x, y, psi);
+    let (mut a, mut d) = ([0.0; 5], [0.0; 5]);
+    let mut residual: f64 = 0.0;
+    for (i, rod) in RODS.iter().enumerate() {
+        let ((o, e, n), side) = match rod.guide {
+            Guide::G1 => (frames[0], -1.0),
+            Guide::G2 => (frames[1], 1.0),
+        };
+        let (xa, ya) = (p[rod.xa], p[rod.ya]);
+        let pa = Vector2::new(x + co * xa - s * ya, y + s * xa + co * ya);
+        let q = if i < 4 {
+            let q = rod_igm_at(p, rod, x, y, (s, co), (o, e, n)).ok()?;
+            c[q_var(rod.actuator)] = q;
+            q
+        } else {
+            c[q_var(rod.actuator)]
+        };
+        // B − A (the assembly mode reads it), A − B (the closure's derivatives)
+        let ba = o + n * p[rod.xb] + e * (q + p[rod.yb]) - pa;
+        if !(rod.k * ba.dot(&e) > 0.0 && side * ba.dot(&n) > 0.0) {
+            return None;
+        }
+        let f = ba.norm_squared() - p[rod.l] * p[rod.l];
+        residual = residual.max(f.abs());
+        let da_dpsi = Vector2::new(-s * xa - co * ya, co * xa - s * ya);
+        a[i] = -2.0 * ba.dot(&da_dpsi);
+        d[i] = 2.0 * ba.dot(&e);
+    }
+    if !(residual < TOL_MM2) || conditioning29(&a, &d) <= SINGULAR_RATIO {
+        return None;
+    }
+    Some(Solution {
+        c,
+        iterations: 0,
+        residual,
+    })
+}
+
+/// [`check_conditioning`]'s ratio for the model-29 inverse model's ∂e/∂(ψ, q1..q4), from
+/// a = ∂e/∂ψ and d = ∂e/∂q of the five rods (see [`igm29`]); NaN counts as singular.
+fn conditioning29(a: &[f64; 5], d: &[f64; 5]) -> f64 {
+    let na = a.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let n4 = (d[3] * d[3] + d[4] * d[4]).sqrt();
+    if !(na > 0.0 && n4 > 0.0 && d[..3].iter().all(|&v| v != 0.0)) {
+        return 0.0;
+    }
+    let det = (a[3] * d[4] - a[4] * d[3]).abs() / (na * n4);
+    let row = |u: f64, v: f64| (u * u + v * v).sqrt();
+    let norms = row(a[0] / na, 1.0)
+        * row(a[1] / na, 1.0)
+        * row(a[2] / na, 1.0)
+        * row(a[3] / na, d[3] / n4)
+        * row(a[4] / na, d[4] / n4);
+    det / norms
 }
 
 /// Analytic model-24 start for a forward model: intersection of the two rods' circles
@@ -439,7 +527,8 @@ fn newton(
             return Err(GeometryError::NonFinite);
         }
         let e_u = select_columns(&cl.e_c, &unknown);
-        check_conditioning(&e_u, sub)?;
+        let lu = Lu5::new(e_u);
+        check_conditioning(&e_u, lu.map(|l| l.det), sub)?;
         if residual < TOL_MM2 {
             return Ok(Solution {
                 c,
@@ -454,10 +543,12 @@ fn newton(
                 residual,
             });
         }
-        let step = e_u.lu().solve(&cl.e).ok_or(GeometryError::Singular {
-            subsystem: sub,
-            ratio: 0.0,
-        })?;
+        let step = lu
+            .ok_or(GeometryError::Singular {
+                subsystem: sub,
+                ratio: 0.0,
+            })?
+            .solve(&SMatrix::<f64, 5, 1>::from(cl.e));
         for (k, &v) in unknown.iter().enumerate() {
             c[v] -= step[k];
         }
@@ -470,17 +561,25 @@ fn select_columns(m: &SMatrix<f64, 5, 7>, cols: &[usize; 5]) -> SMatrix<f64, 5, 
 }
 
 /// Singularity test free of the units of rows and columns: with every column scaled to unit
-/// norm, |det| / Π ‖row‖ (1 for orthogonal rows, 0 when singular).
-fn check_conditioning(e_u: &SMatrix<f64, 5, 5>, sub: Subsystem) -> Result<(), GeometryError> {
+/// norm, |det| / Π ‖row‖ (1 for orthogonal rows, 0 when singular). `det` is the determinant
+/// of `e_u` itself (its LU's; None when a pivot vanished): scaling the columns divides it by
+/// their norms.
+fn check_conditioning(
+    e_u: &SMatrix<f64, 5, 5>,
+    det: Option<f64>,
+    sub: Subsystem,
+) -> Result<(), GeometryError> {
     let mut m = *e_u;
+    let mut scale = 1.0;
     for mut col in m.column_iter_mut() {
         let n = col.norm();
         if n > 0.0 {
             col /= n;
+            scale *= n;
         }
     }
     let norms: f64 = (0..5).map(|r| m.row(r).norm()).product();
-    let ratio = det5(m).abs() / norms;
+    let ratio = det.map_or(0.0, |d| d.abs() / scale) / norms;
     if !(ratio > SINGULAR_RATIO) {
         return Err(GeometryError::Singular {
             subsystem: sub,
@@ -490,35 +589,96 @@ fn check_conditioning(e_u: &SMatrix<f64, 5, 5>, sub: Subsystem) -> Result<(), Ge
     Ok(())
 }
 
-/// Determinant of a 5 × 5 matrix by Gaussian elimination with partial pivoting, in place on
-/// the stack (nalgebra's general LU costs several times more at this size, and every solve
-/// checks its conditioning once per Newton step).
-fn det5(mut m: SMatrix<f64, 5, 5>) -> f64 {
-    let mut det = 1.0;
-    for k in 0..5 {
-        let mut pivot = k;
-        for r in k + 1..5 {
-            if m[(r, k)].abs() > m[(pivot, k)].abs() {
-                pivot = r;
+/// A 5 × 5 LU factorisation with partial pivoting, on the stack: nalgebra's general LU and
+/// its column-by-column triangular solves cost several times more at this size, and every
+/// Newton step and every row's sensitivities (29 + 2 right-hand sides) go through one.
+#[derive(Clone, Copy, Debug)]
+struct Lu5 {
+    /// L below the diagonal (unit diagonal implied), U on and above it.
+    lu: SMatrix<f64, 5, 5>,
+    /// Row k of the factors is row perm[k] of the matrix.
+    perm: [usize; 5],
+    /// 1 / U's diagonal: the solves multiply instead of dividing.
+    inv_diag: [f64; 5],
+    det: f64,
+}
+
+impl Lu5 {
+    /// None when a pivot is exactly zero (the determinant is then 0).
+    fn new(mut m: SMatrix<f64, 5, 5>) -> Option<Lu5> {
+        let mut perm = [0, 1, 2, 3, 4];
+        let mut det = 1.0;
+        for k in 0..5 {
+            let mut pivot = k;
+            for r in k + 1..5 {
+                if m[(r, k)].abs() > m[(pivot, k)].abs() {
+                    pivot = r;
+                }
+            }
+            if m[(pivot, k)] == 0.0 {
+                return None;
+            }
+            if pivot != k {
+                m.swap_rows(k, pivot);
+                perm.swap(k, pivot);
+                det = -det;
+            }
+            let d = m[(k, k)];
+            det *= d;
+            for r in k + 1..5 {
+                let f = m[(r, k)] / d;
+                m[(r, k)] = f;
+                for c in k + 1..5 {
+                    m[(r, c)] -= f * m[(k, c)];
+                }
             }
         }
-        if m[(pivot, k)] == 0.0 {
-            return 0.0;
-        }
-        if pivot != k {
-            m.swap_rows(k, pivot);
-            det = -det;
-        }
-        let d = m[(k, k)];
-        det *= d;
-        for r in k + 1..5 {
-            let f = m[(r, k)] / d;
-            for c in k + 1..5 {
-                m[(r, c)] -= f * m[(k, c)];
-            }
-        }
+        let inv_diag = std::array::from_fn(|k| 1.0 / m[(k, k)]);
+        Some(Lu5 {
+            lu: m,
+            perm,
+            inv_diag,
+            det,
+        })
     }
-    det
+
+    /// A⁻¹: five solves, after which many right-hand sides cost one static product (the
+    /// sensitivities' 31).
+    fn inverse(&self) -> SMatrix<f64, 5, 5> {
+        self.solve(&SMatrix::<f64, 5, 5>::identity())
+    }
+
+    /// X with A X = B, column by column.
+    fn solve<const N: usize>(&self, b: &SMatrix<f64, 5, N>) -> SMatrix<f64, 5, N> {
+        let mut x = SMatrix::<f64, 5, N>::zeros();
+        for c in 0..N {
+            let mut v = [0.0; 5];
+            for k in 0..5 {
+                v[k] = b[(self.perm[k], c)];
+            }
+            for k in 0..5 {
+                for j in 0..k {
+                    v[k] -= self.lu[(k, j)] * v[j];
+                }
+            }
+            for k in (0..5).rev() {
+                for j in k + 1..5 {
+                    v[k] -= self.lu[(k, j)] * v[j];
+                }
+                v[k] *= self.inv_diag[k];
+            }
+            for k in 0..5 {
+                x[(k, c)] = v[k];
+            }
+        }
+        x
+    }
+}
+
+/// Determinant of a 5 × 5 matrix (0 when singular to the last bit).
+#[cfg(test)]
+fn det5(m: SMatrix<f64, 5, 5>) -> f64 {
+    Lu5::new(m).map_or(0.0, |lu| lu.det)
 }
 
 /// The closed-form inverse model 24: ψ = γ2 and each rod by eq. 4.6 close every equation
@@ -599,6 +759,11 @@ pub fn solve(
             return Ok(sol);
         }
     }
+    if model == Model::M29 && sub == Subsystem::Tcp {
+        if let Some(sol) = igm29(p, known[0], known[1]) {
+            return Ok(sol);
+        }
+    }
     let start = match sub {
         Subsystem::Tcp if model == Model::M29 => igm29_start(p, known[0], known[1])?,
         Subsystem::Tcp => igm_start(p, known[0], known[1])?,
@@ -649,23 +814,26 @@ pub fn sensitivity(
     let known = sub.known();
     let cl = closure(p, model, &sol.c);
     let e_u = select_columns(&cl.e_c, &unknown);
-    check_conditioning(&e_u, sub)?;
-    let lu = e_u.lu();
-    let e_p = closure_params(p, model, &sol.c);
-    let du_dp = lu.solve(&e_p).ok_or(GeometryError::Singular {
+    let lu = Lu5::new(e_u);
+    check_conditioning(&e_u, lu.map(|l| l.det), sub)?;
+    let lu = lu.ok_or(GeometryError::Singular {
         subsystem: sub,
         ratio: 0.0,
     })?;
-    let e_k = SMatrix::<f64, 5, 2>::from_fn(|r, k| cl.e_c[(r, known[k])]);
-    let du_dk = lu.solve(&e_k).ok_or(GeometryError::Singular {
-        subsystem: sub,
-        ratio: 0.0,
-    })?;
+    let inv = lu.inverse();
+    let du_dp = inv * closure_params(p, model, &sol.c);
+    let du_dk = inv * SMatrix::<f64, 5, 2>::from_fn(|r, k| cl.e_c[(r, known[k])]);
     let mut dc_dp = ParamJacobian::zeros();
     let mut dc_dk = SMatrix::<f64, 7, 2>::zeros();
+    // element by element: row views of column-major matrices copy through a strided
+    // iterator that cost a third of this function
     for (k, &v) in unknown.iter().enumerate() {
-        dc_dp.set_row(v, &(-du_dp.row(k)));
-        dc_dk.set_row(v, &(-du_dk.row(k)));
+        for j in 0..N_PARAMS {
+            dc_dp[(v, j)] = -du_dp[(k, j)];
+        }
+        for j in 0..2 {
+            dc_dk[(v, j)] = -du_dk[(k, j)];
+        }
     }
     dc_dk[(known[0], 0)] = 1.0;
     dc_dk[(known[1], 1)] = 1.0;
@@ -691,6 +859,24 @@ mod tests {
             let (a, b) = (det5(m), m.determinant());
             assert!((a - b).abs() <= 1e-12 * b.abs().max(1e-3), "{a} vs {b}");
         }
+        // the solves too: A X = B for 31 right-hand sides, against nalgebra's LU
+        for _ in 0..50 {
+            let mut next = || {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+            };
+            let a = SMatrix::<f64, 5, 5>::from_fn(|_, _| next());
+            let b = SMatrix::<f64, 5, 31>::from_fn(|_, _| next());
+            let ours = Lu5::new(a).expect("regular").solve(&b);
+            let want = a.lu().solve(&b).expect("regular");
+            assert!(
+                (ours - want).amax() <= 1e-10 * want.amax(),
+                "{ours} vs {want}"
+            );
+            assert!((a * ours - b).amax() < 1e-12, "residual");
+        }
         let mut singular = SMatrix::<f64, 5, 5>::identity();
         singular.set_row(4, &singular.row(3).clone_owned());
         assert_eq!(det5(singular), 0.0);
@@ -699,26 +885,39 @@ mod tests {
         assert_eq!(det5(swap), -1.0);
     }
 
-    /// The model-29 igm from the rod-5 start gives what Newton from the model-24 start gives
-    /// (to 1e-9 mm, both within the solver's tolerance), with fewer Newton steps.
+    /// The model-29 igm (the closed checks of [`igm29`], else Newton from the rod-5 start)
+    /// gives what Newton from the model-24 start gives (to 1e-9 mm, both within the solver's
+    /// tolerance), refuses the poses that refuses, and needs the general solver nowhere in
+    /// the workspace.
     #[test]
     fn igm29_start_converges_to_the_same_pose() {
         let mut p = Params::nominal();
         for (k, i) in [0, 3, 7, 12, 20, 24, 26].into_iter().enumerate() {
             p[i] += 0.05 * (k as f64 + 1.0);
         }
-        let (mut solved, mut steps_old, mut steps_new) = (0, 0, 0);
+        let (mut solved, mut closed, mut steps_old, mut steps_new) = (0, 0, 0, 0);
         for i in 0..31 {
             for j in 0..31 {
                 let (x, y) = (-300.0 + 20.0 * f64::from(i), 500.0 + 80.0 * f64::from(j));
                 let new = solve(&p, Model::M29, Subsystem::Tcp, [x, y]);
-                let old =
-                    igm_start(&p, x, y).and_then(|c| newton(&p, Model::M29, Subsystem::Tcp, c));
+                let old = igm_start(&p, x, y)
+                    .and_then(|c| newton(&p, Model::M29, Subsystem::Tcp, c))
+                    .and_then(|sol| {
+                        let t = Trig::new(&p, &sol.c);
+                        match RODS
+                            .iter()
+                            .find(|r| !rod_in_assembly_mode(&p, r, &sol.c, &t))
+                        {
+                            Some(rod) => Err(GeometryError::AssemblyMode { rod: rod.number }),
+                            None => Ok(sol),
+                        }
+                    });
                 match (new, old) {
                     (Ok(a), Ok(b)) => {
                         let gap = (a.c - b.c).amax();
                         assert!(gap < 1e-9, "({x}, {y}): {gap:e}");
                         solved += 1;
+                        closed += usize::from(igm29(&p, x, y).is_some());
                         steps_new += a.iterations;
                         steps_old += b.iterations;
                     }
@@ -728,6 +927,7 @@ mod tests {
             }
         }
         assert!(solved > 500, "only {solved} poses solved");
+        assert_eq!(closed, solved, "poses left to the general solver");
         assert!(
             steps_new < steps_old,
             "Newton steps {steps_new} vs {steps_old}"

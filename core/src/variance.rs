@@ -99,8 +99,16 @@ pub fn calibrate_estimating_noise(
     let mut total = [1.0; N_GROUPS];
     let mut dof = [0.0; N_GROUPS];
     let mut rounds = 0;
+    let mut last: Option<Calibration> = None;
     let cal = loop {
-        let cal = calib::calibrate_with(campaign, start, &o, effects, &[])?;
+        // each round starts where the last ended: only the weights changed, so the LM takes
+        // one or two steps instead of a calibration's four or five from the start
+        let warm = last.as_ref().map(|c| calib::WarmStart {
+            params: &c.params,
+            theta: &c.theta,
+            screen: false,
+        });
+        let cal = calib::calibrate_from(campaign, start, &o, effects, &[], warm)?;
         rounds += 1;
         let terms = factor_terms(&cal.residuals, &cal.leverage);
         let mut step = [1.0; N_GROUPS];
@@ -122,6 +130,7 @@ pub fn calibrate_estimating_noise(
             total[k] *= step[k];
         }
         o.noise = assumed.scaled(&total);
+        last = Some(cal);
     };
     let distance = mean_tracker_distance(campaign, &assumed);
     let groups = Group::ALL

@@ -327,3 +327,57 @@ fn the_diagnosis_does_not_depend_on_the_thread_count() {
     assert!(one.contains("encoder_scale"), "{one}");
     assert_eq!(one, two);
 }
+
+/// Screening the candidates changes no conclusion: against the same diagnosis with every
+/// candidate fitted to convergence (the reference), on a twin hiding thermal expansion and on
+/// one hiding nothing: the same verdict and named effect, the same held-out figures, the same
+/// significant candidates; every candidate that may be significant (converged p < SCREEN_P)
+/// carries its converged figures, and no candidate the screen let pass could have been
+/// significant.
+#[test]
+fn screened_candidates_change_no_conclusion() {
+    let twins = [
+        (52, vec![EffectKind::Thermal], Some("thermal")),
+        (53, vec![], None),
+    ];
+    for (seed, hidden, named) in twins {
+        let (cal, val, _) = campaigns(seed, &hidden);
+        let with = |screen| {
+            let opts = Options {
+                screen,
+                ..Options::default()
+            };
+            diagnose::diagnose(&cal, Some(&val), &[], &opts).expect("diagnose")
+        };
+        let (fast, full) = (with(true), with(false));
+        let label = format!("seed {seed}, hidden {hidden:?}");
+        assert_eq!(fast.verdict_kind, full.verdict_kind, "{label}");
+        assert_eq!(fast.missing_effect, full.missing_effect, "{label}");
+        assert_eq!(
+            fast.baseline.val_rms_um, full.baseline.val_rms_um,
+            "{label}: the current model's held-out RMS"
+        );
+        assert_eq!(fast.candidates.len(), full.candidates.len(), "{label}");
+        for c in &full.candidates {
+            let s = fast
+                .candidates
+                .iter()
+                .find(|s| s.effect == c.effect)
+                .expect("the same candidates");
+            assert_eq!(s.significant, c.significant, "{label}: {}", c.effect);
+            if c.p_value < diagnose::SCREEN_P {
+                assert_eq!(s.f_statistic, c.f_statistic, "{label}: {}", c.effect);
+                assert_eq!(s.val_rms_after_um, c.val_rms_after_um, "{label}");
+            } else {
+                assert!(
+                    s.p_value >= diagnose::SCREEN_P,
+                    "{label}: {} screened p {} converged p {}",
+                    c.effect,
+                    s.p_value,
+                    c.p_value
+                );
+            }
+        }
+        assert_eq!(full.missing_effect.as_deref(), named, "{label}");
+    }
+}

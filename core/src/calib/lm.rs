@@ -30,6 +30,13 @@ pub const XTOL: f64 = 1.490_116_119_384_765_6e-8;
 /// took 12-15 (the damping then decays by 3 per step over the problem's six decades of
 /// eigenvalues), with χ² equal to 1e-8 relative.
 pub const TAU: f64 = 1e-9;
+/// How far the actual reduction of a screening step may be from the predicted one (ρ = 1 on
+/// a quadratic model) for the step to stand for the fit (see [`Lm::screen`]).
+pub const SCREEN_RHO: f64 = 0.02;
+/// Initial damping of a screening run: the first step is Gauss-Newton's to round-off (the
+/// effect columns added to a model at its minimum reach six decades below the largest
+/// diagonal, where [`TAU`]'s damping would hold the step back).
+pub const SCREEN_TAU: f64 = 1e-15;
 
 use super::rows::{weighted_jacobian, weighted_theta, weighted_values, Key, Problem};
 use super::CalibrationError;
@@ -59,6 +66,11 @@ pub(super) struct Lm<'a> {
     pub free_theta: &'a [usize],
     pub h_theta: DVector<f64>,
     pub max_iterations: usize,
+    /// Stop after the first step when it was taken at the first try and the rows confirmed
+    /// its predicted reduction (|ρ − 1| ≤ [`SCREEN_RHO`]): from a neighbouring model's
+    /// minimum that step is Gauss-Newton's on a quadratic model that holds, the screening
+    /// fit of the diagnosis. Otherwise the run goes on to convergence as without it.
+    pub screen: bool,
     /// Per reduced parameter: its index and tolerance (empty: no prior), and the prior's
     /// centre.
     pub prior: Vec<(usize, f64)>,
@@ -94,6 +106,8 @@ impl Normal {
 pub(super) struct LmResult {
     pub state: State,
     pub iterations: usize,
+    /// Stopped after a screening step (see [`Lm::screen`]), not converged.
+    pub screened: bool,
 }
 
 impl Lm<'_> {
@@ -186,9 +200,17 @@ impl Lm<'_> {
         let cols = self.n_unknowns();
         let mut p = start.clone();
         let mut nq = self.normal_at(&p)?;
-        let mut mu = TAU * nq.a.diagonal().max();
+        // a screening step is Gauss-Newton's: undamped where the normal equations allow
+        let tau = if self.screen { SCREEN_TAU } else { TAU };
+        let mut mu = tau * nq.a.diagonal().max();
         let mut nu = 2.0;
-        let done = |state: State, iterations: usize| Ok(LmResult { state, iterations });
+        let done = |state: State, iterations: usize| {
+            Ok(LmResult {
+                state,
+                iterations,
+                screened: false,
+            })
+        };
         // distance travelled from the start in the scaled variables (for xtol)
         let mut travelled = DVector::<f64>::zeros(cols);
         for it in 0..self.max_iterations {
@@ -226,6 +248,13 @@ impl Lm<'_> {
                     let xtol = step.norm() <= XTOL * (travelled.norm() + XTOL);
                     if ftol || xtol || nq.cost == 0.0 {
                         return done(p, it + 1);
+                    }
+                    if self.screen && it == 0 && (rho - 1.0).abs() <= SCREEN_RHO {
+                        return Ok(LmResult {
+                            state: p,
+                            iterations: 1,
+                            screened: true,
+                        });
                     }
                 }
                 _ => {

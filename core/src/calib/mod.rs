@@ -247,6 +247,9 @@ pub struct Calibration {
     pub params: Params,
     pub identified: Vec<Identified>,
     pub iterations: usize,
+    /// Whether the LM stopped after one confirmed screening step from a warm start instead
+    /// of converging ([`WarmStart::screen`]).
+    pub screened: bool,
     /// Condition number of the column-normalised weighted Jacobian of the identified
     /// parameters (step 1).
     pub condition_number: f64,
@@ -306,6 +309,11 @@ pub struct WarmStart<'a> {
     pub params: &'a Params,
     /// The effects' parameters (as many as the effects have).
     pub theta: &'a [f64],
+    /// Stop after the first step if the rows confirm it (the LM's predicted reduction
+    /// realised within 2 %): from the neighbour's minimum that is the Gauss-Newton step of
+    /// the linearised problem, what the diagnosis screens its candidates with. Where the
+    /// step is not confirmed the fit goes on to convergence as without it.
+    pub screen: bool,
 }
 
 /// [`calibrate_with`], the LM started at `warm` when given.
@@ -319,7 +327,7 @@ pub fn calibrate_from(
 ) -> Result<Calibration, CalibrationError> {
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
-    let plan = Plan::new(&pb, &theta0)?;
+    let mut plan = Plan::new(&pb, &theta0)?;
     let init = match warm {
         Some(w) => State {
             p: *w.params,
@@ -330,7 +338,7 @@ pub fn calibrate_from(
             theta: theta0.clone(),
         },
     };
-    let fit = step1(&pb, &plan, init)?;
+    let fit = step1(&pb, &plan, init, warm.is_some_and(|w| w.screen))?;
     let corr = effects.corrections(&fit.state.theta);
     let (rows_final, post) = posterior(&pb, &plan, &fit.state.p, &corr, &fit.drop)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
@@ -339,11 +347,19 @@ pub fn calibrate_from(
     let s1 = Step1Report::new(&pb, &plan, &fit.state, &post, chi2_per_dof.max(1.0));
     let mut table = report::RmsTable::default();
     table.after(rows_final.iter().cloned());
-    let before = pb.map_pieces(Step::Direct, start, start, &plan.corr0, &fit.drop, |rows| {
-        let mut t = report::RmsTable::default();
-        t.before(rows.iter().map(RowValue::from));
-        t
-    })?;
+    // the rows at the start are the plan's, unless outliers were dropped since
+    let before = if fit.drop.is_empty() {
+        std::mem::take(&mut plan.before)
+    } else {
+        pb.map_pieces(
+            Step::Direct,
+            start,
+            start,
+            &plan.corr0,
+            &fit.drop,
+            before_table,
+        )?
+    };
     for t in before {
         table.merge(t);
     }
@@ -364,6 +380,7 @@ pub fn calibrate_from(
         params: p,
         identified,
         iterations,
+        screened: fit.screened,
         condition_number: plan.condition,
         outliers: fit.outliers,
         rms: table.finish(),
@@ -461,6 +478,8 @@ struct Plan {
     observability: Vec<f64>,
     /// Rows at the start (the cap on outliers is a share of them).
     n_rows0: usize,
+    /// Their RMS table per piece: the report's "before" (taken once it is used).
+    before: Vec<report::RmsTable>,
 }
 
 impl Plan {
@@ -503,6 +522,7 @@ impl Plan {
             h_theta,
             observability: observability.iter().map(|o| o.0).collect(),
             n_rows0: start.n_rows,
+            before: start.before,
         })
     }
 }
@@ -512,6 +532,15 @@ impl Plan {
 struct StartRows {
     n_rows: usize,
     columns: Columns,
+    /// Each piece's RMS table (the report's "before": the same rows).
+    before: Vec<report::RmsTable>,
+}
+
+/// The "before" RMS table of one piece's rows.
+fn before_table(rows: &[Residual]) -> report::RmsTable {
+    let mut t = report::RmsTable::default();
+    t.before(rows.iter().map(RowValue::from));
+    t
 }
 
 impl StartRows {
@@ -529,7 +558,12 @@ impl StartRows {
                     .iter()
                     .find(|r| !(r.value / r.sigma).powi(2).is_finite())
                     .map(|r| (r.pose, r.value));
-                (rows.len(), bad, Columns::piece(rows, n_theta))
+                (
+                    rows.len(),
+                    bad,
+                    Columns::piece(rows, n_theta),
+                    before_table(rows),
+                )
             },
         )?;
         if let Some((pose, value)) = pieces.iter().find_map(|p| p.1) {
@@ -545,8 +579,13 @@ impl StartRows {
         if n_rows == 0 {
             return Err(CalibrationError::NoMeasurements(pb.campaign.source.clone()));
         }
-        let columns = Columns::combine(pieces.into_iter().map(|p| p.2).collect(), n_theta);
-        Ok(StartRows { n_rows, columns })
+        let (factors, before) = pieces.into_iter().map(|p| (p.2, p.3)).unzip();
+        let columns = Columns::combine(factors, n_theta);
+        Ok(StartRows {
+            n_rows,
+            columns,
+            before,
+        })
     }
 }
 
@@ -554,17 +593,25 @@ impl StartRows {
 struct Step1Fit {
     state: State,
     iterations: usize,
+    /// The LM stopped after a confirmed screening step (see [`WarmStart::screen`]).
+    screened: bool,
     drop: HashSet<Key>,
     outliers: Vec<Outlier>,
 }
 
 /// Step 1 with outlier elimination rounds (eq. 3.31-3.32): fit, drop the rows beyond
 /// `outlier_sigma`, fit again, while new outliers appear and fewer than 5 % are dropped.
-fn step1(pb: &Problem, plan: &Plan, init: State) -> Result<Step1Fit, CalibrationError> {
+fn step1(
+    pb: &Problem,
+    plan: &Plan,
+    init: State,
+    screen: bool,
+) -> Result<Step1Fit, CalibrationError> {
     let opts = pb.opts;
     let mut fit = Step1Fit {
         state: init,
         iterations: 0,
+        screened: false,
         drop: HashSet::new(),
         outliers: Vec::new(),
     };
@@ -579,12 +626,14 @@ fn step1(pb: &Problem, plan: &Plan, init: State) -> Result<Step1Fit, Calibration
             free_theta: &plan.free_theta,
             h_theta: plan.h_theta.clone(),
             max_iterations: opts.max_iterations,
+            screen,
             prior: plan.prior.clone(),
             center: pb.start,
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;
         fit.iterations += res.iterations;
+        fit.screened = res.screened;
         let Some(k) = opts.outlier_sigma else { break };
         let corr = pb.effects.corrections(&fit.state.theta);
         let rows = pb.direct(&fit.state.p, &corr, &fit.drop)?;
@@ -704,6 +753,7 @@ fn step2(
         free_theta: &[],
         h_theta: DVector::zeros(0),
         max_iterations: opts.max_iterations,
+        screen: false,
         prior: prior2.clone(),
         center: pb.start,
     };

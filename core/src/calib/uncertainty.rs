@@ -28,6 +28,11 @@ pub(super) struct Posterior {
 /// Rows per block of the sums below: the rows' Jacobian is never stored whole.
 const BLOCK: usize = 512;
 
+/// Campaigns up to this many poses keep their final rows' Jacobian between the information
+/// and the leverages (at most a few rows per pose of 29 + k columns: 10-50 MB); larger ones
+/// evaluate the rows twice and hold one piece per thread.
+const KEEP_JACOBIAN_POSES: usize = 20_000;
+
 /// The weighted Jacobian of a block of rows in the unknowns: parameters `ids` under links,
 /// then the effect parameters `free`.
 fn block_jacobian(
@@ -57,28 +62,45 @@ pub(super) fn posterior(
     let (ids, links, free, prior) = (&plan.ids, &pb.opts.links, &plan.free_theta, &plan.prior);
     let n = ids.len();
     let jacobian = |rows: &[Residual]| block_jacobian(rows, ids, links, free);
+    // a small campaign keeps each piece's Jacobian for the leverages (one pass over the
+    // rows instead of two); a large one evaluates its rows again rather than hold them
+    let keep = pb.campaign.poses.len() <= KEEP_JACOBIAN_POSES;
     let pieces = pb.map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
         let jr = jacobian(rows);
         let values: Vec<RowValue> = rows.iter().map(RowValue::from).collect();
-        (jr.tr_mul(&jr), values)
+        (jr.tr_mul(&jr), values, keep.then_some(jr))
     })?;
     let cols = n + free.len();
     let mut info = DMatrix::zeros(cols, cols);
-    for (piece, _) in &pieces {
+    for (piece, _, _) in &pieces {
         info += piece;
     }
-    let values: Vec<RowValue> = pieces.into_iter().flat_map(|(_, v)| v).collect();
     let inv = normal_inverse(&info, ids, prior)?;
     let dof_model = (&inv * &info).trace();
-    let leverage = pb
-        .map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
-            let jr = jacobian(rows);
-            let ji = &jr * &inv;
-            (0..jr.nrows())
-                .map(|i| ji.row(i).dot(&jr.row(i)))
-                .collect::<Vec<f64>>()
-        })?
-        .concat();
+    let leverage_of = |jr: &DMatrix<f64>| {
+        let ji = jr * &inv;
+        (0..jr.nrows())
+            .map(|i| ji.row(i).dot(&jr.row(i)))
+            .collect::<Vec<f64>>()
+    };
+    let (values, leverage) = if keep {
+        let leverage = pieces
+            .iter()
+            .flat_map(|(_, _, jr)| jr.as_ref().map(leverage_of).unwrap_or_default())
+            .collect();
+        (
+            pieces.into_iter().flat_map(|(_, v, _)| v).collect(),
+            leverage,
+        )
+    } else {
+        let values: Vec<RowValue> = pieces.into_iter().flat_map(|(_, v, _)| v).collect();
+        let leverage = pb
+            .map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
+                leverage_of(&jacobian(rows))
+            })?
+            .concat();
+        (values, leverage)
+    };
     // directions: eigenvalues of the data's information in units of the prior's
     let determined = (!prior.is_empty()).then(|| {
         let tol = DVector::from_iterator(n, prior.iter().map(|p| p.1));

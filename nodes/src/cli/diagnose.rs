@@ -68,6 +68,13 @@ pub struct DiagnoseArgs {
     /// same, to the bit, whatever the number.
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Fit every candidate effect to convergence instead of screening it first (by default
+    /// each takes one Gauss-Newton step from the current model's fit, and only one that may
+    /// be significant, p < 0.05, is fitted to convergence). The same verdict, slower; the
+    /// candidates' figures then come from converged fits. Example:
+    /// rpkm diagnose cal.csv --validate val.csv --no-screen
+    #[arg(long)]
+    pub no_screen: bool,
 }
 
 /// Effects of a comma-separated list, or a bad-input error naming the option.
@@ -103,6 +110,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             angle_rad: args.tolerance_mrad * 1e-3,
         },
         threads: args.threads,
+        screen: !args.no_screen,
         ..Default::default()
     };
     let d = diagnose::diagnose(&campaign, validation.as_ref(), &refs, &opts)

@@ -6,7 +6,7 @@
 //!   wall time, LM iterations, peak resident memory (the child's `ru_maxrss`), time per pose.
 //! - The same calibrations on one thread (`--threads 1`): the parallel speed-up.
 //! - Diagnosis of a campaign of about 1,000 poses with every library effect tried, in
-//!   process.
+//!   process: screened (the default) and with every candidate fitted to convergence.
 //! - When Python with scipy is there: the plain `scipy.optimize.least_squares` script of
 //!   tests/python on the smallest campaign, and the ratio of its time to ours.
 
@@ -160,14 +160,29 @@ fn diagnosis(seed: u64) -> Result<()> {
     let three = [Instrument::Lt, Instrument::Kgm, Instrument::SelfCal];
     let cal: Campaign = twin.campaign(&three.repeat(3))?;
     let val = twin.validation(100)?;
-    let t0 = Instant::now();
-    let d = diagnose::diagnose(&cal, Some(&val), &[], &Options::default())?;
-    let ms = t0.elapsed().as_secs_f64() * 1e3;
+    // screened (the default) and every candidate fitted to convergence, side by side
+    let mut ms = [0.0; 2];
+    let mut kinds = Vec::new();
+    for (k, screen) in [true, false].into_iter().enumerate() {
+        let opts = Options {
+            screen,
+            ..Options::default()
+        };
+        let t0 = Instant::now();
+        let d = diagnose::diagnose(&cal, Some(&val), &[], &opts)?;
+        ms[k] = t0.elapsed().as_secs_f64() * 1e3;
+        kinds.push((d.verdict_kind, d.candidates.len()));
+    }
     println!(
-        "\ndiagnosis, {} poses, {} candidate effects: {ms:.0} ms (verdict: {:?})",
+        "\ndiagnosis, {} poses, {} candidate effects: {:.0} ms (verdict: {:?}); every candidate \
+         fitted to convergence (--no-screen): {:.0} ms ({:?}), {:.1}x",
         cal.poses.len(),
-        d.candidates.len(),
-        d.verdict_kind
+        kinds[0].1,
+        ms[0],
+        kinds[0].0,
+        ms[1],
+        kinds[1].0,
+        ms[1] / ms[0]
     );
     Ok(())
 }
