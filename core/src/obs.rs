@@ -503,6 +503,36 @@ fn force_step(i: usize) -> f64 {
     }
 }
 
+/// The drive forces of the elasto-geometric model with all four drives position-controlled
+/// at `q` (parameters `p`, stiffness `k`) and their derivatives by the 29 parameters: central
+/// differences of the equilibrium, warm-started from its own (from `warm` where given: the
+/// previous sample of a stream).
+pub fn force_jacobian(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    warm: Option<&Equilibrium>,
+) -> Result<(Equilibrium, [Row; 4]), ElasticError> {
+    let eq: Equilibrium = match warm {
+        Some(w) => fegm_from(p, k, q, ALL_ACTIVE, w)?,
+        None => fegm(p, k, q, ALL_ACTIVE)?,
+    };
+    let mut dp = [Row::zeros(); 4];
+    for j in 0..N_PARAMS {
+        let h = force_step(j);
+        let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
+            let mut pj = *p;
+            pj[j] += sign * h;
+            Ok(fegm_from(&pj, k, q, ALL_ACTIVE, &eq)?.drive_force)
+        };
+        let (plus, minus) = (at(1.0)?, at(-1.0)?);
+        for a in 0..4 {
+            dp[a][j] = (plus[a] - minus[a]) / (2.0 * h);
+        }
+    }
+    Ok((eq, dp))
+}
+
 /// Drive-force rows (thesis 4.4, used as measurements): with all four drives
 /// position-controlled at the recorded positions, the elasto-geometric model's drive forces
 /// minus the recorded ones, f1..f4 (N), with the default stiffness times 1 + the effects'
@@ -521,19 +551,10 @@ fn force_rows(
     let d = ctx.corr.delta(i);
     let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
     let k = Stiffness::default().scaled(1.0 + d.dk);
-    let eq: Equilibrium = fegm(&p_i, &k, q_i, ALL_ACTIVE)?;
+    let (eq, dp) = force_jacobian(&p_i, &k, q_i, None)?;
     let mut sens = [InputSensitivity::default(); 4];
-    for j in 0..N_PARAMS {
-        let h = force_step(j);
-        let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
-            let mut pj = p_i;
-            pj[j] += sign * h;
-            Ok(fegm_from(&pj, &k, q_i, ALL_ACTIVE, &eq)?.drive_force)
-        };
-        let (plus, minus) = (at(1.0)?, at(-1.0)?);
-        for a in 0..4 {
-            sens[a].dp[j] = (plus[a] - minus[a]) / (2.0 * h);
-        }
+    for a in 0..4 {
+        sens[a].dp = dp[a];
     }
     // the carrier positions matter only through an effect that moves them (a scale)
     if ctx.corr.n_params > 0 {
