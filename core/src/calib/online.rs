@@ -25,6 +25,13 @@ use crate::obs::force_jacobian;
 use crate::params::{unit, Params, Unit, N_PARAMS};
 use nalgebra::{Matrix4, SMatrix, SVector, Vector3, Vector4};
 
+/// The state's units inside the filter: the tolerance prior (0.1 mm, 1 mrad) and 10 % of
+/// the stiffness.
+fn scale() -> SVector<f64, N_STATE> {
+    let prior = Prior::default();
+    SVector::from_fn(|i, _| if i == STIFFNESS { 0.1 } else { prior.sigma(i) })
+}
+
 /// Unknowns: the 29 parameters, then the stiffness change.
 pub const N_STATE: usize = N_PARAMS + 1;
 /// Index of the stiffness change in the state.
@@ -33,7 +40,6 @@ pub const STIFFNESS: usize = N_PARAMS;
 pub const GATE_CHI2_4: f64 = 33.4;
 
 pub type Covariance = SMatrix<f64, N_STATE, N_STATE>;
-type Gain = SMatrix<f64, N_STATE, 4>;
 type Rows = SMatrix<f64, 4, N_STATE>;
 
 /// Settings of the online estimator.
@@ -91,7 +97,7 @@ impl Default for OnlineOptions {
             // held: forces alone cannot tell it from the geometry (rpkm analyze
             // observability --method currents); an offline calibration of forces and
             // followers gives it
-            stiffness_sigma: 0.0,
+            stiffness_sigma: 1e-6,
             step_samples: 10,
             step_margin: 1.5,
             step_max_samples: 60,
@@ -147,6 +153,9 @@ struct Held {
 pub struct OnlineEstimator {
     p: Params,
     dk: f64,
+    /// Covariance of the state in units of [`scale`] (lengths in 0.1 mm, angles in mrad,
+    /// the stiffness in 10 %): forces of 1e5 N/mm against 1e8 N/rad would otherwise lose
+    /// the update's digits.
     cov: Covariance,
     opts: OnlineOptions,
     last_t: Option<f64>,
@@ -161,10 +170,11 @@ impl OnlineEstimator {
     /// Starts at `p` with covariance `cov` over (p, dk) (a calibration's, see
     /// [`OnlineEstimator::from_sigmas`]).
     pub fn new(p: Params, cov: Covariance, opts: OnlineOptions) -> OnlineEstimator {
+        let d = scale();
         OnlineEstimator {
             p,
             dk: 0.0,
-            cov,
+            cov: Covariance::from_fn(|i, j| cov[(i, j)] / (d[i] * d[j])),
             opts,
             last_t: None,
             warm: None,
@@ -193,12 +203,14 @@ impl OnlineEstimator {
     pub fn stiffness_change(&self) -> f64 {
         self.dk
     }
-    pub fn covariance(&self) -> &Covariance {
-        &self.cov
+    /// Covariance of the state (mm, rad, relative stiffness).
+    pub fn covariance(&self) -> Covariance {
+        let d = scale();
+        Covariance::from_fn(|i, j| self.cov[(i, j)] * d[i] * d[j])
     }
     /// σ of state `i`.
     pub fn sigma(&self, i: usize) -> f64 {
-        self.cov[(i, i)].max(0.0).sqrt()
+        self.cov[(i, i)].max(0.0).sqrt() * scale()[i]
     }
     /// Samples applied and outliers dropped so far.
     pub fn counts(&self) -> (usize, usize) {
@@ -235,9 +247,10 @@ impl OnlineEstimator {
                 Unit::Mm => o.length_drift_mm_per_sqrt_h,
                 Unit::Rad => o.angle_drift_rad_per_sqrt_h,
             };
-            self.cov[(i, i)] += rate * rate * dt_h;
+            self.cov[(i, i)] += rate * rate * dt_h / scale()[i].powi(2);
         }
-        self.cov[(STIFFNESS, STIFFNESS)] += o.stiffness_drift_per_sqrt_h.powi(2) * dt_h;
+        self.cov[(STIFFNESS, STIFFNESS)] +=
+            o.stiffness_drift_per_sqrt_h.powi(2) * dt_h / scale()[STIFFNESS].powi(2);
     }
 
     /// The sample's force rows at the estimate: Jacobian over the state and innovation.
@@ -252,11 +265,12 @@ impl OnlineEstimator {
         self.warm = Some(eq);
         let mut h = Rows::zeros();
         let mut y = Vector4::zeros();
+        let d = scale();
         for a in 0..4 {
             for j in 0..N_PARAMS {
-                h[(a, j)] = dp[a][j];
+                h[(a, j)] = dp[a][j] * d[j];
             }
-            h[(a, STIFFNESS)] = eq.drive_force[a] / (1.0 + self.dk);
+            h[(a, STIFFNESS)] = eq.drive_force[a] / (1.0 + self.dk) * d[STIFFNESS];
             y[a] = s.f[a] - eq.drive_force[a];
         }
         Ok(Held { sample: *s, h, y })
@@ -267,24 +281,39 @@ impl OnlineEstimator {
         h * self.cov * h.transpose() + Matrix4::identity() * r
     }
 
-    /// Kalman update with one linearised sample (Joseph form); its normalised innovation.
+    /// Update with one linearised sample in information form (the information gained is
+    /// added, never subtracted: a force row carries 10⁸ times the information of the prior
+    /// in its direction, where the covariance form loses its positive definiteness); its
+    /// normalised innovation.
     fn apply(&mut self, held: &Held) -> f64 {
-        let s = self.innovation_cov(&held.h);
-        let Some(s_inv) = s.try_inverse() else {
+        let nis = self.nis(held);
+        let r = self.opts.force_sigma_n.powi(2);
+        let Some(prior) = self.cov.cholesky() else {
             return f64::NAN;
         };
-        let nis = (held.y.transpose() * s_inv * held.y)[(0, 0)];
-        let k: Gain = self.cov * held.h.transpose() * s_inv;
-        let dx: SVector<f64, N_STATE> = k * held.y;
+        let info = prior.inverse() + held.h.transpose() * held.h / r;
+        let info = (info + info.transpose()) * 0.5;
+        let Some(post) = info.cholesky() else {
+            return f64::NAN;
+        };
+        let dx: SVector<f64, N_STATE> = post.solve(&(held.h.transpose() * held.y / r));
+        let d = scale();
         for i in 0..N_PARAMS {
-            self.p[i] += dx[i];
+            self.p[i] += dx[i] * d[i];
         }
-        self.dk += dx[STIFFNESS];
-        let i_kh = Covariance::identity() - k * held.h;
-        let r = self.opts.force_sigma_n.powi(2);
-        self.cov = i_kh * self.cov * i_kh.transpose() + k * k.transpose() * r;
+        self.dk += dx[STIFFNESS] * d[STIFFNESS];
+        let cov = post.inverse();
+        self.cov = (cov + cov.transpose()) * 0.5;
         self.applied += 1;
         nis
+    }
+
+    /// Normalised innovation of a linearised sample.
+    fn nis(&self, held: &Held) -> f64 {
+        let s = self.innovation_cov(&held.h);
+        let s = (s + s.transpose()) * 0.5;
+        s.cholesky()
+            .map_or(f64::INFINITY, |c| held.y.dot(&c.solve(&held.y)))
     }
 
     /// One decimated sample of the drives: predict, gate, update (or hold, or find a step).
@@ -330,7 +359,8 @@ impl OnlineEstimator {
         // would move the ones they cannot tell apart
         self.set_state(step.param, self.state(step.param) + step.change);
         let c = 0.2 * step.change;
-        self.cov[(step.param, step.param)] += c * c + step.sigma * step.sigma;
+        self.cov[(step.param, step.param)] +=
+            (c * c + step.sigma * step.sigma) / scale()[step.param].powi(2);
         // the held samples again, linearised at the estimate as it moves
         let held: Vec<ForceSample> = self.held.drain(..).map(|h| h.sample).collect();
         for s in &held {
@@ -358,10 +388,11 @@ impl OnlineEstimator {
         order.sort_by(|&a, &b| gain(b).total_cmp(&gain(a)));
         let best = order[0];
         let next = order.get(1).copied().unwrap_or(best);
+        let d = scale()[best];
         StepChange {
             param: best,
-            change: g[best] / c[best],
-            sigma: c[best].powf(-0.5),
+            change: g[best] / c[best] * d,
+            sigma: c[best].powf(-0.5) * d,
             since_s: self.held[0].sample.t,
             margin: gain(best) / gain(next).max(f64::MIN_POSITIVE),
         }
@@ -374,11 +405,149 @@ impl OnlineEstimator {
         let k = self.stiffness();
         let eq = crate::elastic::fegm(&self.p, &k, q, ALL_ACTIVE)?;
         let sens = sensitivity(&self.p, &k, q, ALL_ACTIVE, &eq)?;
-        let pp = self.cov.fixed_view::<N_PARAMS, N_PARAMS>(0, 0);
+        let full = self.covariance();
+        let pp = full.fixed_view::<N_PARAMS, N_PARAMS>(0, 0);
         let cov = sens.dpose_dp * pp * sens.dpose_dp.transpose();
         Ok((
             Vector3::new(eq.x, eq.y, eq.psi),
             Vector3::from_fn(|i, _| cov[(i, i)].max(0.0).sqrt()),
         ))
+    }
+}
+
+/// A parameter that moved beyond the threshold since the tracking began.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Drift {
+    /// Parameter index.
+    pub param: usize,
+    /// Change since the reference, mm or rad, and over how long, s.
+    pub change: f64,
+    pub over_s: f64,
+    /// Correlation of its track with the temperature (None without a temperature, or too
+    /// few points).
+    pub temperature_correlation: Option<f64>,
+}
+
+impl Drift {
+    /// "l3 +12 µm in 40 min, follows temp_machine" (the temperature named `temp_name`).
+    pub fn describe(&self, temp_name: &str) -> String {
+        let (v, unit) = match unit(self.param) {
+            Unit::Mm => (self.change * 1e3, "µm"),
+            Unit::Rad => (self.change * 1e6, "µrad"),
+        };
+        let mut s = format!(
+            "{} {v:+.0} {unit} in {:.0} min",
+            crate::params::NAMES[self.param],
+            self.over_s / 60.0
+        );
+        if let Some(r) = self.temperature_correlation.filter(|r| r.abs() >= FOLLOWS) {
+            s += &format!(", follows {temp_name} (r = {r:.2})");
+        }
+        s
+    }
+}
+
+/// Correlation with the temperature from which a drift "follows" it.
+pub const FOLLOWS: f64 = 0.9;
+
+/// The history of the tracked parameters (a fixed ring of points, allocated once) and what
+/// moved in it.
+#[derive(Clone, Debug)]
+pub struct DriftMonitor {
+    reference: Option<(f64, Params)>,
+    ring: Vec<(f64, f64, Params)>,
+    next: usize,
+    capacity: usize,
+}
+
+impl DriftMonitor {
+    /// Keeps up to `capacity` points (older ones are overwritten).
+    pub fn new(capacity: usize) -> DriftMonitor {
+        let capacity = capacity.max(2);
+        DriftMonitor {
+            reference: None,
+            ring: Vec::with_capacity(capacity),
+            next: 0,
+            capacity,
+        }
+    }
+
+    /// Records the estimate `p` at time `t` with the temperature `temp` (NaN: none). The
+    /// first point is the reference.
+    pub fn record(&mut self, t: f64, temp: f64, p: &Params) {
+        if self.reference.is_none() {
+            self.reference = Some((t, *p));
+        }
+        if self.ring.len() < self.capacity {
+            self.ring.push((t, temp, *p));
+        } else {
+            self.ring[self.next] = (t, temp, *p);
+        }
+        self.next = (self.next + 1) % self.capacity;
+    }
+
+    /// Restarts from the estimate now (after a step was reported, or drifts acknowledged).
+    pub fn rebase(&mut self) {
+        self.reference = None;
+        self.ring.clear();
+        self.next = 0;
+    }
+
+    /// The parameters whose change from the reference exceeds both `threshold` (mm; rad
+    /// thresholds are `threshold` / 1000 mm) and 3σ of the estimate (`sigma`), largest first.
+    pub fn drifts(&self, threshold_mm: f64, sigma: &[f64; N_PARAMS]) -> Vec<Drift> {
+        let (Some((t0, p0)), Some(&(t, _, p))) = (self.reference, self.latest()) else {
+            return Vec::new();
+        };
+        let mut out: Vec<Drift> = (0..N_PARAMS)
+            .filter_map(|i| {
+                let change = p[i] - p0[i];
+                let threshold = match unit(i) {
+                    Unit::Mm => threshold_mm,
+                    Unit::Rad => threshold_mm / 1000.0,
+                };
+                (change.abs() > threshold && change.abs() > 3.0 * sigma[i]).then(|| Drift {
+                    param: i,
+                    change,
+                    over_s: t - t0,
+                    temperature_correlation: self.correlation(i),
+                })
+            })
+            .collect();
+        out.sort_by(|a, b| {
+            (b.change / sigma[b.param])
+                .abs()
+                .total_cmp(&(a.change / sigma[a.param]).abs())
+        });
+        out
+    }
+
+    fn latest(&self) -> Option<&(f64, f64, Params)> {
+        let last = (self.next + self.capacity - 1) % self.capacity;
+        self.ring.get(last).or_else(|| self.ring.last())
+    }
+
+    /// Pearson correlation of parameter `i`'s track with the temperature.
+    fn correlation(&self, i: usize) -> Option<f64> {
+        let pts: Vec<(f64, f64)> = self
+            .ring
+            .iter()
+            .filter(|(_, temp, _)| temp.is_finite())
+            .map(|(_, temp, p)| (*temp, p[i]))
+            .collect();
+        if pts.len() < 8 {
+            return None;
+        }
+        let n = pts.len() as f64;
+        let (mx, my) = pts
+            .iter()
+            .fold((0.0, 0.0), |a, b| (a.0 + b.0 / n, a.1 + b.1 / n));
+        let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+        for (x, y) in &pts {
+            sxy += (x - mx) * (y - my);
+            sxx += (x - mx).powi(2);
+            syy += (y - my).powi(2);
+        }
+        (sxx > 0.0 && syy > 0.0).then(|| sxy / (sxx * syy).sqrt())
     }
 }
