@@ -21,6 +21,7 @@
 
 use crate::campaign::{Campaign, Instrument, Pose};
 use crate::design::{self, PlannedPose, CENTRE};
+use crate::effects::{Corrections, Delta};
 use crate::geometry::{self, GeometryError};
 use crate::noise::NoiseModel;
 use crate::obs::{self, Direction, PoseError, Residual, Step};
@@ -70,16 +71,27 @@ pub enum Method {
     Psi,
     /// Self-calibration: q2, q3 followers against rgm(q1, q4).
     SelfCal,
+    /// The drive forces (redundancy currents) with all four drives position-controlled and
+    /// no instrument (issue 15), with the stiffness factor as an unknown beside the
+    /// parameters ([`STIFFNESS_FACTOR`]).
+    Currents,
 }
 
+/// Name of the stiffness factor's column in the analyses of [`Method::Currents`].
+pub const STIFFNESS_FACTOR: &str = "stiffness_factor";
+/// Its variation range (the scaling of its column, as 0.1 mm and 1° are the parameters'):
+/// 10 % of the default stiffness.
+pub const STIFFNESS_RANGE: f64 = crate::effects::stiffness_factor::PRIOR;
+
 impl Method {
-    pub const ALL: [Method; 6] = [
+    pub const ALL: [Method; 7] = [
         Method::Lt,
         Method::Kgm,
         Method::Dbb,
         Method::Li,
         Method::Psi,
         Method::SelfCal,
+        Method::Currents,
     ];
 
     /// Spelling on the command line: `lt`, `kgm`, `dbb`, `li`, `psi`, `self`.
@@ -91,6 +103,7 @@ impl Method {
             Method::Li => "li",
             Method::Psi => "psi",
             Method::SelfCal => "self",
+            Method::Currents => "currents",
         }
     }
 
@@ -103,6 +116,7 @@ impl Method {
             Method::Li => vec![Instrument::LiX, Instrument::LiY],
             Method::Psi => vec![Instrument::Lt, Instrument::LiPsi],
             Method::SelfCal => vec![Instrument::SelfCal],
+            Method::Currents => vec![Instrument::None],
         }
     }
 
@@ -114,6 +128,9 @@ impl Method {
 
     /// The campaign design of the method (observability).
     pub fn design(self) -> Vec<PlannedPose> {
+        if self == Method::Currents {
+            return grid_design(Instrument::None);
+        }
         self.instruments()
             .into_iter()
             .flat_map(design::for_instrument)
@@ -142,7 +159,7 @@ impl fmt::Display for Method {
 
 /// A method name that is not one of `lt`, `kgm`, `dbb`, `li`, `psi`, `self`.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown method {0:?}, expected one of lt, kgm, dbb, li, psi, self")]
+#[error("unknown method {0:?}, expected one of lt, kgm, dbb, li, psi, self, currents")]
 pub struct ParseMethodError(pub String);
 
 impl FromStr for Method {
@@ -255,6 +272,9 @@ pub fn design_rows(
     second_step: bool,
 ) -> Result<Vec<Residual>, AnalysisError> {
     let c = nominal_campaign(design, p, model)?;
+    if design.iter().all(|d| d.instrument == Instrument::None) {
+        return currents_rows(&c, p);
+    }
     let mut rows = obs::residuals(&c, p, model, Step::Direct, p, &NoiseModel::default())?;
     if second_step {
         rows.extend(obs::residuals(
@@ -272,6 +292,69 @@ pub fn design_rows(
     Ok(rows)
 }
 
+/// The drive-force rows of every pose of `c` with all four drives position-controlled, at
+/// `p`, with the stiffness factor's derivative as their one `d_theta` (an analysis of
+/// [`Method::Currents`]; planned poses consistent with `p` have no preload, so its column is
+/// zero there: only a recorded path shows it).
+pub fn currents_rows(c: &Campaign, p: &Params) -> Result<Vec<Residual>, AnalysisError> {
+    let stiffness = Delta {
+        dk: 1.0,
+        ..Default::default()
+    };
+    let corr = Corrections {
+        poses: vec![(Delta::default(), vec![stiffness]); c.poses.len()],
+        n_params: 1,
+    };
+    let rows = obs::force_residuals(c, p, &corr, &NoiseModel::default())?;
+    if rows.is_empty() {
+        return Err(AnalysisError::NoRows);
+    }
+    Ok(rows)
+}
+
+/// The columns of an analysis: the model's parameters (by index) and, for the currents,
+/// the stiffness factor (the rows' `d_theta[0]`).
+#[derive(Clone, Debug)]
+struct Columns {
+    /// Parameter index, or None for the stiffness factor.
+    ids: Vec<Option<usize>>,
+}
+
+impl Columns {
+    fn new(model: Model, exclude: &[usize], method: Method) -> Columns {
+        let mut ids: Vec<Option<usize>> = model
+            .params()
+            .into_iter()
+            .filter(|i| !exclude.contains(i))
+            .map(Some)
+            .collect();
+        if method == Method::Currents {
+            ids.push(None);
+        }
+        Columns { ids }
+    }
+    fn name(&self, k: usize) -> String {
+        self.ids[k]
+            .map_or(STIFFNESS_FACTOR, |i| NAMES[i])
+            .to_owned()
+    }
+    fn range(&self, k: usize) -> f64 {
+        self.ids[k].map_or(STIFFNESS_RANGE, variation_range)
+    }
+    fn entry(&self, r: &Residual, k: usize) -> f64 {
+        match self.ids[k] {
+            Some(i) => r.jacobian[i],
+            None => r.d_theta.first().copied().unwrap_or(0.0),
+        }
+    }
+    fn jacobian(&self, rows: &[Residual], weighted: bool) -> DMatrix<f64> {
+        DMatrix::from_fn(rows.len(), self.ids.len(), |i, k| {
+            let w = if weighted { 1.0 / rows[i].sigma } else { 1.0 };
+            self.entry(&rows[i], k) * w
+        })
+    }
+}
+
 /// One measurement direction of a sensitivity table.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct SensitivityDirection {
@@ -279,7 +362,7 @@ pub struct SensitivityDirection {
     pub name: String,
     /// Instrument of its rows.
     pub instrument: Instrument,
-    /// Unit of its entries: `µm` or `mrad`.
+    /// Unit of its entries: `µm`, `mrad` or `N`.
     pub unit: &'static str,
     /// Number of rows m_d.
     pub rows: usize,
@@ -307,9 +390,10 @@ impl SensitivityTable {
 }
 
 /// Sensitivity table of rows (eq. 3.14-3.16): per direction (instrument and [`Direction`]),
-/// the 2-norm mean of J_{i,k}·δp_k over the direction's rows, ×1000 (mm → µm, rad → mrad).
+/// the 2-norm mean of J_{i,k}·δp_k over the direction's rows, ×1000 (mm → µm, rad → mrad;
+/// forces stay in N). The currents have the stiffness factor as a last parameter.
 pub fn sensitivity_of_rows(rows: &[Residual], method: Method, model: Model) -> SensitivityTable {
-    let ids = model.params();
+    let cols = Columns::new(model, &[], method);
     let mut groups: BTreeMap<(Instrument, Direction), Vec<&Residual>> = BTreeMap::new();
     for r in rows {
         groups
@@ -335,17 +419,17 @@ pub fn sensitivity_of_rows(rows: &[Residual], method: Method, model: Model) -> S
             rows: g.len(),
         })
         .collect();
-    let values = ids
-        .iter()
-        .map(|&k| {
+    let values = (0..cols.ids.len())
+        .map(|k| {
             groups
-                .values()
-                .map(|g| {
+                .iter()
+                .map(|((_, dir), g)| {
                     let s: f64 = g
                         .iter()
-                        .map(|r| (r.jacobian[k] * variation_range(k)).powi(2))
+                        .map(|r| (cols.entry(r, k) * cols.range(k)).powi(2))
                         .sum();
-                    1000.0 * (s / g.len() as f64).sqrt()
+                    let unit = if dir.is_force() { 1.0 } else { 1000.0 };
+                    unit * (s / g.len() as f64).sqrt()
                 })
                 .collect()
         })
@@ -353,7 +437,7 @@ pub fn sensitivity_of_rows(rows: &[Residual], method: Method, model: Model) -> S
     SensitivityTable {
         method,
         model: model.number(),
-        parameters: ids.iter().map(|&k| NAMES[k].to_owned()).collect(),
+        parameters: (0..cols.ids.len()).map(|k| cols.name(k)).collect(),
         directions,
         values,
     }
@@ -475,6 +559,57 @@ pub struct Observability {
     pub practical_rank: usize,
     /// Condition number of the whole (column-normalised) Jacobian.
     pub condition_number: f64,
+    /// The currents only: how the stiffness factor separates from the geometry.
+    pub stiffness: Option<StiffnessSeparation>,
+}
+
+/// How far the data separate the stiffness factor from the geometric parameters: its
+/// column of the weighted, range-scaled Jacobian (rows in σ, the factor in units of
+/// 10 %) and the part of it no combination of the parameters' columns explains.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct StiffnessSeparation {
+    /// Norm of its column: 0 where nothing is preloaded (a machine consistent with the
+    /// controller), below 1 where its whole range moves the forces by less than their noise.
+    pub column_norm: f64,
+    /// Norm of the part orthogonal to every parameter's column: what the data determine of
+    /// it with the geometry free (its σ with the geometry free is `range / independent_norm`).
+    pub independent_norm: f64,
+}
+
+impl StiffnessSeparation {
+    /// Share of the column the geometry explains (1: indistinguishable).
+    pub fn explained(&self) -> f64 {
+        if self.column_norm > 0.0 {
+            1.0 - (self.independent_norm / self.column_norm).powi(2)
+        } else {
+            f64::NAN
+        }
+    }
+
+    /// σ of the stiffness factor (relative) the rows give it with the geometry free.
+    pub fn sigma_free(&self) -> f64 {
+        STIFFNESS_RANGE / self.independent_norm
+    }
+}
+
+/// The stiffness factor's column `k` of `m` against the span of the others.
+fn stiffness_separation(m: &DMatrix<f64>, k: usize) -> StiffnessSeparation {
+    let c = m.column(k).into_owned();
+    let others = m.clone().remove_column(k);
+    let svd = others.svd(true, false);
+    let u = svd.u.expect("U requested");
+    let top = svd.singular_values.iter().copied().fold(0.0, f64::max);
+    let mut rest = c.clone();
+    for (j, s) in svd.singular_values.iter().enumerate() {
+        if *s > 1e-12 * top {
+            let uj = u.column(j);
+            rest -= uj * uj.dot(&c);
+        }
+    }
+    StiffnessSeparation {
+        column_norm: c.norm(),
+        independent_norm: rest.norm(),
+    }
 }
 
 impl Observability {
@@ -496,10 +631,11 @@ pub fn jacobian(rows: &[Residual], ids: &[usize], weighted: bool) -> DMatrix<f64
     })
 }
 
-fn scale_columns(j: &DMatrix<f64>, ids: &[usize], scaling: ParamScaling) -> DMatrix<f64> {
+fn scale_columns(j: &DMatrix<f64>, cols: &Columns, scaling: ParamScaling) -> DMatrix<f64> {
     match scaling {
         ParamScaling::Range => {
-            let h = DVector::from_iterator(ids.len(), ids.iter().map(|&i| variation_range(i)));
+            let h =
+                DVector::from_iterator(cols.ids.len(), (0..cols.ids.len()).map(|k| cols.range(k)));
             j * DMatrix::from_diagonal(&h)
         }
         ParamScaling::ColumnNorm => normalize_columns(j),
@@ -557,7 +693,7 @@ pub fn sv_pivot_order(m: &DMatrix<f64>, r: usize) -> Vec<usize> {
 /// Observability analysis of calibration rows over the model's parameters.
 ///
 /// `exclude`: parameters left out of the analysis (e.g. d1 for self-calibration with model 29,
-/// thesis 4.3.4.2).
+/// thesis 4.3.4.2). The currents have the stiffness factor as a last unknown.
 pub fn observability_of_rows(
     rows: &[Residual],
     method: Method,
@@ -565,14 +701,11 @@ pub fn observability_of_rows(
     exclude: &[usize],
     opts: &ObservabilityOptions,
 ) -> Observability {
-    let ids: Vec<usize> = model
-        .params()
-        .into_iter()
-        .filter(|i| !exclude.contains(i))
-        .collect();
-    let j = jacobian(rows, &ids, opts.weighted);
-    let scaled = scale_columns(&j, &ids, opts.scaling);
-    let ranged = scale_columns(&j, &ids, ParamScaling::Range);
+    let cols = Columns::new(model, exclude, method);
+    let ids = &cols.ids;
+    let j = cols.jacobian(rows, opts.weighted);
+    let scaled = scale_columns(&j, &cols, opts.scaling);
+    let ranged = scale_columns(&j, &cols, ParamScaling::Range);
     let mut sv: Vec<f64> = ranged.singular_values().iter().copied().collect();
     sv.sort_by(|a, b| b.total_cmp(a));
     let rank = sv.iter().filter(|&&s| s > opts.tau).count();
@@ -588,7 +721,7 @@ pub fn observability_of_rows(
     };
     let order_entries = (0..order.len())
         .map(|k| OrderEntry {
-            parameter: NAMES[ids[order[k]]].to_owned(),
+            parameter: cols.name(order[k]),
             condition_number: condition_number(&cond_matrix.select_columns(order[..=k].iter())),
         })
         .collect();
@@ -601,6 +734,10 @@ pub fn observability_of_rows(
         singular_values: sv,
         practical_rank: rank,
         condition_number: condition_number(&normalize_columns(&j)),
+        stiffness: ids
+            .iter()
+            .position(Option::is_none)
+            .map(|k| stiffness_separation(&ranged, k)),
     }
 }
 

@@ -239,6 +239,7 @@ fn negated(mut s: InputSensitivity) -> InputSensitivity {
     s.dp = -s.dp;
     s.dq = s.dq.map(|v| -v);
     s.dm = -s.dm;
+    s.dk = -s.dk;
     s
 }
 
@@ -502,12 +503,45 @@ fn force_step(i: usize) -> f64 {
     }
 }
 
+/// The drive forces of the elasto-geometric model with all four drives position-controlled
+/// at `q` (parameters `p`, stiffness `k`) and their derivatives by the 29 parameters: central
+/// differences of the equilibrium, warm-started from its own (from `warm` where given: the
+/// previous sample of a stream).
+pub fn force_jacobian(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    warm: Option<&Equilibrium>,
+) -> Result<(Equilibrium, [Row; 4]), ElasticError> {
+    let eq: Equilibrium = match warm {
+        Some(w) => fegm_from(p, k, q, ALL_ACTIVE, w)?,
+        None => fegm(p, k, q, ALL_ACTIVE)?,
+    };
+    let mut dp = [Row::zeros(); 4];
+    for j in 0..N_PARAMS {
+        let h = force_step(j);
+        let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
+            let mut pj = *p;
+            pj[j] += sign * h;
+            Ok(fegm_from(&pj, k, q, ALL_ACTIVE, &eq)?.drive_force)
+        };
+        let (plus, minus) = (at(1.0)?, at(-1.0)?);
+        for a in 0..4 {
+            dp[a][j] = (plus[a] - minus[a]) / (2.0 * h);
+        }
+    }
+    Ok((eq, dp))
+}
+
 /// Drive-force rows (thesis 4.4, used as measurements): with all four drives
 /// position-controlled at the recorded positions, the elasto-geometric model's drive forces
-/// minus the recorded ones, f1..f4 (N), with the default stiffness. Their derivatives by
-/// the 29 parameters by central differences of the equilibrium (warm-started from the
-/// pose's own). The effects' corrections enter the value; the force rows carry no
-/// derivative by the effects' parameters (zero), which they leave to the instruments.
+/// minus the recorded ones, f1..f4 (N), with the default stiffness times 1 + the effects'
+/// stiffness change. Their derivatives by the 29 parameters (and, with effects, by the
+/// carrier positions) by central differences of the equilibrium, warm-started from the
+/// pose's own; by the stiffness change exactly f / (1 + dk): uniformly scaled springs deform
+/// alike, only their forces scale. The effects' columns are the chain rule through these
+/// ([`Delta::chain`]): a temperature that lengthens a rod enters the forces as it enters
+/// the geometry.
 fn force_rows(
     ctx: &Ctx,
     i: usize,
@@ -516,23 +550,31 @@ fn force_rows(
 ) -> Result<(), ElasticError> {
     let d = ctx.corr.delta(i);
     let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
-    let k = Stiffness::default();
-    let eq: Equilibrium = fegm(&p_i, &k, q_i, ALL_ACTIVE)?;
-    let mut jac = [[0.0; N_PARAMS]; 4];
-    for j in 0..N_PARAMS {
-        let h = force_step(j);
-        let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
-            let mut pj = p_i;
-            pj[j] += sign * h;
-            Ok(fegm_from(&pj, &k, q_i, ALL_ACTIVE, &eq)?.drive_force)
-        };
-        let (plus, minus) = (at(1.0)?, at(-1.0)?);
+    let k = Stiffness::default().scaled(1.0 + d.dk);
+    let (eq, dp) = force_jacobian(&p_i, &k, q_i, None)?;
+    let mut sens = [InputSensitivity::default(); 4];
+    for a in 0..4 {
+        sens[a].dp = dp[a];
+    }
+    // the carrier positions matter only through an effect that moves them (a scale)
+    if ctx.corr.n_params > 0 {
+        for b in 0..4 {
+            let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
+                let mut qb = q_i;
+                qb[b] += sign * 1e-3;
+                Ok(fegm_from(&p_i, &k, qb, ALL_ACTIVE, &eq)?.drive_force)
+            };
+            let (plus, minus) = (at(1.0)?, at(-1.0)?);
+            for a in 0..4 {
+                sens[a].dq[b] = (plus[a] - minus[a]) / 2e-3;
+            }
+        }
         for a in 0..4 {
-            jac[a][j] = (plus[a] - minus[a]) / (2.0 * h);
+            sens[a].dk = eq.drive_force[a] / (1.0 + d.dk);
         }
     }
     let parts = ctx.noise.force_parts();
-    for (a, jac_a) in jac.iter().enumerate() {
+    for (a, s) in sens.iter().enumerate() {
         out.push(Residual {
             pose: i,
             instrument: pose.instrument,
@@ -540,12 +582,40 @@ fn force_rows(
             value: eq.drive_force[a] - pose.f[a],
             sigma: noise::sigma_of(&parts),
             parts,
-            jacobian: Row::from_row_slice(jac_a),
+            jacobian: s.dp,
             d_pcal: None,
-            d_theta: vec![0.0; ctx.corr.n_params],
+            d_theta: ctx.corr.theta_row(&[(i, *s)]),
         });
     }
     Ok(())
+}
+
+/// The drive-force rows of every pose of `campaign` with all four drives position-controlled,
+/// whether or not forces were recorded (a pose without is read as zero force): the
+/// observability of the currents on a planned design, where a machine consistent with `p`
+/// has no preload to record.
+pub fn force_residuals(
+    campaign: &Campaign,
+    p: &Params,
+    corr: &Corrections,
+    noise: &NoiseModel,
+) -> Result<Vec<Residual>, PoseError> {
+    let ctx = Ctx {
+        p,
+        p_cal: p,
+        model: Model::M29,
+        corr,
+        noise,
+        decorrelated: true,
+    };
+    let mut out = Vec::with_capacity(4 * campaign.poses.len());
+    for (i, pose) in campaign.poses.iter().enumerate() {
+        if pose.follower.iter().any(|f| *f) {
+            continue;
+        }
+        force_rows(&ctx, i, pose, &mut out).map_err(|e| PoseError::at(campaign, pose, e))?;
+    }
+    Ok(out)
 }
 
 /// Inverse calibration rows (eq. 4.30) of a laser-tracker or grid-encoder pose.

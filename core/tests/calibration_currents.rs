@@ -16,7 +16,10 @@
 use rpkm_core::calib::{Calibration, Options, Selection};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::design;
-use rpkm_core::effects::{Corrections, EffectSet};
+use rpkm_core::effects::{
+    Corrections, Effect, EffectSet, PreloadElastic, StiffnessFactor, Thermal,
+};
+use rpkm_core::elastic::Stiffness;
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs::{self, Step};
 use rpkm_core::params::{Model, Params, NAMES};
@@ -143,4 +146,142 @@ fn the_drive_forces_alone_find_the_true_machine() {
         }
     }
     assert!(compared >= 1, "no parameter determined by both");
+}
+
+/// A twin whose true stiffness is `factor` times the model's default.
+fn twin_with_stiffness(seed: u64, factor: f64) -> Twin {
+    let elastic = EffectKind::PreloadElastic;
+    Twin::new(TwinConfig {
+        seed,
+        effects: vec![(elastic, elastic.default_magnitude())],
+        stiffness: Stiffness::default().scaled(factor),
+        noise: Some(NoiseModel {
+            force_n: TWIN_FORCE_NOISE_N,
+            ..NoiseModel::default()
+        }),
+        ..Default::default()
+    })
+    .expect("twin")
+}
+
+fn calibrate_with(c: &Campaign, effects: &[&dyn Effect]) -> Calibration {
+    let set = EffectSet::bind(effects, c, &Params::nominal()).expect("binds");
+    let (cal, _) =
+        variance::calibrate_estimating_noise(c, &Params::nominal(), &Options::default(), &set)
+            .expect("calibrates");
+    cal
+}
+
+/// The forces are the stiffness times the incompatibility: alone they cannot tell a softer
+/// machine from a geometry further from its controller's (calibration_currents_observability
+/// shows it); the followers of a self-calibration measure the incompatibility in mm, so
+/// forces and followers in one campaign give the stiffness, and it lies within 3σ of the
+/// twin's (10 % softer than the model's default).
+#[test]
+fn forces_and_followers_in_one_campaign_find_the_stiffness() {
+    const TRUE_FACTOR: f64 = 0.9;
+    let mut t = twin_with_stiffness(29, TRUE_FACTOR);
+    let truth = *t.true_params();
+    let mut plan = design::for_instrument(Instrument::SelfCal);
+    plan.extend(design::production(300, 29));
+    let mixed = t.run(&plan, "self + production").expect("mixed campaign");
+    assert!(mixed.poses.iter().any(obs::drives_loaded));
+    assert!(mixed
+        .poses
+        .iter()
+        .any(|p| p.instrument == Instrument::SelfCal));
+    let cal = calibrate_with(&mixed, &[&StiffnessFactor]);
+    let k = &cal.effects[0];
+    assert!(
+        k.identified,
+        "stiffness held: observability {}",
+        k.observability
+    );
+    let z = (k.value - (TRUE_FACTOR - 1.0)) / k.sigma;
+    assert!(
+        z.abs() < 3.0 && k.sigma < 0.02,
+        "stiffness change {:.4} ± {:.4}, truth {:.2} ({z:.2}σ)",
+        k.value,
+        k.sigma,
+        TRUE_FACTOR - 1.0
+    );
+    for (i, value, sigma) in determined(&cal) {
+        let z = (value - truth[i]) / sigma;
+        assert!(z.abs() < 3.0, "{}: {z:.2}σ from the truth", NAMES[i]);
+    }
+}
+
+/// The effects' columns of the force rows (the chain rule through the force model's
+/// sensitivities to p, q and the stiffness) against central differences of the force rows
+/// themselves, for a temperature that lengthens rods and frame and for the stiffness.
+#[test]
+fn effect_columns_of_the_force_rows_match_finite_differences() {
+    let mut t = Twin::new(TwinConfig {
+        seed: 31,
+        effects: vec![
+            (EffectKind::PreloadElastic, 0.3),
+            (EffectKind::Thermal, 3.0),
+        ],
+        ..Default::default()
+    })
+    .expect("twin");
+    let c = t
+        .run(&design::production(20, 31), "production")
+        .expect("production");
+    let p = Params::nominal();
+    let thermal = Thermal::default();
+    let set = EffectSet::bind(&[&thermal, &StiffnessFactor], &c, &p).expect("binds");
+    let layout = set.layout();
+    let theta: Vec<f64> = layout.iter().map(|l| 0.7 * l.param.prior).collect();
+    let rows_at = |theta: &[f64]| {
+        obs::residuals_with(
+            &c,
+            &p,
+            Model::M29,
+            Step::Direct,
+            &p,
+            &set.corrections(theta),
+            &NoiseModel::default(),
+        )
+        .expect("force rows")
+    };
+    let rows = rows_at(&theta);
+    assert_eq!(rows.len(), 4 * 20);
+    for k in 0..theta.len() {
+        let h = 1e-2 * layout[k].param.prior;
+        let (mut tp, mut tm) = (theta.clone(), theta.clone());
+        tp[k] += h;
+        tm[k] -= h;
+        let (rp, rm) = (rows_at(&tp), rows_at(&tm));
+        let mut checked = 0;
+        for (i, r) in rows.iter().enumerate() {
+            let fd = (rp[i].value - rm[i].value) / (2.0 * h);
+            let tol = 1e-3 * r.d_theta[k].abs().max(1.0);
+            assert!(
+                (fd - r.d_theta[k]).abs() <= tol,
+                "{}.{} row {i} ({}): chain rule {} vs differences {fd}",
+                layout[k].effect,
+                layout[k].param.name,
+                r.direction,
+                r.d_theta[k]
+            );
+            checked += (r.d_theta[k].abs() > 1.0) as usize;
+        }
+        assert!(checked > 0, "{}: no force moved", layout[k].param.name);
+    }
+}
+
+/// An effect the force rows cannot carry is refused with the line of the force row.
+#[test]
+fn preload_elastic_is_refused_on_force_rows() {
+    let mut t = twin(37);
+    let c = t
+        .run(&design::production(5, 37), "production")
+        .expect("production");
+    let err = EffectSet::bind(&[&PreloadElastic], &c, &Params::nominal()).expect_err("refused");
+    assert_eq!(err.effect, "preload_elastic");
+    assert!(
+        err.reason.contains("production:2") && err.reason.contains("twice"),
+        "{err}"
+    );
 }

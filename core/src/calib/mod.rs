@@ -4,6 +4,7 @@
 //! procedure of the forward instruments.
 
 mod lm;
+pub mod online;
 mod report;
 mod rows;
 mod select;

@@ -24,6 +24,7 @@ mod guide_straightness;
 mod instrument_alignment;
 mod parallelogram;
 mod preload_elastic;
+pub mod stiffness_factor;
 mod thermal;
 
 pub use encoder_scale::EncoderScale;
@@ -31,6 +32,7 @@ pub use guide_straightness::GuideStraightness;
 pub use instrument_alignment::InstrumentAlignment;
 pub use parallelogram::Parallelogram;
 pub use preload_elastic::PreloadElastic;
+pub use stiffness_factor::StiffnessFactor;
 pub use thermal::Thermal;
 
 use crate::campaign::Campaign;
@@ -51,14 +53,24 @@ pub fn library() -> Vec<Box<dyn Effect>> {
     ]
 }
 
-/// Names of the effects of [`library`].
-pub fn names() -> Vec<&'static str> {
-    library().iter().map(|e| e.name()).collect()
+/// Every effect a calibration can be asked for: the [`library`] and the stiffness factor of
+/// the drive-force rows ([`StiffnessFactor`]), which the diagnosis does not try (it changes
+/// nothing but the forces, and the forces scale with it exactly as with the geometry's
+/// distance from the controller's: see docs/calibration.md).
+pub fn all() -> Vec<Box<dyn Effect>> {
+    let mut out = library();
+    out.push(Box::new(StiffnessFactor));
+    out
 }
 
-/// The library's effect called `name`.
+/// Names of the effects of [`all`].
+pub fn names() -> Vec<&'static str> {
+    all().iter().map(|e| e.name()).collect()
+}
+
+/// The effect called `name` (of [`all`]).
 pub fn by_name(name: &str) -> Result<Box<dyn Effect>, UnknownEffect> {
-    library()
+    all()
         .into_iter()
         .find(|e| e.name() == name.trim())
         .ok_or_else(|| UnknownEffect {
@@ -143,6 +155,9 @@ pub struct Delta {
     pub dq: [f64; 4],
     /// True − recorded instrument (x, y), mm.
     pub dm: Vector2<f64>,
+    /// Relative change of the machine's stiffness (the drive-force rows' springs are
+    /// k · (1 + dk)); no other row depends on it.
+    pub dk: f64,
 }
 
 impl Default for Delta {
@@ -151,6 +166,7 @@ impl Default for Delta {
             dp: Row::zeros(),
             dq: [0.0; 4],
             dm: Vector2::zeros(),
+            dk: 0.0,
         }
     }
 }
@@ -158,7 +174,10 @@ impl Default for Delta {
 impl Delta {
     /// The chain rule: the change of a model value with sensitivities `s` for this change.
     pub fn chain(&self, s: &InputSensitivity) -> f64 {
-        s.dp.dot(&self.dp) + (0..4).map(|a| s.dq[a] * self.dq[a]).sum::<f64>() + s.dm.dot(&self.dm)
+        s.dp.dot(&self.dp)
+            + (0..4).map(|a| s.dq[a] * self.dq[a]).sum::<f64>()
+            + s.dm.dot(&self.dm)
+            + s.dk * self.dk
     }
 }
 
@@ -169,6 +188,8 @@ pub struct InputSensitivity {
     pub dp: Row,
     pub dq: [f64; 4],
     pub dm: Vector2<f64>,
+    /// ... and to the relative stiffness change (drive-force rows only).
+    pub dk: f64,
 }
 
 impl Default for InputSensitivity {
@@ -177,6 +198,7 @@ impl Default for InputSensitivity {
             dp: Row::zeros(),
             dq: [0.0; 4],
             dm: Vector2::zeros(),
+            dk: 0.0,
         }
     }
 }

@@ -36,6 +36,18 @@ impl Effect for PreloadElastic {
         let mut loaded = 0;
         for pose in &campaign.poses {
             let active = pose.follower.iter().all(|f| !f) && pose.f.iter().any(|f| *f != 0.0);
+            if active && pose.instrument == crate::campaign::Instrument::None {
+                // a force row's elastic model stretches the rods by its own forces already
+                return Err(NotApplicable {
+                    effect: "preload_elastic",
+                    reason: format!(
+                        "{}:{}: a drive-force row (instrument none): its elastic model \
+                         stretches the rods by the forces already, the effect would count the \
+                         stretch twice (stiffness_factor is the force rows' stiffness unknown)",
+                        campaign.source, pose.line
+                    ),
+                });
+            }
             if !active {
                 stretch.push([0.0; 5]);
                 continue;

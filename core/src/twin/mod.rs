@@ -20,9 +20,11 @@
 //! encoder reading to carrier position (thermal expansion of the scale, scale error).
 
 pub mod effects;
+pub mod production;
 mod stream;
 
 pub use effects::EffectKind;
+pub use production::{ProductionConfig, ProductionSample, ProductionStream, StepChange};
 pub use stream::{DriveSample, DriveStream};
 
 use crate::campaign::{Campaign, Instrument, Pose};

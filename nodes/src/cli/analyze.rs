@@ -4,6 +4,7 @@
 use anyhow::{Context, Result};
 use rpkm_core::analysis::{
     self, Method, Observability, ObservabilityOptions, ParamScaling, Pivoting, SensitivityTable,
+    StiffnessSeparation, STIFFNESS_RANGE,
 };
 use rpkm_core::params::{self, Model, Params};
 use std::path::{Path, PathBuf};
@@ -47,16 +48,22 @@ fn parse_method(s: &str) -> std::result::Result<Method, String> {
 #[command(
     after_help = "Methods: lt (laser tracker), kgm (grid encoder), dbb (double \
 ball-bar, forward, + second-step q2), li (laser interferometer x and y), psi (laser tracker \
-+ platform-angle measurements), self (self-calibration, q2 and q3 followers).\n\n\
++ platform-angle measurements), self (self-calibration, q2 and q3 followers), currents (the \
+drive forces with all four drives position-controlled, no instrument: the stiffness factor is \
+analysed beside the parameters, and the output says how much of it the geometry explains; on \
+the 231-point grid a machine consistent with the parameters has no preload, so give a recorded \
+path with --campaign to see it).\n\n\
 Examples:\n  rpkm analyze sensitivity --method lt --model 24 --json out/lt24.json\n  \
 rpkm analyze observability --method self --model 24 --block 5 --json out/self24.json\n  \
-rpkm analyze observability --method self --model 29 --exclude d1"
+rpkm analyze observability --method self --model 29 --exclude d1\n  \
+rpkm simulate --campaign production --effect preload_elastic --out prod.csv\n  \
+rpkm analyze observability --method currents --campaign prod.csv"
 )]
 pub struct AnalyzeArgs {
     /// sensitivity or observability.
     #[arg(value_enum)]
     pub kind: Kind,
-    /// Calibration method: lt, kgm, dbb, li, psi, self.
+    /// Calibration method: lt, kgm, dbb, li, psi, self, currents.
     #[arg(long, value_parser = parse_method)]
     pub method: Method,
     /// Geometric model: 24 or 29.
@@ -87,6 +94,41 @@ pub struct AnalyzeArgs {
     /// Observability: parameters left out, comma-separated (e.g. d1).
     #[arg(long, value_delimiter = ',')]
     pub exclude: Vec<String>,
+    /// `--method currents` only: analyse this recorded path (a campaign CSV; its poses with
+    /// all four drives position-controlled, at their recorded positions and forces) instead
+    /// of the 231-point grid.
+    #[arg(long)]
+    pub campaign: Option<PathBuf>,
+}
+
+/// The rows of the analysis: the method's design, or for the currents a recorded path.
+fn rows_of(
+    args: &AnalyzeArgs,
+    p: &Params,
+    model: Model,
+    second_step: bool,
+) -> Result<Vec<rpkm_core::obs::Residual>> {
+    let Some(path) = &args.campaign else {
+        let design = if second_step {
+            args.method.sensitivity_design()
+        } else {
+            args.method.design()
+        };
+        return Ok(analysis::design_rows(
+            &design,
+            p,
+            model,
+            second_step && args.method.has_second_step(),
+        )?);
+    };
+    if args.method != Method::Currents {
+        return Err(super::bad_input(format!(
+            "--campaign {}: a recorded path is analysed for --method currents only",
+            path.display()
+        )));
+    }
+    let c = crate::input::read_campaign(path)?;
+    Ok(analysis::currents_rows(&c, p).with_context(|| format!("{}", path.display()))?)
 }
 
 /// Run `rpkm analyze`.
@@ -113,7 +155,8 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
     );
     match args.kind {
         Kind::Sensitivity => {
-            let t = analysis::sensitivity(args.method, &p, model)?;
+            let rows = rows_of(args, &p, model, true)?;
+            let t = analysis::sensitivity_of_rows(&rows, args.method, model);
             say(&sensitivity_text(&t));
             let svg = sensitivity_svg(&t);
             let path = svg_dir.join(format!("{stem}.svg"));
@@ -143,7 +186,8 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
                 tau: args.tau,
                 ..Default::default()
             };
-            let o = analysis::observability(args.method, &p, model, &exclude, &opts)?;
+            let rows = rows_of(args, &p, model, false)?;
+            let o = analysis::observability_of_rows(&rows, args.method, model, &exclude, &opts);
             say(&observability_text(&o));
             let path = svg_dir.join(format!("{stem}.svg"));
             std::fs::write(&path, observability_svg(&o))
@@ -222,7 +266,7 @@ pub fn sensitivity_json(t: &SensitivityTable) -> serde_json::Value {
 /// below the first.
 pub fn sensitivity_svg(t: &SensitivityTable) -> String {
     let mut out = String::new();
-    for unit in ["µm", "mrad"] {
+    for unit in ["µm", "mrad", "N"] {
         let series: Vec<(String, Vec<f64>)> = t
             .directions
             .iter()
@@ -315,7 +359,34 @@ pub fn observability_text(o: &Observability) -> String {
         s += &format!(" {v:.3e}");
     }
     s += "\n";
+    if let Some(k) = &o.stiffness {
+        s += &stiffness_text(k);
+    }
     s
+}
+
+/// What the rows say of the stiffness factor beside the geometry.
+fn stiffness_text(k: &StiffnessSeparation) -> String {
+    if !(k.column_norm > 1e-3) {
+        return "stiffness_factor: no preload in these rows (a machine consistent with the \
+                parameters): the forces are zero whatever the stiffness; analyse a recorded \
+                path (--campaign)\n"
+            .to_owned();
+    }
+    format!(
+        "stiffness_factor: column {:.3e} (in σ per 10 %), {:.4} % of it explained by the \
+         parameters (scaling the geometry's distance from the controller's scales the forces \
+         alike); with the geometry free the rows give it σ = {:.3e} (relative): {}\n",
+        k.column_norm,
+        100.0 * k.explained(),
+        k.sigma_free(),
+        if k.sigma_free() < STIFFNESS_RANGE / 3.0 {
+            "separable"
+        } else {
+            "not separable from the geometry by these rows alone (an instrument's rows or a \
+             stated stiffness fix it)"
+        }
+    )
 }
 
 fn fmt_cond(c: f64) -> String {
@@ -354,6 +425,12 @@ pub fn observability_json(o: &Observability) -> serde_json::Value {
         "order": order,
         "singular_values": o.singular_values,
         "practical_rank": o.practical_rank,
+        "stiffness": o.stiffness.map(|k| serde_json::json!({
+            "column_norm": k.column_norm,
+            "independent_norm": k.independent_norm,
+            "explained": if k.explained().is_finite() { serde_json::Value::from(k.explained()) } else { serde_json::Value::Null },
+            "sigma_free": if k.sigma_free().is_finite() { serde_json::Value::from(k.sigma_free()) } else { serde_json::Value::Null },
+        })),
         "condition_number": if o.condition_number.is_finite() {
             serde_json::Value::from(o.condition_number)
         } else {

@@ -29,12 +29,19 @@ rpkm simulate --campaign lt,self --effect parallelogram=1.0 --seed 7 --out calib
 --validation 0\n  \
 rpkm simulate --stream-hz 8000 --stream-seconds 0.5 --seed 3 --out stream_8khz\n  \
 rpkm simulate --stream-hz 1000 --stream-seconds 2 --stream-motion hold --fault q3=0.8 \
---effect preload_elastic=1 --seed 5 --out preload_fault --truth preload_fault.truth.json"
+--effect preload_elastic=1 --seed 5 --out preload_fault --truth preload_fault.truth.json\n\n\
+Production stream (CSV, truth in prod.truth.csv):\n  \
+rpkm simulate --production-seconds 600 --production-step l3=0.1@300 --production-decimate 100 \
+--effect preload_elastic --seed 3 --out prod.csv"
 )]
 pub struct SimulateArgs {
     /// Comma-separated campaigns, measured one after the other into one file (optional for
     /// a bag with --stream-hz).
-    #[arg(long, value_delimiter = ',', required_unless_present = "stream_hz")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        required_unless_present_any = ["stream_hz", "production_seconds"]
+    )]
     pub campaign: Vec<String>,
     /// Hidden effects, NAME or NAME=MAGNITUDE, comma-separated (default magnitude if none).
     #[arg(long, value_delimiter = ',')]
@@ -76,6 +83,24 @@ pub struct SimulateArgs {
     /// current grows; 0.4 mm on q3 is about 100 %).
     #[arg(long)]
     pub fault: Option<crate::stream::Fault>,
+    /// A production stream instead of campaigns (issue 15): this many seconds of a
+    /// machining-like path (random contour moves at 50 mm/s), all drives active (give
+    /// --effect preload_elastic), force noise, a drifting temperature, sampled at --stream-hz
+    /// (default 1000) and written every --production-decimate-th sample as a campaign CSV
+    /// (instrument none, f1..f4, temp_machine), with the truth over time beside it in
+    /// OUT.truth.csv (true TCP, noiseless forces and the 29 true parameters per row).
+    #[arg(long)]
+    pub production_seconds: Option<f64>,
+    /// Temperature drift of the production stream, K/h.
+    #[arg(long, default_value_t = 4.0)]
+    pub production_drift: f64,
+    /// A crash during the production stream: PARAM=CHANGE@SECONDS (mm or rad), e.g.
+    /// l3=0.1@2400 bends rod 3 by 0.1 mm at 40 min.
+    #[arg(long)]
+    pub production_step: Option<String>,
+    /// Write one production sample in this many.
+    #[arg(long, default_value_t = 1)]
+    pub production_decimate: usize,
     /// Bag only: compress chunks with zstd.
     #[arg(long)]
     pub zstd: bool,
@@ -139,6 +164,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         noise: twin_noise(args)?,
         ..TwinConfig::default()
     })?;
+    if let Some(seconds) = args.production_seconds {
+        return run_production(args, &twin, seconds);
+    }
     let names: Vec<&str> = args.campaign.iter().map(|s| s.trim()).collect();
     if !is_csv(&args.out) {
         return super::simulate_bag::run(args, &mut twin, &names);
@@ -185,5 +213,111 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if let Some(path) = &args.truth {
         super::write_json(path, &serde_json::to_value(twin.truth())?)?;
     }
+    Ok(())
+}
+
+/// A production stream's crash `PARAM=CHANGE@SECONDS`.
+fn parse_step(s: &str) -> Result<rpkm_core::twin::StepChange> {
+    let bad = || {
+        super::bad_input(format!(
+            "--production-step {s}: expected PARAM=CHANGE@SECONDS, e.g. l3=0.1@2400"
+        ))
+    };
+    let (name, rest) = s.split_once('=').ok_or_else(bad)?;
+    let (change, at) = rest.split_once('@').ok_or_else(bad)?;
+    let param = rpkm_core::params::index_of(name.trim()).ok_or_else(|| {
+        super::bad_input(format!("--production-step: unknown parameter `{name}`"))
+    })?;
+    let change: f64 = change.trim().parse().map_err(|_| bad())?;
+    let at_s: f64 = at.trim().parse().map_err(|_| bad())?;
+    if !change.is_finite() || !at_s.is_finite() || at_s < 0.0 {
+        return Err(bad());
+    }
+    Ok(rpkm_core::twin::StepChange {
+        at_s,
+        param,
+        change,
+    })
+}
+
+/// `--production-seconds`: the stream as a campaign CSV and its truth beside it.
+fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> {
+    use rpkm_core::campaign::{Campaign, Instrument, Pose};
+    use rpkm_core::params::{NAMES, N_PARAMS};
+    use rpkm_core::twin::{ProductionConfig, ProductionStream};
+    use std::fmt::Write as _;
+    if !is_csv(&args.out) || !(seconds > 0.0 && seconds <= 86_400.0) {
+        return Err(super::bad_input(format!(
+            "--production-seconds {seconds}: a CSV --out and 0 < seconds <= 86400"
+        )));
+    }
+    let cfg = ProductionConfig {
+        rate_hz: args.stream_hz.unwrap_or(1000.0),
+        seconds,
+        drift_k_per_h: args.production_drift,
+        step: args
+            .production_step
+            .as_deref()
+            .map(parse_step)
+            .transpose()?,
+        seed: args.seed,
+        ..Default::default()
+    };
+    let every = args.production_decimate.max(1);
+    let mut poses = Vec::new();
+    let mut truth = String::from("t,x,y,psi,f1,f2,f3,f4");
+    for n in NAMES.iter() {
+        let _ = write!(truth, ",{n}");
+    }
+    truth.push('\n');
+    for (k, s) in ProductionStream::new(twin, cfg).enumerate() {
+        let s = s?;
+        if k % every != 0 {
+            continue;
+        }
+        poses.push(Pose {
+            t: s.t,
+            setup: "production".into(),
+            instrument: Instrument::None,
+            reset: false,
+            q: s.q,
+            f: s.f,
+            follower: [false; 4],
+            x: None,
+            y: None,
+            r: None,
+            psi: None,
+            covariates: vec![Some(s.temp_c)],
+            line: poses.len() + 2,
+        });
+        let _ = write!(truth, "{},{},{},{}", s.t, s.tcp[0], s.tcp[1], s.tcp[2]);
+        for f in s.f_true {
+            let _ = write!(truth, ",{f}");
+        }
+        for i in 0..N_PARAMS {
+            let _ = write!(truth, ",{}", s.truth[i]);
+        }
+        truth.push('\n');
+    }
+    let c = Campaign {
+        source: args.out.display().to_string(),
+        comments: vec![format!(
+            "production stream, seed {}, {seconds} s",
+            args.seed
+        )],
+        covariate_names: vec!["temp_machine".into()],
+        poses,
+    };
+    std::fs::write(&args.out, c.to_csv())
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    let truth_path = args.out.with_extension("truth.csv");
+    std::fs::write(&truth_path, truth)
+        .with_context(|| format!("writing {}", truth_path.display()))?;
+    println!(
+        "{}: {} production samples; truth over time: {}",
+        args.out.display(),
+        c.poses.len(),
+        truth_path.display()
+    );
     Ok(())
 }

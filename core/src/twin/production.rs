@@ -1,0 +1,227 @@
+//! The twin at work: a production stream (issue 15). A machining-like path (straight contour
+//! moves at feed speed between random targets over the workspace), all four drives
+//! position-controlled, the drive forces with the stream's own noise, a machine temperature
+//! that drifts (its own law: a ramp with a cycling ripple, which no model here assumes) and
+//! optionally a crash that bends a rod (a step in its length at a given time). Every sample
+//! carries the truth beside the readings: the true parameters at that time (thermal expansion
+//! and step included) and the true TCP.
+
+use super::{gauss, Twin, TwinError, TEMP_SENSOR_K};
+use crate::design::{X_RANGE, Y_RANGE};
+use crate::elastic::{self, Equilibrium, ALL_ACTIVE};
+use crate::geometry;
+use crate::params::{Model, Params};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+
+/// A step change of one parameter (a crash that bends a rod).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct StepChange {
+    /// Stream time of the crash, s.
+    pub at_s: f64,
+    /// Parameter index (a rod length l1..l5).
+    pub param: usize,
+    /// Change, mm (rad for an angle).
+    pub change: f64,
+}
+
+/// What the production stream does.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProductionConfig {
+    /// Sample rate of the drive interface, Hz.
+    pub rate_hz: f64,
+    /// Length of the stream, s.
+    pub seconds: f64,
+    /// Feed speed of the contour moves, mm/s.
+    pub feed_mm_s: f64,
+    /// Machine temperature at the start, °C.
+    pub start_temp_c: f64,
+    /// Temperature drift, K per hour.
+    pub drift_k_per_h: f64,
+    /// Amplitude of the temperature's cycling ripple (period [`RIPPLE_PERIOD_S`]), K.
+    pub ripple_k: f64,
+    /// σ of the drive forces read from the motor currents, N (the stream's own).
+    pub force_noise_n: f64,
+    pub step: Option<StepChange>,
+    /// Seed of the path and the noise.
+    pub seed: u64,
+}
+
+/// Period of the temperature ripple, s (coolant cycling).
+pub const RIPPLE_PERIOD_S: f64 = 900.0;
+
+impl Default for ProductionConfig {
+    fn default() -> Self {
+        ProductionConfig {
+            rate_hz: 1000.0,
+            seconds: 3600.0,
+            feed_mm_s: 50.0,
+            start_temp_c: 20.0,
+            drift_k_per_h: 4.0,
+            ripple_k: 0.2,
+            force_noise_n: 3.0,
+            step: None,
+            seed: 1,
+        }
+    }
+}
+
+impl ProductionConfig {
+    /// The true machine temperature at stream time `t`, °C.
+    pub fn temperature(&self, t: f64) -> f64 {
+        self.start_temp_c
+            + self.drift_k_per_h * t / 3600.0
+            + self.ripple_k * (2.0 * std::f64::consts::PI * t / RIPPLE_PERIOD_S).sin()
+    }
+
+    /// Number of samples.
+    pub fn samples(&self) -> usize {
+        (self.seconds * self.rate_hz).round().max(0.0) as usize
+    }
+}
+
+/// One sample of the production stream: the readings and the truth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProductionSample {
+    /// Stream time, s.
+    pub t: f64,
+    /// Drive positions (the commands the drives hold), mm.
+    pub q: [f64; 4],
+    /// Drive forces from the motor currents, with noise, N.
+    pub f: [f64; 4],
+    /// The machine thermometer, °C.
+    pub temp_c: f64,
+    /// Truth: the machine's parameters now (thermal expansion and any step included).
+    pub truth: Params,
+    /// Truth: the TCP (x, y mm, ψ rad).
+    pub tcp: [f64; 3],
+    /// Truth: the drive forces without noise, N.
+    pub f_true: [f64; 4],
+}
+
+/// The production stream of a twin (an iterator of samples).
+pub struct ProductionStream<'a> {
+    twin: &'a Twin,
+    cfg: ProductionConfig,
+    controller: Params,
+    path_rng: StdRng,
+    noise_rng: StdRng,
+    k: usize,
+    at: (f64, f64),
+    target: (f64, f64),
+    warm: Option<Equilibrium>,
+    encoder_mm: f64,
+}
+
+impl<'a> ProductionStream<'a> {
+    /// The stream of `twin` (its true machine, stiffness, controller and encoder noise) under
+    /// `cfg`. The twin's thermal physics says what expands; its temperature law is replaced by
+    /// the stream's.
+    pub fn new(twin: &'a Twin, cfg: ProductionConfig) -> ProductionStream<'a> {
+        let mut path_rng = StdRng::seed_from_u64(cfg.seed ^ 0x9a7e_0000_0000_0015);
+        let at = random_target(&mut path_rng);
+        let target = random_target(&mut path_rng);
+        ProductionStream {
+            controller: twin.controller(false),
+            noise_rng: StdRng::seed_from_u64(cfg.seed ^ 0x9015_e000_0000_0015),
+            encoder_mm: twin.config().noise.as_ref().map_or(0.0, |n| n.encoder_mm),
+            twin,
+            cfg,
+            path_rng,
+            k: 0,
+            at,
+            target,
+            warm: None,
+        }
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ProductionConfig {
+        &self.cfg
+    }
+
+    /// The true parameters at time `t` with guide-2 carriers at s1, s4.
+    fn truth_at(&self, t: f64, s1: f64, s4: f64) -> Params {
+        let mut p = self.twin.effective(self.cfg.temperature(t), s1, s4);
+        if let Some(step) = self.cfg.step.filter(|s| t >= s.at_s) {
+            p[step.param] += step.change;
+        }
+        p
+    }
+
+    /// Moves the TCP one sample along the path.
+    fn advance(&mut self) {
+        let ds = self.cfg.feed_mm_s / self.cfg.rate_hz;
+        let (dx, dy) = (self.target.0 - self.at.0, self.target.1 - self.at.1);
+        let d = dx.hypot(dy);
+        if d <= ds {
+            self.at = self.target;
+            self.target = random_target(&mut self.path_rng);
+        } else {
+            self.at = (self.at.0 + dx / d * ds, self.at.1 + dy / d * ds);
+        }
+    }
+
+    fn sample(&mut self) -> Result<ProductionSample, TwinError> {
+        let t = self.k as f64 / self.cfg.rate_hz;
+        let (x, y) = self.at;
+        let cmd = geometry::igm(&self.controller, Model::M29, x, y)
+            .map_err(|source| TwinError::Controller {
+                setup: "production".to_owned(),
+                x,
+                y,
+                source,
+            })?
+            .q();
+        let temp = self.cfg.temperature(t);
+        let sc = self.twin.scale(temp);
+        let s =
+            [0, 1, 2, 3].map(|a| (cmd[a] + self.encoder_mm * gauss(&mut self.noise_rng)) * sc[a]);
+        let truth = self.truth_at(t, s[0], s[3]);
+        let k = self.twin.stiffness();
+        let solved = match &self.warm {
+            Some(w) => elastic::fegm_from(&truth, &k, s, ALL_ACTIVE, w),
+            None => elastic::fegm(&truth, &k, s, ALL_ACTIVE),
+        };
+        let eq = solved.map_err(|source| TwinError::Elastic {
+            setup: "production".to_owned(),
+            x,
+            y,
+            source,
+        })?;
+        self.warm = Some(eq);
+        let mut f = eq.drive_force;
+        for v in &mut f {
+            *v += self.cfg.force_noise_n * gauss(&mut self.noise_rng);
+        }
+        Ok(ProductionSample {
+            t,
+            q: cmd,
+            f,
+            temp_c: temp + TEMP_SENSOR_K * gauss(&mut self.noise_rng),
+            truth,
+            tcp: [eq.x, eq.y, eq.psi],
+            f_true: eq.drive_force,
+        })
+    }
+}
+
+fn random_target(rng: &mut StdRng) -> (f64, f64) {
+    (
+        rng.gen_range(X_RANGE.0..=X_RANGE.1),
+        rng.gen_range(Y_RANGE.0..=Y_RANGE.1),
+    )
+}
+
+impl Iterator for ProductionStream<'_> {
+    type Item = Result<ProductionSample, TwinError>;
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.k >= self.cfg.samples() {
+            return None;
+        }
+        let out = self.sample();
+        self.advance();
+        self.k += 1;
+        Some(out)
+    }
+}
