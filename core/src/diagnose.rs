@@ -250,6 +250,9 @@ pub struct Diagnosis {
     /// The current model's TCP error of every tracker and grid-encoder pose as a vector, from
     /// the same fit as `points`.
     pub error_vectors: Vec<ErrorVector>,
+    /// Why `error_vectors` is empty although the campaign has such poses, if it is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_vectors_missing: Option<String>,
     pub test: String,
 }
 
@@ -348,7 +351,10 @@ impl Search<'_> {
             Some(cal) => cal,
             None => fit_model(self.campaign, self.in_model, copts)?,
         };
-        let vectors = error_vectors(self.campaign, self.in_model, &cal, copts.model)?;
+        // a picture, not a number the verdict rests on: a pose the forward model cannot
+        // solve costs the arrows, not the diagnosis
+        let vectors = error_vectors(self.campaign, self.in_model, &cal, copts.model)
+            .map_err(|e| e.to_string());
         let base = finish(self.campaign, val.as_ref(), self.in_model, cal, copts)?;
         let tries = try_all(
             self.campaign,
@@ -442,13 +448,13 @@ fn conclude(
         unexplained,
         groups: groups(&base.rows),
         points: points(campaign, &base.rows),
-        error_vectors: vectors,
+        error_vectors_missing: vectors.as_ref().err().cloned(),
+        error_vectors: vectors.unwrap_or_default(),
         test,
     }
 }
 
 /// What trying every candidate gave.
-#[derive(Default)]
 struct Round {
     /// Each tried effect compared with the current model.
     candidates: Vec<Candidate>,
@@ -456,8 +462,20 @@ struct Round {
     fits: Vec<(&'static str, Fitted)>,
     /// The effects that could not be tried, and why.
     skipped: Vec<Skipped>,
-    /// The current model's TCP error vectors (2-D relative instruments).
-    vectors: Vec<ErrorVector>,
+    /// The current model's TCP error vectors (2-D relative instruments), or why there are
+    /// none (a pose whose forward model has no solution).
+    vectors: Result<Vec<ErrorVector>, String>,
+}
+
+impl Default for Round {
+    fn default() -> Self {
+        Round {
+            candidates: Vec::new(),
+            fits: Vec::new(),
+            skipped: Vec::new(),
+            vectors: Ok(Vec::new()),
+        }
+    }
 }
 
 /// A candidate effect's fits: the full effect and the parts of it kept.

@@ -363,7 +363,12 @@ fn arrows(d: &Diagnosis, inst: &str) -> Vec<Arrow> {
 fn vector_maps(r: &Report, inst: &str, view: View) -> String {
     let before = arrows(r.before, inst);
     if before.is_empty() {
-        return String::new();
+        return match &r.before.error_vectors_missing {
+            Some(why) if matches!(inst, "lt" | "kgm") => {
+                format!("<p class=\"muted\">No error vectors: {}</p>", escape(why))
+            }
+            _ => String::new(),
+        };
     }
     let after = r.after.map_or(Vec::new(), |a| arrows(a, inst));
     let size = p98(before.iter().chain(&after).map(|a| a.dx_um.hypot(a.dy_um)));
