@@ -71,6 +71,10 @@ pub(super) struct Lm<'a> {
     /// minimum that step is Gauss-Newton's on a quadratic model that holds, the screening
     /// fit of the diagnosis. Otherwise the run goes on to convergence as without it.
     pub screen: bool,
+    /// The start is a neighbouring model's minimum (a warm start): the first step is
+    /// Gauss-Newton's ([`SCREEN_TAU`]) instead of [`TAU`]'s, which holds back the directions
+    /// six decades below the largest diagonal and takes several steps to release them.
+    pub warm: bool,
     /// Per reduced parameter: its index and tolerance (empty: no prior), and the prior's
     /// centre.
     pub prior: Vec<(usize, f64)>,
@@ -200,8 +204,13 @@ impl Lm<'_> {
         let cols = self.n_unknowns();
         let mut p = start.clone();
         let mut nq = self.normal_at(&p)?;
-        // a screening step is Gauss-Newton's: undamped where the normal equations allow
-        let tau = if self.screen { SCREEN_TAU } else { TAU };
+        // from a neighbour's minimum the step is Gauss-Newton's: undamped where the normal
+        // equations allow
+        let tau = if self.screen || self.warm {
+            SCREEN_TAU
+        } else {
+            TAU
+        };
         let mut mu = tau * nq.a.diagonal().max();
         let mut nu = 2.0;
         let done = |state: State, iterations: usize| {

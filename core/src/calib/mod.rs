@@ -339,7 +339,12 @@ pub fn calibrate_from(
             theta: theta0.clone(),
         },
     };
-    let fit = step1(&pb, &plan, init, warm.is_some_and(|w| w.screen))?;
+    let fit = step1(
+        &pb,
+        &plan,
+        init,
+        (warm.is_some(), warm.is_some_and(|w| w.screen)),
+    )?;
     let corr = effects.corrections(&fit.state.theta);
     let (rows_final, post) = posterior(&pb, &plan, &fit.state.p, &corr, &fit.drop)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
@@ -606,7 +611,7 @@ fn step1(
     pb: &Problem,
     plan: &Plan,
     init: State,
-    screen: bool,
+    (warm, screen): (bool, bool),
 ) -> Result<Step1Fit, CalibrationError> {
     let opts = pb.opts;
     let mut fit = Step1Fit {
@@ -628,6 +633,7 @@ fn step1(
             h_theta: plan.h_theta.clone(),
             max_iterations: opts.max_iterations,
             screen,
+            warm,
             prior: plan.prior.clone(),
             center: pb.start,
         };
@@ -755,6 +761,7 @@ fn step2(
         h_theta: DVector::zeros(0),
         max_iterations: opts.max_iterations,
         screen: false,
+        warm: false,
         prior: prior2.clone(),
         center: pb.start,
     };
