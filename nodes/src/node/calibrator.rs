@@ -439,7 +439,7 @@ impl OnlineWorker {
             return;
         }
         self.seen += 1;
-        if (self.seen - 1) % self.decimation != 0 {
+        if !(self.seen - 1).is_multiple_of(self.decimation) {
             return;
         }
         let sample = ForceSample {
