@@ -569,8 +569,8 @@ fn force_rows(
                 sens[a].dq[b] = (plus[a] - minus[a]) / 2e-3;
             }
         }
-        for a in 0..4 {
-            sens[a].dk = eq.drive_force[a] / (1.0 + d.dk);
+        for (s, f) in sens.iter_mut().zip(eq.drive_force) {
+            s.dk = f / (1.0 + d.dk);
         }
     }
     let parts = ctx.noise.force_parts();

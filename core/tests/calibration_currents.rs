@@ -209,6 +209,12 @@ fn forces_and_followers_in_one_campaign_find_the_stiffness() {
         let z = (value - truth[i]) / sigma;
         assert!(z.abs() < 3.0, "{}: {z:.2}σ from the truth", NAMES[i]);
     }
+    eprintln!(
+        "stiffness change {:.4} ± {:.4} (truth {:.2})",
+        k.value,
+        k.sigma,
+        TRUE_FACTOR - 1.0
+    );
 }
 
 /// The effects' columns of the force rows (the chain rule through the force model's

@@ -128,7 +128,7 @@ fn rows_of(
         )));
     }
     let c = crate::input::read_campaign(path)?;
-    Ok(analysis::currents_rows(&c, p).with_context(|| format!("{}", path.display()))?)
+    analysis::currents_rows(&c, p).with_context(|| format!("{}", path.display()))
 }
 
 /// Run `rpkm analyze`.

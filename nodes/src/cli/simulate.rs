@@ -246,7 +246,7 @@ fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> 
     use rpkm_core::params::{NAMES, N_PARAMS};
     use rpkm_core::twin::{ProductionConfig, ProductionStream};
     use std::fmt::Write as _;
-    if !is_csv(&args.out) || !(seconds > 0.0 && seconds <= 86_400.0) {
+    if !(is_csv(&args.out) && seconds > 0.0 && seconds <= 86_400.0) {
         return Err(super::bad_input(format!(
             "--production-seconds {seconds}: a CSV --out and 0 < seconds <= 86400"
         )));

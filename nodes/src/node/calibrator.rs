@@ -404,6 +404,12 @@ impl OnlineWorker {
         std::thread::Builder::new()
             .name("online-calibration".into())
             .spawn(move || {
+                // the lowest priority of the host: the tracker takes what the estimator and
+                // the drive stream leave (on Linux a thread's nice value is its own)
+                // SAFETY: setpriority on the calling thread with a constant; no memory passed.
+                unsafe {
+                    libc::setpriority(libc::PRIO_PROCESS, 0, 19);
+                }
                 let mut tracker = OnlineTracker::new(&start, settings);
                 let mut told = false;
                 while let Ok((s, temp)) = samples.recv() {
@@ -433,7 +439,7 @@ impl OnlineWorker {
             return;
         }
         self.seen += 1;
-        if (self.seen - 1) % self.decimation != 0 {
+        if !(self.seen - 1).is_multiple_of(self.decimation) {
             return;
         }
         let sample = ForceSample {
