@@ -16,6 +16,7 @@ pub mod preload_monitor;
 pub mod realtime;
 pub mod shutdown;
 pub mod tcp_estimator;
+pub mod views;
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
