@@ -212,9 +212,12 @@ fn monitor_in_tmux_shows_the_fault_and_the_silent_estimator() {
         &monitor,
     ]);
     tmux.run(&["set-option", "-t", "mon", "remain-on-exit", "on"]);
-    // The thresholds come with preload_monitor's first report on an evaluated state.
+    // The thresholds come with preload_monitor's first report, as key-values, before any
+    // drive state (the parameter file's 30 / 80 %).
     tmux.wait_screen("both nodes reporting", Duration::from_secs(30), |s| {
-        s.contains("all 2 nodes reporting") && s.contains("thresholds unknown")
+        s.contains("all 2 nodes reporting")
+            && s.contains("WARN 30 % · ERROR 80 % (from preload_monitor)")
+            && s.contains("no drive state evaluated yet")
     });
 
     // Replay at half speed (2,000 samples in 4 s) and read the screen as it goes.

@@ -105,12 +105,12 @@ fn drive_until_level(
 }
 
 /// Runs the peer on `script`; its JSON lines come back through the channel.
-fn peer(py: &Path, dir: &TempDir, script: Value) -> (Proc, mpsc::Receiver<Value>) {
+fn peer(py: &Path, dir: &TempDir, node: &str, script: Value) -> (Proc, mpsc::Receiver<Value>) {
     let file = dir.path("script.json");
     std::fs::write(&file, script.to_string()).expect("script");
     let mut child = Command::new(py)
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/ros2_params_peer.py"))
-        .args(["--domain", DOMAIN, "--timeout", "60"])
+        .args(["--domain", DOMAIN, "--timeout", "60", "--node", node])
         .arg(&file)
         .stdout(Stdio::piped())
         .spawn()
@@ -190,7 +190,7 @@ fn a_cyclone_peer_sets_a_threshold_and_the_monitor_level_follows_live() {
         {"await_event": "warn_percent"},
         {"await_rosout": "parameters set: warn_percent"},
     ]);
-    let (_peer, rx) = peer(&py, &dir, script);
+    let (_peer, rx) = peer(&py, &dir, "/rpkm/preload_monitor", script);
     let get = next(&rx, &statuses, "get");
     assert_eq!(get["get"]["warn_percent"], serde_json::json!([3, 20.0]));
     assert_eq!(get["get"]["error_percent"], serde_json::json!([3, 50.0]));
@@ -256,4 +256,68 @@ fn a_cyclone_peer_sets_a_threshold_and_the_monitor_level_follows_live() {
         (worst - deviation).abs() < 1e-6 && worst < above,
         "{worst} vs {deviation}"
     );
+}
+
+/// The peer's next line, within 60 s.
+fn next_line(rx: &mpsc::Receiver<Value>, what: &str) -> Value {
+    let v = rx
+        .recv_timeout(Duration::from_secs(60))
+        .unwrap_or_else(|_| panic!("the peer gave no answer for {what} within 60 s"));
+    assert!(v.get("timeout").is_none(), "{what}: {v}");
+    v
+}
+
+/// tcp_estimator on the same services: `view_every` (the decimation of its standard views)
+/// is set live, `views` and `rt_priority` need a restart and are refused.
+#[test]
+fn a_cyclone_peer_reads_and_sets_the_estimators_parameters() {
+    let Some(py) = python() else { return };
+    let dir = TempDir::new("ros2params_est");
+    let prefix = unique("r2pe");
+    let _node = Proc(
+        Command::new(rpkm())
+            .args(["node", "tcp_estimator", "--backend", "both"])
+            .args(["--input-backend", "ipc", "--param", "view_every=7"])
+            .args(["--param", "follow_parameters=false"])
+            .env("RPKM_IPC_PREFIX", &prefix)
+            .env("ROS_DOMAIN_ID", DOMAIN)
+            .spawn()
+            .expect("start tcp_estimator"),
+    );
+    let script = serde_json::json!([
+        {"get": ["view_every", "views", "model", "rt_priority"]},
+        {"describe": ["view_every", "views"]},
+        {"set": {"view_every": 0}},
+        {"set": {"views": false}},
+        {"set": {"view_every": 2}},
+        {"await_event": "view_every"},
+        {"await_rosout": "parameters set: view_every"},
+    ]);
+    let (_peer, rx) = peer(&py, &dir, "/rpkm/tcp_estimator", script);
+    let get = next_line(&rx, "get");
+    assert_eq!(
+        get["get"],
+        serde_json::json!({"view_every": [2, 7], "views": [1, true], "model": [2, 29],
+            "rt_priority": [2, 0]})
+    );
+    let d = &next_line(&rx, "describe")["describe"];
+    assert_eq!(d["view_every"]["read_only"], false);
+    assert_eq!(
+        d["view_every"]["integer_range"],
+        serde_json::json!([[1, 1_000_000]])
+    );
+    assert_eq!(d["views"]["read_only"], true);
+    let zero = next_line(&rx, "set 0");
+    assert_eq!(zero["set"]["view_every"][0], false, "{zero}");
+    let views = next_line(&rx, "set views");
+    assert_eq!(views["set"]["views"][0], false, "{views}");
+    let reason = views["set"]["views"][1].as_str().unwrap_or_default();
+    assert!(reason.contains("read-only"), "{reason}");
+    let set = next_line(&rx, "set 2");
+    assert_eq!(set["set"]["view_every"], serde_json::json!([true, ""]));
+    let event = next_line(&rx, "event");
+    assert_eq!(event["event"]["node"], "/rpkm/tcp_estimator");
+    assert_eq!(event["event"]["value"], serde_json::json!([2, 2]));
+    let rosout = next_line(&rx, "rosout");
+    assert_eq!(rosout["rosout"]["name"], "rpkm.tcp_estimator");
 }

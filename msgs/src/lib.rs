@@ -19,11 +19,14 @@ pub mod cdr;
 pub mod diagnosis;
 pub mod diagnosis_candidate;
 pub mod diagnostic_msgs;
+pub mod geometry_msgs;
 pub mod parameters;
 pub mod preload_status;
+pub mod sensor_msgs;
 pub mod std_msgs;
 pub mod tcp_estimate;
 pub mod tcp_measurement;
+pub mod tf2_msgs;
 
 pub use actuator_state::ActuatorState;
 pub use builtin_interfaces::Time;
@@ -32,11 +35,16 @@ pub use cdr::{from_cdr, to_cdr, CdrError, CDR_LE_HEADER};
 pub use diagnosis::Diagnosis;
 pub use diagnosis_candidate::DiagnosisCandidate;
 pub use diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
+pub use geometry_msgs::{
+    Point, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Vector3,
+};
 pub use parameters::Parameters;
 pub use preload_status::{PreloadLevel, PreloadStatus};
+pub use sensor_msgs::JointState;
 pub use std_msgs::Header;
 pub use tcp_estimate::TcpEstimate;
 pub use tcp_measurement::{Instrument, TcpMeasurement, UnknownInstrument};
+pub use tf2_msgs::TfMessage;
 
 /// Package name of the project's own messages.
 pub const PACKAGE: &str = "rpkm_msgs";
@@ -124,6 +132,43 @@ mod tests {
             DiagnosticArray::type_name(),
             "diagnostic_msgs/msg/DiagnosticArray"
         );
+    }
+
+    #[test]
+    fn standard_views_carry_their_ros_names() {
+        assert_eq!(
+            PoseStamped::dds_type_name(),
+            "geometry_msgs::msg::dds_::PoseStamped_"
+        );
+        assert_eq!(
+            TfMessage::dds_type_name(),
+            "tf2_msgs::msg::dds_::TFMessage_"
+        );
+        assert_eq!(JointState::type_name(), "sensor_msgs/msg/JointState");
+        let def = TfMessage::definition();
+        for dep in [
+            "geometry_msgs/msg/TransformStamped",
+            "std_msgs/msg/Header",
+            "builtin_interfaces/msg/Time",
+            "geometry_msgs/msg/Transform",
+            "geometry_msgs/msg/Vector3",
+            "geometry_msgs/msg/Quaternion",
+        ] {
+            assert!(def.contains(&format!("MSG: {dep}\n")), "{dep} missing");
+        }
+    }
+
+    #[test]
+    fn a_yaw_quaternion_rotates_x_by_the_angle() {
+        // v' = q v q*: for q = (0, 0, z, w) the image of (1, 0, 0) is
+        // (w² − z², 2wz, 0), which must be (cos ψ, sin ψ, 0).
+        for psi in [0.3, -2.5, std::f64::consts::PI] {
+            let q = Quaternion::about_z(psi);
+            let (w, z) = (q.w, q.z);
+            assert!((w * w - z * z - psi.cos()).abs() < 1e-15, "{psi}");
+            assert!((2.0 * w * z - psi.sin()).abs() < 1e-15, "{psi}");
+            assert!((w * w + z * z - 1.0).abs() < 1e-15);
+        }
     }
 
     #[test]

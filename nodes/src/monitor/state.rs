@@ -379,7 +379,7 @@ impl Watch {
         for st in a.status {
             let name = st.name.strip_prefix("rpkm/").unwrap_or(&st.name).to_owned();
             if name == "preload_monitor" {
-                self.thresholds_from_message(&st.message);
+                self.thresholds_from_status(&st);
             }
             let node = self.nodes.entry(name).or_default();
             if let Some((_, at)) = node.diagnostic {
@@ -392,10 +392,33 @@ impl Watch {
         }
     }
 
-    fn thresholds_from_message(&mut self, message: &str) {
+    /// The thresholds from the status's key-values (`warn_percent`, `error_percent`,
+    /// `dq_warn_m`, `dq_error_m`); from the sentence when a preload_monitor older than those
+    /// values sent it.
+    fn thresholds_from_status(&mut self, st: &DiagnosticStatus) {
         if matches!(self.thresholds.source, ThresholdSource::ParamsFile(_)) {
             return;
         }
+        let value = |key: &str| {
+            st.values
+                .iter()
+                .find(|v| v.key == key)
+                .and_then(|v| v.value.parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+        };
+        if let (Some(warn), Some(error)) = (value("warn_percent"), value("error_percent")) {
+            self.thresholds.warn_percent = warn;
+            self.thresholds.error_percent = error;
+            self.thresholds.source = ThresholdSource::Diagnostics;
+            if let (Some(w), Some(e)) = (value("dq_warn_m"), value("dq_error_m")) {
+                self.thresholds.dq_m = Some((w, e));
+            }
+            return;
+        }
+        self.thresholds_from_message(&st.message);
+    }
+
+    fn thresholds_from_message(&mut self, message: &str) {
         if let Some((warn, error)) = parse_thresholds(message, "%") {
             self.thresholds.warn_percent = warn;
             self.thresholds.error_percent = error;

@@ -14,6 +14,9 @@
 //! ([`report`]). Nothing in the input stops the node. At the end of a file or of stdin an
 //! end-of-campaign marker follows (see [`END_OF_CAMPAIGN`]).
 //!
+//! With `views` on (default with DDS output) every `view_every`-th accepted state is also
+//! published as `sensor_msgs/JointState` on `/joint_states` ([`super::views`]).
+//!
 //! The flow: a source ([`dds`], or [`csv::Stdin`] / [`csv::FileLines`]) → one validation
 //! loop ([`csv::stream`], or the DDS loop) → [`output::Output`] (publish, count, report).
 
@@ -39,7 +42,7 @@ use output::Output;
 pub const END_OF_CAMPAIGN: &str = "__end_of_campaign__";
 
 /// Parameter keys of the node.
-pub const KEYS: [&str; 11] = [
+pub const KEYS: [&str; 13] = [
     "source",
     "rate_hz",
     "start_delay_s",
@@ -51,6 +54,8 @@ pub const KEYS: [&str; 11] = [
     "measurement_max_m",
     "input_actuator_topic",
     "input_measurement_topic",
+    "views",
+    "view_every",
 ];
 
 /// `rpkm node ingest`.

@@ -16,6 +16,7 @@ pub mod preload_monitor;
 pub mod realtime;
 pub mod shutdown;
 pub mod tcp_estimator;
+pub mod views;
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -39,6 +40,7 @@ pub const MM_PER_M: f64 = 1e3;
 #[command(after_help = "Examples:\n  \
 rpkm node ingest --source campaign.csv --params launch_scripts/params.yaml\n  \
 rpkm node tcp_estimator --params launch_scripts/params.yaml --backend both\n  \
+rpkm node tcp_estimator --backend dds --param view_every=80   # PoseStamped + /tf at 100 Hz of 8 kHz\n  \
 rpkm node preload_monitor --param warn_percent=20 --param error_percent=50")]
 pub struct NodeArgs {
     #[command(subcommand)]

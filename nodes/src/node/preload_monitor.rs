@@ -67,6 +67,20 @@ impl Default for Thresholds {
     }
 }
 
+impl Thresholds {
+    /// The /diagnostics key-values of the thresholds (`warn_percent`, `error_percent`,
+    /// `dq_warn_m`, `dq_error_m`, as the parameters are named), written so that they parse
+    /// back to the same f64: a viewer reads them instead of the sentence.
+    pub fn values(&self) -> [(&'static str, String); 4] {
+        [
+            ("warn_percent", self.warn_percent.to_string()),
+            ("error_percent", self.error_percent.to_string()),
+            ("dq_warn_m", self.dq_warn_m.to_string()),
+            ("dq_error_m", self.dq_error_m.to_string()),
+        ]
+    }
+}
+
 fn level_u8(l: PreloadLevel) -> u8 {
     match l {
         PreloadLevel::Ok => PreloadStatus::OK,
@@ -263,6 +277,7 @@ impl Monitor {
                     ("implausible", self.implausible.to_string()),
                 ]
                 .into_iter()
+                .chain(t.values())
                 .chain(self.input.values())
                 .collect(),
             );
@@ -306,6 +321,7 @@ impl Monitor {
             ("dq3_m", format!("{:e}", st.dq3)),
             ("parameters", self.geometry.source.clone()),
         ];
+        values.extend(t.values());
         values.extend(self.input.values());
         const KEYS: [[&str; 3]; 4] = [
             [

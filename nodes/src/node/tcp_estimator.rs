@@ -13,6 +13,9 @@
 //! and which check rejected the elastic solve (`reason`, the core's [`Reason`] code); the
 //! reasons are also counted on /diagnostics (WARN; ERROR while it persists). A state no model can
 //! solve gets no estimate. ψ is published wrapped to (−π, π].
+//! With `views` on (default with DDS output) every `view_every`-th estimate is also published
+//! as `geometry_msgs/PoseStamped` on `/rpkm/tcp_pose` and `tf2_msgs/TFMessage` on `/tf`
+//! ([`super::views`]).
 //! Per sample nothing is allocated: static nalgebra types, a `Copy` message, zero-copy
 //! publishing on iceoryx2.
 
@@ -25,10 +28,16 @@ use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
 use super::inputs::{ParameterFollower, SeqGaps};
-use super::{diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext, MM_PER_M};
+use super::live::{self, LiveParams, Spec};
+use super::views::{self, TcpViews};
+use super::{
+    diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext, NodeParams, MM_PER_M,
+};
+use rpkm_transport::dds_params::ParamRange;
+use rpkm_transport::Backend;
 
 /// Parameter keys of the node.
-pub const KEYS: [&str; 2] = ["busy_poll_ms", "rt_priority"];
+pub const KEYS: [&str; 4] = ["busy_poll_ms", "rt_priority", "views", "view_every"];
 
 /// Consecutive estimates without a plausible elastic equilibrium from which /diagnostics
 /// says ERROR instead of WARN: one odd sample is a warning, a stream of them means the
@@ -305,6 +314,48 @@ fn loop_residuals(g: &Geometry, q: &[f64; 4], x: f64, y: f64, psi: f64) -> [f64;
     out
 }
 
+/// The node's parameters on its ROS 2 parameter services: model, stiffness and `view_every`
+/// live (taken between samples; a new geometry is solved cold), the rest need a restart.
+/// `views_default`: whether the views are on unless a file says otherwise (DDS output).
+fn specs(views_default: bool) -> Vec<Spec> {
+    let mut specs = vec![
+        Spec::fixed(
+            "busy_poll_ms",
+            live::Default::F64(0.0),
+            "yield-polling time after a sample before sleeping, ms (0 to 1000)",
+        ),
+        Spec::fixed(
+            "rt_priority",
+            live::Default::U64(0),
+            "SCHED_FIFO priority of the estimating thread, 0 for none (0 to 99)",
+        ),
+        Spec::fixed(
+            "views",
+            live::Default::Bool(views_default),
+            "publish /rpkm/tcp_pose (PoseStamped) and /tf (machine -> platform) on DDS",
+        ),
+        Spec::live(
+            "view_every",
+            live::Default::U64(views::VIEW_EVERY),
+            "publish the views of every N-th estimate",
+            ParamRange::Integer(
+                views::VIEW_EVERY_RANGE.0 as i64,
+                views::VIEW_EVERY_RANGE.1 as i64,
+            ),
+        ),
+    ];
+    specs.extend(super::geometry_specs());
+    specs
+}
+
+/// What a parameter set changes while the node runs: the geometry and `view_every`.
+fn configure(p: &NodeParams) -> anyhow::Result<(Geometry, u64)> {
+    let every = p
+        .u64_in("view_every", views::VIEW_EVERY, views::VIEW_EVERY_RANGE)
+        .map_err(super::bad_param)?;
+    Ok((Geometry::from_params(p)?, every))
+}
+
 /// Runs the node until SIGINT/SIGTERM.
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let declared = super::declared_keys("tcp_estimator").unwrap_or_default();
@@ -323,6 +374,9 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
     let mut parameters = ParameterFollower::open(&ctx)?;
     let estimates = ctx.publisher(&topic::TCP_ESTIMATE)?;
+    let mut views = TcpViews::open(&ctx)?;
+    let dds = matches!(ctx.output, Backend::Dds | Backend::Both);
+    let mut live = LiveParams::start(&ctx, &specs(dds), |p| configure(p).map(|_| ()))?;
     let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
     ctx.log(format!(
         "estimating with {} ({}), publishing on {:?}, subscribing on {:?}",
@@ -354,10 +408,24 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             Some(state) => {
                 if let Some(e) = est.estimate(&state) {
                     estimates.publish(&e)?;
+                    if let Some(v) = views.as_mut() {
+                        v.offer(&e)?;
+                    }
                 }
                 idle.worked();
             }
             None => {
+                // Between samples only: a set costs the sample path nothing.
+                if let Some((p, names)) = live.poll() {
+                    let (g, every) = configure(&p)?;
+                    if names.iter().any(|k| super::is_geometry_key(k)) {
+                        est.set_geometry(g);
+                    }
+                    if let Some(v) = views.as_mut() {
+                        v.set_every(every);
+                    }
+                    ctx.log(format!("parameters set: {}", names.join(", ")));
+                }
                 if report.due() {
                     diagnostics.publish(&diagnostic_array(est.status(&ctx.name)))?;
                     // A loss is logged once per report, not per gap (a stall loses in bursts).

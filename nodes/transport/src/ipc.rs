@@ -23,8 +23,8 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo, SendError};
 use iceoryx2::prelude::*;
 use rpkm_msgs::{
-    from_cdr, to_cdr, ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, Parameters,
-    PreloadStatus, RosMessage, TcpEstimate, TcpMeasurement,
+    from_cdr, to_cdr, ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, JointState,
+    Parameters, PoseStamped, PreloadStatus, RosMessage, TcpEstimate, TcpMeasurement, TfMessage,
 };
 
 use crate::error::TransportError;
@@ -598,7 +598,10 @@ as_cdr!(
     Diagnosis,
     PreloadStatus,
     DiagnosticArray,
-    CampaignInfo
+    CampaignInfo,
+    PoseStamped,
+    TfMessage,
+    JointState
 );
 
 #[cfg(test)]

@@ -3,8 +3,8 @@
 use std::marker::PhantomData;
 
 use rpkm_msgs::{
-    ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, Parameters, PreloadStatus,
-    TcpEstimate, TcpMeasurement,
+    ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, JointState, Parameters, PoseStamped,
+    PreloadStatus, TcpEstimate, TcpMeasurement, TfMessage,
 };
 
 /// Delivery guarantee.
@@ -123,6 +123,15 @@ pub const PRELOAD_STATUS: Topic<PreloadStatus> =
     Topic::new("/rpkm/preload_status", Qos::reliable(16));
 /// `/diagnostics`: the standard ROS 2 diagnostics topic; reliable keep-last 16.
 pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new("/diagnostics", Qos::reliable(16));
+/// `/rpkm/tcp_pose`: the standard view of the TCP estimate (frame `machine`); reliable
+/// keep-last 10, the default QoS RViz and Foxglove subscribe with. DDS only.
+pub const TCP_POSE: Topic<PoseStamped> = Topic::new("/rpkm/tcp_pose", Qos::reliable(10));
+/// `/tf`: the transform `machine` → `platform` of the TCP estimate; reliable keep-last 100
+/// as tf2's listeners subscribe. DDS only.
+pub const TF: Topic<TfMessage> = Topic::new("/tf", Qos::reliable(100));
+/// `/joint_states`: the drives q1..q4 as prismatic joints (m, N); reliable keep-last 10.
+/// DDS only.
+pub const JOINT_STATES: Topic<JointState> = Topic::new("/joint_states", Qos::reliable(10));
 /// `/rpkm/campaign_info`: source, comments and covariate names of the campaign whose poses
 /// follow on `/rpkm/actuator_state` and `/rpkm/tcp_measurement`; reliable transient-local
 /// keep-last 1.

@@ -88,6 +88,43 @@ fn thresholds_come_from_the_preload_nodes_own_report() {
 }
 
 #[test]
+fn thresholds_are_read_from_the_reports_values_before_any_drive_state() {
+    // A preload_monitor that has judged nothing yet says no thresholds in its sentence, but
+    // its key-values carry all four as set.
+    let node = Monitor::new(
+        Geometry {
+            params: Params::nominal(),
+            model: Model::M29,
+            stiffness: Stiffness::default(),
+            source: "test".into(),
+        },
+        NodeThresholds {
+            warn_percent: 27.5,
+            error_percent: 61.0,
+            dq_warn_m: 4.5e-5,
+            dq_error_m: 1.75e-4,
+            debounce_samples: 1,
+        },
+    );
+    let st = node.status("preload_monitor");
+    assert_eq!(parse_thresholds(&st.message, "%"), None, "{}", st.message);
+    let mut w = watch();
+    w.on_diagnostics(
+        DiagnosticArray {
+            status: vec![st],
+            ..DiagnosticArray::default()
+        },
+        1.0,
+    );
+    assert_eq!(w.thresholds.source, ThresholdSource::Diagnostics);
+    assert_eq!(
+        (w.thresholds.warn_percent, w.thresholds.error_percent),
+        (27.5, 61.0)
+    );
+    assert_eq!(w.thresholds.dq_m, Some((4.5e-5, 1.75e-4)));
+}
+
+#[test]
 fn follower_thresholds_come_from_the_follower_message() {
     // Followers q2, q3 with q3 read 0.3 mm off: the node names the Δq thresholds in mm.
     let (st, s) = node_status(0.3, true);

@@ -9,6 +9,7 @@ use super::report::Tally;
 use super::validate::{reject, Limits, Reject, RejectKind, Validator};
 use super::END_OF_CAMPAIGN;
 use crate::campaign_bag::{campaign_info, pose_messages};
+use crate::node::views::JointViews;
 use crate::node::{diagnostic_array, Every, NodeContext};
 
 /// The publishers and bookkeeping shared by the sources.
@@ -17,6 +18,7 @@ pub(super) struct Output {
     measurements: Publisher<TcpMeasurement>,
     info: Publisher<CampaignInfo>,
     diagnostics: Publisher<DiagnosticArray>,
+    views: Option<JointViews>,
     validator: Validator,
     pub(super) tally: Tally,
     seq: u64,
@@ -35,6 +37,7 @@ impl Output {
             measurements: ctx.publisher(&topic::TCP_MEASUREMENT)?,
             info: ctx.publisher(&topic::CAMPAIGN_INFO)?,
             diagnostics: ctx.publisher(&topic::DIAGNOSTICS)?,
+            views: JointViews::open(ctx)?,
             validator: Validator::new(limits),
             tally: Tally::default(),
             seq: 0,
@@ -107,6 +110,9 @@ impl Output {
 
     fn publish_state(&mut self, state: &ActuatorState) -> anyhow::Result<()> {
         self.states.publish(state)?;
+        if let Some(v) = self.views.as_mut() {
+            v.offer(state)?;
+        }
         self.seq = state.seq;
         self.last_stamp = state.stamp;
         self.tally.accepted_states += 1;
