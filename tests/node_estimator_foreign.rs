@@ -9,6 +9,7 @@
 //! ingest path and the units end to end. The tolerance bites: the nominal geometry's rigid
 //! model misses the same poses by ten times it (asserted). Required under CI.
 
+mod foreign_support;
 mod node_support;
 
 use std::f64::consts::PI;
@@ -28,25 +29,10 @@ const TOL_MM: f64 = 0.010;
 /// Largest ψ error (rad): the same noise over the rods' ~1 m lever.
 const TOL_PSI: f64 = 2e-5;
 
-fn foreign_null() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/campaigns/foreign/null");
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "CI: {} is missing",
-        dir.display()
-    );
-    eprintln!("skipped: no {}", dir.display());
-    None
-}
-
 /// The foreign truth: its true parameters (our names: `g1`, `g2` are γ1, γ2) and the true
 /// pose (x, y mm; ψ rad) of every row of cal.csv.
 fn truth(dir: &Path) -> (Params, Vec<[f64; 3]>) {
-    let text = std::fs::read_to_string(dir.join("truth.json")).expect("truth.json");
-    let t: serde_json::Value = serde_json::from_str(&text).expect("truth json");
+    let t = foreign_support::json(&dir.join("truth.json"));
     let mut p = Params::nominal();
     for (i, name) in NAMES.iter().enumerate() {
         let key = match *name {
@@ -54,7 +40,9 @@ fn truth(dir: &Path) -> (Params, Vec<[f64; 3]>) {
             "gamma2" => "g2",
             n => n,
         };
-        p[i] = t["P_true"][key].as_f64().expect("P_true names every parameter");
+        p[i] = t["P_true"][key]
+            .as_f64()
+            .expect("P_true names every parameter");
     }
     let poses = t["true_pose_cal"]
         .as_array()
@@ -119,7 +107,9 @@ fn nominal_miss_mm(c: &Campaign, truth: &[[f64; 3]]) -> f64 {
 
 #[test]
 fn live_estimates_lie_on_the_foreign_simulators_true_poses() {
-    let Some(ds) = foreign_null() else { return };
+    let Some(ds) = foreign_support::dataset("null") else {
+        return;
+    };
     let csv = ds.join("cal.csv");
     let text = std::fs::read_to_string(&csv).expect("cal.csv");
     let c = Campaign::parse(&text, "foreign null").expect("foreign campaign");

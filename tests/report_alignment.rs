@@ -10,22 +10,12 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn alignment() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/campaigns/foreign/alignment");
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "CI: {} is missing",
-        dir.display()
-    );
-    eprintln!("skipped: no {}", dir.display());
-    None
-}
+mod foreign_support;
 
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).expect("read json")).expect("json")
+use foreign_support::json;
+
+fn alignment() -> Option<PathBuf> {
+    foreign_support::dataset("alignment")
 }
 
 /// What the tracker's arrows show: Pearson r of |arrow| with the distance from the reset
