@@ -11,34 +11,16 @@
 
 mod node_support;
 
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use node_support::{rpkm, unique};
+use node_support::{python, rpkm, unique, Proc};
 use rpkm_msgs::{ActuatorState, Time};
 use rpkm_transport::{topic, Transport, TransportConfig};
 
 const COUNT: u64 = 10;
 const DOMAIN: &str = "58";
-
-fn python() -> Option<PathBuf> {
-    let py = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
-    if py.exists() {
-        return Some(py);
-    }
-    assert!(
-        std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
-        "RPKM_REQUIRE_PYTHON is set but {} is missing",
-        py.display()
-    );
-    eprintln!(
-        "SKIPPED: {} not found; create it with `python3 -m venv .venv && \
-         .venv/bin/pip install -r tests/python/requirements.txt`",
-        py.display()
-    );
-    None
-}
 
 /// Same formula as `expected_actuator` in cyclone_peer.py.
 fn expected_actuator(seq: u64) -> ActuatorState {
@@ -59,19 +41,6 @@ fn expected_actuator(seq: u64) -> ActuatorState {
         follower: [false, !seq.is_multiple_of(2), seq.is_multiple_of(3), false],
         covariate_count: 2,
         covariates: [21.5 + s, 22.25, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-    }
-}
-
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        std::thread::sleep(Duration::from_millis(200));
-        let _ = self.0.kill();
-        let _ = self.0.wait();
     }
 }
 

@@ -16,12 +16,12 @@
 mod node_support;
 
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::{Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use node_support::{rpkm, unique, TempDir};
+use node_support::{python, rpkm, unique, Proc, TempDir};
 use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, NOMINAL_DRIVE_FORCE_N};
 use rpkm_core::geometry::igm;
 use rpkm_core::params::{Model, Params};
@@ -30,31 +30,6 @@ use rpkm_transport::{topic, Transport, TransportConfig};
 use serde_json::Value;
 
 const DOMAIN: &str = "71";
-
-fn python() -> Option<PathBuf> {
-    let py = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
-    if py.exists() {
-        return Some(py);
-    }
-    assert!(
-        std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
-        "RPKM_REQUIRE_PYTHON is set but {} is missing",
-        py.display()
-    );
-    eprintln!("SKIPPED: {} not found", py.display());
-    None
-}
-
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        let _ = self.0.wait();
-    }
-}
 
 /// The state and its largest |measured − predicted| current, %, from the core.
 fn state_with_deviation() -> (ActuatorState, f64) {

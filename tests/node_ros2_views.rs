@@ -18,12 +18,12 @@ mod node_support;
 
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Write};
-use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
+use std::path::Path;
+use std::process::{ChildStdin, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use node_support::{rpkm, unique};
+use node_support::{python, rpkm, unique, Proc};
 use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::igm;
 use rpkm_core::params::{Model, Params};
@@ -36,31 +36,6 @@ const GAMMA2_RAD: f64 = 0.02;
 const POSE_EVERY: u64 = 3;
 /// Samples of each view the peer must receive.
 const COUNT: usize = 20;
-
-fn python() -> Option<PathBuf> {
-    let py = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
-    if py.exists() {
-        return Some(py);
-    }
-    assert!(
-        std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
-        "RPKM_REQUIRE_PYTHON is set but {} is missing",
-        py.display()
-    );
-    eprintln!("SKIPPED: {} not found", py.display());
-    None
-}
-
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        let _ = self.0.wait();
-    }
-}
 
 /// CSV row `k` of the campaign stream: a pose of the γ2 machine on a slow figure, drive
 /// forces from the core's elastic model with q3 pushed 0.05 mm (so that efforts differ).

@@ -212,3 +212,35 @@ impl Drop for TempDir {
         let _ = std::fs::remove_dir_all(&self.0);
     }
 }
+
+/// The test venv's Python (the independent peers: Cyclone DDS, readers); `None` skips with a
+/// word, except under `RPKM_REQUIRE_PYTHON` (CI), where it must be there.
+pub fn python() -> Option<PathBuf> {
+    let py = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
+    if py.exists() {
+        return Some(py);
+    }
+    assert!(
+        std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
+        "RPKM_REQUIRE_PYTHON is set but {} is missing",
+        py.display()
+    );
+    eprintln!(
+        "SKIPPED: {} not found; create it with `python3 -m venv .venv && \
+         .venv/bin/pip install -r tests/python/requirements.txt`",
+        py.display()
+    );
+    None
+}
+
+/// A child process stopped with SIGTERM (its clean shutdown) when the test lets go of it.
+pub struct Proc(pub Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+        let _ = self.0.wait();
+    }
+}
