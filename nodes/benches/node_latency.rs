@@ -16,7 +16,7 @@
 //! (default 2).
 
 use std::process::Command;
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use rpkm_transport::{Backend, Transport, TransportConfig};
 use support::{us, Node, Stats};
@@ -100,14 +100,7 @@ fn run(
 }
 
 fn main() {
-    let secs: f64 = std::env::var("RPKM_BENCH_SECS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(2.0);
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
-        .unwrap_or(0);
+    let (secs, nanos) = (support::case_seconds(), support::run_nanos());
     println!(
         "ActuatorState -> rpkm node tcp_estimator (elastic fegm) -> TcpEstimate, {secs} s per case"
     );

@@ -8,7 +8,7 @@
 //! optimised test profile). Env `RPKM_BENCH_SECS`: seconds per case (default 2).
 
 use std::process::Command;
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use rpkm_transport::{Backend, Transport, TransportConfig};
 use support::{us, Node, Stats};
@@ -48,14 +48,7 @@ fn run(
 }
 
 fn main() {
-    let secs: f64 = std::env::var("RPKM_BENCH_SECS")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(2.0);
-    let nanos = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
-        .unwrap_or(0);
+    let (secs, nanos) = (support::case_seconds(), support::run_nanos());
     println!("ActuatorState -> tcp_estimator -> TcpEstimate at 8 kHz, calibrator beside it, {secs} s per case");
     println!(
         "{:<22} {:>7} {:>6} {:>10} {:>10} {:>10}",

@@ -3,7 +3,7 @@
 #![allow(dead_code)] // each bench uses a part
 
 use std::process::{Child, Command};
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use rpkm_core::geometry::igm;
 use rpkm_core::params::{Model, Params};
@@ -134,4 +134,20 @@ pub fn measure(
 /// Microseconds of a duration.
 pub fn us(d: Duration) -> f64 {
     d.as_secs_f64() * 1e6
+}
+
+/// Seconds per case: `RPKM_BENCH_SECS`, 2 by default.
+pub fn case_seconds() -> f64 {
+    std::env::var("RPKM_BENCH_SECS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2.0)
+}
+
+/// This run's nanoseconds, to make the iceoryx2 prefixes of its cases unique on the machine.
+pub fn run_nanos() -> u32 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.subsec_nanos())
+        .unwrap_or(0)
 }
