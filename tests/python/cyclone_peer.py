@@ -27,16 +27,7 @@ import sys
 import time
 from dataclasses import dataclass
 
-LOOPBACK_CONFIG = """<CycloneDDS><Domain id="any">
-  <General><Interfaces><NetworkInterface name="lo"/></Interfaces>
-    <AllowMulticast>false</AllowMulticast></General>
-  <Discovery><Peers><Peer address="127.0.0.1"/></Peers>
-    <ParticipantIndex>auto</ParticipantIndex>
-    <MaxAutoParticipantIndex>60</MaxAutoParticipantIndex></Discovery>
-</Domain></CycloneDDS>"""
-
-# Must be set before the first DomainParticipant is created.
-os.environ.setdefault("CYCLONEDDS_URI", LOOPBACK_CONFIG)
+import loopback  # noqa: E402,F401  (before cyclonedds: the loopback configuration)
 
 from cyclonedds.core import Qos, Policy  # noqa: E402
 from cyclonedds.domain import DomainParticipant  # noqa: E402
