@@ -117,7 +117,7 @@ const LAUNCH_VALUES: [&str; 16] = [
 /// duplicated line; in a third of the cases then [`mutate_text`] (lines, bytes).
 fn mutate_launch(text: &str, rng: &mut Rng) -> Vec<u8> {
     let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
-    for _ in 0..1 + rng.below(3) {
+    for _ in 0..=rng.below(3) {
         let i = rng.below(lines.len());
         let line = lines[i].clone();
         lines[i] = match rng.below(6) {
@@ -299,7 +299,7 @@ fn family(cases: usize, one: impl Fn(usize) -> (Option<String>, bool) + Sync) ->
                     rejected.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 }
                 if let Some(f) = failure {
-                    failures.lock().unwrap_or_else(|e| e.into_inner()).push(f);
+                    failures.lock().unwrap_or_else(std::sync::PoisonError::into_inner).push(f);
                 }
             });
         }
@@ -309,7 +309,7 @@ fn family(cases: usize, one: impl Fn(usize) -> (Option<String>, bool) + Sync) ->
         rejected * 5 >= cases,
         "only {rejected} of {cases} mutated inputs were rejected"
     );
-    failures.into_inner().unwrap_or_else(|e| e.into_inner())
+    failures.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 #[test]
@@ -361,7 +361,7 @@ fn fuzzed_bags_end_in_0_or_2_naming_their_file() {
             match rng.below(3) {
                 0 => bytes.truncate(rng.below(bytes.len())),
                 _ => {
-                    for _ in 0..1 + rng.below(4) {
+                    for _ in 0..=rng.below(4) {
                         let at = rng.below(bytes.len());
                         bytes[at] ^= 1 << rng.below(8);
                     }

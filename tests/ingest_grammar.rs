@@ -150,7 +150,7 @@ fn ingest_and_calibrate_reject_the_same_rows_with_the_same_message() {
     let (mut rejected_files, mut rows_rejected, mut calibrated) = (0, 0, 0);
     for n in 0..FILES {
         let mut lines = base.clone();
-        for _ in 0..1 + rng.below(3) {
+        for _ in 0..=rng.below(3) {
             mutate(&mut lines, &mut rng);
         }
         let bytes = [lines.join(&b"\n"[..]), b"\n".to_vec()].concat();

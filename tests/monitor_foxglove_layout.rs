@@ -180,7 +180,7 @@ fn message_paths(v: &Value, out: &mut Vec<String>) {
                     ("value" | "path" | "topicPath" | "topicToRender", Value::String(s))
                         if !s.is_empty() =>
                     {
-                        out.push(s.clone())
+                        out.push(s.clone());
                     }
                     _ => message_paths(v, out),
                 }

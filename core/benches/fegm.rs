@@ -28,7 +28,7 @@ fn main() {
     let n = 2000;
     let qs: Vec<[f64; 4]> = (0..n)
         .map(|i| {
-            let a = i as f64 / n as f64 * std::f64::consts::TAU;
+            let a = f64::from(i) / f64::from(n) * std::f64::consts::TAU;
             let (x, y) = (100.0 * a.cos(), 1700.0 + 100.0 * a.sin());
             let q = igm(&p, Model::M29, x, y).expect("igm").q();
             [q[0], q[1], q[2] + 0.1, q[3]]
@@ -46,7 +46,7 @@ fn main() {
                 acc += f(black_box(q));
             }
         }
-        let ns = t0.elapsed().as_nanos() as f64 / (reps * n) as f64;
+        let ns = t0.elapsed().as_nanos() as f64 / f64::from(reps * n);
         black_box(acc);
         println!("{label:<36} {ns:>9.0} ns/sample");
         ns

@@ -28,7 +28,7 @@ fn per_call_ns(n: usize, mut f: impl FnMut(usize)) -> f64 {
 fn main() {
     let p = support::true_params(3, false);
     let poses: Vec<(f64, f64)> = (0..1000)
-        .map(|i| (-150.0 + 0.3 * i as f64, 700.0 + 2.0 * i as f64))
+        .map(|i| (-150.0 + 0.3 * f64::from(i), 700.0 + 2.0 * f64::from(i)))
         .collect();
     let qs: Vec<[f64; 4]> = poses
         .iter()
@@ -71,7 +71,7 @@ fn main() {
         let cal = calib::calibrate(&campaign, &Params::nominal(), &opts).expect("calibration");
         identified = cal.identified.len();
     }
-    let ms = t.elapsed().as_secs_f64() * 1e3 / runs as f64;
+    let ms = t.elapsed().as_secs_f64() * 1e3 / f64::from(runs);
     println!(
         "calibration, model 29, {} poses, {identified} parameters identified: {ms:.1} ms",
         campaign.poses.len()

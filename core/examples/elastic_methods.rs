@@ -107,8 +107,7 @@ fn print_force_table(rows: &[Comparison]) {
         let current = c
             .result(RedundantModel::FeActuatorDisplacements)
             .drive_force
-            .map(|f| f.iter().fold(0.0_f64, |m, v| m.max(v.abs())) / 8600.0 * 100.0)
-            .unwrap_or(0.0);
+            .map_or(0.0, |f| f.iter().fold(0.0_f64, |m, v| m.max(v.abs())) / 8600.0 * 100.0);
         println!(
             "| ({}, {}) | {} | {} | {} | {} | {:.1} % |",
             c.x,
@@ -144,7 +143,7 @@ fn print_fe_variants(nominal: &Params) -> Result<(), Box<dyn std::error::Error>>
             f[1],
             f[2],
             f[3]
-        )
+        );
     };
     line("spring fegm", [sp.x, sp.y, sp.psi], sp.drive_force);
     let d = FeStiffness::default();

@@ -316,9 +316,9 @@ mod tests {
             match out.iter_mut().find(|s| s.0 == p.setup) {
                 Some(s) => {
                     s.1 += 1;
-                    s.2 += p.reset as usize;
+                    s.2 += usize::from(p.reset);
                 }
-                None => out.push((p.setup.clone(), 1, p.reset as usize)),
+                None => out.push((p.setup.clone(), 1, usize::from(p.reset))),
             }
         }
         out

@@ -280,7 +280,7 @@ pub fn diagnose(
     let in_names: Vec<&str> = in_model.iter().map(|e| e.name()).collect();
     let tried: Vec<&dyn Effect> = library
         .iter()
-        .map(|e| e.as_ref())
+        .map(std::convert::AsRef::as_ref)
         .filter(|e| !in_names.contains(&e.name()))
         .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
         .collect();
@@ -493,7 +493,7 @@ fn try_all(
     (threads, screen): (usize, bool),
 ) -> Vec<Tried> {
     let start = Params::nominal();
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let threads = if threads == 0 { cores } else { threads }.clamp(1, tried.len().max(1));
     if threads == 1 {
         return tried

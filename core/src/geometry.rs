@@ -1006,7 +1006,7 @@ mod tests {
         assert!(
             matches!(
                 r,
-                Err(GeometryError::Singular { .. }) | Err(GeometryError::NoIntersection { .. })
+                Err(GeometryError::Singular { .. } | GeometryError::NoIntersection { .. })
             ),
             "{r:?}"
         );

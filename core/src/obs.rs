@@ -438,7 +438,7 @@ impl Evaluation<'_> {
             match self.step {
                 Step::Direct => pose_rows(&ctx, i, pose, reset, out).map_err(err)?,
                 Step::VirtualQ2 => {
-                    virtual_q2_row(&ctx, i, pose, self.p_cal, out).map_err(|e| err(e.into()))?
+                    virtual_q2_row(&ctx, i, pose, self.p_cal, out).map_err(|e| err(e.into()))?;
                 }
             }
         }
@@ -475,7 +475,7 @@ fn pose_rows(
     reset: Option<(usize, &Pose)>,
     out: &mut Vec<Residual>,
 ) -> Result<(), ModelError> {
-    use Instrument::*;
+    use Instrument::{Lt, Kgm, Dbb, LiX, LiY, LiPsi, SelfCal, None};
     match (pose.instrument, reset) {
         (Lt, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Lt, (i, pose), reset, out)?),
         (Kgm, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Kgm, (i, pose), reset, out)?),
@@ -920,7 +920,7 @@ fn virtual_q2_row(
     p_cal: &Params,
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
-    use Instrument::*;
+    use Instrument::{Dbb, LiX, LiY, LiPsi};
     if !matches!(pose.instrument, Dbb | LiX | LiY | LiPsi) {
         return Ok(());
     }

@@ -271,7 +271,7 @@ fn effect_columns_of_the_force_rows_match_finite_differences() {
                 r.direction,
                 r.d_theta[k]
             );
-            checked += (r.d_theta[k].abs() > 1.0) as usize;
+            checked += usize::from(r.d_theta[k].abs() > 1.0);
         }
         assert!(checked > 0, "{}: no force moved", layout[k].param.name);
     }

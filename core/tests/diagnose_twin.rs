@@ -54,7 +54,7 @@ fn run(cal: &Campaign, val: &Campaign, in_model: &[&str]) -> Diagnosis {
         .iter()
         .map(|n| effects::by_name(n).expect("library effect"))
         .collect();
-    let refs: Vec<&dyn Effect> = boxed.iter().map(|b| b.as_ref()).collect();
+    let refs: Vec<&dyn Effect> = boxed.iter().map(std::convert::AsRef::as_ref).collect();
     diagnose::diagnose(cal, Some(val), &refs, &Options::default()).expect("diagnose")
 }
 

@@ -350,7 +350,7 @@ fn bad_inputs_are_typed_errors() {
     assert!(
         matches!(
             err,
-            Err(FeError::DegenerateBeam { .. }) | Err(FeError::Reference(_))
+            Err(FeError::DegenerateBeam { .. } | FeError::Reference(_))
         ),
         "{err:?}"
     );

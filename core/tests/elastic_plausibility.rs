@@ -59,17 +59,14 @@ fn replay(p: &Params, c: &Campaign, checked: bool) -> (usize, usize) {
         } else {
             fegm_unchecked(p, &k, pose.q, pose.follower, prev.as_ref())
         };
-        match r {
-            Ok(eq) => {
-                if off_rigid(p, &pose.q, &eq) > 2.0 || eq.psi.abs() > PI || eq.psi.is_nan() {
-                    wrong += 1;
-                }
-                prev = Some(eq);
+        if let Ok(eq) = r {
+            if off_rigid(p, &pose.q, &eq) > 2.0 || eq.psi.abs() > PI || eq.psi.is_nan() {
+                wrong += 1;
             }
-            Err(_) => {
-                unsolved += 1;
-                prev = None;
-            }
+            prev = Some(eq);
+        } else {
+            unsolved += 1;
+            prev = None;
         }
     }
     (wrong, unsolved)

@@ -117,7 +117,7 @@ fn effect_free_data_is_reproduced_by_the_true_parameters() {
     ] {
         let c = t.campaign(&[inst]).expect("c");
         let (pos, fol) = residuals(&c, &truth);
-        assert!(pos.iter().all(|r| r.abs() < 1e-8), "{inst}: {:?}", pos);
+        assert!(pos.iter().all(|r| r.abs() < 1e-8), "{inst}: {pos:?}");
         assert!(fol.iter().all(|r| r.abs() < 1e-8), "{inst}");
     }
     // With noise: RMS consistent with the instrument sigma.
@@ -177,8 +177,8 @@ fn thermal_residual_correlates_with_temp_machine() {
     let corr = correlation(&q3, &temp);
     eprintln!(
         "thermal: corr(q3 residual, temp_machine) = {corr:.3}, temp range {:.2}..{:.2} °C",
-        temp.iter().cloned().fold(f64::INFINITY, f64::min),
-        temp.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+        temp.iter().copied().fold(f64::INFINITY, f64::min),
+        temp.iter().copied().fold(f64::NEG_INFINITY, f64::max)
     );
     assert!(corr.abs() > 0.95, "{corr}");
 }

@@ -22,8 +22,7 @@ pub fn rpkm() -> &'static str {
 pub fn unique(tag: &str) -> String {
     let ns = SystemTime::now()
         .duration_since(UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
-        .unwrap_or(0);
+        .map_or(0, |d| d.subsec_nanos());
     format!("t_{tag}_{}_{ns}", std::process::id())
 }
 

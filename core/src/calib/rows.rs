@@ -139,7 +139,7 @@ impl<'a> Problem<'a> {
 /// `threads` resolved: 0 is every core.
 pub(super) fn thread_count(threads: usize) -> usize {
     if threads == 0 {
-        std::thread::available_parallelism().map_or(1, |n| n.get())
+        std::thread::available_parallelism().map_or(1, std::num::NonZero::get)
     } else {
         threads
     }

@@ -533,18 +533,15 @@ impl Checker {
             check_setup(setup, pose, layout, file)?;
         }
         self.previous = Some((pose.t, pose.line));
-        let k = match self.index.get(&pose.setup) {
-            Some(&k) => k,
-            None => {
-                self.setups.push(SetupState {
-                    id: pose.setup.clone(),
-                    instrument: pose.instrument,
-                    first_line: pose.line,
-                    reset_line: None,
-                });
-                self.index.insert(pose.setup.clone(), self.setups.len() - 1);
-                self.setups.len() - 1
-            }
+        let k = if let Some(&k) = self.index.get(&pose.setup) { k } else {
+            self.setups.push(SetupState {
+                id: pose.setup.clone(),
+                instrument: pose.instrument,
+                first_line: pose.line,
+                reset_line: None,
+            });
+            self.index.insert(pose.setup.clone(), self.setups.len() - 1);
+            self.setups.len() - 1
         };
         if let Some(setup) = self.setups.get_mut(k) {
             if pose.reset {

@@ -162,8 +162,8 @@ mod tests {
     fn ln_gamma_of_integers_is_log_factorial() {
         let mut f = 1.0f64;
         for n in 1..20 {
-            assert!((ln_gamma(n as f64) - f.ln()).abs() < 1e-10, "n = {n}");
-            f *= n as f64;
+            assert!((ln_gamma(f64::from(n)) - f.ln()).abs() < 1e-10, "n = {n}");
+            f *= f64::from(n);
         }
         // Γ(1/2) = √π
         assert!((ln_gamma(0.5) - std::f64::consts::PI.sqrt().ln()).abs() < 1e-12);

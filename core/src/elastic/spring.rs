@@ -257,21 +257,18 @@ fn system(
             continue;
         }
         let v = 3 + j;
-        match k.carrier[j] {
-            Some(c) => {
-                g[v] += c * (z[v] - q[j]);
-                h[(v, v)] += c;
-            }
-            None => {
-                g[v] = z[v] - q[j];
-                for col in 0..7 {
-                    h[(v, col)] = 0.0;
-                    if symmetric {
-                        h[(col, v)] = 0.0;
-                    }
+        if let Some(c) = k.carrier[j] {
+            g[v] += c * (z[v] - q[j]);
+            h[(v, v)] += c;
+        } else {
+            g[v] = z[v] - q[j];
+            for col in 0..7 {
+                h[(v, col)] = 0.0;
+                if symmetric {
+                    h[(col, v)] = 0.0;
                 }
-                h[(v, v)] = 1.0;
             }
+            h[(v, v)] = 1.0;
         }
     }
     (g, h, ok)

@@ -241,7 +241,7 @@ fn by_name(p: &Params) -> BTreeMap<String, f64> {
 /// FNV-1a of a string, to seed per-setup draws independently of the order of campaigns.
 fn fnv(s: &str) -> u64 {
     s.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| {
-        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
     })
 }
 

@@ -101,21 +101,21 @@ pub fn measure(
                     0.0
                 } else {
                     rel.expect("reset").0.x + k * n_model.li_mm * gauss(&mut rng)
-                })
+                });
             }
             Instrument::LiY => {
                 pose.y = Some(if zero {
                     0.0
                 } else {
                     rel.expect("reset").0.y + k * n_model.li_mm * gauss(&mut rng)
-                })
+                });
             }
             Instrument::LiPsi => {
                 pose.psi = Some(if zero {
                     0.0
                 } else {
                     rel.expect("reset").1 + k * n_model.psi_rad * gauss(&mut rng)
-                })
+                });
             }
             Instrument::SelfCal | Instrument::None => {}
         }

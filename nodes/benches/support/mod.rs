@@ -148,6 +148,5 @@ pub fn case_seconds() -> f64 {
 pub fn run_nanos() -> u32 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
-        .map(|d| d.subsec_nanos())
-        .unwrap_or(0)
+        .map_or(0, |d| d.subsec_nanos())
 }

@@ -70,7 +70,7 @@ fn info(path: &Path) -> Result<()> {
     let bag = open(path)?;
     println!("bag:       {}", path.display());
     for file in bag.files() {
-        let size = std::fs::metadata(file).map(|m| m.len()).unwrap_or(0);
+        let size = std::fs::metadata(file).map_or(0, |m| m.len());
         println!("file:      {} ({})", file.display(), human_bytes(size));
     }
     let (start, end) = bag.time_bounds().unwrap_or((0, 0));
@@ -110,9 +110,7 @@ fn human_bytes(n: u64) -> String {
 /// `run1` → `run1_recovered`.
 fn default_recovered(src: &Path) -> PathBuf {
     let name = src
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "bag".into());
+        .file_stem().map_or_else(|| "bag".into(), |s| s.to_string_lossy().into_owned());
     src.with_file_name(format!("{name}_recovered"))
 }
 

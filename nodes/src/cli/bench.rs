@@ -215,7 +215,7 @@ fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
             .iter()
             .map(|n| effects::by_name(n))
             .collect::<Result<_, _>>()?;
-        let refs: Vec<&dyn Effect> = boxed.iter().map(|b| b.as_ref()).collect();
+        let refs: Vec<&dyn Effect> = boxed.iter().map(std::convert::AsRef::as_ref).collect();
         // the bench runs machines in parallel (--threads): each diagnosis on one thread
         let opts = Options {
             threads: 1,

@@ -310,7 +310,7 @@ fn write_report(
     use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
     let effects = super::diagnose::parse_effects(&args.effects)?;
-    let refs: Vec<&dyn rpkm_core::effects::Effect> = effects.iter().map(|e| e.as_ref()).collect();
+    let refs: Vec<&dyn rpkm_core::effects::Effect> = effects.iter().map(std::convert::AsRef::as_ref).collect();
     let before = diagnose::diagnose(campaign, validation, &[], &opts)?;
     let after = if refs.is_empty() {
         super::diagnose::with_named_effect(campaign, validation, &[], &opts, &before)?
@@ -351,7 +351,7 @@ fn effect_stages(
     let mut stages = Vec::new();
     for k in 0..=effects.len() {
         let refs: Vec<&dyn rpkm_core::effects::Effect> =
-            effects[..k].iter().map(|e| e.as_ref()).collect();
+            effects[..k].iter().map(std::convert::AsRef::as_ref).collect();
         let (fit, _) = diagnose::evaluate(campaign, validation, &refs, &opts)?;
         let name = match k {
             0 => format!("{}", opts.model),

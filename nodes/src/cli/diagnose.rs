@@ -94,7 +94,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let campaign = read_campaign(&args.campaign)?;
     let validation = args.validate.as_deref().map(read_campaign).transpose()?;
     let in_model = parse_effects(&args.effects)?;
-    let refs: Vec<&dyn Effect> = in_model.iter().map(|e| e.as_ref()).collect();
+    let refs: Vec<&dyn Effect> = in_model.iter().map(std::convert::AsRef::as_ref).collect();
     let positive = |v: f64| v.is_finite() && v > 0.0;
     if !(positive(args.tolerance_mm) && positive(args.tolerance_mrad)) {
         return Err(bad_input(

@@ -217,7 +217,7 @@ fn quits(e: &Event) -> bool {
     k.kind == KeyEventKind::Press
         && (matches!(
             k.code,
-            KeyCode::Char('q') | KeyCode::Char('Q') | KeyCode::Esc
+            KeyCode::Char('q' | 'Q') | KeyCode::Esc
         ) || (k.code == KeyCode::Char('c') && k.modifiers.contains(KeyModifiers::CONTROL)))
 }
 
@@ -329,7 +329,7 @@ impl Ports {
         n += take(&self.estimate, &mut errors, |m| w.on_estimate(&m, t()));
         n += take(&self.preload, &mut errors, |m| w.on_preload(&m, t()));
         n += take(&self.measurement, &mut errors, |m| {
-            w.on_measurement(&m, t())
+            w.on_measurement(&m, t());
         });
         n += take(&self.campaign, &mut errors, |m| w.on_campaign(m));
         n += take(&self.parameters, &mut errors, |m| w.on_parameters(m, t()));

@@ -80,7 +80,7 @@ pub fn run(args: &PreloadArgs) -> Result<()> {
     let plan = offset_effect(&p, &k, Model::M29, x, y, offsets)
         .with_context(|| format!("elasto-geometric model at ({x}, {y}) mm"))?;
     let eq = &plan.equilibrium;
-    println!("pose ({x}, {y}) mm, offsets q1..q4 {:?} mm", offsets);
+    println!("pose ({x}, {y}) mm, offsets q1..q4 {offsets:?} mm");
     println!(
         "TCP displacement ({:.4}, {:.4}) mm, platform angle {:.3e} rad",
         plan.tcp_displacement[0], plan.tcp_displacement[1], plan.psi_displacement

@@ -197,7 +197,7 @@ fn wait_until(due: Instant) {
         }
         let left = due - now;
         if left > SPIN_BEFORE {
-            std::thread::sleep(left - SPIN_BEFORE);
+            std::thread::sleep(left.checked_sub(SPIN_BEFORE).unwrap());
         } else {
             std::hint::spin_loop();
         }

@@ -145,9 +145,7 @@ fn twin_noise(args: &SimulateArgs) -> Result<Option<NoiseModel>> {
 /// `dir/name.csv` → `dir/name.val.csv`.
 fn validation_path(out: &Path) -> PathBuf {
     let stem = out
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "campaign".into());
+        .file_stem().map_or_else(|| "campaign".into(), |s| s.to_string_lossy().into_owned());
     out.with_file_name(format!("{stem}.val.csv"))
 }
 
@@ -266,7 +264,7 @@ fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> 
     let every = args.production_decimate.max(1);
     let mut poses = Vec::new();
     let mut truth = String::from("t,x,y,psi,f1,f2,f3,f4");
-    for n in NAMES.iter() {
+    for n in &NAMES {
         let _ = write!(truth, ",{n}");
     }
     truth.push('\n');

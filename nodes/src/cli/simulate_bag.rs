@@ -19,9 +19,7 @@ const STREAM_GAP_S: f64 = 1.0;
 /// `dir/name` → `dir/name_val`.
 fn validation_bag(out: &Path) -> PathBuf {
     let name = out
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "campaign".into());
+        .file_name().map_or_else(|| "campaign".into(), |s| s.to_string_lossy().into_owned());
     out.with_file_name(format!("{name}_val"))
 }
 
@@ -71,26 +69,23 @@ pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
     let mut bag = BagWriter::create(&args.out, bag_options(args.zstd))?;
     let topics = CampaignTopics::add(&mut bag)?;
     let mut count = 0;
-    match &messages {
-        Some(m) => count += write_campaign(&mut bag, &topics, m)?,
-        None => {
-            // A stream alone still names its covariate, and says where it comes from.
-            let info = CampaignInfo {
-                source: "rpkm simulate (actuator stream)".into(),
-                comments: vec![format!(
-                    "rpkm digital twin: seed {}, effects [{}]",
-                    args.seed,
-                    args.effect.join(", ")
-                )],
-                covariate_names: vec!["temp_machine".into()],
-            };
-            let t0 = spec.map_or(0, |s| {
-                crate::campaign_bag::stamp_from_seconds(s.start_s)
-                    .map_or(0, |t| u64::try_from(stamp_ns(t)).unwrap_or(0))
-            });
-            bag.write(&topics.info, t0, &info)?;
-            count += 1;
-        }
+    if let Some(m) = &messages { count += write_campaign(&mut bag, &topics, m)? } else {
+        // A stream alone still names its covariate, and says where it comes from.
+        let info = CampaignInfo {
+            source: "rpkm simulate (actuator stream)".into(),
+            comments: vec![format!(
+                "rpkm digital twin: seed {}, effects [{}]",
+                args.seed,
+                args.effect.join(", ")
+            )],
+            covariate_names: vec!["temp_machine".into()],
+        };
+        let t0 = spec.map_or(0, |s| {
+            crate::campaign_bag::stamp_from_seconds(s.start_s)
+                .map_or(0, |t| u64::try_from(stamp_ns(t)).unwrap_or(0))
+        });
+        bag.write(&topics.info, t0, &info)?;
+        count += 1;
     }
     let mut samples = 0;
     if let Some(spec) = &spec {

@@ -455,8 +455,7 @@ impl LaunchDescription {
                 }
                 _ => {
                     return Err(ctx.err(format!(
-                        "launch item {k}: unknown kind {:?} (arg, node, executable, set_env)",
-                        kind
+                        "launch item {k}: unknown kind {kind:?} (arg, node, executable, set_env)"
                     )))
                 }
             }
@@ -541,8 +540,8 @@ fn respawn(
     };
     let respawn = match field("respawn")?.as_deref() {
         None => default,
-        Some("true") | Some("True") => true,
-        Some("false") | Some("False") => false,
+        Some("true" | "True") => true,
+        Some("false" | "False") => false,
         Some(other) => {
             return Err(ctx.err_at(
                 "respawn",

@@ -100,7 +100,7 @@ fn reaped(n: &mut Supervised<'_>, status: ExitStatus, lived: Duration, failed: &
     if status.code() == Some(2) {
         failed.push(n.spec.name.clone());
     }
-    let final_exit = matches!(status.code(), Some(0) | Some(2));
+    let final_exit = matches!(status.code(), Some(0 | 2));
     if final_exit || !n.spec.respawn {
         n.state = State::Done;
         return;

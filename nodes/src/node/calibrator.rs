@@ -647,7 +647,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                     last = (
                         DiagnosticStatus::ERROR,
                         format!("calibration of {n} measurements failed: {e:#}"),
-                    )
+                    );
                 }
             }
             ctx.log(&last.1);

@@ -265,7 +265,7 @@ impl NodeSetup {
                     "{}/{key}: expected ipc, dds or both, found {s:?}",
                     params
                         .origin(key)
-                        .map(|o| o.to_string())
+                        .map(std::string::ToString::to_string)
                         .unwrap_or_default()
                 ))
             })
@@ -477,7 +477,7 @@ impl Geometry {
             .ok_or_else(|| {
                 crate::error::bad_input(format!(
                     "{}/model: expected 24 or 29, found {model_n}",
-                    p.origin("model").map(|o| o.to_string()).unwrap_or_default()
+                    p.origin("model").map(std::string::ToString::to_string).unwrap_or_default()
                 ))
             })?;
         let factor = p.positive("stiffness_factor", 1.0).map_err(bad_param)?;

@@ -73,8 +73,7 @@ pub fn parse_yaml(text: &str, file: &str) -> Result<Value, YamlSyntax> {
     serde_yaml::from_str(text).map_err(|e| {
         let (line, column) = e
             .location()
-            .map(|l| (l.line(), l.column()))
-            .unwrap_or((0, 0));
+            .map_or((0, 0), |l| (l.line(), l.column()));
         YamlSyntax {
             file: file.to_owned(),
             line,
@@ -186,9 +185,7 @@ fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Value)>) {
 fn yaml_text(v: &Value) -> String {
     match v {
         Value::String(s) => format!("{s:?}"),
-        other => serde_yaml::to_string(other)
-            .map(|s| s.trim().to_owned())
-            .unwrap_or_else(|_| format!("{other:?}")),
+        other => serde_yaml::to_string(other).map_or_else(|_| format!("{other:?}"), |s| s.trim().to_owned()),
     }
 }
 

@@ -497,44 +497,41 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         if let Some(g) = parameters.poll(&ctx, monitor.geometry())? {
             monitor.set_geometry(g);
         }
-        match states.try_recv()? {
-            Some(s) => {
-                idle.worked();
-                if let Some(e) = monitor.evaluate(&s) {
-                    n += 1;
-                    if e.changed || n.is_multiple_of(status_every) {
-                        statuses.publish(&e.status)?;
-                    }
-                    if e.changed {
-                        ctx.log(monitor.status(&ctx.name).message);
-                        diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
-                    }
+        if let Some(s) = states.try_recv()? {
+            idle.worked();
+            if let Some(e) = monitor.evaluate(&s) {
+                n += 1;
+                if e.changed || n.is_multiple_of(status_every) {
+                    statuses.publish(&e.status)?;
                 }
-            }
-            None => {
-                // Between samples only: a set costs the sample path nothing.
-                if let Some((p, names)) = live.poll() {
-                    let c = configure(&p)?;
-                    monitor.set_thresholds(c.thresholds);
-                    status_every = c.status_every;
-                    if names.iter().any(|k| super::is_geometry_key(k)) {
-                        monitor.set_geometry(c.geometry);
-                    }
-                    ctx.log(format!("parameters set: {}", names.join(", ")));
-                }
-                if report.due() {
+                if e.changed {
+                    ctx.log(monitor.status(&ctx.name).message);
                     diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
-                    // A loss is logged once per report, not per gap (a stall loses in bursts).
-                    if monitor.input.lost > lost_reported {
-                        lost_reported = monitor.input.lost;
-                        ctx.log(format!(
-                            "WARN: {}",
-                            monitor.input.summary().unwrap_or_default()
-                        ));
-                    }
                 }
-                idle.wait_for(&states)?;
             }
+        } else {
+            // Between samples only: a set costs the sample path nothing.
+            if let Some((p, names)) = live.poll() {
+                let c = configure(&p)?;
+                monitor.set_thresholds(c.thresholds);
+                status_every = c.status_every;
+                if names.iter().any(|k| super::is_geometry_key(k)) {
+                    monitor.set_geometry(c.geometry);
+                }
+                ctx.log(format!("parameters set: {}", names.join(", ")));
+            }
+            if report.due() {
+                diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
+                // A loss is logged once per report, not per gap (a stall loses in bursts).
+                if monitor.input.lost > lost_reported {
+                    lost_reported = monitor.input.lost;
+                    ctx.log(format!(
+                        "WARN: {}",
+                        monitor.input.summary().unwrap_or_default()
+                    ));
+                }
+            }
+            idle.wait_for(&states)?;
         }
     }
     ctx.log("stopping");

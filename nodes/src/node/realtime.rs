@@ -36,7 +36,7 @@ pub fn set_fifo(priority: u64) -> Result<Option<String>, RealtimeError> {
         sched_priority: prio,
     };
     // SAFETY: sched_setscheduler on pid 0 (this process) with a valid, initialised param.
-    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) };
+    let rc = unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &raw const param) };
     if rc != 0 {
         return Err(RealtimeError::Scheduler {
             priority,

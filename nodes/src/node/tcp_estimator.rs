@@ -404,38 +404,35 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         if let Some(g) = parameters.poll(&ctx, est.geometry())? {
             est.set_geometry(g);
         }
-        match states.try_recv()? {
-            Some(state) => {
-                if let Some(e) = est.estimate(&state) {
-                    estimates.publish(&e)?;
-                    if let Some(v) = views.as_mut() {
-                        v.offer(&e)?;
-                    }
+        if let Some(state) = states.try_recv()? {
+            if let Some(e) = est.estimate(&state) {
+                estimates.publish(&e)?;
+                if let Some(v) = views.as_mut() {
+                    v.offer(&e)?;
                 }
-                idle.worked();
             }
-            None => {
-                // Between samples only: a set costs the sample path nothing.
-                if let Some((p, names)) = live.poll() {
-                    let (g, every) = configure(&p)?;
-                    if names.iter().any(|k| super::is_geometry_key(k)) {
-                        est.set_geometry(g);
-                    }
-                    if let Some(v) = views.as_mut() {
-                        v.set_every(every);
-                    }
-                    ctx.log(format!("parameters set: {}", names.join(", ")));
+            idle.worked();
+        } else {
+            // Between samples only: a set costs the sample path nothing.
+            if let Some((p, names)) = live.poll() {
+                let (g, every) = configure(&p)?;
+                if names.iter().any(|k| super::is_geometry_key(k)) {
+                    est.set_geometry(g);
                 }
-                if report.due() {
-                    diagnostics.publish(&diagnostic_array(est.status(&ctx.name)))?;
-                    // A loss is logged once per report, not per gap (a stall loses in bursts).
-                    if est.input.lost > lost_reported {
-                        lost_reported = est.input.lost;
-                        ctx.log(format!("WARN: {}", est.input.summary().unwrap_or_default()));
-                    }
+                if let Some(v) = views.as_mut() {
+                    v.set_every(every);
                 }
-                idle.wait_for(&states)?;
+                ctx.log(format!("parameters set: {}", names.join(", ")));
             }
+            if report.due() {
+                diagnostics.publish(&diagnostic_array(est.status(&ctx.name)))?;
+                // A loss is logged once per report, not per gap (a stall loses in bursts).
+                if est.input.lost > lost_reported {
+                    lost_reported = est.input.lost;
+                    ctx.log(format!("WARN: {}", est.input.summary().unwrap_or_default()));
+                }
+            }
+            idle.wait_for(&states)?;
         }
     }
     ctx.log("stopping");

@@ -70,8 +70,8 @@ impl Axes<'_> {
         let mut frame = Frame {
             x: self.x,
             y: self.y,
-            px: (0.0, self.width as f64),
-            py: (self.height as f64, 0.0),
+            px: (0.0, f64::from(self.width)),
+            py: (f64::from(self.height), 0.0),
         };
         {
             let root =
@@ -102,8 +102,8 @@ impl Axes<'_> {
                 };
                 let _ = mesh.draw();
                 let (xs, ys) = chart.plotting_area().get_pixel_range();
-                frame.px = (xs.start as f64, xs.end as f64);
-                frame.py = (ys.end as f64, ys.start as f64);
+                frame.px = (f64::from(xs.start), f64::from(xs.end));
+                frame.py = (f64::from(ys.end), f64::from(ys.start));
             }
             let _ = root.present();
         }

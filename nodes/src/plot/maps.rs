@@ -65,11 +65,11 @@ pub fn diverging(v: f64, vmax: f64) -> String {
         (0.6, [239.0, 138.0, 98.0]),
         (1.0, [178.0, 24.0, 43.0]),
     ];
-    let level = (v / vmax * LEVELS as f64)
+    let level = (v / vmax * f64::from(LEVELS))
         .round()
-        .clamp(-LEVELS as f64, LEVELS as f64);
+        .clamp(f64::from(-LEVELS), f64::from(LEVELS));
     let t = if level.is_finite() {
-        level / LEVELS as f64
+        level / f64::from(LEVELS)
     } else {
         0.0
     };
@@ -202,14 +202,14 @@ fn median_neighbour_distance(pts: &[(f64, f64, f64)]) -> f64 {
 /// The colour bar of a pair of maps: ±`vmax` in [`LEVELS`] steps per side.
 pub fn colour_bar(vmax: f64, unit: &str) -> String {
     let (top, h, w) = (40.0, 340.0, 22.0);
-    let step = h / (2 * LEVELS + 1) as f64;
+    let step = h / f64::from(2 * LEVELS + 1);
     let mut o = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"96\" height=\"440\" viewBox=\"0 0 96 440\" font-family=\"sans-serif\" font-size=\"11\"><rect width=\"96\" height=\"440\" fill=\"#fff\"/><text x=\"4\" y=\"24\">{}</text>",
         escape(unit)
     );
     for k in -LEVELS..=LEVELS {
-        let v = vmax * k as f64 / LEVELS as f64;
-        let y = top + (LEVELS - k) as f64 * step;
+        let v = vmax * f64::from(k) / f64::from(LEVELS);
+        let y = top + f64::from(LEVELS - k) * step;
         let _ = write!(
             o,
             "<rect x=\"6\" y=\"{y:.1}\" width=\"{w}\" height=\"{:.1}\" fill=\"{}\"><title>{v:.2} {}</title></rect>",

@@ -62,9 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
 
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let python = std::env::var_os("RPKM_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join(".venv/bin/python"));
+    let python = std::env::var_os("RPKM_PYTHON").map_or_else(|| root.join(".venv/bin/python"), PathBuf::from);
     let python_s = if python.is_file() {
         let output = Command::new(&python)
             .arg(root.join("tests/python/bag_check.py"))

@@ -154,8 +154,7 @@ fn main() {
         .unwrap_or(2.0);
     let nanos = SystemTime::now()
         .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
+        .map_or(0, |d| d.as_nanos());
     let prefix = format!("rpkm_bench_{}_{nanos}", std::process::id());
     println!("round trip ActuatorState -> echo -> TcpEstimate, {secs} s per case, polling with yield, loopback");
     println!(

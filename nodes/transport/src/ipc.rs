@@ -352,21 +352,18 @@ impl Waker {
             backend: BACKEND,
             reason,
         };
-        match self.listener.get() {
-            Some(listener) => match listener.timed_wait(|_| {}, timeout) {
-                // A signal (SIGTERM: the node's stop request) ends the wait like a wake-up;
-                // the caller's loop then sees the request.
-                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
-                Err(e) => return Err(err(format!("waiting for a wake-up: {e:?}"))),
-            },
-            None => {
-                let listener = self
-                    .service
-                    .listener_builder()
-                    .create()
-                    .map_err(|e| err(format!("creating the wake-up listener: {e:?}")))?;
-                let _ = self.listener.set(listener);
-            }
+        if let Some(listener) = self.listener.get() { match listener.timed_wait(|_| {}, timeout) {
+            // A signal (SIGTERM: the node's stop request) ends the wait like a wake-up;
+            // the caller's loop then sees the request.
+            Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+            Err(e) => return Err(err(format!("waiting for a wake-up: {e:?}"))),
+        } } else {
+            let listener = self
+                .service
+                .listener_builder()
+                .create()
+                .map_err(|e| err(format!("creating the wake-up listener: {e:?}")))?;
+            let _ = self.listener.set(listener);
         }
         Ok(())
     }

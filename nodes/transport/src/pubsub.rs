@@ -223,8 +223,8 @@ impl<T: IpcMessage> Publisher<T> {
     /// Sends `msg` on every backend of this publisher. With both, DDS is tried even if
     /// iceoryx2 failed; the first error is returned.
     pub fn publish(&self, msg: &T) -> Result<(), TransportError> {
-        let ipc = self.ipc.as_ref().map(|p| p.send(msg)).unwrap_or(Ok(()));
-        let dds = self.dds.as_ref().map(|p| p.send(msg)).unwrap_or(Ok(()));
+        let ipc = self.ipc.as_ref().map_or(Ok(()), |p| p.send(msg));
+        let dds = self.dds.as_ref().map_or(Ok(()), |p| p.send(msg));
         ipc.and(dds)
     }
 
@@ -300,7 +300,7 @@ impl<T: IpcMessage> Subscriber<T> {
             if elapsed < SPIN {
                 std::hint::spin_loop();
             } else {
-                std::thread::sleep(POLL_SLEEP.min(timeout - elapsed));
+                std::thread::sleep(POLL_SLEEP.min(timeout.checked_sub(elapsed).unwrap()));
             }
         }
     }

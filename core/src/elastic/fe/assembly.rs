@@ -284,16 +284,16 @@ impl Solver {
     }
 
     fn reset(&mut self, n: usize) {
-        if self.k.nrows() != n {
+        if self.k.nrows() == n {
+            self.k.fill(0.0);
+            self.f.fill(0.0);
+        } else {
             self.k = DMatrix::zeros(n, n);
             self.factor = DMatrix::zeros(n, n);
             self.f = DVector::zeros(n);
             self.u = DVector::zeros(n);
             self.reaction = DVector::zeros(n);
             self.diag = vec![0.0; n];
-        } else {
-            self.k.fill(0.0);
-            self.f.fill(0.0);
         }
     }
 

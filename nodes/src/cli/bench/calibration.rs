@@ -137,7 +137,7 @@ fn wait_with_rusage(pid: u32) -> Result<(i32, i64)> {
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
     let pid = libc::pid_t::try_from(pid).context("child pid out of range")?;
     // SAFETY: status and usage point to live locals of the right types
-    let r = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+    let r = unsafe { libc::wait4(pid, &raw mut status, 0, &raw mut usage) };
     if r != pid {
         anyhow::bail!("wait4: {}", std::io::Error::last_os_error());
     }

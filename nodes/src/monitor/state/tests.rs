@@ -33,7 +33,7 @@ fn node_status(dq3: f64, followers: bool) -> (DiagnosticStatus, PreloadStatus) {
     let p = Params::nominal();
     let mut node = Monitor::new(
         Geometry {
-            params: p.clone(),
+            params: p,
             model: Model::M29,
             stiffness: Stiffness::default(),
             source: "test".into(),

@@ -6,7 +6,6 @@ use std::time::{SystemTime, UNIX_EPOCH};
 pub fn unique_prefix(test: &str) -> String {
     let nanos = SystemTime::now()
         .duration_since(UNIX_EPOCH)
-        .map(|d| d.as_nanos())
-        .unwrap_or(0);
+        .map_or(0, |d| d.as_nanos());
     format!("rpkm_test_{test}_{}_{nanos}", std::process::id())
 }
