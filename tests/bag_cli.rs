@@ -3,6 +3,10 @@
 //! `rpkm bag recover` with every message of its complete chunks; a reliable replay goes on
 //! when its recorder dies with a full queue; `rpkm replay --rate max` into `rpkm record`
 //! reproduces a bag message for message.
+#![expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 
 mod bag_support;
 
@@ -221,7 +225,9 @@ fn reliable_record_and_replay(
 /// than wait for it forever.
 #[test]
 fn reliable_replay_goes_on_when_its_recorder_dies_with_a_full_queue() {
-    let _alone = KILLS_A_RECORDER.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let _alone = KILLS_A_RECORDER
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let dir = scratch("dead_subscriber");
     let prefix = ipc_prefix("dead");
     // A stream five times the subscriber queue: the queue must fill while the recorder is
@@ -276,7 +282,9 @@ fn reliable_replay_goes_on_when_its_recorder_dies_with_a_full_queue() {
 
 #[test]
 fn recorder_killed_during_8khz_stream_is_recovered() {
-    let _alone = KILLS_A_RECORDER.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let _alone = KILLS_A_RECORDER
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let dir = scratch("sigkill");
     let prefix = ipc_prefix("kill");
     let rec = dir.join("rec");

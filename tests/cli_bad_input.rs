@@ -17,18 +17,17 @@ fn demo(name: &str) -> PathBuf {
 /// into `dir`.
 fn edited(dir: &Path, name: &str, line: usize, column: usize, value: &str) -> PathBuf {
     let text = std::fs::read_to_string(demo(name)).expect("demo campaign");
-    let out: String = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| {
-            if i + 1 != line {
-                return format!("{l}\n");
-            }
+    let mut out = String::new();
+    for (i, l) in text.lines().enumerate() {
+        if i + 1 == line {
             let mut fields: Vec<&str> = l.split(',').collect();
             fields[column - 1] = value;
-            format!("{}\n", fields.join(","))
-        })
-        .collect();
+            out += &fields.join(",");
+        } else {
+            out += l;
+        }
+        out.push('\n');
+    }
     let path = dir.join(format!("{line}_{column}_{name}"));
     std::fs::write(&path, out).expect("write campaign");
     path

@@ -58,7 +58,7 @@ fn mutate_text(text: &str, rng: &mut Rng) -> Vec<u8> {
             let i = rng.below(n);
             let mut fields: Vec<String> = lines[i].split(',').map(str::to_owned).collect();
             let k = rng.below(fields.len());
-            fields[k] = rng.pick(&ODD_VALUES).to_owned();
+            rng.pick(&ODD_VALUES).clone_into(&mut fields[k]);
             lines[i] = fields.join(",");
         }
         3 => {
@@ -299,7 +299,10 @@ fn family(cases: usize, one: impl Fn(usize) -> (Option<String>, bool) + Sync) ->
                     rejected.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 }
                 if let Some(f) = failure {
-                    failures.lock().unwrap_or_else(std::sync::PoisonError::into_inner).push(f);
+                    failures
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .push(f);
                 }
             });
         }
@@ -309,7 +312,9 @@ fn family(cases: usize, one: impl Fn(usize) -> (Option<String>, bool) + Sync) ->
         rejected * 5 >= cases,
         "only {rejected} of {cases} mutated inputs were rejected"
     );
-    failures.into_inner().unwrap_or_else(std::sync::PoisonError::into_inner)
+    failures
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 #[test]

@@ -33,9 +33,8 @@ fn base() -> Vec<Vec<u8>> {
         let wanted = ["lt", "kgm01", "dbb1", "self_y700"].contains(&setup.as_str());
         match kept.iter_mut().find(|(s, _)| *s == setup) {
             Some((_, count)) if *count < 8 => *count += 1,
-            Some(_) => continue,
             None if wanted => kept.push((setup, 1)),
-            None => continue,
+            Some(_) | None => continue,
         }
         lines.push(line.as_bytes().to_vec());
     }

@@ -16,6 +16,10 @@ use serde_json::Value;
 #[derive(Debug, Clone)]
 struct Field {
     ty: String,
+    #[expect(
+        clippy::option_option,
+        reason = "the .msg grammar's three cases: no array, unbounded `[]`, fixed `[n]`"
+    )]
     array: Option<Option<usize>>,
 }
 
@@ -202,6 +206,10 @@ fn layout_errors(layout: &Value, types: &Types) -> Vec<String> {
         errors.push("no message path at all".into());
     }
     // Every configured panel is placed in the tree, and the tree names no unknown panel.
+    #[expect(
+        clippy::items_after_statements,
+        reason = "the walk belongs to this check only"
+    )]
     fn leaves(v: &Value, out: &mut BTreeSet<String>) {
         match v {
             Value::String(s) => {

@@ -9,6 +9,10 @@
 //! - `q` ends the monitor with exit status 0.
 //!
 //! Skipped with a message where tmux is missing, unless RPKM_REQUIRE_PYTHON or CI is set.
+#![expect(
+    clippy::cast_possible_truncation,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 mod bag_support;
 mod node_support;

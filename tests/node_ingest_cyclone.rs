@@ -8,6 +8,10 @@
 //! The venv: `python3 -m venv .venv && .venv/bin/pip install -r tests/python/requirements.txt`
 //! in the repository root; without it the test prints SKIPPED, and under
 //! RPKM_REQUIRE_PYTHON=1 (`.ci/run`) it fails instead.
+#![expect(
+    clippy::cast_possible_truncation,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 mod node_support;
 
@@ -32,10 +36,10 @@ fn expected_actuator(seq: u64) -> ActuatorState {
         },
         seq,
         position: [
-            2.6110556 + s * 1e-6,
-            2.6110556,
-            0.7889444,
-            0.7889444 - s * 1e-6,
+            2.611_055_6 + s * 1e-6,
+            2.611_055_6,
+            0.788_944_4,
+            0.788_944_4 - s * 1e-6,
         ],
         force: [s, -2.0 * s, 0.0, 8600.0],
         follower: [false, !seq.is_multiple_of(2), seq.is_multiple_of(3), false],

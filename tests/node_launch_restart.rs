@@ -3,6 +3,11 @@
 //! estimator rejoins the stream (its estimates match the twin's true TCP again), and the
 //! stream of the other nodes goes on without a gap: every ActuatorState reaches this test and
 //! the monitor answers every sample.
+#![expect(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 mod node_support;
 

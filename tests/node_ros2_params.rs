@@ -12,6 +12,10 @@
 //!
 //! Needs the venv (`python3 -m venv .venv && .venv/bin/pip install -r
 //! tests/python/requirements.txt`); without it SKIPPED, under RPKM_REQUIRE_PYTHON=1 a failure.
+#![expect(
+    clippy::cast_possible_truncation,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 mod node_support;
 
@@ -80,7 +84,7 @@ fn drive_until_level(
 }
 
 /// Runs the peer on `script`; its JSON lines come back through the channel.
-fn peer(py: &Path, dir: &TempDir, node: &str, script: Value) -> (Proc, mpsc::Receiver<Value>) {
+fn peer(py: &Path, dir: &TempDir, node: &str, script: &Value) -> (Proc, mpsc::Receiver<Value>) {
     let file = dir.path("script.json");
     std::fs::write(&file, script.to_string()).expect("script");
     let mut child = Command::new(py)
@@ -120,7 +124,7 @@ fn next(
                 return v;
             }
             Err(_) if Instant::now() < deadline => {}
-            Err(_) => panic!("the peer gave no answer for {what} within 60 s"),
+            Err(e) => panic!("the peer gave no answer for {what} within 60 s: {e}"),
         }
     }
 }
@@ -165,7 +169,7 @@ fn a_cyclone_peer_sets_a_threshold_and_the_monitor_level_follows_live() {
         {"await_event": "warn_percent"},
         {"await_rosout": "parameters set: warn_percent"},
     ]);
-    let (_peer, rx) = peer(&py, &dir, "/rpkm/preload_monitor", script);
+    let (_peer, rx) = peer(&py, &dir, "/rpkm/preload_monitor", &script);
     let get = next(&rx, &statuses, "get");
     assert_eq!(get["get"]["warn_percent"], serde_json::json!([3, 20.0]));
     assert_eq!(get["get"]["error_percent"], serde_json::json!([3, 50.0]));
@@ -268,7 +272,7 @@ fn a_cyclone_peer_reads_and_sets_the_estimators_parameters() {
         {"await_event": "view_every"},
         {"await_rosout": "parameters set: view_every"},
     ]);
-    let (_peer, rx) = peer(&py, &dir, "/rpkm/tcp_estimator", script);
+    let (_peer, rx) = peer(&py, &dir, "/rpkm/tcp_estimator", &script);
     let get = next_line(&rx, "get");
     assert_eq!(
         get["get"],

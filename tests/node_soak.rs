@@ -6,6 +6,11 @@
 //!     cargo test -p rpkm --test node_soak -- --ignored --nocapture
 //!
 //! `RPKM_SOAK_SECONDS` (default 180) sets the length.
+#![expect(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 use std::process::Command;
 

@@ -6,6 +6,11 @@
 //!
 //! The README's picture of the report (`docs/report.png`, the first screen) is re-minted with
 //! `RPKM_UPDATE_DOCS=1 cargo test --test report_chromium`.
+#![expect(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

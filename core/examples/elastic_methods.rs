@@ -107,7 +107,9 @@ fn print_force_table(rows: &[Comparison]) {
         let current = c
             .result(RedundantModel::FeActuatorDisplacements)
             .drive_force
-            .map_or(0.0, |f| f.iter().fold(0.0_f64, |m, v| m.max(v.abs())) / 8600.0 * 100.0);
+            .map_or(0.0, |f| {
+                f.iter().fold(0.0_f64, |m, v| m.max(v.abs())) / 8600.0 * 100.0
+            });
         println!(
             "| ({}, {}) | {} | {} | {} | {} | {:.1} % |",
             c.x,

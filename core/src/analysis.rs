@@ -653,6 +653,9 @@ fn right_singular_vectors(m: &DMatrix<f64>) -> (Vec<usize>, DMatrix<f64>) {
 }
 
 /// Order of [`Pivoting::SingularVectors`] with a first block of `r` parameters.
+///
+/// # Panics
+/// Never: a column remains while fewer than `r <= n` are ordered.
 pub fn sv_pivot_order(m: &DMatrix<f64>, r: usize) -> Vec<usize> {
     let n = m.ncols();
     let scale = (0..n).map(|j| m.column(j).norm()).fold(0.0, f64::max);

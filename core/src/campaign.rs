@@ -179,6 +179,10 @@ impl Instrument {
 }
 
 /// The measured columns an instrument gives (see [`Instrument::measures`]).
+#[expect(
+    clippy::struct_excessive_bools,
+    reason = "one flag per column of the spec's CSV (x, y, r, psi), any subset measured"
+)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Measures {
     pub x: bool,
@@ -363,7 +367,7 @@ impl Campaign {
                     dir[i - 1][a]
                 };
                 dir[i][a] = d;
-                travel[i][a] = if d == dir[i - 1][a] {
+                travel[i][a] = if d.total_cmp(&dir[i - 1][a]).is_eq() {
                     travel[i - 1][a] + dq.abs()
                 } else {
                     dq.abs()

@@ -57,7 +57,7 @@ fn linspace(a: f64, b: f64, n: usize) -> impl Iterator<Item = f64> {
 /// Values from `a` to `b` with a raster `step` (the last value is `b` when it falls on the
 /// raster within 1e-9 mm).
 fn raster(a: f64, b: f64, step: f64) -> impl Iterator<Item = f64> {
-    let n = ((b - a) / step + 1e-9).floor() as usize + 1;
+    let n = crate::convert::floor_count((b - a) / step + 1e-9) + 1;
     (0..n).map(move |k| a + step * k as f64)
 }
 

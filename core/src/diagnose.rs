@@ -36,6 +36,7 @@ use crate::params::{Model, Params};
 use crate::variance::{self, GroupNoise, NoiseEstimate};
 use nalgebra::{DMatrix, DVector, Vector2};
 use std::collections::BTreeMap;
+use std::fmt::Write as _;
 
 /// Fraction of an effect parameter's plausible magnitude below which a significant estimate
 /// is no missing physics: a model's approximation seen at encoder precision (a bow of
@@ -1201,10 +1202,10 @@ fn evidence(
         shown.join(", ")
     );
     if let Some(c) = sparse::follows(campaign, &base.rows, covariates) {
-        s.push_str(&format!("; {}", c.sentence));
+        let _ = write!(s, "; {}", c.sentence);
     }
     if let (Some(b), Some(a)) = (base.fit.val_rms_um, with.fit.val_rms_um) {
-        s.push_str(&format!("; held-out RMS {b:.1} -> {a:.1} um"));
+        let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
     }
     s
 }
@@ -1233,7 +1234,8 @@ fn groups(rows: &[RowValue]) -> Vec<GroupRms> {
         sigma2: f64,
         chi2: f64,
     }
-    let mut acc: std::collections::BTreeMap<(String, String), (Sums, f64)> = Default::default();
+    let mut acc: std::collections::BTreeMap<(String, String), (Sums, f64)> =
+        std::collections::BTreeMap::default();
     for r in rows {
         let (e, scale) = acc
             .entry((r.instrument.as_str().to_owned(), r.direction.to_string()))

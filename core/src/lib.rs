@@ -29,6 +29,7 @@ pub mod analysis;
 pub mod calib;
 pub mod campaign;
 pub mod circular;
+pub mod convert;
 pub mod design;
 pub mod diagnose;
 pub mod effects;

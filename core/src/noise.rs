@@ -241,6 +241,7 @@ impl NoiseModel {
     }
 
     /// The model with every group's σ multiplied by `factor[group]`.
+    #[must_use]
     pub fn scaled(&self, factor: &[f64; N_GROUPS]) -> NoiseModel {
         let f = |g: Group| factor[g.index()];
         NoiseModel {
@@ -369,6 +370,10 @@ pub fn sigma_of(parts: &Parts) -> f64 {
 }
 
 #[cfg(test)]
+#[expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 mod tests {
     use super::*;
 

@@ -475,7 +475,7 @@ fn pose_rows(
     reset: Option<(usize, &Pose)>,
     out: &mut Vec<Residual>,
 ) -> Result<(), ModelError> {
-    use Instrument::{Lt, Kgm, Dbb, LiX, LiY, LiPsi, SelfCal, None};
+    use Instrument::{Dbb, Kgm, LiPsi, LiX, LiY, Lt, None, SelfCal};
     match (pose.instrument, reset) {
         (Lt, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Lt, (i, pose), reset, out)?),
         (Kgm, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Kgm, (i, pose), reset, out)?),
@@ -920,7 +920,7 @@ fn virtual_q2_row(
     p_cal: &Params,
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
-    use Instrument::{Dbb, LiX, LiY, LiPsi};
+    use Instrument::{Dbb, LiPsi, LiX, LiY};
     if !matches!(pose.instrument, Dbb | LiX | LiY | LiPsi) {
         return Ok(());
     }

@@ -277,6 +277,7 @@ impl Params {
 
     /// A copy in which model 24's perfect parallel-holder holds: rod 5 is rod 4 shifted by the
     /// nominal holder offset (used to make model-29 data that model 24 describes exactly).
+    #[must_use]
     pub fn with_perfect_parallelogram(mut self) -> Self {
         self.0[L5] = self.0[L4];
         self.0[XA5R] = self.0[XA4R];

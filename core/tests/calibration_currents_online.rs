@@ -66,7 +66,7 @@ pub struct Run {
     pub windows: Vec<(f64, f64, f64)>,
 }
 
-pub fn track(
+fn track(
     seed: u64,
     cfg: ProductionConfig,
     opts: OnlineOptions,
@@ -197,7 +197,7 @@ fn the_forces_track_a_drifting_machine_and_name_a_crash() {
 /// Minutes in a release build: `cargo test --release -p rpkm-core --test
 /// calibration_currents_online -- --ignored --nocapture`.
 #[test]
-#[ignore]
+#[ignore = "an hour of stream at 1 kHz (about 6 min): run with --ignored"]
 fn calibration_currents_online_hour() {
     let seed = 43;
     let l3 = index_of("l3").expect("l3");

@@ -59,18 +59,18 @@ fn own_rms_um(c: &Campaign, p: &Params, model: Model) -> f64 {
     1e3 * calib::rms(&values)
 }
 
-fn check(name: &str, design: Vec<PlannedPose>, model: Model, seed: u64) -> Calibration {
+fn check(name: &str, design: &[PlannedPose], model: Model, seed: u64) -> Calibration {
     check_against(name, design, model, seed, HeldOut::Tracker)
 }
 
 fn check_against(
     name: &str,
-    design: Vec<PlannedPose>,
+    design: &[PlannedPose],
     model: Model,
     seed: u64,
     held_out: HeldOut,
 ) -> Calibration {
-    let ids = identifiable(&design, model);
+    let ids = identifiable(design, model);
     assert!(
         ids.len() >= 6,
         "{name}: only {} identifiable parameters",
@@ -88,7 +88,7 @@ fn check_against(
     if model == Model::M24 {
         truth = truth.with_perfect_parallelogram();
     }
-    let c = support::measure(&design, &truth, seed, true, name);
+    let c = support::measure(design, &truth, seed, true, name);
     let opts = Options {
         model,
         selection: Selection::List(ids.clone()),
@@ -119,7 +119,7 @@ fn check_against(
             (rms(&cal.params), rms(&truth), rms(&Params::nominal()))
         }
         HeldOut::Own => {
-            let val = support::measure(&design, &truth, seed + 100, true, "held-out.csv");
+            let val = support::measure(design, &truth, seed + 100, true, "held-out.csv");
             let rms = |p: &Params| own_rms_um(&val, p, model);
             (rms(&cal.params), rms(&truth), rms(&Params::nominal()))
         }
@@ -140,7 +140,7 @@ fn check_against(
 fn laser_tracker_and_self_calibration_model_29() {
     check(
         "lt+self",
-        [design::lt(), design::self_cal()].concat(),
+        &[design::lt(), design::self_cal()].concat(),
         Model::M29,
         21,
     );
@@ -148,17 +148,17 @@ fn laser_tracker_and_self_calibration_model_29() {
 
 #[test]
 fn laser_tracker_model_24() {
-    check("lt", design::lt(), Model::M24, 22);
+    check("lt", &design::lt(), Model::M24, 22);
 }
 
 #[test]
 fn grid_encoder_model_29() {
-    check("kgm", design::kgm(), Model::M29, 23);
+    check("kgm", &design::kgm(), Model::M29, 23);
 }
 
 #[test]
 fn ball_bar_two_step_model_29() {
-    let cal = check_against("dbb", design::dbb(), Model::M29, 24, HeldOut::Own);
+    let cal = check_against("dbb", &design::dbb(), Model::M29, 24, HeldOut::Own);
     assert!(
         cal.identified.iter().any(|i| i.step == 2),
         "the q2 branch comes from the virtual measurements"
@@ -169,7 +169,7 @@ fn ball_bar_two_step_model_29() {
 fn interferometer_two_step_model_29() {
     let cal = check(
         "li",
-        [design::li_x(), design::li_y(), design::li_psi()].concat(),
+        &[design::li_x(), design::li_y(), design::li_psi()].concat(),
         Model::M29,
         25,
     );
@@ -178,7 +178,7 @@ fn interferometer_two_step_model_29() {
 
 #[test]
 fn self_calibration_model_24() {
-    check("self", design::self_cal(), Model::M24, 26);
+    check("self", &design::self_cal(), Model::M24, 26);
 }
 
 /// With errors on all 29 parameters, the full-pose instruments still reach the noise floor on

@@ -265,7 +265,7 @@ fn apply(text: &str, mutation: &Mutation) -> String {
             }
         }
         Mutation::ReplaceField(l, f, s) => {
-            edit_fields(&mut lines, *l, &|fields, k| fields[f % k] = s.clone());
+            edit_fields(&mut lines, *l, &|fields, k| fields[f % k].clone_from(s));
         }
         Mutation::DeleteField(l, f) => edit_fields(&mut lines, *l, &|fields, k| {
             fields.remove(f % k);

@@ -1,5 +1,9 @@
 //! The campaign CSV reader against the spec's contract (section "Campaign CSV"): a valid file
 //! with every instrument, and each error kind with its line and column.
+#![expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 
 use rpkm_core::campaign::{Campaign, CampaignError, Instrument, Pose};
 
@@ -100,26 +104,25 @@ fn every_instrument_parses_to_the_right_values() {
     assert!(c.poses[0].reset);
     assert_eq!(c.poses[0].x, Some(0.0));
     let instruments: Vec<Instrument> = c.poses.iter().map(|p| p.instrument).collect();
-    use Instrument as I;
     assert_eq!(
         instruments,
         [
-            I::Lt,
-            I::Lt,
-            I::Kgm,
-            I::Kgm,
-            I::Dbb,
-            I::Dbb,
-            I::LiX,
-            I::LiX,
-            I::LiY,
-            I::LiY,
-            I::LiPsi,
-            I::LiPsi,
-            I::SelfCal,
-            I::Circle,
-            I::None,
-            I::Circle
+            Instrument::Lt,
+            Instrument::Lt,
+            Instrument::Kgm,
+            Instrument::Kgm,
+            Instrument::Dbb,
+            Instrument::Dbb,
+            Instrument::LiX,
+            Instrument::LiX,
+            Instrument::LiY,
+            Instrument::LiY,
+            Instrument::LiPsi,
+            Instrument::LiPsi,
+            Instrument::SelfCal,
+            Instrument::Circle,
+            Instrument::None,
+            Instrument::Circle
         ]
     );
     assert_eq!(c.poses[5].r, Some(150.0012));
@@ -296,7 +299,7 @@ fn header_errors() {
     assert!(matches!(e, CampaignError::Empty { .. }), "{e}");
     let e = error_at("# only comments\n\n   \n#\n", None, None);
     assert!(matches!(e, CampaignError::Empty { .. }), "{e}");
-    let header_only: String = VALID.lines().take(3).map(|l| format!("{l}\n")).collect();
+    let header_only: String = VALID.lines().take(3).flat_map(|l| [l, "\n"]).collect();
     let e = error_at(&header_only, Some(3), None);
     assert!(matches!(e, CampaignError::NoPoses { .. }), "{e}");
 }

@@ -3,7 +3,7 @@
 //! every instrument and on held-out TCP errors; and each effect's parameters identified on
 //! twin data where it is hidden, against the twin's truth.
 
-use rpkm_core::calib::{self, Link, Options, Selection};
+use rpkm_core::calib::{self, Link, Options, Prior, Selection};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::effects::{self, EffectSet};
 use rpkm_core::noise::NoiseModel;
@@ -133,7 +133,7 @@ fn identified(hidden: EffectKind, magnitude: f64, effect: &str, param: &str) -> 
     let set = EffectSet::bind(&[e.as_ref()], &c, &start).expect("bind");
     let opts = Options {
         model: Model::M29,
-        selection: Selection::Prior(Default::default()),
+        selection: Selection::Prior(Prior::default()),
         links: Link::perfect_parallelogram(),
         outlier_sigma: None,
         ..Default::default()

@@ -3,6 +3,10 @@
 //! the guarded solve replays campaigns with 1 m jumps and every estimate stays within 2 mm of
 //! truth that does not come from the elastic solver (the rigid forward model of the same
 //! encoders, the twin's true poses, the targets of compatible commands).
+#![expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 
 use std::f64::consts::PI;
 

@@ -1,5 +1,9 @@
 //! igm/fgm/rgm round trips over the workspace with random parameter errors, and the analytic
 //! sensitivities against central finite differences.
+#![expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rpkm_core::geometry::{self, Subsystem};

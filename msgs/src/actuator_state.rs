@@ -54,12 +54,12 @@ impl ActuatorState {
 
     /// Sets the covariates; `None` if more than [`MAX_COVARIATES`] are given.
     pub fn set_covariates(&mut self, values: &[f64]) -> Option<()> {
-        if values.len() > MAX_COVARIATES {
-            return None;
-        }
+        let count = u8::try_from(values.len())
+            .ok()
+            .filter(|_| values.len() <= MAX_COVARIATES)?;
         self.covariates = [0.0; MAX_COVARIATES];
         self.covariates[..values.len()].copy_from_slice(values);
-        self.covariate_count = values.len() as u8;
+        self.covariate_count = count;
         Some(())
     }
 }

@@ -44,7 +44,7 @@ impl Time {
     /// From nanoseconds since the epoch; saturates outside the `i32` seconds range.
     pub fn from_nanos(ns: i128) -> Self {
         let sec = ns.div_euclid(1_000_000_000);
-        let nanosec = ns.rem_euclid(1_000_000_000) as u32;
+        let nanosec = u32::try_from(ns.rem_euclid(1_000_000_000)).unwrap_or(0);
         match i32::try_from(sec) {
             Ok(sec) => Self { sec, nanosec },
             Err(_) if sec < 0 => Self {
@@ -66,8 +66,8 @@ impl Time {
     /// The current system time.
     pub fn now() -> Self {
         let ns = match std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH) {
-            Ok(d) => d.as_nanos() as i128,
-            Err(e) => -(e.duration().as_nanos() as i128),
+            Ok(d) => d.as_nanos().cast_signed(),
+            Err(e) => -e.duration().as_nanos().cast_signed(),
         };
         Self::from_nanos(ns)
     }

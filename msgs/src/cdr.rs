@@ -58,9 +58,8 @@ pub fn to_cdr<T: Serialize>(msg: &T) -> Result<Vec<u8>, CdrError> {
 
 /// Decodes a message with its encapsulation header (little or big endian plain CDR).
 pub fn from_cdr<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, CdrError> {
-    let (header, body) = match (bytes.get(..4), bytes.get(4..)) {
-        (Some(h), Some(b)) => (h, b),
-        _ => return Err(CdrError::Truncated { len: bytes.len() }),
+    let (Some(header), Some(body)) = (bytes.get(..4), bytes.get(4..)) else {
+        return Err(CdrError::Truncated { len: bytes.len() });
     };
     let body_err = |e: cdr_encoding::Error| CdrError::Body {
         type_name: std::any::type_name::<T>(),

@@ -5,6 +5,10 @@ use serde::{Deserialize, Serialize};
 use crate::builtin_interfaces::Time;
 
 /// One external TCP measurement by a metrology instrument.
+#[expect(
+    clippy::struct_excessive_bools,
+    reason = "the .msg's validity flags, one per measured value, as ROS 2 defines the type"
+)]
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct TcpMeasurement {
     /// `builtin_interfaces/Time stamp`: time of the pose.

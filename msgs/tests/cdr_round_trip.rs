@@ -23,7 +23,7 @@ fn actuator_state() -> ActuatorState {
     let mut m = ActuatorState {
         stamp: stamp(),
         seq: 0x0102_0304_0506_0708,
-        position: [2.6110556, 2.6110556, 0.7889444, 0.7889444],
+        position: [2.611_055_6, 2.611_055_6, 0.788_944_4, 0.788_944_4],
         force: [120.5, -80.25, 0.0, 3.0],
         follower: [false, true, true, false],
         ..Default::default()

@@ -78,7 +78,7 @@ pub struct StreamSpec {
 impl StreamSpec {
     /// Number of samples: `hz * seconds`, rounded.
     pub fn samples(&self) -> u64 {
-        (self.hz * self.seconds).round() as u64
+        rpkm_core::convert::round_u64(self.hz * self.seconds)
     }
 
     /// Twin time of sample `k`, s.
@@ -159,6 +159,10 @@ pub fn run(
 }
 
 #[cfg(test)]
+#[expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 mod tests {
     use super::*;
 

@@ -257,7 +257,10 @@ pub fn decode_json(type_name: &str, cdr: &[u8]) -> Option<Result<serde_json::Val
         let msg: T = bag::decode_cdr(cdr).map_err(|e| e.to_string())?;
         serde_json::to_value(&msg).map_err(|e| e.to_string())
     }
-    use rpkm_msgs::{RosMessage, CampaignInfo, ActuatorState, TcpMeasurement, TcpEstimate, Parameters, Diagnosis, PreloadStatus, DiagnosticArray};
+    use rpkm_msgs::{
+        ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, Parameters, PreloadStatus,
+        RosMessage, TcpEstimate, TcpMeasurement,
+    };
     let f: fn(&[u8]) -> Result<serde_json::Value, String> = match type_name {
         n if n == CampaignInfo::type_name() => json::<CampaignInfo>,
         n if n == ActuatorState::type_name() => json::<ActuatorState>,

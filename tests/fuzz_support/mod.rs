@@ -1,4 +1,8 @@
 //! The fuzzing tests' random stream: xorshift64*, fixed seeds, no dependency.
+#![expect(
+    clippy::cast_possible_truncation,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 /// xorshift64* (Vigna 2016): a fixed, dependency-free stream of cases.
 pub struct Rng(pub u64);

@@ -142,7 +142,7 @@ impl Launch {
             match self.lines.recv_timeout(left) {
                 Ok(l) if l.contains(needle) => return l,
                 Ok(_) => {}
-                Err(_) => panic!("no line with {needle:?} within {timeout:?}"),
+                Err(e) => panic!("no line with {needle:?} within {timeout:?}: {e}"),
             }
         }
     }

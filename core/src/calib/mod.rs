@@ -89,7 +89,7 @@ pub struct Link {
 impl Link {
     /// The perfect parallel-holder as links: rod 5 follows rod 4 (l5 = l4, xa5r = xa4r, ...).
     pub fn perfect_parallelogram() -> Vec<Link> {
-        use params::{L5, L4, XA5R, XA4R, YA5R, YA4R, XB5R, XB4R, YB5R, YB4R};
+        use params::{L4, L5, XA4R, XA5R, XB4R, XB5R, YA4R, YA5R, YB4R, YB5R};
         [
             (L5, L4),
             (XA5R, XA4R),

@@ -24,6 +24,7 @@ use crate::elastic::{sensitivity, ElasticError, Equilibrium, Stiffness, ALL_ACTI
 use crate::obs::force_jacobian;
 use crate::params::{unit, Params, Unit, N_PARAMS};
 use nalgebra::{Matrix4, SMatrix, SVector, Vector3, Vector4};
+use std::fmt::Write as _;
 
 /// The state's units inside the filter: the tolerance prior (0.1 mm, 1 mrad) and 10 % of
 /// the stiffness.
@@ -441,7 +442,7 @@ impl Drift {
             self.over_s / 60.0
         );
         if let Some(r) = self.temperature_correlation.filter(|r| r.abs() >= FOLLOWS) {
-            s += &format!(", follows {temp_name} (r = {r:.2})");
+            let _ = write!(s, ", follows {temp_name} (r = {r:.2})");
         }
         s
     }

@@ -262,7 +262,9 @@ mod tests {
             (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
         let cols = N_PARAMS + 3;
-        let j = DMatrix::from_fn(700, cols, |_, k| next() * 10f64.powi((k % 7) as i32 - 3));
+        let j = DMatrix::from_fn(700, cols, |_, k| {
+            next() * 10f64.powi(i32::try_from(k % 7).expect("below 7") - 3)
+        });
         let blocks = [0..5, 5..260, 260..290, 290..700]
             .map(|r| j.rows(r.start, r.len()).into_owned().qr().r());
         let columns = Columns::combine(blocks.to_vec(), 3);

@@ -65,7 +65,7 @@ pub(super) fn scaling_vector(
 
 /// Rod-2 parameters: identified by the virtual q2 step of forward instruments.
 fn rod2_params() -> [usize; 5] {
-    use params::{L2, XA2R, YA2R, XB2R, YB2R};
+    use params::{L2, XA2R, XB2R, YA2R, YB2R};
     [L2, XA2R, YA2R, XB2R, YB2R]
 }
 

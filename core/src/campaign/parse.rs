@@ -533,7 +533,9 @@ impl Checker {
             check_setup(setup, pose, layout, file)?;
         }
         self.previous = Some((pose.t, pose.line));
-        let k = if let Some(&k) = self.index.get(&pose.setup) { k } else {
+        let k = if let Some(&k) = self.index.get(&pose.setup) {
+            k
+        } else {
             self.setups.push(SetupState {
                 id: pose.setup.clone(),
                 instrument: pose.instrument,

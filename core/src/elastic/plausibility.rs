@@ -206,7 +206,7 @@ pub fn check(
         return fail(Reason::PlatformAngle, 0, dpsi, limits.psi_rad);
     }
     check_forces(eq, limits)?;
-    check_closure(p, k, q, followers, eq, limits)?;
+    check_closure(p, k, q, *followers, eq, limits)?;
     check_balance(p, eq, limits)?;
     let d = (eq.x - rigid.x).hypot(eq.y - rigid.y);
     if !within(d, limits.rigid_mm) {
@@ -237,7 +237,7 @@ fn check_closure(
     p: &Params,
     k: &Stiffness,
     q: &[f64; 4],
-    followers: &Followers,
+    followers: Followers,
     eq: &Equilibrium,
     limits: &Limits,
 ) -> Result<(), Violation> {

@@ -55,6 +55,7 @@ impl Default for Stiffness {
 
 impl Stiffness {
     /// Every stiffness multiplied by `factor` (a compliance study: `factor` < 1 is softer).
+    #[must_use]
     pub fn scaled(mut self, factor: f64) -> Self {
         for k in &mut self.rod {
             *k *= factor;
@@ -227,7 +228,7 @@ fn system(
     fr: &Frames,
     k: &Stiffness,
     q: &[f64; 4],
-    fol: &Followers,
+    fol: Followers,
     z: &V7,
     symmetric: bool,
 ) -> (V7, M7, bool) {
@@ -276,7 +277,7 @@ fn system(
 
 /// Rigid start: the model-29 forward model of the first viable subsystem whose two drives are
 /// active, at the commanded positions.
-fn rigid_start(p: &Params, q: &[f64; 4], fol: &Followers) -> Result<V7, ElasticError> {
+fn rigid_start(p: &Params, q: &[f64; 4], fol: Followers) -> Result<V7, ElasticError> {
     for sub in Subsystem::VIABLE {
         if let Subsystem::Actuators(a, b) = sub {
             if fol[a] || fol[b] {
@@ -345,7 +346,7 @@ pub fn fegm_checked(
         return Err(ElasticError::NonFinite);
     }
     // The rigid model is both the reference of the checks and the cold start.
-    let z0 = rigid_start(p, &q, &followers)?;
+    let z0 = rigid_start(p, &q, followers)?;
     let rigid = RigidPose {
         x: z0[0],
         y: z0[1],
@@ -354,7 +355,7 @@ pub fn fegm_checked(
     let check = |eq: &Equilibrium| plausibility::check(p, k, &q, &followers, eq, &rigid, limits);
     let mut warm_rejected = None;
     if let Some(prev) = previous {
-        let rejection = match solve_from(p, k, q, followers, warm_start(&q, &followers, prev)) {
+        let rejection = match solve_from(p, k, q, followers, warm_start(&q, followers, prev)) {
             Ok(eq) => match check(&eq) {
                 Ok(()) => {
                     return Ok(Checked {
@@ -394,14 +395,14 @@ pub fn fegm_unchecked(
         return Err(ElasticError::NonFinite);
     }
     let z0 = match previous {
-        Some(prev) => warm_start(&q, &followers, prev),
-        None => rigid_start(p, &q, &followers)?,
+        Some(prev) => warm_start(&q, followers, prev),
+        None => rigid_start(p, &q, followers)?,
     };
     solve_from(p, k, q, followers, z0)
 }
 
 /// The previous equilibrium with the active carriers moved to their new commands.
-fn warm_start(q: &[f64; 4], followers: &Followers, previous: &Equilibrium) -> V7 {
+fn warm_start(q: &[f64; 4], followers: Followers, previous: &Equilibrium) -> V7 {
     let mut z0 = previous.z();
     for j in 0..4 {
         if !followers[j] {
@@ -440,7 +441,7 @@ fn solve_from(
     let mut gnorm = f64::INFINITY;
     let fr = frames(p);
     for it in 0..MAX_ITER {
-        let (g, h, ok) = system(p, &fr, k, &q, &followers, &z, true);
+        let (g, h, ok) = system(p, &fr, k, &q, followers, &z, true);
         if !ok {
             return Err(ElasticError::Degenerate);
         }
@@ -463,7 +464,7 @@ fn solve_from(
             return Err(ElasticError::NonFinite);
         }
         if last_step < STEP_TOL {
-            return Ok(finish(p, k, &followers, &z, it + 1));
+            return Ok(finish(p, k, followers, &z, it + 1));
         }
     }
     Err(ElasticError::NotConverged {
@@ -473,7 +474,7 @@ fn solve_from(
     })
 }
 
-fn finish(p: &Params, k: &Stiffness, fol: &Followers, z: &V7, iterations: usize) -> Equilibrium {
+fn finish(p: &Params, k: &Stiffness, fol: Followers, z: &V7, iterations: usize) -> Equilibrium {
     let mut rod_force = [0.0; 5];
     let mut drive_force = [0.0; 4];
     for (i, f) in rod_force.iter_mut().enumerate() {
@@ -535,7 +536,7 @@ type RodPartial = (usize, Vector2<f64>, Option<(usize, Vector2<f64>)>, f64);
 fn g_params(
     p: &Params,
     k: &Stiffness,
-    followers: &Followers,
+    followers: Followers,
     z: &SVector<f64, 7>,
 ) -> SMatrix<f64, 7, N_PARAMS> {
     let mut g_p = SMatrix::<f64, 7, N_PARAMS>::zeros();
@@ -605,7 +606,7 @@ pub fn sensitivity(
     eq: &Equilibrium,
 ) -> Result<ElasticSensitivity, ElasticError> {
     let z = eq.z();
-    let (_, h, _) = system(p, &frames(p), k, &q, &followers, &z, false);
+    let (_, h, _) = system(p, &frames(p), k, &q, followers, &z, false);
     let lu = h.lu();
     // ∂G/∂q: only the rows of active carriers depend on q.
     let mut g_q = SMatrix::<f64, 7, 4>::zeros();
@@ -617,7 +618,7 @@ pub fn sensitivity(
             };
         }
     }
-    let g_p = g_params(p, k, &followers, &z);
+    let g_p = g_params(p, k, followers, &z);
     let dz_dq = lu
         .solve(&g_q)
         .ok_or(ElasticError::Singular { iteration: 0 })?;

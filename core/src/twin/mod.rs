@@ -674,7 +674,7 @@ impl Twin {
 
     /// Measure the designs of `instruments` one after the other, in one campaign.
     pub fn campaign(&mut self, instruments: &[Instrument]) -> Result<Campaign, TwinError> {
-        let (mut design, mut taken) = (Vec::new(), Default::default());
+        let (mut design, mut taken) = (Vec::new(), std::collections::HashSet::default());
         for &i in instruments {
             append_design(&mut design, &mut taken, design::for_instrument(i));
         }
@@ -691,7 +691,7 @@ impl Twin {
         names: &[&str],
         n_validation: usize,
     ) -> Result<Campaign, TwinError> {
-        let (mut design, mut taken) = (Vec::new(), Default::default());
+        let (mut design, mut taken) = (Vec::new(), std::collections::HashSet::default());
         for n in names {
             if *n == "validation" {
                 let more = self.validation_design(n_validation);

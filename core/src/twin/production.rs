@@ -76,7 +76,7 @@ impl ProductionConfig {
 
     /// Number of samples.
     pub fn samples(&self) -> usize {
-        (self.seconds * self.rate_hz).round().max(0.0) as usize
+        crate::convert::round_count(self.seconds * self.rate_hz)
     }
 }
 

@@ -1,5 +1,10 @@
 //! Shared by the latency benchmarks: the real `tcp_estimator` process fed a circle of
 //! actuator states at a fixed rate, each TcpEstimate matched to its state by seq on one clock.
+#![expect(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 #![allow(dead_code)] // each bench uses a part
 
 use std::process::{Child, Command};

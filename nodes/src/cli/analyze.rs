@@ -7,6 +7,7 @@ use rpkm_core::analysis::{
     StiffnessSeparation, STIFFNESS_RANGE,
 };
 use rpkm_core::params::{self, Model, Params};
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Which analysis.
@@ -220,15 +221,15 @@ pub fn sensitivity_text(t: &SensitivityTable) -> String {
         "sensitivity, method {}, model {} (2-norm mean over the points, per 0.1 mm / 1°)\n",
         t.method, t.model
     );
-    s += &format!("{:<10}", "parameter");
+    let _ = write!(s, "{:<10}", "parameter");
     for d in &t.directions {
-        s += &format!(" {:>16}", format!("{} [{}]", d.name, d.unit));
+        let _ = write!(s, " {:>16}", format!("{} [{}]", d.name, d.unit));
     }
     s += "\n";
     for (k, p) in t.parameters.iter().enumerate() {
-        s += &format!("{p:<10}");
+        let _ = write!(s, "{p:<10}");
         for v in &t.values[k] {
-            s += &format!(" {v:>16.3}");
+            let _ = write!(s, " {v:>16.3}");
         }
         s += "\n";
     }
@@ -345,10 +346,11 @@ pub fn observability_text(o: &Observability) -> String {
         "observability, method {}, model {}: {} rows, practical rank {} (tau = {}), condition number of all columns {:.3e}\n",
         o.method, o.model, o.rows, o.practical_rank, o.options.tau, o.condition_number
     );
-    s += &format!("{:>3} {:<10} {:>14}\n", "#", "parameter", "condition");
+    let _ = writeln!(s, "{:>3} {:<10} {:>14}", "#", "parameter", "condition");
     for (k, e) in o.order.iter().enumerate() {
-        s += &format!(
-            "{:>3} {:<10} {:>14}\n",
+        let _ = writeln!(
+            s,
+            "{:>3} {:<10} {:>14}",
             k + 1,
             e.parameter,
             fmt_cond(e.condition_number)
@@ -356,7 +358,7 @@ pub fn observability_text(o: &Observability) -> String {
     }
     s += "singular values (weighted, range-scaled):";
     for v in &o.singular_values {
-        s += &format!(" {v:.3e}");
+        let _ = write!(s, " {v:.3e}");
     }
     s += "\n";
     if let Some(k) = &o.stiffness {

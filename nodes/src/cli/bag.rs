@@ -110,7 +110,8 @@ fn human_bytes(n: u64) -> String {
 /// `run1` → `run1_recovered`.
 fn default_recovered(src: &Path) -> PathBuf {
     let name = src
-        .file_stem().map_or_else(|| "bag".into(), |s| s.to_string_lossy().into_owned());
+        .file_stem()
+        .map_or_else(|| "bag".into(), |s| s.to_string_lossy().into_owned());
     src.with_file_name(format!("{name}_recovered"))
 }
 

@@ -303,7 +303,9 @@ fn print_table(all: &[Outcome]) {
     ratio.sort_by(f64::total_cmp);
     let q = |f: f64| {
         ratio
-            .get(((ratio.len() as f64 - 1.0) * f).round() as usize)
+            .get(rpkm_core::convert::round_count(
+                (ratio.len() as f64 - 1.0) * f,
+            ))
             .copied()
     };
     println!(

@@ -310,7 +310,8 @@ fn write_report(
     use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
     let effects = super::diagnose::parse_effects(&args.effects)?;
-    let refs: Vec<&dyn rpkm_core::effects::Effect> = effects.iter().map(std::convert::AsRef::as_ref).collect();
+    let refs: Vec<&dyn rpkm_core::effects::Effect> =
+        effects.iter().map(std::convert::AsRef::as_ref).collect();
     let before = diagnose::diagnose(campaign, validation, &[], &opts)?;
     let after = if refs.is_empty() {
         super::diagnose::with_named_effect(campaign, validation, &[], &opts, &before)?
@@ -350,8 +351,10 @@ fn effect_stages(
     let opts = diagnosis_options(args, model)?;
     let mut stages = Vec::new();
     for k in 0..=effects.len() {
-        let refs: Vec<&dyn rpkm_core::effects::Effect> =
-            effects[..k].iter().map(std::convert::AsRef::as_ref).collect();
+        let refs: Vec<&dyn rpkm_core::effects::Effect> = effects[..k]
+            .iter()
+            .map(std::convert::AsRef::as_ref)
+            .collect();
         let (fit, _) = diagnose::evaluate(campaign, validation, &refs, &opts)?;
         let name = match k {
             0 => format!("{}", opts.model),
@@ -386,7 +389,7 @@ fn print_stages(stages: &[Stage]) {
     for s in stages {
         let bar = s
             .val_rms_um
-            .map(|v| "#".repeat((40.0 * v / top.max(1e-9)).round() as usize))
+            .map(|v| "#".repeat(rpkm_core::convert::round_count(40.0 * v / top.max(1e-9))))
             .unwrap_or_default();
         println!(
             "  {:<24} {:>10.2} {:>12.1} {:>12} {bar}",

@@ -26,7 +26,10 @@ pub use crate::input::{read_campaign, read_params};
 /// (`.yaml`/`.yml`); the spec's figures for what it does not name.
 pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<rpkm_core::noise::NoiseModel> {
     let spec = spec.unwrap_or("").trim();
-    let text = if spec.ends_with(".yaml") || spec.ends_with(".yml") {
+    let is_yaml = std::path::Path::new(spec)
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("yaml") || e.eq_ignore_ascii_case("yml"));
+    let text = if is_yaml {
         let raw =
             std::fs::read_to_string(spec).map_err(|e| bad_input(format!("--noise {spec}: {e}")))?;
         let map: std::collections::BTreeMap<String, f64> = serde_yaml::from_str(&raw)

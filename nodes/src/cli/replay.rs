@@ -163,7 +163,7 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
         if let Rate::Scaled(rate) = args.rate {
             let first = *t0.get_or_insert(message.log_time);
             let offset_ns = message.log_time.saturating_sub(first) as f64 / rate;
-            let due = start + Duration::from_nanos(offset_ns as u64);
+            let due = start + Duration::from_nanos(rpkm_core::convert::round_u64(offset_ns));
             wait_until(due);
         }
         ports[port].publish(&message.data).map_err(|e| {
@@ -197,7 +197,7 @@ fn wait_until(due: Instant) {
         }
         let left = due - now;
         if left > SPIN_BEFORE {
-            std::thread::sleep(left.checked_sub(SPIN_BEFORE).unwrap());
+            std::thread::sleep(left.saturating_sub(SPIN_BEFORE));
         } else {
             std::hint::spin_loop();
         }

@@ -145,7 +145,8 @@ fn twin_noise(args: &SimulateArgs) -> Result<Option<NoiseModel>> {
 /// `dir/name.csv` → `dir/name.val.csv`.
 fn validation_path(out: &Path) -> PathBuf {
     let stem = out
-        .file_stem().map_or_else(|| "campaign".into(), |s| s.to_string_lossy().into_owned());
+        .file_stem()
+        .map_or_else(|| "campaign".into(), |s| s.to_string_lossy().into_owned());
     out.with_file_name(format!("{stem}.val.csv"))
 }
 

@@ -19,7 +19,8 @@ const STREAM_GAP_S: f64 = 1.0;
 /// `dir/name` → `dir/name_val`.
 fn validation_bag(out: &Path) -> PathBuf {
     let name = out
-        .file_name().map_or_else(|| "campaign".into(), |s| s.to_string_lossy().into_owned());
+        .file_name()
+        .map_or_else(|| "campaign".into(), |s| s.to_string_lossy().into_owned());
     out.with_file_name(format!("{name}_val"))
 }
 
@@ -69,7 +70,9 @@ pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
     let mut bag = BagWriter::create(&args.out, bag_options(args.zstd))?;
     let topics = CampaignTopics::add(&mut bag)?;
     let mut count = 0;
-    if let Some(m) = &messages { count += write_campaign(&mut bag, &topics, m)? } else {
+    if let Some(m) = &messages {
+        count += write_campaign(&mut bag, &topics, m)?;
+    } else {
         // A stream alone still names its covariate, and says where it comes from.
         let info = CampaignInfo {
             source: "rpkm simulate (actuator stream)".into(),

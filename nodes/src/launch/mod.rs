@@ -339,7 +339,7 @@ fn unlocated_error_line(text: &str) -> usize {
 /// Where a UTF-8 error lies in `bytes`: the 1-based line and the byte offset.
 fn utf8_error_place(bytes: &[u8], error: &std::str::Utf8Error) -> (usize, usize) {
     let offset = error.valid_up_to();
-    let line = 1 + bytes[..offset].iter().filter(|&&b| b == b'\n').count();
+    let line = bytes[..offset].split(|&b| b == b'\n').count();
     (line, offset)
 }
 

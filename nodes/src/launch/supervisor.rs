@@ -110,7 +110,7 @@ fn reaped(n: &mut Supervised<'_>, status: ExitStatus, lived: Duration, failed: &
     } else {
         0
     };
-    let factor = 2f64.powi(n.quick_crashes.saturating_sub(1).min(16) as i32);
+    let factor = 2f64.powi(i32::try_from(n.quick_crashes.saturating_sub(1).min(16)).unwrap_or(16));
     // Capped in seconds before the `Duration` exists: from_secs_f64 panics on values
     // beyond its range.
     let delay = Duration::from_secs_f64(

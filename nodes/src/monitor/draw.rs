@@ -252,7 +252,8 @@ pub fn axis_cells(width: usize, range: f64, m: f64, p: f64, t: &Thresholds) -> V
     }
     let col = |v: f64| -> Option<usize> {
         let x = (v + range) / (2.0 * range) * (width - 1) as f64;
-        (x.is_finite() && (-0.5..(width as f64 - 0.5)).contains(&x)).then(|| x.round() as usize)
+        (x.is_finite() && (-0.5..(width as f64 - 0.5)).contains(&x))
+            .then(|| rpkm_core::convert::round_count(x))
     };
     let zero = (width - 1) / 2;
     let mut cells = vec![Cell::Empty; width];

@@ -199,11 +199,11 @@ impl Latency {
     }
 
     fn state(&mut self, seq: u64, now: f64) {
-        self.sent[(seq % Self::RING as u64) as usize] = (seq, now);
+        self.sent[ring_slot(seq, Self::RING)] = (seq, now);
     }
 
     fn estimate(&mut self, seq: u64, now: f64) {
-        let (s, t) = self.sent[(seq % Self::RING as u64) as usize];
+        let (s, t) = self.sent[ring_slot(seq, Self::RING)];
         if s != seq {
             return;
         }
@@ -349,7 +349,7 @@ impl Watch {
     pub fn bucket(&self, now: f64) -> u64 {
         let b = now / self.config.history_bucket_s;
         if b.is_finite() && b > 0.0 {
-            b as u64
+            rpkm_core::convert::round_u64(b.floor())
         } else {
             0
         }
@@ -458,7 +458,7 @@ impl Watch {
     }
 
     /// Per drive (measured %, predicted %, deviation %, level by the thresholds).
-    pub fn drives(&self) -> Option<[(f64, f64, f64, Option<u8>); 4]> {
+    pub fn drives(&self) -> Option<[DriveRow; 4]> {
         let (s, _) = self.preload?;
         Some([0, 1, 2, 3].map(|i| {
             let d = s.deviation[i];
@@ -645,3 +645,12 @@ fn diagnosis_json(d: &Diagnosis) -> Value {
 
 #[cfg(test)]
 mod tests;
+
+/// The slot of sequence number `seq` in a ring of `len` entries.
+fn ring_slot(seq: u64, len: usize) -> usize {
+    // usize is at most 64 bits: the remainder is below `len`, so it fits.
+    usize::try_from(seq % len as u64).unwrap_or(0)
+}
+
+/// One drive's row: measured %, predicted %, deviation %, level by the thresholds.
+pub type DriveRow = (f64, f64, f64, Option<u8>);

@@ -550,7 +550,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         let mut worked = false;
         while let Some(info) = infos.try_recv()? {
             if let Some(name) = info.covariate_names.first() {
-                temp_name = name.clone();
+                temp_name.clone_from(name);
             }
             if let Err(e) = acc.info(&info) {
                 last = (DiagnosticStatus::WARN, format!("campaign info: {e:#}"));
@@ -704,7 +704,7 @@ mod tests {
                 seq,
                 stamp: rpkm_msgs::Time {
                     sec: 1,
-                    nanosec: seq as u32,
+                    nanosec: u32::try_from(seq).expect("seq <= 1000"),
                 },
                 ..Default::default()
             };
@@ -737,7 +737,7 @@ mod tests {
             start: Geometry {
                 params: Params::nominal(),
                 model: Model::M29,
-                stiffness: Default::default(),
+                stiffness: rpkm_core::elastic::Stiffness::default(),
                 source: "nominal".into(),
             },
             validation_prefix: "val".into(),

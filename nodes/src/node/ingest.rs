@@ -136,7 +136,7 @@ fn file(out: &mut Output, path: &str, rate_hz: f64) -> anyhow::Result<bool> {
     csv::stream(
         &mut lines,
         path,
-        Some(comments),
+        Some(&comments),
         out,
         Some(csv::Pacer::new(rate_hz)),
     )
@@ -223,18 +223,17 @@ mod tests {
             .into_iter()
             .map(|r| r.map_err(|(k, _)| k))
             .collect();
-        use RejectKind::*;
         assert_eq!(
             kinds,
             [
                 Ok(2),
-                Err(Malformed),
-                Err(NonFinite),
-                Err(Malformed),
-                Err(Malformed),
-                Err(OutOfRange),
-                Err(OutOfOrder),
-                Err(Malformed)
+                Err(RejectKind::Malformed),
+                Err(RejectKind::NonFinite),
+                Err(RejectKind::Malformed),
+                Err(RejectKind::Malformed),
+                Err(RejectKind::OutOfRange),
+                Err(RejectKind::OutOfOrder),
+                Err(RejectKind::Malformed)
             ]
         );
         let details: Vec<String> = judge(text)

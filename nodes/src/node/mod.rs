@@ -18,6 +18,7 @@ pub mod shutdown;
 pub mod tcp_estimator;
 pub mod views;
 
+use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -415,6 +416,10 @@ pub fn log_line(who: &str, msg: impl std::fmt::Display) {
 }
 
 /// A parameter error as bad input (exit code 2: `rpkm launch` does not restart the node).
+#[expect(
+    clippy::needless_pass_by_value,
+    reason = "used as `map_err(bad_param)`"
+)]
 pub fn bad_param(e: ParamError) -> anyhow::Error {
     crate::error::bad_input(e.to_string())
 }
@@ -477,7 +482,9 @@ impl Geometry {
             .ok_or_else(|| {
                 crate::error::bad_input(format!(
                     "{}/model: expected 24 or 29, found {model_n}",
-                    p.origin("model").map(std::string::ToString::to_string).unwrap_or_default()
+                    p.origin("model")
+                        .map(std::string::ToString::to_string)
+                        .unwrap_or_default()
                 ))
             })?;
         let factor = p.positive("stiffness_factor", 1.0).map_err(bad_param)?;
@@ -501,7 +508,7 @@ impl Geometry {
             params[i] = value * si_factor(i);
         }
         if !overrides.is_empty() {
-            source.push_str(&format!(" with {} YAML overrides", overrides.len()));
+            let _ = write!(source, " with {} YAML overrides", overrides.len());
         }
         if model == Model::M24 {
             params = params.with_perfect_parallelogram();
@@ -554,6 +561,9 @@ impl Geometry {
 
 /// A Parameters message of `p` (the model's parameters, SI), with `sigmas` in mm/rad by index
 /// (0 for parameters not identified).
+///
+/// # Panics
+/// Never: a model number (24 or 29) fits a byte.
 pub fn parameters_msg(
     p: &Params,
     model: Model,
@@ -561,7 +571,7 @@ pub fn parameters_msg(
 ) -> Parameters {
     let ids = model.params();
     Parameters {
-        model: model.number() as u8,
+        model: u8::try_from(model.number()).expect("model number is 24 or 29"),
         names: ids.iter().map(|&i| NAMES[i].to_owned()).collect(),
         values: ids.iter().map(|&i| p[i] / si_factor(i)).collect(),
         sigmas: ids.iter().map(|&i| sigmas[i] / si_factor(i)).collect(),
@@ -609,7 +619,7 @@ pub fn diagnostic_array(s: DiagnosticStatus) -> DiagnosticArray {
 pub struct Idle {
     last_work: Instant,
     busy: Duration,
-    idle_sleep: Duration,
+    sleep: Duration,
 }
 
 impl Idle {
@@ -618,7 +628,7 @@ impl Idle {
         Self {
             last_work: Instant::now(),
             busy,
-            idle_sleep,
+            sleep: idle_sleep,
         }
     }
     /// Records that a sample was processed.
@@ -630,7 +640,7 @@ impl Idle {
         if self.last_work.elapsed() < self.busy {
             std::thread::yield_now();
         } else {
-            std::thread::sleep(self.idle_sleep);
+            std::thread::sleep(self.sleep);
         }
     }
     /// Waits for `input`: yields during the busy time after work, then sleeps until a
@@ -644,7 +654,7 @@ impl Idle {
             std::thread::yield_now();
             Ok(())
         } else {
-            input.wait(self.idle_sleep)
+            input.wait(self.sleep)
         }
     }
 }

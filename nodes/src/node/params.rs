@@ -71,9 +71,7 @@ pub struct YamlSyntax {
 /// Parses the YAML `text` of `file`.
 pub fn parse_yaml(text: &str, file: &str) -> Result<Value, YamlSyntax> {
     serde_yaml::from_str(text).map_err(|e| {
-        let (line, column) = e
-            .location()
-            .map_or((0, 0), |l| (l.line(), l.column()));
+        let (line, column) = e.location().map_or((0, 0), |l| (l.line(), l.column()));
         YamlSyntax {
             file: file.to_owned(),
             line,
@@ -185,7 +183,8 @@ fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Value)>) {
 fn yaml_text(v: &Value) -> String {
     match v {
         Value::String(s) => format!("{s:?}"),
-        other => serde_yaml::to_string(other).map_or_else(|_| format!("{other:?}"), |s| s.trim().to_owned()),
+        other => serde_yaml::to_string(other)
+            .map_or_else(|_| format!("{other:?}"), |s| s.trim().to_owned()),
     }
 }
 
@@ -465,6 +464,10 @@ impl NodeParams {
 }
 
 #[cfg(test)]
+#[expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 mod tests {
     use super::*;
 

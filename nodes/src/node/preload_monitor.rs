@@ -323,29 +323,7 @@ impl Monitor {
         ];
         values.extend(t.values());
         values.extend(self.input.values());
-        const KEYS: [[&str; 3]; 4] = [
-            [
-                "q1_measured_percent",
-                "q1_predicted_percent",
-                "q1_deviation_percent",
-            ],
-            [
-                "q2_measured_percent",
-                "q2_predicted_percent",
-                "q2_deviation_percent",
-            ],
-            [
-                "q3_measured_percent",
-                "q3_predicted_percent",
-                "q3_deviation_percent",
-            ],
-            [
-                "q4_measured_percent",
-                "q4_predicted_percent",
-                "q4_deviation_percent",
-            ],
-        ];
-        for (i, keys) in KEYS.iter().enumerate() {
+        for (i, keys) in DRIVE_KEYS.iter().enumerate() {
             values.push((keys[0], format!("{:.3}", st.measured_current[i])));
             values.push((keys[1], format!("{:.3}", st.predicted_current[i])));
             values.push((keys[2], format!("{:.3}", st.deviation[i])));
@@ -406,8 +384,33 @@ fn configure(p: &NodeParams) -> anyhow::Result<Config> {
     })
 }
 
+/// The /diagnostics keys of each drive: measured, predicted and deviation, % of nominal.
+const DRIVE_KEYS: [[&str; 3]; 4] = [
+    [
+        "q1_measured_percent",
+        "q1_predicted_percent",
+        "q1_deviation_percent",
+    ],
+    [
+        "q2_measured_percent",
+        "q2_predicted_percent",
+        "q2_deviation_percent",
+    ],
+    [
+        "q3_measured_percent",
+        "q3_predicted_percent",
+        "q3_deviation_percent",
+    ],
+    [
+        "q4_measured_percent",
+        "q4_predicted_percent",
+        "q4_deviation_percent",
+    ],
+];
+
 const fn count_range((lo, hi): (u64, u64)) -> ParamRange {
-    ParamRange::Integer(lo as i64, hi as i64)
+    // The ranges are small (below 2^31): the conversion never wraps.
+    ParamRange::Integer(lo.cast_signed(), hi.cast_signed())
 }
 
 /// The node's parameters on its ROS 2 parameter services (thresholds and model live).

@@ -339,8 +339,8 @@ fn specs(views_default: bool) -> Vec<Spec> {
             live::Default::U64(views::VIEW_EVERY),
             "publish the views of every N-th estimate",
             ParamRange::Integer(
-                views::VIEW_EVERY_RANGE.0 as i64,
-                views::VIEW_EVERY_RANGE.1 as i64,
+                views::VIEW_EVERY_RANGE.0.cast_signed(),
+                views::VIEW_EVERY_RANGE.1.cast_signed(),
             ),
         ),
     ];
@@ -440,6 +440,10 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
 }
 
 #[cfg(test)]
+#[expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 mod tests {
     use super::*;
     use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, FOLLOWERS_23};
@@ -521,16 +525,16 @@ mod tests {
         // Poses 76 and 77 of bags/demo/campaign.csv: the last laser-tracker pose, then the
         // first self-calibration pose 1 m away, where the warm solve turns the platform over.
         let a = [
-            1719.8170527623831,
-            1440.9921488891168,
-            -44.11895240915077,
-            -319.8170527623831,
+            1_719.817_052_762_383_1,
+            1_440.992_148_889_116_8,
+            -44.118_952_409_150_77,
+            -319.817_052_762_383_1,
         ];
         let b = [
-            2442.3098745182497,
-            2719.006545410108,
-            678.6435583303341,
-            957.6901254817501,
+            2_442.309_874_518_249_7,
+            2_719.006_545_410_108,
+            678.643_558_330_334_1,
+            957.690_125_481_750_1,
         ];
         let mut est = Estimator::new(geometry());
         let mut s = state(a, 1);

@@ -216,6 +216,10 @@ fn dds_publisher<T: rpkm_transport::IpcMessage>(
 }
 
 #[cfg(test)]
+#[expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 mod tests {
     use super::*;
     use rpkm_msgs::Time;

@@ -22,6 +22,10 @@ pub struct Axes<'a> {
 }
 
 /// Tick label with as few digits as the ticks need.
+#[expect(
+    clippy::trivially_copy_pass_by_ref,
+    reason = "a plotters label formatter: `&dyn Fn(&f64) -> String`"
+)]
 pub fn plain(v: &f64) -> String {
     let a = v.abs();
     if a != 0.0 && !(1e-3..1e5).contains(&a) {

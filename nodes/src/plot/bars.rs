@@ -23,7 +23,7 @@ pub fn bar_chart(
     opts: &BarOptions,
 ) -> String {
     let band = (14.0 * series.len().max(1) as f64 + 10.0).max(22.0);
-    let height = (96.0 + band * categories.len().max(1) as f64).round() as u32;
+    let height = rpkm_core::convert::round_u32(96.0 + band * categories.len().max(1) as f64);
     let widest = categories
         .iter()
         .map(|c| c.chars().count())
@@ -53,7 +53,7 @@ pub fn bar_chart(
         y_label: "",
         x: (lo, hi),
         y: (0.0, categories.len().max(1) as f64),
-        y_label_area: (7 * widest as u32 + 14).clamp(60, 260),
+        y_label_area: (7 * u32::try_from(widest).unwrap_or(u32::MAX / 8) + 14).clamp(60, 260),
         x_ticks: Some(if opts.log { decade } else { plain }),
         y_ticks: None,
     };
@@ -122,6 +122,10 @@ fn value_text(v: f64) -> String {
 }
 
 /// Tick label of a log10 axis: the decade.
+#[expect(
+    clippy::trivially_copy_pass_by_ref,
+    reason = "a plotters label formatter: `&dyn Fn(&f64) -> String`"
+)]
 fn decade(v: &f64) -> String {
     if (v - v.round()).abs() < 1e-9 {
         format!("1e{}", v.round())

@@ -81,7 +81,7 @@ pub fn diverging(v: f64, vmax: f64) -> String {
     let ((t0, c0), (t1, c1)) = (STOPS[k], STOPS[k + 1]);
     let w = ((t - t0) / (t1 - t0)).clamp(0.0, 1.0);
     let c: Vec<u8> = (0..3)
-        .map(|i| (c0[i] + w * (c1[i] - c0[i])).round() as u8)
+        .map(|i| rpkm_core::convert::round_u8(c0[i] + w * (c1[i] - c0[i])))
         .collect();
     format!("#{:02x}{:02x}{:02x}", c[0], c[1], c[2])
 }
@@ -120,8 +120,8 @@ pub fn heat_map(caption: &str, points: &[MapPoint], view: View, vmax: f64, unit:
     let reach = 2.2 * median_neighbour_distance(&pts).max(6.0);
     let mut o = String::from("<g class=\"heat\">");
     let (nx, ny) = (
-        ((f.px.1 - f.px.0) / CELL).ceil() as usize,
-        ((f.py.0 - f.py.1) / CELL).ceil() as usize,
+        rpkm_core::convert::ceil_count((f.px.1 - f.px.0) / CELL),
+        rpkm_core::convert::ceil_count((f.py.0 - f.py.1) / CELL),
     );
     for j in 0..ny {
         let cy = f.py.1 + (j as f64 + 0.5) * CELL;
@@ -335,7 +335,7 @@ pub fn machine_figure(
 ) -> String {
     let ((x0, x1), (y0, y1)) = machine.extent();
     let (mut x, mut y) = ((x0 - 120.0, x1 + 120.0), (y0 - 120.0, y1 + 120.0));
-    let height = (520.0 * (y.1 - y.0) / (x.1 - x.0) + 90.0).round() as u32;
+    let height = rpkm_core::convert::round_u32(520.0 * (y.1 - y.0) / (x.1 - x.0) + 90.0);
     let mut axes = Axes {
         width: 590,
         height,

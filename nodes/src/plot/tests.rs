@@ -1,4 +1,8 @@
 //! Checks of the charts against what they must show, independent of how they draw it.
+#![expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 
 use super::machine::Machine;
 use super::maps::{diverging, round_length, round_up};
@@ -51,7 +55,10 @@ fn reference_lengths_are_round() {
 /// One bar per category and series, each with its value on hover; a NaN is an empty bar.
 #[test]
 fn bar_chart_has_one_bar_per_category_and_series() {
-    let cats: Vec<String> = ["l1", "d2 & <g2>"].iter().map(std::string::ToString::to_string).collect();
+    let cats: Vec<String> = ["l1", "d2 & <g2>"]
+        .iter()
+        .map(std::string::ToString::to_string)
+        .collect();
     let svg = bar_chart(
         "t",
         "v",

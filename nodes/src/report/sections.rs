@@ -225,7 +225,7 @@ fn map_points<'a>(pts: impl Iterator<Item = &'a Point>) -> Vec<MapPoint> {
 fn p98(values: impl Iterator<Item = f64>) -> f64 {
     let mut v: Vec<f64> = values.filter(|v| v.is_finite()).map(f64::abs).collect();
     v.sort_by(f64::total_cmp);
-    let k = ((v.len() as f64 * 0.98).ceil() as usize).saturating_sub(1);
+    let k = rpkm_core::convert::ceil_count(v.len() as f64 * 0.98).saturating_sub(1);
     v.get(k).copied().filter(|m| *m > 0.0).unwrap_or(1.0)
 }
 
@@ -325,7 +325,8 @@ fn direction_maps(r: &Report, inst: &str, dir: &str, view: View) -> String {
 /// The arrows of one instrument in `d`, each titled with its line, pose, error and the σ of
 /// its rows along and across the beam (x and y for the grid encoder).
 fn arrows(d: &Diagnosis, inst: &str) -> Vec<Arrow> {
-    let mut sigma: std::collections::BTreeMap<usize, [f64; 2]> = Default::default();
+    let mut sigma: std::collections::BTreeMap<usize, [f64; 2]> =
+        std::collections::BTreeMap::default();
     for p in d.points.iter().filter(|p| p.instrument == inst) {
         let k = match p.direction.as_str() {
             "along" => 0,

@@ -2,6 +2,10 @@
 //! Python `mcap_ros2` (tests/python/bag_check.py --bench), on the same machine in the same run.
 //!
 //! `cargo bench -p rpkm-transport --bench bag_replay` (Python part skipped without `.venv`).
+#![expect(
+    clippy::cast_possible_truncation,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -62,7 +66,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
 
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let python = std::env::var_os("RPKM_PYTHON").map_or_else(|| root.join(".venv/bin/python"), PathBuf::from);
+    let python = std::env::var_os("RPKM_PYTHON")
+        .map_or_else(|| root.join(".venv/bin/python"), PathBuf::from);
     let python_s = if python.is_file() {
         let output = Command::new(&python)
             .arg(root.join("tests/python/bag_check.py"))

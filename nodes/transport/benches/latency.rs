@@ -6,6 +6,11 @@
 //!
 //! `cargo bench -p rpkm-transport --bench latency` (release). Env `RPKM_BENCH_SECS` sets
 //! the seconds per case (default 2).
+#![expect(
+    clippy::cast_possible_truncation,
+    clippy::cast_sign_loss,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;

@@ -160,7 +160,6 @@ impl DdsNode {
     }
 
     fn topic<T: RosMessage>(
-        &self,
         node: &mut Node,
         topic: &Topic<T>,
     ) -> Result<ros2_client::dds::rustdds::Topic, TransportError> {
@@ -181,7 +180,7 @@ impl DdsNode {
         topic: &Topic<T>,
     ) -> Result<DdsPublisher<T>, TransportError> {
         let mut node = self.lock(topic.name())?;
-        let dds_topic = self.topic(&mut node, topic)?;
+        let dds_topic = Self::topic(&mut node, topic)?;
         let publisher = node
             .create_publisher::<Wire<T>>(&dds_topic, Some(qos_profile(topic.qos())))
             .map_err(|e| create_err(topic.name(), "publisher", e))?;
@@ -197,7 +196,7 @@ impl DdsNode {
         topic: &Topic<T>,
     ) -> Result<DdsSubscriber<T>, TransportError> {
         let mut node = self.lock(topic.name())?;
-        let dds_topic = self.topic(&mut node, topic)?;
+        let dds_topic = Self::topic(&mut node, topic)?;
         let subscription = node
             .create_subscription::<Wire<T>>(&dds_topic, Some(qos_profile(topic.qos())))
             .map_err(|e| create_err(topic.name(), "subscriber", e))?;

@@ -190,27 +190,24 @@ fn backpressure(qos: Qos) -> BackpressureStrategy {
 
 /// How long a reliable publisher waits on a full subscriber queue before it looks for a
 /// dead subscriber, and how often it looks again.
-const STALL_CHECK: Duration = Duration::from_millis(250);
+const STALL_CHECK_MS: u64 = 250;
 
 /// Reliable delivery waits for a live subscriber as long as it takes, but a subscriber
 /// killed with SIGKILL stays connected (its queue full) until someone removes the stale
-/// resources of dead nodes. While it waits, the handler checks every [`STALL_CHECK`]
+/// resources of dead nodes. While it waits, the handler checks every [`STALL_CHECK_MS`] milliseconds
 /// whether any node on the machine is dead; if one is, delivery to the stalled queue is
 /// abandoned and [`SendSide::sent`] removes the dead nodes.
 fn backpressure_handler() -> impl Fn(&BackpressureInfo) -> BackpressureAction + Send {
-    let next_check_ms = AtomicU64::new(STALL_CHECK.as_millis() as u64);
+    let next_check_ms = AtomicU64::new(STALL_CHECK_MS);
     move |info: &BackpressureInfo| {
-        let elapsed_ms = info.elapsed_time.as_millis() as u64;
+        let elapsed_ms = u64::try_from(info.elapsed_time.as_millis()).unwrap_or(u64::MAX);
         if info.retries == 0 {
-            next_check_ms.store(STALL_CHECK.as_millis() as u64, Ordering::Relaxed);
+            next_check_ms.store(STALL_CHECK_MS, Ordering::Relaxed);
         }
         if elapsed_ms < next_check_ms.load(Ordering::Relaxed) {
             return BackpressureAction::Retry;
         }
-        next_check_ms.store(
-            elapsed_ms + STALL_CHECK.as_millis() as u64,
-            Ordering::Relaxed,
-        );
+        next_check_ms.store(elapsed_ms.saturating_add(STALL_CHECK_MS), Ordering::Relaxed);
         if any_dead_node() {
             BackpressureAction::DiscardDataAndFail
         } else {
@@ -352,12 +349,14 @@ impl Waker {
             backend: BACKEND,
             reason,
         };
-        if let Some(listener) = self.listener.get() { match listener.timed_wait(|_| {}, timeout) {
-            // A signal (SIGTERM: the node's stop request) ends the wait like a wake-up;
-            // the caller's loop then sees the request.
-            Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
-            Err(e) => return Err(err(format!("waiting for a wake-up: {e:?}"))),
-        } } else {
+        if let Some(listener) = self.listener.get() {
+            match listener.timed_wait(|_| {}, timeout) {
+                // A signal (SIGTERM: the node's stop request) ends the wait like a wake-up;
+                // the caller's loop then sees the request.
+                Ok(_) | Err(ListenerWaitError::InterruptSignal) => {}
+                Err(e) => return Err(err(format!("waiting for a wake-up: {e:?}"))),
+            }
+        } else {
             let listener = self
                 .service
                 .listener_builder()

@@ -59,16 +59,19 @@ impl TransportConfig {
         }
     }
     /// Sets the backend.
+    #[must_use]
     pub fn backend(mut self, backend: Backend) -> Self {
         self.backend = backend;
         self
     }
     /// Sets the iceoryx2 service-name prefix.
+    #[must_use]
     pub fn ipc_prefix(mut self, prefix: impl Into<String>) -> Self {
         self.ipc_prefix = prefix.into();
         self
     }
     /// Sets the DDS domain id instead of reading `ROS_DOMAIN_ID`.
+    #[must_use]
     pub fn dds_domain(mut self, domain: u16) -> Self {
         self.dds_domain = Some(domain);
         self
@@ -300,7 +303,7 @@ impl<T: IpcMessage> Subscriber<T> {
             if elapsed < SPIN {
                 std::hint::spin_loop();
             } else {
-                std::thread::sleep(POLL_SLEEP.min(timeout.checked_sub(elapsed).unwrap()));
+                std::thread::sleep(POLL_SLEEP.min(timeout.saturating_sub(elapsed)));
             }
         }
     }

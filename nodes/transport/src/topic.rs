@@ -96,6 +96,7 @@ impl<T> Topic<T> {
         self.qos
     }
     /// The same topic with another QoS.
+    #[must_use]
     pub const fn with_qos(self, qos: Qos) -> Self {
         Self { qos, ..self }
     }

@@ -1,6 +1,10 @@
 //! A bag whose bytes changed after it was written is refused, naming the file and the byte
 //! offset, even where no chunk CRC covers the change: the data section's CRC (stored in the
 //! `DataEnd` record by the writer) is checked over every byte before it.
+#![expect(
+    clippy::cast_possible_truncation,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 use rpkm_transport::bag::{BagOpenError, BagReader};
 use std::path::{Path, PathBuf};
@@ -77,7 +81,12 @@ fn a_channel_in_another_encoding_is_refused_naming_its_topic() {
             .add_schema("rpkm_msgs/msg/ActuatorState", "jsonschema", b"{}")
             .expect("schema");
         let channel = w
-            .add_channel(schema, "/rpkm/actuator_state", "json", &Default::default())
+            .add_channel(
+                schema,
+                "/rpkm/actuator_state",
+                "json",
+                &std::collections::BTreeMap::default(),
+            )
             .expect("channel");
         let header = mcap::records::MessageHeader {
             channel_id: channel,
@@ -124,7 +133,12 @@ fn crc_less_chunk(name: &str, data_section_crc: bool) -> (PathBuf, Vec<u8>) {
             .add_schema("rpkm_msgs/msg/Blob", "ros2msg", b"uint8[] data\n")
             .expect("schema");
         let channel = w
-            .add_channel(schema, "/blob", "cdr", &Default::default())
+            .add_channel(
+                schema,
+                "/blob",
+                "cdr",
+                &std::collections::BTreeMap::default(),
+            )
             .expect("channel");
         for (i, data) in [&b"\0\x01\0\0first"[..], MARKER, b"\0\x01\0\0third"]
             .iter()

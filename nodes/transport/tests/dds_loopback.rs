@@ -1,5 +1,9 @@
 //! DDS (ros2-client) Rust-to-Rust over loopback: exact values, in order; transient-local
 //! Parameters reach a late subscriber. Domain 57 keeps it apart from other tests.
+#![expect(
+    clippy::cast_possible_truncation,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 use std::time::{Duration, Instant};
 

@@ -1,5 +1,9 @@
 //! iceoryx2 publish/subscribe between two threads: a burst of 10,000 ActuatorState samples
 //! (zero-copy type) arrives complete, in order and intact; CDR-carried types arrive intact.
+#![expect(
+    clippy::cast_possible_truncation,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 
 mod ipc_common;
 

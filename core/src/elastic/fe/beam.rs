@@ -40,6 +40,7 @@ impl Section {
     }
 
     /// The section with both stiffnesses multiplied by `factor`.
+    #[must_use]
     pub fn scaled(self, factor: f64) -> Section {
         Section {
             ea: self.ea * factor,

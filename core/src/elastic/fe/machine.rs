@@ -97,6 +97,7 @@ impl FeStiffness {
 
     /// Platform and carriers `factor` times stiffer (a nearly rigid frame: only the rods and
     /// drives deform, as in the spring model).
+    #[must_use]
     pub fn with_stiff_frame(mut self, factor: f64) -> FeStiffness {
         self.platform = self.platform.scaled(factor);
         self.carrier = self.carrier.scaled(factor);

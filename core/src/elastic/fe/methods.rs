@@ -100,8 +100,8 @@ impl FeModel {
         if !(q.iter().all(|v| v.is_finite()) && p.0.iter().all(|v| v.is_finite())) {
             return Err(FeError::NonFinite);
         }
-        let rigid = reference(p, &q, &followers)?;
-        let placement = place(p, &q, &followers, &rigid, method);
+        let rigid = reference(p, &q, followers)?;
+        let placement = place(p, &q, followers, &rigid, method);
         let layout = build(&mut self.structure, p, &self.stiffness, &placement);
         self.solver.solve(&self.structure)?;
         self.finish(method, &placement, &layout)
@@ -163,7 +163,7 @@ pub fn fe_solve(
 
 /// Rigid reference: the model-29 forward model of the first viable subsystem whose two drives
 /// are active (the same start as the spring model's), at their commanded positions.
-fn reference(p: &Params, q: &[f64; 4], followers: &Followers) -> Result<Solution, FeError> {
+fn reference(p: &Params, q: &[f64; 4], followers: Followers) -> Result<Solution, FeError> {
     for sub in Subsystem::VIABLE {
         if let Subsystem::Actuators(a, b) = sub {
             if followers[a] || followers[b] {
@@ -180,7 +180,7 @@ fn reference(p: &Params, q: &[f64; 4], followers: &Followers) -> Result<Solution
 fn place(
     p: &Params,
     q: &[f64; 4],
-    followers: &Followers,
+    followers: Followers,
     rigid: &Solution,
     method: Method,
 ) -> Placement {
@@ -191,7 +191,7 @@ fn place(
         carrier: fit,
         rod_elongation: [0.0; 5],
         drive_displacement: [0.0; 4],
-        followers: *followers,
+        followers,
     };
     for j in 0..4 {
         if followers[j] {

@@ -62,7 +62,7 @@ pub fn run(a: &SoakArgs) -> Result<()> {
         )));
     }
     let rows = Rows::circle(a.rate_hz)?;
-    let total = n.round() as u64;
+    let total = rpkm_core::convert::round_u64(n);
     let prefix = format!("soak_{}", std::process::id());
     let observer = Transport::new(&TransportConfig::new("soak_observer").ipc_prefix(&prefix))?;
     let estimates = observer.subscriber(&topic::TCP_ESTIMATE)?;
@@ -183,7 +183,7 @@ impl Rows {
     /// Row `k` (0-based) of the stream, time 1 s + k / rate.
     fn line(&self, k: u64, rate_hz: f64) -> String {
         let t = 1.0 + k as f64 / rate_hz;
-        let rest = &self.rest[(k % self.rest.len() as u64) as usize];
+        let rest = &self.rest[usize::try_from(k).unwrap_or(0) % self.rest.len()];
         format!("{t},{rest}\n")
     }
 }
@@ -191,9 +191,9 @@ impl Rows {
 /// `setup,instrument,reset,q1..q4 (mm),f1..f4,follower,x,y,r,psi,temp_machine` of a state.
 fn row_after_t(s: &ActuatorState) -> String {
     let q = s.position.map(|p| p * crate::campaign_bag::MM_PER_M);
-    let follower: String = (0..4)
-        .filter(|&i| s.follower[i])
-        .map(|i| char::from(b'1' + i as u8))
+    let follower: String = (b'1'..=b'4')
+        .zip(s.follower)
+        .filter_map(|(digit, on)| on.then_some(char::from(digit)))
         .collect();
     let temp = s.covariates[0];
     format!(

@@ -1,4 +1,8 @@
 //! The screen: the axis geometry by hand, and every terminal size drawn without a panic.
+#![expect(
+    clippy::float_cmp,
+    reason = "exact values: parsed, copied or computed without rounding"
+)]
 
 use super::*;
 use crate::monitor::WatchConfig;

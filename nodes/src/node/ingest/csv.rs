@@ -158,7 +158,7 @@ pub fn reject_of(e: &CampaignError) -> Reject {
 pub(super) fn stream(
     lines: &mut dyn Lines,
     label: &str,
-    comments: Option<Vec<String>>,
+    comments: Option<&[String]>,
     out: &mut Output,
     mut pace: Option<Pacer>,
 ) -> anyhow::Result<bool> {
@@ -177,9 +177,7 @@ pub(super) fn stream(
                 match reader.read_line(&bytes) {
                     Ok(None) if !had_header && reader.has_header() => {
                         campaign.covariate_names = reader.covariate_names();
-                        campaign.comments = comments
-                            .clone()
-                            .unwrap_or_else(|| reader.comments().to_vec());
+                        campaign.comments = comments.unwrap_or_else(|| reader.comments()).to_vec();
                         out.info(&campaign, &format!("{label}:{}", reader.line()))?;
                     }
                     Ok(None) => {}

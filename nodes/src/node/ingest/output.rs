@@ -66,13 +66,14 @@ impl Output {
     /// Validates and publishes one pose of a campaign (state, then its measurement).
     pub(super) fn pose(&mut self, c: &Campaign, pose: &Pose) -> anyhow::Result<()> {
         let label = format!("{}:{}", c.source, pose.line);
-        let (mut state, measurement) = match pose_messages(c, self.seq as usize, pose) {
-            Ok(m) => m,
-            Err(e) => {
-                self.reject(reject(RejectKind::OutOfRange, format!("{label}: {e}")));
-                return Ok(());
-            }
-        };
+        let (mut state, measurement) =
+            match pose_messages(c, usize::try_from(self.seq).unwrap_or(usize::MAX), pose) {
+                Ok(m) => m,
+                Err(e) => {
+                    self.reject(reject(RejectKind::OutOfRange, format!("{label}: {e}")));
+                    return Ok(());
+                }
+            };
         // seq counts the published states over the node's life, so that it increases across
         // campaigns and the estimates echo a unique number.
         state.seq = self.seq + 1;

@@ -160,7 +160,8 @@ impl SegmentReader {
             Some(position) if position == offset => {}
             // Relative: a nearby record (the next message outside chunks) stays in the buffer.
             Some(position) if position.abs_diff(offset) < 1 << 40 => {
-                let delta = offset as i64 - position as i64;
+                // Both below 2^63 (file offsets), their difference below 2^40.
+                let delta = offset.cast_signed() - position.cast_signed();
                 open.reader.seek_relative(delta).map_err(io_err)?;
             }
             _ => {

@@ -1,4 +1,9 @@
 //! Test-only messages and helpers shared by the `bag_*` integration tests.
+#![expect(
+    clippy::cast_possible_truncation,
+    clippy::cast_possible_wrap,
+    reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
+)]
 #![allow(dead_code)] // each test file uses a different part of this module
 
 use rpkm_msgs::RosMessage;
