@@ -313,7 +313,10 @@ pub fn residuals_with(
 }
 
 /// [`residuals_with`] in either [`Form`].
-#[allow(clippy::too_many_arguments)]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the rows of one campaign: each argument is one independent input of the model"
+)]
 pub fn residuals_in(
     campaign: &Campaign,
     p: &Params,

@@ -5,7 +5,7 @@
 
 use rpkm_core::calib::{self, Link, Options, Prior, Selection};
 use rpkm_core::campaign::{Campaign, Instrument};
-use rpkm_core::effects::{self, EffectSet};
+use rpkm_core::effects::{self, Corrections, EffectSet};
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs::Form;
 use rpkm_core::obs::{self, Step};
@@ -29,6 +29,28 @@ fn twin_campaign(hidden: &[(EffectKind, f64)], instruments: &[Instrument]) -> (T
     .expect("twin");
     let c = twin.campaign(instruments).expect("campaign");
     (twin, c)
+}
+
+/// The thesis's q rows of `c` (the decorrelated ones are fixed combinations of them at a
+/// pose) and the TCP errors, with the effects' `corr`.
+fn rows_and_tcp_errors(
+    c: &Campaign,
+    p: &Params,
+    corr: &Corrections,
+) -> (Vec<obs::Residual>, Vec<obs::TcpError>) {
+    let rows = obs::residuals_in(
+        c,
+        p,
+        Model::M29,
+        Step::Direct,
+        p,
+        corr,
+        &NoiseModel::default(),
+        Form::Thesis,
+    )
+    .expect("rows");
+    let errs = obs::tcp_errors_with(c, p, Model::M29, corr).expect("tcp");
+    (rows, errs)
 }
 
 #[test]
@@ -55,39 +77,13 @@ fn effect_jacobians_match_finite_differences() {
         let n = set.n_params();
         // a point away from zero, so that nonlinear effects are tested off their origin
         let theta: Vec<f64> = set.layout().iter().map(|l| 0.7 * l.param.prior).collect();
-        // the thesis's q rows: the decorrelated ones are fixed combinations of them at a pose
-        let rows = obs::residuals_in(
-            &c,
-            &p,
-            Model::M29,
-            Step::Direct,
-            &p,
-            &set.corrections(&theta),
-            &NoiseModel::default(),
-            Form::Thesis,
-        )
-        .expect("rows");
-        let errs = obs::tcp_errors_with(&c, &p, Model::M29, &set.corrections(&theta)).expect("tcp");
+        let (rows, errs) = rows_and_tcp_errors(&c, &p, &set.corrections(&theta));
         for k in 0..n {
             let h = 1e-3 * set.layout()[k].param.prior;
             let at = |d: f64| {
                 let mut t = theta.clone();
                 t[k] += d;
-                let corr = set.corrections(&t);
-                (
-                    obs::residuals_in(
-                        &c,
-                        &p,
-                        Model::M29,
-                        Step::Direct,
-                        &p,
-                        &corr,
-                        &NoiseModel::default(),
-                        Form::Thesis,
-                    )
-                    .expect("rows"),
-                    obs::tcp_errors_with(&c, &p, Model::M29, &corr).expect("tcp"),
-                )
+                rows_and_tcp_errors(&c, &p, &set.corrections(&t))
             };
             let (rp, ep) = at(h);
             let (rm, em) = at(-h);

@@ -29,6 +29,62 @@ fn gauss(rng: &mut StdRng) -> f64 {
     StandardNormal.sample(rng)
 }
 
+/// What the pose's instrument reads: the TCP's displacement `rel` from its setup's reset pose
+/// (position, angle), with the default noise model's noise times `k`.
+fn read_instrument(
+    pose: &mut Pose,
+    rel: Option<(Vector2<f64>, f64)>,
+    tcp: Vector2<f64>,
+    k: f64,
+    rng: &mut StdRng,
+) {
+    let n_model = noise::NoiseModel::default();
+    let zero = pose.reset;
+    match pose.instrument {
+        Instrument::Lt | Instrument::Kgm => {
+            let (d, _) = rel.expect("reset first");
+            let xy = noise::XyInstrument::of(pose.instrument).expect("a 2-D instrument");
+            let l = Cholesky::new(n_model.xy_covariance(xy, tcp))
+                .expect("covariance")
+                .l();
+            let e = l * Vector2::new(gauss(rng), gauss(rng)) * k;
+            let m = if zero { Vector2::zeros() } else { d + e };
+            pose.x = Some(m.x);
+            pose.y = Some(m.y);
+        }
+        Instrument::Dbb | Instrument::Circle => {
+            let (d, _) = rel.expect("reset first");
+            pose.r = Some(if zero {
+                0.0
+            } else {
+                d.norm() + k * n_model.dbb_mm * gauss(rng)
+            });
+        }
+        Instrument::LiX => {
+            pose.x = Some(if zero {
+                0.0
+            } else {
+                rel.expect("reset").0.x + k * n_model.li_mm * gauss(rng)
+            });
+        }
+        Instrument::LiY => {
+            pose.y = Some(if zero {
+                0.0
+            } else {
+                rel.expect("reset").0.y + k * n_model.li_mm * gauss(rng)
+            });
+        }
+        Instrument::LiPsi => {
+            pose.psi = Some(if zero {
+                0.0
+            } else {
+                rel.expect("reset").1 + k * n_model.psi_rad * gauss(rng)
+            });
+        }
+        Instrument::SelfCal | Instrument::None => {}
+    }
+}
+
 /// Measure `design` on the machine `truth` (model 29 geometry; with a perfect parallel-holder
 /// it is also model 24's), with noise if `noisy`.
 pub fn measure(
@@ -75,50 +131,7 @@ pub fn measure(
             .as_ref()
             .filter(|r| r.0 == plan.setup)
             .map(|r| (tcp - r.1, real.psi() - r.2));
-        let zero = plan.reset;
-        match plan.instrument {
-            Instrument::Lt | Instrument::Kgm => {
-                let (d, _) = rel.expect("reset first");
-                let xy = noise::XyInstrument::of(plan.instrument).expect("a 2-D instrument");
-                let l = Cholesky::new(n_model.xy_covariance(xy, tcp))
-                    .expect("covariance")
-                    .l();
-                let e = l * Vector2::new(gauss(&mut rng), gauss(&mut rng)) * k;
-                let m = if zero { Vector2::zeros() } else { d + e };
-                pose.x = Some(m.x);
-                pose.y = Some(m.y);
-            }
-            Instrument::Dbb | Instrument::Circle => {
-                let (d, _) = rel.expect("reset first");
-                pose.r = Some(if zero {
-                    0.0
-                } else {
-                    d.norm() + k * n_model.dbb_mm * gauss(&mut rng)
-                });
-            }
-            Instrument::LiX => {
-                pose.x = Some(if zero {
-                    0.0
-                } else {
-                    rel.expect("reset").0.x + k * n_model.li_mm * gauss(&mut rng)
-                });
-            }
-            Instrument::LiY => {
-                pose.y = Some(if zero {
-                    0.0
-                } else {
-                    rel.expect("reset").0.y + k * n_model.li_mm * gauss(&mut rng)
-                });
-            }
-            Instrument::LiPsi => {
-                pose.psi = Some(if zero {
-                    0.0
-                } else {
-                    rel.expect("reset").1 + k * n_model.psi_rad * gauss(&mut rng)
-                });
-            }
-            Instrument::SelfCal | Instrument::None => {}
-        }
+        read_instrument(&mut pose, rel, tcp, k, &mut rng);
         poses.push(pose);
     }
     Campaign {

@@ -126,6 +126,43 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         Some(path) => super::read_params(path)?,
         None => Params::nominal(),
     };
+    let opts = options(args, model)?;
+    let (cal, noise) =
+        // A calibration error is the campaign's (exit 2, crate::error::exit_code).
+        calibrate(&campaign, &start, &opts, !args.no_noise_estimation).map_err(|e| {
+            anyhow::Error::new(e).context(format!("calibrating {}", args.campaign.display()))
+        })?;
+    let val = validation
+        .as_ref()
+        .map(|v| validate(v, &start, &cal.params, model))
+        .transpose()?;
+    print_report(&campaign, &cal, val.as_ref());
+    print_noise(&noise);
+    let stages = if args.effects.trim().is_empty() {
+        None
+    } else {
+        Some(effect_stages(args, model, &campaign, validation.as_ref())?)
+    };
+    if let Some(dir) = &args.report {
+        let page = write_report(
+            dir,
+            args,
+            model,
+            &campaign,
+            validation.as_ref(),
+            stages.as_deref(),
+        )?;
+        println!("\nreport: {}", page.display());
+    }
+    if let Some(path) = &args.json {
+        write_calibration_json(path, &cal, &noise, val.as_ref(), stages.as_deref())?;
+        println!("\nwrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// The calibration's options from the command line, each flag checked.
+fn options(args: &CalibrateArgs, model: Model) -> anyhow::Result<Options> {
     let prior = calib::Prior {
         length_mm: positive("--tolerance-mm", args.tolerance_mm)?,
         angle_rad: positive("--tolerance-mrad", args.tolerance_mrad)? * 1e-3,
@@ -157,7 +194,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     } else {
         Vec::new()
     };
-    let opts = Options {
+    Ok(Options {
         model,
         selection,
         links,
@@ -166,49 +203,28 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         noise: super::parse_noise(args.noise.as_deref())?,
         threads: args.threads,
         ..Default::default()
-    };
-    let (cal, noise) =
-        // A calibration error is the campaign's (exit 2, crate::error::exit_code).
-        calibrate(&campaign, &start, &opts, !args.no_noise_estimation).map_err(|e| {
-            anyhow::Error::new(e).context(format!("calibrating {}", args.campaign.display()))
-        })?;
-    let val = validation
-        .as_ref()
-        .map(|v| validate(v, &start, &cal.params, model))
-        .transpose()?;
-    print_report(&campaign, &cal, val.as_ref());
-    print_noise(&noise);
-    let stages = if args.effects.trim().is_empty() {
-        None
-    } else {
-        Some(effect_stages(args, model, &campaign, validation.as_ref())?)
-    };
-    if let Some(dir) = &args.report {
-        let page = write_report(
-            dir,
-            args,
-            model,
-            &campaign,
-            validation.as_ref(),
-            stages.as_deref(),
-        )?;
-        println!("\nreport: {}", page.display());
-    }
-    if let Some(path) = &args.json {
-        let mut out = report_json(&cal, val.as_ref());
-        out["noise"] = serde_json::to_value(&noise.groups)?;
-        out["determined"] = serde_json::to_value(cal.determined)?;
-        if let Some(st) = &stages {
-            out["effect_stages"] = serde_json::to_value(st)?;
-            // the figure of the whole model, effects included, as its table shows it
-            if let Some(last) = st.last().and_then(|s| s.val_rms_um) {
-                out["val_rms_after_um"] = json!(last);
-            }
+    })
+}
+
+/// The `--json` file: the calibration, its noise and the effect stages.
+fn write_calibration_json(
+    path: &std::path::Path,
+    cal: &Calibration,
+    noise: &NoiseEstimate,
+    val: Option<&Validation>,
+    stages: Option<&[Stage]>,
+) -> anyhow::Result<()> {
+    let mut out = report_json(cal, val);
+    out["noise"] = serde_json::to_value(&noise.groups)?;
+    out["determined"] = serde_json::to_value(cal.determined)?;
+    if let Some(st) = stages {
+        out["effect_stages"] = serde_json::to_value(st)?;
+        // the figure of the whole model, effects included, as its table shows it
+        if let Some(last) = st.last().and_then(|s| s.val_rms_um) {
+            out["val_rms_after_um"] = json!(last);
         }
-        write_json(path, &out)?;
-        println!("\nwrote {}", path.display());
     }
-    Ok(())
+    write_json(path, &out)
 }
 
 fn positive(flag: &str, v: f64) -> anyhow::Result<f64> {

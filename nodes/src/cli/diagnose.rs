@@ -170,6 +170,24 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
              tolerance; the rest stayed at the prior"
         );
     }
+    print_groups(d);
+    print_effects(d);
+    let kind = serde_json::to_value(d.verdict_kind)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_default();
+    println!("\n3. Verdict ({kind}): {}", d.verdict);
+    if let Some(u) = &d.unexplained {
+        println!("\n4. Unexplained structure: {}", u.sentence);
+        for (f, i, dir, r) in &u.also {
+            println!("   also: {i} {dir} follows {f} (r = {r:.2})");
+        }
+    }
+    println!("\n({})", d.test);
+}
+
+/// The noise per group, the residual per instrument and direction, the worst rows.
+fn print_groups(d: &Diagnosis) {
     if !d.noise_groups.is_empty() {
         println!("\n   noise per group, estimated from the residuals:");
         super::calibrate::print_noise_groups(&d.noise_groups, "   ");
@@ -197,6 +215,10 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
             p.y
         );
     }
+}
+
+/// Every effect tried, best first, and those not tried.
+fn print_effects(d: &Diagnosis) {
     println!("\n2. Effects tried (best first)");
     println!(
         "   {:<22} {:>6} {:>9} {:>11} {:>10} {:>10}",
@@ -219,18 +241,6 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
     if let Some(c) = d.candidates.first() {
         println!("   evidence for {}: {}", c.effect, c.evidence);
     }
-    let kind = serde_json::to_value(d.verdict_kind)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_owned))
-        .unwrap_or_default();
-    println!("\n3. Verdict ({kind}): {}", d.verdict);
-    if let Some(u) = &d.unexplained {
-        println!("\n4. Unexplained structure: {}", u.sentence);
-        for (f, i, dir, r) in &u.also {
-            println!("   also: {i} {dir} follows {f} (r = {r:.2})");
-        }
-    }
-    println!("\n({})", d.test);
 }
 
 /// The diagnosis with the effect `d` names added to the model (diagnosed again), if it names

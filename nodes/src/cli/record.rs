@@ -114,22 +114,7 @@ const BATCH: usize = 256;
 const IDLE_SLEEP: Duration = Duration::from_micros(100);
 
 pub fn run(args: &RecordArgs) -> Result<()> {
-    let names: Vec<String> = if args.topics.is_empty() {
-        topics::ALL.iter().map(|s| (*s).to_owned()).collect()
-    } else {
-        args.topics.iter().map(|s| s.trim().to_owned()).collect()
-    };
-    topics::check_names(&names).map_err(|e| super::bad_input(e.to_string()))?;
-    if args.chunk_kib == 0 {
-        return Err(super::bad_input("--chunk-kib must be at least 1".into()));
-    }
-    if let Some(d) = args.duration {
-        if !(d > 0.0 && d.is_finite()) {
-            return Err(super::bad_input(format!(
-                "--duration {d}: expected a positive number of seconds"
-            )));
-        }
-    }
+    let names = checked_topics(args)?;
     let stop = stop_flag()?;
     let transport = args.transport.open("rpkm_record")?;
     let out = args
@@ -159,34 +144,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
         out.display()
     );
     let start = Instant::now();
-    let deadline = args.duration.map(|d| start + Duration::from_secs_f64(d));
-    let flush_every = (args.flush_every > 0.0).then(|| Duration::from_secs_f64(args.flush_every));
-    let mut last_flush = Instant::now();
-    let mut flushed = 0;
-    loop {
-        if stop.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
-            break;
-        }
-        let mut taken = 0;
-        for port in &mut ports {
-            taken += port.drain(&mut bag, BATCH)?;
-        }
-        if flush_every.is_some_and(|every| last_flush.elapsed() >= every)
-            && bag.message_count() > bag.flushed_message_count()
-        {
-            bag.flush()?;
-        }
-        if bag.flushed_message_count() != flushed {
-            flushed = bag.flushed_message_count();
-            last_flush = Instant::now();
-            if args.progress {
-                eprintln!("rpkm record: flushed {flushed} messages");
-            }
-        }
-        if taken == 0 {
-            std::thread::sleep(IDLE_SLEEP);
-        }
-    }
+    record_until_stopped(args, &stop, &mut ports, &mut bag, start)?;
     // Write what is still queued, then close the bag.
     while ports
         .iter_mut()
@@ -233,6 +191,67 @@ fn civil_from_days(days: u64) -> (u64, u64, u64) {
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + u64::from(m <= 2);
     (y, m, d)
+}
+
+/// The topics to record (all by default), and the flags checked.
+fn checked_topics(args: &RecordArgs) -> Result<Vec<String>> {
+    let names: Vec<String> = if args.topics.is_empty() {
+        topics::ALL.iter().map(|s| (*s).to_owned()).collect()
+    } else {
+        args.topics.iter().map(|s| s.trim().to_owned()).collect()
+    };
+    topics::check_names(&names).map_err(|e| super::bad_input(e.to_string()))?;
+    if args.chunk_kib == 0 {
+        return Err(super::bad_input("--chunk-kib must be at least 1".into()));
+    }
+    if let Some(d) = args.duration {
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(super::bad_input(format!(
+                "--duration {d}: expected a positive number of seconds"
+            )));
+        }
+    }
+    Ok(names)
+}
+
+/// Takes samples from every port into the bag until SIGINT/SIGTERM or `--duration`, flushing
+/// every `--flush-every` seconds.
+fn record_until_stopped(
+    args: &RecordArgs,
+    stop: &AtomicBool,
+    ports: &mut [Box<dyn RecordPort>],
+    bag: &mut BagWriter,
+    start: Instant,
+) -> Result<()> {
+    let deadline = args.duration.map(|d| start + Duration::from_secs_f64(d));
+    let flush_every = (args.flush_every > 0.0).then(|| Duration::from_secs_f64(args.flush_every));
+    let mut last_flush = Instant::now();
+    let mut flushed = 0;
+    loop {
+        if stop.load(Ordering::Relaxed) || deadline.is_some_and(|d| Instant::now() >= d) {
+            break;
+        }
+        let mut taken = 0;
+        for port in ports.iter_mut() {
+            taken += port.drain(bag, BATCH)?;
+        }
+        if flush_every.is_some_and(|every| last_flush.elapsed() >= every)
+            && bag.message_count() > bag.flushed_message_count()
+        {
+            bag.flush()?;
+        }
+        if bag.flushed_message_count() != flushed {
+            flushed = bag.flushed_message_count();
+            last_flush = Instant::now();
+            if args.progress {
+                eprintln!("rpkm record: flushed {flushed} messages");
+            }
+        }
+        if taken == 0 {
+            std::thread::sleep(IDLE_SLEEP);
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@ use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
-use rpkm_transport::bag::BagReadError;
+use rpkm_transport::bag::{BagReadError, BagReader};
 
 use super::record::{stop_flag, TransportArgs};
 use crate::topics::{self, ReplayPort};
@@ -73,59 +73,12 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
             args.wait
         )));
     }
-    let wanted: Vec<String> = args.topics.iter().map(|s| s.trim().to_owned()).collect();
-    topics::check_names(&wanted).map_err(|e| super::bad_input(e.to_string()))?;
     let bag = super::bag::open(&args.bag)?;
-    for name in &wanted {
-        if bag.topic(name).is_none() {
-            return Err(super::bad_input(format!(
-                "{}: no topic {name} in the bag (it has {})",
-                args.bag.display(),
-                bag.topics()
-                    .iter()
-                    .map(|t| t.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )));
-        }
-    }
-    // Which bag topics to publish, after checking that their types are rpkm's.
-    let mut selected: Vec<&str> = Vec::new();
-    // Per topic of the bag its port, so that the timed loop neither hashes nor compares names.
-    let mut port_of_topic: Vec<Option<usize>> = vec![None; bag.topics().len()];
-    let mut total = 0;
-    for (topic_index, t) in bag.topics().iter().enumerate() {
-        let Some(expected) = topics::type_name(&t.name) else {
-            eprintln!(
-                "rpkm replay: skipping {} ({}): not an rpkm topic",
-                t.name, t.type_name
-            );
-            continue;
-        };
-        if !wanted.is_empty() && !wanted.contains(&t.name) {
-            continue;
-        }
-        if t.type_name != expected {
-            return Err(super::bad_input(format!(
-                "{}: topic {} has type {}, rpkm publishes {expected} there",
-                args.bag.display(),
-                t.name,
-                t.type_name
-            )));
-        }
-        // the payloads go out as they are: another encoding would reach subscribers as garbage
-        if t.message_encoding != "cdr" {
-            return Err(super::bad_input(format!(
-                "{}: topic {} has message encoding {:?}, expected \"cdr\"",
-                args.bag.display(),
-                t.name,
-                t.message_encoding
-            )));
-        }
-        port_of_topic[topic_index] = Some(selected.len());
-        total += t.message_count;
-        selected.push(&t.name);
-    }
+    let Selected {
+        names: selected,
+        port_of_topic,
+        total,
+    } = select_topics(args, &bag)?;
     let stop = stop_flag()?;
     let transport = args.transport.open("rpkm_replay")?;
     let mut ports: Vec<Box<dyn ReplayPort>> = Vec::with_capacity(selected.len());
@@ -202,4 +155,74 @@ fn wait_until(due: Instant) {
             std::hint::spin_loop();
         }
     }
+}
+
+/// The bag's topics to publish.
+struct Selected<'a> {
+    names: Vec<&'a str>,
+    /// Per topic of the bag its port, so that the timed loop neither hashes nor compares names.
+    port_of_topic: Vec<Option<usize>>,
+    /// Messages on the selected topics.
+    total: u64,
+}
+
+/// The topics `--topics` names (all of rpkm's by default), each checked to be in the bag with
+/// rpkm's type and CDR payloads.
+fn select_topics<'a>(args: &ReplayArgs, bag: &'a BagReader) -> Result<Selected<'a>> {
+    let wanted: Vec<String> = args.topics.iter().map(|s| s.trim().to_owned()).collect();
+    topics::check_names(&wanted).map_err(|e| super::bad_input(e.to_string()))?;
+    for name in &wanted {
+        if bag.topic(name).is_none() {
+            return Err(super::bad_input(format!(
+                "{}: no topic {name} in the bag (it has {})",
+                args.bag.display(),
+                bag.topics()
+                    .iter()
+                    .map(|t| t.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+    }
+    // Which bag topics to publish, after checking that their types are rpkm's.
+    let mut selected: Vec<&str> = Vec::new();
+    let mut port_of_topic: Vec<Option<usize>> = vec![None; bag.topics().len()];
+    let mut total = 0;
+    for (topic_index, t) in bag.topics().iter().enumerate() {
+        let Some(expected) = topics::type_name(&t.name) else {
+            eprintln!(
+                "rpkm replay: skipping {} ({}): not an rpkm topic",
+                t.name, t.type_name
+            );
+            continue;
+        };
+        if !wanted.is_empty() && !wanted.contains(&t.name) {
+            continue;
+        }
+        if t.type_name != expected {
+            return Err(super::bad_input(format!(
+                "{}: topic {} has type {}, rpkm publishes {expected} there",
+                args.bag.display(),
+                t.name,
+                t.type_name
+            )));
+        }
+        // the payloads go out as they are: another encoding would reach subscribers as garbage
+        if t.message_encoding != "cdr" {
+            return Err(super::bad_input(format!(
+                "{}: topic {} has message encoding {:?}, expected \"cdr\"",
+                args.bag.display(),
+                t.name,
+                t.message_encoding
+            )));
+        }
+        port_of_topic[topic_index] = Some(selected.len());
+        total += t.message_count;
+        selected.push(&t.name);
+    }
+    Ok(Selected {
+        names: selected,
+        port_of_topic,
+        total,
+    })
 }

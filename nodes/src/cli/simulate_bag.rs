@@ -25,43 +25,8 @@ fn validation_bag(out: &Path) -> PathBuf {
 }
 
 pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
-    let only_validation = !names.is_empty() && names.iter().all(|n| *n == "validation");
-    let campaign: Option<Campaign> = if names.is_empty() {
-        None
-    } else if only_validation {
-        let mut c = twin.validation(args.validation.max(1))?;
-        c.source = args.out.display().to_string();
-        Some(c)
-    } else {
-        let main: Vec<&str> = names
-            .iter()
-            .copied()
-            .filter(|n| *n != "validation")
-            .collect();
-        Some(twin.campaign_by_names(&main, 0)?)
-    };
-    // Validation poses are measured after the main campaign, before the stream: the twin's
-    // clock runs on, as in the CSV path.
-    let validation = match (&campaign, only_validation, args.validation) {
-        (Some(_), false, n) if n > 0 => Some(twin.validation(n)?),
-        _ => None,
-    };
-    let spec = match args.stream_hz {
-        Some(hz) => Some(StreamSpec {
-            hz,
-            seconds: args.stream_seconds,
-            motion: args.stream_motion,
-            fault: args.fault,
-            start_s: twin.time() + STREAM_GAP_S,
-            first_seq: campaign.as_ref().map_or(0, |c| c.poses.len() as u64),
-        }),
-        None if args.fault.is_some() => {
-            return Err(super::bad_input(
-                "--fault acts on the stream: give --stream-hz too".into(),
-            ))
-        }
-        None => None,
-    };
+    let (campaign, validation) = campaigns(args, twin, names)?;
+    let spec = stream_spec(args, twin, campaign.as_ref())?;
     let messages = match &campaign {
         Some(c) => Some(campaign_messages(c).map_err(|e| super::bad_input(e.to_string()))?),
         None => None,
@@ -119,4 +84,59 @@ pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
         super::write_json(path, &truth)?;
     }
     Ok(())
+}
+
+/// The main campaign `names` asks for (or the validation alone), and the validation poses
+/// measured after it.
+fn campaigns(
+    args: &SimulateArgs,
+    twin: &mut Twin,
+    names: &[&str],
+) -> Result<(Option<Campaign>, Option<Campaign>)> {
+    let only_validation = !names.is_empty() && names.iter().all(|n| *n == "validation");
+    let campaign: Option<Campaign> = if names.is_empty() {
+        None
+    } else if only_validation {
+        let mut c = twin.validation(args.validation.max(1))?;
+        c.source = args.out.display().to_string();
+        Some(c)
+    } else {
+        let main: Vec<&str> = names
+            .iter()
+            .copied()
+            .filter(|n| *n != "validation")
+            .collect();
+        Some(twin.campaign_by_names(&main, 0)?)
+    };
+    // Validation poses are measured after the main campaign, before the stream: the twin's
+    // clock runs on, as in the CSV path.
+    let validation = match (&campaign, only_validation, args.validation) {
+        (Some(_), false, n) if n > 0 => Some(twin.validation(n)?),
+        _ => None,
+    };
+    Ok((campaign, validation))
+}
+
+/// The actuator stream `--stream-hz` asks for, after the campaign.
+fn stream_spec(
+    args: &SimulateArgs,
+    twin: &Twin,
+    campaign: Option<&Campaign>,
+) -> Result<Option<StreamSpec>> {
+    Ok(match args.stream_hz {
+        Some(hz) => Some(StreamSpec {
+            hz,
+            seconds: args.stream_seconds,
+            motion: args.stream_motion,
+            fault: args.fault,
+            start_s: twin.time() + STREAM_GAP_S,
+            first_seq: campaign.map_or(0, |c| c.poses.len() as u64),
+        }),
+        None if args.fault.is_some() => {
+            return Err(super::bad_input(
+                "--fault acts on the stream: give --stream-hz too".into(),
+            ))
+        }
+        None => None,
+    })
 }

@@ -205,42 +205,16 @@ impl Monitor {
             .unwrap_or(0);
         let worst = st.deviation[worst_drive].abs();
         let t = self.thresholds;
-        let mut sample_level = if worst >= t.error_percent {
-            PreloadLevel::Error
-        } else if worst >= t.warn_percent {
-            PreloadLevel::Warn
-        } else {
-            PreloadLevel::Ok
-        };
+        let mut sample_level = level_by(worst, t.warn_percent, t.error_percent);
         if s.follower[1] && s.follower[2] {
             if let Ok([q2, q3]) = rgm(&g.params, g.model, q[0], q[3]) {
                 st.dq2 = (q2 - q[1]) / MM_PER_M;
                 st.dq3 = (q3 - q[2]) / MM_PER_M;
                 let dq = st.dq2.abs().max(st.dq3.abs());
-                let dq_level = if dq >= t.dq_error_m {
-                    PreloadLevel::Error
-                } else if dq >= t.dq_warn_m {
-                    PreloadLevel::Warn
-                } else {
-                    PreloadLevel::Ok
-                };
-                sample_level = sample_level.max(dq_level);
+                sample_level = sample_level.max(level_by(dq, t.dq_warn_m, t.dq_error_m));
             }
         }
-        let bump = |run: &mut u32, on: bool| *run = if on { run.saturating_add(1) } else { 0 };
-        bump(&mut self.run_error, sample_level >= PreloadLevel::Error);
-        bump(&mut self.run_warn, sample_level >= PreloadLevel::Warn);
-        bump(&mut self.run_ok, sample_level == PreloadLevel::Ok);
-        let d = t.debounce_samples.max(1);
-        let held = if self.run_error >= d {
-            PreloadLevel::Error
-        } else if self.run_warn >= d {
-            PreloadLevel::Warn
-        } else if self.run_ok >= d {
-            PreloadLevel::Ok
-        } else {
-            self.level
-        };
+        let held = self.debounced(sample_level);
         let changed = held != self.level;
         self.level = held;
         st.level = level_u8(held);
@@ -252,6 +226,25 @@ impl Monitor {
         };
         self.last = Some(e);
         Some(e)
+    }
+
+    /// The level held after this sample's: a level is taken once `debounce_samples` samples
+    /// in a row reached it.
+    fn debounced(&mut self, sample_level: PreloadLevel) -> PreloadLevel {
+        let bump = |run: &mut u32, on: bool| *run = if on { run.saturating_add(1) } else { 0 };
+        bump(&mut self.run_error, sample_level >= PreloadLevel::Error);
+        bump(&mut self.run_warn, sample_level >= PreloadLevel::Warn);
+        bump(&mut self.run_ok, sample_level == PreloadLevel::Ok);
+        let d = self.thresholds.debounce_samples.max(1);
+        if self.run_error >= d {
+            PreloadLevel::Error
+        } else if self.run_warn >= d {
+            PreloadLevel::Warn
+        } else if self.run_ok >= d {
+            PreloadLevel::Ok
+        } else {
+            self.level
+        }
     }
 
     /// The /diagnostics status: the held level, naming the worst drive. Lost input states
@@ -407,6 +400,17 @@ const DRIVE_KEYS: [[&str; 3]; 4] = [
         "q4_deviation_percent",
     ],
 ];
+
+/// The level of `value` against its WARN and ERROR thresholds.
+fn level_by(value: f64, warn: f64, error: f64) -> PreloadLevel {
+    if value >= error {
+        PreloadLevel::Error
+    } else if value >= warn {
+        PreloadLevel::Warn
+    } else {
+        PreloadLevel::Ok
+    }
+}
 
 const fn count_range((lo, hi): (u64, u64)) -> ParamRange {
     // The ranges are small (below 2^31): the conversion never wraps.

@@ -1,7 +1,7 @@
 //! Horizontal bar chart: one band per category (names readable however long), one bar per
 //! series in it; each bar carries `class="bar"` and a `<title>` with its value.
 
-use super::axes::{plain, Axes};
+use super::axes::{plain, Axes, Frame};
 use super::{color, escape, with_overlay};
 use std::fmt::Write as _;
 
@@ -92,22 +92,26 @@ pub fn bar_chart(
         }
     }
     if series.len() > 1 {
-        // legend in a row at the top right, beside the caption
-        for (s, (label, _)) in series.iter().enumerate() {
-            let x = f.px.1 - 110.0 * (series.len() - s) as f64;
-            let y = f.py.1 - 6.0;
-            let _ = write!(
-                o,
-                "<rect x=\"{x:.1}\" y=\"{:.1}\" width=\"12\" height=\"10\" fill=\"{}\"/><text x=\"{:.1}\" y=\"{y:.1}\">{}</text>",
-                y - 9.0,
-                color(s),
-                x + 16.0,
-                escape(label)
-            );
-        }
+        legend(&mut o, series, &f);
     }
     o.push_str("</g>");
     with_overlay(svg, &o)
+}
+
+/// The legend in a row at the top right, beside the caption.
+fn legend(o: &mut String, series: &[(String, Vec<f64>)], f: &Frame) {
+    for (s, (label, _)) in series.iter().enumerate() {
+        let x = f.px.1 - 110.0 * (series.len() - s) as f64;
+        let y = f.py.1 - 6.0;
+        let _ = write!(
+            o,
+            "<rect x=\"{x:.1}\" y=\"{:.1}\" width=\"12\" height=\"10\" fill=\"{}\"/><text x=\"{:.1}\" y=\"{y:.1}\">{}</text>",
+            y - 9.0,
+            color(s),
+            x + 16.0,
+            escape(label)
+        );
+    }
 }
 
 /// A value for a tooltip: significant digits whatever its magnitude.

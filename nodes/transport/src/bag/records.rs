@@ -105,49 +105,15 @@ pub(crate) fn walk_data_section<R: Read, E>(
     };
     loop {
         let mut frame = [0u8; 9];
-        let got = read_full(&mut reader, &mut frame).map_err(WalkError::Io)?;
-        if got == 0 {
-            summary.end = SectionEnd::Eof;
-            return Ok(summary);
-        }
-        if got < frame.len() {
-            summary.end = SectionEnd::Truncated {
-                offset,
-                missing: (frame.len() - got) as u64,
-            };
-            return Ok(summary);
-        }
-        let opcode = frame[0];
-        let mut len_bytes = [0u8; 8];
-        len_bytes.copy_from_slice(&frame[1..]);
-        let len = u64::from_le_bytes(len_bytes);
-        let available = file_len.saturating_sub(offset + frame.len() as u64);
-        if len > available {
-            // Do not trust the length (nor allocate for it) beyond what the file holds.
-            summary.end = SectionEnd::Truncated {
-                offset,
-                missing: len - available,
-            };
-            return Ok(summary);
-        }
-        // `len <= available <= file_len`, which fits in memory only if it fits in usize.
-        let Ok(len_usize) = usize::try_from(len) else {
-            summary.end = SectionEnd::Truncated {
-                offset,
-                missing: len - available,
-            };
-            return Ok(summary);
+        let len = match read_record(&mut reader, file_len, offset, &mut frame, &mut body) {
+            Ok(Ok(len)) => len,
+            Ok(Err(end)) => {
+                summary.end = end;
+                return Ok(summary);
+            }
+            Err(e) => return Err(WalkError::Io(e)),
         };
-        body.resize(len_usize, 0);
-        let got = read_full(&mut reader, &mut body).map_err(WalkError::Io)?;
-        if got < len_usize {
-            // The file shrank or grew differently than its length said.
-            summary.end = SectionEnd::Truncated {
-                offset,
-                missing: (len_usize - got) as u64,
-            };
-            return Ok(summary);
-        }
+        let opcode = frame[0];
         let record_offset = offset;
         let next_offset = offset + frame.len() as u64 + len;
         match opcode {
@@ -196,6 +162,47 @@ pub(crate) fn walk_data_section<R: Read, E>(
         summary.valid_bytes = next_offset;
         offset = next_offset;
     }
+}
+
+/// Reads the record at `offset`: its opcode and length into `frame`, its body into `body`.
+/// Returns the body's length, or how the data section ends there (at a record boundary, or
+/// inside a record whose length the file does not hold).
+fn read_record<R: Read>(
+    reader: &mut R,
+    file_len: u64,
+    offset: u64,
+    frame: &mut [u8; 9],
+    body: &mut Vec<u8>,
+) -> std::io::Result<Result<u64, SectionEnd>> {
+    let got = read_full(reader, frame)?;
+    if got == 0 {
+        return Ok(Err(SectionEnd::Eof));
+    }
+    if got < frame.len() {
+        let missing = (frame.len() - got) as u64;
+        return Ok(Err(SectionEnd::Truncated { offset, missing }));
+    }
+    let mut len_bytes = [0u8; 8];
+    len_bytes.copy_from_slice(&frame[1..]);
+    let len = u64::from_le_bytes(len_bytes);
+    let available = file_len.saturating_sub(offset + frame.len() as u64);
+    // Do not trust the length (nor allocate for it) beyond what the file holds; and
+    // `len <= available <= file_len` fits in memory only if it fits in usize.
+    let len_usize = match usize::try_from(len) {
+        Ok(n) if len <= available => n,
+        _ => {
+            let missing = len.saturating_sub(available);
+            return Ok(Err(SectionEnd::Truncated { offset, missing }));
+        }
+    };
+    body.resize(len_usize, 0);
+    let got = read_full(reader, body)?;
+    if got < len_usize {
+        // The file shrank or grew differently than its length said.
+        let missing = (len_usize - got) as u64;
+        return Ok(Err(SectionEnd::Truncated { offset, missing }));
+    }
+    Ok(Ok(len))
 }
 
 /// The records of a chunk: decompressed, its CRC checked where the writer stored one, every

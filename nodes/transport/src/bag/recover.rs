@@ -96,6 +96,21 @@ pub fn recover(
     })
 }
 
+/// Why the walk over a file's data section stopped, as the recovery reports it.
+fn stop_reason(end: SectionEnd) -> StopReason {
+    match end {
+        SectionEnd::DataEnd => StopReason::Complete,
+        SectionEnd::Eof => StopReason::EndOfFile,
+        SectionEnd::Truncated { offset, missing } => {
+            StopReason::TruncatedRecord { offset, missing }
+        }
+        SectionEnd::Corrupt { offset, source } => StopReason::CorruptRecord {
+            offset,
+            error: source.to_string(),
+        },
+    }
+}
+
 fn recover_file(path: &Path, writer: &mut BagWriter) -> Result<FileRecovery, RecoverError> {
     let io_err = |source| RecoverError::Io {
         path: path.to_path_buf(),
@@ -156,17 +171,7 @@ fn recover_file(path: &Path, writer: &mut BagWriter) -> Result<FileRecovery, Rec
         Err(WalkError::Io(source)) => return Err(io_err(source)),
         Err(WalkError::Visit(err)) => return Err(err.into()),
     };
-    let stop = match summary.end {
-        SectionEnd::DataEnd => StopReason::Complete,
-        SectionEnd::Eof => StopReason::EndOfFile,
-        SectionEnd::Truncated { offset, missing } => {
-            StopReason::TruncatedRecord { offset, missing }
-        }
-        SectionEnd::Corrupt { offset, source } => StopReason::CorruptRecord {
-            offset,
-            error: source.to_string(),
-        },
-    };
+    let stop = stop_reason(summary.end);
     // A complete file's summary section is not lost, only not needed.
     let lost_bytes = match stop {
         StopReason::Complete => 0,
