@@ -314,7 +314,10 @@ fn check_calibrator(states_first: bool) {
 /// `rpkm diagnose` on the equivalent CSVs (`rpkm bag campaign` of both bags), candidate by
 /// candidate, and it names the effect the twin hid (the truth file's parallelogram).
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn calibration_bags_through_the_calibrator_give_rpkm_diagnose_s_diagnosis() {
     let dir = scratch("nodes-calibrator-diagnosis");
     let csv = |bag: &str| {

@@ -143,7 +143,10 @@ fn bad_campaign_files_exit_2_with_file_line_and_column() {
 /// with default options reaches the held-out noise floor (the twin's truth: the same
 /// validation measured without noise), and `rpkm diagnose` reports the same held-out figure.
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn default_calibration_of_a_29_parameter_machine_reaches_the_floor_and_diagnose_agrees() {
     use rpkm_core::noise::{NoiseModel, N_GROUPS};
     let dir = scratch("map29");

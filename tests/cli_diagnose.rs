@@ -30,7 +30,10 @@ fn json(path: &PathBuf) -> serde_json::Value {
 }
 
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn diagnose_names_the_hidden_effect_of_the_truth_file_and_calibrate_adds_it() {
     let dir = scratch("thermal");
     let (c, truth) = (dir.join("c.csv"), dir.join("truth.json"));

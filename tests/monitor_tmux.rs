@@ -182,7 +182,10 @@ fn start_nodes(dir: &std::path::Path, p: &Params, prefix: &str) -> Launch {
 }
 
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn monitor_in_tmux_shows_the_fault_and_the_silent_estimator() {
     if !tmux_available() {
         return;

@@ -54,7 +54,10 @@ fn write_launch(dir: &TempDir) -> std::path::PathBuf {
 }
 
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn demo_campaign_estimates_stay_on_the_rigid_model_of_their_pose() {
     let c = demo();
     let n = c.poses.len();

@@ -49,7 +49,10 @@ fn expected_actuator(seq: u64) -> ActuatorState {
 }
 
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn ingest_accepts_cyclone_actuator_states_and_counts_the_bad_ones() {
     let Some(py) = python() else { return };
     let prefix = unique("cyc");

@@ -114,7 +114,10 @@ fn skip(reason: &str) {
 }
 
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn ingest_and_estimator_in_two_namespaces_over_dds() {
     let uid = Command::new("id")
         .arg("-u")

@@ -130,7 +130,10 @@ fn next(
 }
 
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn a_cyclone_peer_sets_a_threshold_and_the_monitor_level_follows_live() {
     let Some(py) = python() else { return };
     let (mut state, deviation) = state_with_deviation();

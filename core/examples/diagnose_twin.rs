@@ -57,20 +57,20 @@ fn main() {
             if std::env::var("VERBOSE").is_ok() {
                 for c in &d.candidates {
                     println!(
-                        "    {} expl {:.2} sig {} p {:.1e} bic {:.1} val {:?}: {}",
+                        "    {} expl {:.2} sig {} p {:.1e} bic {:.1} val {:?}, follows {:?}",
                         c.effect,
                         c.explained_fraction,
                         c.significant,
                         c.p_value,
                         c.bic_gain,
                         c.val_rms_after_um,
-                        c.evidence
+                        c.follows.as_ref().map(|f| (&f.feature, f.r))
                     );
                 }
                 for s in &d.skipped {
                     println!("    skipped {}: {}", s.effect, s.reason);
                 }
-                println!("    {}", d.verdict);
+                println!("    {:?} {:?}", d.verdict_kind, d.missing_effect);
             }
         }
     }

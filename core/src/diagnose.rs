@@ -36,7 +36,6 @@ use crate::params::{Model, Params};
 use crate::variance::{self, GroupNoise, NoiseEstimate};
 use nalgebra::{DMatrix, DVector, Vector2};
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
 
 /// Fraction of an effect parameter's plausible magnitude below which a significant estimate
 /// is no missing physics: a model's approximation seen at encoder precision (a bow of
@@ -163,8 +162,11 @@ pub struct Candidate {
     /// The effect's parameters as identified (parts the data do not support held at 0,
     /// `identified` false).
     pub params: Vec<EffectEstimate>,
-    /// A sentence an engineer can check.
-    pub evidence: String,
+    /// χ²/dof of the current model (at the estimated noise), before the effect.
+    pub chi2_per_dof_before: f64,
+    /// The covariate of the effect the current model's residual follows most, if the effect
+    /// has covariates: the evidence an engineer can check in the data.
+    pub follows: Option<sparse::Pointer>,
 }
 
 /// An effect that could not be tried, and why.
@@ -229,7 +231,8 @@ pub struct Diagnosis {
     pub effects_in_model: Vec<String>,
     pub verdict_kind: VerdictKind,
     pub missing_effect: Option<String>,
-    pub verdict: String,
+    /// χ²/dof of the current model at the estimated noise (near 1 when nothing is missing).
+    pub chi2_per_dof: f64,
     /// Per group: the stated and the estimated noise.
     pub noise: BTreeMap<String, NoiseReport>,
     /// The same, with whether each was estimated from the data.
@@ -254,7 +257,22 @@ pub struct Diagnosis {
     /// Why `error_vectors` is empty although the campaign has such poses, if it is.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error_vectors_missing: Option<String>,
-    pub test: String,
+    /// How the verdict was tested.
+    pub test: Test,
+}
+
+/// How a diagnosis tested its verdict.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct Test {
+    /// Rounds of the noise estimation per group.
+    pub noise_rounds: usize,
+    /// Level of each candidate's nested F-test (Bonferroni over the candidates tried).
+    pub candidate_level: f64,
+    pub candidates_tried: usize,
+    /// Level of the dictionary test of the residual.
+    pub dictionary_level: f64,
+    /// Rows of the calibration.
+    pub rows: usize,
 }
 
 /// What one fit produced: its final rows and statistics.
@@ -304,7 +322,7 @@ pub fn diagnose(
         let est = NoiseEstimate::assumed(&opts.noise);
         let val = held_out(validation, &opts.noise)?;
         let baseline = baseline(&base1, &opts.noise, val.as_ref(), opts);
-        return Ok(conclude(&search, opts, base1, baseline, first, &est));
+        return Ok(conclude(&search, opts, &base1, baseline, first, &est));
     }
     // Round 2: the noise estimated under the model with the most significant candidate (or
     // the current model), and every model compared again with those weights (the nested
@@ -321,7 +339,7 @@ pub fn diagnose(
     let (base, round) = search.round(&copts, fitted)?;
     let val = held_out(validation, &est.model)?;
     let baseline = baseline(&base, &est.model, val.as_ref(), opts);
-    Ok(conclude(&search, opts, base, baseline, round, &est))
+    Ok(conclude(&search, opts, &base, baseline, round, &est))
 }
 
 /// What every round of a diagnosis shares.
@@ -377,7 +395,7 @@ impl Search<'_> {
 fn conclude(
     search: &Search,
     opts: &Options,
-    base: Fitted,
+    base: &Fitted,
     baseline: Baseline,
     round: Round,
     est: &NoiseEstimate,
@@ -401,7 +419,7 @@ fn conclude(
     let remaining: &Fitted = missing_effect
         .as_ref()
         .and_then(|m| fits.iter().find(|(name, _)| name == m))
-        .map_or(&base, |(_, fit)| fit);
+        .map_or(base, |(_, fit)| fit);
     let left = sparse::structure(campaign, &remaining.rows);
     let unexplained = (left.p_value < opts.alpha)
         .then(|| left.pointer.clone())
@@ -413,32 +431,19 @@ fn conclude(
         (None, false) => VerdictKind::NothingMissing,
     };
     let unexplained = if exact { None } else { unexplained };
-    let words = noise_sentence(&est.groups);
-    let verdict = verdict(
-        verdict_kind,
-        &base,
-        best,
-        &candidates,
-        unexplained.as_ref(),
-        &in_names,
-        &words,
-    );
-    let test = format!(
-        "noise levels estimated per group from the campaign ({} rounds); candidates by nested \
-         F-test at level {:.2e} (Bonferroni over {}), ranked by BIC gain, named when they beat \
-         the best dictionary term; dictionary test at level {} (n = {} rows)",
-        est.rounds,
-        search.level,
-        search.tried.len(),
-        opts.alpha,
-        base.rows.len()
-    );
+    let test = Test {
+        noise_rounds: est.rounds,
+        candidate_level: search.level,
+        candidates_tried: search.tried.len(),
+        dictionary_level: opts.alpha,
+        rows: base.rows.len(),
+    };
     Diagnosis {
         model: format!("{}", opts.model),
         effects_in_model: in_names.iter().map(|s| (*s).to_owned()).collect(),
         verdict_kind,
         missing_effect,
-        verdict,
+        chi2_per_dof: base.fit.chi2_per_dof,
         noise: noise_map(&est.groups),
         noise_groups: est.groups.clone(),
         determined: base.fit.determined,
@@ -671,24 +676,6 @@ fn noise_map(groups: &[GroupNoise]) -> BTreeMap<String, NoiseReport> {
         .collect()
 }
 
-/// "the tracker is 2.1x noisier than its rating" for every group off its rating by > 30 %.
-fn noise_sentence(groups: &[GroupNoise]) -> String {
-    let off: Vec<String> = groups
-        .iter()
-        .filter(|g| g.estimated_from_data && g.assumed > 0.0)
-        .filter(|g| !(0.77..=1.3).contains(&(g.estimated / g.assumed)))
-        .map(|g| {
-            let ratio = g.estimated / g.assumed;
-            if ratio > 1.0 {
-                format!("{} {:.1}x noisier than stated", g.group, ratio)
-            } else {
-                format!("{} {:.1}x quieter than stated", g.group, 1.0 / ratio)
-            }
-        })
-        .collect();
-    off.join(", ")
-}
-
 /// A candidate whose screening fit leaves its F-test's p-value above this is no contender:
 /// its figures are the screening fit's. Below it the candidate is fitted to convergence, so
 /// that every candidate that can be significant (level α/m ≤ 1e-3) or can be the verdict is
@@ -812,55 +799,6 @@ fn weak_parts(cal: &Calibration, set: &EffectSet, effect: &str) -> Vec<usize> {
         .filter(|o| o.1 < 2.0 && o.1 < strongest)
         .map(|o| o.0)
         .collect()
-}
-
-fn verdict(
-    kind: VerdictKind,
-    base: &Fitted,
-    best: Option<&Candidate>,
-    candidates: &[Candidate],
-    unexplained: Option<&sparse::Pointer>,
-    in_model: &[&str],
-    noise_words: &str,
-) -> String {
-    let model = if in_model.is_empty() {
-        "the geometric model".to_owned()
-    } else {
-        format!("the model with {}", in_model.join(", "))
-    };
-    let noise = if noise_words.is_empty() {
-        String::new()
-    } else {
-        format!("; noise: {noise_words}")
-    };
-    match (kind, best) {
-        (VerdictKind::MissingEffect, Some(c)) => format!(
-            "missing effect: {} ({}){}{noise}",
-            c.effect,
-            c.evidence,
-            unexplained.map_or(String::new(), |u| format!("; what remains: {}", u.sentence))
-        ),
-        (VerdictKind::UnexplainedStructure, _) => {
-            let why = candidates.first().map_or(String::new(), |c| {
-                format!(
-                    " (the best, {}, p = {:.1e}, BIC gain {:.1})",
-                    c.effect, c.p_value, c.bic_gain
-                )
-            });
-            format!(
-                "{model} leaves a structured residual that no effect of the library explains{why}; {}{noise}",
-                unexplained.map_or(
-                    "no covariate, force, time or workspace term follows it".to_owned(),
-                    |u| u.sentence.clone()
-                )
-            )
-        }
-        _ => format!(
-            "nothing is missing: {model} explains the measurements to their noise (no effect \
-             and no dictionary term is significant; chi2/dof {:.2} at the estimated noise){noise}",
-            base.fit.chi2_per_dof
-        ),
-    }
 }
 
 /// A fit that failed.
@@ -998,19 +936,20 @@ fn finish_with(
     cal: Calibration,
     copts: &calib::Options,
 ) -> Result<Fitted, FitError> {
-    let rows = cal.residuals.clone();
-    let chi2: f64 = rows.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
-    let dof = (rows.len() as f64 - cal.dof_model).max(1.0);
     let val_rms_um = val
         .map(|v| held_out_rms(v, effects, set, &cal, copts.model))
         .transpose()?;
+    // The calibration is spent here: its rows and parameters move into the fit.
+    let rows = cal.residuals;
+    let chi2: f64 = rows.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
+    let dof = (rows.len() as f64 - cal.dof_model).max(1.0);
     let fit = Fit {
         chi2,
         dof,
         chi2_per_dof: chi2 / dof,
         cal_rms_um: calib::rms(&length_values(&rows)) * 1e3,
         val_rms_um,
-        effect_params: cal.effects.clone(),
+        effect_params: cal.effects,
         determined: cal.determined,
         params: cal.params,
     };
@@ -1148,15 +1087,7 @@ fn compare(
         .filter(|e| e.effect == name)
         .cloned()
         .collect();
-    let evidence = evidence(
-        base,
-        kept,
-        effect.covariates(),
-        campaign,
-        &params,
-        f,
-        p_value,
-    );
+    let follows = sparse::follows(campaign, &base.rows, effect.covariates());
     let relevant = params
         .iter()
         .filter(|p| p.identified && p.prior > 0.0)
@@ -1174,40 +1105,9 @@ fn compare(
         p_value,
         bic_gain: kept_dchi2 - kept_k * n.ln(),
         params,
-        evidence,
+        chi2_per_dof_before: base.fit.chi2_per_dof,
+        follows,
     })
-}
-
-fn evidence(
-    base: &Fitted,
-    with: &Fitted,
-    covariates: &[&str],
-    campaign: &Campaign,
-    params: &[EffectEstimate],
-    f: f64,
-    p: f64,
-) -> String {
-    let shown: Vec<String> = params
-        .iter()
-        .filter(|e| e.identified)
-        .take(3)
-        .map(|e| format!("{} = {:.3} ± {:.3} {}", e.name, e.value, e.sigma, e.unit))
-        .collect();
-    let mut s = format!(
-        "chi2/dof {:.2} -> {:.2}, F = {:.1} (p = {:.1e}); {}",
-        base.fit.chi2_per_dof,
-        with.fit.chi2_per_dof,
-        f,
-        p,
-        shown.join(", ")
-    );
-    if let Some(c) = sparse::follows(campaign, &base.rows, covariates) {
-        let _ = write!(s, "; {}", c.sentence);
-    }
-    if let (Some(b), Some(a)) = (base.fit.val_rms_um, with.fit.val_rms_um) {
-        let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
-    }
-    s
 }
 
 /// Values (mm) of the length rows (not ψ, not forces).

@@ -69,14 +69,19 @@ fn check_named(effect: EffectKind, seed: u64) {
     let before = d.baseline.val_rms_um.expect("held-out RMS");
     eprintln!(
         "{name} seed {seed}: held-out {before:.1} um (true floor {floor:.1}), verdict: {}",
-        d.verdict
+        summary(&d)
     );
-    assert_eq!(d.verdict_kind, VerdictKind::MissingEffect, "{}", d.verdict);
+    assert_eq!(
+        d.verdict_kind,
+        VerdictKind::MissingEffect,
+        "{}",
+        summary(&d)
+    );
     assert_eq!(
         d.missing_effect.as_deref(),
         Some(name),
         "seed {seed}: {}",
-        d.verdict
+        summary(&d)
     );
     let named = d
         .candidates
@@ -96,11 +101,12 @@ fn check_named(effect: EffectKind, seed: u64) {
     // and with it in the model, no effect is missing any more
     let d2 = run(&cal, &val, &[name]);
     assert_eq!(
-        d2.missing_effect, None,
+        d2.missing_effect,
+        None,
         "{name} seed {seed}: {}",
-        d2.verdict
+        summary(&d2)
     );
-    eprintln!("  then: {}", d2.verdict);
+    eprintln!("  then: {}", summary(&d2));
 }
 
 macro_rules! named_test {
@@ -124,6 +130,18 @@ named_test!(
     EffectKind::InstrumentAlignment
 );
 
+/// The verdict in numbers, for failure messages (the sentences are the nodes crate's).
+fn summary(d: &Diagnosis) -> String {
+    let best = d
+        .candidates
+        .first()
+        .map(|c| (&c.effect, c.p_value, c.bic_gain));
+    format!(
+        "{:?}, missing {:?}, chi2/dof {:.2}, best candidate {best:?}",
+        d.verdict_kind, d.missing_effect, d.chi2_per_dof
+    )
+}
+
 /// A machine noisier than the model's defaults (2.5x every group) with nothing hidden:
 /// nothing is missing, and the noise estimates find the truth.
 #[test]
@@ -136,7 +154,7 @@ fn nothing_missing_on_a_machine_noisier_than_rated() {
             ..Default::default()
         });
         let d = run(&cal, &val, &[]);
-        eprintln!("seed {seed}: {}", d.verdict);
+        eprintln!("seed {seed}: {}", summary(&d));
         for c in &d.candidates {
             eprintln!("  {} p = {:.2e}", c.effect, c.p_value);
         }
@@ -198,7 +216,7 @@ fn thermal_variants_keep_the_parts_that_expand() {
             ..Default::default()
         });
         let d = run(&cal, &val, &[]);
-        eprintln!("{label}: {}", d.verdict);
+        eprintln!("{label}: {}", summary(&d));
         assert_eq!(d.missing_effect.as_deref(), Some("thermal"), "{label}");
         let c = d
             .candidates
@@ -237,8 +255,8 @@ fn nothing_missing_without_a_hidden_effect() {
     for seed in 1..=4 {
         let (cal, val, floor) = campaigns(seed, &[]);
         let d = run(&cal, &val, &[]);
-        eprintln!("seed {seed}: {}", d.verdict);
-        assert_eq!(d.missing_effect, None, "seed {seed}: {}", d.verdict);
+        eprintln!("seed {seed}: {}", summary(&d));
+        assert_eq!(d.missing_effect, None, "seed {seed}: {}", summary(&d));
         assert_eq!(d.verdict_kind, VerdictKind::NothingMissing, "seed {seed}");
         for c in &d.candidates {
             eprintln!(
@@ -264,19 +282,22 @@ fn two_hidden_effects_are_found_one_after_the_other() {
         assert!(
             names.contains(&first.as_str()),
             "seed {seed}: {}",
-            d1.verdict
+            summary(&d1)
         );
         let d2 = run(&cal, &val, &[&first]);
         let second = d2.missing_effect.clone().expect("a second effect");
         assert!(
             names.contains(&second.as_str()) && second != first,
             "seed {seed}: {} then {}",
-            d1.verdict,
-            d2.verdict
+            summary(&d1),
+            summary(&d2)
         );
         let d3 = run(&cal, &val, &[&first, &second]);
-        eprintln!("seed {seed}: {first}, then {second}, then: {}", d3.verdict);
-        assert_eq!(d3.missing_effect, None, "{}", d3.verdict);
+        eprintln!(
+            "seed {seed}: {first}, then {second}, then: {}",
+            summary(&d3)
+        );
+        assert_eq!(d3.missing_effect, None, "{}", summary(&d3));
         let after = d3.baseline.val_rms_um.expect("held-out");
         assert!(after <= 1.5 * floor, "{after} um, true floor {floor}");
     }
@@ -294,13 +315,13 @@ fn lost_motion_is_unexplained_and_points_at_the_direction_of_motion() {
             p.covariates.truncate(1);
         }
         let d = run(&cal, &val, &[]);
-        eprintln!("seed {seed}: {}", d.verdict);
-        assert_eq!(d.missing_effect, None, "{}", d.verdict);
+        eprintln!("seed {seed}: {}", summary(&d));
+        assert_eq!(d.missing_effect, None, "{}", summary(&d));
         assert_eq!(
             d.verdict_kind,
             VerdictKind::UnexplainedStructure,
             "{}",
-            d.verdict
+            summary(&d)
         );
         let u = d.unexplained.as_ref().expect("a pointer at the structure");
         // in follower mode q2 moves with q4: their directions are one column, named together

@@ -34,7 +34,10 @@ fn actuator_state() -> ActuatorState {
 }
 
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn every_type_round_trips() {
     round_trip(&stamp());
     round_trip(&actuator_state());

@@ -12,3 +12,4 @@ pub mod plot;
 pub mod report;
 pub mod stream;
 pub mod topics;
+pub mod words;

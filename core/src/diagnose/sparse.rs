@@ -29,12 +29,21 @@ pub struct Pointer {
     pub r: f64,
     /// Fraction of that direction's χ² a linear fit of the term removes (r²).
     pub explained: f64,
-    pub sentence: String,
     /// Terms the same direction follows exactly as much (one column under two names: a
     /// follower moves with its drive).
     pub ties: Vec<String>,
-    /// The next best terms (feature, instrument, direction, r).
-    pub also: Vec<(String, String, String, f64)>,
+    /// The next best terms.
+    pub also: Vec<Term>,
+}
+
+/// A term of the dictionary and how much a direction's residual follows it.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Term {
+    pub feature: String,
+    pub instrument: String,
+    pub direction: String,
+    /// Pearson correlation of the weighted residual with the term.
+    pub r: f64,
 }
 
 /// Where each pose of a campaign is, for maps and workspace terms: the nominal forward model
@@ -176,11 +185,6 @@ fn pointer(s: &[Scored]) -> Option<Pointer> {
         .filter(|x| (x.r.abs() - best.r.abs()).abs() < 1e-9)
         .map(|x| x.feature.clone())
         .collect();
-    let tied = if ties.is_empty() {
-        String::new()
-    } else {
-        format!(", and equally {}", ties.join(", "))
-    };
     Some(Pointer {
         ties,
         feature: best.feature.clone(),
@@ -188,21 +192,15 @@ fn pointer(s: &[Scored]) -> Option<Pointer> {
         direction: best.direction.clone(),
         r: best.r,
         explained: best.r * best.r,
-        sentence: format!(
-            "the {} {} residual follows {} (r = {:.2}{tied})",
-            best.instrument, best.direction, best.feature, best.r
-        ),
         also: s
             .iter()
             .skip(1)
             .take(4)
-            .map(|x| {
-                (
-                    x.feature.clone(),
-                    x.instrument.clone(),
-                    x.direction.clone(),
-                    x.r,
-                )
+            .map(|x| Term {
+                feature: x.feature.clone(),
+                instrument: x.instrument.clone(),
+                direction: x.direction.clone(),
+                r: x.r,
             })
             .collect(),
     })

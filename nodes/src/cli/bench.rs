@@ -223,7 +223,7 @@ fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
         };
         let d = diagnose::diagnose(&cal, Some(&val), &refs, &opts)?;
         if verbose {
-            println!("with {named:?}: {}", d.verdict);
+            println!("with {named:?}: {}", crate::words::verdict(&d));
         }
         match d.missing_effect {
             Some(e) if !named.contains(&e) && named.len() < 3 => named.push(e),

@@ -54,7 +54,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         um(after.baseline.val_rms_um),
         after.baseline.noise_floor_um
     );
-    println!("   verdict now: {}", after.verdict);
+    println!("   verdict now: {}", crate::words::verdict(&after));
     let page = write_report(
         &args.out,
         "rpkm demo",

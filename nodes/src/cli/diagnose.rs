@@ -4,6 +4,7 @@
 
 use super::{bad_input, read_campaign, write_json};
 use crate::report::{Report, Stage};
+use crate::words;
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::{self, Diagnosis, Options};
@@ -117,7 +118,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         .with_context(|| format!("diagnosing {}", args.campaign.display()))?;
     print_summary(&campaign, &d);
     if let Some(path) = &args.json {
-        write_json(path, &serde_json::to_value(&d)?)?;
+        write_json(path, &crate::words::diagnosis_json(&d)?)?;
         println!("\nwrote {}", path.display());
     }
     if let Some(dir) = &args.report {
@@ -176,14 +177,17 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
         .ok()
         .and_then(|v| v.as_str().map(str::to_owned))
         .unwrap_or_default();
-    println!("\n3. Verdict ({kind}): {}", d.verdict);
+    println!("\n3. Verdict ({kind}): {}", words::verdict(d));
     if let Some(u) = &d.unexplained {
-        println!("\n4. Unexplained structure: {}", u.sentence);
-        for (f, i, dir, r) in &u.also {
-            println!("   also: {i} {dir} follows {f} (r = {r:.2})");
+        println!("\n4. Unexplained structure: {}", words::follows(u));
+        for t in &u.also {
+            println!(
+                "   also: {} {} follows {} (r = {:.2})",
+                t.instrument, t.direction, t.feature, t.r
+            );
         }
     }
-    println!("\n({})", d.test);
+    println!("\n({})", words::test(&d.test));
 }
 
 /// The noise per group, the residual per instrument and direction, the worst rows.
@@ -239,7 +243,7 @@ fn print_effects(d: &Diagnosis) {
         println!("   {:<22} not tried: {}", s.effect, s.reason);
     }
     if let Some(c) = d.candidates.first() {
-        println!("   evidence for {}: {}", c.effect, c.evidence);
+        println!("   evidence for {}: {}", c.effect, words::evidence(c));
     }
 }
 

@@ -43,7 +43,7 @@ fn verdict_box(label: &str, d: &Diagnosis) -> String {
         "<div class=\"verdict{ok}\" title=\"{}\"><b>{}</b>: {}</div>",
         kind(d.verdict_kind),
         escape(label),
-        escape(&d.verdict)
+        escape(&crate::words::verdict(d))
     )
 }
 
@@ -513,7 +513,7 @@ pub fn against(r: &Report) -> String {
     };
     let mut o = format!(
         "<section id=\"against\"><h2>Against time and against what the residual follows</h2><p>{}</p><div class=\"row\">",
-        escape(&pointer.map_or("The direction with the largest χ² per row.".to_owned(), |p| p.sentence.clone()))
+        escape(&pointer.map_or("The direction with the largest χ² per row.".to_owned(), crate::words::follows))
     );
     let times: Vec<f64> = r.campaign.poses.iter().map(|p| p.t).collect();
     o.push_str(&against_term(r, &inst, &dir, "t", &times));
@@ -541,7 +541,7 @@ pub fn effects(r: &Report) -> String {
             c.f_statistic,
             c.p_value,
             um(c.val_rms_after_um),
-            escape(&c.evidence)
+            escape(&crate::words::evidence(c))
         );
     }
     o.push_str("</table>");

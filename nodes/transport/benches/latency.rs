@@ -41,7 +41,10 @@ fn config(name: &str, backend: Backend, prefix: &str) -> TransportConfig {
         .dds_domain(DDS_DOMAIN)
 }
 
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn run(case: &Case, secs: f64, prefix: &str) -> Result<Stats, Box<dyn std::error::Error>> {
     let stop = Arc::new(AtomicBool::new(false));
     // Echo node: ActuatorState in, TcpEstimate of the same seq out.

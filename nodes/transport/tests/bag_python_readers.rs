@@ -96,7 +96,10 @@ fn normalise(mut messages: Vec<(String, String, u64, Value)>) -> Vec<(String, St
 }
 
 #[test]
-#[expect(clippy::too_many_lines, reason = "an end-to-end scenario, read top to bottom")]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn python_readers_see_the_values_written() {
     let Some(python) = python() else {
         println!("skipped: no .venv/bin/python (python3 -m venv .venv && .venv/bin/pip install mcap mcap-ros2-support rosbags)");

@@ -1,0 +1,144 @@
+//! Sentences for people, built from the core's numbers: a diagnosis's verdict, a candidate's
+//! evidence, what a residual follows, how the verdict was tested. The core returns named
+//! figures (`rpkm_core::diagnose`); the words and their units live here, once, for the
+//! terminal, the HTML report and the JSON's text fields alike.
+
+use rpkm_core::diagnose::sparse::Pointer;
+use rpkm_core::diagnose::{Candidate, Diagnosis, Test, VerdictKind};
+use rpkm_core::variance::GroupNoise;
+use std::fmt::Write as _;
+
+/// A group's estimated noise is called off its rating outside this ratio band.
+const RATED_BAND: std::ops::RangeInclusive<f64> = 0.77..=1.3;
+
+/// "the lt x residual follows temp_machine (r = 0.93, and equally q2)".
+pub fn follows(p: &Pointer) -> String {
+    let tied = if p.ties.is_empty() {
+        String::new()
+    } else {
+        format!(", and equally {}", p.ties.join(", "))
+    };
+    format!(
+        "the {} {} residual follows {} (r = {:.2}{tied})",
+        p.instrument, p.direction, p.feature, p.r
+    )
+}
+
+/// "tracker 2.1x noisier than stated, ..." for every group off its rating.
+pub fn noise(groups: &[GroupNoise]) -> String {
+    let off: Vec<String> = groups
+        .iter()
+        .filter(|g| g.estimated_from_data && g.assumed > 0.0)
+        .filter(|g| !RATED_BAND.contains(&(g.estimated / g.assumed)))
+        .map(|g| {
+            let ratio = g.estimated / g.assumed;
+            if ratio > 1.0 {
+                format!("{} {ratio:.1}x noisier than stated", g.group)
+            } else {
+                format!("{} {:.1}x quieter than stated", g.group, 1.0 / ratio)
+            }
+        })
+        .collect();
+    off.join(", ")
+}
+
+/// What an engineer can check of a candidate: the F-test, its parameters, the covariate
+/// the residual follows, the held-out RMS before and after.
+pub fn evidence(c: &Candidate) -> String {
+    let shown: Vec<String> = c
+        .params
+        .iter()
+        .filter(|e| e.identified)
+        .take(3)
+        .map(|e| format!("{} = {:.3} ± {:.3} {}", e.name, e.value, e.sigma, e.unit))
+        .collect();
+    let mut s = format!(
+        "chi2/dof {:.2} -> {:.2}, F = {:.1} (p = {:.1e}); {}",
+        c.chi2_per_dof_before,
+        c.chi2_per_dof_after,
+        c.f_statistic,
+        c.p_value,
+        shown.join(", ")
+    );
+    if let Some(f) = &c.follows {
+        let _ = write!(s, "; {}", follows(f));
+    }
+    if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
+        let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
+    }
+    s
+}
+
+/// The verdict in one sentence: the missing effect and its evidence, the structure no effect
+/// explains, or that nothing is missing; the noise groups off their rating appended.
+pub fn verdict(d: &Diagnosis) -> String {
+    let model = if d.effects_in_model.is_empty() {
+        "the geometric model".to_owned()
+    } else {
+        format!("the model with {}", d.effects_in_model.join(", "))
+    };
+    let noise_words = noise(&d.noise_groups);
+    let noise = if noise_words.is_empty() {
+        String::new()
+    } else {
+        format!("; noise: {noise_words}")
+    };
+    let remains = d.unexplained.as_ref().map(follows);
+    let named = d
+        .missing_effect
+        .as_deref()
+        .and_then(|m| d.candidates.iter().find(|c| c.effect == m));
+    match (d.verdict_kind, named) {
+        (VerdictKind::MissingEffect, Some(c)) => format!(
+            "missing effect: {} ({}){}{noise}",
+            c.effect,
+            evidence(c),
+            remains.map_or(String::new(), |u| format!("; what remains: {u}"))
+        ),
+        (VerdictKind::UnexplainedStructure, _) => {
+            let why = d.candidates.first().map_or(String::new(), |c| {
+                format!(
+                    " (the best, {}, p = {:.1e}, BIC gain {:.1})",
+                    c.effect, c.p_value, c.bic_gain
+                )
+            });
+            format!(
+                "{model} leaves a structured residual that no effect of the library explains{why}; {}{noise}",
+                remains.unwrap_or_else(|| {
+                    "no covariate, force, time or workspace term follows it".to_owned()
+                })
+            )
+        }
+        _ => format!(
+            "nothing is missing: {model} explains the measurements to their noise (no effect \
+             and no dictionary term is significant; chi2/dof {:.2} at the estimated noise){noise}",
+            d.chi2_per_dof
+        ),
+    }
+}
+
+/// How the verdict was tested, in one sentence.
+pub fn test(t: &Test) -> String {
+    format!(
+        "noise levels estimated per group from the campaign ({} rounds); candidates by nested \
+         F-test at level {:.2e} (Bonferroni over {}), ranked by BIC gain, named when they beat \
+         the best dictionary term; dictionary test at level {} (n = {} rows)",
+        t.noise_rounds, t.candidate_level, t.candidates_tried, t.dictionary_level, t.rows
+    )
+}
+
+/// The diagnosis as the `--json` file has it: the core's figures, and the sentences beside
+/// them (`verdict`, `test`, each candidate's `evidence`; the test's figures are in
+/// `test_settings`).
+pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
+    let mut v = serde_json::to_value(d)?;
+    v["verdict"] = verdict(d).into();
+    v["test_settings"] = serde_json::to_value(d.test)?;
+    v["test"] = test(&d.test).into();
+    if let Some(cands) = v["candidates"].as_array_mut() {
+        for (json, c) in cands.iter_mut().zip(&d.candidates) {
+            json["evidence"] = evidence(c).into();
+        }
+    }
+    Ok(v)
+}
