@@ -212,6 +212,34 @@ impl NoiseModel {
         Ok(m)
     }
 
+    /// The model with the σ an instrument states for its own readings (mm, rad for ψ): the
+    /// tracker's along-beam σ (what `TcpMeasurement::sigma` carries for it), the grid
+    /// encoder's, the ball bar's, the interferometer's, the encoders' for a self-calibration
+    /// reading. `Instrument::None` reads nothing and changes nothing.
+    pub fn with_instrument_sigma(
+        mut self,
+        instrument: Instrument,
+        sigma: f64,
+    ) -> Result<NoiseModel, NoiseSpecError> {
+        let name = match instrument {
+            Instrument::Lt => "lt_along",
+            Instrument::Kgm => "kgm",
+            Instrument::Dbb | Instrument::Circle => "dbb",
+            Instrument::LiX | Instrument::LiY => "li",
+            Instrument::LiPsi => "psi",
+            Instrument::SelfCal => "encoder",
+            Instrument::None => return Ok(self),
+        };
+        if !(sigma.is_finite() && sigma > 0.0) {
+            return Err(NoiseSpecError::Value {
+                name: name.to_owned(),
+                value: sigma.to_string(),
+            });
+        }
+        self.set(name, sigma)?;
+        Ok(self)
+    }
+
     fn set(&mut self, name: &str, v: f64) -> Result<(), NoiseSpecError> {
         match name {
             "lt" => {

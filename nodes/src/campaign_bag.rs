@@ -22,6 +22,7 @@
 use std::collections::{BTreeMap, VecDeque};
 
 use rpkm_core::campaign::{Campaign, CampaignError, Instrument, Pose};
+use rpkm_core::noise::{NoiseModel, NoiseSpecError};
 use rpkm_msgs::actuator_state::MAX_COVARIATES;
 use rpkm_msgs::{ActuatorState, CampaignInfo, TcpMeasurement, Time};
 use rpkm_transport::bag::{BagReader, BagWriteError, BagWriter, TopicHandle};
@@ -58,6 +59,13 @@ pub enum ToMessagesError {
 /// Messages that do not make a campaign.
 #[derive(Debug, thiserror::Error)]
 pub enum FromMessagesError {
+    /// A measurement whose stated σ is negative or not a number.
+    #[error("TcpMeasurement {index} (stamp {stamp_s} s): sigma {value}, expected a finite value >= 0 (0: none stated)")]
+    Sigma {
+        index: usize,
+        stamp_s: f64,
+        value: f64,
+    },
     /// A measurement with no drive state before it.
     #[error(
         "TcpMeasurement {index} (stamp {stamp_s} s, setup {setup:?}) has no ActuatorState \
@@ -266,6 +274,8 @@ pub struct CampaignAssembler {
     /// Most states kept (see [`STATE_HISTORY`]).
     history: usize,
     poses: Vec<Pose>,
+    /// The σ each measurement states for itself (mm, rad for ψ), by instrument.
+    stated_sigma: BTreeMap<Instrument, Vec<f64>>,
 }
 
 impl Default for CampaignAssembler {
@@ -286,6 +296,7 @@ impl CampaignAssembler {
             state_count: 0,
             history: STATE_HISTORY,
             poses: Vec::new(),
+            stated_sigma: BTreeMap::new(),
         }
     }
 
@@ -383,6 +394,25 @@ impl CampaignAssembler {
                 value: measurement.instrument,
             },
         )?;
+        if !(measurement.sigma.is_finite() && measurement.sigma >= 0.0) {
+            return Err(FromMessagesError::Sigma {
+                index,
+                stamp_s,
+                value: measurement.sigma,
+            });
+        }
+        // 0: the sender states no σ (the noise model's then stands).
+        if measurement.sigma > 0.0 {
+            let unit = if instrument == Instrument::LiPsi {
+                1.0
+            } else {
+                MM_PER_M
+            };
+            self.stated_sigma
+                .entry(instrument)
+                .or_default()
+                .push(measurement.sigma * unit);
+        }
         let mm = |v: f64, valid: bool| valid.then_some(v * MM_PER_M);
         self.poses.push(Pose {
             t: stamp_s,
@@ -404,6 +434,19 @@ impl CampaignAssembler {
             line: 0,
         });
         Ok(())
+    }
+
+    /// `base` with the σ the measurements state for themselves: per instrument, the median
+    /// of the `TcpMeasurement::sigma` they carry (those with 0 state none). The stated noise
+    /// of the calibration, which estimates the noise from the data from there.
+    pub fn stated_noise(&self, base: NoiseModel) -> Result<NoiseModel, NoiseSpecError> {
+        let mut noise = base;
+        for (&instrument, sigmas) in &self.stated_sigma {
+            let mut sorted = sigmas.clone();
+            sorted.sort_by(f64::total_cmp);
+            noise = noise.with_instrument_sigma(instrument, sorted[sorted.len() / 2])?;
+        }
+        Ok(noise)
     }
 
     /// Poses so far.
@@ -598,5 +641,50 @@ mod tests {
             .push_measurement(&TcpMeasurement::default())
             .expect_err("no state");
         assert!(e.to_string().contains("has no ActuatorState"), "{e}");
+    }
+
+    /// A grid-encoder reading stating 3 µm, another 5 µm, a third 4 µm: the calibration's
+    /// stated kgm noise is their median, 0.004 mm; a NaN σ is refused by name.
+    #[test]
+    fn measurements_state_their_own_sigma() {
+        let mut a = CampaignAssembler::new();
+        for (k, sigma_m) in [3e-6, 5e-6, 4e-6].into_iter().enumerate() {
+            let stamp = Time {
+                sec: i32::try_from(k).expect("small") + 1,
+                nanosec: 0,
+            };
+            a.push_state(&ActuatorState {
+                stamp,
+                ..ActuatorState::default()
+            })
+            .expect("state");
+            a.push_measurement(&TcpMeasurement {
+                stamp,
+                setup: "kgm1".into(),
+                instrument: TcpMeasurement::KGM,
+                reset: k == 0,
+                sigma: sigma_m,
+                ..TcpMeasurement::default()
+            })
+            .expect("measurement");
+        }
+        let stated = a.stated_noise(NoiseModel::default()).expect("valid σ");
+        assert!((stated.kgm_mm - 0.004).abs() < 1e-15, "{}", stated.kgm_mm);
+        assert_eq!(stated.li_mm, NoiseModel::default().li_mm);
+        let stamp = Time { sec: 9, nanosec: 0 };
+        a.push_state(&ActuatorState {
+            stamp,
+            ..ActuatorState::default()
+        })
+        .expect("state");
+        let e = a
+            .push_measurement(&TcpMeasurement {
+                stamp,
+                instrument: TcpMeasurement::KGM,
+                sigma: f64::NAN,
+                ..TcpMeasurement::default()
+            })
+            .expect_err("NaN σ");
+        assert!(e.to_string().contains("sigma NaN"), "{e}");
     }
 }

@@ -119,6 +119,9 @@ pub struct CalibratorOptions {
     pub max_condition: f64,
     /// Outlier threshold in σ (0: keep all).
     pub outlier_sigma: f64,
+    /// The noise stated for the readings before the campaign's own estimate (the spec's
+    /// defaults, with the σ the measurements state for themselves).
+    pub noise: rpkm_core::noise::NoiseModel,
 }
 
 /// Splits a campaign into its calibration and validation parts.
@@ -148,6 +151,7 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
     let mut opts = Options {
         model: o.start.model,
         outlier_sigma: (o.outlier_sigma > 0.0).then_some(o.outlier_sigma),
+        noise: o.noise.clone(),
         ..Default::default()
     };
     // the calibration every command shares: tolerance prior, noise estimated from the data
@@ -280,15 +284,17 @@ impl Accumulator {
         Ok(true)
     }
 
-    /// The campaign so far; the accumulator starts a new one (keeping the description).
-    pub fn take(&mut self) -> anyhow::Result<Campaign> {
+    /// The campaign so far and the noise its measurements state for themselves (over the
+    /// spec's defaults); the accumulator starts a new one (keeping the description).
+    pub fn take(&mut self) -> anyhow::Result<(Campaign, rpkm_core::noise::NoiseModel)> {
         let mut next = CampaignAssembler::new();
         if let Some(info) = &self.info {
             next.push_info(info)?;
         }
         let done = std::mem::replace(&mut self.assembler, next);
         self.measurements = 0;
-        Ok(done.finish()?)
+        let noise = done.stated_noise(rpkm_core::noise::NoiseModel::default())?;
+        Ok((done.finish()?, noise))
     }
 }
 
@@ -498,6 +504,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         outlier_sigma: p
             .f64_in("outlier_sigma", 0.0, super::params::OUTLIER_SIGMA, " σ")
             .map_err(bad_param)?,
+        noise: rpkm_core::noise::NoiseModel::default(),
     };
     let every = p
         .u64_in("calibrate_every", 0, super::params::MEASUREMENT_COUNT)
@@ -622,7 +629,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         }
         if end && acc.measurements > 0 {
             let n = acc.measurements;
-            let result = acc.take().and_then(|c| calibrate_campaign(&c, &options));
+            let result = acc.take().and_then(|(c, noise)| {
+                let stated = CalibratorOptions {
+                    noise,
+                    ..options.clone()
+                };
+                calibrate_campaign(&c, &stated)
+            });
             match result {
                 Ok(out) => {
                     calibrations += 1;
@@ -732,7 +745,9 @@ mod tests {
             acc.state(&s);
             assert!(acc.measurement(&m)?);
         }
-        let rebuilt = acc.take()?;
+        let (rebuilt, stated) = acc.take()?;
+        // The messages carry the spec's σ of each instrument: read back, it is the default.
+        assert_eq!(stated, rpkm_core::noise::NoiseModel::default());
         let o = CalibratorOptions {
             start: Geometry {
                 params: Params::nominal(),
@@ -744,6 +759,7 @@ mod tests {
             selection: "map".into(),
             max_condition: 100.0,
             outlier_sigma: 0.0,
+            noise: stated,
         };
         let out = calibrate_campaign(&rebuilt, &o)?;
         // Independent truth: the core on the original campaign without its held-out setup.
