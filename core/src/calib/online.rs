@@ -212,6 +212,18 @@ impl OnlineEstimator {
     pub fn sigma(&self, i: usize) -> f64 {
         self.cov[(i, i)].max(0.0).sqrt() * scale()[i]
     }
+    /// How far `p` lies from the estimate in the estimate's own covariance (√ of the
+    /// Mahalanobis distance over the 29 parameters): a move along a combination the forces
+    /// determine counts by its σ, not by the marginal σ of each parameter, which the
+    /// combinations the forces cannot see keep wide.
+    pub fn distance(&self, p: &Params) -> f64 {
+        let d = scale();
+        let pp = self.cov.fixed_view::<N_PARAMS, N_PARAMS>(0, 0).into_owned();
+        let dx = SVector::<f64, N_PARAMS>::from_fn(|i, _| (self.p[i] - p[i]) / d[i]);
+        pp.cholesky()
+            .map_or(f64::INFINITY, |c| dx.dot(&c.solve(&dx)).max(0.0).sqrt())
+    }
+
     /// Samples applied and outliers dropped so far.
     pub fn counts(&self) -> (usize, usize) {
         (self.applied, self.outliers)
@@ -361,12 +373,10 @@ impl OnlineEstimator {
         let c = 0.2 * step.change;
         self.cov[(step.param, step.param)] +=
             (c * c + step.sigma * step.sigma) / scale()[step.param].powi(2);
-        // the held samples again, linearised at the estimate as it moves
-        let held: Vec<ForceSample> = self.held.drain(..).map(|h| h.sample).collect();
-        for s in &held {
-            let h = self.linearise(s)?;
-            self.apply(&h);
-        }
+        // the held samples are spent on the step's size: through the filter again they
+        // would pull the combinations the forces cannot tell from the step (a start
+        // covariance without its correlations leaves them free) and move the TCP
+        self.held.clear();
         Ok(step)
     }
 
