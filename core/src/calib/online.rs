@@ -119,6 +119,12 @@ pub struct StepChange {
     /// How much better it explains the held innovations than the next best parameter
     /// (ratio of their χ² reductions).
     pub margin: f64,
+    /// The next best parameter when the margin stayed below
+    /// [`OnlineOptions::step_margin`] until [`OnlineOptions::step_max_samples`]: the path
+    /// could not tell the two apart (rods 1 and 3 move the forces alike everywhere on the
+    /// workspace: their force columns are 0.985 to 0.996 parallel over two minutes of path,
+    /// 0.9999 over any ten seconds), and the step is "this or that".
+    pub alternative: Option<usize>,
 }
 
 /// What one sample did.
@@ -364,7 +370,10 @@ impl OnlineEstimator {
 
     /// Names the step of the held samples, applies it, and the held samples after it.
     fn step_found(&mut self) -> Result<StepChange, ElasticError> {
-        let step = self.attribute_step();
+        let mut step = self.attribute_step();
+        if step.margin >= self.opts.step_margin {
+            step.alternative = None;
+        }
         // the step itself, then the held samples through the filter with the parameter's
         // variance opened by a fifth of it (a one-parameter fit of a few poses is close,
         // not exact): spreading the whole step over every parameter the forces see alike
@@ -405,6 +414,8 @@ impl OnlineEstimator {
             sigma: c[best].powf(-0.5) * d,
             since_s: self.held[0].sample.t,
             margin: gain(best) / gain(next).max(f64::MIN_POSITIVE),
+            // the runner-up, kept by the caller only while the margin is not clear
+            alternative: (next != best).then_some(next),
         }
     }
 

@@ -511,13 +511,23 @@ pub fn start_sigmas(geometry_file: &str) -> anyhow::Result<[f64; N_PARAMS]> {
 /// The WARN line of a report: the step, else the drifts (None when nothing moved enough).
 pub fn report_warning(r: &OnlineReport, temp_name: &str) -> Option<String> {
     if let Some(step) = &r.step {
-        let name = if step.param < N_PARAMS {
-            rpkm_core::params::NAMES[step.param]
-        } else {
-            "stiffness"
+        let name = |i: usize| {
+            if i < N_PARAMS {
+                rpkm_core::params::NAMES[i]
+            } else {
+                "stiffness"
+            }
+        };
+        let (who, why) = match step.alternative {
+            // the path so far moved the forces alike for both: say so, do not pick
+            Some(other) => (
+                format!("{} or {}", name(step.param), name(other)),
+                "the path cannot tell them apart",
+            ),
+            None => (name(step.param).to_owned(), "next best"),
         };
         return Some(format!(
-            "step change at t = {:.1} s: {name} {:+.0} µm (next best explains {:.2}x less)",
+            "step change at t = {:.1} s: {who} {:+.0} µm ({why}: explains {:.2}x less)",
             step.since_s,
             step.change * 1e3,
             step.margin
