@@ -906,7 +906,8 @@ mod tests {
         assert!(tracker.error.is_none(), "{:?}", tracker.error);
         let (t, w, moved) = warned.ok_or_else(|| anyhow::anyhow!("no step reported"))?;
         assert!(t - 30.0 <= 10.0, "reported at {t} s");
-        assert!(w.contains("l3 +"), "{w}");
+        // l3, alone or with l1 that the forces cannot tell from it
+        assert!(w.contains("l3 +") || w.contains("l3 or l1 +"), "{w}");
         assert!((moved - 0.1).abs() < 0.02, "l3 moved {moved} mm");
         Ok(())
     }
