@@ -120,6 +120,12 @@ pub struct StepChange {
     /// How much better it explains the held innovations than the next best parameter
     /// (ratio of their χ² reductions).
     pub margin: f64,
+    /// The next best parameter when the margin stayed below
+    /// [`OnlineOptions::step_margin`] until [`OnlineOptions::step_max_samples`]: the path
+    /// could not tell the two apart (rods 1 and 3 move the forces alike everywhere on the
+    /// workspace: their force columns are 0.985 to 0.996 parallel over two minutes of path,
+    /// 0.9999 over any ten seconds), and the step is "this or that".
+    pub alternative: Option<usize>,
 }
 
 /// What one sample did.
@@ -213,6 +219,18 @@ impl OnlineEstimator {
     pub fn sigma(&self, i: usize) -> f64 {
         self.cov[(i, i)].max(0.0).sqrt() * scale()[i]
     }
+    /// How far `p` lies from the estimate in the estimate's own covariance (√ of the
+    /// Mahalanobis distance over the 29 parameters): a move along a combination the forces
+    /// determine counts by its σ, not by the marginal σ of each parameter, which the
+    /// combinations the forces cannot see keep wide.
+    pub fn distance(&self, p: &Params) -> f64 {
+        let d = scale();
+        let pp = self.cov.fixed_view::<N_PARAMS, N_PARAMS>(0, 0).into_owned();
+        let dx = SVector::<f64, N_PARAMS>::from_fn(|i, _| (self.p[i] - p[i]) / d[i]);
+        pp.cholesky()
+            .map_or(f64::INFINITY, |c| dx.dot(&c.solve(&dx)).max(0.0).sqrt())
+    }
+
     /// Samples applied and outliers dropped so far.
     pub fn counts(&self) -> (usize, usize) {
         (self.applied, self.outliers)
@@ -353,7 +371,10 @@ impl OnlineEstimator {
 
     /// Names the step of the held samples, applies it, and the held samples after it.
     fn step_found(&mut self) -> Result<StepChange, ElasticError> {
-        let step = self.attribute_step();
+        let mut step = self.attribute_step();
+        if step.margin >= self.opts.step_margin {
+            step.alternative = None;
+        }
         // the step itself, then the held samples through the filter with the parameter's
         // variance opened by a fifth of it (a one-parameter fit of a few poses is close,
         // not exact): spreading the whole step over every parameter the forces see alike
@@ -362,12 +383,10 @@ impl OnlineEstimator {
         let c = 0.2 * step.change;
         self.cov[(step.param, step.param)] +=
             (c * c + step.sigma * step.sigma) / scale()[step.param].powi(2);
-        // the held samples again, linearised at the estimate as it moves
-        let held: Vec<ForceSample> = self.held.drain(..).map(|h| h.sample).collect();
-        for s in &held {
-            let h = self.linearise(s)?;
-            self.apply(&h);
-        }
+        // the held samples are spent on the step's size: through the filter again they
+        // would pull the combinations the forces cannot tell from the step (a start
+        // covariance without its correlations leaves them free) and move the TCP
+        self.held.clear();
         Ok(step)
     }
 
@@ -396,6 +415,8 @@ impl OnlineEstimator {
             sigma: c[best].powf(-0.5) * d,
             since_s: self.held[0].sample.t,
             margin: gain(best) / gain(next).max(f64::MIN_POSITIVE),
+            // the runner-up, kept by the caller only while the margin is not clear
+            alternative: (next != best).then_some(next),
         }
     }
 

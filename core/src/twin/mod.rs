@@ -24,7 +24,7 @@ pub mod production;
 mod stream;
 
 pub use effects::EffectKind;
-pub use production::{ProductionConfig, ProductionSample, ProductionStream, StepChange};
+pub use production::{Creep, ProductionConfig, ProductionSample, ProductionStream, StepChange};
 pub use stream::{DriveSample, DriveStream};
 
 use crate::campaign::{Campaign, Instrument, Pose};

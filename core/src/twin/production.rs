@@ -25,6 +25,17 @@ pub struct StepChange {
     pub change: f64,
 }
 
+/// A parameter that creeps with the machine temperature beyond the thermal expansion (a
+/// clamping that slips as the frame warms, a guide that bends): its change from the start
+/// is `per_k` times the temperature's.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Creep {
+    /// Parameter index.
+    pub param: usize,
+    /// mm (rad for an angle) per K.
+    pub per_k: f64,
+}
+
 /// What the production stream does.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ProductionConfig {
@@ -43,6 +54,7 @@ pub struct ProductionConfig {
     /// σ of the drive forces read from the motor currents, N (the stream's own).
     pub force_noise_n: f64,
     pub step: Option<StepChange>,
+    pub creep: Option<Creep>,
     /// Seed of the path and the noise.
     pub seed: u64,
 }
@@ -61,6 +73,7 @@ impl Default for ProductionConfig {
             ripple_k: 0.2,
             force_noise_n: 3.0,
             step: None,
+            creep: None,
             seed: 1,
         }
     }
@@ -145,6 +158,9 @@ impl<'a> ProductionStream<'a> {
         let mut p = self.twin.effective(self.cfg.temperature(t), s1, s4);
         if let Some(step) = self.cfg.step.filter(|s| t >= s.at_s) {
             p[step.param] += step.change;
+        }
+        if let Some(c) = self.cfg.creep {
+            p[c.param] += c.per_k * (self.cfg.temperature(t) - self.cfg.start_temp_c);
         }
         p
     }
