@@ -209,6 +209,10 @@ fn rms_in(values: &[(usize, f64)], truth: &[Truth], from: f64, to: f64) -> f64 {
 }
 
 #[test]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
 fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash() {
     let dir = TempDir::new("online_follow");
     // the start: a calibration of the same twin (seed) as a user makes one, tracker,
@@ -250,7 +254,11 @@ fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash()
     let no_crash = read_truth(&dir.path("calm.truth.csv"));
     let csv = dir.path("prod.csv");
     let truth = read_truth(&dir.path("prod.truth.csv"));
-    assert_eq!(truth.len(), (SECONDS * ROWS_HZ) as usize, "truth rows");
+    assert_eq!(
+        truth.len(),
+        rpkm_core::convert::round_count(SECONDS * ROWS_HZ),
+        "truth rows"
+    );
     let geometry = dir.path("start.json");
     let start = rpkm::input::read_params(&geometry).expect("start calibration");
     let obs = observe(&launch_files(&dir, &csv, &geometry), &truth);

@@ -346,7 +346,7 @@ impl OnlineEstimator {
         if nis <= GATE_CHI2_4 {
             if self.held.len() >= self.opts.step_samples.max(1) {
                 // a step the path has moved away from: named with what was held
-                let step = self.step_found()?;
+                let step = self.step_found();
                 let again = self.linearise(sample)?;
                 self.apply(&again);
                 return Ok(Outcome::Step(step));
@@ -366,11 +366,11 @@ impl OnlineEstimator {
         if margin < self.opts.step_margin && self.held.len() < self.opts.step_max_samples {
             return Ok(Outcome::Held { nis });
         }
-        Ok(Outcome::Step(self.step_found()?))
+        Ok(Outcome::Step(self.step_found()))
     }
 
     /// Names the step of the held samples, applies it, and the held samples after it.
-    fn step_found(&mut self) -> Result<StepChange, ElasticError> {
+    fn step_found(&mut self) -> StepChange {
         let mut step = self.attribute_step();
         if step.margin >= self.opts.step_margin {
             step.alternative = None;
@@ -387,7 +387,7 @@ impl OnlineEstimator {
         // would pull the combinations the forces cannot tell from the step (a start
         // covariance without its correlations leaves them free) and move the TCP
         self.held.clear();
-        Ok(step)
+        step
     }
 
     /// The single state that best explains the held innovations (least squares of each

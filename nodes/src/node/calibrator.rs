@@ -412,7 +412,8 @@ struct OnlineWorker {
 }
 
 impl OnlineWorker {
-    fn start(start: Params, settings: OnlineSettings) -> anyhow::Result<OnlineWorker> {
+    fn start(start: Params, settings: &OnlineSettings) -> anyhow::Result<OnlineWorker> {
+        let tracker_settings = *settings;
         let (tx, samples) = std::sync::mpsc::sync_channel::<(ForceSample, f64)>(256);
         let (reports, rx) = std::sync::mpsc::channel();
         std::thread::Builder::new()
@@ -424,7 +425,7 @@ impl OnlineWorker {
                 unsafe {
                     libc::setpriority(libc::PRIO_PROCESS, 0, 19);
                 }
-                let mut tracker = OnlineTracker::new(&start, settings);
+                let mut tracker = OnlineTracker::new(&start, tracker_settings);
                 let mut told = false;
                 while let Ok((s, temp)) = samples.recv() {
                     if let Some(r) = tracker.sample(&s, temp) {
@@ -592,7 +593,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 ..OnlineOptions::default()
             },
         };
-        Some(OnlineWorker::start(options.start.params, settings)?)
+        Some(OnlineWorker::start(options.start.params, &settings)?)
     } else {
         None
     };
