@@ -43,6 +43,19 @@ pub enum CdrError {
     },
 }
 
+/// Encodes `msg` into `out` (cleared first, its capacity kept: the bag writer's one buffer):
+/// header `00 01 00 00`, then the little-endian CDR body.
+pub fn to_cdr_into<T: Serialize>(msg: &T, out: &mut Vec<u8>) -> Result<(), CdrError> {
+    out.clear();
+    out.extend_from_slice(&CDR_LE_HEADER);
+    cdr_encoding::to_writer::<T, byteorder::LittleEndian, _>(&mut *out, msg).map_err(|e| {
+        CdrError::Encode {
+            type_name: std::any::type_name::<T>(),
+            reason: e.to_string(),
+        }
+    })
+}
+
 /// Encodes `msg` as header `00 01 00 00` followed by its little-endian CDR body.
 pub fn to_cdr<T: Serialize>(msg: &T) -> Result<Vec<u8>, CdrError> {
     let body =

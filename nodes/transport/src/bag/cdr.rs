@@ -1,37 +1,20 @@
-//! CDR payloads as ROS 2 stores them: a 4-byte encapsulation header then the CDR body.
+//! CDR payloads as ROS 2 stores them: the one codec of the workspace, `rpkm_msgs::cdr`, with
+//! the bag's names.
 
-use byteorder::{BigEndian, LittleEndian};
 use serde::{de::DeserializeOwned, Serialize};
 
-use super::error::CdrError;
-
-/// Encapsulation header of little-endian plain CDR (`CDR_LE`, options 0).
-const CDR_LE_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
+pub use rpkm_msgs::cdr::CdrError;
 
 /// Serialises `message` into `out` (cleared first): `00 01 00 00` then little-endian CDR.
 pub fn encode_cdr<T: Serialize>(message: &T, out: &mut Vec<u8>) -> Result<(), CdrError> {
-    out.clear();
-    out.extend_from_slice(&CDR_LE_HEADER);
-    cdr_encoding::to_writer::<T, LittleEndian, _>(&mut *out, message)
-        .map_err(|source| CdrError::Serialize { source })
+    rpkm_msgs::cdr::to_cdr_into(message, out)
 }
 
 /// Deserialises a payload with its encapsulation header (`CDR_LE` or `CDR_BE`).
 ///
 /// Bytes after the value (alignment padding) are ignored, as ROS 2 readers do.
 pub fn decode_cdr<T: DeserializeOwned>(payload: &[u8]) -> Result<T, CdrError> {
-    let (header, body) = match payload {
-        [a, b, _, _, body @ ..] => ([*a, *b], body),
-        _ => return Err(CdrError::TooShort { len: payload.len() }),
-    };
-    let decoded = match header {
-        [0x00, 0x01] => cdr_encoding::from_bytes::<T, LittleEndian>(body),
-        [0x00, 0x00] => cdr_encoding::from_bytes::<T, BigEndian>(body),
-        other => return Err(CdrError::UnsupportedEncapsulation { header: other }),
-    };
-    decoded
-        .map(|(value, _consumed)| value)
-        .map_err(|source| CdrError::Deserialize { source })
+    rpkm_msgs::cdr::from_cdr(payload)
 }
 
 #[cfg(test)]
@@ -56,7 +39,7 @@ mod tests {
         };
         let mut buf = Vec::new();
         encode_cdr(&value, &mut buf).expect("encodes");
-        assert_eq!(&buf[..4], &CDR_LE_HEADER);
+        assert_eq!(&buf[..4], &rpkm_msgs::cdr::CDR_LE_HEADER);
         // u8 at 0, f64 aligned to 8 (relative to the body), string length at 16.
         assert_eq!(&buf[4 + 8..4 + 16], &(-1.25e-3f64).to_le_bytes());
         let back: Sample = decode_cdr(&buf).expect("decodes");
@@ -67,15 +50,15 @@ mod tests {
     fn short_and_foreign_payloads_are_errors() {
         assert!(matches!(
             decode_cdr::<Sample>(&[0, 1]),
-            Err(CdrError::TooShort { len: 2 })
+            Err(CdrError::Truncated { len: 2 })
         ));
         assert!(matches!(
             decode_cdr::<Sample>(&[0, 0x11, 0, 0, 1]),
-            Err(CdrError::UnsupportedEncapsulation { header: [0, 0x11] })
+            Err(CdrError::Encapsulation { found: [0, 0x11] })
         ));
         assert!(matches!(
             decode_cdr::<Sample>(&[0, 1, 0, 0, 1]),
-            Err(CdrError::Deserialize { .. })
+            Err(CdrError::Body { .. })
         ));
     }
 }

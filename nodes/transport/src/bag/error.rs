@@ -2,22 +2,7 @@
 
 use std::path::PathBuf;
 
-/// A CDR payload that could not be encoded or decoded.
-#[derive(Debug, thiserror::Error)]
-pub enum CdrError {
-    /// Fewer bytes than the 4-byte encapsulation header.
-    #[error("payload of {len} bytes is shorter than the 4-byte CDR encapsulation header")]
-    TooShort { len: usize },
-    /// An encapsulation other than plain CDR (`00 00` big endian, `00 01` little endian).
-    #[error("unsupported CDR encapsulation {header:02x?} (expected [00, 01] or [00, 00])")]
-    UnsupportedEncapsulation { header: [u8; 2] },
-    /// The serialiser failed.
-    #[error("CDR serialisation failed: {source}")]
-    Serialize { source: cdr_encoding::Error },
-    /// The body does not hold a value of the expected type.
-    #[error("CDR deserialisation failed: {source}")]
-    Deserialize { source: cdr_encoding::Error },
-}
+pub use super::cdr::CdrError;
 
 /// Errors of [`BagWriter`](super::BagWriter).
 #[derive(Debug, thiserror::Error)]
