@@ -214,8 +214,21 @@ pub struct Corrections {
 
 impl Corrections {
     /// The change at pose `i` (none without effects).
+    ///
+    /// # Panics
+    /// If effects are bound and `i` is not a pose of the campaign they were bound to: a
+    /// correction of another campaign's pose would be a wrong number, not a missing one.
     pub fn delta(&self, i: usize) -> Delta {
-        self.poses.get(i).map(|d| d.0).unwrap_or_default()
+        if self.poses.is_empty() {
+            return Delta::default();
+        }
+        match self.poses.get(i) {
+            Some(d) => d.0,
+            None => panic!(
+                "effect corrections of {} poses asked for pose {i}: bound to another campaign",
+                self.poses.len()
+            ),
+        }
     }
 
     /// ∂value/∂θ over every effect parameter of a value with input sensitivities `at`
