@@ -155,11 +155,11 @@ impl ParamDecl {
 /// refuses the set.
 pub type Check = dyn Fn(&BTreeMap<String, ParameterValue>) -> Result<(), String> + Send;
 
-/// The running parameter services of one node.
+/// The running parameter services of one node: a task on the node's DDS runtime.
 pub struct ParamServer {
     changes: mpsc::Receiver<Vec<(String, ParameterValue)>>,
     stop: Option<futures::channel::oneshot::Sender<()>>,
-    thread: Option<std::thread::JoinHandle<()>>,
+    task: Option<tokio::task::JoinHandle<()>>,
 }
 
 impl std::fmt::Debug for ParamServer {
@@ -181,8 +181,10 @@ impl Drop for ParamServer {
         if let Some(stop) = self.stop.take() {
             let _ = stop.send(());
         }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
+        // The task ends at its next poll, on the runtime's thread; waiting for it here
+        // keeps the servers from answering for a node that is gone.
+        if let Some(task) = self.task.take() {
+            let _ = futures::executor::block_on(task);
         }
     }
 }
@@ -453,9 +455,9 @@ async fn serve(s: Servers, mut svc: Service, stop: futures::channel::oneshot::Re
 }
 
 impl DdsNode {
-    /// Declares `decls` and starts the six parameter services on a thread of their own (an
-    /// async loop that sleeps until a request arrives: nothing of it runs on the node's
-    /// sample path). `check` sees every proposed set after the per-parameter rules.
+    /// Declares `decls` and starts the six parameter services as a task on the node's tokio
+    /// runtime (it sleeps until a request arrives: nothing of it runs on the node's sample
+    /// path). `check` sees every proposed set after the per-parameter rules.
     pub fn serve_parameters(
         self: &Arc<Self>,
         decls: Vec<ParamDecl>,
@@ -488,14 +490,11 @@ impl DdsNode {
             node: Arc::clone(self),
             changes: tx,
         };
-        let thread = std::thread::Builder::new()
-            .name("rpkm-params".into())
-            .spawn(move || futures::executor::block_on(serve(servers, svc, stop_rx)))
-            .map_err(|e| err(e.to_string()))?;
+        let task = self.runtime().spawn(serve(servers, svc, stop_rx));
         Ok(ParamServer {
             changes: rx,
             stop: Some(stop_tx),
-            thread: Some(thread),
+            task: Some(task),
         })
     }
 }
