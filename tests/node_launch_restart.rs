@@ -12,6 +12,7 @@
 mod node_support;
 
 use std::collections::{BTreeSet, HashMap};
+use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -163,4 +164,78 @@ fn sigkilled_estimator_is_restarted_and_rejoins_while_the_stream_goes_on() {
         worst_error_m < 1e-9,
         "estimates match the twin's truth: {worst_error_m} m"
     );
+}
+
+/// SIGTERM to `rpkm launch` (its tokio signal stream): SIGTERM to every node, each stops
+/// cleanly (exit 0, not killed: the grace is 5 s), the launch exits 0, and no node process
+/// is left (their pids are gone from /proc).
+#[test]
+fn sigterm_stops_every_node_cleanly_and_the_launch_exits_0() {
+    let dir = TempDir::new("launch_term");
+    let launch = dir.path("term.launch.yaml");
+    std::fs::write(
+        &launch,
+        "launch:\n  - node: {pkg: rpkm, exec: tcp_estimator, respawn: true}\n  \
+         - node: {pkg: rpkm, exec: preload_monitor}\n",
+    )
+    .expect("launch file");
+    let prefix = unique("term");
+    let mut launched = Launch::start(&launch, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
+    // The nodes' own first lines, in whichever order: their signal handlers are installed
+    // before them.
+    let up = Instant::now() + Duration::from_secs(60);
+    let logged = |needle: &str| {
+        let log = launched.log.lock().expect("log");
+        log.iter().any(|l| l.contains(needle))
+    };
+    while !(logged("[tcp_estimator] estimating with")
+        && logged("[preload_monitor] monitoring with"))
+    {
+        assert!(Instant::now() < up, "the nodes did not start within 60 s");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let pids: Vec<u32> = ["tcp_estimator", "preload_monitor"]
+        .iter()
+        .flat_map(|n| launched.started(n))
+        .collect();
+    assert_eq!(pids.len(), 2, "one start each: {pids:?}");
+    let term = Command::new("kill")
+        .args(["-TERM", &launched.child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(term.success());
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(s) = launched.child.try_wait().expect("wait") {
+            break s;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "rpkm launch did not exit within 30 s of SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert_eq!(status.code(), Some(0), "launch exit status {status:?}");
+    // Its stderr is read to the end on another thread: the last lines may still be on the way.
+    let done = Instant::now() + Duration::from_secs(10);
+    while !logged("[launch] preload_monitor exited") && Instant::now() < done {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    for line in [
+        "[launch] SIGTERM received",
+        "[launch] tcp_estimator exited with code 0",
+        "[launch] preload_monitor exited with code 0",
+    ] {
+        assert!(
+            logged(line),
+            "no line {line:?} in {:?}",
+            launched.log.lock().expect("log")
+        );
+    }
+    for pid in pids {
+        assert!(
+            !Path::new(&format!("/proc/{pid}")).exists(),
+            "node pid {pid} still exists after the launch ended"
+        );
+    }
 }

@@ -304,3 +304,235 @@ fn a_cyclone_peer_reads_and_sets_the_estimators_parameters() {
     let rosout = next_line(&rx, "rosout");
     assert_eq!(rosout["rosout"]["name"], "rpkm.tcp_estimator");
 }
+
+/// A CSV row of ingest's stdin at `t` s: the nominal machine at (0, 1700) mm, drive forces
+/// `f` N (the validator judges their size, not their physics).
+fn ingest_row(t: f64, f: [f64; 4]) -> String {
+    let q = igm(&Params::nominal(), Model::M29, 0.0, 1700.0)
+        .expect("igm")
+        .q();
+    format!(
+        "{t},A,none,0,{},{},{},{},{},{},{},{},,,,,\n",
+        q[0], q[1], q[2], q[3], f[0], f[1], f[2], f[3]
+    )
+}
+
+/// The stamps (s) of the ActuatorStates ingest publishes, until the one at `until` s.
+fn states_until(
+    states: &rpkm_transport::Subscriber<ActuatorState>,
+    until: f64,
+    what: &str,
+) -> Vec<f64> {
+    let mut seen = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while Instant::now() < deadline {
+        while let Some(s) = states.try_recv().expect("recv") {
+            let t = f64::from(s.stamp.sec) + f64::from(s.stamp.nanosec) * 1e-9;
+            seen.push(t);
+            if (t - until).abs() < 1e-6 {
+                return seen;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    panic!("{what}: no ActuatorState stamped {until} s within 30 s (seen {seen:?})");
+}
+
+/// ingest on the same services: `force_max_n` set live judges the next row (a row within the
+/// default 43,000 N passes, the same row after the set to 2,500 N is rejected, a smaller one
+/// passes); `source` is read-only, a minimum position above the maximum is refused.
+#[test]
+#[expect(
+    clippy::too_many_lines,
+    reason = "an end-to-end scenario, read top to bottom"
+)]
+fn a_cyclone_peer_sets_an_ingest_limit_and_the_next_row_is_judged_by_it() {
+    use std::io::Write;
+    let Some(py) = python() else { return };
+    let dir = TempDir::new("ros2params_ingest");
+    let prefix = unique("r2pi");
+    let t = Transport::new(&TransportConfig::new(unique("obs")).ipc_prefix(&prefix))
+        .expect("transport");
+    let states = t.subscriber(&topic::ACTUATOR_STATE).expect("sub");
+    let mut node = Proc(
+        Command::new(rpkm())
+            .args(["node", "ingest", "--backend", "both", "--source", "stdin"])
+            .args(["--param", "start_delay_s=0"])
+            .env("RPKM_IPC_PREFIX", &prefix)
+            .env("ROS_DOMAIN_ID", DOMAIN)
+            .stdin(Stdio::piped())
+            .spawn()
+            .expect("start ingest"),
+    );
+    let mut stdin = node.0.stdin.take().expect("ingest stdin");
+    let big = [1000.0, -2000.0, 3000.0, -1500.0];
+    let small = [1000.0, -2000.0, 2000.0, -1500.0];
+    stdin
+        .write_all(b"t,setup,instrument,reset,q1,q2,q3,q4,f1,f2,f3,f4,follower,x,y,r,psi\n")
+        .expect("header");
+    stdin
+        .write_all(ingest_row(100.0, big).as_bytes())
+        .expect("row");
+    stdin.flush().expect("flush");
+    assert_eq!(states_until(&states, 100.0, "before the set"), [100.0]);
+
+    let script = serde_json::json!([
+        {"list": true},
+        {"get": ["force_max_n", "source", "view_every"]},
+        {"describe": ["force_max_n", "rate_hz", "source"]},
+        {"set": {"force_max_n": -1.0}},
+        {"set": {"source": "dds"}},
+        {"set": {"position_min_m": 10.0}},
+        {"set": {"force_max_n": 2500.0}},
+        {"await_event": "force_max_n"},
+        {"await_rosout": "parameters set: force_max_n"},
+    ]);
+    let (_peer, rx) = peer(&py, &dir, "/rpkm/ingest", &script);
+    let list = next_line(&rx, "list");
+    let names: Vec<&str> = list["list"]
+        .as_array()
+        .expect("names")
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    for key in rpkm::node::ingest::KEYS
+        .iter()
+        .chain(&["backend", "input_backend"])
+    {
+        assert!(names.contains(key), "{key} not listed: {names:?}");
+    }
+    assert_eq!(
+        next_line(&rx, "get")["get"],
+        serde_json::json!({"force_max_n": [3, 43000.0], "source": [4, "stdin"],
+            "view_every": [2, 100]})
+    );
+    let d = &next_line(&rx, "describe")["describe"];
+    assert_eq!(d["force_max_n"]["read_only"], false);
+    assert_eq!(d["rate_hz"]["read_only"], true);
+    assert_eq!(
+        d["rate_hz"]["float_range"],
+        serde_json::json!([[0.001, 1e6]])
+    );
+    assert_eq!(d["source"]["read_only"], true);
+    let refused = |v: &Value, key: &str, why: &str| {
+        let r = &v["set"][key];
+        assert_eq!(r[0], false, "{key} must be refused: {v}");
+        let reason = r[1].as_str().unwrap_or_default();
+        assert!(reason.contains(why), "{key}: {reason:?} lacks {why:?}");
+    };
+    refused(&next_line(&rx, "set -1"), "force_max_n", "> 0");
+    refused(&next_line(&rx, "set source"), "source", "read-only");
+    refused(
+        &next_line(&rx, "set min 10"),
+        "position_min_m",
+        "below position_max_m",
+    );
+    let set = next_line(&rx, "set 2500");
+    assert_eq!(set["set"]["force_max_n"], serde_json::json!([true, ""]));
+    let event = next_line(&rx, "event");
+    assert_eq!(event["event"]["node"], "/rpkm/ingest");
+    assert_eq!(event["event"]["value"], serde_json::json!([3, 2500.0]));
+    // The node logs the line once it has taken the change: the next row is judged by it.
+    let rosout = next_line(&rx, "rosout");
+    assert_eq!(rosout["rosout"]["name"], "rpkm.ingest");
+
+    stdin
+        .write_all(ingest_row(100.001, big).as_bytes())
+        .expect("row");
+    stdin
+        .write_all(ingest_row(100.002, small).as_bytes())
+        .expect("row");
+    stdin.flush().expect("flush");
+    assert_eq!(
+        states_until(&states, 100.002, "after the set"),
+        [100.002],
+        "the 3,000 N row must be rejected at 2,500 N, the 2,000 N row pass"
+    );
+}
+
+/// The calibrator on the same services: what the next calibration uses is live, the state
+/// buffer and the online tracker need a restart, a selection other than map or auto and an
+/// outlier threshold beyond 100 σ are refused.
+#[test]
+fn a_cyclone_peer_reads_and_sets_the_calibrators_parameters() {
+    let Some(py) = python() else { return };
+    let dir = TempDir::new("ros2params_cal");
+    let prefix = unique("r2pc");
+    let _node = Proc(
+        Command::new(rpkm())
+            .args(["node", "calibrator", "--backend", "both"])
+            .args(["--input-backend", "ipc", "--param", "calibrate_every=40"])
+            .env("RPKM_IPC_PREFIX", &prefix)
+            .env("ROS_DOMAIN_ID", DOMAIN)
+            .spawn()
+            .expect("start calibrator"),
+    );
+    let script = serde_json::json!([
+        {"list": true},
+        {"get": ["calibrate_every", "selection", "state_buffer", "model"]},
+        {"describe": ["outlier_sigma", "state_buffer", "calibrate_every"]},
+        {"set": {"selection": "best"}},
+        {"set": {"state_buffer": 10}},
+        {"set": {"outlier_sigma": 200.0}},
+        {"set": {"selection": "auto"}},
+        {"await_event": "selection"},
+        {"await_rosout": "parameters set: selection"},
+        {"get": ["selection"]},
+    ]);
+    let (_peer, rx) = peer(&py, &dir, "/rpkm/calibrator", &script);
+    let list = next_line(&rx, "list");
+    let names = list["list"].as_array().expect("names");
+    for key in [
+        "calibrate_every",
+        "selection",
+        "outlier_sigma",
+        "state_buffer",
+        "online",
+    ] {
+        assert!(names.iter().any(|n| n == key), "{key} not listed: {list}");
+    }
+    assert_eq!(
+        next_line(&rx, "get")["get"],
+        serde_json::json!({"calibrate_every": [2, 40], "selection": [4, "map"],
+            "state_buffer": [2, 4096], "model": [2, 29]})
+    );
+    let d = &next_line(&rx, "describe")["describe"];
+    assert_eq!(
+        d["outlier_sigma"]["float_range"],
+        serde_json::json!([[0.0, 100.0]])
+    );
+    assert_eq!(d["outlier_sigma"]["read_only"], false);
+    assert_eq!(d["state_buffer"]["read_only"], true);
+    assert_eq!(
+        d["calibrate_every"]["integer_range"],
+        serde_json::json!([[0, 1_000_000]])
+    );
+    let refused = |v: &Value, key: &str, why: &str| {
+        let r = &v["set"][key];
+        assert_eq!(r[0], false, "{key} must be refused: {v}");
+        let reason = r[1].as_str().unwrap_or_default();
+        assert!(reason.contains(why), "{key}: {reason:?} lacks {why:?}");
+    };
+    refused(
+        &next_line(&rx, "set best"),
+        "selection",
+        "expected map or auto",
+    );
+    refused(&next_line(&rx, "set buffer"), "state_buffer", "read-only");
+    refused(
+        &next_line(&rx, "set 200 sigma"),
+        "outlier_sigma",
+        "out of range",
+    );
+    let set = next_line(&rx, "set auto");
+    assert_eq!(set["set"]["selection"], serde_json::json!([true, ""]));
+    let event = next_line(&rx, "event");
+    assert_eq!(event["event"]["node"], "/rpkm/calibrator");
+    assert_eq!(event["event"]["value"], serde_json::json!([4, "auto"]));
+    let rosout = next_line(&rx, "rosout");
+    assert_eq!(rosout["rosout"]["name"], "rpkm.calibrator");
+    assert_eq!(
+        next_line(&rx, "get after")["get"],
+        serde_json::json!({"selection": [4, "auto"]})
+    );
+}

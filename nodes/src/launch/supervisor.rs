@@ -8,18 +8,28 @@
 //!   are removed (a SIGKILLed node leaves its shared memory behind);
 //! - SIGINT/SIGTERM: SIGTERM to every node, SIGKILL after 5 s for those still running.
 //!
+//! One tokio select loop on a current-thread runtime waits for whichever comes first: a
+//! signal (`tokio::signal`), a node's exit (`tokio::process`, reaped on SIGCHLD, no
+//! polling), or the next restart time (`tokio::time`). Children are killed on drop, so an
+//! error that ends the launch early leaves no node behind.
+//!
 //! Events go to stderr as `[launch] ...` lines: `started NAME pid PID`, `NAME pid PID
 //! exited ...`, `restarting NAME in S s`.
 
+use std::future::Future;
 use std::os::unix::process::ExitStatusExt;
 use std::path::Path;
-use std::process::{Child, Command, ExitStatus};
-use std::time::{Duration, Instant};
+use std::pin::Pin;
+use std::process::ExitStatus;
+use std::task::Poll;
+use std::time::Duration;
 
 use anyhow::Context;
+use tokio::process::{Child, Command};
+use tokio::signal::unix::{signal, Signal, SignalKind};
+use tokio::time::Instant;
 
 use super::{LaunchDescription, NodeSpec};
-use crate::node::shutdown;
 
 /// A node's crash within this time of its start doubles the next restart delay.
 const QUICK_CRASH: Duration = Duration::from_secs(10);
@@ -27,12 +37,17 @@ const QUICK_CRASH: Duration = Duration::from_secs(10);
 const MAX_DELAY: Duration = Duration::from_secs(5);
 /// Time the nodes get to stop after SIGTERM.
 const STOP_TIMEOUT: Duration = Duration::from_secs(5);
-/// Supervision period.
-const TICK: Duration = Duration::from_millis(10);
 
 enum State {
-    Running { child: Child, since: Instant },
-    Waiting { until: Instant },
+    /// `pid` as it was at the start: tokio forgets it once the child is reaped.
+    Running {
+        child: Child,
+        pid: u32,
+        since: Instant,
+    },
+    Waiting {
+        until: Instant,
+    },
     Done,
 }
 
@@ -60,10 +75,16 @@ fn spawn(exe: &Path, spec: &NodeSpec, env: &[(String, String)]) -> anyhow::Resul
     let mut cmd = Command::new(exe);
     cmd.args(spec.argv());
     cmd.envs(env.iter().map(|(k, v)| (k, v)));
+    // A launch that ends on an error (or a panic) takes its nodes with it.
+    cmd.kill_on_drop(true);
     let child = cmd
         .spawn()
         .with_context(|| format!("starting node {} ({})", spec.name, exe.display()))?;
-    log(format!("started {} pid {}", spec.name, child.id()));
+    log(format!(
+        "started {} pid {}",
+        spec.name,
+        child.id().unwrap_or_default()
+    ));
     Ok(child)
 }
 
@@ -83,12 +104,15 @@ fn cleanup_dead() {
     }
 }
 
-fn signal(child: &Child, sig: libc::c_int) {
-    if let Ok(pid) = libc::pid_t::try_from(child.id()) {
-        // SAFETY: kill(2) on the pid of our own child, which has not been reaped yet (we hold
-        // its `Child` and only reap through it), so the pid cannot have been reused.
+/// SIGTERM to a running child.
+fn terminate(child: &Child) {
+    // `id()` is `None` once the child was reaped: then there is no process to signal, and
+    // its pid may belong to another process already.
+    if let Some(pid) = child.id().and_then(|p| libc::pid_t::try_from(p).ok()) {
+        // SAFETY: kill(2) on the pid of our own child, which has not been reaped yet (tokio
+        // reaps it only inside `wait`, which this task is not in), so the pid is still ours.
         unsafe {
-            libc::kill(pid, sig);
+            libc::kill(pid, libc::SIGTERM);
         }
     }
 }
@@ -127,32 +151,31 @@ fn reaped(n: &mut Supervised<'_>, status: ExitStatus, lived: Duration, failed: &
 }
 
 /// SIGTERM to every running node, SIGKILL to those still running after [`STOP_TIMEOUT`].
-fn stop_all(nodes: &mut [Supervised<'_>]) {
+async fn stop_all(nodes: &mut [Supervised<'_>]) {
     log("stopping every node");
     for n in nodes.iter() {
         if let State::Running { child, .. } = &n.state {
-            signal(child, libc::SIGTERM);
+            terminate(child);
         }
     }
     let deadline = Instant::now() + STOP_TIMEOUT;
     for n in nodes.iter_mut() {
         if let State::Running { child, .. } = &mut n.state {
-            loop {
-                match child.try_wait() {
-                    Ok(Some(status)) => {
-                        log(format!("{} {}", n.spec.name, describe(status)));
-                        break;
-                    }
-                    Ok(None) if Instant::now() < deadline => std::thread::sleep(TICK),
-                    _ => {
-                        log(format!("{} did not stop: SIGKILL", n.spec.name));
-                        let _ = child.kill();
-                        let _ = child.wait();
-                        break;
+            match tokio::time::timeout_at(deadline, child.wait()).await {
+                Ok(Ok(status)) => log(format!("{} {}", n.spec.name, describe(status))),
+                outcome => {
+                    let why = match outcome {
+                        Ok(Err(e)) => format!("could not be waited for ({e})"),
+                        _ => format!("did not stop within {} s", STOP_TIMEOUT.as_secs()),
+                    };
+                    log(format!("{} {why}: SIGKILL", n.spec.name));
+                    if let Err(e) = child.kill().await {
+                        log(format!("{}: SIGKILL failed: {e}", n.spec.name));
                     }
                 }
             }
         }
+        n.state = State::Done;
     }
     cleanup_dead();
 }
@@ -169,10 +192,121 @@ fn outcome(failed: &[String]) -> anyhow::Result<()> {
     )))
 }
 
+/// What the select loop woke up for.
+enum Event {
+    /// SIGINT or SIGTERM, by name.
+    Stop(&'static str),
+    /// The node at this index ended (or could not be waited for).
+    Exited(usize, std::io::Result<ExitStatus>),
+    /// A waiting node's restart time came.
+    RestartDue,
+}
+
+/// SIGINT and SIGTERM as streams; registered before the first node starts.
+struct StopSignals {
+    interrupt: Signal,
+    terminate: Signal,
+}
+
+impl StopSignals {
+    fn new() -> anyhow::Result<Self> {
+        Ok(Self {
+            interrupt: signal(SignalKind::interrupt()).context("handling SIGINT")?,
+            terminate: signal(SignalKind::terminate()).context("handling SIGTERM")?,
+        })
+    }
+
+    async fn next(&mut self) -> &'static str {
+        tokio::select! {
+            _ = self.interrupt.recv() => "SIGINT",
+            _ = self.terminate.recv() => "SIGTERM",
+        }
+    }
+}
+
+type ExitWait<'c> = Pin<Box<dyn Future<Output = std::io::Result<ExitStatus>> + Send + 'c>>;
+
+/// The first of the running children to end; never, when none runs.
+async fn first_exit(mut waits: Vec<(usize, ExitWait<'_>)>) -> (usize, std::io::Result<ExitStatus>) {
+    std::future::poll_fn(|cx| {
+        for (i, wait) in &mut waits {
+            if let Poll::Ready(r) = wait.as_mut().poll(cx) {
+                return Poll::Ready((*i, r));
+            }
+        }
+        Poll::Pending
+    })
+    .await
+}
+
+/// Waits for the next signal, node exit or restart time. Cancel-safe: `Child::wait` and
+/// `Signal::recv` lose nothing when another branch wins.
+async fn next_event(nodes: &mut [Supervised<'_>], signals: &mut StopSignals) -> Event {
+    let restart_at = nodes
+        .iter()
+        .filter_map(|n| match n.state {
+            State::Waiting { until } => Some(until),
+            _ => None,
+        })
+        .min();
+    let waits: Vec<(usize, ExitWait<'_>)> = nodes
+        .iter_mut()
+        .enumerate()
+        .filter_map(|(i, n)| match &mut n.state {
+            State::Running { child, .. } => Some((i, Box::pin(child.wait()) as ExitWait<'_>)),
+            _ => None,
+        })
+        .collect();
+    let restart = async {
+        match restart_at {
+            Some(t) => tokio::time::sleep_until(t).await,
+            None => std::future::pending().await,
+        }
+    };
+    tokio::select! {
+        name = signals.next() => Event::Stop(name),
+        (i, r) = first_exit(waits) => Event::Exited(i, r),
+        () = restart => Event::RestartDue,
+    }
+}
+
+/// The state of a node just started.
+fn running(child: Child) -> State {
+    State::Running {
+        pid: child.id().unwrap_or_default(),
+        child,
+        since: Instant::now(),
+    }
+}
+
+/// Restarts every waiting node whose time has come.
+fn restart_due(
+    nodes: &mut [Supervised<'_>],
+    exe: &Path,
+    env: &[(String, String)],
+) -> anyhow::Result<()> {
+    let now = Instant::now();
+    for n in nodes.iter_mut() {
+        if matches!(n.state, State::Waiting { until } if until <= now) {
+            n.state = running(spawn(exe, n.spec, env)?);
+        }
+    }
+    Ok(())
+}
+
 /// Runs the description until SIGINT/SIGTERM or until every node is done; an error when a
 /// node rejected its configuration.
 pub fn run(desc: &LaunchDescription) -> anyhow::Result<()> {
-    shutdown::install();
+    tokio::runtime::Builder::new_current_thread()
+        .enable_io()
+        .enable_time()
+        .build()
+        .context("starting the launch's tokio runtime")?
+        .block_on(supervise(desc))
+}
+
+async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
+    let mut signals = StopSignals::new()?;
     let exe = std::env::current_exe().context("locating the rpkm binary")?;
     cleanup_dead();
     let mut nodes: Vec<Supervised<'_>> = Vec::new();
@@ -180,52 +314,35 @@ pub fn run(desc: &LaunchDescription) -> anyhow::Result<()> {
         let child = spawn(&exe, spec, &desc.env)?;
         nodes.push(Supervised {
             spec,
-            state: State::Running {
-                child,
-                since: Instant::now(),
-            },
+            state: running(child),
             quick_crashes: 0,
         });
     }
     let mut failed = Vec::new();
-    while !shutdown::requested() {
-        let mut any_alive = false;
-        for n in &mut nodes {
-            match &mut n.state {
-                State::Running { child, since } => {
-                    any_alive = true;
-                    let Some(status) = child.try_wait().context("waiting for a node")? else {
-                        continue;
-                    };
-                    let lived = since.elapsed();
-                    log(format!(
-                        "{} pid {} {}",
-                        n.spec.name,
-                        child.id(),
-                        describe(status)
-                    ));
-                    cleanup_dead();
-                    reaped(n, status, lived, &mut failed);
-                }
-                State::Waiting { until } => {
-                    any_alive = true;
-                    if Instant::now() >= *until {
-                        let child = spawn(&exe, n.spec, &desc.env)?;
-                        n.state = State::Running {
-                            child,
-                            since: Instant::now(),
-                        };
-                    }
-                }
-                State::Done => {}
-            }
-        }
-        if !any_alive {
+    loop {
+        if nodes.iter().all(|n| matches!(n.state, State::Done)) {
             log("every node has finished");
             return outcome(&failed);
         }
-        std::thread::sleep(TICK);
+        match next_event(&mut nodes, &mut signals).await {
+            Event::Stop(name) => {
+                log(format!("{name} received"));
+                break;
+            }
+            Event::Exited(i, status) => {
+                let n = &mut nodes[i];
+                let State::Running { pid, since, .. } = n.state else {
+                    continue;
+                };
+                let lived = since.elapsed();
+                let status = status.with_context(|| format!("waiting for node {}", n.spec.name))?;
+                log(format!("{} pid {pid} {}", n.spec.name, describe(status)));
+                cleanup_dead();
+                reaped(n, status, lived, &mut failed);
+            }
+            Event::RestartDue => restart_due(&mut nodes, &exe, &desc.env)?,
+        }
     }
-    stop_all(&mut nodes);
+    stop_all(&mut nodes).await;
     outcome(&failed)
 }

@@ -37,9 +37,10 @@ use rpkm_msgs::{
 use rpkm_transport::topic;
 
 use super::ingest::END_OF_CAMPAIGN;
+use super::live::{self, LiveParams, Spec};
 use super::{
     bad_param, diagnostic_array, parameters_msg, status, CommonArgs, Every, Geometry, Idle,
-    NodeContext, MM_PER_M,
+    NodeContext, NodeParams, MM_PER_M,
 };
 use crate::campaign_bag::CampaignAssembler;
 use crate::error::bad_input;
@@ -552,26 +553,143 @@ pub fn report_warning(r: &OnlineReport, temp_name: &str) -> Option<String> {
     Some(format!("geometry drift: {}", parts.join("; ")))
 }
 
+/// What a parameter set changes while the node runs: the options of the next calibration
+/// (start geometry, selection, outliers, held-out prefix) and when a campaign ends.
+struct Settings {
+    options: CalibratorOptions,
+    every: u64,
+    idle_end: f64,
+}
+
+/// The calibrator's settings of a parameter set (at start-up and for every set on the
+/// parameter services, by the same bounded readers).
+fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
+    let selection = p.string("selection", "map").map_err(bad_param)?;
+    if !matches!(selection.as_str(), "map" | "auto") {
+        return Err(crate::error::bad_input(format!(
+            "selection: expected map or auto, found {selection}"
+        )));
+    }
+    Ok(Settings {
+        options: CalibratorOptions {
+            start: Geometry::from_params(p)?,
+            validation_prefix: p.string("validation_prefix", "val").map_err(bad_param)?,
+            selection,
+            max_condition: p.positive("max_condition", 100.0).map_err(bad_param)?,
+            outlier_sigma: p
+                .f64_in("outlier_sigma", 0.0, super::params::OUTLIER_SIGMA, " σ")
+                .map_err(bad_param)?,
+            noise: rpkm_core::noise::NoiseModel::default(),
+        },
+        every: p
+            .u64_in("calibrate_every", 0, super::params::MEASUREMENT_COUNT)
+            .map_err(bad_param)?,
+        idle_end: p
+            .f64_in("idle_end_s", 0.0, super::params::DURATION_S, " s")
+            .map_err(bad_param)?,
+    })
+}
+
+/// The calibrator's parameters on its ROS 2 parameter services: what the next calibration
+/// uses and when a campaign ends are live; the buffer and the online tracker need a restart.
+fn specs() -> Vec<Spec> {
+    use live::Default::{Bool, Str, F64, U64};
+    use rpkm_transport::dds_params::ParamRange;
+    let int = ParamRange::count;
+    let float = |(lo, hi): (f64, f64)| ParamRange::Float(lo, hi);
+    let fixed_in = |key, default, description, range| Spec {
+        range,
+        ..Spec::fixed(key, default, description)
+    };
+    let [model, _, geometry_file, _] = super::geometry_specs();
+    vec![
+        Spec {
+            description: "model of the next calibration: 24 or 29 parameters",
+            ..model
+        },
+        geometry_file,
+        Spec::live(
+            "calibrate_every",
+            U64(0),
+            "calibrate after N measurements, 0 for at the end marker only",
+            int(super::params::MEASUREMENT_COUNT),
+        ),
+        Spec::live(
+            "idle_end_s",
+            F64(0.0),
+            "end a campaign after this long without a measurement, s (0: never)",
+            float(super::params::DURATION_S),
+        ),
+        Spec::live(
+            "validation_prefix",
+            Str("val"),
+            "setups whose name starts with this are held out for validation",
+            ParamRange::None,
+        ),
+        Spec::live(
+            "selection",
+            Str("map"),
+            "map (every parameter under its tolerance) or auto (the thesis's selection)",
+            ParamRange::None,
+        ),
+        Spec::live(
+            "max_condition",
+            F64(100.0),
+            "condition-number limit of selection auto (> 0)",
+            ParamRange::None,
+        ),
+        Spec::live(
+            "outlier_sigma",
+            F64(0.0),
+            "outlier threshold, sigma (0: keep all)",
+            float(super::params::OUTLIER_SIGMA),
+        ),
+        fixed_in(
+            "state_buffer",
+            U64(4096),
+            "drive states kept for pairing with measurements",
+            int(super::params::BUFFER_LEN),
+        ),
+        Spec::fixed(
+            "online",
+            Bool(false),
+            "track the geometry live from the drive forces",
+        ),
+        fixed_in(
+            "online_decimation",
+            U64(100),
+            "online tracker: every N-th drive state",
+            int((1, 1_000_000)),
+        ),
+        Spec::fixed(
+            "online_publish_sigma",
+            F64(1.0),
+            "online tracker: publish when a parameter moved by this many sigma (> 0)",
+        ),
+        fixed_in(
+            "online_drift_warn_um",
+            F64(10.0),
+            "online tracker: WARN from this drift, um",
+            float((0.1, 10_000.0)),
+        ),
+        Spec::fixed(
+            "online_force_sigma_n",
+            F64(5.0),
+            "online tracker: drive force noise, N (> 0)",
+        ),
+    ]
+}
+
 /// Runs the node until SIGINT/SIGTERM.
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let ctx = NodeContext::open("calibrator", args, &KEYS, None)?;
     let p = &ctx.params;
-    let options = CalibratorOptions {
-        start: Geometry::from_params(p)?,
-        validation_prefix: p.string("validation_prefix", "val").map_err(bad_param)?,
-        selection: p.string("selection", "map").map_err(bad_param)?,
-        max_condition: p.positive("max_condition", 100.0).map_err(bad_param)?,
-        outlier_sigma: p
-            .f64_in("outlier_sigma", 0.0, super::params::OUTLIER_SIGMA, " σ")
-            .map_err(bad_param)?,
-        noise: rpkm_core::noise::NoiseModel::default(),
-    };
-    let every = p
-        .u64_in("calibrate_every", 0, super::params::MEASUREMENT_COUNT)
-        .map_err(bad_param)?;
-    let idle_end = p
-        .f64_in("idle_end_s", 0.0, super::params::DURATION_S, " s")
-        .map_err(bad_param)?;
+    let Settings {
+        mut options,
+        mut every,
+        mut idle_end,
+    } = configure(p)?;
+    let mut live = LiveParams::start(&ctx, &specs(), |p| configure(p).map(|_| ()))?;
     // Bounded before the ring is preallocated from it (4294967296 asked for 650 GB).
     let capacity = p
         .u64_in("state_buffer", 4096, super::params::BUFFER_LEN)
@@ -731,6 +849,15 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 last.1.clone(),
                 vec![("calibrations", calibrations.to_string())],
             )))?;
+        }
+        // Between calibrations: the next campaign ends and calibrates by the new settings.
+        if let Some((p, names)) = live.poll() {
+            Settings {
+                options,
+                every,
+                idle_end,
+            } = configure(&p)?;
+            ctx.log(format!("parameters set: {}", names.join(", ")));
         }
         if report.due() {
             diagnostics.publish(&diagnostic_array(status(

@@ -28,12 +28,14 @@ pub mod validate;
 
 use std::time::Duration;
 
+use rpkm_transport::dds_params::ParamRange;
 use rpkm_transport::Backend;
 
 pub use report::Tally;
 pub use validate::{Limits, Reject, RejectKind, Validator};
 
-use super::{bad_param, params::DURATION_S, shutdown, CommonArgs, NodeContext};
+use super::live::{self, Spec};
+use super::{bad_param, params::DURATION_S, shutdown, CommonArgs, NodeContext, NodeParams};
 use crate::error::bad_input;
 use output::Output;
 
@@ -93,25 +95,11 @@ fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
     let extra = (source == "dds").then_some(Backend::Dds);
     let ctx = NodeContext::open("ingest", &args.common, &KEYS, extra)?;
     let p = &ctx.params;
-    let d = Limits::default();
-    let limits = Limits {
-        position_min_m: p
-            .f64("position_min_m", d.position_min_m)
-            .map_err(bad_param)?,
-        position_max_m: p
-            .f64("position_max_m", d.position_max_m)
-            .map_err(bad_param)?,
-        force_max_n: p
-            .positive("force_max_n", d.force_max_n)
-            .map_err(bad_param)?,
-        measurement_max_m: p
-            .positive("measurement_max_m", d.measurement_max_m)
-            .map_err(bad_param)?,
-    };
+    let limits = limits(p)?;
     // 1 mHz to 1 MHz: the period 1/rate becomes a `Duration`, which a rate of 1e-300 Hz
     // would overflow.
     let rate_hz = p
-        .f64_in("rate_hz", 1000.0, (1e-3, 1e6), " Hz")
+        .f64_in("rate_hz", 1000.0, RATE_HZ, " Hz")
         .map_err(bad_param)?;
     let start_delay = p
         .f64_in("start_delay_s", 1.0, DURATION_S, " s")
@@ -125,6 +113,125 @@ fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
         exit_at_end: p.bool("exit_at_end", false).map_err(bad_param)?,
     };
     Ok((ctx, settings))
+}
+
+/// Bounds of `rate_hz`, Hz.
+const RATE_HZ: (f64, f64) = (1e-3, 1e6);
+
+/// The validation limits of a parameter set (at start-up and for every set on the parameter
+/// services): forces and measurements above 0, positions an interval.
+fn limits(p: &NodeParams) -> anyhow::Result<Limits> {
+    let d = Limits::default();
+    let l = Limits {
+        position_min_m: p
+            .f64("position_min_m", d.position_min_m)
+            .map_err(bad_param)?,
+        position_max_m: p
+            .f64("position_max_m", d.position_max_m)
+            .map_err(bad_param)?,
+        force_max_n: p
+            .positive("force_max_n", d.force_max_n)
+            .map_err(bad_param)?,
+        measurement_max_m: p
+            .positive("measurement_max_m", d.measurement_max_m)
+            .map_err(bad_param)?,
+    };
+    // Written so that a NaN fails too: no position would ever pass.
+    if !(l.position_min_m < l.position_max_m) {
+        return Err(bad_input(format!(
+            "position_min_m {} must be below position_max_m {}",
+            l.position_min_m, l.position_max_m
+        )));
+    }
+    Ok(l)
+}
+
+/// What a parameter set changes while the node runs: the limits and `view_every`.
+fn configure(p: &NodeParams) -> anyhow::Result<(Limits, u64)> {
+    let every = p
+        .u64_in(
+            "view_every",
+            super::views::VIEW_EVERY,
+            super::views::VIEW_EVERY_RANGE,
+        )
+        .map_err(bad_param)?;
+    Ok((limits(p)?, every))
+}
+
+/// The node's parameters on its ROS 2 parameter services: the validation limits and
+/// `view_every` live (the next sample is judged by them); the source, pacing and topics need
+/// a restart. `views_default`: whether the views are on unless a file says otherwise.
+fn specs(views_default: bool) -> Vec<Spec> {
+    use live::Default::{Bool, Str, F64, U64};
+    let d = Limits::default();
+    let fixed_in = |key, default, description, (lo, hi): (f64, f64)| Spec {
+        range: ParamRange::Float(lo, hi),
+        ..Spec::fixed(key, default, description)
+    };
+    let limit =
+        |key, default, description| Spec::live(key, F64(default), description, ParamRange::None);
+    vec![
+        Spec::fixed("source", Str("dds"), "dds, stdin or a campaign CSV file"),
+        fixed_in(
+            "rate_hz",
+            F64(1000.0),
+            "pace of a campaign file, Hz",
+            RATE_HZ,
+        ),
+        fixed_in(
+            "start_delay_s",
+            F64(1.0),
+            "wait before the first sample, s",
+            DURATION_S,
+        ),
+        Spec::fixed(
+            "end_marker",
+            Bool(true),
+            "send the end-of-campaign marker at the end of the input",
+        ),
+        Spec::fixed("exit_at_end", Bool(false), "exit at the end of the input"),
+        limit(
+            "position_min_m",
+            d.position_min_m,
+            "lowest accepted drive position, m (below position_max_m)",
+        ),
+        limit(
+            "position_max_m",
+            d.position_max_m,
+            "highest accepted drive position, m",
+        ),
+        limit(
+            "force_max_n",
+            d.force_max_n,
+            "largest accepted |drive force|, N (> 0)",
+        ),
+        limit(
+            "measurement_max_m",
+            d.measurement_max_m,
+            "largest accepted |x|, |y|, |r| of a measurement, m (> 0)",
+        ),
+        Spec::fixed(
+            "input_actuator_topic",
+            Str(dds::ACTUATOR_TOPIC),
+            "DDS topic of the drive states (source dds)",
+        ),
+        Spec::fixed(
+            "input_measurement_topic",
+            Str(dds::MEASUREMENT_TOPIC),
+            "DDS topic of the measurements (source dds)",
+        ),
+        Spec::fixed(
+            "views",
+            Bool(views_default),
+            "publish /joint_states (JointState) on DDS",
+        ),
+        Spec::live(
+            "view_every",
+            U64(super::views::VIEW_EVERY),
+            "publish the joint states of every N-th accepted state",
+            ParamRange::count(super::views::VIEW_EVERY_RANGE),
+        ),
+    ]
 }
 
 /// Streams a campaign file at `rate_hz`; a file that cannot be read is bad input.
@@ -144,8 +251,13 @@ fn file(out: &mut Output, path: &str, rate_hz: f64) -> anyhow::Result<bool> {
 
 /// Runs the node until its input ends (and `exit_at_end`) or SIGINT/SIGTERM.
 pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
-    let (ctx, s) = open(args)?;
-    let mut out = Output::open(&ctx, s.limits, &s.source)?;
+    let (mut ctx, s) = open(args)?;
+    // The source in use (the option may have chosen it) is the one the services report.
+    ctx.params
+        .set_from_service("source", serde_yaml::Value::String(s.source.clone()));
+    let views_default = matches!(ctx.output, Backend::Dds | Backend::Both);
+    let live = live::LiveParams::start(&ctx, &specs(views_default), |p| configure(p).map(|_| ()))?;
+    let mut out = Output::open(&ctx, s.limits, &s.source, live)?;
     ctx.log(format!(
         "source {}, publishing on {:?}",
         s.source, ctx.output

@@ -412,11 +412,6 @@ fn level_by(value: f64, warn: f64, error: f64) -> PreloadLevel {
     }
 }
 
-const fn count_range((lo, hi): (u64, u64)) -> ParamRange {
-    // The ranges are small (below 2^31): the conversion never wraps.
-    ParamRange::Integer(lo.cast_signed(), hi.cast_signed())
-}
-
 /// The node's parameters on its ROS 2 parameter services (thresholds and model live).
 fn specs() -> Vec<Spec> {
     let d = Thresholds::default();
@@ -451,13 +446,13 @@ fn specs() -> Vec<Spec> {
             "debounce_samples",
             live::Default::U64(u64::from(d.debounce_samples)),
             "consecutive samples before a level is taken",
-            count_range(super::params::SAMPLE_COUNT),
+            ParamRange::count(super::params::SAMPLE_COUNT),
         ),
         Spec::live(
             "status_every",
             live::Default::U64(1),
             "PreloadStatus every this many samples (and at every level change)",
-            count_range(super::params::SAMPLE_COUNT),
+            ParamRange::count(super::params::SAMPLE_COUNT),
         ),
         Spec::fixed(
             "busy_poll_ms",

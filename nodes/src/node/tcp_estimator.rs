@@ -338,10 +338,7 @@ fn specs(views_default: bool) -> Vec<Spec> {
             "view_every",
             live::Default::U64(views::VIEW_EVERY),
             "publish the views of every N-th estimate",
-            ParamRange::Integer(
-                views::VIEW_EVERY_RANGE.0.cast_signed(),
-                views::VIEW_EVERY_RANGE.1.cast_signed(),
-            ),
+            ParamRange::count(views::VIEW_EVERY_RANGE),
         ),
     ];
     specs.extend(super::geometry_specs());

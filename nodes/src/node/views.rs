@@ -195,6 +195,11 @@ impl JointViews {
         }))
     }
 
+    /// A new `view_every` (a parameter set while the node runs); counts again from 0.
+    pub fn set_every(&mut self, every: u64) {
+        self.every = Decimator::new(every);
+    }
+
     /// Publishes the view of `s` if it is a `view_every`-th state.
     pub fn offer(&mut self, s: &ActuatorState) -> anyhow::Result<()> {
         if self.every.due() {

@@ -3,6 +3,10 @@
 //! Topic `/rpkm/x` is the DDS topic `rt/rpkm/x`, type `rpkm_msgs::msg::dds_::Name_`, CDR
 //! (XCDR1) payload. The domain id comes from [`domain_id_from_env`] (`ROS_DOMAIN_ID`,
 //! default 0) unless the configuration names one.
+//!
+//! The node's non-real-time DDS side (parameter services, `/parameter_events`, `/rosout`)
+//! runs on a current-thread tokio runtime in a thread of its own ([`DdsRuntime`]), beside the
+//! node: a sample loop hands it work through a channel and never waits for the wire.
 
 use std::sync::{Arc, Mutex};
 
@@ -73,14 +77,101 @@ pub fn qos_profile(qos: Qos) -> QosProfile {
         })
 }
 
+/// Records a `/rosout` queue holds before the node's log lines are counted as dropped: a
+/// node logs a few lines per report period, a queue this long is a stuck runtime.
+const ROSOUT_QUEUE: usize = 1024;
+
+/// One `/rosout` record on its way to the runtime.
+struct RosoutRecord {
+    level: RosoutLevel,
+    msg: String,
+    file: String,
+    line: u32,
+    stamp: ros2_client::builtin_interfaces::Time,
+}
+
+/// The node's tokio runtime (current thread) on a thread of its own: the `/rosout` writer
+/// and the tasks others spawn on [`Self::handle`] (the parameter services). Dropping it
+/// writes the queued `/rosout` records, stops the tasks and joins the thread.
+struct DdsRuntime {
+    handle: tokio::runtime::Handle,
+    rosout: tokio::sync::mpsc::Sender<RosoutRecord>,
+    /// Records refused by a full queue since the last one that went through.
+    rosout_dropped: std::sync::atomic::AtomicU64,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl DdsRuntime {
+    fn start(
+        name: &str,
+        writer: ros2_client::rosout::NodeLoggingHandle,
+        logger: String,
+    ) -> std::io::Result<Self> {
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_time()
+            .build()?;
+        let handle = runtime.handle().clone();
+        let (tx, mut rx) = tokio::sync::mpsc::channel::<RosoutRecord>(ROSOUT_QUEUE);
+        let (stop_tx, mut stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let thread = std::thread::Builder::new()
+            .name(format!("rpkm-dds-{name}"))
+            .spawn(move || {
+                runtime.block_on(async {
+                    loop {
+                        tokio::select! {
+                            Some(r) = rx.recv() => write_rosout(&writer, &logger, &r),
+                            _ = &mut stop_rx => break,
+                        }
+                    }
+                    // The node's last lines (why it stopped) still reach /rosout.
+                    while let Ok(r) = rx.try_recv() {
+                        write_rosout(&writer, &logger, &r);
+                    }
+                });
+            })?;
+        Ok(Self {
+            handle,
+            rosout: tx,
+            rosout_dropped: std::sync::atomic::AtomicU64::new(0),
+            stop: Some(stop_tx),
+            thread: Some(thread),
+        })
+    }
+}
+
+impl Drop for DdsRuntime {
+    fn drop(&mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(t) = self.thread.take() {
+            // Never join from the runtime's own thread (a task holding the last reference).
+            if t.thread().id() != std::thread::current().id() {
+                let _ = t.join();
+            }
+        }
+    }
+}
+
+fn write_rosout(w: &ros2_client::rosout::NodeLoggingHandle, logger: &str, r: &RosoutRecord) {
+    use ros2_client::rosout::RosoutRaw;
+    let level = match r.level {
+        RosoutLevel::Debug => ros2_client::ros2::LogLevel::Debug,
+        RosoutLevel::Info => ros2_client::ros2::LogLevel::Info,
+        RosoutLevel::Warn => ros2_client::ros2::LogLevel::Warn,
+        RosoutLevel::Error => ros2_client::ros2::LogLevel::Error,
+    };
+    w.rosout_raw(r.stamp, level, logger, &r.msg, &r.file, "", r.line);
+}
+
 /// A DDS participant with one ROS 2 node.
 pub struct DdsNode {
+    /// The `/rosout` writer and the parameter services' runtime; first, so that it drains
+    /// its queue while the node still exists.
+    runtime: DdsRuntime,
     pub(crate) node: Mutex<Node>,
     domain: u16,
-    /// The `/rosout` writer, usable without the node's lock.
-    rosout: ros2_client::rosout::NodeLoggingHandle,
-    /// Logger name as rclcpp names a node's logger: `rpkm.<name>`.
-    logger: String,
 }
 
 impl std::fmt::Debug for DdsNode {
@@ -116,13 +207,19 @@ impl DdsNode {
                     .allow_undeclared_parameters(true),
             )
             .map_err(|e| err(format!("{e:?}")))?;
-        let rosout = node.logging_handle();
+        let logger = format!("{}.{name}", crate::NODE_NAMESPACE.trim_start_matches('/'));
+        let runtime = DdsRuntime::start(name, node.logging_handle(), logger)
+            .map_err(|e| err(format!("starting the DDS runtime: {e}")))?;
         Ok(Arc::new(Self {
+            runtime,
             node: Mutex::new(node),
             domain,
-            rosout,
-            logger: format!("{}.{name}", crate::NODE_NAMESPACE.trim_start_matches('/')),
         }))
+    }
+
+    /// The node's tokio runtime, for its non-real-time DDS tasks.
+    pub(crate) fn runtime(&self) -> &tokio::runtime::Handle {
+        &self.runtime.handle
     }
 
     /// The DDS domain id.
@@ -133,17 +230,30 @@ impl DdsNode {
     /// Publishes one `rcl_interfaces/Log` on `/rosout` (rqt_console, `ros2 topic echo
     /// /rosout`, bags): `level` as ROS 2 numbers it (10 debug, 20 info, 30 warn, 40 error,
     /// 50 fatal).
+    ///
+    /// Queued for the node's runtime, which writes it: the caller (a sample loop) never
+    /// waits for DDS. A record that finds the queue full is counted, and the count goes out
+    /// with the next record that fits (never dropped unsaid).
     pub fn rosout(&self, level: RosoutLevel, msg: &str, file: &str, line: u32) {
-        use ros2_client::rosout::RosoutRaw;
-        let level = match level {
-            RosoutLevel::Debug => ros2_client::ros2::LogLevel::Debug,
-            RosoutLevel::Info => ros2_client::ros2::LogLevel::Info,
-            RosoutLevel::Warn => ros2_client::ros2::LogLevel::Warn,
-            RosoutLevel::Error => ros2_client::ros2::LogLevel::Error,
+        use std::sync::atomic::Ordering;
+        let rt = &self.runtime;
+        let dropped = rt.rosout_dropped.swap(0, Ordering::Relaxed);
+        let msg = if dropped > 0 {
+            format!("{msg} ({dropped} earlier /rosout records dropped: queue full)")
+        } else {
+            msg.to_owned()
         };
-        let stamp = ros2_client::builtin_interfaces::Time::now();
-        self.rosout
-            .rosout_raw(stamp, level, &self.logger, msg, file, "", line);
+        let record = RosoutRecord {
+            level,
+            msg,
+            file: file.to_owned(),
+            line,
+            stamp: ros2_client::builtin_interfaces::Time::now(),
+        };
+        if rt.rosout.try_send(record).is_err() {
+            rt.rosout_dropped
+                .fetch_add(dropped.saturating_add(1), Ordering::Relaxed);
+        }
     }
 
     /// Stores `value` in ros2-client's parameter store, which publishes the

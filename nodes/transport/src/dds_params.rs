@@ -49,6 +49,15 @@ pub enum ParamRange {
     Integer(i64, i64),
 }
 
+impl ParamRange {
+    /// The integer range of a count `lo..=hi`; a bound beyond `i64::MAX` (ROS 2 integers are
+    /// signed) is capped there.
+    pub fn count((lo, hi): (u64, u64)) -> Self {
+        let signed = |v: u64| i64::try_from(v).unwrap_or(i64::MAX);
+        ParamRange::Integer(signed(lo), signed(hi))
+    }
+}
+
 /// One declared parameter: its value now and its descriptor.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ParamDecl {
@@ -155,11 +164,11 @@ impl ParamDecl {
 /// refuses the set.
 pub type Check = dyn Fn(&BTreeMap<String, ParameterValue>) -> Result<(), String> + Send;
 
-/// The running parameter services of one node.
+/// The running parameter services of one node: a task on the node's DDS runtime.
 pub struct ParamServer {
     changes: mpsc::Receiver<Vec<(String, ParameterValue)>>,
     stop: Option<futures::channel::oneshot::Sender<()>>,
-    thread: Option<std::thread::JoinHandle<()>>,
+    task: Option<tokio::task::JoinHandle<()>>,
 }
 
 impl std::fmt::Debug for ParamServer {
@@ -181,8 +190,10 @@ impl Drop for ParamServer {
         if let Some(stop) = self.stop.take() {
             let _ = stop.send(());
         }
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
+        // The task ends at its next poll, on the runtime's thread; waiting for it here
+        // keeps the servers from answering for a node that is gone.
+        if let Some(task) = self.task.take() {
+            let _ = futures::executor::block_on(task);
         }
     }
 }
@@ -453,9 +464,9 @@ async fn serve(s: Servers, mut svc: Service, stop: futures::channel::oneshot::Re
 }
 
 impl DdsNode {
-    /// Declares `decls` and starts the six parameter services on a thread of their own (an
-    /// async loop that sleeps until a request arrives: nothing of it runs on the node's
-    /// sample path). `check` sees every proposed set after the per-parameter rules.
+    /// Declares `decls` and starts the six parameter services as a task on the node's tokio
+    /// runtime (it sleeps until a request arrives: nothing of it runs on the node's sample
+    /// path). `check` sees every proposed set after the per-parameter rules.
     pub fn serve_parameters(
         self: &Arc<Self>,
         decls: Vec<ParamDecl>,
@@ -488,14 +499,11 @@ impl DdsNode {
             node: Arc::clone(self),
             changes: tx,
         };
-        let thread = std::thread::Builder::new()
-            .name("rpkm-params".into())
-            .spawn(move || futures::executor::block_on(serve(servers, svc, stop_rx)))
-            .map_err(|e| err(e.to_string()))?;
+        let task = self.runtime().spawn(serve(servers, svc, stop_rx));
         Ok(ParamServer {
             changes: rx,
             stop: Some(stop_tx),
-            thread: Some(thread),
+            task: Some(task),
         })
     }
 }

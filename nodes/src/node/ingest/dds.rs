@@ -9,6 +9,11 @@ use super::output::Output;
 use crate::error::bad_input;
 use crate::node::{bad_param, shutdown, Idle, NodeContext};
 
+/// Default DDS topic of the controller's drive states.
+pub(super) const ACTUATOR_TOPIC: &str = "/rpkm/controller/actuator_state";
+/// Default DDS topic of the controller's measurements.
+pub(super) const MEASUREMENT_TOPIC: &str = "/rpkm/controller/tcp_measurement";
+
 /// A topic name that lives as long as the node (the transport keeps `&'static str` names).
 fn leak(s: String) -> &'static str {
     Box::leak(s.into_boxed_str())
@@ -18,15 +23,12 @@ fn leak(s: String) -> &'static str {
 pub(super) fn run(ctx: &NodeContext, out: &mut Output) -> anyhow::Result<()> {
     let p = &ctx.params;
     let a_name = leak(
-        p.string("input_actuator_topic", "/rpkm/controller/actuator_state")
+        p.string("input_actuator_topic", ACTUATOR_TOPIC)
             .map_err(bad_param)?,
     );
     let m_name = leak(
-        p.string(
-            "input_measurement_topic",
-            "/rpkm/controller/tcp_measurement",
-        )
-        .map_err(bad_param)?,
+        p.string("input_measurement_topic", MEASUREMENT_TOPIC)
+            .map_err(bad_param)?,
     );
     if ctx.output != Backend::Ipc
         && (a_name == topic::ACTUATOR_STATE.name() || m_name == topic::TCP_MEASUREMENT.name())

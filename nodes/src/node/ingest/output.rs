@@ -3,12 +3,13 @@
 
 use rpkm_core::campaign::{Campaign, Pose};
 use rpkm_msgs::{ActuatorState, CampaignInfo, DiagnosticArray, TcpMeasurement, Time};
-use rpkm_transport::{topic, Publisher};
+use rpkm_transport::{dds::DdsNode, topic, Publisher};
 
 use super::report::Tally;
 use super::validate::{reject, Limits, Reject, RejectKind, Validator};
 use super::END_OF_CAMPAIGN;
 use crate::campaign_bag::{campaign_info, pose_messages};
+use crate::node::live::LiveParams;
 use crate::node::views::JointViews;
 use crate::node::{diagnostic_array, Every, NodeContext};
 
@@ -24,6 +25,10 @@ pub(super) struct Output {
     seq: u64,
     last_stamp: Time,
     report: Every,
+    /// The parameter services; their accepted changes are taken between samples.
+    live: LiveParams,
+    /// Where the node's log lines go besides stderr: `/rosout`.
+    dds: Option<std::sync::Arc<DdsNode>>,
     node: String,
     source: String,
 }
@@ -31,7 +36,12 @@ pub(super) struct Output {
 impl Output {
     /// The publishers of node `ctx`, validating with `limits`; `source` names the input on
     /// /diagnostics.
-    pub(super) fn open(ctx: &NodeContext, limits: Limits, source: &str) -> anyhow::Result<Self> {
+    pub(super) fn open(
+        ctx: &NodeContext,
+        limits: Limits,
+        source: &str,
+        live: LiveParams,
+    ) -> anyhow::Result<Self> {
         Ok(Self {
             states: ctx.publisher(&topic::ACTUATOR_STATE)?,
             measurements: ctx.publisher(&topic::TCP_MEASUREMENT)?,
@@ -43,6 +53,8 @@ impl Output {
             seq: 0,
             last_stamp: Time::default(),
             report: Every::new(ctx.diagnostics_period()?),
+            live,
+            dds: ctx.transport.dds_node().cloned(),
             node: ctx.name.clone(),
             source: source.to_owned(),
         })
@@ -131,8 +143,21 @@ impl Output {
         Ok(())
     }
 
-    /// Publishes the /diagnostics status when its period has passed.
+    /// Publishes the /diagnostics status when its period has passed, and takes the changes
+    /// the parameter services accepted (between samples: the next one is judged by them).
     pub(super) fn report_if_due(&mut self) -> anyhow::Result<()> {
+        if let Some((p, names)) = self.live.poll() {
+            let (limits, every) = super::configure(&p)?;
+            self.validator.set_limits(limits);
+            if let Some(v) = self.views.as_mut() {
+                v.set_every(every);
+            }
+            let text = format!("parameters set: {}", names.join(", "));
+            crate::node::log_line(&self.node, &text);
+            if let Some(dds) = &self.dds {
+                dds.rosout(crate::node::severity(&text), &text, file!(), line!());
+            }
+        }
         if self.report.due() {
             self.report_now()?;
         }

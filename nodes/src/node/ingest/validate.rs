@@ -88,6 +88,11 @@ impl Validator {
         }
     }
 
+    /// Judges the next samples by `limits` (the order of stamps and seq stays).
+    pub fn set_limits(&mut self, limits: Limits) {
+        self.limits = limits;
+    }
+
     /// Accepts or rejects a drive state; `label` names its source in the reason.
     pub fn state(&mut self, s: &ActuatorState, label: &str) -> Result<(), Reject> {
         let l = &self.limits;
