@@ -336,6 +336,18 @@ fn unlocated_error_line(text: &str) -> usize {
         .map_or(first + 1, |(i, _)| i + 1)
 }
 
+/// The `NAME:=VALUE` launch arguments of the command line, by name.
+fn launch_arguments(overrides: &[String]) -> Result<BTreeMap<String, String>, String> {
+    let mut given = BTreeMap::new();
+    for o in overrides {
+        let (k, v) = o
+            .split_once(":=")
+            .ok_or_else(|| format!("launch argument {o:?}: expected NAME:=VALUE"))?;
+        given.insert(k.to_owned(), v.to_owned());
+    }
+    Ok(given)
+}
+
 /// Where a UTF-8 error lies in `bytes`: the 1-based line and the byte offset.
 fn utf8_error_place(bytes: &[u8], error: &std::str::Utf8Error) -> (usize, usize) {
     let offset = error.valid_up_to();
@@ -399,13 +411,7 @@ impl LaunchDescription {
             file: file.to_owned(),
             what,
         };
-        let mut given = BTreeMap::new();
-        for o in overrides {
-            let (k, v) = o
-                .split_once(":=")
-                .ok_or_else(|| argument(format!("launch argument {o:?}: expected NAME:=VALUE")))?;
-            given.insert(k.to_owned(), v.to_owned());
-        }
+        let given = launch_arguments(overrides).map_err(argument)?;
         let items = doc
             .get("launch")
             .and_then(Value::as_sequence)

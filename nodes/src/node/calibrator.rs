@@ -29,12 +29,13 @@ use rpkm_core::calib::online::{
 use rpkm_core::calib::{self, Calibration, Options, Selection};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::obs;
+use rpkm_core::params::Model;
 use rpkm_core::params::{Params, N_PARAMS};
 use rpkm_msgs::{
-    ActuatorState, CampaignInfo, Diagnosis, DiagnosisCandidate, DiagnosticStatus, Parameters,
-    TcpMeasurement,
+    ActuatorState, CampaignInfo, Diagnosis, DiagnosisCandidate, DiagnosticArray, DiagnosticStatus,
+    Parameters, TcpMeasurement,
 };
-use rpkm_transport::topic;
+use rpkm_transport::{topic, Publisher, Subscriber};
 
 use super::ingest::END_OF_CAMPAIGN;
 use super::live::{self, LiveParams, Spec};
@@ -593,7 +594,7 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
 /// The calibrator's parameters on its ROS 2 parameter services: what the next calibration
 /// uses and when a campaign ends are live; the buffer and the online tracker need a restart.
 fn specs() -> Vec<Spec> {
-    use live::Default::{Bool, Str, F64, U64};
+    use live::Default::{Str, F64, U64};
     use rpkm_transport::dds_params::ParamRange;
     let int = ParamRange::count;
     let float = |(lo, hi): (f64, f64)| ParamRange::Float(lo, hi);
@@ -650,6 +651,21 @@ fn specs() -> Vec<Spec> {
             "drive states kept for pairing with measurements",
             int(super::params::BUFFER_LEN),
         ),
+    ]
+    .into_iter()
+    .chain(online_specs())
+    .collect()
+}
+
+/// The online tracker's parameters (read at start: the tracker's thread is set up once).
+fn online_specs() -> Vec<Spec> {
+    use live::Default::{Bool, F64, U64};
+    use rpkm_transport::dds_params::ParamRange;
+    let fixed_in = |key, default, description, range| Spec {
+        range,
+        ..Spec::fixed(key, default, description)
+    };
+    vec![
         Spec::fixed(
             "online",
             Bool(false),
@@ -659,7 +675,7 @@ fn specs() -> Vec<Spec> {
             "online_decimation",
             U64(100),
             "online tracker: every N-th drive state",
-            int((1, 1_000_000)),
+            ParamRange::count((1, 1_000_000)),
         ),
         Spec::fixed(
             "online_publish_sigma",
@@ -670,7 +686,7 @@ fn specs() -> Vec<Spec> {
             "online_drift_warn_um",
             F64(10.0),
             "online tracker: WARN from this drift, um",
-            float((0.1, 10_000.0)),
+            ParamRange::Float(0.1, 10_000.0),
         ),
         Spec::fixed(
             "online_force_sigma_n",
@@ -678,6 +694,211 @@ fn specs() -> Vec<Spec> {
             "online tracker: drive force noise, N (> 0)",
         ),
     ]
+}
+
+/// The node's outputs.
+struct Outputs {
+    parameters: Publisher<Parameters>,
+    diagnosis: Publisher<Diagnosis>,
+    diagnostics: Publisher<DiagnosticArray>,
+}
+
+/// What the node's loop keeps between samples.
+struct Calibrator {
+    acc: Accumulator,
+    online: Option<OnlineWorker>,
+    temp_name: String,
+    last_measurement: Option<Instant>,
+    calibrations: u64,
+    /// The last status: level and message.
+    last: (u8, String),
+}
+
+/// The online tracker's settings from the parameters, if `online` is on.
+fn online_settings(p: &NodeParams) -> anyhow::Result<Option<OnlineSettings>> {
+    if !p.bool("online", false).map_err(bad_param)? {
+        return Ok(None);
+    }
+    Ok(Some(OnlineSettings {
+        start_sigma: start_sigmas(&p.string("geometry_file", "").map_err(bad_param)?)?,
+        decimation: p
+            .u64_in("online_decimation", 100, (1, 1_000_000))
+            .map_err(bad_param)?,
+        publish_sigma: p.positive("online_publish_sigma", 1.0).map_err(bad_param)?,
+        drift_warn_mm: p
+            .f64_in("online_drift_warn_um", 10.0, (0.1, 10_000.0), " µm")
+            .map_err(bad_param)?
+            / 1000.0,
+        options: OnlineOptions {
+            force_sigma_n: p.positive("online_force_sigma_n", 5.0).map_err(bad_param)?,
+            ..OnlineOptions::default()
+        },
+    }))
+}
+
+impl Calibrator {
+    fn campaign_info(&mut self, info: &CampaignInfo) {
+        if let Some(name) = info.covariate_names.first() {
+            self.temp_name.clone_from(name);
+        }
+        if let Err(e) = self.acc.info(info) {
+            self.last = (DiagnosticStatus::WARN, format!("campaign info: {e:#}"));
+        }
+    }
+
+    fn state(&mut self, s: &ActuatorState) {
+        self.acc.state(s);
+        if let Some(w) = &mut self.online {
+            w.offer(s);
+        }
+    }
+
+    /// Publishes what the online tracker reported; whether it reported anything.
+    fn online_reports(
+        &mut self,
+        ctx: &NodeContext,
+        out: &Outputs,
+        model: Model,
+    ) -> anyhow::Result<bool> {
+        let Some(w) = &self.online else {
+            return Ok(false);
+        };
+        let mut worked = false;
+        while let Ok(report) = w.rx.try_recv() {
+            worked = true;
+            let r = match report {
+                Ok(r) => r,
+                Err(e) => {
+                    self.last = (DiagnosticStatus::WARN, format!("online calibration: {e}"));
+                    continue;
+                }
+            };
+            out.parameters
+                .publish(&parameters_msg(&r.params, model, &r.sigma))?;
+            if let Some(warning) = report_warning(&r, &self.temp_name) {
+                ctx.log(&warning);
+                self.last = (DiagnosticStatus::WARN, warning);
+                let t = vec![("online_t_s", format!("{:.3}", r.t))];
+                out.diagnostics.publish(&diagnostic_array(status(
+                    self.last.0,
+                    &ctx.name,
+                    self.last.1.clone(),
+                    t,
+                )))?;
+            }
+        }
+        Ok(worked)
+    }
+
+    /// Pairs one measurement with its state; whether the campaign ends with it.
+    fn measurement(
+        &mut self,
+        m: &TcpMeasurement,
+        states: &Subscriber<ActuatorState>,
+        every: u64,
+    ) -> anyhow::Result<bool> {
+        if m.setup == END_OF_CAMPAIGN {
+            return Ok(true);
+        }
+        // Its state may have arrived after the drain above (a fast publisher interleaves
+        // state, measurement, state, ...): drain the states again before pairing.
+        if !self.acc.has_state_for(m) {
+            while let Some(s) = states.try_recv()? {
+                self.acc.state(&s);
+            }
+        }
+        match self.acc.measurement(m) {
+            Ok(_) => self.last_measurement = Some(Instant::now()),
+            Err(e) => self.last = (DiagnosticStatus::WARN, format!("measurement: {e:#}")),
+        }
+        Ok(every > 0 && self.acc.measurements >= every)
+    }
+
+    /// Whether the campaign so far has been idle for `idle_end` seconds.
+    fn idle_ended(&self, idle_end: f64) -> bool {
+        idle_end > 0.0
+            && self.acc.measurements > 0
+            && self
+                .last_measurement
+                .is_some_and(|t| t.elapsed().as_secs_f64() >= idle_end)
+    }
+
+    /// Calibrates the campaign so far and publishes the outcome.
+    fn calibrate(
+        &mut self,
+        ctx: &NodeContext,
+        out: &Outputs,
+        options: &CalibratorOptions,
+    ) -> anyhow::Result<()> {
+        let n = self.acc.measurements;
+        let result = self.acc.take().and_then(|(c, noise)| {
+            let stated = CalibratorOptions {
+                noise,
+                ..options.clone()
+            };
+            calibrate_campaign(&c, &stated)
+        });
+        self.last = match result {
+            Ok(o) => {
+                self.calibrations += 1;
+                out.parameters.publish(&o.parameters)?;
+                match &o.diagnosis {
+                    Ok(d) => out.diagnosis.publish(d)?,
+                    Err(e) => ctx.log(format!("no diagnosis: {e}")),
+                }
+                (
+                    DiagnosticStatus::OK,
+                    format!(
+                        "calibration {}: {n} measurements ({} calibrated, {} held out), RMS \
+                         {:.2} µm, condition {:.1}",
+                        self.calibrations,
+                        o.parameters.measurement_count,
+                        n.saturating_sub(u64::from(o.parameters.measurement_count)),
+                        o.parameters.cal_rms * 1e6,
+                        o.parameters.condition_number
+                    ),
+                )
+            }
+            Err(e) => (
+                DiagnosticStatus::ERROR,
+                format!("calibration of {n} measurements failed: {e:#}"),
+            ),
+        };
+        ctx.log(&self.last.1);
+        let values = vec![("calibrations", self.calibrations.to_string())];
+        out.diagnostics.publish(&diagnostic_array(status(
+            self.last.0,
+            &ctx.name,
+            self.last.1.clone(),
+            values,
+        )))?;
+        Ok(())
+    }
+
+    /// The periodic /diagnostics status: the last message and the counts.
+    fn publish_status(&self, ctx: &NodeContext, out: &Outputs) -> anyhow::Result<()> {
+        let (level, message) = (self.last.0, self.last.1.clone());
+        out.diagnostics.publish(&diagnostic_array(status(
+            level,
+            &ctx.name,
+            message,
+            self.report_values(),
+        )))?;
+        Ok(())
+    }
+
+    /// The periodic /diagnostics values.
+    fn report_values(&self) -> Vec<(&'static str, String)> {
+        let online = |f: fn(&OnlineWorker) -> u64| self.online.as_ref().map_or(0, f).to_string();
+        vec![
+            ("calibrations", self.calibrations.to_string()),
+            ("pending_measurements", self.acc.measurements.to_string()),
+            ("unpaired_measurements", self.acc.unpaired.to_string()),
+            ("unmeasured_poses", self.acc.unmeasured.to_string()),
+            ("online_samples", online(|w| w.offered)),
+            ("online_dropped", online(|w| w.dropped)),
+        ]
+    }
 }
 
 /// Runs the node until SIGINT/SIGTERM.
@@ -694,161 +915,53 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let capacity = p
         .u64_in("state_buffer", 4096, super::params::BUFFER_LEN)
         .map_err(bad_param)?;
-    let capacity = usize::try_from(capacity).unwrap_or(usize::MAX);
-    let mut online = if p.bool("online", false).map_err(bad_param)? {
-        let settings = OnlineSettings {
-            start_sigma: start_sigmas(&p.string("geometry_file", "").map_err(bad_param)?)?,
-            decimation: p
-                .u64_in("online_decimation", 100, (1, 1_000_000))
-                .map_err(bad_param)?,
-            publish_sigma: p.positive("online_publish_sigma", 1.0).map_err(bad_param)?,
-            drift_warn_mm: p
-                .f64_in("online_drift_warn_um", 10.0, (0.1, 10_000.0), " µm")
-                .map_err(bad_param)?
-                / 1000.0,
-            options: OnlineOptions {
-                force_sigma_n: p.positive("online_force_sigma_n", 5.0).map_err(bad_param)?,
-                ..OnlineOptions::default()
-            },
-        };
-        Some(OnlineWorker::start(options.start.params, &settings)?)
-    } else {
-        None
+    let online = match online_settings(p)? {
+        Some(settings) => Some(OnlineWorker::start(options.start.params, &settings)?),
+        None => None,
     };
-    let mut temp_name = "covariate 1".to_owned();
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
     let measurements = ctx.subscriber(&topic::TCP_MEASUREMENT)?;
     let infos = ctx.subscriber(&topic::CAMPAIGN_INFO)?;
-    let parameters = ctx.publisher(&topic::PARAMETERS)?;
-    let diagnosis = ctx.publisher(&topic::DIAGNOSIS)?;
-    let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
+    let out = Outputs {
+        parameters: ctx.publisher(&topic::PARAMETERS)?,
+        diagnosis: ctx.publisher(&topic::DIAGNOSIS)?,
+        diagnostics: ctx.publisher(&topic::DIAGNOSTICS)?,
+    };
     ctx.log(format!(
         "calibrating {} from {}",
         options.start.model, options.start.source
     ));
-    let mut acc = Accumulator::new(capacity);
+    let mut node = Calibrator {
+        acc: Accumulator::new(usize::try_from(capacity).unwrap_or(usize::MAX)),
+        online,
+        temp_name: "covariate 1".to_owned(),
+        last_measurement: None,
+        calibrations: 0,
+        last: (DiagnosticStatus::OK, "waiting for measurements".into()),
+    };
     let mut idle = Idle::new(Duration::from_millis(50), Duration::from_millis(1));
     let mut report = Every::new(ctx.diagnostics_period()?);
-    let mut last_measurement: Option<Instant> = None;
-    let mut calibrations = 0u64;
-    let mut last: (u8, String) = (DiagnosticStatus::OK, "waiting for measurements".into());
     while !super::shutdown::requested() {
-        let mut worked = false;
         while let Some(info) = infos.try_recv()? {
-            if let Some(name) = info.covariate_names.first() {
-                temp_name.clone_from(name);
-            }
-            if let Err(e) = acc.info(&info) {
-                last = (DiagnosticStatus::WARN, format!("campaign info: {e:#}"));
-            }
+            node.campaign_info(&info);
         }
         // States first: ingest publishes a pose's state before its measurement.
+        let mut worked = false;
         while let Some(s) = states.try_recv()? {
-            acc.state(&s);
-            if let Some(w) = &mut online {
-                w.offer(&s);
-            }
+            node.state(&s);
             worked = true;
         }
-        if let Some(w) = &online {
-            while let Ok(report) = w.rx.try_recv() {
-                worked = true;
-                match report {
-                    Ok(r) => {
-                        parameters.publish(&parameters_msg(
-                            &r.params,
-                            options.start.model,
-                            &r.sigma,
-                        ))?;
-                        if let Some(warning) = report_warning(&r, &temp_name) {
-                            ctx.log(&warning);
-                            last = (DiagnosticStatus::WARN, warning);
-                            diagnostics.publish(&diagnostic_array(status(
-                                last.0,
-                                &ctx.name,
-                                last.1.clone(),
-                                vec![("online_t_s", format!("{:.3}", r.t))],
-                            )))?;
-                        }
-                    }
-                    Err(e) => {
-                        last = (DiagnosticStatus::WARN, format!("online calibration: {e}"));
-                    }
-                }
-            }
-        }
+        worked |= node.online_reports(&ctx, &out, options.start.model)?;
         let mut end = false;
         while let Some(m) = measurements.try_recv()? {
             worked = true;
-            if m.setup == END_OF_CAMPAIGN {
-                end = true;
-                break;
-            }
-            // Its state may have arrived after the drain above (a fast publisher interleaves
-            // state, measurement, state, ...): drain the states again before pairing.
-            if !acc.has_state_for(&m) {
-                while let Some(s) = states.try_recv()? {
-                    acc.state(&s);
-                }
-            }
-            match acc.measurement(&m) {
-                Ok(_) => last_measurement = Some(Instant::now()),
-                Err(e) => last = (DiagnosticStatus::WARN, format!("measurement: {e:#}")),
-            }
-            if every > 0 && acc.measurements >= every {
-                end = true;
+            end = node.measurement(&m, &states, every)?;
+            if end {
                 break;
             }
         }
-        if idle_end > 0.0
-            && acc.measurements > 0
-            && last_measurement.is_some_and(|t| t.elapsed().as_secs_f64() >= idle_end)
-        {
-            end = true;
-        }
-        if end && acc.measurements > 0 {
-            let n = acc.measurements;
-            let result = acc.take().and_then(|(c, noise)| {
-                let stated = CalibratorOptions {
-                    noise,
-                    ..options.clone()
-                };
-                calibrate_campaign(&c, &stated)
-            });
-            match result {
-                Ok(out) => {
-                    calibrations += 1;
-                    parameters.publish(&out.parameters)?;
-                    match &out.diagnosis {
-                        Ok(d) => diagnosis.publish(d)?,
-                        Err(e) => ctx.log(format!("no diagnosis: {e}")),
-                    }
-                    last = (
-                        DiagnosticStatus::OK,
-                        format!(
-                            "calibration {calibrations}: {n} measurements ({} calibrated, {} \
-                             held out), RMS {:.2} µm, condition {:.1}",
-                            out.parameters.measurement_count,
-                            n.saturating_sub(u64::from(out.parameters.measurement_count)),
-                            out.parameters.cal_rms * 1e6,
-                            out.parameters.condition_number
-                        ),
-                    );
-                }
-                Err(e) => {
-                    last = (
-                        DiagnosticStatus::ERROR,
-                        format!("calibration of {n} measurements failed: {e:#}"),
-                    );
-                }
-            }
-            ctx.log(&last.1);
-            diagnostics.publish(&diagnostic_array(status(
-                last.0,
-                &ctx.name,
-                last.1.clone(),
-                vec![("calibrations", calibrations.to_string())],
-            )))?;
+        if (end || node.idle_ended(idle_end)) && node.acc.measurements > 0 {
+            node.calibrate(&ctx, &out, &options)?;
         }
         // Between calibrations: the next campaign ends and calibrates by the new settings.
         if let Some((p, names)) = live.poll() {
@@ -860,25 +973,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             ctx.log(format!("parameters set: {}", names.join(", ")));
         }
         if report.due() {
-            diagnostics.publish(&diagnostic_array(status(
-                last.0,
-                &ctx.name,
-                last.1.clone(),
-                vec![
-                    ("calibrations", calibrations.to_string()),
-                    ("pending_measurements", acc.measurements.to_string()),
-                    ("unpaired_measurements", acc.unpaired.to_string()),
-                    ("unmeasured_poses", acc.unmeasured.to_string()),
-                    (
-                        "online_samples",
-                        online.as_ref().map_or(0, |w| w.offered).to_string(),
-                    ),
-                    (
-                        "online_dropped",
-                        online.as_ref().map_or(0, |w| w.dropped).to_string(),
-                    ),
-                ],
-            )))?;
+            node.publish_status(&ctx, &out)?;
         }
         if worked {
             idle.worked();
