@@ -246,6 +246,14 @@ pub struct Pose {
     pub line: usize,
 }
 
+impl Pose {
+    /// Whether the pose carries drive forces as measurements: all four drives
+    /// position-controlled (no follower) and forces recorded.
+    pub fn drives_loaded(&self) -> bool {
+        self.follower.iter().all(|f| !f) && self.f.iter().any(|f| *f != 0.0)
+    }
+}
+
 /// A measurement campaign: the rows of one campaign file.
 #[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Campaign {

@@ -484,15 +484,9 @@ fn pose_rows(
         (Kgm, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Kgm, (i, pose), reset, out)?),
         (Dbb | LiX | LiY | LiPsi, Some(reset)) => Ok(forward_rows(ctx, i, pose, reset, out)?),
         (SelfCal, _) => Ok(self_rows(ctx, i, pose, out)?),
-        (None, _) if drives_loaded(pose) => Ok(force_rows(ctx, i, pose, out)?),
+        (None, _) if pose.drives_loaded() => Ok(force_rows(ctx, i, pose, out)?),
         _ => Ok(()),
     }
-}
-
-/// Whether a pose carries drive forces as measurements: all four drives position-controlled
-/// (no follower) and forces recorded.
-pub fn drives_loaded(pose: &Pose) -> bool {
-    pose.follower.iter().all(|f| !f) && pose.f.iter().any(|f| *f != 0.0)
 }
 
 /// Step of the central differences of the force rows' Jacobian: small against the

@@ -88,3 +88,153 @@ fn the_core_depends_on_no_transport_crate() {
     }
     assert!(offences.is_empty(), "{}", offences.join("\n"));
 }
+
+/// The top-level modules of the core (`core/src/X.rs` or `core/src/X/`), each with the text of
+/// its files, comments removed.
+fn module_texts(src: &Path) -> Vec<(String, String)> {
+    let mut modules = Vec::new();
+    let entries = std::fs::read_dir(src).expect("read core/src");
+    for entry in entries.map(|e| e.expect("directory entry")) {
+        let path = entry.path();
+        let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("");
+        if stem == "lib" || (path.is_file() && path.extension().is_none_or(|x| x != "rs")) {
+            continue;
+        }
+        let mut files = Vec::new();
+        if path.is_dir() {
+            rust_files(&path, &mut files);
+        } else {
+            files.push(path.clone());
+        }
+        let code: String = files
+            .iter()
+            .map(|f| std::fs::read_to_string(f).expect("read source"))
+            .flat_map(|t| {
+                t.lines()
+                    .map(|l| l.split("//").next().unwrap_or("").to_owned() + "\n")
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        match modules
+            .iter_mut()
+            .find(|(m, _): &&mut (String, String)| m == stem)
+        {
+            Some((_, text)) => text.push_str(&code),
+            None => modules.push((stem.to_owned(), code)),
+        }
+    }
+    modules
+}
+
+/// The top-level modules `code` names through `crate::`: `crate::a::b`, and each first name
+/// of a group `crate::{a, b::{c, d}}` (nested groups and line breaks included).
+fn crate_references(code: &str) -> Vec<String> {
+    let ident = |s: &str| -> String {
+        s.chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect()
+    };
+    let mut names = Vec::new();
+    for (at, _) in code.match_indices("crate::") {
+        let rest = &code[at + "crate::".len()..];
+        let Some(group) = rest.strip_prefix('{') else {
+            names.push(ident(rest));
+            continue;
+        };
+        let (mut depth, mut start) = (1, true);
+        for (i, c) in group.char_indices() {
+            match c {
+                '{' => depth += 1,
+                '}' if depth == 1 => break,
+                '}' => depth -= 1,
+                ',' if depth == 1 => start = true,
+                c if start && depth == 1 && (c.is_alphanumeric() || c == '_') => {
+                    names.push(ident(&group[i..]));
+                    start = false;
+                }
+                _ => {}
+            }
+        }
+    }
+    names.retain(|n| !n.is_empty());
+    names
+}
+
+/// A cycle of the graph, as the modules along it, if any (depth-first search).
+fn find_cycle(graph: &[(String, Vec<String>)]) -> Option<Vec<String>> {
+    fn visit(
+        graph: &[(String, Vec<String>)],
+        node: &str,
+        path: &mut Vec<String>,
+        done: &mut Vec<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(pos) = path.iter().position(|m| m == node) {
+            let mut cycle = path[pos..].to_vec();
+            cycle.push(node.to_owned());
+            return Some(cycle);
+        }
+        if done.iter().any(|m| m == node) {
+            return None;
+        }
+        path.push(node.to_owned());
+        let edges = graph
+            .iter()
+            .find(|(m, _)| m == node)
+            .map(|(_, e)| e.as_slice());
+        for next in edges.unwrap_or_default() {
+            if let Some(cycle) = visit(graph, next, path, done) {
+                return Some(cycle);
+            }
+        }
+        path.pop();
+        done.push(node.to_owned());
+        None
+    }
+    let mut done = Vec::new();
+    graph
+        .iter()
+        .find_map(|(m, _)| visit(graph, m, &mut Vec::new(), &mut done))
+}
+
+#[test]
+fn the_cycle_finder_sees_a_cycle_through_a_group_import() {
+    let refs = crate_references(
+        "use crate::{\n    obs::{a, b},\n    params::Params,\n};\nx(crate::geometry::igm)",
+    );
+    assert_eq!(refs, ["obs", "params", "geometry"]);
+    let graph = |edges: &[(&str, &[&str])]| -> Vec<(String, Vec<String>)> {
+        edges
+            .iter()
+            .map(|(m, e)| ((*m).to_owned(), e.iter().map(|s| (*s).to_owned()).collect()))
+            .collect()
+    };
+    let cycle = find_cycle(&graph(&[("a", &["b"]), ("b", &["c"]), ("c", &["a"])]));
+    assert_eq!(cycle.expect("a -> b -> c -> a").len(), 4);
+    assert!(find_cycle(&graph(&[("a", &["b", "c"]), ("b", &["c"]), ("c", &[])])).is_none());
+}
+
+/// No two modules of the core import each other, directly or around a loop: each layer can be
+/// read, tested and changed knowing only those below it.
+#[test]
+fn no_core_module_imports_in_a_circle() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let modules = module_texts(&src);
+    assert!(modules.len() >= 15, "found only {} modules", modules.len());
+    let names: Vec<String> = modules.iter().map(|(m, _)| m.clone()).collect();
+    let graph: Vec<(String, Vec<String>)> = modules
+        .iter()
+        .map(|(m, code)| {
+            let mut deps = crate_references(code);
+            deps.retain(|d| d != m && names.contains(d));
+            deps.sort();
+            deps.dedup();
+            (m.clone(), deps)
+        })
+        .collect();
+    let cycle = find_cycle(&graph);
+    assert!(
+        cycle.is_none(),
+        "core modules import each other: {}",
+        cycle.unwrap_or_default().join(" -> ")
+    );
+}

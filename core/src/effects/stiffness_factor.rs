@@ -12,8 +12,7 @@
 //! (`rpkm analyze observability --method currents` shows both).
 
 use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
-use crate::campaign::Campaign;
-use crate::obs::drives_loaded;
+use crate::campaign::{Campaign, Pose};
 use crate::params::Params;
 
 /// See the module documentation.
@@ -30,7 +29,7 @@ impl Effect for StiffnessFactor {
         "the machine's stiffness relative to the model's default (drive-force rows only)"
     }
     fn bind(&self, campaign: &Campaign, _p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
-        if !campaign.poses.iter().any(drives_loaded) {
+        if !campaign.poses.iter().any(Pose::drives_loaded) {
             return Err(NotApplicable {
                 effect: "stiffness_factor",
                 reason: format!(

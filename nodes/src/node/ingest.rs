@@ -122,13 +122,15 @@ const RATE_HZ: (f64, f64) = (1e-3, 1e6);
 /// services): forces and measurements above 0, positions an interval.
 fn limits(p: &NodeParams) -> anyhow::Result<Limits> {
     let d = Limits::default();
+    let (position_min_m, position_max_m) = p
+        .interval(
+            ("position_min_m", d.position_min_m),
+            ("position_max_m", d.position_max_m),
+        )
+        .map_err(bad_param)?;
     let l = Limits {
-        position_min_m: p
-            .f64("position_min_m", d.position_min_m)
-            .map_err(bad_param)?,
-        position_max_m: p
-            .f64("position_max_m", d.position_max_m)
-            .map_err(bad_param)?,
+        position_min_m,
+        position_max_m,
         force_max_n: p
             .positive("force_max_n", d.force_max_n)
             .map_err(bad_param)?,
@@ -136,13 +138,6 @@ fn limits(p: &NodeParams) -> anyhow::Result<Limits> {
             .positive("measurement_max_m", d.measurement_max_m)
             .map_err(bad_param)?,
     };
-    // Written so that a NaN fails too: no position would ever pass.
-    if !(l.position_min_m < l.position_max_m) {
-        return Err(bad_input(format!(
-            "position_min_m {} must be below position_max_m {}",
-            l.position_min_m, l.position_max_m
-        )));
-    }
     Ok(l)
 }
 

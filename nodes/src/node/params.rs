@@ -116,6 +116,15 @@ pub enum ParamError {
         hi: String,
         unit: &'static str,
     },
+    /// Two keys that bound an interval, the lower one not below the upper.
+    #[error("{origin}/{lo_key}: {lo} must be below {hi_key} {hi}")]
+    Interval {
+        origin: Box<Origin>,
+        lo_key: String,
+        lo: f64,
+        hi_key: String,
+        hi: f64,
+    },
     /// A key the node does not declare.
     #[error("{origin}/{key}: unknown parameter of node {node} (known: {known})")]
     Unknown {
@@ -321,6 +330,35 @@ impl NodeParams {
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| self.type_err(key, "a finite number")),
         }
+    }
+
+    /// Two finite doubles `lo < hi` (each its default where not set): an interval. The error
+    /// names where the keys were set (the lower one's place where both were).
+    pub fn interval(
+        &self,
+        (lo_key, lo_default): (&str, f64),
+        (hi_key, hi_default): (&str, f64),
+    ) -> Result<(f64, f64), ParamError> {
+        let (lo, hi) = (self.f64(lo_key, lo_default)?, self.f64(hi_key, hi_default)?);
+        // written so that a NaN fails too
+        if lo < hi {
+            return Ok((lo, hi));
+        }
+        let origin = [lo_key, hi_key]
+            .iter()
+            .find_map(|k| self.values.get(*k).map(|(_, o)| o.clone()))
+            .unwrap_or_else(|| Origin {
+                file: "defaults".into(),
+                section: self.node.clone(),
+                specific: true,
+            });
+        Err(ParamError::Interval {
+            origin: Box::new(origin),
+            lo_key: lo_key.into(),
+            lo,
+            hi_key: hi_key.into(),
+            hi,
+        })
     }
 
     /// A finite double > 0, or `default`.
