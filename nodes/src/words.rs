@@ -3,8 +3,10 @@
 //! figures (`rpkm_core::diagnose`); the words and their units live here, once, for the
 //! terminal, the HTML report and the JSON's text fields alike.
 
+use rpkm_core::calib::online::{Drift, DriftInput, FOLLOWS};
 use rpkm_core::diagnose::sparse::Pointer;
 use rpkm_core::diagnose::{Candidate, Diagnosis, Test, VerdictKind};
+use rpkm_core::params::{unit, Unit, NAMES};
 use rpkm_core::variance::GroupNoise;
 use std::fmt::Write as _;
 
@@ -22,6 +24,34 @@ pub fn follows(p: &Pointer) -> String {
         "the {} {} residual follows {} (r = {:.2}{tied})",
         p.instrument, p.direction, p.feature, p.r
     )
+}
+
+/// "l3 +48 µm in 6 min (+12.0 ± 0.3 µm/K), follows temp_machine (r = 0.98)", or "l3 or l1
+/// ..." when the forces moved alike for both (the temperature named `temp_name`).
+pub fn drift(d: &Drift, temp_name: &str) -> String {
+    let (k, unit) = match unit(d.param) {
+        Unit::Mm => (1e3, "µm"),
+        Unit::Rad => (1e6, "µrad"),
+    };
+    let who = match d.alternative {
+        Some(other) => format!("{} or {}", NAMES[d.param], NAMES[other]),
+        None => NAMES[d.param].to_owned(),
+    };
+    let per = match d.input {
+        DriftInput::Temperature(_) => "K",
+        DriftInput::Time | DriftInput::Unknown => "h",
+    };
+    let mut s = format!(
+        "{who} {:+.0} {unit} in {:.0} min ({:+.1} ± {:.1} {unit}/{per})",
+        d.change * k,
+        d.over_s / 60.0,
+        d.rate * k,
+        d.rate_sigma * k
+    );
+    if let Some(r) = d.temperature_correlation.filter(|r| r.abs() >= FOLLOWS) {
+        let _ = write!(s, ", follows {temp_name} (r = {r:.2})");
+    }
+    s
 }
 
 /// "tracker 2.1x noisier than stated, ..." for every group off its rating.
@@ -141,4 +171,40 @@ pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
         }
     }
     Ok(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The drift WARN's words: who ("A or B" when the forces moved alike for both), the
+    /// change and rate in µm, and "follows" only from FOLLOWS on.
+    #[test]
+    fn a_drift_in_words() {
+        let l3 = rpkm_core::params::index_of("l3").expect("l3");
+        let l4 = rpkm_core::params::index_of("l4").expect("l4");
+        let mut d = Drift {
+            param: l3,
+            alternative: Some(l4),
+            margin: 1.002,
+            rate: 0.0115,
+            rate_sigma: 0.0008,
+            input: DriftInput::Temperature(20.4),
+            change: 0.0188,
+            over_s: 136.0,
+            explained: 0.89,
+            alike: 22,
+            temperature_correlation: Some(0.86),
+        };
+        assert_eq!(
+            drift(&d, "temp_machine"),
+            "l3 or l4 +19 µm in 2 min (+11.5 ± 0.8 µm/K)"
+        );
+        d.alternative = None;
+        d.temperature_correlation = Some(0.95);
+        assert_eq!(
+            drift(&d, "temp_machine"),
+            "l3 +19 µm in 2 min (+11.5 ± 0.8 µm/K), follows temp_machine (r = 0.95)"
+        );
+    }
 }

@@ -18,13 +18,18 @@
 //! The forces determine some combinations of the parameters (`rpkm analyze observability
 //! --method currents`); the start covariance (a calibration's, or the tolerances) holds the
 //! rest, whose σ then grows with the drift allowed.
+//!
+//! Drift: the random walk that lets the estimate follow a drift widens its σ by as much, so
+//! [`DriftMonitor`] tests the estimate's change since a reference against the covariance that
+//! change would have had were nothing to have moved ([`OnlineEstimator::change`]), the
+//! expansion of rods and frame fitted out, and names the rod whose creep with the
+//! temperature explains it best.
 
 use super::Prior;
 use crate::elastic::{sensitivity, ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
 use crate::obs::force_jacobian;
 use crate::params::{unit, Params, Unit, N_PARAMS};
 use nalgebra::{Matrix4, SMatrix, SVector, Vector3, Vector4};
-use std::fmt::Write as _;
 
 /// The state's units inside the filter: the tolerance prior (0.1 mm, 1 mrad) and 10 % of
 /// the stiffness.
@@ -171,6 +176,101 @@ pub struct OnlineEstimator {
     held: Vec<Held>,
     applied: usize,
     outliers: usize,
+    /// The estimate's change since a reference, for the drift test.
+    change: ChangeTrack,
+    /// The machine temperature last given, °C (NaN: none).
+    temp_c: f64,
+}
+
+/// What the estimate's change since a reference would be were nothing to have moved: the
+/// estimation error evolves as e ← A e + K v (A = I − K H) under noise v alone, so the change
+/// e_t − e_r = (Φ − I) e_r + Σ Φ K v, Φ the product of the A since the reference. Its
+/// covariance (Φ − I) P_r (Φ − I)ᵀ + M, M ← A M Aᵀ + K R Kᵀ, stays bounded where the random
+/// walk's own covariance grows with time: the random walk lets the estimate follow a drift,
+/// and the test still measures the drift against what noise alone would have moved it (the
+/// filter's own innovations would not: they are tested against the random walk, which
+/// allows any drift this slow). Scaled units, as the filter.
+///
+/// Beside it, what the filter makes of a parameter that creeps along the input s (the
+/// temperature's change since the reference, or the hours where there is no temperature):
+/// the truth x_r + e_i s moves the estimate by R e_i, R ← A R + K H s. The forces see a
+/// parameter's change only through the combinations they determine, so a creep is compared
+/// with the estimate's change through the filter's own response, not as the unit vector.
+#[derive(Clone, Debug)]
+struct ChangeTrack {
+    p: Params,
+    cov: Covariance,
+    phi: Covariance,
+    noise: Covariance,
+    response: SMatrix<f64, N_STATE, N_PARAMS>,
+    input: DriftInput,
+    /// The input now (K or h since the reference).
+    s: f64,
+    t: Option<f64>,
+}
+
+/// What a creep is assumed to follow.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DriftInput {
+    /// Not yet known (no sample since the reference).
+    Unknown,
+    /// The temperature (°C at the reference): changes per K.
+    Temperature(f64),
+    /// Time, where no temperature is given: changes per hour.
+    Time,
+}
+
+impl ChangeTrack {
+    fn at(p: Params, cov: &Covariance, t: Option<f64>) -> ChangeTrack {
+        ChangeTrack {
+            p,
+            cov: *cov,
+            phi: Covariance::identity(),
+            noise: Covariance::zeros(),
+            response: SMatrix::zeros(),
+            input: DriftInput::Unknown,
+            s: 0.0,
+            t,
+        }
+    }
+
+    /// The input at time `t` with temperature `temp_c` (NaN: none), fixing its kind at the
+    /// first sample after the reference.
+    fn input(&mut self, t: f64, temp_c: f64) -> f64 {
+        let t0 = *self.t.get_or_insert(t);
+        if self.input == DriftInput::Unknown {
+            self.input = if temp_c.is_finite() {
+                DriftInput::Temperature(temp_c)
+            } else {
+                DriftInput::Time
+            };
+        }
+        self.s = match self.input {
+            DriftInput::Temperature(t_ref) if temp_c.is_finite() => temp_c - t_ref,
+            // a thermometer that stops reading: the last change holds
+            DriftInput::Temperature(_) => self.s,
+            DriftInput::Time | DriftInput::Unknown => (t - t0) / 3600.0,
+        };
+        self.s
+    }
+}
+
+/// The parameters' change since the reference and its covariance had nothing moved (mm, rad).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Change {
+    /// Time of the reference, s (None before the first sample).
+    pub since_s: Option<f64>,
+    /// Estimate now minus the estimate at the reference.
+    pub dp: SVector<f64, N_PARAMS>,
+    /// Its covariance under noise alone (see [`OnlineEstimator::change`]).
+    pub cov: SMatrix<f64, N_PARAMS, N_PARAMS>,
+    /// Column i: the estimate's change had parameter i crept by one unit (mm, rad) per unit
+    /// of the input since the reference.
+    pub response: SMatrix<f64, N_PARAMS, N_PARAMS>,
+    /// What the creep follows, and its value now (K or h since the reference).
+    pub input: DriftInput,
+    pub input_now: f64,
 }
 
 impl OnlineEstimator {
@@ -178,10 +278,13 @@ impl OnlineEstimator {
     /// [`OnlineEstimator::from_sigmas`]).
     pub fn new(p: Params, cov: Covariance, opts: OnlineOptions) -> OnlineEstimator {
         let d = scale();
+        let cov = Covariance::from_fn(|i, j| cov[(i, j)] / (d[i] * d[j]));
         OnlineEstimator {
             p,
             dk: 0.0,
-            cov: Covariance::from_fn(|i, j| cov[(i, j)] / (d[i] * d[j])),
+            cov,
+            change: ChangeTrack::at(p, &cov, None),
+            temp_c: f64::NAN,
             opts,
             last_t: None,
             warm: None,
@@ -234,6 +337,38 @@ impl OnlineEstimator {
     /// Samples applied and outliers dropped so far.
     pub fn counts(&self) -> (usize, usize) {
         (self.applied, self.outliers)
+    }
+
+    /// The parameters' change since the reference (the start, the last step, or
+    /// [`OnlineEstimator::rebase_change`]), its covariance were nothing to have moved (the
+    /// start error the forces go on correcting and the force noise, through the gains the
+    /// filter used; its random walk's growth not included: that is what a drift would be),
+    /// and the estimate's response to a creep of each parameter (see [`ChangeTrack`]).
+    pub fn change(&self) -> Change {
+        let d = scale();
+        let c = &self.change;
+        let phi = c.phi.fixed_view::<N_PARAMS, N_STATE>(0, 0)
+            - Covariance::identity().fixed_view::<N_PARAMS, N_STATE>(0, 0);
+        let cov = phi * c.cov * phi.transpose() + c.noise.fixed_view::<N_PARAMS, N_PARAMS>(0, 0);
+        Change {
+            since_s: c.t,
+            dp: SVector::from_fn(|i, _| self.p[i] - c.p[i]),
+            cov: SMatrix::from_fn(|i, j| (cov[(i, j)] + cov[(j, i)]) * 0.5 * d[i] * d[j]),
+            response: SMatrix::from_fn(|j, i| c.response[(j, i)] * d[j] / d[i]),
+            input: c.input,
+            input_now: c.s,
+        }
+    }
+
+    /// Takes the estimate now as the reference of [`OnlineEstimator::change`].
+    pub fn rebase_change(&mut self) {
+        self.change = ChangeTrack::at(self.p, &self.cov, self.last_t);
+    }
+
+    /// The machine temperature now, °C (NaN: none), for the drift test's input (see
+    /// [`OnlineEstimator::change`]); the filter itself knows no temperature.
+    pub fn set_temperature(&mut self, temp_c: f64) {
+        self.temp_c = temp_c;
     }
 
     fn state(&self, i: usize) -> f64 {
@@ -323,8 +458,25 @@ impl OnlineEstimator {
         self.dk += dx[STIFFNESS] * d[STIFFNESS];
         let cov = post.inverse();
         self.cov = (cov + cov.transpose()) * 0.5;
+        self.track_change(&held.h, r);
         self.applied += 1;
         nis
+    }
+
+    /// The change's covariance and the creep responses through one update's gain (see
+    /// [`ChangeTrack`]).
+    fn track_change(&mut self, h: &Rows, r: f64) {
+        let k = self.cov * h.transpose() / r;
+        let kh = k * h;
+        let a = Covariance::identity() - kh;
+        let t = self.last_t.unwrap_or(0.0);
+        let temp_c = self.temp_c;
+        let c = &mut self.change;
+        let s = c.input(t, temp_c);
+        c.phi = a * c.phi;
+        let noise = a * c.noise * a.transpose() + k * k.transpose() * r;
+        c.noise = (noise + noise.transpose()) * 0.5;
+        c.response = a * c.response + kh.fixed_view::<N_STATE, N_PARAMS>(0, 0) * s;
     }
 
     /// Normalised innovation of a linearised sample.
@@ -387,6 +539,8 @@ impl OnlineEstimator {
         // would pull the combinations the forces cannot tell from the step (a start
         // covariance without its correlations leaves them free) and move the TCP
         self.held.clear();
+        // a step is reported on its own: the drift test starts again from the estimate with it
+        self.rebase_change();
         step
     }
 
@@ -437,111 +591,324 @@ impl OnlineEstimator {
     }
 }
 
-/// A parameter that moved beyond the threshold since the tracking began.
+/// The single parameter that best explains a drift (see [`DriftMonitor::record`]).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Drift {
     /// Parameter index.
     pub param: usize,
-    /// Change since the reference, mm or rad, and over how long, s.
+    /// The runner-up when the best explains the drift less than [`DRIFT_NAME_MARGIN`] times
+    /// better: the forces moved alike for both ("l3 or l1").
+    pub alternative: Option<usize>,
+    /// How much better the best explains the drift than the runner-up (ratio of their χ²
+    /// reductions).
+    pub margin: f64,
+    /// Its creep per unit of the input (mm or rad per K, or per h without a temperature) and
+    /// that rate's σ.
+    pub rate: f64,
+    pub rate_sigma: f64,
+    /// What the rate is per.
+    pub input: DriftInput,
+    /// Its change since the reference (the rate times the input now), mm or rad, and over
+    /// how long, s.
     pub change: f64,
     pub over_s: f64,
+    /// The share of the drift's χ² it explains.
+    pub explained: f64,
+    /// How many parameters outside the candidates explain it as well (within
+    /// [`DRIFT_NAME_MARGIN`]): a slow drift shows in the few combinations the forces pin,
+    /// where a rod's length and its joints' positions across it move alike.
+    pub alike: usize,
     /// Correlation of its track with the temperature (None without a temperature, or too
     /// few points).
     pub temperature_correlation: Option<f64>,
 }
 
-impl Drift {
-    /// "l3 +12 µm in 40 min, follows temp_machine" (the temperature named `temp_name`).
-    pub fn describe(&self, temp_name: &str) -> String {
-        let (v, unit) = match unit(self.param) {
-            Unit::Mm => (self.change * 1e3, "µm"),
-            Unit::Rad => (self.change * 1e6, "µrad"),
+/// The drift test of the estimate's change since the reference: a χ² in the covariance the
+/// change would have had were nothing to have moved, after the expansion of the rods and
+/// the frame (the `thermal` effect's two parts that are parameters, each at a rate of its
+/// own, fitted) is taken out.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct DriftTest {
+    pub chi2: f64,
+    /// Degrees of freedom: the combinations the forces have determined since the reference,
+    /// less the expansion's.
+    pub dof: usize,
+    /// P(χ²_dof ≥ chi2): the probability that noise alone moved the estimate this far.
+    pub p_value: f64,
+    /// The fitted expansion of the rods and of the frame, per unit of the input, ppm (NaN
+    /// where the forces did not see it).
+    pub expansion_ppm: [f64; 2],
+    /// Per parameter, the χ² its creep alone explains of the rest, and its rate (mm or rad
+    /// per unit of the input): a slow drift shows in the few combinations the forces pin, so
+    /// several parameters may explain it alike.
+    pub explains: [f64; N_PARAMS],
+    pub rates: [f64; N_PARAMS],
+    /// The candidate that explains the rest best (None before the forces saw anything).
+    pub best: Option<Drift>,
+}
+
+impl DriftTest {
+    /// The drift to warn about: significant at [`DRIFT_FALSE_ALARM`] and its parameter's
+    /// change beyond `threshold_mm` (rad: `threshold_mm` / 1000), so that a µm the forces
+    /// resolve is not a WARN.
+    pub fn warning(&self, threshold_mm: f64) -> Option<&Drift> {
+        let d = self.best.as_ref()?;
+        let threshold = match unit(d.param) {
+            Unit::Mm => threshold_mm,
+            Unit::Rad => threshold_mm / 1000.0,
         };
-        let mut s = format!(
-            "{} {v:+.0} {unit} in {:.0} min",
-            crate::params::NAMES[self.param],
-            self.over_s / 60.0
-        );
-        if let Some(r) = self.temperature_correlation.filter(|r| r.abs() >= FOLLOWS) {
-            let _ = write!(s, ", follows {temp_name} (r = {r:.2})");
-        }
-        s
+        (self.p_value < DRIFT_FALSE_ALARM && d.change.abs() > threshold).then_some(d)
     }
 }
+
+/// False-alarm probability of one drift test under noise alone (a check a second: at most
+/// 0.4 % per hour by the union bound, less as successive checks share their data).
+pub const DRIFT_FALSE_ALARM: f64 = 1e-6;
+/// A drift is named alone when its parameter explains it this many times better than the
+/// next (as [`OnlineOptions::step_margin`]).
+pub const DRIFT_NAME_MARGIN: f64 = 1.5;
+/// Eigenvalues of the change's covariance below this fraction of the largest are
+/// combinations the forces have not determined (scaled units: rounding sits near 1e-16).
+const DRIFT_RANK_CUTOFF: f64 = 1e-12;
 
 /// Correlation with the temperature from which a drift "follows" it.
 pub const FOLLOWS: f64 = 0.9;
 
-/// The history of the tracked parameters (a fixed ring of points, allocated once) and what
-/// moved in it.
+/// Whitened vectors of the drift test: the change and the creep responses in the eigenbasis
+/// of the change's covariance, scaled to unit variance, the combinations the forces have not
+/// determined (no variance: the estimate does not move along them) dropped.
+struct Whitened {
+    w: SMatrix<f64, N_PARAMS, N_PARAMS>,
+    z: SVector<f64, N_PARAMS>,
+    cols: SMatrix<f64, N_PARAMS, N_PARAMS>,
+    rank: usize,
+}
+
+impl Whitened {
+    fn new(c: &Change) -> Whitened {
+        let d = scale();
+        let cov = SMatrix::<f64, N_PARAMS, N_PARAMS>::from_fn(|i, j| c.cov[(i, j)] / (d[i] * d[j]));
+        let eig = cov.symmetric_eigen();
+        let top = eig.eigenvalues.max();
+        let mut w = eig.eigenvectors.transpose();
+        let mut rank = 0;
+        for (k, &l) in eig.eigenvalues.iter().enumerate() {
+            let keep = top > 0.0 && l > DRIFT_RANK_CUTOFF * top;
+            rank += usize::from(keep);
+            let f = if keep { l.sqrt().recip() } else { 0.0 };
+            w.row_mut(k).scale_mut(f);
+        }
+        let dp = SVector::<f64, N_PARAMS>::from_fn(|i, _| c.dp[i] / d[i]);
+        let resp =
+            SMatrix::<f64, N_PARAMS, N_PARAMS>::from_fn(|j, i| c.response[(j, i)] / d[j] * d[i]);
+        Whitened {
+            z: w * dp,
+            cols: w * resp,
+            w,
+            rank,
+        }
+    }
+}
+
+/// One parameter's creep against the rest of the change: its whitened response with the
+/// expansion taken out, its least-squares rate (scaled units per unit of the input) and the
+/// χ² it explains.
+type CreepFit = (SVector<f64, N_PARAMS>, f64, f64);
+
+/// Each parameter's creep fitted alone to the rest `z` of the change.
+fn creep_fits(
+    w: &Whitened,
+    basis: &[SVector<f64, N_PARAMS>],
+    z: &SVector<f64, N_PARAMS>,
+) -> Vec<CreepFit> {
+    (0..N_PARAMS)
+        .map(|i| {
+            let mut u: SVector<f64, N_PARAMS> = w.cols.column(i).into_owned();
+            project_out(&mut u, basis);
+            let info = u.norm_squared();
+            let g = u.dot(z);
+            if info > 0.0 {
+                (u, g / info, g * g / info)
+            } else {
+                (u, 0.0, 0.0)
+            }
+        })
+        .collect()
+}
+
+/// Removes from `v` its components along the orthonormal `basis`.
+fn project_out(v: &mut SVector<f64, N_PARAMS>, basis: &[SVector<f64, N_PARAMS>]) {
+    for q in basis {
+        let c = q.dot(v);
+        *v -= q * c;
+    }
+}
+
+/// The expansion of the rods and of the frame as creeps of their lengths, ppm of each.
+fn expansion_directions(p: &Params) -> [SVector<f64, N_PARAMS>; 2] {
+    let mut rods = SVector::zeros();
+    for r in &crate::params::RODS {
+        rods[r.l] = p[r.l] * 1e-6 / scale()[r.l];
+    }
+    let mut frame = SVector::zeros();
+    for i in [crate::params::D1, crate::params::D2] {
+        frame[i] = p[i] * 1e-6 / scale()[i];
+    }
+    [rods, frame]
+}
+
+/// Stream time after the start (or a step) before the drift test takes its reference, s:
+/// until the forces have determined what they can of the start error, a change since the
+/// start is mostly the start error corrected, which noise alone would explain as well as a
+/// drift.
+pub const DRIFT_SETTLE_S: f64 = 30.0;
+
+/// The history of the tracked parameters (a fixed ring of points, allocated once), the
+/// reference of the estimator's change and the drift test of it.
 #[derive(Clone, Debug)]
 pub struct DriftMonitor {
+    /// Time of the first point since the start or the last rebase.
+    start: Option<f64>,
+    /// Time and estimate at the drift test's reference, once settled.
     reference: Option<(f64, Params)>,
     ring: Vec<(f64, f64, Params)>,
     next: usize,
     capacity: usize,
+    settle_s: f64,
+    candidates: StepCandidates,
 }
 
 impl DriftMonitor {
-    /// Keeps up to `capacity` points (older ones are overwritten).
+    /// Keeps up to `capacity` points (older ones are overwritten); the reference is taken
+    /// [`DRIFT_SETTLE_S`] after the first point.
     pub fn new(capacity: usize) -> DriftMonitor {
         let capacity = capacity.max(2);
         DriftMonitor {
+            start: None,
             reference: None,
             ring: Vec::with_capacity(capacity),
             next: 0,
             capacity,
+            settle_s: DRIFT_SETTLE_S,
+            candidates: StepCandidates::Rods,
         }
     }
 
-    /// Records the estimate `p` at time `t` with the temperature `temp` (NaN: none). The
-    /// first point is the reference.
-    pub fn record(&mut self, t: f64, temp: f64, p: &Params) {
+    /// Which parameters a drift is named among (the rod lengths by default, as a step: a
+    /// clamping that slips, a rod that bends as it warms).
+    #[must_use]
+    pub fn with_candidates(mut self, candidates: StepCandidates) -> DriftMonitor {
+        self.candidates = candidates;
+        self
+    }
+
+    /// Records the estimate of `est` at time `t` with the temperature `temp` (NaN: none):
+    /// once settled (the estimator's change then rebased to now), the drift test of its change
+    /// since (None before).
+    pub fn record(&mut self, t: f64, temp: f64, est: &mut OnlineEstimator) -> Option<DriftTest> {
+        let start = *self.start.get_or_insert(t);
         if self.reference.is_none() {
-            self.reference = Some((t, *p));
+            if t - start < self.settle_s {
+                return None;
+            }
+            est.rebase_change();
+            self.reference = Some((t, *est.params()));
         }
+        let p = *est.params();
         if self.ring.len() < self.capacity {
-            self.ring.push((t, temp, *p));
+            self.ring.push((t, temp, p));
         } else {
-            self.ring[self.next] = (t, temp, *p);
+            self.ring[self.next] = (t, temp, p);
         }
         self.next = (self.next + 1) % self.capacity;
+        Some(self.test(&est.change()))
     }
 
-    /// Restarts from the estimate now (after a step was reported, or drifts acknowledged).
+    /// Restarts (after a step was reported, or drifts acknowledged): settles again from now.
     pub fn rebase(&mut self) {
+        self.start = None;
         self.reference = None;
         self.ring.clear();
         self.next = 0;
     }
 
-    /// The parameters whose change from the reference exceeds both `threshold` (mm; rad
-    /// thresholds are `threshold` / 1000 mm) and 3σ of the estimate (`sigma`), largest first.
-    pub fn drifts(&self, threshold_mm: f64, sigma: &[f64; N_PARAMS]) -> Vec<Drift> {
-        let (Some((t0, p0)), Some(&(t, _, p))) = (self.reference, self.latest()) else {
-            return Vec::new();
+    /// The drift test of `change` (the estimator's, [`OnlineEstimator::change`]): its χ² once
+    /// the expansion of the rods and the frame is taken out, and the single parameter whose
+    /// creep explains the rest best, with its track's correlation with the temperature.
+    fn test(&self, change: &Change) -> DriftTest {
+        let w = Whitened::new(change);
+        let p0 = self.reference.map_or_else(Params::nominal, |r| r.1);
+        let mut basis: Vec<SVector<f64, N_PARAMS>> = Vec::with_capacity(2);
+        let mut expansion_ppm = [f64::NAN; 2];
+        let raw = expansion_directions(&p0).map(|g| w.cols * g);
+        for (k, v) in raw.iter().enumerate() {
+            let mut q = *v;
+            project_out(&mut q, &basis);
+            // an expansion the forces did not see (or the other part's again) fits nothing
+            if q.norm() > 1e-6 * v.norm() && q.norm() > 0.0 {
+                basis.push(q.normalize());
+                expansion_ppm[k] = 0.0;
+            }
+        }
+        fit_expansion(&raw, &w.z, &mut expansion_ppm);
+        let mut z = w.z;
+        project_out(&mut z, &basis);
+        let chi2 = z.norm_squared();
+        let dof = w.rank.saturating_sub(basis.len());
+        let p_value = if dof == 0 {
+            1.0
+        } else {
+            crate::diagnose::stats::chi2_upper_tail(chi2, dof as f64)
         };
-        let mut out: Vec<Drift> = (0..N_PARAMS)
-            .filter_map(|i| {
-                let change = p[i] - p0[i];
-                let threshold = match unit(i) {
-                    Unit::Mm => threshold_mm,
-                    Unit::Rad => threshold_mm / 1000.0,
-                };
-                (change.abs() > threshold && change.abs() > 3.0 * sigma[i]).then(|| Drift {
-                    param: i,
-                    change,
-                    over_s: t - t0,
-                    temperature_correlation: self.correlation(i),
-                })
-            })
+        let fits = creep_fits(&w, &basis, &z);
+        let d = scale();
+        DriftTest {
+            chi2,
+            dof,
+            p_value,
+            expansion_ppm,
+            explains: std::array::from_fn(|i| fits[i].2),
+            rates: std::array::from_fn(|i| fits[i].1 * d[i]),
+            best: self.name(&w, &fits, chi2, change),
+        }
+    }
+
+    /// The candidate whose creep explains the rest of the change best (`fits` from
+    /// [`creep_fits`], `chi2` the rest's).
+    fn name(&self, w: &Whitened, fits: &[CreepFit], chi2: f64, change: &Change) -> Option<Drift> {
+        let mut order: Vec<usize> = self
+            .candidates
+            .states()
+            .into_iter()
+            .filter(|&i| i < N_PARAMS && fits[i].2 > 0.0)
             .collect();
-        out.sort_by(|a, b| {
-            (b.change / sigma[b.param])
-                .abs()
-                .total_cmp(&(a.change / sigma[a.param]).abs())
-        });
-        out
+        order.sort_by(|&a, &b| fits[b].2.total_cmp(&fits[a].2));
+        let &param = order.first()?;
+        let (u, rate, gain) = &fits[param];
+        let next = order.get(1).copied();
+        let margin = next.map_or(f64::INFINITY, |n| gain / fits[n].2.max(f64::MIN_POSITIVE));
+        let d = scale()[param];
+        // the estimate's track as this parameter's creep (its least-squares fit at each
+        // point, in the metric now), for the correlation with the temperature
+        let along = w.w.transpose() * u;
+        Some(Drift {
+            param,
+            alternative: next.filter(|_| margin < DRIFT_NAME_MARGIN),
+            margin,
+            rate: rate * d,
+            rate_sigma: u.norm().recip() * d,
+            input: change.input,
+            change: rate * d * change.input_now,
+            over_s: change
+                .since_s
+                .zip(self.latest().map(|l| l.0))
+                .map_or(0.0, |(t0, t)| t - t0),
+            explained: if chi2 > 0.0 { gain / chi2 } else { 0.0 },
+            alike: (0..N_PARAMS)
+                .filter(|i| !order.contains(i) && fits[*i].2 * DRIFT_NAME_MARGIN >= *gain)
+                .count(),
+            temperature_correlation: self.correlation(&along),
+        })
     }
 
     fn latest(&self) -> Option<&(f64, f64, Params)> {
@@ -549,13 +916,21 @@ impl DriftMonitor {
         self.ring.get(last).or_else(|| self.ring.last())
     }
 
-    /// Pearson correlation of parameter `i`'s track with the temperature.
-    fn correlation(&self, i: usize) -> Option<f64> {
+    /// Pearson correlation with the temperature of the estimate's track since the reference
+    /// projected on `along` (scaled units).
+    fn correlation(&self, along: &SVector<f64, N_PARAMS>) -> Option<f64> {
+        let (_, p0) = self.reference?;
+        let d = scale();
         let pts: Vec<(f64, f64)> = self
             .ring
             .iter()
             .filter(|(_, temp, _)| temp.is_finite())
-            .map(|(_, temp, p)| (*temp, p[i]))
+            .map(|(_, temp, p)| {
+                let y = (0..N_PARAMS)
+                    .map(|j| along[j] * (p[j] - p0[j]) / d[j])
+                    .sum();
+                (*temp, y)
+            })
             .collect();
         if pts.len() < 8 {
             return None;
@@ -571,5 +946,30 @@ impl DriftMonitor {
             syy += (y - my).powi(2);
         }
         (sxx > 0.0 && syy > 0.0).then(|| sxy / (sxx * syy).sqrt())
+    }
+}
+
+/// The least-squares expansion rates (ppm per unit of the input) of the parts the forces saw
+/// (`ppm` not NaN), from their whitened responses `raw` and the whitened change `z`.
+fn fit_expansion(
+    raw: &[SVector<f64, N_PARAMS>; 2],
+    z: &SVector<f64, N_PARAMS>,
+    ppm: &mut [f64; 2],
+) {
+    let seen: Vec<usize> = (0..2).filter(|&k| ppm[k].is_finite()).collect();
+    let n = seen.len();
+    if n == 0 {
+        return;
+    }
+    let a = nalgebra::DMatrix::from_fn(N_PARAMS, n, |r, c| raw[seen[c]][r]);
+    let b = nalgebra::DVector::from_column_slice(z.as_slice());
+    let Some(x) = (a.transpose() * &a)
+        .cholesky()
+        .map(|c| c.solve(&(a.transpose() * b)))
+    else {
+        return;
+    };
+    for (c, &k) in seen.iter().enumerate() {
+        ppm[k] = x[c];
     }
 }

@@ -16,8 +16,10 @@
 //! to `rpkm_core::calib::online` on a worker thread (the loop hands it over without waiting;
 //! a full hand-over queue is counted, never waited on), which publishes Parameters with their
 //! σ when a parameter moved by `online_publish_sigma` σ since the last, and a WARN on
-//! /diagnostics naming a step change or the parameters that drifted by more than
-//! `online_drift_warn_um` ("l3 +12 µm in 40 min, follows temp_machine").
+//! /diagnostics naming a step change, or a drift: the change since the drift test's reference
+//! beyond what noise alone would have moved it (`DriftMonitor`, χ² at a false alarm of 1e-6
+//! a check) and its rod's change beyond `online_drift_warn_um` ("l3 or l4 +19 µm in 2 min
+//! (+11.5 ± 0.8 µm/K)").
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -323,9 +325,9 @@ pub struct OnlineReport {
     pub t: f64,
     /// A step change found since the last report.
     pub step: Option<StepChange>,
-    /// Parameters that drifted beyond the threshold since the tracking began (or since the
-    /// last step).
-    pub drifts: Vec<Drift>,
+    /// The parameter whose creep explains a significant drift since the tracking began (or
+    /// since the last step) beyond the threshold.
+    pub drift: Option<Drift>,
 }
 
 /// The tracker's side: the estimator, its drift history and when to report.
@@ -363,8 +365,9 @@ impl OnlineTracker {
     }
 
     /// One decimated sample (mm, N, °C or NaN); a report when the parameters moved
-    /// significantly, a step was found or a drift passed the threshold.
+    /// significantly, a step was found or the drift test warns.
     pub fn sample(&mut self, s: &ForceSample, temp_c: f64) -> Option<OnlineReport> {
+        self.est.set_temperature(temp_c);
         let outcome = match self.est.update(s) {
             Ok(o) => o,
             Err(e) => {
@@ -381,14 +384,19 @@ impl OnlineTracker {
             }
             _ => None,
         };
+        // the drift test at each point of the history (a second at 10 Hz)
+        let mut drift = None;
         if self.updates % DRIFT_EVERY == 1 || step.is_some() {
-            self.monitor.record(s.t, temp_c, self.est.params());
+            drift = self
+                .monitor
+                .record(s.t, temp_c, &mut self.est)
+                .and_then(|test| test.warning(self.settings.drift_warn_mm).copied());
         }
         let sigma = self.sigma();
         // in the estimate's covariance: the forces pin combinations of the parameters whose
         // single σ stay wide
         let moved = self.est.distance(&self.published) > self.settings.publish_sigma;
-        if !(moved || step.is_some()) {
+        if !(moved || step.is_some() || drift.is_some()) {
             return None;
         }
         self.published = *self.est.params();
@@ -397,7 +405,7 @@ impl OnlineTracker {
             sigma,
             t: s.t,
             step,
-            drifts: self.monitor.drifts(self.settings.drift_warn_mm, &sigma),
+            drift,
         })
     }
 }
@@ -542,16 +550,9 @@ pub fn report_warning(r: &OnlineReport, temp_name: &str) -> Option<String> {
             step.margin
         ));
     }
-    if r.drifts.is_empty() {
-        return None;
-    }
-    let parts: Vec<String> = r
-        .drifts
-        .iter()
-        .take(3)
-        .map(|d| d.describe(temp_name))
-        .collect();
-    Some(format!("geometry drift: {}", parts.join("; ")))
+    r.drift
+        .as_ref()
+        .map(|d| format!("geometry drift: {}", crate::words::drift(d, temp_name)))
 }
 
 /// What a parameter set changes while the node runs: the options of the next calibration
