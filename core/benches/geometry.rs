@@ -93,7 +93,10 @@ fn main() {
         igms.push(igm);
     }
     let (checked, unchecked) = fegm_ns(&p, n / 4);
-    for (label, ns) in [("fegm warm, checked", checked), ("fegm warm, unchecked", unchecked)] {
+    for (label, ns) in [
+        ("fegm warm, checked", checked),
+        ("fegm warm, unchecked", unchecked),
+    ] {
         println!(
             "{label:<36} {ns:>10.0} {:>8.2}  (/ igm model 24: {:.2})",
             ns / igms[1],
