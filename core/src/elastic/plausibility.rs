@@ -23,9 +23,10 @@
 use std::f64::consts::{PI, TAU};
 use std::fmt;
 
-use super::spring::{platform_balance, Equilibrium, Followers, Stiffness, NOMINAL_DRIVE_FORCE_N};
-use crate::geometry::{carrier_joint, platform_joint};
-use crate::params::{Params, GAMMA2, RODS};
+use super::spring::{
+    balance_of, rod_geometry, Equilibrium, Followers, RodState, Stiffness, NOMINAL_DRIVE_FORCE_N,
+};
+use crate::params::{Params, GAMMA2};
 
 /// Why an equilibrium is not physical. The discriminants are stable codes (for diagnostics
 /// and logs); 0 means "plausible".
@@ -206,8 +207,10 @@ pub fn check(
         return fail(Reason::PlatformAngle, 0, dpsi, limits.psi_rad);
     }
     check_forces(eq, limits)?;
-    check_closure(p, k, q, *followers, eq, limits)?;
-    check_balance(p, eq, limits)?;
+    // the rods' geometry at the equilibrium once, for the closure and the balance
+    let rods = rod_geometry(p, eq);
+    check_closure(p, &rods, k, q, *followers, eq, limits)?;
+    check_balance(&rods, eq, limits)?;
     let d = (eq.x - rigid.x).hypot(eq.y - rigid.y);
     if !within(d, limits.rigid_mm) {
         return fail(Reason::FarFromRigid, 0, d, limits.rigid_mm);
@@ -235,16 +238,15 @@ fn check_forces(eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
 /// (s − q = −f/c), a follower near its reading.
 fn check_closure(
     p: &Params,
+    rods: &[RodState; 5],
     k: &Stiffness,
     q: &[f64; 4],
     followers: Followers,
     eq: &Equilibrium,
     limits: &Limits,
 ) -> Result<(), Violation> {
-    for (i, rod) in RODS.iter().enumerate() {
-        let a = platform_joint(p, rod, eq.x, eq.y, eq.psi);
-        let b = carrier_joint(p, rod, eq.carrier[rod.actuator]);
-        let off = ((a - b).norm() - p[rod.l] - eq.rod_force[i] / k.rod[i]).abs();
+    for (i, (st, rod)) in rods.iter().zip(&crate::params::RODS).enumerate() {
+        let off = (st.rho - p[rod.l] - eq.rod_force[i] / k.rod[i]).abs();
         if !within(off, limits.closure_mm) {
             return fail(Reason::LoopClosure, i + 1, off, limits.closure_mm);
         }
@@ -264,10 +266,10 @@ fn check_closure(
     Ok(())
 }
 
-fn check_balance(p: &Params, eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
+fn check_balance(rods: &[RodState; 5], eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
     let largest = eq.rod_force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
     let force_tol = 1.0 + limits.balance_rel * largest;
-    let [fx, fy, mz] = platform_balance(p, eq);
+    let [fx, fy, mz] = balance_of(rods, eq);
     let force = fx.hypot(fy);
     if !within(force, force_tol) {
         return fail(Reason::ForceBalance, 0, force, force_tol);

@@ -143,10 +143,11 @@ type V7 = SVector<f64, 7>;
 type M7 = SMatrix<f64, 7, 7>;
 
 /// Per-rod kinematic quantities at a state z.
-struct RodState {
+pub(super) struct RodState {
     /// Carrier index 0..=3 (unknown index 3 + carrier).
     carrier: usize,
-    rho: f64,
+    /// |A − B|, mm.
+    pub(super) rho: f64,
     u: Vector2<f64>,
     delta: f64,
     /// A − P (platform joint relative to the TCP, rotated): ∂r/∂ψ = perp(A − P).
@@ -164,6 +165,13 @@ fn frames(p: &Params) -> Frames {
 
 fn rod_state(p: &Params, i: usize, z: &V7) -> RodState {
     rod_state_with(p, &frames(p), z[2].sin_cos(), i, z)
+}
+
+/// The five rods' states at z with the guides' frames given: one sin_cos (ψ's) for all of
+/// them instead of three per rod.
+fn rod_states(p: &Params, fr: &Frames, z: &V7) -> [RodState; 5] {
+    let sc = z[2].sin_cos();
+    std::array::from_fn(|i| rod_state_with(p, fr, sc, i, z))
 }
 
 #[inline]
@@ -218,6 +226,37 @@ fn dr_dz(st: &RodState) -> SMatrix<f64, 2, 7> {
     j
 }
 
+/// One rod's share of the gradient and the tangent stiffness. A rod's terms touch four
+/// unknowns only (x, y, ψ, its carrier), so they are assembled on those: with d = ∂ρ/∂z = Jᵀu
+/// and J = ∂r/∂z, k·d·dᵀ + (T/ρ)·Jᵀ(I − u·uᵀ)J = (k − T/ρ)·d·dᵀ + (T/ρ)·JᵀJ, a 4 × 4 block of
+/// dot products instead of the dense 7 × 7 products (which cost most of a warm solve).
+#[inline]
+fn rod_terms(st: &RodState, ki: f64, g: &mut V7, h: &mut M7) {
+    let t = ki * st.delta;
+    let idx = [0, 1, 2, 3 + st.carrier];
+    // columns of J: ∂r/∂x, ∂r/∂y, ∂r/∂ψ = perp(arm), ∂r/∂s = −e
+    let jc = [
+        Vector2::new(1.0, 0.0),
+        Vector2::new(0.0, 1.0),
+        Vector2::new(-st.arm.y, st.arm.x),
+        -st.e,
+    ];
+    let d = jc.map(|c| st.u.dot(&c));
+    let (tr, kk) = (t / st.rho, ki - t / st.rho);
+    for a in 0..4 {
+        g[idx[a]] += d[a] * t;
+        for b in a..4 {
+            let v = kk * d[a] * d[b] + tr * jc[a].dot(&jc[b]);
+            h[(idx[a], idx[b])] += v;
+            if a != b {
+                h[(idx[b], idx[a])] += v;
+            }
+        }
+    }
+    // ∂²r/∂ψ² = −arm
+    h[(2, 2)] -= t * st.u.dot(&st.arm);
+}
+
 /// Gradient (generalised forces) and Hessian (tangent stiffness) of the system, with the rows of
 /// rigid active carriers replaced by s_j − q_j = 0. With `symmetric`, their columns are zeroed
 /// too, which keeps the matrix symmetric for the Newton step (valid because the solver keeps
@@ -235,23 +274,12 @@ fn system(
     let mut g = V7::zeros();
     let mut h = M7::zeros();
     let mut ok = true;
-    let sc = z[2].sin_cos();
-    for i in 0..5 {
-        let st = rod_state_with(p, fr, sc, i, z);
+    for (i, st) in rod_states(p, fr, z).iter().enumerate() {
         if !(st.rho > 1e-9) {
             ok = false;
             continue;
         }
-        let ki = k.rod[i];
-        let t = ki * st.delta;
-        let d = drho_dz(&st);
-        g += d * t;
-        let j = dr_dz(&st);
-        let proj = Matrix2::identity() - st.u * st.u.transpose();
-        h += d * d.transpose() * ki;
-        h += j.transpose() * proj * j * (t / st.rho);
-        // ∂²r/∂ψ² = −arm
-        h[(2, 2)] += t * (-st.u.dot(&st.arm));
+        rod_terms(st, k.rod[i], &mut g, &mut h);
     }
     for j in 0..4 {
         if fol[j] {
@@ -440,6 +468,16 @@ fn solve_from(
     let mut last_step = f64::INFINITY;
     let mut gnorm = f64::INFINITY;
     let fr = frames(p);
+    // the unknowns Newton moves: pose, followers' and compliant carriers
+    let mut free = [0; 7];
+    let mut n_free = 0;
+    for (slot, v) in free
+        .iter_mut()
+        .zip((0..7).filter(|&v| v < 3 || followers[v - 3] || k.carrier[v - 3].is_some()))
+    {
+        *slot = v;
+        n_free += 1;
+    }
     for it in 0..MAX_ITER {
         let (g, h, ok) = system(p, &fr, k, &q, followers, &z, true);
         if !ok {
@@ -450,9 +488,9 @@ fn solve_from(
             return Err(ElasticError::NonFinite);
         }
         // The tangent stiffness is symmetric and, near a stable equilibrium, positive definite:
-        // Cholesky, with LU as the fallback.
-        let step = match h.cholesky() {
-            Some(c) => c.solve(&g),
+        // Cholesky on the free unknowns, with LU of the whole matrix as the fallback.
+        let step = match spd_step(&h, &g, &free[..n_free]) {
+            Some(step) => step,
             _ => h
                 .lu()
                 .solve(&g)
@@ -464,7 +502,7 @@ fn solve_from(
             return Err(ElasticError::NonFinite);
         }
         if last_step < STEP_TOL {
-            return Ok(finish(p, k, followers, &z, it + 1));
+            return Ok(finish(p, &fr, k, followers, &z, it + 1));
         }
     }
     Err(ElasticError::NotConverged {
@@ -474,11 +512,60 @@ fn solve_from(
     })
 }
 
-fn finish(p: &Params, k: &Stiffness, fol: Followers, z: &V7, iterations: usize) -> Equilibrium {
+/// The Newton step H⁻¹g of the symmetric system, whose rows and columns of rigid active
+/// carriers are unit ones (with g = 0 there once the carriers sit at their commands): a
+/// Cholesky on the `free` unknowns only, on the stack (3 of 7 unknowns when every drive holds
+/// a rigid carrier, the servo-rate case, where the whole 7 × 7 factorisation cost more than
+/// the rest of the iteration). None where H is not positive definite on them: the caller then
+/// takes the LU of the whole matrix, as before.
+fn spd_step(h: &M7, g: &V7, free: &[usize]) -> Option<V7> {
+    let n = free.len();
+    let mut l = [[0.0f64; 7]; 7];
+    for i in 0..n {
+        for j in 0..=i {
+            let dot: f64 = l[i][..j].iter().zip(&l[j][..j]).map(|(a, b)| a * b).sum();
+            let s = h[(free[i], free[j])] - dot;
+            if i == j {
+                if !(s > 0.0) {
+                    return None;
+                }
+                l[i][i] = s.sqrt();
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+    }
+    let mut y = [0.0f64; 7];
+    for i in 0..n {
+        let dot: f64 = l[i][..i].iter().zip(&y[..i]).map(|(a, b)| a * b).sum();
+        y[i] = (g[free[i]] - dot) / l[i][i];
+    }
+    for i in (0..n).rev() {
+        let mut s = y[i];
+        for k in i + 1..n {
+            s -= l[k][i] * y[k];
+        }
+        y[i] = s / l[i][i];
+    }
+    // the fixed unknowns' rows are unit rows: their step is g there
+    let mut step = *g;
+    for (i, &v) in free.iter().enumerate() {
+        step[v] = y[i];
+    }
+    Some(step)
+}
+
+fn finish(
+    p: &Params,
+    fr: &Frames,
+    k: &Stiffness,
+    fol: Followers,
+    z: &V7,
+    iterations: usize,
+) -> Equilibrium {
     let mut rod_force = [0.0; 5];
     let mut drive_force = [0.0; 4];
-    for (i, f) in rod_force.iter_mut().enumerate() {
-        let st = rod_state(p, i, z);
+    for ((i, f), st) in rod_force.iter_mut().enumerate().zip(rod_states(p, fr, z)) {
         *f = k.rod[i] * st.delta;
         // Force of the drive on its carrier balances the rod's pull T·u along the guide.
         drive_force[st.carrier] -= *f * st.u.dot(&st.e);
@@ -503,10 +590,20 @@ fn finish(p: &Params, k: &Stiffness, fol: Followers, z: &V7, iterations: usize) 
 /// Force and moment balance of the platform at an equilibrium: (Σ F_x, Σ F_y, Σ M_z about the
 /// TCP), N and N·mm, from the rod forces alone (no external load).
 pub fn platform_balance(p: &Params, eq: &Equilibrium) -> [f64; 3] {
-    let z = eq.z();
+    balance_of(&rod_geometry(p, eq), eq)
+}
+
+/// The rods' states at an equilibrium's pose and carriers, with the trigonometry once (three
+/// sin_cos for the five rods): what the plausibility checks read.
+pub(super) fn rod_geometry(p: &Params, eq: &Equilibrium) -> [RodState; 5] {
+    rod_states(p, &frames(p), &eq.z())
+}
+
+/// [`platform_balance`] from the rods' states at the equilibrium (computed once by a caller
+/// that also needs them for other checks).
+pub(super) fn balance_of(states: &[RodState; 5], eq: &Equilibrium) -> [f64; 3] {
     let mut out = [0.0; 3];
-    for i in 0..5 {
-        let st = rod_state(p, i, &z);
+    for (i, st) in states.iter().enumerate() {
         // A rod in tension pulls the platform joint towards its carrier: force −T·u.
         let f = -st.u * eq.rod_force[i];
         out[0] += f.x;
@@ -630,4 +727,80 @@ pub fn sensitivity(
         dpose_dp: -dz_dp.fixed_rows::<3>(0).into_owned(),
         dcarrier_dq: -dz_dq.fixed_rows::<4>(3).into_owned(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The dense rod terms the solver assembled before [`rod_terms`]: k·d·dᵀ + (T/ρ)·JᵀPJ.
+    fn dense_rod_terms(p: &Params, fr: &Frames, k: &Stiffness, z: &V7) -> (V7, M7) {
+        let (mut g, mut h) = (V7::zeros(), M7::zeros());
+        for i in 0..5 {
+            let st = rod_state_with(p, fr, z[2].sin_cos(), i, z);
+            let t = k.rod[i] * st.delta;
+            let d = drho_dz(&st);
+            g += d * t;
+            let j = dr_dz(&st);
+            let proj = Matrix2::identity() - st.u * st.u.transpose();
+            h += d * d.transpose() * k.rod[i];
+            h += j.transpose() * proj * j * (t / st.rho);
+            h[(2, 2)] += t * (-st.u.dot(&st.arm));
+        }
+        (g, h)
+    }
+
+    /// The sparse assembly ([`rod_terms`]) is the dense one, and the Cholesky on the free
+    /// unknowns ([`spd_step`]) gives nalgebra's Cholesky step on the whole matrix, to round-off:
+    /// at equilibria and off them, rigid and compliant carriers, all drives active and q2, q3
+    /// followers. So the warm fegm's iterates, and its result, are those of before.
+    #[test]
+    fn sparse_assembly_and_free_cholesky_match_the_dense_forms() {
+        let mut p = Params::nominal();
+        for (n, i) in [0, 3, 7, 12, 20, 24, 26].into_iter().enumerate() {
+            p[i] += 0.03 * (n as f64 + 1.0);
+        }
+        let fr = frames(&p);
+        let compliant = Stiffness {
+            carrier: [Some(4e4), None, Some(6e4), Some(5e4)],
+            ..Stiffness::default()
+        };
+        let mut steps = 0;
+        for k in [Stiffness::default(), compliant] {
+            for (x, y) in [(0.0, 1700.0), (-200.0, 1100.0), (250.0, 2300.0)] {
+                let q = geometry::igm(&p, Model::M29, x, y).unwrap().q();
+                let q = [q[0], q[1], q[2] + 0.2, q[3]];
+                for fol in [ALL_ACTIVE, FOLLOWERS_23] {
+                    let eq = fegm(&p, &k, q, fol).unwrap();
+                    for dz in [0.0, 0.3] {
+                        let z = eq.z() + V7::from([dz, -dz, 1e-3 * dz, 0.0, dz, -dz, 0.0]);
+                        let (g0, h0) = dense_rod_terms(&p, &fr, &k, &z);
+                        let (g1, h1, ok) = system(&p, &fr, &k, &q, [true; 4], &z, true);
+                        assert!(ok);
+                        assert!(
+                            (g1 - g0).amax() <= 1e-9 * g0.amax().max(1.0),
+                            "{g1} vs {g0}"
+                        );
+                        assert!((h1 - h0).amax() <= 1e-9 * h0.amax(), "{h1} vs {h0}");
+                        let mut zq = z;
+                        for j in (0..4).filter(|&j| !fol[j] && k.carrier[j].is_none()) {
+                            zq[3 + j] = q[j];
+                        }
+                        let (g, h, _) = system(&p, &fr, &k, &q, fol, &zq, true);
+                        let free: Vec<usize> = (0..7)
+                            .filter(|&v| v < 3 || fol[v - 3] || k.carrier[v - 3].is_some())
+                            .collect();
+                        let ours = spd_step(&h, &g, &free).unwrap();
+                        let want = h.cholesky().unwrap().solve(&g);
+                        assert!((ours - want).amax() <= 1e-9 * want.amax().max(1e-9));
+                        steps += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(steps, 24);
+        // not positive definite on the free unknowns: None, the caller's LU decides
+        let h = -M7::identity();
+        assert!(spd_step(&h, &V7::repeat(1.0), &[0, 1, 2]).is_none());
+    }
 }
