@@ -976,20 +976,21 @@ fn fgm_ratio_squared(model: Model, a: usize, b: usize, rows: &[[f64; 4]; 5]) -> 
         }
     };
     // e_u's entries: (g_i, d_i on drive c's column, on drive d's column)
-    let m: [[f64; 5]; 5] = std::array::from_fn(|i| {
+    let mut m = [[0.0, 0.0, 1.0, 0.0, 0.0]; 5];
+    for (i, (row, rod)) in m.iter_mut().zip(&RODS).enumerate() {
         if model == Model::M24 && i == 4 {
-            return [0.0, 0.0, 1.0, 0.0, 0.0];
+            break;
         }
-        let j = RODS[i].actuator;
+        let j = rod.actuator;
         let dq = rows[i][3];
-        [
+        *row = [
             rows[i][0],
             rows[i][1],
             rows[i][2],
             if j == c { dq } else { 0.0 },
             if j == d { dq } else { 0.0 },
-        ]
-    });
+        ];
+    }
     ratio_squared(&m, det)
 }
 
@@ -1004,7 +1005,7 @@ fn ratio_squared(m: &[[f64; 5]; 5], det: f64) -> f64 {
         }
     }
     // a zero column leaves the determinant 0; check_conditioning leaves it unscaled
-    let inv: [f64; 5] = std::array::from_fn(|k| if col[k] > 0.0 { 1.0 / col[k] } else { 1.0 });
+    let inv = col.map(|v| if v > 0.0 { 1.0 / v } else { 1.0 });
     let scale: f64 = col.iter().map(|&v| if v > 0.0 { v } else { 1.0 }).product();
     let norms: f64 = m
         .iter()

@@ -24,7 +24,7 @@ use std::f64::consts::{PI, TAU};
 use std::fmt;
 
 use super::spring::{
-    balance_of, rod_geometry, Equilibrium, Followers, RodState, Stiffness, NOMINAL_DRIVE_FORCE_N,
+    lengths_and_balance, Equilibrium, Followers, Stiffness, NOMINAL_DRIVE_FORCE_N,
 };
 use crate::params::{Params, GAMMA2};
 
@@ -208,9 +208,9 @@ pub fn check(
     }
     check_forces(eq, limits)?;
     // the rods' geometry at the equilibrium once, for the closure and the balance
-    let rods = rod_geometry(p, eq);
-    check_closure(p, &rods, k, q, *followers, eq, limits)?;
-    check_balance(&rods, eq, limits)?;
+    let (lengths, balance) = lengths_and_balance(p, eq);
+    check_closure(p, &lengths, k, q, *followers, eq, limits)?;
+    check_balance(balance, eq, limits)?;
     let d = (eq.x - rigid.x).hypot(eq.y - rigid.y);
     if !within(d, limits.rigid_mm) {
         return fail(Reason::FarFromRigid, 0, d, limits.rigid_mm);
@@ -238,15 +238,15 @@ fn check_forces(eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
 /// (s − q = −f/c), a follower near its reading.
 fn check_closure(
     p: &Params,
-    rods: &[RodState; 5],
+    lengths: &[f64; 5],
     k: &Stiffness,
     q: &[f64; 4],
     followers: Followers,
     eq: &Equilibrium,
     limits: &Limits,
 ) -> Result<(), Violation> {
-    for (i, (st, rod)) in rods.iter().zip(&crate::params::RODS).enumerate() {
-        let off = (st.rho - p[rod.l] - eq.rod_force[i] / k.rod[i]).abs();
+    for (i, (rho, rod)) in lengths.iter().zip(&crate::params::RODS).enumerate() {
+        let off = (rho - p[rod.l] - eq.rod_force[i] / k.rod[i]).abs();
         if !within(off, limits.closure_mm) {
             return fail(Reason::LoopClosure, i + 1, off, limits.closure_mm);
         }
@@ -266,10 +266,10 @@ fn check_closure(
     Ok(())
 }
 
-fn check_balance(rods: &[RodState; 5], eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
+fn check_balance(balance: [f64; 3], eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
     let largest = eq.rod_force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
     let force_tol = 1.0 + limits.balance_rel * largest;
-    let [fx, fy, mz] = balance_of(rods, eq);
+    let [fx, fy, mz] = balance;
     let force = fx.hypot(fy);
     if !within(force, force_tol) {
         return fail(Reason::ForceBalance, 0, force, force_tol);

@@ -24,6 +24,25 @@ pub const NOMINAL_DRIVE_FORCE_N: f64 = 8600.0;
 pub const STEP_TOL: f64 = 1e-7;
 /// Iteration cap of the equilibrium Newton.
 pub const MAX_ITER: usize = 30;
+/// Newton also stops after a step s_k that the quadratic convergence of the two last steps
+/// puts this close to the root, mm: the next step would be about s_k·(s_k/s_(k−1))². From a
+/// warm start the steps run 0.3 mm, 4e-5 mm, 6e-13 mm: the third only confirmed the second,
+/// and its 6e-13 mm is round-off on coordinates of 10³ mm. It is taken only after a
+/// contraction by [`CONTRACTION`] at least, where the convergence is quadratic.
+const PREDICTED_TOL: f64 = 1e-11;
+/// The contraction of the last step against the one before that the prediction of
+/// [`PREDICTED_TOL`] needs.
+const CONTRACTION: f64 = 1e-3;
+
+/// Whether Newton may stop after `step`, with `previous` the step before it: below
+/// [`STEP_TOL`], or quadratically converging to within [`PREDICTED_TOL`]. The first step
+/// has no previous one (infinite): only [`STEP_TOL`] stops it.
+fn converged(step: f64, previous: f64) -> bool {
+    step < STEP_TOL
+        || (previous.is_finite()
+            && step <= CONTRACTION * previous
+            && step * (step / previous).powi(2) < PREDICTED_TOL)
+}
 
 /// Default effective axial stiffness of each rod, N/mm (rod, its two joints and the carrier in
 /// series). Chosen so that an incompatibility of 0.4 mm on one redundant drive (q3 offset by
@@ -143,11 +162,10 @@ type V7 = SVector<f64, 7>;
 type M7 = SMatrix<f64, 7, 7>;
 
 /// Per-rod kinematic quantities at a state z.
-pub(super) struct RodState {
+struct RodState {
     /// Carrier index 0..=3 (unknown index 3 + carrier).
     carrier: usize,
-    /// |A − B|, mm.
-    pub(super) rho: f64,
+    rho: f64,
     u: Vector2<f64>,
     delta: f64,
     /// A − P (platform joint relative to the TCP, rotated): ∂r/∂ψ = perp(A − P).
@@ -165,13 +183,6 @@ fn frames(p: &Params) -> Frames {
 
 fn rod_state(p: &Params, i: usize, z: &V7) -> RodState {
     rod_state_with(p, &frames(p), z[2].sin_cos(), i, z)
-}
-
-/// The five rods' states at z with the guides' frames given: one sin_cos (ψ's) for all of
-/// them instead of three per rod.
-fn rod_states(p: &Params, fr: &Frames, z: &V7) -> [RodState; 5] {
-    let sc = z[2].sin_cos();
-    std::array::from_fn(|i| rod_state_with(p, fr, sc, i, z))
 }
 
 #[inline]
@@ -261,25 +272,28 @@ fn rod_terms(st: &RodState, ki: f64, g: &mut V7, h: &mut M7) {
 /// rigid active carriers replaced by s_j − q_j = 0. With `symmetric`, their columns are zeroed
 /// too, which keeps the matrix symmetric for the Newton step (valid because the solver keeps
 /// s_j = q_j exactly, so those components of the step are 0); the sensitivities need the
-/// unsymmetric form.
+/// unsymmetric form. Inlined: its 7 × 7 result was copied out on every Newton iteration.
+#[inline]
 fn system(
     p: &Params,
     fr: &Frames,
     k: &Stiffness,
-    q: &[f64; 4],
-    fol: Followers,
+    (q, fol): (&[f64; 4], Followers),
     z: &V7,
     symmetric: bool,
-) -> (V7, M7, bool) {
-    let mut g = V7::zeros();
-    let mut h = M7::zeros();
+    (g, h): (&mut V7, &mut M7),
+) -> bool {
+    g.fill(0.0);
+    h.fill(0.0);
     let mut ok = true;
-    for (i, st) in rod_states(p, fr, z).iter().enumerate() {
+    let sc = z[2].sin_cos();
+    for i in 0..5 {
+        let st = rod_state_with(p, fr, sc, i, z);
         if !(st.rho > 1e-9) {
             ok = false;
             continue;
         }
-        rod_terms(st, k.rod[i], &mut g, &mut h);
+        rod_terms(&st, k.rod[i], g, h);
     }
     for j in 0..4 {
         if fol[j] {
@@ -300,7 +314,7 @@ fn system(
             h[(v, v)] = 1.0;
         }
     }
-    (g, h, ok)
+    ok
 }
 
 /// Rigid start: the model-29 forward model of the first viable subsystem whose two drives are
@@ -458,7 +472,18 @@ fn solve_from(
     k: &Stiffness,
     q: [f64; 4],
     followers: Followers,
+    z: V7,
+) -> Result<Equilibrium, ElasticError> {
+    newton(p, k, (q, followers), z, converged)
+}
+
+/// Newton on the equilibrium from z, stopping where `stop(step, previous step)` says.
+fn newton(
+    p: &Params,
+    k: &Stiffness,
+    (q, followers): ([f64; 4], Followers),
     mut z: V7,
+    stop: impl Fn(f64, f64) -> bool,
 ) -> Result<Equilibrium, ElasticError> {
     for j in 0..4 {
         if !followers[j] && k.carrier[j].is_none() {
@@ -468,6 +493,8 @@ fn solve_from(
     let mut last_step = f64::INFINITY;
     let mut gnorm = f64::INFINITY;
     let fr = frames(p);
+    // the system's buffers, filled in place by every iteration
+    let (mut g, mut h) = (V7::zeros(), M7::zeros());
     // the unknowns Newton moves: pose, followers' and compliant carriers
     let mut free = [0; 7];
     let mut n_free = 0;
@@ -479,8 +506,7 @@ fn solve_from(
         n_free += 1;
     }
     for it in 0..MAX_ITER {
-        let (g, h, ok) = system(p, &fr, k, &q, followers, &z, true);
-        if !ok {
+        if !system(p, &fr, k, (&q, followers), &z, true, (&mut g, &mut h)) {
             return Err(ElasticError::Degenerate);
         }
         gnorm = g.amax();
@@ -497,11 +523,12 @@ fn solve_from(
                 .ok_or(ElasticError::Singular { iteration: it })?,
         };
         z -= step;
+        let previous = last_step;
         last_step = step.amax();
         if !last_step.is_finite() {
             return Err(ElasticError::NonFinite);
         }
-        if last_step < STEP_TOL {
+        if stop(last_step, previous) {
             return Ok(finish(p, &fr, k, followers, &z, it + 1));
         }
     }
@@ -565,7 +592,10 @@ fn finish(
 ) -> Equilibrium {
     let mut rod_force = [0.0; 5];
     let mut drive_force = [0.0; 4];
-    for ((i, f), st) in rod_force.iter_mut().enumerate().zip(rod_states(p, fr, z)) {
+    // ψ's trigonometry once for the five rods
+    let sc = z[2].sin_cos();
+    for (i, f) in rod_force.iter_mut().enumerate() {
+        let st = rod_state_with(p, fr, sc, i, z);
         *f = k.rod[i] * st.delta;
         // Force of the drive on its carrier balances the rod's pull T·u along the guide.
         drive_force[st.carrier] -= *f * st.u.dot(&st.e);
@@ -590,27 +620,27 @@ fn finish(
 /// Force and moment balance of the platform at an equilibrium: (Σ F_x, Σ F_y, Σ M_z about the
 /// TCP), N and N·mm, from the rod forces alone (no external load).
 pub fn platform_balance(p: &Params, eq: &Equilibrium) -> [f64; 3] {
-    balance_of(&rod_geometry(p, eq), eq)
+    lengths_and_balance(p, eq).1
 }
 
-/// The rods' states at an equilibrium's pose and carriers, with the trigonometry once (three
-/// sin_cos for the five rods): what the plausibility checks read.
-pub(super) fn rod_geometry(p: &Params, eq: &Equilibrium) -> [RodState; 5] {
-    rod_states(p, &frames(p), &eq.z())
-}
-
-/// [`platform_balance`] from the rods' states at the equilibrium (computed once by a caller
-/// that also needs them for other checks).
-pub(super) fn balance_of(states: &[RodState; 5], eq: &Equilibrium) -> [f64; 3] {
+/// The rods' lengths |A − B| at an equilibrium's pose and carriers, and the platform's
+/// balance ([`platform_balance`]), in one pass with the trigonometry once (three sin_cos for
+/// the five rods): what the plausibility checks read.
+pub(super) fn lengths_and_balance(p: &Params, eq: &Equilibrium) -> ([f64; 5], [f64; 3]) {
+    let z = eq.z();
+    let (fr, sc) = (frames(p), z[2].sin_cos());
+    let mut lengths = [0.0; 5];
     let mut out = [0.0; 3];
-    for (i, st) in states.iter().enumerate() {
+    for (i, rho) in lengths.iter_mut().enumerate() {
+        let st = rod_state_with(p, &fr, sc, i, &z);
+        *rho = st.rho;
         // A rod in tension pulls the platform joint towards its carrier: force −T·u.
         let f = -st.u * eq.rod_force[i];
         out[0] += f.x;
         out[1] += f.y;
         out[2] += st.arm.x * f.y - st.arm.y * f.x;
     }
-    out
+    (lengths, out)
 }
 
 /// Sensitivities of an equilibrium (implicit-function theorem on ∇V = 0).
@@ -703,7 +733,16 @@ pub fn sensitivity(
     eq: &Equilibrium,
 ) -> Result<ElasticSensitivity, ElasticError> {
     let z = eq.z();
-    let (_, h, _) = system(p, &frames(p), k, &q, followers, &z, false);
+    let (mut g, mut h) = (V7::zeros(), M7::zeros());
+    system(
+        p,
+        &frames(p),
+        k,
+        (&q, followers),
+        &z,
+        false,
+        (&mut g, &mut h),
+    );
     let lu = h.lu();
     // ∂G/∂q: only the rows of active carriers depend on q.
     let mut g_q = SMatrix::<f64, 7, 4>::zeros();
@@ -775,8 +814,16 @@ mod tests {
                     for dz in [0.0, 0.3] {
                         let z = eq.z() + V7::from([dz, -dz, 1e-3 * dz, 0.0, dz, -dz, 0.0]);
                         let (g0, h0) = dense_rod_terms(&p, &fr, &k, &z);
-                        let (g1, h1, ok) = system(&p, &fr, &k, &q, [true; 4], &z, true);
-                        assert!(ok);
+                        let (mut g1, mut h1) = (V7::zeros(), M7::zeros());
+                        assert!(system(
+                            &p,
+                            &fr,
+                            &k,
+                            (&q, [true; 4]),
+                            &z,
+                            true,
+                            (&mut g1, &mut h1)
+                        ));
                         assert!(
                             (g1 - g0).amax() <= 1e-9 * g0.amax().max(1.0),
                             "{g1} vs {g0}"
@@ -786,7 +833,8 @@ mod tests {
                         for j in (0..4).filter(|&j| !fol[j] && k.carrier[j].is_none()) {
                             zq[3 + j] = q[j];
                         }
-                        let (g, h, _) = system(&p, &fr, &k, &q, fol, &zq, true);
+                        let (mut g, mut h) = (V7::zeros(), M7::zeros());
+                        system(&p, &fr, &k, (&q, fol), &zq, true, (&mut g, &mut h));
                         let free: Vec<usize> = (0..7)
                             .filter(|&v| v < 3 || fol[v - 3] || k.carrier[v - 3].is_some())
                             .collect();
