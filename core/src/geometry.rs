@@ -694,10 +694,11 @@ fn det5(m: SMatrix<f64, 5, 5>) -> f64 {
 /// ∂e/∂c vanishes; otherwise the normalised determinant ratio is at least 1/4). None when the
 /// residual is above the tolerance (round-off on extreme parameters): Newton then takes over.
 fn igm24(p: &Params, x: f64, y: f64) -> Result<Option<Solution>, GeometryError> {
-    // the trigonometry once per call, not once per rod and check
+    // the trigonometry once per call, not once per rod and check; ψ = γ2 is guide 2's angle,
+    // whose sine and cosine its frame holds already (n = (cos γ2, sin γ2))
     let psi = p[GAMMA2];
-    let (s, co) = psi.sin_cos();
     let frames = [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)];
+    let (s, co) = (frames[1].2.y, frames[1].2.x);
     let mut c = Config::zeros();
     c[X] = x;
     c[Y] = y;
@@ -750,9 +751,15 @@ fn igm24(p: &Params, x: f64, y: f64) -> Result<Option<Solution>, GeometryError> 
 }
 
 /// A guide's frame: origin, e (along), n (across).
-type Frame = (Vector2<f64>, Vector2<f64>, Vector2<f64>);
+pub(crate) type Frame = (Vector2<f64>, Vector2<f64>, Vector2<f64>);
 /// Both guides' frames, computed once per call (with ψ's, three sin_cos in all).
-type Frames = [Frame; 2];
+pub(crate) type Frames = [Frame; 2];
+
+/// Both guides' frames of a machine: two sin_cos, for callers that solve several models on
+/// one machine per sample (the elastic model's rigid reference, its solve and its checks).
+pub(crate) fn frames(p: &Params) -> Frames {
+    [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)]
+}
 
 /// The guide frame of `rod` and the side its carrier must be on across the guide (guide 2 to
 /// the right, guide 1 to the left: see [`in_assembly_mode`]).
@@ -802,19 +809,20 @@ fn two_circles(
     let ca = tcp_circle_centre(p, frames, ra, qa, sc);
     let cb = tcp_circle_centre(p, frames, rb, qb, sc);
     let (la, lb) = (p[ra.l], p[rb.l]);
+    // in units of the centres' distance d (no root for d): the foot of the chord lies at
+    // t·(cb − ca) from ca, the candidates at ±√(h²/d²) across
     let d_vec = cb - ca;
-    let d = d_vec.norm();
-    let along = (la * la - lb * lb + d * d) / (2.0 * d);
-    let h2 = la * la - along * along;
-    if !(h2 >= 0.0) || d == 0.0 {
+    let inv_d2 = 1.0 / d_vec.norm_squared();
+    let t = 0.5 * (la * la - lb * lb) * inv_d2 + 0.5;
+    let h2 = la * la * inv_d2 - t * t;
+    if !(h2 >= 0.0 && inv_d2.is_finite()) {
         return None;
     }
-    let u = d_vec / d;
-    let perp = Vector2::new(-u.y, u.x) * h2.sqrt();
-    let base = ca + u * along;
+    let perp = Vector2::new(-d_vec.y, d_vec.x) * h2.sqrt();
+    let base = ca + d_vec * t;
     [base + perp, base - perp]
         .into_iter()
-        .find(|&t| assembled(frames, ra, ca - t) && assembled(frames, rb, cb - t))
+        .find(|&tcp| assembled(frames, ra, ca - tcp) && assembled(frames, rb, cb - tcp))
 }
 
 /// Drive position q4 of a forward solve: known (b = q4) or rod 4's by eq. 4.6.
@@ -882,13 +890,19 @@ fn settled_psi_fgm(
 /// the TCP where the two known rods' circles meet, the other drives by eq. 4.6. What Newton
 /// and [`solve`] would check is checked in closed form ([`closed_fgm_at`]); None where a
 /// check fails: the general solver then decides, with its errors.
-fn fgm_closed(p: &Params, model: Model, a: usize, b: usize, qa: f64, qb: f64) -> Option<Solution> {
-    let frames = [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)];
+fn fgm_closed(
+    p: &Params,
+    frames: &Frames,
+    model: Model,
+    (a, qa): (usize, f64),
+    (b, qb): (usize, f64),
+) -> Option<Solution> {
     let (psi, sc) = match model {
-        Model::M24 => (p[GAMMA2], p[GAMMA2].sin_cos()),
-        Model::M29 => settled_psi_fgm(p, &frames, (a, qa), (b, qb))?,
+        // ψ = γ2: guide 2's frame holds its sine and cosine (n = (cos γ2, sin γ2))
+        Model::M24 => (p[GAMMA2], (frames[1].2.y, frames[1].2.x)),
+        Model::M29 => settled_psi_fgm(p, frames, (a, qa), (b, qb))?,
     };
-    closed_fgm_at(p, model, &frames, (a, qa), (b, qb), (psi, sc))
+    closed_fgm_at(p, model, frames, (a, qa), (b, qb), (psi, sc))
 }
 
 /// The configuration of the forward solve at platform angle ψ, checked: every equation rod
@@ -1035,13 +1049,42 @@ pub fn solve(
             return Ok(sol);
         }
     }
+    if let Subsystem::Actuators(..) = sub {
+        return fgm_with_frames(p, &frames(p), model, sub, known);
+    }
+    general(p, model, sub, known)
+}
+
+/// [`solve`] of a forward subsystem with the guides' frames given: the closed form
+/// ([`fgm_closed`]) where its checks pass, else the general solver.
+pub(crate) fn fgm_with_frames(
+    p: &Params,
+    frames: &Frames,
+    model: Model,
+    sub: Subsystem,
+    known: [f64; 2],
+) -> Result<Solution, GeometryError> {
+    if !known.iter().all(|v| v.is_finite()) {
+        return Err(GeometryError::NonFinite);
+    }
     if let Subsystem::Actuators(a, b) = sub {
         if a < b && b < 4 {
-            if let Some(sol) = fgm_closed(p, model, a, b, known[0], known[1]) {
+            if let Some(sol) = fgm_closed(p, frames, model, (a, known[0]), (b, known[1])) {
                 return Ok(sol);
             }
         }
     }
+    general(p, model, sub, known)
+}
+
+/// The general solver: Newton from the analytic start, then the assembly check of every
+/// equation rod.
+fn general(
+    p: &Params,
+    model: Model,
+    sub: Subsystem,
+    known: [f64; 2],
+) -> Result<Solution, GeometryError> {
     let start = match sub {
         Subsystem::Tcp if model == Model::M29 => igm29_start(p, known[0], known[1])?,
         Subsystem::Tcp => igm_start(p, known[0], known[1])?,
@@ -1322,7 +1365,7 @@ mod tests {
                                 continue;
                             };
                             let k = [pose.c[q_var(a)], pose.c[q_var(b)]];
-                            let fast = fgm_closed(&p, model, a, b, k[0], k[1]);
+                            let fast = fgm_closed(&p, &frames(&p), model, (a, k[0]), (b, k[1]));
                             match (fast, general_fgm(&p, model, sub, k)) {
                                 (Some(f), Ok(g)) => {
                                     let gap = (f.c - g.c).amax();
@@ -1365,7 +1408,7 @@ mod tests {
                 };
                 // the two carriers 3 m apart: the rods cannot meet
                 let k = [q[a] - 1500.0, q[b] + 1500.0];
-                assert!(fgm_closed(&p, model, a, b, k[0], k[1]).is_none());
+                assert!(fgm_closed(&p, &frames(&p), model, (a, k[0]), (b, k[1])).is_none());
                 assert_eq!(solve(&p, model, sub, k), general_fgm(&p, model, sub, k));
                 assert!(solve(&p, model, sub, k).is_err(), "{model} {sub}");
             }

@@ -26,6 +26,7 @@ use std::fmt;
 use super::spring::{
     lengths_and_balance, Equilibrium, Followers, Stiffness, NOMINAL_DRIVE_FORCE_N,
 };
+use crate::geometry::{frames, Frames};
 use crate::params::{Params, GAMMA2};
 
 /// Why an equilibrium is not physical. The discriminants are stable codes (for diagnostics
@@ -193,6 +194,20 @@ pub fn check(
     rigid: &RigidPose,
     limits: &Limits,
 ) -> Result<(), Violation> {
+    check_with(&frames(p), p, k, (q, *followers), eq, rigid, limits)
+}
+
+/// [`check`] with the guides' frames given (the guarded solve computes them once for its
+/// rigid reference, its solve and these checks).
+pub(super) fn check_with(
+    fr: &Frames,
+    p: &Params,
+    k: &Stiffness,
+    (q, followers): (&[f64; 4], Followers),
+    eq: &Equilibrium,
+    rigid: &RigidPose,
+    limits: &Limits,
+) -> Result<(), Violation> {
     let pose_finite = [eq.x, eq.y, eq.psi].iter().all(|v| v.is_finite());
     let forces_finite = eq
         .rod_force
@@ -208,8 +223,8 @@ pub fn check(
     }
     check_forces(eq, limits)?;
     // the rods' geometry at the equilibrium once, for the closure and the balance
-    let (lengths, balance) = lengths_and_balance(p, eq);
-    check_closure(p, &lengths, k, q, *followers, eq, limits)?;
+    let (lengths, balance) = lengths_and_balance(p, fr, eq);
+    check_closure(p, &lengths, k, q, followers, eq, limits)?;
     check_balance(balance, eq, limits)?;
     let d = (eq.x - rigid.x).hypot(eq.y - rigid.y);
     if !within(d, limits.rigid_mm) {

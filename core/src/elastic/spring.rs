@@ -13,7 +13,7 @@
 //! quadratically from the rigid forward model of a pair of active drives.
 
 use super::plausibility::{self, wrap_angle, Limits, Reason, RigidPose, Violation};
-use crate::geometry::{self, guide_frame, Subsystem};
+use crate::geometry::{self, frames, Frames, Subsystem};
 use crate::params::{Guide, Model, Params, N_PARAMS, RODS};
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
@@ -174,13 +174,6 @@ struct RodState {
     n: Vector2<f64>,
 }
 
-/// Guide frames (origin, e, n) of guides 1 and 2, computed once per solve.
-type Frames = [(Vector2<f64>, Vector2<f64>, Vector2<f64>); 2];
-
-fn frames(p: &Params) -> Frames {
-    [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)]
-}
-
 fn rod_state(p: &Params, i: usize, z: &V7) -> RodState {
     rod_state_with(p, &frames(p), z[2].sin_cos(), i, z)
 }
@@ -319,13 +312,13 @@ fn system(
 
 /// Rigid start: the model-29 forward model of the first viable subsystem whose two drives are
 /// active, at the commanded positions.
-fn rigid_start(p: &Params, q: &[f64; 4], fol: Followers) -> Result<V7, ElasticError> {
+fn rigid_start(p: &Params, fr: &Frames, q: &[f64; 4], fol: Followers) -> Result<V7, ElasticError> {
     for sub in Subsystem::VIABLE {
         if let Subsystem::Actuators(a, b) = sub {
             if fol[a] || fol[b] {
                 continue;
             }
-            let s = geometry::solve(p, Model::M29, sub, [q[a], q[b]])?;
+            let s = geometry::fgm_with_frames(p, fr, Model::M29, sub, [q[a], q[b]])?;
             let c = s.c;
             return Ok(V7::from([c[0], c[1], c[2], c[3], c[4], c[5], c[6]]));
         }
@@ -387,17 +380,20 @@ pub fn fegm_checked(
     if !q.iter().all(|v| v.is_finite()) {
         return Err(ElasticError::NonFinite);
     }
+    // The guides' frames once for the rigid model, the solve and the checks.
+    let fr = frames(p);
     // The rigid model is both the reference of the checks and the cold start.
-    let z0 = rigid_start(p, &q, followers)?;
+    let z0 = rigid_start(p, &fr, &q, followers)?;
     let rigid = RigidPose {
         x: z0[0],
         y: z0[1],
         psi: z0[2],
     };
-    let check = |eq: &Equilibrium| plausibility::check(p, k, &q, &followers, eq, &rigid, limits);
+    let check =
+        |eq: &Equilibrium| plausibility::check_with(&fr, p, k, (&q, followers), eq, &rigid, limits);
     let mut warm_rejected = None;
     if let Some(prev) = previous {
-        let rejection = match solve_from(p, k, q, followers, warm_start(&q, followers, prev)) {
+        let rejection = match solve_from(p, &fr, k, q, followers, warm_start(&q, followers, prev)) {
             Ok(eq) => match check(&eq) {
                 Ok(()) => {
                     return Ok(Checked {
@@ -413,7 +409,7 @@ pub fn fegm_checked(
         };
         warm_rejected = Some(rejection);
     }
-    let eq = solve_from(p, k, q, followers, z0)?;
+    let eq = solve_from(p, &fr, k, q, followers, z0)?;
     check(&eq).map_err(ElasticError::Implausible)?;
     Ok(Checked {
         eq,
@@ -436,11 +432,12 @@ pub fn fegm_unchecked(
     if !q.iter().all(|v| v.is_finite()) {
         return Err(ElasticError::NonFinite);
     }
+    let fr = frames(p);
     let z0 = match previous {
         Some(prev) => warm_start(&q, followers, prev),
-        None => rigid_start(p, &q, followers)?,
+        None => rigid_start(p, &fr, &q, followers)?,
     };
-    solve_from(p, k, q, followers, z0)
+    solve_from(p, &fr, k, q, followers, z0)
 }
 
 /// The previous equilibrium with the active carriers moved to their new commands.
@@ -469,17 +466,19 @@ fn solver_violation(e: &ElasticError) -> Violation {
 
 fn solve_from(
     p: &Params,
+    fr: &Frames,
     k: &Stiffness,
     q: [f64; 4],
     followers: Followers,
     z: V7,
 ) -> Result<Equilibrium, ElasticError> {
-    newton(p, k, (q, followers), z, converged)
+    newton(p, fr, k, (q, followers), z, converged)
 }
 
 /// Newton on the equilibrium from z, stopping where `stop(step, previous step)` says.
 fn newton(
     p: &Params,
+    fr: &Frames,
     k: &Stiffness,
     (q, followers): ([f64; 4], Followers),
     mut z: V7,
@@ -492,7 +491,6 @@ fn newton(
     }
     let mut last_step = f64::INFINITY;
     let mut gnorm = f64::INFINITY;
-    let fr = frames(p);
     // the system's buffers, filled in place by every iteration
     let (mut g, mut h) = (V7::zeros(), M7::zeros());
     // the unknowns Newton moves: pose, followers' and compliant carriers
@@ -506,7 +504,7 @@ fn newton(
         n_free += 1;
     }
     for it in 0..MAX_ITER {
-        if !system(p, &fr, k, (&q, followers), &z, true, (&mut g, &mut h)) {
+        if !system(p, fr, k, (&q, followers), &z, true, (&mut g, &mut h)) {
             return Err(ElasticError::Degenerate);
         }
         gnorm = g.amax();
@@ -529,7 +527,7 @@ fn newton(
             return Err(ElasticError::NonFinite);
         }
         if stop(last_step, previous) {
-            return Ok(finish(p, &fr, k, followers, &z, it + 1));
+            return Ok(finish(p, fr, k, followers, &z, it + 1));
         }
     }
     Err(ElasticError::NotConverged {
@@ -620,19 +618,23 @@ fn finish(
 /// Force and moment balance of the platform at an equilibrium: (Σ F_x, Σ F_y, Σ M_z about the
 /// TCP), N and N·mm, from the rod forces alone (no external load).
 pub fn platform_balance(p: &Params, eq: &Equilibrium) -> [f64; 3] {
-    lengths_and_balance(p, eq).1
+    lengths_and_balance(p, &frames(p), eq).1
 }
 
 /// The rods' lengths |A − B| at an equilibrium's pose and carriers, and the platform's
 /// balance ([`platform_balance`]), in one pass with the trigonometry once (three sin_cos for
 /// the five rods): what the plausibility checks read.
-pub(super) fn lengths_and_balance(p: &Params, eq: &Equilibrium) -> ([f64; 5], [f64; 3]) {
+pub(super) fn lengths_and_balance(
+    p: &Params,
+    fr: &Frames,
+    eq: &Equilibrium,
+) -> ([f64; 5], [f64; 3]) {
     let z = eq.z();
-    let (fr, sc) = (frames(p), z[2].sin_cos());
+    let sc = z[2].sin_cos();
     let mut lengths = [0.0; 5];
     let mut out = [0.0; 3];
     for (i, rho) in lengths.iter_mut().enumerate() {
-        let st = rod_state_with(p, &fr, sc, i, &z);
+        let st = rod_state_with(p, fr, sc, i, &z);
         *rho = st.rho;
         // A rod in tension pulls the platform joint towards its carrier: force −T·u.
         let f = -st.u * eq.rod_force[i];
