@@ -357,18 +357,35 @@ fn settled_psi(
         let r = Vector2::new(x + c * xa - s * ya, y + s * xa + c * ya) - b;
         Ok(r.norm_squared() - p[rod5.l] * p[rod5.l])
     };
+    secant_psi(p, rod5_closure)
+}
+
+/// The secant in ψ from γ2 (and γ2 + 1e-6 rad) on a closure g(sin ψ, cos ψ), mm²; with the
+/// sine and cosine of where it stops: |g| below [`SETTLED_MM2`], or an iterate whose value
+/// the two last ones put below it. The secant's contraction only grows (e_(n+1)/e_n =
+/// (e_n/e_(n−1))·(e_(n−1)/e_(n−2)) asymptotically), so |g_n|·|g_n/g_(n−1)| bounds the next
+/// value, and evaluating it would only confirm it (one closure of five); the caller's closed
+/// checks verify the residual of the configuration it builds there all the same.
+fn secant_psi<E>(
+    p: &Params,
+    g: impl Fn((f64, f64)) -> Result<f64, E>,
+) -> Result<(f64, (f64, f64)), E> {
     let (mut psi0, mut psi1) = (p[GAMMA2], p[GAMMA2] + 1e-6);
     let mut sc1 = psi1.sin_cos();
-    let (mut g0, mut g1) = (rod5_closure(psi0.sin_cos())?, rod5_closure(sc1)?);
+    let (mut g0, mut g1) = (g(psi0.sin_cos())?, g(sc1)?);
     for _ in 0..8 {
         if !(g1.abs() >= SETTLED_MM2) || g1.total_cmp(&g0).is_eq() {
             break;
         }
         let psi2 = psi1 - g1 * (psi1 - psi0) / (g1 - g0);
+        let predicted = g1.abs() * (g1 / g0).abs();
         (psi0, g0) = (psi1, g1);
         psi1 = psi2;
         sc1 = psi1.sin_cos();
-        g1 = rod5_closure(sc1)?;
+        if predicted < SETTLED_MM2 {
+            break;
+        }
+        g1 = g(sc1)?;
     }
     Ok((psi1, sc1))
 }
@@ -757,6 +774,7 @@ pub(crate) type Frames = [Frame; 2];
 
 /// Both guides' frames of a machine: two sin_cos, for callers that solve several models on
 /// one machine per sample (the elastic model's rigid reference, its solve and its checks).
+#[inline]
 pub(crate) fn frames(p: &Params) -> Frames {
     [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)]
 }
@@ -859,8 +877,8 @@ fn rod5_open(
     Some(ba.norm_squared() - p[rod5.l] * p[rod5.l])
 }
 
-/// ψ closing rod 5's loop for a model-29 forward solve ([`rod5_open`]), by the secant of
-/// [`settled_psi`] from γ2; with its sine and cosine. None where an iterate leaves the
+/// ψ closing rod 5's loop for a model-29 forward solve ([`rod5_open`]), by the secant from γ2
+/// ([`secant_psi`]); with its sine and cosine. None where an iterate leaves the
 /// circles' intersection.
 fn settled_psi_fgm(
     p: &Params,
@@ -868,21 +886,7 @@ fn settled_psi_fgm(
     ka: (usize, f64),
     kb: (usize, f64),
 ) -> Option<(f64, (f64, f64))> {
-    let g = |sc: (f64, f64)| rod5_open(p, frames, ka, kb, sc);
-    let (mut psi0, mut psi1) = (p[GAMMA2], p[GAMMA2] + 1e-6);
-    let mut sc1 = psi1.sin_cos();
-    let (mut g0, mut g1) = (g(psi0.sin_cos())?, g(sc1)?);
-    for _ in 0..8 {
-        if !(g1.abs() >= SETTLED_MM2) || g1.total_cmp(&g0).is_eq() {
-            break;
-        }
-        let psi2 = psi1 - g1 * (psi1 - psi0) / (g1 - g0);
-        (psi0, g0) = (psi1, g1);
-        psi1 = psi2;
-        sc1 = psi1.sin_cos();
-        g1 = g(sc1)?;
-    }
-    Some((psi1, sc1))
+    secant_psi(p, |sc| rod5_open(p, frames, ka, kb, sc).ok_or(())).ok()
 }
 
 /// Closed-form forward model of the subsystem (qa, qb) (drive indexes a < b < 4): ψ = γ2 for
@@ -924,25 +928,35 @@ fn closed_fgm_at(
     let mut residual: f64 = 0.0;
     let (s, co) = sc;
     for (i, rod) in equation_rods(model).iter().enumerate() {
+        let ((o, e, n), side) = rod_frame(frames, rod);
+        let (xa, ya, l) = (p[rod.xa], p[rod.ya], p[rod.l]);
+        // R(ψ)·a once per rod: A, and dA/dψ = perp(R(ψ)·a)
+        let arm = Vector2::new(co * xa - s * ya, s * xa + co * ya);
+        // A − (o + n·xb): eq. 4.6's w, and B − A = e·(q + yb) − w
+        let w = tcp + arm - o - n * p[rod.xb];
         let j = rod.actuator;
         let q = if j == a {
             qa
         } else if j == b {
             qb
         } else if i < 4 {
-            rod_igm_at(p, rod, tcp.x, tcp.y, sc, rod_frame(frames, rod).0).ok()?
+            // eq. 4.6, as rod_igm writes it
+            let we = w.dot(&e);
+            let disc = we * we - w.norm_squared() + l * l;
+            if !(disc >= 0.0) {
+                return None;
+            }
+            we + rod.k * disc.sqrt() - p[rod.yb]
         } else {
             c[q_var(j)]
         };
         c[q_var(j)] = q;
-        let ba = tcp_circle_centre(p, frames, rod, q, sc) - tcp;
-        if !assembled(frames, rod, ba) {
+        let ba = e * (q + p[rod.yb]) - w;
+        if !(rod.k * ba.dot(&e) > 0.0 && side * ba.dot(&n) > 0.0) {
             return None;
         }
-        residual = residual.max((ba.norm_squared() - p[rod.l] * p[rod.l]).abs());
-        let (xa, ya) = (p[rod.xa], p[rod.ya]);
-        let da_dpsi = Vector2::new(-s * xa - co * ya, co * xa - s * ya);
-        let e = rod_frame(frames, rod).0 .1;
+        residual = residual.max((ba.norm_squared() - l * l).abs());
+        let da_dpsi = Vector2::new(-arm.y, arm.x);
         rows[i] = [
             -2.0 * ba.x,
             -2.0 * ba.y,
@@ -970,7 +984,8 @@ fn closed_fgm_at(
 /// - model 29, q4 known: det = d_c·d_d·det(g_a, g_b, g_5),
 /// - model 29, q4 unknown (c the other): det = d_c·det(g_a, g_b, d_4·g_5 − d_5·g_4).
 ///
-/// The ratio then follows from the matrix's column and row norms, squared (no roots).
+/// The ratio then follows from the matrix's column and row norms, squared (no roots); for
+/// model 24 written out ([`ratio24_squared`]).
 fn fgm_ratio_squared(model: Model, a: usize, b: usize, rows: &[[f64; 4]; 5]) -> f64 {
     // the unknown drives, in order
     let [c, d] = {
@@ -980,21 +995,19 @@ fn fgm_ratio_squared(model: Model, a: usize, b: usize, rows: &[[f64; 4]; 5]) -> 
         }
         u
     };
+    if model == Model::M24 {
+        return ratio24_squared([a, b, c, d], rows);
+    }
     let g = |i: usize| Vector3::new(rows[i][0], rows[i][1], rows[i][2]);
-    let det = match model {
-        Model::M24 => rows[c][3] * rows[d][3] * (rows[a][0] * rows[b][1] - rows[a][1] * rows[b][0]),
-        Model::M29 if b == 3 => rows[c][3] * rows[d][3] * g(a).dot(&g(b).cross(&g(4))),
-        Model::M29 => {
-            let w = g(4) * rows[3][3] - g(3) * rows[4][3];
-            rows[c][3] * g(a).dot(&g(b).cross(&w))
-        }
+    let det = if b == 3 {
+        rows[c][3] * rows[d][3] * g(a).dot(&g(b).cross(&g(4)))
+    } else {
+        let w = g(4) * rows[3][3] - g(3) * rows[4][3];
+        rows[c][3] * g(a).dot(&g(b).cross(&w))
     };
     // e_u's entries: (g_i, d_i on drive c's column, on drive d's column)
-    let mut m = [[0.0, 0.0, 1.0, 0.0, 0.0]; 5];
+    let mut m = [[0.0; 5]; 5];
     for (i, (row, rod)) in m.iter_mut().zip(&RODS).enumerate() {
-        if model == Model::M24 && i == 4 {
-            break;
-        }
         let j = rod.actuator;
         let dq = rows[i][3];
         *row = [
@@ -1006,6 +1019,26 @@ fn fgm_ratio_squared(model: Model, a: usize, b: usize, rows: &[[f64; 4]; 5]) -> 
         ];
     }
     ratio_squared(&m, det)
+}
+
+/// Model 24's ratio² of [`fgm_ratio_squared`] written out (the drives `[a, b, c, d]`: known,
+/// then unknown). With the column sums of squares cx, cy (x, y over rods 1-4), cψ (ψ, with
+/// the ψ row's 1) and d_c², d_d², and s_i = gx_i²/cx + gy_i²/cy + A_i²/cψ (+1 for the rows
+/// of c and d, whose drive entry scales to 1), det² = d_c²·d_d²·(g_a × g_b)² and the ψ row's
+/// norm² 1/cψ cancel: ratio² = (g_a × g_b)² / (cx·cy·s_a·s_b·s_c·s_d). Three divisions
+/// instead of the general form's five and its 5 × 5 loops; 0 where a column vanishes.
+fn ratio24_squared([a, b, c, d]: [usize; 4], rows: &[[f64; 4]; 5]) -> f64 {
+    let sum = |k: usize| rows[..4].iter().map(|r| r[k] * r[k]).sum::<f64>();
+    let (cx, cy, cpsi) = (sum(0), sum(1), sum(2) + 1.0);
+    if !(cx > 0.0 && cy > 0.0) || rows[c][3] == 0.0 || rows[d][3] == 0.0 {
+        return 0.0;
+    }
+    let (ix, iy, ipsi) = (1.0 / cx, 1.0 / cy, 1.0 / cpsi);
+    let s = |i: usize| {
+        rows[i][0] * rows[i][0] * ix + rows[i][1] * rows[i][1] * iy + rows[i][2] * rows[i][2] * ipsi
+    };
+    let cross = rows[a][0] * rows[b][1] - rows[a][1] * rows[b][0];
+    cross * cross * ix * iy / (s(a) * s(b) * (s(c) + 1.0) * (s(d) + 1.0))
 }
 
 /// [`conditioning_ratio`] squared, from the matrix and its determinant: with every
@@ -1049,8 +1082,12 @@ pub fn solve(
             return Ok(sol);
         }
     }
-    if let Subsystem::Actuators(..) = sub {
-        return fgm_with_frames(p, &frames(p), model, sub, known);
+    if let Subsystem::Actuators(a, b) = sub {
+        if a < b && b < 4 {
+            if let Some(sol) = fgm_closed(p, &frames(p), model, (a, known[0]), (b, known[1])) {
+                return Ok(sol);
+            }
+        }
     }
     general(p, model, sub, known)
 }
