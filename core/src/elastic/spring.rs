@@ -276,8 +276,10 @@ fn system(
     symmetric: bool,
     (g, h): (&mut V7, &mut M7),
 ) -> bool {
-    g.fill(0.0);
-    h.fill(0.0);
+    // whole assignments: nalgebra's fill walked the 49 entries one by one with index
+    // arithmetic, a fifth of this function
+    *g = V7::zeros();
+    *h = M7::zeros();
     let mut ok = true;
     let sc = z[2].sin_cos();
     for i in 0..5 {
@@ -539,38 +541,39 @@ fn newton(
 
 /// The Newton step H⁻¹g of the symmetric system, whose rows and columns of rigid active
 /// carriers are unit ones (with g = 0 there once the carriers sit at their commands): a
-/// Cholesky on the `free` unknowns only, on the stack (3 of 7 unknowns when every drive holds
+/// Cholesky (LDLᵀ) on the `free` unknowns only, on the stack (3 of 7 unknowns when every drive holds
 /// a rigid carrier, the servo-rate case, where the whole 7 × 7 factorisation cost more than
 /// the rest of the iteration). None where H is not positive definite on them: the caller then
 /// takes the LU of the whole matrix, as before.
 fn spd_step(h: &M7, g: &V7, free: &[usize]) -> Option<V7> {
+    // LDLᵀ, the Cholesky without its roots: H positive definite on the free unknowns exactly
+    // when every pivot d is; the pivots' reciprocals once, so that the factorisation and
+    // both solves multiply (the divisions and roots in a chain were most of the step)
     let n = free.len();
     let mut l = [[0.0f64; 7]; 7];
+    let (mut d, mut inv_d) = ([0.0f64; 7], [0.0f64; 7]);
     for i in 0..n {
-        for j in 0..=i {
-            let dot: f64 = l[i][..j].iter().zip(&l[j][..j]).map(|(a, b)| a * b).sum();
-            let s = h[(free[i], free[j])] - dot;
-            if i == j {
-                if !(s > 0.0) {
-                    return None;
-                }
-                l[i][i] = s.sqrt();
-            } else {
-                l[i][j] = s / l[j][j];
-            }
+        for j in 0..i {
+            let dot: f64 = (0..j).map(|k| l[i][k] * l[j][k] * d[k]).sum();
+            l[i][j] = (h[(free[i], free[j])] - dot) * inv_d[j];
         }
+        let di = h[(free[i], free[i])] - (0..i).map(|k| l[i][k] * l[i][k] * d[k]).sum::<f64>();
+        if !(di > 0.0) {
+            return None;
+        }
+        (d[i], inv_d[i]) = (di, 1.0 / di);
     }
     let mut y = [0.0f64; 7];
     for i in 0..n {
         let dot: f64 = l[i][..i].iter().zip(&y[..i]).map(|(a, b)| a * b).sum();
-        y[i] = (g[free[i]] - dot) / l[i][i];
+        y[i] = g[free[i]] - dot;
     }
     for i in (0..n).rev() {
-        let mut s = y[i];
+        let mut s = y[i] * inv_d[i];
         for k in i + 1..n {
             s -= l[k][i] * y[k];
         }
-        y[i] = s / l[i][i];
+        y[i] = s;
     }
     // the fixed unknowns' rows are unit rows: their step is g there
     let mut step = *g;
