@@ -541,10 +541,10 @@ fn newton(
 
 /// The Newton step H⁻¹g of the symmetric system, whose rows and columns of rigid active
 /// carriers are unit ones (with g = 0 there once the carriers sit at their commands): a
-/// Cholesky (LDLᵀ) on the `free` unknowns only, on the stack (3 of 7 unknowns when every drive holds
-/// a rigid carrier, the servo-rate case, where the whole 7 × 7 factorisation cost more than
-/// the rest of the iteration). None where H is not positive definite on them: the caller then
-/// takes the LU of the whole matrix, as before.
+/// Cholesky (LDLᵀ) on the `free` unknowns only, on the stack (3 of 7 unknowns when every
+/// drive holds a rigid carrier, the servo-rate case, where the whole 7 × 7 factorisation cost
+/// more than the rest of the iteration). None where H is not positive definite on them: the
+/// caller then takes the LU of the whole matrix, as before.
 fn spd_step(h: &M7, g: &V7, free: &[usize]) -> Option<V7> {
     // LDLᵀ, the Cholesky without its roots: H positive definite on the free unknowns exactly
     // when every pivot d is; the pivots' reciprocals once, so that the factorisation and
