@@ -23,9 +23,11 @@
 use std::f64::consts::{PI, TAU};
 use std::fmt;
 
-use super::spring::{platform_balance, Equilibrium, Followers, Stiffness, NOMINAL_DRIVE_FORCE_N};
-use crate::geometry::{carrier_joint, platform_joint};
-use crate::params::{Params, GAMMA2, RODS};
+use super::spring::{
+    lengths_and_balance, Equilibrium, Followers, Stiffness, NOMINAL_DRIVE_FORCE_N,
+};
+use crate::geometry::{frames, Frames};
+use crate::params::{Params, GAMMA2};
 
 /// Why an equilibrium is not physical. The discriminants are stable codes (for diagnostics
 /// and logs); 0 means "plausible".
@@ -192,6 +194,20 @@ pub fn check(
     rigid: &RigidPose,
     limits: &Limits,
 ) -> Result<(), Violation> {
+    check_with(&frames(p), p, k, (q, *followers), eq, rigid, limits)
+}
+
+/// [`check`] with the guides' frames given (the guarded solve computes them once for its
+/// rigid reference, its solve and these checks).
+pub(super) fn check_with(
+    fr: &Frames,
+    p: &Params,
+    k: &Stiffness,
+    (q, followers): (&[f64; 4], Followers),
+    eq: &Equilibrium,
+    rigid: &RigidPose,
+    limits: &Limits,
+) -> Result<(), Violation> {
     let pose_finite = [eq.x, eq.y, eq.psi].iter().all(|v| v.is_finite());
     let forces_finite = eq
         .rod_force
@@ -206,8 +222,10 @@ pub fn check(
         return fail(Reason::PlatformAngle, 0, dpsi, limits.psi_rad);
     }
     check_forces(eq, limits)?;
-    check_closure(p, k, q, *followers, eq, limits)?;
-    check_balance(p, eq, limits)?;
+    // the rods' geometry at the equilibrium once, for the closure and the balance
+    let (lengths, balance) = lengths_and_balance(p, fr, eq);
+    check_closure(p, &lengths, k, q, followers, eq, limits)?;
+    check_balance(balance, eq, limits)?;
     let d = (eq.x - rigid.x).hypot(eq.y - rigid.y);
     if !within(d, limits.rigid_mm) {
         return fail(Reason::FarFromRigid, 0, d, limits.rigid_mm);
@@ -235,16 +253,15 @@ fn check_forces(eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
 /// (s − q = −f/c), a follower near its reading.
 fn check_closure(
     p: &Params,
+    lengths: &[f64; 5],
     k: &Stiffness,
     q: &[f64; 4],
     followers: Followers,
     eq: &Equilibrium,
     limits: &Limits,
 ) -> Result<(), Violation> {
-    for (i, rod) in RODS.iter().enumerate() {
-        let a = platform_joint(p, rod, eq.x, eq.y, eq.psi);
-        let b = carrier_joint(p, rod, eq.carrier[rod.actuator]);
-        let off = ((a - b).norm() - p[rod.l] - eq.rod_force[i] / k.rod[i]).abs();
+    for (i, (rho, rod)) in lengths.iter().zip(&crate::params::RODS).enumerate() {
+        let off = (rho - p[rod.l] - eq.rod_force[i] / k.rod[i]).abs();
         if !within(off, limits.closure_mm) {
             return fail(Reason::LoopClosure, i + 1, off, limits.closure_mm);
         }
@@ -264,10 +281,10 @@ fn check_closure(
     Ok(())
 }
 
-fn check_balance(p: &Params, eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
+fn check_balance(balance: [f64; 3], eq: &Equilibrium, limits: &Limits) -> Result<(), Violation> {
     let largest = eq.rod_force.iter().fold(0.0f64, |m, f| m.max(f.abs()));
     let force_tol = 1.0 + limits.balance_rel * largest;
-    let [fx, fy, mz] = platform_balance(p, eq);
+    let [fx, fy, mz] = balance;
     let force = fx.hypot(fy);
     if !within(force, force_tol) {
         return fail(Reason::ForceBalance, 0, force, force_tol);

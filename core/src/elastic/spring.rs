@@ -13,7 +13,7 @@
 //! quadratically from the rigid forward model of a pair of active drives.
 
 use super::plausibility::{self, wrap_angle, Limits, Reason, RigidPose, Violation};
-use crate::geometry::{self, guide_frame, Subsystem};
+use crate::geometry::{self, frames, Frames, Subsystem};
 use crate::params::{Guide, Model, Params, N_PARAMS, RODS};
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
@@ -24,6 +24,25 @@ pub const NOMINAL_DRIVE_FORCE_N: f64 = 8600.0;
 pub const STEP_TOL: f64 = 1e-7;
 /// Iteration cap of the equilibrium Newton.
 pub const MAX_ITER: usize = 30;
+/// Newton also stops after a step s_k that the quadratic convergence of the two last steps
+/// puts this close to the root, mm: the next step would be about s_k·(s_k/s_(k−1))². From a
+/// warm start the steps run 0.3 mm, 4e-5 mm, 6e-13 mm: the third only confirmed the second,
+/// and its 6e-13 mm is round-off on coordinates of 10³ mm. It is taken only after a
+/// contraction by [`CONTRACTION`] at least, where the convergence is quadratic.
+const PREDICTED_TOL: f64 = 1e-11;
+/// The contraction of the last step against the one before that the prediction of
+/// [`PREDICTED_TOL`] needs.
+const CONTRACTION: f64 = 1e-3;
+
+/// Whether Newton may stop after `step`, with `previous` the step before it: below
+/// [`STEP_TOL`], or quadratically converging to within [`PREDICTED_TOL`]. The first step
+/// has no previous one (infinite): only [`STEP_TOL`] stops it.
+fn converged(step: f64, previous: f64) -> bool {
+    step < STEP_TOL
+        || (previous.is_finite()
+            && step <= CONTRACTION * previous
+            && step * (step / previous).powi(2) < PREDICTED_TOL)
+}
 
 /// Default effective axial stiffness of each rod, N/mm (rod, its two joints and the carrier in
 /// series). Chosen so that an incompatibility of 0.4 mm on one redundant drive (q3 offset by
@@ -155,13 +174,6 @@ struct RodState {
     n: Vector2<f64>,
 }
 
-/// Guide frames (origin, e, n) of guides 1 and 2, computed once per solve.
-type Frames = [(Vector2<f64>, Vector2<f64>, Vector2<f64>); 2];
-
-fn frames(p: &Params) -> Frames {
-    [guide_frame(p, Guide::G1), guide_frame(p, Guide::G2)]
-}
-
 fn rod_state(p: &Params, i: usize, z: &V7) -> RodState {
     rod_state_with(p, &frames(p), z[2].sin_cos(), i, z)
 }
@@ -218,22 +230,56 @@ fn dr_dz(st: &RodState) -> SMatrix<f64, 2, 7> {
     j
 }
 
+/// One rod's share of the gradient and the tangent stiffness. A rod's terms touch four
+/// unknowns only (x, y, ψ, its carrier), so they are assembled on those: with d = ∂ρ/∂z = Jᵀu
+/// and J = ∂r/∂z, k·d·dᵀ + (T/ρ)·Jᵀ(I − u·uᵀ)J = (k − T/ρ)·d·dᵀ + (T/ρ)·JᵀJ, a 4 × 4 block of
+/// dot products instead of the dense 7 × 7 products (which cost most of a warm solve).
+#[inline]
+fn rod_terms(st: &RodState, ki: f64, g: &mut V7, h: &mut M7) {
+    let t = ki * st.delta;
+    let idx = [0, 1, 2, 3 + st.carrier];
+    // columns of J: ∂r/∂x, ∂r/∂y, ∂r/∂ψ = perp(arm), ∂r/∂s = −e
+    let jc = [
+        Vector2::new(1.0, 0.0),
+        Vector2::new(0.0, 1.0),
+        Vector2::new(-st.arm.y, st.arm.x),
+        -st.e,
+    ];
+    let d = jc.map(|c| st.u.dot(&c));
+    let (tr, kk) = (t / st.rho, ki - t / st.rho);
+    for a in 0..4 {
+        g[idx[a]] += d[a] * t;
+        for b in a..4 {
+            let v = kk * d[a] * d[b] + tr * jc[a].dot(&jc[b]);
+            h[(idx[a], idx[b])] += v;
+            if a != b {
+                h[(idx[b], idx[a])] += v;
+            }
+        }
+    }
+    // ∂²r/∂ψ² = −arm
+    h[(2, 2)] -= t * st.u.dot(&st.arm);
+}
+
 /// Gradient (generalised forces) and Hessian (tangent stiffness) of the system, with the rows of
 /// rigid active carriers replaced by s_j − q_j = 0. With `symmetric`, their columns are zeroed
 /// too, which keeps the matrix symmetric for the Newton step (valid because the solver keeps
 /// s_j = q_j exactly, so those components of the step are 0); the sensitivities need the
-/// unsymmetric form.
+/// unsymmetric form. Inlined: its 7 × 7 result was copied out on every Newton iteration.
+#[inline]
 fn system(
     p: &Params,
     fr: &Frames,
     k: &Stiffness,
-    q: &[f64; 4],
-    fol: Followers,
+    (q, fol): (&[f64; 4], Followers),
     z: &V7,
     symmetric: bool,
-) -> (V7, M7, bool) {
-    let mut g = V7::zeros();
-    let mut h = M7::zeros();
+    (g, h): (&mut V7, &mut M7),
+) -> bool {
+    // whole assignments: nalgebra's fill walked the 49 entries one by one with index
+    // arithmetic, a fifth of this function
+    *g = V7::zeros();
+    *h = M7::zeros();
     let mut ok = true;
     let sc = z[2].sin_cos();
     for i in 0..5 {
@@ -242,16 +288,7 @@ fn system(
             ok = false;
             continue;
         }
-        let ki = k.rod[i];
-        let t = ki * st.delta;
-        let d = drho_dz(&st);
-        g += d * t;
-        let j = dr_dz(&st);
-        let proj = Matrix2::identity() - st.u * st.u.transpose();
-        h += d * d.transpose() * ki;
-        h += j.transpose() * proj * j * (t / st.rho);
-        // ∂²r/∂ψ² = −arm
-        h[(2, 2)] += t * (-st.u.dot(&st.arm));
+        rod_terms(&st, k.rod[i], g, h);
     }
     for j in 0..4 {
         if fol[j] {
@@ -272,18 +309,18 @@ fn system(
             h[(v, v)] = 1.0;
         }
     }
-    (g, h, ok)
+    ok
 }
 
 /// Rigid start: the model-29 forward model of the first viable subsystem whose two drives are
 /// active, at the commanded positions.
-fn rigid_start(p: &Params, q: &[f64; 4], fol: Followers) -> Result<V7, ElasticError> {
+fn rigid_start(p: &Params, fr: &Frames, q: &[f64; 4], fol: Followers) -> Result<V7, ElasticError> {
     for sub in Subsystem::VIABLE {
         if let Subsystem::Actuators(a, b) = sub {
             if fol[a] || fol[b] {
                 continue;
             }
-            let s = geometry::solve(p, Model::M29, sub, [q[a], q[b]])?;
+            let s = geometry::fgm_with_frames(p, fr, Model::M29, sub, [q[a], q[b]])?;
             let c = s.c;
             return Ok(V7::from([c[0], c[1], c[2], c[3], c[4], c[5], c[6]]));
         }
@@ -345,17 +382,20 @@ pub fn fegm_checked(
     if !q.iter().all(|v| v.is_finite()) {
         return Err(ElasticError::NonFinite);
     }
+    // The guides' frames once for the rigid model, the solve and the checks.
+    let fr = frames(p);
     // The rigid model is both the reference of the checks and the cold start.
-    let z0 = rigid_start(p, &q, followers)?;
+    let z0 = rigid_start(p, &fr, &q, followers)?;
     let rigid = RigidPose {
         x: z0[0],
         y: z0[1],
         psi: z0[2],
     };
-    let check = |eq: &Equilibrium| plausibility::check(p, k, &q, &followers, eq, &rigid, limits);
+    let check =
+        |eq: &Equilibrium| plausibility::check_with(&fr, p, k, (&q, followers), eq, &rigid, limits);
     let mut warm_rejected = None;
     if let Some(prev) = previous {
-        let rejection = match solve_from(p, k, q, followers, warm_start(&q, followers, prev)) {
+        let rejection = match solve_from(p, &fr, k, q, followers, warm_start(&q, followers, prev)) {
             Ok(eq) => match check(&eq) {
                 Ok(()) => {
                     return Ok(Checked {
@@ -371,7 +411,7 @@ pub fn fegm_checked(
         };
         warm_rejected = Some(rejection);
     }
-    let eq = solve_from(p, k, q, followers, z0)?;
+    let eq = solve_from(p, &fr, k, q, followers, z0)?;
     check(&eq).map_err(ElasticError::Implausible)?;
     Ok(Checked {
         eq,
@@ -394,11 +434,12 @@ pub fn fegm_unchecked(
     if !q.iter().all(|v| v.is_finite()) {
         return Err(ElasticError::NonFinite);
     }
+    let fr = frames(p);
     let z0 = match previous {
         Some(prev) => warm_start(&q, followers, prev),
-        None => rigid_start(p, &q, followers)?,
+        None => rigid_start(p, &fr, &q, followers)?,
     };
-    solve_from(p, k, q, followers, z0)
+    solve_from(p, &fr, k, q, followers, z0)
 }
 
 /// The previous equilibrium with the active carriers moved to their new commands.
@@ -427,10 +468,23 @@ fn solver_violation(e: &ElasticError) -> Violation {
 
 fn solve_from(
     p: &Params,
+    fr: &Frames,
     k: &Stiffness,
     q: [f64; 4],
     followers: Followers,
+    z: V7,
+) -> Result<Equilibrium, ElasticError> {
+    newton(p, fr, k, (q, followers), z, converged)
+}
+
+/// Newton on the equilibrium from z, stopping where `stop(step, previous step)` says.
+fn newton(
+    p: &Params,
+    fr: &Frames,
+    k: &Stiffness,
+    (q, followers): ([f64; 4], Followers),
     mut z: V7,
+    stop: impl Fn(f64, f64) -> bool,
 ) -> Result<Equilibrium, ElasticError> {
     for j in 0..4 {
         if !followers[j] && k.carrier[j].is_none() {
@@ -439,10 +493,20 @@ fn solve_from(
     }
     let mut last_step = f64::INFINITY;
     let mut gnorm = f64::INFINITY;
-    let fr = frames(p);
+    // the system's buffers, filled in place by every iteration
+    let (mut g, mut h) = (V7::zeros(), M7::zeros());
+    // the unknowns Newton moves: pose, followers' and compliant carriers
+    let mut free = [0; 7];
+    let mut n_free = 0;
+    for (slot, v) in free
+        .iter_mut()
+        .zip((0..7).filter(|&v| v < 3 || followers[v - 3] || k.carrier[v - 3].is_some()))
+    {
+        *slot = v;
+        n_free += 1;
+    }
     for it in 0..MAX_ITER {
-        let (g, h, ok) = system(p, &fr, k, &q, followers, &z, true);
-        if !ok {
+        if !system(p, fr, k, (&q, followers), &z, true, (&mut g, &mut h)) {
             return Err(ElasticError::Degenerate);
         }
         gnorm = g.amax();
@@ -450,21 +514,22 @@ fn solve_from(
             return Err(ElasticError::NonFinite);
         }
         // The tangent stiffness is symmetric and, near a stable equilibrium, positive definite:
-        // Cholesky, with LU as the fallback.
-        let step = match h.cholesky() {
-            Some(c) => c.solve(&g),
+        // Cholesky on the free unknowns, with LU of the whole matrix as the fallback.
+        let step = match spd_step(&h, &g, &free[..n_free]) {
+            Some(step) => step,
             _ => h
                 .lu()
                 .solve(&g)
                 .ok_or(ElasticError::Singular { iteration: it })?,
         };
         z -= step;
+        let previous = last_step;
         last_step = step.amax();
         if !last_step.is_finite() {
             return Err(ElasticError::NonFinite);
         }
-        if last_step < STEP_TOL {
-            return Ok(finish(p, k, followers, &z, it + 1));
+        if stop(last_step, previous) {
+            return Ok(finish(p, fr, k, followers, &z, it + 1));
         }
     }
     Err(ElasticError::NotConverged {
@@ -474,11 +539,64 @@ fn solve_from(
     })
 }
 
-fn finish(p: &Params, k: &Stiffness, fol: Followers, z: &V7, iterations: usize) -> Equilibrium {
+/// The Newton step H⁻¹g of the symmetric system, whose rows and columns of rigid active
+/// carriers are unit ones (with g = 0 there once the carriers sit at their commands): a
+/// Cholesky (LDLᵀ) on the `free` unknowns only, on the stack (3 of 7 unknowns when every
+/// drive holds a rigid carrier, the servo-rate case, where the whole 7 × 7 factorisation cost
+/// more than the rest of the iteration). None where H is not positive definite on them: the
+/// caller then takes the LU of the whole matrix, as before.
+fn spd_step(h: &M7, g: &V7, free: &[usize]) -> Option<V7> {
+    // LDLᵀ, the Cholesky without its roots: H positive definite on the free unknowns exactly
+    // when every pivot d is; the pivots' reciprocals once, so that the factorisation and
+    // both solves multiply (the divisions and roots in a chain were most of the step)
+    let n = free.len();
+    let mut l = [[0.0f64; 7]; 7];
+    let (mut d, mut inv_d) = ([0.0f64; 7], [0.0f64; 7]);
+    for i in 0..n {
+        for j in 0..i {
+            let dot: f64 = (0..j).map(|k| l[i][k] * l[j][k] * d[k]).sum();
+            l[i][j] = (h[(free[i], free[j])] - dot) * inv_d[j];
+        }
+        let di = h[(free[i], free[i])] - (0..i).map(|k| l[i][k] * l[i][k] * d[k]).sum::<f64>();
+        if !(di > 0.0) {
+            return None;
+        }
+        (d[i], inv_d[i]) = (di, 1.0 / di);
+    }
+    let mut y = [0.0f64; 7];
+    for i in 0..n {
+        let dot: f64 = l[i][..i].iter().zip(&y[..i]).map(|(a, b)| a * b).sum();
+        y[i] = g[free[i]] - dot;
+    }
+    for i in (0..n).rev() {
+        let mut s = y[i] * inv_d[i];
+        for k in i + 1..n {
+            s -= l[k][i] * y[k];
+        }
+        y[i] = s;
+    }
+    // the fixed unknowns' rows are unit rows: their step is g there
+    let mut step = *g;
+    for (i, &v) in free.iter().enumerate() {
+        step[v] = y[i];
+    }
+    Some(step)
+}
+
+fn finish(
+    p: &Params,
+    fr: &Frames,
+    k: &Stiffness,
+    fol: Followers,
+    z: &V7,
+    iterations: usize,
+) -> Equilibrium {
     let mut rod_force = [0.0; 5];
     let mut drive_force = [0.0; 4];
+    // ψ's trigonometry once for the five rods
+    let sc = z[2].sin_cos();
     for (i, f) in rod_force.iter_mut().enumerate() {
-        let st = rod_state(p, i, z);
+        let st = rod_state_with(p, fr, sc, i, z);
         *f = k.rod[i] * st.delta;
         // Force of the drive on its carrier balances the rod's pull T·u along the guide.
         drive_force[st.carrier] -= *f * st.u.dot(&st.e);
@@ -503,17 +621,31 @@ fn finish(p: &Params, k: &Stiffness, fol: Followers, z: &V7, iterations: usize) 
 /// Force and moment balance of the platform at an equilibrium: (Σ F_x, Σ F_y, Σ M_z about the
 /// TCP), N and N·mm, from the rod forces alone (no external load).
 pub fn platform_balance(p: &Params, eq: &Equilibrium) -> [f64; 3] {
+    lengths_and_balance(p, &frames(p), eq).1
+}
+
+/// The rods' lengths |A − B| at an equilibrium's pose and carriers, and the platform's
+/// balance ([`platform_balance`]), in one pass with the trigonometry once (three sin_cos for
+/// the five rods): what the plausibility checks read.
+pub(super) fn lengths_and_balance(
+    p: &Params,
+    fr: &Frames,
+    eq: &Equilibrium,
+) -> ([f64; 5], [f64; 3]) {
     let z = eq.z();
+    let sc = z[2].sin_cos();
+    let mut lengths = [0.0; 5];
     let mut out = [0.0; 3];
-    for i in 0..5 {
-        let st = rod_state(p, i, &z);
+    for (i, rho) in lengths.iter_mut().enumerate() {
+        let st = rod_state_with(p, fr, sc, i, &z);
+        *rho = st.rho;
         // A rod in tension pulls the platform joint towards its carrier: force −T·u.
         let f = -st.u * eq.rod_force[i];
         out[0] += f.x;
         out[1] += f.y;
         out[2] += st.arm.x * f.y - st.arm.y * f.x;
     }
-    out
+    (lengths, out)
 }
 
 /// Sensitivities of an equilibrium (implicit-function theorem on ∇V = 0).
@@ -606,7 +738,16 @@ pub fn sensitivity(
     eq: &Equilibrium,
 ) -> Result<ElasticSensitivity, ElasticError> {
     let z = eq.z();
-    let (_, h, _) = system(p, &frames(p), k, &q, followers, &z, false);
+    let (mut g, mut h) = (V7::zeros(), M7::zeros());
+    system(
+        p,
+        &frames(p),
+        k,
+        (&q, followers),
+        &z,
+        false,
+        (&mut g, &mut h),
+    );
     let lu = h.lu();
     // ∂G/∂q: only the rows of active carriers depend on q.
     let mut g_q = SMatrix::<f64, 7, 4>::zeros();
@@ -630,4 +771,89 @@ pub fn sensitivity(
         dpose_dp: -dz_dp.fixed_rows::<3>(0).into_owned(),
         dcarrier_dq: -dz_dq.fixed_rows::<4>(3).into_owned(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The dense rod terms the solver assembled before [`rod_terms`]: k·d·dᵀ + (T/ρ)·JᵀPJ.
+    fn dense_rod_terms(p: &Params, fr: &Frames, k: &Stiffness, z: &V7) -> (V7, M7) {
+        let (mut g, mut h) = (V7::zeros(), M7::zeros());
+        for i in 0..5 {
+            let st = rod_state_with(p, fr, z[2].sin_cos(), i, z);
+            let t = k.rod[i] * st.delta;
+            let d = drho_dz(&st);
+            g += d * t;
+            let j = dr_dz(&st);
+            let proj = Matrix2::identity() - st.u * st.u.transpose();
+            h += d * d.transpose() * k.rod[i];
+            h += j.transpose() * proj * j * (t / st.rho);
+            h[(2, 2)] += t * (-st.u.dot(&st.arm));
+        }
+        (g, h)
+    }
+
+    /// The sparse assembly ([`rod_terms`]) is the dense one, and the Cholesky on the free
+    /// unknowns ([`spd_step`]) gives nalgebra's Cholesky step on the whole matrix, to round-off:
+    /// at equilibria and off them, rigid and compliant carriers, all drives active and q2, q3
+    /// followers. So the warm fegm's iterates, and its result, are those of before.
+    #[test]
+    fn sparse_assembly_and_free_cholesky_match_the_dense_forms() {
+        let mut p = Params::nominal();
+        for (n, i) in [0, 3, 7, 12, 20, 24, 26].into_iter().enumerate() {
+            p[i] += 0.03 * (n as f64 + 1.0);
+        }
+        let fr = frames(&p);
+        let compliant = Stiffness {
+            carrier: [Some(4e4), None, Some(6e4), Some(5e4)],
+            ..Stiffness::default()
+        };
+        let mut steps = 0;
+        for k in [Stiffness::default(), compliant] {
+            for (x, y) in [(0.0, 1700.0), (-200.0, 1100.0), (250.0, 2300.0)] {
+                let q = geometry::igm(&p, Model::M29, x, y).unwrap().q();
+                let q = [q[0], q[1], q[2] + 0.2, q[3]];
+                for fol in [ALL_ACTIVE, FOLLOWERS_23] {
+                    let eq = fegm(&p, &k, q, fol).unwrap();
+                    for dz in [0.0, 0.3] {
+                        let z = eq.z() + V7::from([dz, -dz, 1e-3 * dz, 0.0, dz, -dz, 0.0]);
+                        let (g0, h0) = dense_rod_terms(&p, &fr, &k, &z);
+                        let (mut g1, mut h1) = (V7::zeros(), M7::zeros());
+                        assert!(system(
+                            &p,
+                            &fr,
+                            &k,
+                            (&q, [true; 4]),
+                            &z,
+                            true,
+                            (&mut g1, &mut h1)
+                        ));
+                        assert!(
+                            (g1 - g0).amax() <= 1e-9 * g0.amax().max(1.0),
+                            "{g1} vs {g0}"
+                        );
+                        assert!((h1 - h0).amax() <= 1e-9 * h0.amax(), "{h1} vs {h0}");
+                        let mut zq = z;
+                        for j in (0..4).filter(|&j| !fol[j] && k.carrier[j].is_none()) {
+                            zq[3 + j] = q[j];
+                        }
+                        let (mut g, mut h) = (V7::zeros(), M7::zeros());
+                        system(&p, &fr, &k, (&q, fol), &zq, true, (&mut g, &mut h));
+                        let free: Vec<usize> = (0..7)
+                            .filter(|&v| v < 3 || fol[v - 3] || k.carrier[v - 3].is_some())
+                            .collect();
+                        let ours = spd_step(&h, &g, &free).unwrap();
+                        let want = h.cholesky().unwrap().solve(&g);
+                        assert!((ours - want).amax() <= 1e-9 * want.amax().max(1e-9));
+                        steps += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(steps, 24);
+        // not positive definite on the free unknowns: None, the caller's LU decides
+        let h = -M7::identity();
+        assert!(spd_step(&h, &V7::repeat(1.0), &[0, 1, 2]).is_none());
+    }
 }
