@@ -24,7 +24,6 @@
 //!    even when the instruments are noisier than rated (the noise table says so).
 
 pub mod sparse;
-pub mod stats;
 
 use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Prior};
 use crate::campaign::Campaign;
@@ -33,6 +32,7 @@ use crate::geometry;
 use crate::noise::{Group, NoiseModel, XyInstrument, N_GROUPS};
 use crate::obs::{self, PoseError, RowValue};
 use crate::params::{Model, Params};
+use crate::stats;
 use crate::variance::{self, GroupNoise, NoiseEstimate};
 use nalgebra::{DMatrix, DVector, Vector2};
 use std::collections::BTreeMap;

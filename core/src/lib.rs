@@ -39,5 +39,6 @@ pub mod noise;
 pub mod obs;
 pub mod observability;
 pub mod params;
+pub mod stats;
 pub mod twin;
 pub mod variance;

@@ -858,7 +858,7 @@ impl DriftMonitor {
         let p_value = if dof == 0 {
             1.0
         } else {
-            crate::diagnose::stats::chi2_upper_tail(chi2, dof as f64)
+            crate::stats::chi2_upper_tail(chi2, dof as f64)
         };
         let fits = creep_fits(&w, &basis, &z);
         let d = scale();

@@ -240,7 +240,7 @@ pub fn structure(campaign: &Campaign, rows: &[RowValue]) -> Structure {
     let n = best.rows as f64;
     let r2 = (best.r * best.r).min(1.0 - 1e-15);
     let f = r2 * (n - 2.0) / (1.0 - r2);
-    let p = super::stats::f_upper_tail(f, 1.0, n - 2.0);
+    let p = crate::stats::f_upper_tail(f, 1.0, n - 2.0);
     Structure {
         pointer: pointer(&s),
         f_statistic: f,

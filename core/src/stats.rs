@@ -1,7 +1,8 @@
-//! Distribution tails for the tests of the diagnosis: the chi-square test of a residual against
-//! the instruments' noise, and the nested F-test of a model extension. Regularised incomplete
-//! gamma and beta functions by their series and continued fractions (Press et al., Numerical
-//! Recipes, 6.2 and 6.4), accurate to ~1e-12 over the ranges used here.
+//! Distribution tails for the statistical tests (the diagnosis's chi-square test of a residual
+//! against the instruments' noise and nested F-test of a model extension; the online tracker's
+//! drift gate). Regularised incomplete gamma and beta functions by their series and continued
+//! fractions (Press et al., Numerical Recipes, 6.2 and 6.4), accurate to ~1e-12 over the ranges
+//! used here.
 
 /// ln Γ(x), x > 0 (Lanczos, g = 7, n = 9).
 pub fn ln_gamma(x: f64) -> f64 {
