@@ -19,12 +19,12 @@ use crate::noise::NoiseModel;
 use crate::obs::{PoseError, Residual, RowValue, Step};
 use crate::observability::{condition_number, normalize_columns};
 use crate::params::{self, unit, Model, Params, Unit, NAMES};
-use lm::{Lm, State};
+use lm::{Final, Keep, Lm, State};
 use nalgebra::{DMatrix, DVector};
 use rows::{dependency, reduced_jacobian, Columns, Key, Problem};
 use select::{auto_select, effect_observability, prior_of, scaling_vector, select_geometric};
 use std::collections::HashSet;
-use uncertainty::{posterior, step2_uncertainties, Posterior};
+use uncertainty::{posterior, step2_uncertainties, Posterior, KEEP_JACOBIAN_POSES};
 
 /// Which parameters the calibration identifies.
 #[derive(Clone, Debug, PartialEq)]
@@ -339,14 +339,15 @@ pub fn calibrate_from(
             theta: theta0.clone(),
         },
     };
-    let fit = step1(
+    let mut fit = step1(
         &pb,
         &plan,
         init,
         (warm.is_some(), warm.is_some_and(|w| w.screen)),
     )?;
     let corr = effects.corrections(&fit.state.theta);
-    let (rows_final, post) = posterior(&pb, &plan, &fit.state.p, &corr, &fit.drop)?;
+    let last = fit.last.take();
+    let (rows_final, post) = posterior(&pb, &plan, (&fit.state.p, &corr, &fit.drop), last)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
     let chi2: f64 = rows_final.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
     let chi2_per_dof = chi2 / (rows_final.len() as f64 - post.dof_model).max(1.0);
@@ -603,6 +604,8 @@ struct Step1Fit {
     screened: bool,
     drop: HashSet<Key>,
     outliers: Vec<Outlier>,
+    /// The LM's last evaluation of the rows at `state` (the posterior's rows).
+    last: Option<Final>,
 }
 
 /// Step 1 with outlier elimination rounds (eq. 3.31-3.32): fit, drop the rows beyond
@@ -620,6 +623,13 @@ fn step1(
         screened: false,
         drop: HashSet::new(),
         outliers: Vec::new(),
+        last: None,
+    };
+    // a small campaign keeps its final rows' Jacobian for the leverages
+    let keep = if pb.campaign.poses.len() <= KEEP_JACOBIAN_POSES {
+        Keep::Jacobians
+    } else {
+        Keep::Values
     };
     loop {
         let lm = Lm {
@@ -636,15 +646,23 @@ fn step1(
             warm,
             prior: plan.prior.clone(),
             center: pb.start,
+            keep,
+            initial: None,
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;
         fit.iterations += res.iterations;
         fit.screened = res.screened;
+        fit.last = res.last;
         let Some(k) = opts.outlier_sigma else { break };
-        let corr = pb.effects.corrections(&fit.state.theta);
-        let rows = pb.direct(&fit.state.p, &corr, &fit.drop)?;
-        let found = report::find_outliers(&rows, pb.campaign, k);
+        // the outliers among the rows the LM ended with, or evaluated where it kept none
+        let found = if let Some(last) = &fit.last {
+            report::find_outliers(&last.rows, pb.campaign, k)
+        } else {
+            let corr = pb.effects.corrections(&fit.state.theta);
+            let rows = pb.values(&fit.state.p, &corr, &fit.drop)?;
+            report::find_outliers(&rows, pb.campaign, k)
+        };
         if found.is_empty() || fit.outliers.len() > plan.n_rows0 / 20 {
             break;
         }
@@ -764,6 +782,8 @@ fn step2(
         warm: false,
         prior: prior2.clone(),
         center: pb.start,
+        keep: Keep::Nothing,
+        initial: None,
     };
     let res = lm.run(&fit.state)?;
     let p = res.state.p;
