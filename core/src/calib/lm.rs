@@ -89,10 +89,13 @@ pub(super) struct Lm<'a> {
 
 /// What an evaluation of the LM keeps of its rows besides their normal equations, so that
 /// the rows at the fit's end need no evaluation of their own: the outlier test reads their
-/// values, the posterior their information (and leverages from the pieces' Jacobians).
+/// values, the posterior their information (and leverages from the pieces' Jacobians). A
+/// large campaign keeps nothing: every trial would hold a copy of its row values beside the
+/// accepted one's (10⁵ poses: 20 MB each); its final rows are evaluated once after the fit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum Keep {
-    /// Nothing (step 2's virtual rows: their final rows are evaluated apart).
+    /// Nothing (step 2's virtual rows, a large campaign: their final rows are evaluated
+    /// apart).
     Nothing,
     /// The rows' values.
     Values,
@@ -114,6 +117,7 @@ pub(super) struct Final {
 /// The normal equations of one point: JᵀJ, Jᵀr and ½‖r‖² of the scaled weighted rows (and
 /// the prior's pseudo-rows), summed piece by piece: no m × n Jacobian is ever stored, so a
 /// campaign of 10⁵ poses costs the memory of one piece per thread.
+#[derive(Clone)]
 pub(super) struct Normal {
     pub a: DMatrix<f64>,
     pub g: DVector<f64>,
@@ -121,7 +125,16 @@ pub(super) struct Normal {
 }
 
 impl Normal {
-    fn zeros(cols: usize) -> Normal {
+    /// The normal equations of weighted rows: their Jacobian `j` (m × n) and values `r`.
+    pub fn of(j: &DMatrix<f64>, r: &DVector<f64>) -> Normal {
+        Normal {
+            a: gram(j),
+            g: j.tr_mul(r),
+            cost: 0.5 * r.norm_squared(),
+        }
+    }
+
+    pub fn zeros(cols: usize) -> Normal {
         Normal {
             a: DMatrix::zeros(cols, cols),
             g: DVector::zeros(cols),
@@ -129,7 +142,7 @@ impl Normal {
         }
     }
 
-    fn add(&mut self, other: &Normal) {
+    pub fn add(&mut self, other: &Normal) {
         self.a += &other.a;
         self.g += &other.g;
         self.cost += other.cost;
@@ -139,7 +152,7 @@ impl Normal {
 /// JᵀJ of a block's columns (m × n, stored by column): each entry the dot product of two
 /// contiguous columns, the upper triangle only and mirrored (half the products of a general
 /// product).
-pub(super) fn gram(j: &DMatrix<f64>) -> DMatrix<f64> {
+fn gram(j: &DMatrix<f64>) -> DMatrix<f64> {
     let n = j.ncols();
     let mut a = DMatrix::zeros(n, n);
     for c in 0..n {
@@ -215,21 +228,16 @@ impl Lm<'_> {
 
     /// The normal equations of one piece's rows in the unscaled unknowns, and what is kept
     /// of them.
-    fn piece(&self, rows: &[Residual], terms: &[Vec<(usize, f64)>]) -> Piece {
+    fn piece(&self, rows: &[Residual], terms: &[Vec<(usize, f64)>], keep: Keep) -> Piece {
         let jr = self.jacobian(rows, terms);
-        let r = weighted_values(rows);
         Piece {
-            normal: Normal {
-                a: gram(&jr),
-                g: jr.tr_mul(&r),
-                cost: 0.5 * r.norm_squared(),
-            },
-            rows: if self.keep == Keep::Nothing {
+            normal: Normal::of(&jr, &weighted_values(rows)),
+            rows: if keep == Keep::Nothing {
                 Vec::new()
             } else {
                 rows.iter().map(RowValue::from).collect()
             },
-            jacobian: (self.keep == Keep::Jacobians).then_some(jr),
+            jacobian: (keep == Keep::Jacobians).then_some(jr),
         }
     }
 
@@ -244,29 +252,30 @@ impl Lm<'_> {
     /// The normal equations at `x`: the pieces summed in order (in the unscaled unknowns, the
     /// posterior's information as it is), scaled, then the prior as pseudo-rows
     /// (p − centre)/tolerance; with what [`Keep`] asks of the rows.
-    fn normal_at(&self, x: &State) -> Result<Evaluated, PoseError> {
+    fn normal_at(&self, x: &State, keep: Keep) -> Result<Evaluated, PoseError> {
         let pb = self.problem;
         let corr = pb.effects.corrections(&x.theta);
         let terms = self.column_terms();
         let parts = pb.map_pieces(self.step, &x.p, &self.p_cal, &corr, self.drop, |rows| {
-            self.piece(rows, &terms)
+            self.piece(rows, &terms, keep)
         })?;
         let mut total = Normal::zeros(self.n_unknowns());
         for part in &parts {
             total.add(&part.normal);
         }
-        let kept = (self.keep != Keep::Nothing).then(|| {
+        let kept = (keep != Keep::Nothing).then(|| {
             let mut f = Final {
                 info: total.a.clone(),
                 rows: Vec::new(),
                 jacobians: None,
             };
             let mut jacobians = Vec::new();
+            f.rows.reserve_exact(parts.iter().map(|p| p.rows.len()).sum());
             for part in parts {
                 f.rows.extend(part.rows);
                 jacobians.extend(part.jacobian);
             }
-            f.jacobians = (self.keep == Keep::Jacobians).then_some(jacobians);
+            f.jacobians = (keep == Keep::Jacobians).then_some(jacobians);
             f
         });
         let mut total = self.scaled(&total);
@@ -285,6 +294,17 @@ impl Lm<'_> {
             g: u.g.component_mul(&s),
             cost: u.cost,
         }
+    }
+
+    /// The rows at `x` as the posterior reads them (values and information), where the LM
+    /// kept nothing of its last evaluation.
+    pub fn final_rows(&self, x: &State) -> Result<Final, PoseError> {
+        let kept = self.normal_at(x, Keep::Values)?.kept;
+        Ok(kept.unwrap_or(Final {
+            rows: Vec::new(),
+            info: DMatrix::zeros(0, 0),
+            jacobians: None,
+        }))
     }
 
     /// The prior's pseudo-rows (p − centre)/tolerance added to normal equations at `x`.
@@ -337,7 +357,7 @@ impl Lm<'_> {
                 self.add_prior(&mut normal, start);
                 Ok(Evaluated { normal, kept: None })
             }
-            None => self.normal_at(start),
+            None => self.normal_at(start, self.keep),
         }
     }
 
@@ -387,7 +407,7 @@ impl Lm<'_> {
             let candidate = self.apply(&p, &step);
             let cost = nq.cost;
             let predicted = 0.5 * step.dot(&(step.scale(mu) - &nq.g));
-            let trial = self.normal_at(&candidate).ok();
+            let trial = self.normal_at(&candidate, self.keep).ok();
             match trial {
                 Some(trial) if trial.normal.cost < cost && predicted > 0.0 => {
                     let rho = (cost - trial.normal.cost) / predicted;

@@ -18,8 +18,8 @@ use crate::effects::{Corrections, EffectSet};
 use crate::noise::NoiseModel;
 use crate::obs::{PoseError, Residual, RowValue, Step};
 use crate::observability::{condition_number, normalize_columns};
-use crate::params::{self, unit, Model, Params, Unit, NAMES};
-use lm::{Final, Keep, Lm, State};
+use crate::params::{self, unit, Model, Params, Unit, NAMES, N_PARAMS};
+use lm::{Final, Keep, Lm, Normal, State};
 use nalgebra::{DMatrix, DVector};
 use rows::{dependency, reduced_jacobian, Columns, Key, Problem};
 use select::{auto_select, effect_observability, prior_of, scaling_vector, select_geometric};
@@ -487,6 +487,9 @@ struct Plan {
     n_rows0: usize,
     /// Their RMS table per piece: the report's "before" (taken once it is used).
     before: Vec<report::RmsTable>,
+    /// Their normal equations in the unknowns, unscaled and without the prior: where the LM
+    /// starts at the start (a cold start), it starts from these.
+    normal0: Normal,
 }
 
 impl Plan {
@@ -518,7 +521,9 @@ impl Plan {
             free_theta.iter().map(|&k| layout[k].param.prior),
         );
         let jr0 = start.columns.reduced(&ids, &opts.links);
+        let normal0 = reduced_normal(&start.normal, &ids, &opts.links, &free_theta);
         Ok(Plan {
+            normal0,
             corr0,
             h: scaling_vector(&jr0, &ids, opts.scaling)?,
             condition: condition_number(&normalize_columns(&jr0)),
@@ -539,6 +544,10 @@ impl Plan {
 struct StartRows {
     n_rows: usize,
     columns: Columns,
+    /// Their normal equations in all 29 + k columns, unscaled: summed as the LM sums its
+    /// own (the same products, pieces in order), so that its start from them is the start
+    /// it would evaluate.
+    normal: Normal,
     /// Each piece's RMS table (the report's "before": the same rows).
     before: Vec<report::RmsTable>,
 }
@@ -569,7 +578,7 @@ impl StartRows {
                     rows.len(),
                     bad,
                     Columns::piece(rows, n_theta),
-                    before_table(rows),
+                    (before_table(rows), all_columns_normal(rows, n_theta)),
                 )
             },
         )?;
@@ -586,13 +595,48 @@ impl StartRows {
         if n_rows == 0 {
             return Err(CalibrationError::NoMeasurements(pb.campaign.source.clone()));
         }
-        let (factors, before) = pieces.into_iter().map(|p| (p.2, p.3)).unzip();
+        let mut normal = Normal::zeros(N_PARAMS + n_theta);
+        for p in &pieces {
+            normal.add(&p.3 .1);
+        }
+        let (factors, before) = pieces.into_iter().map(|p| (p.2, p.3 .0)).unzip();
         let columns = Columns::combine(factors, n_theta);
         Ok(StartRows {
             n_rows,
             columns,
+            normal,
             before,
         })
+    }
+}
+
+/// The normal equations of a block of rows in all 29 + `n_theta` columns, unscaled: the
+/// products the LM forms for its unknowns ([`Normal::of`]).
+fn all_columns_normal(rows: &[Residual], n_theta: usize) -> Normal {
+    let all: Vec<usize> = (0..n_theta).collect();
+    let mut j = DMatrix::zeros(rows.len(), N_PARAMS + n_theta);
+    j.columns_mut(0, N_PARAMS)
+        .copy_from(&rows::weighted_jacobian(rows));
+    j.columns_mut(N_PARAMS, n_theta)
+        .copy_from(&rows::weighted_theta(rows, &all));
+    Normal::of(&j, &rows::weighted_values(rows))
+}
+
+/// Normal equations in all 29 + k columns (`all`) reduced to the unknowns: the parameters
+/// `ids` under `links`, then the effect parameters `free` (Dᵀ A D with D's entries 0 and
+/// 1 where nothing is linked: the reduced equations are the same numbers).
+fn reduced_normal(all: &Normal, ids: &[usize], links: &[Link], free: &[usize]) -> Normal {
+    let (n, cols) = (ids.len(), all.g.len());
+    let mut d = DMatrix::zeros(cols, n + free.len());
+    d.view_mut((0, 0), (N_PARAMS, n))
+        .copy_from(&dependency(ids, links));
+    for (k, &f) in free.iter().enumerate() {
+        d[(N_PARAMS + f, n + k)] = 1.0;
+    }
+    Normal {
+        a: d.tr_mul(&all.a) * &d,
+        g: d.tr_mul(&all.g),
+        cost: all.cost,
     }
 }
 
@@ -629,7 +673,7 @@ fn step1(
     let keep = if pb.campaign.poses.len() <= KEEP_JACOBIAN_POSES {
         Keep::Jacobians
     } else {
-        Keep::Values
+        Keep::Nothing
     };
     loop {
         let lm = Lm {
@@ -647,22 +691,25 @@ fn step1(
             prior: plan.prior.clone(),
             center: pb.start,
             keep,
-            initial: None,
+            // the plan's rows are the rows at a cold start (the start, θ₀, nothing dropped)
+            initial: (!warm && fit.drop.is_empty() && fit.iterations == 0)
+                .then(|| plan.normal0.clone()),
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;
         fit.iterations += res.iterations;
         fit.screened = res.screened;
-        fit.last = res.last;
-        let Some(k) = opts.outlier_sigma else { break };
-        // the outliers among the rows the LM ended with, or evaluated where it kept none
-        let found = if let Some(last) = &fit.last {
-            report::find_outliers(&last.rows, pb.campaign, k)
-        } else {
-            let corr = pb.effects.corrections(&fit.state.theta);
-            let rows = pb.values(&fit.state.p, &corr, &fit.drop)?;
-            report::find_outliers(&rows, pb.campaign, k)
+        // the rows the LM ended with (evaluated once more where it kept none): the outlier
+        // test's and the posterior's
+        let last = match res.last {
+            Some(last) => last,
+            None => lm.final_rows(&fit.state)?,
         };
+        let found = opts
+            .outlier_sigma
+            .map(|k| report::find_outliers(&last.rows, pb.campaign, k));
+        fit.last = Some(last);
+        let Some(found) = found else { break };
         if found.is_empty() || fit.outliers.len() > plan.n_rows0 / 20 {
             break;
         }

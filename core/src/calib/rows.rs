@@ -5,7 +5,7 @@ use super::{Link, Options};
 use crate::campaign::Campaign;
 use crate::effects::{Corrections, EffectSet};
 use crate::noise::NoiseModel;
-use crate::obs::{Direction, Evaluation, Form, Pieces, PoseError, Residual, RowValue, Step};
+use crate::obs::{Direction, Evaluation, Form, Pieces, PoseError, Residual, Step};
 use crate::params::{Model, Params, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
@@ -123,19 +123,6 @@ impl<'a> Problem<'a> {
         };
         done.sort_by_key(|(k, _)| *k);
         done.into_iter().map(|(_, r)| r).collect()
-    }
-
-    /// The values of the direct rows (step 1) at `p` with corrections `corr`.
-    pub fn values(
-        &self,
-        p: &Params,
-        corr: &Corrections,
-        drop: &HashSet<Key>,
-    ) -> Result<Vec<RowValue>, PoseError> {
-        let pieces = self.map_pieces(Step::Direct, p, &self.start, corr, drop, |rows| {
-            rows.iter().map(RowValue::from).collect::<Vec<_>>()
-        })?;
-        Ok(pieces.concat())
     }
 }
 
