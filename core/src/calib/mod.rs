@@ -328,7 +328,7 @@ pub fn calibrate_from(
 ) -> Result<Calibration, CalibrationError> {
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
-    let mut plan = Plan::new(&pb, &theta0)?;
+    let mut plan = Plan::new(&pb, &theta0, warm.is_none())?;
     let init = match warm {
         Some(w) => State {
             p: *w.params,
@@ -487,16 +487,16 @@ struct Plan {
     n_rows0: usize,
     /// Their RMS table per piece: the report's "before" (taken once it is used).
     before: Vec<report::RmsTable>,
-    /// Their normal equations in the unknowns, unscaled and without the prior: where the LM
-    /// starts at the start (a cold start), it starts from these.
-    normal0: Normal,
+    /// Their normal equations in the unknowns, unscaled and without the prior, for a cold
+    /// start (the LM starts at the start): it starts from these.
+    normal0: Option<Normal>,
 }
 
 impl Plan {
-    fn new(pb: &Problem, theta0: &[f64]) -> Result<Plan, CalibrationError> {
+    fn new(pb: &Problem, theta0: &[f64], cold: bool) -> Result<Plan, CalibrationError> {
         let opts = pb.opts;
         let corr0 = pb.effects.corrections(theta0);
-        let start = StartRows::of(pb, &corr0)?;
+        let start = StartRows::of(pb, &corr0, cold)?;
         let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();
         let (ids, step2_wanted) = select_geometric(pb.campaign, &start.columns, opts, &linked)?;
         let prior = prior_of(&opts.selection, &ids);
@@ -521,7 +521,10 @@ impl Plan {
             free_theta.iter().map(|&k| layout[k].param.prior),
         );
         let jr0 = start.columns.reduced(&ids, &opts.links);
-        let normal0 = reduced_normal(&start.normal, &ids, &opts.links, &free_theta);
+        let normal0 = start
+            .normal
+            .as_ref()
+            .map(|all| reduced_normal(all, &ids, &opts.links, &free_theta));
         Ok(Plan {
             normal0,
             corr0,
@@ -546,8 +549,8 @@ struct StartRows {
     columns: Columns,
     /// Their normal equations in all 29 + k columns, unscaled: summed as the LM sums its
     /// own (the same products, pieces in order), so that its start from them is the start
-    /// it would evaluate.
-    normal: Normal,
+    /// it would evaluate; only for a cold start (a warm one starts elsewhere).
+    normal: Option<Normal>,
     /// Each piece's RMS table (the report's "before": the same rows).
     before: Vec<report::RmsTable>,
 }
@@ -560,7 +563,7 @@ fn before_table(rows: &[Residual]) -> report::RmsTable {
 }
 
 impl StartRows {
-    fn of(pb: &Problem, corr0: &Corrections) -> Result<StartRows, CalibrationError> {
+    fn of(pb: &Problem, corr0: &Corrections, cold: bool) -> Result<StartRows, CalibrationError> {
         let n_theta = pb.effects.n_params();
         let pieces = pb.map_pieces(
             Step::Direct,
@@ -578,7 +581,7 @@ impl StartRows {
                     rows.len(),
                     bad,
                     Columns::piece(rows, n_theta),
-                    (before_table(rows), all_columns_normal(rows, n_theta)),
+                    (before_table(rows), cold.then(|| all_columns_normal(rows, n_theta))),
                 )
             },
         )?;
@@ -595,10 +598,13 @@ impl StartRows {
         if n_rows == 0 {
             return Err(CalibrationError::NoMeasurements(pb.campaign.source.clone()));
         }
-        let mut normal = Normal::zeros(N_PARAMS + n_theta);
-        for p in &pieces {
-            normal.add(&p.3 .1);
-        }
+        let normal = cold.then(|| {
+            let mut sum = Normal::zeros(N_PARAMS + n_theta);
+            for part in pieces.iter().filter_map(|p| p.3 .1.as_ref()) {
+                sum.add(part);
+            }
+            sum
+        });
         let (factors, before) = pieces.into_iter().map(|p| (p.2, p.3 .0)).unzip();
         let columns = Columns::combine(factors, n_theta);
         Ok(StartRows {
@@ -693,7 +699,8 @@ fn step1(
             keep,
             // the plan's rows are the rows at a cold start (the start, θ₀, nothing dropped)
             initial: (!warm && fit.drop.is_empty() && fit.iterations == 0)
-                .then(|| plan.normal0.clone()),
+                .then(|| plan.normal0.clone())
+                .flatten(),
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;
