@@ -38,9 +38,9 @@ pub const SCREEN_RHO: f64 = 0.02;
 /// diagonal, where [`TAU`]'s damping would hold the step back).
 pub const SCREEN_TAU: f64 = 1e-15;
 
-use super::rows::{weighted_jacobian, weighted_theta, weighted_values, Key, Problem};
+use super::rows::{weighted_values, Key, Problem};
 use super::CalibrationError;
-use crate::obs::{PoseError, Residual, Step};
+use crate::obs::{PoseError, Residual, RowValue, Step};
 use crate::params::{Params, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
@@ -79,19 +79,62 @@ pub(super) struct Lm<'a> {
     /// centre.
     pub prior: Vec<(usize, f64)>,
     pub center: Params,
+    /// What each evaluation keeps of its rows for after the fit ([`Keep`]).
+    pub keep: Keep,
+    /// The normal equations at the start in the unscaled unknowns, without the prior, when
+    /// the caller has them from rows it already evaluated there (the plan's, at a cold
+    /// start): the LM then starts without evaluating the rows.
+    pub initial: Option<Normal>,
+}
+
+/// What an evaluation of the LM keeps of its rows besides their normal equations, so that
+/// the rows at the fit's end need no evaluation of their own: the outlier test reads their
+/// values, the posterior their information (and leverages from the pieces' Jacobians). A
+/// large campaign keeps nothing: every trial would hold a copy of its row values beside the
+/// accepted one's (10⁵ poses: 20 MB each); its final rows are evaluated once after the fit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Keep {
+    /// Nothing (step 2's virtual rows, a large campaign: their final rows are evaluated
+    /// apart).
+    Nothing,
+    /// The rows' values.
+    Values,
+    /// The rows' values and each piece's scaled weighted Jacobian (a small campaign's
+    /// leverages without evaluating its rows again).
+    Jacobians,
+}
+
+/// The rows of the point the LM ended at, as its last accepted evaluation saw them.
+pub(super) struct Final {
+    /// Every row's value, in piece order.
+    pub rows: Vec<RowValue>,
+    /// JᵀJ of the weighted rows alone (no prior) in the unscaled unknowns.
+    pub info: DMatrix<f64>,
+    /// Each piece's weighted Jacobian in the unscaled unknowns ([`Keep::Jacobians`]).
+    pub jacobians: Option<Vec<DMatrix<f64>>>,
 }
 
 /// The normal equations of one point: JᵀJ, Jᵀr and ½‖r‖² of the scaled weighted rows (and
 /// the prior's pseudo-rows), summed piece by piece: no m × n Jacobian is ever stored, so a
 /// campaign of 10⁵ poses costs the memory of one piece per thread.
-struct Normal {
-    a: DMatrix<f64>,
-    g: DVector<f64>,
-    cost: f64,
+#[derive(Clone)]
+pub(super) struct Normal {
+    pub a: DMatrix<f64>,
+    pub g: DVector<f64>,
+    pub cost: f64,
 }
 
 impl Normal {
-    fn zeros(cols: usize) -> Normal {
+    /// The normal equations of weighted rows: their Jacobian `j` (m × n) and values `r`.
+    pub fn of(j: &DMatrix<f64>, r: &DVector<f64>) -> Normal {
+        Normal {
+            a: gram(j),
+            g: j.tr_mul(r),
+            cost: 0.5 * r.norm_squared(),
+        }
+    }
+
+    pub fn zeros(cols: usize) -> Normal {
         Normal {
             a: DMatrix::zeros(cols, cols),
             g: DVector::zeros(cols),
@@ -99,11 +142,40 @@ impl Normal {
         }
     }
 
-    fn add(&mut self, other: &Normal) {
+    pub fn add(&mut self, other: &Normal) {
         self.a += &other.a;
         self.g += &other.g;
         self.cost += other.cost;
     }
+}
+
+/// JᵀJ of a block's columns (m × n, stored by column): each entry the dot product of two
+/// contiguous columns, the upper triangle only and mirrored (half the products of a general
+/// product).
+fn gram(j: &DMatrix<f64>) -> DMatrix<f64> {
+    let n = j.ncols();
+    let mut a = DMatrix::zeros(n, n);
+    for c in 0..n {
+        for r in 0..=c {
+            let v = j.column(r).dot(&j.column(c));
+            a[(r, c)] = v;
+            a[(c, r)] = v;
+        }
+    }
+    a
+}
+
+/// One piece's share of an evaluation: its normal equations and what [`Keep`] asks for.
+struct Piece {
+    normal: Normal,
+    rows: Vec<RowValue>,
+    jacobian: Option<DMatrix<f64>>,
+}
+
+/// The normal equations at a point and what the evaluation kept of its rows.
+struct Evaluated {
+    normal: Normal,
+    kept: Option<Final>,
 }
 
 /// What a converged run found.
@@ -112,6 +184,9 @@ pub(super) struct LmResult {
     pub iterations: usize,
     /// Stopped after a screening step (see [`Lm::screen`]), not converged.
     pub screened: bool,
+    /// The rows at `state` ([`Keep`]); None when nothing was kept or the LM never
+    /// evaluated the rows there (it stopped at a start given as [`Lm::initial`]).
+    pub last: Option<Final>,
 }
 
 impl Lm<'_> {
@@ -119,53 +194,127 @@ impl Lm<'_> {
         self.h.len() + self.free_theta.len()
     }
 
-    /// The weighted rows' Jacobian in the scaled unknowns (m × n).
-    fn scaled_jacobian(&self, rows: &[Residual]) -> DMatrix<f64> {
+    /// Per reduced parameter: the (parameter, coefficient) terms of its column of D (one
+    /// term per identified parameter, more for a parameter others are linked to).
+    fn column_terms(&self) -> Vec<Vec<(usize, f64)>> {
+        (0..self.h.len())
+            .map(|k| {
+                (0..N_PARAMS)
+                    .filter(|&i| self.d[(i, k)] != 0.0)
+                    .map(|i| (i, self.d[(i, k)]))
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The weighted rows' Jacobian in the unknowns, unscaled (m × n): the reduced
+    /// parameters' columns from the rows' 29 derivatives through the sparse D (no m × 29
+    /// intermediate), then the free effect parameters'.
+    fn jacobian(&self, rows: &[Residual], terms: &[Vec<(usize, f64)>]) -> DMatrix<f64> {
         let n = self.h.len();
-        let mut js = DMatrix::zeros(rows.len(), self.n_unknowns());
-        let mut jg = weighted_jacobian(rows) * &self.d;
-        for k in 0..n {
-            jg.column_mut(k).scale_mut(self.h[k]);
+        let mut jr = DMatrix::zeros(rows.len(), self.n_unknowns());
+        for (k, t) in terms.iter().enumerate() {
+            for (i, row) in rows.iter().enumerate() {
+                jr[(i, k)] = t.iter().map(|&(j, d)| row.jacobian[j] / row.sigma * d).sum();
+            }
         }
-        js.columns_mut(0, n).copy_from(&jg);
-        let mut jt = weighted_theta(rows, self.free_theta);
-        for k in 0..self.free_theta.len() {
-            jt.column_mut(k).scale_mut(self.h_theta[k]);
+        for (k, &f) in self.free_theta.iter().enumerate() {
+            for (i, row) in rows.iter().enumerate() {
+                jr[(i, n + k)] = row.d_theta[f] / row.sigma;
+            }
         }
-        js.columns_mut(n, jt.ncols()).copy_from(&jt);
-        js
+        jr
     }
 
-    /// The normal equations of one piece's rows.
-    fn piece_normal(&self, rows: &[Residual]) -> Normal {
-        let js = self.scaled_jacobian(rows);
-        let r = weighted_values(rows);
-        Normal {
-            a: js.tr_mul(&js),
-            g: js.tr_mul(&r),
-            cost: 0.5 * r.norm_squared(),
+    /// The normal equations of one piece's rows in the unscaled unknowns, and what is kept
+    /// of them.
+    fn piece(&self, rows: &[Residual], terms: &[Vec<(usize, f64)>], keep: Keep) -> Piece {
+        let jr = self.jacobian(rows, terms);
+        Piece {
+            normal: Normal::of(&jr, &weighted_values(rows)),
+            rows: if keep == Keep::Nothing {
+                Vec::new()
+            } else {
+                rows.iter().map(RowValue::from).collect()
+            },
+            jacobian: (keep == Keep::Jacobians).then_some(jr),
         }
     }
 
-    /// The normal equations at `x`: the pieces summed in order, then the prior as pseudo-rows
-    /// (p − centre)/tolerance.
-    fn normal_at(&self, x: &State) -> Result<Normal, PoseError> {
+    /// The scale of every unknown: the geometric parameters' then the effect parameters'.
+    fn scales(&self) -> DVector<f64> {
+        DVector::from_iterator(
+            self.n_unknowns(),
+            self.h.iter().chain(self.h_theta.iter()).copied(),
+        )
+    }
+
+    /// The normal equations at `x`: the pieces summed in order (in the unscaled unknowns, the
+    /// posterior's information as it is), scaled, then the prior as pseudo-rows
+    /// (p − centre)/tolerance; with what [`Keep`] asks of the rows.
+    fn normal_at(&self, x: &State, keep: Keep) -> Result<Evaluated, PoseError> {
         let pb = self.problem;
         let corr = pb.effects.corrections(&x.theta);
+        let terms = self.column_terms();
         let parts = pb.map_pieces(self.step, &x.p, &self.p_cal, &corr, self.drop, |rows| {
-            self.piece_normal(rows)
+            self.piece(rows, &terms, keep)
         })?;
         let mut total = Normal::zeros(self.n_unknowns());
         for part in &parts {
-            total.add(part);
+            total.add(&part.normal);
         }
+        let kept = (keep != Keep::Nothing).then(|| {
+            let mut f = Final {
+                info: total.a.clone(),
+                rows: Vec::new(),
+                jacobians: None,
+            };
+            let mut jacobians = Vec::new();
+            f.rows.reserve_exact(parts.iter().map(|p| p.rows.len()).sum());
+            for part in parts {
+                f.rows.extend(part.rows);
+                jacobians.extend(part.jacobian);
+            }
+            f.jacobians = (keep == Keep::Jacobians).then_some(jacobians);
+            f
+        });
+        let mut total = self.scaled(&total);
+        self.add_prior(&mut total, x);
+        Ok(Evaluated {
+            normal: total,
+            kept,
+        })
+    }
+
+    /// Normal equations in the unscaled unknowns (`u`) in the scaled ones: H A H, H g.
+    fn scaled(&self, u: &Normal) -> Normal {
+        let s = self.scales();
+        Normal {
+            a: DMatrix::from_fn(s.len(), s.len(), |i, j| s[i] * u.a[(i, j)] * s[j]),
+            g: u.g.component_mul(&s),
+            cost: u.cost,
+        }
+    }
+
+    /// The rows at `x` as the posterior reads them (values and information), where the LM
+    /// kept nothing of its last evaluation.
+    pub fn final_rows(&self, x: &State) -> Result<Final, PoseError> {
+        let kept = self.normal_at(x, Keep::Values)?.kept;
+        Ok(kept.unwrap_or(Final {
+            rows: Vec::new(),
+            info: DMatrix::zeros(0, 0),
+            jacobians: None,
+        }))
+    }
+
+    /// The prior's pseudo-rows (p − centre)/tolerance added to normal equations at `x`.
+    fn add_prior(&self, total: &mut Normal, x: &State) {
         for (k, &(i, tol)) in self.prior.iter().enumerate() {
             let (r, j) = ((x.p[i] - self.center[i]) / tol, self.h[k] / tol);
             total.a[(k, k)] += j * j;
             total.g[k] += j * r;
             total.cost += 0.5 * r * r;
         }
-        Ok(total)
     }
 
     fn apply(&self, x: &State, delta: &DVector<f64>) -> State {
@@ -200,31 +349,50 @@ impl Lm<'_> {
             .fold(0.0, f64::max)
     }
 
-    pub fn run(&self, start: &State) -> Result<LmResult, CalibrationError> {
-        let cols = self.n_unknowns();
-        let mut p = start.clone();
-        let mut nq = self.normal_at(&p)?;
-        // from a neighbour's minimum the step is Gauss-Newton's: undamped where the normal
-        // equations allow
-        let tau = if self.screen || self.warm {
+    /// The normal equations at the start: the caller's ([`Lm::initial`]) or evaluated.
+    fn start_at(&self, start: &State) -> Result<Evaluated, PoseError> {
+        match &self.initial {
+            Some(n) => {
+                let mut normal = self.scaled(n);
+                self.add_prior(&mut normal, start);
+                Ok(Evaluated { normal, kept: None })
+            }
+            None => self.normal_at(start, self.keep),
+        }
+    }
+
+    /// The initial damping relative to the largest diagonal: from a neighbour's minimum the
+    /// step is Gauss-Newton's, undamped where the normal equations allow.
+    fn tau(&self) -> f64 {
+        if self.screen || self.warm {
             SCREEN_TAU
         } else {
             TAU
-        };
-        let mut mu = tau * nq.a.diagonal().max();
+        }
+    }
+
+    pub fn run(&self, start: &State) -> Result<LmResult, CalibrationError> {
+        let cols = self.n_unknowns();
+        let mut p = start.clone();
+        let Evaluated {
+            normal: mut nq,
+            kept: mut last,
+        } = self.start_at(&p)?;
+        let mut mu = self.tau() * nq.a.diagonal().max();
         let mut nu = 2.0;
-        let done = |state: State, iterations: usize| {
+        let done = |state: State, iterations: usize, last: Option<Final>| {
             Ok(LmResult {
                 state,
                 iterations,
                 screened: false,
+                last,
             })
         };
         // distance travelled from the start in the scaled variables (for xtol)
         let mut travelled = DVector::<f64>::zeros(cols);
         for it in 0..self.max_iterations {
             if Self::gradient_cosine(&nq) <= GTOL {
-                return done(p, it);
+                return done(p, it, last);
             }
             let mut damped = nq.a.clone();
             for k in 0..cols {
@@ -239,14 +407,15 @@ impl Lm<'_> {
             let candidate = self.apply(&p, &step);
             let cost = nq.cost;
             let predicted = 0.5 * step.dot(&(step.scale(mu) - &nq.g));
-            let trial = self.normal_at(&candidate).ok();
+            let trial = self.normal_at(&candidate, self.keep).ok();
             match trial {
-                Some(trial) if trial.cost < cost && predicted > 0.0 => {
-                    let rho = (cost - trial.cost) / predicted;
-                    let actual_rel = (cost - trial.cost) / cost;
+                Some(trial) if trial.normal.cost < cost && predicted > 0.0 => {
+                    let rho = (cost - trial.normal.cost) / predicted;
+                    let actual_rel = (cost - trial.normal.cost) / cost;
                     travelled += &step;
                     p = candidate;
-                    nq = trial;
+                    nq = trial.normal;
+                    last = trial.kept;
                     // Nielsen's rule, with the floor at 1/30 instead of 1/3: ρ ≈ 1 says the
                     // quadratic model holds, so the step goes to Gauss-Newton in two steps
                     // instead of five (measured on 10⁵ self-calibration poses: 11 → 5
@@ -256,13 +425,14 @@ impl Lm<'_> {
                     let ftol = actual_rel <= FTOL && predicted / cost <= FTOL && rho <= 2.0;
                     let xtol = step.norm() <= XTOL * (travelled.norm() + XTOL);
                     if ftol || xtol || nq.cost == 0.0 {
-                        return done(p, it + 1);
+                        return done(p, it + 1, last);
                     }
                     if self.screen && it == 0 && (rho - 1.0).abs() <= SCREEN_RHO {
                         return Ok(LmResult {
                             state: p,
                             iterations: 1,
                             screened: true,
+                            last,
                         });
                     }
                 }
@@ -270,8 +440,9 @@ impl Lm<'_> {
                     // MINPACK applies ftol to a refused step too: a cost that no longer moves
                     // beyond round-off, and a model that predicts no more, is the minimum
                     if let Some(trial) = trial {
-                        if ((cost - trial.cost) / cost).abs() <= FTOL && predicted / cost <= FTOL {
-                            return done(p, it + 1);
+                        let actual = (cost - trial.normal.cost) / cost;
+                        if actual.abs() <= FTOL && predicted / cost <= FTOL {
+                            return done(p, it + 1, last);
                         }
                     }
                     // a step that raises the cost or leaves the assembly mode is refused
@@ -281,7 +452,7 @@ impl Lm<'_> {
                         // no step lowers the cost: a minimum to machine precision, unless
                         // the gradient says otherwise
                         if nq.g.amax() < 1e-3 * (1.0 + cost) {
-                            return done(p, it + 1);
+                            return done(p, it + 1, last);
                         }
                         return Err(Self::not_converged(it + 1, &nq));
                     }

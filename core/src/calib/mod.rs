@@ -18,13 +18,13 @@ use crate::effects::{Corrections, EffectSet};
 use crate::noise::NoiseModel;
 use crate::obs::{PoseError, Residual, RowValue, Step};
 use crate::observability::{condition_number, normalize_columns};
-use crate::params::{self, unit, Model, Params, Unit, NAMES};
-use lm::{Lm, State};
+use crate::params::{self, unit, Model, Params, Unit, NAMES, N_PARAMS};
+use lm::{Final, Keep, Lm, Normal, State};
 use nalgebra::{DMatrix, DVector};
 use rows::{dependency, reduced_jacobian, Columns, Key, Problem};
 use select::{auto_select, effect_observability, prior_of, scaling_vector, select_geometric};
 use std::collections::HashSet;
-use uncertainty::{posterior, step2_uncertainties, Posterior};
+use uncertainty::{posterior, step2_uncertainties, Posterior, KEEP_JACOBIAN_POSES};
 
 /// Which parameters the calibration identifies.
 #[derive(Clone, Debug, PartialEq)]
@@ -328,7 +328,7 @@ pub fn calibrate_from(
 ) -> Result<Calibration, CalibrationError> {
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
-    let mut plan = Plan::new(&pb, &theta0)?;
+    let mut plan = Plan::new(&pb, &theta0, warm.is_none())?;
     let init = match warm {
         Some(w) => State {
             p: *w.params,
@@ -339,14 +339,15 @@ pub fn calibrate_from(
             theta: theta0.clone(),
         },
     };
-    let fit = step1(
+    let mut fit = step1(
         &pb,
         &plan,
         init,
         (warm.is_some(), warm.is_some_and(|w| w.screen)),
     )?;
     let corr = effects.corrections(&fit.state.theta);
-    let (rows_final, post) = posterior(&pb, &plan, &fit.state.p, &corr, &fit.drop)?;
+    let last = fit.last.take();
+    let (rows_final, post) = posterior(&pb, &plan, (&fit.state.p, &corr, &fit.drop), last)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
     let chi2: f64 = rows_final.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
     let chi2_per_dof = chi2 / (rows_final.len() as f64 - post.dof_model).max(1.0);
@@ -486,13 +487,16 @@ struct Plan {
     n_rows0: usize,
     /// Their RMS table per piece: the report's "before" (taken once it is used).
     before: Vec<report::RmsTable>,
+    /// Their normal equations in the unknowns, unscaled and without the prior, for a cold
+    /// start (the LM starts at the start): it starts from these.
+    normal0: Option<Normal>,
 }
 
 impl Plan {
-    fn new(pb: &Problem, theta0: &[f64]) -> Result<Plan, CalibrationError> {
+    fn new(pb: &Problem, theta0: &[f64], cold: bool) -> Result<Plan, CalibrationError> {
         let opts = pb.opts;
         let corr0 = pb.effects.corrections(theta0);
-        let start = StartRows::of(pb, &corr0)?;
+        let start = StartRows::of(pb, &corr0, cold)?;
         let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();
         let (ids, step2_wanted) = select_geometric(pb.campaign, &start.columns, opts, &linked)?;
         let prior = prior_of(&opts.selection, &ids);
@@ -517,7 +521,12 @@ impl Plan {
             free_theta.iter().map(|&k| layout[k].param.prior),
         );
         let jr0 = start.columns.reduced(&ids, &opts.links);
+        let normal0 = start
+            .normal
+            .as_ref()
+            .map(|all| reduced_normal(all, &ids, &opts.links, &free_theta));
         Ok(Plan {
+            normal0,
             corr0,
             h: scaling_vector(&jr0, &ids, opts.scaling)?,
             condition: condition_number(&normalize_columns(&jr0)),
@@ -538,6 +547,10 @@ impl Plan {
 struct StartRows {
     n_rows: usize,
     columns: Columns,
+    /// Their normal equations in all 29 + k columns, unscaled: summed as the LM sums its
+    /// own (the same products, pieces in order), so that its start from them is the start
+    /// it would evaluate; only for a cold start (a warm one starts elsewhere).
+    normal: Option<Normal>,
     /// Each piece's RMS table (the report's "before": the same rows).
     before: Vec<report::RmsTable>,
 }
@@ -550,7 +563,7 @@ fn before_table(rows: &[Residual]) -> report::RmsTable {
 }
 
 impl StartRows {
-    fn of(pb: &Problem, corr0: &Corrections) -> Result<StartRows, CalibrationError> {
+    fn of(pb: &Problem, corr0: &Corrections, cold: bool) -> Result<StartRows, CalibrationError> {
         let n_theta = pb.effects.n_params();
         let pieces = pb.map_pieces(
             Step::Direct,
@@ -568,7 +581,7 @@ impl StartRows {
                     rows.len(),
                     bad,
                     Columns::piece(rows, n_theta),
-                    before_table(rows),
+                    (before_table(rows), cold.then(|| all_columns_normal(rows, n_theta))),
                 )
             },
         )?;
@@ -585,13 +598,51 @@ impl StartRows {
         if n_rows == 0 {
             return Err(CalibrationError::NoMeasurements(pb.campaign.source.clone()));
         }
-        let (factors, before) = pieces.into_iter().map(|p| (p.2, p.3)).unzip();
+        let normal = cold.then(|| {
+            let mut sum = Normal::zeros(N_PARAMS + n_theta);
+            for part in pieces.iter().filter_map(|p| p.3 .1.as_ref()) {
+                sum.add(part);
+            }
+            sum
+        });
+        let (factors, before) = pieces.into_iter().map(|p| (p.2, p.3 .0)).unzip();
         let columns = Columns::combine(factors, n_theta);
         Ok(StartRows {
             n_rows,
             columns,
+            normal,
             before,
         })
+    }
+}
+
+/// The normal equations of a block of rows in all 29 + `n_theta` columns, unscaled: the
+/// products the LM forms for its unknowns ([`Normal::of`]).
+fn all_columns_normal(rows: &[Residual], n_theta: usize) -> Normal {
+    let all: Vec<usize> = (0..n_theta).collect();
+    let mut j = DMatrix::zeros(rows.len(), N_PARAMS + n_theta);
+    j.columns_mut(0, N_PARAMS)
+        .copy_from(&rows::weighted_jacobian(rows));
+    j.columns_mut(N_PARAMS, n_theta)
+        .copy_from(&rows::weighted_theta(rows, &all));
+    Normal::of(&j, &rows::weighted_values(rows))
+}
+
+/// Normal equations in all 29 + k columns (`all`) reduced to the unknowns: the parameters
+/// `ids` under `links`, then the effect parameters `free` (Dᵀ A D with D's entries 0 and
+/// 1 where nothing is linked: the reduced equations are the same numbers).
+fn reduced_normal(all: &Normal, ids: &[usize], links: &[Link], free: &[usize]) -> Normal {
+    let (n, cols) = (ids.len(), all.g.len());
+    let mut d = DMatrix::zeros(cols, n + free.len());
+    d.view_mut((0, 0), (N_PARAMS, n))
+        .copy_from(&dependency(ids, links));
+    for (k, &f) in free.iter().enumerate() {
+        d[(N_PARAMS + f, n + k)] = 1.0;
+    }
+    Normal {
+        a: d.tr_mul(&all.a) * &d,
+        g: d.tr_mul(&all.g),
+        cost: all.cost,
     }
 }
 
@@ -603,6 +654,8 @@ struct Step1Fit {
     screened: bool,
     drop: HashSet<Key>,
     outliers: Vec<Outlier>,
+    /// The LM's last evaluation of the rows at `state` (the posterior's rows).
+    last: Option<Final>,
 }
 
 /// Step 1 with outlier elimination rounds (eq. 3.31-3.32): fit, drop the rows beyond
@@ -620,6 +673,13 @@ fn step1(
         screened: false,
         drop: HashSet::new(),
         outliers: Vec::new(),
+        last: None,
+    };
+    // a small campaign keeps its final rows' Jacobian for the leverages
+    let keep = if pb.campaign.poses.len() <= KEEP_JACOBIAN_POSES {
+        Keep::Jacobians
+    } else {
+        Keep::Nothing
     };
     loop {
         let lm = Lm {
@@ -636,15 +696,27 @@ fn step1(
             warm,
             prior: plan.prior.clone(),
             center: pb.start,
+            keep,
+            // the plan's rows are the rows at a cold start (the start, θ₀, nothing dropped)
+            initial: (!warm && fit.drop.is_empty() && fit.iterations == 0)
+                .then(|| plan.normal0.clone())
+                .flatten(),
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;
         fit.iterations += res.iterations;
         fit.screened = res.screened;
-        let Some(k) = opts.outlier_sigma else { break };
-        let corr = pb.effects.corrections(&fit.state.theta);
-        let rows = pb.direct(&fit.state.p, &corr, &fit.drop)?;
-        let found = report::find_outliers(&rows, pb.campaign, k);
+        // the rows the LM ended with (evaluated once more where it kept none): the outlier
+        // test's and the posterior's
+        let last = match res.last {
+            Some(last) => last,
+            None => lm.final_rows(&fit.state)?,
+        };
+        let found = opts
+            .outlier_sigma
+            .map(|k| report::find_outliers(&last.rows, pb.campaign, k));
+        fit.last = Some(last);
+        let Some(found) = found else { break };
         if found.is_empty() || fit.outliers.len() > plan.n_rows0 / 20 {
             break;
         }
@@ -764,6 +836,8 @@ fn step2(
         warm: false,
         prior: prior2.clone(),
         center: pb.start,
+        keep: Keep::Nothing,
+        initial: None,
     };
     let res = lm.run(&fit.state)?;
     let p = res.state.p;

@@ -4,12 +4,12 @@
 use super::rows::Key;
 use super::{DirectionRms, Outlier};
 use crate::campaign::{Campaign, Instrument};
-use crate::obs::{Direction, Residual, RowValue};
+use crate::obs::{Direction, RowValue};
 use std::collections::BTreeMap;
 
 /// Rows further than `k` standard deviations from the mean of their instrument and direction.
-pub(super) fn find_outliers(rows: &[Residual], campaign: &Campaign, k: f64) -> Vec<(Key, Outlier)> {
-    let mut groups: BTreeMap<(&str, Direction), Vec<&Residual>> = BTreeMap::new();
+pub(super) fn find_outliers(rows: &[RowValue], campaign: &Campaign, k: f64) -> Vec<(Key, Outlier)> {
+    let mut groups: BTreeMap<(&str, Direction), Vec<&RowValue>> = BTreeMap::new();
     for r in rows {
         groups
             .entry((r.instrument.as_str(), r.direction))

@@ -124,16 +124,6 @@ impl<'a> Problem<'a> {
         done.sort_by_key(|(k, _)| *k);
         done.into_iter().map(|(_, r)| r).collect()
     }
-
-    /// The direct rows (step 1) at `p` with corrections `corr`.
-    pub fn direct(
-        &self,
-        p: &Params,
-        corr: &Corrections,
-        drop: &HashSet<Key>,
-    ) -> Result<Vec<Residual>, PoseError> {
-        self.rows(Step::Direct, p, &self.start, corr, drop)
-    }
 }
 
 /// `threads` resolved: 0 is every core.

@@ -1,6 +1,7 @@
 //! What the data tell about the identified unknowns: posterior covariance under the prior,
 //! the determined combinations, leverages, and step 2's uncertainty with step 1's propagated.
 
+use super::lm::Final;
 use super::rows::{reduced_jacobian, weighted_theta, Key, Problem};
 use super::{CalibrationError, Link, Plan};
 use crate::effects::Corrections;
@@ -30,8 +31,8 @@ const BLOCK: usize = 512;
 
 /// Campaigns up to this many poses keep their final rows' Jacobian between the information
 /// and the leverages (at most a few rows per pose of 29 + k columns: 10-50 MB); larger ones
-/// evaluate the rows twice and hold one piece per thread.
-const KEEP_JACOBIAN_POSES: usize = 20_000;
+/// evaluate the rows once more for the leverages and hold one piece per thread.
+pub(super) const KEEP_JACOBIAN_POSES: usize = 20_000;
 
 /// The weighted Jacobian of a block of rows in the unknowns: parameters `ids` under links,
 /// then the effect parameters `free`.
@@ -50,56 +51,89 @@ fn block_jacobian(
     jr
 }
 
+/// The final rows of step 1 as the posterior reads them: their values, their information
+/// JᵀJ in the unknowns, and where kept each piece's Jacobian.
+struct FinalRows {
+    values: Vec<RowValue>,
+    info: DMatrix<f64>,
+    jacobians: Option<Vec<DMatrix<f64>>>,
+}
+
+impl FinalRows {
+    /// From the LM's last evaluation (`last`): the rows not evaluated again.
+    fn from_lm(last: Final) -> FinalRows {
+        FinalRows {
+            values: last.rows,
+            info: last.info,
+            jacobians: last.jacobians,
+        }
+    }
+
+    /// From an evaluation of the rows at `p`: a small campaign keeps each piece's Jacobian
+    /// for the leverages (one pass over the rows instead of two); a large one evaluates its
+    /// rows again rather than hold them.
+    fn evaluate(
+        pb: &Problem,
+        plan: &Plan,
+        (p, corr, drop): (&Params, &Corrections, &HashSet<Key>),
+    ) -> Result<FinalRows, CalibrationError> {
+        let (ids, links, free) = (&plan.ids, &pb.opts.links, &plan.free_theta);
+        let keep = pb.campaign.poses.len() <= KEEP_JACOBIAN_POSES;
+        let pieces = pb.map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
+            let jr = block_jacobian(rows, ids, links, free);
+            let values: Vec<RowValue> = rows.iter().map(RowValue::from).collect();
+            (jr.tr_mul(&jr), values, keep.then_some(jr))
+        })?;
+        let cols = ids.len() + free.len();
+        let mut info = DMatrix::zeros(cols, cols);
+        for (piece, _, _) in &pieces {
+            info += piece;
+        }
+        let mut values = Vec::new();
+        let mut jacobians = Vec::new();
+        for (_, v, jr) in pieces {
+            values.extend(v);
+            jacobians.extend(jr);
+        }
+        Ok(FinalRows {
+            values,
+            info,
+            jacobians: keep.then_some(jacobians),
+        })
+    }
+}
+
 /// The final rows of step 1 at `p` (their values) and what they tell about the plan's
-/// unknowns: two passes over the pieces, the information first, then each row's leverage.
+/// unknowns: from the LM's last evaluation there (`last`) when it kept them, else from an
+/// evaluation of the rows; the leverages from the kept Jacobians or one more pass.
 pub(super) fn posterior(
     pb: &Problem,
     plan: &Plan,
-    p: &Params,
-    corr: &Corrections,
-    drop: &HashSet<Key>,
+    (p, corr, drop): (&Params, &Corrections, &HashSet<Key>),
+    last: Option<Final>,
 ) -> Result<(Vec<RowValue>, Posterior), CalibrationError> {
     let (ids, links, free, prior) = (&plan.ids, &pb.opts.links, &plan.free_theta, &plan.prior);
     let n = ids.len();
-    let jacobian = |rows: &[Residual]| block_jacobian(rows, ids, links, free);
-    // a small campaign keeps each piece's Jacobian for the leverages (one pass over the
-    // rows instead of two); a large one evaluates its rows again rather than hold them
-    let keep = pb.campaign.poses.len() <= KEEP_JACOBIAN_POSES;
-    let pieces = pb.map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
-        let jr = jacobian(rows);
-        let values: Vec<RowValue> = rows.iter().map(RowValue::from).collect();
-        (jr.tr_mul(&jr), values, keep.then_some(jr))
-    })?;
-    let cols = n + free.len();
-    let mut info = DMatrix::zeros(cols, cols);
-    for (piece, _, _) in &pieces {
-        info += piece;
-    }
+    let rows = match last {
+        Some(last) => FinalRows::from_lm(last),
+        None => FinalRows::evaluate(pb, plan, (p, corr, drop))?,
+    };
+    let info = rows.info;
     let inv = normal_inverse(&info, ids, prior)?;
     let dof_model = (&inv * &info).trace();
-    let leverage_of = |jr: &DMatrix<f64>| {
-        let ji = jr * &inv;
+    let leverage_of = |jr: &DMatrix<f64>, inv: &DMatrix<f64>| {
+        let ji = jr * inv;
         (0..jr.nrows())
             .map(|i| ji.row(i).dot(&jr.row(i)))
             .collect::<Vec<f64>>()
     };
-    let (values, leverage) = if keep {
-        let leverage = pieces
-            .iter()
-            .flat_map(|(_, _, jr)| jr.as_ref().map(leverage_of).unwrap_or_default())
-            .collect();
-        (
-            pieces.into_iter().flat_map(|(_, v, _)| v).collect(),
-            leverage,
-        )
-    } else {
-        let values: Vec<RowValue> = pieces.into_iter().flat_map(|(_, v, _)| v).collect();
-        let leverage = pb
+    let leverage = match rows.jacobians {
+        Some(pieces) => pieces.iter().flat_map(|jr| leverage_of(jr, &inv)).collect(),
+        None => pb
             .map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
-                leverage_of(&jacobian(rows))
+                leverage_of(&block_jacobian(rows, ids, links, free), &inv)
             })?
-            .concat();
-        (values, leverage)
+            .concat(),
     };
     // directions: eigenvalues of the data's information in units of the prior's
     let determined = (!prior.is_empty()).then(|| {
@@ -118,7 +152,7 @@ pub(super) fn posterior(
         leverage,
         determined,
     };
-    Ok((values, post))
+    Ok((rows.values, post))
 }
 
 /// (JᵀJ + Λ)⁻¹ from the information JᵀJ, with the prior's precision Λ on the first
