@@ -1082,12 +1082,8 @@ pub fn solve(
             return Ok(sol);
         }
     }
-    if let Subsystem::Actuators(a, b) = sub {
-        if a < b && b < 4 {
-            if let Some(sol) = fgm_closed(p, &frames(p), model, (a, known[0]), (b, known[1])) {
-                return Ok(sol);
-            }
-        }
+    if let Subsystem::Actuators(..) = sub {
+        return fgm_with_frames(p, &frames(p), model, sub, known);
     }
     general(p, model, sub, known)
 }

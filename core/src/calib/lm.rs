@@ -215,7 +215,10 @@ impl Lm<'_> {
         let mut jr = DMatrix::zeros(rows.len(), self.n_unknowns());
         for (k, t) in terms.iter().enumerate() {
             for (i, row) in rows.iter().enumerate() {
-                jr[(i, k)] = t.iter().map(|&(j, d)| row.jacobian[j] / row.sigma * d).sum();
+                jr[(i, k)] = t
+                    .iter()
+                    .map(|&(j, d)| row.jacobian[j] / row.sigma * d)
+                    .sum();
             }
         }
         for (k, &f) in self.free_theta.iter().enumerate() {
@@ -270,7 +273,8 @@ impl Lm<'_> {
                 jacobians: None,
             };
             let mut jacobians = Vec::new();
-            f.rows.reserve_exact(parts.iter().map(|p| p.rows.len()).sum());
+            f.rows
+                .reserve_exact(parts.iter().map(|p| p.rows.len()).sum());
             for part in parts {
                 f.rows.extend(part.rows);
                 jacobians.extend(part.jacobian);

@@ -581,7 +581,10 @@ impl StartRows {
                     rows.len(),
                     bad,
                     Columns::piece(rows, n_theta),
-                    (before_table(rows), cold.then(|| all_columns_normal(rows, n_theta))),
+                    (
+                        before_table(rows),
+                        cold.then(|| all_columns_normal(rows, n_theta)),
+                    ),
                 )
             },
         )?;
