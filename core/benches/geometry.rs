@@ -11,7 +11,9 @@ mod support;
 
 use rpkm_core::calib::{self, Options, Selection};
 use rpkm_core::design;
-use rpkm_core::elastic::{fegm, fegm_from, fegm_unchecked, Stiffness, ALL_ACTIVE};
+use rpkm_core::elastic::{
+    fegm, fegm_checked_after, fegm_from, fegm_unchecked, Limits, Stiffness, ALL_ACTIVE,
+};
 use rpkm_core::geometry::{self, Subsystem};
 use rpkm_core::params::{Model, Params};
 use std::hint::black_box;
@@ -39,9 +41,11 @@ fn per_call_ns(n: usize, mut f: impl FnMut(usize)) -> f64 {
     rounds[rounds.len() / 10]
 }
 
-/// ns per warm spring fegm (from the previous sample, the servo-rate use), checked and
-/// unchecked, on a slow circle through the workspace with 0.1 mm incompatibility on q3.
-fn fegm_ns(p: &Params, n: usize) -> (f64, f64) {
+/// ns per warm spring fegm (from the previous sample, the servo-rate use): checked with the
+/// rigid reference from γ2 (`fegm_from`), checked with it from the previous rigid ψ
+/// (`fegm_checked_after`), and unchecked; on a slow circle through the workspace with 0.1 mm
+/// incompatibility on q3.
+fn fegm_ns(p: &Params, n: usize) -> [f64; 3] {
     let k = Stiffness::default();
     let m = 2000;
     let qs: Vec<[f64; 4]> = (0..m)
@@ -56,12 +60,18 @@ fn fegm_ns(p: &Params, n: usize) -> (f64, f64) {
     let checked = per_call_ns(n, |i| {
         prev = fegm_from(p, &k, black_box(qs[i % qs.len()]), ALL_ACTIVE, &prev).expect("fegm");
     });
+    let limits = Limits::default();
+    let mut last = fegm_checked_after(p, &k, qs[0], ALL_ACTIVE, None, &limits).expect("fegm");
+    let after = per_call_ns(n, |i| {
+        let q = black_box(qs[i % qs.len()]);
+        last = fegm_checked_after(p, &k, q, ALL_ACTIVE, Some(&last), &limits).expect("fegm");
+    });
     let mut raw = prev;
     let unchecked = per_call_ns(n, |i| {
         let q = black_box(qs[i % qs.len()]);
         raw = fegm_unchecked(p, &k, q, ALL_ACTIVE, Some(&raw)).expect("fegm");
     });
-    (checked, unchecked)
+    [checked, after, unchecked]
 }
 
 fn main() {
@@ -103,9 +113,10 @@ fn main() {
         }
         igms.push(igm);
     }
-    let (checked, unchecked) = fegm_ns(&p, n / 4);
+    let [checked, after, unchecked] = fegm_ns(&p, n / 4);
     for (label, ns) in [
-        ("fegm warm, checked", checked),
+        ("fegm warm, checked, rigid from γ2", checked),
+        ("fegm warm, checked, rigid warm", after),
         ("fegm warm, unchecked", unchecked),
     ] {
         println!(

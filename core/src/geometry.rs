@@ -357,22 +357,31 @@ fn settled_psi(
         let r = Vector2::new(x + c * xa - s * ya, y + s * xa + c * ya) - b;
         Ok(r.norm_squared() - p[rod5.l] * p[rod5.l])
     };
-    secant_psi(p, rod5_closure)
+    secant_psi(p[GAMMA2], None, rod5_closure)
 }
 
-/// The secant in ψ from γ2 (and γ2 + 1e-6 rad) on a closure g(sin ψ, cos ψ), mm²; with the
-/// sine and cosine of where it stops: |g| below [`SETTLED_MM2`], or an iterate whose value
-/// the two last ones put below it. The secant's contraction only grows (e_(n+1)/e_n =
-/// (e_n/e_(n−1))·(e_(n−1)/e_(n−2)) asymptotically), so |g_n|·|g_n/g_(n−1)| bounds the next
-/// value, and evaluating it would only confirm it (one closure of five); the caller's closed
-/// checks verify the residual of the configuration it builds there all the same.
+/// The secant in ψ from `gamma2` (and γ2 + 1e-6 rad), or from a `warm` start ψw (ψw + 1e-6
+/// rad, then ψw: the better guess last, so that a settled one stops it at once), on a closure
+/// g(sin ψ, cos ψ), mm²; with the sine and cosine of where it stops: |g| below
+/// [`SETTLED_MM2`], or an iterate whose value the two last ones put below it. The secant's
+/// contraction only grows (e_(n+1)/e_n = (e_n/e_(n−1))·(e_(n−1)/e_(n−2)) asymptotically), so
+/// |g_n|·|g_n/g_(n−1)| bounds the next value, and evaluating it would only confirm it (one
+/// closure of five); the caller's closed checks verify the residual of the configuration it
+/// builds there all the same. From a warm start, ψw's sine and cosine are the only ones
+/// computed: the iterates within [`WARM_PSI_RAD`] of it rotate them ([`near`]).
 fn secant_psi<E>(
-    p: &Params,
+    gamma2: f64,
+    warm: Option<f64>,
     g: impl Fn((f64, f64)) -> Result<f64, E>,
 ) -> Result<(f64, (f64, f64)), E> {
-    let (mut psi0, mut psi1) = (p[GAMMA2], p[GAMMA2] + 1e-6);
-    let mut sc1 = psi1.sin_cos();
-    let (mut g0, mut g1) = (g(psi0.sin_cos())?, g(sc1)?);
+    let (mut psi0, mut psi1) = match warm {
+        Some(w) => (w + 1e-6, w),
+        None => (gamma2, gamma2 + 1e-6),
+    };
+    let anchor = warm.map(|w| (w, w.sin_cos()));
+    let trig = |psi: f64| anchor.map_or_else(|| psi.sin_cos(), |a| near(a, psi));
+    let mut sc1 = trig(psi1);
+    let (mut g0, mut g1) = (g(trig(psi0))?, g(sc1)?);
     for _ in 0..8 {
         if !(g1.abs() >= SETTLED_MM2) || g1.total_cmp(&g0).is_eq() {
             break;
@@ -381,13 +390,27 @@ fn secant_psi<E>(
         let predicted = g1.abs() * (g1 / g0).abs();
         (psi0, g0) = (psi1, g1);
         psi1 = psi2;
-        sc1 = psi1.sin_cos();
+        sc1 = trig(psi1);
         if predicted < SETTLED_MM2 {
             break;
         }
         g1 = g(sc1)?;
     }
     Ok((psi1, sc1))
+}
+
+/// sin and cos of ψ from those of a nearby ψa (`anchor`): ψa's rotated by d = ψ − ψa, whose
+/// sine and cosine are their series to d⁵ and d⁶ (the next terms below 1e-24 for |d| ≤
+/// [`WARM_PSI_RAD`], far under an ulp); `sin_cos` where ψ is farther.
+fn near((psi_a, (sa, ca)): (f64, (f64, f64)), psi: f64) -> (f64, f64) {
+    let d = psi - psi_a;
+    if !(d.abs() <= WARM_PSI_RAD) {
+        return psi.sin_cos();
+    }
+    let d2 = d * d;
+    let sd = d * (1.0 - d2 / 6.0 * (1.0 - d2 / 20.0));
+    let cd = 1.0 - d2 / 2.0 * (1.0 - d2 / 12.0 * (1.0 - d2 / 30.0));
+    (sa * cd + ca * sd, ca * cd - sa * sd)
 }
 
 /// The model-29 inverse model without the general solver: ψ settled on rod 5's closure
@@ -878,15 +901,18 @@ fn rod5_open(
 }
 
 /// ψ closing rod 5's loop for a model-29 forward solve ([`rod5_open`]), by the secant from γ2
-/// ([`secant_psi`]); with its sine and cosine. None where an iterate leaves the
-/// circles' intersection.
+/// or from a `warm` ψ ([`secant_psi`]); with its sine and cosine. None where an iterate leaves
+/// the circles' intersection.
 fn settled_psi_fgm(
     p: &Params,
     frames: &Frames,
-    ka: (usize, f64),
-    kb: (usize, f64),
+    (ka, kb): ((usize, f64), (usize, f64)),
+    warm: Option<f64>,
 ) -> Option<(f64, (f64, f64))> {
-    secant_psi(p, |sc| rod5_open(p, frames, ka, kb, sc).ok_or(())).ok()
+    secant_psi(p[GAMMA2], warm, |sc| {
+        rod5_open(p, frames, ka, kb, sc).ok_or(())
+    })
+    .ok()
 }
 
 /// Closed-form forward model of the subsystem (qa, qb) (drive indexes a < b < 4): ψ = γ2 for
@@ -904,7 +930,7 @@ fn fgm_closed(
     let (psi, sc) = match model {
         // ψ = γ2: guide 2's frame holds its sine and cosine (n = (cos γ2, sin γ2))
         Model::M24 => (p[GAMMA2], (frames[1].2.y, frames[1].2.x)),
-        Model::M29 => settled_psi_fgm(p, frames, (a, qa), (b, qb))?,
+        Model::M29 => settled_psi_fgm(p, frames, ((a, qa), (b, qb)), None)?,
     };
     closed_fgm_at(p, model, frames, (a, qa), (b, qb), (psi, sc))
 }
@@ -1108,6 +1134,35 @@ pub(crate) fn fgm_with_frames(
         }
     }
     general(p, model, sub, known)
+}
+
+/// Largest move of ψ from a warm start that [`fgm29_from`] accepts, rad: the servo stream
+/// moves ψ by µrad per sample, the other root of rod 5's closure lies radians away.
+const WARM_PSI_RAD: f64 = 1e-3;
+
+/// The model-29 forward model of the subsystem (qa, qb) (drive indexes a < b < 4), its secant
+/// in ψ started from `psi_warm` (the previous sample's rigid ψ) instead of γ2: the same
+/// configuration as [`fgm_with_frames`] (the same root, settled to the same bound, with the
+/// same closed checks), in fewer closures. Where the warm secant fails, a check fails, or ψ
+/// settles more than [`WARM_PSI_RAD`] from `psi_warm`, [`fgm_with_frames`] decides.
+pub(crate) fn fgm29_from(
+    p: &Params,
+    frames: &Frames,
+    (a, b): (usize, usize),
+    known: [f64; 2],
+    psi_warm: f64,
+) -> Result<Solution, GeometryError> {
+    let ka = (a, known[0]);
+    let kb = (b, known[1]);
+    if a < b && b < 4 && psi_warm.is_finite() && known.iter().all(|v| v.is_finite()) {
+        let warm = settled_psi_fgm(p, frames, (ka, kb), Some(psi_warm))
+            .filter(|(psi, _)| (psi - psi_warm).abs() <= WARM_PSI_RAD)
+            .and_then(|settled| closed_fgm_at(p, Model::M29, frames, ka, kb, settled));
+        if let Some(sol) = warm {
+            return Ok(sol);
+        }
+    }
+    fgm_with_frames(p, frames, Model::M29, Subsystem::Actuators(a, b), known)
 }
 
 /// The general solver: Newton from the analytic start, then the assembly check of every
@@ -1524,6 +1579,51 @@ mod tests {
                 );
             }
             assert!(s.psi().abs() < 1e-12);
+        }
+    }
+
+    /// The model-29 forward model with its secant warm-started from the previous sample's ψ
+    /// ([`fgm29_from`], the elastic checks' rigid reference) is the pose of the one from γ2
+    /// (to 1e-9 mm and rad), over a servo-like trajectory (a 100 mm circle in 2,000 samples,
+    /// and a 600 mm diagonal in 10 jumps, both carried from sample to sample) on three
+    /// machines with random parameter errors, for every viable subsystem; a wild warm ψ
+    /// (0.5 rad off) falls back to the same pose too.
+    #[test]
+    fn warm_rigid_psi_gives_the_pose_from_gamma2() {
+        let circle = (0..2000).map(|i| {
+            let t = f64::from(i) / 2000.0 * std::f64::consts::TAU;
+            (100.0 * t.cos(), 1700.0 + 100.0 * t.sin())
+        });
+        let diagonal = (0..10).map(|i| (-300.0 + 60.0 * f64::from(i), 900.0 + 80.0 * f64::from(i)));
+        let path: Vec<(f64, f64)> = circle.chain(diagonal).collect();
+        for seed in 1..=3 {
+            let p = perturbed(seed);
+            let fr = frames(&p);
+            for sub in Subsystem::VIABLE {
+                let Subsystem::Actuators(a, b) = sub else {
+                    unreachable!("forward subsystems only")
+                };
+                let mut warm: Option<f64> = None;
+                for &(x, y) in &path {
+                    let q = igm(&p, Model::M29, x, y).expect("igm").q();
+                    let known = [q[a], q[b]];
+                    let cold = fgm_with_frames(&p, &fr, Model::M29, sub, known).expect("fgm");
+                    // the warm secant itself settles where the closed form from γ2 does
+                    if let Some(w) = warm {
+                        let ks = ((a, known[0]), (b, known[1]));
+                        let closed = fgm_closed(&p, &fr, Model::M29, ks.0, ks.1).is_some();
+                        let settled = settled_psi_fgm(&p, &fr, ks, Some(w))
+                            .is_some_and(|(psi, _)| (psi - w).abs() <= WARM_PSI_RAD);
+                        assert!(settled || !closed, "seed {seed} {sub} ({x}, {y})");
+                    }
+                    for start in [warm.unwrap_or(p[GAMMA2]), cold.c[PSI] + 0.5] {
+                        let hot = fgm29_from(&p, &fr, (a, b), known, start).expect("warm fgm");
+                        let gap = (hot.c - cold.c).amax();
+                        assert!(gap < 1e-9, "seed {seed} {sub} ({x}, {y}): {gap:e}");
+                    }
+                    warm = Some(cold.c[PSI]);
+                }
+            }
         }
     }
 

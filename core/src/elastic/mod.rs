@@ -28,7 +28,7 @@ pub use fe::{fe_solve, FeEquilibrium, FeError, FeModel, FeStiffness, Method};
 pub use plausibility::{wrap_angle, Limits, Reason, RigidPose, Violation};
 pub use preload::{compatibility, offset_effect, preload_offsets, Compatibility, PreloadPlan};
 pub use spring::{
-    fegm, fegm_checked, fegm_from, fegm_unchecked, platform_balance, sensitivity, Checked,
-    ElasticError, ElasticSensitivity, Equilibrium, Followers, Stiffness, ALL_ACTIVE,
-    DEFAULT_ROD_STIFFNESS_N_PER_MM, FOLLOWERS_23, NOMINAL_DRIVE_FORCE_N,
+    fegm, fegm_checked, fegm_checked_after, fegm_from, fegm_unchecked, platform_balance,
+    sensitivity, Checked, ElasticError, ElasticSensitivity, Equilibrium, Followers, Stiffness,
+    ALL_ACTIVE, DEFAULT_ROD_STIFFNESS_N_PER_MM, FOLLOWERS_23, NOMINAL_DRIVE_FORCE_N,
 };

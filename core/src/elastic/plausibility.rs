@@ -26,7 +26,7 @@ use std::fmt;
 use super::spring::{
     lengths_and_balance, Equilibrium, Followers, Stiffness, NOMINAL_DRIVE_FORCE_N,
 };
-use crate::geometry::{frames, Frames};
+use crate::geometry::frames;
 use crate::params::{Params, GAMMA2};
 
 /// Why an equilibrium is not physical. The discriminants are stable codes (for diagnostics
@@ -194,17 +194,27 @@ pub fn check(
     rigid: &RigidPose,
     limits: &Limits,
 ) -> Result<(), Violation> {
-    check_with(&frames(p), p, k, (q, *followers), eq, rigid, limits)
+    let (lengths, balance) = lengths_and_balance(p, &frames(p), eq);
+    check_with(
+        p,
+        k,
+        (q, *followers),
+        eq,
+        (&lengths, balance),
+        rigid,
+        limits,
+    )
 }
 
-/// [`check`] with the guides' frames given (the guarded solve computes them once for its
-/// rigid reference, its solve and these checks).
+/// [`check`] with the rods' lengths |A − B| and the platform's balance at `eq` given (the
+/// guarded solve has them from the pass over the rods that computed `eq`'s forces, at the
+/// same state).
 pub(super) fn check_with(
-    fr: &Frames,
     p: &Params,
     k: &Stiffness,
     (q, followers): (&[f64; 4], Followers),
     eq: &Equilibrium,
+    (lengths, balance): (&[f64; 5], [f64; 3]),
     rigid: &RigidPose,
     limits: &Limits,
 ) -> Result<(), Violation> {
@@ -222,9 +232,7 @@ pub(super) fn check_with(
         return fail(Reason::PlatformAngle, 0, dpsi, limits.psi_rad);
     }
     check_forces(eq, limits)?;
-    // the rods' geometry at the equilibrium once, for the closure and the balance
-    let (lengths, balance) = lengths_and_balance(p, fr, eq);
-    check_closure(p, &lengths, k, q, followers, eq, limits)?;
+    check_closure(p, lengths, k, q, followers, eq, limits)?;
     check_balance(balance, eq, limits)?;
     let d = (eq.x - rigid.x).hypot(eq.y - rigid.y);
     if !within(d, limits.rigid_mm) {

@@ -313,14 +313,24 @@ fn system(
 }
 
 /// Rigid start: the model-29 forward model of the first viable subsystem whose two drives are
-/// active, at the commanded positions.
-fn rigid_start(p: &Params, fr: &Frames, q: &[f64; 4], fol: Followers) -> Result<V7, ElasticError> {
+/// active, at the commanded positions; its secant in ψ from `psi_warm` where given (the
+/// previous sample's rigid ψ, never the elastic one: the same pose, in fewer closures).
+fn rigid_start(
+    p: &Params,
+    fr: &Frames,
+    (q, fol): (&[f64; 4], Followers),
+    psi_warm: Option<f64>,
+) -> Result<V7, ElasticError> {
     for sub in Subsystem::VIABLE {
         if let Subsystem::Actuators(a, b) = sub {
             if fol[a] || fol[b] {
                 continue;
             }
-            let s = geometry::fgm_with_frames(p, fr, Model::M29, sub, [q[a], q[b]])?;
+            let known = [q[a], q[b]];
+            let s = match psi_warm {
+                Some(w) => geometry::fgm29_from(p, fr, (a, b), known, w)?,
+                None => geometry::fgm_with_frames(p, fr, Model::M29, sub, known)?,
+            };
             let c = s.c;
             return Ok(V7::from([c[0], c[1], c[2], c[3], c[4], c[5], c[6]]));
         }
@@ -379,27 +389,57 @@ pub fn fegm_checked(
     previous: Option<&Equilibrium>,
     limits: &Limits,
 ) -> Result<Checked, ElasticError> {
+    guarded(p, k, (q, followers), (previous, None), limits)
+}
+
+/// [`fegm_checked`] after the previous sample's checked solve (the servo-rate use): the solve
+/// warm-started from its equilibrium, and the rigid reference's secant in ψ from its rigid ψ
+/// (the reference stays that of the holding drives alone, independent of any elastic
+/// solution: the same pose as from γ2, in fewer closures).
+pub fn fegm_checked_after(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    followers: Followers,
+    previous: Option<&Checked>,
+    limits: &Limits,
+) -> Result<Checked, ElasticError> {
+    let warm = previous.map_or((None, None), |c| (Some(&c.eq), Some(c.rigid.psi)));
+    guarded(p, k, (q, followers), warm, limits)
+}
+
+/// The guarded solve of [`fegm_checked`], with the rigid reference's secant from `psi_warm`
+/// where given.
+fn guarded(
+    p: &Params,
+    k: &Stiffness,
+    (q, followers): ([f64; 4], Followers),
+    (previous, psi_warm): (Option<&Equilibrium>, Option<f64>),
+    limits: &Limits,
+) -> Result<Checked, ElasticError> {
     if !q.iter().all(|v| v.is_finite()) {
         return Err(ElasticError::NonFinite);
     }
     // The guides' frames once for the rigid model, the solve and the checks.
     let fr = frames(p);
     // The rigid model is both the reference of the checks and the cold start.
-    let z0 = rigid_start(p, &fr, &q, followers)?;
+    let z0 = rigid_start(p, &fr, (&q, followers), psi_warm)?;
     let rigid = RigidPose {
         x: z0[0],
         y: z0[1],
         psi: z0[2],
     };
-    let check =
-        |eq: &Equilibrium| plausibility::check_with(&fr, p, k, (&q, followers), eq, &rigid, limits);
+    let check = |sol: &Solved| {
+        let rods = (&sol.lengths, sol.balance);
+        plausibility::check_with(p, k, (&q, followers), &sol.eq, rods, &rigid, limits)
+    };
     let mut warm_rejected = None;
     if let Some(prev) = previous {
         let rejection = match solve_from(p, &fr, k, q, followers, warm_start(&q, followers, prev)) {
-            Ok(eq) => match check(&eq) {
+            Ok(sol) => match check(&sol) {
                 Ok(()) => {
                     return Ok(Checked {
-                        eq,
+                        eq: sol.eq,
                         cold: false,
                         warm_rejected: None,
                         rigid,
@@ -411,10 +451,10 @@ pub fn fegm_checked(
         };
         warm_rejected = Some(rejection);
     }
-    let eq = solve_from(p, &fr, k, q, followers, z0)?;
-    check(&eq).map_err(ElasticError::Implausible)?;
+    let sol = solve_from(p, &fr, k, q, followers, z0)?;
+    check(&sol).map_err(ElasticError::Implausible)?;
     Ok(Checked {
-        eq,
+        eq: sol.eq,
         cold: true,
         warm_rejected,
         rigid,
@@ -437,9 +477,9 @@ pub fn fegm_unchecked(
     let fr = frames(p);
     let z0 = match previous {
         Some(prev) => warm_start(&q, followers, prev),
-        None => rigid_start(p, &fr, &q, followers)?,
+        None => rigid_start(p, &fr, (&q, followers), None)?,
     };
-    solve_from(p, &fr, k, q, followers, z0)
+    solve_from(p, &fr, k, q, followers, z0).map(|sol| sol.eq)
 }
 
 /// The previous equilibrium with the active carriers moved to their new commands.
@@ -466,6 +506,16 @@ fn solver_violation(e: &ElasticError) -> Violation {
     }
 }
 
+/// An equilibrium with its rods' lengths and the platform's balance, from the pass over the
+/// rods that computes its forces ([`finish`]): what the plausibility checks read, which
+/// [`lengths_and_balance`] would compute again from the equilibrium's fields, the same rods
+/// at the same state.
+struct Solved {
+    eq: Equilibrium,
+    lengths: [f64; 5],
+    balance: [f64; 3],
+}
+
 fn solve_from(
     p: &Params,
     fr: &Frames,
@@ -473,7 +523,7 @@ fn solve_from(
     q: [f64; 4],
     followers: Followers,
     z: V7,
-) -> Result<Equilibrium, ElasticError> {
+) -> Result<Solved, ElasticError> {
     newton(p, fr, k, (q, followers), z, converged)
 }
 
@@ -485,7 +535,7 @@ fn newton(
     (q, followers): ([f64; 4], Followers),
     mut z: V7,
     stop: impl Fn(f64, f64) -> bool,
-) -> Result<Equilibrium, ElasticError> {
+) -> Result<Solved, ElasticError> {
     for j in 0..4 {
         if !followers[j] && k.carrier[j].is_none() {
             z[3 + j] = q[j];
@@ -590,9 +640,10 @@ fn finish(
     fol: Followers,
     z: &V7,
     iterations: usize,
-) -> Equilibrium {
+) -> Solved {
     let mut rod_force = [0.0; 5];
     let mut drive_force = [0.0; 4];
+    let (mut lengths, mut balance) = ([0.0; 5], [0.0; 3]);
     // ψ's trigonometry once for the five rods
     let sc = z[2].sin_cos();
     for (i, f) in rod_force.iter_mut().enumerate() {
@@ -600,13 +651,19 @@ fn finish(
         *f = k.rod[i] * st.delta;
         // Force of the drive on its carrier balances the rod's pull T·u along the guide.
         drive_force[st.carrier] -= *f * st.u.dot(&st.e);
+        // as lengths_and_balance: the length, and the rod's force −T·u on the platform
+        lengths[i] = st.rho;
+        let on_platform = -st.u * *f;
+        balance[0] += on_platform.x;
+        balance[1] += on_platform.y;
+        balance[2] += st.arm.x * on_platform.y - st.arm.y * on_platform.x;
     }
     for j in 0..4 {
         if fol[j] {
             drive_force[j] = 0.0;
         }
     }
-    Equilibrium {
+    let eq = Equilibrium {
         x: z[0],
         y: z[1],
         // The solver works on sin/cos of ψ only: a warm start may drift by whole turns.
@@ -615,6 +672,11 @@ fn finish(
         rod_force,
         drive_force,
         iterations,
+    };
+    Solved {
+        eq,
+        lengths,
+        balance,
     }
 }
 
