@@ -1,6 +1,7 @@
 //! `tcp_estimator`: for every ActuatorState, the elasto-geometric TCP estimate
-//! (`rpkm_core::elastic::fegm_checked`, warm-started from the previous equilibrium) with the
-//! current parameters, published as TcpEstimate with the state's stamp and seq.
+//! (`rpkm_core::elastic::fegm_checked_after`, warm-started from the previous equilibrium, its
+//! rigid reference from the previous rigid ψ) with the current parameters, published as
+//! TcpEstimate with the state's stamp and seq.
 //!
 //! Every elastic equilibrium passes the core's plausibility checks before it is published
 //! (loop closure, platform balance, forces within 10× the drives, ψ near γ2, TCP within 2 mm
@@ -21,7 +22,7 @@
 
 use std::time::Duration;
 
-use rpkm_core::elastic::{fegm_checked, wrap_angle, ElasticError, Equilibrium, Limits, Reason};
+use rpkm_core::elastic::{fegm_checked_after, wrap_angle, Checked, ElasticError, Limits, Reason};
 use rpkm_core::geometry::{self, carrier_joint, platform_joint};
 use rpkm_core::params::{Model, RODS};
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
@@ -72,12 +73,13 @@ impl EstimatorCounts {
     }
 }
 
-/// The estimator's state: the geometry and the previous equilibrium (warm start).
+/// The estimator's state: the geometry and the previous checked solve (warm start of the
+/// equilibrium and of the rigid reference).
 #[derive(Debug, Clone)]
 pub struct Estimator {
     geometry: Geometry,
     limits: Limits,
-    previous: Option<Equilibrium>,
+    previous: Option<Checked>,
     /// Counters.
     pub counts: EstimatorCounts,
     /// The last elastic failure (kept typed: formatted only for /diagnostics).
@@ -128,7 +130,7 @@ impl Estimator {
         let g = &self.geometry;
         let q = state.position.map(|p| p * MM_PER_M);
         let prev = self.previous.as_ref();
-        let solved = fegm_checked(
+        let solved = fegm_checked_after(
             &g.params,
             &g.stiffness,
             q,
@@ -161,7 +163,7 @@ impl Estimator {
                 }
                 c.consecutive_failures = 0;
                 let eq = s.eq;
-                self.previous = Some(eq);
+                self.previous = Some(s);
                 est.x = eq.x / MM_PER_M;
                 est.y = eq.y / MM_PER_M;
                 est.psi = wrap_angle(eq.psi);
@@ -651,7 +653,7 @@ mod tests {
         est.estimate(&state(q, 1)).ok_or("no estimate")?;
         // A warm start a whole turn away (what the issue saw as ψ = −6.2832 rad).
         if let Some(prev) = est.previous.as_mut() {
-            prev.psi -= std::f64::consts::TAU;
+            prev.eq.psi -= std::f64::consts::TAU;
         }
         let e = est.estimate(&state(q, 2)).ok_or("no estimate")?;
         assert!(e.psi.abs() < 1e-6, "ψ {}", e.psi);
