@@ -8,14 +8,16 @@
 //! `status_every` samples and at each level change, /diagnostics every period and at each
 //! level change, naming the drive.
 //!
-//! The prediction comes from the core's guarded solve (`fegm_checked`: warm, else cold, each
-//! checked against physics). A state without a plausible prediction is skipped and counted
+//! The prediction comes from the core's guarded solve (`fegm_checked_after`: warm, else cold,
+//! each checked against physics). A state without a plausible prediction is skipped and counted
 //! (`implausible` on /diagnostics): it never sets a level, so a non-physical branch of the
 //! solver (10⁸ N "predicted") cannot raise ERROR on a drive.
 
 use std::time::Duration;
 
-use rpkm_core::elastic::{fegm_checked, ElasticError, Equilibrium, Limits, NOMINAL_DRIVE_FORCE_N};
+use rpkm_core::elastic::{
+    fegm_checked_after, Checked, ElasticError, Limits, NOMINAL_DRIVE_FORCE_N,
+};
 use rpkm_core::geometry::rgm;
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, PreloadLevel, PreloadStatus};
 use rpkm_transport::topic;
@@ -107,7 +109,7 @@ pub struct Evaluation {
 pub struct Monitor {
     geometry: Geometry,
     thresholds: Thresholds,
-    previous: Option<Equilibrium>,
+    previous: Option<Checked>,
     level: PreloadLevel,
     run_warn: u32,
     run_error: u32,
@@ -173,8 +175,12 @@ impl Monitor {
         let q = s.position.map(|p| p * MM_PER_M);
         let prev = self.previous.as_ref();
         let limits = Limits::default();
-        let eq = match fegm_checked(&g.params, &g.stiffness, q, s.follower, prev, &limits) {
-            Ok(solved) => solved.eq,
+        let solved = fegm_checked_after(&g.params, &g.stiffness, q, s.follower, prev, &limits);
+        let eq = match solved {
+            Ok(solved) => {
+                self.previous = Some(solved);
+                solved.eq
+            }
             Err(e) => {
                 self.previous = None;
                 match e {
@@ -184,7 +190,6 @@ impl Monitor {
                 return None;
             }
         };
-        self.previous = Some(eq);
         self.samples += 1;
         let to_percent = |f: f64| f / NOMINAL_DRIVE_FORCE_N * 100.0;
         let mut st = PreloadStatus {
