@@ -1095,6 +1095,10 @@ pub fn solve(
     sub: Subsystem,
     known: [f64; 2],
 ) -> Result<Solution, GeometryError> {
+    if let Subsystem::Actuators(..) = sub {
+        // its own finiteness check, closed form, then the general solver
+        return fgm_with_frames(p, &frames(p), model, sub, known);
+    }
     if !known.iter().all(|v| v.is_finite()) {
         return Err(GeometryError::NonFinite);
     }
@@ -1107,9 +1111,6 @@ pub fn solve(
         if let Some(sol) = igm29(p, known[0], known[1]) {
             return Ok(sol);
         }
-    }
-    if let Subsystem::Actuators(..) = sub {
-        return fgm_with_frames(p, &frames(p), model, sub, known);
     }
     general(p, model, sub, known)
 }

@@ -216,7 +216,7 @@ fn check_floors(run: &Run, second_half_s: f64) {
     }
     // ... and in the second half, where the drift rather than the start calibration's own
     // error makes the TCP error, the tracker stays within 1.5x of one that knew the truth at
-    // the start (the first half: 5-22x, the start calibration's 55 µm the forces do not see)
+    // the start (the first half: 6-22x, the start calibration's 55 µm the forces do not see)
     for w in run.windows.iter().filter(|w| w.end > second_half_s) {
         assert!(
             w.online <= 1.5 * w.floor_truth,

@@ -165,6 +165,24 @@ fn gram(j: &DMatrix<f64>) -> DMatrix<f64> {
     a
 }
 
+impl Final {
+    /// What `keep` asks of an evaluation's pieces (`parts`, in order) with their summed
+    /// normal equations `total` (unscaled, no prior).
+    fn gather(total: &Normal, parts: Vec<Piece>, keep: Keep) -> Final {
+        let mut rows = Vec::with_capacity(parts.iter().map(|p| p.rows.len()).sum());
+        let mut jacobians = Vec::new();
+        for part in parts {
+            rows.extend(part.rows);
+            jacobians.extend(part.jacobian);
+        }
+        Final {
+            rows,
+            info: total.a.clone(),
+            jacobians: (keep == Keep::Jacobians).then_some(jacobians),
+        }
+    }
+}
+
 /// One piece's share of an evaluation: its normal equations and what [`Keep`] asks for.
 struct Piece {
     normal: Normal,
@@ -252,10 +270,9 @@ impl Lm<'_> {
         )
     }
 
-    /// The normal equations at `x`: the pieces summed in order (in the unscaled unknowns, the
-    /// posterior's information as it is), scaled, then the prior as pseudo-rows
-    /// (p − centre)/tolerance; with what [`Keep`] asks of the rows.
-    fn normal_at(&self, x: &State, keep: Keep) -> Result<Evaluated, PoseError> {
+    /// The rows at `x`, piece by piece in order, and their normal equations summed in the
+    /// unscaled unknowns (the posterior's information as it is), without the prior.
+    fn evaluate(&self, x: &State, keep: Keep) -> Result<(Normal, Vec<Piece>), PoseError> {
         let pb = self.problem;
         let corr = pb.effects.corrections(&x.theta);
         let terms = self.column_terms();
@@ -266,22 +283,14 @@ impl Lm<'_> {
         for part in &parts {
             total.add(&part.normal);
         }
-        let kept = (keep != Keep::Nothing).then(|| {
-            let mut f = Final {
-                info: total.a.clone(),
-                rows: Vec::new(),
-                jacobians: None,
-            };
-            let mut jacobians = Vec::new();
-            f.rows
-                .reserve_exact(parts.iter().map(|p| p.rows.len()).sum());
-            for part in parts {
-                f.rows.extend(part.rows);
-                jacobians.extend(part.jacobian);
-            }
-            f.jacobians = (keep == Keep::Jacobians).then_some(jacobians);
-            f
-        });
+        Ok((total, parts))
+    }
+
+    /// The normal equations at `x` ([`Lm::evaluate`]), scaled, then the prior as pseudo-rows
+    /// (p − centre)/tolerance; with what [`Keep`] asks of the rows.
+    fn normal_at(&self, x: &State, keep: Keep) -> Result<Evaluated, PoseError> {
+        let (total, parts) = self.evaluate(x, keep)?;
+        let kept = (keep != Keep::Nothing).then(|| Final::gather(&total, parts, keep));
         let mut total = self.scaled(&total);
         self.add_prior(&mut total, x);
         Ok(Evaluated {
@@ -303,12 +312,8 @@ impl Lm<'_> {
     /// The rows at `x` as the posterior reads them (values and information), where the LM
     /// kept nothing of its last evaluation.
     pub fn final_rows(&self, x: &State) -> Result<Final, PoseError> {
-        let kept = self.normal_at(x, Keep::Values)?.kept;
-        Ok(kept.unwrap_or(Final {
-            rows: Vec::new(),
-            info: DMatrix::zeros(0, 0),
-            jacobians: None,
-        }))
+        let (total, parts) = self.evaluate(x, Keep::Values)?;
+        Ok(Final::gather(&total, parts, Keep::Values))
     }
 
     /// The prior's pseudo-rows (p − centre)/tolerance added to normal equations at `x`.

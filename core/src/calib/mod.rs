@@ -339,14 +339,13 @@ pub fn calibrate_from(
             theta: theta0.clone(),
         },
     };
-    let mut fit = step1(
+    let (fit, last) = step1(
         &pb,
         &plan,
         init,
         (warm.is_some(), warm.is_some_and(|w| w.screen)),
     )?;
     let corr = effects.corrections(&fit.state.theta);
-    let last = fit.last.take();
     let (rows_final, post) = posterior(&pb, &plan, (&fit.state.p, &corr, &fit.drop), last)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
     let chi2: f64 = rows_final.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
@@ -657,18 +656,17 @@ struct Step1Fit {
     screened: bool,
     drop: HashSet<Key>,
     outliers: Vec<Outlier>,
-    /// The LM's last evaluation of the rows at `state` (the posterior's rows).
-    last: Option<Final>,
 }
 
 /// Step 1 with outlier elimination rounds (eq. 3.31-3.32): fit, drop the rows beyond
 /// `outlier_sigma`, fit again, while new outliers appear and fewer than 5 % are dropped.
+/// With the fit, the rows it ended with (the LM's last evaluation: the posterior's rows).
 fn step1(
     pb: &Problem,
     plan: &Plan,
     init: State,
     (warm, screen): (bool, bool),
-) -> Result<Step1Fit, CalibrationError> {
+) -> Result<(Step1Fit, Final), CalibrationError> {
     let opts = pb.opts;
     let mut fit = Step1Fit {
         state: init,
@@ -676,7 +674,6 @@ fn step1(
         screened: false,
         drop: HashSet::new(),
         outliers: Vec::new(),
-        last: None,
     };
     // a small campaign keeps its final rows' Jacobian for the leverages
     let keep = if pb.campaign.poses.len() <= KEEP_JACOBIAN_POSES {
@@ -684,7 +681,7 @@ fn step1(
     } else {
         Keep::Nothing
     };
-    loop {
+    let last = loop {
         let lm = Lm {
             problem: pb,
             step: Step::Direct,
@@ -718,17 +715,16 @@ fn step1(
         let found = opts
             .outlier_sigma
             .map(|k| report::find_outliers(&last.rows, pb.campaign, k));
-        fit.last = Some(last);
-        let Some(found) = found else { break };
+        let Some(found) = found else { break last };
         if found.is_empty() || fit.outliers.len() > plan.n_rows0 / 20 {
-            break;
+            break last;
         }
         for (key, o) in found {
             fit.drop.insert(key);
             fit.outliers.push(o);
         }
-    }
-    Ok(fit)
+    };
+    Ok((fit, last))
 }
 
 /// Step 1's parameters with their uncertainties (scaled by the variance factor `s2`), and

@@ -51,74 +51,18 @@ fn block_jacobian(
     jr
 }
 
-/// The final rows of step 1 as the posterior reads them: their values, their information
-/// JᵀJ in the unknowns, and where kept each piece's Jacobian.
-struct FinalRows {
-    values: Vec<RowValue>,
-    info: DMatrix<f64>,
-    jacobians: Option<Vec<DMatrix<f64>>>,
-}
-
-impl FinalRows {
-    /// From the LM's last evaluation (`last`): the rows not evaluated again.
-    fn from_lm(last: Final) -> FinalRows {
-        FinalRows {
-            values: last.rows,
-            info: last.info,
-            jacobians: last.jacobians,
-        }
-    }
-
-    /// From an evaluation of the rows at `p`: a small campaign keeps each piece's Jacobian
-    /// for the leverages (one pass over the rows instead of two); a large one evaluates its
-    /// rows again rather than hold them.
-    fn evaluate(
-        pb: &Problem,
-        plan: &Plan,
-        (p, corr, drop): (&Params, &Corrections, &HashSet<Key>),
-    ) -> Result<FinalRows, CalibrationError> {
-        let (ids, links, free) = (&plan.ids, &pb.opts.links, &plan.free_theta);
-        let keep = pb.campaign.poses.len() <= KEEP_JACOBIAN_POSES;
-        let pieces = pb.map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
-            let jr = block_jacobian(rows, ids, links, free);
-            let values: Vec<RowValue> = rows.iter().map(RowValue::from).collect();
-            (jr.tr_mul(&jr), values, keep.then_some(jr))
-        })?;
-        let cols = ids.len() + free.len();
-        let mut info = DMatrix::zeros(cols, cols);
-        for (piece, _, _) in &pieces {
-            info += piece;
-        }
-        let mut values = Vec::new();
-        let mut jacobians = Vec::new();
-        for (_, v, jr) in pieces {
-            values.extend(v);
-            jacobians.extend(jr);
-        }
-        Ok(FinalRows {
-            values,
-            info,
-            jacobians: keep.then_some(jacobians),
-        })
-    }
-}
-
 /// The final rows of step 1 at `p` (their values) and what they tell about the plan's
-/// unknowns: from the LM's last evaluation there (`last`) when it kept them, else from an
-/// evaluation of the rows; the leverages from the kept Jacobians or one more pass.
+/// unknowns: the LM's last evaluation there (`last`: values and information); the leverages
+/// from its kept Jacobians or, for a large campaign, one more pass over the rows.
 pub(super) fn posterior(
     pb: &Problem,
     plan: &Plan,
     (p, corr, drop): (&Params, &Corrections, &HashSet<Key>),
-    last: Option<Final>,
+    last: Final,
 ) -> Result<(Vec<RowValue>, Posterior), CalibrationError> {
     let (ids, links, free, prior) = (&plan.ids, &pb.opts.links, &plan.free_theta, &plan.prior);
     let n = ids.len();
-    let rows = match last {
-        Some(last) => FinalRows::from_lm(last),
-        None => FinalRows::evaluate(pb, plan, (p, corr, drop))?,
-    };
-    let info = rows.info;
+    let info = last.info;
     let inv = normal_inverse(&info, ids, prior)?;
     let dof_model = (&inv * &info).trace();
     let leverage_of = |jr: &DMatrix<f64>, inv: &DMatrix<f64>| {
@@ -127,7 +71,7 @@ pub(super) fn posterior(
             .map(|i| ji.row(i).dot(&jr.row(i)))
             .collect::<Vec<f64>>()
     };
-    let leverage = match rows.jacobians {
+    let leverage = match last.jacobians {
         Some(pieces) => pieces.iter().flat_map(|jr| leverage_of(jr, &inv)).collect(),
         None => pb
             .map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
@@ -152,7 +96,7 @@ pub(super) fn posterior(
         leverage,
         determined,
     };
-    Ok((rows.values, post))
+    Ok((last.rows, post))
 }
 
 /// (JᵀJ + Λ)⁻¹ from the information JᵀJ, with the prior's precision Λ on the first
