@@ -248,3 +248,66 @@ fn default_calibration_of_a_29_parameter_machine_reaches_the_floor_and_diagnose_
         }
     }
 }
+
+/// The JSON carries the posterior covariance with its correlations, and the calibrator node
+/// starts its tracker from it (`geometry_file`): the variances are the σ² the same file
+/// states, the campaign pins combinations (parameters correlated beyond 0.9), the matrix is
+/// a covariance; a broken one is refused naming the file and the entry.
+#[test]
+fn the_json_carries_the_covariance_the_calibrator_starts_from() {
+    let dir = scratch("covariance");
+    let (c, _) = write_twin_campaigns(&dir, 9);
+    let json = dir.join("cal.json");
+    let out = rpkm()
+        .arg("calibrate")
+        .arg(&c)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("run rpkm");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let cov = rpkm::node::calibrator::start_covariance(json.to_str().expect("utf-8"))
+        .expect("the calibrator reads it");
+    let text = std::fs::read_to_string(&json).expect("json");
+    let value: serde_json::Value = serde_json::from_str(&text).expect("parses");
+    let identified = value["identified"].as_array().expect("identified");
+    assert!(identified.len() > 20, "{} identified", identified.len());
+    for id in identified {
+        let i = usize::try_from(id["index"].as_u64().expect("index")).expect("index");
+        let s = id["sigma"].as_f64().expect("sigma");
+        assert!(
+            (cov[(i, i)].sqrt() - s).abs() <= 1e-12 * s,
+            "{}: σ {s} against √variance {}",
+            id["name"],
+            cov[(i, i)].sqrt()
+        );
+    }
+    let n = cov.nrows();
+    let strongest = (0..n)
+        .flat_map(|i| (0..i).map(move |j| (i, j)))
+        .filter(|&(i, j)| cov[(i, i)] > 0.0 && cov[(j, j)] > 0.0)
+        .map(|(i, j)| (cov[(i, j)] / (cov[(i, i)] * cov[(j, j)]).sqrt()).abs())
+        .fold(0.0, f64::max);
+    assert!(strongest > 0.9, "largest correlation {strongest}");
+    let eig = cov.symmetric_eigenvalues();
+    assert!(eig.min() >= -1e-9 * eig.max(), "eigenvalues {eig}");
+
+    // a matrix that is not symmetric, and names in another order
+    let mut broken = value.clone();
+    broken["covariance"]["matrix"][1][0] = serde_json::json!(1.0);
+    let path = dir.join("broken.json");
+    std::fs::write(&path, broken.to_string()).expect("write");
+    let err = rpkm::node::calibrator::start_covariance(path.to_str().expect("utf-8"))
+        .expect_err("refused");
+    let msg = format!("{err:#}");
+    assert!(
+        msg.contains("broken.json") && msg.contains("matrix[1][0]") && msg.contains("symmetric"),
+        "{msg}"
+    );
+    let mut renamed = value;
+    renamed["covariance"]["names"][0] = serde_json::json!("l4");
+    std::fs::write(&path, renamed.to_string()).expect("write");
+    let err = rpkm::node::calibrator::start_covariance(path.to_str().expect("utf-8"))
+        .expect_err("refused");
+    assert!(format!("{err:#}").contains("names"), "{err:#}");
+}

@@ -20,11 +20,11 @@ use crate::obs::{PoseError, Residual, RowValue, Step};
 use crate::observability::{condition_number, normalize_columns};
 use crate::params::{self, unit, Model, Params, Unit, NAMES, N_PARAMS};
 use lm::{Final, Keep, Lm, Normal, State};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SMatrix};
 use rows::{dependency, reduced_jacobian, Columns, Key, Problem};
 use select::{auto_select, effect_observability, prior_of, scaling_vector, select_geometric};
 use std::collections::HashSet;
-use uncertainty::{posterior, step2_uncertainties, Posterior, KEEP_JACOBIAN_POSES};
+use uncertainty::{posterior, step2_covariance, Posterior, KEEP_JACOBIAN_POSES};
 
 /// Which parameters the calibration identifies.
 #[derive(Clone, Debug, PartialEq)]
@@ -276,6 +276,12 @@ pub struct Calibration {
     /// hat matrix), for the noise estimation.
     pub residuals: Vec<RowValue>,
     pub leverage: Vec<f64>,
+    /// Posterior covariance of the 29 parameters (mm, rad, scaled by the variance factor as
+    /// the σ of `identified`), with the correlations the campaign left between them: a
+    /// campaign pins combinations, and the σ alone would let a later estimator (the online
+    /// tracker) move what the campaign had pinned. Rows and columns of parameters not
+    /// identified are zero (held at their start value).
+    pub covariance: SMatrix<f64, N_PARAMS, N_PARAMS>,
 }
 
 /// Calibrate `campaign` starting from `start`.
@@ -372,9 +378,14 @@ pub fn calibrate_from(
     let mut identified = s1.identified;
     let mut iterations = fit.iterations;
     let mut p = fit.state.p;
+    // symmetric to the bit: the inverse's round-off is not the campaign's
+    let mut covariance = SMatrix::<f64, N_PARAMS, N_PARAMS>::from_fn(|i, j| {
+        0.5 * (s1.cov_p1[(i, j)] + s1.cov_p1[(j, i)])
+    });
     if let Some(s2) = step2(&pb, &plan, &fit, &corr, &s1.cov_p1)? {
         p = s2.p;
         iterations += s2.iterations;
+        s2.widen(&mut covariance);
         identified.extend(s2.identified);
         table.before(s2.before_rows.iter().map(RowValue::from));
         table.after(s2.after_rows.iter().map(RowValue::from));
@@ -401,6 +412,7 @@ pub fn calibrate_from(
         determined: post.determined,
         residuals: rows_final,
         leverage: post.leverage,
+        covariance,
     })
 }
 
@@ -786,6 +798,29 @@ struct Step2Fit {
     identified: Vec<Identified>,
     before_rows: Vec<Residual>,
     after_rows: Vec<Residual>,
+    /// Covariance of step 2's parameters, and with the 29 of step 1 (see
+    /// [`uncertainty::step2_covariance`]).
+    cov: DMatrix<f64>,
+    cross: DMatrix<f64>,
+}
+
+impl Step2Fit {
+    /// Step 1's 29 × 29 covariance with step 2's parameters in it: their own block and their
+    /// covariance with step 1's (step 2 re-identifies parameters step 1 held).
+    fn widen(&self, cov: &mut SMatrix<f64, N_PARAMS, N_PARAMS>) {
+        let ids: Vec<usize> = self.identified.iter().map(|id| id.index).collect();
+        for (a, &i) in ids.iter().enumerate() {
+            for j in 0..N_PARAMS {
+                cov[(i, j)] = self.cross[(a, j)];
+                cov[(j, i)] = self.cross[(a, j)];
+            }
+        }
+        for (a, &i) in ids.iter().enumerate() {
+            for (b, &j) in ids.iter().enumerate() {
+                cov[(i, j)] = self.cov[(a, b)];
+            }
+        }
+    }
 }
 
 /// Step 2: rod 2 from virtual measurements of the forward instruments (eq. 4.32), made with
@@ -841,16 +876,16 @@ fn step2(
     let res = lm.run(&fit.state)?;
     let p = res.state.p;
     let after_rows = virtual_rows(&p)?;
-    let sig2 = step2_uncertainties(&after_rows, &ids2, &prior2, cov_p1)?;
+    let (cov, cross) = step2_covariance(&after_rows, &ids2, &prior2, cov_p1)?;
     let identified = ids2
         .iter()
-        .zip(&sig2)
-        .map(|(&i, &s)| Identified {
+        .enumerate()
+        .map(|(k, &i)| Identified {
             name: NAMES[i],
             index: i,
             nominal: pb.start[i],
             value: p[i],
-            sigma: s,
+            sigma: cov[(k, k)].max(0.0).sqrt(),
             step: 2,
         })
         .collect();
@@ -867,5 +902,7 @@ fn step2(
         identified,
         before_rows,
         after_rows,
+        cov,
+        cross,
     }))
 }

@@ -306,6 +306,34 @@ impl OnlineEstimator {
         OnlineEstimator::new(p, cov, opts)
     }
 
+    /// Starts at a calibration's parameters with its full posterior covariance (see
+    /// [`OnlineEstimator::from_covariance`]).
+    pub fn from_calibration(cal: &super::Calibration, opts: OnlineOptions) -> Self {
+        OnlineEstimator::from_covariance(cal.params, &cal.covariance, opts)
+    }
+
+    /// Starts at `p` with the covariance `cov` of a calibration (mm, rad), with the
+    /// correlations the campaign left: the forces then move only what the campaign had not
+    /// pinned (from the σ alone they would move combinations the campaign had pinned, and
+    /// the TCP with them). A parameter with zero variance, which the calibration did not
+    /// identify, takes the tolerance prior's σ; the stiffness the options' σ.
+    pub fn from_covariance(
+        p: Params,
+        cov: &SMatrix<f64, N_PARAMS, N_PARAMS>,
+        opts: OnlineOptions,
+    ) -> Self {
+        let prior = Prior::default();
+        let mut full = Covariance::zeros();
+        full.fixed_view_mut::<N_PARAMS, N_PARAMS>(0, 0).copy_from(cov);
+        for i in 0..N_PARAMS {
+            if cov[(i, i)] <= 0.0 {
+                full[(i, i)] = prior.sigma(i).powi(2);
+            }
+        }
+        full[(STIFFNESS, STIFFNESS)] = opts.stiffness_sigma.powi(2);
+        OnlineEstimator::new(p, full, opts)
+    }
+
     pub fn params(&self) -> &Params {
         &self.p
     }

@@ -115,15 +115,17 @@ fn normal_inverse(
     })
 }
 
-/// Uncertainty of the second step's parameters: the noise of its virtual rows plus the first
+/// Covariance of the second step's parameters: the noise of its virtual rows plus the first
 /// step's parameter uncertainty (`cov_p1`, 29 × 29), propagated linearly through the virtual
-/// measurements (which share it, so it does not average out).
-pub(super) fn step2_uncertainties(
+/// measurements (which share it, so it does not average out). Returns that covariance
+/// (`ids` × `ids`) and the covariance of step 2's parameters with the 29 of step 1 (`ids` ×
+/// 29): a Gauss-Newton step δp2 = −(JᵀJ + Λ)⁻¹ Jᵀ G δp1 moves them with step 1's error.
+pub(super) fn step2_covariance(
     rows: &[Residual],
     ids: &[usize],
     prior: &[(usize, f64)],
     cov_p1: &DMatrix<f64>,
-) -> Result<Vec<f64>, CalibrationError> {
+) -> Result<(DMatrix<f64>, DMatrix<f64>), CalibrationError> {
     let n = ids.len();
     let (mut info, mut jtg) = (DMatrix::zeros(n, n), DMatrix::zeros(n, N_PARAMS));
     for block in rows.chunks(BLOCK) {
@@ -136,8 +138,7 @@ pub(super) fn step2_uncertainties(
     }
     let inv = normal_inverse(&info, ids, prior)?;
     let mg = &inv * jtg;
+    let cross = -(&mg * cov_p1);
     let cov = inv + &mg * cov_p1 * mg.transpose();
-    Ok((0..ids.len())
-        .map(|k| cov[(k, k)].max(0.0).sqrt())
-        .collect())
+    Ok((cov, cross))
 }

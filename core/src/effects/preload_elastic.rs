@@ -34,21 +34,15 @@ impl Effect for PreloadElastic {
     fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
         let mut stretch = Vec::with_capacity(campaign.poses.len());
         let mut loaded = 0;
+        let mut first_force_row = None;
         for pose in &campaign.poses {
             let active = pose.follower.iter().all(|f| !f) && pose.f.iter().any(|f| *f != 0.0);
-            if active && pose.instrument == crate::campaign::Instrument::None {
-                // a force row's elastic model stretches the rods by its own forces already
-                return Err(NotApplicable {
-                    effect: "preload_elastic",
-                    reason: format!(
-                        "{}:{}: a drive-force row (instrument none): its elastic model \
-                         stretches the rods by the forces already, the effect would count the \
-                         stretch twice (stiffness_factor is the force rows' stiffness unknown)",
-                        campaign.source, pose.line
-                    ),
-                });
-            }
-            if !active {
+            if !active || pose.instrument == crate::campaign::Instrument::None {
+                // a force row's elastic model stretches the rods by its own forces already:
+                // the effect corrects the instrument rows of loaded poses only
+                if active {
+                    first_force_row.get_or_insert(pose.line);
+                }
                 stretch.push([0.0; 5]);
                 continue;
             }
@@ -62,7 +56,18 @@ impl Effect for PreloadElastic {
         if loaded == 0 {
             return Err(NotApplicable {
                 effect: "preload_elastic",
-                reason: "no pose with all four drives active and drive forces recorded".to_owned(),
+                reason: match first_force_row {
+                    Some(line) => format!(
+                        "{}:{line}: only drive-force rows (instrument none) are loaded: their \
+                         elastic model stretches the rods by the forces already, the effect \
+                         would have no instrument row to correct (stiffness_factor is the force \
+                         rows' stiffness unknown)",
+                        campaign.source
+                    ),
+                    None => "no instrument pose with all four drives active and drive forces \
+                             recorded"
+                        .to_owned(),
+                },
             });
         }
         Ok(Box::new(BoundPreload {

@@ -4,7 +4,7 @@ use super::{bad_input, read_campaign, write_json};
 use rpkm_core::calib::{self, Calibration, Options, Scaling, Selection};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::obs;
-use rpkm_core::params::{self, Model, Params, NAMES};
+use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS};
 use rpkm_core::variance::{self, NoiseEstimate};
 use serde_json::json;
 use std::path::PathBuf;
@@ -581,6 +581,14 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
         "iterations": cal.iterations,
         "rows": cal.rows,
         "outliers": cal.outliers,
+        // the posterior with its correlations, for a tracker that starts from it (the
+        // calibrator node's `geometry_file`): rows and columns in `names` order, mm and rad
+        "covariance": {
+            "names": NAMES,
+            "matrix": (0..N_PARAMS)
+                .map(|i| (0..N_PARAMS).map(|j| cal.covariance[(i, j)]).collect::<Vec<f64>>())
+                .collect::<Vec<_>>(),
+        },
     });
     if let Some(v) = val {
         out["val_rms_before_um"] = json!(v.rms_before_um);
