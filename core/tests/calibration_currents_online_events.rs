@@ -361,7 +361,8 @@ fn three_more_paths() {
                 told.steps
             );
             if creep.is_none() {
-                assert!(told.drifts.is_empty(), "seed {seed} {name}: {first:?}");
+                // under the gate by the statistic itself, not only under the µm threshold
+                assert_silent(&told, t, &test);
                 continue;
             }
             let (t_warn, _) = told.drifts.first().expect("a drift WARN");
