@@ -1069,3 +1069,36 @@ fn fit_expansion(
         ppm[k] = x[c];
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::StdRng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    /// The force noise from successive innovations is the noise, not the filter's lag: a
+    /// slow bias on top of white noise (3 N and 7 N on two drives) leaves its estimate at the
+    /// noise's variance, where the innovations' own mean square takes the bias for noise.
+    #[test]
+    fn force_noise_ignores_a_slow_bias() {
+        let mut rng = StdRng::seed_from_u64(15);
+        let sigma = Vector4::new(3.0, 7.0, 3.0, 3.0);
+        let unit = Normal::new(0.0, 1.0).expect("normal");
+        let mut seen = ForceNoise::stated(25.0);
+        let mut mean_square = Matrix4::zeros();
+        let n = 20_000;
+        for k in 0..n {
+            let lag = 20.0 * (f64::from(k) / 2000.0).sin();
+            let y = Vector4::from_fn(|a, _| lag + sigma[a] * unit.sample(&mut rng));
+            seen.add(&y);
+            mean_square += y * y.transpose() / f64::from(n);
+        }
+        let r = seen.covariance();
+        for a in 0..4 {
+            let truth = sigma[a] * sigma[a];
+            assert!((r[(a, a)] / truth - 1.0).abs() < 0.05, "drive {a}: {r}");
+            assert!(mean_square[(a, a)] > truth + 150.0, "{mean_square}");
+        }
+        assert!(r[(0, 1)].abs() < 0.05 * 21.0, "{r}");
+    }
+}
