@@ -209,8 +209,9 @@ struct ChangeTrack {
     s: f64,
     t: Option<f64>,
     /// The force noise the filter actually sees, from its innovations (kept across a
-    /// rebase: the drives' noise does not change with the reference).
-    noise_seen: ForceNoise,
+    /// rebase: the drives' noise does not change with the reference; None before the first
+    /// applied sample, which starts it from the stated σ).
+    noise_seen: Option<ForceNoise>,
 }
 
 /// The covariance of the force noise as the innovations show it (N²): the filter's stated
@@ -279,9 +280,9 @@ pub enum DriftInput {
 }
 
 impl ChangeTrack {
-    fn at(p: Params, cov: &Covariance, t: Option<f64>, noise_seen: ForceNoise) -> ChangeTrack {
+    fn at(p: Params, cov: &Covariance, t: Option<f64>) -> ChangeTrack {
         ChangeTrack {
-            noise_seen,
+            noise_seen: None,
             p,
             cov: *cov,
             phi: Covariance::identity(),
@@ -341,12 +342,7 @@ impl OnlineEstimator {
             p,
             dk: 0.0,
             cov,
-            change: ChangeTrack::at(
-                p,
-                &cov,
-                None,
-                ForceNoise::stated(opts.force_sigma_n.powi(2)),
-            ),
+            change: ChangeTrack::at(p, &cov, None),
             temp_c: f64::NAN,
             opts,
             last_t: None,
@@ -425,7 +421,9 @@ impl OnlineEstimator {
 
     /// Takes the estimate now as the reference of [`OnlineEstimator::change`].
     pub fn rebase_change(&mut self) {
-        self.change = ChangeTrack::at(self.p, &self.cov, self.last_t, self.change.noise_seen);
+        let seen = self.change.noise_seen;
+        self.change = ChangeTrack::at(self.p, &self.cov, self.last_t);
+        self.change.noise_seen = seen;
     }
 
     /// The machine temperature now, °C (NaN: none), for the drift test's input (see
@@ -538,8 +536,9 @@ impl OnlineEstimator {
         let c = &mut self.change;
         let s = c.input(t, temp_c);
         c.phi = a * c.phi;
-        c.noise_seen.add(&held.y);
-        let noise = a * c.noise * a.transpose() + k * c.noise_seen.covariance() * k.transpose();
+        let seen = c.noise_seen.get_or_insert_with(|| ForceNoise::stated(r));
+        seen.add(&held.y);
+        let noise = a * c.noise * a.transpose() + k * seen.covariance() * k.transpose();
         c.noise = (noise + noise.transpose()) * 0.5;
         c.response = a * c.response + kh.fixed_view::<N_STATE, N_PARAMS>(0, 0) * s;
     }
@@ -660,8 +659,8 @@ impl OnlineEstimator {
 /// and every candidate that explains it as well within [`DRIFT_NAME_MARGIN`]. A slow drift
 /// that the filter follows shows in the few combinations the forces pin, which every rod
 /// length moves alike; there the best of the candidates is an accident of the path (on the
-/// twin a creep of l3 was first named l1, l2 or l2 with the wrong sign), so one parameter
-/// is claimed only with the margin over all others.
+/// twin a creep of l3 was first named after l1 or l2 on three paths of four, with the wrong
+/// sign on two), so one parameter is claimed only with the margin over all others.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Drift {
     /// Parameter index of the best.
