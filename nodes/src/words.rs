@@ -26,32 +26,77 @@ pub fn follows(p: &Pointer) -> String {
     )
 }
 
-/// "l3 +48 µm in 6 min (+12.0 ± 0.3 µm/K), follows temp_machine (r = 0.98)", or "l3 or l1
-/// ..." when the forces moved alike for both (the temperature named `temp_name`).
+/// The drift WARN's words, claiming no more than the path identifies: "l3 +48 µm in 6 min
+/// (+12.0 ± 0.3 µm/K), follows temp_machine (r = 0.98)" where one candidate explains it with
+/// the margin; else "l1..l5 alike in 2 min, the path cannot tell which: l3 +19 µm, l1 +15 µm,
+/// ..." with the change each would need (they differ in size and sign), and no rate; "; 22
+/// other parameters explain it alike" where parameters outside the candidates do (the
+/// temperature named `temp_name`).
 pub fn drift(d: &Drift, temp_name: &str) -> String {
-    let (k, unit) = match unit(d.param) {
-        Unit::Mm => (1e3, "µm"),
-        Unit::Rad => (1e6, "µrad"),
-    };
-    let who = match d.alternative {
-        Some(other) => format!("{} or {}", NAMES[d.param], NAMES[other]),
-        None => NAMES[d.param].to_owned(),
-    };
+    let (k, unit) = scaled_unit(d.param);
     let per = match d.input {
         DriftInput::Temperature(_) => "K",
         DriftInput::Time | DriftInput::Unknown => "h",
     };
-    let mut s = format!(
-        "{who} {:+.0} {unit} in {:.0} min ({:+.1} ± {:.1} {unit}/{per})",
-        d.change * k,
-        d.over_s / 60.0,
-        d.rate * k,
-        d.rate_sigma * k
-    );
+    let minutes = d.over_s / 60.0;
+    let mut s = if d.is_identified() {
+        format!(
+            "{} {:+.0} {unit} in {minutes:.0} min ({:+.1} ± {:.1} {unit}/{per})",
+            NAMES[d.param],
+            d.change * k,
+            d.rate * k,
+            d.rate_sigma * k
+        )
+    } else {
+        // the best first, the others by name
+        let mut named: Vec<(usize, f64)> = d.named().collect();
+        named[1..].sort_by_key(|(i, _)| NAMES[*i]);
+        let each: Vec<String> = named
+            .iter()
+            .map(|&(i, c)| {
+                let (k, unit) = scaled_unit(i);
+                format!("{} {:+.0} {unit}", NAMES[i], c * k)
+            })
+            .collect();
+        format!(
+            "{} alike in {minutes:.0} min, the path cannot tell which: {}",
+            alike_names(d),
+            each.join(", ")
+        )
+    };
     if let Some(r) = d.temperature_correlation.filter(|r| r.abs() >= FOLLOWS) {
         let _ = write!(s, ", follows {temp_name} (r = {r:.2})");
     }
+    if d.alike > 0 {
+        let _ = write!(s, "; {} other parameters explain it alike", d.alike);
+    }
     s
+}
+
+/// Factor from mm or rad to the unit a drift is told in, and that unit.
+fn scaled_unit(param: usize) -> (f64, &'static str) {
+    match unit(param) {
+        Unit::Mm => (1e3, "µm"),
+        Unit::Rad => (1e6, "µrad"),
+    }
+}
+
+/// "l1..l5" when a drift's alike candidates are every rod, else their names, the best first:
+/// "l3 or l1", "l3, l1 or l5".
+fn alike_names(d: &Drift) -> String {
+    let mut named: Vec<usize> = d.named().map(|(i, _)| i).collect();
+    named.sort_unstable();
+    let mut rods: Vec<usize> = rpkm_core::params::RODS.iter().map(|r| r.l).collect();
+    rods.sort_unstable();
+    if named == rods {
+        return "l1..l5".to_owned();
+    }
+    let mut names: Vec<&str> = d.named().map(|(i, _)| NAMES[i]).collect();
+    names[1..].sort_unstable();
+    match names.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+        _ => names.concat(),
+    }
 }
 
 /// "tracker 2.1x noisier than stated, ..." for every group off its rating.
@@ -177,34 +222,55 @@ pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
 mod tests {
     use super::*;
 
-    /// The drift WARN's words: who ("A or B" when the forces moved alike for both), the
-    /// change and rate in µm, and "follows" only from FOLLOWS on.
+    /// The drift WARN's words: one rod with its change and rate only where the path names it
+    /// alone; else every rod that explains it alike with the change each would need and no
+    /// rate ("l1..l5" for all five); "follows" only from FOLLOWS on; the other parameters
+    /// alike counted.
     #[test]
     fn a_drift_in_words() {
-        let l3 = rpkm_core::params::index_of("l3").expect("l3");
-        let l4 = rpkm_core::params::index_of("l4").expect("l4");
+        let index = |n: &str| rpkm_core::params::index_of(n).expect("rod");
         let mut d = Drift {
-            param: l3,
-            alternative: Some(l4),
-            margin: 1.002,
-            rate: 0.0115,
-            rate_sigma: 0.0008,
+            param: index("l3"),
+            margin: 1.001,
+            candidates_alike: [None; rpkm_core::params::N_PARAMS],
+            rate: 0.0118,
+            rate_sigma: 0.0009,
             input: DriftInput::Temperature(20.4),
-            change: 0.0188,
+            change: 0.0193,
             over_s: 136.0,
-            explained: 0.89,
+            explained: 0.91,
             alike: 22,
-            temperature_correlation: Some(0.86),
+            temperature_correlation: Some(0.87),
         };
+        for (rod, c) in [
+            ("l1", 0.015),
+            ("l2", -0.0193),
+            ("l3", 0.0193),
+            ("l4", -0.0059),
+            ("l5", 0.0097),
+        ] {
+            d.candidates_alike[index(rod)] = Some(c);
+        }
         assert_eq!(
             drift(&d, "temp_machine"),
-            "l3 or l4 +19 µm in 2 min (+11.5 ± 0.8 µm/K)"
+            "l1..l5 alike in 2 min, the path cannot tell which: l3 +19 µm, l1 +15 µm, \
+             l2 -19 µm, l4 -6 µm, l5 +10 µm; 22 other parameters explain it alike"
         );
-        d.alternative = None;
+        d.candidates_alike[index("l2")] = None;
+        d.candidates_alike[index("l4")] = None;
+        d.candidates_alike[index("l5")] = None;
+        assert!(
+            drift(&d, "temp_machine").starts_with("l3 or l1 alike in 2 min"),
+            "{}",
+            drift(&d, "temp_machine")
+        );
+        d.candidates_alike[index("l1")] = None;
+        d.margin = 1.8;
+        d.alike = 0;
         d.temperature_correlation = Some(0.95);
         assert_eq!(
             drift(&d, "temp_machine"),
-            "l3 +19 µm in 2 min (+11.5 ± 0.8 µm/K), follows temp_machine (r = 0.95)"
+            "l3 +19 µm in 2 min (+11.8 ± 0.9 µm/K), follows temp_machine (r = 0.95)"
         );
     }
 }

@@ -185,7 +185,8 @@ pub struct OnlineEstimator {
 /// What the estimate's change since a reference would be were nothing to have moved: the
 /// estimation error evolves as e ← A e + K v (A = I − K H) under noise v alone, so the change
 /// e_t − e_r = (Φ − I) e_r + Σ Φ K v, Φ the product of the A since the reference. Its
-/// covariance (Φ − I) P_r (Φ − I)ᵀ + M, M ← A M Aᵀ + K R Kᵀ, stays bounded where the random
+/// covariance (Φ − I) P_r (Φ − I)ᵀ + M, M ← A M Aᵀ + K R Kᵀ with R the force noise the
+/// innovations show ([`ForceNoise`], not the stated σ), stays bounded where the random
 /// walk's own covariance grows with time: the random walk lets the estimate follow a drift,
 /// and the test still measures the drift against what noise alone would have moved it (the
 /// filter's own innovations would not: they are tested against the random walk, which
@@ -207,6 +208,63 @@ struct ChangeTrack {
     /// The input now (K or h since the reference).
     s: f64,
     t: Option<f64>,
+    /// The force noise the filter actually sees, from its innovations (kept across a
+    /// rebase: the drives' noise does not change with the reference; None before the first
+    /// applied sample, which starts it from the stated σ).
+    noise_seen: Option<ForceNoise>,
+}
+
+/// The covariance of the force noise as the innovations show it (N²): the filter's stated
+/// σ (`force_sigma_n`, white and alike on the four drives) is not what its forces carry. An
+/// encoder's few tenths of a µm through the loop's stiffness are several N on the four
+/// drives' preload at once (one direction of the four forces, not four independent ones):
+/// on the twin 7 N rms a drive at the truth where the force readings have 3 N. The change
+/// since the reference is K v summed through the filter's gains, so its covariance is
+/// K R Kᵀ with the noise v really has, whatever the filter assumed when it chose K (the
+/// Joseph form of a suboptimal gain).
+///
+/// Estimated from the differences of successive innovations, ½ mean Δy Δyᵀ: the noise is
+/// independent from sample to sample, so a difference carries it twice, while the
+/// innovation's slow part (the filter's lag behind a drift, its prediction error) cancels.
+/// The innovations themselves (mean y yᵀ) take that lag for noise: under a creep of l3 they
+/// widened M until the drift test lost it for a minute at a time. Their normalised mean
+/// (χ² per dof) says nothing of R here: it is 0.18 on the twin, the random walk's H P Hᵀ
+/// (10⁴ N² a sample at 0.15 mm/√h) dwarfing R in every direction the forces see.
+#[derive(Clone, Copy, Debug)]
+struct ForceNoise {
+    /// ½ Σ Δy Δyᵀ, the stated R as [`STATED_NOISE_SAMPLES`] samples included.
+    sum: Matrix4<f64>,
+    n: f64,
+    /// The last applied sample's innovation.
+    last: Option<Vector4<f64>>,
+}
+
+/// The stated force σ counts as this many samples in [`ForceNoise`]'s mean: it holds the
+/// first samples (a 4 × 4 covariance from fewer than its 10 entries would be singular) and
+/// weighs nothing after the first minute (600 samples at 10 Hz).
+const STATED_NOISE_SAMPLES: f64 = 10.0;
+
+impl ForceNoise {
+    fn stated(r: f64) -> ForceNoise {
+        ForceNoise {
+            sum: Matrix4::identity() * (r * STATED_NOISE_SAMPLES),
+            n: STATED_NOISE_SAMPLES,
+            last: None,
+        }
+    }
+
+    /// Adds the innovation `y` of an applied sample (its difference from the last one).
+    fn add(&mut self, y: &Vector4<f64>) {
+        if let Some(last) = self.last.replace(*y) {
+            let d = y - last;
+            self.sum += d * d.transpose() * 0.5;
+            self.n += 1.0;
+        }
+    }
+
+    fn covariance(&self) -> Matrix4<f64> {
+        self.sum / self.n
+    }
 }
 
 /// What a creep is assumed to follow.
@@ -224,6 +282,7 @@ pub enum DriftInput {
 impl ChangeTrack {
     fn at(p: Params, cov: &Covariance, t: Option<f64>) -> ChangeTrack {
         ChangeTrack {
+            noise_seen: None,
             p,
             cov: *cov,
             phi: Covariance::identity(),
@@ -390,7 +449,9 @@ impl OnlineEstimator {
 
     /// Takes the estimate now as the reference of [`OnlineEstimator::change`].
     pub fn rebase_change(&mut self) {
+        let seen = self.change.noise_seen;
         self.change = ChangeTrack::at(self.p, &self.cov, self.last_t);
+        self.change.noise_seen = seen;
     }
 
     /// The machine temperature now, °C (NaN: none), for the drift test's input (see
@@ -486,14 +547,15 @@ impl OnlineEstimator {
         self.dk += dx[STIFFNESS] * d[STIFFNESS];
         let cov = post.inverse();
         self.cov = (cov + cov.transpose()) * 0.5;
-        self.track_change(&held.h, r);
+        self.track_change(held, r);
         self.applied += 1;
         nis
     }
 
     /// The change's covariance and the creep responses through one update's gain (see
     /// [`ChangeTrack`]).
-    fn track_change(&mut self, h: &Rows, r: f64) {
+    fn track_change(&mut self, held: &Held, r: f64) {
+        let h = &held.h;
         let k = self.cov * h.transpose() / r;
         let kh = k * h;
         let a = Covariance::identity() - kh;
@@ -502,7 +564,9 @@ impl OnlineEstimator {
         let c = &mut self.change;
         let s = c.input(t, temp_c);
         c.phi = a * c.phi;
-        let noise = a * c.noise * a.transpose() + k * k.transpose() * r;
+        let seen = c.noise_seen.get_or_insert_with(|| ForceNoise::stated(r));
+        seen.add(&held.y);
+        let noise = a * c.noise * a.transpose() + k * seen.covariance() * k.transpose();
         c.noise = (noise + noise.transpose()) * 0.5;
         c.response = a * c.response + kh.fixed_view::<N_STATE, N_PARAMS>(0, 0) * s;
     }
@@ -619,36 +683,62 @@ impl OnlineEstimator {
     }
 }
 
-/// The single parameter that best explains a drift (see [`DriftMonitor::record`]).
+/// What explains a drift (see [`DriftMonitor::record`]): the candidate that explains it best
+/// and every candidate that explains it as well within [`DRIFT_NAME_MARGIN`]. A slow drift
+/// that the filter follows shows in the few combinations the forces pin, which every rod
+/// length moves alike; there the best of the candidates is an accident of the path (on the
+/// twin a creep of l3 was first named after l1 or l2 on three paths of four, with the wrong
+/// sign on two), so one parameter is claimed only with the margin over all others.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct Drift {
-    /// Parameter index.
+    /// Parameter index of the best.
     pub param: usize,
-    /// The runner-up when the best explains the drift less than [`DRIFT_NAME_MARGIN`] times
-    /// better: the forces moved alike for both ("l3 or l1").
-    pub alternative: Option<usize>,
     /// How much better the best explains the drift than the runner-up (ratio of their χ²
     /// reductions).
     pub margin: f64,
-    /// Its creep per unit of the input (mm or rad per K, or per h without a temperature) and
-    /// that rate's σ.
+    /// Per parameter: its change since the reference (mm or rad) where it is a candidate that
+    /// explains the drift within [`DRIFT_NAME_MARGIN`] of the best (the best included), None
+    /// for the others. One entry: the path names it; more: the path cannot tell which, and
+    /// each has the change it would need (sizes and signs differ between them).
+    pub candidates_alike: [Option<f64>; N_PARAMS],
+    /// The best's creep per unit of the input (mm or rad per K, or per h without a
+    /// temperature) and that rate's σ.
     pub rate: f64,
     pub rate_sigma: f64,
     /// What the rate is per.
     pub input: DriftInput,
-    /// Its change since the reference (the rate times the input now), mm or rad, and over
-    /// how long, s.
+    /// The best's change since the reference (the rate times the input now), mm or rad, and
+    /// over how long, s.
     pub change: f64,
     pub over_s: f64,
-    /// The share of the drift's χ² it explains.
+    /// The share of the drift's χ² the best explains.
     pub explained: f64,
     /// How many parameters outside the candidates explain it as well (within
     /// [`DRIFT_NAME_MARGIN`]): a slow drift shows in the few combinations the forces pin,
     /// where a rod's length and its joints' positions across it move alike.
     pub alike: usize,
-    /// Correlation of its track with the temperature (None without a temperature, or too
-    /// few points).
+    /// Correlation of the best's track with the temperature (None without a temperature, or
+    /// too few points).
     pub temperature_correlation: Option<f64>,
+}
+
+impl Drift {
+    /// The candidates that explain it alike, each with its change (mm or rad): the best
+    /// first, then the others in parameter order.
+    pub fn named(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let others = self
+            .candidates_alike
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != self.param)
+            .filter_map(|(i, c)| c.map(|c| (i, c)));
+        std::iter::once((self.param, self.change)).chain(others)
+    }
+
+    /// Whether the path names one candidate alone.
+    pub fn is_identified(&self) -> bool {
+        self.named().count() == 1
+    }
 }
 
 /// The drift test of the estimate's change since the reference: a χ² in the covariance the
@@ -676,9 +766,10 @@ pub struct DriftTest {
 }
 
 impl DriftTest {
-    /// The drift to warn about: significant at [`DRIFT_FALSE_ALARM`] and its parameter's
+    /// The drift to warn about: significant at [`DRIFT_FALSE_ALARM`] and the best candidate's
     /// change beyond `threshold_mm` (rad: `threshold_mm` / 1000), so that a µm the forces
-    /// resolve is not a WARN.
+    /// resolve is not a WARN (the others alike are told with their own changes, which differ
+    /// in size and sign: see [`Drift`]).
     pub fn warning(&self, threshold_mm: f64) -> Option<&Drift> {
         let d = self.best.as_ref()?;
         let threshold = match unit(d.param) {
@@ -919,10 +1010,14 @@ impl DriftMonitor {
         // the estimate's track as this parameter's creep (its least-squares fit at each
         // point, in the metric now), for the correlation with the temperature
         let along = w.w.transpose() * u;
+        let candidates_alike = std::array::from_fn(|i| {
+            (order.contains(&i) && fits[i].2 * DRIFT_NAME_MARGIN >= *gain)
+                .then(|| fits[i].1 * scale()[i] * change.input_now)
+        });
         Some(Drift {
             param,
-            alternative: next.filter(|_| margin < DRIFT_NAME_MARGIN),
             margin,
+            candidates_alike,
             rate: rate * d,
             rate_sigma: u.norm().recip() * d,
             input: change.input,
@@ -999,5 +1094,38 @@ fn fit_expansion(
     };
     for (c, &k) in seen.iter().enumerate() {
         ppm[k] = x[c];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::StdRng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    /// The force noise from successive innovations is the noise, not the filter's lag: a
+    /// slow bias on top of white noise (3 N and 7 N on two drives) leaves its estimate at the
+    /// noise's variance, where the innovations' own mean square takes the bias for noise.
+    #[test]
+    fn force_noise_ignores_a_slow_bias() {
+        let mut rng = StdRng::seed_from_u64(15);
+        let sigma = Vector4::new(3.0, 7.0, 3.0, 3.0);
+        let unit = Normal::new(0.0, 1.0).expect("normal");
+        let mut seen = ForceNoise::stated(25.0);
+        let mut mean_square = Matrix4::zeros();
+        let n = 20_000;
+        for k in 0..n {
+            let lag = 20.0 * (f64::from(k) / 2000.0).sin();
+            let y = Vector4::from_fn(|a, _| lag + sigma[a] * unit.sample(&mut rng));
+            seen.add(&y);
+            mean_square += y * y.transpose() / f64::from(n);
+        }
+        let r = seen.covariance();
+        for a in 0..4 {
+            let truth = sigma[a] * sigma[a];
+            assert!((r[(a, a)] / truth - 1.0).abs() < 0.05, "drive {a}: {r}");
+            assert!(mean_square[(a, a)] > truth + 150.0, "{mean_square}");
+        }
+        assert!(r[(0, 1)].abs() < 0.05 * 21.0, "{r}");
     }
 }
