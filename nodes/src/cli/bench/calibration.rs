@@ -199,7 +199,8 @@ fn diagnosis(seed: u64) -> Result<()> {
 ///   estimation, no outlier test) calibrated in this process on one thread, the campaign read
 ///   before the clock starts; median of [`RPKM_RUNS`].
 /// - rpkm, whole processes: `rpkm calibrate --no-noise-estimation` (the same problem) and
-///   plain `rpkm calibrate` (noise estimated: two fits), process start and reading included;
+///   plain `rpkm calibrate` (noise estimated: a fit per round, one round where the stated
+///   noise holds), process start and reading included;
 ///   medians of [`RPKM_RUNS`].
 fn scipy_baseline(path: &Path) -> Result<()> {
     let Some(scipy) = scipy_seconds(path) else {
@@ -219,7 +220,7 @@ fn scipy_baseline(path: &Path) -> Result<()> {
     println!("  {:<62} {scipy:>8.4} s", "scipy least_squares, its fit alone");
     line("rpkm, the same fit alone (in process, 1 thread)", fit_s);
     line("rpkm calibrate --no-noise-estimation, whole process", same);
-    line("rpkm calibrate (noise estimated, two fits), whole process", default);
+    line("rpkm calibrate (default: noise estimated), whole process", default);
     println!("  (reading the CSV in process: {read_s:.4} s, not in the fit's figure)");
     Ok(())
 }
