@@ -197,18 +197,57 @@ struct Forward {
     sens: geometry::Sensitivity,
 }
 
+impl Forward {
+    fn zeros() -> Forward {
+        Forward {
+            sol: Solution {
+                c: geometry::Config::zeros(),
+                iterations: 0,
+                residual: 0.0,
+            },
+            sens: geometry::Sensitivity::zeros(),
+        }
+    }
+}
+
 fn forward(
     p: &Params,
     model: Model,
     sub: Subsystem,
     q: &[f64; 4],
 ) -> Result<Forward, GeometryError> {
+    let mut f = Forward {
+        sol: solve_forward(p, model, sub, q)?,
+        sens: geometry::Sensitivity::zeros(),
+    };
+    geometry::sensitivity_into(p, model, sub, &f.sol, &mut f.sens)?;
+    Ok(f)
+}
+
+/// [`forward`] into `f`, a buffer the caller reuses: the sensitivities written where they
+/// are read (1.7 kB a pose not copied through returns).
+fn forward_into(
+    p: &Params,
+    model: Model,
+    sub: Subsystem,
+    q: &[f64; 4],
+    f: &mut Forward,
+) -> Result<(), GeometryError> {
+    f.sol = solve_forward(p, model, sub, q)?;
+    geometry::sensitivity_into(p, model, sub, &f.sol, &mut f.sens)
+}
+
+/// The configuration of a forward subsystem `sub` at the actuator positions `q`.
+fn solve_forward(
+    p: &Params,
+    model: Model,
+    sub: Subsystem,
+    q: &[f64; 4],
+) -> Result<Solution, GeometryError> {
     let Subsystem::Actuators(a, b) = sub else {
         unreachable!("forward rows use actuator subsystems")
     };
-    let sol = geometry::solve(p, model, sub, [q[a], q[b]])?;
-    let sens = geometry::sensitivity(p, model, sub, &sol)?;
-    Ok(Forward { sol, sens })
+    geometry::solve(p, model, sub, [q[a], q[b]])
 }
 
 /// Parameters and carrier positions of a pose under its effect correction.
@@ -432,6 +471,8 @@ impl Evaluation<'_> {
             forward(&p_r, self.model, Subsystem::NR, &q_r)
                 .map_err(|e| PoseError::at(campaign, reset, e))?;
         }
+        // one buffer of the forward solves' sensitivities for the piece's poses
+        let mut f = Forward::zeros();
         for &i in &poses[range.clone()] {
             let pose = &campaign.poses[i];
             if pose.reset && pose.instrument.is_relative() {
@@ -439,7 +480,7 @@ impl Evaluation<'_> {
             }
             let err = |error: ModelError| PoseError::at(campaign, pose, error);
             match self.step {
-                Step::Direct => pose_rows(&ctx, i, pose, reset, out).map_err(err)?,
+                Step::Direct => pose_rows(&ctx, (i, pose), reset, &mut f, out).map_err(err)?,
                 Step::VirtualQ2 => {
                     virtual_q2_row(&ctx, i, pose, self.p_cal, out).map_err(|e| err(e.into()))?;
                 }
@@ -473,9 +514,9 @@ struct Ctx<'a> {
 
 fn pose_rows(
     ctx: &Ctx,
-    i: usize,
-    pose: &Pose,
+    (i, pose): (usize, &Pose),
     reset: Option<(usize, &Pose)>,
+    f: &mut Forward,
     out: &mut Vec<Residual>,
 ) -> Result<(), ModelError> {
     use Instrument::{Dbb, Kgm, LiPsi, LiX, LiY, Lt, None, SelfCal};
@@ -483,7 +524,7 @@ fn pose_rows(
         (Lt, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Lt, (i, pose), reset, out)?),
         (Kgm, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Kgm, (i, pose), reset, out)?),
         (Dbb | LiX | LiY | LiPsi, Some(reset)) => Ok(forward_rows(ctx, i, pose, reset, out)?),
-        (SelfCal, _) => Ok(self_rows(ctx, i, pose, out)?),
+        (SelfCal, _) => Ok(self_rows(ctx, (i, pose), f, out)?),
         (None, _) if pose.drives_loaded() => Ok(force_rows(ctx, i, pose, out)?),
         _ => Ok(()),
     }
@@ -880,19 +921,24 @@ fn b_of(sub: Subsystem) -> usize {
 /// Self-calibration rows (eq. 4.37): followers q2, q3 against rgm(q1, q4).
 fn self_rows(
     ctx: &Ctx,
-    i: usize,
-    pose: &Pose,
+    (i, pose): (usize, &Pose),
+    f: &mut Forward,
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
     let d = ctx.corr.delta(i);
     let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
-    let f = forward(&p_i, ctx.model, Subsystem::NR, &q_i)?;
+    forward_into(&p_i, ctx.model, Subsystem::NR, &q_i, f)?;
     for a in [1, 2] {
         let v = q_var(a);
         // the follower's own encoder and those of q1, q4 through rgm
-        let parts = ctx.noise.encoder_parts(1.0 + encoder_gain2(&f, v));
-        let mut at_pose = input_sensitivity(&f, Subsystem::NR, &[(v, 1.0)]);
+        let parts = ctx.noise.encoder_parts(1.0 + encoder_gain2(f, v));
+        let mut at_pose = input_sensitivity(f, Subsystem::NR, &[(v, 1.0)]);
         at_pose.dq[a] -= 1.0;
+        let d_theta = if ctx.corr.n_params == 0 {
+            Vec::new()
+        } else {
+            ctx.corr.theta_row(&[(i, at_pose)])
+        };
         out.push(Residual {
             pose: i,
             instrument: pose.instrument,
@@ -902,7 +948,7 @@ fn self_rows(
             parts,
             jacobian: at_pose.dp,
             d_pcal: None,
-            d_theta: ctx.corr.theta_row(&[(i, at_pose)]),
+            d_theta,
         });
     }
     Ok(())

@@ -9,6 +9,7 @@ use crate::obs::{Direction, Evaluation, Form, Pieces, PoseError, Residual, Step}
 use crate::params::{Model, Params, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
+use std::sync::{Mutex, PoisonError};
 
 /// A row's identity across evaluations: its pose and direction (what outlier elimination
 /// drops).
@@ -31,6 +32,9 @@ pub(super) struct Problem<'a> {
     pub opts: &'a Options,
     /// The campaign cut into pieces, once.
     pub pieces: Pieces,
+    /// The row buffers of the evaluations' workers, kept from one evaluation to the next (a
+    /// piece's 512 rows are 200 kB: fresh pages on every evaluation otherwise).
+    buffers: Mutex<Vec<Vec<Residual>>>,
 }
 
 impl<'a> Problem<'a> {
@@ -48,6 +52,7 @@ impl<'a> Problem<'a> {
             effects,
             opts,
             pieces: Pieces::new(campaign, PIECE_POSES),
+            buffers: Mutex::new(Vec::new()),
         }
     }
 
@@ -90,7 +95,7 @@ impl<'a> Problem<'a> {
         let n = self.pieces.len();
         // one piece after the other from `first`, every `stride`-th; the row buffer reused
         let run = |first: usize, stride: usize| {
-            let mut rows = Vec::new();
+            let mut rows = self.take_buffer();
             let mut out = Vec::new();
             for k in (first..n).step_by(stride) {
                 rows.clear();
@@ -101,6 +106,7 @@ impl<'a> Problem<'a> {
                 rows.retain(|r| !drop.contains(&(r.pose, r.direction)));
                 out.push((k, Ok(each(&rows))));
             }
+            self.give_buffer(rows);
             out
         };
         let threads = thread_count(self.opts.threads).min(n.max(1));
@@ -123,6 +129,23 @@ impl<'a> Problem<'a> {
         };
         done.sort_by_key(|(k, _)| *k);
         done.into_iter().map(|(_, r)| r).collect()
+    }
+}
+
+impl Problem<'_> {
+    /// A row buffer of an earlier evaluation, or a new one.
+    fn take_buffer(&self) -> Vec<Residual> {
+        // a poisoned lock only means another worker panicked (a bug it re-raises): the
+        // buffers themselves are plain vectors, whatever state they were left in
+        let mut pool = self.buffers.lock().unwrap_or_else(PoisonError::into_inner);
+        pool.pop().unwrap_or_default()
+    }
+
+    /// Returns `rows` for the next evaluation.
+    fn give_buffer(&self, mut rows: Vec<Residual>) {
+        rows.clear();
+        let mut pool = self.buffers.lock().unwrap_or_else(PoisonError::into_inner);
+        pool.push(rows);
     }
 }
 

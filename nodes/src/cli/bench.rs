@@ -45,8 +45,9 @@ pub enum Bench {
     Soak(soak::SoakArgs),
     /// Calibration time, LM iterations and peak memory of `rpkm calibrate` on twin
     /// self-calibration campaigns of about 10³, 10⁴ and 10⁵ poses (child processes, on every
-    /// core and on one), the diagnosis of a 1,000-pose campaign with every library effect, and
-    /// the ratio to a plain scipy least_squares script when Python with scipy is there.
+    /// core and on one), the diagnosis of a 1,000-pose campaign with every library effect, and,
+    /// when Python with scipy is there, a plain scipy least_squares script's fit against
+    /// rpkm's fit of the same problem alone and against whole `rpkm calibrate` processes.
     ///
     /// Example: rpkm bench calibration --repeats 7,67,672
     Calibration(calibration::CalibrationArgs),
