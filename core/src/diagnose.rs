@@ -489,7 +489,7 @@ type Tried = Result<(Fitted, Fitted), FitError>;
 
 /// Each effect of `tried` added to the model and fitted, in `tried`'s order, on `threads`
 /// threads (0: every core). Each fit is independent and lands at its own index: the result
-/// does not depend on the number of threads.
+/// does not depend on the number of threads, nor on which thread fitted which candidate.
 fn try_all(
     campaign: &Campaign,
     val: Option<&Validation>,
@@ -499,53 +499,77 @@ fn try_all(
     (threads, screen): (usize, bool),
 ) -> Vec<Tried> {
     let start = Params::nominal();
+    // each candidate's model bound once, here: its size orders the work below
+    let bound: Vec<Result<EffectSet, NotApplicable>> = tried
+        .iter()
+        .map(|e| EffectSet::bind(&with_effect(in_model, *e), campaign, &start))
+        .collect();
     let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let threads = if threads == 0 { cores } else { threads }.clamp(1, tried.len().max(1));
-    if threads == 1 {
-        return tried
-            .iter()
-            .map(|e| try_effect(campaign, val, (in_model, base), *e, (&start, screen), copts))
-            .collect();
-    }
-    // the candidates share the cores: each fit's rows on one thread
     let copts = &calib::Options {
-        threads: 1,
+        // the candidates share the cores: each fit's rows on one thread
+        threads: if threads == 1 { copts.threads } else { 1 },
         ..copts.clone()
     };
-    let one = |effect: &dyn Effect| {
-        try_effect(
-            campaign,
-            val,
-            (in_model, base),
-            effect,
-            (&start, screen),
-            copts,
-        )
+    let one = |i: usize, set: EffectSet| {
+        let ctx = (campaign, val, (in_model, base));
+        try_effect(ctx, tried[i], set, (&start, screen), copts)
     };
     let mut out: Vec<Option<Tried>> = (0..tried.len()).map(|_| None).collect();
+    let mut queue: Vec<(usize, EffectSet)> = Vec::new();
+    for (i, set) in bound.into_iter().enumerate() {
+        match set {
+            Ok(set) => queue.push((i, set)),
+            Err(e) => out[i] = Some(Err(e.into())),
+        }
+    }
+    // largest first (the setup-local parameters of an instrument's alignment cost more than
+    // all the other candidates together on a campaign of many setups), each thread taking
+    // the next one when it is free: the last to finish is a small one
+    queue.sort_by_key(|(i, set)| (std::cmp::Reverse(set.n_params()), *i));
+    for (i, fit) in run_queue(queue, threads, &one) {
+        out[i] = Some(fit);
+    }
+    out.into_iter().flatten().collect()
+}
+
+/// `in_model` and `effect`: a candidate's model.
+fn with_effect<'a>(in_model: &[&'a dyn Effect], effect: &'a dyn Effect) -> Vec<&'a dyn Effect> {
+    let mut with = in_model.to_vec();
+    with.push(effect);
+    with
+}
+
+/// `one` applied to every (index, set) of `queue`, in order, on `threads` threads that each
+/// take the next entry when free; the results with their indexes, in no particular order.
+fn run_queue<T: Send>(
+    queue: Vec<(usize, EffectSet)>,
+    threads: usize,
+    one: &(impl Fn(usize, EffectSet) -> T + Sync),
+) -> Vec<(usize, T)> {
+    if threads <= 1 {
+        return queue.into_iter().map(|(i, set)| (i, one(i, set))).collect();
+    }
+    let queue = std::sync::Mutex::new(queue.into_iter());
+    // a poisoned lock is a panic in another worker, which the join below passes on
+    let next = || queue.lock().ok().and_then(|mut q| q.next());
     std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
-            .map(|t| {
-                let one = &one;
+            .map(|_| {
+                let next = &next;
                 scope.spawn(move || {
-                    (t..tried.len())
-                        .step_by(threads)
-                        .map(|i| (i, one(tried[i])))
+                    std::iter::from_fn(next)
+                        .map(|(i, set)| (i, one(i, set)))
                         .collect::<Vec<_>>()
                 })
             })
             .collect();
-        for worker in workers {
+        workers
+            .into_iter()
             // a panic in a fit is a bug: it goes on in this thread
-            let fits = worker
-                .join()
-                .unwrap_or_else(|p| std::panic::resume_unwind(p));
-            for (i, fit) in fits {
-                out[i] = Some(fit);
-            }
-        }
-    });
-    out.into_iter().flatten().collect()
+            .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect()
+    })
 }
 
 /// Compare every tried effect's fit with `base`.
@@ -691,16 +715,13 @@ pub const SCREEN_P: f64 = 0.05;
 /// model ended); a candidate that is then far from significance ([`SCREEN_P`]) keeps that
 /// fit, any other is fitted to convergence.
 fn try_effect(
-    campaign: &Campaign,
-    val: Option<&Validation>,
-    (in_model, base): (&[&dyn Effect], &Fit),
+    (campaign, val, (in_model, base)): (&Campaign, Option<&Validation>, (&[&dyn Effect], &Fit)),
     effect: &dyn Effect,
+    mut set: EffectSet,
     (start, screen): (&Params, bool),
     copts: &calib::Options,
 ) -> Result<(Fitted, Fitted), FitError> {
-    let mut with: Vec<&dyn Effect> = in_model.to_vec();
-    with.push(effect);
-    let mut set = EffectSet::bind(&with, campaign, start)?;
+    let with = with_effect(in_model, effect);
     // the candidate starts where the current model ended, its own parameters at zero
     let theta = warm_theta(&set, base);
     let warm = |screen| {

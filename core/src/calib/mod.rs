@@ -345,7 +345,9 @@ pub fn calibrate_from(
         init,
         (warm.is_some(), warm.is_some_and(|w| w.screen)),
     )?;
-    let corr = effects.corrections(&fit.state.theta);
+    // the corrections at the fit's θ: only a large campaign's leverages and step 2 read them
+    let corr = std::cell::OnceCell::new();
+    let corr = || corr.get_or_init(|| effects.corrections(&fit.state.theta));
     let (rows_final, post) = posterior(&pb, &plan, (&fit.state.p, &corr, &fit.drop), last)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
     let chi2: f64 = rows_final.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
@@ -466,7 +468,9 @@ fn start_theta(
 
 /// What step 1 identifies and how, decided once from the rows at the start parameters.
 struct Plan {
-    /// The effects' corrections at θ₀ (the "before" of the report).
+    /// The effects' corrections at θ₀ (the "before" of the report, and the LM's where it
+    /// evaluates at θ₀).
+    theta0: Vec<f64>,
     corr0: Corrections,
     /// Geometric parameters of step 1, and the rod-2 parameters wanted from step 2.
     ids: Vec<usize>,
@@ -526,6 +530,7 @@ impl Plan {
             .map(|all| reduced_normal(all, &ids, &opts.links, &free_theta));
         Ok(Plan {
             normal0,
+            theta0: theta0.to_vec(),
             corr0,
             h: scaling_vector(&jr0, &ids, opts.scaling)?,
             condition: condition_number(&normalize_columns(&jr0)),
@@ -701,6 +706,7 @@ fn step1(
             initial: (!warm && fit.drop.is_empty() && fit.iterations == 0)
                 .then(|| plan.normal0.clone())
                 .flatten(),
+            made: Some((&plan.theta0, &plan.corr0)),
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;
@@ -791,16 +797,17 @@ struct Step2Fit {
 /// Step 2: rod 2 from virtual measurements of the forward instruments (eq. 4.32), made with
 /// step 1's parameters; None when the campaign has no forward instrument or nothing to
 /// identify there.
-fn step2(
+fn step2<'c>(
     pb: &Problem,
     plan: &Plan,
     fit: &Step1Fit,
-    corr: &Corrections,
+    corr: &dyn Fn() -> &'c Corrections,
     cov_p1: &DMatrix<f64>,
 ) -> Result<Option<Step2Fit>, CalibrationError> {
     if plan.step2_wanted.is_empty() {
         return Ok(None);
     }
+    let corr = corr();
     let opts = pb.opts;
     let p1 = fit.state.p;
     // the virtual q2 rows at p, their virtual measurements made with step 1's p1
@@ -837,6 +844,7 @@ fn step2(
         center: pb.start,
         keep: Keep::Nothing,
         initial: None,
+        made: None,
     };
     let res = lm.run(&fit.state)?;
     let p = res.state.p;
