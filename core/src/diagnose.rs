@@ -25,7 +25,7 @@
 
 pub mod sparse;
 
-use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Prior};
+use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Prior, SharedRows};
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::geometry;
@@ -506,14 +506,19 @@ fn try_all(
         .collect();
     let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let threads = if threads == 0 { cores } else { threads }.clamp(1, tried.len().max(1));
-    let copts = &calib::Options {
-        // the candidates share the cores: each fit's rows on one thread
-        threads: if threads == 1 { copts.threads } else { 1 },
-        ..copts.clone()
-    };
-    let one = |i: usize, set: EffectSet| {
-        let ctx = (campaign, val, (in_model, base));
-        try_effect(ctx, tried[i], set, (&start, screen), copts)
+    let trials = Trials {
+        campaign,
+        val,
+        in_model,
+        base,
+        start,
+        screen,
+        shared: shared_rows(campaign, (in_model, base), tried, &bound, copts),
+        copts: calib::Options {
+            // the candidates share the cores: each fit's rows on one thread
+            threads: if threads == 1 { copts.threads } else { 1 },
+            ..copts.clone()
+        },
     };
     let mut out: Vec<Option<Tried>> = (0..tried.len()).map(|_| None).collect();
     let mut queue: Vec<(usize, EffectSet)> = Vec::new();
@@ -527,10 +532,51 @@ fn try_all(
     // all the other candidates together on a campaign of many setups), each thread taking
     // the next one when it is free: the last to finish is a small one
     queue.sort_by_key(|(i, set)| (std::cmp::Reverse(set.n_params()), *i));
+    let one = |i: usize, set: EffectSet| trials.try_effect(tried[i], set);
     for (i, fit) in run_queue(queue, threads, &one) {
         out[i] = Some(fit);
     }
     out.into_iter().flatten().collect()
+}
+
+/// The rows at the start and at the current model's minimum with the effect columns of
+/// every candidate that binds (`bound`), evaluated once for all of them; None where they
+/// cannot be evaluated (each candidate then evaluates its own rows and reports why that
+/// failed).
+fn shared_rows(
+    campaign: &Campaign,
+    (in_model, base): (&[&dyn Effect], &Fit),
+    tried: &[&dyn Effect],
+    bound: &[Result<EffectSet, NotApplicable>],
+    copts: &calib::Options,
+) -> Option<SharedRows> {
+    let start = Params::nominal();
+    let mut union: Vec<&dyn Effect> = in_model.to_vec();
+    union.extend(
+        tried
+            .iter()
+            .zip(bound)
+            .filter(|(_, b)| b.is_ok())
+            .map(|(e, _)| *e),
+    );
+    let set = EffectSet::bind(&union, campaign, &start).ok()?;
+    let theta = warm_theta(&set, base);
+    SharedRows::new(campaign, &start, copts, &set, (&base.params, &theta)).ok()
+}
+
+/// What every candidate of a round shares.
+struct Trials<'a> {
+    campaign: &'a Campaign,
+    val: Option<&'a Validation<'a>>,
+    in_model: &'a [&'a dyn Effect],
+    /// The current model's fit: where each candidate starts, and what it is tested against.
+    base: &'a Fit,
+    start: Params,
+    /// Whether candidates are screened first ([`Options::screen`]).
+    screen: bool,
+    copts: calib::Options,
+    /// The rows at the start and at the current model's minimum ([`shared_rows`]).
+    shared: Option<SharedRows>,
 }
 
 /// `in_model` and `effect`: a candidate's model.
@@ -709,60 +755,65 @@ fn noise_map(groups: &[GroupNoise]) -> BTreeMap<String, NoiseReport> {
 /// moves the χ² within 1e-3 relative of the converged value on the twin's campaigns.
 pub const SCREEN_P: f64 = 0.05;
 
-/// Fit `effect` added to the model: the whole family, and the parts the data support. First
-/// one LM step from the current model's minimum (the candidate's own parameters at zero,
-/// nearly Gauss-Newton's step: the score test of the effect, linearised where the current
-/// model ended); a candidate that is then far from significance ([`SCREEN_P`]) keeps that
-/// fit, any other is fitted to convergence.
-fn try_effect(
-    (campaign, val, (in_model, base)): (&Campaign, Option<&Validation>, (&[&dyn Effect], &Fit)),
-    effect: &dyn Effect,
-    mut set: EffectSet,
-    (start, screen): (&Params, bool),
-    copts: &calib::Options,
-) -> Result<(Fitted, Fitted), FitError> {
-    let with = with_effect(in_model, effect);
-    // the candidate starts where the current model ended, its own parameters at zero
-    let theta = warm_theta(&set, base);
-    let warm = |screen| {
-        Some(calib::WarmStart {
-            params: &base.params,
+impl Trials<'_> {
+    /// Fit `effect` added to the model (`set`: the model with it, bound): the whole family,
+    /// and the parts the data support. First one LM step from the current model's minimum
+    /// (the candidate's own parameters at zero, nearly Gauss-Newton's step: the score test of
+    /// the effect, linearised where the current model ended); a candidate that is then far
+    /// from significance ([`SCREEN_P`]) keeps that fit, any other is fitted to convergence.
+    fn try_effect(&self, effect: &dyn Effect, mut set: EffectSet) -> Tried {
+        let (val, base, copts) = (self.val, self.base, &self.copts);
+        let with = with_effect(self.in_model, effect);
+        // the screening step; where the rows did not confirm it, this is the converged fit
+        let cal = self.fit(&set, self.screen)?;
+        let cal = if cal.screened {
+            let screened = finish_with(val, &with, &set, cal, copts)?;
+            if screen_p_value(base, &screened.fit) > SCREEN_P {
+                let kept = Fitted {
+                    rows: screened.rows.clone(),
+                    fit: screened.fit.clone(),
+                };
+                return Ok((screened, kept));
+            }
+            // a contender: fitted to convergence from the current model, as without the
+            // screen
+            self.fit(&set, false)?
+        } else {
+            cal
+        };
+        // parts of the family the data do not support: held at zero in the kept variant
+        let weak = weak_parts(&cal, &set, effect.name());
+        let full = finish_with(val, &with, &set, cal, copts)?;
+        if weak.is_empty() {
+            let kept = Fitted {
+                rows: full.rows.clone(),
+                fit: full.fit.clone(),
+            };
+            return Ok((full, kept));
+        }
+        for k in weak {
+            set.hold(k);
+        }
+        let cal = self.fit(&set, false)?;
+        let kept = finish_with(val, &with, &set, cal, copts)?;
+        Ok((full, kept))
+    }
+
+    /// The model `set` calibrated from the current model's minimum, its own parameters at
+    /// zero (`screen`: [`calib::WarmStart::screen`]).
+    fn fit(&self, set: &EffectSet, screen: bool) -> Result<Calibration, CalibrationError> {
+        let (campaign, start, copts) = (self.campaign, &self.start, &self.copts);
+        let theta = warm_theta(set, self.base);
+        let warm = calib::WarmStart {
+            params: &self.base.params,
             theta: &theta,
             screen,
-        })
-    };
-    // the screening step; where the rows did not confirm it, this is the converged fit
-    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm(screen))?;
-    let cal = if cal.screened {
-        let screened = finish_with(val, &with, &set, cal, copts)?;
-        if screen_p_value(base, &screened.fit) > SCREEN_P {
-            let kept = Fitted {
-                rows: screened.rows.clone(),
-                fit: screened.fit.clone(),
-            };
-            return Ok((screened, kept));
-        }
-        // a contender: fitted to convergence from the current model, as without the screen
-        calib::calibrate_from(campaign, start, copts, &set, &[], warm(false))?
-    } else {
-        cal
-    };
-    // parts of the family the data do not support: held at zero in the kept variant
-    let weak = weak_parts(&cal, &set, effect.name());
-    let full = finish_with(val, &with, &set, cal, copts)?;
-    if weak.is_empty() {
-        let kept = Fitted {
-            rows: full.rows.clone(),
-            fit: full.fit.clone(),
         };
-        return Ok((full, kept));
+        match &self.shared {
+            Some(shared) => calib::calibrate_shared(campaign, start, copts, set, warm, shared),
+            None => calib::calibrate_from(campaign, start, copts, set, &[], Some(warm)),
+        }
     }
-    for k in weak {
-        set.hold(k);
-    }
-    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm(false))?;
-    let kept = finish_with(val, &with, &set, cal, copts)?;
-    Ok((full, kept))
 }
 
 /// The nested F-test's p-value of a screening fit against the current model (1 when the

@@ -39,6 +39,7 @@ pub const SCREEN_RHO: f64 = 0.02;
 pub const SCREEN_TAU: f64 = 1e-15;
 
 use super::rows::{weighted_values, Key, Problem};
+use super::shared::View;
 use super::CalibrationError;
 use crate::effects::Corrections;
 use crate::obs::{PoseError, Residual, RowValue, Step};
@@ -86,6 +87,9 @@ pub(super) struct Lm<'a> {
     /// the caller has them from rows it already evaluated there (the plan's, at a cold
     /// start): the LM then starts without evaluating the rows.
     pub initial: Option<Normal>,
+    /// The rows at the start read from rows shared with other calibrations (their
+    /// `at_warm`), where the start is a warm one they were evaluated at.
+    pub shared: Option<&'a View<'a>>,
     /// The effects' corrections already made at some θ (the plan's, at θ₀): an evaluation
     /// there takes them instead of making them again (a warm start at θ₀, every candidate
     /// of a diagnosis: an instrument's alignment of 50 setups makes 15 MB of them).
@@ -311,13 +315,31 @@ impl Lm<'_> {
     /// (p − centre)/tolerance; with what [`Keep`] asks of the rows.
     fn normal_at(&self, x: &State, keep: Keep) -> Result<Evaluated, PoseError> {
         let (total, parts) = self.evaluate(x, keep)?;
-        let kept = (keep != Keep::Nothing).then(|| Final::gather(&total, parts, keep));
-        let mut total = self.scaled(&total);
-        self.add_prior(&mut total, x);
-        Ok(Evaluated {
-            normal: total,
+        Ok(self.evaluated(x, &total, parts, keep))
+    }
+
+    /// The normal equations at `x` of the shared rows (`view`'s `at_warm`): what
+    /// [`Lm::normal_at`] makes of the same rows evaluated.
+    fn normal_shared(&self, view: &View, x: &State, keep: Keep) -> Evaluated {
+        let terms = self.column_terms();
+        let parts = view.map(view.at_warm, |rows| self.piece(rows, &terms, keep));
+        let mut total = Normal::zeros(self.n_unknowns());
+        for part in &parts {
+            total.add(&part.normal);
+        }
+        self.evaluated(x, &total, parts, keep)
+    }
+
+    /// Unscaled normal equations `total` at `x` and their `parts` as the LM uses them:
+    /// scaled, the prior added, what [`Keep`] asks of the rows kept.
+    fn evaluated(&self, x: &State, total: &Normal, parts: Vec<Piece>, keep: Keep) -> Evaluated {
+        let kept = (keep != Keep::Nothing).then(|| Final::gather(total, parts, keep));
+        let mut scaled = self.scaled(total);
+        self.add_prior(&mut scaled, x);
+        Evaluated {
+            normal: scaled,
             kept,
-        })
+        }
     }
 
     /// Normal equations in the unscaled unknowns (`u`) in the scaled ones: H A H, H g.
@@ -379,15 +401,17 @@ impl Lm<'_> {
             .fold(0.0, f64::max)
     }
 
-    /// The normal equations at the start: the caller's ([`Lm::initial`]) or evaluated.
+    /// The normal equations at the start: the caller's ([`Lm::initial`]), from shared rows
+    /// ([`Lm::shared`]) or evaluated.
     fn start_at(&self, start: &State) -> Result<Evaluated, PoseError> {
-        match &self.initial {
-            Some(n) => {
+        match (&self.initial, self.shared) {
+            (Some(n), _) => {
                 let mut normal = self.scaled(n);
                 self.add_prior(&mut normal, start);
                 Ok(Evaluated { normal, kept: None })
             }
-            None => self.normal_at(start, self.keep),
+            (None, Some(view)) => Ok(self.normal_shared(view, start, self.keep)),
+            (None, None) => self.normal_at(start, self.keep),
         }
     }
 

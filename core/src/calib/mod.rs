@@ -8,10 +8,12 @@ pub mod online;
 mod report;
 mod rows;
 mod select;
+mod shared;
 mod uncertainty;
 
 pub use report::{gain, rms};
 pub use select::{MIN_EFFECT_OBSERVABILITY, MIN_EFFECT_SIGNAL};
+pub use shared::SharedRows;
 
 use crate::campaign::Campaign;
 use crate::effects::{Corrections, EffectSet};
@@ -23,6 +25,8 @@ use lm::{Final, Keep, Lm, Normal, State};
 use nalgebra::{DMatrix, DVector};
 use rows::{dependency, reduced_jacobian, Columns, Key, Problem};
 use select::{auto_select, effect_observability, prior_of, scaling_vector, select_geometric};
+use shared::View;
+use std::cell::OnceCell;
 use std::collections::HashSet;
 use uncertainty::{posterior, step2_uncertainties, Posterior, KEEP_JACOBIAN_POSES};
 
@@ -326,9 +330,36 @@ pub fn calibrate_from(
     theta0: &[f64],
     warm: Option<WarmStart>,
 ) -> Result<Calibration, CalibrationError> {
+    calibrate_sharing(campaign, start, opts, effects, theta0, warm, None)
+}
+
+/// [`calibrate_from`] from θ₀ = 0 and the warm start `warm`, its rows at those two points
+/// read from `shared` where they are there ([`SharedRows`]; where they are not, it
+/// evaluates them). The same calibration to the bit.
+pub fn calibrate_shared(
+    campaign: &Campaign,
+    start: &Params,
+    opts: &Options,
+    effects: &EffectSet,
+    warm: WarmStart,
+    shared: &SharedRows,
+) -> Result<Calibration, CalibrationError> {
+    calibrate_sharing(campaign, start, opts, effects, &[], Some(warm), Some(shared))
+}
+
+/// [`calibrate_from`], with the rows at the start and the warm start from `shared` where
+/// they are there.
+fn calibrate_sharing(
+    campaign: &Campaign,
+    start: &Params,
+    opts: &Options,
+    effects: &EffectSet,
+    theta0: &[f64],
+    warm: Option<WarmStart>,
+    shared: Option<&SharedRows>,
+) -> Result<Calibration, CalibrationError> {
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
-    let mut plan = Plan::new(&pb, &theta0, warm.is_none())?;
     let init = match warm {
         Some(w) => State {
             p: *w.params,
@@ -339,11 +370,18 @@ pub fn calibrate_from(
             theta: theta0.clone(),
         },
     };
+    // rows shared with other calibrations serve a warm start only (a cold one starts from
+    // the plan's)
+    let view = shared
+        .filter(|_| warm.is_some())
+        .and_then(|s| s.view(&pb, &theta0, &init));
+    let mut plan = Plan::new(&pb, &theta0, warm.is_none(), view.as_ref())?;
     let (fit, last) = step1(
         &pb,
         &plan,
         init,
         (warm.is_some(), warm.is_some_and(|w| w.screen)),
+        view.as_ref(),
     )?;
     // the corrections at the fit's θ: only a large campaign's leverages and step 2 read them
     let corr = std::cell::OnceCell::new();
@@ -363,7 +401,7 @@ pub fn calibrate_from(
             Step::Direct,
             start,
             start,
-            &plan.corr0,
+            plan.corr0(&pb),
             &fit.drop,
             before_table,
         )?
@@ -471,7 +509,7 @@ struct Plan {
     /// The effects' corrections at θ₀ (the "before" of the report, and the LM's where it
     /// evaluates at θ₀).
     theta0: Vec<f64>,
-    corr0: Corrections,
+    corr0: OnceCell<Corrections>,
     /// Geometric parameters of step 1, and the rod-2 parameters wanted from step 2.
     ids: Vec<usize>,
     step2_wanted: Vec<usize>,
@@ -496,10 +534,26 @@ struct Plan {
 }
 
 impl Plan {
-    fn new(pb: &Problem, theta0: &[f64], cold: bool) -> Result<Plan, CalibrationError> {
+    /// The effects' corrections at θ₀, made the first time they are read.
+    fn corr0(&self, pb: &Problem) -> &Corrections {
+        self.corr0
+            .get_or_init(|| pb.effects.corrections(&self.theta0))
+    }
+
+    fn new(
+        pb: &Problem,
+        theta0: &[f64],
+        cold: bool,
+        shared: Option<&View>,
+    ) -> Result<Plan, CalibrationError> {
         let opts = pb.opts;
-        let corr0 = pb.effects.corrections(theta0);
-        let start = StartRows::of(pb, &corr0, cold)?;
+        let corr0 = OnceCell::new();
+        let source = if let Some(view) = shared {
+            Source::Shared(view)
+        } else {
+            Source::Evaluated(corr0.get_or_init(|| pb.effects.corrections(theta0)))
+        };
+        let start = StartRows::of(pb, source, cold)?;
         let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();
         let (ids, step2_wanted) = select_geometric(pb.campaign, &start.columns, opts, &linked)?;
         let prior = prior_of(&opts.selection, &ids);
@@ -567,31 +621,31 @@ fn before_table(rows: &[Residual]) -> report::RmsTable {
 }
 
 impl StartRows {
-    fn of(pb: &Problem, corr0: &Corrections, cold: bool) -> Result<StartRows, CalibrationError> {
+    fn of(pb: &Problem, source: Source, cold: bool) -> Result<StartRows, CalibrationError> {
         let n_theta = pb.effects.n_params();
-        let pieces = pb.map_pieces(
-            Step::Direct,
-            &pb.start,
-            &pb.start,
-            corr0,
-            &HashSet::new(),
-            |rows| {
-                // a row whose squared weighted value overflows makes the cost infinite
-                let bad = rows
-                    .iter()
-                    .find(|r| !(r.value / r.sigma).powi(2).is_finite())
-                    .map(|r| (r.pose, r.value));
+        let each = |rows: &[Residual]| {
+            // a row whose squared weighted value overflows makes the cost infinite
+            let bad = rows
+                .iter()
+                .find(|r| !(r.value / r.sigma).powi(2).is_finite())
+                .map(|r| (r.pose, r.value));
+            (
+                rows.len(),
+                bad,
+                Columns::piece(rows, n_theta),
                 (
-                    rows.len(),
-                    bad,
-                    Columns::piece(rows, n_theta),
-                    (
-                        before_table(rows),
-                        cold.then(|| all_columns_normal(rows, n_theta)),
-                    ),
-                )
-            },
-        )?;
+                    before_table(rows),
+                    cold.then(|| all_columns_normal(rows, n_theta)),
+                ),
+            )
+        };
+        let pieces = match source {
+            Source::Evaluated(corr0) => {
+                let none = HashSet::new();
+                pb.map_pieces(Step::Direct, &pb.start, &pb.start, corr0, &none, each)?
+            }
+            Source::Shared(view) => view.map(view.at_start, each),
+        };
         if let Some((pose, value)) = pieces.iter().find_map(|p| p.1) {
             let pose = &pb.campaign.poses[pose];
             return Err(CalibrationError::NonFiniteRow {
@@ -621,6 +675,14 @@ impl StartRows {
             before,
         })
     }
+}
+
+/// Where the rows at the start come from: evaluated with the effects' corrections there, or
+/// read from rows shared with other calibrations.
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    Evaluated(&'a Corrections),
+    Shared(&'a View<'a>),
 }
 
 /// The normal equations of a block of rows in all 29 + `n_theta` columns, unscaled: the
@@ -671,6 +733,7 @@ fn step1(
     plan: &Plan,
     init: State,
     (warm, screen): (bool, bool),
+    shared: Option<&View>,
 ) -> Result<(Step1Fit, Final), CalibrationError> {
     let opts = pb.opts;
     let mut fit = Step1Fit {
@@ -687,6 +750,8 @@ fn step1(
         Keep::Nothing
     };
     let last = loop {
+        // the plan's rows are the rows at a cold start (the start, θ₀, nothing dropped)
+        let first = fit.drop.is_empty() && fit.iterations == 0;
         let lm = Lm {
             problem: pb,
             step: Step::Direct,
@@ -702,11 +767,10 @@ fn step1(
             prior: plan.prior.clone(),
             center: pb.start,
             keep,
-            // the plan's rows are the rows at a cold start (the start, θ₀, nothing dropped)
-            initial: (!warm && fit.drop.is_empty() && fit.iterations == 0)
-                .then(|| plan.normal0.clone())
-                .flatten(),
-            made: Some((&plan.theta0, &plan.corr0)),
+            initial: (!warm && first).then(|| plan.normal0.clone()).flatten(),
+            // the first run at a warm start reads its start from shared rows, if any
+            shared: shared.filter(|_| warm && first),
+            made: shared.is_none().then(|| (plan.theta0.as_slice(), plan.corr0(pb))),
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;
@@ -844,6 +908,7 @@ fn step2<'c>(
         center: pb.start,
         keep: Keep::Nothing,
         initial: None,
+        shared: None,
         made: None,
     };
     let res = lm.run(&fit.state)?;
@@ -866,7 +931,7 @@ fn step2<'c>(
         Step::VirtualQ2,
         &pb.start,
         &pb.start,
-        &plan.corr0,
+        plan.corr0(pb),
         &fit.drop,
     )?;
     Ok(Some(Step2Fit {
