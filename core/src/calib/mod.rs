@@ -384,7 +384,7 @@ fn calibrate_sharing(
         view.as_ref(),
     )?;
     // the corrections at the fit's θ: only a large campaign's leverages and step 2 read them
-    let corr = std::cell::OnceCell::new();
+    let corr = OnceCell::new();
     let corr = || corr.get_or_init(|| effects.corrections(&fit.state.theta));
     let (rows_final, post) = posterior(&pb, &plan, (&fit.state.p, &corr, &fit.drop), last)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
@@ -506,8 +506,8 @@ fn start_theta(
 
 /// What step 1 identifies and how, decided once from the rows at the start parameters.
 struct Plan {
-    /// The effects' corrections at θ₀ (the "before" of the report, and the LM's where it
-    /// evaluates at θ₀).
+    /// θ₀ and the effects' corrections there (the "before" of the report, and the LM's
+    /// where it evaluates at θ₀), made when first read: a plan from shared rows needs none.
     theta0: Vec<f64>,
     corr0: OnceCell<Corrections>,
     /// Geometric parameters of step 1, and the rod-2 parameters wanted from step 2.
@@ -750,7 +750,8 @@ fn step1(
         Keep::Nothing
     };
     let last = loop {
-        // the plan's rows are the rows at a cold start (the start, θ₀, nothing dropped)
+        // the first run starts where the plan's rows (or the shared ones) were evaluated:
+        // the start (cold) or the warm start, θ₀, nothing dropped
         let first = fit.drop.is_empty() && fit.iterations == 0;
         let lm = Lm {
             problem: pb,
