@@ -25,7 +25,7 @@
 
 pub mod sparse;
 
-use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Prior};
+use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Prior, SharedRows};
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::geometry;
@@ -489,7 +489,7 @@ type Tried = Result<(Fitted, Fitted), FitError>;
 
 /// Each effect of `tried` added to the model and fitted, in `tried`'s order, on `threads`
 /// threads (0: every core). Each fit is independent and lands at its own index: the result
-/// does not depend on the number of threads.
+/// does not depend on the number of threads, nor on which thread fitted which candidate.
 fn try_all(
     campaign: &Campaign,
     val: Option<&Validation>,
@@ -499,53 +499,123 @@ fn try_all(
     (threads, screen): (usize, bool),
 ) -> Vec<Tried> {
     let start = Params::nominal();
+    // each candidate's model bound once, here: its size orders the work below
+    let bound: Vec<Result<EffectSet, NotApplicable>> = tried
+        .iter()
+        .map(|e| EffectSet::bind(&with_effect(in_model, *e), campaign, &start))
+        .collect();
     let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let threads = if threads == 0 { cores } else { threads }.clamp(1, tried.len().max(1));
-    if threads == 1 {
-        return tried
-            .iter()
-            .map(|e| try_effect(campaign, val, (in_model, base), *e, (&start, screen), copts))
-            .collect();
-    }
-    // the candidates share the cores: each fit's rows on one thread
-    let copts = &calib::Options {
-        threads: 1,
-        ..copts.clone()
-    };
-    let one = |effect: &dyn Effect| {
-        try_effect(
-            campaign,
-            val,
-            (in_model, base),
-            effect,
-            (&start, screen),
-            copts,
-        )
+    let trials = Trials {
+        campaign,
+        val,
+        in_model,
+        base,
+        start,
+        screen,
+        shared: shared_rows(campaign, (in_model, base), tried, &bound, copts),
+        copts: calib::Options {
+            // the candidates share the cores: each fit's rows on one thread
+            threads: if threads == 1 { copts.threads } else { 1 },
+            ..copts.clone()
+        },
     };
     let mut out: Vec<Option<Tried>> = (0..tried.len()).map(|_| None).collect();
+    let mut queue: Vec<(usize, EffectSet)> = Vec::new();
+    for (i, set) in bound.into_iter().enumerate() {
+        match set {
+            Ok(set) => queue.push((i, set)),
+            Err(e) => out[i] = Some(Err(e.into())),
+        }
+    }
+    // largest first (the setup-local parameters of an instrument's alignment cost more than
+    // all the other candidates together on a campaign of many setups), each thread taking
+    // the next one when it is free: the last to finish is a small one
+    queue.sort_by_key(|(i, set)| (std::cmp::Reverse(set.n_params()), *i));
+    let one = |i: usize, set: EffectSet| trials.try_effect(tried[i], set);
+    for (i, fit) in run_queue(queue, threads, &one) {
+        out[i] = Some(fit);
+    }
+    out.into_iter().flatten().collect()
+}
+
+/// The rows at the start and at the current model's minimum with the effect columns of
+/// every candidate that binds (`bound`), evaluated once for all of them; None where they
+/// cannot be evaluated (each candidate then evaluates its own rows and reports why that
+/// failed).
+fn shared_rows(
+    campaign: &Campaign,
+    (in_model, base): (&[&dyn Effect], &Fit),
+    tried: &[&dyn Effect],
+    bound: &[Result<EffectSet, NotApplicable>],
+    copts: &calib::Options,
+) -> Option<SharedRows> {
+    let start = Params::nominal();
+    let mut union: Vec<&dyn Effect> = in_model.to_vec();
+    union.extend(
+        tried
+            .iter()
+            .zip(bound)
+            .filter(|(_, b)| b.is_ok())
+            .map(|(e, _)| *e),
+    );
+    let set = EffectSet::bind(&union, campaign, &start).ok()?;
+    let theta = warm_theta(&set, base);
+    SharedRows::new(campaign, &start, copts, &set, (&base.params, &theta)).ok()
+}
+
+/// What every candidate of a round shares.
+struct Trials<'a> {
+    campaign: &'a Campaign,
+    val: Option<&'a Validation<'a>>,
+    in_model: &'a [&'a dyn Effect],
+    /// The current model's fit: where each candidate starts, and what it is tested against.
+    base: &'a Fit,
+    start: Params,
+    /// Whether candidates are screened first ([`Options::screen`]).
+    screen: bool,
+    copts: calib::Options,
+    /// The rows at the start and at the current model's minimum ([`shared_rows`]).
+    shared: Option<SharedRows>,
+}
+
+/// `in_model` and `effect`: a candidate's model.
+fn with_effect<'a>(in_model: &[&'a dyn Effect], effect: &'a dyn Effect) -> Vec<&'a dyn Effect> {
+    let mut with = in_model.to_vec();
+    with.push(effect);
+    with
+}
+
+/// `one` applied to every (index, set) of `queue`, in order, on `threads` threads that each
+/// take the next entry when free; the results with their indexes, in no particular order.
+fn run_queue<T: Send>(
+    queue: Vec<(usize, EffectSet)>,
+    threads: usize,
+    one: &(impl Fn(usize, EffectSet) -> T + Sync),
+) -> Vec<(usize, T)> {
+    if threads <= 1 {
+        return queue.into_iter().map(|(i, set)| (i, one(i, set))).collect();
+    }
+    let queue = std::sync::Mutex::new(queue.into_iter());
+    // a poisoned lock is a panic in another worker, which the join below passes on
+    let next = || queue.lock().ok().and_then(|mut q| q.next());
     std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads)
-            .map(|t| {
-                let one = &one;
+            .map(|_| {
+                let next = &next;
                 scope.spawn(move || {
-                    (t..tried.len())
-                        .step_by(threads)
-                        .map(|i| (i, one(tried[i])))
+                    std::iter::from_fn(next)
+                        .map(|(i, set)| (i, one(i, set)))
                         .collect::<Vec<_>>()
                 })
             })
             .collect();
-        for worker in workers {
+        workers
+            .into_iter()
             // a panic in a fit is a bug: it goes on in this thread
-            let fits = worker
-                .join()
-                .unwrap_or_else(|p| std::panic::resume_unwind(p));
-            for (i, fit) in fits {
-                out[i] = Some(fit);
-            }
-        }
-    });
-    out.into_iter().flatten().collect()
+            .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect()
+    })
 }
 
 /// Compare every tried effect's fit with `base`.
@@ -685,63 +755,65 @@ fn noise_map(groups: &[GroupNoise]) -> BTreeMap<String, NoiseReport> {
 /// moves the χ² within 1e-3 relative of the converged value on the twin's campaigns.
 pub const SCREEN_P: f64 = 0.05;
 
-/// Fit `effect` added to the model: the whole family, and the parts the data support. First
-/// one LM step from the current model's minimum (the candidate's own parameters at zero,
-/// nearly Gauss-Newton's step: the score test of the effect, linearised where the current
-/// model ended); a candidate that is then far from significance ([`SCREEN_P`]) keeps that
-/// fit, any other is fitted to convergence.
-fn try_effect(
-    campaign: &Campaign,
-    val: Option<&Validation>,
-    (in_model, base): (&[&dyn Effect], &Fit),
-    effect: &dyn Effect,
-    (start, screen): (&Params, bool),
-    copts: &calib::Options,
-) -> Result<(Fitted, Fitted), FitError> {
-    let mut with: Vec<&dyn Effect> = in_model.to_vec();
-    with.push(effect);
-    let mut set = EffectSet::bind(&with, campaign, start)?;
-    // the candidate starts where the current model ended, its own parameters at zero
-    let theta = warm_theta(&set, base);
-    let warm = |screen| {
-        Some(calib::WarmStart {
-            params: &base.params,
+impl Trials<'_> {
+    /// Fit `effect` added to the model (`set`: the model with it, bound): the whole family,
+    /// and the parts the data support. First one LM step from the current model's minimum
+    /// (the candidate's own parameters at zero, nearly Gauss-Newton's step: the score test of
+    /// the effect, linearised where the current model ended); a candidate that is then far
+    /// from significance ([`SCREEN_P`]) keeps that fit, any other is fitted to convergence.
+    fn try_effect(&self, effect: &dyn Effect, mut set: EffectSet) -> Tried {
+        let (val, base, copts) = (self.val, self.base, &self.copts);
+        let with = with_effect(self.in_model, effect);
+        // the screening step; where the rows did not confirm it, this is the converged fit
+        let cal = self.fit(&set, self.screen)?;
+        let cal = if cal.screened {
+            let screened = finish_with(val, &with, &set, cal, copts)?;
+            if screen_p_value(base, &screened.fit) > SCREEN_P {
+                let kept = Fitted {
+                    rows: screened.rows.clone(),
+                    fit: screened.fit.clone(),
+                };
+                return Ok((screened, kept));
+            }
+            // a contender: fitted to convergence from the current model, as without the
+            // screen
+            self.fit(&set, false)?
+        } else {
+            cal
+        };
+        // parts of the family the data do not support: held at zero in the kept variant
+        let weak = weak_parts(&cal, &set, effect.name());
+        let full = finish_with(val, &with, &set, cal, copts)?;
+        if weak.is_empty() {
+            let kept = Fitted {
+                rows: full.rows.clone(),
+                fit: full.fit.clone(),
+            };
+            return Ok((full, kept));
+        }
+        for k in weak {
+            set.hold(k);
+        }
+        let cal = self.fit(&set, false)?;
+        let kept = finish_with(val, &with, &set, cal, copts)?;
+        Ok((full, kept))
+    }
+
+    /// The model `set` calibrated from the current model's minimum, its own parameters at
+    /// zero (`screen`: [`calib::WarmStart::screen`]).
+    fn fit(&self, set: &EffectSet, screen: bool) -> Result<Calibration, CalibrationError> {
+        let (campaign, start, copts) = (self.campaign, &self.start, &self.copts);
+        let theta = warm_theta(set, self.base);
+        let warm = calib::WarmStart {
+            params: &self.base.params,
             theta: &theta,
             screen,
-        })
-    };
-    // the screening step; where the rows did not confirm it, this is the converged fit
-    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm(screen))?;
-    let cal = if cal.screened {
-        let screened = finish_with(val, &with, &set, cal, copts)?;
-        if screen_p_value(base, &screened.fit) > SCREEN_P {
-            let kept = Fitted {
-                rows: screened.rows.clone(),
-                fit: screened.fit.clone(),
-            };
-            return Ok((screened, kept));
-        }
-        // a contender: fitted to convergence from the current model, as without the screen
-        calib::calibrate_from(campaign, start, copts, &set, &[], warm(false))?
-    } else {
-        cal
-    };
-    // parts of the family the data do not support: held at zero in the kept variant
-    let weak = weak_parts(&cal, &set, effect.name());
-    let full = finish_with(val, &with, &set, cal, copts)?;
-    if weak.is_empty() {
-        let kept = Fitted {
-            rows: full.rows.clone(),
-            fit: full.fit.clone(),
         };
-        return Ok((full, kept));
+        match &self.shared {
+            Some(shared) => calib::calibrate_shared(campaign, start, copts, set, warm, shared),
+            None => calib::calibrate_from(campaign, start, copts, set, &[], Some(warm)),
+        }
     }
-    for k in weak {
-        set.hold(k);
-    }
-    let cal = calib::calibrate_from(campaign, start, copts, &set, &[], warm(false))?;
-    let kept = finish_with(val, &with, &set, cal, copts)?;
-    Ok((full, kept))
 }
 
 /// The nested F-test's p-value of a screening fit against the current model (1 when the

@@ -39,7 +39,9 @@ pub const SCREEN_RHO: f64 = 0.02;
 pub const SCREEN_TAU: f64 = 1e-15;
 
 use super::rows::{weighted_values, Key, Problem};
+use super::shared::View;
 use super::CalibrationError;
+use crate::effects::Corrections;
 use crate::obs::{PoseError, Residual, RowValue, Step};
 use crate::params::{Params, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
@@ -85,6 +87,13 @@ pub(super) struct Lm<'a> {
     /// the caller has them from rows it already evaluated there (the plan's, at a cold
     /// start): the LM then starts without evaluating the rows.
     pub initial: Option<Normal>,
+    /// The rows at the start read from rows shared with other calibrations (their
+    /// `at_warm`), where the start is a warm one they were evaluated at.
+    pub shared: Option<&'a View<'a>>,
+    /// The effects' corrections already made at some θ (the plan's, at θ₀): an evaluation
+    /// there takes them instead of making them again (a warm start at θ₀, every candidate
+    /// of a diagnosis: an instrument's alignment of 50 setups makes 15 MB of them).
+    pub made: Option<(&'a [f64], &'a Corrections)>,
 }
 
 /// What an evaluation of the LM keeps of its rows besides their normal equations, so that
@@ -147,6 +156,12 @@ impl Normal {
         self.g += &other.g;
         self.cost += other.cost;
     }
+}
+
+/// Whether `a` and `b` are the same numbers to the bit (corrections made at one are those
+/// of the other).
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 /// JᵀJ of a block's columns (m × n, stored by column): each entry the dot product of two
@@ -297,9 +312,19 @@ impl Lm<'_> {
     /// unscaled unknowns (the posterior's information as it is), without the prior.
     fn evaluate(&self, x: &State, keep: Keep) -> Result<(Normal, Vec<Piece>), PoseError> {
         let pb = self.problem;
-        let corr = pb.effects.corrections(&x.theta);
+        let made = self
+            .made
+            .filter(|(theta, _)| same_bits(theta, &x.theta))
+            .map(|(_, corr)| corr);
+        let own;
+        let corr = if let Some(corr) = made {
+            corr
+        } else {
+            own = pb.effects.corrections(&x.theta);
+            &own
+        };
         let terms = self.column_terms();
-        let parts = pb.map_pieces(self.step, &x.p, &self.p_cal, &corr, self.drop, |rows| {
+        let parts = pb.map_pieces(self.step, &x.p, &self.p_cal, corr, self.drop, |rows| {
             self.piece(rows, &terms, keep)
         })?;
         let mut total = Normal::zeros(self.n_unknowns());
@@ -313,13 +338,31 @@ impl Lm<'_> {
     /// (p − centre)/tolerance; with what [`Keep`] asks of the rows.
     fn normal_at(&self, x: &State, keep: Keep) -> Result<Evaluated, PoseError> {
         let (total, parts) = self.evaluate(x, keep)?;
-        let kept = (keep != Keep::Nothing).then(|| Kept::new(&total, parts, keep));
-        let mut total = self.scaled(&total);
-        self.add_prior(&mut total, x);
-        Ok(Evaluated {
-            normal: total,
+        Ok(self.evaluated(x, &total, parts, keep))
+    }
+
+    /// The normal equations at `x` of the shared rows (`view`'s `at_warm`): what
+    /// [`Lm::normal_at`] makes of the same rows evaluated.
+    fn normal_shared(&self, view: &View, x: &State, keep: Keep) -> Evaluated {
+        let terms = self.column_terms();
+        let parts = view.map(view.at_warm, |rows| self.piece(rows, &terms, keep));
+        let mut total = Normal::zeros(self.n_unknowns());
+        for part in &parts {
+            total.add(&part.normal);
+        }
+        self.evaluated(x, &total, parts, keep)
+    }
+
+    /// Unscaled normal equations `total` at `x` and their `parts` as the LM uses them:
+    /// scaled, the prior added, what [`Keep`] asks of the rows kept.
+    fn evaluated(&self, x: &State, total: &Normal, parts: Vec<Piece>, keep: Keep) -> Evaluated {
+        let kept = (keep != Keep::Nothing).then(|| Kept::new(total, parts, keep));
+        let mut scaled = self.scaled(total);
+        self.add_prior(&mut scaled, x);
+        Evaluated {
+            normal: scaled,
             kept,
-        })
+        }
     }
 
     /// Normal equations in the unscaled unknowns (`u`) in the scaled ones: H A H, H g.
@@ -381,15 +424,17 @@ impl Lm<'_> {
             .fold(0.0, f64::max)
     }
 
-    /// The normal equations at the start: the caller's ([`Lm::initial`]) or evaluated.
+    /// The normal equations at the start: the caller's ([`Lm::initial`]), from shared rows
+    /// ([`Lm::shared`]) or evaluated.
     fn start_at(&self, start: &State) -> Result<Evaluated, PoseError> {
-        match &self.initial {
-            Some(n) => {
+        match (&self.initial, self.shared) {
+            (Some(n), _) => {
                 let mut normal = self.scaled(n);
                 self.add_prior(&mut normal, start);
                 Ok(Evaluated { normal, kept: None })
             }
-            None => self.normal_at(start, self.keep),
+            (None, Some(view)) => Ok(self.normal_shared(view, start, self.keep)),
+            (None, None) => self.normal_at(start, self.keep),
         }
     }
 

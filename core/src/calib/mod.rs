@@ -8,10 +8,12 @@ pub mod online;
 mod report;
 mod rows;
 mod select;
+mod shared;
 mod uncertainty;
 
 pub use report::{gain, rms};
 pub use select::{MIN_EFFECT_OBSERVABILITY, MIN_EFFECT_SIGNAL};
+pub use shared::SharedRows;
 
 use crate::campaign::Campaign;
 use crate::effects::{Corrections, EffectSet};
@@ -23,6 +25,8 @@ use lm::{Final, Keep, Lm, Normal, State};
 use nalgebra::{DMatrix, DVector, SMatrix};
 use rows::{dependency, reduced_jacobian, Columns, Key, Problem};
 use select::{auto_select, effect_observability, prior_of, scaling_vector, select_geometric};
+use shared::View;
+use std::cell::OnceCell;
 use std::collections::HashSet;
 use uncertainty::{posterior, step2_covariance, Posterior, KEEP_JACOBIAN_POSES};
 
@@ -332,9 +336,36 @@ pub fn calibrate_from(
     theta0: &[f64],
     warm: Option<WarmStart>,
 ) -> Result<Calibration, CalibrationError> {
+    calibrate_sharing(campaign, start, opts, effects, theta0, warm, None)
+}
+
+/// [`calibrate_from`] from θ₀ = 0 and the warm start `warm`, its rows at those two points
+/// read from `shared` where they are there ([`SharedRows`]; where they are not, it
+/// evaluates them). The same calibration to the bit.
+pub fn calibrate_shared(
+    campaign: &Campaign,
+    start: &Params,
+    opts: &Options,
+    effects: &EffectSet,
+    warm: WarmStart,
+    shared: &SharedRows,
+) -> Result<Calibration, CalibrationError> {
+    calibrate_sharing(campaign, start, opts, effects, &[], Some(warm), Some(shared))
+}
+
+/// [`calibrate_from`], with the rows at the start and the warm start from `shared` where
+/// they are there.
+fn calibrate_sharing(
+    campaign: &Campaign,
+    start: &Params,
+    opts: &Options,
+    effects: &EffectSet,
+    theta0: &[f64],
+    warm: Option<WarmStart>,
+    shared: Option<&SharedRows>,
+) -> Result<Calibration, CalibrationError> {
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
-    let mut plan = Plan::new(&pb, &theta0, warm.is_none())?;
     let init = match warm {
         Some(w) => State {
             p: *w.params,
@@ -345,13 +376,22 @@ pub fn calibrate_from(
             theta: theta0.clone(),
         },
     };
+    // rows shared with other calibrations serve a warm start only (a cold one starts from
+    // the plan's)
+    let view = shared
+        .filter(|_| warm.is_some())
+        .and_then(|s| s.view(&pb, &theta0, &init));
+    let mut plan = Plan::new(&pb, &theta0, warm.is_none(), view.as_ref())?;
     let (fit, last) = step1(
         &pb,
         &plan,
         init,
         (warm.is_some(), warm.is_some_and(|w| w.screen)),
+        view.as_ref(),
     )?;
-    let corr = effects.corrections(&fit.state.theta);
+    // the corrections at the fit's θ: only a large campaign's leverages and step 2 read them
+    let corr = OnceCell::new();
+    let corr = || corr.get_or_init(|| effects.corrections(&fit.state.theta));
     let (rows_final, post) = posterior(&pb, &plan, (&fit.state.p, &corr, &fit.drop), last)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
     let chi2: f64 = rows_final.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
@@ -367,7 +407,7 @@ pub fn calibrate_from(
             Step::Direct,
             start,
             start,
-            &plan.corr0,
+            plan.corr0(&pb),
             &fit.drop,
             before_table,
         )?
@@ -478,8 +518,10 @@ fn start_theta(
 
 /// What step 1 identifies and how, decided once from the rows at the start parameters.
 struct Plan {
-    /// The effects' corrections at θ₀ (the "before" of the report).
-    corr0: Corrections,
+    /// θ₀ and the effects' corrections there (the "before" of the report, and the LM's
+    /// where it evaluates at θ₀), made when first read: a plan from shared rows needs none.
+    theta0: Vec<f64>,
+    corr0: OnceCell<Corrections>,
     /// Geometric parameters of step 1, and the rod-2 parameters wanted from step 2.
     ids: Vec<usize>,
     step2_wanted: Vec<usize>,
@@ -504,10 +546,26 @@ struct Plan {
 }
 
 impl Plan {
-    fn new(pb: &Problem, theta0: &[f64], cold: bool) -> Result<Plan, CalibrationError> {
+    /// The effects' corrections at θ₀, made the first time they are read.
+    fn corr0(&self, pb: &Problem) -> &Corrections {
+        self.corr0
+            .get_or_init(|| pb.effects.corrections(&self.theta0))
+    }
+
+    fn new(
+        pb: &Problem,
+        theta0: &[f64],
+        cold: bool,
+        shared: Option<&View>,
+    ) -> Result<Plan, CalibrationError> {
         let opts = pb.opts;
-        let corr0 = pb.effects.corrections(theta0);
-        let start = StartRows::of(pb, &corr0, cold)?;
+        let corr0 = OnceCell::new();
+        let source = if let Some(view) = shared {
+            Source::Shared(view)
+        } else {
+            Source::Evaluated(corr0.get_or_init(|| pb.effects.corrections(theta0)))
+        };
+        let start = StartRows::of(pb, source, cold)?;
         let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();
         let (ids, step2_wanted) = select_geometric(pb.campaign, &start.columns, opts, &linked)?;
         let prior = prior_of(&opts.selection, &ids);
@@ -538,6 +596,7 @@ impl Plan {
             .map(|all| reduced_normal(all, &ids, &opts.links, &free_theta));
         Ok(Plan {
             normal0,
+            theta0: theta0.to_vec(),
             corr0,
             h: scaling_vector(&jr0, &ids, opts.scaling)?,
             condition: condition_number(&normalize_columns(&jr0)),
@@ -574,31 +633,31 @@ fn before_table(rows: &[Residual]) -> report::RmsTable {
 }
 
 impl StartRows {
-    fn of(pb: &Problem, corr0: &Corrections, cold: bool) -> Result<StartRows, CalibrationError> {
+    fn of(pb: &Problem, source: Source, cold: bool) -> Result<StartRows, CalibrationError> {
         let n_theta = pb.effects.n_params();
-        let pieces = pb.map_pieces(
-            Step::Direct,
-            &pb.start,
-            &pb.start,
-            corr0,
-            &HashSet::new(),
-            |rows| {
-                // a row whose squared weighted value overflows makes the cost infinite
-                let bad = rows
-                    .iter()
-                    .find(|r| !(r.value / r.sigma).powi(2).is_finite())
-                    .map(|r| (r.pose, r.value));
+        let each = |rows: &[Residual]| {
+            // a row whose squared weighted value overflows makes the cost infinite
+            let bad = rows
+                .iter()
+                .find(|r| !(r.value / r.sigma).powi(2).is_finite())
+                .map(|r| (r.pose, r.value));
+            (
+                rows.len(),
+                bad,
+                Columns::piece(rows, n_theta),
                 (
-                    rows.len(),
-                    bad,
-                    Columns::piece(rows, n_theta),
-                    (
-                        before_table(rows),
-                        cold.then(|| all_columns_normal(rows, n_theta)),
-                    ),
-                )
-            },
-        )?;
+                    before_table(rows),
+                    cold.then(|| all_columns_normal(rows, n_theta)),
+                ),
+            )
+        };
+        let pieces = match source {
+            Source::Evaluated(corr0) => {
+                let none = HashSet::new();
+                pb.map_pieces(Step::Direct, &pb.start, &pb.start, corr0, &none, each)?
+            }
+            Source::Shared(view) => view.map(view.at_start, each),
+        };
         if let Some((pose, value)) = pieces.iter().find_map(|p| p.1) {
             let pose = &pb.campaign.poses[pose];
             return Err(CalibrationError::NonFiniteRow {
@@ -628,6 +687,14 @@ impl StartRows {
             before,
         })
     }
+}
+
+/// Where the rows at the start come from: evaluated with the effects' corrections there, or
+/// read from rows shared with other calibrations.
+#[derive(Clone, Copy)]
+enum Source<'a> {
+    Evaluated(&'a Corrections),
+    Shared(&'a View<'a>),
 }
 
 /// The normal equations of a block of rows in all 29 + `n_theta` columns, unscaled: the
@@ -678,6 +745,7 @@ fn step1(
     plan: &Plan,
     init: State,
     (warm, screen): (bool, bool),
+    shared: Option<&View>,
 ) -> Result<(Step1Fit, Final), CalibrationError> {
     let opts = pb.opts;
     let mut fit = Step1Fit {
@@ -694,6 +762,9 @@ fn step1(
         Keep::Nothing
     };
     let last = loop {
+        // the first run starts where the plan's rows (or the shared ones) were evaluated:
+        // the start (cold) or the warm start, θ₀, nothing dropped
+        let first = fit.drop.is_empty() && fit.iterations == 0;
         let lm = Lm {
             problem: pb,
             step: Step::Direct,
@@ -709,10 +780,10 @@ fn step1(
             prior: plan.prior.clone(),
             center: pb.start,
             keep,
-            // the plan's rows are the rows at a cold start (the start, θ₀, nothing dropped)
-            initial: (!warm && fit.drop.is_empty() && fit.iterations == 0)
-                .then(|| plan.normal0.clone())
-                .flatten(),
+            initial: (!warm && first).then(|| plan.normal0.clone()).flatten(),
+            // the first run at a warm start reads its start from shared rows, if any
+            shared: shared.filter(|_| warm && first),
+            made: shared.is_none().then(|| (plan.theta0.as_slice(), plan.corr0(pb))),
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;
@@ -826,16 +897,17 @@ impl Step2Fit {
 /// Step 2: rod 2 from virtual measurements of the forward instruments (eq. 4.32), made with
 /// step 1's parameters; None when the campaign has no forward instrument or nothing to
 /// identify there.
-fn step2(
+fn step2<'c>(
     pb: &Problem,
     plan: &Plan,
     fit: &Step1Fit,
-    corr: &Corrections,
+    corr: &dyn Fn() -> &'c Corrections,
     cov_p1: &DMatrix<f64>,
 ) -> Result<Option<Step2Fit>, CalibrationError> {
     if plan.step2_wanted.is_empty() {
         return Ok(None);
     }
+    let corr = corr();
     let opts = pb.opts;
     let p1 = fit.state.p;
     // the virtual q2 rows at p, their virtual measurements made with step 1's p1
@@ -872,6 +944,8 @@ fn step2(
         center: pb.start,
         keep: Keep::Nothing,
         initial: None,
+        shared: None,
+        made: None,
     };
     let res = lm.run(&fit.state)?;
     let p = res.state.p;
@@ -893,7 +967,7 @@ fn step2(
         Step::VirtualQ2,
         &pb.start,
         &pb.start,
-        &plan.corr0,
+        plan.corr0(pb),
         &fit.drop,
     )?;
     Ok(Some(Step2Fit {

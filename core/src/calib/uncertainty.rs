@@ -53,11 +53,12 @@ fn block_jacobian(
 
 /// The final rows of step 1 at `p` (their values) and what they tell about the plan's
 /// unknowns: the LM's last evaluation there (`last`: values and information); the leverages
-/// from its kept Jacobians or, for a large campaign, one more pass over the rows.
-pub(super) fn posterior(
+/// from its kept Jacobians or, for a large campaign, one more pass over the rows (the
+/// effects' corrections at `p` then, from `corr`: made only where needed).
+pub(super) fn posterior<'c>(
     pb: &Problem,
     plan: &Plan,
-    (p, corr, drop): (&Params, &Corrections, &HashSet<Key>),
+    (p, corr, drop): (&Params, &dyn Fn() -> &'c Corrections, &HashSet<Key>),
     last: Final,
 ) -> Result<(Vec<RowValue>, Posterior), CalibrationError> {
     let (ids, links, free, prior) = (&plan.ids, &pb.opts.links, &plan.free_theta, &plan.prior);
@@ -74,7 +75,7 @@ pub(super) fn posterior(
     let leverage = match last.jacobians {
         Some(pieces) => pieces.iter().flat_map(|jr| leverage_of(jr, &inv)).collect(),
         None => pb
-            .map_pieces(Step::Direct, p, &pb.start, corr, drop, |rows| {
+            .map_pieces(Step::Direct, p, &pb.start, corr(), drop, |rows| {
                 leverage_of(&block_jacobian(rows, ids, links, free), &inv)
             })?
             .concat(),
