@@ -437,7 +437,7 @@ fn secant_from<E>(
 /// sin and cos of ψ from those of a nearby ψa (`anchor`): ψa's rotated by d = ψ − ψa, whose
 /// sine and cosine are their series to d⁵ and d⁶ (the next terms below 1e-24 for |d| ≤
 /// [`WARM_PSI_RAD`], far under an ulp); `sin_cos` where ψ is farther.
-fn near((psi_a, (sa, ca)): (f64, (f64, f64)), psi: f64) -> (f64, f64) {
+pub(crate) fn near((psi_a, (sa, ca)): (f64, (f64, f64)), psi: f64) -> (f64, f64) {
     let d = psi - psi_a;
     if !(d.abs() <= WARM_PSI_RAD) {
         return psi.sin_cos();

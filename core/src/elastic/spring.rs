@@ -13,7 +13,7 @@
 //! quadratically from the rigid forward model of a pair of active drives.
 
 use super::plausibility::{self, wrap_angle, Limits, Reason, RigidPose, Violation};
-use crate::geometry::{self, frames, Frames, Subsystem};
+use crate::geometry::{self, frames, near, Frames, Subsystem};
 use crate::params::{Guide, Model, Params, N_PARAMS, RODS};
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
@@ -268,13 +268,14 @@ fn rod_terms<const M: usize>(st: &RodState, ki: f64, g: &mut V7, h: &mut M7) {
 /// too, which keeps the matrix symmetric for the Newton step (valid because the solver keeps
 /// s_j = q_j exactly, so those components of the step are 0); the sensitivities need the
 /// unsymmetric form. Inlined: its 7 × 7 result was copied out on every Newton iteration.
+/// `sc`: sin and cos of ψ = z[2].
 #[inline]
 fn system(
     p: &Params,
     fr: &Frames,
     k: &Stiffness,
     (q, fol): (&[f64; 4], Followers),
-    z: &V7,
+    (z, sc): (&V7, (f64, f64)),
     symmetric: bool,
     (g, h): (&mut V7, &mut M7),
 ) -> bool {
@@ -283,7 +284,6 @@ fn system(
     *g = V7::zeros();
     *h = M7::zeros();
     let mut ok = true;
-    let sc = z[2].sin_cos();
     // drives whose row (and, symmetric, column) the constraint s_j − q_j = 0 replaces
     let fixed = |j: usize| !fol[j] && k.carrier[j].is_none();
     for i in 0..5 {
@@ -552,6 +552,9 @@ fn newton(
     }
     let mut last_step = f64::INFINITY;
     let mut gnorm = f64::INFINITY;
+    // ψ's sine and cosine once: the iterates' (a warm solve moves ψ by 1e-5 rad) rotate them
+    // (three sin_cos per solve were a tenth of the checked warm fegm)
+    let anchor = (z[2], z[2].sin_cos());
     // the system's buffers, filled in place by every iteration
     let (mut g, mut h) = (V7::zeros(), M7::zeros());
     // the unknowns Newton moves: pose, followers' and compliant carriers
@@ -565,7 +568,8 @@ fn newton(
         n_free += 1;
     }
     for it in 0..MAX_ITER {
-        if !system(p, fr, k, (&q, followers), &z, true, (&mut g, &mut h)) {
+        let sc = near(anchor, z[2]);
+        if !system(p, fr, k, (&q, followers), (&z, sc), true, (&mut g, &mut h)) {
             return Err(ElasticError::Degenerate);
         }
         gnorm = g.amax();
@@ -588,7 +592,14 @@ fn newton(
             return Err(ElasticError::NonFinite);
         }
         if stop(last_step, previous) {
-            return Ok(finish(p, fr, k, followers, &z, it + 1));
+            return Ok(finish(
+                p,
+                fr,
+                k,
+                followers,
+                (&z, near(anchor, z[2])),
+                it + 1,
+            ));
         }
     }
     Err(ElasticError::NotConverged {
@@ -665,19 +676,19 @@ fn ldl_step<const N: usize>(h: &M7, g: &V7, free: &[usize]) -> Option<V7> {
     Some(step)
 }
 
+/// The equilibrium at z (`sc`: sin and cos of ψ = z[2]) with its forces, the rods' lengths
+/// and the platform's balance, in one pass over the rods.
 fn finish(
     p: &Params,
     fr: &Frames,
     k: &Stiffness,
     fol: Followers,
-    z: &V7,
+    (z, sc): (&V7, (f64, f64)),
     iterations: usize,
 ) -> Solved {
     let mut rod_force = [0.0; 5];
     let mut drive_force = [0.0; 4];
     let (mut lengths, mut balance) = ([0.0; 5], [0.0; 3]);
-    // ψ's trigonometry once for the five rods
-    let sc = z[2].sin_cos();
     for (i, f) in rod_force.iter_mut().enumerate() {
         let st = rod_state_with(p, fr, sc, i, z);
         *f = k.rod[i] * st.delta;
@@ -838,7 +849,7 @@ pub fn sensitivity(
         &frames(p),
         k,
         (&q, followers),
-        &z,
+        (&z, z[2].sin_cos()),
         false,
         (&mut g, &mut h),
     );
@@ -919,7 +930,7 @@ mod tests {
                             &fr,
                             &k,
                             (&q, [true; 4]),
-                            &z,
+                            (&z, z[2].sin_cos()),
                             true,
                             (&mut g1, &mut h1)
                         ));
@@ -933,7 +944,15 @@ mod tests {
                             zq[3 + j] = q[j];
                         }
                         let (mut g, mut h) = (V7::zeros(), M7::zeros());
-                        system(&p, &fr, &k, (&q, fol), &zq, true, (&mut g, &mut h));
+                        system(
+                            &p,
+                            &fr,
+                            &k,
+                            (&q, fol),
+                            (&zq, zq[2].sin_cos()),
+                            true,
+                            (&mut g, &mut h),
+                        );
                         // the symmetric system: the dense terms with the rigid drives' rows
                         // and columns replaced by their constraints
                         let (mut gd, mut hd) = dense_rod_terms(&p, &fr, &k, &zq);
