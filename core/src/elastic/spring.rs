@@ -552,8 +552,8 @@ fn newton(
     }
     let mut last_step = f64::INFINITY;
     let mut gnorm = f64::INFINITY;
-    // ψ's sine and cosine once: the iterates' (a warm solve moves ψ by 1e-5 rad) rotate them
-    // (three sin_cos per solve were a tenth of the checked warm fegm)
+    // ψ's sine and cosine once, rotated for the iterates (`near`, sin_cos again beyond 1 mrad
+    // from the start): three sin_cos per solve were a tenth of the checked warm fegm
     let anchor = (z[2], z[2].sin_cos());
     // the system's buffers, filled in place by every iteration
     let (mut g, mut h) = (V7::zeros(), M7::zeros());
