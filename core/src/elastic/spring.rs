@@ -13,7 +13,7 @@
 //! quadratically from the rigid forward model of a pair of active drives.
 
 use super::plausibility::{self, wrap_angle, Limits, Reason, RigidPose, Violation};
-use crate::geometry::{self, frames, Frames, Subsystem};
+use crate::geometry::{self, frames, near, Frames, Subsystem};
 use crate::params::{Guide, Model, Params, N_PARAMS, RODS};
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
 
@@ -234,8 +234,10 @@ fn dr_dz(st: &RodState) -> SMatrix<f64, 2, 7> {
 /// unknowns only (x, y, ψ, its carrier), so they are assembled on those: with d = ∂ρ/∂z = Jᵀu
 /// and J = ∂r/∂z, k·d·dᵀ + (T/ρ)·Jᵀ(I − u·uᵀ)J = (k − T/ρ)·d·dᵀ + (T/ρ)·JᵀJ, a 4 × 4 block of
 /// dot products instead of the dense 7 × 7 products (which cost most of a warm solve).
+/// `M` = 4 assembles all four; `M` = 3 the pose's only, for a carrier whose row and column
+/// the symmetric system replaces by its drive's constraint (see [`system`]): 6 entries of 10.
 #[inline]
-fn rod_terms(st: &RodState, ki: f64, g: &mut V7, h: &mut M7) {
+fn rod_terms<const M: usize>(st: &RodState, ki: f64, g: &mut V7, h: &mut M7) {
     let t = ki * st.delta;
     let idx = [0, 1, 2, 3 + st.carrier];
     // columns of J: ∂r/∂x, ∂r/∂y, ∂r/∂ψ = perp(arm), ∂r/∂s = −e
@@ -247,9 +249,9 @@ fn rod_terms(st: &RodState, ki: f64, g: &mut V7, h: &mut M7) {
     ];
     let d = jc.map(|c| st.u.dot(&c));
     let (tr, kk) = (t / st.rho, ki - t / st.rho);
-    for a in 0..4 {
+    for a in 0..M {
         g[idx[a]] += d[a] * t;
-        for b in a..4 {
+        for b in a..M {
             let v = kk * d[a] * d[b] + tr * jc[a].dot(&jc[b]);
             h[(idx[a], idx[b])] += v;
             if a != b {
@@ -266,13 +268,14 @@ fn rod_terms(st: &RodState, ki: f64, g: &mut V7, h: &mut M7) {
 /// too, which keeps the matrix symmetric for the Newton step (valid because the solver keeps
 /// s_j = q_j exactly, so those components of the step are 0); the sensitivities need the
 /// unsymmetric form. Inlined: its 7 × 7 result was copied out on every Newton iteration.
+/// `sc`: sin and cos of ψ = z[2].
 #[inline]
 fn system(
     p: &Params,
     fr: &Frames,
     k: &Stiffness,
     (q, fol): (&[f64; 4], Followers),
-    z: &V7,
+    (z, sc): (&V7, (f64, f64)),
     symmetric: bool,
     (g, h): (&mut V7, &mut M7),
 ) -> bool {
@@ -281,14 +284,19 @@ fn system(
     *g = V7::zeros();
     *h = M7::zeros();
     let mut ok = true;
-    let sc = z[2].sin_cos();
+    // drives whose row (and, symmetric, column) the constraint s_j − q_j = 0 replaces
+    let fixed = |j: usize| !fol[j] && k.carrier[j].is_none();
     for i in 0..5 {
         let st = rod_state_with(p, fr, sc, i, z);
         if !(st.rho > 1e-9) {
             ok = false;
             continue;
         }
-        rod_terms(&st, k.rod[i], g, h);
+        if symmetric && fixed(st.carrier) {
+            rod_terms::<3>(&st, k.rod[i], g, h);
+        } else {
+            rod_terms::<4>(&st, k.rod[i], g, h);
+        }
     }
     for j in 0..4 {
         if fol[j] {
@@ -300,10 +308,11 @@ fn system(
             h[(v, v)] += c;
         } else {
             g[v] = z[v] - q[j];
-            for col in 0..7 {
-                h[(v, col)] = 0.0;
-                if symmetric {
-                    h[(col, v)] = 0.0;
+            // symmetric, the rods left this row and column out (rod_terms::<3>); else the
+            // row is the constraint's and the columns keep the rods' terms
+            if !symmetric {
+                for col in 0..7 {
+                    h[(v, col)] = 0.0;
                 }
             }
             h[(v, v)] = 1.0;
@@ -543,6 +552,9 @@ fn newton(
     }
     let mut last_step = f64::INFINITY;
     let mut gnorm = f64::INFINITY;
+    // ψ's sine and cosine once, rotated for the iterates (`near`, sin_cos again beyond 1 mrad
+    // from the start): three sin_cos per solve were a tenth of the checked warm fegm
+    let anchor = (z[2], z[2].sin_cos());
     // the system's buffers, filled in place by every iteration
     let (mut g, mut h) = (V7::zeros(), M7::zeros());
     // the unknowns Newton moves: pose, followers' and compliant carriers
@@ -556,7 +568,8 @@ fn newton(
         n_free += 1;
     }
     for it in 0..MAX_ITER {
-        if !system(p, fr, k, (&q, followers), &z, true, (&mut g, &mut h)) {
+        let sc = near(anchor, z[2]);
+        if !system(p, fr, k, (&q, followers), (&z, sc), true, (&mut g, &mut h)) {
             return Err(ElasticError::Degenerate);
         }
         gnorm = g.amax();
@@ -579,7 +592,14 @@ fn newton(
             return Err(ElasticError::NonFinite);
         }
         if stop(last_step, previous) {
-            return Ok(finish(p, fr, k, followers, &z, it + 1));
+            return Ok(finish(
+                p,
+                fr,
+                k,
+                followers,
+                (&z, near(anchor, z[2])),
+                it + 1,
+            ));
         }
     }
     Err(ElasticError::NotConverged {
@@ -596,56 +616,79 @@ fn newton(
 /// more than the rest of the iteration). None where H is not positive definite on them: the
 /// caller then takes the LU of the whole matrix, as before.
 fn spd_step(h: &M7, g: &V7, free: &[usize]) -> Option<V7> {
+    // the pose is always free: 3 to 7 unknowns, each count its own factorisation with the
+    // size known at compile time (unrolled, no bounds checks: with the count a run-time
+    // value, the loops over 3 unknowns cost as much as the rest of a Newton iteration)
+    match free.len() {
+        3 => ldl_step::<3>(h, g, free),
+        4 => ldl_step::<4>(h, g, free),
+        5 => ldl_step::<5>(h, g, free),
+        6 => ldl_step::<6>(h, g, free),
+        7 => ldl_step::<7>(h, g, free),
+        _ => None,
+    }
+}
+
+/// [`spd_step`] on N free unknowns.
+#[inline]
+fn ldl_step<const N: usize>(h: &M7, g: &V7, free: &[usize]) -> Option<V7> {
+    let free: &[usize; N] = free.try_into().ok()?;
+    // the free block, gathered once
+    let mut a = [[0.0f64; N]; N];
+    for (row, &r) in a.iter_mut().zip(free) {
+        for (v, &c) in row.iter_mut().zip(free) {
+            *v = h[(r, c)];
+        }
+    }
     // LDLᵀ, the Cholesky without its roots: H positive definite on the free unknowns exactly
     // when every pivot d is; the pivots' reciprocals once, so that the factorisation and
     // both solves multiply (the divisions and roots in a chain were most of the step)
-    let n = free.len();
-    let mut l = [[0.0f64; 7]; 7];
-    let (mut d, mut inv_d) = ([0.0f64; 7], [0.0f64; 7]);
-    for i in 0..n {
+    let mut l = [[0.0f64; N]; N];
+    let (mut d, mut inv_d) = ([0.0f64; N], [0.0f64; N]);
+    for i in 0..N {
         for j in 0..i {
             let dot: f64 = (0..j).map(|k| l[i][k] * l[j][k] * d[k]).sum();
-            l[i][j] = (h[(free[i], free[j])] - dot) * inv_d[j];
+            l[i][j] = (a[i][j] - dot) * inv_d[j];
         }
-        let di = h[(free[i], free[i])] - (0..i).map(|k| l[i][k] * l[i][k] * d[k]).sum::<f64>();
+        let di = a[i][i] - (0..i).map(|k| l[i][k] * l[i][k] * d[k]).sum::<f64>();
         if !(di > 0.0) {
             return None;
         }
         (d[i], inv_d[i]) = (di, 1.0 / di);
     }
-    let mut y = [0.0f64; 7];
-    for i in 0..n {
+    let mut y = [0.0f64; N];
+    for i in 0..N {
         let dot: f64 = l[i][..i].iter().zip(&y[..i]).map(|(a, b)| a * b).sum();
         y[i] = g[free[i]] - dot;
     }
-    for i in (0..n).rev() {
+    for i in (0..N).rev() {
         let mut s = y[i] * inv_d[i];
-        for k in i + 1..n {
+        for k in i + 1..N {
             s -= l[k][i] * y[k];
         }
         y[i] = s;
     }
     // the fixed unknowns' rows are unit rows: their step is g there
     let mut step = *g;
-    for (i, &v) in free.iter().enumerate() {
-        step[v] = y[i];
+    for (&v, &yi) in free.iter().zip(&y) {
+        step[v] = yi;
     }
     Some(step)
 }
 
+/// The equilibrium at z (`sc`: sin and cos of ψ = z[2]) with its forces, the rods' lengths
+/// and the platform's balance, in one pass over the rods.
 fn finish(
     p: &Params,
     fr: &Frames,
     k: &Stiffness,
     fol: Followers,
-    z: &V7,
+    (z, sc): (&V7, (f64, f64)),
     iterations: usize,
 ) -> Solved {
     let mut rod_force = [0.0; 5];
     let mut drive_force = [0.0; 4];
     let (mut lengths, mut balance) = ([0.0; 5], [0.0; 3]);
-    // ψ's trigonometry once for the five rods
-    let sc = z[2].sin_cos();
     for (i, f) in rod_force.iter_mut().enumerate() {
         let st = rod_state_with(p, fr, sc, i, z);
         *f = k.rod[i] * st.delta;
@@ -806,7 +849,7 @@ pub fn sensitivity(
         &frames(p),
         k,
         (&q, followers),
-        &z,
+        (&z, z[2].sin_cos()),
         false,
         (&mut g, &mut h),
     );
@@ -887,7 +930,7 @@ mod tests {
                             &fr,
                             &k,
                             (&q, [true; 4]),
-                            &z,
+                            (&z, z[2].sin_cos()),
                             true,
                             (&mut g1, &mut h1)
                         ));
@@ -901,7 +944,32 @@ mod tests {
                             zq[3 + j] = q[j];
                         }
                         let (mut g, mut h) = (V7::zeros(), M7::zeros());
-                        system(&p, &fr, &k, (&q, fol), &zq, true, (&mut g, &mut h));
+                        system(
+                            &p,
+                            &fr,
+                            &k,
+                            (&q, fol),
+                            (&zq, zq[2].sin_cos()),
+                            true,
+                            (&mut g, &mut h),
+                        );
+                        // the symmetric system: the dense terms with the rigid drives' rows
+                        // and columns replaced by their constraints
+                        let (mut gd, mut hd) = dense_rod_terms(&p, &fr, &k, &zq);
+                        for j in (0..4).filter(|&j| !fol[j]) {
+                            let v = 3 + j;
+                            if let Some(c) = k.carrier[j] {
+                                gd[v] += c * (zq[v] - q[j]);
+                                hd[(v, v)] += c;
+                            } else {
+                                gd[v] = zq[v] - q[j];
+                                hd.row_mut(v).fill(0.0);
+                                hd.column_mut(v).fill(0.0);
+                                hd[(v, v)] = 1.0;
+                            }
+                        }
+                        assert!((g - gd).amax() <= 1e-9 * gd.amax().max(1.0), "{g} vs {gd}");
+                        assert!((h - hd).amax() <= 1e-9 * hd.amax(), "{h} vs {hd}");
                         let free: Vec<usize> = (0..7)
                             .filter(|&v| v < 3 || fol[v - 3] || k.carrier[v - 3].is_some())
                             .collect();
