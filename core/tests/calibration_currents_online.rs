@@ -19,7 +19,9 @@
 //! away. What the drift alone does: the same tracker and a frozen calibration, both started
 //! from the twin's true machine. The full hour: `calibration_currents_online_hour` (ignored;
 //! figures in docs/calibration.md).
-use rpkm_core::calib::online::{ForceSample, OnlineEstimator, OnlineOptions, Outcome};
+use rpkm_core::calib::online::{
+    Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome,
+};
 use rpkm_core::calib::{Calibration, Options};
 use rpkm_core::campaign::Instrument;
 use rpkm_core::design;
@@ -28,7 +30,8 @@ use rpkm_core::effects::{self, Effect, EffectSet};
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{index_of, Params, NAMES, N_PARAMS};
 use rpkm_core::twin::{
-    EffectKind, ProductionConfig, ProductionStream, StepChange, ThermalPhysics, Twin, TwinConfig,
+    EffectKind, ProductionConfig, ProductionSample, ProductionStream, StepChange, ThermalPhysics,
+    Twin, TwinConfig,
 };
 use rpkm_core::variance;
 
@@ -63,7 +66,9 @@ fn start_calibration(t: &mut Twin, seed: u64) -> Calibration {
         let in_model: Vec<&dyn Effect> = named.iter().map(AsRef::as_ref).collect();
         let d = diagnose::diagnose(&c, None, &in_model, &diagnose::Options::default())
             .expect("diagnoses");
-        let Some(name) = d.missing_effect.filter(|_| d.verdict_kind == VerdictKind::MissingEffect)
+        let Some(name) = d
+            .missing_effect
+            .filter(|_| d.verdict_kind == VerdictKind::MissingEffect)
         else {
             break;
         };
@@ -90,6 +95,10 @@ pub struct Run {
     pub windows: Vec<Window>,
     /// Steps the tracker started from the truth found.
     pub floor_steps: Vec<(f64, rpkm_core::calib::online::StepChange)>,
+    /// The drift test at every check (1 s): time, P(noise alone), χ², dof; and the drift
+    /// WARNs it raised (`online_drift_warn_um` at its default, 10 µm).
+    pub drift_tests: Vec<(f64, f64, f64, usize)>,
+    pub drift_warnings: Vec<(f64, Drift)>,
 }
 
 /// One window of stream time: the TCP errors against the twin's true TCP (RMS of the xy
@@ -122,6 +131,22 @@ struct Sums {
 }
 
 impl Sums {
+    /// One sample's TCP errors of the tracker, the frozen start, the tracker from the truth
+    /// and the perfect start frozen, with the tracker's σ.
+    fn add(&mut self, s: &ProductionSample, [est, frozen, knows, perfect]: [&OnlineEstimator; 4]) {
+        let err = |e: &OnlineEstimator| {
+            let (tcp, _) = e.tcp(s.q).expect("tcp");
+            xy_err2(&tcp, &s.tcp)
+        };
+        let (_, sd) = est.tcp(s.q).expect("online tcp");
+        self.online += err(est);
+        self.frozen += err(frozen);
+        self.truth += err(knows);
+        self.frozen_truth += err(perfect);
+        self.cov += sd.x * sd.x + sd.y * sd.y;
+        self.n += 1;
+    }
+
     fn window(&self, end: f64) -> Window {
         let rms = |v: f64| (v / self.n as f64).sqrt();
         Window {
@@ -171,7 +196,10 @@ fn track(
         steps: Vec::new(),
         windows: Vec::new(),
         floor_steps: Vec::new(),
+        drift_tests: Vec::new(),
+        drift_warnings: Vec::new(),
     };
+    let mut monitor = DriftMonitor::new(4096);
     let mut w = Sums::default();
     let mut end = window_s;
     let mut named = false;
@@ -185,6 +213,7 @@ fn track(
             q: s.q,
             f: s.f,
         };
+        est.set_temperature(s.temp_c);
         let out = est.update(&sample).expect("update");
         if let Outcome::Step(st) = knows.update(&sample).expect("update from the truth") {
             run.floor_steps.push((s.t, st));
@@ -192,17 +221,18 @@ fn track(
         if let Outcome::Step(st) = out {
             run.steps.push((s.t, st));
             named = true;
+            monitor.rebase();
         }
-        let (tcp, sd) = est.tcp(s.q).expect("online tcp");
-        let (ftcp, _) = frozen.tcp(s.q).expect("frozen tcp");
-        let (ktcp, _) = knows.tcp(s.q).expect("tcp from the truth");
-        let (ptcp, _) = perfect.tcp(s.q).expect("tcp of the perfect start");
-        w.online += xy_err2(&tcp, &s.tcp);
-        w.frozen += xy_err2(&ftcp, &s.tcp);
-        w.truth += xy_err2(&ktcp, &s.tcp);
-        w.frozen_truth += xy_err2(&ptcp, &s.tcp);
-        w.cov += sd.x * sd.x + sd.y * sd.y;
-        w.n += 1;
+        if n % (10 * decimate) == 0 {
+            if let Some(test) = monitor.record(s.t, s.temp_c, &mut est) {
+                run.drift_tests
+                    .push((s.t, test.p_value, test.chi2, test.dof));
+                if let Some(d) = test.warning(0.010) {
+                    run.drift_warnings.push((s.t, *d));
+                }
+            }
+        }
+        w.add(&s, [&est, &frozen, &knows, &perfect]);
         if s.t >= end {
             run.windows.push(w.window(end));
             w = Sums::default();
@@ -256,6 +286,26 @@ fn check_floors(run: &Run) {
     );
 }
 
+/// The drift test from a calibration's start, on a stream that only expands with the
+/// temperature before its crash: no drift WARN; the least P(noise alone) over its checks told.
+fn check_drift_test(run: &Run, crash_at: f64) {
+    let before: Vec<_> = run.drift_tests.iter().filter(|t| t.0 < crash_at).collect();
+    let least = before.iter().min_by(|a, b| a.1.total_cmp(&b.1));
+    eprintln!(
+        "drift test before the crash: {} checks, least p {:?}; WARNs {:?}",
+        before.len(),
+        least,
+        run.drift_warnings
+    );
+    assert!(before.len() > 100, "{} checks", before.len());
+    let early: Vec<_> = run
+        .drift_warnings
+        .iter()
+        .filter(|w| w.0 < crash_at)
+        .collect();
+    assert!(early.is_empty(), "drift WARNs without a drift: {early:?}");
+}
+
 /// The tracked parameters stay within 3σ of the truth at every check, or, where the start
 /// calibration had one further (the forces do not see every combination it left), no
 /// further than it was at the start.
@@ -306,6 +356,7 @@ fn the_forces_track_a_drifting_machine_and_name_a_crash() {
     assert!((step.change - 0.1).abs() < 0.02, "size {} mm", step.change);
 
     check_floors(&run);
+    check_drift_test(&run, 240.0);
     let last = run.windows.last().expect("windows");
     assert!(
         last.frozen > 1.5 * last.online,
@@ -351,6 +402,7 @@ fn calibration_currents_online_hour() {
     );
     check_floors(&run);
     check_parameters(&run);
+    check_drift_test(&run, 2400.0);
     assert_eq!(run.steps.len(), 1);
     assert!(run.steps[0].0 - 2400.0 <= 10.0);
 }

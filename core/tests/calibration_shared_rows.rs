@@ -50,8 +50,8 @@ fn shared_rows_give_the_calibration_of_own_rows() {
         ..Default::default()
     };
     let start = Params::nominal();
-    let base = calibrate_with(&campaign, &start, &opts, &EffectSet::empty(), &[])
-        .expect("current model");
+    let base =
+        calibrate_with(&campaign, &start, &opts, &EffectSet::empty(), &[]).expect("current model");
     let library = effects::library();
     let tried: Vec<&dyn Effect> = library
         .iter()
@@ -74,8 +74,8 @@ fn shared_rows_give_the_calibration_of_own_rows() {
                 theta: &theta,
                 screen,
             };
-            let own = calibrate_from(&campaign, &start, &opts, &set, &[], Some(warm))
-                .expect("own rows");
+            let own =
+                calibrate_from(&campaign, &start, &opts, &set, &[], Some(warm)).expect("own rows");
             for rows in [&shared, &elsewhere] {
                 let read = calibrate_shared(&campaign, &start, &opts, &set, warm, rows)
                     .expect("shared rows");

@@ -350,7 +350,15 @@ pub fn calibrate_shared(
     warm: WarmStart,
     shared: &SharedRows,
 ) -> Result<Calibration, CalibrationError> {
-    calibrate_sharing(campaign, start, opts, effects, &[], Some(warm), Some(shared))
+    calibrate_sharing(
+        campaign,
+        start,
+        opts,
+        effects,
+        &[],
+        Some(warm),
+        Some(shared),
+    )
 }
 
 /// [`calibrate_from`], with the rows at the start and the warm start from `shared` where
@@ -397,24 +405,7 @@ fn calibrate_sharing(
     let chi2: f64 = rows_final.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
     let chi2_per_dof = chi2 / (rows_final.len() as f64 - post.dof_model).max(1.0);
     let s1 = Step1Report::new(&pb, &plan, &fit.state, &post, chi2_per_dof.max(1.0));
-    let mut table = report::RmsTable::default();
-    table.after(rows_final.iter().cloned());
-    // the rows at the start are the plan's, unless outliers were dropped since
-    let before = if fit.drop.is_empty() {
-        std::mem::take(&mut plan.before)
-    } else {
-        pb.map_pieces(
-            Step::Direct,
-            start,
-            start,
-            plan.corr0(&pb),
-            &fit.drop,
-            before_table,
-        )?
-    };
-    for t in before {
-        table.merge(t);
-    }
+    let mut table = step1_table(&pb, &mut plan, &fit.drop, &rows_final)?;
     let mut identified = s1.identified;
     let mut iterations = fit.iterations;
     let mut p = fit.state.p;
@@ -454,6 +445,35 @@ fn calibrate_sharing(
         leverage: post.leverage,
         covariance,
     })
+}
+
+/// The RMS table of step 1: its final rows, and the rows at the start, which are the plan's
+/// unless outliers (`drop`) were dropped since.
+fn step1_table(
+    pb: &Problem,
+    plan: &mut Plan,
+    drop: &HashSet<Key>,
+    rows_final: &[RowValue],
+) -> Result<report::RmsTable, CalibrationError> {
+    let mut table = report::RmsTable::default();
+    table.after(rows_final.iter().cloned());
+    let before = if drop.is_empty() {
+        std::mem::take(&mut plan.before)
+    } else {
+        let start = &pb.start;
+        pb.map_pieces(
+            Step::Direct,
+            start,
+            start,
+            plan.corr0(pb),
+            drop,
+            before_table,
+        )?
+    };
+    for t in before {
+        table.merge(t);
+    }
+    Ok(table)
 }
 
 /// A calibration whose values, uncertainties or χ² are not finite is refused, naming what:
@@ -783,7 +803,9 @@ fn step1(
             initial: (!warm && first).then(|| plan.normal0.clone()).flatten(),
             // the first run at a warm start reads its start from shared rows, if any
             shared: shared.filter(|_| warm && first),
-            made: shared.is_none().then(|| (plan.theta0.as_slice(), plan.corr0(pb))),
+            made: shared
+                .is_none()
+                .then(|| (plan.theta0.as_slice(), plan.corr0(pb))),
         };
         let res = lm.run(&fit.state)?;
         fit.state = res.state;

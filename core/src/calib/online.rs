@@ -383,7 +383,8 @@ impl OnlineEstimator {
     ) -> Self {
         let prior = Prior::default();
         let mut full = Covariance::zeros();
-        full.fixed_view_mut::<N_PARAMS, N_PARAMS>(0, 0).copy_from(cov);
+        full.fixed_view_mut::<N_PARAMS, N_PARAMS>(0, 0)
+            .copy_from(cov);
         for i in 0..N_PARAMS {
             if cov[(i, i)] <= 0.0 {
                 full[(i, i)] = prior.sigma(i).powi(2);
