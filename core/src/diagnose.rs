@@ -316,7 +316,7 @@ pub fn diagnose(
     // noise estimated with the current model, its misfit inflates the levels and dims the
     // very effect that would explain it.)
     let stated = calib_options(opts);
-    let (base1, first) = search.round(&stated, None)?;
+    let (base1, first, cal1) = search.round(&stated, None)?;
     // noise-free (simulated) data: no noise to estimate, the stated weights stay
     if calib::rms(&length_values(&base1.rows)) < NUMERICAL_RMS_MM {
         let est = NoiseEstimate::assumed(&opts.noise);
@@ -333,10 +333,12 @@ pub fn diagnose(
     {
         with.push(*top);
     }
-    let (cal, est, copts) = current_model(campaign, &with, opts)?;
+    // under the current model itself the noise estimation's first round is round 1's base
+    let same = with.len() == in_model.len();
+    let (cal, est, copts) = current_model(campaign, &with, opts, cal1.filter(|_| same))?;
     // the noise was estimated under the current model itself: its last fit is the base
-    let fitted = (with.len() == in_model.len()).then_some(cal);
-    let (base, round) = search.round(&copts, fitted)?;
+    let fitted = same.then_some(cal);
+    let (base, round, _) = search.round(&copts, fitted)?;
     let val = held_out(validation, &est.model)?;
     let baseline = baseline(&base, &est.model, val.as_ref(), opts);
     Ok(conclude(&search, opts, &base, baseline, round, &est))
@@ -359,16 +361,20 @@ struct Search<'a> {
 impl Search<'_> {
     /// The current model and every candidate, calibrated with `copts` (its noise weights the
     /// rows and the held-out errors); the current model's calibration with `copts` when it
-    /// is at hand (`fitted`).
+    /// is at hand (`fitted`), else made here and returned (the noise estimation's first
+    /// round when the current model stays).
     fn round(
         &self,
         copts: &calib::Options,
         fitted: Option<Calibration>,
-    ) -> Result<(Fitted, Round), DiagnoseError> {
+    ) -> Result<(Fitted, Round, Option<Calibration>), DiagnoseError> {
         let val = held_out(self.validation, &copts.noise)?;
-        let cal = match fitted {
-            Some(cal) => cal,
-            None => fit_model(self.campaign, self.in_model, copts)?,
+        let (cal, made) = match fitted {
+            Some(cal) => (cal, None),
+            None => {
+                let cal = fit_model(self.campaign, self.in_model, copts)?;
+                (cal.clone(), Some(cal))
+            }
         };
         // a picture, not a number the verdict rests on: a pose the forward model cannot
         // solve costs the arrows, not the diagnosis
@@ -387,7 +393,7 @@ impl Search<'_> {
             vectors,
             ..candidates(self.campaign, self.tried, tries, &base, self.level)
         };
-        Ok((base, round))
+        Ok((base, round, made))
     }
 }
 
@@ -677,12 +683,13 @@ fn current_model(
     campaign: &Campaign,
     in_model: &[&dyn Effect],
     opts: &Options,
+    first: Option<Calibration>,
 ) -> Result<(Calibration, NoiseEstimate, calib::Options), DiagnoseError> {
     let start = Params::nominal();
     let set = EffectSet::bind(in_model, campaign, &start)?;
     let mut copts = calib_options(opts);
     let (cal, est) = if opts.estimate_noise {
-        variance::calibrate_estimating_noise(campaign, &start, &copts, &set)
+        variance::calibrate_estimating_noise_after(campaign, &start, &copts, &set, first)
     } else {
         calib::calibrate_with(campaign, &start, &copts, &set, &[])
             .map(|c| (c, NoiseEstimate::assumed(&opts.noise)))
@@ -893,7 +900,7 @@ pub fn evaluate(
     effects: &[&dyn Effect],
     opts: &Options,
 ) -> Result<(Fit, NoiseEstimate), DiagnoseError> {
-    let (cal, est, copts) = current_model(campaign, effects, opts)?;
+    let (cal, est, copts) = current_model(campaign, effects, opts, None)?;
     let val = held_out(validation, &est.model)?;
     Ok((
         finish(campaign, val.as_ref(), effects, cal, &copts)?.fit,

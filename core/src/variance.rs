@@ -94,6 +94,19 @@ pub fn calibrate_estimating_noise(
     opts: &Options,
     effects: &EffectSet,
 ) -> Result<(Calibration, NoiseEstimate), CalibrationError> {
+    calibrate_estimating_noise_after(campaign, start, opts, effects, None)
+}
+
+/// [`calibrate_estimating_noise`], its first round given: `first`, the same problem
+/// calibrated from `start` with `opts.noise` (a caller that has made it, as the diagnosis's
+/// first round, does not pay for it twice).
+pub fn calibrate_estimating_noise_after(
+    campaign: &Campaign,
+    start: &Params,
+    opts: &Options,
+    effects: &EffectSet,
+    mut first: Option<Calibration>,
+) -> Result<(Calibration, NoiseEstimate), CalibrationError> {
     let assumed = opts.noise.clone();
     let mut o = opts.clone();
     let mut total = [1.0; N_GROUPS];
@@ -108,7 +121,10 @@ pub fn calibrate_estimating_noise(
             theta: &c.theta,
             screen: false,
         });
-        let cal = calib::calibrate_from(campaign, start, &o, effects, &[], warm)?;
+        let cal = match first.take() {
+            Some(cal) => cal,
+            None => calib::calibrate_from(campaign, start, &o, effects, &[], warm)?,
+        };
         rounds += 1;
         let terms = factor_terms(&cal.residuals, &cal.leverage);
         let mut step = [1.0; N_GROUPS];
