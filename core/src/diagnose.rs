@@ -369,12 +369,11 @@ impl Search<'_> {
         fitted: Option<Calibration>,
     ) -> Result<(Fitted, Round, Option<Calibration>), DiagnoseError> {
         let val = held_out(self.validation, &copts.noise)?;
-        let (cal, made) = match fitted {
-            Some(cal) => (cal, None),
-            None => {
-                let cal = fit_model(self.campaign, self.in_model, copts)?;
-                (cal.clone(), Some(cal))
-            }
+        let (cal, made) = if let Some(cal) = fitted {
+            (cal, None)
+        } else {
+            let cal = fit_model(self.campaign, self.in_model, copts)?;
+            (cal.clone(), Some(cal))
         };
         // a picture, not a number the verdict rests on: a pose the forward model cannot
         // solve costs the arrows, not the diagnosis

@@ -110,26 +110,36 @@ impl<'a> Problem<'a> {
             out
         };
         let threads = thread_count(self.opts.threads).min(n.max(1));
-        let mut done: Vec<(usize, Result<T, PoseError>)> = if threads == 1 {
-            run(0, 1)
-        } else {
-            std::thread::scope(|scope| {
-                let workers: Vec<_> = (0..threads)
-                    .map(|t| {
-                        let run = &run;
-                        scope.spawn(move || run(t, threads))
-                    })
-                    .collect();
-                workers
-                    .into_iter()
-                    // a panic in a piece is a bug: it goes on in this thread
-                    .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-                    .collect()
-            })
-        };
-        done.sort_by_key(|(k, _)| *k);
-        done.into_iter().map(|(_, r)| r).collect()
+        in_piece_order(threads, run).into_iter().collect()
     }
+}
+
+/// `run(first, stride)` on `threads` scoped threads (every `stride`-th piece from `first`,
+/// each result with its piece's index), the results in piece order: the same whatever the
+/// thread count.
+pub(super) fn in_piece_order<T: Send>(
+    threads: usize,
+    run: impl Fn(usize, usize) -> Vec<(usize, T)> + Sync,
+) -> Vec<T> {
+    let mut done = if threads <= 1 {
+        run(0, 1)
+    } else {
+        std::thread::scope(|scope| {
+            let workers: Vec<_> = (0..threads)
+                .map(|t| {
+                    let run = &run;
+                    scope.spawn(move || run(t, threads))
+                })
+                .collect();
+            workers
+                .into_iter()
+                // a panic in a piece is a bug: it goes on in this thread
+                .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+                .collect()
+        })
+    };
+    done.sort_by_key(|(k, _)| *k);
+    done.into_iter().map(|(_, t)| t).collect()
 }
 
 impl Problem<'_> {

@@ -10,7 +10,7 @@
 //! its own rows.
 
 use super::lm::State;
-use super::rows::{thread_count, Problem};
+use super::rows::{in_piece_order, thread_count, Problem};
 use super::{CalibrationError, Options};
 use crate::campaign::Campaign;
 use crate::effects::EffectSet;
@@ -149,26 +149,7 @@ impl View<'_> {
             }
             out
         };
-        let threads = self.threads.min(n.max(1));
-        let mut done = if threads == 1 {
-            run(0, 1)
-        } else {
-            std::thread::scope(|scope| {
-                let workers: Vec<_> = (0..threads)
-                    .map(|t| {
-                        let run = &run;
-                        scope.spawn(move || run(t, threads))
-                    })
-                    .collect();
-                workers
-                    .into_iter()
-                    // a panic in a piece is a bug: it goes on in this thread
-                    .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-                    .collect()
-            })
-        };
-        done.sort_by_key(|(k, _)| *k);
-        done.into_iter().map(|(_, t)| t).collect()
+        in_piece_order(self.threads.min(n.max(1)), run)
     }
 
     /// A union row as the calibration's own: its effect columns picked out.
