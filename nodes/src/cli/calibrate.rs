@@ -56,7 +56,9 @@ pub struct CalibrateArgs {
     /// Held-out campaign: reports the TCP RMS with nominal and identified parameters, and the gain.
     #[arg(long)]
     pub validate: Option<PathBuf>,
-    /// Write the result as JSON (parameters by spec name, RMS, condition number, gain ...).
+    /// Write the result as JSON (parameters by spec name, their σ and full covariance, RMS,
+    /// condition number, gain ...): the calibrator node's `geometry_file` starts its online
+    /// tracker from that covariance.
     #[arg(long)]
     pub json: Option<PathBuf>,
     /// Starting parameters: JSON object of name → value (mm, rad); default the nominal set.
