@@ -265,7 +265,11 @@ fn the_json_carries_the_covariance_the_calibrator_starts_from() {
         .arg(&json)
         .output()
         .expect("run rpkm");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let cov = rpkm::node::calibrator::start_covariance(json.to_str().expect("utf-8"))
         .expect("the calibrator reads it");
     let text = std::fs::read_to_string(&json).expect("json");

@@ -235,7 +235,14 @@ fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash()
     // calibration_currents_online.rs diagnoses the same design): the lt poses are loaded
     rpkm_in(
         &dir,
-        &["calibrate", "start.csv", "--effects", "preload_elastic", "--json", "start.json"],
+        &[
+            "calibrate",
+            "start.csv",
+            "--effects",
+            "preload_elastic",
+            "--json",
+            "start.json",
+        ],
     );
     let (seconds, decimate) = (SECONDS.to_string(), (1000.0 / ROWS_HZ).to_string());
     let step = format!("l3={STEP_MM}@{STEP_AT_S}");

@@ -25,6 +25,7 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
+use nalgebra::SMatrix;
 use rpkm_core::calib::online::{
     Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome as OnlineOutcome,
     StepChange,
@@ -34,7 +35,6 @@ use rpkm_core::campaign::Campaign;
 use rpkm_core::obs;
 use rpkm_core::params::Model;
 use rpkm_core::params::{Params, N_PARAMS};
-use nalgebra::SMatrix;
 use rpkm_msgs::{
     ActuatorState, CampaignInfo, Diagnosis, DiagnosisCandidate, DiagnosticArray, DiagnosticStatus,
     Parameters, TcpMeasurement,
@@ -557,20 +557,26 @@ fn covariance_of(
             .filter(|r| r.len() == N_PARAMS)
             .ok_or_else(|| bad(format!("matrix[{i}]: expected {N_PARAMS} numbers")))?;
         for (j, x) in row.iter().enumerate() {
-            cov[(i, j)] = x
-                .as_f64()
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| bad(format!("matrix[{i}][{j}]: expected a finite number, found {x}")))?;
+            cov[(i, j)] = x.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
+                bad(format!(
+                    "matrix[{i}][{j}]: expected a finite number, found {x}"
+                ))
+            })?;
         }
     }
     for i in 0..N_PARAMS {
         if cov[(i, i)] < 0.0 {
-            return Err(bad(format!("matrix[{i}][{i}]: a negative variance {}", cov[(i, i)])));
+            return Err(bad(format!(
+                "matrix[{i}][{i}]: a negative variance {}",
+                cov[(i, i)]
+            )));
         }
         for j in 0..i {
             let (a, b) = (cov[(i, j)], cov[(j, i)]);
             if (a - b).abs() > 1e-9 * (cov[(i, i)] * cov[(j, j)]).sqrt().max(f64::MIN_POSITIVE) {
-                return Err(bad(format!("matrix[{i}][{j}] = {a} but matrix[{j}][{i}] = {b}: not symmetric")));
+                return Err(bad(format!(
+                    "matrix[{i}][{j}] = {a} but matrix[{j}][{i}] = {b}: not symmetric"
+                )));
             }
         }
     }

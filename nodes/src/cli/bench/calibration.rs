@@ -105,7 +105,11 @@ fn write_self_campaign(dir: &Path, seed: u64, k: usize) -> Result<(PathBuf, usiz
 fn calibrate(path: &Path, threads: Option<usize>, extra: &[&str]) -> Result<Run> {
     let json = path.with_extension(format!("t{}.json", threads.unwrap_or(0)));
     let mut cmd = Command::new(std::env::current_exe()?);
-    cmd.arg("calibrate").arg(path).arg("--json").arg(&json).args(extra);
+    cmd.arg("calibrate")
+        .arg(path)
+        .arg("--json")
+        .arg(&json)
+        .args(extra);
     if let Some(t) = threads {
         cmd.arg("--threads").arg(t.to_string());
     }
@@ -217,10 +221,16 @@ fn scipy_baseline(path: &Path) -> Result<()> {
         path.display()
     );
     let line = |what: &str, s: f64| println!("  {what:<62} {s:>8.4} s {:>7.0}x", scipy / s);
-    println!("  {:<62} {scipy:>8.4} s", "scipy least_squares, its fit alone");
+    println!(
+        "  {:<62} {scipy:>8.4} s",
+        "scipy least_squares, its fit alone"
+    );
     line("rpkm, the same fit alone (in process, 1 thread)", fit_s);
     line("rpkm calibrate --no-noise-estimation, whole process", same);
-    line("rpkm calibrate (default: noise estimated), whole process", default);
+    line(
+        "rpkm calibrate (default: noise estimated), whole process",
+        default,
+    );
     println!("  (reading the CSV in process: {read_s:.4} s, not in the fit's figure)");
     Ok(())
 }
@@ -282,11 +292,16 @@ fn scipy_seconds(path: &Path) -> Option<f64> {
             .arg(path)
             .envs(["OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"].map(|k| (k, "1")))
             .output();
-        let seconds = out.as_ref().ok().filter(|o| o.status.success()).and_then(|o| {
-            String::from_utf8_lossy(&o.stdout)
-                .lines()
-                .find_map(|l| l.strip_prefix("seconds ").and_then(|s| s.trim().parse().ok()))
-        });
+        let seconds = out
+            .as_ref()
+            .ok()
+            .filter(|o| o.status.success())
+            .and_then(|o| {
+                String::from_utf8_lossy(&o.stdout).lines().find_map(|l| {
+                    l.strip_prefix("seconds ")
+                        .and_then(|s| s.trim().parse().ok())
+                })
+            });
         match (seconds, out) {
             (Some(s), _) => runs.push(s),
             (None, Ok(o)) => {
