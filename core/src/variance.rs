@@ -99,8 +99,9 @@ pub fn calibrate_estimating_noise(
 
 /// [`calibrate_estimating_noise`], its first round given: `first`, the same problem
 /// calibrated from `start` with `opts.noise` (a caller that has made it, as the diagnosis's
-/// first round, does not pay for it twice).
-pub fn calibrate_estimating_noise_after(
+/// first round, does not pay for it twice; it is not checked to be that calibration, so
+/// the core's own callers only).
+pub(crate) fn calibrate_estimating_noise_after(
     campaign: &Campaign,
     start: &Params,
     opts: &Options,

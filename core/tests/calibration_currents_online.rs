@@ -138,8 +138,8 @@ impl Sums {
             let (tcp, _) = e.tcp(s.q).expect("tcp");
             xy_err2(&tcp, &s.tcp)
         };
-        let (_, sd) = est.tcp(s.q).expect("online tcp");
-        self.online += err(est);
+        let (tcp, sd) = est.tcp(s.q).expect("online tcp");
+        self.online += xy_err2(&tcp, &s.tcp);
         self.frozen += err(frozen);
         self.truth += err(knows);
         self.frozen_truth += err(perfect);
