@@ -9,10 +9,13 @@ XCDR1 little-endian):
       expected_estimate(seq), prints one JSON line per first-seen seq, then "DONE".
       Exit 0 when all N were seen and correct, 1 on a wrong value, 2 on timeout.
 
-  pub_actuator  --domain D --count N --timeout S [--topic T] [--bad]
+  pub_actuator  --domain D --count N --timeout S [--topic T] [--bad] [--fresh-rounds]
       Publishes ActuatorState seq 1..N (values from expected_actuator(seq)) on
       /rpkm/actuator_state (or T), the whole set every 50 ms until killed or timeout (exit 0);
-      with --bad also seq N+1 (a NaN position) and N+2 (a position out of range).
+      with --bad also seq N+1 (a NaN position) and N+2 (a position out of range). It writes
+      once a reader has matched, and 0.5 s later. With --fresh-rounds, round r has seqs
+      (r-1)(N+2)+1.. and ends with its last good sample repeated (out of order), so that a
+      reader that joins mid-round still sees every later sample once.
 
 Run with the venv made by `python3 -m venv .venv && .venv/bin/pip install cyclonedds`.
 Discovery is restricted to loopback (interface lo, no multicast, peer 127.0.0.1): without it
@@ -156,14 +159,23 @@ def sub_estimate(args):
     return 2
 
 
-def bad_actuators(count):
-    """Samples ingest must reject: a NaN position (seq count+1), a position 10 km out of
-    range (count+2); both after the good ones, so only their own fault rejects them."""
-    nan = expected_actuator(count + 1)
+def bad_actuators(first, count):
+    """Samples ingest must reject: a NaN position (seq first+count), a position 10 km out of
+    range (first+count+1); both after the good ones, so only their own fault rejects them."""
+    nan = expected_actuator(first + count)
     nan.position = [nan.position[0], float("nan"), nan.position[2], nan.position[3]]
-    far = expected_actuator(count + 2)
+    far = expected_actuator(first + count + 1)
     far.position = [1.0e4, far.position[1], far.position[2], far.position[3]]
     return [nan, far]
+
+
+def wait_matched(writer, deadline):
+    """Until Cyclone has matched a reader, then a settling pause: the match is one direction of
+    discovery, the reader learning of this writer is the other, and a sample written before
+    it is lost to a volatile reader (the CI once saw a round without its seq 1)."""
+    while time.monotonic() < deadline and not writer.get_matched_subscriptions():
+        time.sleep(0.01)
+    time.sleep(0.5)
 
 
 def pub_actuator(args):
@@ -173,12 +185,18 @@ def pub_actuator(args):
     writer = DataWriter(dp, topic, qos=qos)
     print("READY", flush=True)
     deadline = time.monotonic() + args.timeout
+    wait_matched(writer, deadline)
+    first = 1
     while time.monotonic() < deadline:
-        for seq in range(1, args.count + 1):
+        for seq in range(first, first + args.count):
             writer.write(expected_actuator(seq))
         if args.bad:
-            for msg in bad_actuators(args.count):
+            for msg in bad_actuators(first, args.count):
                 writer.write(msg)
+        if args.fresh_rounds:
+            # The round's last good sample once more: out of order by its repeated seq.
+            writer.write(expected_actuator(first + args.count - 1))
+            first += args.count + 2
         time.sleep(0.05)
     return 0
 
@@ -191,6 +209,9 @@ def main():
     p.add_argument("--timeout", type=float, default=20.0)
     p.add_argument("--topic", default="/rpkm/actuator_state",
                    help="ROS topic of pub_actuator (ingest listens on /rpkm/controller/actuator_state)")
+    p.add_argument("--fresh-rounds", action="store_true",
+                   help="pub_actuator: each round continues the seqs (N+2 further on) and ends with "
+                        "its last good sample repeated, instead of repeating seq 1..N")
     p.add_argument("--bad", action="store_true",
                    help="pub_actuator: also publish a NaN and an out-of-range sample after the good ones")
     args = p.parse_args()
