@@ -301,10 +301,7 @@ pub fn currents_rows(c: &Campaign, p: &Params) -> Result<Vec<Residual>, Analysis
         dk: 1.0,
         ..Default::default()
     };
-    let corr = Corrections {
-        poses: vec![(Delta::default(), vec![stiffness]); c.poses.len()],
-        n_params: 1,
-    };
+    let corr = Corrections::uniform(c.poses.len(), Delta::default(), &[stiffness]);
     let rows = obs::force_residuals(c, p, &corr, &NoiseModel::default())?;
     if rows.is_empty() {
         return Err(AnalysisError::NoRows);

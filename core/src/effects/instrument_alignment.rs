@@ -68,6 +68,13 @@ impl Bound for BoundAlign {
     fn setup_local(&self) -> bool {
         true
     }
+    fn touched(&self, pose: usize) -> std::ops::Range<usize> {
+        // only the pose's own setup's angle moves it
+        match self.setup_of.get(pose).copied().flatten() {
+            Some(k) => k..k + 1,
+            None => 0..0,
+        }
+    }
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
         let Some(k) = self.setup_of[pose] else { return };
         let th = theta[k] * 1e-3;
