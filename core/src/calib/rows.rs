@@ -206,10 +206,16 @@ impl Columns {
     }
 
     /// The pieces' R factors combined in order (each step the QR of two stacked factors).
+    /// Once the factor so far is square, a piece is folded in by [`Stack::factor`]: the
+    /// QR's operations on the stack's non-zero entries only, the same numbers.
     pub fn combine(pieces: Vec<DMatrix<f64>>, n_theta: usize) -> Columns {
         let cols = N_PARAMS + n_theta;
         let mut r = DMatrix::zeros(0, cols);
-        for piece in pieces {
+        for mut piece in pieces {
+            if r.nrows() == cols && piece.nrows() <= cols {
+                Stack::new(&mut r, &mut piece).factor();
+                continue;
+            }
             let mut both = DMatrix::zeros(r.nrows() + piece.nrows(), cols);
             both.rows_mut(0, r.nrows()).copy_from(&r);
             both.rows_mut(r.nrows(), piece.nrows()).copy_from(&piece);
@@ -238,6 +244,132 @@ impl Columns {
         DMatrix::from_fn(self.r.nrows(), free.len(), |i, k| {
             self.r[(i, N_PARAMS + free[k])]
         })
+    }
+}
+
+/// The QR of `r` (n × n, upper triangular) stacked on `piece` (q × n, q ≤ n, zero below its
+/// diagonal) as `nalgebra`'s Householder QR makes it, operation for operation, but on the
+/// stack's non-zero entries only: the rows of `r` below step k's row and of `piece` below
+/// its row k are zero in column k, and a reflection only negates them (when the step's
+/// sign is −1) in the columns to the right. Those negations are applied when such a row
+/// joins a reflection ([`Stack::step`]). Every product and sum the QR makes with a non-zero
+/// entry is made, in the same order (the 8 accumulators of its dot products included),
+/// so the factor is the same to the bit, at a quarter of the operations.
+struct Stack<'a> {
+    r: &'a mut DMatrix<f64>,
+    piece: &'a mut DMatrix<f64>,
+    /// The product of the signs of the reflections so far: the factor of every row not yet
+    /// in a reflection.
+    sign: f64,
+}
+
+impl<'a> Stack<'a> {
+    fn new(r: &'a mut DMatrix<f64>, piece: &'a mut DMatrix<f64>) -> Stack<'a> {
+        Stack {
+            r,
+            piece,
+            sign: 1.0,
+        }
+    }
+
+    /// All n steps; `r` becomes the R factor of the stack.
+    fn factor(mut self) {
+        for k in 0..self.r.ncols() {
+            self.step(k);
+        }
+    }
+
+    /// Step k of the QR: the reflection that clears column k below the diagonal.
+    fn step(&mut self, k: usize) {
+        let (n, q) = (self.r.ncols(), self.piece.nrows());
+        let h = q.min(k + 1);
+        // where the piece's rows stand in the reflection's vector (rows k.. of the stack),
+        // and how much of it the dot products' 8 accumulators take
+        let at = n - k;
+        let len = n + q - k;
+        let dot = Dot {
+            at,
+            unrolled: len - len % 8,
+        };
+        // row k of r and of the piece join: the negations they were spared
+        if self.sign < 0.0 {
+            for j in k..n {
+                self.r[(k, j)] = -self.r[(k, j)];
+                if k < q {
+                    self.piece[(k, j)] = -self.piece[(k, j)];
+                }
+            }
+        }
+        let cells = self.piece.as_mut_slice();
+        let (left, right) = cells.split_at_mut((k + 1) * q);
+        let xs = &mut left[k * q..k * q + h];
+        // nalgebra's reflection_axis_mut
+        let mut x0 = self.r[(k, k)];
+        let squared = dot.of(x0, x0, xs, xs);
+        let norm = squared.sqrt();
+        let (modulus, sign) = if x0 >= 0.0 { (x0, 1.0) } else { (-x0, -1.0) };
+        let signed_norm = sign * norm;
+        let factor = (squared + modulus * norm) * 2.0;
+        x0 += signed_norm;
+        if factor == 0.0 {
+            self.r[(k, k)] = signed_norm.abs();
+            return;
+        }
+        let root = factor.sqrt();
+        x0 /= root;
+        xs.iter_mut().for_each(|x| *x /= root);
+        let unit = dot.of(x0, x0, xs, xs).sqrt();
+        x0 /= unit;
+        xs.iter_mut().for_each(|x| *x /= unit);
+        // nalgebra's reflect_with_sign, the sign making the diagonal −signed_norm
+        let diagonal = -signed_norm;
+        let sign = diagonal.signum();
+        let m_two = sign * -2.0;
+        for (j, col) in (k + 1..n).zip(right.chunks_exact_mut(q)) {
+            let ys = &mut col[..h];
+            let y0 = self.r[(k, j)];
+            let a = (dot.of(x0, y0, xs, ys) - 0.0) * m_two;
+            self.r[(k, j)] = a * x0 * 1.0 + sign * y0;
+            for (y, x) in ys.iter_mut().zip(xs.iter()) {
+                *y = a * *x * 1.0 + sign * *y;
+            }
+        }
+        self.r[(k, k)] = diagonal.abs();
+        self.sign *= sign;
+    }
+}
+
+/// nalgebra's dot product of two vectors of a reflection (rows k.. of the stack) from their
+/// non-zero entries: the first (`x0`, `y0`) and the piece's rows from index `at` on.
+#[derive(Clone, Copy)]
+struct Dot {
+    at: usize,
+    /// Entries before this index go to 8 accumulators (index mod 8), the rest one by one.
+    unrolled: usize,
+}
+
+impl Dot {
+    fn of(self, x0: f64, y0: f64, xs: &[f64], ys: &[f64]) -> f64 {
+        let mut acc = [0.0f64; 8];
+        if self.unrolled > 0 {
+            acc[0] += x0 * y0;
+        }
+        let split = self.unrolled.saturating_sub(self.at).min(xs.len());
+        for (m, (x, y)) in xs[..split].iter().zip(&ys[..split]).enumerate() {
+            acc[(self.at + m) % 8] += x * y;
+        }
+        let mut res = 0.0;
+        res += acc[0] + acc[4];
+        res += acc[1] + acc[5];
+        res += acc[2] + acc[6];
+        res += acc[3] + acc[7];
+        if self.unrolled == 0 {
+            res += x0 * y0;
+        }
+        for (x, y) in xs[split..].iter().zip(&ys[split..]) {
+            res += x * y;
+        }
+        res
     }
 }
 
@@ -297,6 +429,46 @@ mod tests {
         let norms = |m: &DMatrix<f64>| (0..cols).map(|k| m.column(k).norm()).collect::<Vec<_>>();
         for (a, b) in norms(&columns.r).iter().zip(norms(&j)) {
             assert!((a - b).abs() <= 1e-12 * b, "{a} vs {b}");
+        }
+    }
+
+    /// A piece folded into a square factor ([`Stack`]) gives nalgebra's QR of the stack to
+    /// the bit: pieces of fewer rows than columns and of as many, with columns that are zero
+    /// in a piece (another setup's alignment angle) and a column that is zero everywhere.
+    #[test]
+    fn folded_piece_is_the_stacked_qr_to_the_bit() {
+        let mut x = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let cols = N_PARAMS + 7;
+        for rows in [1, 5, 9, 17, 40, cols, 300] {
+            let mut block = |m: usize, zero: usize| {
+                let j = DMatrix::from_fn(m, cols, |_, k| {
+                    if k == N_PARAMS + zero || k == cols - 1 {
+                        0.0
+                    } else {
+                        next() * 10f64.powi(i32::try_from(k % 5).expect("below 5") - 2)
+                    }
+                });
+                j.qr().r()
+            };
+            let (first, piece) = (block(200, 1), block(rows, 3));
+            let got = Columns::combine(vec![first.clone(), piece.clone()], 7).r;
+            // the factor so far: the first piece's R through the stacked QR
+            let first = Columns::combine(vec![first], 7).r;
+            let mut both = DMatrix::zeros(first.nrows() + piece.nrows(), cols);
+            both.rows_mut(0, first.nrows()).copy_from(&first);
+            both.rows_mut(first.nrows(), piece.nrows())
+                .copy_from(&piece);
+            let want = both.qr().r();
+            assert_eq!(got.shape(), want.shape());
+            for (g, w) in got.iter().zip(want.iter()) {
+                assert!(g.to_bits() == w.to_bits(), "{rows} rows: {g:e} vs {w:e}");
+            }
         }
     }
 
