@@ -355,8 +355,24 @@ impl Dot {
             acc[0] += x0 * y0;
         }
         let split = self.unrolled.saturating_sub(self.at).min(xs.len());
-        for (m, (x, y)) in xs[..split].iter().zip(&ys[..split]).enumerate() {
+        // entry m goes to accumulator (at + m) mod 8: up to the first multiple of 8, then
+        // whole rounds of 8 (each accumulator's terms in the same order)
+        let head = ((8 - self.at % 8) % 8).min(split);
+        for (m, (x, y)) in xs[..head].iter().zip(&ys[..head]).enumerate() {
             acc[(self.at + m) % 8] += x * y;
+        }
+        let (xr, yr) = (
+            xs[head..split].chunks_exact(8),
+            ys[head..split].chunks_exact(8),
+        );
+        let (xt, yt) = (xr.remainder(), yr.remainder());
+        for (x, y) in xr.zip(yr) {
+            for c in 0..8 {
+                acc[c] += x[c] * y[c];
+            }
+        }
+        for (c, (x, y)) in xt.iter().zip(yt).enumerate() {
+            acc[c] += x * y;
         }
         let mut res = 0.0;
         res += acc[0] + acc[4];

@@ -402,10 +402,18 @@ impl EffectSet {
         if self.bound.is_empty() {
             return Corrections::default();
         }
+        let touched: usize = (0..self.n_poses)
+            .map(|i| {
+                self.bound
+                    .iter()
+                    .map(|b| b.1.touched(i).len())
+                    .sum::<usize>()
+            })
+            .sum();
         let mut out = Corrections {
             values: Vec::with_capacity(self.n_poses),
             starts: Vec::with_capacity(self.n_poses + 1),
-            partials: Vec::new(),
+            partials: Vec::with_capacity(touched),
             n_params: n,
         };
         out.starts.push(0);
