@@ -317,10 +317,14 @@ impl<'a> Stack<'a> {
         }
         let root = factor.sqrt();
         x0 /= root;
-        xs.iter_mut().for_each(|x| *x /= root);
+        for x in xs.iter_mut() {
+            *x /= root;
+        }
         let unit = dot.of(x0, x0, xs, xs).sqrt();
         x0 /= unit;
-        xs.iter_mut().for_each(|x| *x /= unit);
+        for x in xs.iter_mut() {
+            *x /= unit;
+        }
         // nalgebra's reflect_with_sign, the sign making the diagonal −signed_norm
         let diagonal = -signed_norm;
         let sign = diagonal.signum();
@@ -367,12 +371,12 @@ impl Dot {
         );
         let (xt, yt) = (xr.remainder(), yr.remainder());
         for (x, y) in xr.zip(yr) {
-            for c in 0..8 {
-                acc[c] += x[c] * y[c];
+            for ((a, x), y) in acc.iter_mut().zip(x).zip(y) {
+                *a += x * y;
             }
         }
-        for (c, (x, y)) in xt.iter().zip(yt).enumerate() {
-            acc[c] += x * y;
+        for ((a, x), y) in acc.iter_mut().zip(xt).zip(yt) {
+            *a += x * y;
         }
         let mut res = 0.0;
         res += acc[0] + acc[4];
