@@ -254,7 +254,9 @@ impl Columns {
 /// sign is −1) in the columns to the right. Those negations are applied when such a row
 /// joins a reflection ([`Stack::step`]). Every product and sum the QR makes with a non-zero
 /// entry is made, in the same order (the 8 accumulators of its dot products included),
-/// so the factor is the same to the bit, at a quarter of the operations.
+/// so the factor is the same to the bit, at a quarter of the operations. It follows
+/// `nalgebra` 0.33's QR: `folded_piece_is_the_stacked_qr_to_the_bit` says when another
+/// version makes it differently.
 struct Stack<'a> {
     r: &'a mut DMatrix<f64>,
     piece: &'a mut DMatrix<f64>,
