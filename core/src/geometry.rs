@@ -748,10 +748,7 @@ impl Lu5 {
     fn inverse_from(&self, first: usize) -> SMatrix<f64, 5, 5> {
         let mut x = SMatrix::<f64, 5, 5>::zeros();
         for c in 0..5 {
-            let mut v = [0.0; 5];
-            for k in 0..5 {
-                v[k] = if self.perm[k] == c { 1.0 } else { 0.0 };
-            }
+            let mut v = self.perm.map(|r| if r == c { 1.0 } else { 0.0 });
             for k in 0..5 {
                 for j in 0..k {
                     v[k] -= self.lu[(k, j)] * v[j];
