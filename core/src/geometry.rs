@@ -742,6 +742,29 @@ impl Lu5 {
         self.solve(&SMatrix::<f64, 5, 5>::identity())
     }
 
+    /// The rows `first`.. of A⁻¹ (the others zero): the same numbers as those rows of
+    /// [`Lu5::inverse`] (the same solves, the back substitution stopped at row `first`,
+    /// since it runs from the last row up).
+    fn inverse_from(&self, first: usize) -> SMatrix<f64, 5, 5> {
+        let mut x = SMatrix::<f64, 5, 5>::zeros();
+        for c in 0..5 {
+            let mut v = self.perm.map(|r| if r == c { 1.0 } else { 0.0 });
+            for k in 0..5 {
+                for j in 0..k {
+                    v[k] -= self.lu[(k, j)] * v[j];
+                }
+            }
+            for k in (first..5).rev() {
+                for j in k + 1..5 {
+                    v[k] -= self.lu[(k, j)] * v[j];
+                }
+                v[k] *= self.inv_diag[k];
+                x[(k, c)] = v[k];
+            }
+        }
+        x
+    }
+
     /// X with A X = B, column by column.
     fn solve<const N: usize>(&self, b: &SMatrix<f64, 5, N>) -> SMatrix<f64, 5, N> {
         let mut x = SMatrix::<f64, 5, N>::zeros();
@@ -1385,6 +1408,60 @@ pub fn sensitivity_into(
     Ok(())
 }
 
+/// [`sensitivity_into`] of the configuration variables `vars` alone, with the guides'
+/// `frames` of `p` given: their rows of `out`, the same numbers to the bit (each entry the
+/// same products summed in the same order as the static product computes them); the other
+/// rows are left as they were. A self-calibration row reads 2 of the 5 unknowns' rows: the
+/// 5 × 5 × 29 product of every row becomes 2 × 5 × 29, and the frames' two `sin_cos` are the
+/// caller's, once for all the poses of one machine.
+pub(crate) fn sensitivity_rows_into<const N: usize>(
+    p: &Params,
+    model: Model,
+    (sub, sol): (Subsystem, &Solution),
+    frames: &Frames,
+    vars: &[usize; N],
+    out: &mut Sensitivity,
+) -> Result<(), GeometryError> {
+    let (known, unknown) = (sub.known(), sub.unknown());
+    let t = Trig {
+        psi: sol.c[PSI].sin_cos(),
+        frames: *frames,
+    };
+    let cl = closure_with(p, model, &sol.c, &t);
+    let e_u = select_columns(&cl.e_c, &unknown);
+    let lu = Lu5::new(e_u);
+    check_conditioning(&e_u, lu.map(|l| l.det), sub)?;
+    let lu = lu.ok_or(GeometryError::Singular {
+        subsystem: sub,
+        ratio: 0.0,
+    })?;
+    // the inverse's rows of the unknowns asked for (a known variable's: zero, replaced
+    // below): each entry of their product is that of the full product, summed alike
+    let at = vars.map(|v| unknown.iter().position(|&u| u == v));
+    let inv = lu.inverse_from(at.iter().flatten().copied().min().unwrap_or(5));
+    let chosen = SMatrix::<f64, N, 5>::from_fn(|r, m| at[r].map_or(0.0, |k| inv[(k, m)]));
+    let du_dp = chosen * closure_params_with(p, model, &sol.c, &t);
+    let du_dk = chosen * SMatrix::<f64, 5, 2>::from_fn(|r, k| cl.e_c[(r, known[k])]);
+    for (r, &v) in vars.iter().enumerate() {
+        if at[r].is_some() {
+            for j in 0..N_PARAMS {
+                out.dc_dp[(v, j)] = -du_dp[(r, j)];
+            }
+            for j in 0..2 {
+                out.dc_dk[(v, j)] = -du_dk[(r, j)];
+            }
+        } else if let Some(k) = known.iter().position(|&u| u == v) {
+            for j in 0..N_PARAMS {
+                out.dc_dp[(v, j)] = 0.0;
+            }
+            for j in 0..2 {
+                out.dc_dk[(v, j)] = if j == k { 1.0 } else { 0.0 };
+            }
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 #[expect(
     clippy::float_cmp,
@@ -1617,6 +1694,62 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The sensitivities of chosen rows ([`sensitivity_rows_into`], what a calibration row
+    /// reads) are [`sensitivity_into`]'s rows to the bit, for known and unknown variables of
+    /// every viable forward subsystem and both models, and leave the other rows untouched;
+    /// and the full sensitivities predict how the solved configuration moves when a
+    /// parameter does (central differences of the solver itself, an independent truth).
+    #[test]
+    fn chosen_sensitivity_rows_are_the_full_rows_to_the_bit() {
+        let p = perturbed(2);
+        let mut checked = 0;
+        for model in [Model::M24, Model::M29] {
+            for sub in Subsystem::VIABLE {
+                let Subsystem::Actuators(a, b) = sub else {
+                    unreachable!("forward subsystems only")
+                };
+                for (x, y) in [(-200.0, 900.0), (0.0, 1400.0), (150.0, 2000.0)] {
+                    let Ok(pose) = igm(&p, model, x, y) else {
+                        continue;
+                    };
+                    let k = [pose.c[q_var(a)], pose.c[q_var(b)]];
+                    let sol = solve(&p, model, sub, k).expect("fgm of an igm pose");
+                    let full = sensitivity(&p, model, sub, &sol).expect("regular");
+                    let vars = [q_var(1), q_var(2), q_var(a)];
+                    let mut rows = Sensitivity::zeros();
+                    rows.dc_dp.fill(7.0);
+                    sensitivity_rows_into(&p, model, (sub, &sol), &frames(&p), &vars, &mut rows)
+                        .expect("regular");
+                    for v in 0..7 {
+                        let (want, got) = (full.dc_dp.row(v), rows.dc_dp.row(v));
+                        if vars.contains(&v) {
+                            let bits =
+                                |r: &[f64]| r.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                            assert_eq!(
+                                bits(want.clone_owned().as_slice()),
+                                bits(got.clone_owned().as_slice())
+                            );
+                            assert_eq!(full.dc_dk.row(v), rows.dc_dk.row(v));
+                        } else {
+                            assert!(got.iter().all(|&e| e == 7.0), "row {v} written");
+                        }
+                    }
+                    // d q2 / d l1 against the solver's central difference
+                    let h = 1e-6;
+                    let (mut up, mut down) = (p, p);
+                    up[crate::params::L1] += h;
+                    down[crate::params::L1] -= h;
+                    let moved = |p: &Params| solve(p, model, sub, k).expect("near").c[q_var(1)];
+                    let fd = (moved(&up) - moved(&down)) / (2.0 * h);
+                    let an = full.dc_dp[(q_var(1), crate::params::L1)];
+                    assert!((fd - an).abs() < 1e-5 * (1.0 + an.abs()), "{fd} vs {an}");
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked >= 12, "only {checked} poses checked");
     }
 
     /// Where the closed form refuses (actuator positions no pose of the machine reaches, or

@@ -22,7 +22,7 @@ use crate::effects::{Corrections, Delta, InputSensitivity};
 use crate::elastic::{fegm, fegm_from, ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
 use crate::geometry::{self, q_var, GeometryError, Solution, Subsystem, PSI, X, Y};
 use crate::noise::{self, NoiseModel, Parts, XyInstrument};
-use crate::params::{Model, Params, N_PARAMS};
+use crate::params::{Model, Params, D1, D2, GAMMA1, GAMMA2, N_PARAMS};
 use nalgebra::Vector2;
 
 pub use crate::params::Row;
@@ -222,19 +222,6 @@ fn forward(
     };
     geometry::sensitivity_into(p, model, sub, &f.sol, &mut f.sens)?;
     Ok(f)
-}
-
-/// [`forward`] into `f`, a buffer the caller reuses: the sensitivities written where they
-/// are read (1.7 kB a pose not copied through returns).
-fn forward_into(
-    p: &Params,
-    model: Model,
-    sub: Subsystem,
-    q: &[f64; 4],
-    f: &mut Forward,
-) -> Result<(), GeometryError> {
-    f.sol = solve_forward(p, model, sub, q)?;
-    geometry::sensitivity_into(p, model, sub, &f.sol, &mut f.sens)
 }
 
 /// The configuration of a forward subsystem `sub` at the actuator positions `q`.
@@ -463,6 +450,7 @@ impl Evaluation<'_> {
             corr: self.corr,
             noise: self.noise,
             decorrelated: self.form == Form::Decorrelated,
+            frames: geometry::frames(self.p),
         };
         // a reset pose that cannot be solved is blamed on its own line, not on the first
         // pose measured relative to it
@@ -510,6 +498,8 @@ struct Ctx<'a> {
     /// Whether a 2-D instrument's q rows are decorrelated (the calibration's form) or kept
     /// as the thesis writes them (its observability tables).
     decorrelated: bool,
+    /// The guides' frames of `p`, once per piece.
+    frames: geometry::Frames,
 }
 
 fn pose_rows(
@@ -645,6 +635,7 @@ pub fn force_residuals(
         corr,
         noise,
         decorrelated: true,
+        frames: geometry::frames(p),
     };
     let mut out = Vec::with_capacity(4 * campaign.poses.len());
     for (i, pose) in campaign.poses.iter().enumerate() {
@@ -927,7 +918,21 @@ fn self_rows(
 ) -> Result<(), GeometryError> {
     let d = ctx.corr.delta(i);
     let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
-    forward_into(&p_i, ctx.model, Subsystem::NR, &q_i, f)?;
+    // the guides' frames of the piece's machine where the correction leaves its guides as
+    // they are (every pose without effects): two sin_cos less per pose
+    let same_guides = [D1, GAMMA1, D2, GAMMA2]
+        .iter()
+        .all(|&k| p_i[k].to_bits() == ctx.p[k].to_bits());
+    let frames = if same_guides {
+        ctx.frames
+    } else {
+        geometry::frames(&p_i)
+    };
+    let sub = Subsystem::NR;
+    f.sol = geometry::fgm_with_frames(&p_i, &frames, ctx.model, sub, [q_i[0], q_i[3]])?;
+    // only the followers' rows of the sensitivities: what these rows read
+    let vars = [q_var(1), q_var(2)];
+    geometry::sensitivity_rows_into(&p_i, ctx.model, (sub, &f.sol), &frames, &vars, &mut f.sens)?;
     for a in [1, 2] {
         let v = q_var(a);
         // the follower's own encoder and those of q1, q4 through rgm

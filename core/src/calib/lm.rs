@@ -268,21 +268,18 @@ impl Lm<'_> {
     /// intermediate), then the free effect parameters'.
     fn jacobian(&self, rows: &[Residual], terms: &[Vec<(usize, f64)>]) -> DMatrix<f64> {
         let n = self.h.len();
-        let mut jr = DMatrix::zeros(rows.len(), self.n_unknowns());
-        for (k, t) in terms.iter().enumerate() {
-            for (i, row) in rows.iter().enumerate() {
-                jr[(i, k)] = t
+        // every entry written once, column by column (no zeroed matrix first)
+        DMatrix::from_fn(rows.len(), self.n_unknowns(), |i, k| {
+            let row = &rows[i];
+            if k < n {
+                terms[k]
                     .iter()
                     .map(|&(j, d)| row.jacobian[j] / row.sigma * d)
-                    .sum();
+                    .sum()
+            } else {
+                row.d_theta[self.free_theta[k - n]] / row.sigma
             }
-        }
-        for (k, &f) in self.free_theta.iter().enumerate() {
-            for (i, row) in rows.iter().enumerate() {
-                jr[(i, n + k)] = row.d_theta[f] / row.sigma;
-            }
-        }
-        jr
+        })
     }
 
     /// The normal equations of one piece's rows in the unscaled unknowns, and what is kept
