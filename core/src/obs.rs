@@ -606,9 +606,8 @@ fn force_rows(
     for a in 0..4 {
         sens[a].dp = dp[a];
     }
-    // the carrier positions matter through an effect that moves them (a scale) and through
-    // the encoders' noise
-    if ctx.corr.n_params > 0 || encoders {
+    // the carrier positions matter only through an effect that moves them (a scale)
+    if ctx.corr.n_params > 0 {
         for b in 0..4 {
             let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
                 let mut qb = q_i;
@@ -640,9 +639,35 @@ fn force_rows(
         });
     }
     if encoders {
-        decorrelate_forces(&mut out[first..], &sens, ctx.noise);
+        let gains = force_position_gains(ctx.p_cal, pose.q)?;
+        decorrelate_forces(&mut out[first..], &gains, ctx.noise);
     }
     Ok(())
+}
+
+/// The derivatives K of the four drive forces by the four carrier positions at `q` under the
+/// parameters `p_cal` (fixed during a calibration) and the default stiffness, without
+/// effects: the decorrelating combinations stay the same while the parameters move, so the
+/// rows' Jacobian is exact (as [`fixed_gains`] for a 2-D instrument).
+fn force_position_gains(
+    p_cal: &Params,
+    q: [f64; 4],
+) -> Result<nalgebra::Matrix4<f64>, ElasticError> {
+    let k = Stiffness::default();
+    let eq = fegm(p_cal, &k, q, ALL_ACTIVE)?;
+    let mut gains = nalgebra::Matrix4::zeros();
+    for b in 0..4 {
+        let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
+            let mut qb = q;
+            qb[b] += sign * 1e-3;
+            Ok(fegm_from(p_cal, &k, qb, ALL_ACTIVE, &eq)?.drive_force)
+        };
+        let (plus, minus) = (at(1.0)?, at(-1.0)?);
+        for a in 0..4 {
+            gains[(a, b)] = (plus[a] - minus[a]) / 2e-3;
+        }
+    }
+    Ok(gains)
 }
 
 /// Replace the four force rows of one pose (r = −K e + n: K the 4 × 4 derivative of the
@@ -652,11 +677,10 @@ fn force_rows(
 /// the two levels, and each row's encoder share is its eigenvalue. K has rank two (the
 /// forces of a preload span two modes), so two rows carry the encoders' noise and the
 /// signal, two the currents' noise alone.
-fn decorrelate_forces(rows: &mut [Residual], sens: &[InputSensitivity; 4], noise: &NoiseModel) {
+fn decorrelate_forces(rows: &mut [Residual], k: &nalgebra::Matrix4<f64>, noise: &NoiseModel) {
     if rows.len() != 4 {
         return;
     }
-    let k = nalgebra::Matrix4::from_fn(|a, b| sens[a].dq[b]);
     let eig = (k * k.transpose()).symmetric_eigen();
     let mut order = [0, 1, 2, 3];
     order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
