@@ -190,23 +190,25 @@ pub(crate) fn calibrate_estimating_noise_after(
     ))
 }
 
-/// Whether `effects` read the geometry when they are bound (the effects of the library
-/// whose per-pose data depend on the parameters they are bound at), so that a fit bound at
-/// the start is re-bound at its own parameters; a set with an effect outside the library is
-/// left as the caller bound it.
+/// Whether `effects` are re-bound at each fit's parameters: where one of them reads the
+/// geometry when it is bound ([`READS_GEOMETRY`]) and every one of them is rebuilt by its
+/// name alone. The thermal effect carries its reference temperature, which its name does not
+/// give back (its binding reads the lengths too, but their 1e-4 of error is 1e-4 of a few
+/// µm of expansion); a set with it, or with an effect outside the library, stays as the
+/// caller bound it.
 fn reads_geometry(effects: &EffectSet) -> bool {
     let names = effects.names();
-    names.iter().all(|n| effects::by_name(n).is_ok())
+    names.contains(&READS_GEOMETRY)
         && names
             .iter()
-            .any(|n| GEOMETRY_READERS.contains(n))
+            .all(|n| *n != "thermal" && effects::by_name(n).is_ok())
 }
 
-/// Effects whose binding reads the geometry: the preload's rod forces balance the drive
-/// forces through the rods' directions at the pose (0.1 mm of parameter error turns their
-/// 1-10 kN by 0.3 %: a third of a micrometre of stretch on rods the instrument rows measure to
-/// a few hundredths), the thermal effect's expansion of the nominal lengths.
-const GEOMETRY_READERS: [&str; 2] = ["preload_elastic", "thermal"];
+/// The effect whose binding reads the geometry: the preload's rod forces balance the drive
+/// forces through the rods' directions at the pose, and 0.1 mm of parameter error turns
+/// those directions by 1e-4, their 1-10 kN by 0.3 %: a third of a micrometre of stretch on
+/// rods the instrument rows measure to a few hundredths.
+const READS_GEOMETRY: &str = "preload_elastic";
 
 /// `effects` bound again to `campaign` at the parameters `p` (a fit's), the parameters the
 /// set holds held again; None where one does not bind there.
