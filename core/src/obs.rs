@@ -733,8 +733,7 @@ pub fn force_residuals(
         if pose.follower.iter().any(|f| *f) {
             continue;
         }
-        force_rows(&ctx, i, pose, &mut out, false)
-            .map_err(|e| PoseError::at(campaign, pose, e))?;
+        force_rows(&ctx, i, pose, &mut out, false).map_err(|e| PoseError::at(campaign, pose, e))?;
     }
     Ok(out)
 }
