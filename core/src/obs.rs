@@ -52,10 +52,6 @@ pub enum Direction {
     /// Drive force f1..f4 (index 0..=3, N) with all four drives position-controlled: the
     /// model's preload at the recorded positions minus the recorded force.
     F(usize),
-    /// The four force rows of a pose decorrelated ([`decorrelate_forces`]): their
-    /// combinations along the eigenvectors of the encoders' share, largest first (N): the
-    /// preload modes the drives' position noise enters (two), then those it does not.
-    FMode(usize),
 }
 
 impl std::fmt::Display for Direction {
@@ -71,7 +67,6 @@ impl std::fmt::Display for Direction {
             Direction::Across => write!(f, "across"),
             Direction::Compat(k) => write!(f, "compat{}", k + 1),
             Direction::F(a) => write!(f, "f{}", a + 1),
-            Direction::FMode(k) => write!(f, "fmode{}", k + 1),
         }
     }
 }
@@ -84,7 +79,7 @@ impl Direction {
 
     /// Whether the row's residual is a drive force (N).
     pub fn is_force(self) -> bool {
-        matches!(self, Direction::F(..) | Direction::FMode(..))
+        matches!(self, Direction::F(..))
     }
 
     /// Whether the row's residual is a length (mm).
@@ -530,7 +525,7 @@ fn pose_rows(
         (Kgm, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Kgm, (i, pose), reset, out)?),
         (Dbb | LiX | LiY | LiPsi, Some(reset)) => Ok(forward_rows(ctx, i, pose, reset, out)?),
         (SelfCal, _) => Ok(self_rows(ctx, (i, pose), f, out)?),
-        (None, _) if pose.drives_loaded() => Ok(force_rows(ctx, i, pose, out, true)?),
+        (None, _) if pose.drives_loaded() => Ok(force_rows(ctx, i, pose, out)?),
         _ => Ok(()),
     }
 }
@@ -585,18 +580,11 @@ pub fn force_jacobian(
 /// alike, only their forces scale. The effects' columns are the chain rule through these
 /// ([`Delta::chain`]): a temperature that lengthens a rod enters the forces as it enters
 /// the geometry.
-///
-/// With `encoders` the rows carry the drives' position noise too (errors in variables: the
-/// forces respond to a carrier's position error by the rods' stiffness, 0.2 µm of encoder
-/// noise is 10-20 N of force, several times the currents' own noise) and are decorrelated
-/// ([`decorrelate_forces`]); without, they are the four forces with the currents' noise
-/// alone (the observability tables of the currents).
 fn force_rows(
     ctx: &Ctx,
     i: usize,
     pose: &Pose,
     out: &mut Vec<Residual>,
-    encoders: bool,
 ) -> Result<(), ElasticError> {
     let d = ctx.corr.delta(i);
     let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
@@ -624,7 +612,6 @@ fn force_rows(
         }
     }
     let parts = ctx.noise.force_parts();
-    let first = out.len();
     for (a, s) in sens.iter().enumerate() {
         out.push(Residual {
             pose: i,
@@ -638,76 +625,7 @@ fn force_rows(
             d_theta: ctx.corr.theta_row(&[(i, *s)]),
         });
     }
-    if encoders {
-        let gains = force_position_gains(ctx.p_cal, pose.q)?;
-        decorrelate_forces(&mut out[first..], &gains, ctx.noise);
-    }
     Ok(())
-}
-
-/// The derivatives K of the four drive forces by the four carrier positions at `q` under the
-/// parameters `p_cal` (fixed during a calibration) and the default stiffness, without
-/// effects: the decorrelating combinations stay the same while the parameters move, so the
-/// rows' Jacobian is exact (as [`fixed_gains`] for a 2-D instrument).
-fn force_position_gains(
-    p_cal: &Params,
-    q: [f64; 4],
-) -> Result<nalgebra::Matrix4<f64>, ElasticError> {
-    let k = Stiffness::default();
-    let eq = fegm(p_cal, &k, q, ALL_ACTIVE)?;
-    let mut gains = nalgebra::Matrix4::zeros();
-    for b in 0..4 {
-        let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
-            let mut qb = q;
-            qb[b] += sign * 1e-3;
-            Ok(fegm_from(p_cal, &k, qb, ALL_ACTIVE, &eq)?.drive_force)
-        };
-        let (plus, minus) = (at(1.0)?, at(-1.0)?);
-        for a in 0..4 {
-            gains[(a, b)] = (plus[a] - minus[a]) / 2e-3;
-        }
-    }
-    Ok(gains)
-}
-
-/// Replace the four force rows of one pose (r = −K e + n: K the 4 × 4 derivative of the
-/// forces by the carrier positions, e the encoders' errors, n the currents' noise) by their
-/// combinations along the eigenvectors of K Kᵀ, largest eigenvalue first: both noises are
-/// diagonal in that basis (the currents' is isotropic), so the rows are independent whatever
-/// the two levels, and each row's encoder share is its eigenvalue. K has rank two (the
-/// forces of a preload span two modes), so two rows carry the encoders' noise and the
-/// signal, two the currents' noise alone.
-fn decorrelate_forces(rows: &mut [Residual], k: &nalgebra::Matrix4<f64>, noise: &NoiseModel) {
-    if rows.len() != 4 {
-        return;
-    }
-    let eig = (k * k.transpose()).symmetric_eigen();
-    let mut order = [0, 1, 2, 3];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let old: Vec<Residual> = rows.to_vec();
-    for (m, (row, &j)) in rows.iter_mut().zip(&order).enumerate() {
-        let w = eig.eigenvectors.column(j);
-        let mut value = 0.0;
-        let mut jac = Row::zeros();
-        let mut d_theta = vec![0.0; old[0].d_theta.len()];
-        for (a, o) in old.iter().enumerate() {
-            value += w[a] * o.value;
-            jac += o.jacobian * w[a];
-            for (d, od) in d_theta.iter_mut().zip(&o.d_theta) {
-                *d += w[a] * od;
-            }
-        }
-        let parts = noise::add(
-            noise.force_parts(),
-            noise.encoder_parts(eig.eigenvalues[j].max(0.0)),
-        );
-        row.direction = Direction::FMode(m);
-        row.value = value;
-        row.jacobian = jac;
-        row.d_theta = d_theta;
-        row.sigma = noise::sigma_of(&parts);
-        row.parts = parts;
-    }
 }
 
 /// The drive-force rows of every pose of `campaign` with all four drives position-controlled,
@@ -733,7 +651,7 @@ pub fn force_residuals(
         if pose.follower.iter().any(|f| *f) {
             continue;
         }
-        force_rows(&ctx, i, pose, &mut out, false).map_err(|e| PoseError::at(campaign, pose, e))?;
+        force_rows(&ctx, i, pose, &mut out).map_err(|e| PoseError::at(campaign, pose, e))?;
     }
     Ok(out)
 }
