@@ -81,9 +81,33 @@ impl Effect for PreloadElastic {
     }
 }
 
-/// Rod forces (N, tension positive) that balance the recorded drive forces at the rigid pose
-/// of the pose's (q1, q4).
+/// Passes of the balance at the deformed pose: the first at the rigid pose, then at the pose
+/// of the rods stretched by the last pass's forces.
+const DEFORMED_PASSES: usize = 3;
+
+/// Rod forces (N, tension positive) that balance the recorded drive forces at the pose the
+/// loaded machine takes: under a preload of kN the rods stretch by up to a few tenths of a
+/// millimetre and the platform turns by 1e-4 rad, which changes the rods' directions against
+/// the guides and the arms of the moment balance; balanced at the rigid pose instead, the
+/// forces of the parallelogram rods came out 0.3-0.5 % wrong (up to 1 µm of stretch on a
+/// stressed twin, against a stretch the instrument rows determine to 0.03 %). The deformed
+/// pose is the rigid model's with the rods lengthened by T / k (the default stiffness: a
+/// compliance c ≠ 1 moves it by (c − 1) of a second-order term).
 fn rod_forces(p: &Params, pose: &Pose) -> Result<[f64; 5], String> {
+    let mut t = balance_at(p, pose)?;
+    for _ in 1..DEFORMED_PASSES {
+        let mut stretched = *p;
+        for (rod, ti) in RODS.iter().zip(t) {
+            stretched[rod.l] += ti / DEFAULT_ROD_STIFFNESS_N_PER_MM;
+        }
+        t = balance_at(&stretched, pose)?;
+    }
+    Ok(t)
+}
+
+/// Rod forces that balance the recorded drive forces at the rigid pose of the pose's (q1, q4)
+/// under the parameters `p`: 4 carrier and 3 platform equations, least squares.
+fn balance_at(p: &Params, pose: &Pose) -> Result<[f64; 5], String> {
     let sol = geometry::fgm(p, Model::M29, pose.q[0], pose.q[3])
         .map_err(|e| format!("rigid pose: {e}"))?;
     let (x, y, psi) = (sol.x(), sol.y(), sol.psi());
