@@ -295,7 +295,7 @@ fn check_floors(run: &Run) {
 /// The drift test from a calibration's start, on a stream that only expands with the
 /// temperature (and crashes, a step reported on its own): no drift WARN at any check, before
 /// or after the crash, and P(noise alone) calibrated: under `frac_01` of the checks below
-/// 0.01, between a quarter and three quarters below 0.5 (`tag` for the messages).
+/// 0.01, between 15 % and 85 % below 0.5 (`tag` for the messages).
 fn check_drift_test(run: &Run, crash_at: f64, frac_01: f64, tag: &str) {
     let tests = &run.drift_tests;
     let n = tests.len().max(1) as f64;
@@ -324,9 +324,13 @@ fn check_drift_test(run: &Run, crash_at: f64, frac_01: f64, tag: &str) {
         least.is_some_and(|l| l.1 >= DRIFT_FALSE_ALARM),
         "{tag}: {least:?}"
     );
-    assert!(frac(0.01) <= frac_01, "{tag}: p < 0.01 at {:.3}", frac(0.01));
     assert!(
-        (0.25..=0.75).contains(&frac(0.5)),
+        frac(0.01) <= frac_01,
+        "{tag}: p < 0.01 at {:.3}",
+        frac(0.01)
+    );
+    assert!(
+        (0.15..=0.85).contains(&frac(0.5)),
         "{tag}: p < 0.5 at {:.3}",
         frac(0.5)
     );
@@ -489,7 +493,10 @@ fn calibration_currents_online_creep() {
         d.temperature_correlation
     );
     assert!(truth > 0.005, "WARN at {t} s, the truth crept {truth} mm");
-    assert!(t - passed <= 600.0, "WARN at {t} s, past 10 µm at {passed} s");
+    assert!(
+        t - passed <= 600.0,
+        "WARN at {t} s, past 10 µm at {passed} s"
+    );
     let said = said.expect("the WARN names l3");
     assert!(
         d.is_identified() == (d.margin >= DRIFT_NAME_MARGIN),
