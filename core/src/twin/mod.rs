@@ -24,7 +24,9 @@ pub mod production;
 mod stream;
 
 pub use effects::EffectKind;
-pub use production::{Creep, ProductionConfig, ProductionSample, ProductionStream, StepChange};
+pub use production::{
+    Creep, ProductionConfig, ProductionSample, ProductionStream, StepChange, TimeCreep,
+};
 pub use stream::{DriveSample, DriveStream};
 
 use crate::campaign::{Campaign, Instrument, Pose};

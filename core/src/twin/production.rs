@@ -36,6 +36,33 @@ pub struct Creep {
     pub per_k: f64,
 }
 
+/// A parameter that creeps over time, whatever the temperature (a clamping that slips under
+/// the machining loads, a joint that wears): from `from_s` it moves at a steady rate by
+/// `change` over `over_s`, then holds.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TimeCreep {
+    /// Parameter index.
+    pub param: usize,
+    /// Stream time the creep starts, s.
+    pub from_s: f64,
+    /// How long it creeps, s.
+    pub over_s: f64,
+    /// Its whole change, mm (rad for an angle).
+    pub change: f64,
+}
+
+impl TimeCreep {
+    /// The creep's change at stream time `t`.
+    pub fn at(&self, t: f64) -> f64 {
+        let f = if self.over_s > 0.0 {
+            ((t - self.from_s) / self.over_s).clamp(0.0, 1.0)
+        } else {
+            f64::from(u8::from(t >= self.from_s))
+        };
+        self.change * f
+    }
+}
+
 /// What the production stream does.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ProductionConfig {
@@ -55,6 +82,7 @@ pub struct ProductionConfig {
     pub force_noise_n: f64,
     pub step: Option<StepChange>,
     pub creep: Option<Creep>,
+    pub time_creep: Option<TimeCreep>,
     /// Seed of the path and the noise.
     pub seed: u64,
 }
@@ -74,6 +102,7 @@ impl Default for ProductionConfig {
             force_noise_n: 3.0,
             step: None,
             creep: None,
+            time_creep: None,
             seed: 1,
         }
     }
@@ -161,6 +190,9 @@ impl<'a> ProductionStream<'a> {
         }
         if let Some(c) = self.cfg.creep {
             p[c.param] += c.per_k * (self.cfg.temperature(t) - self.cfg.start_temp_c);
+        }
+        if let Some(c) = self.cfg.time_creep {
+            p[c.param] += c.at(t);
         }
         p
     }

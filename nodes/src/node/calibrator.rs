@@ -16,9 +16,9 @@
 //! to `rpkm_core::calib::online` on a worker thread (the loop hands it over without waiting;
 //! a full hand-over queue is counted, never waited on), which publishes Parameters with their
 //! σ when a parameter moved by `online_publish_sigma` σ since the last, and a WARN on
-//! /diagnostics naming a step change, or a drift: the change since the drift test's reference
-//! beyond what noise alone would have moved it (`DriftMonitor`, χ² at a false alarm of 1e-6
-//! a check) and its best rod's change beyond `online_drift_warn_um` ("l3 +48 µm in 6 min
+//! /diagnostics naming a step change, or a drift: a rod's creep explaining the change since
+//! the drift test's reference beyond what noise alone would have (`DriftMonitor`, at a false
+//! alarm of 1e-6 a check) and its change beyond `online_drift_warn_um` ("l3 +48 µm in 6 min
 //! (+12.0 ± 0.3 µm/K)", or "l1..l5 alike in 2 min, the path cannot tell which: ..." where the
 //! path does not name one rod).
 
