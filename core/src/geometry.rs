@@ -683,6 +683,22 @@ fn check_conditioning(
     Ok(())
 }
 
+/// The LU of the unknowns' columns of ∂e/∂c at a solution, refused where they are singular
+/// or ill-conditioned ([`check_conditioning`]): what the sensitivities are solved with.
+fn checked_lu(
+    e_c: &SMatrix<f64, 5, 7>,
+    unknown: &[usize; 5],
+    sub: Subsystem,
+) -> Result<Lu5, GeometryError> {
+    let e_u = select_columns(e_c, unknown);
+    let lu = Lu5::new(e_u);
+    check_conditioning(&e_u, lu.map(|l| l.det), sub)?;
+    lu.ok_or(GeometryError::Singular {
+        subsystem: sub,
+        ratio: 0.0,
+    })
+}
+
 /// A 5 × 5 LU factorisation with partial pivoting, on the stack: nalgebra's general LU and
 /// its column-by-column triangular solves cost several times more at this size, and every
 /// Newton step and every row's sensitivities (29 + 2 right-hand sides) go through one.
@@ -1375,13 +1391,7 @@ pub fn sensitivity_into(
     let known = sub.known();
     let t = Trig::new(p, &sol.c);
     let cl = closure_with(p, model, &sol.c, &t);
-    let e_u = select_columns(&cl.e_c, &unknown);
-    let lu = Lu5::new(e_u);
-    check_conditioning(&e_u, lu.map(|l| l.det), sub)?;
-    let lu = lu.ok_or(GeometryError::Singular {
-        subsystem: sub,
-        ratio: 0.0,
-    })?;
+    let lu = checked_lu(&cl.e_c, &unknown, sub)?;
     let inv = lu.inverse();
     let e_p = closure_params_with(p, model, &sol.c, &t);
     let du_dp = inv * e_p;
@@ -1428,13 +1438,7 @@ pub(crate) fn sensitivity_rows_into<const N: usize>(
         frames: *frames,
     };
     let cl = closure_with(p, model, &sol.c, &t);
-    let e_u = select_columns(&cl.e_c, &unknown);
-    let lu = Lu5::new(e_u);
-    check_conditioning(&e_u, lu.map(|l| l.det), sub)?;
-    let lu = lu.ok_or(GeometryError::Singular {
-        subsystem: sub,
-        ratio: 0.0,
-    })?;
+    let lu = checked_lu(&cl.e_c, &unknown, sub)?;
     // the inverse's rows of the unknowns asked for (a known variable's: zero, replaced
     // below): each entry of their product is that of the full product, summed alike
     let at = vars.map(|v| unknown.iter().position(|&u| u == v));
