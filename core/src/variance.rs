@@ -16,7 +16,7 @@
 
 use crate::calib::{self, Calibration, CalibrationError, Options};
 use crate::campaign::{Campaign, Instrument};
-use crate::effects::{self, Effect, EffectSet};
+use crate::effects::EffectSet;
 use crate::geometry;
 use crate::noise::{Group, NoiseModel, N_GROUPS};
 use crate::obs::RowValue;
@@ -114,9 +114,9 @@ pub(crate) fn calibrate_estimating_noise_after(
     let mut dof = [0.0; N_GROUPS];
     let mut rounds = 0;
     let mut last: Option<Calibration> = None;
-    // the effects bound at the last round's parameters (see `rebound`)
+    // the effects bound at the last round's parameters (`EffectSet::rebound`)
     let mut bound_at_fit: Option<EffectSet> = None;
-    let mut rebinds = reads_geometry(effects);
+    let mut rebinds = effects.rebinds();
     let cal = loop {
         let set = bound_at_fit.as_ref().unwrap_or(effects);
         // each round starts where the last ended: only the weights changed, so the LM takes
@@ -153,7 +153,7 @@ pub(crate) fn calibrate_estimating_noise_after(
         if rebinds {
             // an effect that bound at the start and not at the fit (a pose the fit moved to
             // a singular configuration) keeps its binding at the start
-            bound_at_fit = rebound(effects, campaign, &cal.params);
+            bound_at_fit = effects.rebound(campaign, &cal.params).and_then(Result::ok);
             rebinds = bound_at_fit.is_some();
         }
         for k in 0..N_GROUPS {
@@ -188,44 +188,6 @@ pub(crate) fn calibrate_estimating_noise_after(
             rounds,
         },
     ))
-}
-
-/// Whether `effects` are re-bound at each fit's parameters: where one of them reads the
-/// geometry when it is bound ([`READS_GEOMETRY`]) and every one of them is rebuilt by its
-/// name alone. The thermal effect carries its reference temperature, which its name does not
-/// give back (its binding reads the lengths too, but their 1e-4 of error is 1e-4 of a few
-/// µm of expansion); a set with it, or with an effect outside the library, stays as the
-/// caller bound it.
-fn reads_geometry(effects: &EffectSet) -> bool {
-    let names = effects.names();
-    names.contains(&READS_GEOMETRY)
-        && names
-            .iter()
-            .all(|n| *n != "thermal" && effects::by_name(n).is_ok())
-}
-
-/// The effect whose binding reads the geometry: the preload's rod forces balance the drive
-/// forces through the rods' directions at the pose, and 0.1 mm of parameter error turns
-/// those directions by 1e-4, their 1-10 kN by 0.3 %: a third of a micrometre of stretch on
-/// rods the instrument rows measure to a few hundredths.
-const READS_GEOMETRY: &str = "preload_elastic";
-
-/// `effects` bound again to `campaign` at the parameters `p` (a fit's), the parameters the
-/// set holds held again; None where one does not bind there.
-fn rebound(effects: &EffectSet, campaign: &Campaign, p: &Params) -> Option<EffectSet> {
-    let library: Vec<Box<dyn Effect>> = effects
-        .names()
-        .iter()
-        .filter_map(|n| effects::by_name(n).ok())
-        .collect();
-    let refs: Vec<&dyn Effect> = library.iter().map(AsRef::as_ref).collect();
-    let mut set = EffectSet::bind(&refs, campaign, p).ok()?;
-    for k in 0..effects.n_params() {
-        if effects.is_held(k) {
-            set.hold(k);
-        }
-    }
-    Some(set)
 }
 
 /// Mean distance (mm) from the tracker to the campaign's laser-tracker poses (nominal

@@ -35,6 +35,8 @@ pub use preload_elastic::PreloadElastic;
 pub use stiffness_factor::StiffnessFactor;
 pub use thermal::Thermal;
 
+use std::sync::Arc;
+
 use crate::campaign::Campaign;
 use crate::params::Params;
 use nalgebra::Vector2;
@@ -150,6 +152,13 @@ pub trait Bound: Send + Sync {
     fn touched(&self, pose: usize) -> std::ops::Range<usize> {
         let _ = pose;
         0..self.params().len()
+    }
+    /// The effect to bind again at a fit's parameters, where this binding read the geometry
+    /// at the parameters it was bound with enough that the fit's change it (see
+    /// [`EffectSet::rebound`]); None, the default, where the binding at the start serves (it
+    /// reads no geometry, or too little to matter).
+    fn rebinds_from(&self) -> Option<&dyn Effect> {
+        None
     }
 }
 
@@ -300,7 +309,9 @@ pub struct Slot {
 
 /// Effects bound to one campaign, with one parameter vector θ for all of them.
 pub struct EffectSet {
-    bound: Vec<(&'static str, Box<dyn Bound>)>,
+    /// Shared, so that a set bound again at other parameters keeps the bindings that do
+    /// not change ([`EffectSet::rebound`]).
+    bound: Vec<(&'static str, Arc<dyn Bound>)>,
     n_poses: usize,
     /// Parameters held at zero (a part of an effect the data do not support).
     held: Vec<bool>,
@@ -338,7 +349,7 @@ impl EffectSet {
     ) -> Result<EffectSet, NotApplicable> {
         let bound = effects
             .iter()
-            .map(|e| Ok((e.name(), e.bind(campaign, p)?)))
+            .map(|e| Ok((e.name(), Arc::<dyn Bound>::from(e.bind(campaign, p)?))))
             .collect::<Result<Vec<_>, NotApplicable>>()?;
         let n: usize = bound.iter().map(|b| b.1.params().len()).sum();
         Ok(EffectSet {
@@ -346,6 +357,38 @@ impl EffectSet {
             n_poses: campaign.poses.len(),
             held: vec![false; n],
         })
+    }
+
+    /// Whether a binding of the set reads the geometry at the parameters it was bound with
+    /// ([`Bound::rebinds_from`]): a fit that moved them leaves it a model error.
+    pub fn rebinds(&self) -> bool {
+        self.bound.iter().any(|b| b.1.rebinds_from().is_some())
+    }
+
+    /// The set bound again to `campaign` at the parameters `p` (a fit's) where a binding
+    /// reads the geometry ([`EffectSet::rebinds`]), the others and the held parameters kept;
+    /// None where none does.
+    pub fn rebound(
+        &self,
+        campaign: &Campaign,
+        p: &Params,
+    ) -> Option<Result<EffectSet, NotApplicable>> {
+        if !self.rebinds() {
+            return None;
+        }
+        let bound = self
+            .bound
+            .iter()
+            .map(|(name, b)| match b.rebinds_from() {
+                Some(e) => Ok((*name, Arc::<dyn Bound>::from(e.bind(campaign, p)?))),
+                None => Ok((*name, Arc::clone(b))),
+            })
+            .collect::<Result<Vec<_>, NotApplicable>>();
+        Some(bound.map(|bound| EffectSet {
+            bound,
+            n_poses: self.n_poses,
+            held: self.held.clone(),
+        }))
     }
 
     /// Hold parameter `k` (θ order) at zero: the calibration does not identify it.
