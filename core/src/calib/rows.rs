@@ -426,18 +426,23 @@ mod tests {
     use super::*;
     use crate::params::{L4, L5, XA4R};
 
+    /// Numbers uniform in [−0.5, 0.5) from `seed` (xorshift64): the same matrices on every
+    /// run without a random-number crate.
+    fn uniform(mut x: u64) -> impl FnMut() -> f64 {
+        move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        }
+    }
+
     /// R factors of blocks combined in order are the R factor of the whole: RᵀR = JᵀJ (the
     /// Gram matrix every selection and scaling reads), for blocks with fewer rows than
     /// columns too.
     #[test]
     fn combined_block_factors_keep_the_gram_matrix() {
-        let mut x = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = uniform(0x9e37_79b9_7f4a_7c15_u64);
         let cols = N_PARAMS + 3;
         let j = DMatrix::from_fn(700, cols, |_, k| {
             next() * 10f64.powi(i32::try_from(k % 7).expect("below 7") - 3)
@@ -459,13 +464,7 @@ mod tests {
     /// in a piece (another setup's alignment angle) and a column that is zero everywhere.
     #[test]
     fn folded_piece_is_the_stacked_qr_to_the_bit() {
-        let mut x = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = uniform(0x2545_f491_4f6c_dd1d_u64);
         let cols = N_PARAMS + 7;
         for rows in [1, 5, 9, 17, 40, cols, 300] {
             let mut block = |m: usize, zero: usize| {
