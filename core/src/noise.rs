@@ -29,10 +29,14 @@ pub enum Group {
     Encoder,
     /// Drive forces, from the motor currents (N).
     Force,
+    /// The drives' position noise as their forces see it, all four holding their commands
+    /// ([`DriveNoise`]): the same encoders, a level of its own (see
+    /// [`NoiseModel::drive_position_mm`]).
+    DrivePosition,
 }
 
 /// Number of noise groups.
-pub const N_GROUPS: usize = 8;
+pub const N_GROUPS: usize = 9;
 
 /// Variance (mm² or rad²) a row receives from each group, in [`Group::ALL`] order.
 pub type Parts = [f64; N_GROUPS];
@@ -48,6 +52,7 @@ impl Group {
         Group::Psi,
         Group::Encoder,
         Group::Force,
+        Group::DrivePosition,
     ];
 
     /// Index in [`Parts`].
@@ -56,7 +61,7 @@ impl Group {
     }
 
     /// Name in reports and in `--noise` (`lt`, `lt_across`, `kgm`, `dbb`, `li`, `psi`,
-    /// `encoder`).
+    /// `encoder`, `force`, `drive_position`).
     pub fn name(self) -> &'static str {
         match self {
             Group::Lt => "lt",
@@ -67,6 +72,7 @@ impl Group {
             Group::Psi => "psi",
             Group::Encoder => "encoder",
             Group::Force => "force",
+            Group::DrivePosition => "drive_position",
         }
     }
 
@@ -145,6 +151,14 @@ pub struct NoiseModel {
     pub encoder_mm: f64,
     /// Drive forces read from the motor currents, N.
     pub force_n: f64,
+    /// The drives' position noise in their force rows (mm): the encoders' noise, which the
+    /// forces see through the rods' stiffness while all four drives hold their commands
+    /// ([`DriveNoise`]). Its own group, not `encoder_mm`'s: the encoder group's level is
+    /// also set by the loaded tracker poses' incompatibility rows, where a model without
+    /// the rods' stretch leaves 0.1 mm of misfit (a twin's campaign calibrated without
+    /// `preload_elastic`: 20 µm, the estimation's cap), and force rows weighed by that lose
+    /// their information.
+    pub drive_position_mm: f64,
 }
 
 impl Default for NoiseModel {
@@ -165,6 +179,8 @@ impl Default for NoiseModel {
             encoder_mm: 0.0002,
             // the spec gives none: a drive's force from its current, a few N of a 2 kN drive
             force_n: 5.0,
+            // the same encoders
+            drive_position_mm: 0.0002,
         }
     }
 }
@@ -181,7 +197,7 @@ pub enum NoiseSpecError {
 }
 
 const NAMES: &str = "lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, \
-                     psi, encoder, force (N), tracker_x, tracker_y";
+                     psi, encoder, force (N), drive_position, tracker_x, tracker_y";
 
 impl NoiseModel {
     /// The default with the statements `name=value,...` applied (mm, rad for `psi`):
@@ -256,6 +272,7 @@ impl NoiseModel {
             "psi" => self.psi_rad = v,
             "encoder" => self.encoder_mm = v,
             "force" => self.force_n = v,
+            "drive_position" => self.drive_position_mm = v,
             "tracker_x" => self.tracker_position[0] = v,
             "tracker_y" => self.tracker_position[1] = v,
             _ => {
@@ -283,6 +300,7 @@ impl NoiseModel {
             psi_rad: self.psi_rad * f(Group::Psi),
             encoder_mm: self.encoder_mm * f(Group::Encoder),
             force_n: self.force_n * f(Group::Force),
+            drive_position_mm: self.drive_position_mm * f(Group::DrivePosition),
         }
     }
 
@@ -297,6 +315,7 @@ impl NoiseModel {
             Group::Psi => self.psi_rad,
             Group::Encoder => self.encoder_mm,
             Group::Force => self.force_n,
+            Group::DrivePosition => self.drive_position_mm,
         }
     }
 
@@ -372,11 +391,12 @@ impl NoiseModel {
         parts
     }
 
-    /// The drive forces' noise: the currents' and the encoders' levels ([`DriveNoise`]).
+    /// The drive forces' noise: the currents' and the drives' positions' levels
+    /// ([`DriveNoise`]).
     pub fn drives(&self) -> DriveNoise {
         DriveNoise {
             force_n: self.force_n,
-            encoder_mm: self.encoder_mm,
+            encoder_mm: self.drive_position_mm,
         }
     }
 
@@ -421,7 +441,7 @@ pub struct ForceModes {
     /// Column m: the m-th combination's weights on f1..f4 (unit length).
     pub basis: Matrix4<f64>,
     /// Per combination: its variance (N²) split by group, the currents' σ_f² and the
-    /// encoders' σ_e² λ_m.
+    /// drives' positions' σ_e² λ_m ([`Group::DrivePosition`]).
     pub parts: [Parts; 4],
 }
 
@@ -439,7 +459,7 @@ impl DriveNoise {
             // round-off leaves the rank-two K's null eigenvalues a hair below zero
             let share = eig.eigenvalues[j].max(0.0) * self.encoder_mm.powi(2);
             parts[m][Group::Force.index()] = self.force_n.powi(2);
-            parts[m][Group::Encoder.index()] = share;
+            parts[m][Group::DrivePosition.index()] = share;
         }
         ForceModes { basis, parts }
     }
@@ -552,7 +572,7 @@ mod tests {
         assert!((modes.covariance() - want).norm() < 1e-9 * want.norm());
         assert!((modes.information() * want - Matrix4::identity()).norm() < 1e-9);
         // largest encoder share first, the currents' share alike in every combination
-        let enc = |m: usize| modes.parts[m][Group::Encoder.index()];
+        let enc = |m: usize| modes.parts[m][Group::DrivePosition.index()];
         assert!(enc(0) >= enc(1) && enc(1) >= enc(2) && enc(2) >= enc(3));
         assert!((0..4).all(|m| (modes.parts[m][Group::Force.index()] - 9.0).abs() < 1e-12));
     }
