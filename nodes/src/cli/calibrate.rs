@@ -268,12 +268,12 @@ pub fn print_noise(noise: &NoiseEstimate) {
 /// The rows of the noise table, each line starting with `indent`.
 pub fn print_noise_groups(groups: &[variance::GroupNoise], indent: &str) {
     println!(
-        "{indent}{:<10} {:>10} {:>10} {:>8}  unit",
+        "{indent}{:<14} {:>10} {:>10} {:>8}  unit",
         "group", "stated", "estimated", "dof"
     );
     for g in groups {
         println!(
-            "{indent}{:<10} {:>10.3} {:>10.3} {:>8.1}  {}{}",
+            "{indent}{:<14} {:>10.3} {:>10.3} {:>8.1}  {}{}",
             g.group,
             g.assumed,
             g.estimated,
