@@ -14,9 +14,10 @@
 //! (0.43-1.67: a fixed [0.7, 1.4] fails a right covariance somewhere in 83 % of draws of 16
 //! machines).
 //!
-//! With the start campaign's 200 production poses (ignored: about 30 s in release) the same
+//! With the start campaign's 200 production poses (ignored: about 15 s in release) the same
 //! checks hold: their drive-force rows carry the encoders' noise (0.2 µm is 10-20 N of force
-//! when the drives hold their commands), decorrelated (`noise::DriveNoise`).
+//! when the drives hold their commands), decorrelated (`noise::DriveNoise`), at a level of
+//! its own (the `drive_position` group).
 //!
 //! What remains (docs/calibration.md, issue 15): the prior holds rods 4 and 5 independent
 //! where the twin builds them equal (a perfect parallel-holder), so the pair's sum has twice
@@ -110,9 +111,9 @@ fn the_covariance_covers_the_errors_of_twin_machines() {
 }
 
 /// The online test's whole start campaign: its 200 production poses' drive-force rows carry
-/// the encoders' noise (`noise::DriveNoise`). About 30 s in release.
+/// the encoders' noise (`noise::DriveNoise`). About 15 s in release.
 #[test]
-#[ignore = "16 calibrations with 200 force poses each (about 30 s in release): run with --ignored"]
+#[ignore = "16 calibrations with 200 force poses each (about 15 s in release): run with --ignored"]
 fn the_covariance_covers_the_errors_with_production_poses() {
     check_coverage(200);
 }

@@ -42,7 +42,8 @@ pub struct CalibrateArgs {
     pub tolerance_mrad: f64,
     /// The instruments' stated noise, NAME=VALUE comma-separated or a YAML file (mm, rad for
     /// psi): lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, psi,
-    /// encoder, force (N, drive forces), tracker_x, tracker_y. Default: the spec's figures. Example:
+    /// encoder, force (N, drive forces), drive_position (the encoders in the force rows),
+    /// tracker_x, tracker_y. Default: the spec's figures. Example:
     /// --noise lt=0.005,kgm=0.001,encoder=0.0005
     #[arg(long)]
     pub noise: Option<String>,
