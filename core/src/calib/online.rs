@@ -58,7 +58,8 @@ pub struct OnlineOptions {
     /// σ of a drive force reading, N.
     pub force_sigma_n: f64,
     /// σ of a drive's encoder, mm: the drives hold their commands, so an encoder's error
-    /// moves the forces by the rods' stiffness ([`DriveNoise`]).
+    /// moves the forces by the rods' stiffness ([`DriveNoise`]; the calibration's
+    /// `drive_position` group).
     pub encoder_sigma_mm: f64,
     /// Random-walk rate of the lengths, mm per √h (thermal drift of a steel machine: about
     /// 11.5 µm per m and K).
@@ -114,7 +115,7 @@ impl Default for OnlineOptions {
     fn default() -> Self {
         OnlineOptions {
             force_sigma_n: 5.0,
-            // the calibration's default (NoiseModel): a linear scale of this class
+            // the calibration's stated level (NoiseModel::drive_position_mm)
             encoder_sigma_mm: 0.0002,
             length_drift_mm_per_sqrt_h: 0.05,
             angle_drift_rad_per_sqrt_h: 2e-5,
