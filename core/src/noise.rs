@@ -434,8 +434,9 @@ pub struct DriveNoise {
 
 /// The four force combinations of one pose that are independent under [`DriveNoise`]: the
 /// eigenvectors of K Kᵀ, largest eigenvalue first. K has rank two (the forces of a preload
-/// span two modes), so the first two carry the encoders' noise and the geometry's signal,
-/// the last two the currents' noise alone.
+/// span two modes; on the twin the third's share is a thousandth of the second's, the
+/// central differences' round-off), so the first two carry the encoders' noise and the
+/// geometry's signal, the last two the currents' noise alone.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ForceModes {
     /// Column m: the m-th combination's weights on f1..f4 (unit length).
