@@ -8,7 +8,7 @@
 //! (variance-component estimation) and the rows re-weighted with the estimates.
 
 use crate::campaign::Instrument;
-use nalgebra::{Matrix2, Vector2};
+use nalgebra::{Matrix2, Matrix4, Vector2};
 
 /// A source of noise whose level is stated and estimated on its own.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize)]
@@ -29,10 +29,14 @@ pub enum Group {
     Encoder,
     /// Drive forces, from the motor currents (N).
     Force,
+    /// The drives' position noise as their forces see it, all four holding their commands
+    /// ([`DriveNoise`]): the same encoders, a level of its own (see
+    /// [`NoiseModel::drive_position_mm`]).
+    DrivePosition,
 }
 
 /// Number of noise groups.
-pub const N_GROUPS: usize = 8;
+pub const N_GROUPS: usize = 9;
 
 /// Variance (mm² or rad²) a row receives from each group, in [`Group::ALL`] order.
 pub type Parts = [f64; N_GROUPS];
@@ -48,6 +52,7 @@ impl Group {
         Group::Psi,
         Group::Encoder,
         Group::Force,
+        Group::DrivePosition,
     ];
 
     /// Index in [`Parts`].
@@ -56,7 +61,7 @@ impl Group {
     }
 
     /// Name in reports and in `--noise` (`lt`, `lt_across`, `kgm`, `dbb`, `li`, `psi`,
-    /// `encoder`).
+    /// `encoder`, `force`, `drive_position`).
     pub fn name(self) -> &'static str {
         match self {
             Group::Lt => "lt",
@@ -67,6 +72,7 @@ impl Group {
             Group::Psi => "psi",
             Group::Encoder => "encoder",
             Group::Force => "force",
+            Group::DrivePosition => "drive_position",
         }
     }
 
@@ -145,6 +151,14 @@ pub struct NoiseModel {
     pub encoder_mm: f64,
     /// Drive forces read from the motor currents, N.
     pub force_n: f64,
+    /// The drives' position noise in their force rows (mm): the encoders' noise, which the
+    /// forces see through the rods' stiffness while all four drives hold their commands
+    /// ([`DriveNoise`]). Its own group, not `encoder_mm`'s: the encoder group's level is
+    /// also set by the loaded tracker poses' incompatibility rows, where a model without
+    /// the rods' stretch leaves 0.1 mm of misfit (a twin's campaign calibrated without
+    /// `preload_elastic`: 20 µm, the estimation's cap), and force rows weighed by that lose
+    /// their information.
+    pub drive_position_mm: f64,
 }
 
 impl Default for NoiseModel {
@@ -165,6 +179,8 @@ impl Default for NoiseModel {
             encoder_mm: 0.0002,
             // the spec gives none: a drive's force from its current, a few N of a 2 kN drive
             force_n: 5.0,
+            // the same encoders
+            drive_position_mm: 0.0002,
         }
     }
 }
@@ -181,7 +197,7 @@ pub enum NoiseSpecError {
 }
 
 const NAMES: &str = "lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, \
-                     psi, encoder, force (N), tracker_x, tracker_y";
+                     psi, encoder, force (N), drive_position, tracker_x, tracker_y";
 
 impl NoiseModel {
     /// The default with the statements `name=value,...` applied (mm, rad for `psi`):
@@ -256,6 +272,7 @@ impl NoiseModel {
             "psi" => self.psi_rad = v,
             "encoder" => self.encoder_mm = v,
             "force" => self.force_n = v,
+            "drive_position" => self.drive_position_mm = v,
             "tracker_x" => self.tracker_position[0] = v,
             "tracker_y" => self.tracker_position[1] = v,
             _ => {
@@ -283,6 +300,7 @@ impl NoiseModel {
             psi_rad: self.psi_rad * f(Group::Psi),
             encoder_mm: self.encoder_mm * f(Group::Encoder),
             force_n: self.force_n * f(Group::Force),
+            drive_position_mm: self.drive_position_mm * f(Group::DrivePosition),
         }
     }
 
@@ -297,6 +315,7 @@ impl NoiseModel {
             Group::Psi => self.psi_rad,
             Group::Encoder => self.encoder_mm,
             Group::Force => self.force_n,
+            Group::DrivePosition => self.drive_position_mm,
         }
     }
 
@@ -372,6 +391,15 @@ impl NoiseModel {
         parts
     }
 
+    /// The drive forces' noise: the currents' and the drives' positions' levels
+    /// ([`DriveNoise`]).
+    pub fn drives(&self) -> DriveNoise {
+        DriveNoise {
+            force_n: self.force_n,
+            encoder_mm: self.drive_position_mm,
+        }
+    }
+
     /// Variance parts of one drive force reading (N²).
     pub fn force_parts(&self) -> Parts {
         let mut parts = [0.0; N_GROUPS];
@@ -384,6 +412,85 @@ impl NoiseModel {
         let mut parts = [0.0; N_GROUPS];
         parts[Group::Encoder.index()] = gain2 * self.encoder_mm.powi(2);
         parts
+    }
+}
+
+/// The noise of the four drive forces of one pose with all four drives position-controlled,
+/// as a row of a calibration or a sample of the online tracker compares them: the model's
+/// forces at the recorded carrier positions minus the recorded forces, r = K e − n (K the
+/// 4 × 4 derivative of the forces by the carrier positions, e the encoders' errors, n the
+/// currents' noise). The drives hold their commands, so an encoder's error is a real
+/// incompatibility of the loop: 0.2 µm of it is 10-20 N of force by the rods' stiffness
+/// (97.7 kN/mm), several times the currents' few N. The forces' covariance is
+/// σ_f² I + σ_e² K Kᵀ; in the eigenvectors of K Kᵀ ([`ForceModes`]) both noises are diagonal
+/// (the currents' is isotropic), so the four combinations are independent at any levels.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct DriveNoise {
+    /// σ of a drive force read from the motor current, N.
+    pub force_n: f64,
+    /// σ of a drive's encoder, mm.
+    pub encoder_mm: f64,
+}
+
+/// The four force combinations of one pose that are independent under [`DriveNoise`]: the
+/// eigenvectors of K Kᵀ, largest eigenvalue first. K has rank two (the forces of a preload
+/// span two modes; on the twin the third's share is a thousandth of the second's, the
+/// central differences' round-off), so the first two carry the encoders' noise and the
+/// geometry's signal, the last two the currents' noise alone.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForceModes {
+    /// Column m: the m-th combination's weights on f1..f4 (unit length).
+    pub basis: Matrix4<f64>,
+    /// Per combination: its variance (N²) split by group, the currents' σ_f² and the
+    /// drives' positions' σ_e² λ_m ([`Group::DrivePosition`]).
+    pub parts: [Parts; 4],
+}
+
+impl DriveNoise {
+    /// The independent combinations of the four forces of a pose whose forces move by
+    /// `gains` (N/mm, row a: force a, column b: carrier b) with the carrier positions.
+    pub fn modes(&self, gains: &Matrix4<f64>) -> ForceModes {
+        let eig = (gains * gains.transpose()).symmetric_eigen();
+        let mut order = [0, 1, 2, 3];
+        order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+        let mut parts = [[0.0; N_GROUPS]; 4];
+        let mut basis = Matrix4::zeros();
+        for (m, &j) in order.iter().enumerate() {
+            basis.set_column(m, &eig.eigenvectors.column(j));
+            // round-off leaves the rank-two K's null eigenvalues a hair below zero
+            let share = eig.eigenvalues[j].max(0.0) * self.encoder_mm.powi(2);
+            parts[m][Group::Force.index()] = self.force_n.powi(2);
+            parts[m][Group::DrivePosition.index()] = share;
+        }
+        ForceModes { basis, parts }
+    }
+}
+
+impl ForceModes {
+    /// Variance of combination `m`, N².
+    pub fn variance(&self, m: usize) -> f64 {
+        self.parts[m].iter().sum()
+    }
+
+    /// The forces' covariance σ_f² I + σ_e² K Kᵀ (N²).
+    pub fn covariance(&self) -> Matrix4<f64> {
+        self.weighted(|v| v)
+    }
+
+    /// Its inverse, the forces' information (N⁻²), from the combinations: exact where the
+    /// encoders' share dwarfs the currents'.
+    pub fn information(&self) -> Matrix4<f64> {
+        self.weighted(|v| 1.0 / v)
+    }
+
+    /// Σ_m f(variance m) b_m b_mᵀ.
+    fn weighted(&self, f: impl Fn(f64) -> f64) -> Matrix4<f64> {
+        let mut out = Matrix4::zeros();
+        for m in 0..4 {
+            let b = self.basis.column(m);
+            out += b * b.transpose() * f(self.variance(m));
+        }
+        out
     }
 }
 
@@ -449,6 +556,26 @@ mod tests {
         // on the tracker's own position the frame is still defined
         let on = m.xy_parts(XyInstrument::Lt, Vector2::from(m.tracker_position), g);
         assert!(on.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn force_modes_are_the_forces_covariance_diagonalised() {
+        let k = Matrix4::new(
+            -97.7, 60.0, -12.0, 3.0, 40.0, -97.7, 8.0, -1.0, -20.0, 15.0, -97.7, 30.0, 5.0, -2.0,
+            44.0, -97.7,
+        ) * 1e3;
+        let noise = DriveNoise {
+            force_n: 3.0,
+            encoder_mm: 2e-4,
+        };
+        let modes = noise.modes(&k);
+        let want = Matrix4::identity() * 9.0 + k * k.transpose() * 4e-8;
+        assert!((modes.covariance() - want).norm() < 1e-9 * want.norm());
+        assert!((modes.information() * want - Matrix4::identity()).norm() < 1e-9);
+        // largest encoder share first, the currents' share alike in every combination
+        let enc = |m: usize| modes.parts[m][Group::DrivePosition.index()];
+        assert!(enc(0) >= enc(1) && enc(1) >= enc(2) && enc(2) >= enc(3));
+        assert!((0..4).all(|m| (modes.parts[m][Group::Force.index()] - 9.0).abs() < 1e-12));
     }
 
     #[test]

@@ -21,9 +21,9 @@ use crate::campaign::{Campaign, Instrument, Pose};
 use crate::effects::{Corrections, Delta, InputSensitivity};
 use crate::elastic::{fegm, fegm_from, ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
 use crate::geometry::{self, q_var, GeometryError, Solution, Subsystem, PSI, X, Y};
-use crate::noise::{self, NoiseModel, Parts, XyInstrument};
+use crate::noise::{self, ForceModes, NoiseModel, Parts, XyInstrument};
 use crate::params::{Model, Params, D1, D2, GAMMA1, GAMMA2, N_PARAMS};
-use nalgebra::Vector2;
+use nalgebra::{Matrix4, Vector2};
 
 pub use crate::params::Row;
 
@@ -52,6 +52,10 @@ pub enum Direction {
     /// Drive force f1..f4 (index 0..=3, N) with all four drives position-controlled: the
     /// model's preload at the recorded positions minus the recorded force.
     F(usize),
+    /// The four force rows of a pose decorrelated ([`decorrelate_forces`]): their
+    /// combinations along [`ForceModes`], largest encoder share first (N): the preload
+    /// modes the drives' position noise enters (two), then those it does not.
+    FMode(usize),
 }
 
 impl std::fmt::Display for Direction {
@@ -67,6 +71,7 @@ impl std::fmt::Display for Direction {
             Direction::Across => write!(f, "across"),
             Direction::Compat(k) => write!(f, "compat{}", k + 1),
             Direction::F(a) => write!(f, "f{}", a + 1),
+            Direction::FMode(k) => write!(f, "fmode{}", k + 1),
         }
     }
 }
@@ -79,7 +84,7 @@ impl Direction {
 
     /// Whether the row's residual is a drive force (N).
     pub fn is_force(self) -> bool {
-        matches!(self, Direction::F(..))
+        matches!(self, Direction::F(..) | Direction::FMode(..))
     }
 
     /// Whether the row's residual is a length (mm).
@@ -570,6 +575,11 @@ pub fn force_jacobian(
 /// alike, only their forces scale. The effects' columns are the chain rule through these
 /// ([`Delta::chain`]): a temperature that lengthens a rod enters the forces as it enters
 /// the geometry.
+///
+/// In the calibration's form the rows carry the drives' position noise too (errors in
+/// variables: [`noise::DriveNoise`]) and are decorrelated ([`decorrelate_forces`]); in the
+/// thesis's form they are the four forces with the currents' noise alone (the observability
+/// tables of the currents).
 fn force_rows(
     ctx: &Ctx,
     i: usize,
@@ -586,22 +596,14 @@ fn force_rows(
     }
     // the carrier positions matter only through an effect that moves them (a scale)
     if ctx.corr.n_params > 0 {
-        for b in 0..4 {
-            let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
-                let mut qb = q_i;
-                qb[b] += sign * 1e-3;
-                Ok(fegm_from(&p_i, &k, qb, ALL_ACTIVE, &eq)?.drive_force)
-            };
-            let (plus, minus) = (at(1.0)?, at(-1.0)?);
-            for a in 0..4 {
-                sens[a].dq[b] = (plus[a] - minus[a]) / 2e-3;
-            }
-        }
-        for (s, f) in sens.iter_mut().zip(eq.drive_force) {
-            s.dk = f / (1.0 + d.dk);
+        let gains = force_position_gains(&p_i, &k, q_i, &eq)?;
+        for (a, s) in sens.iter_mut().enumerate() {
+            s.dq = std::array::from_fn(|b| gains[(a, b)]);
+            s.dk = eq.drive_force[a] / (1.0 + d.dk);
         }
     }
     let parts = ctx.noise.force_parts();
+    let first = out.len();
     for (a, s) in sens.iter().enumerate() {
         out.push(Residual {
             pose: i,
@@ -615,7 +617,62 @@ fn force_rows(
             d_theta: ctx.corr.theta_row(&[(i, *s)]),
         });
     }
+    if ctx.decorrelated {
+        // at the fixed p_cal: combinations that moved with the fit would make the
+        // Jacobian inexact (as [`fixed_gains`] for a 2-D instrument)
+        let k = Stiffness::default();
+        let eq = fegm(ctx.p_cal, &k, pose.q, ALL_ACTIVE)?;
+        let gains = force_position_gains(ctx.p_cal, &k, pose.q, &eq)?;
+        decorrelate_forces(&mut out[first..], &ctx.noise.drives().modes(&gains));
+    }
     Ok(())
+}
+
+/// The derivatives of the four drive forces by the four carrier positions (N/mm; row a:
+/// force a, column b: carrier b) at `q` under `p` and `k`, all drives position-controlled:
+/// central differences of the equilibrium, warm-started from `eq`, its own at `q`. What an
+/// encoder's error does to the forces ([`noise::DriveNoise`]).
+pub fn force_position_gains(
+    p: &Params,
+    k: &Stiffness,
+    q: [f64; 4],
+    eq: &Equilibrium,
+) -> Result<Matrix4<f64>, ElasticError> {
+    let mut gains = Matrix4::zeros();
+    for b in 0..4 {
+        let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
+            let mut qb = q;
+            qb[b] += sign * 1e-3;
+            Ok(fegm_from(p, k, qb, ALL_ACTIVE, eq)?.drive_force)
+        };
+        let (plus, minus) = (at(1.0)?, at(-1.0)?);
+        for a in 0..4 {
+            gains[(a, b)] = (plus[a] - minus[a]) / 2e-3;
+        }
+    }
+    Ok(gains)
+}
+
+/// Replaces the four force rows of one pose by their combinations along `modes` (the
+/// forces' noise diagonalised: [`noise::DriveNoise::modes`]), each with its own variance
+/// parts: independent rows whatever the currents' and the encoders' levels, so that the
+/// noise rounds estimate both.
+fn decorrelate_forces(rows: &mut [Residual], modes: &ForceModes) {
+    if rows.len() != 4 {
+        return;
+    }
+    let old: [Residual; 4] = std::array::from_fn(|a| rows[a].clone());
+    for (m, row) in rows.iter_mut().enumerate() {
+        let w = modes.basis.column(m);
+        row.value = (0..4).map(|a| w[a] * old[a].value).sum();
+        row.jacobian = (0..4).map(|a| old[a].jacobian * w[a]).sum();
+        for (j, t) in row.d_theta.iter_mut().enumerate() {
+            *t = (0..4).map(|a| w[a] * old[a].d_theta[j]).sum();
+        }
+        row.direction = Direction::FMode(m);
+        row.parts = modes.parts[m];
+        row.sigma = noise::sigma_of(&row.parts);
+    }
 }
 
 /// The drive-force rows of every pose of `campaign` with all four drives position-controlled,
@@ -634,7 +691,8 @@ pub fn force_residuals(
         model: Model::M29,
         corr,
         noise,
-        decorrelated: true,
+        // the four forces as recorded, with the currents' noise alone
+        decorrelated: false,
         frames: geometry::frames(p),
     };
     let mut out = Vec::with_capacity(4 * campaign.poses.len());

@@ -292,3 +292,53 @@ fn preload_elastic_is_refused_on_force_rows() {
         "{err}"
     );
 }
+
+/// The calibration's force rows are the four forces of each pose turned into the
+/// combinations the drives' noise is diagonal in (`noise::DriveNoise`): an orthonormal turn,
+/// so each pose keeps its sum of squares and its information JᵀJ at equal weights; two
+/// combinations carry the encoders' share (`drive_position`), two the currents' noise alone.
+#[test]
+fn the_force_rows_turn_into_the_drives_noise_modes() {
+    let mut t = twin(11);
+    let c = t
+        .run(&design::production(12, 11), "prod")
+        .expect("production campaign");
+    let p = Params::nominal();
+    let noise = NoiseModel::default();
+    let thesis = obs::residuals(&c, &p, Model::M29, Step::Direct, &p, &noise).expect("rows");
+    let modes = obs::residuals_with(
+        &c,
+        &p,
+        Model::M29,
+        Step::Direct,
+        &p,
+        &Corrections::default(),
+        &noise,
+    )
+    .expect("rows");
+    assert_eq!(thesis.len(), modes.len());
+    let (force, drive) = (
+        rpkm_core::noise::Group::Force.index(),
+        rpkm_core::noise::Group::DrivePosition.index(),
+    );
+    for (f, m) in thesis.chunks(4).zip(modes.chunks(4)) {
+        let names: Vec<String> = m.iter().map(|r| r.direction.to_string()).collect();
+        assert_eq!(names, ["fmode1", "fmode2", "fmode3", "fmode4"]);
+        let ss = |rows: &[obs::Residual]| rows.iter().map(|r| r.value * r.value).sum::<f64>();
+        assert!((ss(f) - ss(m)).abs() <= 1e-9 * ss(f), "{} {}", ss(f), ss(m));
+        let info = |rows: &[obs::Residual]| {
+            rows.iter()
+                .map(|r| r.jacobian * r.jacobian.transpose())
+                .fold(nalgebra::SMatrix::<f64, 29, 29>::zeros(), |a, b| a + b)
+        };
+        let (a, b) = (info(f), info(m));
+        assert!((a - b).norm() <= 1e-9 * a.norm());
+        // 0.2 µm through the rods' stiffness: N in the first two, in the others a hundredth
+        // of the currents' σ at most (K's rank is two up to its central differences)
+        let share: Vec<f64> = m.iter().map(|r| r.parts[drive].sqrt()).collect();
+        assert!(share[0] >= share[1] && share[1] > 1.0, "{share:?}");
+        let floor = 0.01 * noise.force_n;
+        assert!(share[2] < floor && share[3] < floor, "{share:?}");
+        assert!(m.iter().all(|r| (r.parts[force] - 25.0).abs() < 1e-12));
+    }
+}

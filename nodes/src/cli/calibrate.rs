@@ -42,7 +42,8 @@ pub struct CalibrateArgs {
     pub tolerance_mrad: f64,
     /// The instruments' stated noise, NAME=VALUE comma-separated or a YAML file (mm, rad for
     /// psi): lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, psi,
-    /// encoder, force (N, drive forces), tracker_x, tracker_y. Default: the spec's figures. Example:
+    /// encoder, force (N, drive forces), drive_position (the encoders in the force rows),
+    /// tracker_x, tracker_y. Default: the spec's figures. Example:
     /// --noise lt=0.005,kgm=0.001,encoder=0.0005
     #[arg(long)]
     pub noise: Option<String>,
@@ -268,12 +269,12 @@ pub fn print_noise(noise: &NoiseEstimate) {
 /// The rows of the noise table, each line starting with `indent`.
 pub fn print_noise_groups(groups: &[variance::GroupNoise], indent: &str) {
     println!(
-        "{indent}{:<10} {:>10} {:>10} {:>8}  unit",
+        "{indent}{:<14} {:>10} {:>10} {:>8}  unit",
         "group", "stated", "estimated", "dof"
     );
     for g in groups {
         println!(
-            "{indent}{:<10} {:>10.3} {:>10.3} {:>8.1}  {}{}",
+            "{indent}{:<14} {:>10.3} {:>10.3} {:>8.1}  {}{}",
             g.group,
             g.assumed,
             g.estimated,

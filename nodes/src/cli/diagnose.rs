@@ -55,7 +55,8 @@ pub struct DiagnoseArgs {
     pub alpha: f64,
     /// The instruments' stated noise, NAME=VALUE comma-separated or a YAML file (mm, rad for
     /// psi): lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, psi,
-    /// encoder, force (N, drive forces), tracker_x, tracker_y. Only the start of the estimation and the rating the
+    /// encoder, force (N, drive forces), drive_position (the encoders in the force rows),
+    /// tracker_x, tracker_y. Only the start of the estimation and the rating the
     /// estimates are compared with: the verdict does not hinge on it.
     #[arg(long)]
     pub noise: Option<String>,

@@ -51,7 +51,7 @@ use crate::campaign_bag::CampaignAssembler;
 use crate::error::bad_input;
 
 /// Parameter keys of the node.
-pub const KEYS: [&str; 15] = [
+pub const KEYS: [&str; 16] = [
     "model",
     "geometry_file",
     "geometry.",
@@ -67,6 +67,7 @@ pub const KEYS: [&str; 15] = [
     "online_publish_sigma",
     "online_drift_warn_um",
     "online_force_sigma_n",
+    "online_encoder_sigma_um",
 ];
 
 /// The model diagnosis of `rpkm_core::diagnose` on the calibrated campaign (the held-out part
@@ -752,6 +753,12 @@ fn online_specs() -> Vec<Spec> {
             F64(5.0),
             "online tracker: drive force noise, N (> 0)",
         ),
+        fixed_in(
+            "online_encoder_sigma_um",
+            F64(0.2),
+            "online tracker: drive encoder noise, um (the forces move by the rods' stiffness)",
+            ParamRange::Float(0.0, 100.0),
+        ),
     ]
 }
 
@@ -790,6 +797,10 @@ fn online_settings(p: &NodeParams) -> anyhow::Result<Option<OnlineSettings>> {
             / 1000.0,
         options: OnlineOptions {
             force_sigma_n: p.positive("online_force_sigma_n", 5.0).map_err(bad_param)?,
+            encoder_sigma_mm: p
+                .f64_in("online_encoder_sigma_um", 0.2, (0.0, 100.0), " µm")
+                .map_err(bad_param)?
+                / 1000.0,
             ..OnlineOptions::default()
         },
     }))
