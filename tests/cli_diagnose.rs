@@ -122,6 +122,16 @@ fn diagnose_names_the_hidden_effect_of_the_truth_file_and_calibrate_adds_it() {
         (alpha - truth_alpha).abs() < 0.05 * truth_alpha,
         "{alpha} vs {truth_alpha}"
     );
+    // the calibration itself is the model's with the effect: its held-out error at the
+    // floor, its own α where the table's last stage has it
+    let cal = json(&cj);
+    let after = cal["val_rms_after_um"].as_f64().expect("val_rms_after_um");
+    assert!(after < 1.5 * floor, "calibrated with thermal: {after} um");
+    let alpha_cal = cal["effects"][0]["value"].as_f64().expect("effects");
+    assert!(
+        (alpha_cal - truth_alpha).abs() < 0.05 * truth_alpha,
+        "{alpha_cal} vs {truth_alpha}"
+    );
     assert!(chart.exists());
     // its report: the table's stages, the model with thermal as "after"
     let r = json(&dir.join("cal-report/report.json"));

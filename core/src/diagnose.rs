@@ -1053,8 +1053,7 @@ pub fn calib_options(opts: &Options) -> calib::Options {
     }
 }
 
-/// RMS of the held-out TCP errors (mm → µm) with the calibrated model and effects; the
-/// effects' setup-local parameters are re-fitted on the held-out setups (Gauss-Newton).
+/// RMS of the held-out TCP errors (mm → µm) with the calibrated model and effects.
 fn held_out_rms(
     val: &Validation,
     effects: &[&dyn Effect],
@@ -1062,6 +1061,36 @@ fn held_out_rms(
     cal: &Calibration,
     model: Model,
 ) -> Result<f64, FitError> {
+    Ok(calib::rms(&held_out_values(val, effects, cal_set, cal, model)?) * 1e3)
+}
+
+/// The held-out TCP errors (mm, in [`obs::tcp_errors`] order) of a calibration `cal` of the
+/// model with `effects` (bound to the calibration's campaign as `cal_set`), the held-out
+/// rows weighted by `noise`: what `rpkm calibrate --effects ... --validate` reports.
+pub fn held_out_errors(
+    validation: &Campaign,
+    noise: &NoiseModel,
+    effects: &[&dyn Effect],
+    cal_set: &EffectSet,
+    cal: &Calibration,
+) -> Result<Vec<f64>, DiagnoseError> {
+    let sigma = validation_noise(validation, noise).map_err(DiagnoseError::Validation)?;
+    let val = Validation {
+        campaign: validation,
+        sigma,
+    };
+    Ok(held_out_values(&val, effects, cal_set, cal, cal.model)?)
+}
+
+/// The held-out TCP errors (mm) with the calibrated model and effects; the effects'
+/// setup-local parameters are re-fitted on the held-out setups (Gauss-Newton).
+fn held_out_values(
+    val: &Validation,
+    effects: &[&dyn Effect],
+    cal_set: &EffectSet,
+    cal: &Calibration,
+    model: Model,
+) -> Result<Vec<f64>, FitError> {
     let set = EffectSet::bind(effects, val.campaign, &cal.params)?;
     let cal_layout = cal_set.layout();
     let layout = set.layout();
@@ -1105,8 +1134,7 @@ fn held_out_rms(
         }
     }
     let errs = obs::tcp_errors_with(val.campaign, &cal.params, model, &set.corrections(&theta))?;
-    let v: Vec<f64> = errs.iter().map(|e| e.value).collect();
-    Ok(calib::rms(&v) * 1e3)
+    Ok(errs.iter().map(|e| e.value).collect())
 }
 
 /// σ of every held-out TCP error, in [`obs::tcp_errors`] order: the instrument's noise at the

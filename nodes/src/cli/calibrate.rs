@@ -3,6 +3,7 @@
 use super::{bad_input, read_campaign, write_json};
 use rpkm_core::calib::{self, Calibration, Options, Scaling, Selection};
 use rpkm_core::campaign::Campaign;
+use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS};
 use rpkm_core::variance::{self, NoiseEstimate};
@@ -76,7 +77,9 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub perfect_parallelogram: bool,
     /// Physical effects to add to the model, in order (e.g. thermal,preload_elastic): the
-    /// output then shows the error falling effect by effect (table; chart with --chart).
+    /// geometry is calibrated with them (the parameters, σ and covariance printed and in
+    /// --json are the model's with the effects, whose own parameters follow), and the output
+    /// shows the error falling effect by effect (table; chart with --chart).
     /// Library: parallelogram, preload_elastic, thermal, encoder_scale, guide_straightness,
     /// instrument_alignment.
     #[arg(long, default_value = "")]
@@ -130,14 +133,19 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         None => Params::nominal(),
     };
     let opts = options(args, model)?;
+    // The geometry comes out of the model with the effects (what --json hands to the nodes).
+    let effects = super::diagnose::parse_effects(&args.effects)?;
+    let refs: Vec<&dyn Effect> = effects.iter().map(AsRef::as_ref).collect();
+    let set = EffectSet::bind(&refs, &campaign, &start)
+        .map_err(|e| bad_input(format!("--effects: {e}")))?;
     let (cal, noise) =
         // A calibration error is the campaign's (exit 2, crate::error::exit_code).
-        calibrate(&campaign, &start, &opts, !args.no_noise_estimation).map_err(|e| {
+        calibrate(&campaign, &start, &opts, !args.no_noise_estimation, &set).map_err(|e| {
             anyhow::Error::new(e).context(format!("calibrating {}", args.campaign.display()))
         })?;
     let val = validation
         .as_ref()
-        .map(|v| validate(v, &start, &cal.params, model))
+        .map(|v| validate_with(v, &start, &cal, &noise, (&refs, &set)))
         .transpose()?;
     print_report(&campaign, &cal, val.as_ref());
     print_noise(&noise);
@@ -222,10 +230,6 @@ fn write_calibration_json(
     out["determined"] = serde_json::to_value(cal.determined)?;
     if let Some(st) = stages {
         out["effect_stages"] = serde_json::to_value(st)?;
-        // the figure of the whole model, effects included, as its table shows it
-        if let Some(last) = st.last().and_then(|s| s.val_rms_um) {
-            out["val_rms_after_um"] = json!(last);
-        }
     }
     write_json(path, &out)
 }
@@ -244,12 +248,12 @@ fn calibrate(
     start: &Params,
     opts: &Options,
     estimate: bool,
+    effects: &EffectSet,
 ) -> Result<(Calibration, NoiseEstimate), calib::CalibrationError> {
-    let effects = rpkm_core::effects::EffectSet::empty();
     if estimate {
-        variance::calibrate_estimating_noise(campaign, start, opts, &effects)
+        variance::calibrate_estimating_noise(campaign, start, opts, effects)
     } else {
-        calib::calibrate_with(campaign, start, opts, &effects, &[])
+        calib::calibrate_with(campaign, start, opts, effects, &[])
             .map(|c| (c, NoiseEstimate::assumed(&opts.noise)))
     }
 }
@@ -469,14 +473,44 @@ pub fn validate(
     identified: &Params,
     model: Model,
 ) -> anyhow::Result<Validation> {
-    let err = |p: &Params| -> anyhow::Result<Vec<f64>> {
-        Ok(obs::tcp_errors(val, p, model)
-            .map_err(|e| bad_input(format!("{e}")))?
-            .iter()
-            .map(|e| e.2)
-            .collect())
-    };
-    let (before, after) = (err(start)?, err(identified)?);
+    let after = tcp_errors(val, identified, model)?;
+    compare(val, start, model, &after)
+}
+
+/// The held-out TCP errors of the calibration `cal` of the model with the `effects` bound
+/// to its campaign, against the starting parameters without them.
+fn validate_with(
+    val: &Campaign,
+    start: &Params,
+    cal: &Calibration,
+    noise: &NoiseEstimate,
+    (effects, set): (&[&dyn Effect], &EffectSet),
+) -> anyhow::Result<Validation> {
+    if effects.is_empty() {
+        return validate(val, start, &cal.params, cal.model);
+    }
+    let after = rpkm_core::diagnose::held_out_errors(val, &noise.model, effects, set, cal)
+        .map_err(|e| bad_input(format!("{}: {e}", val.source)))?;
+    compare(val, start, cal.model, &after)
+}
+
+/// The held-out TCP errors (mm) of the parameters `p` in the model without effects.
+fn tcp_errors(val: &Campaign, p: &Params, model: Model) -> anyhow::Result<Vec<f64>> {
+    Ok(obs::tcp_errors(val, p, model)
+        .map_err(|e| bad_input(format!("{e}")))?
+        .iter()
+        .map(|e| e.2)
+        .collect())
+}
+
+/// The held-out errors `after` against those of the starting parameters.
+fn compare(
+    val: &Campaign,
+    start: &Params,
+    model: Model,
+    after: &[f64],
+) -> anyhow::Result<Validation> {
+    let before = tcp_errors(val, start, model)?;
     if before.is_empty() {
         return Err(bad_input(format!(
             "{}: no held-out TCP measurement (lt, kgm, dbb, li_x, li_y rows)",
@@ -485,8 +519,8 @@ pub fn validate(
     }
     Ok(Validation {
         rms_before_um: 1e3 * calib::rms(&before),
-        rms_after_um: 1e3 * calib::rms(&after),
-        gain: calib::gain(&before, &after),
+        rms_after_um: 1e3 * calib::rms(after),
+        gain: calib::gain(&before, after),
         values: before.len(),
     })
 }
@@ -525,6 +559,7 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
             id.step
         );
     }
+    print_effects(&cal.effects);
     println!(
         "\n{:<8} {:<14} {:>6} {:>12} {:>12}",
         "instr.", "direction", "rows", "RMS before", "RMS after"
@@ -567,6 +602,24 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
     }
 }
 
+/// The effects' parameters of the calibrated model (--effects), after the geometry's.
+fn print_effects(effects: &[calib::EffectEstimate]) {
+    for e in effects {
+        println!(
+            "{:<24} {:>14.6} {:>11.2e} {}{}",
+            format!("{}.{}", e.effect, e.name),
+            e.value,
+            e.sigma,
+            e.unit,
+            if e.identified {
+                ""
+            } else {
+                "  (held: the campaign cannot tell it from the geometry)"
+            }
+        );
+    }
+}
+
 fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value {
     let parameters: serde_json::Map<String, serde_json::Value> = cal
         .model
@@ -593,6 +646,9 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
                 .collect::<Vec<_>>(),
         },
     });
+    if !cal.effects.is_empty() {
+        out["effects"] = json!(cal.effects);
+    }
     if let Some(v) = val {
         out["val_rms_before_um"] = json!(v.rms_before_um);
         out["val_rms_after_um"] = json!(v.rms_after_um);
