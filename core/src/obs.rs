@@ -24,6 +24,7 @@ use crate::geometry::{self, q_var, GeometryError, Solution, Subsystem, PSI, X, Y
 use crate::noise::{self, NoiseModel, Parts, XyInstrument};
 use crate::params::{Model, Params, D1, D2, GAMMA1, GAMMA2, N_PARAMS};
 use nalgebra::Vector2;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 pub use crate::params::Row;
 
@@ -362,6 +363,7 @@ pub fn residuals_in(
         corr,
         noise,
         form,
+        warm: None,
     };
     let pieces = Pieces::new(campaign, usize::MAX);
     let mut out = Vec::with_capacity(campaign.poses.len() * 4);
@@ -371,16 +373,22 @@ pub fn residuals_in(
     Ok(out)
 }
 
-/// A campaign cut into pieces of at most `size` poses of one setup, in file order within
-/// each setup. Evaluated piece by piece and concatenated, the rows are those of
-/// [`residuals_in`] in the same order; a piece is the unit of parallel work of a large
-/// calibration, and fixed pieces make its sums the same on any number of threads.
+/// A campaign cut into pieces of at most `size` poses, in file order within each setup.
+/// A piece holds one setup's poses where its rows are read relative to the setup's reset
+/// pose; consecutive setups whose rows read no reset pose (self-calibration, drive forces)
+/// share pieces (the 1,043 self-calibration poses of 28 setups make 5 pieces, not 28: a
+/// piece's sums and its R factor cost the same for 40 poses as for 256). Evaluated piece
+/// by piece and concatenated, the rows are those of [`residuals_in`] in the same order; a
+/// piece is the unit of parallel work of a large calibration, and fixed pieces make its
+/// sums the same on any number of threads.
 #[derive(Clone, Debug)]
 pub struct Pieces {
     /// Per setup: its reset pose and its poses.
     setups: Vec<(Option<usize>, Vec<usize>)>,
-    /// Per piece: its setup and the range of that setup's poses.
-    pieces: Vec<(usize, std::ops::Range<usize>)>,
+    /// The pieces' parts, piece after piece: a setup and the range of that setup's poses.
+    parts: Vec<(usize, std::ops::Range<usize>)>,
+    /// Per piece: the range of its parts.
+    pieces: Vec<std::ops::Range<usize>>,
 }
 
 impl Pieces {
@@ -391,19 +399,24 @@ impl Pieces {
             .into_iter()
             .map(|s| (s.reset, s.poses))
             .collect();
-        let mut pieces = Vec::new();
+        let mut cut = Cut {
+            size,
+            parts: Vec::new(),
+            pieces: Vec::new(),
+            open: None,
+        };
         for (k, (_, poses)) in setups.iter().enumerate() {
-            let mut a = 0usize;
-            loop {
-                let b = poses.len().min(a.saturating_add(size));
-                pieces.push((k, a..b));
-                if b == poses.len() {
-                    break;
-                }
-                a = b;
-            }
+            let shared = poses
+                .iter()
+                .all(|&i| !campaign.poses[i].instrument.is_relative());
+            cut.setup(k, poses.len(), shared);
         }
-        Pieces { setups, pieces }
+        cut.close();
+        Pieces {
+            setups,
+            parts: cut.parts,
+            pieces: cut.pieces,
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -412,6 +425,47 @@ impl Pieces {
 
     pub fn is_empty(&self) -> bool {
         self.pieces.is_empty()
+    }
+}
+
+/// [`Pieces::new`]'s cutting, setup after setup.
+struct Cut {
+    size: usize,
+    parts: Vec<(usize, std::ops::Range<usize>)>,
+    pieces: Vec<std::ops::Range<usize>>,
+    /// The piece still open to the next setup without a reset pose: its first part and
+    /// its poses so far.
+    open: Option<(usize, usize)>,
+}
+
+impl Cut {
+    /// Setup `k` of `n` poses; `shared`: its rows read no reset pose, so it may share a
+    /// piece with its neighbours of the same kind.
+    fn setup(&mut self, k: usize, n: usize, shared: bool) {
+        if !shared {
+            self.close();
+        }
+        let mut a = 0usize;
+        loop {
+            let (first, held) = self.open.unwrap_or((self.parts.len(), 0));
+            let b = n.min(a.saturating_add(self.size - held));
+            self.parts.push((k, a..b));
+            self.open = Some((first, held + (b - a)));
+            if held + (b - a) >= self.size || !shared {
+                self.close();
+            }
+            if b == n {
+                break;
+            }
+            a = b;
+        }
+    }
+
+    /// Ends the open piece, if any.
+    fn close(&mut self) {
+        if let Some((first, _)) = self.open.take() {
+            self.pieces.push(first..self.parts.len());
+        }
     }
 }
 
@@ -427,6 +481,9 @@ pub struct Evaluation<'a> {
     pub corr: &'a Corrections,
     pub noise: &'a NoiseModel,
     pub form: Form,
+    /// Each pose's ψ of an earlier evaluation, where the forward solves start from (and
+    /// leave their own for the next); None: every solve from γ2.
+    pub warm: Option<&'a WarmPsi>,
 }
 
 impl Evaluation<'_> {
@@ -437,12 +494,9 @@ impl Evaluation<'_> {
         k: usize,
         out: &mut Vec<Residual>,
     ) -> Result<(), PoseError> {
-        let Some((setup, range)) = pieces.pieces.get(k) else {
+        let Some(parts) = pieces.pieces.get(k) else {
             return Ok(());
         };
-        let (reset, poses) = &pieces.setups[*setup];
-        let campaign = self.campaign;
-        let reset = reset.map(|i| (i, &campaign.poses[i]));
         let ctx = Ctx {
             p: self.p,
             p_cal: self.p_cal,
@@ -451,7 +505,28 @@ impl Evaluation<'_> {
             noise: self.noise,
             decorrelated: self.form == Form::Decorrelated,
             frames: geometry::frames(self.p),
+            warm: self.warm,
         };
+        // one buffer of the forward solves' sensitivities for the piece's poses
+        let mut f = Forward::zeros();
+        for (setup, range) in &pieces.parts[parts.clone()] {
+            let (reset, poses) = &pieces.setups[*setup];
+            self.part_into(&ctx, (*reset, poses), range.clone(), &mut f, out)?;
+        }
+        Ok(())
+    }
+
+    /// Appends the rows of the poses `range` of one setup (its reset pose and poses).
+    fn part_into(
+        &self,
+        ctx: &Ctx,
+        (reset, poses): (Option<usize>, &[usize]),
+        range: std::ops::Range<usize>,
+        f: &mut Forward,
+        out: &mut Vec<Residual>,
+    ) -> Result<(), PoseError> {
+        let campaign = self.campaign;
+        let reset = reset.map(|i| (i, &campaign.poses[i]));
         // a reset pose that cannot be solved is blamed on its own line, not on the first
         // pose measured relative to it
         if let Some((ri, reset)) = reset.filter(|(_, r)| r.instrument.is_relative()) {
@@ -459,8 +534,6 @@ impl Evaluation<'_> {
             forward(&p_r, self.model, Subsystem::NR, &q_r)
                 .map_err(|e| PoseError::at(campaign, reset, e))?;
         }
-        // one buffer of the forward solves' sensitivities for the piece's poses
-        let mut f = Forward::zeros();
         for &i in &poses[range.clone()] {
             let pose = &campaign.poses[i];
             if pose.reset && pose.instrument.is_relative() {
@@ -468,9 +541,9 @@ impl Evaluation<'_> {
             }
             let err = |error: ModelError| PoseError::at(campaign, pose, error);
             match self.step {
-                Step::Direct => pose_rows(&ctx, (i, pose), reset, &mut f, out).map_err(err)?,
+                Step::Direct => pose_rows(ctx, (i, pose), reset, f, out).map_err(err)?,
                 Step::VirtualQ2 => {
-                    virtual_q2_row(&ctx, i, pose, self.p_cal, out).map_err(|e| err(e.into()))?;
+                    virtual_q2_row(ctx, i, pose, self.p_cal, out).map_err(|e| err(e.into()))?;
                 }
             }
         }
@@ -479,7 +552,7 @@ impl Evaluation<'_> {
         if self.step == Step::VirtualQ2 && range.end == poses.len() {
             if let Some((i, pose)) = reset {
                 let err = |error| PoseError::at(campaign, pose, error);
-                virtual_q2_row(&ctx, i, pose, self.p_cal, out).map_err(err)?;
+                virtual_q2_row(ctx, i, pose, self.p_cal, out).map_err(err)?;
             }
         }
         Ok(())
@@ -500,6 +573,60 @@ struct Ctx<'a> {
     decorrelated: bool,
     /// The guides' frames of `p`, once per piece.
     frames: geometry::Frames,
+    warm: Option<&'a WarmPsi>,
+}
+
+/// Each pose's platform angle ψ from the last evaluation of the rows that solved its forward
+/// model (NaN: none yet), for the next evaluation's solve to start from: the LM's trials
+/// move ψ by µrad, and the secant from there settles in 2 closures where it takes 4-5 from
+/// γ2 ([`geometry::fgm29_from`]: the same root, to the closure's round-off). Each pose is
+/// read and written by the one thread evaluating its piece; evaluations follow one another
+/// (their threads joined), so what a solve starts from does not depend on the thread count.
+pub struct WarmPsi(Vec<AtomicU64>);
+
+impl WarmPsi {
+    /// No ψ yet for any of `poses` poses.
+    pub fn new(poses: usize) -> WarmPsi {
+        WarmPsi(
+            (0..poses)
+                .map(|_| AtomicU64::new(f64::NAN.to_bits()))
+                .collect(),
+        )
+    }
+
+    fn get(&self, i: usize) -> Option<f64> {
+        let psi = f64::from_bits(self.0.get(i)?.load(Ordering::Relaxed));
+        psi.is_finite().then_some(psi)
+    }
+
+    fn set(&self, i: usize, psi: f64) {
+        if let Some(slot) = self.0.get(i) {
+            slot.store(psi.to_bits(), Ordering::Relaxed);
+        }
+    }
+
+    /// Forgets every ψ: after a failed evaluation, whose pieces stopped at places that
+    /// depend on the thread count.
+    pub fn clear(&self) {
+        for slot in &self.0 {
+            slot.store(f64::NAN.to_bits(), Ordering::Relaxed);
+        }
+    }
+
+    /// Every pose's ψ (NaN: none).
+    pub fn values(&self) -> Vec<f64> {
+        self.0
+            .iter()
+            .map(|v| f64::from_bits(v.load(Ordering::Relaxed)))
+            .collect()
+    }
+
+    /// Takes `psi` (from [`WarmPsi::values`] of another evaluation of the same campaign).
+    pub fn seed(&self, psi: &[f64]) {
+        for (slot, v) in self.0.iter().zip(psi) {
+            slot.store(v.to_bits(), Ordering::Relaxed);
+        }
+    }
 }
 
 fn pose_rows(
@@ -636,6 +763,7 @@ pub fn force_residuals(
         noise,
         decorrelated: true,
         frames: geometry::frames(p),
+        warm: None,
     };
     let mut out = Vec::with_capacity(4 * campaign.poses.len());
     for (i, pose) in campaign.poses.iter().enumerate() {
@@ -929,7 +1057,15 @@ fn self_rows(
         geometry::frames(&p_i)
     };
     let sub = Subsystem::NR;
-    f.sol = geometry::fgm_with_frames(&p_i, &frames, ctx.model, sub, [q_i[0], q_i[3]])?;
+    let known = [q_i[0], q_i[3]];
+    let warm = ctx.warm.and_then(|w| w.get(i));
+    f.sol = match warm.filter(|_| ctx.model == Model::M29) {
+        Some(psi) => geometry::fgm29_from(&p_i, &frames, (0, 3), known, psi)?,
+        None => geometry::fgm_with_frames(&p_i, &frames, ctx.model, sub, known)?,
+    };
+    if let Some(w) = ctx.warm {
+        w.set(i, f.sol.c[PSI]);
+    }
     // only the followers' rows of the sensitivities: what these rows read
     let vars = [q_var(1), q_var(2)];
     geometry::sensitivity_rows_into(&p_i, ctx.model, (sub, &f.sol), &frames, &vars, &mut f.sens)?;

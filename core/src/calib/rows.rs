@@ -5,7 +5,7 @@ use super::{Link, Options};
 use crate::campaign::Campaign;
 use crate::effects::{Corrections, EffectSet};
 use crate::noise::NoiseModel;
-use crate::obs::{Direction, Evaluation, Form, Pieces, PoseError, Residual, Step};
+use crate::obs::{Direction, Evaluation, Form, Pieces, PoseError, Residual, Step, WarmPsi};
 use crate::params::{Model, Params, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
@@ -35,6 +35,8 @@ pub(super) struct Problem<'a> {
     /// The row buffers of the evaluations' workers, kept from one evaluation to the next (a
     /// piece's 512 rows are 200 kB: fresh pages on every evaluation otherwise).
     buffers: Mutex<Vec<Vec<Residual>>>,
+    /// Each pose's ψ of the last evaluation, where the next one's forward solves start.
+    pub warm: WarmPsi,
 }
 
 impl<'a> Problem<'a> {
@@ -53,6 +55,7 @@ impl<'a> Problem<'a> {
             opts,
             pieces: Pieces::new(campaign, PIECE_POSES),
             buffers: Mutex::new(Vec::new()),
+            warm: WarmPsi::new(campaign.poses.len()),
         }
     }
 
@@ -91,6 +94,7 @@ impl<'a> Problem<'a> {
             corr,
             noise: self.noise,
             form: Form::Decorrelated,
+            warm: Some(&self.warm),
         };
         let n = self.pieces.len();
         // one piece after the other from `first`, every `stride`-th; the row buffer reused
@@ -110,7 +114,11 @@ impl<'a> Problem<'a> {
             out
         };
         let threads = thread_count(self.opts.threads).min(n.max(1));
-        in_piece_order(threads, run).into_iter().collect()
+        let done: Result<Vec<T>, PoseError> = in_piece_order(threads, run).into_iter().collect();
+        if done.is_err() {
+            self.warm.clear();
+        }
+        done
     }
 }
 
@@ -196,12 +204,12 @@ pub(super) struct Columns {
 impl Columns {
     /// The R factor of one block of rows with `n_theta` effect parameters.
     pub fn piece(rows: &[Residual], n_theta: usize) -> DMatrix<f64> {
-        let all: Vec<usize> = (0..n_theta).collect();
-        let mut j = DMatrix::zeros(rows.len(), N_PARAMS + n_theta);
-        j.columns_mut(0, N_PARAMS)
-            .copy_from(&weighted_jacobian(rows));
-        j.columns_mut(N_PARAMS, n_theta)
-            .copy_from(&weighted_theta(rows, &all));
+        Columns::factor(all_columns(rows, n_theta))
+    }
+
+    /// The R factor of a block's weighted Jacobian in all 29 + k columns
+    /// ([`all_columns`]).
+    pub fn factor(j: DMatrix<f64>) -> DMatrix<f64> {
         j.qr().r()
     }
 
@@ -405,6 +413,18 @@ pub(super) fn weighted_jacobian(rows: &[Residual]) -> DMatrix<f64> {
     DMatrix::from_fn(rows.len(), N_PARAMS, |i, k| {
         rows[i].jacobian[k] / rows[i].sigma
     })
+}
+
+/// Weighted Jacobian (m × (29 + k)) of rows in every column: the 29 parameters', then the
+/// `n_theta` effect parameters'.
+pub(super) fn all_columns(rows: &[Residual], n_theta: usize) -> DMatrix<f64> {
+    let all: Vec<usize> = (0..n_theta).collect();
+    let mut j = DMatrix::zeros(rows.len(), N_PARAMS + n_theta);
+    j.columns_mut(0, N_PARAMS)
+        .copy_from(&weighted_jacobian(rows));
+    j.columns_mut(N_PARAMS, n_theta)
+        .copy_from(&weighted_theta(rows, &all));
+    j
 }
 
 /// Weighted Jacobian columns (m × k) of the effect parameters `free`. Every row of a
