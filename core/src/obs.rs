@@ -24,7 +24,6 @@ use crate::geometry::{self, q_var, GeometryError, Solution, Subsystem, PSI, X, Y
 use crate::noise::{self, NoiseModel, Parts, XyInstrument};
 use crate::params::{Model, Params, D1, D2, GAMMA1, GAMMA2, N_PARAMS};
 use nalgebra::Vector2;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 pub use crate::params::Row;
 
@@ -363,7 +362,6 @@ pub fn residuals_in(
         corr,
         noise,
         form,
-        warm: None,
     };
     let pieces = Pieces::new(campaign, usize::MAX);
     let mut out = Vec::with_capacity(campaign.poses.len() * 4);
@@ -481,9 +479,6 @@ pub struct Evaluation<'a> {
     pub corr: &'a Corrections,
     pub noise: &'a NoiseModel,
     pub form: Form,
-    /// Each pose's ψ of an earlier evaluation, where the forward solves start from (and
-    /// leave their own for the next); None: every solve from γ2.
-    pub warm: Option<&'a WarmPsi>,
 }
 
 impl Evaluation<'_> {
@@ -505,7 +500,6 @@ impl Evaluation<'_> {
             noise: self.noise,
             decorrelated: self.form == Form::Decorrelated,
             frames: geometry::frames(self.p),
-            warm: self.warm,
         };
         // one buffer of the forward solves' sensitivities for the piece's poses
         let mut f = Forward::zeros();
@@ -573,60 +567,6 @@ struct Ctx<'a> {
     decorrelated: bool,
     /// The guides' frames of `p`, once per piece.
     frames: geometry::Frames,
-    warm: Option<&'a WarmPsi>,
-}
-
-/// Each pose's platform angle ψ from the last evaluation of the rows that solved its forward
-/// model (NaN: none yet), for the next evaluation's solve to start from: the LM's trials
-/// move ψ by µrad, and the secant from there settles in 2 closures where it takes 4-5 from
-/// γ2 ([`geometry::fgm29_from`]: the same root, to the closure's round-off). Each pose is
-/// read and written by the one thread evaluating its piece; evaluations follow one another
-/// (their threads joined), so what a solve starts from does not depend on the thread count.
-pub struct WarmPsi(Vec<AtomicU64>);
-
-impl WarmPsi {
-    /// No ψ yet for any of `poses` poses.
-    pub fn new(poses: usize) -> WarmPsi {
-        WarmPsi(
-            (0..poses)
-                .map(|_| AtomicU64::new(f64::NAN.to_bits()))
-                .collect(),
-        )
-    }
-
-    fn get(&self, i: usize) -> Option<f64> {
-        let psi = f64::from_bits(self.0.get(i)?.load(Ordering::Relaxed));
-        psi.is_finite().then_some(psi)
-    }
-
-    fn set(&self, i: usize, psi: f64) {
-        if let Some(slot) = self.0.get(i) {
-            slot.store(psi.to_bits(), Ordering::Relaxed);
-        }
-    }
-
-    /// Forgets every ψ: after a failed evaluation, whose pieces stopped at places that
-    /// depend on the thread count.
-    pub fn clear(&self) {
-        for slot in &self.0 {
-            slot.store(f64::NAN.to_bits(), Ordering::Relaxed);
-        }
-    }
-
-    /// Every pose's ψ (NaN: none).
-    pub fn values(&self) -> Vec<f64> {
-        self.0
-            .iter()
-            .map(|v| f64::from_bits(v.load(Ordering::Relaxed)))
-            .collect()
-    }
-
-    /// Takes `psi` (from [`WarmPsi::values`] of another evaluation of the same campaign).
-    pub fn seed(&self, psi: &[f64]) {
-        for (slot, v) in self.0.iter().zip(psi) {
-            slot.store(v.to_bits(), Ordering::Relaxed);
-        }
-    }
 }
 
 fn pose_rows(
@@ -763,7 +703,6 @@ pub fn force_residuals(
         noise,
         decorrelated: true,
         frames: geometry::frames(p),
-        warm: None,
     };
     let mut out = Vec::with_capacity(4 * campaign.poses.len());
     for (i, pose) in campaign.poses.iter().enumerate() {
@@ -1057,15 +996,7 @@ fn self_rows(
         geometry::frames(&p_i)
     };
     let sub = Subsystem::NR;
-    let known = [q_i[0], q_i[3]];
-    let warm = ctx.warm.and_then(|w| w.get(i));
-    f.sol = match warm.filter(|_| ctx.model == Model::M29) {
-        Some(psi) => geometry::fgm29_from(&p_i, &frames, (0, 3), known, psi)?,
-        None => geometry::fgm_with_frames(&p_i, &frames, ctx.model, sub, known)?,
-    };
-    if let Some(w) = ctx.warm {
-        w.set(i, f.sol.c[PSI]);
-    }
+    f.sol = geometry::fgm_with_frames(&p_i, &frames, ctx.model, sub, [q_i[0], q_i[3]])?;
     // only the followers' rows of the sensitivities: what these rows read
     let vars = [q_var(1), q_var(2)];
     geometry::sensitivity_rows_into(&p_i, ctx.model, (sub, &f.sol), &frames, &vars, &mut f.sens)?;
@@ -1073,11 +1004,13 @@ fn self_rows(
         let v = q_var(a);
         // the follower's own encoder and those of q1, q4 through rgm
         let parts = ctx.noise.encoder_parts(1.0 + encoder_gain2(f, v));
-        let mut at_pose = input_sensitivity(f, Subsystem::NR, &[(v, 1.0)]);
-        at_pose.dq[a] -= 1.0;
+        // the sensitivity to the pose's inputs only where effects read it: without, the
+        // row's derivatives are the solve's own (1.2 kB less copied per row)
         let d_theta = if ctx.corr.n_params == 0 {
             Vec::new()
         } else {
+            let mut at_pose = input_sensitivity(f, Subsystem::NR, &[(v, 1.0)]);
+            at_pose.dq[a] -= 1.0;
             ctx.corr.theta_row(&[(i, at_pose)])
         };
         out.push(Residual {
@@ -1087,7 +1020,7 @@ fn self_rows(
             value: f.sol.c[v] - q_i[a],
             sigma: noise::sigma_of(&parts),
             parts,
-            jacobian: at_pose.dp,
+            jacobian: f.sens.dc_dp.row(v).transpose(),
             d_pcal: None,
             d_theta,
         });

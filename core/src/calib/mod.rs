@@ -389,10 +389,6 @@ fn calibrate_sharing(
     let view = shared
         .filter(|_| warm.is_some())
         .and_then(|s| s.view(&pb, &theta0, &init));
-    // the forward solves go on from where the shared rows' left them, as from its own
-    if let Some(view) = &view {
-        pb.warm.seed(view.psi);
-    }
     let mut plan = Plan::new(&pb, &theta0, warm.is_none(), view.as_ref())?;
     let (fit, last) = step1(
         &pb,

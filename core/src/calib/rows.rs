@@ -5,7 +5,7 @@ use super::{Link, Options};
 use crate::campaign::Campaign;
 use crate::effects::{Corrections, EffectSet};
 use crate::noise::NoiseModel;
-use crate::obs::{Direction, Evaluation, Form, Pieces, PoseError, Residual, Step, WarmPsi};
+use crate::obs::{Direction, Evaluation, Form, Pieces, PoseError, Residual, Step};
 use crate::params::{Model, Params, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
@@ -35,8 +35,6 @@ pub(super) struct Problem<'a> {
     /// The row buffers of the evaluations' workers, kept from one evaluation to the next (a
     /// piece's 512 rows are 200 kB: fresh pages on every evaluation otherwise).
     buffers: Mutex<Vec<Vec<Residual>>>,
-    /// Each pose's ψ of the last evaluation, where the next one's forward solves start.
-    pub warm: WarmPsi,
 }
 
 impl<'a> Problem<'a> {
@@ -55,7 +53,6 @@ impl<'a> Problem<'a> {
             opts,
             pieces: Pieces::new(campaign, PIECE_POSES),
             buffers: Mutex::new(Vec::new()),
-            warm: WarmPsi::new(campaign.poses.len()),
         }
     }
 
@@ -94,7 +91,6 @@ impl<'a> Problem<'a> {
             corr,
             noise: self.noise,
             form: Form::Decorrelated,
-            warm: Some(&self.warm),
         };
         let n = self.pieces.len();
         // one piece after the other from `first`, every `stride`-th; the row buffer reused
@@ -114,11 +110,7 @@ impl<'a> Problem<'a> {
             out
         };
         let threads = thread_count(self.opts.threads).min(n.max(1));
-        let done: Result<Vec<T>, PoseError> = in_piece_order(threads, run).into_iter().collect();
-        if done.is_err() {
-            self.warm.clear();
-        }
-        done
+        in_piece_order(threads, run).into_iter().collect()
     }
 }
 

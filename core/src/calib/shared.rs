@@ -33,9 +33,6 @@ pub struct SharedRows {
     slots: Vec<(&'static str, String)>,
     at_start: Vec<Vec<Residual>>,
     at_warm: Vec<Vec<Residual>>,
-    /// Each pose's ψ after the two evaluations: what a calibration evaluating its own rows
-    /// at the same points would start its next forward solves from.
-    psi: Vec<f64>,
 }
 
 impl SharedRows {
@@ -74,7 +71,6 @@ impl SharedRows {
                 .collect(),
             at_start: at(start, &zero)?,
             at_warm: at(warm, warm_theta)?,
-            psi: pb.warm.values(),
         })
     }
 
@@ -112,7 +108,6 @@ impl SharedRows {
         (zero_at_start && at_warm && theta_of.len() == init.theta.len()).then(|| View {
             at_start: &self.at_start,
             at_warm: &self.at_warm,
-            psi: &self.psi,
             theta_of,
             threads: thread_count(pb.opts.threads),
         })
@@ -129,8 +124,6 @@ fn same_params(a: &Params, b: &Params) -> bool {
 pub(super) struct View<'a> {
     pub at_start: &'a [Vec<Residual>],
     pub at_warm: &'a [Vec<Residual>],
-    /// Each pose's ψ after those evaluations ([`SharedRows`]'s `psi`).
-    pub psi: &'a [f64],
     theta_of: Vec<usize>,
     threads: usize,
 }
