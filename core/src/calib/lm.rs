@@ -44,7 +44,7 @@ use super::CalibrationError;
 use crate::effects::Corrections;
 use crate::obs::{PoseError, Residual, RowValue, Step};
 use crate::params::{Params, N_PARAMS};
-use nalgebra::{DMatrix, DVector, Dyn, MatrixView};
+use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
 
 /// The unknowns of a calibration: geometric parameters and effect parameters.
@@ -164,26 +164,17 @@ fn same_bits(a: &[f64], b: &[f64]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
-/// JᵀJ of a block's columns (m × n, stored by column): one matrix product of the block's
-/// transpose (a view of the same numbers with the strides swapped, no copy) with the block,
-/// which `nalgebra` hands to `matrixmultiply`'s packed, vectorised kernels (FMA where the
-/// CPU has it: a piece's 435 distinct dots in a fifth of the instructions of one dot after
-/// the other, at the cost of the lower triangle's products computed twice). The upper
-/// triangle is mirrored: symmetric to the bit, whatever the kernel's order. Every
-/// evaluation and every thread count forms each piece's product the same way.
+/// JᵀJ of a block's columns (m × n, stored by column): each entry the dot product of two
+/// contiguous columns, the upper triangle only and mirrored (half the products of a general
+/// product).
 fn gram(j: &DMatrix<f64>) -> DMatrix<f64> {
-    let (m, n) = j.shape();
-    let jt = MatrixView::<f64, Dyn, Dyn, Dyn, Dyn>::from_slice_with_strides_generic(
-        j.as_slice(),
-        Dyn(n),
-        Dyn(m),
-        Dyn(m),
-        Dyn(1),
-    );
-    let mut a = jt * j;
+    let n = j.ncols();
+    let mut a = DMatrix::zeros(n, n);
     for c in 0..n {
-        for r in 0..c {
-            a[(c, r)] = a[(r, c)];
+        for r in 0..=c {
+            let v = j.column(r).dot(&j.column(c));
+            a[(r, c)] = v;
+            a[(c, r)] = v;
         }
     }
     a
