@@ -386,7 +386,7 @@ pub struct Pieces {
     /// The pieces' parts, piece after piece: a setup and the range of that setup's poses.
     parts: Vec<(usize, std::ops::Range<usize>)>,
     /// Per piece: the range of its parts.
-    pieces: Vec<std::ops::Range<usize>>,
+    spans: Vec<std::ops::Range<usize>>,
 }
 
 impl Pieces {
@@ -400,7 +400,7 @@ impl Pieces {
         let mut cut = Cut {
             size,
             parts: Vec::new(),
-            pieces: Vec::new(),
+            spans: Vec::new(),
             open: None,
         };
         for (k, (_, poses)) in setups.iter().enumerate() {
@@ -413,16 +413,16 @@ impl Pieces {
         Pieces {
             setups,
             parts: cut.parts,
-            pieces: cut.pieces,
+            spans: cut.spans,
         }
     }
 
     pub fn len(&self) -> usize {
-        self.pieces.len()
+        self.spans.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.pieces.is_empty()
+        self.spans.is_empty()
     }
 }
 
@@ -430,7 +430,7 @@ impl Pieces {
 struct Cut {
     size: usize,
     parts: Vec<(usize, std::ops::Range<usize>)>,
-    pieces: Vec<std::ops::Range<usize>>,
+    spans: Vec<std::ops::Range<usize>>,
     /// The piece still open to the next setup without a reset pose: its first part and
     /// its poses so far.
     open: Option<(usize, usize)>,
@@ -462,7 +462,7 @@ impl Cut {
     /// Ends the open piece, if any.
     fn close(&mut self) {
         if let Some((first, _)) = self.open.take() {
-            self.pieces.push(first..self.parts.len());
+            self.spans.push(first..self.parts.len());
         }
     }
 }
@@ -489,7 +489,7 @@ impl Evaluation<'_> {
         k: usize,
         out: &mut Vec<Residual>,
     ) -> Result<(), PoseError> {
-        let Some(parts) = pieces.pieces.get(k) else {
+        let Some(parts) = pieces.spans.get(k) else {
             return Ok(());
         };
         let ctx = Ctx {

@@ -129,8 +129,8 @@ fn pieces_across_setups_give_the_rows_of_one_pass() {
                 noise: &noise,
                 form: Form::Decorrelated,
             };
-            let whole = residuals_in(&c, &p, Model::M29, step, &p, &corr, &noise, eval.form)
-                .expect("rows");
+            let whole =
+                residuals_in(&c, &p, Model::M29, step, &p, &corr, &noise, eval.form).expect("rows");
             for size in [1, 7, 100, 256] {
                 let pieces = Pieces::new(&c, size);
                 let mut rows = Vec::new();
