@@ -983,23 +983,32 @@ fn self_rows(
     f: &mut Forward,
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
-    let d = ctx.corr.delta(i);
-    let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
+    // without effects the pose's inputs are the machine's and the recorded positions
+    // themselves: no correction (0.5 kB) built, added and copied per pose
+    let own;
+    let (p_i, q_i) = if ctx.corr.is_empty() {
+        (ctx.p, pose.q)
+    } else {
+        own = corrected(ctx.p, &pose.q, &ctx.corr.delta(i));
+        (&own.0, own.1)
+    };
     // the guides' frames of the piece's machine where the correction leaves its guides as
     // they are (every pose without effects): two sin_cos less per pose
     let same_guides = [D1, GAMMA1, D2, GAMMA2]
         .iter()
         .all(|&k| p_i[k].to_bits() == ctx.p[k].to_bits());
+    let mine;
     let frames = if same_guides {
-        ctx.frames
+        &ctx.frames
     } else {
-        geometry::frames(&p_i)
+        mine = geometry::frames(p_i);
+        &mine
     };
     let sub = Subsystem::NR;
-    f.sol = geometry::fgm_with_frames(&p_i, &frames, ctx.model, sub, [q_i[0], q_i[3]])?;
+    f.sol = geometry::fgm_with_frames(p_i, frames, ctx.model, sub, [q_i[0], q_i[3]])?;
     // only the followers' rows of the sensitivities: what these rows read
     let vars = [q_var(1), q_var(2)];
-    geometry::sensitivity_rows_into(&p_i, ctx.model, (sub, &f.sol), &frames, &vars, &mut f.sens)?;
+    geometry::sensitivity_rows_into(p_i, ctx.model, (sub, &f.sol), frames, &vars, &mut f.sens)?;
     for a in [1, 2] {
         let v = q_var(a);
         // the follower's own encoder and those of q1, q4 through rgm
