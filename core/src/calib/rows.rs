@@ -125,8 +125,8 @@ pub(super) fn in_piece_order<T: Send>(
         run(0, 1)
     } else {
         std::thread::scope(|scope| {
-            // the calling thread takes the first share itself: one thread started less per
-            // evaluation (a start and a join cost about as much as 20 poses here)
+            // the calling thread takes the first share itself: one thread started and
+            // joined less per evaluation
             let workers: Vec<_> = (1..threads)
                 .map(|t| {
                     let run = &run;
