@@ -400,9 +400,8 @@ impl Lm<'_> {
         };
         let n = parts.len();
         let threads = thread_count(self.problem.opts.threads).min(n.max(1));
-        let grams = in_piece_order(threads, |first, stride| {
-            (first..n)
-                .step_by(stride)
+        let grams = in_piece_order(threads, n, |claims| {
+            claims
                 .map(|k| (k, parts[k].jacobian.as_ref().map(gram)))
                 .collect()
         });
