@@ -434,14 +434,14 @@ struct Cut {
     size: usize,
     parts: Vec<(usize, std::ops::Range<usize>)>,
     spans: Vec<std::ops::Range<usize>>,
-    /// The piece still open to the next setup without a reset pose: its first part and
-    /// its poses so far.
+    /// The piece still open to the next self-calibration setup: its first part and its
+    /// poses so far.
     open: Option<(usize, usize)>,
 }
 
 impl Cut {
-    /// Setup `k` of `n` poses; `shared`: its rows read no reset pose, so it may share a
-    /// piece with its neighbours of the same kind.
+    /// Setup `k` of `n` poses; `shared`: a self-calibration setup, which may share a piece
+    /// with its neighbours of the same kind.
     fn setup(&mut self, k: usize, n: usize, shared: bool) {
         if !shared {
             self.close();
