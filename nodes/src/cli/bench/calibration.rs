@@ -200,8 +200,8 @@ fn diagnosis(seed: u64) -> Result<()> {
 ///   from more, and its idle threads spin against the other processes of a shared machine).
 /// - rpkm, the fit alone: the same problem (the script's rows, the 29 unknowns of model 29
 ///   held by the same tolerance prior, the encoder noise fixed at the spec's 0.2 µm: no noise
-///   estimation, no outlier test) calibrated in this process on one thread (the headline
-///   figure, the core against scipy's one BLAS thread), then on every core (`--threads 0`,
+///   estimation, no outlier test) calibrated in this process on one thread (core against
+///   core: scipy runs on one BLAS thread), then on every core (`--threads 0`,
 ///   what `rpkm calibrate` does by default: the per-pose work spread over the pieces), the
 ///   campaign read before the clock starts; medians of [`RPKM_RUNS`].
 /// - rpkm, whole processes: `rpkm calibrate --no-noise-estimation` (the same problem) and
