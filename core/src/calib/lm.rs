@@ -38,7 +38,7 @@ pub const SCREEN_RHO: f64 = 0.02;
 /// diagonal, where [`TAU`]'s damping would hold the step back).
 pub const SCREEN_TAU: f64 = 1e-15;
 
-use super::rows::{weighted_values, Key, Problem};
+use super::rows::{in_piece_order, thread_count, weighted_values, Key, Problem};
 use super::shared::View;
 use super::CalibrationError;
 use crate::effects::Corrections;
@@ -234,6 +234,22 @@ struct Evaluated {
     kept: Option<Kept>,
 }
 
+/// A trial point's rows ([`Lm::trial_at`]): evaluated, or up to their cost (with the
+/// prior), JᵀJ deferred until the step is accepted.
+enum Trial {
+    Done(Evaluated),
+    Deferred { cost: f64, parts: Vec<Piece> },
+}
+
+impl Trial {
+    fn cost(&self) -> f64 {
+        match self {
+            Trial::Done(evaluated) => evaluated.normal.cost,
+            Trial::Deferred { cost, .. } => *cost,
+        }
+    }
+}
+
 /// What a converged run found.
 pub(super) struct LmResult {
     pub state: State,
@@ -283,11 +299,28 @@ impl Lm<'_> {
     }
 
     /// The normal equations of one piece's rows in the unscaled unknowns, and what is kept
-    /// of them.
-    fn piece(&self, rows: &[Residual], terms: &[Vec<(usize, f64)>], keep: Keep) -> Piece {
+    /// of them; with `defer`, JᵀJ left at zero for [`Lm::accepted`] to form from the kept
+    /// Jacobian.
+    fn piece(
+        &self,
+        rows: &[Residual],
+        terms: &[Vec<(usize, f64)>],
+        (keep, defer): (Keep, bool),
+    ) -> Piece {
         let jr = self.jacobian(rows, terms);
+        let r = weighted_values(rows);
+        let normal = if defer {
+            let n = self.n_unknowns();
+            Normal {
+                a: DMatrix::zeros(n, n),
+                g: jr.tr_mul(&r),
+                cost: 0.5 * r.norm_squared(),
+            }
+        } else {
+            Normal::of(&jr, &r)
+        };
         Piece {
-            normal: Normal::of(&jr, &weighted_values(rows)),
+            normal,
             rows: if keep == Keep::Nothing {
                 Vec::new()
             } else {
@@ -306,8 +339,9 @@ impl Lm<'_> {
     }
 
     /// The rows at `x`, piece by piece in order, and their normal equations summed in the
-    /// unscaled unknowns (the posterior's information as it is), without the prior.
-    fn evaluate(&self, x: &State, keep: Keep) -> Result<(Normal, Vec<Piece>), PoseError> {
+    /// unscaled unknowns (the posterior's information as it is), without the prior (JᵀJ
+    /// zero where `keep.1` defers it).
+    fn evaluate(&self, x: &State, keep: (Keep, bool)) -> Result<(Normal, Vec<Piece>), PoseError> {
         let pb = self.problem;
         let made = self
             .made
@@ -334,15 +368,60 @@ impl Lm<'_> {
     /// The normal equations at `x` ([`Lm::evaluate`]), scaled, then the prior as pseudo-rows
     /// (p − centre)/tolerance; with what [`Keep`] asks of the rows.
     fn normal_at(&self, x: &State, keep: Keep) -> Result<Evaluated, PoseError> {
-        let (total, parts) = self.evaluate(x, keep)?;
+        let (total, parts) = self.evaluate(x, (keep, false))?;
         Ok(self.evaluated(x, &total, parts, keep))
+    }
+
+    /// The rows at a trial point `x`, evaluated up to what deciding on the step reads: the
+    /// cost. Where the pieces keep their Jacobians anyway (a small campaign), JᵀJ waits for
+    /// the step to be accepted ([`Lm::accepted`]): a refused trial, the last of most fits,
+    /// never forms it.
+    fn trial_at(&self, x: &State) -> Result<Trial, PoseError> {
+        if self.keep != Keep::Jacobians {
+            return Ok(Trial::Done(self.normal_at(x, self.keep)?));
+        }
+        let (total, parts) = self.evaluate(x, (self.keep, true))?;
+        // the cost as [`Lm::evaluated`] makes it: scaling leaves it, the prior adds to it
+        let mut scaled = self.scaled(&total);
+        self.add_prior(&mut scaled, x);
+        Ok(Trial::Deferred {
+            cost: scaled.cost,
+            parts,
+        })
+    }
+
+    /// The normal equations of an accepted trial at `x`: a deferred JᵀJ formed from the
+    /// pieces' kept Jacobians (on the options' threads), then summed in piece order as
+    /// [`Lm::normal_at`] sums them: the same numbers.
+    fn accepted(&self, x: &State, trial: Trial) -> Evaluated {
+        let mut parts = match trial {
+            Trial::Done(evaluated) => return evaluated,
+            Trial::Deferred { parts, .. } => parts,
+        };
+        let n = parts.len();
+        let threads = thread_count(self.problem.opts.threads).min(n.max(1));
+        let grams = in_piece_order(threads, n, |claims| {
+            claims
+                .map(|k| (k, parts[k].jacobian.as_ref().map(gram)))
+                .collect()
+        });
+        for (part, a) in parts.iter_mut().zip(grams) {
+            if let Some(a) = a {
+                part.normal.a = a;
+            }
+        }
+        let mut total = Normal::zeros(self.n_unknowns());
+        for part in &parts {
+            total.add(&part.normal);
+        }
+        self.evaluated(x, &total, parts, self.keep)
     }
 
     /// The normal equations at `x` of the shared rows (`view`'s `at_warm`): what
     /// [`Lm::normal_at`] makes of the same rows evaluated.
     fn normal_shared(&self, view: &View, x: &State, keep: Keep) -> Evaluated {
         let terms = self.column_terms();
-        let parts = view.map(view.at_warm, |rows| self.piece(rows, &terms, keep));
+        let parts = view.map(view.at_warm, |rows| self.piece(rows, &terms, (keep, false)));
         let mut total = Normal::zeros(self.n_unknowns());
         for part in &parts {
             total.add(&part.normal);
@@ -375,7 +454,7 @@ impl Lm<'_> {
     /// The rows at `x` as the posterior reads them (values and information), where the LM
     /// kept nothing of its last evaluation.
     pub fn final_rows(&self, x: &State) -> Result<Final, PoseError> {
-        let (total, parts) = self.evaluate(x, Keep::Values)?;
+        let (total, parts) = self.evaluate(x, (Keep::Values, false))?;
         Ok(Final::gather(&total, parts, Keep::Values))
     }
 
@@ -481,9 +560,10 @@ impl Lm<'_> {
             let candidate = self.apply(&p, &step);
             let cost = nq.cost;
             let predicted = 0.5 * step.dot(&(step.scale(mu) - &nq.g));
-            let trial = self.normal_at(&candidate, self.keep).ok();
+            let trial = self.trial_at(&candidate).ok();
             match trial {
-                Some(trial) if trial.normal.cost < cost && predicted > 0.0 => {
+                Some(trial) if trial.cost() < cost && predicted > 0.0 => {
+                    let trial = self.accepted(&candidate, trial);
                     let rho = (cost - trial.normal.cost) / predicted;
                     let actual_rel = (cost - trial.normal.cost) / cost;
                     travelled += &step;
@@ -514,7 +594,7 @@ impl Lm<'_> {
                     // MINPACK applies ftol to a refused step too: a cost that no longer moves
                     // beyond round-off, and a model that predicts no more, is the minimum
                     if let Some(trial) = trial {
-                        let actual = (cost - trial.normal.cost) / cost;
+                        let actual = (cost - trial.cost()) / cost;
                         if actual.abs() <= FTOL && predicted / cost <= FTOL {
                             return done(p, it + 1, last);
                         }

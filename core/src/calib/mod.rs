@@ -661,14 +661,14 @@ impl StartRows {
                 .iter()
                 .find(|r| !(r.value / r.sigma).powi(2).is_finite())
                 .map(|r| (r.pose, r.value));
+            // the block's Jacobian once, for its normal equations and its R factor
+            let j = rows::all_columns(rows, n_theta);
+            let normal = cold.then(|| Normal::of(&j, &rows::weighted_values(rows)));
             (
                 rows.len(),
                 bad,
-                Columns::piece(rows, n_theta),
-                (
-                    before_table(rows),
-                    cold.then(|| all_columns_normal(rows, n_theta)),
-                ),
+                Columns::factor(j),
+                (before_table(rows), normal),
             )
         };
         let pieces = match source {
@@ -715,18 +715,6 @@ impl StartRows {
 enum Source<'a> {
     Evaluated(&'a Corrections),
     Shared(&'a View<'a>),
-}
-
-/// The normal equations of a block of rows in all 29 + `n_theta` columns, unscaled: the
-/// products the LM forms for its unknowns ([`Normal::of`]).
-fn all_columns_normal(rows: &[Residual], n_theta: usize) -> Normal {
-    let all: Vec<usize> = (0..n_theta).collect();
-    let mut j = DMatrix::zeros(rows.len(), N_PARAMS + n_theta);
-    j.columns_mut(0, N_PARAMS)
-        .copy_from(&rows::weighted_jacobian(rows));
-    j.columns_mut(N_PARAMS, n_theta)
-        .copy_from(&rows::weighted_theta(rows, &all));
-    Normal::of(&j, &rows::weighted_values(rows))
 }
 
 /// Normal equations in all 29 + k columns (`all`) reduced to the unknowns: the parameters

@@ -9,6 +9,7 @@ use crate::obs::{Direction, Evaluation, Form, Pieces, PoseError, Residual, Step}
 use crate::params::{Model, Params, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 /// A row's identity across evaluations: its pose and direction (what outlier elimination
@@ -93,11 +94,11 @@ impl<'a> Problem<'a> {
             form: Form::Decorrelated,
         };
         let n = self.pieces.len();
-        // one piece after the other from `first`, every `stride`-th; the row buffer reused
-        let run = |first: usize, stride: usize| {
+        // the pieces this worker claims, one after the other; the row buffer reused
+        let run = |claims: Claims| {
             let mut rows = self.take_buffer();
             let mut out = Vec::new();
-            for k in (first..n).step_by(stride) {
+            for k in claims {
                 rows.clear();
                 if let Err(e) = eval.piece_into(&self.pieces, k, &mut rows) {
                     out.push((k, Err(e)));
@@ -110,32 +111,57 @@ impl<'a> Problem<'a> {
             out
         };
         let threads = thread_count(self.opts.threads).min(n.max(1));
-        in_piece_order(threads, run).into_iter().collect()
+        in_piece_order(threads, n, run).into_iter().collect()
     }
 }
 
-/// `run(first, stride)` on `threads` scoped threads (every `stride`-th piece from `first`,
-/// each result with its piece's index), the results in piece order: the same whatever the
-/// thread count.
+/// The pieces one worker claims, one at a time and in increasing order, from a counter the
+/// workers share: a worker that starts late (a thread to start, a core busy with another
+/// process) takes what is left instead of holding a fixed share back.
+pub(super) struct Claims<'a> {
+    next: &'a AtomicUsize,
+    n: usize,
+}
+
+impl Iterator for Claims<'_> {
+    type Item = usize;
+
+    fn next(&mut self) -> Option<usize> {
+        let k = self.next.fetch_add(1, Ordering::Relaxed);
+        (k < self.n).then_some(k)
+    }
+}
+
+/// `run` on `threads` scoped threads sharing the `n` pieces ([`Claims`]; each result with
+/// its piece's index), the results in piece order: each piece's result is the same
+/// whichever thread made it, so the whole is the same whatever the thread count. A worker
+/// stops at its first failing piece; the others go on, so every piece before the first
+/// failure in piece order is made, as one thread would have made them.
 pub(super) fn in_piece_order<T: Send>(
     threads: usize,
-    run: impl Fn(usize, usize) -> Vec<(usize, T)> + Sync,
+    n: usize,
+    run: impl Fn(Claims) -> Vec<(usize, T)> + Sync,
 ) -> Vec<T> {
+    let next = AtomicUsize::new(0);
+    let claims = || Claims { next: &next, n };
     let mut done = if threads <= 1 {
-        run(0, 1)
+        run(claims())
     } else {
         std::thread::scope(|scope| {
-            let workers: Vec<_> = (0..threads)
-                .map(|t| {
-                    let run = &run;
-                    scope.spawn(move || run(t, threads))
+            // the calling thread claims pieces too: one thread started and joined less per
+            // evaluation
+            let workers: Vec<_> = (1..threads)
+                .map(|_| {
+                    let (run, claims) = (&run, &claims);
+                    scope.spawn(move || run(claims()))
                 })
                 .collect();
-            workers
-                .into_iter()
+            let mut done = run(claims());
+            for w in workers {
                 // a panic in a piece is a bug: it goes on in this thread
-                .flat_map(|w| w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-                .collect()
+                done.extend(w.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+            }
+            done
         })
     };
     done.sort_by_key(|(k, _)| *k);
@@ -196,12 +222,12 @@ pub(super) struct Columns {
 impl Columns {
     /// The R factor of one block of rows with `n_theta` effect parameters.
     pub fn piece(rows: &[Residual], n_theta: usize) -> DMatrix<f64> {
-        let all: Vec<usize> = (0..n_theta).collect();
-        let mut j = DMatrix::zeros(rows.len(), N_PARAMS + n_theta);
-        j.columns_mut(0, N_PARAMS)
-            .copy_from(&weighted_jacobian(rows));
-        j.columns_mut(N_PARAMS, n_theta)
-            .copy_from(&weighted_theta(rows, &all));
+        Columns::factor(all_columns(rows, n_theta))
+    }
+
+    /// The R factor of a block's weighted Jacobian in all 29 + k columns
+    /// ([`all_columns`]).
+    pub fn factor(j: DMatrix<f64>) -> DMatrix<f64> {
         j.qr().r()
     }
 
@@ -405,6 +431,18 @@ pub(super) fn weighted_jacobian(rows: &[Residual]) -> DMatrix<f64> {
     DMatrix::from_fn(rows.len(), N_PARAMS, |i, k| {
         rows[i].jacobian[k] / rows[i].sigma
     })
+}
+
+/// Weighted Jacobian (m × (29 + k)) of rows in every column: the 29 parameters', then the
+/// `n_theta` effect parameters'.
+pub(super) fn all_columns(rows: &[Residual], n_theta: usize) -> DMatrix<f64> {
+    let all: Vec<usize> = (0..n_theta).collect();
+    let mut j = DMatrix::zeros(rows.len(), N_PARAMS + n_theta);
+    j.columns_mut(0, N_PARAMS)
+        .copy_from(&weighted_jacobian(rows));
+    j.columns_mut(N_PARAMS, n_theta)
+        .copy_from(&weighted_theta(rows, &all));
+    j
 }
 
 /// Weighted Jacobian columns (m × k) of the effect parameters `free`. Every row of a

@@ -10,7 +10,7 @@
 //! its own rows.
 
 use super::lm::State;
-use super::rows::{in_piece_order, thread_count, Problem};
+use super::rows::{in_piece_order, thread_count, Claims, Problem};
 use super::{CalibrationError, Options};
 use crate::campaign::Campaign;
 use crate::effects::EffectSet;
@@ -138,18 +138,18 @@ impl View<'_> {
         each: impl Fn(&[Residual]) -> T + Sync,
     ) -> Vec<T> {
         let n = pieces.len();
-        // one piece after the other from `first`, every `stride`-th; the row buffer reused
-        let run = |first: usize, stride: usize| {
+        // the pieces this worker claims, one after the other; the row buffer reused
+        let run = |claims: Claims| {
             let mut rows = Vec::new();
             let mut out = Vec::new();
-            for k in (first..n).step_by(stride) {
+            for k in claims {
                 rows.clear();
                 rows.extend(pieces[k].iter().map(|r| self.own(r)));
                 out.push((k, each(&rows)));
             }
             out
         };
-        in_piece_order(self.threads.min(n.max(1)), run)
+        in_piece_order(self.threads.min(n.max(1)), n, run)
     }
 
     /// A union row as the calibration's own: its effect columns picked out.

@@ -254,6 +254,11 @@ impl Corrections {
         out
     }
 
+    /// Whether no pose is changed: no effect bound (every [`Corrections::delta`] zero).
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
     /// The change at pose `i` (none without effects).
     ///
     /// # Panics

@@ -200,8 +200,10 @@ fn diagnosis(seed: u64) -> Result<()> {
 ///   from more, and its idle threads spin against the other processes of a shared machine).
 /// - rpkm, the fit alone: the same problem (the script's rows, the 29 unknowns of model 29
 ///   held by the same tolerance prior, the encoder noise fixed at the spec's 0.2 µm: no noise
-///   estimation, no outlier test) calibrated in this process on one thread, the campaign read
-///   before the clock starts; median of [`RPKM_RUNS`].
+///   estimation, no outlier test) calibrated in this process on one thread (core against
+///   core: scipy runs on one BLAS thread), then on every core (`--threads 0`,
+///   what `rpkm calibrate` does by default: the per-pose work spread over the pieces), the
+///   campaign read before the clock starts; medians of [`RPKM_RUNS`].
 /// - rpkm, whole processes: `rpkm calibrate --no-noise-estimation` (the same problem) and
 ///   plain `rpkm calibrate` (noise estimated: a fit per round, one round where the stated
 ///   noise holds), process start and reading included;
@@ -210,28 +212,40 @@ fn scipy_baseline(path: &Path) -> Result<()> {
     let Some(scipy) = scipy_seconds(path) else {
         return Ok(());
     };
-    let (read_s, fit_s, poses) = fit_alone(path)?;
+    let fit = fit_alone(path)?;
     let same = median_of(RPKM_RUNS, || {
         calibrate(path, None, &["--no-noise-estimation"]).map(|r| r.seconds)
     })?;
     let default = median_of(RPKM_RUNS, || calibrate(path, None, &[]).map(|r| r.seconds))?;
     println!(
-        "\nagainst scipy on {} ({poses} poses; medians: scipy of {SCIPY_RUNS} runs, rpkm of \
+        "\nagainst scipy on {} ({} poses; medians: scipy of {SCIPY_RUNS} runs, rpkm of \
          {RPKM_RUNS}):",
-        path.display()
+        path.display(),
+        fit.poses
     );
     let line = |what: &str, s: f64| println!("  {what:<62} {s:>8.4} s {:>7.0}x", scipy / s);
     println!(
         "  {:<62} {scipy:>8.4} s",
         "scipy least_squares, its fit alone"
     );
-    line("rpkm, the same fit alone (in process, 1 thread)", fit_s);
+    line(
+        "rpkm, the same fit alone (in process, 1 thread)",
+        fit.one_thread_s,
+    );
+    let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
+    line(
+        &format!("rpkm, the same fit alone (in process, all {cores} cores)"),
+        fit.all_cores_s,
+    );
     line("rpkm calibrate --no-noise-estimation, whole process", same);
     line(
         "rpkm calibrate (default: noise estimated), whole process",
         default,
     );
-    println!("  (reading the CSV in process: {read_s:.4} s, not in the fit's figure)");
+    println!(
+        "  (reading the CSV in process: {:.4} s, not in the fits' figures)",
+        fit.read_s
+    );
     Ok(())
 }
 
@@ -246,26 +260,42 @@ fn median_of(n: usize, mut f: impl FnMut() -> Result<f64>) -> Result<f64> {
     Ok(v[n / 2])
 }
 
-/// The scipy problem in process: (seconds reading the CSV, median seconds of the fit, poses).
-fn fit_alone(path: &Path) -> Result<(f64, f64, usize)> {
+/// The scipy problem in process: seconds reading the CSV, median seconds of the fit on one
+/// thread and on every core (`--threads 0`, the default of `rpkm calibrate`), poses.
+fn fit_alone(path: &Path) -> Result<FitAlone> {
     use rpkm_core::calib::{self, Options, Prior, Selection};
     let t0 = Instant::now();
     let campaign = crate::input::read_campaign(path)?;
     let read_s = t0.elapsed().as_secs_f64();
-    let opts = Options {
-        selection: Selection::Prior(Prior::default()),
-        outlier_sigma: None,
-        threads: 1,
-        ..Options::default()
-    };
     let start = rpkm_core::params::Params::nominal();
-    let fit_s = median_of(RPKM_RUNS, || {
-        let t = Instant::now();
-        let cal = calib::calibrate(&campaign, &start, &opts)?;
-        std::hint::black_box(&cal);
-        Ok(t.elapsed().as_secs_f64())
-    })?;
-    Ok((read_s, fit_s, campaign.poses.len()))
+    let fit_on = |threads: usize| {
+        let opts = Options {
+            selection: Selection::Prior(Prior::default()),
+            outlier_sigma: None,
+            threads,
+            ..Options::default()
+        };
+        median_of(RPKM_RUNS, || {
+            let t = Instant::now();
+            let cal = calib::calibrate(&campaign, &start, &opts)?;
+            std::hint::black_box(&cal);
+            Ok(t.elapsed().as_secs_f64())
+        })
+    };
+    Ok(FitAlone {
+        read_s,
+        one_thread_s: fit_on(1)?,
+        all_cores_s: fit_on(0)?,
+        poses: campaign.poses.len(),
+    })
+}
+
+/// [`fit_alone`]'s figures.
+struct FitAlone {
+    read_s: f64,
+    one_thread_s: f64,
+    all_cores_s: f64,
+    poses: usize,
 }
 
 /// The median `seconds` of tests/python/scipy_calibration.py on `path`, when Python with
