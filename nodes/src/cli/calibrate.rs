@@ -149,16 +149,21 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         .transpose()?;
     print_report(&campaign, &cal, val.as_ref());
     print_noise(&noise);
-    let stages = if args.effects.trim().is_empty() {
+    let stages = if refs.is_empty() {
         None
     } else {
-        Some(effect_stages(args, model, &campaign, validation.as_ref())?)
+        Some(effect_stages(
+            args,
+            model,
+            &refs,
+            &campaign,
+            validation.as_ref(),
+        )?)
     };
     if let Some(dir) = &args.report {
         let page = write_report(
             dir,
-            args,
-            model,
+            (args, model, &refs),
             &campaign,
             validation.as_ref(),
             stages.as_deref(),
@@ -324,22 +329,18 @@ fn diagnosis_options(
 /// --effects (or with the effect the diagnosis names); the stages of --effects as its table.
 fn write_report(
     dir: &std::path::Path,
-    args: &CalibrateArgs,
-    model: Model,
+    (args, model, refs): (&CalibrateArgs, Model, &[&dyn Effect]),
     campaign: &Campaign,
     validation: Option<&Campaign>,
     stages: Option<&[Stage]>,
 ) -> anyhow::Result<std::path::PathBuf> {
     use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
-    let effects = super::diagnose::parse_effects(&args.effects)?;
-    let refs: Vec<&dyn rpkm_core::effects::Effect> =
-        effects.iter().map(std::convert::AsRef::as_ref).collect();
     let before = diagnose::diagnose(campaign, validation, &[], &opts)?;
     let after = if refs.is_empty() {
         super::diagnose::with_named_effect(campaign, validation, &[], &opts, &before)?
     } else {
-        Some(diagnose::diagnose(campaign, validation, &refs, &opts)?)
+        Some(diagnose::diagnose(campaign, validation, refs, &opts)?)
     };
     let stages = stages
         .unwrap_or_default()
@@ -366,19 +367,15 @@ fn write_report(
 fn effect_stages(
     args: &CalibrateArgs,
     model: Model,
+    effects: &[&dyn Effect],
     campaign: &Campaign,
     validation: Option<&Campaign>,
 ) -> anyhow::Result<Vec<Stage>> {
     use rpkm_core::diagnose;
-    let effects = super::diagnose::parse_effects(&args.effects)?;
     let opts = diagnosis_options(args, model)?;
     let mut stages = Vec::new();
     for k in 0..=effects.len() {
-        let refs: Vec<&dyn rpkm_core::effects::Effect> = effects[..k]
-            .iter()
-            .map(std::convert::AsRef::as_ref)
-            .collect();
-        let (fit, _) = diagnose::evaluate(campaign, validation, &refs, &opts)?;
+        let (fit, _) = diagnose::evaluate(campaign, validation, &effects[..k], &opts)?;
         let name = match k {
             0 => format!("{}", opts.model),
             _ => format!("+ {}", effects[k - 1].name()),
