@@ -673,28 +673,26 @@ fn force_rows(
         }
     }
     let parts = ctx.noise.force_parts();
-    let first = out.len();
-    for (a, s) in sens.iter().enumerate() {
-        out.push(Residual {
-            pose: i,
-            instrument: pose.instrument,
-            direction: Direction::F(a),
-            value: eq.drive_force[a] - pose.f[a],
-            sigma: noise::sigma_of(&parts),
-            parts,
-            jacobian: s.dp,
-            d_pcal: None,
-            d_theta: ctx.corr.theta_row(&[(i, *s)]),
-        });
-    }
+    let mut rows: [Residual; 4] = std::array::from_fn(|a| Residual {
+        pose: i,
+        instrument: pose.instrument,
+        direction: Direction::F(a),
+        value: eq.drive_force[a] - pose.f[a],
+        sigma: noise::sigma_of(&parts),
+        parts,
+        jacobian: sens[a].dp,
+        d_pcal: None,
+        d_theta: ctx.corr.theta_row(&[(i, sens[a])]),
+    });
     if ctx.decorrelated {
         // at the fixed p_cal: combinations that moved with the fit would make the
         // Jacobian inexact (as [`fixed_gains`] for a 2-D instrument)
         let k = Stiffness::default();
         let eq = fegm(ctx.p_cal, &k, pose.q, ALL_ACTIVE)?;
         let gains = force_position_gains(ctx.p_cal, &k, pose.q, &eq)?;
-        decorrelate_forces(&mut out[first..], &ctx.noise.drives().modes(&gains));
+        decorrelate_forces(&mut rows, &ctx.noise.drives().modes(&gains));
     }
+    out.extend(rows);
     Ok(())
 }
 
@@ -727,21 +725,11 @@ pub fn force_position_gains(
 /// forces' noise diagonalised: [`noise::DriveNoise::modes`]), each with its own variance
 /// parts: independent rows whatever the currents' and the encoders' levels, so that the
 /// noise rounds estimate both.
-fn decorrelate_forces(rows: &mut [Residual], modes: &ForceModes) {
-    if rows.len() != 4 {
-        return;
-    }
-    let old: [Residual; 4] = std::array::from_fn(|a| rows[a].clone());
+fn decorrelate_forces(rows: &mut [Residual; 4], modes: &ForceModes) {
+    let old = rows.clone();
     for (m, row) in rows.iter_mut().enumerate() {
         let w = modes.basis.column(m);
-        row.value = (0..4).map(|a| w[a] * old[a].value).sum();
-        row.jacobian = (0..4).map(|a| old[a].jacobian * w[a]).sum();
-        for (j, t) in row.d_theta.iter_mut().enumerate() {
-            *t = (0..4).map(|a| w[a] * old[a].d_theta[j]).sum();
-        }
-        row.direction = Direction::FMode(m);
-        row.parts = modes.parts[m];
-        row.sigma = noise::sigma_of(&row.parts);
+        combine_into(row, &old, |a| w[a], (Direction::FMode(m), modes.parts[m]));
     }
 }
 
@@ -894,29 +882,40 @@ fn decorrelate(
     ];
     let old: Vec<Residual> = rows.to_vec();
     for (row, (direction, w)) in rows.iter_mut().zip(weights) {
-        let mut value = 0.0;
-        let mut jac = Row::zeros();
-        let mut d_theta = vec![0.0; old[0].d_theta.len()];
-        for (k, o) in old.iter().enumerate() {
-            value += w[k] * o.value;
-            jac += o.jacobian * w[k];
-            for (d, od) in d_theta.iter_mut().zip(&o.d_theta) {
-                *d += w[k] * od;
-            }
-        }
         // wᵀ G is the row's gain on the instrument's (x, y) error; |w|² on the encoders'
         let gain = Vector2::new((w * gm.column(0))[0], (w * gm.column(1))[0]);
         let parts = noise::add(
             noise.xy_parts(instrument, tcp, gain),
             noise.encoder_parts(w.norm_squared()),
         );
-        row.direction = direction;
-        row.value = value;
-        row.jacobian = jac;
-        row.d_theta = d_theta;
-        row.sigma = noise::sigma_of(&parts);
-        row.parts = parts;
+        combine_into(row, &old, |k| w[k], (direction, parts));
     }
+}
+
+/// `row` made the combination Σ_k w(k) old_k of a pose's rows (value, parameters' and
+/// effects' derivatives), with its own direction and variance parts: one decorrelated row.
+fn combine_into(
+    row: &mut Residual,
+    old: &[Residual],
+    w: impl Fn(usize) -> f64,
+    (direction, parts): (Direction, Parts),
+) {
+    let mut value = 0.0;
+    let mut jac = Row::zeros();
+    let mut d_theta = vec![0.0; old[0].d_theta.len()];
+    for (k, o) in old.iter().enumerate() {
+        value += w(k) * o.value;
+        jac += o.jacobian * w(k);
+        for (d, od) in d_theta.iter_mut().zip(&o.d_theta) {
+            *d += w(k) * od;
+        }
+    }
+    row.direction = direction;
+    row.value = value;
+    row.jacobian = jac;
+    row.d_theta = d_theta;
+    row.sigma = noise::sigma_of(&parts);
+    row.parts = parts;
 }
 
 /// Two orthonormal rows spanning the complement of the first two columns of `basis`
