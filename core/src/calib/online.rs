@@ -30,7 +30,7 @@
 
 use super::Prior;
 use crate::elastic::{sensitivity, ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
-use crate::noise::DriveNoise;
+use crate::noise::{DriveNoise, NoiseModel};
 use crate::obs::{force_jacobian, force_position_gains};
 use crate::params::{unit, Params, Unit, N_PARAMS};
 use nalgebra::{Matrix4, SMatrix, SVector, Vector3, Vector4};
@@ -115,8 +115,8 @@ impl Default for OnlineOptions {
     fn default() -> Self {
         OnlineOptions {
             force_sigma_n: 5.0,
-            // the calibration's stated level (NoiseModel::drive_position_mm)
-            encoder_sigma_mm: 0.0002,
+            // the calibration's stated level
+            encoder_sigma_mm: NoiseModel::default().drive_position_mm,
             length_drift_mm_per_sqrt_h: 0.05,
             angle_drift_rad_per_sqrt_h: 2e-5,
             stiffness_drift_per_sqrt_h: 0.0,

@@ -721,6 +721,8 @@ fn specs() -> Vec<Spec> {
 fn online_specs() -> Vec<Spec> {
     use live::Default::{Bool, F64, U64};
     use rpkm_transport::dds_params::ParamRange;
+    // the tracker's noise levels default to the core's (the calibration's stated ones)
+    let tracker = OnlineOptions::default();
     let fixed_in = |key, default, description, range| Spec {
         range,
         ..Spec::fixed(key, default, description)
@@ -750,12 +752,12 @@ fn online_specs() -> Vec<Spec> {
         ),
         Spec::fixed(
             "online_force_sigma_n",
-            F64(5.0),
+            F64(tracker.force_sigma_n),
             "online tracker: drive force noise, N (> 0)",
         ),
         fixed_in(
             "online_encoder_sigma_um",
-            F64(0.2),
+            F64(tracker.encoder_sigma_mm * 1000.0),
             "online tracker: drive encoder noise, um (the forces move by the rods' stiffness)",
             ParamRange::Float(0.0, 100.0),
         ),
@@ -785,6 +787,7 @@ fn online_settings(p: &NodeParams) -> anyhow::Result<Option<OnlineSettings>> {
     if !p.bool("online", false).map_err(bad_param)? {
         return Ok(None);
     }
+    let tracker = OnlineOptions::default();
     Ok(Some(OnlineSettings {
         start_cov: start_covariance(&p.string("geometry_file", "").map_err(bad_param)?)?,
         decimation: p
@@ -796,12 +799,19 @@ fn online_settings(p: &NodeParams) -> anyhow::Result<Option<OnlineSettings>> {
             .map_err(bad_param)?
             / 1000.0,
         options: OnlineOptions {
-            force_sigma_n: p.positive("online_force_sigma_n", 5.0).map_err(bad_param)?,
+            force_sigma_n: p
+                .positive("online_force_sigma_n", tracker.force_sigma_n)
+                .map_err(bad_param)?,
             encoder_sigma_mm: p
-                .f64_in("online_encoder_sigma_um", 0.2, (0.0, 100.0), " µm")
+                .f64_in(
+                    "online_encoder_sigma_um",
+                    tracker.encoder_sigma_mm * 1000.0,
+                    (0.0, 100.0),
+                    " µm",
+                )
                 .map_err(bad_param)?
                 / 1000.0,
-            ..OnlineOptions::default()
+            ..tracker
         },
     }))
 }
