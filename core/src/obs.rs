@@ -128,6 +128,10 @@ pub struct Residual {
     /// d value / d θ over the effects' parameters (empty without effects; zero for the
     /// virtual rows of the second step, which hold the effects fixed).
     pub d_theta: Vec<f64>,
+    /// The row's gain on the error of the reading its setup was zeroed on (x, y of a 2-D
+    /// instrument; a single coordinate or ψ in x): every row of a relative setup shares
+    /// that error ([`share_reset`]). Zero where the row reads no such reading.
+    pub reset_gain: Vector2<f64>,
 }
 
 /// A row's value without its derivatives: what a fit keeps of its rows (the statistics,
@@ -411,11 +415,13 @@ impl Pieces {
             spans: Vec::new(),
             open: None,
         };
-        for (k, (_, poses)) in setups.iter().enumerate() {
+        for (k, (reset, poses)) in setups.iter().enumerate() {
             let shared = poses
                 .iter()
                 .all(|&i| campaign.poses[i].instrument == Instrument::SelfCal);
-            cut.setup(k, poses.len(), shared);
+            // a relative setup's rows share its reset reading: one piece holds them all
+            let whole = reset.is_some_and(|r| campaign.poses[r].instrument.is_relative());
+            cut.setup(k, poses.len(), shared, whole);
         }
         cut.close();
         Pieces {
@@ -446,15 +452,19 @@ struct Cut {
 
 impl Cut {
     /// Setup `k` of `n` poses; `shared`: a self-calibration setup, which may share a piece
-    /// with its neighbours of the same kind.
-    fn setup(&mut self, k: usize, n: usize, shared: bool) {
+    /// with its neighbours of the same kind; `whole`: a setup never cut in two.
+    fn setup(&mut self, k: usize, n: usize, shared: bool, whole: bool) {
         if !shared {
             self.close();
         }
         let mut a = 0usize;
         loop {
             let (first, held) = self.open.unwrap_or((self.parts.len(), 0));
-            let b = n.min(a.saturating_add(self.size - held));
+            let b = if whole {
+                n
+            } else {
+                n.min(a.saturating_add(self.size - held))
+            };
             self.parts.push((k, a..b));
             self.open = Some((first, held + (b - a)));
             if held + (b - a) >= self.size || !shared {
@@ -536,6 +546,7 @@ impl Evaluation<'_> {
             forward(&p_r, self.model, Subsystem::NR, &q_r)
                 .map_err(|e| PoseError::at(campaign, reset, e))?;
         }
+        let first = out.len();
         for &i in &poses[range.clone()] {
             let pose = &campaign.poses[i];
             if pose.reset && pose.instrument.is_relative() {
@@ -548,6 +559,13 @@ impl Evaluation<'_> {
                     virtual_q2_row(ctx, i, pose, self.p_cal, out).map_err(|e| err(e.into()))?;
                 }
             }
+        }
+        // a relative setup is never split between pieces ([`Pieces::new`]): here are all
+        // its rows
+        if let Some((_, reset)) = reset.filter(|_| ctx.decorrelated && self.step == Step::Direct) {
+            let cov =
+                reset_covariance(ctx, reset).map_err(|e| PoseError::at(campaign, reset, e))?;
+            share_reset(&mut out[first..], &cov);
         }
         // the reset pose of a forward instrument still yields a virtual q2 measurement,
         // after the setup's last pose
@@ -683,6 +701,7 @@ fn force_rows(
         jacobian: sens[a].dp,
         d_pcal: None,
         d_theta: ctx.corr.theta_row(&[(i, sens[a])]),
+        reset_gain: Vector2::zeros(),
     });
     if ctx.decorrelated {
         // at the fixed p_cal: combinations that moved with the fit would make the
@@ -807,6 +826,8 @@ fn inverse_rows(
             jacobian: at_pose.dp + at_reset.dp,
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
+            // the reset's reading error enters as the pose's own does, through X
+            reset_gain: g,
         });
     }
     if ctx.decorrelated {
@@ -902,10 +923,12 @@ fn combine_into(
 ) {
     let mut value = 0.0;
     let mut jac = Row::zeros();
+    let mut reset_gain = Vector2::zeros();
     let mut d_theta = vec![0.0; old[0].d_theta.len()];
     for (k, o) in old.iter().enumerate() {
         value += w(k) * o.value;
         jac += o.jacobian * w(k);
+        reset_gain += o.reset_gain * w(k);
         for (d, od) in d_theta.iter_mut().zip(&o.d_theta) {
             *d += w(k) * od;
         }
@@ -914,8 +937,96 @@ fn combine_into(
     row.value = value;
     row.jacobian = jac;
     row.d_theta = d_theta;
+    row.reset_gain = reset_gain;
     row.sigma = noise::sigma_of(&parts);
     row.parts = parts;
+}
+
+/// Covariance (mm², rad² in x for ψ) of the error of the reading a setup was zeroed on, in
+/// the frame of the rows' [`Residual::reset_gain`]: the instrument's own reading at the reset
+/// pose and, for a 2-D instrument, what the reset's encoders (q1, q4) put into the TCP the
+/// model adds to every reading. Evaluated at the calibration's fixed `p_cal`, so that the
+/// rows' combinations stay put while the parameters move. Zero for an instrument zeroed on
+/// no reading (a ball-bar).
+fn reset_covariance(ctx: &Ctx, reset: &Pose) -> Result<nalgebra::Matrix2<f64>, GeometryError> {
+    let xy = match reset.instrument {
+        Instrument::Lt => XyInstrument::Lt,
+        Instrument::Kgm => XyInstrument::Kgm,
+        Instrument::LiX | Instrument::LiY | Instrument::LiPsi => {
+            let sigma = ctx.noise.scalar_sigma(reset.instrument).unwrap_or(0.0);
+            return Ok(nalgebra::Matrix2::new(sigma * sigma, 0.0, 0.0, 0.0));
+        }
+        _ => return Ok(nalgebra::Matrix2::zeros()),
+    };
+    let sol = geometry::fgm(ctx.p_cal, ctx.model, reset.q[0], reset.q[3])?;
+    let s = geometry::sensitivity(ctx.p_cal, ctx.model, Subsystem::NR, &sol)?;
+    let j = nalgebra::Matrix2::new(
+        s.dc_dk[(X, 0)],
+        s.dc_dk[(X, 1)],
+        s.dc_dk[(Y, 0)],
+        s.dc_dk[(Y, 1)],
+    );
+    let encoders = j * j.transpose() * ctx.noise.encoder_mm.powi(2);
+    Ok(ctx.noise.xy_covariance(xy, Vector2::new(sol.x(), sol.y())) + encoders)
+}
+
+/// The rows of one relative setup made independent again. The setup was zeroed on a
+/// reading as noisy as any other, so every row carries that reading's error e (covariance
+/// `cov`) with its own gain g_i: with z = r/σ, cov(z) = I + H S Hᵀ (row i of H is g_iᵀ/σ_i,
+/// S = `cov`), an offset per setup with a prior of one reading's noise, marginalised. Each
+/// row becomes its row of cov(z)^(−1/2) z (value, parameters' and effects' derivatives
+/// alike): with H S Hᵀ = Σ λ_k q_k q_kᵀ (rank two at most), z − Σ (1 − 1/√(1 + λ_k)) q_k
+/// q_kᵀ z. Each row keeps its σ and its variance parts: the offset is the same
+/// instrument's noise as the row's own, so the noise rounds estimate one reading's level.
+fn share_reset(rows: &mut [Residual], cov: &nalgebra::Matrix2<f64>) {
+    if rows.iter().any(|r| !(r.sigma > 0.0)) {
+        return;
+    }
+    let eig = cov.symmetric_eigen();
+    let root = eig.eigenvectors
+        * nalgebra::Matrix2::from_diagonal(&eig.eigenvalues.map(|v| v.max(0.0).sqrt()))
+        * eig.eigenvectors.transpose();
+    let k: Vec<nalgebra::RowVector2<f64>> = rows
+        .iter()
+        .map(|r| r.reset_gain.transpose() / r.sigma * root)
+        .collect();
+    let m = k
+        .iter()
+        .fold(nalgebra::Matrix2::zeros(), |m, ki| m + ki.transpose() * ki);
+    let modes = m.symmetric_eigen();
+    for c in 0..2 {
+        let lambda = modes.eigenvalues[c];
+        if !(lambda > 1e-12) {
+            continue;
+        }
+        let v = modes.eigenvectors.column(c);
+        let q: Vec<f64> = k.iter().map(|ki| (ki * v)[0] / lambda.sqrt()).collect();
+        let beta = 1.0 - 1.0 / (1.0 + lambda).sqrt();
+        shrink_along(rows, &q, beta);
+    }
+}
+
+/// z ← z − β q (qᵀ z) for every column of the rows (z = r/σ): value, parameters' and
+/// effects' derivatives.
+fn shrink_along(rows: &mut [Residual], q: &[f64], beta: f64) {
+    let n_theta = rows.first().map_or(0, |r| r.d_theta.len());
+    let (mut value, mut jac, mut theta) = (0.0, Row::zeros(), vec![0.0; n_theta]);
+    for (r, qi) in rows.iter().zip(q) {
+        let w = qi / r.sigma;
+        value += w * r.value;
+        jac += r.jacobian * w;
+        for (t, d) in theta.iter_mut().zip(&r.d_theta) {
+            *t += w * d;
+        }
+    }
+    for (r, qi) in rows.iter_mut().zip(q) {
+        let a = beta * qi * r.sigma;
+        r.value -= a * value;
+        r.jacobian -= jac * a;
+        for (d, t) in r.d_theta.iter_mut().zip(&theta) {
+            *d -= a * t;
+        }
+    }
 }
 
 /// Two orthonormal rows spanning the complement of the first two columns of `basis`
@@ -1017,6 +1128,13 @@ fn forward_rows(
             jacobian: at_pose.dp + at_reset.dp,
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
+            // an interferometer is zeroed on a reading; a ball-bar's pivot is where the
+            // machine stood, read by no instrument
+            reset_gain: if inst == Instrument::Dbb {
+                Vector2::zeros()
+            } else {
+                Vector2::x()
+            },
         });
     }
     Ok(())
@@ -1092,6 +1210,7 @@ fn self_rows(
             jacobian: f.sens.dc_dp.row(v).transpose(),
             d_pcal: None,
             d_theta,
+            reset_gain: Vector2::zeros(),
         });
     }
     Ok(())
@@ -1132,6 +1251,7 @@ fn virtual_q2_row(
         jacobian: s.dc_dp.row(v).transpose(),
         d_pcal: Some(Box::new(d_pcal)),
         d_theta: vec![0.0; ctx.corr.n_params],
+        reset_gain: Vector2::zeros(),
     });
     Ok(())
 }
