@@ -656,8 +656,8 @@ impl Shape {
 }
 
 /// The effect a round names, if any: the best-ranked candidate that is significant,
-/// relevant, gains in BIC, predicts held-out data better where there are such data, and is
-/// not outdone by a single dictionary term. A term that explains as much as the effect
+/// relevant, predicts held-out (or left-out) data better where there are such data (gains in
+/// BIC where there are none), and is not outdone by a single dictionary term. A term that explains as much as the effect
 /// gives way to it when the effect predicts better and leaves no structure behind (a term
 /// cannot predict a pose it has not seen; the effect can).
 fn choose(
@@ -669,8 +669,11 @@ fn choose(
     // a single dictionary term's BIC gain: what an effect must beat to be the explanation
     let term_bic = structure.explained_chi2 - (n_rows as f64).ln();
     candidates.iter().find_map(|c| {
-        let predicts = c.prediction.is_none_or(|p| p.better);
-        if !(c.significant && c.relevant && c.bic_gain > 0.0 && predicts) {
+        // where held-out data judge, a better prediction is the evidence that the effect's
+        // parameters are worth their number (setup-local ones, an instrument's alignment in
+        // each mounting, cost BIC per setup); else the information criterion is
+        let worth = c.prediction.map_or(c.bic_gain > 0.0, |p| p.better);
+        if !(c.significant && c.relevant && worth) {
             return None;
         }
         if c.bic_gain > term_bic {
