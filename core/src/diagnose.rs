@@ -290,6 +290,9 @@ pub struct Diagnosis {
     pub missing_effect: Option<String>,
     /// χ²/dof of the current model at the estimated noise (near 1 when nothing is missing).
     pub chi2_per_dof: f64,
+    /// The current model's calibrated geometric parameters (mm, rad) by name: the
+    /// calibration the verdict rests on, the one `rpkm calibrate` makes with the same options.
+    pub parameters: BTreeMap<String, f64>,
     /// Per group: the stated and the estimated noise.
     pub noise: BTreeMap<String, NoiseReport>,
     /// The same, with whether each was estimated from the data.
@@ -571,6 +574,11 @@ fn conclude(
         verdict_kind,
         missing_effect,
         chi2_per_dof: base.fit.chi2_per_dof,
+        parameters: crate::params::NAMES
+            .iter()
+            .enumerate()
+            .map(|(i, n)| ((*n).to_owned(), base.fit.params[i]))
+            .collect(),
         noise: noise_map(&est.groups),
         noise_groups: est.groups.clone(),
         determined: base.fit.determined,
@@ -1291,8 +1299,6 @@ pub fn calib_options(opts: &Options) -> calib::Options {
         },
         outlier_sigma: None,
         noise: opts.noise.clone(),
-        // a model far from the data (a missing effect of 10⁷ χ²) takes the LM longer
-        max_iterations: 400,
         ..Default::default()
     }
 }

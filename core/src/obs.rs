@@ -128,10 +128,21 @@ pub struct Residual {
     /// d value / d θ over the effects' parameters (empty without effects; zero for the
     /// virtual rows of the second step, which hold the effects fixed).
     pub d_theta: Vec<f64>,
-    /// The row's gain on the error of the reading its setup was zeroed on (x, y of a 2-D
-    /// instrument; a single coordinate or ψ in x): every row of a relative setup shares
-    /// that error ([`share_reset`]). Zero where the row reads no such reading.
-    pub reset_gain: Vector2<f64>,
+    /// The row's gains on the errors its setup's reset pose puts into every row of the
+    /// setup ([`ResetGain`], [`share_reset`]); zero where the row reads no reset pose.
+    pub reset_gain: ResetGain,
+}
+
+/// A row's gains on what its setup's reset pose read once for all its rows: the error of the
+/// reading the instrument was zeroed on (x, y of a 2-D instrument; a single coordinate or ψ
+/// in the first), then the errors of the reset pose's four encoders (the model adds the reset
+/// pose's TCP, or subtracts its configuration, from every reading).
+pub type ResetGain = nalgebra::SVector<f64, 6>;
+
+/// The [`ResetGain`] of a row: `reading` on the instrument's zero, `reset` the row's
+/// sensitivity to the reset pose's carrier positions.
+fn reset_gain(reading: Vector2<f64>, reset: &[f64; 4]) -> ResetGain {
+    ResetGain::from_column_slice(&[reading.x, reading.y, reset[0], reset[1], reset[2], reset[3]])
 }
 
 /// A row's value without its derivatives: what a fit keeps of its rows (the statistics,
@@ -701,7 +712,7 @@ fn force_rows(
         jacobian: sens[a].dp,
         d_pcal: None,
         d_theta: ctx.corr.theta_row(&[(i, sens[a])]),
-        reset_gain: Vector2::zeros(),
+        reset_gain: ResetGain::zeros(),
     });
     if ctx.decorrelated {
         // at the fixed p_cal: combinations that moved with the fit would make the
@@ -827,7 +838,7 @@ fn inverse_rows(
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
             // the reset's reading error enters as the pose's own does, through X
-            reset_gain: g,
+            reset_gain: reset_gain(g, &at_reset.dq),
         });
     }
     if ctx.decorrelated {
@@ -923,7 +934,7 @@ fn combine_into(
 ) {
     let mut value = 0.0;
     let mut jac = Row::zeros();
-    let mut reset_gain = Vector2::zeros();
+    let mut reset_gain = ResetGain::zeros();
     let mut d_theta = vec![0.0; old[0].d_theta.len()];
     for (k, o) in old.iter().enumerate() {
         value += w(k) * o.value;
@@ -942,32 +953,33 @@ fn combine_into(
     row.parts = parts;
 }
 
-/// Covariance (mm², rad² in x for ψ) of the error of the reading a setup was zeroed on, in
-/// the frame of the rows' [`Residual::reset_gain`]: the instrument's own reading at the reset
-/// pose and, for a 2-D instrument, what the reset's encoders (q1, q4) put into the TCP the
-/// model adds to every reading. Evaluated at the calibration's fixed `p_cal`, so that the
-/// rows' combinations stay put while the parameters move. Zero for an instrument zeroed on
-/// no reading (a ball-bar).
-fn reset_covariance(ctx: &Ctx, reset: &Pose) -> Result<nalgebra::Matrix2<f64>, GeometryError> {
-    let xy = match reset.instrument {
-        Instrument::Lt => XyInstrument::Lt,
-        Instrument::Kgm => XyInstrument::Kgm,
+/// Covariance of the errors a setup's reset pose shares with all its rows, in the order of
+/// [`ResetGain`]: the reading the instrument was zeroed on (at the reset pose; none for a
+/// ball-bar, whose pivot is where the machine stood) and the reset pose's four encoders.
+/// The reading's at the calibration's fixed `p_cal`, so that the rows' combinations stay put
+/// while the parameters move.
+fn reset_covariance(
+    ctx: &Ctx,
+    reset: &Pose,
+) -> Result<nalgebra::SMatrix<f64, 6, 6>, GeometryError> {
+    let mut cov = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+    for k in 2..6 {
+        cov[(k, k)] = ctx.noise.encoder_mm.powi(2);
+    }
+    let reading = match reset.instrument {
+        Instrument::Lt | Instrument::Kgm => {
+            let xy = XyInstrument::of(reset.instrument).unwrap_or(XyInstrument::Kgm);
+            let sol = geometry::fgm(ctx.p_cal, ctx.model, reset.q[0], reset.q[3])?;
+            ctx.noise.xy_covariance(xy, Vector2::new(sol.x(), sol.y()))
+        }
         Instrument::LiX | Instrument::LiY | Instrument::LiPsi => {
             let sigma = ctx.noise.scalar_sigma(reset.instrument).unwrap_or(0.0);
-            return Ok(nalgebra::Matrix2::new(sigma * sigma, 0.0, 0.0, 0.0));
+            nalgebra::Matrix2::new(sigma * sigma, 0.0, 0.0, 0.0)
         }
-        _ => return Ok(nalgebra::Matrix2::zeros()),
+        _ => nalgebra::Matrix2::zeros(),
     };
-    let sol = geometry::fgm(ctx.p_cal, ctx.model, reset.q[0], reset.q[3])?;
-    let s = geometry::sensitivity(ctx.p_cal, ctx.model, Subsystem::NR, &sol)?;
-    let j = nalgebra::Matrix2::new(
-        s.dc_dk[(X, 0)],
-        s.dc_dk[(X, 1)],
-        s.dc_dk[(Y, 0)],
-        s.dc_dk[(Y, 1)],
-    );
-    let encoders = j * j.transpose() * ctx.noise.encoder_mm.powi(2);
-    Ok(ctx.noise.xy_covariance(xy, Vector2::new(sol.x(), sol.y())) + encoders)
+    cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&reading);
+    Ok(cov)
 }
 
 /// The rows of one relative setup made independent again. The setup was zeroed on a
@@ -975,26 +987,31 @@ fn reset_covariance(ctx: &Ctx, reset: &Pose) -> Result<nalgebra::Matrix2<f64>, G
 /// `cov`) with its own gain g_i: with z = r/σ, cov(z) = I + H S Hᵀ (row i of H is g_iᵀ/σ_i,
 /// S = `cov`), an offset per setup with a prior of one reading's noise, marginalised. Each
 /// row becomes its row of cov(z)^(−1/2) z (value, parameters' and effects' derivatives
-/// alike): with H S Hᵀ = Σ λ_k q_k q_kᵀ (rank two at most), z − Σ (1 − 1/√(1 + λ_k)) q_k
-/// q_kᵀ z. Each row keeps its σ and its variance parts: the offset is the same
-/// instrument's noise as the row's own, so the noise rounds estimate one reading's level.
-fn share_reset(rows: &mut [Residual], cov: &nalgebra::Matrix2<f64>) {
+/// alike): with H S Hᵀ = Σ λ_k q_k q_kᵀ (rank six at most), z − Σ (1 − 1/√(1 + λ_k)) q_k
+/// q_kᵀ z. Each row keeps its σ and its variance parts: the shared errors are the same
+/// instruments' noise as the row's own (the reading's and the encoders'), so the noise
+/// rounds estimate the level of one reading.
+fn share_reset(rows: &mut [Residual], cov: &nalgebra::SMatrix<f64, 6, 6>) {
     if rows.iter().any(|r| !(r.sigma > 0.0)) {
         return;
     }
     let eig = cov.symmetric_eigen();
     let root = eig.eigenvectors
-        * nalgebra::Matrix2::from_diagonal(&eig.eigenvalues.map(|v| v.max(0.0).sqrt()))
+        * nalgebra::SMatrix::<f64, 6, 6>::from_diagonal(
+            &eig.eigenvalues.map(|v| v.max(0.0).sqrt()),
+        )
         * eig.eigenvectors.transpose();
-    let k: Vec<nalgebra::RowVector2<f64>> = rows
+    let k: Vec<nalgebra::SMatrix<f64, 1, 6>> = rows
         .iter()
         .map(|r| r.reset_gain.transpose() / r.sigma * root)
         .collect();
     let m = k
         .iter()
-        .fold(nalgebra::Matrix2::zeros(), |m, ki| m + ki.transpose() * ki);
+        .fold(nalgebra::SMatrix::<f64, 6, 6>::zeros(), |m, ki| {
+            m + ki.transpose() * ki
+        });
     let modes = m.symmetric_eigen();
-    for c in 0..2 {
+    for c in 0..6 {
         let lambda = modes.eigenvalues[c];
         if !(lambda > 1e-12) {
             continue;
@@ -1073,7 +1090,8 @@ fn forward_rows(
         let now = forward(&p_i, ctx.model, sub, &q_i)?;
         let zero = forward(&p_r, ctx.model, sub, &q_r)?;
         let d = |v: usize| now.sol.c[v] - zero.sol.c[v];
-        let var = |v: usize| encoder_gain2(&now, v) + encoder_gain2(&zero, v);
+        // the reset pose's encoders are the whole setup's: in its shared part
+        let var = |v: usize| encoder_gain2(&now, v);
         let inst = pose.instrument;
         // the value as Σ g_v · Δc_v − (measured + dm_w): g has two terms (x, y of the
         // ball-bar's direction); a single coordinate pads it with a zero-weight term
@@ -1130,11 +1148,14 @@ fn forward_rows(
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
             // an interferometer is zeroed on a reading; a ball-bar's pivot is where the
             // machine stood, read by no instrument
-            reset_gain: if inst == Instrument::Dbb {
-                Vector2::zeros()
-            } else {
-                Vector2::x()
-            },
+            reset_gain: reset_gain(
+                if inst == Instrument::Dbb {
+                    Vector2::zeros()
+                } else {
+                    Vector2::x()
+                },
+                &at_reset.dq,
+            ),
         });
     }
     Ok(())
@@ -1210,7 +1231,7 @@ fn self_rows(
             jacobian: f.sens.dc_dp.row(v).transpose(),
             d_pcal: None,
             d_theta,
-            reset_gain: Vector2::zeros(),
+            reset_gain: ResetGain::zeros(),
         });
     }
     Ok(())
@@ -1251,7 +1272,7 @@ fn virtual_q2_row(
         jacobian: s.dc_dp.row(v).transpose(),
         d_pcal: Some(Box::new(d_pcal)),
         d_theta: vec![0.0; ctx.corr.n_params],
-        reset_gain: Vector2::zeros(),
+        reset_gain: ResetGain::zeros(),
     });
     Ok(())
 }

@@ -138,7 +138,9 @@ impl Default for Options {
             links: Vec::new(),
             scaling: Scaling::ColumnNorm,
             outlier_sigma: Some(3.0),
-            max_iterations: 100,
+            // a model far from the data (a missing effect of 10⁷ χ², what a diagnosis meets)
+            // takes the LM longer; a good one stops in a handful
+            max_iterations: 400,
             noise: NoiseModel::default(),
             threads: 0,
         }

@@ -75,6 +75,29 @@ pub struct TwinConfig {
     pub noise: Option<NoiseModel>,
     /// What a relative instrument is zeroed on.
     pub reset: ResetReading,
+    /// A periodic error of one carrier's scale (None: none).
+    pub cyclic: Option<CyclicScale>,
+}
+
+/// A periodic error of one carrier's scale (a linear scale's or an encoder's interpolation
+/// error, a ball screw's pitch error): the carrier stands at its reading plus
+/// `amplitude_mm` · sin(2π · reading / `pitch_mm` + `phase`). Not in the model's library: the
+/// diagnosis must find it without a term made for it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CyclicScale {
+    /// Carrier 0..=3 (q1..q4).
+    pub carrier: usize,
+    pub amplitude_mm: f64,
+    pub pitch_mm: f64,
+    /// rad.
+    pub phase: f64,
+}
+
+impl CyclicScale {
+    /// Carrier position minus reading at `reading` (mm).
+    pub fn offset(&self, reading: f64) -> f64 {
+        self.amplitude_mm * (std::f64::consts::TAU * reading / self.pitch_mm + self.phase).sin()
+    }
 }
 
 /// What a relative instrument (tracker, grid encoder, interferometer) is zeroed on at its
@@ -101,6 +124,7 @@ impl Default for TwinConfig {
             noise: Some(NoiseModel::default()),
             thermal: ThermalPhysics::default(),
             reset: ResetReading::default(),
+            cyclic: None,
         }
     }
 }
@@ -455,7 +479,10 @@ impl Twin {
         let sc = self.scale(temp);
         let elastic_on = self.magnitude(EffectKind::PreloadElastic).is_some() && !followers_23;
         // True carrier positions of the active drives.
-        let s = [0, 1, 2, 3].map(|i| (cmd[i] + enc[i]) * sc[i]);
+        let mut s = [0, 1, 2, 3].map(|i| (cmd[i] + enc[i]) * sc[i]);
+        if let Some(c) = self.config.cyclic.filter(|c| c.carrier < 4) {
+            s[c.carrier] += c.offset(cmd[c.carrier] + enc[c.carrier]);
+        }
         let p = self.effective(temp, s[0], s[3]);
         if elastic_on {
             let eq = elastic::fegm(&p, &self.stiffness(), s, ALL_ACTIVE).map_err(|source| {
@@ -482,10 +509,20 @@ impl Twin {
                 source,
             })?;
         let c = sol.q();
+        let mut q = [cmd[0], c[1] / sc[1], c[2] / sc[2], cmd[3]];
+        // a follower reads its position less its scale's error (to first order in an
+        // amplitude of µm against a pitch of mm)
+        if let Some(cy) = self
+            .config
+            .cyclic
+            .filter(|c| c.carrier == 1 || c.carrier == 2)
+        {
+            q[cy.carrier] -= cy.offset(q[cy.carrier]);
+        }
         Ok(MachineState {
             tcp: Vector2::new(sol.x(), sol.y()),
             psi: sol.psi(),
-            q: [cmd[0], c[1] / sc[1], c[2] / sc[2], cmd[3]],
+            q,
             f: [0.0; 4],
             follower: [false, true, true, false],
         })
