@@ -178,7 +178,7 @@ fn nothing_missing_on_a_machine_noisier_than_rated() {
         let twin_noise = NoiseModel::default().scaled(&[2.5; N_GROUPS]);
         let (cal, val, floor) = campaigns_with(TwinConfig {
             seed,
-            noise: Some(twin_noise),
+            noise: Some(twin_noise.clone()),
             ..Default::default()
         });
         let d = run(&cal, &val, &[]);
