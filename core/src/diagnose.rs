@@ -344,6 +344,9 @@ pub struct Diagnosis {
     /// The dictionary term that explained the residual as well as the named effect: the
     /// effect was preferred because it predicts held-out data, which a term cannot.
     pub tied_term: Option<String>,
+    /// The second missing effect, where the named one predicts better only together with
+    /// it (alone, each absorbs part of the other): add both.
+    pub together_with: Option<String>,
     /// Noise groups estimated more than [`NOISIER_THAN_RATED`] times their rating: either
     /// the instrument is that noisy or something is missing that the tests cannot see.
     pub noisier_than_rated: Vec<Noisier>,
@@ -736,6 +739,7 @@ fn conclude(
         structure,
         periodic: shape.periodic,
         neighbours: shape.neighbours,
+        together_with: chosen.as_ref().and_then(|c| c.together_with.clone()),
         tied_term: chosen.and_then(|c| c.tied_term),
         noisier_than_rated: noisier(&est.groups),
         unexplained,
@@ -845,6 +849,7 @@ fn choose(
             return Some(Chosen {
                 effect: c.effect.clone(),
                 tied_term: None,
+                together_with: partner(c),
             });
         }
         let proven = judged.is_some_and(|p| p.better);
@@ -853,14 +858,30 @@ fn choose(
         (proven && clean).then(|| Chosen {
             effect: c.effect.clone(),
             tied_term: structure.pointer.as_ref().map(|p| p.feature.clone()),
+            together_with: partner(c),
         })
     })
+}
+
+/// The partner of a candidate that predicts better only together with it.
+fn partner(c: &Candidate) -> Option<String> {
+    let alone = c
+        .prediction
+        .filter(|p| p.better || p.worse)
+        .or(c.cross_validated)
+        .is_some_and(|p| p.better);
+    c.together
+        .as_ref()
+        .filter(|_| !alone)
+        .map(|(name, _)| name.clone())
 }
 
 /// The effect a round names, and the dictionary term it was preferred to.
 struct Chosen {
     effect: String,
     tied_term: Option<String>,
+    /// The effect it predicts better with (and without which it predicts worse).
+    together_with: Option<String>,
 }
 
 /// What trying every candidate gave.

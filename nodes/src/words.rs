@@ -230,12 +230,15 @@ pub fn verdict(d: &Diagnosis) -> String {
         .missing_effect
         .as_deref()
         .and_then(|m| d.candidates.iter().find(|c| c.effect == m));
+    let together = d.together_with.as_ref().map_or(String::new(), |t| {
+        format!("; together with {t}: alone each absorbs part of the other and predicts worse, add both")
+    });
     let tied = d.tied_term.as_ref().map_or(String::new(), |t| {
         format!("; the dictionary term {t} follows the residual as well, but a term cannot predict held-out poses")
     });
     match (d.verdict_kind, named) {
         (VerdictKind::MissingEffect, Some(c)) => format!(
-            "missing effect: {} ({}){tied}{}{noise}",
+            "missing effect: {} ({}){together}{tied}{}{noise}",
             c.effect,
             evidence(c),
             remains.map_or(String::new(), |u| format!("; what remains: {u}"))

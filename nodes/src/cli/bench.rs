@@ -305,7 +305,10 @@ fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
         }
         path.push(d.baseline.val_rms_um.unwrap_or(f64::NAN));
         match d.missing_effect {
-            Some(e) if !named.contains(&e) && named.len() < 3 => named.push(e),
+            Some(e) if !named.contains(&e) && named.len() < 3 => {
+                named.push(e);
+                named.extend(d.together_with.filter(|t| !named.contains(t)));
+            }
             _ => break (d.verdict_kind, d.baseline.val_rms_um.unwrap_or(f64::NAN)),
         }
     };
