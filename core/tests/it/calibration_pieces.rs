@@ -2,7 +2,7 @@
 //! depend on the thread count (to the bit), and a campaign of many pieces (a setup cut in
 //! several, a forward instrument's step 2 among them) must still find the true machine.
 
-mod support;
+use crate::support;
 
 use rpkm_core::calib::{self, Options};
 use rpkm_core::design;

@@ -8,7 +8,7 @@
     reason = "exact values: parsed, copied or computed without rounding"
 )]
 
-mod bag_support;
+use crate::bag_support;
 
 use std::time::Duration;
 
@@ -184,10 +184,11 @@ fn reference_stream() -> Vec<ActuatorState> {
     states
 }
 
-/// Held by the tests that SIGKILL a recorder: iceoryx2's dead-node clean-up is machine-wide,
-/// so one test's replayer would remove the other's dead recorder before that one's queue
-/// filled, and the second replayer would never have to go on by itself.
-static KILLS_A_RECORDER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+// Held by the tests that SIGKILL a recorder (crate::KILLS_A_NODE): iceoryx2's dead-node
+// clean-up is machine-wide, so one test's replayer would remove the other's dead recorder
+// before that one's queue filled, and the second replayer would never have to go on by
+// itself.
+use crate::KILLS_A_NODE as KILLS_A_RECORDER;
 
 /// `rpkm record --reliable` of the actuator stream into `out` with `chunk_kib` chunks,
 /// printing each flush, and the reliable replay of `bag` at `rate`, both on `prefix`;
