@@ -124,46 +124,16 @@ const SETUP_RUNS: usize = 5;
 /// column differs), and a campaign of the foreign simulator's class of design of as many
 /// poses; `rpkm calibrate` with default options on each, every figure against the best.
 fn setups(dir: &Path, seed: u64) -> Result<()> {
-    use rpkm_core::design::random_setups;
-    let mut twin = Twin::new(TwinConfig {
-        seed,
-        ..Default::default()
-    })?;
-    let per = SETUP_POSES / SPLITS[SPLITS.len() - 1];
-    let design = random_setups(Instrument::SelfCal, SPLITS[SPLITS.len() - 1], per, seed);
-    let base = twin.run(&design, "self, random targets")?;
-    let mut campaigns = Vec::new();
-    for n in SPLITS {
-        let mut c = base.clone();
-        let per = SETUP_POSES / n;
-        for (i, pose) in c.poses.iter_mut().enumerate() {
-            pose.setup = format!("self{:04}", i / per);
-        }
-        campaigns.push((format!("self, {n} setups of {per}"), c));
-    }
-    // the foreign class: laser-tracker and grid-encoder setups of 10 poses (reset first),
-    // self-calibration setups of 100, in the proportions of its campaigns' rows
-    let mut twin = Twin::new(TwinConfig {
-        seed: seed + 1,
-        ..Default::default()
-    })?;
-    let mut design = random_setups(Instrument::Lt, 1_500, 10, seed + 1);
-    design.extend(random_setups(Instrument::Kgm, 1_500, 10, seed + 2));
-    design.extend(random_setups(Instrument::SelfCal, 700, 100, seed + 3));
-    campaigns.push((
-        "foreign class: 1,500 lt + 1,500 kgm of 10, 700 self of 100".into(),
-        twin.run(&design, "foreign class")?,
-    ));
+    // the campaigns written and dropped before the first child starts: a child's peak
+    // memory counts what this process held when it started it
+    let files = write_setup_campaigns(dir, seed)?;
     let mut runs = Vec::new();
-    for (k, (what, c)) in campaigns.iter().enumerate() {
-        let path = dir.join(format!("setups_{k}.csv"));
-        std::fs::write(&path, c.to_csv()).with_context(|| format!("writing {}", path.display()))?;
+    for (what, setups, poses, path) in &files {
         let mut all = (0..SETUP_RUNS)
-            .map(|_| calibrate(&path, None, &[]))
+            .map(|_| calibrate(path, None, &[]))
             .collect::<Result<Vec<Run>>>()?;
         all.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
-        let median = all.swap_remove(SETUP_RUNS / 2);
-        runs.push((what, c.setups().len(), c.poses.len(), median));
+        runs.push((what, setups, poses, all.swap_remove(SETUP_RUNS / 2)));
     }
     let best = runs.iter().map(|r| r.3.seconds).fold(f64::INFINITY, f64::min);
     println!(
@@ -181,6 +151,48 @@ fn setups(dir: &Path, seed: u64) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// [`setups`]' campaigns written under `dir`: what each is, its setups, poses and file.
+fn write_setup_campaigns(dir: &Path, seed: u64) -> Result<Vec<(String, usize, usize, PathBuf)>> {
+    use rpkm_core::design::random_setups;
+    let mut twin = Twin::new(TwinConfig {
+        seed,
+        ..Default::default()
+    })?;
+    let most = SPLITS[SPLITS.len() - 1];
+    let design = random_setups(Instrument::SelfCal, most, SETUP_POSES / most, seed);
+    let base = twin.run(&design, "self, random targets")?;
+    let mut campaigns = Vec::new();
+    for n in SPLITS {
+        let mut c = base.clone();
+        let per = SETUP_POSES / n;
+        for (i, pose) in c.poses.iter_mut().enumerate() {
+            pose.setup = format!("self{:04}", i / per);
+        }
+        campaigns.push((format!("self, {n} setups of {per}"), c));
+    }
+    drop(base);
+    // the foreign class: laser-tracker and grid-encoder setups of 10 poses (reset first),
+    // self-calibration setups of 100
+    let mut twin = Twin::new(TwinConfig {
+        seed: seed + 1,
+        ..Default::default()
+    })?;
+    let mut design = random_setups(Instrument::Lt, 1_500, 10, seed + 1);
+    design.extend(random_setups(Instrument::Kgm, 1_500, 10, seed + 2));
+    design.extend(random_setups(Instrument::SelfCal, 700, 100, seed + 3));
+    campaigns.push((
+        "foreign class: 1,500 lt + 1,500 kgm of 10, 700 self of 100".into(),
+        twin.run(&design, "foreign class")?,
+    ));
+    let mut files = Vec::new();
+    for (k, (what, c)) in campaigns.into_iter().enumerate() {
+        let path = dir.join(format!("setups_{k}.csv"));
+        std::fs::write(&path, c.to_csv()).with_context(|| format!("writing {}", path.display()))?;
+        files.push((what, c.setups().len(), c.poses.len(), path));
+    }
+    Ok(files)
 }
 
 /// `rpkm calibrate FILE [EXTRA]` as a child process: wall time, iterations (from its JSON), peak
