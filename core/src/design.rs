@@ -382,8 +382,20 @@ mod tests {
         assert_eq!(validation(50, 1).len(), 51);
         let random_kgm = random_setups(Instrument::Kgm, 7, 9, 1);
         assert!(setups(&random_kgm).iter().all(|s| s.1 == 9 && s.2 == 1));
-        assert_eq!(setups(&random_setups(Instrument::SelfCal, 3, 100, 1))[2], ("self0002".into(), 100, 0));
-        for d in [lt(), kgm(), dbb(), li_x(), li_y(), li_psi(), circle(), random_kgm] {
+        assert_eq!(
+            setups(&random_setups(Instrument::SelfCal, 3, 100, 1))[2],
+            ("self0002".into(), 100, 0)
+        );
+        for d in [
+            lt(),
+            kgm(),
+            dbb(),
+            li_x(),
+            li_y(),
+            li_psi(),
+            circle(),
+            random_kgm,
+        ] {
             for p in &d {
                 assert_eq!(clamp_to_workspace(p.x, p.y), (p.x, p.y));
             }

@@ -646,9 +646,7 @@ fn pose_rows(
             (reset, at),
             out,
         )?),
-        (Dbb | LiX | LiY | LiPsi, Some(reset)) => {
-            Ok(forward_rows(ctx, i, pose, (reset, at), out)?)
-        }
+        (Dbb | LiX | LiY | LiPsi, Some(reset)) => Ok(forward_rows(ctx, i, pose, (reset, at), out)?),
         (SelfCal, _) => Ok(self_rows(ctx, (i, pose), f, out)?),
         (None, _) if pose.drives_loaded() => Ok(force_rows(ctx, i, pose, out)?),
         _ => Ok(()),
@@ -895,12 +893,11 @@ fn fixed_gains(
     my: f64,
     (q_reset, reset_cal): (&[f64; 4], Option<Vector2<f64>>),
 ) -> Result<([Vector2<f64>; 4], Vector2<f64>), GeometryError> {
-    let r = match reset_cal {
-        Some(r) => r,
-        None => {
-            let r = geometry::fgm(ctx.p_cal, ctx.model, q_reset[0], q_reset[3])?;
-            Vector2::new(r.x(), r.y())
-        }
+    let r = if let Some(r) = reset_cal {
+        r
+    } else {
+        let r = geometry::fgm(ctx.p_cal, ctx.model, q_reset[0], q_reset[3])?;
+        Vector2::new(r.x(), r.y())
     };
     let tcp = Vector2::new(mx + r.x, my + r.y);
     let inv = geometry::solve(ctx.p_cal, ctx.model, Subsystem::Tcp, [tcp.x, tcp.y])?;

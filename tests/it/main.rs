@@ -3,10 +3,11 @@
 //! line, which made the test build most of CI's time (issue 30). A new test file goes here as
 //! `tests/it/NAME.rs` with a `mod NAME;` line below; `cargo test --test it NAME` runs it
 //! alone. Shared helpers are the `*_support` modules (`use crate::node_support;`).
+//! `tests/bag_cli.rs` stays a binary of its own (why: at its `mod bag_support`).
 
 use std::sync::Mutex;
 
-/// Held by every test that SIGKILLs a node (a recorder, tcp_estimator): iceoryx2's dead-node
+/// Held by every test that SIGKILLs a node (tcp_estimator): iceoryx2's dead-node
 /// clean-up is machine-wide, so another test's process may remove a killed node's resources
 /// before the test that killed it has seen what it checks. The files were separate binaries,
 /// run one after the other; as modules of one they run side by side.
@@ -17,7 +18,6 @@ mod foreign_support;
 mod fuzz_support;
 mod node_support;
 
-mod bag_cli;
 mod bag_nodes;
 mod bag_reference;
 mod bag_rosbag2_metadata;

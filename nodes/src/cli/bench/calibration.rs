@@ -135,7 +135,10 @@ fn setups(dir: &Path, seed: u64) -> Result<()> {
         all.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
         runs.push((what, setups, poses, all.swap_remove(SETUP_RUNS / 2)));
     }
-    let best = runs.iter().map(|r| r.3.seconds).fold(f64::INFINITY, f64::min);
+    let best = runs
+        .iter()
+        .map(|r| r.3.seconds)
+        .fold(f64::INFINITY, f64::min);
     println!(
         "\ncost per setup (rpkm calibrate, default options, medians of {SETUP_RUNS}):\n  \
          {:<58} {:>7} {:>7} {:>6} {:>9} {:>8} {:>7}",

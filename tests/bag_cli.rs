@@ -8,7 +8,12 @@
     reason = "exact values: parsed, copied or computed without rounding"
 )]
 
-use crate::bag_support;
+// A binary of its own, not a module of tests/it: its SIGKILLed recorders must stay dead
+// and uncleaned until its replayer has seen their full queues, and any iceoryx2 node that
+// starts meanwhile removes dead nodes' resources machine-wide (run beside the tests of
+// tests/it, its first test failed so). Cargo runs test binaries one after the other.
+#[path = "it/bag_support/mod.rs"]
+mod bag_support;
 
 use std::time::Duration;
 
@@ -184,11 +189,10 @@ fn reference_stream() -> Vec<ActuatorState> {
     states
 }
 
-// Held by the tests that SIGKILL a recorder (crate::KILLS_A_NODE): iceoryx2's dead-node
-// clean-up is machine-wide, so one test's replayer would remove the other's dead recorder
-// before that one's queue filled, and the second replayer would never have to go on by
-// itself.
-use crate::KILLS_A_NODE as KILLS_A_RECORDER;
+/// Held by the tests that SIGKILL a recorder: iceoryx2's dead-node clean-up is machine-wide,
+/// so one test's replayer would remove the other's dead recorder before that one's queue
+/// filled, and the second replayer would never have to go on by itself.
+static KILLS_A_RECORDER: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// `rpkm record --reliable` of the actuator stream into `out` with `chunk_kib` chunks,
 /// printing each flush, and the reliable replay of `bag` at `rate`, both on `prefix`;
