@@ -21,6 +21,7 @@ mod node_support;
 mod bag_nodes;
 mod bag_reference;
 mod bag_rosbag2_metadata;
+mod calibration_one_owner;
 mod cli_bad_config;
 mod cli_bad_input;
 mod cli_calibrate;
