@@ -8,6 +8,11 @@
     reason = "exact values: parsed, copied or computed without rounding"
 )]
 
+// A binary of its own, not a module of tests/it: its SIGKILLed recorders must stay dead
+// and uncleaned until its replayer has seen their full queues, and any iceoryx2 node that
+// starts meanwhile removes dead nodes' resources machine-wide (run beside the tests of
+// tests/it, its first test failed so). Cargo runs test binaries one after the other.
+#[path = "it/bag_support/mod.rs"]
 mod bag_support;
 
 use std::time::Duration;

@@ -6,7 +6,7 @@
 //!
 //! cargo bench -p rpkm-core --bench geometry
 
-#[path = "../tests/support/mod.rs"]
+#[path = "../tests/it/support/mod.rs"]
 mod support;
 
 use rpkm_core::calib::{self, Options, Selection};

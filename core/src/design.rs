@@ -282,6 +282,50 @@ pub fn production(n: usize, seed: u64) -> Vec<PlannedPose> {
         .collect()
 }
 
+/// Random targets in small setups, the class of design of the foreign simulator's campaigns
+/// (`../shared/campaigns/foreign`): `setups` setups of `poses` poses of `instrument`, each
+/// target drawn uniformly over the workspace from `seed` (a grid encoder's within its square
+/// around the setup's reset pose, which a relative instrument's setup starts with and
+/// counts among its poses). Setup ids are the instrument's name and the setup's number. A
+/// campaign of many such setups is what a calibration's cost must not follow: its cost is
+/// per pose, not per setup (issue 30).
+pub fn random_setups(
+    instrument: Instrument,
+    setups: usize,
+    poses: usize,
+    seed: u64,
+) -> Vec<PlannedPose> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let anywhere = |rng: &mut StdRng| {
+        (
+            rng.gen_range(X_RANGE.0..=X_RANGE.1),
+            rng.gen_range(Y_RANGE.0..=Y_RANGE.1),
+        )
+    };
+    let mut out = Vec::with_capacity(setups * poses);
+    for k in 0..setups {
+        let id = format!("{}{k:04}", instrument.as_str());
+        let reset = anywhere(&mut rng);
+        let resets = instrument.takes_reset();
+        if resets {
+            out.push(pose(&id, instrument, true, reset.0, reset.1));
+        }
+        for _ in usize::from(resets)..poses {
+            let (x, y) = if instrument == Instrument::Kgm {
+                let h = KGM_SQUARE_MM / 2.0;
+                (
+                    reset.0 + rng.gen_range(-h..=h),
+                    reset.1 + rng.gen_range(-h..=h),
+                )
+            } else {
+                anywhere(&mut rng)
+            };
+            out.push(pose(&id, instrument, false, x, y));
+        }
+    }
+    out
+}
+
 /// The 231-point evaluation grid (11 x × 21 y, row-major in y) of sensitivity and
 /// observability studies.
 pub fn grid_231() -> Vec<(f64, f64)> {
@@ -336,7 +380,22 @@ mod tests {
         assert_eq!(self_cal().len(), 31 + 61 + 31 + 26);
         assert_eq!(grid_231().len(), 231);
         assert_eq!(validation(50, 1).len(), 51);
-        for d in [lt(), kgm(), dbb(), li_x(), li_y(), li_psi(), circle()] {
+        let random_kgm = random_setups(Instrument::Kgm, 7, 9, 1);
+        assert!(setups(&random_kgm).iter().all(|s| s.1 == 9 && s.2 == 1));
+        assert_eq!(
+            setups(&random_setups(Instrument::SelfCal, 3, 100, 1))[2],
+            ("self0002".into(), 100, 0)
+        );
+        for d in [
+            lt(),
+            kgm(),
+            dbb(),
+            li_x(),
+            li_y(),
+            li_psi(),
+            circle(),
+            random_kgm,
+        ] {
             for p in &d {
                 assert_eq!(clamp_to_workspace(p.x, p.y), (p.x, p.y));
             }

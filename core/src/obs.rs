@@ -392,10 +392,11 @@ pub fn residuals_in(
 }
 
 /// A campaign cut into pieces of at most `size` poses, in file order within each setup.
-/// A piece holds one setup's poses, except that consecutive self-calibration setups (their
-/// rows read no reset pose) share pieces: the 1,043 self-calibration poses of 28 setups make
-/// 5 pieces, not 28 (a piece's sums and its R factor cost the same for 40 poses as for 256).
-/// Drive-force setups read no reset pose either but keep pieces of their own: merged, the
+/// Consecutive setups share pieces (a piece's part of a setup reads that setup's reset
+/// pose; a relative setup is never cut in two, its rows share its reset reading): the 1,043 self-calibration poses of 28 setups make 5 pieces, not 28, and a
+/// campaign's 3,000 laser-tracker and grid-encoder setups of 10 poses 118, not 3,000 (a
+/// piece's sums and its R factor cost the same for 10 poses as for 256; issue 30).
+/// Drive-force setups keep pieces of their own: merged, the
 /// sums of the online tracker's start calibration regroup, and that round-off alone moved
 /// its six-minute drift test's share of checks below p = 0.01 from 0.033 to 0.074, past the
 /// test's 0.05 (docs/calibration.md, "Since: pieces across setups"). Evaluated piece
@@ -427,9 +428,9 @@ impl Pieces {
             open: None,
         };
         for (k, (reset, poses)) in setups.iter().enumerate() {
-            let shared = poses
+            let shared = !poses
                 .iter()
-                .all(|&i| campaign.poses[i].instrument == Instrument::SelfCal);
+                .any(|&i| campaign.poses[i].instrument == Instrument::None);
             // a relative setup's rows share its reset reading: one piece holds them all
             let whole = reset.is_some_and(|r| campaign.poses[r].instrument.is_relative());
             cut.setup(k, poses.len(), shared, whole);
@@ -456,14 +457,14 @@ struct Cut {
     size: usize,
     parts: Vec<(usize, std::ops::Range<usize>)>,
     spans: Vec<std::ops::Range<usize>>,
-    /// The piece still open to the next self-calibration setup: its first part and its
-    /// poses so far.
+    /// The piece still open to the next setup: its first part and its poses so far.
     open: Option<(usize, usize)>,
 }
 
 impl Cut {
-    /// Setup `k` of `n` poses; `shared`: a self-calibration setup, which may share a piece
-    /// with its neighbours of the same kind; `whole`: a setup never cut in two.
+    /// Setup `k` of `n` poses; `shared`: a setup that may share a piece with its neighbours
+    /// (every one but a drive-force one); `whole`: a setup never cut in two (a relative
+    /// one: a piece holding it may exceed `size` by up to its length).
     fn setup(&mut self, k: usize, n: usize, shared: bool, whole: bool) {
         if !shared {
             self.close();
@@ -550,12 +551,16 @@ impl Evaluation<'_> {
     ) -> Result<(), PoseError> {
         let campaign = self.campaign;
         let reset = reset.map(|i| (i, &campaign.poses[i]));
+        let mut at_reset = AtReset::default();
         // a reset pose that cannot be solved is blamed on its own line, not on the first
         // pose measured relative to it
         if let Some((ri, reset)) = reset.filter(|(_, r)| r.instrument.is_relative()) {
             let (p_r, q_r) = corrected(self.p, &reset.q, &self.corr.delta(ri));
-            forward(&p_r, self.model, Subsystem::NR, &q_r)
+            let nr = forward(&p_r, self.model, Subsystem::NR, &q_r)
                 .map_err(|e| PoseError::at(campaign, reset, e))?;
+            if self.step == Step::Direct {
+                at_reset = AtReset::of(ctx, reset, (&p_r, &q_r), nr);
+            }
         }
         let first = out.len();
         for &i in &poses[range.clone()] {
@@ -565,7 +570,9 @@ impl Evaluation<'_> {
             }
             let err = |error: ModelError| PoseError::at(campaign, pose, error);
             match self.step {
-                Step::Direct => pose_rows(ctx, (i, pose), reset, f, out).map_err(err)?,
+                Step::Direct => {
+                    pose_rows(ctx, (i, pose), (reset, &at_reset), f, out).map_err(err)?;
+                }
                 Step::VirtualQ2 => {
                     virtual_q2_row(ctx, i, pose, self.p_cal, out).map_err(|e| err(e.into()))?;
                 }
@@ -606,18 +613,69 @@ struct Ctx<'a> {
     frames: geometry::Frames,
 }
 
+/// What every pose of a relative setup reads of its reset pose, solved once for a piece's
+/// part of the setup instead of once per pose (issue 30: a campaign of small setups paid
+/// them per pose): the same solves of the same inputs, so the rows are the same to the
+/// bit. A solve that failed here is left to the pose that reads it, which makes it again
+/// and reports its error as before, on the pose's line.
+#[derive(Default)]
+struct AtReset {
+    /// Through the redundant subsystem, at the reset's corrected inputs (2-D instruments).
+    nr: Option<Forward>,
+    /// Through each of [`FORWARD_SUBSYSTEMS`] (forward instruments).
+    subs: [Option<Forward>; 2],
+    /// The reset's TCP under `p_cal` without effects (the decorrelating gains).
+    tcp_cal: Option<Vector2<f64>>,
+}
+
+impl AtReset {
+    /// What the poses of `reset`'s setup read of it: `nr`, its solve through the redundant
+    /// subsystem at its corrected inputs `p_r`, `q_r`, and the instrument's other solves.
+    fn of(ctx: &Ctx, reset: &Pose, (p_r, q_r): (&Params, &[f64; 4]), nr: Forward) -> AtReset {
+        use Instrument::{Dbb, Kgm, LiPsi, LiX, LiY, Lt};
+        match reset.instrument {
+            Lt | Kgm => AtReset {
+                nr: Some(nr),
+                tcp_cal: ctx
+                    .decorrelated
+                    .then(|| geometry::fgm(ctx.p_cal, ctx.model, reset.q[0], reset.q[3]).ok())
+                    .flatten()
+                    .map(|r| Vector2::new(r.x(), r.y())),
+                ..AtReset::default()
+            },
+            Dbb | LiX | LiY | LiPsi => AtReset {
+                subs: FORWARD_SUBSYSTEMS.map(|sub| forward(p_r, ctx.model, sub, q_r).ok()),
+                ..AtReset::default()
+            },
+            _ => AtReset::default(),
+        }
+    }
+}
+
 fn pose_rows(
     ctx: &Ctx,
     (i, pose): (usize, &Pose),
-    reset: Option<(usize, &Pose)>,
+    (reset, at): (Option<(usize, &Pose)>, &AtReset),
     f: &mut Forward,
     out: &mut Vec<Residual>,
 ) -> Result<(), ModelError> {
     use Instrument::{Dbb, Kgm, LiPsi, LiX, LiY, Lt, None, SelfCal};
     match (pose.instrument, reset) {
-        (Lt, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Lt, (i, pose), reset, out)?),
-        (Kgm, Some(reset)) => Ok(inverse_rows(ctx, XyInstrument::Kgm, (i, pose), reset, out)?),
-        (Dbb | LiX | LiY | LiPsi, Some(reset)) => Ok(forward_rows(ctx, i, pose, reset, out)?),
+        (Lt, Some(reset)) => Ok(inverse_rows(
+            ctx,
+            XyInstrument::Lt,
+            (i, pose),
+            (reset, at),
+            out,
+        )?),
+        (Kgm, Some(reset)) => Ok(inverse_rows(
+            ctx,
+            XyInstrument::Kgm,
+            (i, pose),
+            (reset, at),
+            out,
+        )?),
+        (Dbb | LiX | LiY | LiPsi, Some(reset)) => Ok(forward_rows(ctx, i, pose, (reset, at), out)?),
         (SelfCal, _) => Ok(self_rows(ctx, (i, pose), f, out)?),
         (None, _) if pose.drives_loaded() => Ok(force_rows(ctx, i, pose, out)?),
         _ => Ok(()),
@@ -798,15 +856,21 @@ fn inverse_rows(
     ctx: &Ctx,
     xy: XyInstrument,
     (i, pose): (usize, &Pose),
-    (ri, reset): (usize, &Pose),
+    ((ri, reset), at): ((usize, &Pose), &AtReset),
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
     let (Some(mx), Some(my)) = (pose.x, pose.y) else {
         return Ok(());
     };
-    let (dpose, dreset) = (ctx.corr.delta(i), ctx.corr.delta(ri));
-    let (p_r, q_r) = corrected(ctx.p, &reset.q, &dreset);
-    let r = forward(&p_r, ctx.model, Subsystem::NR, &q_r)?;
+    let dpose = ctx.corr.delta(i);
+    let own;
+    let r = if let Some(r) = &at.nr {
+        r
+    } else {
+        let (p_r, q_r) = corrected(ctx.p, &reset.q, &ctx.corr.delta(ri));
+        own = forward(&p_r, ctx.model, Subsystem::NR, &q_r)?;
+        &own
+    };
     let (x, y) = (mx + dpose.dm.x + r.sol.c[X], my + dpose.dm.y + r.sol.c[Y]);
     let (p_i, q_i) = corrected(ctx.p, &pose.q, &dpose);
     let inv = geometry::solve(&p_i, ctx.model, Subsystem::Tcp, [x, y])?;
@@ -816,7 +880,7 @@ fn inverse_rows(
         let v = q_var(a);
         let g = Vector2::new(s.dc_dk[(v, 0)], s.dc_dk[(v, 1)]);
         // dq/dp = ∂igm/∂p + ∂igm/∂X · d fgm(Q_reset)/dp
-        let at_reset = input_sensitivity(&r, Subsystem::NR, &[(X, g.x), (Y, g.y)]);
+        let at_reset = input_sensitivity(r, Subsystem::NR, &[(X, g.x), (Y, g.y)]);
         let mut at_pose = InputSensitivity {
             dp: s.dc_dp.row(v).transpose(),
             dm: g,
@@ -842,7 +906,7 @@ fn inverse_rows(
         });
     }
     if ctx.decorrelated {
-        let (g_fixed, tcp) = fixed_gains(ctx, mx, my, &reset.q)?;
+        let (g_fixed, tcp) = fixed_gains(ctx, mx, my, (&reset.q, at.tcp_cal))?;
         let (ux, uy) = match xy {
             XyInstrument::Lt => ctx.noise.beam_frame(tcp),
             XyInstrument::Kgm => (Vector2::x(), Vector2::y()),
@@ -859,10 +923,15 @@ fn fixed_gains(
     ctx: &Ctx,
     mx: f64,
     my: f64,
-    q_reset: &[f64; 4],
+    (q_reset, reset_cal): (&[f64; 4], Option<Vector2<f64>>),
 ) -> Result<([Vector2<f64>; 4], Vector2<f64>), GeometryError> {
-    let r = geometry::fgm(ctx.p_cal, ctx.model, q_reset[0], q_reset[3])?;
-    let tcp = Vector2::new(mx + r.x(), my + r.y());
+    let r = if let Some(r) = reset_cal {
+        r
+    } else {
+        let r = geometry::fgm(ctx.p_cal, ctx.model, q_reset[0], q_reset[3])?;
+        Vector2::new(r.x(), r.y())
+    };
+    let tcp = Vector2::new(mx + r.x, my + r.y);
     let inv = geometry::solve(ctx.p_cal, ctx.model, Subsystem::Tcp, [tcp.x, tcp.y])?;
     let s = geometry::sensitivity(ctx.p_cal, ctx.model, Subsystem::Tcp, &inv)?;
     let g = [0, 1, 2, 3].map(|a| {
@@ -1080,15 +1149,21 @@ fn forward_rows(
     ctx: &Ctx,
     i: usize,
     pose: &Pose,
-    (ri, reset): (usize, &Pose),
+    ((ri, reset), at): ((usize, &Pose), &AtReset),
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
     let (dpose, dreset) = (ctx.corr.delta(i), ctx.corr.delta(ri));
     let (p_i, q_i) = corrected(ctx.p, &pose.q, &dpose);
     let (p_r, q_r) = corrected(ctx.p, &reset.q, &dreset);
-    for sub in FORWARD_SUBSYSTEMS {
+    for (sub, solved) in FORWARD_SUBSYSTEMS.into_iter().zip(&at.subs) {
         let now = forward(&p_i, ctx.model, sub, &q_i)?;
-        let zero = forward(&p_r, ctx.model, sub, &q_r)?;
+        let own;
+        let zero = if let Some(zero) = solved {
+            zero
+        } else {
+            own = forward(&p_r, ctx.model, sub, &q_r)?;
+            &own
+        };
         let d = |v: usize| now.sol.c[v] - zero.sol.c[v];
         // the reset pose's encoders are the whole setup's: in its shared part
         let var = |v: usize| encoder_gain2(&now, v);
@@ -1131,7 +1206,7 @@ fn forward_rows(
         if let Some(k) = w {
             at_pose.dm[k] = -1.0;
         }
-        let at_reset = negated(input_sensitivity(&zero, sub, &g));
+        let at_reset = negated(input_sensitivity(zero, sub, &g));
         let parts = noise::add(
             ctx.noise.scalar_parts(inst, 1.0),
             ctx.noise.encoder_parts(var_enc),

@@ -22,7 +22,7 @@ reads) and declares what the ROS 2 interface-package rules ask (buildtool_depend
 rosidl_default_generators, exec_depend rosidl_default_runtime, member_of_group
 rosidl_interface_packages) and a dependency on every package a .msg refers to; the installed
 ament index lists exactly the messages of msg/.
-Used by tests/ros_interface_package.rs.
+Used by tests/it/ros_interface_package.rs.
 """
 
 import json

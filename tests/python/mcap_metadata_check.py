@@ -12,7 +12,7 @@ schema's name as type, the message encoding as serialization_format, the channel
 `offered_qos_profiles` and `topic_type_hash`, and the channel's count in
 channelMessageCounts (0 when absent). A metadata.yaml that says otherwise describes another
 bag than the one `ros2 bag play` reads. The file is read with the `mcap` package, the YAML
-with ruamel (both independent of rpkm). Used by tests/bag_rosbag2_metadata.rs.
+with ruamel (both independent of rpkm). Used by tests/it/bag_rosbag2_metadata.rs.
 """
 
 import json

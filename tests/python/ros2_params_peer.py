@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Independent ROS 2 parameter client (Eclipse Cyclone DDS, PyPI `cyclonedds`) for
-tests/node_ros2_params.rs: speaks to an rpkm node as `ros2 param` on rmw_cyclonedds does.
+tests/it/node_ros2_params.rs: speaks to an rpkm node as `ros2 param` on rmw_cyclonedds does.
 
 The services are DDS topic pairs `rq/<node>/<service>Request` and `rr/<node>/<service>Reply`
 with types `rcl_interfaces::srv::dds_::<Service>_Request_` / `_Response_`. rmw_cyclonedds

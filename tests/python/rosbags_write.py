@@ -7,7 +7,7 @@ Three std_msgs/msg/String messages on /chatter at 1000, 1001, 1002 ns, offered w
 profile (keep last 7, best effort, transient local, infinite durations). Version 9 is the
 layout rosbag2 on Jazzy writes (QoS profiles as a YAML sequence with rmw's policy names),
 version 8 the one before (QoS as a YAML string, policies as integers). Used by
-tests/bag_rosbag2_metadata.rs to check that rpkm reads both and that the rosbag2 metadata
+tests/it/bag_rosbag2_metadata.rs to check that rpkm reads both and that the rosbag2 metadata
 checker accepts what a rosbag2-compatible writer other than rpkm produces.
 """
 

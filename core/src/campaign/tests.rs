@@ -1,4 +1,4 @@
-//! Unit tests of the helpers; the file-level tests are in `core/tests/campaign_*.rs`.
+//! Unit tests of the helpers; the file-level tests are in `core/tests/it/campaign_*.rs`.
 
 use super::parse::parse_follower;
 use super::write::{follower_text, number};

@@ -49,7 +49,7 @@ fn converged(step: f64, previous: f64) -> bool {
 /// 0.4 mm at the workspace centre, nominal parameters, rigid carriers) drives the most loaded
 /// drive to about 100 % redundancy current, as the thesis reports (section 4.4): the model is
 /// linear in the stiffness for small incompatibilities, so the value is the one that gives
-/// 8,600 N there (see `tests/elastic_spring.rs::default_stiffness_gives_100_percent_for_0_4_mm`).
+/// 8,600 N there (see `core/tests/it/elastic_spring.rs::default_stiffness_gives_100_percent_for_0_4_mm`).
 pub const DEFAULT_ROD_STIFFNESS_N_PER_MM: f64 = 97_700.0;
 
 /// Stiffness of the spring model.

@@ -49,7 +49,8 @@ pub enum Bench {
     Soak(soak::SoakArgs),
     /// Calibration time, LM iterations and peak memory of `rpkm calibrate` on twin
     /// self-calibration campaigns of about 10³, 10⁴ and 10⁵ poses (child processes, on every
-    /// core and on one), the diagnosis of a 1,000-pose campaign with every library effect, and,
+    /// core and on one), the same 10⁵ random-target poses in 10, 100 and 1,000 setups and a
+    /// campaign of the foreign simulator's class of design (each against the best), the diagnosis of a 1,000-pose campaign with every library effect, and,
     /// when Python with scipy is there, a plain scipy least_squares script's fit against
     /// rpkm's fit of the same problem alone and against whole `rpkm calibrate` processes.
     ///

@@ -11,7 +11,7 @@
 //! decodes that header as the request itself, so `ros2 param` over Cyclone got garbage or
 //! nothing (ros2-client issues 24, 35). These servers use the Cyclone mapping, which echoes
 //! that header in the reply. Its descriptors also carried no range, read-only flag or
-//! description. Checked with an independent Cyclone DDS peer (tests/node_ros2_params.rs).
+//! description. Checked with an independent Cyclone DDS peer (tests/it/node_ros2_params.rs).
 //!
 //! A set passes, in order: the parameter exists, its type is the declared one, it is not
 //! read-only, it lies in its range, and the node's own check of the whole resulting set

@@ -5,6 +5,11 @@
 //!   thesis's self-calibration design repeated; each run a child `rpkm calibrate` process):
 //!   wall time, LM iterations, peak resident memory (the child's `ru_maxrss`), time per pose.
 //! - The same calibrations on one thread (`--threads 1`): the parallel speed-up.
+//! - The cost per setup (issue 30): the same 10⁵ random-target self-calibration poses split
+//!   into 10, 100 and 1,000 setups, and a campaign of the foreign simulator's class of design
+//!   (random targets in small setups of laser tracker, grid encoder and self-calibration),
+//!   whole `rpkm calibrate` processes with default options, medians of [`SETUP_RUNS`]; each
+//!   against the best of them.
 //! - Diagnosis of a campaign of about 1,000 poses with every library effect tried, in
 //!   process: screened (the default) and with every candidate fitted to convergence.
 //! - When Python with scipy is there: the plain `scipy.optimize.least_squares` script of
@@ -34,6 +39,10 @@ pub struct CalibrationArgs {
     /// Where the campaigns are written (default: a new folder under the system's temp dir).
     #[arg(long)]
     pub dir: Option<PathBuf>,
+    /// Only the cost per setup (the campaigns of 10, 100 and 1,000 setups and the foreign
+    /// class); with --dir, their files stay there to profile.
+    #[arg(long)]
+    pub setups_only: bool,
 }
 
 /// One `rpkm calibrate` process: its wall time, the LM's iterations, peak memory.
@@ -54,6 +63,9 @@ pub fn run(a: &CalibrationArgs) -> Result<()> {
         None => std::env::temp_dir().join(format!("rpkm_bench_calibration_{}", std::process::id())),
     };
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    if a.setups_only {
+        return setups(&dir, a.seed);
+    }
     println!(
         "{:>9} {:>9} {:>7} {:>10} {:>9} {:>10} {:>9}",
         "poses", "rows", "iters", "time (s)", "µs/pose", "1 thread", "peak MB"
@@ -76,6 +88,7 @@ pub fn run(a: &CalibrationArgs) -> Result<()> {
             smallest = Some(path);
         }
     }
+    setups(&dir, a.seed)?;
     diagnosis(a.seed)?;
     if let Some(path) = smallest {
         scipy_baseline(&path)?;
@@ -98,6 +111,91 @@ fn write_self_campaign(dir: &Path, seed: u64, k: usize) -> Result<(PathBuf, usiz
     std::fs::write(&path, campaign.to_csv())
         .with_context(|| format!("writing {}", path.display()))?;
     Ok((path, campaign.poses.len()))
+}
+
+/// Poses of the campaigns of [`setups`], and the setups the same poses are split into.
+const SETUP_POSES: usize = 100_000;
+const SPLITS: [usize; 3] = [10, 100, 1_000];
+/// Runs of each campaign of [`setups`] whose median is quoted (the issue's figure).
+const SETUP_RUNS: usize = 5;
+
+/// The cost per setup: 10⁵ random-target self-calibration poses measured once on a twin
+/// and split into 10, 100 and 1,000 setups (the same poses and readings, only the setup
+/// column differs), and a campaign of the foreign simulator's class of design of as many
+/// poses; `rpkm calibrate` with default options on each, every figure against the best.
+fn setups(dir: &Path, seed: u64) -> Result<()> {
+    // the campaigns written and dropped before the first child starts: a child's peak
+    // memory counts what this process held when it started it
+    let files = write_setup_campaigns(dir, seed)?;
+    let mut runs = Vec::new();
+    for (what, setups, poses, path) in &files {
+        let mut all = (0..SETUP_RUNS)
+            .map(|_| calibrate(path, None, &[]))
+            .collect::<Result<Vec<Run>>>()?;
+        all.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
+        runs.push((what, setups, poses, all.swap_remove(SETUP_RUNS / 2)));
+    }
+    let best = runs
+        .iter()
+        .map(|r| r.3.seconds)
+        .fold(f64::INFINITY, f64::min);
+    println!(
+        "\ncost per setup (rpkm calibrate, default options, medians of {SETUP_RUNS}):\n  \
+         {:<58} {:>7} {:>7} {:>6} {:>9} {:>8} {:>7}",
+        "campaign", "setups", "poses", "iters", "time (s)", "peak MB", "/ best"
+    );
+    for (what, setups, poses, run) in &runs {
+        println!(
+            "  {what:<58} {setups:>7} {poses:>7} {:>6} {:>9.3} {:>8.1} {:>6.2}x",
+            run.iterations,
+            run.seconds,
+            run.max_rss_mb,
+            run.seconds / best
+        );
+    }
+    Ok(())
+}
+
+/// [`setups`]' campaigns written under `dir`: what each is, its setups, poses and file.
+fn write_setup_campaigns(dir: &Path, seed: u64) -> Result<Vec<(String, usize, usize, PathBuf)>> {
+    use rpkm_core::design::random_setups;
+    let mut twin = Twin::new(TwinConfig {
+        seed,
+        ..Default::default()
+    })?;
+    let most = SPLITS[SPLITS.len() - 1];
+    let design = random_setups(Instrument::SelfCal, most, SETUP_POSES / most, seed);
+    let base = twin.run(&design, "self, random targets")?;
+    let mut campaigns = Vec::new();
+    for n in SPLITS {
+        let mut c = base.clone();
+        let per = SETUP_POSES / n;
+        for (i, pose) in c.poses.iter_mut().enumerate() {
+            pose.setup = format!("self{:04}", i / per);
+        }
+        campaigns.push((format!("self, {n} setups of {per}"), c));
+    }
+    drop(base);
+    // the foreign class: laser-tracker and grid-encoder setups of 10 poses (reset first),
+    // self-calibration setups of 100
+    let mut twin = Twin::new(TwinConfig {
+        seed: seed + 1,
+        ..Default::default()
+    })?;
+    let mut design = random_setups(Instrument::Lt, 1_500, 10, seed + 1);
+    design.extend(random_setups(Instrument::Kgm, 1_500, 10, seed + 2));
+    design.extend(random_setups(Instrument::SelfCal, 700, 100, seed + 3));
+    campaigns.push((
+        "foreign class: 1,500 lt + 1,500 kgm of 10, 700 self of 100".into(),
+        twin.run(&design, "foreign class")?,
+    ));
+    let mut files = Vec::new();
+    for (k, (what, c)) in campaigns.into_iter().enumerate() {
+        let path = dir.join(format!("setups_{k}.csv"));
+        std::fs::write(&path, c.to_csv()).with_context(|| format!("writing {}", path.display()))?;
+        files.push((what, c.setups().len(), c.poses.len(), path));
+    }
+    Ok(files)
 }
 
 /// `rpkm calibrate FILE [EXTRA]` as a child process: wall time, iterations (from its JSON), peak

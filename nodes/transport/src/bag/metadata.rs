@@ -15,7 +15,7 @@ use super::error::{BagOpenError, BagWriteError};
 /// string whose profiles give the policies as integers (Iron's player decodes nothing else;
 /// Jazzy's decoder accepts both forms). Versions 6 to 8 require `custom_data`, 7 and 8
 /// `type_description_hash`, 8 `ros_distro` (Jazzy). rosbags 0.11 accepts 4 to 9.
-/// tests/bag_rosbag2_metadata.rs holds every bag rpkm writes to these rules.
+/// tests/it/bag_rosbag2_metadata.rs holds every bag rpkm writes to these rules.
 pub const METADATA_VERSION: u32 = 8;
 
 /// File name of the metadata in a bag folder.

@@ -14,8 +14,8 @@
     reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
 )]
 
-mod bag_support;
-mod node_support;
+use crate::bag_support;
+use crate::node_support;
 
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -187,6 +187,10 @@ fn start_nodes(dir: &std::path::Path, p: &Params, prefix: &str) -> Launch {
     reason = "an end-to-end scenario, read top to bottom"
 )]
 fn monitor_in_tmux_shows_the_fault_and_the_silent_estimator() {
+    // its SIGKILLed node's resources are its own to see cleaned up (crate::KILLS_A_NODE)
+    let _alone = crate::KILLS_A_NODE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     if !tmux_available() {
         return;
     }

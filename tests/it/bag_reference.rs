@@ -15,7 +15,7 @@
     reason = "exact values: parsed, copied or computed without rounding"
 )]
 
-mod bag_support;
+use crate::bag_support;
 
 use std::path::Path;
 use std::process::Command;

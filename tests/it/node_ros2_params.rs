@@ -17,7 +17,7 @@
     reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
 )]
 
-mod node_support;
+use crate::node_support;
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;

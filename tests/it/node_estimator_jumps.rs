@@ -7,7 +7,7 @@
 //! Before the plausibility checks, 118 of the 194 estimates were a turned-over platform
 //! flagged converged, and the monitor predicted 749,800 % current.
 
-mod node_support;
+use crate::node_support;
 
 use std::collections::HashMap;
 use std::f64::consts::PI;

@@ -9,8 +9,8 @@
 //! ingest path and the units end to end. The tolerance bites: the nominal geometry's rigid
 //! model misses the same poses by ten times it (asserted). Required under CI.
 
-mod foreign_support;
-mod node_support;
+use crate::foreign_support;
+use crate::node_support;
 
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};

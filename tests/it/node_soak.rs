@@ -3,7 +3,7 @@
 //! so a host that keeps a node off its core longer than the queue lasts (half a second)
 //! loses states by design; run it by hand on a quiet machine:
 //!
-//!     cargo test -p rpkm --test node_soak -- --ignored --nocapture
+//!     cargo test -p rpkm --test it node_soak -- --ignored --nocapture
 //!
 //! `RPKM_SOAK_SECONDS` (default 180) sets the length.
 #![expect(

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-mod fuzz_support;
+use crate::fuzz_support;
 use fuzz_support::Rng;
 
 /// Cases per family: a few thousand in all, well within a minute of the debug test build on
@@ -414,7 +414,7 @@ fn fuzzed_parameter_files_end_in_0_or_2_naming_their_place() {
         let mut cmd = rpkm();
         // ingest waits start_delay_s (default 1 s) before it opens its source: 0 from the
         // command line, so that a case costs its parsing, not the wait (this one key's
-        // mutations are left to tests/cli_bad_config.rs)
+        // mutations are left to tests/it/cli_bad_config.rs)
         cmd.args(["node", "ingest", "--param", "start_delay_s=0", "--params"])
             .arg(&file)
             .arg("--source")

@@ -14,8 +14,8 @@
 //! - `bags/calibration` and `bags/calibration_val` through the calibrator: its Diagnosis is
 //!   that of `rpkm diagnose` on the equivalent CSVs and names the effect the twin hid.
 
-mod bag_support;
-mod node_support;
+use crate::bag_support;
+use crate::node_support;
 
 use std::collections::HashMap;
 use std::time::{Duration, Instant};

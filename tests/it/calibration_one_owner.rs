@@ -6,7 +6,7 @@
 //! diagnosis's first round, at the stated noise, finds no candidate to estimate the noise
 //! under (the noise is then estimated under the model itself, as `rpkm calibrate` does).
 
-mod foreign_support;
+use crate::foreign_support;
 
 use rpkm::node::calibrator::{calibrate_campaign, CalibratorOptions};
 use rpkm::node::Geometry;

@@ -14,7 +14,7 @@
 //! Needs the venv (`python3 -m venv .venv && .venv/bin/pip install -r
 //! tests/python/requirements.txt`); without it SKIPPED, under RPKM_REQUIRE_PYTHON=1 a failure.
 
-mod node_support;
+use crate::node_support;
 
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Write};

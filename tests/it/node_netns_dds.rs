@@ -7,7 +7,7 @@
 //! Without the privilege the test prints why it skips; with RPKM_REQUIRE_NETNS=1 (a CI that
 //! runs as root) a skip is a failure.
 
-mod node_support;
+use crate::node_support;
 
 use std::collections::HashMap;
 use std::process::{Child, Command, Stdio};

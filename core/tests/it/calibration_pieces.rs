@@ -2,7 +2,7 @@
 //! depend on the thread count (to the bit), and a campaign of many pieces (a setup cut in
 //! several, a forward instrument's step 2 among them) must still find the true machine.
 
-mod support;
+use crate::support;
 
 use rpkm_core::calib::{self, Options};
 use rpkm_core::design;
@@ -151,6 +151,67 @@ fn pieces_across_setups_give_the_rows_of_one_pass() {
             assert_eq!(c.poses.len(), 1043);
             assert!(c.setups().len() > 1, "{} setups", c.setups().len());
             assert_eq!(Pieces::new(&c, 256).len(), 5);
+        }
+    }
+}
+
+/// Every laser-tracker row reads its own setup's reset pose, whichever piece holds it and
+/// whichever setups share that piece (issue 30: setups of 10 poses share pieces, and the
+/// reset's solve is made once per part of a setup): each q row's value is the igm of the
+/// measured displacement added to the fgm of that setup's reset, made here pose by pose
+/// from the geometry alone, for pieces of 1, 7 (setups cut in two) and 256 poses.
+#[test]
+fn relative_rows_read_their_own_setups_reset() {
+    use rpkm_core::campaign::Instrument;
+    use rpkm_core::effects::Corrections;
+    use rpkm_core::geometry::{self, q_var, Subsystem};
+    use rpkm_core::noise::NoiseModel;
+    use rpkm_core::obs::{Direction, Evaluation, Form, Pieces, Step};
+    let truth = support::true_params(5, false);
+    let plan = design::random_setups(Instrument::Lt, 30, 10, 5);
+    let c = support::measure(&plan, &truth, 6, true, "lt setups of 10");
+    assert_eq!(c.setups().len(), 30);
+    let p = Params::nominal();
+    let (corr, noise) = (Corrections::default(), NoiseModel::default());
+    let eval = Evaluation {
+        campaign: &c,
+        p: &p,
+        model: Model::M29,
+        step: Step::Direct,
+        p_cal: &p,
+        corr: &corr,
+        noise: &noise,
+        form: Form::Thesis,
+    };
+    let reset_of = |i: usize| {
+        let setup = &c.poses[i].setup;
+        let r = c.poses.iter().find(|q| &q.setup == setup && q.reset);
+        r.expect("every lt setup has its reset pose")
+    };
+    for size in [1, 7, 256] {
+        let pieces = Pieces::new(&c, size);
+        let mut rows = Vec::new();
+        for k in 0..pieces.len() {
+            eval.piece_into(&pieces, k, &mut rows).expect("piece");
+        }
+        assert_eq!(rows.len(), 4 * (c.poses.len() - 30), "pieces of {size}");
+        for row in &rows {
+            let pose = &c.poses[row.pose];
+            let reset = reset_of(row.pose);
+            let r = geometry::fgm(&p, Model::M29, reset.q[0], reset.q[3]).expect("reset");
+            let (x, y) = (pose.x.expect("x"), pose.y.expect("y"));
+            let inv = geometry::solve(&p, Model::M29, Subsystem::Tcp, [x + r.x(), y + r.y()])
+                .expect("igm");
+            let Direction::Q(a) = row.direction else {
+                panic!("{:?}: a q row expected", row.direction)
+            };
+            let want = inv.c[q_var(a)] - pose.q[a];
+            assert!(
+                (row.value - want).abs() <= 1e-9,
+                "pieces of {size}, line {}: {} vs {want}",
+                pose.line,
+                row.value
+            );
         }
     }
 }

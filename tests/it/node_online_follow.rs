@@ -11,7 +11,7 @@
 //! - the preload monitor's predicted-vs-measured residual jumps and falls back likewise;
 //! - the calibrator's WARN on /diagnostics names the rod.
 
-mod node_support;
+use crate::node_support;
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -231,7 +231,7 @@ fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash()
     ]
     .concat();
     rpkm_in(&dir, &[&sim[..], &["--out", "start.csv"]].concat());
-    // with the effect the discovery names on this campaign (core/tests/
+    // with the effect the discovery names on this campaign (core/tests/it/
     // calibration_currents_online.rs diagnoses the same design): the lt poses are loaded
     rpkm_in(
         &dir,

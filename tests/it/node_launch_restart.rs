@@ -9,7 +9,7 @@
     reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
 )]
 
-mod node_support;
+use crate::node_support;
 
 use std::collections::{BTreeSet, HashMap};
 use std::path::Path;
@@ -27,6 +27,10 @@ const KILL_AFTER: usize = 200;
 
 #[test]
 fn sigkilled_estimator_is_restarted_and_rejoins_while_the_stream_goes_on() {
+    // its SIGKILLed node's resources are its own to see cleaned up (crate::KILLS_A_NODE)
+    let _alone = crate::KILLS_A_NODE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let dir = TempDir::new("restart");
     let stream = twin_stream(N, RATE_HZ, |_| 0.0);
     let csv = dir.path("stream.csv");

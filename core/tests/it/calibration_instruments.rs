@@ -7,7 +7,7 @@
 //!   true parameters give on the same held-out poses): held-out laser-tracker poses, or, for
 //!   the ball-bar, held-out ball-bar readings (see [`HeldOut`]).
 
-mod support;
+use crate::support;
 
 use rand::Rng;
 use rpkm_core::calib::{self, Calibration, Options, Selection};

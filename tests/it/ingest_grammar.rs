@@ -14,7 +14,7 @@ use rpkm_core::campaign::{Campaign, CampaignReader};
 
 const FILES: usize = 240;
 
-mod fuzz_support;
+use crate::fuzz_support;
 use fuzz_support::Rng;
 
 /// The base: setups of every instrument from the foreign null campaign, 8 rows each.

@@ -6,7 +6,7 @@
 //!   gives for the configured thresholds and debounce;
 //! - compatible: no drift, the monitor's parameters are the twin's: OK on every sample.
 
-mod node_support;
+use crate::node_support;
 
 use std::collections::HashMap;
 use std::time::{Duration, Instant};

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-mod foreign_support;
+use crate::foreign_support;
 
 use foreign_support::json;
 

@@ -5,7 +5,7 @@
 //! (`RPKM_REQUIRE_PYTHON`, set by `.ci/run`).
 //!
 //! The README's picture of the report (`docs/report.png`, the first screen) is re-minted with
-//! `RPKM_UPDATE_DOCS=1 cargo test --test report_chromium`.
+//! `RPKM_UPDATE_DOCS=1 cargo test --test it report_chromium`.
 #![expect(
     clippy::cast_possible_truncation,
     clippy::cast_sign_loss,

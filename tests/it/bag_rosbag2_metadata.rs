@@ -9,7 +9,7 @@
 //! bags another rosbag2-compatible writer (rosbags) produces, in version 8 and 9 alike, which
 //! rpkm must read too. Version 9 is refused by Iron, which is why rpkm writes version 8.
 
-mod bag_support;
+use crate::bag_support;
 
 use bag_support::{python, reference_bag, repo_root, rpkm, run_ok, scratch};
 use std::path::{Path, PathBuf};

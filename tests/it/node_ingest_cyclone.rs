@@ -15,7 +15,7 @@
     reason = "test and benchmark fixtures: counters, stamps and sizes far inside the target type's range"
 )]
 
-mod node_support;
+use crate::node_support;
 
 use std::path::Path;
 use std::process::{Command, Stdio};

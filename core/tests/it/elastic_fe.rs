@@ -26,7 +26,7 @@ fn compatible_q(p: &Params, x: f64, y: f64) -> [f64; 4] {
     igm(p, Model::M29, x, y).expect("igm").q()
 }
 
-/// A machine with errors on every parameter (deterministic; as in tests/elastic_spring.rs).
+/// A machine with errors on every parameter (deterministic; as in core/tests/it/elastic_spring.rs).
 fn perturbed() -> Params {
     let mut p = Params::nominal();
     for i in 0..N_PARAMS {
