@@ -264,13 +264,14 @@ fn instruments(spec: &Spec, targets: &[(Target, Program)]) -> Result<Vec<Instrum
 
 /// An expression that is not finite at a pose: which target, at which line of the campaign.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("{target} = {text:?} is {value} at line {line} of {campaign}{at}")]
+#[error("{target} = {text:?} {what} at line {line} of {campaign}{at}")]
 pub struct NotFinite {
     /// Index of the target in the spec.
     pub index: usize,
     pub target: String,
     pub text: String,
-    pub value: String,
+    /// What is not finite (`is NaN`, `has the derivative inf by `a``).
+    pub what: String,
     pub line: usize,
     /// The campaign's source.
     pub campaign: String,
@@ -377,30 +378,45 @@ impl Written {
             for (i, pose) in campaign.poses.iter().enumerate() {
                 for (index, (_, program)) in bound.targets.iter().enumerate() {
                     let v = program.eval(&bound.vars[i], &theta, &mut grad, &mut stack);
-                    let Some(bad) = std::iter::once(v).chain(grad.iter().copied()).find(|v| !v.is_finite()) else {
+                    let what = if !v.is_finite() {
+                        format!("is {v}")
+                    } else if let Some(k) = grad.iter().position(|g| !g.is_finite()) {
+                        format!(
+                            "has the derivative {} by `{}`",
+                            grad[k], self.spec.params[k].name
+                        )
+                    } else {
                         continue;
                     };
                     let (target, text) = self.spec.targets[index].clone();
-                    let what = if bad.to_bits() == v.to_bits() { "" } else { "'s derivative" };
-                    let at = if theta.iter().all(|t| *t == 0.0) {
-                        String::new()
-                    } else {
-                        let values: Vec<String> = self.spec.params.iter().zip(&theta).map(|(p, t)| format!("{} = {t}", p.name)).collect();
-                        format!(" with {}", values.join(", "))
-                    };
                     return Err(BindError::NotFinite(NotFinite {
                         index,
                         target,
                         text,
-                        value: format!("{bad}{what}"),
+                        what,
                         line: pose.line,
                         campaign: campaign.source.clone(),
-                        at,
+                        at: self.shown(&theta),
                     }));
                 }
             }
         }
         Ok(())
+    }
+
+    /// ` with a = 0.1, c = 0` where the parameters are not all zero.
+    fn shown(&self, theta: &[f64]) -> String {
+        if theta.iter().all(|t| *t == 0.0) {
+            return String::new();
+        }
+        let values: Vec<String> = self
+            .spec
+            .params
+            .iter()
+            .zip(theta)
+            .map(|(p, t)| format!("{} = {t}", p.name))
+            .collect();
+        format!(" with {}", values.join(", "))
     }
 }
 
@@ -468,5 +484,51 @@ fn add(d: &mut Delta, target: Target, v: f64) {
         Target::Dx => d.dm.x += v,
         Target::Dy => d.dm.y += v,
         Target::Dp(i) => d.dp[i] += v,
+    }
+}
+
+/// A variable a live pose does not have.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("effect `{effect}` reads `{variable}`, which the live pose does not have")]
+pub struct MissingVariable {
+    pub effect: String,
+    pub variable: String,
+}
+
+impl Written {
+    /// The variables the expressions read.
+    pub fn variables(&self) -> &[String] {
+        &self.vars
+    }
+
+    /// The change of one pose's inputs at parameters `theta` (the live estimator's: a pose
+    /// outside any campaign), its variables read by name from `var`. The 2-D instruments'
+    /// `dx`, `dy` are left out: a live pose has no instrument reading.
+    pub fn delta_at(
+        &self,
+        var: &dyn Fn(&str) -> Option<f64>,
+        theta: &[f64],
+    ) -> Result<Delta, MissingVariable> {
+        let vars = self
+            .vars
+            .iter()
+            .map(|v| {
+                var(v).ok_or_else(|| MissingVariable {
+                    effect: self.spec.name.clone(),
+                    variable: v.clone(),
+                })
+            })
+            .collect::<Result<Vec<f64>, _>>()?;
+        let mut out = Delta::default();
+        let mut grad = vec![0.0; theta.len()];
+        let mut stack = Vec::new();
+        for (target, program) in &self.targets {
+            if matches!(target, Target::Dx | Target::Dy) {
+                continue;
+            }
+            let v = program.eval(&vars, theta, &mut grad, &mut stack);
+            add(&mut out, *target, v);
+        }
+        Ok(out)
     }
 }
