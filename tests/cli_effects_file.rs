@@ -88,8 +88,14 @@ fn every_malformed_effects_file_exits_2_naming_its_place() {
         let file = path.display().to_string();
         let (code, err) = rpkm(&["diagnose", &campaign, "--effects-file", &file]);
         let place = format!("{file}:{line}:{column}: ");
-        if code != Some(2) || !err.contains(&place) || !err.contains(words) || err.contains("panicked") {
-            wrong.push(format!("{what}: exit {code:?}, want {place}... {words}; got {err}"));
+        if code != Some(2)
+            || !err.contains(&place)
+            || !err.contains(words)
+            || err.contains("panicked")
+        {
+            wrong.push(format!(
+                "{what}: exit {code:?}, want {place}... {words}; got {err}"
+            ));
         }
     }
     assert!(wrong.is_empty(), "{}", wrong.join("\n"));
@@ -104,9 +110,19 @@ fn an_unknown_effect_names_the_files_effects() {
     std::fs::write(&path, GOOD).expect("write");
     let file = path.display().to_string();
     let campaign = demo().display().to_string();
-    let (code, err) = rpkm(&["calibrate", &campaign, "--effects-file", &file, "--effects", "cyclic_q1"]);
+    let (code, err) = rpkm(&[
+        "calibrate",
+        &campaign,
+        "--effects-file",
+        &file,
+        "--effects",
+        "cyclic_q1",
+    ]);
     assert_eq!(code, Some(2), "{err}");
-    assert!(err.contains("unknown effect \"cyclic_q1\"") && err.contains("cyclic_q4"), "{err}");
+    assert!(
+        err.contains("unknown effect \"cyclic_q1\"") && err.contains("cyclic_q4"),
+        "{err}"
+    );
 }
 
 /// The foreign simulator's cyclic error of carrier 4's scale (2.5 µm, 60 mm pitch): offered
@@ -122,7 +138,9 @@ fn the_foreign_cyclic_error_is_found_by_the_written_effect() {
     let effects = dir.path().join("cyclic.yaml");
     std::fs::write(&effects, GOOD).expect("write");
     let truth = foreign_support::json(&ds.join("truth.json"));
-    let amplitude = truth["hidden_effects"]["cyclic_q4"][0].as_f64().expect("amplitude");
+    let amplitude = truth["hidden_effects"]["cyclic_q4"][0]
+        .as_f64()
+        .expect("amplitude");
     let diagnose = |extra: &[&str], out: &Path| {
         let o = Command::new(env!("CARGO_BIN_EXE_rpkm"))
             .arg("diagnose")
@@ -141,7 +159,10 @@ fn the_foreign_cyclic_error_is_found_by_the_written_effect() {
     };
     let d = diagnose(&[], &dir.path().join("d1.json"));
     assert_eq!(d["missing_effect"], "cyclic_q4", "{}", d["candidates"]);
-    assert_eq!(d["effects_file"]["effects"][0]["expressions"]["dq4"], "a * sin(2*pi*q4/60) + c * cos(2*pi*q4/60)");
+    assert_eq!(
+        d["effects_file"]["effects"][0]["expressions"]["dq4"],
+        "a * sin(2*pi*q4/60) + c * cos(2*pi*q4/60)"
+    );
     let c = d["candidates"]
         .as_array()
         .expect("candidates")
@@ -158,26 +179,46 @@ fn the_foreign_cyclic_error_is_found_by_the_written_effect() {
          held-out {} -> {} um",
         c["val_rms_before_um"], c["val_rms_after_um"]
     );
-    assert!((amp - amplitude).abs() < 3.0 * sigma, "amplitude {amp} ± {sigma}, truth {amplitude}");
+    assert!(
+        (amp - amplitude).abs() < 3.0 * sigma,
+        "amplitude {amp} ± {sigma}, truth {amplitude}"
+    );
     let d2 = diagnose(&["--effects", "cyclic_q4"], &dir.path().join("d2.json"));
     let after = d2["baseline"]["val_rms_um"].as_f64().expect("held-out");
     let floor = foreign_support::true_floor_um(&ds);
-    eprintln!("with cyclic_q4: verdict {}, held-out {after:.2} um, true floor {floor:.2} um", d2["verdict_kind"]);
+    eprintln!(
+        "with cyclic_q4: verdict {}, held-out {after:.2} um, true floor {floor:.2} um",
+        d2["verdict_kind"]
+    );
     assert!(after <= 1.5 * floor, "held-out {after} um, floor {floor}");
-    assert_eq!(d2["missing_effect"], serde_json::Value::Null, "{}", d2["candidates"]);
+    assert_eq!(
+        d2["missing_effect"],
+        serde_json::Value::Null,
+        "{}",
+        d2["candidates"]
+    );
     // calibrate writes the effect's parameters with their unit into the calibration
     let cal_json = dir.path().join("cal.json");
     let o = Command::new(env!("CARGO_BIN_EXE_rpkm"))
         .arg("calibrate")
         .arg(ds.join("cal.csv"))
-        .args(["--effects-file", &effects.display().to_string(), "--effects", "cyclic_q4", "--json"])
+        .args([
+            "--effects-file",
+            &effects.display().to_string(),
+            "--effects",
+            "cyclic_q4",
+            "--json",
+        ])
         .arg(&cal_json)
         .output()
         .expect("run rpkm");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let cal = foreign_support::json(&cal_json);
     let e = &cal["effects"][0];
-    assert_eq!((e["effect"].as_str(), e["name"].as_str(), e["unit"].as_str()), (Some("cyclic_q4"), Some("a"), Some("mm")));
+    assert_eq!(
+        (e["effect"].as_str(), e["name"].as_str(), e["unit"].as_str()),
+        (Some("cyclic_q4"), Some("a"), Some("mm"))
+    );
     assert!(e["sigma"].as_f64().expect("sigma") > 0.0);
     assert_eq!(cal["effects_file"]["effects"][0]["name"], "cyclic_q4");
 }

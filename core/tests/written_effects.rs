@@ -73,12 +73,25 @@ fn partials_match_finite_differences() {
     let (cal, _, _) = twin_campaigns(3, &[]);
     let e = written(
         "mixed",
-        vec![param("a", "mm", 0.01), param("c", "mm", 0.01), param("k", "1", 0.1)],
+        vec![
+            param("a", "mm", 0.01),
+            param("c", "mm", 0.01),
+            param("k", "1", 0.1),
+        ],
         &[
-            ("dq4", "a * sin(2*pi*q4/60) + c * cos(2*pi*q4/60) - k^2 * dir_q4"),
+            (
+                "dq4",
+                "a * sin(2*pi*q4/60) + c * cos(2*pi*q4/60) - k^2 * dir_q4",
+            ),
             ("dx", "a * y / 1000 + exp(k) * c"),
-            ("dp.l3", "(a + c*k) * (temp_machine - 20) + tanh(k * t_run / 100)"),
-            ("dq1", "abs(a - c) * f1 / 1000 + max(a, k) * travel_q1 / 1e4"),
+            (
+                "dp.l3",
+                "(a + c*k) * (temp_machine - 20) + tanh(k * t_run / 100)",
+            ),
+            (
+                "dq1",
+                "abs(a - c) * f1 / 1000 + max(a, k) * travel_q1 / 1e4",
+            ),
         ],
     );
     let theta = [0.004, -0.003, 0.2];
@@ -95,7 +108,10 @@ fn partials_match_finite_differences() {
                 (partials[k].dq[3], fd(vu.dq[3], vd.dq[3])),
                 (partials[k].dq[0], fd(vu.dq[0], vd.dq[0])),
                 (partials[k].dm.x, fd(vu.dm.x, vd.dm.x)),
-                (partials[k].dp[rpkm_core::params::L3], fd(vu.dp[rpkm_core::params::L3], vd.dp[rpkm_core::params::L3])),
+                (
+                    partials[k].dp[rpkm_core::params::L3],
+                    fd(vu.dp[rpkm_core::params::L3], vd.dp[rpkm_core::params::L3]),
+                ),
             ];
             for (exact, numeric) in pairs {
                 assert!(
@@ -114,7 +130,10 @@ fn encoder_scale_written_gives_the_librarys_parameters() {
     let (cal, val, _) = twin_campaigns(5, &[(EffectKind::EncoderScale, 40.0)]);
     let file = written(
         "encoder_scale_written",
-        vec![param("scale_guide1", "ppm", 50.0), param("scale_guide2", "ppm", 50.0)],
+        vec![
+            param("scale_guide1", "ppm", 50.0),
+            param("scale_guide2", "ppm", 50.0),
+        ],
         &[
             ("dq2", "scale_guide1 * 1e-6 * q2"),
             ("dq3", "scale_guide1 * 1e-6 * q3"),
@@ -127,10 +146,19 @@ fn encoder_scale_written_gives_the_librarys_parameters() {
     let (own, _) = diagnose::evaluate(&cal, Some(&val), &[&file], &opts).expect("written");
     assert_eq!(lib.effect_params.len(), 2);
     for (a, b) in lib.effect_params.iter().zip(&own.effect_params) {
-        eprintln!("{}: library {} ± {}, written {} ± {}", a.name, a.value, a.sigma, b.value, b.sigma);
+        eprintln!(
+            "{}: library {} ± {}, written {} ± {}",
+            a.name, a.value, a.sigma, b.value, b.sigma
+        );
         assert_eq!(a.name, b.name);
-        assert!((a.value - b.value).abs() <= 1e-6 * a.value.abs(), "{a:?} vs {b:?}");
-        assert!((a.sigma - b.sigma).abs() <= 1e-6 * a.sigma.abs(), "{a:?} vs {b:?}");
+        assert!(
+            (a.value - b.value).abs() <= 1e-6 * a.value.abs(),
+            "{a:?} vs {b:?}"
+        );
+        assert!(
+            (a.sigma - b.sigma).abs() <= 1e-6 * a.sigma.abs(),
+            "{a:?} vs {b:?}"
+        );
     }
     // the twin's 40 ppm of guide 2 is found (guide 1 has none)
     let g2 = &lib.effect_params[1];
@@ -157,19 +185,45 @@ fn summary(d: &Diagnosis) -> String {
 fn lost_motion_of_carrier_4_is_found_by_a_written_effect() {
     let b_true = 0.02;
     let (cal, val, floor) = twin_campaigns(7, &[(EffectKind::LostMotionQ4, b_true)]);
-    let lost = written("lost_motion_q4", vec![param("b", "mm", 0.01)], &[("dq4", "-b * dir_q4")]);
+    let lost = written(
+        "lost_motion_q4",
+        vec![param("b", "mm", 0.01)],
+        &[("dq4", "-b * dir_q4")],
+    );
     let opts = Options::default();
     let d = diagnose::diagnose_among(&cal, Some(&val), &[], &[&lost], &opts).expect("diagnose");
     eprintln!("before: {} (floor {floor:.2} um)", summary(&d));
-    assert_eq!(d.missing_effect.as_deref(), Some("lost_motion_q4"), "{}", summary(&d));
-    let c = d.candidates.iter().find(|c| c.effect == "lost_motion_q4").expect("candidate");
+    assert_eq!(
+        d.missing_effect.as_deref(),
+        Some("lost_motion_q4"),
+        "{}",
+        summary(&d)
+    );
+    let c = d
+        .candidates
+        .iter()
+        .find(|c| c.effect == "lost_motion_q4")
+        .expect("candidate");
     let b = &c.params[0];
     eprintln!("b = {} ± {} mm (truth {b_true})", b.value, b.sigma);
-    assert!((b.value - b_true).abs() < 3.0 * b.sigma, "b = {} ± {}", b.value, b.sigma);
+    assert!(
+        (b.value - b_true).abs() < 3.0 * b.sigma,
+        "b = {} ± {}",
+        b.value,
+        b.sigma
+    );
     let d2 = diagnose::diagnose(&cal, Some(&val), &[&lost], &opts).expect("diagnose with it");
     let after = d2.baseline.val_rms_um.expect("held-out");
     eprintln!("after: {} (floor {floor:.2} um)", summary(&d2));
     assert_eq!(d2.missing_effect, None, "{}", summary(&d2));
-    assert_eq!(d2.verdict_kind, VerdictKind::NothingMissing, "{}", summary(&d2));
-    assert!(after <= 1.5 * floor, "held-out {after:.2} um, floor {floor:.2}");
+    assert_eq!(
+        d2.verdict_kind,
+        VerdictKind::NothingMissing,
+        "{}",
+        summary(&d2)
+    );
+    assert!(
+        after <= 1.5 * floor,
+        "held-out {after:.2} um, floor {floor:.2}"
+    );
 }

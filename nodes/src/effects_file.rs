@@ -88,7 +88,10 @@ impl MarkedEventReceiver for Builder {
                 if anchor != 0 {
                     self.alias.get_or_insert(place);
                 }
-                let quoted = matches!(style, TScalarStyle::SingleQuoted | TScalarStyle::DoubleQuoted);
+                let quoted = matches!(
+                    style,
+                    TScalarStyle::SingleQuoted | TScalarStyle::DoubleQuoted
+                );
                 let one_line = matches!(style, TScalarStyle::Plain) || quoted;
                 Node::Scalar {
                     one_line: one_line && !text.contains('\n'),
@@ -172,17 +175,28 @@ pub fn parse(text: &str, file: &str, columns: &[String]) -> Result<EffectsFile, 
         .load(&mut builder, false)
         .map_err(|e| err(place_of(*e.marker()), format!("not YAML: {}", e.info())))?;
     if let Some(place) = builder.alias {
-        return Err(err(place, "anchors and aliases are not supported: write each effect out".into()));
+        return Err(err(
+            place,
+            "anchors and aliases are not supported: write each effect out".into(),
+        ));
     }
     let start = Place { line: 1, column: 1 };
     let Some(Node::Map(top, top_place)) = builder.root else {
-        return Err(err(start, "expected a mapping with the key `effects`".into()));
+        return Err(err(
+            start,
+            "expected a mapping with the key `effects`".into(),
+        ));
     };
     let mut list = None;
     for (k, v) in &top {
         match scalar(k) {
             Some("effects") => list = Some(v),
-            _ => return Err(err(k.place(), format!("unknown key {}: expected `effects`", shown(k)))),
+            _ => {
+                return Err(err(
+                    k.place(),
+                    format!("unknown key {}: expected `effects`", shown(k)),
+                ))
+            }
         }
     }
     let Some(Node::Seq(items, list_place)) = list else {
@@ -201,10 +215,19 @@ pub fn parse(text: &str, file: &str, columns: &[String]) -> Result<EffectsFile, 
         let (spec, places) = effect_spec(item).map_err(|(p, w)| err(p, w))?;
         let named = |n: &str| n == spec.name;
         if out.effects.iter().any(|e| named(e.name())) {
-            return Err(err(places.name, format!("a second effect named `{}`", spec.name)));
+            return Err(err(
+                places.name,
+                format!("a second effect named `{}`", spec.name),
+            ));
         }
         if effects::names().iter().any(|n| named(n)) {
-            return Err(err(places.name, format!("`{}` is the library's effect: choose another name", spec.name)));
+            return Err(err(
+                places.name,
+                format!(
+                    "`{}` is the library's effect: choose another name",
+                    spec.name
+                ),
+            ));
         }
         let written = Written::new(spec.clone(), columns).map_err(|e| {
             let (place, what) = spec_error_place(&e, &spec, &places, item);
@@ -234,7 +257,12 @@ fn number(n: &Node, what: &str) -> Result<f64, Fault> {
     scalar(n)
         .and_then(|s| s.trim().parse::<f64>().ok())
         .filter(|v| v.is_finite())
-        .ok_or_else(|| (n.place(), format!("{what}: expected a number, found {}", shown(n))))
+        .ok_or_else(|| {
+            (
+                n.place(),
+                format!("{what}: expected a number, found {}", shown(n)),
+            )
+        })
 }
 
 fn text(n: &Node, what: &str) -> Result<String, Fault> {
@@ -246,7 +274,10 @@ fn text(n: &Node, what: &str) -> Result<String, Fault> {
 /// One effect's mapping as the core's [`Spec`], with the places of its parts.
 fn effect_spec(item: &Node) -> Result<(Spec, Places), Fault> {
     let Node::Map(entries, at) = item else {
-        return Err((item.place(), "an effect must be a mapping (name, summary, params, expressions)".into()));
+        return Err((
+            item.place(),
+            "an effect must be a mapping (name, summary, params, expressions)".into(),
+        ));
     };
     let mut spec = Spec::default();
     let mut places = Places::default();
@@ -266,9 +297,16 @@ fn effect_spec(item: &Node) -> Result<(Spec, Places), Fault> {
             "params" => spec.params = params(v)?,
             "instruments" => {
                 let Node::Seq(list, _) = v else {
-                    return Err((v.place(), "instruments: expected a list such as [lt]".into()));
+                    return Err((
+                        v.place(),
+                        "instruments: expected a list such as [lt]".into(),
+                    ));
                 };
-                spec.instruments = Some(list.iter().map(|n| text(n, "instruments")).collect::<Result<_, _>>()?);
+                spec.instruments = Some(
+                    list.iter()
+                        .map(|n| text(n, "instruments"))
+                        .collect::<Result<_, _>>()?,
+                );
             }
             target => {
                 spec.targets.push((target.to_owned(), text(v, target)?));
@@ -281,7 +319,10 @@ fn effect_spec(item: &Node) -> Result<(Spec, Places), Fault> {
         return Err((*at, "the effect has no `name`".into()));
     }
     if !seen.contains(&"summary") {
-        return Err((places.name, format!("effect `{}` has no `summary`", spec.name)));
+        return Err((
+            places.name,
+            format!("effect `{}` has no `summary`", spec.name),
+        ));
     }
     Ok((spec, places))
 }
@@ -289,13 +330,19 @@ fn effect_spec(item: &Node) -> Result<(Spec, Places), Fault> {
 /// `params: {NAME: {unit: U, prior: σ, bounds: [lo, hi]}}`.
 fn params(v: &Node) -> Result<Vec<WrittenParam>, Fault> {
     let Node::Map(entries, _) = v else {
-        return Err((v.place(), "params: expected a mapping NAME: {unit: U, prior: σ}".into()));
+        return Err((
+            v.place(),
+            "params: expected a mapping NAME: {unit: U, prior: σ}".into(),
+        ));
     };
     let mut out = Vec::new();
     for (k, spec) in entries {
         let name = text(k, "parameter name")?;
         let Node::Map(fields, _) = spec else {
-            return Err((spec.place(), format!("parameter `{name}`: expected {{unit: U, prior: σ}}")));
+            return Err((
+                spec.place(),
+                format!("parameter `{name}`: expected {{unit: U, prior: σ}}"),
+            ));
         };
         let (mut unit, mut prior, mut bounds) = (None, None, None);
         for (fk, fv) in fields {
@@ -303,7 +350,15 @@ fn params(v: &Node) -> Result<Vec<WrittenParam>, Fault> {
                 Some("unit") => unit = Some(text(fv, "unit")?),
                 Some("prior") => prior = Some(number(fv, "prior")?),
                 Some("bounds") => bounds = Some(two_numbers(fv)?),
-                _ => return Err((fk.place(), format!("parameter `{name}`: unknown key {}: expected unit, prior, bounds", shown(fk)))),
+                _ => {
+                    return Err((
+                        fk.place(),
+                        format!(
+                            "parameter `{name}`: unknown key {}: expected unit, prior, bounds",
+                            shown(fk)
+                        ),
+                    ))
+                }
             }
         }
         let missing = |what: &str| (k.place(), format!("parameter `{name}` has no `{what}`"));
@@ -354,16 +409,27 @@ fn spec_error_place(e: &SpecError, spec: &Spec, places: &Places, item: &Node) ->
 
 /// Where key `key` of an effect's mapping is written.
 fn key_place(item: &Node, key: &str) -> Option<Place> {
-    let Node::Map(entries, _) = item else { return None };
-    entries.iter().find(|(k, _)| scalar(k) == Some(key)).map(|(k, _)| k.place())
+    let Node::Map(entries, _) = item else {
+        return None;
+    };
+    entries
+        .iter()
+        .find(|(k, _)| scalar(k) == Some(key))
+        .map(|(k, _)| k.place())
 }
 
 /// Where parameter `name` of an effect is written.
 fn param_place(item: &Node, name: &str) -> Option<Place> {
-    let Node::Map(entries, _) = item else { return None };
+    let Node::Map(entries, _) = item else {
+        return None;
+    };
     let (_, params) = entries.iter().find(|(k, _)| scalar(k) == Some("params"))?;
-    let Node::Map(ps, _) = params else { return None };
-    ps.iter().find(|(k, _)| scalar(k) == Some(name)).map(|(k, _)| k.place())
+    let Node::Map(ps, _) = params else {
+        return None;
+    };
+    ps.iter()
+        .find(|(k, _)| scalar(k) == Some(name))
+        .map(|(k, _)| k.place())
 }
 
 impl EffectsFile {
@@ -379,9 +445,10 @@ impl EffectsFile {
             let (place, what) = match e.bind_checked(campaign) {
                 Ok(_) => continue,
                 Err(BindError::Variables(n)) => (places.name, n.reason),
-                Err(BindError::NotFinite(n)) => {
-                    (places.targets.get(n.index).map_or(places.name, |t| t.0), n.to_string())
-                }
+                Err(BindError::NotFinite(n)) => (
+                    places.targets.get(n.index).map_or(places.name, |t| t.0),
+                    n.to_string(),
+                ),
             };
             return Err(EffectsFileError {
                 file: self.file.clone(),
@@ -425,7 +492,11 @@ pub fn expressions(file: Option<&EffectsFile>) -> Vec<(String, String)> {
         .iter()
         .map(|e| {
             let s = e.spec();
-            let exprs: Vec<String> = s.targets.iter().map(|(t, x)| format!("{t} = {x}")).collect();
+            let exprs: Vec<String> = s
+                .targets
+                .iter()
+                .map(|(t, x)| format!("{t} = {x}"))
+                .collect();
             (s.name.clone(), exprs.join("; "))
         })
         .collect()

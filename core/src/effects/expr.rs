@@ -234,9 +234,9 @@ impl Parser<'_> {
             }
         }
         let text: String = self.chars[self.pos..end].iter().collect();
-        let value = text.parse::<f64>().map_err(|_| {
-            self.error(ExprErrorKind::Syntax(format!("`{text}` is not a number")))
-        })?;
+        let value = text
+            .parse::<f64>()
+            .map_err(|_| self.error(ExprErrorKind::Syntax(format!("`{text}` is not a number"))))?;
         self.token = Token::Num(value);
         self.pos = end;
         Ok(())
@@ -437,8 +437,16 @@ fn apply(op: Op, a: &mut [f64], b: &[f64]) {
             };
             (v, y * x.powf(y - 1.0), sb)
         }
-        Op::Call(Func::Min) => (x.min(y), f64::from(u8::from(x <= y)), f64::from(u8::from(x > y))),
-        Op::Call(Func::Max) => (x.max(y), f64::from(u8::from(x >= y)), f64::from(u8::from(x < y))),
+        Op::Call(Func::Min) => (
+            x.min(y),
+            f64::from(u8::from(x <= y)),
+            f64::from(u8::from(x > y)),
+        ),
+        Op::Call(Func::Max) => (
+            x.max(y),
+            f64::from(u8::from(x >= y)),
+            f64::from(u8::from(x < y)),
+        ),
         _ => unreachable!("not a binary operation: {op:?}"),
     };
     a[0] = value;
@@ -502,7 +510,11 @@ mod tests {
                 let mut down = theta;
                 down[k] -= h;
                 let fd = (eval(text, &vars, &up).0 - eval(text, &vars, &down).0) / (2.0 * h);
-                assert!((g[k] - fd).abs() < 1e-7 * (1.0 + fd.abs()), "{text}: ∂/∂θ{k} {} vs {fd}", g[k]);
+                assert!(
+                    (g[k] - fd).abs() < 1e-7 * (1.0 + fd.abs()),
+                    "{text}: ∂/∂θ{k} {} vs {fd}",
+                    g[k]
+                );
             }
         }
     }
@@ -512,7 +524,10 @@ mod tests {
         let err = |s: &str| parse(s, &names).expect_err(s);
         assert_eq!(err("a * foo").at, 4);
         assert!(matches!(err("a * foo").kind, ExprErrorKind::UnknownName(_)));
-        assert!(matches!(err("sinh(a)").kind, ExprErrorKind::UnknownFunction(_)));
+        assert!(matches!(
+            err("sinh(a)").kind,
+            ExprErrorKind::UnknownFunction(_)
+        ));
         assert!(matches!(err("min(a)").kind, ExprErrorKind::Arity { .. }));
         assert_eq!(err("a * (q + 1").at, 10);
         assert_eq!(err("a $ 2").at, 2);

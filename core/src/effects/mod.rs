@@ -357,7 +357,12 @@ impl EffectSet {
     ) -> Result<EffectSet, NotApplicable> {
         let bound = effects
             .iter()
-            .map(|e| Ok((e.name().to_owned(), Arc::<dyn Bound>::from(e.bind(campaign, p)?))))
+            .map(|e| {
+                Ok((
+                    e.name().to_owned(),
+                    Arc::<dyn Bound>::from(e.bind(campaign, p)?),
+                ))
+            })
             .collect::<Result<Vec<_>, NotApplicable>>()?;
         let n: usize = bound.iter().map(|b| b.1.params().len()).sum();
         Ok(EffectSet {

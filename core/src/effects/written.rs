@@ -18,8 +18,26 @@ use crate::params::{self, Model, Params};
 
 /// The variables every campaign has (besides its covariate columns).
 pub const VARIABLES: [&str; 20] = [
-    "q1", "q2", "q3", "q4", "dir_q1", "dir_q2", "dir_q3", "dir_q4", "travel_q1", "travel_q2",
-    "travel_q3", "travel_q4", "t", "t_run", "f1", "f2", "f3", "f4", "x", "y",
+    "q1",
+    "q2",
+    "q3",
+    "q4",
+    "dir_q1",
+    "dir_q2",
+    "dir_q3",
+    "dir_q4",
+    "travel_q1",
+    "travel_q2",
+    "travel_q3",
+    "travel_q4",
+    "t",
+    "t_run",
+    "f1",
+    "f2",
+    "f3",
+    "f4",
+    "x",
+    "y",
 ];
 
 /// One parameter of a written effect.
@@ -55,7 +73,9 @@ impl Target {
                 "g2" => "gamma2",
                 other => other,
             };
-            return params::index_of(p).filter(|_| !p.is_empty()).map(Target::Dp);
+            return params::index_of(p)
+                .filter(|_| !p.is_empty())
+                .map(Target::Dp);
         }
         match name {
             "dq1" => Some(Target::Dq(0)),
@@ -119,16 +139,16 @@ pub struct Written {
 
 /// Whether `name` is a word: letters, digits, `_`, not starting with a digit.
 fn is_word(name: &str) -> bool {
-    name.chars().next().is_some_and(|c| c.is_alphabetic() || c == '_')
+    name.chars()
+        .next()
+        .is_some_and(|c| c.is_alphabetic() || c == '_')
         && name.chars().all(|c| c.is_alphanumeric() || c == '_')
 }
 
 /// Whether `name` may be a variable: one of [`VARIABLES`], a `temp_*` column or one of the
 /// campaign's covariate columns `columns`.
 fn is_variable(name: &str, columns: &[String]) -> bool {
-    VARIABLES.contains(&name)
-        || name.starts_with("temp_")
-        || columns.iter().any(|c| c == name)
+    VARIABLES.contains(&name) || name.starts_with("temp_") || columns.iter().any(|c| c == name)
 }
 
 impl Written {
@@ -215,7 +235,9 @@ fn check_params(params: &[WrittenParam], columns: &[String]) -> Result<(), SpecE
             what,
         };
         if !is_word(&p.name) {
-            return Err(bad("the name must be a word of letters, digits and `_`".into()));
+            return Err(bad(
+                "the name must be a word of letters, digits and `_`".into()
+            ));
         }
         if p.name == "pi"
             || expr::Func::ALL.iter().any(|f| f.0 == p.name)
@@ -227,11 +249,16 @@ fn check_params(params: &[WrittenParam], columns: &[String]) -> Result<(), SpecE
             return Err(bad("given twice".into()));
         }
         if !(p.prior.is_finite() && p.prior > 0.0) {
-            return Err(bad(format!("the prior must be a positive number, found {}", p.prior)));
+            return Err(bad(format!(
+                "the prior must be a positive number, found {}",
+                p.prior
+            )));
         }
         if let Some((lo, hi)) = p.bounds {
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-                return Err(bad(format!("bounds [{lo}, {hi}]: expected two numbers, the lower first")));
+                return Err(bad(format!(
+                    "bounds [{lo}, {hi}]: expected two numbers, the lower first"
+                )));
             }
         }
     }
@@ -239,11 +266,19 @@ fn check_params(params: &[WrittenParam], columns: &[String]) -> Result<(), SpecE
 }
 
 fn instruments(spec: &Spec, targets: &[(Target, Program)]) -> Result<Vec<Instrument>, SpecError> {
-    const TWO_D: [Instrument; 4] = [Instrument::Lt, Instrument::Kgm, Instrument::LiX, Instrument::LiY];
+    const TWO_D: [Instrument; 4] = [
+        Instrument::Lt,
+        Instrument::Kgm,
+        Instrument::LiX,
+        Instrument::LiY,
+    ];
     let Some(names) = &spec.instruments else {
         return Ok(TWO_D.to_vec());
     };
-    if !targets.iter().any(|t| matches!(t.0, Target::Dx | Target::Dy)) {
+    if !targets
+        .iter()
+        .any(|t| matches!(t.0, Target::Dx | Target::Dy))
+    {
         return Err(SpecError::InstrumentsWithoutDm);
     }
     names
@@ -280,10 +315,7 @@ pub struct NotFinite {
 }
 
 /// The variables of every pose, pose-major.
-fn variables(
-    campaign: &Campaign,
-    names: &[String],
-) -> Result<Vec<Vec<f64>>, NotApplicable> {
+fn variables(campaign: &Campaign, names: &[String]) -> Result<Vec<Vec<f64>>, NotApplicable> {
     let n = campaign.poses.len();
     let mut columns: Vec<Vec<f64>> = Vec::with_capacity(names.len());
     let tcp = names
@@ -295,18 +327,26 @@ fn variables(
             "t" => campaign.poses.iter().map(|p| p.t).collect(),
             "x" | "y" => {
                 let tcp = tcp.as_ref().map_or(&[][..], Vec::as_slice);
-                tcp.iter().map(|c| if name == "x" { c.0 } else { c.1 }).collect()
+                tcp.iter()
+                    .map(|c| if name == "x" { c.0 } else { c.1 })
+                    .collect()
             }
             q if q.len() == 2 && (q.starts_with('q') || q.starts_with('f')) => {
                 let a = usize::from(q.as_bytes()[1] - b'1');
                 let f = q.starts_with('f');
-                campaign.poses.iter().map(|p| if f { p.f[a] } else { p.q[a] }).collect()
+                campaign
+                    .poses
+                    .iter()
+                    .map(|p| if f { p.f[a] } else { p.q[a] })
+                    .collect()
             }
             other => covariate(campaign, other)?,
         };
         columns.push(column);
     }
-    Ok((0..n).map(|i| columns.iter().map(|c| c[i]).collect()).collect())
+    Ok((0..n)
+        .map(|i| columns.iter().map(|c| c[i]).collect())
+        .collect())
 }
 
 /// A covariate column with a value at every pose.
@@ -318,7 +358,10 @@ fn covariate(campaign: &Campaign, name: &str) -> Result<Vec<f64>, NotApplicable>
         .map(|(v, p)| {
             v.ok_or_else(|| NotApplicable {
                 effect: String::new(),
-                reason: format!("`{name}` has no value at line {} of {}", p.line, campaign.source),
+                reason: format!(
+                    "`{name}` has no value at line {} of {}",
+                    p.line, campaign.source
+                ),
             })
         })
         .collect()

@@ -1,9 +1,9 @@
 //! `rpkm calibrate`: identify the geometric parameters from a campaign file.
 
 use super::{bad_input, read_campaign, write_json};
+use crate::effects_file::EffectsFile;
 use rpkm_core::calib::{self, Calibration, Options, Scaling, Selection};
 use rpkm_core::campaign::Campaign;
-use crate::effects_file::EffectsFile;
 use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS};

@@ -3,8 +3,8 @@
 //! JSON and the HTML report.
 
 use super::{bad_input, read_campaign, write_json};
-use crate::report::{Report, Stage};
 use crate::effects_file::{self, EffectsFile};
+use crate::report::{Report, Stage};
 use crate::words;
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
@@ -176,13 +176,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         println!("\nwrote {}", path.display());
     }
     if let Some(dir) = &args.report {
-        let after = with_named_effect(
-            &campaign,
-            validation.as_ref(),
-            (&refs, &offer),
-            &opts,
-            &d,
-        )?;
+        let after = with_named_effect(&campaign, validation.as_ref(), (&refs, &offer), &opts, &d)?;
         let page = write_report(
             dir,
             "rpkm diagnose",
@@ -312,7 +306,11 @@ fn print_written(file: &EffectsFile) {
     println!("\n   effects of {}:", file.file);
     for e in &file.effects {
         let s = e.spec();
-        let exprs: Vec<String> = s.targets.iter().map(|(t, x)| format!("{t} = {x}")).collect();
+        let exprs: Vec<String> = s
+            .targets
+            .iter()
+            .map(|(t, x)| format!("{t} = {x}"))
+            .collect();
         println!("     {:<20} {}", s.name, exprs.join("; "));
     }
 }
@@ -340,7 +338,11 @@ pub fn with_named_effect(
     };
     let mut with: Vec<&dyn Effect> = in_model.to_vec();
     with.push(effect);
-    let rest: Vec<&dyn Effect> = offered.iter().copied().filter(|e| e.name() != missing).collect();
+    let rest: Vec<&dyn Effect> = offered
+        .iter()
+        .copied()
+        .filter(|e| e.name() != missing)
+        .collect();
     let after = diagnose::diagnose_among(campaign, validation, &with, &rest, opts)
         .with_context(|| format!("diagnosing with {missing} added"))?;
     Ok(Some(after))
