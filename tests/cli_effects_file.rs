@@ -197,28 +197,45 @@ fn the_foreign_cyclic_error_is_found_by_the_written_effect() {
         "{}",
         d2["candidates"]
     );
-    // calibrate writes the effect's parameters with their unit into the calibration
+}
+
+/// `rpkm calibrate --effects-file --effects cyclic_q4` writes the effect's parameters (value,
+/// σ, unit) and the file's expressions into the calibration JSON.
+#[test]
+fn calibrate_writes_the_written_effects_parameters() {
+    let Some(ds) = foreign_support::dataset("cyclic") else {
+        return;
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let effects = dir.path().join("cyclic.yaml");
+    std::fs::write(&effects, GOOD).expect("write");
     let cal_json = dir.path().join("cal.json");
     let o = Command::new(env!("CARGO_BIN_EXE_rpkm"))
         .arg("calibrate")
         .arg(ds.join("cal.csv"))
-        .args([
-            "--effects-file",
-            &effects.display().to_string(),
-            "--effects",
-            "cyclic_q4",
-            "--json",
-        ])
+        .args(["--effects-file", &effects.display().to_string()])
+        .args(["--effects", "cyclic_q4", "--json"])
         .arg(&cal_json)
         .output()
         .expect("run rpkm");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let cal = foreign_support::json(&cal_json);
     let e = &cal["effects"][0];
+    eprintln!("calibration JSON effects: {}", cal["effects"]);
     assert_eq!(
         (e["effect"].as_str(), e["name"].as_str(), e["unit"].as_str()),
         (Some("cyclic_q4"), Some("a"), Some("mm"))
     );
-    assert!(e["sigma"].as_f64().expect("sigma") > 0.0);
-    assert_eq!(cal["effects_file"]["effects"][0]["name"], "cyclic_q4");
+    let (a, sigma) = (
+        e["value"].as_f64().expect("value"),
+        e["sigma"].as_f64().expect("sigma"),
+    );
+    assert!(
+        sigma > 0.0 && (a - 0.0025).abs() < 3.0 * sigma,
+        "a = {a} ± {sigma}"
+    );
+    assert_eq!(
+        cal["effects_file"]["effects"][0]["expressions"]["dq4"],
+        "a * sin(2*pi*q4/60) + c * cos(2*pi*q4/60)"
+    );
 }

@@ -432,7 +432,7 @@ impl Written {
                         continue;
                     };
                     let (target, text) = self.spec.targets[index].clone();
-                    return Err(BindError::NotFinite(NotFinite {
+                    return Err(BindError::NotFinite(Box::new(NotFinite {
                         index,
                         target,
                         text,
@@ -440,7 +440,7 @@ impl Written {
                         line: pose.line,
                         campaign: campaign.source.clone(),
                         at: self.shown(&theta),
-                    }));
+                    })));
                 }
             }
         }
@@ -469,7 +469,7 @@ pub enum BindError {
     #[error(transparent)]
     Variables(NotApplicable),
     #[error(transparent)]
-    NotFinite(NotFinite),
+    NotFinite(Box<NotFinite>),
 }
 
 impl Effect for Written {

@@ -329,12 +329,12 @@ pub fn with_named_effect(
         return Ok(None);
     };
     let from_library;
-    let effect: &dyn Effect = match offered.iter().copied().find(|e| e.name() == missing) {
-        Some(e) => e,
-        None => {
-            from_library = effects::by_name(missing)?;
-            from_library.as_ref()
-        }
+    let effect: &dyn Effect = if let Some(e) = offered.iter().copied().find(|e| e.name() == missing)
+    {
+        e
+    } else {
+        from_library = effects::by_name(missing)?;
+        from_library.as_ref()
     };
     let mut with: Vec<&dyn Effect> = in_model.to_vec();
     with.push(effect);
