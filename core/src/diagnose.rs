@@ -446,11 +446,24 @@ pub fn diagnose(
     in_model: &[&dyn Effect],
     opts: &Options,
 ) -> Result<Diagnosis, DiagnoseError> {
+    diagnose_among(campaign, validation, in_model, &[], opts)
+}
+
+/// [`diagnose`], with the effects `offered` (written ones, `effects::Written`) tried as
+/// candidates beside the library's: the same tests, at the same level for each.
+pub fn diagnose_among(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    in_model: &[&dyn Effect],
+    offered: &[&dyn Effect],
+    opts: &Options,
+) -> Result<Diagnosis, DiagnoseError> {
     let library = effects::library();
     let in_names: Vec<&str> = in_model.iter().map(|e| e.name()).collect();
     let tried: Vec<&dyn Effect> = library
         .iter()
         .map(std::convert::AsRef::as_ref)
+        .chain(offered.iter().copied())
         .filter(|e| !in_names.contains(&e.name()))
         .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
         .collect();
@@ -822,7 +835,7 @@ impl Shape {
 /// cannot predict a pose it has not seen; the effect can).
 fn choose(
     campaign: &Campaign,
-    (candidates, fits): (&[Candidate], &[(&'static str, Fitted)]),
+    (candidates, fits): (&[Candidate], &[(String, Fitted)]),
     (structure, n_rows): (&sparse::Structure, usize),
     level: f64,
 ) -> Option<Chosen> {
@@ -889,7 +902,7 @@ struct Round {
     /// Each tried effect compared with the current model.
     candidates: Vec<Candidate>,
     /// Each compared effect's fit (with the parts of it kept), by effect name.
-    fits: Vec<(&'static str, Fitted)>,
+    fits: Vec<(String, Fitted)>,
     /// The effects that could not be tried, and why.
     skipped: Vec<Skipped>,
     /// The current model's TCP error vectors (2-D relative instruments), or why there are
@@ -1060,7 +1073,7 @@ fn candidates(
             Ok((full, kept)) => match compare(base, &full, &kept, *effect, campaign, level) {
                 Some(c) => {
                     out.candidates.push(c);
-                    out.fits.push((effect.name(), kept));
+                    out.fits.push((effect.name().to_owned(), kept));
                 }
                 None => out.skipped.push(skip(
                     "no parameter of it is observable with this campaign (the geometry \

@@ -2,6 +2,7 @@
 
 pub mod campaign_bag;
 pub mod cli;
+pub mod effects_file;
 pub mod error;
 pub mod input;
 pub mod launch;

@@ -73,6 +73,7 @@ fn calibrate_diagnose_and_the_calibrator_node_give_the_same_parameters() {
             max_condition: 100.0,
             outlier_sigma: 0.0,
             noise: rpkm_core::noise::NoiseModel::default(),
+            effects: None,
             weighting: rpkm_core::calib::Noise::ESTIMATE,
         },
     )

@@ -9,42 +9,10 @@ use std::process::Command;
 
 use crate::foreign_support;
 
-use foreign_support::json;
+use foreign_support::{json, true_floor_um};
 
 fn foreign() -> Option<PathBuf> {
     foreign_support::dataset("")
-}
-
-/// RMS (µm) of the held-out readings against the foreign truth's poses: the noise floor.
-fn true_floor_um(ds: &Path) -> f64 {
-    let truth = json(&ds.join("truth.json"));
-    let text = std::fs::read_to_string(ds.join("val.csv")).expect("val.csv");
-    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
-    let head: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = |name: &str| head.iter().position(|h| *h == name).expect("column");
-    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    let poses = truth["true_pose_val"].as_array().expect("true poses");
-    let theta = truth["hidden_effects"]["instrument_alignment"]
-        .as_f64()
-        .unwrap_or(0.0);
-    let (c, s) = (theta.cos(), theta.sin());
-    let reset = rows
-        .iter()
-        .position(|r| r[col("reset")] == "1")
-        .expect("reset");
-    let at = |i: usize, k: usize| poses[i][k].as_f64().expect("number");
-    let mut e = Vec::new();
-    for (i, r) in rows.iter().enumerate() {
-        if i == reset || r[col("x")].is_empty() {
-            continue;
-        }
-        let (dx, dy) = (at(i, 0) - at(reset, 0), at(i, 1) - at(reset, 1));
-        let x: f64 = r[col("x")].parse().expect("x");
-        let y: f64 = r[col("y")].parse().expect("y");
-        e.push(c * dx + s * dy - x);
-        e.push(-s * dx + c * dy - y);
-    }
-    1e3 * (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt()
 }
 
 /// The loop: diagnose, add what was named, until nothing is named; (named, last JSON).

@@ -233,9 +233,9 @@ pub struct Identified {
 /// One parameter of an effect in the model.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct EffectEstimate {
-    pub effect: &'static str,
+    pub effect: String,
     pub name: String,
-    pub unit: &'static str,
+    pub unit: String,
     pub value: f64,
     pub sigma: f64,
     /// Fraction (0..1) of the parameter's signature in the measurements that the geometric
@@ -803,9 +803,9 @@ impl Step1Report {
             .map(|(k, slot)| {
                 let free = plan.free_theta.iter().position(|&f| f == k);
                 EffectEstimate {
-                    effect: slot.effect,
+                    effect: slot.effect.clone(),
                     name: slot.param.name.clone(),
-                    unit: slot.param.unit,
+                    unit: slot.param.unit.clone(),
                     value: x.theta[k],
                     sigma: free.map_or(0.0, |f| post.sig_theta[f] * s2.sqrt()),
                     observability: plan.observability[k],

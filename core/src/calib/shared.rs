@@ -30,7 +30,7 @@ pub struct SharedRows {
     /// The union's θ at the warm start.
     warm_theta: Vec<f64>,
     /// The union's parameters: effect and parameter name, in θ order.
-    slots: Vec<(&'static str, String)>,
+    slots: Vec<(String, String)>,
     at_start: Vec<Vec<Residual>>,
     at_warm: Vec<Vec<Residual>>,
 }

@@ -26,7 +26,7 @@ impl Effect for EncoderScale {
                 .iter()
                 .map(|g| EffectParam {
                     name: format!("scale_{g}"),
-                    unit: "ppm",
+                    unit: "ppm".into(),
                     prior: 50.0,
                 })
                 .collect(),

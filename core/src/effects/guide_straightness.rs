@@ -35,7 +35,7 @@ impl Effect for GuideStraightness {
                 .iter()
                 .map(|g| EffectParam {
                     name: format!("sagitta_{g}"),
-                    unit: "mm",
+                    unit: "mm".into(),
                     prior: 0.05,
                 })
                 .collect(),

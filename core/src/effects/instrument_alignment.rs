@@ -30,13 +30,13 @@ impl Effect for InstrumentAlignment {
             }
             params.push(EffectParam {
                 name: format!("theta_{}", setup.id),
-                unit: "mrad",
+                unit: "mrad".into(),
                 prior: 0.1,
             });
         }
         if params.is_empty() {
             return Err(NotApplicable {
-                effect: "instrument_alignment",
+                effect: "instrument_alignment".into(),
                 reason: "no laser-tracker or grid-encoder setup in the campaign".to_owned(),
             });
         }

@@ -20,12 +20,14 @@
 //! [`library`] (docs/effects.md walks through one).
 
 mod encoder_scale;
+pub mod expr;
 mod guide_straightness;
 mod instrument_alignment;
 mod parallelogram;
 mod preload_elastic;
 pub mod stiffness_factor;
 mod thermal;
+pub mod written;
 
 pub use encoder_scale::EncoderScale;
 pub use guide_straightness::GuideStraightness;
@@ -34,6 +36,7 @@ pub use parallelogram::Parallelogram;
 pub use preload_elastic::PreloadElastic;
 pub use stiffness_factor::StiffnessFactor;
 pub use thermal::Thermal;
+pub use written::Written;
 
 use std::sync::Arc;
 
@@ -66,8 +69,8 @@ pub fn all() -> Vec<Box<dyn Effect>> {
 }
 
 /// Names of the effects of [`all`].
-pub fn names() -> Vec<&'static str> {
-    all().iter().map(|e| e.name()).collect()
+pub fn names() -> Vec<String> {
+    all().iter().map(|e| e.name().to_owned()).collect()
 }
 
 /// The effect called `name` (of [`all`]).
@@ -101,7 +104,7 @@ pub struct UnknownEffect {
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("{effect}: {reason}")]
 pub struct NotApplicable {
-    pub effect: &'static str,
+    pub effect: String,
     pub reason: String,
 }
 
@@ -111,7 +114,7 @@ pub struct EffectParam {
     /// Name, prefixed by nothing: the effect's name goes with it in reports (`thermal.alpha`).
     pub name: String,
     /// Unit of the value (`ppm/K`, `mm`, `mrad`...).
-    pub unit: &'static str,
+    pub unit: String,
     /// Plausible magnitude (prior range), in `unit`: the scaling of the parameter in the
     /// least squares and the size a report compares the estimate with.
     pub prior: f64,
@@ -120,9 +123,9 @@ pub struct EffectParam {
 /// A physical effect of the library (see the module documentation).
 pub trait Effect: Send + Sync {
     /// Name on the command line and in reports (`thermal`).
-    fn name(&self) -> &'static str;
+    fn name(&self) -> &str;
     /// One sentence on what the effect models.
-    fn summary(&self) -> &'static str;
+    fn summary(&self) -> &str;
     /// Campaign covariate columns the effect needs (`temp_machine`).
     fn covariates(&self) -> &'static [&'static str] {
         &[]
@@ -303,7 +306,7 @@ impl Corrections {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Slot {
     /// The effect's name.
-    pub effect: &'static str,
+    pub effect: String,
     pub param: EffectParam,
     /// Index in θ.
     pub index: usize,
@@ -316,7 +319,7 @@ pub struct Slot {
 pub struct EffectSet {
     /// Shared, so that a set bound again at other parameters keeps the bindings that do
     /// not change ([`EffectSet::rebound`]).
-    bound: Vec<(&'static str, Arc<dyn Bound>)>,
+    bound: Vec<(String, Arc<dyn Bound>)>,
     n_poses: usize,
     /// Parameters held at zero (a part of an effect the data do not support).
     held: Vec<bool>,
@@ -325,7 +328,7 @@ pub struct EffectSet {
 impl std::fmt::Debug for EffectSet {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_list()
-            .entries(self.bound.iter().map(|b| b.0))
+            .entries(self.bound.iter().map(|b| &b.0))
             .finish()
     }
 }
@@ -365,7 +368,12 @@ impl EffectSet {
     ) -> Result<EffectSet, NotApplicable> {
         let bound = effects
             .iter()
-            .map(|e| Ok((e.name(), Arc::<dyn Bound>::from(e.bind(campaign, p)?))))
+            .map(|e| {
+                Ok((
+                    e.name().to_owned(),
+                    Arc::<dyn Bound>::from(e.bind(campaign, p)?),
+                ))
+            })
             .collect::<Result<Vec<_>, NotApplicable>>()?;
         let n: usize = bound.iter().map(|b| b.1.params().len()).sum();
         Ok(EffectSet {
@@ -396,8 +404,8 @@ impl EffectSet {
             .bound
             .iter()
             .map(|(name, b)| match b.rebinds_from() {
-                Some(e) => Ok((*name, Arc::<dyn Bound>::from(e.bind(campaign, p)?))),
-                None => Ok((*name, Arc::clone(b))),
+                Some(e) => Ok((name.clone(), Arc::<dyn Bound>::from(e.bind(campaign, p)?))),
+                None => Ok((name.clone(), Arc::clone(b))),
             })
             .collect::<Result<Vec<_>, NotApplicable>>();
         Some(bound.map(|bound| EffectSet {
@@ -435,8 +443,8 @@ impl EffectSet {
     }
 
     /// Effect names in order.
-    pub fn names(&self) -> Vec<&'static str> {
-        self.bound.iter().map(|b| b.0).collect()
+    pub fn names(&self) -> Vec<&str> {
+        self.bound.iter().map(|b| b.0.as_str()).collect()
     }
 
     /// Every effect parameter's place in θ, in θ order.
@@ -445,7 +453,7 @@ impl EffectSet {
         for (effect, b) in &self.bound {
             for param in b.params() {
                 out.push(Slot {
-                    effect,
+                    effect: effect.clone(),
                     param: param.clone(),
                     index: out.len(),
                     setup_local: b.setup_local(),
@@ -501,11 +509,11 @@ impl EffectSet {
 /// Value of covariate `name` at every pose, or why the effect cannot use it.
 pub(crate) fn covariate_column(
     campaign: &Campaign,
-    effect: &'static str,
+    effect: &str,
     name: &str,
 ) -> Result<Vec<Option<f64>>, NotApplicable> {
     campaign.covariate(name).ok_or_else(|| NotApplicable {
-        effect,
+        effect: effect.to_owned(),
         reason: format!(
             "the campaign {} has no covariate column `{name}`",
             campaign.source

@@ -33,7 +33,7 @@ impl Effect for Parallelogram {
                 .iter()
                 .map(|(_, n)| EffectParam {
                     name: (*n).to_owned(),
-                    unit: "mm",
+                    unit: "mm".into(),
                     prior: 0.1,
                 })
                 .collect(),

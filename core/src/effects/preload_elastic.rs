@@ -48,14 +48,14 @@ impl Effect for PreloadElastic {
             }
             loaded += 1;
             let t = rod_forces(p, pose).map_err(|reason| NotApplicable {
-                effect: "preload_elastic",
+                effect: "preload_elastic".into(),
                 reason: format!("{}:{}: {reason}", campaign.source, pose.line),
             })?;
             stretch.push(t.map(|t| t / DEFAULT_ROD_STIFFNESS_N_PER_MM));
         }
         if loaded == 0 {
             return Err(NotApplicable {
-                effect: "preload_elastic",
+                effect: "preload_elastic".into(),
                 reason: match first_force_row {
                     Some(line) => format!(
                         "{}:{line}: only drive-force rows (instrument none) are loaded: their \
@@ -73,7 +73,7 @@ impl Effect for PreloadElastic {
         Ok(Box::new(BoundPreload {
             params: vec![EffectParam {
                 name: "compliance".to_owned(),
-                unit: "x default",
+                unit: "x default".into(),
                 prior: 1.0,
             }],
             stretch,

@@ -31,7 +31,7 @@ impl Effect for StiffnessFactor {
     fn bind(&self, campaign: &Campaign, _p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
         if !campaign.poses.iter().any(Pose::drives_loaded) {
             return Err(NotApplicable {
-                effect: "stiffness_factor",
+                effect: "stiffness_factor".into(),
                 reason: format!(
                     "the campaign {} has no drive-force row (instrument none, no follower, \
                      f1..f4 recorded): nothing else depends on the stiffness",
@@ -42,7 +42,7 @@ impl Effect for StiffnessFactor {
         Ok(Box::new(BoundStiffness {
             params: vec![EffectParam {
                 name: "change".to_owned(),
-                unit: "x default - 1",
+                unit: "x default - 1".into(),
                 prior: PRIOR,
             }],
         }))

@@ -63,7 +63,7 @@ impl Effect for Thermal {
             .iter()
             .map(|(name, _)| EffectParam {
                 name: (*name).to_owned(),
-                unit: "ppm/K",
+                unit: "ppm/K".into(),
                 prior: 10.0,
             })
             .collect();
@@ -98,7 +98,7 @@ impl Thermal {
             .map(|(i, t)| {
                 t.map(|t| (t - self.reference_c) * 1e-6)
                     .ok_or_else(|| NotApplicable {
-                        effect: "thermal",
+                        effect: "thermal".into(),
                         reason: format!(
                             "{}:{}: no {column} value",
                             campaign.source, campaign.poses[i].line

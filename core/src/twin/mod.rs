@@ -695,7 +695,8 @@ impl Twin {
         let mut reset: Option<(String, Vector2<f64>, f64, Vector2<f64>)> = None;
         let mut last_setup: Option<&str> = None;
         let backlash = self.magnitude(EffectKind::Backlash);
-        // last command and approach direction of q1, q4 (backlash)
+        let lost_q4 = self.magnitude(EffectKind::LostMotionQ4);
+        // last command and approach direction of q1, q4 (backlash, lost motion)
         let mut approach: Option<([f64; 2], [f64; 2])> = None;
         for (n, plan) in design.iter().enumerate() {
             if last_setup.is_some_and(|s| s != plan.setup) {
@@ -707,12 +708,17 @@ impl Twin {
             let self_cal = plan.instrument == Instrument::SelfCal;
             let mut enc = [0; 4].map(|_| k * noise.encoder_mm * gauss(&mut self.rng));
             let mut covariates = Vec::with_capacity(3);
-            if let Some(m) = backlash {
+            if backlash.is_some() || lost_q4.is_some() {
                 let dir = self.approach_direction(plan, self_cal, &mut approach)?;
                 // the carrier lags its command against the direction of travel
-                enc[0] -= 0.5 * m * dir[0];
-                enc[3] -= 0.5 * m * dir[1];
-                covariates.extend([Some(dir[0]), Some(dir[1])]);
+                if let Some(m) = backlash {
+                    enc[0] -= 0.5 * m * dir[0];
+                    enc[3] -= 0.5 * m * dir[1];
+                    covariates.extend([Some(dir[0]), Some(dir[1])]);
+                }
+                if let Some(b) = lost_q4 {
+                    enc[3] -= b * dir[1];
+                }
             }
             let st = self.machine_state(&plan.setup, plan.x, plan.y, t, enc, self_cal)?;
             let mut pose = self.drive_readings(plan, t, &st, (k, noise.encoder_mm), covariates);

@@ -176,7 +176,7 @@ fn hidden_of(k: u32, rng: &mut StdRng) -> Hidden {
     let library: Vec<EffectKind> = EffectKind::ALL
         .iter()
         .copied()
-        .filter(|e| *e != EffectKind::Backlash)
+        .filter(|e| !e.outside_library())
         .collect();
     let pick = |rng: &mut StdRng| library[rng.gen_range(0..library.len())];
     let (class, effects) = match k {

@@ -1,6 +1,7 @@
 //! `rpkm calibrate`: identify the geometric parameters from a campaign file.
 
 use super::{bad_input, read_campaign, write_json};
+use crate::effects_file::EffectsFile;
 use rpkm_core::calib::{self, Calibration, Options, Request, Scaling, Selection};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::{Effect, EffectSet};
@@ -84,6 +85,11 @@ pub struct CalibrateArgs {
     /// instrument_alignment.
     #[arg(long, default_value = "")]
     pub effects: String,
+    /// Effects written as data (YAML, docs/effects.md) that --effects may name; their
+    /// parameters (value, σ, unit) go into --json with the expressions. Example:
+    ///   rpkm calibrate c.csv --effects-file mine.yaml --effects lost_motion_q4 --json cal.json
+    #[arg(long)]
+    pub effects_file: Option<PathBuf>,
     /// With --effects: write the chart of the held-out RMS per added effect (SVG).
     #[arg(long)]
     pub chart: Option<PathBuf>,
@@ -134,7 +140,11 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     };
     let opts = options(args, model)?;
     // The geometry comes out of the model with the effects (what --json hands to the nodes).
-    let effects = super::diagnose::parse_effects(&args.effects)?;
+    let file = super::diagnose::read_effects_file(
+        args.effects_file.as_deref(),
+        &[Some(&campaign), validation.as_ref()],
+    )?;
+    let effects = super::diagnose::parse_effects(&args.effects, file.as_ref())?;
     let refs: Vec<&dyn Effect> = effects.iter().map(AsRef::as_ref).collect();
     let set = EffectSet::bind(&refs, &campaign, &start)
         .map_err(|e| bad_input(format!("--effects: {e}")))?;
@@ -168,7 +178,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     if let Some(dir) = &args.report {
         let page = write_report(
             dir,
-            (args, model, &refs),
+            (args, model, &refs, file.as_ref()),
             &campaign,
             validation.as_ref(),
             stages.as_deref(),
@@ -176,7 +186,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         println!("\nreport: {}", page.display());
     }
     if let Some(path) = &args.json {
-        write_calibration_json(path, &cal, &noise, val.as_ref(), stages.as_deref())?;
+        let file = file.as_ref().map(crate::effects_file::to_json);
+        write_calibration_json(path, &cal, (&noise, file), val.as_ref(), stages.as_deref())?;
         println!("\nwrote {}", path.display());
     }
     Ok(())
@@ -231,12 +242,16 @@ fn options(args: &CalibrateArgs, model: Model) -> anyhow::Result<Options> {
 fn write_calibration_json(
     path: &std::path::Path,
     cal: &Calibration,
-    noise: &NoiseEstimate,
+    (noise, file): (&NoiseEstimate, Option<serde_json::Value>),
     val: Option<&Validation>,
     stages: Option<&[Stage]>,
 ) -> anyhow::Result<()> {
     let mut out = report_json(cal, val);
     out["noise"] = serde_json::to_value(&noise.groups)?;
+    // the written effects as written: what their parameters in `effects` mean
+    if let Some(f) = file {
+        out["effects_file"] = f;
+    }
     out["determined"] = serde_json::to_value(cal.determined)?;
     if let Some(st) = stages {
         out["effect_stages"] = serde_json::to_value(st)?;
@@ -328,16 +343,18 @@ fn diagnosis_options(
 /// --effects (or with the effect the diagnosis names); the stages of --effects as its table.
 fn write_report(
     dir: &std::path::Path,
-    (args, model, refs): (&CalibrateArgs, Model, &[&dyn Effect]),
+    (args, model, refs, file): (&CalibrateArgs, Model, &[&dyn Effect], Option<&EffectsFile>),
     campaign: &Campaign,
     validation: Option<&Campaign>,
     stages: Option<&[Stage]>,
 ) -> anyhow::Result<std::path::PathBuf> {
     use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
-    let before = diagnose::diagnose(campaign, validation, &[], &opts)?;
+    let offer = super::diagnose::offered(file, &[]);
+    let offer = offer.as_slice();
+    let before = diagnose::diagnose_among(campaign, validation, &[], offer, &opts)?;
     let after = if refs.is_empty() {
-        super::diagnose::with_named_effect(campaign, validation, &[], &opts, &before)?
+        super::diagnose::with_named_effect(campaign, validation, (&[], offer), &opts, &before)?
     } else {
         Some(diagnose::diagnose(campaign, validation, refs, &opts)?)
     };
@@ -357,7 +374,7 @@ fn write_report(
         campaign,
         &before,
         after.as_ref(),
-        stages,
+        (stages, crate::effects_file::expressions(file)),
     )
 }
 

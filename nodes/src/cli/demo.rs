@@ -61,7 +61,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         &campaign,
         &before,
         Some(&after),
-        Vec::new(),
+        (Vec::new(), Vec::new()),
     )?;
     println!("\nreport: {}", page.display());
     Ok(())

@@ -3,6 +3,7 @@
 //! JSON and the HTML report.
 
 use super::{bad_input, read_campaign, write_json};
+use crate::effects_file::{self, EffectsFile};
 use crate::report::{Report, Stage};
 use crate::words;
 use anyhow::Context;
@@ -36,9 +37,16 @@ pub struct DiagnoseArgs {
     /// Geometric model: 24 (rod 5 tied to rod 4: a perfect parallel-holder) or 29.
     #[arg(long, default_value_t = 24)]
     pub model: u32,
-    /// Effects already in the model, comma-separated (e.g. thermal,preload_elastic).
+    /// Effects already in the model, comma-separated (e.g. thermal,preload_elastic): the
+    /// library's, or those of --effects-file.
     #[arg(long, default_value = "")]
     pub effects: String,
+    /// Effects written as data (YAML: name, summary, params with unit and prior, expressions
+    /// of dq1..dq4, dx, dy, dp.NAME; docs/effects.md): tried as candidates beside the
+    /// library's, and named by --effects. Example:
+    ///   rpkm diagnose c.csv --effects-file mine.yaml --validate v.csv
+    #[arg(long)]
+    pub effects_file: Option<PathBuf>,
     /// Held-out campaign: the RMS before and after each candidate, and the noise floor.
     #[arg(long)]
     pub validate: Option<PathBuf>,
@@ -79,9 +87,42 @@ pub struct DiagnoseArgs {
     pub no_screen: bool,
 }
 
-/// Effects of a comma-separated list, or a bad-input error naming the option.
-pub fn parse_effects(list: &str) -> anyhow::Result<Vec<Box<dyn Effect>>> {
-    effects::parse_list(list).map_err(|e| bad_input(format!("--effects: {e}")))
+/// Effects of a comma-separated list (the library's, or the file's), or a bad-input error
+/// naming the option.
+pub fn parse_effects(
+    list: &str,
+    file: Option<&EffectsFile>,
+) -> anyhow::Result<Vec<Box<dyn Effect>>> {
+    effects_file::parse_list(list, file).map_err(|e| bad_input(format!("--effects: {e}")))
+}
+
+/// The effects file of --effects-file, read and checked against the campaigns it will meet
+/// (bad input, exit 2, naming its file, line and column).
+pub fn read_effects_file(
+    path: Option<&Path>,
+    campaigns: &[Option<&Campaign>],
+) -> anyhow::Result<Option<EffectsFile>> {
+    let Some(path) = path else {
+        return Ok(None);
+    };
+    let mut columns: Vec<String> = Vec::new();
+    for c in campaigns.iter().flatten() {
+        columns.extend(c.covariate_names.iter().cloned());
+    }
+    let file = effects_file::read(path, &columns).map_err(|e| bad_input(e.to_string()))?;
+    for c in campaigns.iter().flatten() {
+        file.check(c).map_err(|e| bad_input(e.to_string()))?;
+    }
+    Ok(Some(file))
+}
+
+/// The file's effects not in the model: the candidates it offers.
+pub fn offered<'a>(file: Option<&'a EffectsFile>, in_model: &[&dyn Effect]) -> Vec<&'a dyn Effect> {
+    file.map(EffectsFile::all)
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|e| !in_model.iter().any(|m| m.name() == e.name()))
+        .collect()
 }
 
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
@@ -95,7 +136,11 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     }
     let campaign = read_campaign(&args.campaign)?;
     let validation = args.validate.as_deref().map(read_campaign).transpose()?;
-    let in_model = parse_effects(&args.effects)?;
+    let file = read_effects_file(
+        args.effects_file.as_deref(),
+        &[Some(&campaign), validation.as_ref()],
+    )?;
+    let in_model = parse_effects(&args.effects, file.as_ref())?;
     let refs: Vec<&dyn Effect> = in_model.iter().map(std::convert::AsRef::as_ref).collect();
     let positive = |v: f64| v.is_finite() && v > 0.0;
     if !(positive(args.tolerance_mm) && positive(args.tolerance_mrad)) {
@@ -115,22 +160,30 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         screen: !args.no_screen,
         ..Default::default()
     };
-    let d = diagnose::diagnose(&campaign, validation.as_ref(), &refs, &opts)
+    let offer = offered(file.as_ref(), &refs);
+    let d = diagnose::diagnose_among(&campaign, validation.as_ref(), &refs, &offer, &opts)
         .with_context(|| format!("diagnosing {}", args.campaign.display()))?;
     print_summary(&campaign, &d);
+    if let Some(f) = &file {
+        print_written(f);
+    }
     if let Some(path) = &args.json {
-        write_json(path, &crate::words::diagnosis_json(&d)?)?;
+        let mut json = crate::words::diagnosis_json(&d)?;
+        if let Some(f) = &file {
+            json["effects_file"] = effects_file::to_json(f);
+        }
+        write_json(path, &json)?;
         println!("\nwrote {}", path.display());
     }
     if let Some(dir) = &args.report {
-        let after = with_named_effect(&campaign, validation.as_ref(), &refs, &opts, &d)?;
+        let after = with_named_effect(&campaign, validation.as_ref(), (&refs, &offer), &opts, &d)?;
         let page = write_report(
             dir,
             "rpkm diagnose",
             &campaign,
             &d,
             after.as_ref(),
-            Vec::new(),
+            (Vec::new(), effects_file::expressions(file.as_ref())),
         )?;
         println!("report: {}", page.display());
     }
@@ -248,36 +301,64 @@ fn print_effects(d: &Diagnosis) {
     }
 }
 
+/// The file's effects as written, under the summary: what the candidates of the file were.
+fn print_written(file: &EffectsFile) {
+    println!("\n   effects of {}:", file.file);
+    for e in &file.effects {
+        let s = e.spec();
+        let exprs: Vec<String> = s
+            .targets
+            .iter()
+            .map(|(t, x)| format!("{t} = {x}"))
+            .collect();
+        println!("     {:<20} {}", s.name, exprs.join("; "));
+    }
+}
+
 /// The diagnosis with the effect `d` names added to the model (diagnosed again), if it names
-/// one: the "after" of the report.
+/// one: the "after" of the report. `offered` are the written effects tried besides the
+/// library (the named one may be one of them).
 pub fn with_named_effect(
     campaign: &Campaign,
     validation: Option<&Campaign>,
-    in_model: &[&dyn Effect],
+    (in_model, offered): (&[&dyn Effect], &[&dyn Effect]),
     opts: &Options,
     d: &Diagnosis,
 ) -> anyhow::Result<Option<Diagnosis>> {
     let Some(missing) = &d.missing_effect else {
         return Ok(None);
     };
-    let effect = effects::by_name(missing)?;
+    let from_library;
+    let effect: &dyn Effect = if let Some(e) = offered.iter().copied().find(|e| e.name() == missing)
+    {
+        e
+    } else {
+        from_library = effects::by_name(missing)?;
+        from_library.as_ref()
+    };
     let mut with: Vec<&dyn Effect> = in_model.to_vec();
-    with.push(effect.as_ref());
-    let after = diagnose::diagnose(campaign, validation, &with, opts)
+    with.push(effect);
+    let rest: Vec<&dyn Effect> = offered
+        .iter()
+        .copied()
+        .filter(|e| e.name() != missing)
+        .collect();
+    let after = diagnose::diagnose_among(campaign, validation, &with, &rest, opts)
         .with_context(|| format!("diagnosing with {missing} added"))?;
     Ok(Some(after))
 }
 
 /// The HTML report (and the numbers of its error-vector maps as JSON) of `before` and, when
-/// an effect was added, `after`; `stages` the models' table (empty: the two diagnoses').
-/// Returns the page's path.
+/// an effect was added, `after`; `stages` the models' table (empty: the two diagnoses');
+/// `written` the effects of an effects file with their expressions
+/// ([`effects_file::expressions`]). Returns the page's path.
 pub fn write_report(
     dir: &Path,
     command: &str,
     campaign: &Campaign,
     before: &Diagnosis,
     after: Option<&Diagnosis>,
-    stages: Vec<Stage>,
+    (stages, written): (Vec<Stage>, Vec<(String, String)>),
 ) -> anyhow::Result<PathBuf> {
     let stages = if stages.is_empty() {
         std::iter::once(before)
@@ -293,6 +374,7 @@ pub fn write_report(
         before,
         after,
         stages,
+        written,
     }
     .write(dir)
 }

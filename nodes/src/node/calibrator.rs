@@ -51,9 +51,10 @@ use crate::campaign_bag::CampaignAssembler;
 use crate::error::bad_input;
 
 /// Parameter keys of the node.
-pub const KEYS: [&str; 17] = [
+pub const KEYS: [&str; 18] = [
     "model",
     "geometry_file",
+    "effects_file",
     "geometry.",
     "calibrate_every",
     "idle_end_s",
@@ -131,6 +132,9 @@ pub struct CalibratorOptions {
     /// The noise stated for the readings before the campaign's own estimate (the spec's
     /// defaults, with the σ the measurements state for themselves).
     pub noise: rpkm_core::noise::NoiseModel,
+    /// Effects written as data (`effects_file`, docs/effects.md): every one of the file is in
+    /// the model, its parameters published with the geometry.
+    pub effects: Option<crate::effects_file::EffectsFile>,
     /// How the rows are weighted: the levels estimated from the campaign (default, as
     /// `rpkm calibrate`), or the stated ones.
     pub weighting: calib::Noise,
@@ -171,9 +175,23 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
             max_condition: o.max_condition,
         };
     }
+    let written = o
+        .effects
+        .as_ref()
+        .map(crate::effects_file::EffectsFile::all)
+        .unwrap_or_default();
+    if let Some(file) = &o.effects {
+        file.check(&cal_part)
+            .map_err(|e| bad_input(e.to_string()))?;
+    }
+    let set = rpkm_core::effects::EffectSet::bind(&written, &cal_part, &o.start.params)
+        .map_err(|e| bad_input(format!("effects_file: {e}")))?;
+    let theta0 = vec![0.0; set.n_params()];
     // the calibration every command shares: tolerance prior, noise estimated from the data
     let (cal, _) = calib::calibrate(&calib::Request {
         noise: o.weighting,
+        effects: &set,
+        theta0: &theta0,
         ..calib::Request::new(&cal_part, &o.start.params, &opts)
     })?;
     let mut sigmas = [0.0; N_PARAMS];
@@ -181,6 +199,7 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
         sigmas[id.index] = id.sigma;
     }
     let mut msg = parameters_msg(&cal.params, cal.model, &sigmas);
+    effect_parameters(&mut msg, &cal.effects);
     // Measurements, not the fit's rows: a pose gives one row per measured direction (x and y
     // of a tracker, ...), so the 194 measurements of the demo campaign made 453 rows.
     msg.measurement_count = u32::try_from(cal_part.poses.len()).unwrap_or(u32::MAX);
@@ -226,6 +245,25 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
         parameters: msg,
         diagnosis,
     })
+}
+
+/// The calibrated effects' parameters into the message: `effect.parameter`, SI where the
+/// unit is a length in mm or µm or an angle in mrad or µrad, else in the unit the effect
+/// states.
+fn effect_parameters(msg: &mut Parameters, effects: &[calib::EffectEstimate]) {
+    for e in effects {
+        if !msg.active_effects.contains(&e.effect) {
+            msg.active_effects.push(e.effect.clone());
+        }
+        let to_si = match e.unit.as_str() {
+            "mm" | "mrad" => 1e-3,
+            "um" | "µm" | "urad" | "µrad" => 1e-6,
+            _ => 1.0,
+        };
+        msg.effect_parameter_names
+            .push(format!("{}.{}", e.effect, e.name));
+        msg.effect_parameter_values.push(e.value * to_si);
+    }
 }
 
 /// Accumulates the campaign from the two streams.
@@ -645,6 +683,7 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
                 .f64_in("outlier_sigma", 0.0, super::params::OUTLIER_SIGMA, " σ")
                 .map_err(bad_param)?,
             noise: rpkm_core::noise::NoiseModel::default(),
+            effects: effects_file(p)?,
             weighting: if p.bool("noise_estimation", true).map_err(bad_param)? {
                 calib::Noise::ESTIMATE
             } else {
@@ -658,6 +697,18 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
             .f64_in("idle_end_s", 0.0, super::params::DURATION_S, " s")
             .map_err(bad_param)?,
     })
+}
+
+/// The effects file of the `effects_file` parameter (none where empty), read with every
+/// mistake told at its file, line and column (bad input: the node exits 2).
+fn effects_file(p: &NodeParams) -> anyhow::Result<Option<crate::effects_file::EffectsFile>> {
+    let path = p.string("effects_file", "").map_err(bad_param)?;
+    if path.is_empty() {
+        return Ok(None);
+    }
+    crate::effects_file::read(std::path::Path::new(&path), &[])
+        .map(Some)
+        .map_err(|e| bad_input(e.to_string()))
 }
 
 /// The calibrator's parameters on its ROS 2 parameter services: what the next calibration
@@ -678,6 +729,11 @@ fn specs() -> Vec<Spec> {
             ..model
         },
         geometry_file,
+        Spec::fixed(
+            "effects_file",
+            Str(""),
+            "effects written as data (YAML, docs/effects.md) calibrated with the geometry",
+        ),
         Spec::live(
             "calibrate_every",
             U64(0),
@@ -1087,6 +1143,51 @@ mod tests {
     use rpkm_core::params::{Model, Params};
     use rpkm_core::twin::{Twin, TwinConfig};
 
+    /// The calibrator with an effects file: the twin's lost motion of carrier 4 (20 µm) is
+    /// calibrated with the geometry, and the Parameters carry it (SI) within 0.1 µm of the
+    /// truth (its σ on this campaign is 0.02 µm: core/tests/written_effects.rs).
+    #[test]
+    fn parameters_carry_the_written_effects_parameters() -> anyhow::Result<()> {
+        use rpkm_core::campaign::Instrument;
+        use rpkm_core::twin::EffectKind;
+        let b_true = 0.02;
+        let mut twin = Twin::new(TwinConfig {
+            seed: 8,
+            effects: vec![(EffectKind::LostMotionQ4, b_true)],
+            noise: Some(rpkm_core::noise::NoiseModel::default()),
+            ..Default::default()
+        })?;
+        let c = twin.campaign(&[Instrument::Lt, Instrument::Kgm, Instrument::SelfCal])?;
+        let file = crate::effects_file::parse(
+            "effects:\n  - name: lost_motion_q4\n    summary: carrier 4 lags\n    \
+             params: {b: {unit: mm, prior: 0.01}}\n    dq4: \"-b * dir_q4\"\n",
+            "lost.yaml",
+            &[],
+        )?;
+        let o = CalibratorOptions {
+            start: Geometry {
+                params: Params::nominal(),
+                model: Model::M29,
+                stiffness: rpkm_core::elastic::Stiffness::default(),
+                source: "nominal".into(),
+            },
+            validation_prefix: "val".into(),
+            selection: "map".into(),
+            max_condition: 100.0,
+            outlier_sigma: 0.0,
+            noise: rpkm_core::noise::NoiseModel::default(),
+            effects: Some(file),
+            weighting: calib::Noise::ESTIMATE,
+        };
+        let msg = calibrate_campaign(&c, &o)?.parameters;
+        assert_eq!(msg.active_effects, ["lost_motion_q4"]);
+        assert_eq!(msg.effect_parameter_names, ["lost_motion_q4.b"]);
+        let b = msg.effect_parameter_values[0] * MM_PER_M;
+        eprintln!("published b = {b} mm (truth {b_true})");
+        assert!((b - b_true).abs() < 1e-4, "b = {b} mm");
+        Ok(())
+    }
+
     #[test]
     fn poses_without_a_measurement_are_not_kept() -> anyhow::Result<()> {
         let mut acc = Accumulator::new(8);
@@ -1138,6 +1239,7 @@ mod tests {
             max_condition: 100.0,
             outlier_sigma: 0.0,
             noise: stated,
+            effects: None,
             weighting: calib::Noise::ESTIMATE,
         };
         let out = calibrate_campaign(&rebuilt, &o)?;

@@ -36,6 +36,8 @@ pub struct Report<'a> {
     pub after: Option<&'a Diagnosis>,
     /// The models in the order they were fitted (the first is `before`'s).
     pub stages: Vec<Stage>,
+    /// The effects of an effects file: (name, its expressions as written).
+    pub written: Vec<(String, String)>,
 }
 
 impl Report<'_> {

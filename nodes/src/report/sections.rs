@@ -531,10 +531,15 @@ pub fn effects(r: &Report) -> String {
     let d = r.before;
     let mut o = String::from("<section id=\"effects\"><h2>Effects tried</h2><table><tr><th>effect</th><th>significant</th><th>relevant</th><th>explained</th><th>F</th><th>p</th><th>held-out after µm</th><th style=\"text-align:left\">evidence</th></tr>");
     for c in &d.candidates {
+        // a written effect shows what it is: its expressions
+        let name = match r.written.iter().find(|w| w.0 == c.effect) {
+            Some((_, exprs)) => format!("{}<br><code>{}</code>", escape(&c.effect), escape(exprs)),
+            None => escape(&c.effect),
+        };
         let _ = write!(
             o,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.0} %</td><td>{:.3e}</td><td>{:.1e}</td><td>{}</td><td style=\"text-align:left\">{}</td></tr>",
-            escape(&c.effect),
+            name,
             c.significant,
             c.relevant,
             100.0 * c.explained_fraction,
