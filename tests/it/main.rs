@@ -26,6 +26,7 @@ mod cli_bad_config;
 mod cli_bad_input;
 mod cli_calibrate;
 mod cli_diagnose;
+mod cli_effects_file;
 mod cli_foreign;
 mod cli_scipy_baseline;
 mod fuzz_inputs;

@@ -24,3 +24,4 @@ mod elastic_plausibility;
 mod elastic_spring;
 mod geometry_round_trip;
 mod twin_campaigns;
+mod written_effects;
