@@ -52,10 +52,15 @@ pub enum EffectKind {
     /// recorded in the covariates `approach_q1`, `approach_q4`. Outside the model library on
     /// purpose: the diagnosis must point at it without naming a wrong effect.
     Backlash,
+    /// Lost motion of carrier 4 alone: the carrier lags its encoder by the magnitude (mm)
+    /// against the direction it last moved in (carrier = encoder − magnitude · dir_q4), in
+    /// every drive mode; nothing recorded beside it (the diagnosis sees `dir_q4` from the
+    /// drive positions). Outside the model library, as backlash.
+    LostMotionQ4,
 }
 
 impl EffectKind {
-    pub const ALL: [EffectKind; 7] = [
+    pub const ALL: [EffectKind; 8] = [
         EffectKind::Parallelogram,
         EffectKind::PreloadElastic,
         EffectKind::Thermal,
@@ -63,6 +68,7 @@ impl EffectKind {
         EffectKind::GuideStraightness,
         EffectKind::InstrumentAlignment,
         EffectKind::Backlash,
+        EffectKind::LostMotionQ4,
     ];
 
     /// Spelling on the command line and in truth files.
@@ -75,15 +81,17 @@ impl EffectKind {
             EffectKind::GuideStraightness => "guide_straightness",
             EffectKind::InstrumentAlignment => "instrument_alignment",
             EffectKind::Backlash => "backlash",
+            EffectKind::LostMotionQ4 => "lost_motion_q4",
         }
     }
 
     /// Unit of the magnitude.
     pub fn unit(self) -> &'static str {
         match self {
-            EffectKind::Parallelogram | EffectKind::GuideStraightness | EffectKind::Backlash => {
-                "mm"
-            }
+            EffectKind::Parallelogram
+            | EffectKind::GuideStraightness
+            | EffectKind::Backlash
+            | EffectKind::LostMotionQ4 => "mm",
             EffectKind::PreloadElastic => "x controller error",
             EffectKind::Thermal => "K",
             EffectKind::EncoderScale => "ppm",
@@ -101,6 +109,7 @@ impl EffectKind {
             EffectKind::GuideStraightness => 0.08,
             EffectKind::InstrumentAlignment => 0.05,
             EffectKind::Backlash => 0.03,
+            EffectKind::LostMotionQ4 => 0.01,
         }
     }
 }

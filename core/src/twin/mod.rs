@@ -601,6 +601,7 @@ impl Twin {
         let mut reset: Option<(String, Vector2<f64>, f64)> = None;
         let mut last_setup: Option<&str> = None;
         let backlash = self.magnitude(EffectKind::Backlash);
+        let lost_q4 = self.magnitude(EffectKind::LostMotionQ4);
         // last command and approach direction of q1, q4 (backlash)
         let mut approach: Option<([f64; 2], [f64; 2])> = None;
         for (n, plan) in design.iter().enumerate() {
@@ -613,12 +614,19 @@ impl Twin {
             let self_cal = plan.instrument == Instrument::SelfCal;
             let mut enc = [0; 4].map(|_| k * noise.encoder_mm * gauss(&mut self.rng));
             let mut covariates = Vec::with_capacity(3);
+            let dir = if backlash.is_some() || lost_q4.is_some() {
+                self.approach_direction(plan, self_cal, &mut approach)?
+            } else {
+                [1.0; 2]
+            };
             if let Some(m) = backlash {
-                let dir = self.approach_direction(plan, self_cal, &mut approach)?;
                 // the carrier lags its command against the direction of travel
                 enc[0] -= 0.5 * m * dir[0];
                 enc[3] -= 0.5 * m * dir[1];
                 covariates.extend([Some(dir[0]), Some(dir[1])]);
+            }
+            if let Some(m) = lost_q4 {
+                enc[3] -= m * dir[1];
             }
             let st = self.machine_state(&plan.setup, plan.x, plan.y, t, enc, self_cal)?;
             let mut pose = self.drive_readings(plan, t, &st, (k, noise.encoder_mm), covariates);

@@ -138,7 +138,7 @@ fn draw(seed: u64, i: usize) -> (TwinConfig, Vec<EffectKind>) {
     let library: Vec<EffectKind> = EffectKind::ALL
         .iter()
         .copied()
-        .filter(|e| *e != EffectKind::Backlash)
+        .filter(|e| !matches!(e, EffectKind::Backlash | EffectKind::LostMotionQ4))
         .collect();
     let pick = |rng: &mut StdRng| library[rng.gen_range(0..library.len())];
     let hidden = match rng.gen_range(0..20) {
