@@ -21,19 +21,34 @@ use rpkm_core::plan::{self, Start, Unknowns};
 use rpkm_core::variance;
 
 const BUDGET: usize = 20;
+/// Random campaigns the plan is compared with.
+const RANDOM_DRAWS: u64 = 20;
+/// Model 24: the foreign machine's rod 5 is a parallel copy of rod 4 (its README), the
+/// diagnosis's and the demo's model.
+const MODEL: Model = Model::M24;
 /// The foreign tracker's noise per coordinate (its README), mm.
 const TRACKER_MM: f64 = 0.005;
 
 fn options() -> Options {
     Options {
-        model: Model::M29,
+        model: MODEL,
         selection: Selection::Prior(Prior::default()),
         ..Default::default()
     }
 }
 
-/// The calibration's count of determined combinations, noise estimated as `rpkm calibrate`.
-fn determined(c: &Campaign) -> (usize, usize, Params, rpkm_core::noise::NoiseModel) {
+/// What a calibration determined, noise estimated as `rpkm calibrate`.
+struct Determined {
+    /// Combinations better than their tolerance, of how many.
+    count: usize,
+    of: usize,
+    /// The effective number the data determine (the trace of the hat matrix).
+    effective: f64,
+    params: Params,
+    noise: rpkm_core::noise::NoiseModel,
+}
+
+fn determined(c: &Campaign) -> Determined {
     let (cal, noise) = variance::calibrate_estimating_noise(
         c,
         &Params::nominal(),
@@ -41,8 +56,14 @@ fn determined(c: &Campaign) -> (usize, usize, Params, rpkm_core::noise::NoiseMod
         &EffectSet::empty(),
     )
     .unwrap_or_else(|e| panic!("{}: {e}", c.source));
-    let (d, n) = cal.determined.expect("a prior calibration counts");
-    (d, n, cal.params, noise.model)
+    let (count, of) = cal.determined.expect("a prior calibration counts");
+    Determined {
+        count,
+        of,
+        effective: cal.dof_model,
+        params: cal.params,
+        noise: noise.model,
+    }
 }
 
 fn true_params(dir: &std::path::Path) -> Params {
@@ -62,7 +83,7 @@ fn true_params(dir: &std::path::Path) -> Params {
 /// `design` measured on the foreign machine: drive positions and readings of its true
 /// parameters, the tracker's noise added to every reading.
 fn measured(design: &[PlannedPose], truth: &Params, seed: u64) -> Campaign {
-    let mut c = nominal_campaign(design, truth, Model::M29).expect("reachable");
+    let mut c = nominal_campaign(design, truth, MODEL).expect("reachable");
     let mut rng = StdRng::seed_from_u64(seed);
     let n = Normal::new(0.0, TRACKER_MM).expect("a normal");
     for p in c.poses.iter_mut().filter(|p| !p.reset) {
@@ -115,56 +136,71 @@ fn planned_tracker_poses_determine_what_the_whole_campaign_does() {
     let text = std::fs::read_to_string(dir.join("cal.csv")).expect("cal.csv");
     let full = Campaign::parse(&text, "null/cal.csv").expect("a campaign");
     let truth = true_params(&dir);
-    let (d_full, n, _, _) = determined(&full);
+    let full_d = determined(&full);
     let mut self_only = full.clone();
     self_only.source = "null/cal.csv self rows".to_owned();
     self_only
         .poses
         .retain(|p| p.instrument == Instrument::SelfCal);
-    let (d_self, _, params, noise) = determined(&self_only);
+    let self_d = determined(&self_only);
     let start = Start {
         campaign: &self_only,
-        params: &params,
-        model: Model::M29,
-        noise: &noise,
+        params: &self_d.params,
+        model: MODEL,
+        noise: &self_d.noise,
     };
-    let unknowns = Unknowns::of_model(Model::M29, |i| Prior::default().sigma(i));
+    let unknowns = Unknowns::of_model(MODEL, |i| Prior::default().sigma(i));
     let plan =
         plan::plan_determination(&start, &unknowns, &[Instrument::Lt], BUDGET).expect("a plan");
     let design = plan.design();
     assert_eq!(design.len(), BUDGET);
-    let planned = with(
+    let planned = determined(&with(
         &self_only,
         &measured(&design, &truth, 1),
         "self + planned lt",
-    );
-    let (d_planned, _, _, _) = determined(&planned);
-    let randoms: Vec<usize> = (0..5)
+    ));
+    let randoms: Vec<Determined> = (0..RANDOM_DRAWS)
         .map(|s| {
-            let c = with(
+            determined(&with(
                 &self_only,
                 &measured(&random_design(s), &truth, 1),
                 "self + random lt",
-            );
-            determined(&c).0
+            ))
         })
         .collect();
-    let mean_random = randoms.iter().sum::<usize>() as f64 / randoms.len() as f64;
+    let mean =
+        |f: &dyn Fn(&Determined) -> f64| randoms.iter().map(f).sum::<f64>() / randoms.len() as f64;
+    let (random_count, random_effective) = (mean(&|d| d.count as f64), mean(&|d| d.effective));
+    let best_random = randoms.iter().map(|d| d.effective).fold(0.0, f64::max);
     eprintln!(
-        "determined of {n}: full campaign {d_full}, self rows {d_self}, planner's prediction {}, \
-         self + 20 planned lt {d_planned}, self + 20 random lt {randoms:?} (mean {mean_random})",
-        plan.after().determined
+        "model {}, determined of {}: full campaign {} (effective {:.2}), self rows {} ({:.2}), \
+         planner's prediction {} ({:.2}), self + 20 planned lt {} ({:.2}), self + 20 random lt: \
+         mean {random_count:.2} ({random_effective:.2}, best {best_random:.2}) over {RANDOM_DRAWS} draws",
+        MODEL.number(),
+        full_d.of,
+        full_d.count,
+        full_d.effective,
+        self_d.count,
+        self_d.effective,
+        plan.after().determined,
+        plan.after().effective,
+        planned.count,
+        planned.effective
     );
     assert!(
-        d_self < d_full,
+        self_d.count < full_d.count,
         "the self rows alone leave something to plan"
     );
     assert!(
-        d_planned as f64 >= 0.9 * d_full as f64,
-        "planned: {d_planned} of the full campaign's {d_full}"
+        planned.count as f64 >= 0.9 * full_d.count as f64,
+        "planned: {} of the full campaign's {}",
+        planned.count,
+        full_d.count
     );
     assert!(
-        mean_random < d_planned as f64,
-        "random poses: {randoms:?} against the plan's {d_planned}"
+        random_count < planned.count as f64 && best_random < planned.effective,
+        "random poses: {random_count} ({best_random}) against the plan's {} ({})",
+        planned.count,
+        planned.effective
     );
 }

@@ -166,3 +166,30 @@ fn check_setups(poses: &[PlannedPose]) -> Result<(), (usize, String)> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_plan_reads_back_as_written() {
+        let mut poses = design::kgm()[..9].to_vec();
+        poses.extend(design::self_cal()[..3].iter().cloned());
+        let text = to_csv(&poses, &["what it is for".to_owned()]);
+        assert!(text.starts_with("# what it is for\n"));
+        assert_eq!(parse(&text, "p.csv").expect("a plan"), poses);
+    }
+
+    #[test]
+    fn a_bad_plan_names_line_and_column() {
+        let head = format!("# c\n{HEADER}\n");
+        let e = parse(&format!("{head}s,self,0,,0,1700\n"), "p.csv").expect_err("follower");
+        assert_eq!((e.line, e.column), (3, 4), "{e}");
+        let e = parse(&format!("{head}s,lt,0,,0,1700\n"), "p.csv").expect_err("no reset");
+        assert_eq!((e.line, e.column), (3, 1), "{e}");
+        let e = parse(&format!("{head}s,lt,1,,0,3000\n"), "p.csv").expect_err("outside");
+        assert_eq!((e.line, e.column), (3, 5), "{e}");
+        let e = parse("s,lt,1,,0,1700\n", "p.csv").expect_err("header");
+        assert_eq!((e.line, e.column), (1, 1), "{e}");
+    }
+}

@@ -163,36 +163,111 @@ pub fn condition_exchange(
         let k = setups.iter().position(|c| c.id == s.setup.id).unwrap_or(0);
         chosen.extend(s.points.iter().map(|&point| Chosen { setup: k, point }));
     }
-    let mut info = g0.clone();
-    for c in &chosen {
-        info += blocks[c.setup][c.point].tr_mul(&blocks[c.setup][c.point]);
-    }
     for _ in 0..CONDITION_ROUNDS {
-        let mut changed = false;
-        for i in 0..chosen.len() {
-            let c = chosen[i];
-            let old = &blocks[c.setup][c.point];
-            let without = &info - old.tr_mul(old);
-            let now = normalized_condition(&info);
-            let better = swaps(&chosen, i, blocks)
-                .map(|to| {
-                    let b = &blocks[to.setup][to.point];
-                    (to, normalized_condition(&(&without + b.tr_mul(b))))
-                })
-                .filter(|&(_, cond)| cond < now * (1.0 - 1e-9))
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            if let Some((to, _)) = better {
-                let b = &blocks[to.setup][to.point];
-                info = without + b.tr_mul(b);
-                chosen[i] = to;
-                changed = true;
-            }
-        }
-        if !changed {
+        let points = point_exchange(&mut chosen, blocks);
+        let whole = setup_exchange(&mut chosen, blocks);
+        if !(points || whole) {
             break;
         }
     }
     plan_of(&g0, setups, blocks, &chosen)
+}
+
+/// The information of the chosen points.
+fn info_of(chosen: &[Chosen], blocks: &[Vec<DMatrix<f64>>]) -> DMatrix<f64> {
+    let n = blocks
+        .iter()
+        .flatten()
+        .map(DMatrix::ncols)
+        .next()
+        .unwrap_or(0);
+    let mut info = DMatrix::zeros(n, n);
+    for c in chosen {
+        info += blocks[c.setup][c.point].tr_mul(&blocks[c.setup][c.point]);
+    }
+    info
+}
+
+/// One round of single-point swaps that lower the condition number; whether one was made.
+fn point_exchange(chosen: &mut [Chosen], blocks: &[Vec<DMatrix<f64>>]) -> bool {
+    let mut info = info_of(chosen, blocks);
+    let mut changed = false;
+    for i in 0..chosen.len() {
+        let c = chosen[i];
+        let old = &blocks[c.setup][c.point];
+        let without = &info - old.tr_mul(old);
+        let now = normalized_condition(&info);
+        let better = swaps(chosen, i, blocks)
+            .map(|to| {
+                let b = &blocks[to.setup][to.point];
+                (to, normalized_condition(&(&without + b.tr_mul(b))))
+            })
+            .filter(|&(_, cond)| cond < now * (1.0 - 1e-9))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((to, _)) = better {
+            let b = &blocks[to.setup][to.point];
+            info = without + b.tr_mul(b);
+            chosen[i] = to;
+            changed = true;
+        }
+    }
+    changed
+}
+
+/// One round of whole-setup swaps: each opened setup against every unopened one with as
+/// many points, chosen one by one for the condition number; the best swap that lowers it is
+/// made. The cost stays (one reset for one, as many points). Whether one was made.
+fn setup_exchange(chosen: &mut Vec<Chosen>, blocks: &[Vec<DMatrix<f64>>]) -> bool {
+    let mut opened: Vec<usize> = chosen.iter().map(|c| c.setup).collect();
+    opened.sort_unstable();
+    opened.dedup();
+    let mut changed = false;
+    for &s in &opened {
+        let k = chosen.iter().filter(|c| c.setup == s).count();
+        let rest: Vec<Chosen> = chosen.iter().copied().filter(|c| c.setup != s).collect();
+        let base = info_of(&rest, blocks);
+        let now = normalized_condition(&info_of(chosen, blocks));
+        let taken = |t: usize| chosen.iter().any(|c| c.setup == t);
+        let best = (0..blocks.len())
+            .filter(|&t| !taken(t) && blocks[t].len() >= k)
+            .map(|t| fill_setup(&base, t, k, blocks))
+            .filter(|(_, cond)| *cond < now * (1.0 - 1e-9))
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((points, _)) = best {
+            *chosen = rest;
+            chosen.extend(points);
+            changed = true;
+        }
+    }
+    changed
+}
+
+/// `k` points of setup `t` added one by one to `base`, each the one that lowers the
+/// condition number most; with the condition number at the end.
+fn fill_setup(
+    base: &DMatrix<f64>,
+    t: usize,
+    k: usize,
+    blocks: &[Vec<DMatrix<f64>>],
+) -> (Vec<Chosen>, f64) {
+    let mut info = base.clone();
+    let mut points: Vec<Chosen> = Vec::with_capacity(k);
+    for _ in 0..k {
+        let next = (0..blocks[t].len())
+            .filter(|&p| blocks[t][p].nrows() > 0 && !points.iter().any(|c| c.point == p))
+            .map(|p| {
+                let b = &blocks[t][p];
+                (p, normalized_condition(&(&info + b.tr_mul(b))))
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1));
+        let Some((p, _)) = next else { break };
+        info += blocks[t][p].tr_mul(&blocks[t][p]);
+        points.push(Chosen { setup: t, point: p });
+    }
+    if points.len() < k {
+        return (points, f64::INFINITY);
+    }
+    (points, normalized_condition(&info))
 }
 
 /// Where chosen point `i` may move without changing what the plan costs: to an unchosen

@@ -380,3 +380,76 @@ pub fn plan_like(
 pub fn condition(rows: &[Residual], ids: &[usize]) -> f64 {
     condition_number(&normalize_columns(&analysis::jacobian(rows, ids, true)))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DVector;
+
+    /// Eigenvalues 4, 0.5 and 0: one combination pinned better than its tolerance, and
+    /// 4/5 + 0.5/1.5 effective.
+    #[test]
+    fn determination_counts_eigenvalues_above_one() {
+        let g = DMatrix::from_diagonal(&DVector::from_vec(vec![4.0, 0.5, 0.0]));
+        let d = Determination::of(&g);
+        assert_eq!((d.determined, d.of), (1, 3));
+        assert!((d.effective - (0.8 + 1.0 / 3.0)).abs() < 1e-12);
+    }
+
+    fn setup(id: &str, reset: bool, n: usize) -> CandidateSetup {
+        CandidateSetup {
+            id: id.to_owned(),
+            instrument: Instrument::Lt,
+            reset: reset.then_some(CENTRE),
+            points: vec![CENTRE; n],
+        }
+    }
+
+    /// The campaign pins the first unknown (information 10⁴): a pose that adds 100 to it
+    /// gains ln(1 + 100/10001), one that adds 1 to the second ln 2; the second is chosen.
+    #[test]
+    fn the_next_pose_goes_where_nothing_is_determined() {
+        let g0 = DMatrix::from_diagonal(&DVector::from_vec(vec![1e4, 0.0]));
+        let blocks = vec![vec![
+            DMatrix::from_row_slice(1, 2, &[10.0, 0.0]),
+            DMatrix::from_row_slice(1, 2, &[0.0, 1.0]),
+        ]];
+        let p = determine(&g0, &[setup("a", false, 2)], &blocks, 1);
+        assert_eq!(p.setups[0].points, vec![1]);
+        assert_eq!(
+            p.after().determined,
+            1,
+            "the second is at its tolerance, not better"
+        );
+        assert_eq!(p.before.determined, 1);
+    }
+
+    /// A relative setup costs its reset: with one pose left only the setup without a reset
+    /// fits, although the other's point would add more.
+    #[test]
+    fn a_reset_is_paid_when_its_setup_is_opened() {
+        let g0 = DMatrix::zeros(1, 1);
+        let blocks = vec![
+            vec![DMatrix::from_row_slice(1, 1, &[10.0])],
+            vec![DMatrix::from_row_slice(1, 1, &[1.0])],
+        ];
+        let setups = [setup("relative", true, 1), setup("self", false, 1)];
+        let one = determine(&g0, &setups, &blocks, 1);
+        assert_eq!(one.setups.len(), 1);
+        assert_eq!(one.setups[0].setup.id, "self");
+        let two = determine(&g0, &setups, &blocks, 2);
+        assert_eq!(two.setups[0].setup.id, "relative");
+        assert_eq!(two.setups[0].poses, 2);
+    }
+
+    /// √(λmax/λmin) of the normalised information: columns (1, 0) and (1, 1) have the
+    /// normalised Gram matrix [[1, c], [c, 1]], c = 1/√2.
+    #[test]
+    fn condition_of_the_normalised_columns() {
+        let j = DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]);
+        let c = 0.5f64.sqrt();
+        let want = ((1.0 + c) / (1.0 - c)).sqrt();
+        assert!((normalized_condition(&j.tr_mul(&j)) - want).abs() < 1e-12);
+        assert!((condition_number(&normalize_columns(&j)) - want).abs() < 1e-12);
+    }
+}

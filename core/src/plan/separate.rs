@@ -352,3 +352,52 @@ pub fn separate(
         after_each,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sums(j: &DMatrix<f64>, a: &[f64], b: &[f64]) -> Sums {
+        let mut s = Sums::new(j.ncols());
+        s.add(j, &[DVector::from_row_slice(a), DVector::from_row_slice(b)]);
+        s
+    }
+
+    /// Without geometry: one signature (3, 4) against (1, 0) leaves its part across the
+    /// other, 4 σ; the other against it, 1 · sin of the angle, 4/5 σ. Identical signatures
+    /// tie (0), whatever their size.
+    #[test]
+    fn what_no_size_of_the_other_reproduces() {
+        let none = DMatrix::zeros(2, 0);
+        let s = sums(&none, &[3.0, 4.0], &[1.0, 0.0]).separation();
+        assert!((s.a_from_b - 4.0).abs() < 1e-12);
+        assert!((s.b_from_a - 0.8).abs() < 1e-12);
+        assert!((s.sigma() - 0.8).abs() < 1e-12);
+        let tie = sums(&none, &[1.0, 2.0], &[2.0, 4.0]).separation();
+        assert!(tie.sigma() < 1e-7);
+    }
+
+    /// A geometric column equal to the first signature absorbs it under a weak prior (its
+    /// size 100 tolerances): what is left of it is 1/√(1 + 100²) of it.
+    #[test]
+    fn the_geometry_absorbs_what_it_can() {
+        let j = DMatrix::from_row_slice(2, 1, &[100.0, 0.0]);
+        let s = sums(&j, &[1.0, 0.0], &[0.0, 1.0]).separation();
+        assert!((s.a_from_b - (1.0 / (1.0 + 1e4f64)).sqrt()).abs() < 1e-9);
+        assert!((s.b_from_a - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn hypotheses_by_name() {
+        assert_eq!(
+            "dir_q4".parse::<Hypothesis>().ok(),
+            Some(Hypothesis::LostMotion(3))
+        );
+        assert_eq!(
+            "l3".parse::<Hypothesis>().ok(),
+            Some(Hypothesis::Parameter(params::L3))
+        );
+        assert!("dir_q5".parse::<Hypothesis>().is_err());
+        assert_eq!(Hypothesis::LostMotion(1).to_string(), "dir_q2");
+    }
+}
