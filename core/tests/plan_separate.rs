@@ -75,8 +75,13 @@ fn the_separating_plan_names_dir_q4_alone() {
         now.sigma(),
         p.poses.len()
     );
-    assert!(now.sigma() < 1.0, "tied now: {now:?}");
-    assert!(expected > 5.0, "the plan separates them: {expected}");
+    // the campaign's own rows tell the two lost motions apart only through how differently
+    // q2's and q4's readings move the rows (the dictionary's sign columns tie); the plan's
+    // moves make the signs differ
+    assert!(
+        expected > 3.0 * now.sigma() && expected > 5.0,
+        "the plan separates them: {expected} against {now:?}"
+    );
     let planned = twin.run(&p.poses, "planned").expect("measured");
     let after = pointer(&planned);
     eprintln!(
