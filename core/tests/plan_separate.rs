@@ -3,16 +3,14 @@
 //! the diagnosis's pointer ties `dir_q2` and `dir_q4`. The plan that separates them, measured
 //! on the same machine, lets the diagnosis point at `dir_q4` alone.
 
-use rpkm_core::calib::Prior;
+use rpkm_core::calib::{self, Noise, Prior, Request};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::design;
 use rpkm_core::diagnose::{self, Options};
-use rpkm_core::effects::EffectSet;
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::separate::{self, Hypothesis, Pair};
 use rpkm_core::plan::{self, Unknowns};
 use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
-use rpkm_core::variance;
 
 /// The lost motion, mm (10 µm: 20 times the encoders' σ).
 const LOST_MM: f64 = 0.01;
@@ -45,12 +43,11 @@ fn the_separating_plan_names_dir_q4_alone() {
         before.ties
     );
     let opts = diagnose::calib_options(&Options::default());
-    let (cal, noise) = variance::calibrate_estimating_noise(
-        &campaign,
-        &Params::nominal(),
-        &opts,
-        &EffectSet::empty(),
-    )
+    let start = Params::nominal();
+    let (cal, noise) = calib::calibrate(&Request {
+        noise: Noise::ESTIMATE,
+        ..Request::new(&campaign, &start, &opts)
+    })
     .expect("calibrated");
     let prior = Prior::default();
     let unknowns = Unknowns::of_model(Model::M24, |i| prior.sigma(i));

@@ -4,7 +4,6 @@ use super::{bad_input, read_campaign, write_json};
 use anyhow::Context;
 use rpkm_core::calib::{self, Options, Prior, Selection};
 use rpkm_core::campaign::Instrument;
-use rpkm_core::effects::EffectSet;
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::separate::{self, Hypothesis, Pair, SeparationPlan};
 use rpkm_core::plan::{self, csv, DeterminationPlan, Start, Unknowns};
@@ -152,7 +151,11 @@ fn calibrate(
     campaign: &rpkm_core::campaign::Campaign,
     opts: &Options,
 ) -> Result<(calib::Calibration, variance::NoiseEstimate), calib::CalibrationError> {
-    variance::calibrate_estimating_noise(campaign, &Params::nominal(), opts, &EffectSet::empty())
+    let start = Params::nominal();
+    calib::calibrate(&calib::Request {
+        noise: calib::Noise::ESTIMATE,
+        ..calib::Request::new(campaign, &start, opts)
+    })
 }
 
 fn pair(args: &PlanArgs, prior: &Prior) -> anyhow::Result<Pair> {
