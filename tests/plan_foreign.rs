@@ -99,7 +99,7 @@ fn measured(design: &[PlannedPose], truth: &Params, seed: u64) -> Campaign {
 /// The self rows followed by `extra`, as one campaign (times after the self rows').
 fn with(self_rows: &Campaign, extra: &Campaign, name: &str) -> Campaign {
     let mut c = self_rows.clone();
-    c.source = name.to_owned();
+    name.clone_into(&mut c.source);
     let t0 = c.poses.last().map_or(0.0, |p| p.t) + 120.0;
     for (k, p) in extra.poses.iter().enumerate() {
         let mut p = p.clone();
