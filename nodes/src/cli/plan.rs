@@ -88,8 +88,13 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             args.budget
         )));
     }
-    let campaign = read_campaign(&args.campaign)?;
     let prior = Prior::default();
+    // the arguments checked before the campaign is calibrated
+    let instruments = instruments(args)?;
+    let pair = (!args.separate.is_empty())
+        .then(|| pair(args, &prior))
+        .transpose()?;
+    let campaign = read_campaign(&args.campaign)?;
     let opts = Options {
         model,
         selection: Selection::Prior(prior),
@@ -105,45 +110,42 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
         noise: &noise.model,
     };
     let unknowns = Unknowns::of_model(model, |i| prior.sigma(i));
-    let instruments = instruments(args)?;
-    if args.separate.is_empty() {
+    let Some(pair) = pair else {
         let p = plan::plan_determination(&start, &unknowns, &instruments, args.budget)?;
         print_determination(&p, cal.determined);
-        write_outputs(args, &p.design(), &determination_comments(&p), || {
+        return write_outputs(args, &p.design(), &determination_comments(&p), || {
             determination_json(&p)
-        })
-    } else {
-        let pair = pair(args, &prior)?;
-        let before = separate::separation_of(
-            &campaign,
-            &cal.params,
-            (model, &noise.model),
-            &unknowns,
-            &pair,
-        )?;
-        let setup = plan::candidates(&instruments[..1])?.remove(0);
-        let p = separate::separate(
-            &setup,
-            &cal.params,
-            (model, &noise.model),
-            &unknowns,
-            &pair,
-            args.budget,
-        )?;
-        print_separation(&pair, before, &p);
-        let comments = vec![format!(
-            "rpkm plan: separates {} from {} (now {:.2} sigma, after the plan {:.2} sigma, at {} and {})",
-            pair.a,
-            pair.b,
-            before.sigma(),
-            p.after().map_or(0.0, |s| s.sigma()),
-            size_words(pair.a, pair.size[0]),
-            size_words(pair.b, pair.size[1]),
-        )];
-        write_outputs(args, &p.poses, &comments, || {
-            separation_json(&pair, before, &p)
-        })
-    }
+        });
+    };
+    run_separation(args, &start, &unknowns, &instruments[0], &pair)
+}
+
+/// `--separate`: how far the campaign tells the pair apart, and the sequence of poses of
+/// the first instrument's setup that tells them apart most.
+fn run_separation(
+    args: &PlanArgs,
+    start: &Start,
+    unknowns: &Unknowns,
+    instrument: &Instrument,
+    pair: &Pair,
+) -> anyhow::Result<()> {
+    let at = (start.model, start.noise);
+    let before = separate::separation_of(start.campaign, start.params, at, unknowns, pair)?;
+    let setup = plan::candidates(std::slice::from_ref(instrument))?.remove(0);
+    let p = separate::separate(&setup, start.params, at, unknowns, pair, args.budget)?;
+    print_separation(pair, before, &p);
+    let comments = vec![format!(
+        "rpkm plan: separates {} from {} (now {:.2} sigma, after the plan {:.2} sigma, at {} and {})",
+        pair.a,
+        pair.b,
+        before.sigma(),
+        p.after().map_or(0.0, |s| s.sigma()),
+        size_words(pair.a, pair.size[0]),
+        size_words(pair.b, pair.size[1]),
+    )];
+    write_outputs(args, &p.poses, &comments, || {
+        separation_json(pair, before, &p)
+    })
 }
 
 /// The one calibration of the plan: tolerance prior, the noise estimated from the campaign.
