@@ -117,7 +117,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
             determination_json(&p)
         });
     };
-    run_separation(args, &start, &unknowns, &instruments[0], &pair)
+    run_separation(args, &start, &unknowns, instruments[0], &pair)
 }
 
 /// `--separate`: how far the campaign tells the pair apart, and the sequence of poses of
@@ -126,12 +126,12 @@ fn run_separation(
     args: &PlanArgs,
     start: &Start,
     unknowns: &Unknowns,
-    instrument: &Instrument,
+    instrument: Instrument,
     pair: &Pair,
 ) -> anyhow::Result<()> {
     let at = (start.model, start.noise);
     let before = separate::separation_of(start.campaign, start.params, at, unknowns, pair)?;
-    let setup = plan::candidates(std::slice::from_ref(instrument))?.remove(0);
+    let setup = plan::candidates(&[instrument])?.remove(0);
     let p = separate::separate(&setup, start.params, at, unknowns, pair, args.budget)?;
     print_separation(pair, before, &p);
     let comments = vec![format!(
