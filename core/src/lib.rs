@@ -39,6 +39,7 @@ pub mod noise;
 pub mod obs;
 pub mod observability;
 pub mod params;
+pub mod plan;
 pub mod stats;
 pub mod twin;
 pub mod variance;

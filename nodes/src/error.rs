@@ -41,6 +41,8 @@ fn is_bad_input(c: &(dyn std::error::Error + 'static)) -> bool {
         || c.is::<rpkm_core::obs::PoseError>()
         || c.is::<rpkm_core::calib::CalibrationError>()
         || c.is::<rpkm_core::diagnose::DiagnoseError>()
+        || c.is::<rpkm_core::plan::PlanError>()
+        || c.is::<rpkm_core::plan::csv::PlanCsvError>()
         || c.is::<rpkm_transport::bag::BagOpenError>()
         || c.is::<rpkm_transport::bag::BagDecodeError>()
 }

@@ -24,6 +24,9 @@ enum Command {
     Analyze(cli::analyze::AnalyzeArgs),
     /// Simulate measurement campaigns on the digital twin, with hidden effects.
     Simulate(cli::simulate::SimulateArgs),
+    /// What to measure next: the poses that determine what a campaign left, or that separate
+    /// two explanations that tie (see `rpkm plan --help`).
+    Plan(cli::plan::PlanArgs),
     /// Predicted rod and drive forces and redundancy current at a pose.
     Preload(cli::preload::PreloadArgs),
     /// The whole story on the embedded default data: model vs measurements, where it fails,
@@ -86,6 +89,7 @@ fn main() {
         Command::Diagnose(a) => cli::diagnose::run(a),
         Command::Analyze(a) => cli::analyze::run(a),
         Command::Simulate(a) => cli::simulate::run(a),
+        Command::Plan(a) => cli::plan::run(a),
         Command::Preload(a) => cli::preload::run(a),
         Command::Demo(a) => cli::demo::run(a),
         Command::Record(a) => cli::record::run(a),

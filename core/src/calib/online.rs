@@ -153,6 +153,18 @@ pub struct StepChange {
     pub alternative: Option<usize>,
 }
 
+/// A pose that tells two parameters apart in the drive forces (see
+/// [`OnlineEstimator::separating_pose`]).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct SeparatingPose {
+    pub x: f64,
+    pub y: f64,
+    /// Cosine of the angle between the two parameters' force signatures there (±1: alike).
+    pub cos: f64,
+    /// What the change leaves that the other parameter cannot reproduce, σ of one sample.
+    pub sigma: f64,
+}
+
 /// What one sample did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Outcome {
@@ -533,6 +545,35 @@ impl OnlineEstimator {
         }
         self.cov[(STIFFNESS, STIFFNESS)] +=
             o.stiffness_drift_per_sqrt_h.powi(2) * dt_h / scale()[STIFFNESS].powi(2);
+    }
+
+    /// Where to drive the machine to tell parameter `a` from `b` when a step ties them
+    /// ("l3 or l1", issue 28): of the poses `targets` (x, y mm), the one where their force
+    /// signatures at the estimate are least alike, with what a change of `change` (mm or
+    /// rad) in `a` leaves there that no change of `b` reproduces, in σ of the forces (one
+    /// sample; n samples held there: √n times). None where no target can be reached.
+    pub fn separating_pose(
+        &self,
+        (a, b): (usize, usize),
+        change: f64,
+        targets: &[(f64, f64)],
+    ) -> Option<SeparatingPose> {
+        let k = self.stiffness();
+        let w = 1.0 / self.opts.force_sigma_n;
+        targets
+            .iter()
+            .filter_map(|&(x, y)| {
+                let q = crate::geometry::igm(&self.p, crate::params::Model::M29, x, y)
+                    .ok()?
+                    .q();
+                let (_, dp) = force_jacobian(&self.p, &k, q, None).ok()?;
+                let ha = Vector4::from_fn(|r, _| dp[r][a] * w);
+                let hb = Vector4::from_fn(|r, _| dp[r][b] * w);
+                let cos = ha.dot(&hb) / (ha.norm() * hb.norm()).max(f64::MIN_POSITIVE);
+                let sigma = change.abs() * ha.norm() * (1.0 - cos * cos).max(0.0).sqrt();
+                Some(SeparatingPose { x, y, cos, sigma })
+            })
+            .max_by(|p, q| p.sigma.total_cmp(&q.sigma))
     }
 
     /// The sample's force rows at the estimate: Jacobian over the state and innovation.
@@ -1211,6 +1252,33 @@ fn fit_expansion(
 
 #[cfg(test)]
 mod tests {
+
+    /// Rods 1 and 3 move the forces alike along a path (issue 15's "l3 or l1"): somewhere
+    /// on the workspace their signatures part more than at its centre, and a crash of
+    /// 0.1 mm there leaves more than a sample's noise that l1 cannot reproduce.
+    #[test]
+    fn a_pose_separates_l3_from_l1() {
+        use crate::params::{L1, L3};
+        let est = OnlineEstimator::new(
+            Params::nominal(),
+            Covariance::identity(),
+            OnlineOptions::default(),
+        );
+        let grid = crate::design::grid_231();
+        let best = est
+            .separating_pose((L3, L1), 0.1, &grid)
+            .expect("a reachable pose");
+        let centre = est
+            .separating_pose((L3, L1), 0.1, &[crate::design::CENTRE])
+            .expect("the centre");
+        eprintln!("l3 against l1: {best:?}; at the centre {centre:?}");
+        assert!(
+            best.cos.abs() < centre.cos.abs(),
+            "{best:?} against {centre:?}"
+        );
+        assert!(best.sigma > centre.sigma && best.sigma > 1.0, "{best:?}");
+    }
+
     use super::*;
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};

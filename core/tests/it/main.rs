@@ -23,5 +23,7 @@ mod elastic_fe;
 mod elastic_plausibility;
 mod elastic_spring;
 mod geometry_round_trip;
+mod plan_separate;
+mod plan_thesis;
 mod twin_campaigns;
 mod written_effects;

@@ -8,6 +8,7 @@ pub mod demo;
 pub mod diagnose;
 pub mod ingest;
 pub mod monitor;
+pub mod plan;
 pub mod preload;
 pub mod record;
 pub mod replay;

@@ -21,7 +21,9 @@ use std::path::{Path, PathBuf};
 Effects (default magnitude, unit): parallelogram (2 mm), preload_elastic (0.3, scale of the \
 controller's parameter error: all drives active), thermal (5 K), encoder_scale (40 ppm), \
 guide_straightness (0.08 mm), instrument_alignment (0.05 mrad), backlash (0.03 mm, with \
-approach_q1/approach_q4 covariates; not in the diagnosis library).\n\n\
+approach_q1/approach_q4 covariates; not in the diagnosis library), lost_motion_q4 (0.01 mm, \
+carrier 4 alone, nothing recorded beside it).\n\n\
+A plan (rpkm plan --out plan.csv):\n  rpkm simulate --plan plan.csv --effect lost_motion_q4 --seed 7 --out planned.csv\n\n\
 Example:\n  rpkm simulate --campaign lt,self --effect thermal=2,encoder_scale --seed 7 \
 --out lt_self.csv --truth truth.json --validation 100\n\n\
 Bags (--out not ending in .csv; validation poses go to the bag OUT_val):\n  \
@@ -40,9 +42,13 @@ pub struct SimulateArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        required_unless_present_any = ["stream_hz", "production_seconds"]
+        required_unless_present_any = ["stream_hz", "production_seconds", "plan"]
     )]
     pub campaign: Vec<String>,
+    /// A planned campaign (`rpkm plan --out PLAN.csv`) to measure instead: its setups and
+    /// poses in its order, on the twin (CSV --out only).
+    #[arg(long, conflicts_with_all = ["campaign", "production_seconds", "stream_hz"])]
+    pub plan: Option<PathBuf>,
     /// Hidden effects, NAME or NAME=MAGNITUDE, comma-separated (default magnitude if none).
     #[arg(long, value_delimiter = ',')]
     pub effect: Vec<String>,
@@ -166,6 +172,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if let Some(seconds) = args.production_seconds {
         return run_production(args, &twin, seconds);
     }
+    if let Some(plan) = &args.plan {
+        return run_plan(args, &mut twin, plan);
+    }
     let names: Vec<&str> = args.campaign.iter().map(|s| s.trim()).collect();
     if !is_csv(&args.out) {
         return super::simulate_bag::run(args, &mut twin, &names);
@@ -209,6 +218,32 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             eprintln!("{}: {} validation poses", path.display(), v.poses.len());
         }
     }
+    if let Some(path) = &args.truth {
+        super::write_json(path, &serde_json::to_value(twin.truth())?)?;
+    }
+    Ok(())
+}
+
+/// `--plan`: a planned campaign measured on the twin.
+fn run_plan(args: &SimulateArgs, twin: &mut Twin, plan: &Path) -> Result<()> {
+    if !is_csv(&args.out) {
+        return Err(super::bad_input(format!(
+            "--plan needs a CSV --out, not {}",
+            args.out.display()
+        )));
+    }
+    let text = std::fs::read_to_string(plan)
+        .map_err(|e| super::bad_input(format!("{}: cannot read the plan: {e}", plan.display())))?;
+    let design = rpkm_core::plan::csv::parse(&text, &plan.display().to_string())?;
+    let c = twin.run(&design, &args.out.display().to_string())?;
+    std::fs::write(&args.out, c.to_csv())
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    eprintln!(
+        "{}: {} poses of {} measured",
+        args.out.display(),
+        c.poses.len(),
+        plan.display()
+    );
     if let Some(path) = &args.truth {
         super::write_json(path, &serde_json::to_value(twin.truth())?)?;
     }

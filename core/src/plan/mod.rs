@@ -1,0 +1,455 @@
+//! What to measure next (issue 28): from what a campaign already determines, the poses,
+//! instruments and setups that determine most of what is left, and the poses and moves that
+//! separate two explanations that tie.
+//!
+//! Everything is in the calibration's units of belief: the unknowns' columns scaled by their
+//! manufacturing tolerance (the prior of [`crate::calib::Selection::Prior`]), the rows by
+//! their σ. In those units the prior is the identity and the campaign's information G =
+//! T JᵀΣ⁻¹J T; a combination is *determined* where G's eigenvalue exceeds 1 (the data pin it
+//! better than the tolerance), as [`crate::calib::Calibration::determined`] counts.
+//!
+//! - [`candidates`]: the setups an engineer can mount (instrument, reset pose, the points in
+//!   its travel and range).
+//! - [`determine`]: greedy Bayesian D-optimal choice, ln det(I + G) per pose spent, a setup's
+//!   reset pose paid when the setup is opened, then an exchange pass.
+//! - [`separate`]: T-optimal discrimination of two hypotheses (a lost motion `dir_qN`, a
+//!   parameter): the next poses where their predictions, after the geometry has absorbed
+//!   what it can, differ most against the noise.
+//! - [`csv`]: PLAN.csv, the campaign grammar without measured values.
+
+pub mod csv;
+mod greedy;
+pub mod separate;
+
+pub use greedy::{condition_exchange, determine, normalized_condition, Chosen};
+
+use crate::analysis::{self, AnalysisError};
+use crate::campaign::{Campaign, Instrument};
+use crate::design::{self, PlannedPose, CENTRE, DBB_LENGTH_MM, KGM_SQUARE_MM};
+use crate::effects::Corrections;
+use crate::noise::NoiseModel;
+use crate::obs::{self, Residual, Step};
+use crate::observability::{condition_number, normalize_columns};
+use crate::params::{Model, Params, NAMES};
+use nalgebra::DMatrix;
+
+/// Why a plan could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    /// A candidate pose the model cannot reach or evaluate.
+    #[error(transparent)]
+    Analysis(#[from] AnalysisError),
+    #[error(transparent)]
+    Rows(#[from] obs::PoseError),
+    /// An instrument the planner has no candidate setups for.
+    #[error("no candidate setups for instrument {0} (plan with lt, kgm, dbb, li_psi or self)")]
+    NoCandidates(Instrument),
+    /// A hypothesis the separation does not know.
+    #[error("unknown hypothesis `{0}`: expected dir_q1..dir_q4 (lost motion of a carrier) or a parameter name")]
+    UnknownHypothesis(String),
+    /// Two hypotheses named alike.
+    #[error("the two hypotheses are the same (`{0}`)")]
+    SameHypothesis(String),
+}
+
+/// The unknowns a plan is made for: parameter indexes and their tolerance (one σ of the
+/// prior, mm or rad): a column of the information is the parameter in units of it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Unknowns {
+    pub ids: Vec<usize>,
+    pub tolerance: Vec<f64>,
+}
+
+impl Unknowns {
+    /// The parameters of `model`, each under `tolerance(i)`.
+    pub fn of_model(model: Model, tolerance: impl Fn(usize) -> f64) -> Unknowns {
+        let ids = model.params();
+        let tolerance = ids.iter().map(|&i| tolerance(i)).collect();
+        Unknowns { ids, tolerance }
+    }
+
+    pub fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.ids.is_empty()
+    }
+
+    /// Names of the unknowns.
+    pub fn names(&self) -> Vec<&'static str> {
+        self.ids.iter().map(|&i| NAMES[i]).collect()
+    }
+
+    /// Rows as a block of the information's square root: (J/σ) T.
+    pub fn block(&self, rows: &[&Residual]) -> DMatrix<f64> {
+        DMatrix::from_fn(rows.len(), self.len(), |r, k| {
+            rows[r].jacobian[self.ids[k]] * self.tolerance[k] / rows[r].sigma
+        })
+    }
+
+    /// The information G = Bᵀ B of `rows`.
+    pub fn information(&self, rows: &[Residual]) -> DMatrix<f64> {
+        let refs: Vec<&Residual> = rows.iter().collect();
+        let b = self.block(&refs);
+        b.tr_mul(&b)
+    }
+}
+
+/// What a campaign determines: combinations pinned better than their tolerance, out of how
+/// many, and the effective number determined (tr G (I + G)⁻¹, each combination counting
+/// λ/(1 + λ): half at exactly its tolerance).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Determination {
+    pub determined: usize,
+    pub of: usize,
+    pub effective: f64,
+}
+
+impl Determination {
+    /// The determination of information `g` (prior-scaled).
+    pub fn of(g: &DMatrix<f64>) -> Determination {
+        let ev = g.clone().symmetric_eigenvalues();
+        Determination {
+            determined: ev.iter().filter(|&&v| v > 1.0).count(),
+            of: g.nrows(),
+            effective: ev.iter().map(|&v| v.max(0.0) / (1.0 + v.max(0.0))).sum(),
+        }
+    }
+}
+
+/// A setup the engineer can mount: its instrument, its reset pose (relative instruments)
+/// and the points its travel and range reach from there.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CandidateSetup {
+    pub id: String,
+    pub instrument: Instrument,
+    pub reset: Option<(f64, f64)>,
+    pub points: Vec<(f64, f64)>,
+}
+
+impl CandidateSetup {
+    /// The setup as a design: the reset first, then `points` (indexes into `self.points`).
+    pub fn design(&self, points: &[usize]) -> Vec<PlannedPose> {
+        let pose = |reset: bool, (x, y): (f64, f64)| PlannedPose {
+            setup: self.id.clone(),
+            instrument: self.instrument,
+            reset,
+            x,
+            y,
+        };
+        self.reset
+            .map(|r| pose(true, r))
+            .into_iter()
+            .chain(points.iter().map(|&k| pose(false, self.points[k])))
+            .collect()
+    }
+}
+
+/// Ball-bar points per candidate circle (every 10°, as the thesis's circles).
+const DBB_POINTS: usize = 36;
+/// Grid-encoder candidate centres along y (every 133 mm: the spec's 8 centres among them).
+const KGM_CENTRES_Y: usize = 15;
+
+/// The candidate setups of `instruments`: the tracker and the angle optics reset at the
+/// workspace centre over the 231-point grid; grid-encoder discs at 3 × 15 centres, each with
+/// the 5 × 5 points of its 140 mm square; ball-bar circles (150 mm) at 9 pivots along y;
+/// self-calibration (q2, q3 followers, no reset) on the grid.
+pub fn candidates(instruments: &[Instrument]) -> Result<Vec<CandidateSetup>, PlanError> {
+    let grid = design::grid_231();
+    let off_centre: Vec<(f64, f64)> = grid
+        .iter()
+        .copied()
+        .filter(|&(x, y)| (x - CENTRE.0).abs() > 1e-9 || (y - CENTRE.1).abs() > 1e-9)
+        .collect();
+    let mut out = Vec::new();
+    for &inst in instruments {
+        match inst {
+            Instrument::Lt | Instrument::LiPsi => out.push(CandidateSetup {
+                id: format!("plan_{}", inst.as_str()),
+                instrument: inst,
+                reset: Some(CENTRE),
+                points: off_centre.clone(),
+            }),
+            Instrument::SelfCal => out.push(CandidateSetup {
+                id: "plan_self".to_owned(),
+                instrument: inst,
+                reset: None,
+                points: grid.clone(),
+            }),
+            Instrument::Kgm => out.extend(kgm_candidates()),
+            Instrument::Dbb => out.extend(dbb_candidates()),
+            other => return Err(PlanError::NoCandidates(other)),
+        }
+    }
+    Ok(out)
+}
+
+fn spaced(a: f64, b: f64, n: usize) -> impl Iterator<Item = f64> {
+    (0..n).map(move |k| a + (b - a) * k as f64 / (n - 1) as f64)
+}
+
+fn kgm_candidates() -> Vec<CandidateSetup> {
+    let h = KGM_SQUARE_MM / 2.0;
+    let (y0, y1) = (design::Y_RANGE.0 + h, design::Y_RANGE.1 - h);
+    let mut out = Vec::new();
+    for (iy, yc) in spaced(y0, y1, KGM_CENTRES_Y).enumerate() {
+        for (ix, xc) in [-75.0, 0.0, 75.0].into_iter().enumerate() {
+            let points = spaced(-h, h, 5)
+                .flat_map(|dy| spaced(-h, h, 5).map(move |dx| (xc + dx, yc + dy)))
+                .filter(|&(x, y)| (x - xc).abs() > 1e-9 || (y - yc).abs() > 1e-9)
+                .collect();
+            out.push(CandidateSetup {
+                id: format!("plan_kgm{}_{}", iy + 1, ix + 1),
+                instrument: Instrument::Kgm,
+                reset: Some((xc, yc)),
+                points,
+            });
+        }
+    }
+    out
+}
+
+fn dbb_candidates() -> Vec<CandidateSetup> {
+    let r = DBB_LENGTH_MM;
+    let (y0, y1) = (design::Y_RANGE.0 + r, design::Y_RANGE.1 - r);
+    spaced(y0, y1, 9)
+        .enumerate()
+        .map(|(k, yc)| CandidateSetup {
+            id: format!("plan_dbb{}", k + 1),
+            instrument: Instrument::Dbb,
+            reset: Some((0.0, yc)),
+            points: (0..DBB_POINTS)
+                .map(|j| {
+                    let a = std::f64::consts::TAU * j as f64 / DBB_POINTS as f64;
+                    (r * a.cos(), yc + r * a.sin())
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+/// The calibration rows of a design on a machine with parameters `p` (measured values
+/// consistent with `p`: only the Jacobian and σ matter), weighted with `noise`, as the
+/// calibration writes them (decorrelated), direct rows only.
+pub fn design_rows(
+    design: &[PlannedPose],
+    p: &Params,
+    model: Model,
+    noise: &NoiseModel,
+) -> Result<Vec<Residual>, PlanError> {
+    let c = analysis::nominal_campaign(design, p, model)?;
+    Ok(obs::residuals_with(
+        &c,
+        p,
+        model,
+        Step::Direct,
+        p,
+        &Corrections::default(),
+        noise,
+    )?)
+}
+
+/// Each point of a candidate setup as a block of the information's square root (its rows,
+/// in units of σ and tolerance; empty where the point gives no row).
+pub fn point_blocks(
+    setup: &CandidateSetup,
+    p: &Params,
+    model: Model,
+    noise: &NoiseModel,
+    unknowns: &Unknowns,
+) -> Result<Vec<DMatrix<f64>>, PlanError> {
+    let all: Vec<usize> = (0..setup.points.len()).collect();
+    let rows = design_rows(&setup.design(&all), p, model, noise)?;
+    let first = usize::from(setup.reset.is_some());
+    Ok((0..setup.points.len())
+        .map(|k| {
+            let mine: Vec<&Residual> = rows.iter().filter(|r| r.pose == k + first).collect();
+            unknowns.block(&mine)
+        })
+        .collect())
+}
+
+/// The plan of one setup: what it measures and what is determined once it is measured.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlannedSetup {
+    pub setup: CandidateSetup,
+    /// Indexes into the candidate's points, in measuring order.
+    pub points: Vec<usize>,
+    /// Poses it costs (its points and its reset).
+    pub poses: usize,
+    /// The determination after it (and the setups before it).
+    pub after: Determination,
+}
+
+impl PlannedSetup {
+    /// Its poses as a design (reset first).
+    pub fn design(&self) -> Vec<PlannedPose> {
+        self.setup.design(&self.points)
+    }
+}
+
+/// The plan: the determination now, the setups in order with the determination after each.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeterminationPlan {
+    pub before: Determination,
+    pub setups: Vec<PlannedSetup>,
+}
+
+impl DeterminationPlan {
+    /// The determination after the whole plan.
+    pub fn after(&self) -> Determination {
+        self.setups.last().map_or(self.before, |s| s.after)
+    }
+
+    /// All planned poses, setup after setup.
+    pub fn design(&self) -> Vec<PlannedPose> {
+        self.setups.iter().flat_map(PlannedSetup::design).collect()
+    }
+}
+
+/// What a plan starts from: a campaign calibrated at `params` with the noise it showed.
+#[derive(Clone, Copy, Debug)]
+pub struct Start<'a> {
+    pub campaign: &'a Campaign,
+    pub params: &'a Params,
+    pub model: Model,
+    pub noise: &'a NoiseModel,
+}
+
+impl Start<'_> {
+    /// The campaign's information on `unknowns` (its rows at the calibrated parameters).
+    pub fn information(&self, unknowns: &Unknowns) -> Result<DMatrix<f64>, PlanError> {
+        let rows = obs::residuals_with(
+            self.campaign,
+            self.params,
+            self.model,
+            Step::Direct,
+            self.params,
+            &Corrections::default(),
+            self.noise,
+        )?;
+        Ok(unknowns.information(&rows))
+    }
+}
+
+/// The plan of `budget` poses with `instruments` that determines most of what the campaign
+/// of `start` left undetermined on `unknowns`.
+pub fn plan_determination(
+    start: &Start,
+    unknowns: &Unknowns,
+    instruments: &[Instrument],
+    budget: usize,
+) -> Result<DeterminationPlan, PlanError> {
+    let g0 = start.information(unknowns)?;
+    let setups = candidates(instruments)?;
+    let blocks = setups
+        .iter()
+        .map(|s| point_blocks(s, start.params, start.model, start.noise, unknowns))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(determine(&g0, &setups, &blocks, budget))
+}
+
+/// A plan from no campaign of as many poses as `design`, with its instruments, for
+/// `unknowns`, at parameters `p`: what the planner makes of the budget a design spent
+/// (greedy D-optimal, then exchanged for the condition number, as the thesis rates its
+/// designs).
+pub fn plan_like(
+    design: &[PlannedPose],
+    p: &Params,
+    model: Model,
+    noise: &NoiseModel,
+    unknowns: &Unknowns,
+) -> Result<DeterminationPlan, PlanError> {
+    let mut instruments: Vec<Instrument> = Vec::new();
+    for d in design {
+        if !instruments.contains(&d.instrument) {
+            instruments.push(d.instrument);
+        }
+    }
+    let setups = candidates(&instruments)?;
+    let blocks = setups
+        .iter()
+        .map(|s| point_blocks(s, p, model, noise, unknowns))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(condition_exchange(&setups, &blocks, design.len()))
+}
+
+/// Condition number of the column-normalised weighted Jacobian of `rows` over `ids` (the
+/// thesis's "condition number of the normalized Jacobian matrix", eq. 3.26).
+pub fn condition(rows: &[Residual], ids: &[usize]) -> f64 {
+    condition_number(&normalize_columns(&analysis::jacobian(rows, ids, true)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DVector;
+
+    /// Eigenvalues 4, 0.5 and 0: one combination pinned better than its tolerance, and
+    /// 4/5 + 0.5/1.5 effective.
+    #[test]
+    fn determination_counts_eigenvalues_above_one() {
+        let g = DMatrix::from_diagonal(&DVector::from_vec(vec![4.0, 0.5, 0.0]));
+        let d = Determination::of(&g);
+        assert_eq!((d.determined, d.of), (1, 3));
+        assert!((d.effective - (0.8 + 1.0 / 3.0)).abs() < 1e-12);
+    }
+
+    fn setup(id: &str, reset: bool, n: usize) -> CandidateSetup {
+        CandidateSetup {
+            id: id.to_owned(),
+            instrument: Instrument::Lt,
+            reset: reset.then_some(CENTRE),
+            points: vec![CENTRE; n],
+        }
+    }
+
+    /// The campaign pins the first unknown (information 10⁴): a pose that adds 100 to it
+    /// gains ln(1 + 100/10001), one that adds 1 to the second ln 2; the second is chosen.
+    #[test]
+    fn the_next_pose_goes_where_nothing_is_determined() {
+        let g0 = DMatrix::from_diagonal(&DVector::from_vec(vec![1e4, 0.0]));
+        let blocks = vec![vec![
+            DMatrix::from_row_slice(1, 2, &[10.0, 0.0]),
+            DMatrix::from_row_slice(1, 2, &[0.0, 1.0]),
+        ]];
+        let p = determine(&g0, &[setup("a", false, 2)], &blocks, 1);
+        assert_eq!(p.setups[0].points, vec![1]);
+        assert_eq!(
+            p.after().determined,
+            1,
+            "the second is at its tolerance, not better"
+        );
+        assert_eq!(p.before.determined, 1);
+    }
+
+    /// A relative setup costs its reset: with one pose left only the setup without a reset
+    /// fits, although the other's point would add more.
+    #[test]
+    fn a_reset_is_paid_when_its_setup_is_opened() {
+        let g0 = DMatrix::zeros(1, 1);
+        let blocks = vec![
+            vec![DMatrix::from_row_slice(1, 1, &[10.0])],
+            vec![DMatrix::from_row_slice(1, 1, &[1.0])],
+        ];
+        let setups = [setup("relative", true, 1), setup("self", false, 1)];
+        let one = determine(&g0, &setups, &blocks, 1);
+        assert_eq!(one.setups.len(), 1);
+        assert_eq!(one.setups[0].setup.id, "self");
+        let two = determine(&g0, &setups, &blocks, 2);
+        assert_eq!(two.setups[0].setup.id, "relative");
+        assert_eq!(two.setups[0].poses, 2);
+    }
+
+    /// √(λmax/λmin) of the normalised information: columns (1, 0) and (1, 1) have the
+    /// normalised Gram matrix [[1, c], [c, 1]], c = 1/√2.
+    #[test]
+    fn condition_of_the_normalised_columns() {
+        let j = DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 0.0, 1.0]);
+        let c = 0.5f64.sqrt();
+        let want = ((1.0 + c) / (1.0 - c)).sqrt();
+        assert!((normalized_condition(&j.tr_mul(&j)) - want).abs() < 1e-12);
+        assert!((condition_number(&normalize_columns(&j)) - want).abs() < 1e-12);
+    }
+}
