@@ -22,6 +22,7 @@
 //! (+12.0 ± 0.3 µm/K)", or "l1..l5 alike in 2 min, the path cannot tell which: ..." where the
 //! path does not name one rod).
 
+use super::lifecycle::{Lifecycle, Step};
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
@@ -861,7 +862,7 @@ impl Calibrator {
                 let t = vec![("online_t_s", format!("{:.3}", r.t))];
                 out.diagnostics.publish(&diagnostic_array(status(
                     self.last.0,
-                    &ctx.name,
+                    &ctx.status_name,
                     self.last.1.clone(),
                     t,
                 )))?;
@@ -948,7 +949,7 @@ impl Calibrator {
         let values = vec![("calibrations", self.calibrations.to_string())];
         out.diagnostics.publish(&diagnostic_array(status(
             self.last.0,
-            &ctx.name,
+            &ctx.status_name,
             self.last.1.clone(),
             values,
         )))?;
@@ -960,7 +961,7 @@ impl Calibrator {
         let (level, message) = (self.last.0, self.last.1.clone());
         out.diagnostics.publish(&diagnostic_array(status(
             level,
-            &ctx.name,
+            &ctx.status_name,
             message,
             self.report_values(),
         )))?;
@@ -1007,6 +1008,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         diagnosis: ctx.publisher(&topic::DIAGNOSIS)?,
         diagnostics: ctx.publisher(&topic::DIAGNOSTICS)?,
     };
+    let services = super::calibration_services::CalibrationServices::open(&ctx)?;
+    let mut lifecycle = Lifecycle::open(&ctx, super::lifecycle::start(args))?;
     ctx.log(format!(
         "calibrating {} from {}",
         options.start.model, options.start.source
@@ -1040,8 +1043,21 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 break;
             }
         }
-        if (end || node.idle_ended(idle_end)) && node.acc.measurements > 0 {
+        // an inactive node collects its campaign and calibrates (publishes) once active
+        if (end || node.idle_ended(idle_end)) && node.acc.measurements > 0 && lifecycle.active()
+        {
             node.calibrate(&ctx, &out, &options)?;
+        }
+        if let Some(r) = lifecycle.next(&ctx) {
+            let outcome = if r.step() == Step::Configure {
+                ctx.reread_params(args, "calibrator", &KEYS)
+                    .and_then(|p| configure(&p))
+                    .map(|s| (options, every, idle_end) = (s.options, s.every, s.idle_end))
+                    .map_err(|e| crate::error::error_chain(&e))
+            } else {
+                Ok(())
+            };
+            lifecycle.finish(r, outcome, &ctx);
         }
         // Between calibrations: the next campaign ends and calibrates by the new settings.
         if let Some((p, names)) = live.poll() {
@@ -1051,6 +1067,10 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 idle_end,
             } = configure(&p)?;
             ctx.log(format!("parameters set: {}", names.join(", ")));
+        }
+        // the geometry the next calibration starts from
+        if let Some(g) = services.as_ref().and_then(|s| s.poll(&ctx, &options.start)) {
+            options.start = g;
         }
         if report.due() {
             node.publish_status(&ctx, &out)?;
