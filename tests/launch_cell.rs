@@ -83,8 +83,9 @@ impl Running {
             .args(["-INT", &self.child.id().to_string()])
             .status();
         let _ = self.child.wait();
-        self.seen.extend(self.lines.iter());
-        self.seen
+        let mut seen = std::mem::take(&mut self.seen);
+        seen.extend(self.lines.iter());
+        seen
     }
 }
 
