@@ -139,7 +139,9 @@ fn main() {
     let t = Instant::now();
     let mut identified = 0;
     for _ in 0..runs {
-        let cal = calib::calibrate(&campaign, &Params::nominal(), &opts).expect("calibration");
+        let cal = calib::calibrate(&calib::Request::new(&campaign, &Params::nominal(), &opts))
+            .map(|(cal, _)| cal)
+            .expect("calibration");
         identified = cal.identified.len();
     }
     let ms = t.elapsed().as_secs_f64() * 1e3 / f64::from(runs);

@@ -23,9 +23,14 @@
 //!    a significant dictionary term is unexplained structure; otherwise nothing is missing,
 //!    even when the instruments are noisier than rated (the noise table says so).
 
+pub mod cross;
+pub mod neighbours;
+pub mod periodic;
 pub mod sparse;
 
-use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Prior, SharedRows};
+use crate::calib::{
+    self, Calibration, CalibrationError, EffectEstimate, Prior, Request, SharedRows,
+};
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::geometry;
@@ -33,7 +38,7 @@ use crate::noise::{Group, NoiseModel, XyInstrument, N_GROUPS};
 use crate::obs::{self, PoseError, RowValue};
 use crate::params::{Model, Params};
 use crate::stats;
-use crate::variance::{self, GroupNoise, NoiseEstimate};
+use crate::variance::{GroupNoise, NoiseEstimate};
 use nalgebra::{DMatrix, DVector, Vector2};
 use std::collections::BTreeMap;
 
@@ -56,9 +61,9 @@ pub struct Options {
     /// The instruments' stated noise: the start of the estimation, and the rating the
     /// estimates are compared with.
     pub noise: NoiseModel,
-    /// Whether to estimate each noise group's level from the campaign (else the stated
-    /// levels weight the rows as they are).
-    pub estimate_noise: bool,
+    /// How the rows are weighted once the strongest candidate is known: by each noise
+    /// group's level estimated from the campaign (default), or by the stated levels.
+    pub weighting: calib::Noise,
     /// Manufacturing tolerances of the geometric parameters.
     pub prior: Prior,
     /// Threads the candidate effects are fitted on (0: every core). The result does not
@@ -77,7 +82,7 @@ impl Default for Options {
             model: Model::M24,
             alpha: 0.001,
             noise: NoiseModel::default(),
-            estimate_noise: true,
+            weighting: calib::Noise::ESTIMATE,
             prior: Prior::default(),
             threads: 0,
             screen: true,
@@ -110,6 +115,9 @@ pub struct Fit {
     pub cal_rms_um: f64,
     /// RMS of the held-out TCP errors (µm), if there are held-out data.
     pub val_rms_um: Option<f64>,
+    /// The held-out TCP errors themselves (mm), to compare two models pose by pose.
+    #[serde(skip)]
+    pub val_errors: Vec<f64>,
     /// Effect parameters identified.
     pub effect_params: Vec<EffectEstimate>,
     /// Parameter combinations the campaign determined better than their tolerance, of how
@@ -118,6 +126,9 @@ pub struct Fit {
     /// The identified geometric parameters.
     #[serde(skip)]
     pub params: Params,
+    /// The effects' parameters (the calibration's θ).
+    #[serde(skip)]
+    pub theta: Vec<f64>,
 }
 
 /// The current model's fit and its test against the stated noise (the JSON's `baseline`).
@@ -167,6 +178,52 @@ pub struct Candidate {
     /// The covariate of the effect the current model's residual follows most, if the effect
     /// has covariates: the evidence an engineer can check in the data.
     pub follows: Option<sparse::Pointer>,
+    /// Whether the model predicts better with it: held-out errors compared pose by pose
+    /// (None without held-out data).
+    pub prediction: Option<Prediction>,
+}
+
+/// Does a candidate make the model predict better? Its held-out RMS against the current
+/// model's, on the same poses: an effect that fits the campaign and predicts worse absorbs
+/// something else, and is never named.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct Prediction {
+    pub rms_before_um: f64,
+    pub rms_after_um: f64,
+    /// Standard error of the fall (µm), from the poses' paired squared errors.
+    pub standard_error_um: f64,
+    /// The RMS fell by more than its standard error.
+    pub better: bool,
+    /// Judged by cross-validation by setup on the calibration campaign (no held-out data).
+    pub by_setup: bool,
+}
+
+impl Prediction {
+    /// The comparison of the held-out errors `before` and `after` (mm, the same poses in
+    /// the same order); None without poses.
+    pub fn of(before: &[f64], after: &[f64]) -> Option<Prediction> {
+        let n = before.len();
+        if n < 2 || after.len() != n {
+            return None;
+        }
+        let d: Vec<f64> = before
+            .iter()
+            .zip(after)
+            .map(|(b, a)| b * b - a * a)
+            .collect();
+        let mean = d.iter().sum::<f64>() / n as f64;
+        let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        let (rb, ra) = (calib::rms(before), calib::rms(after));
+        // the RMS's fall and its error through d(RMS²) = (RMS_b + RMS_a) d(RMS)
+        let se = (var / n as f64).sqrt() / (rb + ra).max(f64::MIN_POSITIVE);
+        Some(Prediction {
+            rms_before_um: rb * 1e3,
+            rms_after_um: ra * 1e3,
+            standard_error_um: se * 1e3,
+            better: rb - ra > se,
+            by_setup: false,
+        })
+    }
 }
 
 /// An effect that could not be tried, and why.
@@ -233,6 +290,9 @@ pub struct Diagnosis {
     pub missing_effect: Option<String>,
     /// χ²/dof of the current model at the estimated noise (near 1 when nothing is missing).
     pub chi2_per_dof: f64,
+    /// The current model's calibrated geometric parameters (mm, rad) by name: the
+    /// calibration the verdict rests on, the one `rpkm calibrate` makes with the same options.
+    pub parameters: BTreeMap<String, f64>,
     /// Per group: the stated and the estimated noise.
     pub noise: BTreeMap<String, NoiseReport>,
     /// The same, with whether each was estimated from the data.
@@ -246,6 +306,16 @@ pub struct Diagnosis {
     pub skipped: Vec<Skipped>,
     /// The dictionary test of the current model's residual.
     pub structure: sparse::Structure,
+    /// The strongest period of the current model's residual in a carrier's position.
+    pub periodic: Option<periodic::Periodic>,
+    /// The direction whose residuals are most alike along the setups' paths.
+    pub neighbours: Option<neighbours::Neighbours>,
+    /// The dictionary term that explained the residual as well as the named effect: the
+    /// effect was preferred because it predicts held-out data, which a term cannot.
+    pub tied_term: Option<String>,
+    /// Noise groups estimated more than [`NOISIER_THAN_RATED`] times their rating: either
+    /// the instrument is that noisy or something is missing that the tests cannot see.
+    pub noisier_than_rated: Vec<Noisier>,
     /// What the residual left by the verdict's model follows, when it is still structured.
     pub unexplained: Option<sparse::Pointer>,
     pub groups: Vec<GroupRms>,
@@ -335,7 +405,7 @@ pub fn diagnose(
     }
     // under the current model itself the noise estimation's first round is round 1's base
     let same = with.len() == in_model.len();
-    let (cal, est, copts) = current_model(campaign, &with, opts, cal1.filter(|_| same))?;
+    let (cal, est, copts) = current_model(campaign, &with, opts, cal1.as_ref().filter(|_| same))?;
     // the noise was estimated under the current model itself: its last fit is the base
     let fitted = same.then_some(cal);
     let (base, round, _) = search.round(&copts, fitted)?;
@@ -388,11 +458,62 @@ impl Search<'_> {
             copts,
             (self.threads, self.screen),
         );
-        let round = Round {
+        let mut round = Round {
             vectors,
             ..candidates(self.campaign, self.tried, tries, &base, self.level)
         };
+        if self.validation.is_none() {
+            self.cross_validate(&mut round, &base, copts);
+        }
         Ok((base, round, made))
+    }
+}
+
+impl Search<'_> {
+    /// Without held-out data, each candidate that could be named is judged by
+    /// cross-validation by setup ([`cross`]): the current model's and the candidate's
+    /// predictions of the setups each fold left out, compared row by row.
+    fn cross_validate(&self, round: &mut Round, base: &Fitted, copts: &calib::Options) {
+        let mut before: Option<Option<Vec<f64>>> = None;
+        for c in round
+            .candidates
+            .iter_mut()
+            .filter(|c| c.significant && c.relevant)
+        {
+            let Some(effect) = self.tried.iter().find(|e| e.name() == c.effect) else {
+                continue;
+            };
+            let Some((_, fit)) = round.fits.iter().find(|(name, _)| *name == c.effect) else {
+                continue;
+            };
+            let base_rows = before.get_or_insert_with(|| {
+                cross::predicted_rows(
+                    self.campaign,
+                    &cross::Fitted {
+                        effects: self.in_model,
+                        params: &base.fit.params,
+                        theta: &base.fit.theta,
+                    },
+                    copts,
+                )
+            });
+            let with = with_effect(self.in_model, *effect);
+            let after = cross::predicted_rows(
+                self.campaign,
+                &cross::Fitted {
+                    effects: &with,
+                    params: &fit.fit.params,
+                    theta: &fit.fit.theta,
+                },
+                copts,
+            );
+            if let (Some(b), Some(a)) = (base_rows.as_ref(), after) {
+                c.prediction = Prediction::of(b, &a).map(|p| Prediction {
+                    by_setup: true,
+                    ..p
+                });
+            }
+        }
     }
 }
 
@@ -415,22 +536,26 @@ fn conclude(
         vectors,
     } = round;
     candidates.sort_by(|a, b| b.bic_gain.total_cmp(&a.bic_gain));
-    // a single dictionary term's BIC gain: what an effect must beat to be the explanation
-    let term_bic = structure.explained_chi2 - (base.rows.len() as f64).ln();
-    let best = candidates
-        .iter()
-        .find(|c| c.significant && c.relevant && c.bic_gain > 0.0 && c.bic_gain > term_bic);
-    let missing_effect = best.map(|c| c.effect.clone());
+    // each of the three structure tests at a third of the level: the family's stays α
+    let level = opts.alpha / 3.0;
+    let chosen = choose(
+        campaign,
+        (&candidates, &fits),
+        (&structure, base.rows.len()),
+        level,
+    );
+    let missing_effect = chosen.as_ref().map(|c| c.effect.clone());
     let remaining: &Fitted = missing_effect
         .as_ref()
         .and_then(|m| fits.iter().find(|(name, _)| name == m))
         .map_or(base, |(_, fit)| fit);
     let left = sparse::structure(campaign, &remaining.rows);
-    let unexplained = (left.p_value < opts.alpha)
+    let unexplained = (left.p_value < level)
         .then(|| left.pointer.clone())
         .flatten();
     let exact = calib::rms(&length_values(&base.rows)) < NUMERICAL_RMS_MM;
-    let verdict_kind = match (best, structure.p_value < opts.alpha && !exact) {
+    let shape = Shape::of(campaign, &base.rows, &structure, level);
+    let verdict_kind = match (&chosen, shape.structured() && !exact) {
         (Some(_), _) => VerdictKind::MissingEffect,
         (None, true) => VerdictKind::UnexplainedStructure,
         (None, false) => VerdictKind::NothingMissing,
@@ -440,7 +565,7 @@ fn conclude(
         noise_rounds: est.rounds,
         candidate_level: search.level,
         candidates_tried: search.tried.len(),
-        dictionary_level: opts.alpha,
+        dictionary_level: level,
         rows: base.rows.len(),
     };
     Diagnosis {
@@ -449,6 +574,11 @@ fn conclude(
         verdict_kind,
         missing_effect,
         chi2_per_dof: base.fit.chi2_per_dof,
+        parameters: crate::params::NAMES
+            .iter()
+            .enumerate()
+            .map(|(i, n)| ((*n).to_owned(), base.fit.params[i]))
+            .collect(),
         noise: noise_map(&est.groups),
         noise_groups: est.groups.clone(),
         determined: base.fit.determined,
@@ -456,6 +586,10 @@ fn conclude(
         candidates,
         skipped,
         structure,
+        periodic: shape.periodic,
+        neighbours: shape.neighbours,
+        tied_term: chosen.and_then(|c| c.tied_term),
+        noisier_than_rated: noisier(&est.groups),
         unexplained,
         groups: groups(&base.rows),
         points: points(campaign, &base.rows),
@@ -463,6 +597,113 @@ fn conclude(
         error_vectors: vectors.unwrap_or_default(),
         test,
     }
+}
+
+/// A noise estimate this many times the stated level (the rating, or the spec's default) is
+/// never taken silently.
+pub const NOISIER_THAN_RATED: f64 = 2.0;
+
+/// A noise group estimated well above its rating.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Noisier {
+    pub group: String,
+    /// Estimated over stated level.
+    pub ratio: f64,
+}
+
+/// The groups estimated from the data above [`NOISIER_THAN_RATED`] times their rating.
+fn noisier(groups: &[GroupNoise]) -> Vec<Noisier> {
+    groups
+        .iter()
+        .filter(|g| g.estimated_from_data && g.assumed > 0.0)
+        .map(|g| Noisier {
+            group: g.group.to_owned(),
+            ratio: g.estimated / g.assumed,
+        })
+        .filter(|n| n.ratio > NOISIER_THAN_RATED)
+        .collect()
+}
+
+/// The three structure tests of a residual, none resting on the noise's level: the
+/// dictionary of smooth terms, the periodogram of the carriers' positions, and neighbours
+/// along the setups' paths.
+struct Shape {
+    dictionary_p: f64,
+    periodic: Option<periodic::Periodic>,
+    neighbours: Option<neighbours::Neighbours>,
+    level: f64,
+}
+
+impl Shape {
+    fn of(
+        campaign: &Campaign,
+        rows: &[RowValue],
+        dictionary: &sparse::Structure,
+        level: f64,
+    ) -> Shape {
+        Shape {
+            dictionary_p: dictionary.p_value,
+            periodic: periodic::periodogram(campaign, rows),
+            neighbours: neighbours::neighbours(campaign, rows),
+            level,
+        }
+    }
+
+    /// Whether any of the three finds structure at its level.
+    fn structured(&self) -> bool {
+        self.dictionary_p < self.level
+            || self
+                .periodic
+                .as_ref()
+                .is_some_and(|p| p.p_value < self.level)
+            || self
+                .neighbours
+                .as_ref()
+                .is_some_and(|n| n.p_value < self.level)
+    }
+}
+
+/// The effect a round names, if any: the best-ranked candidate that is significant,
+/// relevant, predicts held-out (or left-out) data better where there are such data (gains in
+/// BIC where there are none), and is not outdone by a single dictionary term. A term that explains as much as the effect
+/// gives way to it when the effect predicts better and leaves no structure behind (a term
+/// cannot predict a pose it has not seen; the effect can).
+fn choose(
+    campaign: &Campaign,
+    (candidates, fits): (&[Candidate], &[(&'static str, Fitted)]),
+    (structure, n_rows): (&sparse::Structure, usize),
+    level: f64,
+) -> Option<Chosen> {
+    // a single dictionary term's BIC gain: what an effect must beat to be the explanation
+    let term_bic = structure.explained_chi2 - (n_rows as f64).ln();
+    candidates.iter().find_map(|c| {
+        // where held-out data judge, a better prediction is the evidence that the effect's
+        // parameters are worth their number (setup-local ones, an instrument's alignment in
+        // each mounting, cost BIC per setup); else the information criterion is
+        let worth = c.prediction.map_or(c.bic_gain > 0.0, |p| p.better);
+        if !(c.significant && c.relevant && worth) {
+            return None;
+        }
+        if c.bic_gain > term_bic {
+            return Some(Chosen {
+                effect: c.effect.clone(),
+                tied_term: None,
+            });
+        }
+        let proven = c.prediction.is_some_and(|p| p.better);
+        let fit = fits.iter().find(|(name, _)| *name == c.effect)?;
+        let clean = sparse::structure(campaign, &fit.1.rows).p_value >= level;
+        (proven && clean).then(|| Chosen {
+            effect: c.effect.clone(),
+            tied_term: structure.pointer.as_ref().map(|p| p.feature.clone()),
+        })
+    })
+}
+
+/// The effect a round names, and the dictionary term it was preferred to.
+struct Chosen {
+    effect: String,
+    tied_term: Option<String>,
 }
 
 /// What trying every candidate gave.
@@ -673,7 +914,12 @@ fn fit_model(
 ) -> Result<Calibration, DiagnoseError> {
     let start = Params::nominal();
     let set = EffectSet::bind(in_model, campaign, &start)?;
-    calib::calibrate_with(campaign, &start, copts, &set, &[]).map_err(DiagnoseError::Baseline)
+    calib::calibrate(&Request {
+        effects: &set,
+        ..Request::new(campaign, &start, copts)
+    })
+    .map(|(cal, _)| cal)
+    .map_err(DiagnoseError::Baseline)
 }
 
 /// The current model calibrated with the estimated noise, the estimate, and the calibration
@@ -682,17 +928,17 @@ fn current_model(
     campaign: &Campaign,
     in_model: &[&dyn Effect],
     opts: &Options,
-    first: Option<Calibration>,
+    first: Option<&Calibration>,
 ) -> Result<(Calibration, NoiseEstimate, calib::Options), DiagnoseError> {
     let start = Params::nominal();
     let set = EffectSet::bind(in_model, campaign, &start)?;
     let mut copts = calib_options(opts);
-    let (cal, est) = if opts.estimate_noise {
-        variance::calibrate_estimating_noise_after(campaign, &start, &copts, &set, first)
-    } else {
-        calib::calibrate_with(campaign, &start, &copts, &set, &[])
-            .map(|c| (c, NoiseEstimate::assumed(&opts.noise)))
-    }
+    let (cal, est) = calib::calibrate(&Request {
+        effects: &set,
+        noise: opts.weighting,
+        first_round: first,
+        ..Request::new(campaign, &start, &copts)
+    })
     .map_err(DiagnoseError::Baseline)?;
     copts.noise = est.model.clone();
     Ok((cal, est, copts))
@@ -815,10 +1061,13 @@ impl Trials<'_> {
             theta: &theta,
             screen,
         };
-        match &self.shared {
-            Some(shared) => calib::calibrate_shared(campaign, start, copts, set, warm, shared),
-            None => calib::calibrate_from(campaign, start, copts, set, &[], Some(warm)),
-        }
+        calib::calibrate(&Request {
+            effects: set,
+            warm: Some(warm),
+            shared: self.shared.as_ref(),
+            ..Request::new(campaign, start, copts)
+        })
+        .map(|(cal, _)| cal)
     }
 }
 
@@ -1014,9 +1263,10 @@ fn finish_with(
     cal: Calibration,
     copts: &calib::Options,
 ) -> Result<Fitted, FitError> {
-    let val_rms_um = val
-        .map(|v| held_out_rms(v, effects, set, &cal, copts.model))
+    let val_errors = val
+        .map(|v| held_out_values(v, effects, set, &cal, copts.model))
         .transpose()?;
+    let val_rms_um = val_errors.as_ref().map(|e| calib::rms(e) * 1e3);
     // The calibration is spent here: its rows and parameters move into the fit.
     let rows = cal.residuals;
     let chi2: f64 = rows.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
@@ -1027,9 +1277,11 @@ fn finish_with(
         chi2_per_dof: chi2 / dof,
         cal_rms_um: calib::rms(&length_values(&rows)) * 1e3,
         val_rms_um,
+        val_errors: val_errors.unwrap_or_default(),
         effect_params: cal.effects,
         determined: cal.determined,
         params: cal.params,
+        theta: cal.theta,
     };
     Ok(Fitted { rows, fit })
 }
@@ -1047,21 +1299,8 @@ pub fn calib_options(opts: &Options) -> calib::Options {
         },
         outlier_sigma: None,
         noise: opts.noise.clone(),
-        // a model far from the data (a missing effect of 10⁷ χ²) takes the LM longer
-        max_iterations: 400,
         ..Default::default()
     }
-}
-
-/// RMS of the held-out TCP errors (mm → µm) with the calibrated model and effects.
-fn held_out_rms(
-    val: &Validation,
-    effects: &[&dyn Effect],
-    cal_set: &EffectSet,
-    cal: &Calibration,
-    model: Model,
-) -> Result<f64, FitError> {
-    Ok(calib::rms(&held_out_values(val, effects, cal_set, cal, model)?) * 1e3)
 }
 
 /// The held-out TCP errors (mm, in [`obs::tcp_errors`] order) of a calibration `cal` of the
@@ -1213,6 +1452,7 @@ fn compare(
         params,
         chi2_per_dof_before: base.fit.chi2_per_dof,
         follows,
+        prediction: Prediction::of(&base.fit.val_errors, &kept.fit.val_errors),
     })
 }
 

@@ -128,6 +128,21 @@ pub struct Residual {
     /// d value / d θ over the effects' parameters (empty without effects; zero for the
     /// virtual rows of the second step, which hold the effects fixed).
     pub d_theta: Vec<f64>,
+    /// The row's gains on the errors its setup's reset pose puts into every row of the
+    /// setup ([`ResetGain`], [`share_reset`]); zero where the row reads no reset pose.
+    pub reset_gain: ResetGain,
+}
+
+/// A row's gains on what its setup's reset pose read once for all its rows: the error of the
+/// reading the instrument was zeroed on (x, y of a 2-D instrument; a single coordinate or ψ
+/// in the first), then the errors of the reset pose's four encoders (the model adds the reset
+/// pose's TCP, or subtracts its configuration, from every reading).
+pub type ResetGain = nalgebra::SVector<f64, 6>;
+
+/// The [`ResetGain`] of a row: `reading` on the instrument's zero, `reset` the row's
+/// sensitivity to the reset pose's carrier positions.
+fn reset_gain(reading: Vector2<f64>, reset: &[f64; 4]) -> ResetGain {
+    ResetGain::from_column_slice(&[reading.x, reading.y, reset[0], reset[1], reset[2], reset[3]])
 }
 
 /// A row's value without its derivatives: what a fit keeps of its rows (the statistics,
@@ -411,11 +426,13 @@ impl Pieces {
             spans: Vec::new(),
             open: None,
         };
-        for (k, (_, poses)) in setups.iter().enumerate() {
+        for (k, (reset, poses)) in setups.iter().enumerate() {
             let shared = poses
                 .iter()
                 .all(|&i| campaign.poses[i].instrument == Instrument::SelfCal);
-            cut.setup(k, poses.len(), shared);
+            // a relative setup's rows share its reset reading: one piece holds them all
+            let whole = reset.is_some_and(|r| campaign.poses[r].instrument.is_relative());
+            cut.setup(k, poses.len(), shared, whole);
         }
         cut.close();
         Pieces {
@@ -446,15 +463,19 @@ struct Cut {
 
 impl Cut {
     /// Setup `k` of `n` poses; `shared`: a self-calibration setup, which may share a piece
-    /// with its neighbours of the same kind.
-    fn setup(&mut self, k: usize, n: usize, shared: bool) {
+    /// with its neighbours of the same kind; `whole`: a setup never cut in two.
+    fn setup(&mut self, k: usize, n: usize, shared: bool, whole: bool) {
         if !shared {
             self.close();
         }
         let mut a = 0usize;
         loop {
             let (first, held) = self.open.unwrap_or((self.parts.len(), 0));
-            let b = n.min(a.saturating_add(self.size - held));
+            let b = if whole {
+                n
+            } else {
+                n.min(a.saturating_add(self.size - held))
+            };
             self.parts.push((k, a..b));
             self.open = Some((first, held + (b - a)));
             if held + (b - a) >= self.size || !shared {
@@ -536,6 +557,7 @@ impl Evaluation<'_> {
             forward(&p_r, self.model, Subsystem::NR, &q_r)
                 .map_err(|e| PoseError::at(campaign, reset, e))?;
         }
+        let first = out.len();
         for &i in &poses[range.clone()] {
             let pose = &campaign.poses[i];
             if pose.reset && pose.instrument.is_relative() {
@@ -548,6 +570,13 @@ impl Evaluation<'_> {
                     virtual_q2_row(ctx, i, pose, self.p_cal, out).map_err(|e| err(e.into()))?;
                 }
             }
+        }
+        // a relative setup is never split between pieces ([`Pieces::new`]): here are all
+        // its rows
+        if let Some((_, reset)) = reset.filter(|_| ctx.decorrelated && self.step == Step::Direct) {
+            let cov =
+                reset_covariance(ctx, reset).map_err(|e| PoseError::at(campaign, reset, e))?;
+            share_reset(&mut out[first..], &cov);
         }
         // the reset pose of a forward instrument still yields a virtual q2 measurement,
         // after the setup's last pose
@@ -683,6 +712,7 @@ fn force_rows(
         jacobian: sens[a].dp,
         d_pcal: None,
         d_theta: ctx.corr.theta_row(&[(i, sens[a])]),
+        reset_gain: ResetGain::zeros(),
     });
     if ctx.decorrelated {
         // at the fixed p_cal: combinations that moved with the fit would make the
@@ -807,6 +837,8 @@ fn inverse_rows(
             jacobian: at_pose.dp + at_reset.dp,
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
+            // the reset's reading error enters as the pose's own does, through X
+            reset_gain: reset_gain(g, &at_reset.dq),
         });
     }
     if ctx.decorrelated {
@@ -902,10 +934,12 @@ fn combine_into(
 ) {
     let mut value = 0.0;
     let mut jac = Row::zeros();
+    let mut reset_gain = ResetGain::zeros();
     let mut d_theta = vec![0.0; old[0].d_theta.len()];
     for (k, o) in old.iter().enumerate() {
         value += w(k) * o.value;
         jac += o.jacobian * w(k);
+        reset_gain += o.reset_gain * w(k);
         for (d, od) in d_theta.iter_mut().zip(&o.d_theta) {
             *d += w(k) * od;
         }
@@ -914,8 +948,102 @@ fn combine_into(
     row.value = value;
     row.jacobian = jac;
     row.d_theta = d_theta;
+    row.reset_gain = reset_gain;
     row.sigma = noise::sigma_of(&parts);
     row.parts = parts;
+}
+
+/// Covariance of the errors a setup's reset pose shares with all its rows, in the order of
+/// [`ResetGain`]: the reading the instrument was zeroed on (at the reset pose; none for a
+/// ball-bar, whose pivot is where the machine stood) and the reset pose's four encoders.
+/// The reading's at the calibration's fixed `p_cal`, so that the rows' combinations stay put
+/// while the parameters move.
+fn reset_covariance(
+    ctx: &Ctx,
+    reset: &Pose,
+) -> Result<nalgebra::SMatrix<f64, 6, 6>, GeometryError> {
+    let mut cov = nalgebra::SMatrix::<f64, 6, 6>::zeros();
+    for k in 2..6 {
+        cov[(k, k)] = ctx.noise.encoder_mm.powi(2);
+    }
+    let reading = match reset.instrument {
+        Instrument::Lt | Instrument::Kgm => {
+            let xy = XyInstrument::of(reset.instrument).unwrap_or(XyInstrument::Kgm);
+            let sol = geometry::fgm(ctx.p_cal, ctx.model, reset.q[0], reset.q[3])?;
+            ctx.noise.xy_covariance(xy, Vector2::new(sol.x(), sol.y()))
+        }
+        Instrument::LiX | Instrument::LiY | Instrument::LiPsi => {
+            let sigma = ctx.noise.scalar_sigma(reset.instrument).unwrap_or(0.0);
+            nalgebra::Matrix2::new(sigma * sigma, 0.0, 0.0, 0.0)
+        }
+        _ => nalgebra::Matrix2::zeros(),
+    };
+    cov.fixed_view_mut::<2, 2>(0, 0).copy_from(&reading);
+    Ok(cov)
+}
+
+/// The rows of one relative setup made independent again. The setup was zeroed on a
+/// reading as noisy as any other, so every row carries that reading's error e (covariance
+/// `cov`) with its own gain g_i: with z = r/σ, cov(z) = I + H S Hᵀ (row i of H is g_iᵀ/σ_i,
+/// S = `cov`), an offset per setup with a prior of one reading's noise, marginalised. Each
+/// row becomes its row of cov(z)^(−1/2) z (value, parameters' and effects' derivatives
+/// alike): with H S Hᵀ = Σ λ_k q_k q_kᵀ (rank six at most), z − Σ (1 − 1/√(1 + λ_k)) q_k
+/// q_kᵀ z. Each row keeps its σ and its variance parts: the shared errors are the same
+/// instruments' noise as the row's own (the reading's and the encoders'), so the noise
+/// rounds estimate the level of one reading.
+fn share_reset(rows: &mut [Residual], cov: &nalgebra::SMatrix<f64, 6, 6>) {
+    if rows.iter().any(|r| !(r.sigma > 0.0)) {
+        return;
+    }
+    let eig = cov.symmetric_eigen();
+    let root = eig.eigenvectors
+        * nalgebra::SMatrix::<f64, 6, 6>::from_diagonal(
+            &eig.eigenvalues.map(|v| v.max(0.0).sqrt()),
+        )
+        * eig.eigenvectors.transpose();
+    let k: Vec<nalgebra::SMatrix<f64, 1, 6>> = rows
+        .iter()
+        .map(|r| r.reset_gain.transpose() / r.sigma * root)
+        .collect();
+    let m = k
+        .iter()
+        .fold(nalgebra::SMatrix::<f64, 6, 6>::zeros(), |m, ki| {
+            m + ki.transpose() * ki
+        });
+    let modes = m.symmetric_eigen();
+    for c in 0..6 {
+        let lambda = modes.eigenvalues[c];
+        if !(lambda > 1e-12) {
+            continue;
+        }
+        let v = modes.eigenvectors.column(c);
+        let q: Vec<f64> = k.iter().map(|ki| (ki * v)[0] / lambda.sqrt()).collect();
+        let beta = 1.0 - 1.0 / (1.0 + lambda).sqrt();
+        shrink_along(rows, &q, beta);
+    }
+}
+
+/// z ← z − β q (qᵀ z) for every column of the rows (z = r/σ): value, parameters' and
+/// effects' derivatives.
+fn shrink_along(rows: &mut [Residual], q: &[f64], beta: f64) {
+    let n_theta = rows.first().map_or(0, |r| r.d_theta.len());
+    let (mut value, mut jac, mut theta) = (0.0, Row::zeros(), vec![0.0; n_theta]);
+    for (r, qi) in rows.iter().zip(q) {
+        let w = qi / r.sigma;
+        value += w * r.value;
+        jac += r.jacobian * w;
+        for (t, d) in theta.iter_mut().zip(&r.d_theta) {
+            *t += w * d;
+        }
+    }
+    for (r, qi) in rows.iter_mut().zip(q) {
+        let a = beta * qi * r.sigma;
+        r.value -= a * value;
+        r.jacobian -= jac * a;
+        for (d, t) in r.d_theta.iter_mut().zip(&theta) {
+            *d -= a * t;
+        }
+    }
 }
 
 /// Two orthonormal rows spanning the complement of the first two columns of `basis`
@@ -962,7 +1090,8 @@ fn forward_rows(
         let now = forward(&p_i, ctx.model, sub, &q_i)?;
         let zero = forward(&p_r, ctx.model, sub, &q_r)?;
         let d = |v: usize| now.sol.c[v] - zero.sol.c[v];
-        let var = |v: usize| encoder_gain2(&now, v) + encoder_gain2(&zero, v);
+        // the reset pose's encoders are the whole setup's: in its shared part
+        let var = |v: usize| encoder_gain2(&now, v);
         let inst = pose.instrument;
         // the value as Σ g_v · Δc_v − (measured + dm_w): g has two terms (x, y of the
         // ball-bar's direction); a single coordinate pads it with a zero-weight term
@@ -1017,6 +1146,16 @@ fn forward_rows(
             jacobian: at_pose.dp + at_reset.dp,
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
+            // an interferometer is zeroed on a reading; a ball-bar's pivot is where the
+            // machine stood, read by no instrument
+            reset_gain: reset_gain(
+                if inst == Instrument::Dbb {
+                    Vector2::zeros()
+                } else {
+                    Vector2::x()
+                },
+                &at_reset.dq,
+            ),
         });
     }
     Ok(())
@@ -1092,6 +1231,7 @@ fn self_rows(
             jacobian: f.sens.dc_dp.row(v).transpose(),
             d_pcal: None,
             d_theta,
+            reset_gain: ResetGain::zeros(),
         });
     }
     Ok(())
@@ -1132,6 +1272,7 @@ fn virtual_q2_row(
         jacobian: s.dc_dp.row(v).transpose(),
         d_pcal: Some(Box::new(d_pcal)),
         d_theta: vec![0.0; ctx.corr.n_params],
+        reset_gain: ResetGain::zeros(),
     });
     Ok(())
 }

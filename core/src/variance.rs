@@ -12,11 +12,10 @@
 //! (its expected value is 1 when the assumed levels are right); the denominator is the
 //! group's share of the redundancy, its degrees of freedom. The levels are scaled by √f_k,
 //! the model re-fitted, until the factors settle. A group with too few degrees of freedom
-//! keeps its assumed level and says so.
+//! keeps its assumed level and says so. The rounds themselves are the calibration's
+//! ([`crate::calib::Noise::Estimate`]); this module is their arithmetic.
 
-use crate::calib::{self, Calibration, CalibrationError, Options};
 use crate::campaign::{Campaign, Instrument};
-use crate::effects::EffectSet;
 use crate::geometry;
 use crate::noise::{Group, NoiseModel, N_GROUPS};
 use crate::obs::RowValue;
@@ -26,7 +25,7 @@ use nalgebra::Vector2;
 /// Fewest degrees of freedom for which a group's level is estimated.
 pub const MIN_DOF: f64 = 5.0;
 /// Re-fits at most; the factors usually settle in three.
-const MAX_ROUNDS: usize = 8;
+pub const MAX_ROUNDS: usize = 8;
 /// A round whose factors all lie within this of 1 ends the iteration.
 const SETTLED: f64 = 0.01;
 /// Bounds of an estimated level relative to the stated one: a noiseless (simulated) campaign
@@ -86,108 +85,87 @@ pub fn factor_terms(rows: &[RowValue], leverage: &[f64]) -> [(f64, f64); N_GROUP
     acc
 }
 
-/// Calibrate with the rows weighted by the noise the campaign itself shows: start from
-/// `opts.noise` (the assumed levels), estimate each group's, re-weight, re-fit.
-pub fn calibrate_estimating_noise(
-    campaign: &Campaign,
-    start: &Params,
-    opts: &Options,
-    effects: &EffectSet,
-) -> Result<(Calibration, NoiseEstimate), CalibrationError> {
-    calibrate_estimating_noise_after(campaign, start, opts, effects, None)
+/// The rounds' running state: each group's level as a factor of its stated one, and the
+/// degrees of freedom of its last estimate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Levels {
+    pub total: [f64; N_GROUPS],
+    pub dof: [f64; N_GROUPS],
 }
 
-/// [`calibrate_estimating_noise`], its first round given: `first`, the same problem
-/// calibrated from `start` with `opts.noise` (a caller that has made it, as the diagnosis's
-/// first round, does not pay for it twice; it is not checked to be that calibration, so
-/// the core's own callers only).
-pub(crate) fn calibrate_estimating_noise_after(
-    campaign: &Campaign,
-    start: &Params,
-    opts: &Options,
-    effects: &EffectSet,
-    mut first: Option<Calibration>,
-) -> Result<(Calibration, NoiseEstimate), CalibrationError> {
-    let assumed = opts.noise.clone();
-    let mut o = opts.clone();
-    let mut total = [1.0; N_GROUPS];
-    let mut dof = [0.0; N_GROUPS];
-    let mut rounds = 0;
-    let mut last: Option<Calibration> = None;
-    // the effects bound at the last round's parameters (`EffectSet::rebound`)
-    let mut bound_at_fit: Option<EffectSet> = None;
-    let mut rebinds = effects.rebinds();
-    let cal = loop {
-        let set = bound_at_fit.as_ref().unwrap_or(effects);
-        // each round starts where the last ended: only the weights changed, so the LM takes
-        // one or two steps instead of a calibration's four or five from the start
-        let warm = last.as_ref().map(|c| calib::WarmStart {
-            params: &c.params,
-            theta: &c.theta,
-            screen: false,
-        });
-        let cal = match first.take() {
-            Some(cal) => cal,
-            None => calib::calibrate_from(campaign, start, &o, set, &[], warm)?,
-        };
-        rounds += 1;
-        let terms = factor_terms(&cal.residuals, &cal.leverage);
-        let mut step = [1.0; N_GROUPS];
-        for k in 0..N_GROUPS {
-            dof[k] = terms[k].1;
-            if terms[k].1 >= MIN_DOF && terms[k].0 > 0.0 {
-                step[k] = (terms[k].0 / terms[k].1).sqrt().clamp(1e-2, 1e2);
-            }
+impl Default for Levels {
+    fn default() -> Self {
+        Levels {
+            total: [1.0; N_GROUPS],
+            dof: [0.0; N_GROUPS],
         }
-        for k in 0..N_GROUPS {
-            let bounded = (total[k] * step[k]).clamp(FACTOR_RANGE.0, FACTOR_RANGE.1);
-            step[k] = bounded / total[k];
-        }
-        let settled = step.iter().all(|f| (f - 1.0).abs() < SETTLED);
-        // a fit whose effects were bound at the start has a model error the next round,
-        // bound at this fit, removes: settled weights alone do not end the rounds
-        let bound_here = !rebinds || bound_at_fit.is_some();
-        if (settled && bound_here) || rounds >= MAX_ROUNDS {
-            break cal;
-        }
-        if rebinds {
-            // an effect that bound at the start and not at the fit (a pose the fit moved to
-            // a singular configuration) keeps its binding at the start
-            bound_at_fit = effects.rebound(campaign, &cal.params).and_then(Result::ok);
-            rebinds = bound_at_fit.is_some();
-        }
-        for k in 0..N_GROUPS {
-            total[k] *= step[k];
-        }
-        o.noise = assumed.scaled(&total);
-        last = Some(cal);
-    };
-    let distance = mean_tracker_distance(campaign, &assumed);
-    let groups = Group::ALL
-        .iter()
-        .filter(|g| cal.residuals.iter().any(|r| r.parts[g.index()] > 0.0))
-        .map(|&g| {
-            let k = g.index();
-            let (scale, unit) = g.report_unit();
-            let from_data = dof[k] >= MIN_DOF;
-            GroupNoise {
-                group: g.name(),
-                unit,
-                assumed: assumed.sigma(g, distance) * scale,
-                estimated: o.noise.sigma(g, distance) * scale,
-                dof: dof[k],
-                estimated_from_data: from_data,
-            }
+    }
+}
+
+impl Levels {
+    /// One round's re-weighting from the fit's `rows` and `leverage`: each group's step
+    /// factor (1 where the group has too few degrees of freedom), kept inside
+    /// [`FACTOR_RANGE`] of the stated level. Returns the steps; [`Levels::apply`] takes them.
+    pub fn step(&mut self, rows: &[RowValue], leverage: &[f64]) -> [f64; N_GROUPS] {
+        let terms = factor_terms(rows, leverage);
+        std::array::from_fn(|k| {
+            let (num, dof) = terms[k];
+            self.dof[k] = dof;
+            let step = if dof >= MIN_DOF && num > 0.0 {
+                (num / dof).sqrt().clamp(1e-2, 1e2)
+            } else {
+                1.0
+            };
+            (self.total[k] * step).clamp(FACTOR_RANGE.0, FACTOR_RANGE.1) / self.total[k]
         })
-        .collect();
-    Ok((
-        cal,
+    }
+
+    /// Whether every step lies within [`SETTLED`] of 1.
+    pub fn settled(step: &[f64; N_GROUPS]) -> bool {
+        step.iter().all(|f| (f - 1.0).abs() < SETTLED)
+    }
+
+    /// Take the steps: the levels the next round weights by.
+    pub fn apply(&mut self, step: &[f64; N_GROUPS], stated: &NoiseModel) -> NoiseModel {
+        for k in 0..N_GROUPS {
+            self.total[k] *= step[k];
+        }
+        stated.scaled(&self.total)
+    }
+
+    /// The estimate to report: `stated` against `weighted` (the levels of the last round)
+    /// for every group the campaign's `rows` have.
+    pub fn estimate(
+        &self,
+        campaign: &Campaign,
+        stated: &NoiseModel,
+        weighted: NoiseModel,
+        rows: &[RowValue],
+        rounds: usize,
+    ) -> NoiseEstimate {
+        let distance = mean_tracker_distance(campaign, stated);
+        let groups = Group::ALL
+            .iter()
+            .filter(|g| rows.iter().any(|r| r.parts[g.index()] > 0.0))
+            .map(|&g| {
+                let k = g.index();
+                let (scale, unit) = g.report_unit();
+                GroupNoise {
+                    group: g.name(),
+                    unit,
+                    assumed: stated.sigma(g, distance) * scale,
+                    estimated: weighted.sigma(g, distance) * scale,
+                    dof: self.dof[k],
+                    estimated_from_data: self.dof[k] >= MIN_DOF,
+                }
+            })
+            .collect();
         NoiseEstimate {
-            model: o.noise,
+            model: weighted,
             groups,
             rounds,
-        },
-    ))
+        }
+    }
 }
 
 /// Mean distance (mm) from the tracker to the campaign's laser-tracker poses (nominal

@@ -28,6 +28,7 @@
 //! at the pose it computes and weighs the rows by the noise the campaign shows.
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use rpkm_core::calib;
 use rpkm_core::calib::{Calibration, Options};
 use rpkm_core::campaign::Instrument;
 use rpkm_core::design;
@@ -36,7 +37,6 @@ use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{Params, NAMES, N_PARAMS};
 use rpkm_core::stats::chi2_upper_tail;
 use rpkm_core::twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
-use rpkm_core::variance;
 
 /// Machines calibrated.
 const MACHINES: usize = 16;
@@ -78,9 +78,12 @@ fn calibrate(cfg: TwinConfig, production: usize) -> (Calibration, Params) {
     let c = t.run(&plan, "start").expect("start campaign");
     let elastic = effects::by_name("preload_elastic").expect("library effect");
     let set = EffectSet::bind(&[elastic.as_ref()], &c, &Params::nominal()).expect("binds");
-    let (cal, _) =
-        variance::calibrate_estimating_noise(&c, &Params::nominal(), &Options::default(), &set)
-            .expect("calibrates");
+    let (cal, _) = calib::calibrate(&calib::Request {
+        effects: &set,
+        noise: calib::Noise::ESTIMATE,
+        ..calib::Request::new(&c, &Params::nominal(), &Options::default())
+    })
+    .expect("calibrates");
     (cal, *t.true_params())
 }
 

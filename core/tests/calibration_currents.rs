@@ -13,6 +13,7 @@
 //! model the calibration inverts, with the model's default stiffness (the stiffness scale is
 //! not yet an unknown).
 
+use rpkm_core::calib;
 use rpkm_core::calib::{Calibration, Options, Selection};
 use rpkm_core::campaign::{Campaign, Instrument, Pose};
 use rpkm_core::design;
@@ -24,7 +25,6 @@ use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs::{self, Step};
 use rpkm_core::params::{Model, Params, NAMES};
 use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
-use rpkm_core::variance;
 
 const TWIN_FORCE_NOISE_N: f64 = 3.0;
 
@@ -45,8 +45,12 @@ fn twin(seed: u64) -> Twin {
 fn calibrate(c: &Campaign) -> Calibration {
     let start = Params::nominal();
     let none = EffectSet::empty();
-    let (cal, _) = variance::calibrate_estimating_noise(c, &start, &Options::default(), &none)
-        .expect("calibrates");
+    let (cal, _) = calib::calibrate(&calib::Request {
+        effects: &none,
+        noise: calib::Noise::ESTIMATE,
+        ..calib::Request::new(c, &start, &Options::default())
+    })
+    .expect("calibrates");
     cal
 }
 
@@ -166,9 +170,12 @@ fn twin_with_stiffness(seed: u64, factor: f64) -> Twin {
 
 fn calibrate_with(c: &Campaign, effects: &[&dyn Effect]) -> Calibration {
     let set = EffectSet::bind(effects, c, &Params::nominal()).expect("binds");
-    let (cal, _) =
-        variance::calibrate_estimating_noise(c, &Params::nominal(), &Options::default(), &set)
-            .expect("calibrates");
+    let (cal, _) = calib::calibrate(&calib::Request {
+        effects: &set,
+        noise: calib::Noise::ESTIMATE,
+        ..calib::Request::new(c, &Params::nominal(), &Options::default())
+    })
+    .expect("calibrates");
     cal
 }
 

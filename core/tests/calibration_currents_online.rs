@@ -18,6 +18,7 @@
 //! away. What the drift alone does: the same tracker and a frozen calibration, both started
 //! from the twin's true machine. The full hour: `calibration_currents_online_hour` (ignored;
 //! figures in docs/calibration.md).
+use rpkm_core::calib;
 use rpkm_core::calib::online::{
     Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome, DRIFT_FALSE_ALARM,
     DRIFT_NAME_MARGIN,
@@ -33,7 +34,6 @@ use rpkm_core::twin::{
     EffectKind, ProductionConfig, ProductionSample, ProductionStream, StepChange, ThermalPhysics,
     TimeCreep, Twin, TwinConfig,
 };
-use rpkm_core::variance;
 
 fn twin(seed: u64) -> Twin {
     let elastic = EffectKind::PreloadElastic;
@@ -79,9 +79,12 @@ fn start_calibration(t: &mut Twin, seed: u64) -> Calibration {
     eprintln!("seed {seed}: the discovery named {names:?}");
     let in_model: Vec<&dyn Effect> = named.iter().map(AsRef::as_ref).collect();
     let set = EffectSet::bind(&in_model, &c, &Params::nominal()).expect("binds");
-    let (cal, _) =
-        variance::calibrate_estimating_noise(&c, &Params::nominal(), &Options::default(), &set)
-            .expect("calibrates");
+    let (cal, _) = calib::calibrate(&calib::Request {
+        effects: &set,
+        noise: calib::Noise::ESTIMATE,
+        ..calib::Request::new(&c, &Params::nominal(), &Options::default())
+    })
+    .expect("calibrates");
     cal
 }
 

@@ -34,7 +34,9 @@ fn identifiable(design: &[PlannedPose], model: Model) -> Vec<usize> {
         outlier_sigma: None,
         ..Default::default()
     };
-    let cal = calib::calibrate(&c, &Params::nominal(), &opts).expect("calibration at nominal");
+    let cal = calib::calibrate(&calib::Request::new(&c, &Params::nominal(), &opts))
+        .map(|(cal, _)| cal)
+        .expect("calibration at nominal");
     cal.identified.iter().map(|i| i.index).collect()
 }
 
@@ -94,8 +96,8 @@ fn check_against(
         selection: Selection::List(ids.clone()),
         ..Default::default()
     };
-    let cal =
-        calib::calibrate(&c, &Params::nominal(), &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+    let cal = calib::calibrate(&calib::Request::new(&c, &Params::nominal(), &opts))
+        .map_or_else(|e| panic!("{name}: {e}"), |(cal, _)| cal);
     for id in &cal.identified {
         let z = (id.value - truth[id.index]) / id.sigma;
         assert!(
@@ -196,7 +198,9 @@ fn full_pose_instruments_reach_the_noise_floor_with_all_errors() {
             selection: Selection::Auto { max_condition: 1e5 },
             ..Default::default()
         };
-        let cal = calib::calibrate(&c, &Params::nominal(), &opts).expect("calibration");
+        let cal = calib::calibrate(&calib::Request::new(&c, &Params::nominal(), &opts))
+            .map(|(cal, _)| cal)
+            .expect("calibration");
         let val = support::validation(&truth, seed + 100);
         let (after, floor) = (
             val_rms_um(&val, &cal.params, Model::M29),
@@ -214,14 +218,15 @@ fn outliers_are_eliminated_and_reported() {
     let truth = support::true_params(41, false);
     let mut c = support::measure(&design::lt(), &truth, 41, true, "lt");
     c.poses[7].x = c.poses[7].x.map(|x| x + 0.5);
-    let cal = calib::calibrate(
+    let cal = calib::calibrate(&calib::Request::new(
         &c,
         &Params::nominal(),
         &Options {
             model: Model::M29,
             ..Default::default()
         },
-    )
+    ))
+    .map(|(cal, _)| cal)
     .expect("calibration");
     assert!(
         cal.outliers.iter().any(|o| o.line == c.poses[7].line),
@@ -252,7 +257,9 @@ fn linked_parameters_follow_their_masters() {
         links: calib::Link::perfect_parallelogram(),
         ..Default::default()
     };
-    let cal = calib::calibrate(&c, &Params::nominal(), &opts).expect("calibration");
+    let cal = calib::calibrate(&calib::Request::new(&c, &Params::nominal(), &opts))
+        .map(|(cal, _)| cal)
+        .expect("calibration");
     assert!(
         (cal.params[L4] - truth[L4]).abs() < 0.01,
         "l4 {} vs {}",
@@ -284,8 +291,11 @@ fn effects_bound_to_another_campaign_are_refused() {
     let scale = rpkm_core::effects::by_name("encoder_scale").expect("encoder_scale");
     let set = rpkm_core::effects::EffectSet::bind(&[scale.as_ref()], &lt, &truth)
         .expect("encoder_scale binds to the tracker campaign");
-    let err = calib::calibrate_with(&kgm, &truth, &Options::default(), &set, &[])
-        .expect_err("another campaign's effects");
+    let err = calib::calibrate(&calib::Request {
+        effects: &set,
+        ..calib::Request::new(&kgm, &truth, &Options::default())
+    })
+    .expect_err("another campaign's effects");
     let text = err.to_string();
     assert!(
         text.contains("kgm.csv")
@@ -305,14 +315,22 @@ fn starting_effect_parameters_of_the_wrong_length_are_refused() {
     let set = rpkm_core::effects::EffectSet::bind(&[scale.as_ref()], &lt, &truth)
         .expect("encoder_scale binds");
     let n = set.n_params();
-    let err = calib::calibrate_with(&lt, &truth, &Options::default(), &set, &vec![0.0; n + 1])
-        .expect_err("one parameter too many");
+    let err = calib::calibrate(&calib::Request {
+        effects: &set,
+        theta0: &vec![0.0; n + 1],
+        ..calib::Request::new(&lt, &truth, &Options::default())
+    })
+    .expect_err("one parameter too many");
     assert!(
         matches!(err, calib::CalibrationError::StartThetaLength { given, expected } if given == n + 1 && expected == n),
         "{err}"
     );
-    calib::calibrate_with(&lt, &truth, &Options::default(), &set, &vec![0.0; n])
-        .expect("the right length calibrates");
+    calib::calibrate(&calib::Request {
+        effects: &set,
+        theta0: &vec![0.0; n],
+        ..calib::Request::new(&lt, &truth, &Options::default())
+    })
+    .expect("the right length calibrates");
 }
 
 /// A reading of −1e300 mm (a campaign built in code, past the CSV reader's checks) must not
@@ -326,7 +344,7 @@ fn an_absurd_reading_is_refused_not_calibrated() {
         model: Model::M24,
         ..Default::default()
     };
-    match calib::calibrate(&c, &truth, &opts) {
+    match calib::calibrate(&calib::Request::new(&c, &truth, &opts)).map(|(cal, _)| cal) {
         Ok(cal) => panic!(
             "calibrated: chi2/dof {}, sigmas {:?}",
             cal.chi2_per_dof,
@@ -352,7 +370,9 @@ fn an_unsolvable_reset_is_blamed_on_its_own_line() {
     let ri = c.poses.iter().position(|p| p.reset).expect("a reset pose");
     c.poses[ri].q[0] += 5_000.0;
     let line = format!("lt.csv:{}", c.poses[ri].line);
-    let err = calib::calibrate(&c, &truth, &Options::default()).expect_err("unsolvable reset");
+    let err = calib::calibrate(&calib::Request::new(&c, &truth, &Options::default()))
+        .map(|(cal, _)| cal)
+        .expect_err("unsolvable reset");
     assert!(err.to_string().contains(&line), "{err}");
     let err = obs::tcp_errors(&c, &truth, Model::M29).expect_err("unsolvable reset");
     assert!(err.to_string().contains(&line), "{err}");

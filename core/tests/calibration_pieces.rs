@@ -35,7 +35,9 @@ fn one_two_and_three_threads_give_the_same_calibration_to_the_bit() {
             threads,
             ..Default::default()
         };
-        calib::calibrate(&c, &Params::nominal(), &opts).expect("the twin's campaign calibrates")
+        calib::calibrate(&calib::Request::new(&c, &Params::nominal(), &opts))
+            .map(|(cal, _)| cal)
+            .expect("the twin's campaign calibrates")
     };
     let one = run(1);
     for threads in [2, 3] {
@@ -73,8 +75,9 @@ fn a_campaign_of_many_pieces_finds_the_true_machine() {
         threads: 2,
         ..Default::default()
     };
-    let cal =
-        calib::calibrate(&c, &Params::nominal(), &opts).expect("the twin's campaign calibrates");
+    let cal = calib::calibrate(&calib::Request::new(&c, &Params::nominal(), &opts))
+        .map(|(cal, _)| cal)
+        .expect("the twin's campaign calibrates");
     assert!(cal.rows > 2000, "{} rows", cal.rows);
     for id in &cal.identified {
         let z = (id.value - truth[id.index]) / id.sigma;

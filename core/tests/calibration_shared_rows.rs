@@ -2,9 +2,7 @@
 //! each the calibration it makes from rows it evaluates itself, to the bit; rows shared at
 //! another point are not read.
 
-use rpkm_core::calib::{
-    calibrate_from, calibrate_shared, calibrate_with, Calibration, Options, SharedRows, WarmStart,
-};
+use rpkm_core::calib::{calibrate, Calibration, Options, Request, SharedRows, WarmStart};
 use rpkm_core::campaign::Instrument;
 use rpkm_core::effects::{self, Effect, EffectSet};
 use rpkm_core::params::{Params, N_PARAMS};
@@ -50,8 +48,7 @@ fn shared_rows_give_the_calibration_of_own_rows() {
         ..Default::default()
     };
     let start = Params::nominal();
-    let base =
-        calibrate_with(&campaign, &start, &opts, &EffectSet::empty(), &[]).expect("current model");
+    let (base, _) = calibrate(&Request::new(&campaign, &start, &opts)).expect("current model");
     let library = effects::library();
     let tried: Vec<&dyn Effect> = library
         .iter()
@@ -74,11 +71,18 @@ fn shared_rows_give_the_calibration_of_own_rows() {
                 theta: &theta,
                 screen,
             };
-            let own =
-                calibrate_from(&campaign, &start, &opts, &set, &[], Some(warm)).expect("own rows");
+            let own_rows = Request {
+                effects: &set,
+                warm: Some(warm),
+                ..Request::new(&campaign, &start, &opts)
+            };
+            let (own, _) = calibrate(&own_rows).expect("own rows");
             for rows in [&shared, &elsewhere] {
-                let read = calibrate_shared(&campaign, &start, &opts, &set, warm, rows)
-                    .expect("shared rows");
+                let (read, _) = calibrate(&Request {
+                    shared: Some(rows),
+                    ..own_rows
+                })
+                .expect("shared rows");
                 assert_same(&own, &read, effect.name());
             }
         }

@@ -134,7 +134,12 @@ fn identified(hidden: EffectKind, magnitude: f64, effect: &str, param: &str) -> 
         outlier_sigma: None,
         ..Default::default()
     };
-    let cal = calib::calibrate_with(&c, &start, &opts, &set, &[]).expect("calibration");
+    let cal = calib::calibrate(&calib::Request {
+        effects: &set,
+        ..calib::Request::new(&c, &start, &opts)
+    })
+    .map(|(cal, _)| cal)
+    .expect("calibration");
     let est = cal
         .effects
         .iter()

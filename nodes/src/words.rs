@@ -4,6 +4,8 @@
 //! terminal, the HTML report and the JSON's text fields alike.
 
 use rpkm_core::calib::online::{Drift, DriftInput, FOLLOWS};
+use rpkm_core::diagnose::neighbours::Neighbours;
+use rpkm_core::diagnose::periodic::Periodic;
 use rpkm_core::diagnose::sparse::Pointer;
 use rpkm_core::diagnose::{Candidate, Diagnosis, Test, VerdictKind};
 use rpkm_core::params::{unit, Unit, NAMES};
@@ -138,10 +140,76 @@ pub fn evidence(c: &Candidate) -> String {
     if let Some(f) = &c.follows {
         let _ = write!(s, "; {}", follows(f));
     }
-    if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
-        let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
+    match c.prediction {
+        Some(p) => {
+            let _ = write!(
+                s,
+                "; {} RMS {:.1} -> {:.1} um (± {:.1})",
+                if p.by_setup {
+                    "cross-validated (by setup)"
+                } else {
+                    "held-out"
+                },
+                p.rms_before_um,
+                p.rms_after_um,
+                p.standard_error_um
+            );
+            if !p.better && c.significant && c.relevant {
+                s.push_str(": fits the campaign, predicts worse: it absorbs something else");
+            }
+        }
+        None => {
+            if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
+                let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
+            }
+        }
     }
     s
+}
+
+/// "the kgm along residual follows a 60.0 mm period of carrier 4 (amplitude 2.4 um)".
+pub fn periodic(p: &Periodic) -> String {
+    let (scale, unit) = if p.direction.starts_with("psi") {
+        (1e6, "urad")
+    } else {
+        (1e3, "um")
+    };
+    format!(
+        "the {} {} residual follows a {:.1} mm period of carrier {} (amplitude {:.2} {unit}, \
+         {:.0} % of its variance, p = {:.1e})",
+        p.instrument,
+        p.direction,
+        p.pitch_mm,
+        p.carrier,
+        p.amplitude * scale,
+        100.0 * p.explained,
+        p.p_value
+    )
+}
+
+/// "neighbours along the kgm along paths are alike (autocorrelation 0.62, z = 7.1)".
+pub fn neighbours(n: &Neighbours) -> String {
+    format!(
+        "neighbouring poses of the {} {} residual are alike along the setups' paths \
+         (autocorrelation {:.2}, {:.1} standard deviations above shuffled, p = {:.1e})",
+        n.instrument, n.direction, n.autocorrelation, n.z_score, n.p_value
+    )
+}
+
+/// What a structured residual shows, of the three tests, where each found structure.
+fn structure_found(d: &Diagnosis) -> Vec<String> {
+    let level = d.test.dictionary_level;
+    let mut found = Vec::new();
+    if let Some(u) = &d.unexplained {
+        found.push(follows(u));
+    }
+    if let Some(p) = d.periodic.as_ref().filter(|p| p.p_value < level) {
+        found.push(periodic(p));
+    }
+    if let Some(n) = d.neighbours.as_ref().filter(|n| n.p_value < level) {
+        found.push(neighbours(n));
+    }
+    found
 }
 
 /// The verdict in one sentence: the missing effect and its evidence, the structure no effect
@@ -163,9 +231,12 @@ pub fn verdict(d: &Diagnosis) -> String {
         .missing_effect
         .as_deref()
         .and_then(|m| d.candidates.iter().find(|c| c.effect == m));
+    let tied = d.tied_term.as_ref().map_or(String::new(), |t| {
+        format!("; the dictionary term {t} follows the residual as well, but a term cannot predict held-out poses")
+    });
     match (d.verdict_kind, named) {
         (VerdictKind::MissingEffect, Some(c)) => format!(
-            "missing effect: {} ({}){}{noise}",
+            "missing effect: {} ({}){tied}{}{noise}",
             c.effect,
             evidence(c),
             remains.map_or(String::new(), |u| format!("; what remains: {u}"))
@@ -177,19 +248,44 @@ pub fn verdict(d: &Diagnosis) -> String {
                     c.effect, c.p_value, c.bic_gain
                 )
             });
+            let found = structure_found(d);
             format!(
                 "{model} leaves a structured residual that no effect of the library explains{why}; {}{noise}",
-                remains.unwrap_or_else(|| {
+                if found.is_empty() {
                     "no covariate, force, time or workspace term follows it".to_owned()
-                })
+                } else {
+                    found.join("; ")
+                }
             )
         }
-        _ => format!(
-            "nothing is missing: {model} explains the measurements to their noise (no effect \
-             and no dictionary term is significant; chi2/dof {:.2} at the estimated noise){noise}",
-            d.chi2_per_dof
-        ),
+        _ => {
+            let doubt = noisier_words(d);
+            format!(
+                "nothing is missing that the tests can find: {model} explains the measurements \
+                 to their noise (no effect, dictionary term, period or neighbour structure is \
+                 significant; chi2/dof {:.2} at the estimated noise){noise}{doubt}",
+                d.chi2_per_dof
+            )
+        }
     }
+}
+
+/// "; but encoder is 2.5x noisier than rated: either it is, or something is missing" for
+/// the groups estimated above twice their rating.
+fn noisier_words(d: &Diagnosis) -> String {
+    if d.noisier_than_rated.is_empty() {
+        return String::new();
+    }
+    let groups: Vec<String> = d
+        .noisier_than_rated
+        .iter()
+        .map(|n| format!("{} is {:.1}x", n.group, n.ratio))
+        .collect();
+    format!(
+        "; but {} noisier than rated: either the instrument is that noisy, or something is \
+         missing that shows as noise",
+        groups.join(", ")
+    )
 }
 
 /// How the verdict was tested, in one sentence.
@@ -197,7 +293,8 @@ pub fn test(t: &Test) -> String {
     format!(
         "noise levels estimated per group from the campaign ({} rounds); candidates by nested \
          F-test at level {:.2e} (Bonferroni over {}), ranked by BIC gain, named when they beat \
-         the best dictionary term; dictionary test at level {} (n = {} rows)",
+         the best dictionary term and predict held-out data better; dictionary, periodogram \
+         and neighbour tests each at level {:.2e} (n = {} rows)",
         t.noise_rounds, t.candidate_level, t.candidates_tried, t.dictionary_level, t.rows
     )
 }

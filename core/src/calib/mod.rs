@@ -6,12 +6,14 @@
 mod lm;
 pub mod online;
 mod report;
+mod request;
 mod rows;
 mod select;
 mod shared;
 mod uncertainty;
 
 pub use report::{gain, rms};
+pub use request::{calibrate, Noise, Request};
 pub use select::{MIN_EFFECT_OBSERVABILITY, MIN_EFFECT_SIGNAL};
 pub use shared::SharedRows;
 
@@ -136,7 +138,9 @@ impl Default for Options {
             links: Vec::new(),
             scaling: Scaling::ColumnNorm,
             outlier_sigma: Some(3.0),
-            max_iterations: 100,
+            // a model far from the data (a missing effect of 10⁷ χ², what a diagnosis meets)
+            // takes the LM longer; a good one stops in a handful
+            max_iterations: 400,
             noise: NoiseModel::default(),
             threads: 0,
         }
@@ -288,29 +292,6 @@ pub struct Calibration {
     pub covariance: SMatrix<f64, N_PARAMS, N_PARAMS>,
 }
 
-/// Calibrate `campaign` starting from `start`.
-pub fn calibrate(
-    campaign: &Campaign,
-    start: &Params,
-    opts: &Options,
-) -> Result<Calibration, CalibrationError> {
-    calibrate_with(campaign, start, opts, &EffectSet::empty(), &[])
-}
-
-/// Calibrate `campaign` with the physical `effects` (bound to it) in the model, starting from
-/// `start` and effect parameters `theta0` (empty: all zero). The geometric parameters are
-/// selected as without effects; every effect parameter the campaign can tell from the
-/// geometry (see [`EffectEstimate::observability`]) is identified with them.
-pub fn calibrate_with(
-    campaign: &Campaign,
-    start: &Params,
-    opts: &Options,
-    effects: &EffectSet,
-    theta0: &[f64],
-) -> Result<Calibration, CalibrationError> {
-    calibrate_from(campaign, start, opts, effects, theta0, None)
-}
-
 /// Where the LM starts when not at the start parameters: the fit of a neighbouring model.
 /// The start parameters stay the prior's centre and the "before" of the report; only the
 /// path changes (the diagnosis starts each candidate at the current model's fit, two or
@@ -327,51 +308,20 @@ pub struct WarmStart<'a> {
     pub screen: bool,
 }
 
-/// [`calibrate_with`], the LM started at `warm` when given.
-pub fn calibrate_from(
-    campaign: &Campaign,
-    start: &Params,
-    opts: &Options,
-    effects: &EffectSet,
-    theta0: &[f64],
-    warm: Option<WarmStart>,
-) -> Result<Calibration, CalibrationError> {
-    calibrate_sharing(campaign, start, opts, effects, theta0, warm, None)
-}
-
-/// [`calibrate_from`] from θ₀ = 0 and the warm start `warm`, its rows at those two points
-/// read from `shared` where they are there ([`SharedRows`]; where they are not, it
-/// evaluates them). The same calibration to the bit.
-pub fn calibrate_shared(
-    campaign: &Campaign,
-    start: &Params,
-    opts: &Options,
-    effects: &EffectSet,
-    warm: WarmStart,
-    shared: &SharedRows,
-) -> Result<Calibration, CalibrationError> {
-    calibrate_sharing(
+/// One fit as `req` asks, its rows weighted by `req.options.noise` (the noise rounds of
+/// [`Noise::Estimate`] make one each), with the rows at the start and the warm start read
+/// from `req.shared` where they are there.
+fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
+    let Request {
         campaign,
         start,
-        opts,
+        options: opts,
         effects,
-        &[],
-        Some(warm),
-        Some(shared),
-    )
-}
-
-/// [`calibrate_from`], with the rows at the start and the warm start from `shared` where
-/// they are there.
-fn calibrate_sharing(
-    campaign: &Campaign,
-    start: &Params,
-    opts: &Options,
-    effects: &EffectSet,
-    theta0: &[f64],
-    warm: Option<WarmStart>,
-    shared: Option<&SharedRows>,
-) -> Result<Calibration, CalibrationError> {
+        theta0,
+        warm,
+        shared,
+        ..
+    } = *req;
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
     let init = match warm {

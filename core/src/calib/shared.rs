@@ -20,7 +20,7 @@ use crate::params::{Model, Params, N_PARAMS};
 use std::collections::HashSet;
 
 /// The rows of a campaign, piece by piece, at the start (every θ zero) and at a warm start,
-/// with the effects of a union: what [`super::calibrate_shared`] reads a calibration's rows
+/// with the effects of a union: what a calibration [`super::Request`] with `shared` reads a calibration's rows
 /// at those points from.
 pub struct SharedRows {
     model: Model,
@@ -164,6 +164,7 @@ impl View<'_> {
             jacobian: r.jacobian,
             d_pcal: r.d_pcal.clone(),
             d_theta: self.theta_of.iter().map(|&u| r.d_theta[u]).collect(),
+            reset_gain: r.reset_gain,
         }
     }
 }

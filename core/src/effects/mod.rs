@@ -340,6 +340,17 @@ impl EffectSet {
         }
     }
 
+    /// The empty set, borrowed for as long as needed (a calibration request without
+    /// effects).
+    pub fn none() -> &'static EffectSet {
+        static NONE: EffectSet = EffectSet {
+            bound: Vec::new(),
+            n_poses: 0,
+            held: Vec::new(),
+        };
+        &NONE
+    }
+
     /// Whether the set was bound to a campaign of `n_poses` poses (an empty set fits any):
     /// corrections of another campaign would be read at the wrong poses.
     pub fn fits_campaign_of(&self, n_poses: usize) -> bool {

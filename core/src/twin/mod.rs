@@ -11,8 +11,11 @@
 //!   `self` poses always switch q2, q3 to followers.
 //! - Encoders and instruments with the twin's own noise ([`TwinConfig::noise`]), which a test
 //!   sets apart from what the calibration assumes.
-//! - Relative setups: the reset pose measures exactly 0, the others true TCP − true reset TCP
-//!   (+ noise); ball-bar r is the distance to the pivot (the reset pose's TCP).
+//! - Relative setups: the reset pose records 0, the others true TCP − true reset TCP, plus
+//!   their own noise minus the noise of the reading the instrument was zeroed on (a tracker,
+//!   grid encoder or interferometer is zeroed on a reading as noisy as any other, shared by
+//!   every reading of the setup; [`ResetReading::Exact`] zeroes on the truth); ball-bar r is
+//!   the distance to the pivot (the reset pose's TCP, where the machine stood).
 //! - Covariate `temp_machine` (°C) and time `t` (s): 3 s per pose, 120 s between setups; the
 //!   clock runs on across campaigns, so a later validation campaign is later in time.
 //!
@@ -70,6 +73,43 @@ pub struct TwinConfig {
     /// The noise of the twin's instruments and encoders (None: noiseless). Its own value:
     /// a test makes the machine noisier, or otherwise noisy, than the calibration assumes.
     pub noise: Option<NoiseModel>,
+    /// What a relative instrument is zeroed on.
+    pub reset: ResetReading,
+    /// A periodic error of one carrier's scale (None: none).
+    pub cyclic: Option<CyclicScale>,
+}
+
+/// A periodic error of one carrier's scale (a linear scale's or an encoder's interpolation
+/// error, a ball screw's pitch error): the carrier stands at its reading plus
+/// `amplitude_mm` · sin(2π · reading / `pitch_mm` + `phase`). Not in the model's library: the
+/// diagnosis must find it without a term made for it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CyclicScale {
+    /// Carrier 0..=3 (q1..q4).
+    pub carrier: usize,
+    pub amplitude_mm: f64,
+    pub pitch_mm: f64,
+    /// rad.
+    pub phase: f64,
+}
+
+impl CyclicScale {
+    /// Carrier position minus reading at `reading` (mm).
+    pub fn offset(&self, reading: f64) -> f64 {
+        self.amplitude_mm * (std::f64::consts::TAU * reading / self.pitch_mm + self.phase).sin()
+    }
+}
+
+/// What a relative instrument (tracker, grid encoder, interferometer) is zeroed on at its
+/// setup's reset pose.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ResetReading {
+    /// A reading with the instrument's noise, as a real instrument is: its error is in
+    /// every reading of the setup.
+    #[default]
+    Noisy,
+    /// The true position: readings independent of each other.
+    Exact,
 }
 
 impl Default for TwinConfig {
@@ -83,6 +123,8 @@ impl Default for TwinConfig {
             stiffness: Stiffness::default(),
             noise: Some(NoiseModel::default()),
             thermal: ThermalPhysics::default(),
+            reset: ResetReading::default(),
+            cyclic: None,
         }
     }
 }
@@ -186,6 +228,9 @@ struct Moved {
     d: Vector2<f64>,
     dpsi: f64,
     tcp: Vector2<f64>,
+    /// The error of the reading the instrument was zeroed on (x, y; a single coordinate or
+    /// ψ in x), which every reading of the setup carries.
+    zero: Vector2<f64>,
 }
 
 /// A square root L (L Lᵀ = cov) of a reading's 2 × 2 covariance: its Cholesky factor, or,
@@ -224,6 +269,9 @@ pub struct Twin {
     /// The drive forces' noise: its own stream, so that the other readings draw the same
     /// numbers whether forces are recorded or not.
     force_rng: StdRng,
+    /// The readings the relative setups are zeroed on: their own stream, so that every other
+    /// draw is the same whether resets are noisy or exact.
+    reset_rng: StdRng,
     t: f64,
     alignment: BTreeMap<String, f64>,
 }
@@ -282,6 +330,7 @@ impl Twin {
         let twin = Twin {
             rng: StdRng::seed_from_u64(config.seed ^ 0x9e37_79b9_7f4a_7c15),
             force_rng: StdRng::seed_from_u64(config.seed ^ 0xf0e5_c0de_0000_0004),
+            reset_rng: StdRng::seed_from_u64(config.seed ^ 0x7e5e_7000_0000_0005),
             t: 0.0,
             alignment: BTreeMap::new(),
             truth_params: p,
@@ -430,7 +479,10 @@ impl Twin {
         let sc = self.scale(temp);
         let elastic_on = self.magnitude(EffectKind::PreloadElastic).is_some() && !followers_23;
         // True carrier positions of the active drives.
-        let s = [0, 1, 2, 3].map(|i| (cmd[i] + enc[i]) * sc[i]);
+        let mut s = [0, 1, 2, 3].map(|i| (cmd[i] + enc[i]) * sc[i]);
+        if let Some(c) = self.config.cyclic.filter(|c| c.carrier < 4) {
+            s[c.carrier] += c.offset(cmd[c.carrier] + enc[c.carrier]);
+        }
         let p = self.effective(temp, s[0], s[3]);
         if elastic_on {
             let eq = elastic::fegm(&p, &self.stiffness(), s, ALL_ACTIVE).map_err(|source| {
@@ -457,10 +509,20 @@ impl Twin {
                 source,
             })?;
         let c = sol.q();
+        let mut q = [cmd[0], c[1] / sc[1], c[2] / sc[2], cmd[3]];
+        // a follower reads its position less its scale's error (to first order in an
+        // amplitude of µm against a pitch of mm)
+        if let Some(cy) = self
+            .config
+            .cyclic
+            .filter(|c| c.carrier == 1 || c.carrier == 2)
+        {
+            q[cy.carrier] -= cy.offset(q[cy.carrier]);
+        }
         Ok(MachineState {
             tcp: Vector2::new(sol.x(), sol.y()),
             psi: sol.psi(),
-            q: [cmd[0], c[1] / sc[1], c[2] / sc[2], cmd[3]],
+            q,
             f: [0.0; 4],
             follower: [false, true, true, false],
         })
@@ -532,8 +594,8 @@ impl Twin {
                 };
                 let cov = noise.xy_covariance(xy, moved.tcp);
                 let e = xy_factor(cov) * Vector2::new(gauss(&mut self.rng), gauss(&mut self.rng));
-                pose.x = Some(d.x + k * e.x);
-                pose.y = Some(d.y + k * e.y);
+                pose.x = Some(d.x + k * e.x - moved.zero.x);
+                pose.y = Some(d.y + k * e.y - moved.zero.y);
             }
             Instrument::LiX
             | Instrument::LiY
@@ -541,7 +603,8 @@ impl Twin {
             | Instrument::Circle
             | Instrument::LiPsi => {
                 let sigma = noise.scalar_sigma(plan.instrument).unwrap_or(0.0);
-                let e = k * sigma * gauss(&mut self.rng);
+                // a ball-bar's zero is where the machine stood: `zero` is 0 for it
+                let e = k * sigma * gauss(&mut self.rng) - moved.zero.x;
                 match plan.instrument {
                     Instrument::LiX => pose.x = Some(d.x + e),
                     Instrument::LiY => pose.y = Some(d.y + e),
@@ -550,6 +613,37 @@ impl Twin {
                 }
             }
             Instrument::SelfCal | Instrument::None => {}
+        }
+    }
+
+    /// The error of the reading a relative instrument is zeroed on at its reset pose (true
+    /// TCP `tcp`), with the instrument's noise scaled by `k` ([`ResetReading::Exact`], and
+    /// an instrument zeroed on no reading, the ball-bar: zero). Drawn from its own stream.
+    fn zero_error(
+        &mut self,
+        instrument: Instrument,
+        tcp: Vector2<f64>,
+        noise: &NoiseModel,
+        k: f64,
+    ) -> Vector2<f64> {
+        if self.config.reset == ResetReading::Exact {
+            return Vector2::zeros();
+        }
+        match instrument {
+            Instrument::Lt | Instrument::Kgm => {
+                let xy = if instrument == Instrument::Lt {
+                    XyInstrument::Lt
+                } else {
+                    XyInstrument::Kgm
+                };
+                let e = Vector2::new(gauss(&mut self.reset_rng), gauss(&mut self.reset_rng));
+                k * (xy_factor(noise.xy_covariance(xy, tcp)) * e)
+            }
+            Instrument::LiX | Instrument::LiY | Instrument::LiPsi => {
+                let sigma = noise.scalar_sigma(instrument).unwrap_or(0.0);
+                Vector2::new(k * sigma * gauss(&mut self.reset_rng), 0.0)
+            }
+            _ => Vector2::zeros(),
         }
     }
 
@@ -598,7 +692,7 @@ impl Twin {
             None => (0.0, NoiseModel::default()),
         };
         let mut poses = Vec::with_capacity(design.len());
-        let mut reset: Option<(String, Vector2<f64>, f64)> = None;
+        let mut reset: Option<(String, Vector2<f64>, f64, Vector2<f64>)> = None;
         let mut last_setup: Option<&str> = None;
         let backlash = self.magnitude(EffectKind::Backlash);
         // last command and approach direction of q1, q4 (backlash)
@@ -628,10 +722,12 @@ impl Twin {
             }
             pose.line = n + 2;
             if plan.reset {
-                reset = Some((plan.setup.clone(), st.tcp, st.psi));
+                let zero = self.zero_error(plan.instrument, st.tcp, &noise, k);
+                reset = Some((plan.setup.clone(), st.tcp, st.psi, zero));
             }
             if plan.instrument.takes_reset() {
-                let Some((_, tcp0, psi0)) = reset.as_ref().filter(|r| r.0 == plan.setup) else {
+                let Some((_, tcp0, psi0, zero)) = reset.as_ref().filter(|r| r.0 == plan.setup)
+                else {
                     return Err(TwinError::NoReset {
                         setup: plan.setup.clone(),
                     });
@@ -641,6 +737,7 @@ impl Twin {
                     d: Rotation2::new(theta) * (st.tcp - tcp0),
                     dpsi: st.psi - psi0,
                     tcp: st.tcp,
+                    zero: *zero,
                 };
                 self.read_instrument(plan, &moved, &noise, k, &mut pose);
             }

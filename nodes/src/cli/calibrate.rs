@@ -1,7 +1,7 @@
 //! `rpkm calibrate`: identify the geometric parameters from a campaign file.
 
 use super::{bad_input, read_campaign, write_json};
-use rpkm_core::calib::{self, Calibration, Options, Scaling, Selection};
+use rpkm_core::calib::{self, Calibration, Options, Request, Scaling, Selection};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::obs;
@@ -140,7 +140,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         .map_err(|e| bad_input(format!("--effects: {e}")))?;
     let (cal, noise) =
         // A calibration error is the campaign's (exit 2, crate::error::exit_code).
-        calibrate(&campaign, &start, &opts, !args.no_noise_estimation, &set).map_err(|e| {
+        calib::calibrate(&Request {
+            effects: &set,
+            noise: weighting(args),
+            ..Request::new(&campaign, &start, &opts)
+        })
+        .map_err(|e| {
             anyhow::Error::new(e).context(format!("calibrating {}", args.campaign.display()))
         })?;
     let val = validation
@@ -247,19 +252,13 @@ fn positive(flag: &str, v: f64) -> anyhow::Result<f64> {
     }
 }
 
-/// Calibrate, estimating each noise group's level from the campaign when `estimate`.
-fn calibrate(
-    campaign: &Campaign,
-    start: &Params,
-    opts: &Options,
-    estimate: bool,
-    effects: &EffectSet,
-) -> Result<(Calibration, NoiseEstimate), calib::CalibrationError> {
-    if estimate {
-        variance::calibrate_estimating_noise(campaign, start, opts, effects)
+/// How the rows are weighted: each noise group's level estimated from the campaign unless
+/// `--no-noise-estimation`.
+fn weighting(args: &CalibrateArgs) -> calib::Noise {
+    if args.no_noise_estimation {
+        calib::Noise::Stated
     } else {
-        calib::calibrate_with(campaign, start, opts, effects, &[])
-            .map(|c| (c, NoiseEstimate::assumed(&opts.noise)))
+        calib::Noise::ESTIMATE
     }
 }
 
@@ -320,7 +319,7 @@ fn diagnosis_options(
             model
         },
         noise: super::parse_noise(args.noise.as_deref())?,
-        estimate_noise: !args.no_noise_estimation,
+        weighting: weighting(args),
         ..Default::default()
     })
 }

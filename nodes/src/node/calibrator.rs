@@ -52,7 +52,7 @@ use crate::campaign_bag::CampaignAssembler;
 use crate::error::bad_input;
 
 /// Parameter keys of the node.
-pub const KEYS: [&str; 16] = [
+pub const KEYS: [&str; 17] = [
     "model",
     "geometry_file",
     "geometry.",
@@ -62,6 +62,7 @@ pub const KEYS: [&str; 16] = [
     "selection",
     "max_condition",
     "outlier_sigma",
+    "noise_estimation",
     "state_buffer",
     "online",
     "online_decimation",
@@ -131,6 +132,9 @@ pub struct CalibratorOptions {
     /// The noise stated for the readings before the campaign's own estimate (the spec's
     /// defaults, with the σ the measurements state for themselves).
     pub noise: rpkm_core::noise::NoiseModel,
+    /// How the rows are weighted: the levels estimated from the campaign (default, as
+    /// `rpkm calibrate`), or the stated ones.
+    pub weighting: calib::Noise,
 }
 
 /// Splits a campaign into its calibration and validation parts.
@@ -163,16 +167,16 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
         noise: o.noise.clone(),
         ..Default::default()
     };
-    // the calibration every command shares: tolerance prior, noise estimated from the data
-    let cal = if auto {
+    if auto {
         opts.selection = Selection::Auto {
             max_condition: o.max_condition,
         };
-        calib::calibrate(&cal_part, &o.start.params, &opts)?
-    } else {
-        let none = rpkm_core::effects::EffectSet::empty();
-        rpkm_core::variance::calibrate_estimating_noise(&cal_part, &o.start.params, &opts, &none)?.0
-    };
+    }
+    // the calibration every command shares: tolerance prior, noise estimated from the data
+    let (cal, _) = calib::calibrate(&calib::Request {
+        noise: o.weighting,
+        ..calib::Request::new(&cal_part, &o.start.params, &opts)
+    })?;
     let mut sigmas = [0.0; N_PARAMS];
     for id in &cal.identified {
         sigmas[id.index] = id.sigma;
@@ -642,6 +646,11 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
                 .f64_in("outlier_sigma", 0.0, super::params::OUTLIER_SIGMA, " σ")
                 .map_err(bad_param)?,
             noise: rpkm_core::noise::NoiseModel::default(),
+            weighting: if p.bool("noise_estimation", true).map_err(bad_param)? {
+                calib::Noise::ESTIMATE
+            } else {
+                calib::Noise::Stated
+            },
         },
         every: p
             .u64_in("calibrate_every", 0, super::params::MEASUREMENT_COUNT)
@@ -655,7 +664,7 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
 /// The calibrator's parameters on its ROS 2 parameter services: what the next calibration
 /// uses and when a campaign ends are live; the buffer and the online tracker need a restart.
 fn specs() -> Vec<Spec> {
-    use live::Default::{Str, F64, U64};
+    use live::Default::{Bool, Str, F64, U64};
     use rpkm_transport::dds_params::ParamRange;
     let int = ParamRange::count;
     let float = |(lo, hi): (f64, f64)| ParamRange::Float(lo, hi);
@@ -705,6 +714,12 @@ fn specs() -> Vec<Spec> {
             F64(0.0),
             "outlier threshold, sigma (0: keep all)",
             float(super::params::OUTLIER_SIGMA),
+        ),
+        Spec::live(
+            "noise_estimation",
+            Bool(true),
+            "weight the rows by the noise the campaign shows (false: the stated noise)",
+            ParamRange::None,
         ),
         fixed_in(
             "state_buffer",
@@ -1143,20 +1158,20 @@ mod tests {
             max_condition: 100.0,
             outlier_sigma: 0.0,
             noise: stated,
+            weighting: calib::Noise::ESTIMATE,
         };
         let out = calibrate_campaign(&rebuilt, &o)?;
         // Independent truth: the core on the original campaign without its held-out setup.
         let (cal_part, _) = split(&c, "val");
-        let direct = rpkm_core::variance::calibrate_estimating_noise(
-            &cal_part,
-            &Params::nominal(),
-            &Options {
-                outlier_sigma: None,
-                ..Options::default()
-            },
-            &rpkm_core::effects::EffectSet::empty(),
-        )?
-        .0;
+        let opts = Options {
+            outlier_sigma: None,
+            ..Options::default()
+        };
+        let nominal = Params::nominal();
+        let (direct, _) = calib::calibrate(&calib::Request {
+            noise: calib::Noise::ESTIMATE,
+            ..calib::Request::new(&cal_part, &nominal, &opts)
+        })?;
         for (name, v) in out.parameters.names.iter().zip(&out.parameters.values) {
             let i = rpkm_core::params::index_of(name)
                 .ok_or("name")

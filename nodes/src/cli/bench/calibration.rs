@@ -277,7 +277,8 @@ fn fit_alone(path: &Path) -> Result<FitAlone> {
         };
         median_of(RPKM_RUNS, || {
             let t = Instant::now();
-            let cal = calib::calibrate(&campaign, &start, &opts)?;
+            let cal = calib::calibrate(&calib::Request::new(&campaign, &start, &opts))
+                .map(|(cal, _)| cal)?;
             std::hint::black_box(&cal);
             Ok(t.elapsed().as_secs_f64())
         })
