@@ -72,7 +72,10 @@ impl Running {
                         return;
                     }
                 }
-                Err(e) => panic!("no line with {needle:?} within {timeout:?}: {e}\n{:#?}", self.seen),
+                Err(e) => panic!(
+                    "no line with {needle:?} within {timeout:?}: {e}\n{:#?}",
+                    self.seen
+                ),
             }
         }
     }
@@ -123,7 +126,9 @@ fn a_normal_launch_prints_only_rpkm_lines() {
         "lines that are not rpkm's: {foreign:#?}"
     );
     assert!(
-        lines.iter().any(|l| l.starts_with("[launch] stopping every node")),
+        lines
+            .iter()
+            .any(|l| l.starts_with("[launch] stopping every node")),
         "{lines:#?}"
     );
 }
@@ -151,11 +156,23 @@ fn the_monitor_names_a_launched_node_that_is_gone_with_its_exit_code() {
     );
     run.wait_for("ingest rejected its configuration", Duration::from_secs(60));
     let out = Command::new(rpkm())
-        .args(["monitor", "--once", "--json", "--window", "2.5", "--ipc-prefix", &prefix])
+        .args([
+            "monitor",
+            "--once",
+            "--json",
+            "--window",
+            "2.5",
+            "--ipc-prefix",
+            &prefix,
+        ])
         .output()
         .expect("rpkm monitor");
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let snapshot: serde_json::Value = serde_json::from_str(&text).expect("JSON snapshot");
     let launch: Vec<(String, String)> = snapshot["launch"]
         .as_array()
@@ -235,8 +252,8 @@ fn two_namespaced_sets_in_one_domain_never_hear_each_other() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = TempDir::new("ns");
     // the shipped files, with time for the DDS observers to match before the stream
-    let shipped = std::fs::read_to_string(root.join("launch_scripts/rpkm.launch.yaml"))
-        .expect("launch file");
+    let shipped =
+        std::fs::read_to_string(root.join("launch_scripts/rpkm.launch.yaml")).expect("launch file");
     let params = std::fs::read_to_string(root.join("launch_scripts/params.yaml"))
         .expect("params")
         .replace("start_delay_s: 1.0", "start_delay_s: 4.0");
@@ -261,11 +278,16 @@ fn two_namespaced_sets_in_one_domain_never_hear_each_other() {
                 .names(names),
         )
         .expect("DDS observer");
-        let sub = observer.subscriber(&topic::TCP_ESTIMATE).expect("subscriber");
+        let sub = observer
+            .subscriber(&topic::TCP_ESTIMATE)
+            .expect("subscriber");
         observed.push((ns, times, observer, sub));
     }
     for (ns, ..) in &observed {
-        let source = format!("source:={}", dir.path(&format!("{}.csv", &ns[1..])).display());
+        let source = format!(
+            "source:={}",
+            dir.path(&format!("{}.csv", &ns[1..])).display()
+        );
         sets.push(Running::start(
             &[
                 launch.to_str().expect("utf-8 path"),
@@ -273,7 +295,10 @@ fn two_namespaced_sets_in_one_domain_never_hear_each_other() {
                 "backend:=both",
                 &format!("namespace:={ns}"),
             ],
-            &[("RPKM_IPC_PREFIX", &prefix), ("ROS_DOMAIN_ID", &domain.to_string())],
+            &[
+                ("RPKM_IPC_PREFIX", &prefix),
+                ("ROS_DOMAIN_ID", &domain.to_string()),
+            ],
         ));
     }
     for (ns, times, _observer, sub) in &observed {
@@ -284,7 +309,10 @@ fn two_namespaced_sets_in_one_domain_never_hear_each_other() {
         got.sort_by(f64::total_cmp);
         assert_eq!(got.len(), want.len(), "{ns}: {} estimates", got.len());
         for (g, w) in got.iter().zip(&want) {
-            assert!((g - w).abs() < 1e-6, "{ns}: estimate stamped {g}, expected {w}");
+            assert!(
+                (g - w).abs() < 1e-6,
+                "{ns}: estimate stamped {g}, expected {w}"
+            );
         }
     }
     for run in sets {
@@ -349,7 +377,9 @@ fn the_launch_brings_a_managed_node_up() {
     assert!((e.y - 1.5).abs() < 1e-6 && e.x.abs() < 1e-6, "{e:?}");
     let lines = run.interrupt();
     assert!(
-        lines.iter().any(|l| l.contains("lifecycle: activate -> active")),
+        lines
+            .iter()
+            .any(|l| l.contains("lifecycle: activate -> active")),
         "{lines:#?}"
     );
 }

@@ -64,7 +64,8 @@ fn estimate(
 
 /// Calls `service` of the estimator with `path`; the reply's (success, message).
 fn call(py: &Path, service: &str, path: &Path) -> (bool, String) {
-    let peer = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/calibration_service_peer.py");
+    let peer =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/calibration_service_peer.py");
     let out = Command::new(py)
         .arg(peer)
         .args(["--domain", DOMAIN, "--node", "/rpkm/tcp_estimator"])
@@ -98,8 +99,11 @@ fn load_calibration_changes_the_next_estimate_to_the_loaded_geometry() {
         .enumerate()
         .map(|(i, n)| ((*n).to_owned(), serde_json::Value::from(loaded[i])))
         .collect();
-    std::fs::write(&file, serde_json::json!({ "parameters": parameters }).to_string())
-        .expect("write calibration");
+    std::fs::write(
+        &file,
+        serde_json::json!({ "parameters": parameters }).to_string(),
+    )
+    .expect("write calibration");
     let prefix = unique("calsrv");
     let t = Transport::new(&TransportConfig::new(unique("calobs")).ipc_prefix(&prefix))
         .expect("transport");
@@ -107,7 +111,14 @@ fn load_calibration_changes_the_next_estimate_to_the_loaded_geometry() {
     let estimates = t.subscriber(&topic::TCP_ESTIMATE).expect("subscriber");
     let _node = Proc(
         Command::new(rpkm())
-            .args(["node", "tcp_estimator", "--backend", "both", "--input-backend", "ipc"])
+            .args([
+                "node",
+                "tcp_estimator",
+                "--backend",
+                "both",
+                "--input-backend",
+                "ipc",
+            ])
             .args(["--ipc-prefix", &prefix])
             .env("ROS_DOMAIN_ID", DOMAIN)
             .spawn()
@@ -120,11 +131,17 @@ fn load_calibration_changes_the_next_estimate_to_the_loaded_geometry() {
     };
     let (nominal, wanted) = (rigid(&Params::nominal()), rigid(&loaded));
     let apart = (nominal.0 - wanted.0).hypot(nominal.1 - wanted.1);
-    assert!(apart > 0.5, "the two geometries put the TCP {apart} mm apart");
+    assert!(
+        apart > 0.5,
+        "the two geometries put the TCP {apart} mm apart"
+    );
     let mut seq = 0;
     let before = estimate(&states, &estimates, &mut seq);
     let off = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).hypot(a.1 - b.1);
-    assert!(off(before, nominal) < 1e-3, "{before:?} vs nominal {nominal:?}");
+    assert!(
+        off(before, nominal) < 1e-3,
+        "{before:?} vs nominal {nominal:?}"
+    );
     let (ok, message) = call(&py, "load_calibration", &file);
     assert!(ok, "{message}");
     assert!(message.contains("cal.json"), "{message}");

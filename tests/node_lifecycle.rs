@@ -48,39 +48,31 @@ fn a_lifecycle_client_drives_the_estimator_through_every_transition() {
     let states = t.publisher(&topic::ACTUATOR_STATE).expect("publisher");
     let _node = Proc(
         Command::new(rpkm())
-            .args(["node", "tcp_estimator", "--unconfigured", "--backend", "both"])
+            .args([
+                "node",
+                "tcp_estimator",
+                "--unconfigured",
+                "--backend",
+                "both",
+            ])
             .args(["--input-backend", "ipc", "--ipc-prefix", &prefix])
             .env("ROS_DOMAIN_ID", DOMAIN)
             .spawn()
             .expect("start tcp_estimator"),
     );
-    // drive states at 200 Hz until the client is done
     let done = Arc::new(AtomicBool::new(false));
-    let streaming = {
-        let done = Arc::clone(&done);
-        std::thread::spawn(move || {
-            let q = igm(&Params::nominal(), Model::M29, 0.0, 1500.0)
-                .expect("igm")
-                .q();
-            let mut seq = 0;
-            while !done.load(Ordering::Relaxed) {
-                seq += 1;
-                let state = ActuatorState {
-                    stamp: now().0,
-                    seq,
-                    position: q.map(|v| v * 1e-3),
-                    follower: [false, true, true, false],
-                    ..ActuatorState::default()
-                };
-                states.publish(&state).expect("publish state");
-                std::thread::sleep(Duration::from_millis(5));
-            }
-        })
-    };
+    let streaming = stream(states, Arc::clone(&done));
     let peer = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/lifecycle_peer.py");
     let out = Command::new(&py)
         .arg(peer)
-        .args(["--domain", DOMAIN, "--node", "/rpkm/tcp_estimator", "--dwell", "1.5"])
+        .args([
+            "--domain",
+            DOMAIN,
+            "--node",
+            "/rpkm/tcp_estimator",
+            "--dwell",
+            "1.5",
+        ])
         .args(["configure", "activate", "deactivate", "cleanup", "shutdown"])
         .stderr(Stdio::inherit())
         .output()
@@ -105,6 +97,54 @@ fn a_lifecycle_client_drives_the_estimator_through_every_transition() {
         "{text}"
     );
     let events = report["events"].as_array().expect("events");
+    check_events(events, &text);
+    assert_eq!(report["estimates_before_activate"], 0, "{text}");
+    // the node became inactive at the end of deactivating; no state sent after it was
+    // estimated
+    let inactive_at = events[5]["timestamp"].as_u64().expect("timestamp");
+    let stamps: Vec<u64> = report["estimate_stamps"]
+        .as_array()
+        .expect("stamps")
+        .iter()
+        .filter_map(Value::as_u64)
+        .collect();
+    let while_active = stamps.iter().filter(|&&s| s < inactive_at).count();
+    assert!(while_active > 20, "{while_active} estimates while active");
+    let late = stamps.iter().filter(|&&s| s > inactive_at).count();
+    assert_eq!(
+        late, 0,
+        "estimates of states sent after the node became inactive"
+    );
+}
+
+/// Drive states at 200 Hz, stamped with the wall clock, until `done`.
+fn stream(
+    states: rpkm_transport::Publisher<ActuatorState>,
+    done: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let q = igm(&Params::nominal(), Model::M29, 0.0, 1500.0)
+            .expect("igm")
+            .q();
+        let mut seq = 0;
+        while !done.load(Ordering::Relaxed) {
+            seq += 1;
+            let state = ActuatorState {
+                stamp: now().0,
+                seq,
+                position: q.map(|v| v * 1e-3),
+                follower: [false, true, true, false],
+                ..ActuatorState::default()
+            };
+            states.publish(&state).expect("publish state");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    })
+}
+
+/// The ten transition events, in order: each transition's start into its transition state,
+/// then its end.
+fn check_events(events: &[Value], text: &str) {
     let seen: Vec<(u64, String, u64, u64)> = events
         .iter()
         .map(|e| {
@@ -132,22 +172,4 @@ fn a_lifecycle_client_drives_the_estimator_through_every_transition() {
     .map(|(i, l, s, g)| (i, l.to_owned(), s, g))
     .collect();
     assert_eq!(seen, want, "{text}");
-    assert_eq!(report["estimates_before_activate"], 0, "{text}");
-    // the node became inactive at the end of deactivating; no state sent after it was
-    // estimated
-    let inactive_at = events[5]["timestamp"].as_u64().expect("timestamp");
-    let stamps: Vec<u64> = report["estimate_stamps"]
-        .as_array()
-        .expect("stamps")
-        .iter()
-        .filter_map(Value::as_u64)
-        .collect();
-    let while_active = stamps.iter().filter(|&&s| s < inactive_at).count();
-    assert!(while_active > 20, "{while_active} estimates while active");
-    let late: Vec<&u64> = stamps.iter().filter(|&&s| s > inactive_at).collect();
-    assert!(
-        late.is_empty(),
-        "{} estimates of states sent after the node became inactive",
-        late.len()
-    );
 }

@@ -38,7 +38,10 @@ struct Clients {
 }
 
 impl Clients {
-    fn open(dds: &std::sync::Arc<rpkm_transport::dds::DdsNode>, node: &str) -> anyhow::Result<Self> {
+    fn open(
+        dds: &std::sync::Arc<rpkm_transport::dds::DdsNode>,
+        node: &str,
+    ) -> anyhow::Result<Self> {
         Ok(Self {
             get: dds.client(&format!("{node}/get_state"), kind("GetState"))?,
             change: dds.client(&format!("{node}/change_state"), kind("ChangeState"))?,
@@ -49,7 +52,11 @@ impl Clients {
     async fn state(&self, timeout: Duration) -> Option<u8> {
         let deadline = tokio::time::Instant::now() + timeout;
         while tokio::time::Instant::now() < deadline {
-            if let Some(r) = self.get.call_once(EmptyRequest::default(), REPLY_WAIT).await {
+            if let Some(r) = self
+                .get
+                .call_once(EmptyRequest::default(), REPLY_WAIT)
+                .await
+            {
                 return Some(r.current_state.id);
             }
         }
@@ -130,8 +137,16 @@ pub async fn bring_up(desc: &LaunchDescription) {
             ));
         }
         for (id, goal, label) in [
-            (Transition::TRANSITION_CONFIGURE, State::PRIMARY_STATE_INACTIVE, "configured"),
-            (Transition::TRANSITION_ACTIVATE, State::PRIMARY_STATE_ACTIVE, "active"),
+            (
+                Transition::TRANSITION_CONFIGURE,
+                State::PRIMARY_STATE_INACTIVE,
+                "configured",
+            ),
+            (
+                Transition::TRANSITION_ACTIVATE,
+                State::PRIMARY_STATE_ACTIVE,
+                "active",
+            ),
         ] {
             if let Err(why) = clients.transition(id, goal).await {
                 return log(format!(

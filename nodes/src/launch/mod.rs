@@ -699,13 +699,7 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
         .unwrap_or_default();
     let (respawn, respawn_delay) = respawn(ctx, body, &format!("node {name}"), true)?;
     let (namespace, remaps) = names(ctx, body, &name)?;
-    let managed = flag(ctx, body, "managed", &format!("node {name}"))?;
-    if managed && exec == "ingest" {
-        return Err(ctx.err_at(
-            "managed",
-            format!("node {name}: ingest is not a managed node (tcp_estimator, preload_monitor, calibrator are)"),
-        ));
-    }
+    let managed = managed(ctx, body, &name, &exec)?;
     Ok(NodeSpec {
         program: Program::Node,
         exec,
@@ -741,21 +735,44 @@ fn flag(
     }
 }
 
+/// A node entry's `managed:` (ingest is not a managed node).
+fn managed(
+    ctx: &Ctx<'_>,
+    body: &serde_yaml::Mapping,
+    name: &str,
+    exec: &str,
+) -> Result<bool, LaunchError> {
+    let managed = flag(ctx, body, "managed", &format!("node {name}"))?;
+    if managed && exec == "ingest" {
+        return Err(ctx.err_at(
+            "managed",
+            format!(
+                "node {name}: ingest is not a managed node (tcp_estimator, preload_monitor, \
+                 calibrator are)"
+            ),
+        ));
+    }
+    Ok(managed)
+}
+
+/// Topic remapping rules, (FROM, TO) in order.
+type Remaps = Vec<(String, String)>;
+
 /// A node entry's `namespace:` and `remap: [{from, to}]`, checked as the node will check
 /// them (ROS 2's name rules).
 fn names(
     ctx: &Ctx<'_>,
     body: &serde_yaml::Mapping,
     name: &str,
-) -> Result<(Option<String>, Vec<(String, String)>), LaunchError> {
+) -> Result<(Option<String>, Remaps), LaunchError> {
     let namespace = get(body, "namespace")
         .map(|v| ctx.string(v, &format!("node {name} namespace")))
         .transpose()?;
     let mut remaps = Vec::new();
     if let Some(list) = get(body, "remap") {
-        let list = list.as_sequence().ok_or_else(|| {
-            ctx.err_at("remap", format!("node {name}: remap: expected a list"))
-        })?;
+        let list = list
+            .as_sequence()
+            .ok_or_else(|| ctx.err_at("remap", format!("node {name}: remap: expected a list")))?;
         for rule in list {
             let m = rule.as_mapping().ok_or_else(|| {
                 ctx.err_at("remap", format!("node {name}: remap entry: expected a map"))
@@ -772,9 +789,15 @@ fn names(
             remaps.push((part("from")?, part("to")?));
         }
     }
-    let ns = namespace.as_deref().unwrap_or(rpkm_transport::NODE_NAMESPACE);
+    let ns = namespace
+        .as_deref()
+        .unwrap_or(rpkm_transport::NODE_NAMESPACE);
     if let Err(e) = rpkm_transport::Names::new(ns, &remaps) {
-        let key = if e.what == "namespace" { "namespace" } else { "remap" };
+        let key = if e.what == "namespace" {
+            "namespace"
+        } else {
+            "remap"
+        };
         return Err(ctx.err_at(key, format!("node {name}: {e}")));
     }
     Ok((namespace, remaps))
@@ -1108,8 +1131,9 @@ launch:
                 "n.yaml:5: node name \"aaaa",
             ),
         ] {
-            let e = LaunchDescription::parse(&format!("{entry}{tail}"), "n.yaml", Path::new("."), &[])
-                .expect_err(tail);
+            let e =
+                LaunchDescription::parse(&format!("{entry}{tail}"), "n.yaml", Path::new("."), &[])
+                    .expect_err(tail);
             assert!(e.to_string().starts_with(says), "{tail}: {e}");
         }
         Ok(())

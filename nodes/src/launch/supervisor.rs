@@ -122,7 +122,11 @@ impl Reporter {
                 let p = t
                     .publisher(&rpkm_transport::topic::DIAGNOSTICS)
                     .map_err(|e| e.to_string())?;
-                Ok((t, p, names.status_name(crate::monitor::state::LAUNCH_STATUS)))
+                Ok((
+                    t,
+                    p,
+                    names.status_name(crate::monitor::state::LAUNCH_STATUS),
+                ))
             });
         match opened {
             Ok((t, p, status_name)) => Self {

@@ -328,7 +328,7 @@ impl Watch {
     pub fn in_namespace(&mut self, names: &rpkm_transport::Names) {
         // the status name of a node called "x", without the "x"
         let of_x = names.status_name("x");
-        self.status_prefix = of_x[..of_x.len() - 1].to_owned();
+        of_x[..of_x.len() - 1].clone_into(&mut self.status_prefix);
     }
 
     fn heard_topic(&mut self, topic: &str, now: f64) {

@@ -85,7 +85,11 @@ struct Settings {
 /// Opens the node: its source (the option, else parameter `source`, else dds), transport and
 /// settings; every bad value is bad input (exit 2) naming the key.
 fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
-    let pre = args.common.identity("ingest")?.params().map_err(bad_param)?;
+    let pre = args
+        .common
+        .identity("ingest")?
+        .params()
+        .map_err(bad_param)?;
     let source = match &args.source {
         Some(s) => s.clone(),
         None => pre.string("source", "dds").map_err(bad_param)?,

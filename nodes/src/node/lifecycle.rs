@@ -248,10 +248,8 @@ impl Lifecycle {
             change: dds.serve_calls("change_state", kind("ChangeState"))?,
             get: dds.serve_calls("get_state", kind("GetState"))?,
             states: dds.serve_calls("get_available_states", kind("GetAvailableStates"))?,
-            transitions: dds.serve_calls(
-                "get_available_transitions",
-                kind("GetAvailableTransitions"),
-            )?,
+            transitions: dds
+                .serve_calls("get_available_transitions", kind("GetAvailableTransitions"))?,
         };
         // `~/transition_event`, in the node's namespace like its other topics
         let name = rpkm_transport::names::intern(format!(
@@ -323,11 +321,8 @@ impl Lifecycle {
     /// `~/transition_event` says it.
     pub fn finish(&mut self, r: Requested, outcome: Result<(), String>, ctx: &NodeContext) {
         let via = State::new(r.edge.via.0, r.edge.via.1);
-        let (end, success) = match &outcome {
-            Ok(()) => (
-                Transition::new(r.edge.done, "transition_success"),
-                true,
-            ),
+        let (end, success) = match outcome {
+            Ok(()) => (Transition::new(r.edge.done, "transition_success"), true),
             Err(why) => {
                 ctx.log(format!("WARN: lifecycle: {} failed: {why}", r.edge.label));
                 (
@@ -338,8 +333,25 @@ impl Lifecycle {
         };
         self.state = if success { r.edge.to } else { r.edge.from };
         self.event(end, via, self.state.state());
-        ctx.log(format!("lifecycle: {} -> {}", r.edge.label, self.state.state().label));
+        ctx.log(format!(
+            "lifecycle: {} -> {}",
+            r.edge.label,
+            self.state.state().label
+        ));
         r.call.answer(ChangeStateResponse { success });
+    }
+
+    /// Performs the transition asked for, if any: `configure` sets the node up from its
+    /// parameters read again (the other transitions change only what it publishes).
+    pub fn serve(&mut self, ctx: &NodeContext, configure: impl FnOnce() -> Result<(), String>) {
+        if let Some(r) = self.next(ctx) {
+            let outcome = if r.step() == Step::Configure {
+                configure()
+            } else {
+                Ok(())
+            };
+            self.finish(r, outcome, ctx);
+        }
     }
 
     fn event(&self, transition: Transition, start_state: State, goal_state: State) {
@@ -372,7 +384,10 @@ mod tests {
         );
         assert_eq!(by_id(Primary::Inactive, 3), Some((Primary::Active, 30)));
         assert_eq!(by_id(Primary::Active, 4), Some((Primary::Inactive, 40)));
-        assert_eq!(by_id(Primary::Inactive, 2), Some((Primary::Unconfigured, 20)));
+        assert_eq!(
+            by_id(Primary::Inactive, 2),
+            Some((Primary::Unconfigured, 20))
+        );
         assert_eq!(by_id(Primary::Active, 7), Some((Primary::Finalized, 50)));
         // not offered: activate an unconfigured node, configure an active one, shut down
         // an active node by the inactive node's id

@@ -291,7 +291,6 @@ impl RosArgs {
     }
 }
 
-
 /// Parameter keys every node declares.
 pub const COMMON_KEYS: [&str; 3] = ["backend", "input_backend", "diagnostics_period_s"];
 /// Parameter keys of the nodes that evaluate the model ([`Geometry::from_params`]).
@@ -934,8 +933,12 @@ mod tests {
         assert_eq!(id.name, "est_a");
         assert_eq!(id.names.namespace(), "/machine_a");
         let p = id.params()?;
-        assert_eq!(p.f64("stiffness_factor", 1.0)?, 2.0);
-        assert_eq!(p.u64("model", 29)?, 29, "the /rpkm section is another node's");
+        assert!((p.f64("stiffness_factor", 1.0)? - 2.0).abs() < 1e-12);
+        assert_eq!(
+            p.u64("model", 29)?,
+            29,
+            "the /rpkm section is another node's"
+        );
         let bad = CommonArgs {
             ros_args: words("-r __ns:=machine_a"),
             ..CommonArgs::default()

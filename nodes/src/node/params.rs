@@ -664,8 +664,7 @@ tcp_estimator:
     /// wildcard section) and a value where the geometry map belongs are refused with the
     /// key; an empty map too (it does not vanish).
     #[test]
-    fn maps_and_values_in_each_others_place_are_refused_with_the_key() -> Result<(), ParamError>
-    {
+    fn maps_and_values_in_each_others_place_are_refused_with_the_key() -> Result<(), ParamError> {
         let declared = ["diagnostics_period_s", "model", "geometry."];
         for (text, says) in [
             (

@@ -13,7 +13,7 @@
 //! (`implausible` on /diagnostics): it never sets a level, so a non-physical branch of the
 //! solver (10⁸ N "predicted") cannot raise ERROR on a drive.
 
-use super::lifecycle::{Lifecycle, Step};
+use super::lifecycle::Lifecycle;
 use std::time::Duration;
 
 use rpkm_core::elastic::{
@@ -471,6 +471,18 @@ fn specs() -> Vec<Spec> {
 }
 
 /// Runs the node until SIGINT/SIGTERM.
+/// Logs the input's losses since the last report: once per report, not per gap (a stall
+/// loses in bursts).
+fn report_loss(ctx: &NodeContext, monitor: &Monitor, lost_reported: &mut u64) {
+    if monitor.input.lost > *lost_reported {
+        *lost_reported = monitor.input.lost;
+        ctx.log(format!(
+            "WARN: {}",
+            monitor.input.summary().unwrap_or_default()
+        ));
+    }
+}
+
 /// A lifecycle configure: the parameters read again from the node's files.
 fn reconfigure(args: &CommonArgs, ctx: &NodeContext, declared: &[&str]) -> Result<Config, String> {
     ctx.reread_params(args, "preload_monitor", declared)
@@ -511,19 +523,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let mut n = 0u64;
     let mut lost_reported = 0;
     while !super::shutdown::requested() {
-        if let Some(r) = lifecycle.next(&ctx) {
-            // configure: the parameter files read again, thresholds and geometry from them
-            let outcome = if r.step() == Step::Configure {
-                reconfigure(args, &ctx, &declared).map(|c| {
-                    monitor.set_thresholds(c.thresholds);
-                    status_every = c.status_every;
-                    monitor.set_geometry(c.geometry);
-                })
-            } else {
-                Ok(())
-            };
-            lifecycle.finish(r, outcome, &ctx);
-        }
+        lifecycle.serve(&ctx, || {
+            reconfigure(args, &ctx, &declared).map(|c| {
+                monitor.set_thresholds(c.thresholds);
+                status_every = c.status_every;
+                monitor.set_geometry(c.geometry);
+            })
+        });
         if let Some(g) = parameters.poll(&ctx, monitor.geometry())? {
             monitor.set_geometry(g);
         }
@@ -559,14 +565,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             }
             if report.due() {
                 diagnostics.publish(&diagnostic_array(monitor.status(&ctx.status_name)))?;
-                // A loss is logged once per report, not per gap (a stall loses in bursts).
-                if monitor.input.lost > lost_reported {
-                    lost_reported = monitor.input.lost;
-                    ctx.log(format!(
-                        "WARN: {}",
-                        monitor.input.summary().unwrap_or_default()
-                    ));
-                }
+                report_loss(&ctx, &monitor, &mut lost_reported);
             }
             idle.wait_for(&states)?;
         }

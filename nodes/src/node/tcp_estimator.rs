@@ -29,7 +29,7 @@ use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
 use super::inputs::{ParameterFollower, SeqGaps};
-use super::lifecycle::{Lifecycle, Step};
+use super::lifecycle::Lifecycle;
 use super::live::{self, LiveParams, Spec};
 use super::views::{self, TcpViews};
 use super::{
@@ -423,13 +423,9 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let mut report = Every::new(ctx.diagnostics_period()?);
     let mut lost_reported = 0;
     while !super::shutdown::requested() {
-        if let Some(r) = lifecycle.next(&ctx) {
-            // configure: the parameter files read again, the node set up from them
-            let outcome = (r.step() == Step::Configure)
-                .then(|| reconfigure(args, &ctx, &declared, &mut est, views.as_mut()))
-                .unwrap_or(Ok(()));
-            lifecycle.finish(r, outcome, &ctx);
-        }
+        lifecycle.serve(&ctx, || {
+            reconfigure(args, &ctx, &declared, &mut est, views.as_mut())
+        });
         if let Some(g) = parameters.poll(&ctx, est.geometry())? {
             est.set_geometry(g);
         }

@@ -194,8 +194,7 @@ impl DdsNode {
         };
         let context = Context::with_options(ContextOptions::new().domain_id(domain))
             .map_err(|e| err(e.to_string()))?;
-        let node_name =
-            NodeName::new(namespace, name).map_err(|e| err(format!("{e:?}")))?;
+        let node_name = NodeName::new(namespace, name).map_err(|e| err(format!("{e:?}")))?;
         let node = context
             .new_node(
                 node_name,

@@ -119,7 +119,9 @@ impl DdsNode {
         };
         let (tx, rx) = mpsc::channel();
         let (stop_tx, stop_rx) = futures::channel::oneshot::channel();
-        let task = self.runtime().spawn(serve(server, tx, stop_rx, name.clone()));
+        let task = self
+            .runtime()
+            .spawn(serve(server, tx, stop_rx, name.clone()));
         Ok(CallServer {
             calls: rx,
             stop: Some(stop_tx),

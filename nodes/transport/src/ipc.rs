@@ -22,11 +22,11 @@ use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo, SendError};
 use iceoryx2::prelude::*;
+use rpkm_msgs::lifecycle_msgs::TransitionEvent;
 use rpkm_msgs::{
     from_cdr, to_cdr, ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, JointState,
     Parameters, PoseStamped, PreloadStatus, RosMessage, TcpEstimate, TcpMeasurement, TfMessage,
 };
-use rpkm_msgs::lifecycle_msgs::TransitionEvent;
 
 use crate::error::TransportError;
 use crate::topic::{Durability, Qos, Reliability, Topic};

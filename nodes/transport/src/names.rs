@@ -128,7 +128,10 @@ impl Names {
 
     /// `name` in the namespace: `/rpkm/x` becomes `NS/x`; other names stay.
     fn in_namespace(&self, name: &str) -> String {
-        match name.strip_prefix(NODE_NAMESPACE).and_then(|r| r.strip_prefix('/')) {
+        match name
+            .strip_prefix(NODE_NAMESPACE)
+            .and_then(|r| r.strip_prefix('/'))
+        {
             Some(rest) => self.absolute(rest),
             None => name.to_owned(),
         }
@@ -202,15 +205,24 @@ mod tests {
                 ("/rpkm/parameters".into(), "geometry".into()),
             ],
         )?;
-        assert_eq!(a.resolve("/rpkm/actuator_state"), "/machine_a/actuator_state");
+        assert_eq!(
+            a.resolve("/rpkm/actuator_state"),
+            "/machine_a/actuator_state"
+        );
         assert_eq!(a.resolve("/rpkm/tcp_estimate"), "/cell/estimate_a");
         assert_eq!(a.resolve("/rpkm/parameters"), "/machine_a/geometry");
         assert_eq!(a.resolve("/diagnostics"), "/diagnostics");
         assert_eq!(a.resolve_ipc("/diagnostics"), "/machine_a/diagnostics");
-        assert_eq!(a.resolve_ipc("/rpkm/actuator_state"), "/machine_a/actuator_state");
+        assert_eq!(
+            a.resolve_ipc("/rpkm/actuator_state"),
+            "/machine_a/actuator_state"
+        );
         assert_eq!(a.status_name("ingest"), "machine_a/ingest");
         let nested = Names::new("/cell/m2", &[])?;
-        assert_eq!(nested.resolve("/rpkm/tcp_estimate"), "/cell/m2/tcp_estimate");
+        assert_eq!(
+            nested.resolve("/rpkm/tcp_estimate"),
+            "/cell/m2/tcp_estimate"
+        );
         Ok(())
     }
 

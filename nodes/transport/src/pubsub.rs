@@ -3,10 +3,10 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crate::names::Names;
 use crate::dds::{domain_id_from_env, DdsNode, DdsPublisher, DdsSubscriber};
 use crate::error::TransportError;
 use crate::ipc::{IpcMessage, IpcNode, IpcRecv, IpcSend};
+use crate::names::Names;
 use crate::topic::Topic;
 
 /// Which middleware a port uses.
