@@ -181,6 +181,11 @@ pub struct Candidate {
     /// Whether the model predicts better with it: held-out errors compared pose by pose
     /// (None without held-out data).
     pub prediction: Option<Prediction>,
+    /// The same judged by cross-validation by setup on the calibration campaign, where the
+    /// held-out data cannot tell (none, or a change within its standard error: an effect the
+    /// held-out instrument does not see, forces, or setup-local parameters), for a candidate
+    /// that could be named.
+    pub cross_validated: Option<Prediction>,
 }
 
 /// Does a candidate make the model predict better? Its held-out RMS against the current
@@ -188,20 +193,37 @@ pub struct Candidate {
 /// something else, and is never named.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct Prediction {
-    pub rms_before_um: f64,
-    pub rms_after_um: f64,
-    /// Standard error of the fall (µm), from the poses' paired squared errors.
-    pub standard_error_um: f64,
+    /// RMS of the errors before and after, in `unit`.
+    pub rms_before: f64,
+    pub rms_after: f64,
+    /// Standard error of the fall, from the paired squared errors.
+    pub standard_error: f64,
+    /// `um` (held-out TCP errors) or `sigma` (left-out rows of every instrument, each in its
+    /// own noise).
+    pub unit: &'static str,
     /// The RMS fell by more than its standard error.
     pub better: bool,
-    /// Judged by cross-validation by setup on the calibration campaign (no held-out data).
+    /// The RMS rose by more than its standard error.
+    pub worse: bool,
+    /// Judged by cross-validation by setup on the calibration campaign.
     pub by_setup: bool,
 }
 
 impl Prediction {
-    /// The comparison of the held-out errors `before` and `after` (mm, the same poses in
+    /// The comparison of the held-out TCP errors `before` and `after` (mm, the same poses in
     /// the same order); None without poses.
     pub fn of(before: &[f64], after: &[f64]) -> Option<Prediction> {
+        Self::compared(before, after).map(|p| Prediction {
+            rms_before: p.rms_before * 1e3,
+            rms_after: p.rms_after * 1e3,
+            standard_error: p.standard_error * 1e3,
+            unit: "um",
+            ..p
+        })
+    }
+
+    /// The comparison of errors in any one unit (left-out rows in σ: `unit` sigma).
+    fn compared(before: &[f64], after: &[f64]) -> Option<Prediction> {
         let n = before.len();
         if n < 2 || after.len() != n {
             return None;
@@ -217,10 +239,12 @@ impl Prediction {
         // the RMS's fall and its error through d(RMS²) = (RMS_b + RMS_a) d(RMS)
         let se = (var / n as f64).sqrt() / (rb + ra).max(f64::MIN_POSITIVE);
         Some(Prediction {
-            rms_before_um: rb * 1e3,
-            rms_after_um: ra * 1e3,
-            standard_error_um: se * 1e3,
+            rms_before: rb,
+            rms_after: ra,
+            standard_error: se,
+            unit: "sigma",
             better: rb - ra > se,
+            worse: ra - rb > se,
             by_setup: false,
         })
     }
@@ -462,24 +486,20 @@ impl Search<'_> {
             vectors,
             ..candidates(self.campaign, self.tried, tries, &base, self.level)
         };
-        if self.validation.is_none() {
-            self.cross_validate(&mut round, &base, copts);
-        }
+        self.cross_validate(&mut round, &base, copts);
         Ok((base, round, made))
     }
 }
 
 impl Search<'_> {
-    /// Without held-out data, each candidate that could be named is judged by
-    /// cross-validation by setup ([`cross`]): the current model's and the candidate's
-    /// predictions of the setups each fold left out, compared row by row.
+    /// Each candidate that could be named and that held-out data cannot judge (none, or a
+    /// tie) is judged by cross-validation by setup ([`cross`]): the current model's and the
+    /// candidate's predictions of the setups each fold left out, compared row by row.
     fn cross_validate(&self, round: &mut Round, base: &Fitted, copts: &calib::Options) {
         let mut before: Option<Option<Vec<f64>>> = None;
-        for c in round
-            .candidates
-            .iter_mut()
-            .filter(|c| c.significant && c.relevant)
-        {
+        let undecided = |c: &Candidate| c.prediction.is_none_or(|p| !p.better && !p.worse);
+        let open = |c: &&mut Candidate| c.significant && c.relevant && undecided(c);
+        for c in round.candidates.iter_mut().filter(open) {
             let Some(effect) = self.tried.iter().find(|e| e.name() == c.effect) else {
                 continue;
             };
@@ -508,7 +528,7 @@ impl Search<'_> {
                 copts,
             );
             if let (Some(b), Some(a)) = (base_rows.as_ref(), after) {
-                c.prediction = Prediction::of(b, &a).map(|p| Prediction {
+                c.cross_validated = Prediction::compared(b, &a).map(|p| Prediction {
                     by_setup: true,
                     ..p
                 });
@@ -677,10 +697,14 @@ fn choose(
     // a single dictionary term's BIC gain: what an effect must beat to be the explanation
     let term_bic = structure.explained_chi2 - (n_rows as f64).ln();
     candidates.iter().find_map(|c| {
-        // where held-out data judge, a better prediction is the evidence that the effect's
-        // parameters are worth their number (setup-local ones, an instrument's alignment in
-        // each mounting, cost BIC per setup); else the information criterion is
-        let worth = c.prediction.map_or(c.bic_gain > 0.0, |p| p.better);
+        // where held-out (or left-out) data judge, a better prediction is the evidence that
+        // the effect's parameters are worth their number (setup-local ones, an instrument's
+        // alignment in each mounting, cost BIC per setup); else the information criterion is
+        let judged = c
+            .prediction
+            .filter(|p| p.better || p.worse)
+            .or(c.cross_validated);
+        let worth = judged.map_or(c.bic_gain > 0.0, |p| p.better);
         if !(c.significant && c.relevant && worth) {
             return None;
         }
@@ -690,7 +714,7 @@ fn choose(
                 tied_term: None,
             });
         }
-        let proven = c.prediction.is_some_and(|p| p.better);
+        let proven = judged.is_some_and(|p| p.better);
         let fit = fits.iter().find(|(name, _)| *name == c.effect)?;
         let clean = sparse::structure(campaign, &fit.1.rows).p_value >= level;
         (proven && clean).then(|| Chosen {
@@ -1453,6 +1477,7 @@ fn compare(
         chi2_per_dof_before: base.fit.chi2_per_dof,
         follows,
         prediction: Prediction::of(&base.fit.val_errors, &kept.fit.val_errors),
+        cross_validated: None,
     })
 }
 

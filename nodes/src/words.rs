@@ -140,28 +140,27 @@ pub fn evidence(c: &Candidate) -> String {
     if let Some(f) = &c.follows {
         let _ = write!(s, "; {}", follows(f));
     }
-    match c.prediction {
-        Some(p) => {
-            let _ = write!(
-                s,
-                "; {} RMS {:.1} -> {:.1} um (± {:.1})",
-                if p.by_setup {
-                    "cross-validated (by setup)"
-                } else {
-                    "held-out"
-                },
-                p.rms_before_um,
-                p.rms_after_um,
-                p.standard_error_um
-            );
-            if !p.better && c.significant && c.relevant {
-                s.push_str(": fits the campaign, predicts worse: it absorbs something else");
-            }
+    for p in [c.prediction, c.cross_validated].into_iter().flatten() {
+        let _ = write!(
+            s,
+            "; {} RMS {:.2} -> {:.2} {} (± {:.2})",
+            if p.by_setup {
+                "cross-validated (by setup)"
+            } else {
+                "held-out"
+            },
+            p.rms_before,
+            p.rms_after,
+            p.unit,
+            p.standard_error
+        );
+        if p.worse && c.significant && c.relevant {
+            s.push_str(": fits the campaign, predicts worse: it absorbs something else");
         }
-        None => {
-            if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
-                let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
-            }
+    }
+    if c.prediction.is_none() {
+        if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
+            let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
         }
     }
     s

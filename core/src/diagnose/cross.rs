@@ -24,8 +24,9 @@ pub struct Fitted<'a> {
     pub theta: &'a [f64],
 }
 
-/// The length rows (mm) of every setup, each predicted by the model calibrated without its
-/// fold, in fold order and row order: the same rows for any model of the same campaign.
+/// The rows of every setup (each in its noise, r/σ: every instrument and the drive forces),
+/// each predicted by the model calibrated without its fold, in fold order and row order: the
+/// same rows for any model of the same campaign.
 /// None where the campaign has fewer than two setups or a fold cannot be calibrated.
 pub fn predicted_rows(
     campaign: &Campaign,
@@ -86,9 +87,9 @@ pub fn predicted_rows(
         .ok()?;
         out.extend(
             rows.iter()
-                .filter(|r| r.direction.is_length())
+                .filter(|r| r.sigma > 0.0)
                 .filter(|r| left_out.contains(&campaign.poses[r.pose].setup.as_str()))
-                .map(|r| r.value),
+                .map(|r| r.value / r.sigma),
         );
     }
     Some(out)

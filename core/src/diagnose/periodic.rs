@@ -7,7 +7,7 @@
 //! free) against the rest of the residual.
 
 use crate::campaign::Campaign;
-use crate::obs::RowValue;
+use crate::obs::{Direction, RowValue};
 use std::collections::BTreeMap;
 
 /// Shortest pitch tried, mm: a few times the finest step of the designs.
@@ -73,14 +73,16 @@ pub fn periodogram(campaign: &Campaign, rows: &[RowValue]) -> Option<Periodic> {
     })
 }
 
-/// The rows grouped by instrument and direction, in pose order (forces excluded: their
-/// rows follow the loop's stiffness, not a position's period).
+/// The rows grouped by instrument and direction, in pose order. Forces and a 2-D
+/// instrument's compatibility rows are left out: they follow the loop's stiffness and the
+/// elastic model's last fraction of a µm, which a regular grid of poses aliases into short
+/// periods; a scale's error shows in the TCP and follower rows.
 fn series(campaign: &Campaign, rows: &[RowValue]) -> Vec<Series> {
     let mut groups: BTreeMap<(String, String), Vec<&RowValue>> = BTreeMap::new();
-    for r in rows
-        .iter()
-        .filter(|r| !r.direction.is_force() && r.sigma > 0.0)
-    {
+    let periodic = |r: &&RowValue| {
+        !r.direction.is_force() && !matches!(r.direction, Direction::Compat(_)) && r.sigma > 0.0
+    };
+    for r in rows.iter().filter(periodic) {
         groups
             .entry((r.instrument.as_str().to_owned(), r.direction.to_string()))
             .or_default()
