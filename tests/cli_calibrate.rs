@@ -2,7 +2,7 @@
 //! bad campaign files exit with code 2 and name file, line and column.
 
 use rpkm_core::campaign::Instrument;
-use rpkm_core::twin::{Twin, TwinConfig};
+use rpkm_core::twin::{ResetReading, Twin, TwinConfig};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -16,9 +16,10 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
-fn write_twin_campaigns(dir: &Path, seed: u64) -> (PathBuf, PathBuf) {
+fn write_twin_campaigns(dir: &Path, seed: u64, reset: ResetReading) -> (PathBuf, PathBuf) {
     let mut twin = Twin::new(TwinConfig {
         seed,
+        reset,
         ..Default::default()
     })
     .expect("twin");
@@ -35,7 +36,11 @@ fn write_twin_campaigns(dir: &Path, seed: u64) -> (PathBuf, PathBuf) {
 #[test]
 fn calibrate_twin_campaign_reaches_the_held_out_noise_floor() {
     let dir = scratch("e2e");
-    let (c, v) = write_twin_campaigns(&dir, 5);
+    // The thesis's gain (eq. 3.33) averages |error| ratios value by value: with a held-out
+    // setup zeroed on a noisy reading, that reading's error, shared by every value, is most
+    // of |ΔW_cal| and the figure measures the instrument's zero, not the calibration. Its
+    // held-out data zero on the truth, as the thesis's figure assumes.
+    let (c, v) = write_twin_campaigns(&dir, 5, ResetReading::Exact);
     let json = dir.join("cal.json");
     let out = rpkm()
         .arg("calibrate")
@@ -97,7 +102,7 @@ fn calibrate_twin_campaign_reaches_the_held_out_noise_floor() {
 #[test]
 fn bad_campaign_files_exit_2_with_file_line_and_column() {
     let dir = scratch("bad");
-    let (c, _) = write_twin_campaigns(&dir, 6);
+    let (c, _) = write_twin_campaigns(&dir, 6, ResetReading::Noisy);
     let text = std::fs::read_to_string(&c).expect("read");
     let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
     let h = lines
@@ -256,7 +261,7 @@ fn default_calibration_of_a_29_parameter_machine_reaches_the_floor_and_diagnose_
 #[test]
 fn the_json_carries_the_covariance_the_calibrator_starts_from() {
     let dir = scratch("covariance");
-    let (c, _) = write_twin_campaigns(&dir, 9);
+    let (c, _) = write_twin_campaigns(&dir, 9, ResetReading::Noisy);
     let json = dir.join("cal.json");
     let out = rpkm()
         .arg("calibrate")

@@ -31,7 +31,7 @@ pub mod sparse;
 use crate::calib::{
     self, Calibration, CalibrationError, EffectEstimate, Prior, Request, SharedRows,
 };
-use crate::campaign::Campaign;
+use crate::campaign::{Campaign, Instrument};
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::geometry;
 use crate::noise::{Group, NoiseModel, XyInstrument, N_GROUPS};
@@ -115,7 +115,8 @@ pub struct Fit {
     pub cal_rms_um: f64,
     /// RMS of the held-out TCP errors (µm), if there are held-out data.
     pub val_rms_um: Option<f64>,
-    /// The held-out TCP errors themselves (mm), to compare two models pose by pose.
+    /// The held-out TCP errors (mm) less the mean of their setup and coordinate (the zero
+    /// reading's error, which no model predicts), to compare two models pose by pose.
     #[serde(skip)]
     pub val_errors: Vec<f64>,
     /// Effect parameters identified.
@@ -186,6 +187,10 @@ pub struct Candidate {
     /// held-out instrument does not see, forces, or setup-local parameters), for a candidate
     /// that could be named.
     pub cross_validated: Option<Prediction>,
+    /// Where neither it nor another significant candidate predicts better alone: the held-out
+    /// comparison of the model with both (two effects hidden together each absorb part of the
+    /// other alone), and the other's name.
+    pub together: Option<(String, Prediction)>,
 }
 
 /// Does a candidate make the model predict better? Its held-out RMS against the current
@@ -203,7 +208,9 @@ pub struct Prediction {
     pub unit: &'static str,
     /// The RMS fell by more than its standard error.
     pub better: bool,
-    /// The RMS rose by more than its standard error.
+    /// The RMS rose by more than twice its standard error: clearly worse (a rise within
+    /// that is a tie, which the held-out data do not decide: an effect they do not see
+    /// would otherwise be refused one time in six by chance).
     pub worse: bool,
     /// Judged by cross-validation by setup on the calibration campaign.
     pub by_setup: bool,
@@ -244,7 +251,7 @@ impl Prediction {
             standard_error: se,
             unit: "sigma",
             better: rb - ra > se,
-            worse: ra - rb > se,
+            worse: ra - rb > 2.0 * se,
             by_setup: false,
         })
     }
@@ -380,6 +387,53 @@ struct Validation<'a> {
     campaign: &'a Campaign,
     /// σ of each held-out TCP error, in [`obs::tcp_errors`] order.
     sigma: Vec<f64>,
+    /// Each error's setup and coordinate (an index): the errors of one share the reading
+    /// their setup was zeroed on.
+    zero: Vec<usize>,
+}
+
+impl Validation<'_> {
+    /// The held-out campaign with the noise of each of its TCP errors.
+    fn new<'a>(campaign: &'a Campaign, noise: &NoiseModel) -> Result<Validation<'a>, PoseError> {
+        Ok(Validation {
+            campaign,
+            sigma: validation_noise(campaign, noise)?,
+            zero: zero_groups(campaign)?,
+        })
+    }
+
+    /// `errors` less the mean of their setup and coordinate: what a model can predict of
+    /// them (no model predicts the error of the reading a setup was zeroed on, and one that
+    /// happens to follow it would beat the truth).
+    fn relative(&self, errors: &[f64]) -> Vec<f64> {
+        let n = self.zero.iter().max().map_or(0, |m| m + 1);
+        let mut sum = vec![(0.0, 0usize); n];
+        for (&g, e) in self.zero.iter().zip(errors) {
+            sum[g].0 += e;
+            sum[g].1 += 1;
+        }
+        self.zero
+            .iter()
+            .zip(errors)
+            .map(|(&g, e)| e - sum[g].0 / sum[g].1.max(1) as f64)
+            .collect()
+    }
+}
+
+/// Each held-out TCP error's (setup, coordinate) as an index, in [`obs::tcp_errors`] order.
+fn zero_groups(val: &Campaign) -> Result<Vec<usize>, PoseError> {
+    let errs = obs::tcp_errors(val, &Params::nominal(), Model::M29)?;
+    let mut keys: Vec<(&str, &str)> = Vec::new();
+    Ok(errs
+        .iter()
+        .map(|(i, coordinate, _)| {
+            let key = (val.poses[*i].setup.as_str(), *coordinate);
+            keys.iter().position(|k| *k == key).unwrap_or_else(|| {
+                keys.push(key);
+                keys.len() - 1
+            })
+        })
+        .collect())
 }
 
 /// Diagnose `campaign` with `in_model` effects already in the model; `validation` is held out.
@@ -487,11 +541,85 @@ impl Search<'_> {
             ..candidates(self.campaign, self.tried, tries, &base, self.level)
         };
         self.cross_validate(&mut round, &base, copts);
+        if let Some(val) = val.as_ref() {
+            self.pair_up(&mut round, &base, copts, val);
+        }
         Ok((base, round, made))
     }
 }
 
+/// Significant candidates tried in pairs where none predicts better alone: the best few by
+/// BIC gain.
+const PAIRED: usize = 3;
+
 impl Search<'_> {
+    /// Where no candidate that could be named predicts better alone, the best few are
+    /// fitted in pairs: two effects hidden together each absorb part of the other when
+    /// added alone, and predict worse; together they predict better. The first pair that
+    /// does marks both ([`Candidate::together`]).
+    fn pair_up(&self, round: &mut Round, base: &Fitted, copts: &calib::Options, val: &Validation) {
+        let open = |c: &Candidate| c.significant && c.relevant;
+        let alone = |c: &Candidate| c.prediction.or(c.cross_validated).is_some_and(|p| p.better);
+        if round.candidates.iter().filter(|c| open(c)).any(alone) {
+            return;
+        }
+        let mut ranked: Vec<usize> = (0..round.candidates.len())
+            .filter(|&k| open(&round.candidates[k]))
+            .collect();
+        ranked.sort_by(|&a, &b| {
+            round.candidates[b]
+                .bic_gain
+                .total_cmp(&round.candidates[a].bic_gain)
+        });
+        ranked.truncate(PAIRED);
+        for (n, &a) in ranked.iter().enumerate() {
+            for &b in &ranked[n + 1..] {
+                let names = [
+                    round.candidates[a].effect.clone(),
+                    round.candidates[b].effect.clone(),
+                ];
+                let Some(p) = self.pair(&names, base, copts, val) else {
+                    continue;
+                };
+                if p.better {
+                    round.candidates[a].together = Some((names[1].clone(), p));
+                    round.candidates[b].together = Some((names[0].clone(), p));
+                    return;
+                }
+            }
+        }
+    }
+
+    /// The held-out comparison of the current model with the two effects `names` added
+    /// (None where they cannot be fitted).
+    fn pair(
+        &self,
+        names: &[String; 2],
+        base: &Fitted,
+        copts: &calib::Options,
+        val: &Validation,
+    ) -> Option<Prediction> {
+        let mut with: Vec<&dyn Effect> = self.in_model.to_vec();
+        for name in names {
+            with.push(*self.tried.iter().find(|e| e.name() == name)?);
+        }
+        let start = Params::nominal();
+        let set = EffectSet::bind(&with, self.campaign, &start).ok()?;
+        let theta = warm_theta(&set, &base.fit);
+        let (cal, _) = calib::calibrate(&Request {
+            effects: &set,
+            warm: Some(calib::WarmStart {
+                params: &base.fit.params,
+                theta: &theta,
+                screen: false,
+            }),
+            ..Request::new(self.campaign, &start, copts)
+        })
+        .ok()?;
+        let fit = finish_with(Some(val), &with, &set, cal, copts).ok()?;
+        Prediction::of(&base.fit.val_errors, &fit.fit.val_errors)
+    }
+
     /// Each candidate that could be named and that held-out data cannot judge (none, or a
     /// tie) is judged by cross-validation by setup ([`cross`]): the current model's and the
     /// candidate's predictions of the setups each fold left out, compared row by row.
@@ -704,6 +832,11 @@ fn choose(
             .prediction
             .filter(|p| p.better || p.worse)
             .or(c.cross_validated);
+        let judged = match (judged, &c.together) {
+            (Some(p), _) if p.better => Some(p),
+            (_, Some((_, p))) => Some(*p),
+            (j, None) => j,
+        };
         let worth = judged.map_or(c.bic_gain > 0.0, |p| p.better);
         if !(c.significant && c.relevant && worth) {
             return None;
@@ -1251,7 +1384,7 @@ fn held_out<'a>(
     noise: &NoiseModel,
 ) -> Result<Option<Validation<'a>>, DiagnoseError> {
     validation
-        .map(|v| validation_noise(v, noise).map(|sigma| Validation { campaign: v, sigma }))
+        .map(|v| Validation::new(v, noise))
         .transpose()
         .map_err(DiagnoseError::Validation)
 }
@@ -1291,6 +1424,7 @@ fn finish_with(
         .map(|v| held_out_values(v, effects, set, &cal, copts.model))
         .transpose()?;
     let val_rms_um = val_errors.as_ref().map(|e| calib::rms(e) * 1e3);
+    let val_errors = val.zip(val_errors).map(|(v, e)| v.relative(&e));
     // The calibration is spent here: its rows and parameters move into the fit.
     let rows = cal.residuals;
     let chi2: f64 = rows.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
@@ -1337,11 +1471,7 @@ pub fn held_out_errors(
     cal_set: &EffectSet,
     cal: &Calibration,
 ) -> Result<Vec<f64>, DiagnoseError> {
-    let sigma = validation_noise(validation, noise).map_err(DiagnoseError::Validation)?;
-    let val = Validation {
-        campaign: validation,
-        sigma,
-    };
+    let val = Validation::new(validation, noise).map_err(DiagnoseError::Validation)?;
     Ok(held_out_values(&val, effects, cal_set, cal, cal.model)?)
 }
 
@@ -1401,23 +1531,39 @@ fn held_out_values(
 }
 
 /// σ of every held-out TCP error, in [`obs::tcp_errors`] order: the instrument's noise at the
-/// pose (the reset pose reads 0 by definition).
+/// pose and at its setup's reset pose (zeroed on a reading as noisy as any other), and the
+/// encoders' at both.
 fn validation_noise(val: &Campaign, noise: &NoiseModel) -> Result<Vec<f64>, PoseError> {
     let nominal = Params::nominal();
     let errs = obs::tcp_errors(val, &nominal, Model::M29)?;
+    let mut reset_of = vec![None; val.poses.len()];
+    for setup in val.setups() {
+        for &i in &setup.poses {
+            reset_of[i] = setup.reset;
+        }
+    }
+    let variance = |i: usize, coordinate: &str| -> Result<f64, PoseError> {
+        let pose = &val.poses[i];
+        let tcp = geometry::fgm(&nominal, Model::M29, pose.q[0], pose.q[3])
+            .map_err(|e| PoseError::at(val, pose, e))?;
+        let cov = |xy| noise.xy_covariance(xy, Vector2::new(tcp.x(), tcp.y()));
+        let reading = match (coordinate, XyInstrument::of(pose.instrument)) {
+            ("x", Some(xy)) => cov(xy)[(0, 0)],
+            ("y", Some(xy)) => cov(xy)[(1, 1)],
+            _ => noise.scalar_sigma(pose.instrument).unwrap_or(0.0).powi(2),
+        };
+        Ok(reading + noise.encoder_mm.powi(2))
+    };
     errs.iter()
         .map(|(i, coordinate, _)| {
-            let pose = &val.poses[*i];
-            let tcp = geometry::fgm(&nominal, Model::M29, pose.q[0], pose.q[3])
-                .map_err(|e| PoseError::at(val, pose, e))?;
-            let enc2 = noise.encoder_mm.powi(2);
-            let xy = XyInstrument::of(pose.instrument);
-            let cov = |xy| noise.xy_covariance(xy, Vector2::new(tcp.x(), tcp.y()));
-            Ok(match (*coordinate, xy) {
-                ("x", Some(xy)) => (cov(xy)[(0, 0)] + enc2).sqrt(),
-                ("y", Some(xy)) => (cov(xy)[(1, 1)] + enc2).sqrt(),
-                _ => (noise.scalar_sigma(pose.instrument).unwrap_or(0.0).powi(2) + enc2).sqrt(),
-            })
+            // the reading the setup was zeroed on is in every error of the setup (none for a
+            // ball-bar, zeroed on no reading; the reset's encoders for every instrument)
+            let zero = match reset_of[*i] {
+                Some(r) if val.poses[r].instrument == Instrument::Dbb => noise.encoder_mm.powi(2),
+                Some(r) => variance(r, coordinate)?,
+                None => 0.0,
+            };
+            Ok((variance(*i, coordinate)? + zero).sqrt())
         })
         .collect()
 }
@@ -1478,6 +1624,7 @@ fn compare(
         follows,
         prediction: Prediction::of(&base.fit.val_errors, &kept.fit.val_errors),
         cross_validated: None,
+        together: None,
     })
 }
 

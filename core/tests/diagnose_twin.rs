@@ -90,9 +90,13 @@ fn check_named(effect: EffectKind, seed: u64) {
         .expect("candidate");
     assert!(named.significant);
     let after = named.val_rms_after_um.expect("held-out after");
+    // what a model can predict of the held-out errors (less the zero reading's, shared by
+    // the held-out setup) falls
+    let p = named.prediction.expect("a held-out comparison");
     assert!(
-        after < before,
-        "{name} seed {seed}: {after:.1} um after, {before:.1} before"
+        p.better,
+        "{name} seed {seed}: {:.1} um after, {:.1} before (± {:.1})",
+        p.rms_after, p.rms_before, p.standard_error
     );
     assert!(
         after <= 1.5 * floor,
@@ -136,9 +140,33 @@ fn summary(d: &Diagnosis) -> String {
         .candidates
         .first()
         .map(|c| (&c.effect, c.p_value, c.bic_gain));
+    let judged: Vec<String> = d
+        .candidates
+        .iter()
+        .filter(|c| c.significant)
+        .map(|c| {
+            let p = |p: Option<rpkm_core::diagnose::Prediction>| {
+                p.map_or("-".to_owned(), |p| {
+                    format!(
+                        "{:.2}->{:.2}±{:.2}",
+                        p.rms_before, p.rms_after, p.standard_error
+                    )
+                })
+            };
+            format!(
+                "{} held-out {} cv {}",
+                c.effect,
+                p(c.prediction),
+                p(c.cross_validated)
+            )
+        })
+        .collect();
     format!(
-        "{:?}, missing {:?}, chi2/dof {:.2}, best candidate {best:?}",
-        d.verdict_kind, d.missing_effect, d.chi2_per_dof
+        "{:?}, missing {:?}, chi2/dof {:.2}, best candidate {best:?}; judged: {}",
+        d.verdict_kind,
+        d.missing_effect,
+        d.chi2_per_dof,
+        judged.join("; ")
     )
 }
 
@@ -150,7 +178,7 @@ fn nothing_missing_on_a_machine_noisier_than_rated() {
         let twin_noise = NoiseModel::default().scaled(&[2.5; N_GROUPS]);
         let (cal, val, floor) = campaigns_with(TwinConfig {
             seed,
-            noise: Some(twin_noise),
+            noise: Some(twin_noise.clone()),
             ..Default::default()
         });
         let d = run(&cal, &val, &[]);
@@ -183,13 +211,44 @@ fn nothing_missing_on_a_machine_noisier_than_rated() {
         }
         let v = d.baseline.val_rms_um.expect("held-out");
         assert!(v <= 1.2 * floor, "seed {seed}: {v} um, true floor {floor}");
-        // the floor the diagnosis reports is the estimated one: near the truth
+        // the floor the diagnosis reports is the estimated one: near the one the twin's noise
+        // implies (one held-out setup's realised floor is dominated by the single draw of
+        // the reading it was zeroed on, so the expected one is the comparison)
+        let expected = expected_floor_um(&val, &twin_noise);
         assert!(
-            (d.baseline.noise_floor_um / floor - 1.0).abs() < 0.25,
-            "seed {seed}: reported floor {} vs true {floor}",
+            (d.baseline.noise_floor_um / expected - 1.0).abs() < 0.25,
+            "seed {seed}: reported floor {} vs expected {expected}",
             d.baseline.noise_floor_um
         );
     }
+}
+
+/// The held-out noise floor (µm) the twin's noise model implies: per held-out error, the
+/// reading's variance at its pose and at its setup's reset pose (zeroed on a noisy reading)
+/// and the encoders' at both.
+fn expected_floor_um(val: &Campaign, noise: &NoiseModel) -> f64 {
+    let nominal = rpkm_core::params::Params::nominal();
+    let tcp = |k: usize| {
+        let q = val.poses[k].q;
+        let s = rpkm_core::geometry::fgm(&nominal, rpkm_core::params::Model::M29, q[0], q[3])
+            .expect("a held-out pose");
+        nalgebra::Vector2::new(s.x(), s.y())
+    };
+    let xy = rpkm_core::noise::XyInstrument::Lt;
+    let mut sum = 0.0;
+    let mut n = 0;
+    for setup in val.setups() {
+        let reset = setup.reset.expect("a reset pose");
+        let zero = noise.xy_covariance(xy, tcp(reset));
+        for &i in setup.poses.iter().filter(|&&i| i != reset) {
+            let own = noise.xy_covariance(xy, tcp(i));
+            for c in 0..2 {
+                sum += own[(c, c)] + zero[(c, c)] + 2.0 * noise.encoder_mm.powi(2);
+                n += 1;
+            }
+        }
+    }
+    1e3 * (sum / f64::from(n)).sqrt()
 }
 
 /// A relative instrument is zeroed on a reading as noisy as any other (the twin's default):
@@ -335,7 +394,10 @@ fn two_hidden_effects_are_found_one_after_the_other() {
     for seed in [5, 6] {
         let (cal, val, floor) = campaigns(seed, &hidden);
         let d1 = run(&cal, &val, &[]);
-        let first = d1.missing_effect.clone().expect("a first effect");
+        let first = d1
+            .missing_effect
+            .clone()
+            .unwrap_or_else(|| panic!("seed {seed}: a first effect: {}", summary(&d1)));
         let names: Vec<&str> = hidden.iter().map(|e| e.as_str()).collect();
         assert!(
             names.contains(&first.as_str()),
