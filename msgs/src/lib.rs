@@ -14,12 +14,14 @@
 
 pub mod actuator_state;
 pub mod builtin_interfaces;
+pub mod calibration_srv;
 pub mod campaign_info;
 pub mod cdr;
 pub mod diagnosis;
 pub mod diagnosis_candidate;
 pub mod diagnostic_msgs;
 pub mod geometry_msgs;
+pub mod lifecycle_msgs;
 pub mod parameters;
 pub mod preload_status;
 pub mod sensor_msgs;

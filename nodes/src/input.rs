@@ -14,7 +14,40 @@ use crate::error::bad_input;
 pub fn read_campaign(path: &Path) -> anyhow::Result<Campaign> {
     let bytes = std::fs::read(path)
         .map_err(|e| bad_input(format!("{}: cannot read campaign: {e}", path.display())))?;
-    Campaign::parse_bytes(&bytes, &path.display().to_string()).map_err(anyhow::Error::new)
+    let campaign =
+        Campaign::parse_bytes(&bytes, &path.display().to_string()).map_err(anyhow::Error::new)?;
+    check_readings(&campaign)?;
+    Ok(campaign)
+}
+
+/// Largest distance, mm, between a TCP instrument's reading and where the nominal machine
+/// puts the TCP at the row's actuator positions (relative to the setup's reset pose, as the
+/// instrument measures). A real machine is within millimetres of its drawing (the spec's
+/// tolerances are tenths of a millimetre to a few), so a reading 100 mm off measures
+/// something else: a unit mix-up, another machine, a tracker that lost its target. The same
+/// bound as the actuator positions' [`COMPATIBILITY_MAX_MM`](rpkm_core::campaign::plausible).
+pub const READING_OFF_MAX_MM: f64 = rpkm_core::campaign::plausible::COMPATIBILITY_MAX_MM;
+
+/// Every TCP reading of `campaign` within [`READING_OFF_MAX_MM`] of the nominal machine's
+/// TCP: the plausibility of a reading, which a calibration campaign and a held-out one are
+/// held to alike. A pose the nominal model cannot solve is left to the calibration, which
+/// names it.
+pub fn check_readings(campaign: &Campaign) -> anyhow::Result<()> {
+    let Ok(errors) = rpkm_core::obs::tcp_errors(campaign, &Params::nominal(), params::Model::M24)
+    else {
+        return Ok(());
+    };
+    match errors.iter().find(|e| e.2.abs() > READING_OFF_MAX_MM) {
+        None => Ok(()),
+        Some(&(pose, coordinate, off)) => Err(bad_input(format!(
+            "{}:{} ({coordinate}): the reading is {:.1} mm from where the machine puts the \
+             TCP at this row's actuator positions, expected within {READING_OFF_MAX_MM} mm \
+             (a unit mix-up, or a measurement of something else)",
+            campaign.source,
+            campaign.poses[pose].line,
+            off.abs()
+        ))),
+    }
 }
 
 /// Reads a parameter file: a JSON object mapping spec names to values (mm, rad), or the JSON

@@ -2,8 +2,9 @@
 //! iceoryx2 clean-up of dead nodes) on stderr, so that nothing the libraries report is lost.
 //!
 //! `RPKM_LOG` sets the level for rpkm's own crates (`error`, `warn` (default), `info`,
-//! `debug`, `trace`, `off`). The other crates (rustdds, ros2-client) are quiet by default:
-//! rustdds reports routine shutdown races as errors. From `info` on they report warnings.
+//! `debug`, `trace`, `off`). The other crates (rustdds, ros2-client, iceoryx2) are quiet by
+//! default: rustdds reports routine shutdown races as errors, iceoryx2 warns at every start
+//! that it found no config file. From `info` on they report warnings.
 
 use std::sync::OnceLock;
 
@@ -89,4 +90,7 @@ pub fn init() {
     if log::set_boxed_logger(Box::new(StderrLog { rpkm, others })).is_ok() {
         log::set_max_level(rpkm.max(others));
     }
+    // iceoryx2 logs to the console by itself (a warning at every start that no config file
+    // was found): its records go through this logger too, quiet like the other crates'.
+    rpkm_transport::ipc::route_iceoryx2_log();
 }

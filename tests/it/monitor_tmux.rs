@@ -5,7 +5,8 @@
 //! - the faulty drive of the truth file (q3) shows WARN while its deviation is between the
 //!   thresholds, then ERROR above them, and at the end the deviation the core gives for the
 //!   bag's last sample;
-//! - after SIGKILL of tcp_estimator the screen names it SILENT within 2 s, and only it;
+//! - after SIGKILL of tcp_estimator the screen names it within 2 s, and only it: GONE,
+//!   killed by signal 9, as the launch reports it (SILENT before the monitor knew the launch);
 //! - `q` ends the monitor with exit status 0.
 //!
 //! Skipped with a message where tmux is missing, unless RPKM_REQUIRE_PYTHON or CI is set.
@@ -294,7 +295,7 @@ fn monitor_in_tmux_shows_the_fault_and_the_silent_estimator() {
         "{end}"
     );
 
-    // Kill the estimator: named silent within 2 s, the monitor node not.
+    // Kill the estimator: named gone (the launch says so) within 2 s, the monitor node not.
     let pid = *launched
         .started("tcp_estimator")
         .last()
@@ -305,9 +306,9 @@ fn monitor_in_tmux_shows_the_fault_and_the_silent_estimator() {
         .status()
         .expect("kill");
     assert!(status.success());
-    let silent = tmux.wait_screen("tcp_estimator SILENT", Duration::from_secs(10), |s| {
+    let silent = tmux.wait_screen("tcp_estimator GONE", Duration::from_secs(10), |s| {
         s.lines()
-            .any(|l| l.contains("SILENT:") && l.contains("tcp_estimator"))
+            .any(|l| l.contains("GONE: tcp_estimator (killed by signal 9)"))
     });
     let took = killed.elapsed();
     eprintln!(
@@ -320,7 +321,7 @@ fn monitor_in_tmux_shows_the_fault_and_the_silent_estimator() {
     );
     let alert = silent
         .lines()
-        .find(|l| l.contains("SILENT:"))
+        .find(|l| l.contains("GONE:"))
         .expect("alert line");
     assert!(!alert.contains("preload_monitor"), "{alert}");
 

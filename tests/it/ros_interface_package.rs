@@ -53,15 +53,17 @@ fn text(out: &Output) -> String {
 /// A copy of msgs/ (the ROS package's files only) with `edit` applied to `file`.
 fn broken_copy(dir: &Path, file: &str, edit: impl Fn(&str) -> String) -> PathBuf {
     let copy = dir.join(format!("broken-{}", file.replace('.', "-")));
-    std::fs::create_dir_all(copy.join("msg")).expect("dir");
     let msgs = repo().join("msgs");
-    for entry in std::fs::read_dir(msgs.join("msg")).expect("msg/") {
-        let path = entry.expect("entry").path();
-        std::fs::copy(
-            &path,
-            copy.join("msg").join(path.file_name().expect("name")),
-        )
-        .expect("copy");
+    for folder in ["msg", "srv"] {
+        std::fs::create_dir_all(copy.join(folder)).expect("dir");
+        for entry in std::fs::read_dir(msgs.join(folder)).expect("msg/, srv/") {
+            let path = entry.expect("entry").path();
+            std::fs::copy(
+                &path,
+                copy.join(folder).join(path.file_name().expect("name")),
+            )
+            .expect("copy");
+        }
     }
     for name in ["package.xml", "CMakeLists.txt"] {
         let original = std::fs::read_to_string(msgs.join(name)).expect("read");

@@ -69,7 +69,11 @@ pub fn run(args: &MonitorArgs) -> Result<()> {
         silent_after_s: args.silent_after,
         ..WatchConfig::default()
     };
-    let watch = Arc::new(Mutex::new(Watch::new(config, thresholds)));
+    let mut watch = Watch::new(config, thresholds);
+    let names = rpkm_transport::Names::new(&args.transport.namespace, &[])
+        .map_err(|e| super::bad_input(format!("--namespace: {e}")))?;
+    watch.in_namespace(&names);
+    let watch = Arc::new(Mutex::new(watch));
     let stop = stop_flag()?;
     let start = Instant::now();
     let receiver = spawn_receiver(args, Arc::clone(&watch), Arc::clone(&stop), start)?;

@@ -71,6 +71,10 @@ pub struct TransportArgs {
     /// on those topics must use it (the replayer and the recorder), not nodes started without.
     #[arg(long)]
     pub reliable: bool,
+    /// ROS 2 namespace of the node set (as launched with `namespace:=NS`): its topics are
+    /// `NS/tcp_estimate`, ... (default /rpkm).
+    #[arg(long, default_value = rpkm_transport::NODE_NAMESPACE)]
+    pub namespace: String,
 }
 
 /// `ipc`, `dds` or `both`.
@@ -90,9 +94,12 @@ impl TransportArgs {
             Some(p) => p.clone(),
             None => std::env::var("RPKM_IPC_PREFIX").unwrap_or_default(),
         };
+        let names = rpkm_transport::Names::new(&self.namespace, &[])
+            .map_err(|e| crate::error::bad_input(format!("--namespace: {e}")))?;
         let config = TransportConfig::new(name)
             .backend(self.backend)
-            .ipc_prefix(prefix);
+            .ipc_prefix(prefix)
+            .names(names);
         Transport::new(&config).with_context(|| format!("opening the transport of {name}"))
     }
 }

@@ -120,12 +120,18 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
             wait_until(due);
         }
         ports[port].publish(&message.data).map_err(|e| {
-            anyhow::anyhow!(
-                "message {} (log time {} ns) of {}: {e}",
+            let what = format!(
+                "{}: message {} (log time {} ns): {e}",
+                args.bag.display(),
                 message.index,
-                message.log_time,
-                args.bag.display()
-            )
+                message.log_time
+            );
+            // a payload that does not decode is the bag's fault (bad input, exit 2); a
+            // transport that fails is this host's
+            match e {
+                topics::ReplayError::Decode { .. } => super::bad_input(what),
+                topics::ReplayError::Transport(_) => anyhow::anyhow!(what),
+            }
         })?;
         counts[port] += 1;
     }

@@ -14,6 +14,10 @@
 //!       args: --backend $(var backend)
 //!       respawn: true                # default true: restarted with backoff when it crashes
 //!       respawn_delay: 0.2           # s, doubled per quick crash, at most 5 s
+//!       namespace: /machine_a        # its topics, services, parameters (default /rpkm)
+//!       managed: true                # started unconfigured, configured and activated by
+//!                                    # the launch in file order (default false: active)
+//!       remap: [{from: tcp_estimate, to: /cell/estimate_a}]   # topic remapping
 //!   - set_env: {name: ROS_DOMAIN_ID, value: "7"}
 //!   - executable:                    # another rpkm command, e.g. the recorder
 //!       cmd: rpkm record --out $(var bag) --topics /rpkm/tcp_estimate,/diagnostics
@@ -36,6 +40,7 @@
 //! Substitutions in every string: `$(var NAME)` (an `arg`, overridden by `NAME:=VALUE` on the
 //! command line), `$(env NAME)` / `$(env NAME DEFAULT)`, `$(dirname)` (this file's folder).
 
+mod managed;
 pub mod supervisor;
 
 use std::collections::BTreeMap;
@@ -127,6 +132,13 @@ pub struct NodeSpec {
     pub params: Vec<String>,
     /// Extra command-line arguments.
     pub args: Vec<String>,
+    /// Its namespace (`namespace:`), when not rpkm's default.
+    pub namespace: Option<String>,
+    /// Topic remapping rules (`remap: [{from, to}]`), in order.
+    pub remaps: Vec<(String, String)>,
+    /// Started unconfigured and brought up (configure, activate) by the launch, in file
+    /// order (`managed: true`).
+    pub managed: bool,
     /// Restart when it crashes.
     pub respawn: bool,
     /// First restart delay, s.
@@ -148,10 +160,13 @@ pub struct LaunchDescription {
 
 /// The keys each kind of entry takes: anything else is a typo (`If:`, `respwan:`) that
 /// would otherwise silently change what runs.
-const NODE_KEYS: [&str; 9] = [
+const NODE_KEYS: [&str; 12] = [
     "pkg",
     "exec",
     "name",
+    "namespace",
+    "remap",
+    "managed",
     "param",
     "args",
     "respawn",
@@ -163,6 +178,7 @@ const EXECUTABLE_KEYS: [&str; 6] = ["cmd", "name", "respawn", "respawn_delay", "
 const ARG_KEYS: [&str; 3] = ["name", "default", "description"];
 const SET_ENV_KEYS: [&str; 2] = ["name", "value"];
 const PARAM_KEYS: [&str; 3] = ["from", "name", "value"];
+const REMAP_KEYS: [&str; 2] = ["from", "to"];
 
 struct Ctx<'a> {
     file: String,
@@ -612,6 +628,9 @@ fn executable(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, Lau
         param_files: Vec::new(),
         params: Vec::new(),
         args: words.collect(),
+        namespace: None,
+        remaps: Vec::new(),
+        managed: false,
         respawn,
         respawn_delay,
         line: ctx.entry.0,
@@ -642,6 +661,9 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
         ));
     }
     let name = field("name")?.unwrap_or_else(|| exec.clone());
+    if let Some(why) = crate::node::node_name_error(&name) {
+        return Err(ctx.err_at("name", why));
+    }
     let mut param_files = Vec::new();
     let mut params = Vec::new();
     if let Some(list) = get(body, "param") {
@@ -676,6 +698,8 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
         .map(|a| a.split_whitespace().map(str::to_owned).collect())
         .unwrap_or_default();
     let (respawn, respawn_delay) = respawn(ctx, body, &format!("node {name}"), true)?;
+    let (namespace, remaps) = names(ctx, body, &name)?;
+    let managed = managed(ctx, body, &name, &exec)?;
     Ok(NodeSpec {
         program: Program::Node,
         exec,
@@ -683,10 +707,100 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
         param_files,
         params,
         args,
+        namespace,
+        remaps,
+        managed,
         respawn,
         respawn_delay,
         line: ctx.entry.0,
     })
+}
+
+/// A boolean key of an entry (`true`, `false`, `1`, `0` after substitution), false when
+/// absent.
+fn flag(
+    ctx: &Ctx<'_>,
+    body: &serde_yaml::Mapping,
+    key: &str,
+    what: &str,
+) -> Result<bool, LaunchError> {
+    let Some(v) = get(body, key) else {
+        return Ok(false);
+    };
+    let s = ctx.string(v, &format!("{what} {key}"))?;
+    match s.as_str() {
+        "true" | "1" => Ok(true),
+        "false" | "0" => Ok(false),
+        _ => Err(ctx.err_at(key, format!("{what}: {key} {s:?}: expected true or false"))),
+    }
+}
+
+/// A node entry's `managed:` (ingest is not a managed node).
+fn managed(
+    ctx: &Ctx<'_>,
+    body: &serde_yaml::Mapping,
+    name: &str,
+    exec: &str,
+) -> Result<bool, LaunchError> {
+    let managed = flag(ctx, body, "managed", &format!("node {name}"))?;
+    if managed && exec == "ingest" {
+        return Err(ctx.err_at(
+            "managed",
+            format!(
+                "node {name}: ingest is not a managed node (tcp_estimator, preload_monitor, \
+                 calibrator are)"
+            ),
+        ));
+    }
+    Ok(managed)
+}
+
+/// Topic remapping rules, (FROM, TO) in order.
+type Remaps = Vec<(String, String)>;
+
+/// A node entry's `namespace:` and `remap: [{from, to}]`, checked as the node will check
+/// them (ROS 2's name rules).
+fn names(
+    ctx: &Ctx<'_>,
+    body: &serde_yaml::Mapping,
+    name: &str,
+) -> Result<(Option<String>, Remaps), LaunchError> {
+    let namespace = get(body, "namespace")
+        .map(|v| ctx.string(v, &format!("node {name} namespace")))
+        .transpose()?;
+    let mut remaps = Vec::new();
+    if let Some(list) = get(body, "remap") {
+        let list = list
+            .as_sequence()
+            .ok_or_else(|| ctx.err_at("remap", format!("node {name}: remap: expected a list")))?;
+        for rule in list {
+            let m = rule.as_mapping().ok_or_else(|| {
+                ctx.err_at("remap", format!("node {name}: remap entry: expected a map"))
+            })?;
+            ctx.check_keys(m, &format!("node {name} remap entry"), &REMAP_KEYS)?;
+            let part = |key: &str| {
+                get(m, key)
+                    .map(|v| ctx.string(v, &format!("node {name} remap {key}")))
+                    .transpose()?
+                    .ok_or_else(|| {
+                        ctx.err_at("remap", format!("node {name}: remap entry without {key}"))
+                    })
+            };
+            remaps.push((part("from")?, part("to")?));
+        }
+    }
+    let ns = namespace
+        .as_deref()
+        .unwrap_or(rpkm_transport::NODE_NAMESPACE);
+    if let Err(e) = rpkm_transport::Names::new(ns, &remaps) {
+        let key = if e.what == "namespace" {
+            "namespace"
+        } else {
+            "remap"
+        };
+        return Err(ctx.err_at(key, format!("node {name}: {e}")));
+    }
+    Ok((namespace, remaps))
 }
 
 impl NodeSpec {
@@ -697,6 +811,9 @@ impl NodeSpec {
             // `--name=`, `--param=`: a value that starts with `-` stays a value
             let name = format!("--name={}", self.name);
             argv.extend(["node", &self.exec, &name].map(OsString::from));
+            if self.managed {
+                argv.push("--unconfigured".into());
+            }
             for f in &self.param_files {
                 let mut arg = OsString::from("--params=");
                 arg.push(f);
@@ -709,6 +826,15 @@ impl NodeSpec {
             argv.push(OsString::from(&self.exec));
         }
         argv.extend(self.args.iter().map(OsString::from));
+        // last: `--ros-args` takes every word after it
+        if self.namespace.is_some() || !self.remaps.is_empty() {
+            argv.push("--ros-args".into());
+            let rules = self.namespace.iter().map(|ns| format!("__ns:={ns}"));
+            let rules = rules.chain(self.remaps.iter().map(|(f, t)| format!("{f}:={t}")));
+            for rule in rules {
+                argv.extend(["-r".into(), OsString::from(rule)]);
+            }
+        }
         argv
     }
 }
@@ -956,6 +1082,61 @@ launch:
             let e = LaunchDescription::parse(text, "z.yaml", Path::new("."), &[]).expect_err(text);
             assert!(e.to_string().starts_with(says), "{text}: {e}");
         }
+    }
+
+    /// `namespace:` and `remap:` reach the node as rcl's `--ros-args -r`, last on its line;
+    /// a name ROS 2 would refuse is refused with its key's line, as an unusable node name is.
+    #[test]
+    fn namespace_and_remap_go_to_the_node_as_ros_args() -> Result<(), LaunchError> {
+        let entry = "launch:\n  - node:\n      pkg: rpkm\n      exec: tcp_estimator\n";
+        let d = LaunchDescription::parse(
+            &format!(
+                "{entry}      namespace: /machine_a\n      \
+                 remap: [{{from: tcp_estimate, to: /cell/estimate_a}}]\n"
+            ),
+            "n.yaml",
+            Path::new("."),
+            &[],
+        )?;
+        let argv: Vec<String> = d.nodes[0]
+            .argv()
+            .iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            argv[argv.len() - 5..],
+            [
+                "--ros-args",
+                "-r",
+                "__ns:=/machine_a",
+                "-r",
+                "tcp_estimate:=/cell/estimate_a"
+            ]
+        );
+        for (tail, says) in [
+            (
+                "      namespace: machine_a\n",
+                "n.yaml:5: node tcp_estimator: namespace \"machine_a\": expected an absolute",
+            ),
+            (
+                "      remap: [{from: a, to: b c}]\n",
+                "n.yaml:5: node tcp_estimator: remap \"a:=b c\"",
+            ),
+            (
+                "      name: 1st\n",
+                "n.yaml:5: node name \"1st\" starts with a digit",
+            ),
+            (
+                &format!("      name: {}\n", "a".repeat(5000)),
+                "n.yaml:5: node name \"aaaa",
+            ),
+        ] {
+            let e =
+                LaunchDescription::parse(&format!("{entry}{tail}"), "n.yaml", Path::new("."), &[])
+                    .expect_err(tail);
+            assert!(e.to_string().starts_with(says), "{tail}: {e}");
+        }
+        Ok(())
     }
 
     #[test]

@@ -3,7 +3,9 @@
 //! - a node that dies (non-zero exit or a signal) is restarted when `respawn` is on, after
 //!   `respawn_delay` doubled for every crash within 10 s of its start (at most 5 s); exit
 //!   code 0 (input done) and 2 (bad configuration: restarting cannot help) are final, and
-//!   a node that exited 2 makes the launch exit 2 too, naming it;
+//!   a node that exited 2 makes the launch exit 2 too, naming it; a node that ended 5 times
+//!   in a row within 10 s of its start is not restarted either (the launch exits 1 at its
+//!   end, naming it): what fails at every start is not cured by another;
 //! - before the first start and after every death, the iceoryx2 resources of dead processes
 //!   are removed (a SIGKILLed node leaves its shared memory behind);
 //! - SIGINT/SIGTERM: SIGTERM to every node, SIGKILL after 5 s for those still running.
@@ -33,6 +35,10 @@ use super::{LaunchDescription, NodeSpec};
 
 /// A node's crash within this time of its start doubles the next restart delay.
 const QUICK_CRASH: Duration = Duration::from_secs(10);
+/// Crashes in a row, each within [`QUICK_CRASH`] of its start, after which a node is not
+/// restarted: one that never stays up fails for something a restart does not change (its
+/// configuration, its host), and restarting it for ever would hide that.
+const QUICK_CRASH_LIMIT: u32 = 5;
 /// Largest restart delay.
 const MAX_DELAY: Duration = Duration::from_secs(5);
 /// Time the nodes get to stop after SIGTERM.
@@ -55,6 +61,109 @@ struct Supervised<'a> {
     spec: &'a NodeSpec,
     state: State,
     quick_crashes: u32,
+    /// How its last process ended (`exited with code 2`), once one did.
+    last_exit: Option<(String, bool)>,
+}
+
+impl Supervised<'_> {
+    /// Its state as the launch's /diagnostics status says it (`rpkm monitor` reads it).
+    fn state_text(&self) -> String {
+        use crate::monitor::state::{DONE, GONE};
+        match (&self.state, &self.last_exit) {
+            (State::Running { .. }, _) => "running".to_owned(),
+            (State::Waiting { .. }, _) => "restarting".to_owned(),
+            (State::Done, Some((how, true))) => format!("{DONE}{how}"),
+            (State::Done, Some((how, false))) => format!("{GONE}{how}"),
+            (State::Done, None) => format!("{GONE}stopped"),
+        }
+    }
+}
+
+/// The launch's own status on /diagnostics (iceoryx2, the nodes' prefix): every declared node
+/// and its state, so that `rpkm monitor` knows which nodes should be there and which are
+/// gone, with their exit code. Without iceoryx2 the launch runs on, unreported.
+struct Reporter {
+    publisher: Option<rpkm_transport::Publisher<rpkm_msgs::DiagnosticArray>>,
+    // after the publisher: dropped last
+    _transport: Option<rpkm_transport::Transport>,
+    /// `rpkm/launch`, or `<namespace>/launch`.
+    status_name: String,
+}
+
+/// Period of the launch's status report.
+const REPORT_PERIOD: Duration = Duration::from_secs(1);
+
+impl Reporter {
+    fn open(desc: &LaunchDescription) -> Self {
+        let prefix = desc
+            .env
+            .iter()
+            .rev()
+            .find(|(k, _)| k == "RPKM_IPC_PREFIX")
+            .map(|(_, v)| v.clone())
+            .or_else(|| std::env::var("RPKM_IPC_PREFIX").ok())
+            .unwrap_or_default();
+        // the namespace of the nodes (the first one's): the status goes where they report
+        let namespace = desc
+            .nodes
+            .iter()
+            .find_map(|n| n.namespace.clone())
+            .unwrap_or_else(|| rpkm_transport::NODE_NAMESPACE.to_owned());
+        let opened = rpkm_transport::Names::new(&namespace, &[])
+            .map_err(|e| e.to_string())
+            .and_then(|names| {
+                let config = rpkm_transport::TransportConfig::new(format!(
+                    "rpkm_launch_status_{}",
+                    std::process::id()
+                ))
+                .ipc_prefix(prefix)
+                .names(names.clone());
+                let t = rpkm_transport::Transport::new(&config).map_err(|e| e.to_string())?;
+                let p = t
+                    .publisher(&rpkm_transport::topic::DIAGNOSTICS)
+                    .map_err(|e| e.to_string())?;
+                Ok((
+                    t,
+                    p,
+                    names.status_name(crate::monitor::state::LAUNCH_STATUS),
+                ))
+            });
+        match opened {
+            Ok((t, p, status_name)) => Self {
+                publisher: Some(p),
+                _transport: Some(t),
+                status_name,
+            },
+            Err(e) => {
+                log(format!("no launch status on /diagnostics: {e}"));
+                Self {
+                    publisher: None,
+                    _transport: None,
+                    status_name: String::new(),
+                }
+            }
+        }
+    }
+
+    fn report(&self, nodes: &[Supervised<'_>]) {
+        let Some(publisher) = &self.publisher else {
+            return;
+        };
+        let values: Vec<(&str, String)> = nodes
+            .iter()
+            .map(|n| (n.spec.name.as_str(), n.state_text()))
+            .collect();
+        let gone = values
+            .iter()
+            .filter(|(_, s)| s.starts_with(crate::monitor::state::GONE))
+            .count();
+        let level = if gone > 0 { 2 } else { 0 };
+        let message = format!("{} nodes declared, {gone} gone", values.len());
+        let status = crate::node::status(level, &self.status_name, message, values);
+        if let Err(e) = publisher.publish(&crate::node::diagnostic_array(status)) {
+            log(format!("launch status not published: {e}"));
+        }
+    }
 }
 
 /// One `[launch]` line in one write: the nodes share this stderr, and a line written in
@@ -117,12 +226,26 @@ fn terminate(child: &Child) {
     }
 }
 
+/// The nodes the launch gave up on, by why.
+#[derive(Default)]
+struct Failed {
+    /// Exited 2: rejected their configuration.
+    configuration: Vec<String>,
+    /// Crashed [`QUICK_CRASH_LIMIT`] times in a row right after their start.
+    crashing: Vec<String>,
+}
+
 /// What became of a node whose process ended.
-fn reaped(n: &mut Supervised<'_>, status: ExitStatus, lived: Duration, failed: &mut Vec<String>) {
+fn reaped(n: &mut Supervised<'_>, status: ExitStatus, lived: Duration, failed: &mut Failed) {
+    n.last_exit = Some((describe(status), status.code() == Some(0)));
     // Exit 2 is a configuration error: restarting cannot help, and the launch must say so
     // in its own exit code.
     if status.code() == Some(2) {
-        failed.push(n.spec.name.clone());
+        log(format!(
+            "{} rejected its configuration (exit 2, its lines above say why): not restarted",
+            n.spec.name
+        ));
+        failed.configuration.push(n.spec.name.clone());
     }
     let final_exit = matches!(status.code(), Some(0 | 2));
     if final_exit || !n.spec.respawn {
@@ -134,6 +257,18 @@ fn reaped(n: &mut Supervised<'_>, status: ExitStatus, lived: Duration, failed: &
     } else {
         0
     };
+    if n.quick_crashes >= QUICK_CRASH_LIMIT {
+        log(format!(
+            "{} ended {} times in a row within {} s of its start (its lines above say why): \
+             not restarted",
+            n.spec.name,
+            n.quick_crashes,
+            QUICK_CRASH.as_secs()
+        ));
+        failed.crashing.push(n.spec.name.clone());
+        n.state = State::Done;
+        return;
+    }
     let factor = 2f64.powi(i32::try_from(n.quick_crashes.saturating_sub(1).min(16)).unwrap_or(16));
     // Capped in seconds before the `Duration` exists: from_secs_f64 panics on values
     // beyond its range.
@@ -180,16 +315,25 @@ async fn stop_all(nodes: &mut [Supervised<'_>]) {
     cleanup_dead();
 }
 
-/// The launch's outcome: bad input (exit 2) when nodes rejected their configuration.
-fn outcome(failed: &[String]) -> anyhow::Result<()> {
-    if failed.is_empty() {
-        return Ok(());
+/// The launch's outcome: bad input (exit 2) when nodes rejected their configuration, an
+/// error (exit 1) when nodes kept crashing at their start.
+fn outcome(failed: &Failed) -> anyhow::Result<()> {
+    if !failed.configuration.is_empty() {
+        return Err(crate::error::bad_input(format!(
+            "{} node(s) failed their configuration (exit 2, not restarted): {}",
+            failed.configuration.len(),
+            failed.configuration.join(", ")
+        )));
     }
-    Err(crate::error::bad_input(format!(
-        "{} node(s) failed their configuration (exit 2, not restarted): {}",
-        failed.len(),
-        failed.join(", ")
-    )))
+    if !failed.crashing.is_empty() {
+        anyhow::bail!(
+            "{} node(s) ended {QUICK_CRASH_LIMIT} times in a row right after their start \
+             (not restarted): {}",
+            failed.crashing.len(),
+            failed.crashing.join(", ")
+        );
+    }
+    Ok(())
 }
 
 /// What the select loop woke up for.
@@ -200,6 +344,10 @@ enum Event {
     Exited(usize, std::io::Result<ExitStatus>),
     /// A waiting node's restart time came.
     RestartDue,
+    /// Time for the launch's status report.
+    Report,
+    /// The managed nodes were brought up (or the bring-up stopped, and said why).
+    BroughtUp,
 }
 
 /// SIGINT and SIGTERM as streams; registered before the first node starts.
@@ -241,7 +389,11 @@ async fn first_exit(mut waits: Vec<(usize, ExitWait<'_>)>) -> (usize, std::io::R
 
 /// Waits for the next signal, node exit or restart time. Cancel-safe: `Child::wait` and
 /// `Signal::recv` lose nothing when another branch wins.
-async fn next_event(nodes: &mut [Supervised<'_>], signals: &mut StopSignals) -> Event {
+async fn next_event(
+    nodes: &mut [Supervised<'_>],
+    signals: &mut StopSignals,
+    report_at: Instant,
+) -> Event {
     let restart_at = nodes
         .iter()
         .filter_map(|n| match n.state {
@@ -267,6 +419,7 @@ async fn next_event(nodes: &mut [Supervised<'_>], signals: &mut StopSignals) -> 
         name = signals.next() => Event::Stop(name),
         (i, r) = first_exit(waits) => Event::Exited(i, r),
         () = restart => Event::RestartDue,
+        () = tokio::time::sleep_until(report_at) => Event::Report,
     }
 }
 
@@ -309,6 +462,7 @@ async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
     let mut signals = StopSignals::new()?;
     let exe = std::env::current_exe().context("locating the rpkm binary")?;
     cleanup_dead();
+    let reporter = Reporter::open(desc);
     let mut nodes: Vec<Supervised<'_>> = Vec::new();
     for spec in &desc.nodes {
         let child = spawn(&exe, spec, &desc.env)?;
@@ -316,15 +470,31 @@ async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
             spec,
             state: running(child),
             quick_crashes: 0,
+            last_exit: None,
         });
     }
-    let mut failed = Vec::new();
+    let mut failed = Failed::default();
+    let mut report_at = Instant::now();
+    // the managed nodes configured and activated in file order, while the loop supervises
+    let bring_up = super::managed::bring_up(desc);
+    tokio::pin!(bring_up);
+    let mut brought_up = false;
     loop {
         if nodes.iter().all(|n| matches!(n.state, State::Done)) {
+            reporter.report(&nodes);
             log("every node has finished");
             return outcome(&failed);
         }
-        match next_event(&mut nodes, &mut signals).await {
+        let event = tokio::select! {
+            e = next_event(&mut nodes, &mut signals, report_at) => e,
+            () = &mut bring_up, if !brought_up => Event::BroughtUp,
+        };
+        match event {
+            Event::BroughtUp => brought_up = true,
+            Event::Report => {
+                reporter.report(&nodes);
+                report_at = Instant::now() + REPORT_PERIOD;
+            }
             Event::Stop(name) => {
                 log(format!("{name} received"));
                 break;
@@ -339,6 +509,7 @@ async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
                 log(format!("{} pid {pid} {}", n.spec.name, describe(status)));
                 cleanup_dead();
                 reaped(n, status, lived, &mut failed);
+                reporter.report(&nodes);
             }
             Event::RestartDue => restart_due(&mut nodes, &exe, &desc.env)?,
         }

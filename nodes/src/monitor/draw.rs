@@ -37,7 +37,8 @@ pub fn frame(f: &mut Frame, w: &Watch, now: f64, source: &str) {
         );
         return;
     }
-    let nodes = u16::try_from(w.nodes.len().clamp(1, 8)).unwrap_or(8);
+    let listed = w.nodes.len() + w.not_heard().len() + w.gone().len();
+    let nodes = u16::try_from(listed.clamp(1, 8)).unwrap_or(8);
     let [title, alert, preload, tcp, nodes_area, calib] = Layout::vertical([
         Constraint::Length(1),
         Constraint::Length(1),
@@ -94,26 +95,39 @@ fn small_summary(w: &Watch, now: f64, area: Rect) -> Vec<Line<'static>> {
     ]
 }
 
-/// `SILENT: tcp_estimator (1.4 s)` or that every node reports.
+/// `GONE: ingest (exited with code 2)`, `SILENT: tcp_estimator (1.4 s)`, `NOT HEARD:
+/// calibrator`, or that every node reports (every node the launch declared, when a launch
+/// reports).
 fn silence_line(w: &Watch, now: f64) -> Line<'static> {
     let silent = w.silent(now);
-    if w.nodes.is_empty() {
+    let gone = w.gone();
+    let not_heard = w.not_heard();
+    if w.nodes.is_empty() && gone.is_empty() && not_heard.is_empty() {
         return Line::styled("no node heard yet", bold(Color::Yellow));
     }
-    if silent.is_empty() {
-        return Line::styled(
-            format!("all {} nodes reporting", w.nodes.len()),
-            bold(Color::Green),
-        );
+    let mut alarms = Vec::new();
+    if !gone.is_empty() {
+        let names: Vec<String> = gone.iter().map(|(n, how)| format!("{n} ({how})")).collect();
+        alarms.push(format!("GONE: {}", names.join(", ")));
     }
-    let names: Vec<String> = silent
-        .iter()
-        .map(|(n, quiet)| format!("{n} ({quiet:.1} s)"))
-        .collect();
-    Line::styled(
-        format!("SILENT: {} — nothing heard", names.join(", ")),
-        bold(Color::Red),
-    )
+    if !silent.is_empty() {
+        let names: Vec<String> = silent
+            .iter()
+            .map(|(n, quiet)| format!("{n} ({quiet:.1} s)"))
+            .collect();
+        alarms.push(format!("SILENT: {} — nothing heard", names.join(", ")));
+    }
+    if !not_heard.is_empty() {
+        alarms.push(format!("NOT HEARD: {}", not_heard.join(", ")));
+    }
+    if !alarms.is_empty() {
+        return Line::styled(alarms.join(" · "), bold(Color::Red));
+    }
+    let text = match &w.launch {
+        Some(l) => format!("all {} launched nodes reporting", l.nodes.len()),
+        None => format!("all {} nodes reporting", w.nodes.len()),
+    };
+    Line::styled(text, bold(Color::Green))
 }
 
 fn thresholds_text(t: &Thresholds) -> String {
@@ -374,16 +388,39 @@ fn tcp_lines(w: &Watch) -> Vec<Line<'static>> {
 }
 
 fn node_lines(w: &Watch, now: f64) -> Vec<Line<'static>> {
-    if w.nodes.is_empty() {
+    let gone = w.gone();
+    let unheard = w.not_heard();
+    if w.nodes.is_empty() && gone.is_empty() && unheard.is_empty() {
         return vec![Line::from(
             "nothing heard on /diagnostics or the node topics yet",
         )];
     }
+    let mut lines = heard_node_lines(w, now, &gone);
+    // the launch's nodes never heard: gone before their first word, or still starting
+    for (name, how) in gone.iter().filter(|(n, _)| !w.nodes.contains_key(*n)) {
+        lines.push(Line::from(vec![
+            Span::raw(format!("{name:<16} ")),
+            Span::styled(format!("GONE   {how}"), bold(Color::Red)),
+        ]));
+    }
+    for name in unheard {
+        lines.push(Line::from(vec![
+            Span::raw(format!("{name:<16} ")),
+            Span::styled("not heard yet (launched)", bold(Color::Yellow)),
+        ]));
+    }
+    lines
+}
+
+/// The nodes heard so far: live, SILENT, or GONE when the launch says so.
+fn heard_node_lines(w: &Watch, now: f64, gone: &[(&str, &str)]) -> Vec<Line<'static>> {
     w.nodes
         .iter()
         .map(|(name, n)| {
             let quiet = now - n.last_heard_s;
-            let state = if quiet > n.patience_s(&w.config) {
+            let state = if let Some((_, how)) = gone.iter().find(|(g, _)| g == name) {
+                Span::styled(format!("GONE   {how}"), bold(Color::Red))
+            } else if quiet > n.patience_s(&w.config) {
                 Span::styled(format!("SILENT {quiet:>5.1} s"), bold(Color::Red))
             } else {
                 Span::styled(

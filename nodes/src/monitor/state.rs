@@ -162,6 +162,38 @@ pub const NODE_TOPICS: [(&str, &str); 4] = [
     ("/rpkm/diagnosis", "calibrator"),
 ];
 
+/// The /diagnostics status name under which `rpkm launch` reports its nodes (after the
+/// set's prefix, `rpkm/launch`): one key-value per declared node, its name and its state
+/// ([`GONE`], [`DONE`], `running`, `restarting`).
+pub const LAUNCH_STATUS: &str = "launch";
+/// Prefix of the state of a node that ended with an error and is not restarted:
+/// `gone: exited with code 2`.
+pub const GONE: &str = "gone: ";
+/// Prefix of the state of a node that finished (exit 0): `done: exited with code 0`.
+pub const DONE: &str = "done: ";
+
+/// What `rpkm launch` says of its nodes, in launch-file order.
+#[derive(Debug, Clone, Default)]
+pub struct LaunchView {
+    /// Node name and state.
+    pub nodes: Vec<(String, String)>,
+    /// When the report came, s.
+    pub heard_s: f64,
+}
+
+impl LaunchView {
+    fn from_status(st: &DiagnosticStatus, now: f64) -> Self {
+        Self {
+            nodes: st
+                .values
+                .iter()
+                .map(|kv| (kv.key.clone(), kv.value.clone()))
+                .collect(),
+            heard_s: now,
+        }
+    }
+}
+
 /// Outcome counts of TcpEstimate (`outcome` 0, 1, 2) and the last fallback's reason code.
 #[derive(Debug, Clone, Default)]
 pub struct Outcomes {
@@ -250,6 +282,11 @@ pub struct Watch {
     /// Nodes heard so far, by name (`rpkm/<name>` on /diagnostics, or the publisher of a
     /// topic of [`NODE_TOPICS`]).
     pub nodes: BTreeMap<String, NodeHealth>,
+    /// What `rpkm launch` last said of the nodes it declared, if a launch reports.
+    pub launch: Option<LaunchView>,
+    /// The status names of the watched set's nodes start with this (`rpkm/`, or
+    /// `machine_a/` for the set in namespace /machine_a); it is left out on screen.
+    status_prefix: String,
     /// Samples that could not be received (decode or transport errors), and the last one.
     pub receive_errors: u64,
     pub last_receive_error: Option<(String, f64)>,
@@ -280,9 +317,18 @@ impl Watch {
             parameters: None,
             diagnosis: None,
             nodes: BTreeMap::new(),
+            launch: None,
+            status_prefix: "rpkm/".to_owned(),
             receive_errors: 0,
             last_receive_error: None,
         }
+    }
+
+    /// Watches the set in `names`'s namespace: its status names (`machine_a/ingest`).
+    pub fn in_namespace(&mut self, names: &rpkm_transport::Names) {
+        // the status name of a node called "x", without the "x"
+        let of_x = names.status_name("x");
+        of_x[..of_x.len() - 1].clone_into(&mut self.status_prefix);
     }
 
     fn heard_topic(&mut self, topic: &str, now: f64) {
@@ -377,7 +423,15 @@ impl Watch {
     /// message gives the thresholds unless a parameter file did.
     pub fn on_diagnostics(&mut self, a: DiagnosticArray, now: f64) {
         for st in a.status {
-            let name = st.name.strip_prefix("rpkm/").unwrap_or(&st.name).to_owned();
+            let name = st
+                .name
+                .strip_prefix(self.status_prefix.as_str())
+                .unwrap_or(&st.name)
+                .to_owned();
+            if name == LAUNCH_STATUS {
+                self.launch = Some(LaunchView::from_status(&st, now));
+                continue;
+            }
             if name == "preload_monitor" {
                 self.thresholds_from_status(&st);
             }
@@ -441,10 +495,38 @@ impl Watch {
         self.estimate_rate.tick(now);
     }
 
-    /// The nodes heard before that have been quiet past their patience, with how long, s.
+    /// The launched nodes that are gone (exited and not restarted), with how they ended.
+    pub fn gone(&self) -> Vec<(&str, &str)> {
+        self.launch.as_ref().map_or_else(Vec::new, |l| {
+            l.nodes
+                .iter()
+                .filter_map(|(name, state)| Some((name.as_str(), state.strip_prefix(GONE)?)))
+                .collect()
+        })
+    }
+
+    /// The launched nodes that run (or restart) and have not been heard yet.
+    pub fn not_heard(&self) -> Vec<&str> {
+        self.launch.as_ref().map_or_else(Vec::new, |l| {
+            l.nodes
+                .iter()
+                .filter(|(name, state)| {
+                    !state.starts_with(GONE)
+                        && !state.starts_with(DONE)
+                        && !self.nodes.contains_key(name)
+                })
+                .map(|(name, _)| name.as_str())
+                .collect()
+        })
+    }
+
+    /// The nodes heard before that have been quiet past their patience, with how long, s; a
+    /// node the launch names gone is not here (it is not silent, it is not there).
     pub fn silent(&self, now: f64) -> Vec<(&str, f64)> {
+        let gone = self.gone();
         self.nodes
             .iter()
+            .filter(|(name, _)| !gone.iter().any(|(g, _)| g == name))
             .filter_map(|(name, n)| {
                 let quiet = now - n.last_heard_s;
                 (quiet > n.patience_s(&self.config)).then_some((name.as_str(), quiet))
@@ -528,6 +610,18 @@ impl Watch {
             "receive_errors": self.receive_errors,
             "last_receive_error": self.last_receive_error.as_ref().map(|(e, _)| e.clone()),
             "silent": self.silent(now).iter().map(|(n, _)| *n).collect::<Vec<_>>(),
+            "launch": self.launch.as_ref().map(|l| {
+                l.nodes
+                    .iter()
+                    .map(|(name, state)| json!({"name": name, "state": state}))
+                    .collect::<Vec<_>>()
+            }),
+            "gone": self
+                .gone()
+                .iter()
+                .map(|(name, how)| json!({"name": name, "how": how}))
+                .collect::<Vec<_>>(),
+            "not_heard": self.not_heard(),
         })
     }
 

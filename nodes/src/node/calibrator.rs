@@ -22,6 +22,7 @@
 //! (+12.0 ± 0.3 µm/K)", or "l1..l5 alike in 2 min, the path cannot tell which: ..." where the
 //! path does not name one rod).
 
+use super::lifecycle::Lifecycle;
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
@@ -932,7 +933,7 @@ impl Calibrator {
                 let t = vec![("online_t_s", format!("{:.3}", r.t))];
                 out.diagnostics.publish(&diagnostic_array(status(
                     self.last.0,
-                    &ctx.name,
+                    &ctx.status_name,
                     self.last.1.clone(),
                     t,
                 )))?;
@@ -1019,7 +1020,7 @@ impl Calibrator {
         let values = vec![("calibrations", self.calibrations.to_string())];
         out.diagnostics.publish(&diagnostic_array(status(
             self.last.0,
-            &ctx.name,
+            &ctx.status_name,
             self.last.1.clone(),
             values,
         )))?;
@@ -1031,7 +1032,7 @@ impl Calibrator {
         let (level, message) = (self.last.0, self.last.1.clone());
         out.diagnostics.publish(&diagnostic_array(status(
             level,
-            &ctx.name,
+            &ctx.status_name,
             message,
             self.report_values(),
         )))?;
@@ -1053,6 +1054,30 @@ impl Calibrator {
 }
 
 /// Runs the node until SIGINT/SIGTERM.
+impl Outputs {
+    fn open(ctx: &NodeContext) -> anyhow::Result<Self> {
+        Ok(Self {
+            parameters: ctx.publisher(&topic::PARAMETERS)?,
+            diagnosis: ctx.publisher(&topic::DIAGNOSIS)?,
+            diagnostics: ctx.publisher(&topic::DIAGNOSTICS)?,
+        })
+    }
+}
+
+impl Calibrator {
+    /// A calibrator that keeps `capacity` drive states, with its online tracker if any.
+    fn new(capacity: u64, online: Option<OnlineWorker>) -> Self {
+        Self {
+            acc: Accumulator::new(usize::try_from(capacity).unwrap_or(usize::MAX)),
+            online,
+            temp_name: "covariate 1".to_owned(),
+            last_measurement: None,
+            calibrations: 0,
+            last: (DiagnosticStatus::OK, "waiting for measurements".into()),
+        }
+    }
+}
+
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let ctx = NodeContext::open("calibrator", args, &KEYS, None)?;
     let p = &ctx.params;
@@ -1073,23 +1098,14 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
     let measurements = ctx.subscriber(&topic::TCP_MEASUREMENT)?;
     let infos = ctx.subscriber(&topic::CAMPAIGN_INFO)?;
-    let out = Outputs {
-        parameters: ctx.publisher(&topic::PARAMETERS)?,
-        diagnosis: ctx.publisher(&topic::DIAGNOSIS)?,
-        diagnostics: ctx.publisher(&topic::DIAGNOSTICS)?,
-    };
+    let out = Outputs::open(&ctx)?;
+    let services = super::calibration_services::CalibrationServices::open(&ctx)?;
+    let mut lifecycle = Lifecycle::open(&ctx, super::lifecycle::start(args))?;
     ctx.log(format!(
         "calibrating {} from {}",
         options.start.model, options.start.source
     ));
-    let mut node = Calibrator {
-        acc: Accumulator::new(usize::try_from(capacity).unwrap_or(usize::MAX)),
-        online,
-        temp_name: "covariate 1".to_owned(),
-        last_measurement: None,
-        calibrations: 0,
-        last: (DiagnosticStatus::OK, "waiting for measurements".into()),
-    };
+    let mut node = Calibrator::new(capacity, online);
     let mut idle = Idle::new(Duration::from_millis(50), Duration::from_millis(1));
     let mut report = Every::new(ctx.diagnostics_period()?);
     while !super::shutdown::requested() {
@@ -1111,9 +1127,16 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 break;
             }
         }
-        if (end || node.idle_ended(idle_end)) && node.acc.measurements > 0 {
+        // an inactive node collects its campaign and calibrates (publishes) once active
+        if (end || node.idle_ended(idle_end)) && node.acc.measurements > 0 && lifecycle.active() {
             node.calibrate(&ctx, &out, &options)?;
         }
+        lifecycle.serve(&ctx, || {
+            ctx.reread_params(args, "calibrator", &KEYS)
+                .and_then(|p| configure(&p))
+                .map(|s| (options, every, idle_end) = (s.options, s.every, s.idle_end))
+                .map_err(|e| crate::error::error_chain(&e))
+        });
         // Between calibrations: the next campaign ends and calibrates by the new settings.
         if let Some((p, names)) = live.poll() {
             Settings {
@@ -1122,6 +1145,10 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 idle_end,
             } = configure(&p)?;
             ctx.log(format!("parameters set: {}", names.join(", ")));
+        }
+        // the geometry the next calibration starts from
+        if let Some(g) = services.as_ref().and_then(|s| s.poll(&ctx, &options.start)) {
+            options.start = g;
         }
         if report.due() {
             node.publish_status(&ctx, &out)?;

@@ -85,8 +85,10 @@ struct Settings {
 /// Opens the node: its source (the option, else parameter `source`, else dds), transport and
 /// settings; every bad value is bad input (exit 2) naming the key.
 fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
-    let name = args.common.name.as_deref().unwrap_or("ingest");
-    let pre = super::NodeParams::load(name, &args.common.params, &args.common.param)
+    let pre = args
+        .common
+        .identity("ingest")?
+        .params()
         .map_err(bad_param)?;
     let source = match &args.source {
         Some(s) => s.clone(),

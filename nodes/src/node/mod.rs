@@ -7,9 +7,11 @@
 //! (`--backend ipc|dds|both`) and subscribes on one (`--input-backend`), stops cleanly on
 //! SIGINT/SIGTERM ([`shutdown`]) and reports on `/diagnostics`.
 
+pub mod calibration_services;
 pub mod calibrator;
 pub mod ingest;
 pub mod inputs;
+pub mod lifecycle;
 pub mod live;
 pub mod params;
 pub mod preload_monitor;
@@ -136,6 +138,157 @@ pub struct CommonArgs {
     /// DDS domain id (default: env ROS_DOMAIN_ID, else 0).
     #[arg(long)]
     pub domain: Option<u16>,
+    /// Start as a managed node in the unconfigured state: it publishes nothing until a
+    /// lifecycle client configures and activates it (`ros2 lifecycle set NODE configure`);
+    /// needs DDS. Without it the node starts active (and can still be deactivated).
+    #[arg(long)]
+    pub unconfigured: bool,
+    /// ROS 2 arguments, last on the line: `--ros-args -r __ns:=/machine_a -r __node:=NAME
+    /// -r FROM:=TO -p KEY:=VALUE --params-file FILE` (namespace, name, topic remapping,
+    /// parameters).
+    #[arg(long = "ros-args", num_args = 0.., allow_hyphen_values = true, value_name = "ARGS")]
+    pub ros_args: Vec<String>,
+}
+
+impl CommonArgs {
+    /// Who the node is and where its parameters come from: the command line with its
+    /// `--ros-args` (which win, as with rcl).
+    pub fn identity(&self, kind: &str) -> anyhow::Result<Identity> {
+        let ros = RosArgs::parse(&self.ros_args).map_err(crate::error::bad_input)?;
+        let name = ros
+            .node
+            .clone()
+            .or_else(|| self.name.clone())
+            .unwrap_or_else(|| kind.to_owned());
+        if let Some(why) = node_name_error(&name) {
+            return Err(crate::error::bad_input(format!("--name: {why}")));
+        }
+        let namespace = ros
+            .namespace
+            .as_deref()
+            .unwrap_or(rpkm_transport::NODE_NAMESPACE);
+        let names = rpkm_transport::Names::new(namespace, &ros.remaps)
+            .map_err(|e| crate::error::bad_input(format!("--ros-args: {e}")))?;
+        let mut files = self.params.clone();
+        files.extend(ros.param_files.iter().cloned());
+        let mut overrides = self.param.clone();
+        overrides.extend(ros.params.iter().cloned());
+        Ok(Identity {
+            name,
+            names,
+            files,
+            overrides,
+        })
+    }
+}
+
+impl NodeContext {
+    /// The node's parameters read again from its files (a lifecycle configure), checked
+    /// against `declared` as at its start.
+    pub fn reread_params(
+        &self,
+        args: &CommonArgs,
+        kind: &str,
+        declared: &[&str],
+    ) -> anyhow::Result<NodeParams> {
+        let params = args.identity(kind)?.params().map_err(bad_param)?;
+        let mut all: Vec<&str> = declared.to_vec();
+        all.extend(COMMON_KEYS);
+        params.check_declared(&all).map_err(bad_param)?;
+        Ok(params)
+    }
+}
+
+/// A node's name, namespace and remapping rules, and its parameter sources.
+#[derive(Debug, Clone)]
+pub struct Identity {
+    /// Node name.
+    pub name: String,
+    /// Namespace and remapping rules.
+    pub names: rpkm_transport::Names,
+    /// Parameter files, in order.
+    pub files: Vec<PathBuf>,
+    /// `key=value` overrides, in order.
+    pub overrides: Vec<String>,
+}
+
+impl Identity {
+    /// The merged parameters of this node, from its files and overrides.
+    pub fn params(&self) -> Result<NodeParams, ParamError> {
+        NodeParams::load_in(
+            self.names.namespace(),
+            &self.name,
+            &self.files,
+            &self.overrides,
+        )
+    }
+}
+
+/// What `--ros-args` says, as rcl reads it: `-r __ns:=NS`, `-r __node:=NAME`, `-r FROM:=TO`,
+/// `-p KEY:=VALUE`, `--params-file FILE`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RosArgs {
+    /// `-r __ns:=NS`.
+    pub namespace: Option<String>,
+    /// `-r __node:=NAME` (or `__name`).
+    pub node: Option<String>,
+    /// `-r FROM:=TO`, in order.
+    pub remaps: Vec<(String, String)>,
+    /// `-p KEY:=VALUE`, as `key=value` (`--param`).
+    pub params: Vec<String>,
+    /// `--params-file FILE`.
+    pub param_files: Vec<PathBuf>,
+}
+
+impl RosArgs {
+    /// Reads the words after `--ros-args` (up to a `--`); an error names the word.
+    pub fn parse(words: &[String]) -> Result<Self, String> {
+        let mut out = Self::default();
+        let mut words = words.iter();
+        while let Some(flag) = words.next() {
+            let flag = flag.as_str();
+            match flag {
+                "--" => break,
+                // rcl takes several `--ros-args` sections (the launch appends one)
+                "--ros-args" => continue,
+                _ => {}
+            }
+            let value = |w: Option<&String>| {
+                w.cloned()
+                    .ok_or_else(|| format!("--ros-args {flag}: expected a value after it"))
+            };
+            match flag {
+                "-r" | "--remap" => out.remap(&value(words.next())?)?,
+                "-p" | "--param" => {
+                    let v = value(words.next())?;
+                    let (key, val) = v
+                        .split_once(":=")
+                        .ok_or_else(|| format!("--ros-args -p {v:?}: expected KEY:=VALUE"))?;
+                    out.params.push(format!("{key}={val}"));
+                }
+                "--params-file" => out.param_files.push(PathBuf::from(value(words.next())?)),
+                other => {
+                    return Err(format!(
+                        "--ros-args: unknown argument {other:?} (-r FROM:=TO, -r __ns:=NS, \
+                         -r __node:=NAME, -p KEY:=VALUE, --params-file FILE)"
+                    ))
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    fn remap(&mut self, rule: &str) -> Result<(), String> {
+        let (from, to) = rule
+            .split_once(":=")
+            .ok_or_else(|| format!("--ros-args -r {rule:?}: expected FROM:=TO"))?;
+        match from {
+            "__ns" => self.namespace = Some(to.to_owned()),
+            "__node" | "__name" => self.node = Some(to.to_owned()),
+            _ => self.remaps.push((from.to_owned(), to.to_owned())),
+        }
+        Ok(())
+    }
 }
 
 /// Parameter keys every node declares.
@@ -191,6 +344,8 @@ pub fn geometry_specs() -> [live::Spec; 4] {
 pub struct NodeContext {
     /// Node name.
     pub name: String,
+    /// Its status name on /diagnostics: `rpkm/<name>`, `<namespace>/<name>`.
+    pub status_name: String,
     /// Merged parameters.
     pub params: NodeParams,
     /// The transport (iceoryx2, DDS or both, as the ports need).
@@ -206,6 +361,8 @@ pub struct NodeContext {
 pub struct NodeSetup {
     /// Node name.
     pub name: String,
+    /// Namespace and remapping rules.
+    pub names: rpkm_transport::Names,
     /// Merged parameters, every key declared.
     pub params: NodeParams,
     /// Backend of the publishers.
@@ -242,6 +399,34 @@ pub fn declared_keys(exec: &str) -> Option<Vec<&'static str>> {
     Some(keys)
 }
 
+/// Longest node name: rmw's `RMW_NODE_NAME_MAX_NAME_LENGTH`.
+pub const NODE_NAME_MAX: usize = 255;
+
+/// Why `name` cannot name a ROS 2 node (rmw's rules: letters, digits and `_`, not starting
+/// with a digit, at most [`NODE_NAME_MAX`] characters), or `None`. Checked before anything
+/// is opened: a name the transport refuses later would make a node that fails at every
+/// start.
+pub fn node_name_error(name: &str) -> Option<String> {
+    let shown = if name.chars().count() > 40 {
+        let head: String = name.chars().take(40).collect();
+        format!("{head:?}... ({} characters)", name.chars().count())
+    } else {
+        format!("{name:?}")
+    };
+    let why = if name.is_empty() {
+        "is empty"
+    } else if name.len() > NODE_NAME_MAX {
+        "is longer than 255 characters"
+    } else if name.starts_with(|c: char| c.is_ascii_digit()) {
+        "starts with a digit"
+    } else if !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+        "has a character other than a letter, a digit or `_`"
+    } else {
+        return None;
+    };
+    Some(format!("node name {shown} {why}"))
+}
+
 impl NodeSetup {
     /// Loads the parameters and checks them against `declared` and the backends; `extra_input`
     /// is a backend the node subscribes on besides its input (ingest's DDS source).
@@ -251,8 +436,8 @@ impl NodeSetup {
         declared: &[&str],
         extra_input: Option<Backend>,
     ) -> anyhow::Result<Self> {
-        let name = args.name.clone().unwrap_or_else(|| kind.to_owned());
-        let params = NodeParams::load(&name, &args.params, &args.param).map_err(bad_param)?;
+        let Identity { name, names, .. } = args.identity(kind)?;
+        let params = args.identity(kind)?.params().map_err(bad_param)?;
         let mut all: Vec<&str> = declared.to_vec();
         all.extend(COMMON_KEYS);
         params.check_declared(&all).map_err(bad_param)?;
@@ -297,6 +482,7 @@ impl NodeSetup {
         diagnostics_period(&params)?;
         Ok(Self {
             name,
+            names,
             params,
             output,
             input,
@@ -333,9 +519,11 @@ impl NodeContext {
             Some(p) => p.clone(),
             None => std::env::var("RPKM_IPC_PREFIX").unwrap_or_default(),
         };
+        let status_name = setup.names.status_name(&name);
         let mut config = TransportConfig::new(&name)
             .backend(setup.transport)
-            .ipc_prefix(prefix);
+            .ipc_prefix(prefix)
+            .names(setup.names);
         if let Some(d) = args.domain {
             config = config.dds_domain(d);
         }
@@ -356,6 +544,7 @@ impl NodeContext {
         }
         Ok(Self {
             name,
+            status_name,
             params: setup.params,
             transport,
             output: setup.output,
@@ -579,16 +768,17 @@ pub fn parameters_msg(
     }
 }
 
-/// One `diagnostic_msgs/DiagnosticStatus` of an rpkm node.
+/// One `diagnostic_msgs/DiagnosticStatus` of an rpkm node; `name` is its status name
+/// ([`NodeContext::status_name`]: `rpkm/tcp_estimator`, `machine_a/tcp_estimator`).
 pub fn status(
     level: u8,
-    node: &str,
+    name: &str,
     message: String,
     values: Vec<(&str, String)>,
 ) -> DiagnosticStatus {
     DiagnosticStatus {
         level,
-        name: format!("rpkm/{node}"),
+        name: name.to_owned(),
         message,
         hardware_id: "scissors_kinematics".into(),
         values: values
@@ -683,5 +873,78 @@ impl Every {
         } else {
             false
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn words(s: &str) -> Vec<String> {
+        s.split_whitespace().map(str::to_owned).collect()
+    }
+
+    #[test]
+    fn ros_args_give_namespace_name_rules_and_parameters() -> Result<(), String> {
+        let r = RosArgs::parse(&words(
+            "-r __ns:=/machine_a -r __node:=est_a -r tcp_estimate:=/cell/e -p model:=24 \
+             --params-file p.yaml --ros-args -r a:=b -- -r ignored:=x",
+        ))?;
+        assert_eq!(r.namespace.as_deref(), Some("/machine_a"));
+        assert_eq!(r.node.as_deref(), Some("est_a"));
+        assert_eq!(
+            r.remaps,
+            [
+                ("tcp_estimate".to_owned(), "/cell/e".to_owned()),
+                ("a".to_owned(), "b".to_owned())
+            ]
+        );
+        assert_eq!(r.params, ["model=24"]);
+        assert_eq!(r.param_files, [PathBuf::from("p.yaml")]);
+        for (bad, says) in [
+            ("-r", "expected a value"),
+            ("-r nope", "expected FROM:=TO"),
+            ("-p model=24", "expected KEY:=VALUE"),
+            ("--enclave x", "unknown argument \"--enclave\""),
+        ] {
+            let e = RosArgs::parse(&words(bad)).expect_err(bad);
+            assert!(e.contains(says), "{bad}: {e}");
+        }
+        Ok(())
+    }
+
+    /// The node's name, namespace and parameter sections follow `--ros-args`: a section of
+    /// the namespace applies, the default namespace's does not.
+    #[test]
+    fn a_namespaced_node_reads_its_namespace_s_section() -> anyhow::Result<()> {
+        let dir = tempfile::tempdir()?;
+        let file = dir.path().join("p.yaml");
+        std::fs::write(
+            &file,
+            "/rpkm/est_a:\n  ros__parameters:\n    model: 24\n\
+             /machine_a/est_a:\n  ros__parameters:\n    stiffness_factor: 2.0\n",
+        )?;
+        let args = CommonArgs {
+            params: vec![file],
+            ros_args: words("-r __ns:=/machine_a -r __node:=est_a"),
+            ..CommonArgs::default()
+        };
+        let id = args.identity("tcp_estimator")?;
+        assert_eq!(id.name, "est_a");
+        assert_eq!(id.names.namespace(), "/machine_a");
+        let p = id.params()?;
+        assert!((p.f64("stiffness_factor", 1.0)? - 2.0).abs() < 1e-12);
+        assert_eq!(
+            p.u64("model", 29)?,
+            29,
+            "the /rpkm section is another node's"
+        );
+        let bad = CommonArgs {
+            ros_args: words("-r __ns:=machine_a"),
+            ..CommonArgs::default()
+        };
+        let e = bad.identity("ingest").expect_err("relative namespace");
+        assert!(e.to_string().contains("namespace \"machine_a\""), "{e}");
+        Ok(())
     }
 }

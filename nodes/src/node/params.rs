@@ -142,15 +142,17 @@ pub enum ParamError {
 #[derive(Debug, Clone, Default)]
 pub struct NodeParams {
     node: String,
+    /// The node's namespace: which sections address it.
+    namespace: String,
     values: BTreeMap<String, (Value, Origin)>,
 }
 
-/// Whether a section name addresses the node `node` in rpkm's namespace
-/// ([`rpkm_transport::NODE_NAMESPACE`]): `Some(false)` for every node (`/**`), `Some(true)`
-/// for this one (`node`, `/node`, `/rpkm/node`, `/**/node`, `/*/node`), `None` otherwise, a
-/// section of the same node name in another namespace (`/foo/ingest`) included: ROS 2 would
-/// not apply it either.
-fn section_matches(section: &str, node: &str) -> Option<bool> {
+/// Whether a section name addresses the node `node` in namespace `ours` (rpkm's
+/// [`rpkm_transport::NODE_NAMESPACE`] by default): `Some(false)` for every node (`/**`),
+/// `Some(true)` for this one (`node`, `/node`, `/rpkm/node`, `/**/node`, `/*/node`), `None`
+/// otherwise, a section of the same node name in another namespace (`/foo/ingest`)
+/// included: ROS 2 would not apply it either.
+fn section_matches(section: &str, node: &str, ours: &str) -> Option<bool> {
     let s = section.trim();
     if s == "/**" || s == "**" {
         return Some(false);
@@ -159,7 +161,6 @@ fn section_matches(section: &str, node: &str) -> Option<bool> {
     if last != node {
         return None;
     }
-    let ours = rpkm_transport::NODE_NAMESPACE;
     let one_level = ours.matches('/').count() == 1;
     let here = match namespace {
         "" | "/**" => true,
@@ -171,6 +172,9 @@ fn section_matches(section: &str, node: &str) -> Option<bool> {
 
 fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Value)>) {
     match v {
+        // an empty map stays a value, so that a getter refuses it (`period: {}`) instead
+        // of the key vanishing
+        Value::Mapping(m) if m.is_empty() => out.push((prefix.to_owned(), v.clone())),
         Value::Mapping(m) => {
             for (k, v) in m {
                 let key = match k {
@@ -202,13 +206,25 @@ impl NodeParams {
     pub fn empty(node: &str) -> Self {
         Self {
             node: node.to_owned(),
+            namespace: rpkm_transport::NODE_NAMESPACE.to_owned(),
             values: BTreeMap::new(),
         }
     }
 
     /// Reads `files` in order, then applies `overrides` (`key=value`, value as YAML).
     pub fn load(node: &str, files: &[PathBuf], overrides: &[String]) -> Result<Self, ParamError> {
+        Self::load_in(rpkm_transport::NODE_NAMESPACE, node, files, overrides)
+    }
+
+    /// [`Self::load`] for a node in `namespace`: the sections that address it there.
+    pub fn load_in(
+        namespace: &str,
+        node: &str,
+        files: &[PathBuf],
+        overrides: &[String],
+    ) -> Result<Self, ParamError> {
         let mut out = Self::empty(node);
+        namespace.clone_into(&mut out.namespace);
         for f in files {
             let text = std::fs::read_to_string(f).map_err(|source| ParamError::Read {
                 file: f.display().to_string(),
@@ -257,7 +273,7 @@ impl NodeParams {
                     yaml_text(section)
                 )));
             };
-            let Some(specific) = section_matches(section, &self.node) else {
+            let Some(specific) = section_matches(section, &self.node, &self.namespace) else {
                 continue;
             };
             let params = match body {
@@ -290,6 +306,7 @@ impl NodeParams {
     /// Errors on a key set for this node by name (or `--param`) that is not in `declared`.
     /// A declared key ending in `.` declares a whole group (`geometry.`).
     pub fn check_declared(&self, declared: &[&str]) -> Result<(), ParamError> {
+        self.check_shapes(declared)?;
         for (key, (_, origin)) in &self.values {
             let known = declared
                 .iter()
@@ -301,6 +318,41 @@ impl NodeParams {
                     node: self.node.clone(),
                     known: declared.join(", "),
                 });
+            }
+        }
+        Ok(())
+    }
+
+    /// Errors on a map where a declared key wants a value (`diagnostics_period_s: {a: 1}`
+    /// flattens to `diagnostics_period_s.a`) and on a value where a declared group wants a
+    /// map (`geometry: 5`), whichever section set it: a wildcard section's key is one this
+    /// node takes, so a wrong shape there is as wrong as in its own section.
+    fn check_shapes(&self, declared: &[&str]) -> Result<(), ParamError> {
+        for (key, (value, origin)) in &self.values {
+            let map_under_value = declared.iter().find(|d| {
+                !d.ends_with('.')
+                    && key
+                        .strip_prefix(**d)
+                        .is_some_and(|rest| rest.starts_with('.'))
+            });
+            if let Some(d) = map_under_value {
+                return Err(ParamError::Type {
+                    origin: Box::new(origin.clone()),
+                    key: (*d).to_owned(),
+                    expected: "a value",
+                    found: format!("a map (with {key} = {})", yaml_text(value)),
+                });
+            }
+            let group = declared
+                .iter()
+                .any(|d| d.strip_suffix('.') == Some(key.as_str()));
+            let is_map = matches!(value, Value::Mapping(_));
+            if group && !is_map {
+                return Err(self.type_err(key, "a map of names to values"));
+            }
+            // an empty map under a value's key (flatten keeps it as the key's value)
+            if is_map && declared.contains(&key.as_str()) {
+                return Err(self.type_err(key, "a value"));
             }
         }
         Ok(())
@@ -605,6 +657,49 @@ tcp_estimator:
         );
         let layout = load("ingest:\n  rate_hz: 3\n", "ingest").expect_err("no ros__parameters");
         assert!(layout.to_string().contains("ros__parameters"), "{layout}");
+        Ok(())
+    }
+
+    /// A map where a value belongs (the fuzzer's `diagnostics_period_s: {a: 1}`, in the
+    /// wildcard section) and a value where the geometry map belongs are refused with the
+    /// key; an empty map too (it does not vanish).
+    #[test]
+    fn maps_and_values_in_each_others_place_are_refused_with_the_key() -> Result<(), ParamError> {
+        let declared = ["diagnostics_period_s", "model", "geometry."];
+        for (text, says) in [
+            (
+                "/**:\n  ros__parameters:\n    diagnostics_period_s: {a: 1}\n",
+                "p.yaml: /**/ros__parameters/diagnostics_period_s: expected a value, found a map \
+                 (with diagnostics_period_s.a = 1)",
+            ),
+            (
+                "tcp_estimator:\n  ros__parameters:\n    geometry: 5\n",
+                "p.yaml: tcp_estimator/ros__parameters/geometry: expected a map of names to \
+                 values, found 5",
+            ),
+        ] {
+            let p = load(text, "tcp_estimator")?;
+            let err = p.check_declared(&declared).expect_err(text);
+            assert_eq!(err.to_string(), says);
+        }
+        let p = load(
+            "/**:\n  ros__parameters:\n    diagnostics_period_s: {}\n",
+            "tcp_estimator",
+        )?;
+        let err = p
+            .check_declared(&declared)
+            .expect_err("an empty map is not a value");
+        assert!(
+            err.to_string()
+                .ends_with("diagnostics_period_s: expected a value, found {}"),
+            "{err}"
+        );
+        // a key of another node under a wildcard stays none of this node's business
+        let p = load(
+            "/**:\n  ros__parameters:\n    rate_hz: {a: 1}\n",
+            "tcp_estimator",
+        )?;
+        p.check_declared(&declared)?;
         Ok(())
     }
 

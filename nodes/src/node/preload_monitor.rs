@@ -13,6 +13,7 @@
 //! (`implausible` on /diagnostics): it never sets a level, so a non-physical branch of the
 //! solver (10⁸ N "predicted") cannot raise ERROR on a drive.
 
+use super::lifecycle::Lifecycle;
 use std::time::Duration;
 
 use rpkm_core::elastic::{
@@ -470,6 +471,25 @@ fn specs() -> Vec<Spec> {
 }
 
 /// Runs the node until SIGINT/SIGTERM.
+/// Logs the input's losses since the last report: once per report, not per gap (a stall
+/// loses in bursts).
+fn report_loss(ctx: &NodeContext, monitor: &Monitor, lost_reported: &mut u64) {
+    if monitor.input.lost > *lost_reported {
+        *lost_reported = monitor.input.lost;
+        ctx.log(format!(
+            "WARN: {}",
+            monitor.input.summary().unwrap_or_default()
+        ));
+    }
+}
+
+/// A lifecycle configure: the parameters read again from the node's files.
+fn reconfigure(args: &CommonArgs, ctx: &NodeContext, declared: &[&str]) -> Result<Config, String> {
+    ctx.reread_params(args, "preload_monitor", declared)
+        .and_then(|p| configure(&p))
+        .map_err(|e| crate::error::error_chain(&e))
+}
+
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let declared = super::declared_keys("preload_monitor").unwrap_or_default();
     let ctx = NodeContext::open("preload_monitor", args, &declared, None)?;
@@ -487,6 +507,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let mut parameters = ParameterFollower::open(&ctx)?;
     let statuses = ctx.publisher(&topic::PRELOAD_STATUS)?;
     let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
+    let services = super::calibration_services::CalibrationServices::open(&ctx)?;
+    let mut lifecycle = Lifecycle::open(&ctx, super::lifecycle::start(args))?;
     ctx.log(format!(
         "monitoring with {}; WARN from {} %, ERROR from {} %",
         geometry.source, thresholds.warn_percent, thresholds.error_percent
@@ -501,19 +523,27 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let mut n = 0u64;
     let mut lost_reported = 0;
     while !super::shutdown::requested() {
+        lifecycle.serve(&ctx, || {
+            reconfigure(args, &ctx, &declared).map(|c| {
+                monitor.set_thresholds(c.thresholds);
+                status_every = c.status_every;
+                monitor.set_geometry(c.geometry);
+            })
+        });
         if let Some(g) = parameters.poll(&ctx, monitor.geometry())? {
             monitor.set_geometry(g);
         }
         if let Some(s) = states.try_recv()? {
             idle.worked();
-            if let Some(e) = monitor.evaluate(&s) {
+            // an inactive node takes its input and publishes nothing
+            if let Some(e) = lifecycle.active().then(|| monitor.evaluate(&s)).flatten() {
                 n += 1;
                 if e.changed || n.is_multiple_of(status_every) {
                     statuses.publish(&e.status)?;
                 }
                 if e.changed {
-                    ctx.log(monitor.status(&ctx.name).message);
-                    diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
+                    ctx.log(monitor.status(&ctx.status_name).message);
+                    diagnostics.publish(&diagnostic_array(monitor.status(&ctx.status_name)))?;
                 }
             }
         } else {
@@ -527,16 +557,15 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 }
                 ctx.log(format!("parameters set: {}", names.join(", ")));
             }
+            if let Some(g) = services
+                .as_ref()
+                .and_then(|s| s.poll(&ctx, monitor.geometry()))
+            {
+                monitor.set_geometry(g);
+            }
             if report.due() {
-                diagnostics.publish(&diagnostic_array(monitor.status(&ctx.name)))?;
-                // A loss is logged once per report, not per gap (a stall loses in bursts).
-                if monitor.input.lost > lost_reported {
-                    lost_reported = monitor.input.lost;
-                    ctx.log(format!(
-                        "WARN: {}",
-                        monitor.input.summary().unwrap_or_default()
-                    ));
-                }
+                diagnostics.publish(&diagnostic_array(monitor.status(&ctx.status_name)))?;
+                report_loss(&ctx, &monitor, &mut lost_reported);
             }
             idle.wait_for(&states)?;
         }

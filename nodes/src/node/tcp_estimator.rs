@@ -29,6 +29,7 @@ use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
 use super::inputs::{ParameterFollower, SeqGaps};
+use super::lifecycle::Lifecycle;
 use super::live::{self, LiveParams, Spec};
 use super::views::{self, TcpViews};
 use super::{
@@ -355,6 +356,26 @@ fn configure(p: &NodeParams) -> anyhow::Result<(Geometry, u64)> {
     Ok((Geometry::from_params(p)?, every))
 }
 
+/// A lifecycle configure: the parameters read again from the node's files, its geometry and
+/// views set from them; `Err` names what is wrong (the node stays as it was).
+fn reconfigure(
+    args: &CommonArgs,
+    ctx: &NodeContext,
+    declared: &[&str],
+    est: &mut Estimator,
+    views: Option<&mut TcpViews>,
+) -> Result<(), String> {
+    let p = ctx
+        .reread_params(args, "tcp_estimator", declared)
+        .map_err(|e| crate::error::error_chain(&e))?;
+    let (g, every) = configure(&p).map_err(|e| crate::error::error_chain(&e))?;
+    est.set_geometry(g);
+    if let Some(v) = views {
+        v.set_every(every);
+    }
+    Ok(())
+}
+
 /// Runs the node until SIGINT/SIGTERM.
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let declared = super::declared_keys("tcp_estimator").unwrap_or_default();
@@ -377,6 +398,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let dds = matches!(ctx.output, Backend::Dds | Backend::Both);
     let mut live = LiveParams::start(&ctx, &specs(dds), |p| configure(p).map(|_| ()))?;
     let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
+    let services = super::calibration_services::CalibrationServices::open(&ctx)?;
+    let mut lifecycle = Lifecycle::open(&ctx, super::lifecycle::start(args))?;
     ctx.log(format!(
         "estimating with {} ({}), publishing on {:?}, subscribing on {:?}",
         geometry.source, geometry.model, ctx.output, ctx.input
@@ -400,11 +423,16 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let mut report = Every::new(ctx.diagnostics_period()?);
     let mut lost_reported = 0;
     while !super::shutdown::requested() {
+        lifecycle.serve(&ctx, || {
+            reconfigure(args, &ctx, &declared, &mut est, views.as_mut())
+        });
         if let Some(g) = parameters.poll(&ctx, est.geometry())? {
             est.set_geometry(g);
         }
         if let Some(state) = states.try_recv()? {
-            if let Some(e) = est.estimate(&state) {
+            // an inactive node takes its input (no backlog at activation) and publishes
+            // nothing, as rclcpp's lifecycle publishers
+            if let Some(e) = lifecycle.active().then(|| est.estimate(&state)).flatten() {
                 estimates.publish(&e)?;
                 if let Some(v) = views.as_mut() {
                     v.offer(&e)?;
@@ -423,8 +451,11 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 }
                 ctx.log(format!("parameters set: {}", names.join(", ")));
             }
+            if let Some(g) = services.as_ref().and_then(|s| s.poll(&ctx, est.geometry())) {
+                est.set_geometry(g);
+            }
             if report.due() {
-                diagnostics.publish(&diagnostic_array(est.status(&ctx.name)))?;
+                diagnostics.publish(&diagnostic_array(est.status(&ctx.status_name)))?;
                 // A loss is logged once per report, not per gap (a stall loses in bursts).
                 if est.input.lost > lost_reported {
                     lost_reported = est.input.lost;

@@ -53,7 +53,7 @@ pub enum RosoutLevel {
 /// A message as ros2-client sees it: the same serde form, with ros2-client's marker trait.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(transparent)]
-struct Wire<T>(T);
+pub(crate) struct Wire<T>(pub(crate) T);
 
 impl<T: RosMessage> ros2_client::Message for Wire<T> {}
 
@@ -183,10 +183,10 @@ impl std::fmt::Debug for DdsNode {
 }
 
 impl DdsNode {
-    /// Joins `domain` with a node `/rpkm/<name>`, with a `/rosout` writer ([`Self::rosout`])
+    /// Joins `domain` with a node `<namespace>/<name>`, with a `/rosout` writer ([`Self::rosout`])
     /// and a `/parameter_events` writer. The parameter services are rpkm's own
     /// ([`crate::dds_params`]), started by [`Self::serve_parameters`].
-    pub fn new(name: &str, domain: u16) -> Result<Arc<Self>, TransportError> {
+    pub fn new(name: &str, namespace: &str, domain: u16) -> Result<Arc<Self>, TransportError> {
         let err = |reason: String| TransportError::DdsNode {
             node: name.to_owned(),
             domain,
@@ -194,8 +194,7 @@ impl DdsNode {
         };
         let context = Context::with_options(ContextOptions::new().domain_id(domain))
             .map_err(|e| err(e.to_string()))?;
-        let node_name =
-            NodeName::new(crate::NODE_NAMESPACE, name).map_err(|e| err(format!("{e:?}")))?;
+        let node_name = NodeName::new(namespace, name).map_err(|e| err(format!("{e:?}")))?;
         let node = context
             .new_node(
                 node_name,
@@ -207,7 +206,13 @@ impl DdsNode {
                     .allow_undeclared_parameters(true),
             )
             .map_err(|e| err(format!("{e:?}")))?;
-        let logger = format!("{}.{name}", crate::NODE_NAMESPACE.trim_start_matches('/'));
+        // rcl's logger name: the namespace's parts and the node's, joined by `.`
+        let logger = namespace
+            .split('/')
+            .filter(|p| !p.is_empty())
+            .chain([name])
+            .collect::<Vec<_>>()
+            .join(".");
         let runtime = DdsRuntime::start(name, node.logging_handle(), logger)
             .map_err(|e| err(format!("starting the DDS runtime: {e}")))?;
         Ok(Arc::new(Self {

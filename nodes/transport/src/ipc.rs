@@ -22,6 +22,7 @@ use iceoryx2::port::subscriber::Subscriber as IoxSubscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::port::{BackpressureAction, BackpressureInfo, SendError};
 use iceoryx2::prelude::*;
+use rpkm_msgs::lifecycle_msgs::TransitionEvent;
 use rpkm_msgs::{
     from_cdr, to_cdr, ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, JointState,
     Parameters, PoseStamped, PreloadStatus, RosMessage, TcpEstimate, TcpMeasurement, TfMessage,
@@ -95,6 +96,39 @@ impl IpcNode {
             reason: format!("iceoryx2 service name {name:?}: {e:?}"),
         })
     }
+}
+
+/// iceoryx2's records, handed to the `log` crate under the target `iceoryx2` at their level,
+/// instead of iceoryx2's own console logger (which prints "No config file was loaded ..." at
+/// every process start): the process's logger decides what is shown.
+struct LogBridge;
+
+impl iceoryx2_log::Log for LogBridge {
+    fn log(
+        &self,
+        level: iceoryx2_log::LogLevel,
+        origin: std::fmt::Arguments<'_>,
+        message: std::fmt::Arguments<'_>,
+    ) {
+        use iceoryx2_log::LogLevel as L;
+        let level = match level {
+            L::Trace => log::Level::Trace,
+            L::Debug => log::Level::Debug,
+            L::Info => log::Level::Info,
+            L::Warn => log::Level::Warn,
+            L::Error | L::Fatal => log::Level::Error,
+        };
+        log::log!(target: "iceoryx2", level, "{message} ({origin})");
+    }
+}
+
+/// Routes iceoryx2's log records into the `log` crate (warnings and errors; iceoryx2 formats
+/// nothing below). Call it before anything of iceoryx2 runs: its logger is set once, at the
+/// first record. Returns false when iceoryx2 had already chosen its console logger.
+pub fn route_iceoryx2_log() -> bool {
+    static BRIDGE: LogBridge = LogBridge;
+    set_log_level(LogLevel::Warn);
+    set_logger(&BRIDGE)
 }
 
 /// `prefix/topic-without-leading-slash`, or the bare topic without prefix.
@@ -597,7 +631,8 @@ as_cdr!(
     CampaignInfo,
     PoseStamped,
     TfMessage,
-    JointState
+    JointState,
+    TransitionEvent
 );
 
 #[cfg(test)]

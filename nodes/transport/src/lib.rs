@@ -14,9 +14,11 @@
 //! # Ok(()) }
 //! ```
 pub mod dds;
+pub mod dds_calls;
 pub mod dds_params;
 pub mod error;
 pub mod ipc;
+pub mod names;
 pub mod pubsub;
 pub mod topic;
 
@@ -25,6 +27,7 @@ pub const NODE_NAMESPACE: &str = "/rpkm";
 
 pub use error::TransportError;
 pub use ipc::IpcMessage;
+pub use names::{NameError, Names};
 pub use pubsub::{Backend, Publisher, Subscriber, Transport, TransportConfig};
 pub use topic::{Durability, Qos, Reliability, Topic};
 pub mod bag;

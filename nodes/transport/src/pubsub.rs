@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use crate::dds::{domain_id_from_env, DdsNode, DdsPublisher, DdsSubscriber};
 use crate::error::TransportError;
 use crate::ipc::{IpcMessage, IpcNode, IpcRecv, IpcSend};
+use crate::names::Names;
 use crate::topic::Topic;
 
 /// Which middleware a port uses.
@@ -46,6 +47,8 @@ pub struct TransportConfig {
     pub ipc_prefix: String,
     /// DDS domain id; `None` reads `ROS_DOMAIN_ID` (default 0).
     pub dds_domain: Option<u16>,
+    /// Namespace and remapping rules: every topic's name goes through them.
+    pub names: Names,
 }
 
 impl TransportConfig {
@@ -56,6 +59,7 @@ impl TransportConfig {
             backend: Backend::Ipc,
             ipc_prefix: String::new(),
             dds_domain: None,
+            names: Names::default(),
         }
     }
     /// Sets the backend.
@@ -68,6 +72,12 @@ impl TransportConfig {
     #[must_use]
     pub fn ipc_prefix(mut self, prefix: impl Into<String>) -> Self {
         self.ipc_prefix = prefix.into();
+        self
+    }
+    /// Sets the namespace and remapping rules.
+    #[must_use]
+    pub fn names(mut self, names: Names) -> Self {
+        self.names = names;
         self
     }
     /// Sets the DDS domain id instead of reading `ROS_DOMAIN_ID`.
@@ -84,6 +94,7 @@ pub struct Transport {
     backend: Backend,
     ipc: Option<IpcNode>,
     dds: Option<Arc<DdsNode>>,
+    names: Names,
 }
 
 impl Transport {
@@ -100,7 +111,11 @@ impl Transport {
                 Some(d) => d,
                 None => domain_id_from_env()?,
             };
-            Some(DdsNode::new(&config.node_name, domain)?)
+            Some(DdsNode::new(
+                &config.node_name,
+                config.names.namespace(),
+                domain,
+            )?)
         } else {
             None
         };
@@ -108,7 +123,26 @@ impl Transport {
             backend: config.backend,
             ipc,
             dds,
+            names: config.names.clone(),
         })
+    }
+
+    /// The namespace and remapping rules of this transport's topics.
+    pub fn names(&self) -> &Names {
+        &self.names
+    }
+
+    /// `topic` under this transport's names: for DDS, or (`ipc`) for iceoryx2.
+    fn named<T>(&self, topic: &Topic<T>, ipc: bool) -> Topic<T> {
+        if self.names.is_default() {
+            return *topic;
+        }
+        let name = if ipc {
+            self.names.resolve_ipc(topic.name())
+        } else {
+            self.names.resolve(topic.name())
+        };
+        topic.renamed(crate::names::intern(name))
     }
 
     /// The configured backend.
@@ -145,21 +179,25 @@ impl Transport {
         topic: &Topic<T>,
         backend: Backend,
     ) -> Result<Publisher<T>, TransportError> {
+        let dds_topic = self.named(topic, false);
         let ipc = if backend.uses_ipc() {
             Some(T::ipc_publisher(
-                self.ipc_for(topic.name(), backend)?,
-                topic,
+                self.ipc_for(dds_topic.name(), backend)?,
+                &self.named(topic, true),
             )?)
         } else {
             None
         };
         let dds = if backend.uses_dds() {
-            Some(self.dds_for(topic.name(), backend)?.publisher(topic)?)
+            Some(
+                self.dds_for(dds_topic.name(), backend)?
+                    .publisher(&dds_topic)?,
+            )
         } else {
             None
         };
         Ok(Publisher {
-            topic: topic.name(),
+            topic: dds_topic.name(),
             ipc,
             dds,
         })
@@ -179,17 +217,19 @@ impl Transport {
         topic: &Topic<T>,
         backend: Backend,
     ) -> Result<Subscriber<T>, TransportError> {
+        let dds_topic = self.named(topic, false);
         let inner = match backend {
             Backend::Ipc | Backend::Both => SubInner::Ipc(T::ipc_subscriber(
-                self.ipc_for(topic.name(), backend)?,
-                topic,
+                self.ipc_for(dds_topic.name(), backend)?,
+                &self.named(topic, true),
             )?),
             Backend::Dds => SubInner::Dds(Box::new(
-                self.dds_for(topic.name(), backend)?.subscriber(topic)?,
+                self.dds_for(dds_topic.name(), backend)?
+                    .subscriber(&dds_topic)?,
             )),
         };
         Ok(Subscriber {
-            topic: topic.name(),
+            topic: dds_topic.name(),
             inner,
         })
     }

@@ -95,6 +95,11 @@ impl<T> Topic<T> {
     pub fn qos(&self) -> Qos {
         self.qos
     }
+    /// The same topic under another name (a namespace's, a remapping's).
+    #[must_use]
+    pub const fn renamed(self, name: &'static str) -> Self {
+        Self { name, ..self }
+    }
     /// The same topic with another QoS.
     #[must_use]
     pub const fn with_qos(self, qos: Qos) -> Self {

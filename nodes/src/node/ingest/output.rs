@@ -30,6 +30,8 @@ pub(super) struct Output {
     /// Where the node's log lines go besides stderr: `/rosout`.
     dds: Option<std::sync::Arc<DdsNode>>,
     node: String,
+    /// Its status name on /diagnostics.
+    status_name: String,
     source: String,
 }
 
@@ -56,6 +58,7 @@ impl Output {
             live,
             dds: ctx.transport.dds_node().cloned(),
             node: ctx.name.clone(),
+            status_name: ctx.status_name.clone(),
             source: source.to_owned(),
         })
     }
@@ -166,7 +169,7 @@ impl Output {
 
     /// Publishes the /diagnostics status now.
     pub(super) fn report_now(&mut self) -> anyhow::Result<()> {
-        let status = self.tally.status(&self.node, &self.source);
+        let status = self.tally.status(&self.status_name, &self.source);
         self.diagnostics.publish(&diagnostic_array(status))?;
         Ok(())
     }

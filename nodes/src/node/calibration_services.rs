@@ -1,0 +1,116 @@
+//! `~/load_calibration` and `~/save_calibration` (`rpkm_msgs/srv/LoadCalibration`,
+//! `SaveCalibration`: a calibration JSON path) of the nodes that hold a geometry: the
+//! estimator, the preload monitor and the calibrator. A cell controller loads a calibration
+//! into a running node, or saves the one it holds, without a restart. On DDS only (the
+//! services of ROS 2); answered between samples, from the node's loop.
+//!
+//!     ros2 service call /rpkm/tcp_estimator/load_calibration rpkm_msgs/srv/LoadCalibration \
+//!       "{path: /cell/cal.json}"
+
+use std::path::Path;
+
+use rpkm_core::params::{Model, NAMES};
+use rpkm_msgs::calibration_srv::{
+    CalibrationFileRequest as Request, CalibrationFileResponse as Response, LOAD_CALIBRATION,
+    SAVE_CALIBRATION,
+};
+use rpkm_transport::dds_calls::{CallServer, ServiceType};
+
+use super::{Geometry, NodeContext};
+
+/// The two services of one node.
+pub struct CalibrationServices {
+    load: CallServer<Request, Response>,
+    save: CallServer<Request, Response>,
+}
+
+impl CalibrationServices {
+    /// The services of `ctx`'s node, when it is on DDS (`None` on iceoryx2 only).
+    pub fn open(ctx: &NodeContext) -> anyhow::Result<Option<Self>> {
+        let Some(dds) = ctx.transport.dds_node() else {
+            return Ok(None);
+        };
+        let kind = |name| ServiceType {
+            package: rpkm_msgs::PACKAGE,
+            name,
+        };
+        Ok(Some(Self {
+            load: dds.serve_calls("load_calibration", kind(LOAD_CALIBRATION))?,
+            save: dds.serve_calls("save_calibration", kind(SAVE_CALIBRATION))?,
+        }))
+    }
+
+    /// Answers the requests waiting: a save writes `current`; a load returns the geometry
+    /// it read (the last one, when several came), which the node then takes.
+    pub fn poll(&self, ctx: &NodeContext, current: &Geometry) -> Option<Geometry> {
+        while let Some(call) = self.save.try_next() {
+            let response = match save(current, Path::new(&call.request.path)) {
+                Ok(what) => answer(ctx, true, what),
+                Err(e) => answer(ctx, false, format!("WARN: save_calibration: {e:#}")),
+            };
+            call.answer(response);
+        }
+        let mut loaded = None;
+        while let Some(call) = self.load.try_next() {
+            let response = match load(current, Path::new(&call.request.path)) {
+                Ok(g) => {
+                    let what = format!(
+                        "loaded the geometry of {} (model {}): the next sample uses it",
+                        g.source,
+                        g.model.number()
+                    );
+                    loaded = Some(g);
+                    answer(ctx, true, what)
+                }
+                Err(e) => answer(ctx, false, format!("WARN: load_calibration: {e:#}")),
+            };
+            call.answer(response);
+        }
+        loaded
+    }
+}
+
+/// Logs `message` and makes it the reply.
+fn answer(ctx: &NodeContext, success: bool, message: String) -> Response {
+    ctx.log(&message);
+    Response { success, message }
+}
+
+/// The geometry of `current` with the parameters of the calibration JSON at `path` (the
+/// node's model and stiffness stay).
+fn load(current: &Geometry, path: &Path) -> anyhow::Result<Geometry> {
+    let mut params = crate::input::read_params(path)?;
+    if current.model == Model::M24 {
+        params = params.with_perfect_parallelogram();
+    }
+    Ok(Geometry {
+        params,
+        model: current.model,
+        stiffness: current.stiffness,
+        source: path.display().to_string(),
+    })
+}
+
+/// Writes `g` as calibration JSON (`model`, `parameters` in mm and rad, `source`), the file
+/// [`load`] and `geometry_file` read.
+fn save(g: &Geometry, path: &Path) -> anyhow::Result<String> {
+    let parameters: serde_json::Map<String, serde_json::Value> = NAMES
+        .iter()
+        .enumerate()
+        .map(|(i, name)| ((*name).to_owned(), serde_json::Value::from(g.params[i])))
+        .collect();
+    let doc = serde_json::json!({
+        "model": g.model.number(),
+        "source": g.source,
+        "parameters": parameters,
+    });
+    let text = serde_json::to_string_pretty(&doc)?;
+    std::fs::write(path, text + "\n")
+        .map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", path.display()))?;
+    Ok(format!(
+        "saved the geometry of {} (model {}) to {}",
+        g.source,
+        g.model.number(),
+        path.display()
+    ))
+}
