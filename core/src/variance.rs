@@ -127,8 +127,8 @@ impl Levels {
 
     /// Take the steps: the levels the next round weights by.
     pub fn apply(&mut self, step: &[f64; N_GROUPS], stated: &NoiseModel) -> NoiseModel {
-        for k in 0..N_GROUPS {
-            self.total[k] *= step[k];
+        for (t, s) in self.total.iter_mut().zip(step) {
+            *t *= s;
         }
         stated.scaled(&self.total)
     }
