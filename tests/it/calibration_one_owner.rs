@@ -56,7 +56,10 @@ fn calibrate_diagnose_and_the_calibrator_node_give_the_same_parameters() {
         &["calibrate", path, "--outlier-sigma", "0"],
         &tmp.path().join("cal.json"),
     );
-    let diagnosed = rpkm_json(&["diagnose", path], &tmp.path().join("diag.json"));
+    let diagnosed = rpkm_json(
+        &["diagnose", path, "--model", "29"],
+        &tmp.path().join("diag.json"),
+    );
     let text = std::fs::read_to_string(&campaign_path).expect("campaign");
     let campaign = Campaign::parse(&text, path).expect("the foreign campaign parses");
     let node = calibrate_campaign(

@@ -95,6 +95,13 @@ fn msgs_builds_as_a_ros2_interface_package_with_rosidl() {
         .expect("msg/")
         .map(|e| format!("msg/{}", e.expect("entry").file_name().to_string_lossy()))
         .collect();
+    // rosidl turns a service into its request and response messages
+    for e in std::fs::read_dir(repo().join("msgs/srv")).expect("srv/") {
+        let name = e.expect("entry").file_name().to_string_lossy().into_owned();
+        let stem = name.trim_end_matches(".srv");
+        expected.push(format!("srv/{stem}_Request.msg"));
+        expected.push(format!("srv/{stem}_Response.msg"));
+    }
     expected.sort();
     assert_eq!(report["interfaces"], serde_json::json!(expected));
     assert_eq!(report["depends"], serde_json::json!(["builtin_interfaces"]));
@@ -105,7 +112,7 @@ fn msgs_builds_as_a_ros2_interface_package_with_rosidl() {
     });
     let out = build(&unlisted, &workspace).expect("python3 runs");
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-    assert!(text(&out).contains("msg/ holds"), "{}", text(&out));
+    assert!(text(&out).contains("msg/ and srv/ hold"), "{}", text(&out));
 
     // not in the rosidl_interface_packages group (colcon would not order it before users)
     let ungrouped = broken_copy(&dir, "package.xml", |t| {

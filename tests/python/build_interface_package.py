@@ -268,9 +268,12 @@ def main():
     shutil.copytree(msgs_dir, pkg, ignore=shutil.ignore_patterns("target", "src", "tests"))
     build(py, pkg, ws)
     listed = indexed_interfaces(ws, "rpkm_msgs")
-    in_folder = sorted(f"msg/{p.name}" for p in (msgs_dir / "msg").glob("*.msg"))
+    # rosidl indexes a service as its request and response messages
+    in_folder = sorted([f"msg/{p.name}" for p in (msgs_dir / "msg").glob("*.msg")]
+                       + [f"srv/{p.stem}_{part}.msg" for p in (msgs_dir / "srv").glob("*.srv")
+                          for part in ("Request", "Response")])
     if listed != in_folder:
-        fail(f"rosidl_generate_interfaces lists {listed}, msg/ holds {in_folder}")
+        fail(f"rosidl_generate_interfaces lists {listed}, msg/ and srv/ hold {in_folder}")
     build(py, consumer(msgs_dir, src), ws)
     run = subprocess.run([str(ws / "install/lib/rpkm_msgs_consumer/consumer")])
     if run.returncode != 0:

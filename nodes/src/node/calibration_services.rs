@@ -4,8 +4,10 @@
 //! into a running node, or saves the one it holds, without a restart. On DDS only (the
 //! services of ROS 2); answered between samples, from the node's loop.
 //!
-//!     ros2 service call /rpkm/tcp_estimator/load_calibration rpkm_msgs/srv/LoadCalibration \
-//!       "{path: /cell/cal.json}"
+//! ```text
+//! ros2 service call /rpkm/tcp_estimator/load_calibration rpkm_msgs/srv/LoadCalibration \
+//!   "{path: /cell/cal.json}"
+//! ```
 
 use std::path::Path;
 
