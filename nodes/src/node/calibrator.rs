@@ -157,25 +157,28 @@ fn split(c: &Campaign, prefix: &str) -> (Campaign, Option<Campaign>) {
     (part(false), (!val.poses.is_empty()).then_some(val))
 }
 
-/// Calibrates `campaign` (mm, rad) and builds the messages.
-pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow::Result<Outcome> {
-    let (cal_part, val_part) = split(campaign, &o.validation_prefix);
-    let auto = match o.selection.as_str() {
-        "map" => false,
-        "auto" => true,
+/// The calibration's options of the node's settings (the selection checked).
+fn calibration_options(o: &CalibratorOptions) -> anyhow::Result<Options> {
+    let selection = match o.selection.as_str() {
+        "map" => Options::default().selection,
+        "auto" => Selection::Auto {
+            max_condition: o.max_condition,
+        },
         other => anyhow::bail!("parameter selection `{other}`: expected `map` or `auto`"),
     };
-    let mut opts = Options {
+    Ok(Options {
         model: o.start.model,
+        selection,
         outlier_sigma: (o.outlier_sigma > 0.0).then_some(o.outlier_sigma),
         noise: o.noise.clone(),
         ..Default::default()
-    };
-    if auto {
-        opts.selection = Selection::Auto {
-            max_condition: o.max_condition,
-        };
-    }
+    })
+}
+
+/// Calibrates `campaign` (mm, rad) and builds the messages.
+pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow::Result<Outcome> {
+    let (cal_part, val_part) = split(campaign, &o.validation_prefix);
+    let opts = calibration_options(o)?;
     let written = o
         .effects
         .as_ref()
