@@ -193,6 +193,16 @@ pub struct Candidate {
     pub together: Option<(String, Prediction)>,
 }
 
+impl Candidate {
+    /// How the candidate alone predicts: the held-out comparison where it decides (better,
+    /// or clearly worse), else cross-validation by setup.
+    pub fn alone(&self) -> Option<Prediction> {
+        self.prediction
+            .filter(|p| p.better || p.worse)
+            .or(self.cross_validated)
+    }
+}
+
 /// Does a candidate make the model predict better? Its held-out RMS against the current
 /// model's, on the same poses: an effect that fits the campaign and predicts worse absorbs
 /// something else, and is never named.
@@ -398,10 +408,11 @@ struct Validation<'a> {
 impl Validation<'_> {
     /// The held-out campaign with the noise of each of its TCP errors.
     fn new<'a>(campaign: &'a Campaign, noise: &NoiseModel) -> Result<Validation<'a>, PoseError> {
+        let errs = obs::tcp_errors(campaign, &Params::nominal(), Model::M29)?;
         Ok(Validation {
             campaign,
-            sigma: validation_noise(campaign, noise)?,
-            zero: zero_groups(campaign)?,
+            sigma: validation_noise(campaign, &errs, noise)?,
+            zero: zero_groups(campaign, &errs),
         })
     }
 
@@ -424,11 +435,9 @@ impl Validation<'_> {
 }
 
 /// Each held-out TCP error's (setup, coordinate) as an index, in [`obs::tcp_errors`] order.
-fn zero_groups(val: &Campaign) -> Result<Vec<usize>, PoseError> {
-    let errs = obs::tcp_errors(val, &Params::nominal(), Model::M29)?;
+fn zero_groups(val: &Campaign, errs: &[(usize, &'static str, f64)]) -> Vec<usize> {
     let mut keys: Vec<(&str, &str)> = Vec::new();
-    Ok(errs
-        .iter()
+    errs.iter()
         .map(|(i, coordinate, _)| {
             let key = (val.poses[*i].setup.as_str(), *coordinate);
             keys.iter().position(|k| *k == key).unwrap_or_else(|| {
@@ -436,7 +445,7 @@ fn zero_groups(val: &Campaign) -> Result<Vec<usize>, PoseError> {
                 keys.len() - 1
             })
         })
-        .collect())
+        .collect()
 }
 
 /// Diagnose `campaign` with `in_model` effects already in the model; `validation` is held out.
@@ -575,7 +584,7 @@ impl Search<'_> {
     /// does marks both ([`Candidate::together`]).
     fn pair_up(&self, round: &mut Round, base: &Fitted, copts: &calib::Options, val: &Validation) {
         let open = |c: &Candidate| c.significant && c.relevant;
-        let alone = |c: &Candidate| c.prediction.or(c.cross_validated).is_some_and(|p| p.better);
+        let alone = |c: &Candidate| c.alone().is_some_and(|p| p.better);
         if round.candidates.iter().filter(|c| open(c)).any(alone) {
             return;
         }
@@ -845,11 +854,7 @@ fn choose(
         // where held-out (or left-out) data judge, a better prediction is the evidence that
         // the effect's parameters are worth their number (setup-local ones, an instrument's
         // alignment in each mounting, cost BIC per setup); else the information criterion is
-        let judged = c
-            .prediction
-            .filter(|p| p.better || p.worse)
-            .or(c.cross_validated);
-        let judged = match (judged, &c.together) {
+        let judged = match (c.alone(), &c.together) {
             (Some(p), _) if p.better => Some(p),
             (_, Some((_, p))) => Some(*p),
             (j, None) => j,
@@ -878,11 +883,7 @@ fn choose(
 
 /// The partner of a candidate that predicts better only together with it.
 fn partner(c: &Candidate) -> Option<String> {
-    let alone = c
-        .prediction
-        .filter(|p| p.better || p.worse)
-        .or(c.cross_validated)
-        .is_some_and(|p| p.better);
+    let alone = c.alone().is_some_and(|p| p.better);
     c.together
         .as_ref()
         .filter(|_| !alone)
@@ -1567,9 +1568,12 @@ fn held_out_values(
 /// σ of every held-out TCP error, in [`obs::tcp_errors`] order: the instrument's noise at the
 /// pose and at its setup's reset pose (zeroed on a reading as noisy as any other), and the
 /// encoders' at both.
-fn validation_noise(val: &Campaign, noise: &NoiseModel) -> Result<Vec<f64>, PoseError> {
+fn validation_noise(
+    val: &Campaign,
+    errs: &[(usize, &'static str, f64)],
+    noise: &NoiseModel,
+) -> Result<Vec<f64>, PoseError> {
     let nominal = Params::nominal();
-    let errs = obs::tcp_errors(val, &nominal, Model::M29)?;
     let mut reset_of = vec![None; val.poses.len()];
     for setup in val.setups() {
         for &i in &setup.poses {

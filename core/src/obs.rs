@@ -1035,13 +1035,12 @@ fn reset_covariance(
     for k in 2..6 {
         cov[(k, k)] = ctx.noise.encoder_mm.powi(2);
     }
-    let reading = match reset.instrument {
-        Instrument::Lt | Instrument::Kgm => {
-            let xy = XyInstrument::of(reset.instrument).unwrap_or(XyInstrument::Kgm);
+    let reading = match (reset.instrument, XyInstrument::of(reset.instrument)) {
+        (_, Some(xy)) => {
             let sol = geometry::fgm(ctx.p_cal, ctx.model, reset.q[0], reset.q[3])?;
             ctx.noise.xy_covariance(xy, Vector2::new(sol.x(), sol.y()))
         }
-        Instrument::LiX | Instrument::LiY | Instrument::LiPsi => {
+        (Instrument::LiX | Instrument::LiY | Instrument::LiPsi, None) => {
             let sigma = ctx.noise.scalar_sigma(reset.instrument).unwrap_or(0.0);
             nalgebra::Matrix2::new(sigma * sigma, 0.0, 0.0, 0.0)
         }

@@ -272,20 +272,20 @@ pub fn verdict(d: &Diagnosis) -> String {
     }
 }
 
-/// "; but encoder is 2.5x noisier than rated: either it is, or something is missing" for
-/// the groups estimated above twice their rating.
+/// "; encoder more than twice its rating: either ..." for the groups estimated above twice
+/// their rating (the ratios themselves are in the noise words before it).
 fn noisier_words(d: &Diagnosis) -> String {
     if d.noisier_than_rated.is_empty() {
         return String::new();
     }
-    let groups: Vec<String> = d
+    let groups: Vec<&str> = d
         .noisier_than_rated
         .iter()
-        .map(|n| format!("{} is {:.1}x", n.group, n.ratio))
+        .map(|n| n.group.as_str())
         .collect();
     format!(
-        "; but {} noisier than rated: either the instrument is that noisy, or something is \
-         missing that shows as noise",
+        "; {} more than twice its rating: either the instrument is that noisy, or something \
+         is missing that shows as noise",
         groups.join(", ")
     )
 }

@@ -629,16 +629,11 @@ impl Twin {
         if self.config.reset == ResetReading::Exact {
             return Vector2::zeros();
         }
+        if let Some(xy) = XyInstrument::of(instrument) {
+            let e = Vector2::new(gauss(&mut self.reset_rng), gauss(&mut self.reset_rng));
+            return k * (xy_factor(noise.xy_covariance(xy, tcp)) * e);
+        }
         match instrument {
-            Instrument::Lt | Instrument::Kgm => {
-                let xy = if instrument == Instrument::Lt {
-                    XyInstrument::Lt
-                } else {
-                    XyInstrument::Kgm
-                };
-                let e = Vector2::new(gauss(&mut self.reset_rng), gauss(&mut self.reset_rng));
-                k * (xy_factor(noise.xy_covariance(xy, tcp)) * e)
-            }
             Instrument::LiX | Instrument::LiY | Instrument::LiPsi => {
                 let sigma = noise.scalar_sigma(instrument).unwrap_or(0.0);
                 Vector2::new(k * sigma * gauss(&mut self.reset_rng), 0.0)
