@@ -17,6 +17,7 @@ mod bag_support;
 mod foreign_support;
 mod fuzz_support;
 mod node_support;
+mod security_support;
 
 mod bag_nodes;
 mod bag_reference;
@@ -51,3 +52,6 @@ mod plan_foreign;
 mod report_alignment;
 mod report_chromium;
 mod ros_interface_package;
+
+mod security_keystore;
+mod security_nodes;

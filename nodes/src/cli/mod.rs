@@ -12,6 +12,7 @@ pub mod plan;
 pub mod preload;
 pub mod record;
 pub mod replay;
+pub mod security;
 pub mod simulate;
 pub mod simulate_bag;
 

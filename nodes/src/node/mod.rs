@@ -144,8 +144,8 @@ pub struct CommonArgs {
     #[arg(long)]
     pub unconfigured: bool,
     /// ROS 2 arguments, last on the line: `--ros-args -r __ns:=/machine_a -r __node:=NAME
-    /// -r FROM:=TO -p KEY:=VALUE --params-file FILE` (namespace, name, topic remapping,
-    /// parameters).
+    /// -r FROM:=TO -p KEY:=VALUE --params-file FILE --enclave /rpkm/NAME` (namespace, name,
+    /// topic remapping, parameters, SROS2 enclave).
     #[arg(long = "ros-args", num_args = 0.., allow_hyphen_values = true, value_name = "ARGS")]
     pub ros_args: Vec<String>,
 }
@@ -178,6 +178,7 @@ impl CommonArgs {
             names,
             files,
             overrides,
+            enclave: ros.enclave,
         })
     }
 }
@@ -210,6 +211,8 @@ pub struct Identity {
     pub files: Vec<PathBuf>,
     /// `key=value` overrides, in order.
     pub overrides: Vec<String>,
+    /// `--ros-args --enclave E`.
+    pub enclave: Option<String>,
 }
 
 impl Identity {
@@ -238,6 +241,8 @@ pub struct RosArgs {
     pub params: Vec<String>,
     /// `--params-file FILE`.
     pub param_files: Vec<PathBuf>,
+    /// `-e E` / `--enclave E`: the SROS2 enclave.
+    pub enclave: Option<String>,
 }
 
 impl RosArgs {
@@ -267,10 +272,11 @@ impl RosArgs {
                     out.params.push(format!("{key}={val}"));
                 }
                 "--params-file" => out.param_files.push(PathBuf::from(value(words.next())?)),
+                "-e" | "--enclave" => out.enclave = Some(value(words.next())?),
                 other => {
                     return Err(format!(
                         "--ros-args: unknown argument {other:?} (-r FROM:=TO, -r __ns:=NS, \
-                         -r __node:=NAME, -p KEY:=VALUE, --params-file FILE)"
+                         -r __node:=NAME, -p KEY:=VALUE, --params-file FILE, --enclave E)"
                     ))
                 }
             }
@@ -292,7 +298,12 @@ impl RosArgs {
 }
 
 /// Parameter keys every node declares.
-pub const COMMON_KEYS: [&str; 3] = ["backend", "input_backend", "diagnostics_period_s"];
+pub const COMMON_KEYS: [&str; 4] = [
+    "backend",
+    "input_backend",
+    "diagnostics_period_s",
+    "enclave",
+];
 /// Parameter keys of the nodes that evaluate the model ([`Geometry::from_params`]).
 pub const GEOMETRY_KEYS: [&str; 5] = [
     "model",
@@ -354,6 +365,8 @@ pub struct NodeContext {
     pub output: Backend,
     /// Backend of the subscribers (iceoryx2 or DDS).
     pub input: Backend,
+    /// SROS2 enclave of its DDS participant.
+    pub enclave: String,
 }
 
 /// A node's configuration as its command line and parameter files give it, checked, before
@@ -371,6 +384,8 @@ pub struct NodeSetup {
     pub input: Backend,
     /// Every backend the transport needs.
     pub transport: Backend,
+    /// SROS2 enclave: `--ros-args --enclave`, else parameter `enclave`, else `/rpkm/<name>`.
+    pub enclave: String,
 }
 
 fn union(a: Backend, b: Backend) -> Backend {
@@ -436,7 +451,12 @@ impl NodeSetup {
         declared: &[&str],
         extra_input: Option<Backend>,
     ) -> anyhow::Result<Self> {
-        let Identity { name, names, .. } = args.identity(kind)?;
+        let Identity {
+            name,
+            names,
+            enclave,
+            ..
+        } = args.identity(kind)?;
         let params = args.identity(kind)?.params().map_err(bad_param)?;
         let mut all: Vec<&str> = declared.to_vec();
         all.extend(COMMON_KEYS);
@@ -480,6 +500,7 @@ impl NodeSetup {
             transport = union(transport, extra);
         }
         diagnostics_period(&params)?;
+        let enclave = node_enclave(enclave, &params, &name)?;
         Ok(Self {
             name,
             names,
@@ -487,7 +508,33 @@ impl NodeSetup {
             output,
             input,
             transport,
+            enclave,
         })
+    }
+}
+
+/// The node's SROS2 enclave: `--ros-args --enclave` wins over parameter `enclave`; by
+/// default `/rpkm/<name>`, the enclave `rpkm security enclave` makes for each node.
+fn node_enclave(
+    from_args: Option<String>,
+    params: &NodeParams,
+    name: &str,
+) -> anyhow::Result<String> {
+    let (enclave, what) = match from_args {
+        Some(e) => (e, "--ros-args --enclave".to_owned()),
+        None if params.has("enclave") => (
+            params.string("enclave", "").map_err(bad_param)?,
+            params
+                .origin("enclave")
+                .map_or_else(|| "enclave".to_owned(), |o| format!("{o}/enclave")),
+        ),
+        None => return Ok(format!("{}/{name}", rpkm_transport::NODE_NAMESPACE)),
+    };
+    match rpkm_transport::security::enclave_name_error(&enclave) {
+        Some(why) => Err(crate::error::bad_input(format!(
+            "{what} {enclave:?}: {why}"
+        ))),
+        None => Ok(enclave),
     }
 }
 
@@ -523,7 +570,8 @@ impl NodeContext {
         let mut config = TransportConfig::new(&name)
             .backend(setup.transport)
             .ipc_prefix(prefix)
-            .names(setup.names);
+            .names(setup.names)
+            .enclave(&setup.enclave);
         if let Some(d) = args.domain {
             config = config.dds_domain(d);
         }
@@ -549,6 +597,7 @@ impl NodeContext {
             transport,
             output: setup.output,
             input: setup.input,
+            enclave: setup.enclave,
         })
     }
 

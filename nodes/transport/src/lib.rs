@@ -20,6 +20,7 @@ pub mod error;
 pub mod ipc;
 pub mod names;
 pub mod pubsub;
+pub mod security;
 pub mod topic;
 
 /// The ROS 2 namespace of every rpkm node (`/rpkm/ingest`, `/rpkm/tcp_estimator`, ...).
