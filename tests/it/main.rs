@@ -52,6 +52,6 @@ mod plan_foreign;
 mod report_alignment;
 mod report_chromium;
 mod ros_interface_package;
-
+mod security_cell;
 mod security_keystore;
 mod security_nodes;

@@ -111,7 +111,6 @@ fn the_governance_protects_and_each_grant_names_only_its_programs_topics() {
         "<discovery_protection_kind>ENCRYPT</discovery_protection_kind>",
         "<liveliness_protection_kind>ENCRYPT</liveliness_protection_kind>",
         "<rtps_protection_kind>ENCRYPT</rtps_protection_kind>",
-        "<data_protection_kind>ENCRYPT</data_protection_kind>",
         "<metadata_protection_kind>ENCRYPT</metadata_protection_kind>",
     ] {
         assert!(governance.contains(rule), "governance lacks {rule}");

@@ -224,12 +224,21 @@ pub fn program_of(enclave: &str) -> &str {
     enclave.rsplit('/').next().unwrap_or(enclave)
 }
 
-/// Domains a keystore's documents cover: every domain ROS 2 allows, so that the same
-/// keystore serves whichever `ROS_DOMAIN_ID` the cell uses.
-const DOMAINS: &str = "<domains><id_range><min>0</min><max>232</max></id_range></domains>";
+/// Domains a keystore's documents cover, so that the same keystore serves whichever
+/// `ROS_DOMAIN_ID` the cell uses: 0 to 230, the highest id Cyclone DDS accepts in these
+/// documents (with 232, ROS 2's highest, it refuses to parse them: "failed in data
+/// callback").
+const DOMAINS: &str = "<domains><id_range><min>0</min><max>230</max></id_range></domains>";
 
 /// The governance: no unauthenticated participant, join access control, and discovery,
-/// liveliness, RTPS messages and every topic's metadata and data encrypted.
+/// liveliness, every RTPS message and every topic's submessages encrypted (AES-GCM), which
+/// carries each sample's data encrypted twice over.
+///
+/// `data_protection_kind` (a second, end-to-end encryption of the serialized payload alone,
+/// for data that crosses relays) is `NONE`: with `ENCRYPT` or `SIGN` RustDDS 0.15.1 cannot
+/// read its own protected payloads (every sample between two rpkm processes fails to decode:
+/// ring's "Unspecified" error, tried here); the loopback capture of tests/it/security_cell.rs
+/// shows no estimate in clear without it.
 pub fn governance_xml() -> String {
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
@@ -251,7 +260,7 @@ pub fn governance_xml() -> String {
           <enable_read_access_control>true</enable_read_access_control>
           <enable_write_access_control>true</enable_write_access_control>
           <metadata_protection_kind>ENCRYPT</metadata_protection_kind>
-          <data_protection_kind>ENCRYPT</data_protection_kind>
+          <data_protection_kind>NONE</data_protection_kind>
         </topic_rule>
       </topic_access_rules>
     </domain_rule>
