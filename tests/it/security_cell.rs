@@ -90,9 +90,10 @@ fn secure_peer() -> Option<PathBuf> {
     .clone()
 }
 
-/// Cyclone's configuration: loopback discovery as the other peers (tests/python/loopback.py)
-/// and DDS Security with the enclave `dir`'s files and Debian's plugins.
-fn cyclone_security_xml(dir: &Path) -> String {
+/// Cyclone's configuration: loopback discovery as the other peers (tests/python/loopback.py),
+/// its warnings traced into `trace`, and DDS Security with the enclave `dir`'s files and
+/// Debian's plugins.
+fn cyclone_security_xml(dir: &Path, trace: &Path) -> String {
     let file = |f: &str| format!("file:{}", dir.join(f).display());
     let lib = |name: &str, init: &str, fin: &str| {
         format!(
@@ -106,6 +107,7 @@ fn cyclone_security_xml(dir: &Path) -> String {
   <Discovery><Peers><Peer address="127.0.0.1"/></Peers>
     <ParticipantIndex>auto</ParticipantIndex>
     <MaxAutoParticipantIndex>60</MaxAutoParticipantIndex></Discovery>
+  <Tracing><Verbosity>warning</Verbosity><OutputFile>{}</OutputFile></Tracing>
   <Security>
     <Authentication>{}
       <IdentityCA>{}</IdentityCA>
@@ -120,6 +122,7 @@ fn cyclone_security_xml(dir: &Path) -> String {
     <Cryptographic>{}</Cryptographic>
   </Security>
 </Domain></CycloneDDS>"#,
+        trace.display(),
         lib("auth", "init_authentication", "finalize_authentication"),
         file("identity_ca.cert.pem"),
         file("cert.pem"),
@@ -301,7 +304,10 @@ fn the_secured_cell_runs_the_demo_and_shows_nothing_to_an_outsider() {
         let xml = tmp.path("cyclone.xml");
         std::fs::write(
             &xml,
-            cyclone_security_xml(&keys.join("enclaves/rpkm/secure_peer")),
+            cyclone_security_xml(
+                &keys.join("enclaves/rpkm/secure_peer"),
+                &tmp.path("cyclone.trace"),
+            ),
         )
         .expect("cyclone.xml");
         let mut child = Command::new(bin)
@@ -333,16 +339,26 @@ fn the_secured_cell_runs_the_demo_and_shows_nothing_to_an_outsider() {
 
     let bag = the_bag(&bag_dir);
     let estimates: Vec<TcpEstimate> = decode_all(&bag, "/rpkm/tcp_estimate");
-    assert_eq!(
-        estimates.len(),
-        poses,
-        "estimates recorded over secured DDS"
+    // One estimate per drive state, each once. The drive states are best-effort (as a
+    // controller's stream): on a loaded machine a few may be lost on the way to the
+    // estimator (all 194 arrived in each of five runs here), never duplicated.
+    let mut seqs: Vec<u64> = estimates.iter().map(|e| e.seq).collect();
+    seqs.sort_unstable();
+    seqs.dedup();
+    assert_eq!(seqs.len(), estimates.len(), "an estimate recorded twice");
+    assert!(
+        seqs.iter()
+            .all(|s| (1..=u64::try_from(poses).expect("count")).contains(s))
+            && seqs.len() * 10 >= poses * 9,
+        "{} estimates of {poses} drive states recorded over secured DDS: {seqs:?}",
+        seqs.len()
     );
     let parameters: Vec<rpkm_msgs::Parameters> = decode_all(&bag, "/rpkm/parameters");
     assert!(!parameters.is_empty(), "no calibration recorded");
 
     std::fs::write(&outsider_stop, b"").expect("stop file");
     let seen = verdict(outsider);
+    eprintln!("the outsider, during the run: {seen}");
     assert_eq!(seen["estimate_writers"], 0, "{seen}");
     assert_eq!(seen["parameter_endpoints"], 0, "{seen}");
     assert_eq!(seen["samples"], 0, "{seen}");
@@ -366,9 +382,22 @@ fn the_secured_cell_runs_the_demo_and_shows_nothing_to_an_outsider() {
                 "the secure Cyclone peer received no estimate, and RustDDS did not say it \
                  refused its handshake ({KAGREE_REFUSED}): a new disagreement"
             );
+            // and Cyclone drops RustDDS's handshake messages (builtin participant stateless
+            // message writer 0xc3010200), fragmented, as malformed
+            let trace = std::fs::read_to_string(tmp.path("cyclone.trace")).unwrap_or_default();
+            let dropped = trace
+                .lines()
+                .filter(|l| {
+                    l.contains("malformed packet received from vendor 1.18")
+                        && l.contains("DATA_FRAG")
+                        && l.contains("wid 0xc3010200")
+                })
+                .count();
+            assert!(dropped > 0, "Cyclone's trace: {trace}");
             eprintln!(
                 "KNOWN: the secure Cyclone DDS peer received no estimate: RustDDS refused its \
-                 handshake request {refused} times ({KAGREE_REFUSED})"
+                 handshake request {refused} times ({KAGREE_REFUSED}), Cyclone dropped {dropped} \
+                 of RustDDS's handshake messages as malformed DATA_FRAG"
             );
         } else {
             assert_eq!(got, recorded, "the secure Cyclone peer's estimates");
@@ -379,6 +408,7 @@ fn the_secured_cell_runs_the_demo_and_shows_nothing_to_an_outsider() {
         let pcap = capture.stop();
         let rtps = occurrences(&pcap, b"RTPS");
         assert!(rtps > 100, "the capture holds {rtps} RTPS messages");
+        eprintln!("capture: {} bytes, {rtps} RTPS messages", pcap.len());
         let mcap = std::fs::read(
             std::fs::read_dir(&bag)
                 .expect("bag")
