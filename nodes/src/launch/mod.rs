@@ -1113,8 +1113,31 @@ launch:
         }
     }
 
+    /// `enclave:` reaches the node as rcl's `--ros-args --enclave`.
+    #[test]
+    fn an_enclave_goes_to_the_node_as_ros_args() -> Result<(), LaunchError> {
+        let d = LaunchDescription::parse(
+            "launch:\n  - node:\n      pkg: rpkm\n      exec: tcp_estimator\n      \
+             enclave: /cell/estimator_a\n",
+            "n.yaml",
+            Path::new("."),
+            &[],
+        )?;
+        let argv: Vec<String> = d.nodes[0]
+            .argv()
+            .iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            argv[argv.len() - 3..],
+            ["--ros-args", "--enclave", "/cell/estimator_a"]
+        );
+        Ok(())
+    }
+
     /// `namespace:` and `remap:` reach the node as rcl's `--ros-args -r`, last on its line;
-    /// a name ROS 2 would refuse is refused with its key's line, as an unusable node name is.
+    /// a name ROS 2 would refuse is refused with its key's line, as an unusable node name is
+    /// (an enclave too).
     #[test]
     fn namespace_and_remap_go_to_the_node_as_ros_args() -> Result<(), LaunchError> {
         let entry = "launch:\n  - node:\n      pkg: rpkm\n      exec: tcp_estimator\n";
@@ -1158,6 +1181,10 @@ launch:
             (
                 &format!("      name: {}\n", "a".repeat(5000)),
                 "n.yaml:5: node name \"aaaa",
+            ),
+            (
+                "      enclave: rpkm/estimator\n",
+                "n.yaml:5: node tcp_estimator: enclave \"rpkm/estimator\": expected an absolute",
             ),
         ] {
             let e =

@@ -954,11 +954,15 @@ mod tests {
             ("-r", "expected a value"),
             ("-r nope", "expected FROM:=TO"),
             ("-p model=24", "expected KEY:=VALUE"),
-            ("--enclave x", "unknown argument \"--enclave\""),
+            ("--enclave", "expected a value"),
+            ("--log-level debug", "unknown argument \"--log-level\""),
         ] {
             let e = RosArgs::parse(&words(bad)).expect_err(bad);
             assert!(e.contains(says), "{bad}: {e}");
         }
+        // rcl's enclave flag, long and short; the last one wins
+        let r = RosArgs::parse(&words("--enclave /cell/a -e /cell/b"))?;
+        assert_eq!(r.enclave.as_deref(), Some("/cell/b"));
         Ok(())
     }
 
