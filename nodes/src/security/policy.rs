@@ -8,6 +8,7 @@
 //! granted only these cannot publish an end marker it never publishes, nor call a service.
 
 use std::collections::BTreeSet;
+use std::fmt::Write as _;
 
 use rpkm_transport::{topic, Names};
 
@@ -283,9 +284,10 @@ pub struct Validity {
 /// subject of the enclave's certificate), denying what `grant` does not allow.
 pub fn permissions_xml(enclave: &str, grant: &Grant, validity: &Validity) -> String {
     let topics = |set: &BTreeSet<String>| {
-        set.iter()
-            .map(|t| format!("            <topic>{t}</topic>\n"))
-            .collect::<String>()
+        set.iter().fold(String::new(), |mut out, t| {
+            let _ = writeln!(out, "            <topic>{t}</topic>");
+            out
+        })
     };
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
