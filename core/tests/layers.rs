@@ -238,3 +238,55 @@ fn no_core_module_imports_in_a_circle() {
         cycle.unwrap_or_default().join(" -> ")
     );
 }
+
+#[path = "../../tests/layers_support/file_graph.rs"]
+mod file_graph;
+
+/// The file graph sees an upward import through `super::` and a child's import through a
+/// `mod.rs`'s own submodule path, and resolves a group to its files.
+#[test]
+fn the_file_graph_sees_imports_through_super_and_groups() {
+    let p = file_graph::paths(
+        "use super::{lm::State, types::{Options, Link}};\nlet x = lm::f();",
+        &["super", "lm"],
+    );
+    let joined: Vec<String> = p.iter().map(|s| s.join("::")).collect();
+    assert_eq!(
+        joined,
+        [
+            "super::lm::State",
+            "super::types::Options",
+            "super::types::Link",
+            "lm::f"
+        ]
+    );
+    let code =
+        file_graph::code_of("use super::a; // super::b\n#[cfg(test)]\nmod tests { use super::*; }");
+    assert_eq!(file_graph::paths(&code, &["super"]).len(), 1);
+}
+
+/// No file of the core imports a file that imports it, directly or around a loop (within a
+/// module: calib's files read `types.rs` and each other downwards, never their `mod.rs`).
+#[test]
+fn no_core_file_imports_in_a_circle() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let graph = file_graph::graph(&src);
+    assert!(graph.len() >= 60, "found only {} files", graph.len());
+    let calib_fit = graph
+        .iter()
+        .find(|(m, _)| m == "calib::fit")
+        .expect("calib/fit.rs");
+    assert!(
+        calib_fit.1.iter().any(|d| d == "calib::types"),
+        "{calib_fit:?}"
+    );
+    let cycles: Vec<String> = file_graph::cycles(&graph)
+        .iter()
+        .map(|c| c.join(" -> "))
+        .collect();
+    assert!(
+        cycles.is_empty(),
+        "core files import each other:\n{}",
+        cycles.join("\n")
+    );
+}

@@ -6,7 +6,7 @@
 //! carries the truth beside the readings: the true parameters at that time (thermal expansion
 //! and step included) and the true TCP.
 
-use super::{gauss, Twin, TwinError, TEMP_SENSOR_K};
+use super::machine::{gauss, Twin, TwinError, TEMP_SENSOR_K};
 use crate::design::{X_RANGE, Y_RANGE};
 use crate::elastic::{self, Equilibrium, ALL_ACTIVE};
 use crate::geometry;
