@@ -4,9 +4,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use rpkm_core::campaign::Campaign;
-use rpkm_core::twin::Twin;
 use rpkm_msgs::CampaignInfo;
 use rpkm_transport::bag::BagWriter;
+use rpkm_twin::Twin;
 
 use super::args::SimulateArgs;
 use crate::campaign_bag::{campaign_messages, stamp_ns, write_campaign, CampaignTopics};

@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use rpkm_core::noise::NoiseModel;
-use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, Twin, TwinConfig};
 use std::path::{Path, PathBuf};
 
 mod args;
@@ -149,7 +149,7 @@ fn run_plan(args: &SimulateArgs, twin: &mut Twin, plan: &Path) -> Result<()> {
 }
 
 /// A production stream's crash `PARAM=CHANGE@SECONDS`.
-fn parse_step(s: &str) -> Result<rpkm_core::twin::StepChange> {
+fn parse_step(s: &str) -> Result<rpkm_twin::StepChange> {
     let bad = || {
         super::bad_input(format!(
             "--production-step {s}: expected PARAM=CHANGE@SECONDS, e.g. l3=0.1@2400"
@@ -165,7 +165,7 @@ fn parse_step(s: &str) -> Result<rpkm_core::twin::StepChange> {
     if !change.is_finite() || !at_s.is_finite() || at_s < 0.0 {
         return Err(bad());
     }
-    Ok(rpkm_core::twin::StepChange {
+    Ok(rpkm_twin::StepChange {
         at_s,
         param,
         change,
@@ -176,7 +176,7 @@ fn parse_step(s: &str) -> Result<rpkm_core::twin::StepChange> {
 fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> {
     use rpkm_core::campaign::{Campaign, Instrument, Pose};
     use rpkm_core::params::{NAMES, N_PARAMS};
-    use rpkm_core::twin::{ProductionConfig, ProductionStream};
+    use rpkm_twin::{ProductionConfig, ProductionStream};
     use std::fmt::Write as _;
     if !(is_csv(&args.out) && seconds > 0.0 && seconds <= 86_400.0) {
         return Err(super::bad_input(format!(

@@ -2,12 +2,12 @@
 //! of the twin reads this one; it reads only the effects it is configured with.
 
 use super::effects::{EffectKind, ALPHA_PER_K, REFERENCE_TEMP_C};
-use crate::elastic::{ElasticError, Stiffness};
-use crate::geometry::GeometryError;
-use crate::noise::NoiseModel;
-use crate::params::Params;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
+use rpkm_core::elastic::{ElasticError, Stiffness};
+use rpkm_core::geometry::GeometryError;
+use rpkm_core::noise::NoiseModel;
+use rpkm_core::params::Params;
 use std::collections::BTreeMap;
 
 /// Time per pose, s.

@@ -38,16 +38,16 @@ pub use production::{
 };
 pub use stream::{DriveSample, DriveStream};
 
-use crate::campaign::{Campaign, Instrument, Pose};
-use crate::design::{self, PlannedPose};
-use crate::elastic::{self, Stiffness, ALL_ACTIVE};
-use crate::geometry::{self};
-use crate::noise::{NoiseModel, XyInstrument};
-use crate::params::{self, Model, Params, NAMES, N_PARAMS, RODS};
 use effects::{bow, THERMAL_PERIOD_S};
 use nalgebra::{Cholesky, Matrix2, Rotation2, Vector2};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
+use rpkm_core::campaign::{Campaign, Instrument, Pose};
+use rpkm_core::design::{self, PlannedPose};
+use rpkm_core::elastic::{self, Stiffness, ALL_ACTIVE};
+use rpkm_core::geometry::{self};
+use rpkm_core::noise::{NoiseModel, XyInstrument};
+use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS, RODS};
 use std::collections::BTreeMap;
 
 /// Everything the twin hid, for a report or a test (serde: JSON with parameter names).
