@@ -69,7 +69,7 @@ impl TransportConfig {
         .default_enclave()
     }
     fn default_enclave(mut self) -> Self {
-        self.enclave = format!("{}/{}", crate::NODE_NAMESPACE, self.node_name);
+        self.enclave = format!("{}/{}", crate::names::NODE_NAMESPACE, self.node_name);
         self
     }
     /// Sets the SROS2 enclave (`/rpkm/tcp_estimator`).
