@@ -9,7 +9,8 @@
 //! - `dp`: the 29 geometric parameters at this pose (a temperature-dependent rod length, a
 //!   carrier joint offset that follows a bowed guide, a rod stretched by its force);
 //! - `dq`: carrier position minus encoder reading (a scale error);
-//! - `dm`: the true minus the recorded (x, y) of the instrument (a rotated instrument frame).
+//! - `dm`: the true minus the recorded (x, y) of the instrument (a rotated instrument frame);
+//! - `dpsi`: the true minus the recorded platform angle (an angle interferometer's error).
 //!
 //! with their derivatives ∂/∂θ. The model values (`obs`) are evaluated at the corrected inputs
 //! and carry their own sensitivities to p, q and m, so a Jacobian column of θ is the chain rule
@@ -23,6 +24,7 @@ mod encoder_scale;
 pub mod expr;
 mod guide_straightness;
 mod instrument_alignment;
+pub mod live;
 mod parallelogram;
 mod preload_elastic;
 pub mod stiffness_factor;
@@ -32,6 +34,7 @@ pub mod written;
 pub use encoder_scale::EncoderScale;
 pub use guide_straightness::GuideStraightness;
 pub use instrument_alignment::InstrumentAlignment;
+pub use live::{LiveEffects, LiveError, LiveState};
 pub use parallelogram::Parallelogram;
 pub use preload_elastic::PreloadElastic;
 pub use stiffness_factor::StiffnessFactor;
@@ -175,6 +178,8 @@ pub struct Delta {
     pub dq: [f64; 4],
     /// True − recorded instrument (x, y), mm.
     pub dm: Vector2<f64>,
+    /// True − recorded platform-angle reading (the angle interferometer's ψ), rad.
+    pub dpsi: f64,
     /// Relative change of the machine's stiffness (the drive-force rows' springs are
     /// k · (1 + dk)); no other row depends on it.
     pub dk: f64,
@@ -186,6 +191,7 @@ impl Default for Delta {
             dp: Row::zeros(),
             dq: [0.0; 4],
             dm: Vector2::zeros(),
+            dpsi: 0.0,
             dk: 0.0,
         }
     }
@@ -197,6 +203,7 @@ impl Delta {
         s.dp.dot(&self.dp)
             + (0..4).map(|a| s.dq[a] * self.dq[a]).sum::<f64>()
             + s.dm.dot(&self.dm)
+            + s.dpsi * self.dpsi
             + s.dk * self.dk
     }
 }
@@ -208,6 +215,8 @@ pub struct InputSensitivity {
     pub dp: Row,
     pub dq: [f64; 4],
     pub dm: Vector2<f64>,
+    /// ... to its recorded platform angle (angle rows only),
+    pub dpsi: f64,
     /// ... and to the relative stiffness change (drive-force rows only).
     pub dk: f64,
 }
@@ -218,6 +227,7 @@ impl Default for InputSensitivity {
             dp: Row::zeros(),
             dq: [0.0; 4],
             dm: Vector2::zeros(),
+            dpsi: 0.0,
             dk: 0.0,
         }
     }

@@ -135,7 +135,7 @@ pub struct CalibratorOptions {
     pub noise: rpkm_core::noise::NoiseModel,
     /// Effects written as data (`effects_file`, docs/effects.md): every one of the file is in
     /// the model, its parameters published with the geometry.
-    pub effects: Option<crate::effects_file::EffectsFile>,
+    pub effects: Option<std::sync::Arc<crate::effects_file::EffectsFile>>,
     /// How the rows are weighted: the levels estimated from the campaign (default, as
     /// `rpkm calibrate`), or the stated ones.
     pub weighting: calib::Noise,
@@ -179,11 +179,7 @@ fn calibration_options(o: &CalibratorOptions) -> anyhow::Result<Options> {
 pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow::Result<Outcome> {
     let (cal_part, val_part) = split(campaign, &o.validation_prefix);
     let opts = calibration_options(o)?;
-    let written = o
-        .effects
-        .as_ref()
-        .map(crate::effects_file::EffectsFile::all)
-        .unwrap_or_default();
+    let written = o.effects.as_ref().map(|f| f.all()).unwrap_or_default();
     if let Some(file) = &o.effects {
         file.check(&cal_part)
             .map_err(|e| bad_input(e.to_string()))?;
@@ -259,11 +255,7 @@ fn effect_parameters(msg: &mut Parameters, effects: &[calib::EffectEstimate]) {
         if !msg.active_effects.contains(&e.effect) {
             msg.active_effects.push(e.effect.clone());
         }
-        let to_si = match e.unit.as_str() {
-            "mm" | "mrad" => 1e-3,
-            "um" | "µm" | "urad" | "µrad" => 1e-6,
-            _ => 1.0,
-        };
+        let to_si = crate::effects_file::si_per_unit(&e.unit);
         msg.effect_parameter_names
             .push(format!("{}.{}", e.effect, e.name));
         msg.effect_parameter_values.push(e.value * to_si);
@@ -677,9 +669,11 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
             "selection: expected map or auto, found {selection}"
         )));
     }
+    let start = Geometry::from_params(p)?;
     Ok(Settings {
         options: CalibratorOptions {
-            start: Geometry::from_params(p)?,
+            effects: start.effects.file().cloned(),
+            start,
             validation_prefix: p.string("validation_prefix", "val").map_err(bad_param)?,
             selection,
             max_condition: p.positive("max_condition", 100.0).map_err(bad_param)?,
@@ -687,7 +681,6 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
                 .f64_in("outlier_sigma", 0.0, super::params::OUTLIER_SIGMA, " σ")
                 .map_err(bad_param)?,
             noise: rpkm_core::noise::NoiseModel::default(),
-            effects: effects_file(p)?,
             weighting: if p.bool("noise_estimation", true).map_err(bad_param)? {
                 calib::Noise::ESTIMATE
             } else {
@@ -703,18 +696,6 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
     })
 }
 
-/// The effects file of the `effects_file` parameter (none where empty), read with every
-/// mistake told at its file, line and column (bad input: the node exits 2).
-fn effects_file(p: &NodeParams) -> anyhow::Result<Option<crate::effects_file::EffectsFile>> {
-    let path = p.string("effects_file", "").map_err(bad_param)?;
-    if path.is_empty() {
-        return Ok(None);
-    }
-    crate::effects_file::read(std::path::Path::new(&path), &[])
-        .map(Some)
-        .map_err(|e| bad_input(e.to_string()))
-}
-
 /// The calibrator's parameters on its ROS 2 parameter services: what the next calibration
 /// uses and when a campaign ends are live; the buffer and the online tracker need a restart.
 fn specs() -> Vec<Spec> {
@@ -726,7 +707,7 @@ fn specs() -> Vec<Spec> {
         range,
         ..Spec::fixed(key, default, description)
     };
-    let [model, _, geometry_file, _] = super::geometry_specs();
+    let [model, _, geometry_file, _, _] = super::geometry_specs();
     vec![
         Spec {
             description: "model of the next calibration: 24 or 29 parameters",
@@ -1200,13 +1181,14 @@ mod tests {
                 model: Model::M29,
                 stiffness: rpkm_core::elastic::Stiffness::default(),
                 source: "nominal".into(),
+                effects: crate::node::effects::NodeEffects::default(),
             },
             validation_prefix: "val".into(),
             selection: "map".into(),
             max_condition: 100.0,
             outlier_sigma: 0.0,
             noise: rpkm_core::noise::NoiseModel::default(),
-            effects: Some(file),
+            effects: Some(std::sync::Arc::new(file)),
             weighting: calib::Noise::ESTIMATE,
         };
         let msg = calibrate_campaign(&c, &o)?.parameters;
@@ -1263,6 +1245,7 @@ mod tests {
                 model: Model::M29,
                 stiffness: rpkm_core::elastic::Stiffness::default(),
                 source: "nominal".into(),
+                effects: crate::node::effects::NodeEffects::default(),
             },
             validation_prefix: "val".into(),
             selection: "map".into(),
