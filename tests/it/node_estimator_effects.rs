@@ -181,10 +181,6 @@ fn spread_um(errors: &[[f64; 2]]) -> f64 {
 }
 
 #[test]
-#[expect(
-    clippy::too_many_lines,
-    reason = "an end-to-end scenario, read top to bottom"
-)]
 fn the_estimator_applies_the_calibrated_written_effect() {
     let mut twin = twin();
     let campaign = twin

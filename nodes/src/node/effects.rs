@@ -14,6 +14,7 @@
 //! effects are bound to campaigns, not to a drive state; a geometry that carries them says
 //! in its source that they are not applied live.
 
+use std::fmt::Write as _;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -312,10 +313,11 @@ impl NodeEffects {
             out = format!(" with effects {}", parts.join("; "));
         }
         if !self.not_applied.is_empty() {
-            out.push_str(&format!(
+            let _ = write!(
+                out,
                 " (the library's {} not applied live)",
                 self.not_applied.join(", ")
-            ));
+            );
         }
         out
     }
