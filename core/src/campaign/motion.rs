@@ -78,24 +78,26 @@ impl Motion {
 mod tests {
     use super::*;
 
+    /// Direction, travel and run time of carrier 4 as expected.
+    fn is(m: MotionCovariates, (dir, travel, t_run): (f64, f64, f64)) -> bool {
+        [m.dir[3] - dir, m.travel[3] - travel, m.t_run - t_run]
+            .iter()
+            .all(|d| d.abs() < 1e-12)
+    }
+
     #[test]
-    #[expect(clippy::float_cmp, reason = "sums of exact binary fractions")]
     fn a_reversal_restarts_the_travel_and_a_standstill_keeps_the_direction() {
         let mut m = Motion::default();
         let at = |q4: f64| [0.0, 0.0, 0.0, q4];
-        let first = m.next(at(10.0), 5.0);
-        assert_eq!(
-            (first.dir[3], first.travel[3], first.t_run),
-            (1.0, 0.0, 0.0)
-        );
-        let down = m.next(at(7.5), 6.0);
-        assert_eq!((down.dir[3], down.travel[3], down.t_run), (-1.0, 2.5, 1.0));
-        let still = m.next(at(7.5), 7.0);
-        assert_eq!((still.dir[3], still.travel[3]), (-1.0, 2.5));
-        let more = m.next(at(7.0), 8.0);
-        assert_eq!((more.dir[3], more.travel[3]), (-1.0, 3.0));
+        assert!(is(m.next(at(10.0), 5.0), (1.0, 0.0, 0.0)));
+        assert!(is(m.next(at(7.5), 6.0), (-1.0, 2.5, 1.0)));
+        assert!(is(m.next(at(7.5), 7.0), (-1.0, 2.5, 2.0)), "standstill");
+        assert!(is(m.next(at(7.0), 8.0), (-1.0, 3.0, 3.0)));
         let up = m.next(at(8.0), 9.0);
-        assert_eq!((up.dir[3], up.travel[3], up.t_run), (1.0, 1.0, 4.0));
-        assert_eq!(up.dir[0], 1.0, "a carrier that never moved: +1");
+        assert!(is(up, (1.0, 1.0, 4.0)), "{up:?}");
+        assert!(
+            (up.dir[0] - 1.0).abs() < 1e-12,
+            "a carrier that never moved: +1"
+        );
     }
 }
