@@ -24,6 +24,7 @@
 
 use super::lifecycle::Lifecycle;
 use std::collections::VecDeque;
+use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
 use nalgebra::SMatrix;
@@ -640,12 +641,26 @@ pub fn report_warning(r: &OnlineReport, temp_name: &str) -> Option<String> {
             ),
             None => (name(step.param).to_owned(), "next best"),
         };
-        return Some(format!(
+        let mut line = format!(
             "step change at t = {:.1} s: {who} {:+.0} µm ({why}: explains {:.2}x less)",
             step.since_s,
             step.change * 1e3,
             step.margin
-        ));
+        );
+        if let (Some(at), Some(other)) = (&step.separating, step.alternative) {
+            let _ = write!(
+                line,
+                "; to tell them apart drive to x = {:.0}, y = {:.0} mm with all four drives \
+                 position-controlled: there a sample leaves {:.0} σ of the step that {} cannot \
+                 reproduce (their forces {:.3} alike)",
+                at.x,
+                at.y,
+                at.sigma,
+                name(other),
+                at.cos.abs()
+            );
+        }
+        return Some(line);
     }
     r.drift
         .as_ref()
@@ -914,7 +929,13 @@ impl Calibrator {
             if let Some(warning) = report_warning(&r, &self.temp_name) {
                 ctx.log(&warning);
                 self.last = (DiagnosticStatus::WARN, warning);
-                let t = vec![("online_t_s", format!("{:.3}", r.t))];
+                let mut t = vec![("online_t_s", format!("{:.3}", r.t))];
+                // the motion that separates a tie, SI as on every topic
+                if let Some(at) = r.step.as_ref().and_then(|s| s.separating) {
+                    t.push(("separating_x_m", format!("{}", at.x / MM_PER_M)));
+                    t.push(("separating_y_m", format!("{}", at.y / MM_PER_M)));
+                    t.push(("separating_sigma", format!("{:.1}", at.sigma)));
+                }
                 out.diagnostics.publish(&diagnostic_array(status(
                     self.last.0,
                     &ctx.status_name,
@@ -1355,9 +1376,51 @@ mod tests {
         assert!(tracker.error.is_none(), "{:?}", tracker.error);
         let (t, w, moved) = warned.ok_or_else(|| anyhow::anyhow!("no step reported"))?;
         assert!(t - 30.0 <= 10.0, "reported at {t} s");
-        // l3, alone or with l1 that the forces cannot tell from it
+        // l3, alone or with l1 that the forces cannot tell from it, and then with the
+        // motion that would
         assert!(w.contains("l3 +") || w.contains("l3 or l1 +"), "{w}");
+        if w.contains("l3 or l1 +") {
+            assert!(w.contains("to tell them apart drive to x = "), "{w}");
+        }
         assert!((moved - 0.1).abs() < 0.02, "l3 moved {moved} mm");
         Ok(())
+    }
+
+    /// A tie is reported with the motion that separates it (its pose in mm, its drive mode,
+    /// what a sample there leaves), and the same pose in SI on /diagnostics.
+    #[test]
+    fn a_tie_is_reported_with_the_motion_that_separates_it() {
+        use rpkm_core::calib::online::SeparatingPose;
+        use rpkm_core::params::{L1, L3};
+        let step = StepChange {
+            param: L3,
+            change: 0.1,
+            sigma: 0.001,
+            since_s: 20.0,
+            margin: 1.02,
+            alternative: Some(L1),
+            separating: Some(SeparatingPose {
+                x: -150.0,
+                y: 1700.0,
+                cos: 0.98,
+                sigma: 210.0,
+            }),
+        };
+        let r = OnlineReport {
+            params: Params::nominal(),
+            sigma: [0.0; N_PARAMS],
+            t: 21.0,
+            step: Some(step),
+            drift: None,
+        };
+        assert_eq!(
+            report_warning(&r, "temp_machine").as_deref(),
+            Some(
+                "step change at t = 20.0 s: l3 or l1 +100 µm (the path cannot tell them apart: \
+                 explains 1.02x less); to tell them apart drive to x = -150, y = 1700 mm with \
+                 all four drives position-controlled: there a sample leaves 210 σ of the step \
+                 that l1 cannot reproduce (their forces 0.980 alike)"
+            )
+        );
     }
 }
