@@ -52,7 +52,7 @@ fn true_floor_um(dir: &std::path::Path, c: &std::path::Path) -> f64 {
         let text = std::fs::read_to_string(&p).expect("held-out campaign");
         rpkm_core::campaign::Campaign::parse(&text, "val").expect("parses")
     };
-    rpkm_core::twin::reading_error_rms_um(
+    rpkm_twin::reading_error_rms_um(
         &read(c.with_extension("val.csv")),
         &read(dir.join("clean.val.csv")),
     )

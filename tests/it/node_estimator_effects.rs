@@ -20,7 +20,7 @@ use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::geometry::fgm;
 use rpkm_core::params::{index_of, unit, Model, Params, Unit};
-use rpkm_core::twin::{EffectKind, MachineState, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, MachineState, Twin, TwinConfig};
 use rpkm_msgs::{ActuatorState, Parameters, Time};
 use rpkm_transport::{topic, Publisher, Subscriber, Transport, TransportConfig};
 
