@@ -20,9 +20,9 @@ use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::geometry::fgm;
 use rpkm_core::params::{index_of, unit, Model, Params, Unit};
-use rpkm_twin::{EffectKind, MachineState, Twin, TwinConfig};
 use rpkm_msgs::{ActuatorState, Parameters, Time};
 use rpkm_transport::{topic, Publisher, Subscriber, Transport, TransportConfig};
+use rpkm_twin::{EffectKind, MachineState, Twin, TwinConfig};
 
 /// The twin's lost motion of carrier 4, mm.
 const B_MM: f64 = 0.02;

@@ -12,9 +12,9 @@
 //! Per state nothing is allocated once the first has been evaluated: the variables are
 //! resolved when the effects are applied, the evaluation's buffers kept.
 
+use super::effect::Delta;
 use super::expr::Program;
 use super::written::{self, Target, Written};
-use super::Delta;
 use crate::campaign::MotionCovariates;
 use crate::params::{Params, N_PARAMS};
 
