@@ -37,6 +37,7 @@ mod launch_cell;
 mod monitor_foxglove_layout;
 mod monitor_tmux;
 mod node_calibration_services;
+mod node_estimator_effects;
 mod node_estimator_foreign;
 mod node_estimator_jumps;
 mod node_ingest_cyclone;

@@ -9,6 +9,7 @@
 
 pub mod calibration_services;
 pub mod calibrator;
+pub mod effects;
 pub mod ingest;
 pub mod inputs;
 pub mod lifecycle;
@@ -305,10 +306,11 @@ pub const COMMON_KEYS: [&str; 4] = [
     "enclave",
 ];
 /// Parameter keys of the nodes that evaluate the model ([`Geometry::from_params`]).
-pub const GEOMETRY_KEYS: [&str; 5] = [
+pub const GEOMETRY_KEYS: [&str; 6] = [
     "model",
     "stiffness_factor",
     "geometry_file",
+    "effects_file",
     "geometry.",
     "follow_parameters",
 ];
@@ -323,7 +325,7 @@ pub fn is_geometry_key(key: &str) -> bool {
 /// The geometry parameters on the ROS 2 parameter services: model and stiffness live (the
 /// next sample uses them), the file and following read-only. `geometry.<name>` overrides
 /// (SI) are set in the parameter file.
-pub fn geometry_specs() -> [live::Spec; 4] {
+pub fn geometry_specs() -> [live::Spec; 5] {
     use live::{Default, Spec};
     [
         Spec::live(
@@ -347,6 +349,11 @@ pub fn geometry_specs() -> [live::Spec; 4] {
             "follow_parameters",
             Default::Bool(true),
             "replace the geometry by every /rpkm/parameters message",
+        ),
+        Spec::fixed(
+            "effects_file",
+            Default::Str(""),
+            "effects written as data (YAML, docs/effects.md) whose calibrated values apply",
         ),
     ]
 }
@@ -684,6 +691,9 @@ pub struct Geometry {
     pub stiffness: Stiffness,
     /// Where the parameters came from, for messages.
     pub source: String,
+    /// The calibrated effects applied at each state, and those the node knows
+    /// (`effects_file`).
+    pub effects: effects::NodeEffects,
 }
 
 /// A Parameters message that cannot be used.
@@ -697,6 +707,8 @@ pub enum ParametersMsgError {
     Name(String),
     #[error("/rpkm/parameters: parameter {name}: {value} is not finite")]
     NonFinite { name: String, value: f64 },
+    #[error("/rpkm/parameters: {0}")]
+    Effects(#[from] effects::EffectsError),
 }
 
 /// Length parameters: mm in the core, m on topics and in YAML.
@@ -727,12 +739,15 @@ impl Geometry {
             })?;
         let factor = p.positive("stiffness_factor", 1.0).map_err(bad_param)?;
         let file = p.string("geometry_file", "").map_err(bad_param)?;
-        let (mut params, mut source) = if file.is_empty() {
-            (Params::nominal(), "nominal parameters".to_owned())
+        let known = effects::NodeEffects::from_params(p)?;
+        let (mut params, mut source, effects) = if file.is_empty() {
+            (Params::nominal(), "nominal parameters".to_owned(), known)
         } else {
+            let path = std::path::Path::new(&file);
             (
-                crate::input::read_params(std::path::Path::new(&file))?,
+                crate::input::read_params(path)?,
                 file.clone(),
+                known.read_calibration(path)?,
             )
         };
         let overrides = p.group("geometry.").map_err(bad_param)?;
@@ -751,11 +766,13 @@ impl Geometry {
         if model == Model::M24 {
             params = params.with_perfect_parallelogram();
         }
+        source.push_str(&effects.describe());
         Ok(Self {
             params,
             model,
             stiffness: Stiffness::default().scaled(factor),
             source,
+            effects,
         })
     }
 
@@ -784,15 +801,18 @@ impl Geometry {
         if model == Model::M24 {
             params = params.with_perfect_parallelogram();
         }
+        let effects = self.effects.of_message(msg)?;
         Ok(Self {
             params,
             model,
             stiffness: self.stiffness,
             source: format!(
-                "/rpkm/parameters (model {}, {} measurements)",
+                "/rpkm/parameters (model {}, {} measurements){}",
                 model.number(),
-                msg.measurement_count
+                msg.measurement_count,
+                effects.describe()
             ),
+            effects,
         })
     }
 }
