@@ -12,7 +12,7 @@ use rpkm_msgs::lifecycle_msgs::{
 use rpkm_transport::dds_calls::{CallClient, ServiceType};
 use rpkm_transport::{Backend, Names, Transport, TransportConfig};
 
-use super::{LaunchDescription, NodeSpec};
+use super::description::{LaunchDescription, NodeSpec};
 
 /// How long a managed node may take to answer its first `~/get_state` (its start, DDS
 /// discovery).

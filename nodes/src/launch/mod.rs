@@ -42,14 +42,16 @@
 //! Substitutions in every string: `$(var NAME)` (an `arg`, overridden by `NAME:=VALUE` on the
 //! command line), `$(env NAME)` / `$(env NAME DEFAULT)`, `$(dirname)` (this file's folder).
 
+mod description;
 mod managed;
 pub mod supervisor;
 
 use std::collections::BTreeMap;
-use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
 use serde_yaml::Value;
+
+pub use description::{LaunchDescription, NodeSpec, Program, COMMANDS};
 
 use crate::node::params::{parse_yaml, YamlSyntax};
 use crate::node::{declared_keys, Geometry, NodeArgs, NodeKind, NodeSetup, EXECUTABLES};
@@ -103,64 +105,9 @@ pub enum LaunchError {
     Argument { file: String, what: String },
 }
 
-/// What a launched process runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Program {
-    /// `rpkm node EXEC --name NAME --params ... ARGS`: a node of [`EXECUTABLES`].
-    Node,
-    /// `rpkm EXEC ARGS`: one of [`COMMANDS`] (an `executable` entry).
-    Command,
-}
-
-/// The rpkm commands an `executable` entry may run.
-pub const COMMANDS: [&str; 2] = ["record", "replay"];
-
 /// Bounds of `respawn_delay`, s (the supervisor caps the doubled delay at 5 s anyway).
 const MIN_DELAY_S: f64 = 0.0;
 const MAX_DELAY_S: f64 = 3600.0;
-
-/// One process to run.
-#[derive(Debug, Clone, PartialEq)]
-pub struct NodeSpec {
-    /// A node or an rpkm command.
-    pub program: Program,
-    /// Node executable (one of [`EXECUTABLES`]) or rpkm command (one of [`COMMANDS`]).
-    pub exec: String,
-    /// Node name.
-    pub name: String,
-    /// Parameter files, in order.
-    pub param_files: Vec<PathBuf>,
-    /// Inline parameters as `key=value`.
-    pub params: Vec<String>,
-    /// Extra command-line arguments.
-    pub args: Vec<String>,
-    /// Its namespace (`namespace:`), when not rpkm's default.
-    pub namespace: Option<String>,
-    /// Topic remapping rules (`remap: [{from, to}]`), in order.
-    pub remaps: Vec<(String, String)>,
-    /// Its SROS2 enclave (`enclave:`), when not the node's default `/rpkm/<name>`.
-    pub enclave: Option<String>,
-    /// Started unconfigured and brought up (configure, activate) by the launch, in file
-    /// order (`managed: true`).
-    pub managed: bool,
-    /// Restart when it crashes.
-    pub respawn: bool,
-    /// First restart delay, s.
-    pub respawn_delay: f64,
-    /// Line of its entry in the launch file.
-    pub line: usize,
-}
-
-/// A parsed launch description.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LaunchDescription {
-    /// The launch file, as messages name it.
-    pub file: String,
-    /// The nodes, in file order.
-    pub nodes: Vec<NodeSpec>,
-    /// Environment set for the nodes (`set_env`).
-    pub env: Vec<(String, String)>,
-}
 
 /// The keys each kind of entry takes: anything else is a typo (`If:`, `respwan:`) that
 /// would otherwise silently change what runs.
@@ -827,45 +774,6 @@ fn names(
         return Err(ctx.err_at(key, format!("node {name}: {e}")));
     }
     Ok((namespace, remaps))
-}
-
-impl NodeSpec {
-    /// The arguments after the rpkm binary that start it.
-    pub fn argv(&self) -> Vec<OsString> {
-        let mut argv: Vec<OsString> = Vec::new();
-        if self.program == Program::Node {
-            // `--name=`, `--param=`: a value that starts with `-` stays a value
-            let name = format!("--name={}", self.name);
-            argv.extend(["node", &self.exec, &name].map(OsString::from));
-            if self.managed {
-                argv.push("--unconfigured".into());
-            }
-            for f in &self.param_files {
-                let mut arg = OsString::from("--params=");
-                arg.push(f);
-                argv.push(arg);
-            }
-            for p in &self.params {
-                argv.push(OsString::from(format!("--param={p}")));
-            }
-        } else {
-            argv.push(OsString::from(&self.exec));
-        }
-        argv.extend(self.args.iter().map(OsString::from));
-        // last: `--ros-args` takes every word after it
-        if self.namespace.is_some() || !self.remaps.is_empty() || self.enclave.is_some() {
-            argv.push("--ros-args".into());
-            let rules = self.namespace.iter().map(|ns| format!("__ns:={ns}"));
-            let rules = rules.chain(self.remaps.iter().map(|(f, t)| format!("{f}:={t}")));
-            for rule in rules {
-                argv.extend(["-r".into(), OsString::from(rule)]);
-            }
-            if let Some(e) = &self.enclave {
-                argv.extend(["--enclave".into(), OsString::from(e)]);
-            }
-        }
-        argv
-    }
 }
 
 /// Runs `rpkm launch`.

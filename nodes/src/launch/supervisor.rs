@@ -31,7 +31,7 @@ use tokio::process::{Child, Command};
 use tokio::signal::unix::{signal, Signal, SignalKind};
 use tokio::time::Instant;
 
-use super::{LaunchDescription, NodeSpec};
+use super::description::{LaunchDescription, NodeSpec};
 
 /// A node's crash within this time of its start doubles the next restart delay.
 const QUICK_CRASH: Duration = Duration::from_secs(10);

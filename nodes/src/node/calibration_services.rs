@@ -18,7 +18,8 @@ use rpkm_msgs::calibration_srv::{
 };
 use rpkm_transport::dds_calls::{CallServer, ServiceType};
 
-use super::{Geometry, NodeContext};
+use super::context::NodeContext;
+use super::geometry::Geometry;
 
 /// The two services of one node.
 pub struct CalibrationServices {

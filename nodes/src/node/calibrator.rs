@@ -43,12 +43,13 @@ use rpkm_msgs::{
 };
 use rpkm_transport::{topic, Publisher, Subscriber};
 
+use super::context::{
+    bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M,
+};
+use super::geometry::{parameters_msg, Geometry};
 use super::ingest::END_OF_CAMPAIGN;
 use super::live::{self, LiveParams, Spec};
-use super::{
-    bad_param, diagnostic_array, parameters_msg, status, CommonArgs, Every, Geometry, Idle,
-    NodeContext, NodeParams, MM_PER_M,
-};
+use super::params::NodeParams;
 use crate::campaign_bag::CampaignAssembler;
 use crate::error::bad_input;
 
@@ -722,7 +723,7 @@ fn specs() -> Vec<Spec> {
         range,
         ..Spec::fixed(key, default, description)
     };
-    let [model, _, geometry_file, _, _] = super::geometry_specs();
+    let [model, _, geometry_file, _, _] = super::geometry::geometry_specs();
     vec![
         Spec {
             description: "model of the next calibration: 24 or 29 parameters",

@@ -409,8 +409,10 @@ fn check_unit(w: &Written, param: &str, unit: &str) -> Result<(), EffectsError> 
 impl NodeEffects {
     /// The node's known effects from its `effects_file` parameter (none where empty), read
     /// with every mistake told at its file, line and column (bad input: the node exits 2).
-    pub fn from_params(p: &super::NodeParams) -> anyhow::Result<NodeEffects> {
-        let path = p.string("effects_file", "").map_err(super::bad_param)?;
+    pub fn from_params(p: &super::params::NodeParams) -> anyhow::Result<NodeEffects> {
+        let path = p
+            .string("effects_file", "")
+            .map_err(super::context::bad_param)?;
         if path.is_empty() {
             return Ok(NodeEffects::default());
         }

@@ -37,8 +37,11 @@ use rpkm_transport::Backend;
 pub use report::Tally;
 pub use validate::{Limits, Reject, RejectKind, Validator};
 
+use super::context::{bad_param, CommonArgs, NodeContext};
 use super::live::{self, Spec};
-use super::{bad_param, params::DURATION_S, shutdown, CommonArgs, NodeContext, NodeParams};
+use super::params::NodeParams;
+use super::params::DURATION_S;
+use super::shutdown;
 use crate::error::bad_input;
 use output::Output;
 

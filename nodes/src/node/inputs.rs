@@ -11,7 +11,8 @@ use rpkm_core::params::Params;
 use rpkm_msgs::{ActuatorState, Parameters};
 use rpkm_transport::{topic, Subscriber};
 
-use super::{bad_param, Every, Geometry, NodeContext, MM_PER_M};
+use super::context::{bad_param, Every, NodeContext, MM_PER_M};
+use super::geometry::Geometry;
 use crate::campaign_bag::seconds_from_stamp;
 
 /// How the carriers of one actuator stream moved (the direction of each one's last move, its

@@ -18,10 +18,10 @@ use rpkm_msgs::lifecycle_msgs::{
 use rpkm_transport::dds_calls::{Call, CallServer, ServiceType};
 use rpkm_transport::{Backend, Publisher, Qos, Topic};
 
-use super::NodeContext;
+use super::context::NodeContext;
 
 /// The state a node starts in: unconfigured with `--unconfigured`, else active.
-pub fn start(args: &super::CommonArgs) -> Primary {
+pub fn start(args: &super::context::CommonArgs) -> Primary {
     if args.unconfigured {
         Primary::Unconfigured
     } else {

@@ -13,7 +13,8 @@ use std::time::Duration;
 use rpkm_transport::dds_params::{ParamDecl, ParamRange, ParamServer, ParameterValue};
 use serde_yaml::Value;
 
-use super::{Every, NodeContext, NodeParams};
+use super::context::{Every, NodeContext};
+use super::params::NodeParams;
 
 /// How often a node looks for accepted changes: a person or a tool sets them, and the check
 /// must cost the servo loop nothing.
@@ -71,7 +72,7 @@ impl Spec {
     }
 
     fn value(&self, p: &NodeParams) -> anyhow::Result<ParameterValue> {
-        let bad = super::bad_param;
+        let bad = super::context::bad_param;
         Ok(match self.default {
             Default::F64(d) => ParameterValue::Double(p.f64(self.key, d).map_err(bad)?),
             Default::U64(d) => {

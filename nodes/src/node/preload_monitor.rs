@@ -25,12 +25,13 @@ use rpkm_transport::topic;
 
 use rpkm_transport::dds_params::ParamRange;
 
+use super::context::{
+    bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M,
+};
+use super::geometry::Geometry;
 use super::inputs::{ParameterFollower, SeqGaps, StreamMotion};
 use super::live::{self, LiveParams, Spec};
-use super::{
-    bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext,
-    NodeParams, MM_PER_M,
-};
+use super::params::NodeParams;
 
 /// Parameter keys of the node.
 pub const KEYS: [&str; 7] = [
@@ -470,7 +471,7 @@ fn specs() -> Vec<Spec> {
             "yield-polling time after a sample before sleeping, ms (0 to 1000)",
         ),
     ];
-    specs.extend(super::geometry_specs());
+    specs.extend(super::geometry::geometry_specs());
     specs
 }
 
@@ -495,7 +496,7 @@ fn reconfigure(args: &CommonArgs, ctx: &NodeContext, declared: &[&str]) -> Resul
 }
 
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
-    let declared = super::declared_keys("preload_monitor").unwrap_or_default();
+    let declared = super::geometry::declared(&KEYS, true);
     let ctx = NodeContext::open("preload_monitor", args, &declared, None)?;
     let p = &ctx.params;
     let Config {
@@ -556,7 +557,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 let c = configure(&p)?;
                 monitor.set_thresholds(c.thresholds);
                 status_every = c.status_every;
-                if names.iter().any(|k| super::is_geometry_key(k)) {
+                if names.iter().any(|k| super::geometry::is_geometry_key(k)) {
                     monitor.set_geometry(c.geometry);
                 }
                 ctx.log(format!("parameters set: {}", names.join(", ")));

@@ -28,13 +28,13 @@ use rpkm_core::params::{Model, Params, RODS};
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
+use super::context::{diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M};
+use super::geometry::Geometry;
 use super::inputs::{ParameterFollower, SeqGaps, StreamMotion};
 use super::lifecycle::Lifecycle;
 use super::live::{self, LiveParams, Spec};
+use super::params::NodeParams;
 use super::views::{self, TcpViews};
-use super::{
-    diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext, NodeParams, MM_PER_M,
-};
 use rpkm_transport::dds_params::ParamRange;
 use rpkm_transport::Backend;
 
@@ -348,7 +348,7 @@ fn specs(views_default: bool) -> Vec<Spec> {
             ParamRange::count(views::VIEW_EVERY_RANGE),
         ),
     ];
-    specs.extend(super::geometry_specs());
+    specs.extend(super::geometry::geometry_specs());
     specs
 }
 
@@ -356,7 +356,7 @@ fn specs(views_default: bool) -> Vec<Spec> {
 fn configure(p: &NodeParams) -> anyhow::Result<(Geometry, u64)> {
     let every = p
         .u64_in("view_every", views::VIEW_EVERY, views::VIEW_EVERY_RANGE)
-        .map_err(super::bad_param)?;
+        .map_err(super::context::bad_param)?;
     Ok((Geometry::from_params(p)?, every))
 }
 
@@ -382,19 +382,19 @@ fn reconfigure(
 
 /// Runs the node until SIGINT/SIGTERM.
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
-    let declared = super::declared_keys("tcp_estimator").unwrap_or_default();
+    let declared = super::geometry::declared(&KEYS, true);
     let ctx = NodeContext::open("tcp_estimator", args, &declared, None)?;
     let geometry = Geometry::from_params(&ctx.params)?;
     let busy = ctx
         .params
         .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
-        .map_err(super::bad_param)?;
+        .map_err(super::context::bad_param)?;
     // Bounded where read: an invalid priority is bad configuration (exit 2), not a node that
     // says so in its log and runs at normal priority.
     let rt_priority = ctx
         .params
         .u64_in("rt_priority", 0, super::params::RT_PRIORITY)
-        .map_err(super::bad_param)?;
+        .map_err(super::context::bad_param)?;
     let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
     let mut parameters = ParameterFollower::open(&ctx)?;
     let estimates = ctx.publisher(&topic::TCP_ESTIMATE)?;
@@ -447,7 +447,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             // Between samples only: a set costs the sample path nothing.
             if let Some((p, names)) = live.poll() {
                 let (g, every) = configure(&p)?;
-                if names.iter().any(|k| super::is_geometry_key(k)) {
+                if names.iter().any(|k| super::geometry::is_geometry_key(k)) {
                     est.set_geometry(g);
                 }
                 if let Some(v) = views.as_mut() {

@@ -19,7 +19,7 @@ use rpkm_msgs::{
 };
 use rpkm_transport::{topic, Backend, Publisher};
 
-use super::{bad_param, NodeContext};
+use super::context::{bad_param, NodeContext};
 use crate::error::bad_input;
 
 /// Parameter keys of the views (tcp_estimator and ingest).

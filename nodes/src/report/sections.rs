@@ -56,7 +56,7 @@ pub fn summary(r: &Report) -> String {
         escape(&c.source),
         c.poses.len(),
         d.points.len(),
-        escape(&super::Report::stage_of(d).model),
+        escape(&Report::stage_of(d).model),
         d.determined
             .map_or("all".to_owned(), |(n, of)| format!("{n} of {of}"))
     );
@@ -304,10 +304,10 @@ fn direction_maps(r: &Report, inst: &str, dir: &str, view: View) -> String {
     }
     o.push_str("</h3><div class=\"row pair\">");
     let b = maps::heat_map("before", &map_points(before), view, vmax, unit);
-    o.push_str(&figure(&b, &super::Report::stage_of(r.before).model));
+    o.push_str(&figure(&b, &Report::stage_of(r.before).model));
     if let (Some(a), Some(ad)) = (after, r.after) {
         let m = maps::heat_map("after", &map_points(a), view, vmax, unit);
-        o.push_str(&figure(&m, &super::Report::stage_of(ad).model));
+        o.push_str(&figure(&m, &Report::stage_of(ad).model));
     }
     let thumb = thumbnail(r.campaign, view);
     let side = format!(
@@ -398,14 +398,14 @@ fn vector_maps(r: &Report, inst: &str, view: View) -> String {
     }
     o.push_str("</h3><div class=\"row pair\">");
     let b = maps::quiver("before", &before, &resets, view, um_per_px, reference);
-    o.push_str(&figure(&b, &super::Report::stage_of(r.before).model));
+    o.push_str(&figure(&b, &Report::stage_of(r.before).model));
     if let Some(ad) = r.after {
         let a = maps::quiver("after", &after, &resets, view, um_per_px, reference);
         o.push_str(&figure(
             &a,
             &format!(
                 "{}: one arrow scale with before",
-                super::Report::stage_of(ad).model
+                Report::stage_of(ad).model
             ),
         ));
     }
