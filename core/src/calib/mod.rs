@@ -5,6 +5,7 @@
 
 mod lm;
 pub mod online;
+mod progress;
 mod report;
 mod request;
 mod rows;
@@ -12,6 +13,7 @@ mod select;
 mod shared;
 mod uncertainty;
 
+pub use progress::{Flow, Observer, Progress};
 pub use report::{gain, rms};
 pub use request::{calibrate, Noise, Request};
 pub use select::{MIN_EFFECT_OBSERVABILITY, MIN_EFFECT_SIGNAL};
@@ -189,6 +191,9 @@ pub enum CalibrationError {
     },
     #[error("the calibration's result is not a number: {0} (the rows carry non-finite values or weights)")]
     NonFinite(String),
+    /// Its caller's observer asked it to stop ([`Flow::Stop`]): no result.
+    #[error("the calibration was cancelled by its caller")]
+    Cancelled,
 }
 
 /// A row removed as an outlier.
@@ -320,6 +325,7 @@ fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
         theta0,
         warm,
         shared,
+        progress,
         ..
     } = *req;
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
@@ -346,6 +352,7 @@ fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
         init,
         (warm.is_some(), warm.is_some_and(|w| w.screen)),
         view.as_ref(),
+        progress,
     )?;
     // the corrections at the fit's θ: only a large campaign's leverages and step 2 read them
     let corr = OnceCell::new();
@@ -363,7 +370,7 @@ fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
     let mut covariance = SMatrix::<f64, N_PARAMS, N_PARAMS>::from_fn(|i, j| {
         0.5 * (s1.cov_p1[(i, j)] + s1.cov_p1[(j, i)])
     });
-    if let Some(s2) = step2(&pb, &plan, &fit, &corr, &s1.cov_p1)? {
+    if let Some(s2) = step2(&pb, &plan, &fit, &corr, &s1.cov_p1, progress)? {
         p = s2.p;
         iterations += s2.iterations;
         s2.widen(&mut covariance);
@@ -704,6 +711,7 @@ fn step1(
     init: State,
     (warm, screen): (bool, bool),
     shared: Option<&View>,
+    progress: Option<Observer>,
 ) -> Result<(Step1Fit, Final), CalibrationError> {
     let opts = pb.opts;
     let mut fit = Step1Fit {
@@ -745,7 +753,7 @@ fn step1(
                 .is_none()
                 .then(|| (plan.theta0.as_slice(), plan.corr0(pb))),
         };
-        let res = lm.run(&fit.state)?;
+        let res = lm.run(&fit.state, progress)?;
         fit.state = res.state;
         fit.iterations += res.iterations;
         fit.screened = res.screened;
@@ -863,6 +871,7 @@ fn step2<'c>(
     fit: &Step1Fit,
     corr: &dyn Fn() -> &'c Corrections,
     cov_p1: &DMatrix<f64>,
+    progress: Option<Observer>,
 ) -> Result<Option<Step2Fit>, CalibrationError> {
     if plan.step2_wanted.is_empty() {
         return Ok(None);
@@ -907,7 +916,7 @@ fn step2<'c>(
         shared: None,
         made: None,
     };
-    let res = lm.run(&fit.state)?;
+    let res = lm.run(&fit.state, progress)?;
     let p = res.state.p;
     let after_rows = virtual_rows(&p)?;
     let (cov, cross) = step2_covariance(&after_rows, &ids2, &prior2, cov_p1)?;

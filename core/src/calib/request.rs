@@ -3,6 +3,7 @@
 //! were weighted by. `rpkm calibrate`, the diagnosis and the calibrator node each make one
 //! call, so a change of how rows are weighted is made here once.
 
+use super::progress::round_ended;
 use super::{fit_once, Calibration, CalibrationError, Options, SharedRows, WarmStart};
 use crate::campaign::Campaign;
 use crate::effects::EffectSet;
@@ -46,6 +47,8 @@ pub struct Request<'a> {
     /// with [`Noise::Stated`]. A caller that has it (the diagnosis's first round) does not
     /// pay for it twice; it is not checked to be that calibration.
     pub first_round: Option<&'a Calibration>,
+    /// Told of each LM iteration and noise round; it may stop the calibration (`progress`).
+    pub progress: Option<super::Observer<'a>>,
 }
 
 impl<'a> Request<'a> {
@@ -60,6 +63,7 @@ impl<'a> Request<'a> {
             warm: None,
             shared: None,
             first_round: None,
+            progress: None,
         }
     }
 }
@@ -120,8 +124,10 @@ fn estimating(
             rebinds = bound_at_fit.is_some();
         }
         opts.noise = levels.apply(&step, stated);
+        round_ended(req, || levels.estimate(req.campaign, stated, opts.noise.clone(), &cal.residuals, rounds))?;
         last = Some(cal);
     };
     let estimate = levels.estimate(req.campaign, stated, opts.noise, &cal.residuals, rounds);
+    round_ended(req, || estimate.clone())?;
     Ok((cal, estimate))
 }
