@@ -35,6 +35,7 @@ mod ingest_grammar;
 mod launch_cell;
 mod monitor_foxglove_layout;
 mod monitor_tmux;
+mod node_calibrate_action;
 mod node_calibration_services;
 mod node_estimator_foreign;
 mod node_estimator_jumps;
