@@ -48,7 +48,11 @@ fn demo(name: &str) -> PathBuf {
 fn core_calibration(
     campaign: &Path,
     noise: calib::Noise,
-) -> (calib::Calibration, rpkm_core::variance::NoiseEstimate, usize) {
+) -> (
+    calib::Calibration,
+    rpkm_core::variance::NoiseEstimate,
+    usize,
+) {
     let c = rpkm::input::read_campaign(campaign).expect("campaign");
     let opts = Options {
         outlier_sigma: None,
@@ -117,7 +121,13 @@ fn a_cell_controller_calibrates_with_feedback_and_cancels_a_goal() {
     let peer = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/calibrate_action_peer.py");
     let out = Command::new(&py)
         .arg(peer)
-        .args(["--domain", DOMAIN, "--node", "/rpkm/calibrator", "--campaign"])
+        .args([
+            "--domain",
+            DOMAIN,
+            "--node",
+            "/rpkm/calibrator",
+            "--campaign",
+        ])
         .arg(demo("campaign.csv"))
         .arg("--validation")
         .arg(demo("campaign.val.csv"))
@@ -140,7 +150,11 @@ fn a_cell_controller_calibrates_with_feedback_and_cancels_a_goal() {
 
 /// Goal 1 against the core.
 fn check_calibrated(g: &Value, text: &str) {
-    assert_eq!((&g["accepted"], &g["status"]), (&Value::Bool(true), &Value::from(4)), "{text}");
+    assert_eq!(
+        (&g["accepted"], &g["status"]),
+        (&Value::Bool(true), &Value::from(4)),
+        "{text}"
+    );
     let r = &g["result"];
     let (cal, noise, all) = core_calibration(&demo("campaign.csv"), calib::Noise::ESTIMATE);
     assert_eq!(r["iterations"], cal.iterations, "{text}");
@@ -151,7 +165,11 @@ fn check_calibrated(g: &Value, text: &str) {
         let i = index_of(name).expect("a parameter name");
         let scale = if unit(i) == Unit::Mm { 1e-3 } else { 1.0 };
         let v = v.as_f64().expect("a value");
-        assert!((v - cal.params[i] * scale).abs() < 1e-9, "{name}: {v} vs {}", cal.params[i]);
+        assert!(
+            (v - cal.params[i] * scale).abs() < 1e-9,
+            "{name}: {v} vs {}",
+            cal.params[i]
+        );
     }
     // the held-out RMS: the core's TCP errors of the validation campaign
     let val: Campaign = rpkm::input::read_campaign(&demo("campaign.val.csv")).expect("val");
@@ -161,7 +179,10 @@ fn check_calibrated(g: &Value, text: &str) {
         .map(|e| e.2)
         .collect();
     let val_rms = r["val_rms"].as_f64().expect("a held-out RMS");
-    assert!((val_rms - calib::rms(&errors) * 1e-3).abs() < 1e-12, "{val_rms}");
+    assert!(
+        (val_rms - calib::rms(&errors) * 1e-3).abs() < 1e-12,
+        "{val_rms}"
+    );
     assert!(
         ["nothing_missing", "missing_effect", "unexplained_structure"]
             .contains(&r["verdict"].as_str().expect("verdict")),
@@ -170,20 +191,42 @@ fn check_calibrated(g: &Value, text: &str) {
     let feedback = g["feedback"].as_array().expect("feedback");
     let rounds = per_round(feedback);
     assert_eq!(rounds.len(), noise.rounds, "{text}");
-    assert!(rounds.iter().all(|r| !r.is_empty()), "a round without feedback: {text}");
+    assert!(
+        rounds.iter().all(|r| !r.is_empty()),
+        "a round without feedback: {text}"
+    );
     assert_eq!(rounds.last().map(Vec::len), Some(cal.iterations), "{text}");
     for round in &rounds {
-        let numbers: Vec<u64> = round.iter().map(|f| f["iteration"].as_u64().expect("it")).collect();
-        assert_eq!(numbers, (1..=numbers.len() as u64).collect::<Vec<_>>(), "{text}");
+        let numbers: Vec<u64> = round
+            .iter()
+            .map(|f| f["iteration"].as_u64().expect("it"))
+            .collect();
+        assert_eq!(
+            numbers,
+            (1..=numbers.len() as u64).collect::<Vec<_>>(),
+            "{text}"
+        );
     }
-    let noise_rounds = feedback.iter().filter(|f| f["phase"] == NOISE_ROUND).count();
+    let noise_rounds = feedback
+        .iter()
+        .filter(|f| f["phase"] == NOISE_ROUND)
+        .count();
     assert_eq!(noise_rounds, noise.rounds, "{text}");
-    let last_levels = g["noise_feedback"].as_array().and_then(|a| a.last()).expect("levels");
+    let last_levels = g["noise_feedback"]
+        .as_array()
+        .and_then(|a| a.last())
+        .expect("levels");
     for (group, levels) in r["noise"].as_object().expect("noise") {
         assert_eq!(last_levels[group], levels[1], "{group}: {text}");
     }
-    assert_eq!(feedback.last().map(|f| &f["phase"]), Some(&Value::from(DIAGNOSIS)));
-    assert_eq!(g["statuses"].as_array().and_then(|s| s.last()), Some(&Value::from(4)));
+    assert_eq!(
+        feedback.last().map(|f| &f["phase"]),
+        Some(&Value::from(DIAGNOSIS))
+    );
+    assert_eq!(
+        g["statuses"].as_array().and_then(|s| s.last()),
+        Some(&Value::from(4))
+    );
     let total: usize = rounds.iter().map(Vec::len).sum();
     assert_eq!(total, all, "one feedback per LM iteration: {text}");
     eprintln!(
@@ -199,21 +242,42 @@ fn check_calibrated(g: &Value, text: &str) {
 
 /// Goal 2: cancelled mid-way, before the `whole` calibration's iterations.
 fn check_cancelled(g: &Value, whole: usize, text: &str) {
-    assert_eq!((&g["accepted"], &g["status"]), (&Value::Bool(true), &Value::from(5)), "{text}");
+    assert_eq!(
+        (&g["accepted"], &g["status"]),
+        (&Value::Bool(true), &Value::from(5)),
+        "{text}"
+    );
     let cancel = &g["cancel"];
     assert_eq!(cancel["return_code"], 0, "{text}");
-    assert_eq!(cancel["goals_canceling"], serde_json::json!([true]), "{text}");
+    assert_eq!(
+        cancel["goals_canceling"],
+        serde_json::json!([true]),
+        "{text}"
+    );
     let iterations = g["feedback"]
         .as_array()
         .expect("feedback")
         .iter()
         .filter(|f| f["phase"] == ITERATION)
         .count();
-    assert!(iterations >= 1 && iterations < whole, "{iterations} of {whole}: {text}");
+    assert!(
+        iterations >= 1 && iterations < whole,
+        "{iterations} of {whole}: {text}"
+    );
     assert_eq!(g["result"]["parameters"], serde_json::json!({}), "{text}");
-    assert!(g["result"]["message"].as_str().expect("message").starts_with("cancelled"), "{text}");
+    assert!(
+        g["result"]["message"]
+            .as_str()
+            .expect("message")
+            .starts_with("cancelled"),
+        "{text}"
+    );
     let statuses = g["statuses"].as_array().expect("statuses");
-    assert_eq!(&statuses[statuses.len() - 2..], [Value::from(3), Value::from(5)], "{text}");
+    assert_eq!(
+        &statuses[statuses.len() - 2..],
+        [Value::from(3), Value::from(5)],
+        "{text}"
+    );
     eprintln!(
         "goal 2: cancelled after {iterations} of {whole} iteration feedbacks; {:.1} ms from \
          the cancel request to the result; {}",
@@ -224,7 +288,11 @@ fn check_cancelled(g: &Value, whole: usize, text: &str) {
 
 /// Goal 3: the stated noise, no diagnosis.
 fn check_stated(g: &Value, text: &str) {
-    assert_eq!((&g["accepted"], &g["status"]), (&Value::Bool(true), &Value::from(4)), "{text}");
+    assert_eq!(
+        (&g["accepted"], &g["status"]),
+        (&Value::Bool(true), &Value::from(4)),
+        "{text}"
+    );
     let (cal, _, _) = core_calibration(&demo("campaign.csv"), calib::Noise::Stated);
     let r = &g["result"];
     assert_eq!(r["noise_rounds"], 0, "{text}");

@@ -150,13 +150,19 @@ fn a_lifecycle_client_drives_ingest_through_every_transition() {
         .filter_map(Value::as_u64)
         .collect();
     let while_active = received.iter().filter(|&&t| t < inactive_at).count();
-    assert!(while_active > 20, "{while_active} states while active: {text}");
+    assert!(
+        while_active > 20,
+        "{while_active} states while active: {text}"
+    );
     // a state published before the node became inactive may still be on its way
     let late = received
         .iter()
         .filter(|&&t| t > inactive_at + 250_000_000)
         .count();
-    assert_eq!(late, 0, "states received after the node became inactive: {text}");
+    assert_eq!(
+        late, 0,
+        "states received after the node became inactive: {text}"
+    );
     eprintln!(
         "ingest: {while_active} drive states while active, {} in all",
         received.len()

@@ -137,6 +137,9 @@ class Peer:
         estimates = Qos(Policy.Reliability.Reliable(duration(seconds=1)),
                         Policy.History.KeepLast(1024))
         self.watched = {"tcp_estimate": TcpEstimate, "actuator_state": ActuatorState}[watch]
+        if watch == "actuator_state":
+            # the drive states go out best effort (a reliable reader would not match)
+            estimates = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1024))
         self.estimates = DataReader(self.dp, Topic(self.dp, f"rt/rpkm/{watch}", self.watched),
                                     qos=estimates)
         self.seen_events = []

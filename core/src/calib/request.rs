@@ -124,7 +124,15 @@ fn estimating(
             rebinds = bound_at_fit.is_some();
         }
         opts.noise = levels.apply(&step, stated);
-        round_ended(req, || levels.estimate(req.campaign, stated, opts.noise.clone(), &cal.residuals, rounds))?;
+        round_ended(req, || {
+            levels.estimate(
+                req.campaign,
+                stated,
+                opts.noise.clone(),
+                &cal.residuals,
+                rounds,
+            )
+        })?;
         last = Some(cal);
     };
     let estimate = levels.estimate(req.campaign, stated, opts.noise, &cal.residuals, rounds);

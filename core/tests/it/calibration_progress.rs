@@ -19,7 +19,11 @@ use rpkm_core::twin::{Twin, TwinConfig};
 /// What the observer heard, in order.
 #[derive(Debug, Clone, PartialEq)]
 enum Heard {
-    Iteration { step: Step, iteration: usize, cost: f64 },
+    Iteration {
+        step: Step,
+        iteration: usize,
+        cost: f64,
+    },
     Round(usize),
 }
 
@@ -35,8 +39,7 @@ fn campaign() -> Campaign {
         ..Default::default()
     })
     .expect("twin");
-    twin.campaign(&[Instrument::Dbb])
-        .expect("campaign")
+    twin.campaign(&[Instrument::Dbb]).expect("campaign")
 }
 
 /// The events of each round: (its iterations, in order; the round number that ended it).
@@ -49,7 +52,10 @@ fn rounds(heard: &[Heard]) -> Vec<(Vec<Heard>, usize)> {
             it => current.push(it.clone()),
         }
     }
-    assert!(current.is_empty(), "iterations after the last round: {current:?}");
+    assert!(
+        current.is_empty(),
+        "iterations after the last round: {current:?}"
+    );
     out
 }
 

@@ -187,16 +187,22 @@ impl<'a> Running<'a> {
 
     /// Ends the goal: succeeded with `result`, aborted (its message says why), or canceled.
     pub fn finish(self, ctx: &NodeContext, end: GoalEnd, mut result: CalibrateResult) {
-        let after = self
-            .cancel_seen
-            .get()
-            .map(|t| format!(" ({:.1} ms after the cancel request was seen)", t.elapsed().as_secs_f64() * 1e3));
+        let after = self.cancel_seen.get().map(|t| {
+            format!(
+                " ({:.1} ms after the cancel request was seen)",
+                t.elapsed().as_secs_f64() * 1e3
+            )
+        });
         if end == GoalEnd::Canceled {
             result.message = format!("cancelled{}", after.clone().unwrap_or_default());
         }
         ctx.log(format!(
             "{}{}: goal {} {}: {} feedback messages; {}",
-            if end == GoalEnd::Aborted { "WARN: " } else { "" },
+            if end == GoalEnd::Aborted {
+                "WARN: "
+            } else {
+                ""
+            },
             self.action.server.name(),
             self.goal,
             match end {

@@ -37,11 +37,11 @@ use rpkm_core::campaign::Campaign;
 use rpkm_core::obs;
 use rpkm_core::params::Model;
 use rpkm_core::params::{Params, N_PARAMS};
+use rpkm_msgs::calibrate_action::{CalibrateGoal, CalibrateResult};
 use rpkm_msgs::{
     ActuatorState, CampaignInfo, Diagnosis, DiagnosisCandidate, DiagnosticArray, DiagnosticStatus,
     Parameters, TcpMeasurement,
 };
-use rpkm_msgs::calibrate_action::{CalibrateGoal, CalibrateResult};
 use rpkm_transport::dds_actions::GoalEnd;
 use rpkm_transport::{topic, Publisher, Subscriber};
 
@@ -295,7 +295,11 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<Outcome
 }
 
 /// The Parameters message of a calibration of `cal_part`, its held-out RMS on `val_part`.
-fn parameters_of(cal: &Calibration, cal_part: &Campaign, val_part: Option<&Campaign>) -> Parameters {
+fn parameters_of(
+    cal: &Calibration,
+    cal_part: &Campaign,
+    val_part: Option<&Campaign>,
+) -> Parameters {
     let mut sigmas = [0.0; N_PARAMS];
     for id in &cal.identified {
         sigmas[id.index] = id.sigma;
@@ -1397,7 +1401,10 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 .map_err(|e| crate::error::error_chain(&e))
         });
         // a goal of `~/calibrate`, executed now (the loop waits for it, as for a marker)
-        if let Some(goal) = action.as_ref().and_then(|a| a.next(&ctx, lifecycle.active())) {
+        if let Some(goal) = action
+            .as_ref()
+            .and_then(|a| a.next(&ctx, lifecycle.active()))
+        {
             node.execute(&ctx, &out, &options, goal)?;
         }
         // Between calibrations: the next campaign ends and calibrates by the new settings.
@@ -1475,6 +1482,68 @@ mod tests {
         let b = msg.effect_parameter_values[0] * MM_PER_M;
         eprintln!("published b = {b} mm (truth {b_true})");
         assert!((b - b_true).abs() < 1e-4, "b = {b} mm");
+        Ok(())
+    }
+
+    /// A goal on the campaign collected so far reads it without taking it (a cancelled goal
+    /// leaves it collected); the goal's settings go over the node's, a bad one is refused
+    /// with what was expected.
+    #[test]
+    fn a_goal_reads_the_collected_campaign_and_sets_its_options() -> anyhow::Result<()> {
+        let mut twin = Twin::new(TwinConfig::default())?;
+        let c = twin.campaign_by_names(&["lt"], 0)?;
+        let mut acc = Accumulator::new(8);
+        for (i, pose) in c.poses.iter().enumerate() {
+            let (s, m) = pose_messages(&c, i, pose)?;
+            acc.state(&s);
+            assert!(acc.measurement(&m)?);
+        }
+        let (seen, _) = acc.peek()?;
+        assert_eq!(acc.measurements, c.poses.len() as u64);
+        let (taken, _) = acc.take()?;
+        assert_eq!(seen.poses, taken.poses);
+        assert_eq!(seen.poses.len(), c.poses.len());
+        assert_eq!(acc.measurements, 0);
+
+        let node = CalibratorOptions {
+            start: Geometry {
+                params: Params::nominal(),
+                model: Model::M29,
+                stiffness: rpkm_core::elastic::Stiffness::default(),
+                source: "nominal".into(),
+            },
+            validation_prefix: "val".into(),
+            selection: "map".into(),
+            max_condition: 100.0,
+            outlier_sigma: 0.0,
+            noise: rpkm_core::noise::NoiseModel::default(),
+            effects: None,
+            weighting: calib::Noise::ESTIMATE,
+        };
+        let goal = |selection: &str, noise| CalibrateGoal {
+            selection: selection.into(),
+            noise,
+            ..CalibrateGoal::default()
+        };
+        let noise = rpkm_core::noise::NoiseModel::default;
+        let o = goal_options(&node, &goal("", CalibrateGoal::NOISE_NODE), noise())?;
+        assert_eq!(
+            (o.selection.as_str(), o.weighting),
+            ("map", calib::Noise::ESTIMATE)
+        );
+        let o = goal_options(&node, &goal("auto", CalibrateGoal::NOISE_STATED), noise())?;
+        assert_eq!(
+            (o.selection.as_str(), o.weighting),
+            ("auto", calib::Noise::Stated)
+        );
+        let bad = goal_options(&node, &goal("all", 0), noise()).map(|_| ());
+        let e = bad.expect_err("selection all");
+        assert!(e.to_string().contains("expected map, auto"), "{e}");
+        assert_eq!(crate::error::exit_code(&e), 2);
+        let e = goal_options(&node, &goal("", 7), noise())
+            .map(|_| ())
+            .expect_err("noise 7");
+        assert!(e.to_string().contains("found 7"), "{e}");
         Ok(())
     }
 

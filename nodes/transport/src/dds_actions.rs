@@ -131,7 +131,9 @@ impl DdsNode {
             .map_err(|_| err("node mutex poisoned".into()))?;
         let fqn = node.fully_qualified_name();
         let name = Name::new(&fqn, action).map_err(|e| err(format!("{e:?}")))?;
-        let keep = |depth| QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth });
+        let keep = |depth| {
+            QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth })
+        };
         // rcl_action's: services reliable, volatile, last 10; the status transient-local,
         // last 1 (a late client reads the goals' states)
         let qos = ActionServerQosPolicies {
@@ -139,8 +141,7 @@ impl DdsNode {
             result_service: keep(10),
             cancel_service: keep(10),
             feedback_publisher: keep(FEEDBACK_DEPTH),
-            status_publisher: keep(1)
-                .durability(ros2_client::qos::Durability::TransientLocal),
+            status_publisher: keep(1).durability(ros2_client::qos::Durability::TransientLocal),
         };
         let server = node
             .create_action_server::<Wire<G>, Wire<R>, Wire<F>>(
