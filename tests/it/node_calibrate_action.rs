@@ -188,6 +188,21 @@ fn check_calibrated(g: &Value, text: &str) {
             .contains(&r["verdict"].as_str().expect("verdict")),
         "{text}"
     );
+    check_feedback(g, (&cal, &noise, all), text);
+}
+
+/// Goal 1's feedback against the core's calibration `cal` of `noise.rounds` rounds and
+/// `all` LM iterations.
+fn check_feedback(
+    g: &Value,
+    (cal, noise, all): (
+        &calib::Calibration,
+        &rpkm_core::variance::NoiseEstimate,
+        usize,
+    ),
+    text: &str,
+) {
+    let r = &g["result"];
     let feedback = g["feedback"].as_array().expect("feedback");
     let rounds = per_round(feedback);
     assert_eq!(rounds.len(), noise.rounds, "{text}");

@@ -15,6 +15,7 @@ use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs::Step;
 use rpkm_core::params::Params;
 use rpkm_core::twin::{Twin, TwinConfig};
+use rpkm_core::variance::NoiseEstimate;
 
 /// What the observer heard, in order.
 #[derive(Debug, Clone, PartialEq)]
@@ -49,7 +50,7 @@ fn rounds(heard: &[Heard]) -> Vec<(Vec<Heard>, usize)> {
     for h in heard {
         match h {
             Heard::Round(r) => out.push((std::mem::take(&mut current), *r)),
-            it => current.push(it.clone()),
+            it @ Heard::Iteration { .. } => current.push(it.clone()),
         }
     }
     assert!(
@@ -59,11 +60,22 @@ fn rounds(heard: &[Heard]) -> Vec<(Vec<Heard>, usize)> {
     out
 }
 
-#[test]
-fn the_observer_hears_every_iteration_and_round_and_can_stop_the_calibration() {
-    let c = campaign();
+/// Calibrates `c` as the tests do, with `observer`.
+fn calibrate(
+    c: &Campaign,
+    observer: &dyn Fn(&Progress) -> Flow,
+) -> Result<(calib::Calibration, NoiseEstimate), CalibrationError> {
     let start = Params::nominal();
     let opts = Options::default();
+    calib::calibrate(&calib::Request {
+        noise: calib::Noise::ESTIMATE,
+        progress: Some(observer),
+        ..calib::Request::new(c, &start, &opts)
+    })
+}
+
+/// The calibration of `c` and what an observer heard, round by round.
+fn heard(c: &Campaign) -> (calib::Calibration, NoiseEstimate, Vec<(Vec<Heard>, usize)>) {
     let heard = RefCell::new(Vec::new());
     let observe = |p: &Progress| {
         heard.borrow_mut().push(match *p {
@@ -80,14 +92,14 @@ fn the_observer_hears_every_iteration_and_round_and_can_stop_the_calibration() {
         });
         Flow::Continue
     };
-    let (cal, noise) = calib::calibrate(&calib::Request {
-        noise: calib::Noise::ESTIMATE,
-        progress: Some(&observe),
-        ..calib::Request::new(&c, &start, &opts)
-    })
-    .expect("calibrates");
-    let heard = heard.into_inner();
-    let rounds = rounds(&heard);
+    let (cal, noise) = calibrate(c, &observe).expect("calibrates");
+    let rounds = rounds(&heard.into_inner());
+    (cal, noise, rounds)
+}
+
+#[test]
+fn the_observer_hears_every_iteration_and_noise_round() {
+    let (cal, noise, rounds) = heard(&campaign());
     eprintln!(
         "{} rounds, iterations per round {:?}, the last {}",
         noise.rounds,
@@ -115,8 +127,12 @@ fn the_observer_hears_every_iteration_and_round_and_can_stop_the_calibration() {
         assert_eq!(steps[0], Step::Direct);
         assert!(steps.contains(&Step::VirtualQ2), "round {round}: {steps:?}");
     }
+}
 
-    // the last round's estimate is the one returned
+#[test]
+fn the_last_rounds_estimate_is_the_one_returned() {
+    let c = campaign();
+    let (_, noise, _) = heard(&c);
     let estimate = RefCell::new(None);
     let keep = |p: &Progress| {
         if let Progress::NoiseRound { estimate: e, .. } = p {
@@ -124,17 +140,18 @@ fn the_observer_hears_every_iteration_and_round_and_can_stop_the_calibration() {
         }
         Flow::Continue
     };
-    let (_, again) = calib::calibrate(&calib::Request {
-        noise: calib::Noise::ESTIMATE,
-        progress: Some(&keep),
-        ..calib::Request::new(&c, &start, &opts)
-    })
-    .expect("calibrates");
+    let (_, again) = calibrate(&c, &keep).expect("calibrates");
     assert_eq!(estimate.into_inner(), Some(again.clone()));
     assert_eq!(again, noise, "an observer changes nothing");
+}
 
-    // stopped at the second iteration of the second round (its direct fit's or rod 2's):
-    // cancelled, nothing heard after; (calls, rounds ended, iterations of round 2)
+/// Stopped at the second iteration of the second round (its direct fit's or rod 2's): the
+/// calibration is cancelled and the observer hears nothing after.
+#[test]
+fn a_stop_cancels_the_calibration() {
+    let c = campaign();
+    let (_, _, rounds) = heard(&c);
+    // (calls, rounds ended, iterations of round 2)
     let calls = RefCell::new((0usize, 0usize, 0usize));
     let stop = |p: &Progress| {
         let mut c = calls.borrow_mut();
@@ -155,11 +172,7 @@ fn the_observer_hears_every_iteration_and_round_and_can_stop_the_calibration() {
             Progress::Iteration { .. } => Flow::Continue,
         }
     };
-    let stopped = calib::calibrate(&calib::Request {
-        noise: calib::Noise::ESTIMATE,
-        progress: Some(&stop),
-        ..calib::Request::new(&c, &start, &opts)
-    });
+    let stopped = calibrate(&c, &stop);
     assert!(
         matches!(stopped, Err(CalibrationError::Cancelled)),
         "{stopped:?}"

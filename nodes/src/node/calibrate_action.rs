@@ -50,7 +50,7 @@ impl CalibrateAction {
     /// when the node is `active` (the caller executes it now), else refused and logged.
     pub fn next(&self, ctx: &NodeContext, active: bool) -> Option<(Running<'_>, CalibrateGoal)> {
         self.server.poll();
-        let goal = self.server.next_goal()?;
+        let (goal, what) = self.server.next_goal()?;
         if !active {
             ctx.log(format!(
                 "WARN: {}: goal refused: the node is not active (lifecycle activate first)",
@@ -59,7 +59,6 @@ impl CalibrateAction {
             self.server.reject(goal);
             return None;
         }
-        let what = goal.goal.clone();
         let handle = self.server.accept(goal);
         ctx.log(format!(
             "{}: goal {handle} accepted: {}",

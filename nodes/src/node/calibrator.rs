@@ -397,8 +397,8 @@ fn goal_options(
     };
     Ok(CalibratorOptions {
         selection,
-        weighting,
         noise,
+        weighting,
         ..o.clone()
     })
 }
@@ -1137,6 +1137,29 @@ impl Calibrator {
         Ok(every > 0 && self.acc.measurements >= every)
     }
 
+    /// Takes the drive states (first: ingest publishes a pose's state before its
+    /// measurement), then the measurements up to a campaign's end; (whether any came,
+    /// whether a campaign ended).
+    fn drain(
+        &mut self,
+        states: &Subscriber<ActuatorState>,
+        measurements: &Subscriber<TcpMeasurement>,
+        every: u64,
+    ) -> anyhow::Result<(bool, bool)> {
+        let mut worked = false;
+        while let Some(s) = states.try_recv()? {
+            self.state(&s);
+            worked = true;
+        }
+        while let Some(m) = measurements.try_recv()? {
+            if self.measurement(&m, states, every)? {
+                return Ok((true, true));
+            }
+            worked = true;
+        }
+        Ok((worked, false))
+    }
+
     /// Whether the campaign so far has been idle for `idle_end` seconds.
     fn idle_ended(&self, idle_end: f64) -> bool {
         idle_end > 0.0
@@ -1375,21 +1398,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         while let Some(info) = infos.try_recv()? {
             node.campaign_info(&info);
         }
-        // States first: ingest publishes a pose's state before its measurement.
-        let mut worked = false;
-        while let Some(s) = states.try_recv()? {
-            node.state(&s);
-            worked = true;
-        }
+        let (mut worked, end) = node.drain(&states, &measurements, every)?;
         worked |= node.online_reports(&ctx, &out, options.start.model)?;
-        let mut end = false;
-        while let Some(m) = measurements.try_recv()? {
-            worked = true;
-            end = node.measurement(&m, &states, every)?;
-            if end {
-                break;
-            }
-        }
         // an inactive node collects its campaign and calibrates (publishes) once active
         if (end || node.idle_ended(idle_end)) && node.acc.measurements > 0 && lifecycle.active() {
             node.calibrate(&ctx, &out, &options)?;

@@ -45,12 +45,11 @@ pub struct ActionType {
     pub name: &'static str,
 }
 
-/// A goal as it came, to accept or reject.
-pub struct NewGoal<G> {
+/// A goal as it came, to accept or reject (once: its request gets one reply).
+#[derive(Clone, Copy)]
+pub struct NewGoal {
     id: GoalId,
     request: RmwRequestId,
-    /// What the goal asks.
-    pub goal: G,
 }
 
 /// An accepted goal.
@@ -175,9 +174,10 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
         self.serve_results();
     }
 
-    /// The next goal a client sent, if any; the node accepts or rejects it at once. A goal
-    /// id the server already knows is refused (a client resending its request).
-    pub fn next_goal(&self) -> Option<NewGoal<G>> {
+    /// The next goal a client sent and what it asks, if any; the node accepts or rejects it
+    /// at once. A goal id the server already knows is refused (a client resending its
+    /// request).
+    pub fn next_goal(&self) -> Option<(NewGoal, G)> {
         loop {
             let (request, sent) = match self.server.receive_goal() {
                 Ok(Some(got)) => got,
@@ -190,34 +190,34 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
             let goal = NewGoal {
                 id: sent.goal_id,
                 request,
-                goal: sent.goal.0,
             };
             if !self.goals.borrow().all.contains_key(&goal.id) {
-                return Some(goal);
+                return Some((goal, sent.goal.0));
             }
             self.reject(goal);
         }
     }
 
     /// Accepts `goal`: it executes from now on (the status says accepted, then executing).
-    pub fn accept(&self, goal: NewGoal<G>) -> GoalHandle {
+    pub fn accept(&self, goal: NewGoal) -> GoalHandle {
+        let NewGoal { id, request } = goal;
         let accepted = Time::now();
         self.goals.borrow_mut().all.insert(
-            goal.id,
+            id,
             Goal {
                 status: GoalStatusEnum::Accepted,
                 accepted,
                 result: None,
             },
         );
-        self.reply_goal(goal.request, true, accepted);
+        self.reply_goal(request, true, accepted);
         self.publish_status();
-        self.set_status(goal.id, GoalStatusEnum::Executing);
-        GoalHandle(goal.id)
+        self.set_status(id, GoalStatusEnum::Executing);
+        GoalHandle(id)
     }
 
     /// Refuses `goal` (a client sees `accepted: false`).
-    pub fn reject(&self, goal: NewGoal<G>) {
+    pub fn reject(&self, goal: NewGoal) {
         self.reply_goal(goal.request, false, Time::now());
     }
 
@@ -251,13 +251,6 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
             let mut goals = self.goals.borrow_mut();
             if let Some(g) = goals.all.get_mut(&h.0) {
                 g.status = status;
-                g.result = Some(result.clone());
-            }
-            goals.finished.push_back(h.0);
-            while goals.finished.len() > FINISHED_KEPT {
-                if let Some(old) = goals.finished.pop_front() {
-                    goals.all.remove(&old);
-                }
             }
             let (mine, others): (Vec<_>, Vec<_>) =
                 goals.waiting.drain(..).partition(|(id, _)| *id == h.0);
@@ -266,6 +259,18 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
         };
         for (_, request) in waiting {
             self.send_result(request, status, result.clone());
+        }
+        {
+            let mut goals = self.goals.borrow_mut();
+            if let Some(g) = goals.all.get_mut(&h.0) {
+                g.result = Some(result);
+            }
+            goals.finished.push_back(h.0);
+            while goals.finished.len() > FINISHED_KEPT {
+                if let Some(old) = goals.finished.pop_front() {
+                    goals.all.remove(&old);
+                }
+            }
         }
         self.publish_status();
         self.serve_results();
