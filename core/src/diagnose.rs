@@ -148,6 +148,10 @@ pub struct Baseline {
     /// P(χ²_ν ≥ χ²): small when the residual is more than the rated noise.
     pub p_value: f64,
     pub consistent_with_noise: bool,
+    /// The held-out TCP errors (mm) less their setup's zero mean, as candidates are judged:
+    /// to compare the models of successive diagnoses pose by pose ([`Prediction::of`]).
+    #[serde(skip)]
+    pub val_errors: Vec<f64>,
 }
 
 /// An effect tried as an addition to the model.
@@ -336,6 +340,9 @@ pub struct Diagnosis {
     pub parameters: BTreeMap<String, f64>,
     /// Per group: the stated and the estimated noise.
     pub noise: BTreeMap<String, NoiseReport>,
+    /// The candidates that joined the current model for the noise estimate (round 1's
+    /// significant ones): a model that misses an effect would count it as noise.
+    pub noise_estimated_with: Vec<String>,
     /// The same, with whether each was estimated from the data.
     #[serde(skip)]
     pub noise_groups: Vec<GroupNoise>,
@@ -497,24 +504,38 @@ pub fn diagnose_among(
         let baseline = baseline(&base1, &opts.noise, val.as_ref(), opts);
         return Ok(conclude(&search, opts, &base1, baseline, first, &est));
     }
-    // Round 2: the noise estimated under the model with the most significant candidate (or
-    // the current model), and every model compared again with those weights (the nested
-    // tests need one weighting, any fixed one).
-    let mut with: Vec<&dyn Effect> = in_model.to_vec();
-    if let Some(top) =
-        strongest(&first.candidates).and_then(|t| tried.iter().find(|e| e.name() == t))
-    {
-        with.push(*top);
-    }
+    // Round 2: the noise estimated under the model with every significant candidate (or the
+    // current model), and every model compared again with those weights (the nested tests
+    // need one weighting, any fixed one). A model that misses an effect puts it in the
+    // noise (a 100x encoder "noise" under a model without thermal), and the next step of
+    // the loop, weighted otherwise, would judge another problem; a few parameters too many
+    // cost the estimate a few of its hundreds of degrees of freedom.
+    let under = noise_model(in_model, &first.candidates, &tried, Candidates::Significant);
     // under the current model itself the noise estimation's first round is round 1's base
-    let same = with.len() == in_model.len();
-    let (cal, est, copts) = current_model(campaign, &with, opts, cal1.as_ref().filter(|_| same))?;
+    let same = under.len() == in_model.len();
+    let first_fit = cal1.as_ref().filter(|_| same);
+    let (cal, est, copts, under) = match current_model(campaign, &under, opts, first_fit) {
+        Ok((cal, est, copts)) => (cal, est, copts, under),
+        // the significant candidates together cannot be fitted (one absorbs another to a
+        // singular step): the strongest alone, as the loop did before it took them all
+        Err(_) if under.len() > in_model.len() + 1 => {
+            let under = noise_model(in_model, &first.candidates, &tried, Candidates::Strongest);
+            let (cal, est, copts) = current_model(campaign, &under, opts, None)?;
+            (cal, est, copts, under)
+        }
+        Err(e) => return Err(e),
+    };
     // the noise was estimated under the current model itself: its last fit is the base
     let fitted = same.then_some(cal);
     let (base, round, _) = search.round(&copts, fitted)?;
     let val = held_out(validation, &est.model)?;
     let baseline = baseline(&base, &est.model, val.as_ref(), opts);
-    Ok(conclude(&search, opts, &base, baseline, round, &est))
+    let mut diagnosis = conclude(&search, opts, &base, baseline, round, &est);
+    diagnosis.noise_estimated_with = under[in_model.len()..]
+        .iter()
+        .map(|e| e.name().to_owned())
+        .collect();
+    Ok(diagnosis)
 }
 
 /// What every round of a diagnosis shares.
@@ -753,6 +774,7 @@ fn conclude(
             .map(|(i, n)| ((*n).to_owned(), base.fit.params[i]))
             .collect(),
         noise: noise_map(&est.groups),
+        noise_estimated_with: Vec::new(),
         noise_groups: est.groups.clone(),
         determined: base.fit.determined,
         baseline,
@@ -902,7 +924,7 @@ struct Chosen {
 struct Round {
     /// Each tried effect compared with the current model.
     candidates: Vec<Candidate>,
-    /// Each compared effect's fit (with the parts of it kept), by effect name.
+    /// Each compared effect's fit (the whole family, as the loop adds it), by effect name.
     fits: Vec<(String, Fitted)>,
     /// The effects that could not be tried, and why.
     skipped: Vec<Skipped>,
@@ -1074,7 +1096,7 @@ fn candidates(
             Ok((full, kept)) => match compare(base, &full, &kept, *effect, campaign, level) {
                 Some(c) => {
                     out.candidates.push(c);
-                    out.fits.push((effect.name().to_owned(), kept));
+                    out.fits.push((effect.name().to_owned(), full));
                 }
                 None => out.skipped.push(skip(
                     "no parameter of it is observable with this campaign (the geometry \
@@ -1090,12 +1112,35 @@ fn candidates(
 
 /// The most significant candidate (smallest p-value below the level): under weights the
 /// misfit inflated, its BIC gain may still look small.
-fn strongest(candidates: &[Candidate]) -> Option<&str> {
-    candidates
+/// Which of round 1's candidates join the current model for the noise estimate.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Candidates {
+    /// Every significant one that could be named.
+    Significant,
+    /// The most significant alone.
+    Strongest,
+}
+
+/// The model the noise is estimated under: the current model and round 1's candidates
+/// `which`, most significant first.
+fn noise_model<'a>(
+    in_model: &[&'a dyn Effect],
+    candidates: &[Candidate],
+    tried: &[&'a dyn Effect],
+    which: Candidates,
+) -> Vec<&'a dyn Effect> {
+    let mut open: Vec<&Candidate> = candidates
         .iter()
         .filter(|c| c.significant && c.relevant)
-        .min_by(|a, b| a.p_value.total_cmp(&b.p_value))
-        .map(|c| c.effect.as_str())
+        .collect();
+    open.sort_by(|a, b| a.p_value.total_cmp(&b.p_value));
+    if which == Candidates::Strongest {
+        open.truncate(1);
+    }
+    let added = open
+        .iter()
+        .filter_map(|c| tried.iter().find(|e| e.name() == c.effect).copied());
+    in_model.iter().copied().chain(added).collect()
 }
 
 /// The current model (`in_model` effects) calibrated with `copts` as they are.
@@ -1170,6 +1215,7 @@ fn baseline(
         chi2_per_dof: scale / base.fit.dof,
         p_value,
         consistent_with_noise: p_value > opts.alpha,
+        val_errors: base.fit.val_errors.clone(),
     }
 }
 
@@ -1651,7 +1697,7 @@ fn compare(
         relevant,
         explained_fraction,
         val_rms_before_um: base.fit.val_rms_um,
-        val_rms_after_um: kept.fit.val_rms_um,
+        val_rms_after_um: full.fit.val_rms_um,
         chi2_per_dof_after: kept.fit.chi2_per_dof,
         f_statistic: f,
         f_dof: (k, full.fit.dof),
@@ -1660,7 +1706,9 @@ fn compare(
         params,
         chi2_per_dof_before: base.fit.chi2_per_dof,
         follows,
-        prediction: Prediction::of(&base.fit.val_errors, &kept.fit.val_errors),
+        // judged as the loop will add it: the whole family (the next diagnosis fits every
+        // part), not the parts this campaign supports
+        prediction: Prediction::of(&base.fit.val_errors, &full.fit.val_errors),
         cross_validated: None,
         together: None,
     })

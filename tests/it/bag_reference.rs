@@ -293,3 +293,123 @@ fn python_readers_decode_every_reference_bag_alike() {
         }
     }
 }
+
+/// One line of `bags/recipes.txt`: what `bags/regenerate.sh` runs.
+struct Recipe {
+    out: String,
+    truth: String,
+    args: Vec<String>,
+}
+
+fn recipes() -> Vec<Recipe> {
+    let path = reference_bag("recipes.txt");
+    let text = std::fs::read_to_string(&path).expect("bags/recipes.txt");
+    text.lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let mut words = l.split_whitespace().map(str::to_owned);
+            let (out, truth) = (words.next(), words.next());
+            Recipe {
+                out: out.expect("OUT"),
+                truth: truth.expect("TRUTH"),
+                args: words.collect(),
+            }
+        })
+        .collect()
+}
+
+/// What a bag's format is: its metadata.yaml (counts and times are the recipe's, so the
+/// whole text), and per topic its type, encodings, schema, QoS, type hash and message count;
+/// not the values the messages carry.
+fn bag_format(bag: &Path) -> (String, Vec<String>) {
+    let metadata = std::fs::read_to_string(bag.join("metadata.yaml")).expect("metadata.yaml");
+    let reader = BagReader::open(bag).expect("open bag");
+    let topics = reader
+        .topics()
+        .iter()
+        .map(|t| {
+            format!(
+                "{} {} {} {} {:?} {} {:?} {}",
+                t.name,
+                t.type_name,
+                t.message_encoding,
+                t.schema_encoding,
+                t.definition,
+                t.offered_qos_profiles,
+                t.type_hash,
+                t.message_count
+            )
+        })
+        .collect();
+    (metadata, topics)
+}
+
+/// A CSV campaign's format: its header, and each row's setup, instrument, reset and which
+/// columns are filled (not the values).
+fn csv_format(path: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).expect("campaign CSV");
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| {
+            if l.starts_with("t,") {
+                return l.to_owned();
+            }
+            let cells: Vec<&str> = l.split(',').collect();
+            let filled: String = cells
+                .iter()
+                .map(|c| if c.is_empty() { '.' } else { 'x' })
+                .collect();
+            format!("{} {}", cells[1..4].join(","), filled)
+        })
+        .collect()
+}
+
+/// Every committed artefact of bags/ is what today's writer writes from its recipe: a
+/// format change of the writer (a new metadata key, a QoS depth, a schema) must re-mint them
+/// (`bags/regenerate.sh`), or readers of the committed bags test yesterday's format.
+#[test]
+fn committed_bags_are_what_the_writer_writes_from_their_recipes() {
+    let dir = scratch("fresh-from-recipes");
+    let all = recipes();
+    assert_eq!(all.len(), 4, "bags/recipes.txt");
+    for r in &all {
+        let fresh = dir.join(&r.out);
+        std::fs::create_dir_all(fresh.parent().expect("parent")).expect("dir");
+        run_ok(
+            rpkm()
+                .arg("simulate")
+                .args(&r.args)
+                .arg("--out")
+                .arg(&fresh)
+                .arg("--truth")
+                .arg(dir.join(&r.truth)),
+        );
+        let committed = reference_bag(&r.out);
+        if let Some(stem) = r.out.strip_suffix(".csv") {
+            for suffix in [".csv", ".val.csv"] {
+                let (c, f) = (
+                    reference_bag(&format!("{stem}{suffix}")),
+                    dir.join(format!("{stem}{suffix}")),
+                );
+                assert_eq!(csv_format(&c), csv_format(&f), "{}", c.display());
+            }
+            continue;
+        }
+        let mut bags = vec![(committed, fresh)];
+        let val = reference_bag(&format!("{}_val", r.out));
+        if val.exists() {
+            bags.push((val, dir.join(format!("{}_val", r.out))));
+        }
+        for (c, f) in bags {
+            let (cm, ct) = bag_format(&c);
+            let (fm, ft) = bag_format(&f);
+            assert_eq!(
+                cm,
+                fm,
+                "{}/metadata.yaml: re-mint with bags/regenerate.sh",
+                c.display()
+            );
+            assert_eq!(ct, ft, "{}: topics differ from a fresh bag", c.display());
+        }
+    }
+}

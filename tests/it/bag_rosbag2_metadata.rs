@@ -118,7 +118,12 @@ fn ros2_bag_on_iron_and_jazzy_reads_every_bag_rpkm_writes() {
     let Some(checker) = checker() else { return };
     let dir = scratch("rosbag2-metadata");
     let mut bags = bags_rpkm_writes(&dir);
-    for name in ["calibration", "calibration_val", "preload_fault"] {
+    for name in [
+        "calibration",
+        "calibration_val",
+        "stream_8khz",
+        "preload_fault",
+    ] {
         bags.push(reference_bag(name));
     }
     for bag in &bags {

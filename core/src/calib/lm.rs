@@ -41,19 +41,12 @@ pub const SCREEN_TAU: f64 = 1e-15;
 use super::progress::{Flow, Observer, Progress};
 use super::rows::{in_piece_order, thread_count, weighted_values, Key, Problem};
 use super::shared::View;
-use super::CalibrationError;
+use super::types::{CalibrationError, State};
 use crate::effects::Corrections;
 use crate::obs::{PoseError, Residual, RowValue, Step};
 use crate::params::{Params, N_PARAMS};
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashSet;
-
-/// The unknowns of a calibration: geometric parameters and effect parameters.
-#[derive(Clone, Debug)]
-pub(super) struct State {
-    pub p: Params,
-    pub theta: Vec<f64>,
-}
 
 /// One least-squares problem of a step: which rows, which unknowns, how they are scaled.
 pub(super) struct Lm<'a> {

@@ -28,7 +28,7 @@
 //! by default) explains it beyond noise: 1 dof per candidate, not the χ² of the whole change,
 //! which under noise alone grows without bound over hours (see [`DriftTest`]).
 
-use super::Prior;
+use super::types::Prior;
 use crate::elastic::{sensitivity, ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
 use crate::noise::{DriveNoise, NoiseModel};
 use crate::obs::{force_jacobian, force_position_gains};

@@ -41,22 +41,3 @@ pub enum Progress<'a> {
 
 /// The caller's observer.
 pub type Observer<'a> = &'a dyn Fn(&Progress) -> Flow;
-
-/// Tells `req`'s observer, if any, that a noise round ended with the estimate `shown` makes
-/// (made only when someone listens).
-pub(super) fn round_ended(
-    req: &super::Request,
-    shown: impl FnOnce() -> NoiseEstimate,
-) -> Result<(), super::CalibrationError> {
-    let Some(observer) = req.progress else {
-        return Ok(());
-    };
-    let estimate = shown();
-    match observer(&Progress::NoiseRound {
-        round: estimate.rounds,
-        estimate: &estimate,
-    }) {
-        Flow::Continue => Ok(()),
-        Flow::Stop => Err(super::CalibrationError::Cancelled),
-    }
-}

@@ -2,7 +2,7 @@
 //! and the held-out figures (gain, RMS).
 
 use super::rows::Key;
-use super::{DirectionRms, Outlier};
+use super::types::{DirectionRms, Outlier};
 use crate::campaign::{Campaign, Instrument};
 use crate::obs::{Direction, RowValue};
 use std::collections::BTreeMap;

@@ -1,7 +1,7 @@
 //! The weighted rows of a calibration: the problem's fixed inputs, the dependency matrix and
 //! the weighted Jacobians the steps and the uncertainty share.
 
-use super::{Link, Options};
+use super::types::{Link, Options};
 use crate::campaign::Campaign;
 use crate::effects::{Corrections, EffectSet};
 use crate::noise::NoiseModel;

@@ -3,7 +3,7 @@
 //! scaling, and the effect parameters the campaign can tell from the geometry.
 
 use super::rows::Columns;
-use super::{CalibrationError, Link, Options, Scaling, Selection};
+use super::types::{CalibrationError, Link, Options, Scaling, Selection};
 use crate::campaign::Campaign;
 use crate::effects::EffectSet;
 use crate::obs;

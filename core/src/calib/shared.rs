@@ -9,9 +9,8 @@
 //! calibration whose points are not these (another start, θ, noise or drop list) evaluates
 //! its own rows.
 
-use super::lm::State;
 use super::rows::{in_piece_order, thread_count, Claims, Problem};
-use super::{CalibrationError, Options};
+use super::types::{CalibrationError, Options, State};
 use crate::campaign::Campaign;
 use crate::effects::EffectSet;
 use crate::noise::NoiseModel;

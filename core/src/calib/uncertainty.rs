@@ -2,8 +2,9 @@
 //! the determined combinations, leverages, and step 2's uncertainty with step 1's propagated.
 
 use super::lm::Final;
+use super::plan::Plan;
 use super::rows::{reduced_jacobian, weighted_theta, Key, Problem};
-use super::{CalibrationError, Link, Plan};
+use super::types::{CalibrationError, Link};
 use crate::effects::Corrections;
 use crate::obs::{Residual, RowValue, Step};
 use crate::params::Params;

@@ -1,6 +1,7 @@
 //! Baseline redundant forward models without stiffness (thesis 5.1 and 5.2).
 
-use super::spring::{fegm, ElasticError, Stiffness, ALL_ACTIVE};
+use super::guarded::fegm;
+use super::spring::{ElasticError, Stiffness, ALL_ACTIVE};
 use crate::geometry::{sensitivity, solve, Subsystem, X, Y};
 use crate::params::{Model, Params};
 

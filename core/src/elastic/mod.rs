@@ -20,15 +20,18 @@
 
 pub mod baseline;
 pub mod fe;
+mod guarded;
+pub mod limits;
 pub mod plausibility;
 pub mod preload;
 pub mod spring;
 
 pub use fe::{fe_solve, FeEquilibrium, FeError, FeModel, FeStiffness, Method};
-pub use plausibility::{wrap_angle, Limits, Reason, RigidPose, Violation};
+pub use guarded::{fegm, fegm_checked, fegm_checked_after, fegm_from, Checked};
+pub use limits::{wrap_angle, Limits, Reason, RigidPose, Violation};
 pub use preload::{compatibility, offset_effect, preload_offsets, Compatibility, PreloadPlan};
 pub use spring::{
-    fegm, fegm_checked, fegm_checked_after, fegm_from, fegm_unchecked, platform_balance,
-    sensitivity, Checked, ElasticError, ElasticSensitivity, Equilibrium, Followers, Stiffness,
-    ALL_ACTIVE, DEFAULT_ROD_STIFFNESS_N_PER_MM, FOLLOWERS_23, NOMINAL_DRIVE_FORCE_N,
+    fegm_unchecked, platform_balance, sensitivity, ElasticError, ElasticSensitivity, Equilibrium,
+    Followers, Stiffness, ALL_ACTIVE, DEFAULT_ROD_STIFFNESS_N_PER_MM, FOLLOWERS_23,
+    NOMINAL_DRIVE_FORCE_N,
 };

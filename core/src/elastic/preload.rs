@@ -1,7 +1,8 @@
 //! Compatibility test, predicted redundancy current and the thesis's "first approach" to the
 //! internal preload (thesis 4.4 and the introduction of chapter 5).
 
-use super::spring::{fegm, ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
+use super::guarded::fegm;
+use super::spring::{ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
 use crate::geometry::{igm, rgm};
 use crate::params::{Model, Params};
 use nalgebra::{Matrix2, Vector2};

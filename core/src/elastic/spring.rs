@@ -12,7 +12,7 @@
 //! the analytic Hessian (tangent stiffness, geometric-stiffness terms included) converges
 //! quadratically from the rigid forward model of a pair of active drives.
 
-use super::plausibility::{self, wrap_angle, Limits, Reason, RigidPose, Violation};
+use super::limits::{wrap_angle, Violation};
 use crate::geometry::{self, frames, near, Frames, Subsystem};
 use crate::params::{Guide, Model, Params, N_PARAMS, RODS};
 use nalgebra::{Matrix2, SMatrix, SVector, Vector2};
@@ -324,7 +324,7 @@ fn system(
 /// Rigid start: the model-29 forward model of the first viable subsystem whose two drives are
 /// active, at the commanded positions; its secant in ψ from `psi_warm` where given (the
 /// previous sample's rigid ψ, never the elastic one: the same pose, in fewer closures).
-fn rigid_start(
+pub(super) fn rigid_start(
     p: &Params,
     fr: &Frames,
     (q, fol): (&[f64; 4], Followers),
@@ -345,129 +345,6 @@ fn rigid_start(
         }
     }
     Err(ElasticError::NotHeld)
-}
-
-/// Elasto-geometric forward model: the static equilibrium for commanded actuator positions
-/// `q` (mm), parameters `p` and stiffness `k`, with drives in `followers` free. Starts from the
-/// rigid forward model of an active pair; the result passes the plausibility checks with the
-/// default [`Limits`] (else [`ElasticError::Implausible`]).
-pub fn fegm(
-    p: &Params,
-    k: &Stiffness,
-    q: [f64; 4],
-    followers: Followers,
-) -> Result<Equilibrium, ElasticError> {
-    fegm_checked(p, k, q, followers, None, &Limits::default()).map(|s| s.eq)
-}
-
-/// [`fegm`] from a previous equilibrium (servo-rate use: the last sample is an excellent
-/// start). A warm result that fails the plausibility checks is solved again cold.
-pub fn fegm_from(
-    p: &Params,
-    k: &Stiffness,
-    q: [f64; 4],
-    followers: Followers,
-    previous: &Equilibrium,
-) -> Result<Equilibrium, ElasticError> {
-    fegm_checked(p, k, q, followers, Some(previous), &Limits::default()).map(|s| s.eq)
-}
-
-/// A checked elastic solve and how it was reached.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Checked {
-    /// The equilibrium; it passed every check.
-    pub eq: Equilibrium,
-    /// Solved from the rigid start (no previous equilibrium, or the warm solve was rejected).
-    pub cold: bool,
-    /// Why the warm-started solve was rejected, when it was (a solver failure counts as
-    /// [`Reason::NotConverged`]).
-    pub warm_rejected: Option<Violation>,
-    /// The rigid forward model the result was checked against.
-    pub rigid: RigidPose,
-}
-
-/// The one guarded entry to the elastic model (the CLI, the calibrator and the nodes all come
-/// through here): warm-started from `previous` when given, checked with `limits`; a warm
-/// result that fails is solved again from the rigid start and checked again. An error means
-/// no plausible equilibrium: the caller falls back to the rigid model.
-pub fn fegm_checked(
-    p: &Params,
-    k: &Stiffness,
-    q: [f64; 4],
-    followers: Followers,
-    previous: Option<&Equilibrium>,
-    limits: &Limits,
-) -> Result<Checked, ElasticError> {
-    guarded(p, k, (q, followers), (previous, None), limits)
-}
-
-/// [`fegm_checked`] after the previous sample's checked solve (the servo-rate use): the solve
-/// warm-started from its equilibrium, and the rigid reference's secant in ψ from its rigid ψ
-/// (the reference stays that of the holding drives alone, independent of any elastic
-/// solution: the same pose as from γ2, in fewer closures).
-pub fn fegm_checked_after(
-    p: &Params,
-    k: &Stiffness,
-    q: [f64; 4],
-    followers: Followers,
-    previous: Option<&Checked>,
-    limits: &Limits,
-) -> Result<Checked, ElasticError> {
-    let warm = previous.map_or((None, None), |c| (Some(&c.eq), Some(c.rigid.psi)));
-    guarded(p, k, (q, followers), warm, limits)
-}
-
-/// The guarded solve of [`fegm_checked`], with the rigid reference's secant from `psi_warm`
-/// where given.
-fn guarded(
-    p: &Params,
-    k: &Stiffness,
-    (q, followers): ([f64; 4], Followers),
-    (previous, psi_warm): (Option<&Equilibrium>, Option<f64>),
-    limits: &Limits,
-) -> Result<Checked, ElasticError> {
-    if !q.iter().all(|v| v.is_finite()) {
-        return Err(ElasticError::NonFinite);
-    }
-    // The guides' frames once for the rigid model, the solve and the checks.
-    let fr = frames(p);
-    // The rigid model is both the reference of the checks and the cold start.
-    let z0 = rigid_start(p, &fr, (&q, followers), psi_warm)?;
-    let rigid = RigidPose {
-        x: z0[0],
-        y: z0[1],
-        psi: z0[2],
-    };
-    let check = |sol: &Solved| {
-        let rods = (&sol.lengths, sol.balance);
-        plausibility::check_with(p, k, (&q, followers), &sol.eq, rods, &rigid, limits)
-    };
-    let mut warm_rejected = None;
-    if let Some(prev) = previous {
-        let rejection = match solve_from(p, &fr, k, q, followers, warm_start(&q, followers, prev)) {
-            Ok(sol) => match check(&sol) {
-                Ok(()) => {
-                    return Ok(Checked {
-                        eq: sol.eq,
-                        cold: false,
-                        warm_rejected: None,
-                        rigid,
-                    })
-                }
-                Err(v) => v,
-            },
-            Err(e) => solver_violation(&e),
-        };
-        warm_rejected = Some(rejection);
-    }
-    let sol = solve_from(p, &fr, k, q, followers, z0)?;
-    check(&sol).map_err(ElasticError::Implausible)?;
-    Ok(Checked {
-        eq: sol.eq,
-        cold: true,
-        warm_rejected,
-        rigid,
-    })
 }
 
 /// The raw solver without any plausibility check, from `previous` or else from the rigid
@@ -492,7 +369,7 @@ pub fn fegm_unchecked(
 }
 
 /// The previous equilibrium with the active carriers moved to their new commands.
-fn warm_start(q: &[f64; 4], followers: Followers, previous: &Equilibrium) -> V7 {
+pub(super) fn warm_start(q: &[f64; 4], followers: Followers, previous: &Equilibrium) -> V7 {
     let mut z0 = previous.z();
     for j in 0..4 {
         if !followers[j] {
@@ -502,30 +379,17 @@ fn warm_start(q: &[f64; 4], followers: Followers, previous: &Equilibrium) -> V7 
     z0
 }
 
-/// A solver failure of the warm start, as the reason it was rejected.
-fn solver_violation(e: &ElasticError) -> Violation {
-    match e {
-        ElasticError::Implausible(v) => *v,
-        _ => Violation {
-            reason: Reason::NotConverged,
-            item: 0,
-            value: f64::NAN,
-            limit: 0.0,
-        },
-    }
-}
-
 /// An equilibrium with its rods' lengths and the platform's balance, from the pass over the
 /// rods that computes its forces ([`finish`]): what the plausibility checks read, which
 /// [`lengths_and_balance`] would compute again from the equilibrium's fields, the same rods
 /// at the same state.
-struct Solved {
-    eq: Equilibrium,
-    lengths: [f64; 5],
-    balance: [f64; 3],
+pub(super) struct Solved {
+    pub(super) eq: Equilibrium,
+    pub(super) lengths: [f64; 5],
+    pub(super) balance: [f64; 3],
 }
 
-fn solve_from(
+pub(super) fn solve_from(
     p: &Params,
     fr: &Frames,
     k: &Stiffness,
@@ -881,6 +745,7 @@ pub fn sensitivity(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::elastic::fegm;
 
     /// The dense rod terms the solver assembled before [`rod_terms`]: k·d·dᵀ + (T/ρ)·JᵀPJ.
     fn dense_rod_terms(p: &Params, fr: &Frames, k: &Stiffness, z: &V7) -> (V7, M7) {

@@ -247,7 +247,12 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
 /// The noise per group, the residual per instrument and direction, the worst rows.
 fn print_groups(d: &Diagnosis) {
     if !d.noise_groups.is_empty() {
-        println!("\n   noise per group, estimated from the residuals:");
+        let with = if d.noise_estimated_with.is_empty() {
+            String::new()
+        } else {
+            format!(" (the model with {})", d.noise_estimated_with.join(" and "))
+        };
+        println!("\n   noise per group, estimated from the residuals{with}:");
         super::calibrate::print_noise_groups(&d.noise_groups, "   ");
     }
     println!(

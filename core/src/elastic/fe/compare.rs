@@ -7,7 +7,8 @@ use super::machine::FeStiffness;
 use super::methods::{FeModel, Method};
 use super::FeError;
 use crate::elastic::baseline;
-use crate::elastic::spring::{fegm, ElasticError, Stiffness, ALL_ACTIVE};
+use crate::elastic::guarded::fegm;
+use crate::elastic::spring::{ElasticError, Stiffness, ALL_ACTIVE};
 use crate::geometry::{igm, GeometryError};
 use crate::params::{Model, Params};
 
