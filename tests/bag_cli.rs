@@ -19,9 +19,9 @@ use std::time::Duration;
 
 use bag_support::*;
 use rpkm_core::campaign::{Campaign, Instrument};
-use rpkm_core::twin::{Twin, TwinConfig};
 use rpkm_msgs::{ActuatorState, CampaignInfo, TcpMeasurement};
 use rpkm_transport::bag::BagReader;
+use rpkm_twin::{Twin, TwinConfig};
 
 /// `a` and `b` equal but for the mm → m → mm conversion: a relative error of a few ulp.
 fn close_mm(a: f64, b: f64) -> bool {

@@ -68,3 +68,63 @@ fn nodes_and_launch_never_name_the_cli() {
         offences.join("\n")
     );
 }
+
+#[path = "layers_support/file_graph.rs"]
+mod file_graph;
+
+/// No file of the transport or of the command line imports a file that imports it, directly
+/// or around a loop: what two subcommands share lives in a module both call
+/// (`cli/effect_stages.rs`, `cli/summary.rs`, `cli/transport_args.rs`, `cli/bag_files.rs`),
+/// never in one of them.
+#[test]
+fn no_file_of_the_transport_or_the_cli_imports_in_a_circle() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for (src, within, at_least) in [("nodes/src", "cli", 20), ("nodes/transport/src", "", 10)] {
+        let graph: Vec<(String, Vec<String>)> = file_graph::graph(&root.join(src))
+            .into_iter()
+            .filter(|(m, _)| m.starts_with(within))
+            .collect();
+        assert!(graph.len() >= at_least, "{src}: only {} files", graph.len());
+        let cycles: Vec<String> = file_graph::cycles(&graph)
+            .iter()
+            .map(|c| c.join(" -> "))
+            .collect();
+        assert!(
+            cycles.is_empty(),
+            "{src}: files import each other:\n{}",
+            cycles.join("\n")
+        );
+    }
+}
+
+/// No subcommand of the command line imports another (each is one file or folder of `cli/`
+/// with a `run`; what they share is a module without one).
+#[test]
+fn no_subcommand_imports_another() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("nodes/src");
+    let graph = file_graph::graph(&root);
+    let files = file_graph::crate_files(&root);
+    let subcommand = |m: &str| {
+        m.strip_prefix("cli::")
+            .map(|rest| rest.split("::").next().unwrap_or(rest))
+            .filter(|top| {
+                let file = files.get(&format!("cli::{top}"));
+                file.is_some_and(|f| {
+                    std::fs::read_to_string(f).is_ok_and(|t| t.contains("pub fn run("))
+                })
+            })
+            .map(str::to_owned)
+    };
+    let mut offences = Vec::new();
+    for (module, deps) in &graph {
+        let Some(from) = subcommand(module) else {
+            continue;
+        };
+        for d in deps {
+            if subcommand(d).is_some_and(|to| to != from) {
+                offences.push(format!("{module} -> {d}"));
+            }
+        }
+    }
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
+}

@@ -150,3 +150,51 @@ fn every_opt_out_is_an_expect_with_a_reason_and_counted_in_docs_lints_md() {
         );
     }
 }
+
+/// The tuple types of `text` that bundle more than two flags (`(bool, bool, bool)`): flags
+/// that travel together are a struct with named fields, or the call sites read
+/// `(true, false, true)`.
+fn flag_tuples(text: &str) -> Vec<String> {
+    let mut found = Vec::new();
+    for (at, _) in text.match_indices('(') {
+        let body = &text[at + 1..];
+        let Some(end) = body.find(')') else { continue };
+        let items: Vec<&str> = body[..end].split(',').map(str::trim).collect();
+        let flags = items.iter().filter(|i| **i == "bool").count();
+        if flags > 2 && !body[..end].contains('(') {
+            found.push(format!("({})", &body[..end]));
+        }
+    }
+    found
+}
+
+#[test]
+fn the_flag_tuple_reader_sees_three_flags() {
+    assert_eq!(
+        flag_tuples("fn f((a, b, c): (bool, bool, bool)) {}").len(),
+        1
+    );
+    assert!(flag_tuples("fn f((warm, screen): (bool, bool)) {}").is_empty());
+    assert!(flag_tuples("fn f(x: (usize, f64, bool)) {}").is_empty());
+}
+
+/// No function of the workspace takes (or any type bundles) more than two flags in a tuple.
+#[test]
+fn no_tuple_of_more_than_two_flags() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    for dir in ["core", "twin", "msgs", "nodes"] {
+        rust_files(&root.join(dir), &mut files);
+    }
+    assert!(files.len() >= 100, "found only {} files", files.len());
+    let offences: Vec<String> = files
+        .iter()
+        .flat_map(|f| {
+            let text = std::fs::read_to_string(f).expect("read source");
+            flag_tuples(&text)
+                .into_iter()
+                .map(move |t| format!("{}: {t}", f.display()))
+        })
+        .collect();
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
+}

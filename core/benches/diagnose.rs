@@ -7,7 +7,7 @@
 
 use rpkm_core::campaign::Instrument;
 use rpkm_core::diagnose::{self, Options};
-use rpkm_core::twin::{Twin, TwinConfig};
+use rpkm_twin::{Twin, TwinConfig};
 use std::time::Instant;
 
 fn main() {

@@ -5,7 +5,7 @@
 //!     cargo run --release -p rpkm-core --example diagnose_twin [SEEDS]
 use rpkm_core::campaign::Instrument;
 use rpkm_core::diagnose::{self, Options};
-use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, Twin, TwinConfig};
 
 fn main() {
     let seeds: u64 = std::env::args()

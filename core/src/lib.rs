@@ -22,8 +22,9 @@
 //!   expansion, a bowed guide...), bound to a campaign, with its own parameters.
 //! - **Diagnosis** ([`diagnose`]): which effect the rows ask for, if any: `missing_effect`,
 //!   `unexplained_structure` or `nothing_missing`.
-//! - **Twin** ([`twin`]): a simulated machine and measurement cell with its own conventions,
-//!   to test the model against a truth it did not write. The model never imports it.
+//! - **Twin** (the crate `rpkm-twin`, in `twin/`): a simulated machine and measurement cell
+//!   with its own conventions, to test the model against a truth it did not write. It
+//!   depends on the core; the core cannot name it.
 
 pub mod analysis;
 pub mod calib;
@@ -41,5 +42,4 @@ pub mod observability;
 pub mod params;
 pub mod plan;
 pub mod stats;
-pub mod twin;
 pub mod variance;

@@ -11,8 +11,8 @@
 
 use anyhow::{bail, Result};
 use rpkm_core::design::{CENTRE, CIRCLE_RADIUS_MM};
-use rpkm_core::twin::{DriveStream, Twin};
 use rpkm_msgs::ActuatorState;
+use rpkm_twin::{DriveStream, Twin};
 
 use crate::campaign_bag::{stamp_from_seconds, MM_PER_M};
 

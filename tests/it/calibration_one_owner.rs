@@ -12,7 +12,7 @@ use rpkm::node::calibrator::{calibrate_campaign, CalibratorOptions};
 use rpkm::node::Geometry;
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::params::{unit, Model, Params, Unit, NAMES};
-use rpkm_core::twin::{Twin, TwinConfig};
+use rpkm_twin::{Twin, TwinConfig};
 use std::path::Path;
 use std::process::Command;
 

@@ -2,7 +2,7 @@
 //! bad campaign files exit with code 2 and name file, line and column.
 
 use rpkm_core::campaign::Instrument;
-use rpkm_core::twin::{ResetReading, Twin, TwinConfig};
+use rpkm_twin::{ResetReading, Twin, TwinConfig};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -181,7 +181,7 @@ fn default_calibration_of_a_29_parameter_machine_reaches_the_floor_and_diagnose_
         noise: None,
         ..config
     });
-    let floor = rpkm_core::twin::reading_error_rms_um(&val, &clean);
+    let floor = rpkm_twin::reading_error_rms_um(&val, &clean);
     let (c, v) = (dir.join("all.csv"), dir.join("val.csv"));
     std::fs::write(&c, cal.to_csv()).expect("write");
     std::fs::write(&v, val.to_csv()).expect("write");

@@ -52,7 +52,7 @@ fn true_floor_um(dir: &std::path::Path, c: &std::path::Path) -> f64 {
         let text = std::fs::read_to_string(&p).expect("held-out campaign");
         rpkm_core::campaign::Campaign::parse(&text, "val").expect("parses")
     };
-    rpkm_core::twin::reading_error_rms_um(
+    rpkm_twin::reading_error_rms_um(
         &read(c.with_extension("val.csv")),
         &read(dir.join("clean.val.csv")),
     )
@@ -263,7 +263,10 @@ fn no_step_of_the_loop_raises_the_held_out_error() {
             .collect();
         // one diagnosis per named effect, or one for a pair named together, then the last
         assert!((2..=3).contains(&path.len()), "machine {machine}: {o}");
-        assert!(path[path.len() - 1] < path[0] / 2.0, "machine {machine}: {o}");
+        assert!(
+            path[path.len() - 1] < path[0] / 2.0,
+            "machine {machine}: {o}"
+        );
         let over_floor = o["held_out_over_floor"].as_f64().expect("ratio");
         assert!((0.9..1.1).contains(&over_floor), "machine {machine}: {o}");
     }

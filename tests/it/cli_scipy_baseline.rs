@@ -7,7 +7,7 @@
 //! the twin's true machine.
 
 use rpkm_core::campaign::Instrument;
-use rpkm_core::twin::{Twin, TwinConfig};
+use rpkm_twin::{Twin, TwinConfig};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

@@ -77,7 +77,7 @@ fn core_calibration(
 
 /// A twin campaign of 20,000 tracker poses in one setup (`grid`: not held out).
 fn large_campaign(dir: &TempDir) -> PathBuf {
-    let mut twin = rpkm_core::twin::Twin::new(rpkm_core::twin::TwinConfig {
+    let mut twin = rpkm_twin::Twin::new(rpkm_twin::TwinConfig {
         seed: 3,
         ..Default::default()
     })

@@ -3,7 +3,7 @@
 //! and q3. A common scale of all four is close to a change of every rod length and is mostly
 //! absorbed by the geometry; a scale that differs between the guides is not.
 
-use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::Campaign;
 use crate::params::Params;
 

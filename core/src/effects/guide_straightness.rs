@@ -4,7 +4,7 @@
 //! rotation of the guide, which the geometric parameters d and γ already describe; the
 //! curvature is what they cannot.
 
-use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::Campaign;
 use crate::params::{Guide, Params, RODS};
 

@@ -3,7 +3,7 @@
 //! records R(θ) times the true displacement. The angles belong to the setups, not to the
 //! machine: held-out data re-fit their own (as the registration of a tracker does).
 
-use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::{Campaign, Instrument};
 use crate::params::Params;
 use nalgebra::Vector2;

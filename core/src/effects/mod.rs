@@ -19,6 +19,7 @@
 //! Adding an effect is one new file with a type implementing [`Effect`] and one line in
 //! [`library`] (docs/effects.md walks through one).
 
+mod effect;
 mod encoder_scale;
 pub mod expr;
 mod guide_straightness;
@@ -29,6 +30,7 @@ pub mod stiffness_factor;
 mod thermal;
 pub mod written;
 
+pub use effect::{Bound, Delta, Effect, EffectParam, InputSensitivity, NotApplicable};
 pub use encoder_scale::EncoderScale;
 pub use guide_straightness::GuideStraightness;
 pub use instrument_alignment::InstrumentAlignment;
@@ -42,7 +44,6 @@ use std::sync::Arc;
 
 use crate::campaign::Campaign;
 use crate::params::Params;
-use nalgebra::Vector2;
 
 pub use crate::params::Row;
 
@@ -98,129 +99,6 @@ pub fn parse_list(list: &str) -> Result<Vec<Box<dyn Effect>>, UnknownEffect> {
 pub struct UnknownEffect {
     pub name: String,
     pub known: String,
-}
-
-/// Why an effect cannot be added to a model with this campaign.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("{effect}: {reason}")]
-pub struct NotApplicable {
-    pub effect: String,
-    pub reason: String,
-}
-
-/// One parameter of an effect.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct EffectParam {
-    /// Name, prefixed by nothing: the effect's name goes with it in reports (`thermal.alpha`).
-    pub name: String,
-    /// Unit of the value (`ppm/K`, `mm`, `mrad`...).
-    pub unit: String,
-    /// Plausible magnitude (prior range), in `unit`: the scaling of the parameter in the
-    /// least squares and the size a report compares the estimate with.
-    pub prior: f64,
-}
-
-/// A physical effect of the library (see the module documentation).
-pub trait Effect: Send + Sync {
-    /// Name on the command line and in reports (`thermal`).
-    fn name(&self) -> &str;
-    /// One sentence on what the effect models.
-    fn summary(&self) -> &str;
-    /// Campaign covariate columns the effect needs (`temp_machine`).
-    fn covariates(&self) -> &'static [&'static str] {
-        &[]
-    }
-    /// Bind the effect to a campaign, with parameters `p` for the geometry it needs to read
-    /// its covariates (rod directions for forces): per-pose data are computed once here.
-    fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable>;
-}
-
-/// An effect bound to one campaign.
-pub trait Bound: Send + Sync {
-    /// Its parameters for this campaign (e.g. one angle per instrument setup).
-    fn params(&self) -> &[EffectParam];
-    /// Whether the parameters belong to the campaign's setups rather than to the machine (an
-    /// instrument's alignment): held-out data re-fit them on their own setups instead of
-    /// reusing the calibration's values.
-    fn setup_local(&self) -> bool {
-        false
-    }
-    /// Add the correction of pose `pose` for parameter values `theta` (this effect's, in the
-    /// order of [`Bound::params`]) to `value`, and its derivatives to `partials[k]` = ∂/∂θ_k.
-    fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]);
-    /// The parameters (indices in [`Bound::params`]) whose partials [`Bound::correct`] may
-    /// make non-zero at pose `pose`; it writes no other. An instrument's alignment angle
-    /// moves only its own setup's poses: the corrections keep 1 partial per pose instead of
-    /// one per setup.
-    fn touched(&self, pose: usize) -> std::ops::Range<usize> {
-        let _ = pose;
-        0..self.params().len()
-    }
-    /// The effect to bind again at a fit's parameters, where this binding read the geometry
-    /// at the parameters it was bound with enough that the fit's change it (see
-    /// [`EffectSet::rebound`]); None, the default, where the binding at the start serves (it
-    /// reads no geometry, or too little to matter).
-    fn rebinds_from(&self) -> Option<&dyn Effect> {
-        None
-    }
-}
-
-/// A change of one pose's model inputs (or its derivative with respect to one effect
-/// parameter).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Delta {
-    /// Geometric parameters, mm and rad.
-    pub dp: Row,
-    /// Carrier position − encoder reading, mm, q1..q4.
-    pub dq: [f64; 4],
-    /// True − recorded instrument (x, y), mm.
-    pub dm: Vector2<f64>,
-    /// Relative change of the machine's stiffness (the drive-force rows' springs are
-    /// k · (1 + dk)); no other row depends on it.
-    pub dk: f64,
-}
-
-impl Default for Delta {
-    fn default() -> Self {
-        Delta {
-            dp: Row::zeros(),
-            dq: [0.0; 4],
-            dm: Vector2::zeros(),
-            dk: 0.0,
-        }
-    }
-}
-
-impl Delta {
-    /// The chain rule: the change of a model value with sensitivities `s` for this change.
-    pub fn chain(&self, s: &InputSensitivity) -> f64 {
-        s.dp.dot(&self.dp)
-            + (0..4).map(|a| s.dq[a] * self.dq[a]).sum::<f64>()
-            + s.dm.dot(&self.dm)
-            + s.dk * self.dk
-    }
-}
-
-/// Sensitivity of a model value to one pose's inputs: the 29 parameters used at the pose, its
-/// carrier positions and its recorded (x, y).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct InputSensitivity {
-    pub dp: Row,
-    pub dq: [f64; 4],
-    pub dm: Vector2<f64>,
-    /// ... and to the relative stiffness change (drive-force rows only).
-    pub dk: f64,
-}
-
-impl Default for InputSensitivity {
-    fn default() -> Self {
-        InputSensitivity {
-            dp: Row::zeros(),
-            dq: [0.0; 4],
-            dm: Vector2::zeros(),
-            dk: 0.0,
-        }
-    }
 }
 
 /// The corrections of every pose of a campaign for given effect parameters: per pose the
@@ -504,19 +382,4 @@ impl EffectSet {
         }
         out
     }
-}
-
-/// Value of covariate `name` at every pose, or why the effect cannot use it.
-pub(crate) fn covariate_column(
-    campaign: &Campaign,
-    effect: &str,
-    name: &str,
-) -> Result<Vec<Option<f64>>, NotApplicable> {
-    campaign.covariate(name).ok_or_else(|| NotApplicable {
-        effect: effect.to_owned(),
-        reason: format!(
-            "the campaign {} has no covariate column `{name}`",
-            campaign.source
-        ),
-    })
 }

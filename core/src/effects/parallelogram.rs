@@ -4,7 +4,7 @@
 //! sees it. The effect frees rod 5: its parameters are rod 5's deviations from the perfect
 //! holder.
 
-use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::Campaign;
 use crate::params::{Params, L5, XA5R, XB5R, YA5R, YB5R};
 

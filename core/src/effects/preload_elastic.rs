@@ -7,7 +7,7 @@
 //! [`crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM`]), scales the stretch: dl = c · T / k.
 //! The stiffness is identified with the geometry.
 
-use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::{Campaign, Pose};
 use crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM;
 use crate::geometry::{self, carrier_joint, guide_frame, platform_joint};

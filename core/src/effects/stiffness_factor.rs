@@ -11,7 +11,7 @@
 //! (weakly); an instrument that fixes the geometry (mixed rows) separates it
 //! (`rpkm analyze observability --method currents` shows both).
 
-use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::{Campaign, Pose};
 use crate::params::Params;
 

@@ -13,7 +13,7 @@
 //! calibration at one temperature absorbs the mean; what it cannot absorb is the drift of the
 //! temperatures during the campaign.
 
-use super::{covariate_column, Bound, Delta, Effect, EffectParam, NotApplicable};
+use super::effect::{covariate_column, Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::Campaign;
 use crate::params::{Params, D1, D2, RODS};
 

@@ -10,8 +10,8 @@
 //! (`dir_q4`, `travel_q4`, `t_run`), the campaign's `temp_*` and other covariate columns and
 //! the nominal TCP (`x`, `y`).
 
+use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use super::expr::{self, ExprError, Name, Program};
-use super::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::{Campaign, Instrument};
 use crate::geometry;
 use crate::params::{self, Model, Params};
@@ -351,7 +351,7 @@ fn variables(campaign: &Campaign, names: &[String]) -> Result<Vec<Vec<f64>>, Not
 
 /// A covariate column with a value at every pose.
 fn covariate(campaign: &Campaign, name: &str) -> Result<Vec<f64>, NotApplicable> {
-    let column = super::covariate_column(campaign, "", name)?;
+    let column = super::effect::covariate_column(campaign, "", name)?;
     column
         .iter()
         .zip(&campaign.poses)

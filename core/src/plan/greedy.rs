@@ -1,7 +1,7 @@
 //! Greedy Bayesian D-optimal choice of poses under a budget, then a Fedorov exchange within
 //! each opened setup.
 
-use super::{CandidateSetup, Determination, DeterminationPlan, PlannedSetup};
+use super::types::{CandidateSetup, Determination, DeterminationPlan, PlannedSetup};
 use nalgebra::DMatrix;
 
 /// Rounds of the exchange pass at most (each visits every chosen pose once).

@@ -7,7 +7,7 @@
 //! separation. Poses are chosen one after the other: a lost motion's sign is the direction of
 //! the carrier's last move, so the order of the poses is part of the plan.
 
-use super::{CandidateSetup, PlanError, Unknowns};
+use super::types::{CandidateSetup, PlanError, Unknowns};
 use crate::analysis;
 use crate::campaign::Campaign;
 use crate::design::PlannedPose;

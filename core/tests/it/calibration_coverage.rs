@@ -36,7 +36,7 @@ use rpkm_core::effects::{self, EffectSet};
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{Params, NAMES, N_PARAMS};
 use rpkm_core::stats::chi2_upper_tail;
-use rpkm_core::twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
 
 /// Machines calibrated.
 const MACHINES: usize = 16;

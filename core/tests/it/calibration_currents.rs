@@ -24,7 +24,7 @@ use rpkm_core::elastic::Stiffness;
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs::{self, Step};
 use rpkm_core::params::{Model, Params, NAMES};
-use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, Twin, TwinConfig};
 
 const TWIN_FORCE_NOISE_N: f64 = 3.0;
 

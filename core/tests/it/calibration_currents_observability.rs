@@ -13,7 +13,7 @@ use rpkm_core::analysis::{self, Method, ObservabilityOptions};
 use rpkm_core::design;
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{Model, Params, NAMES, N_PARAMS};
-use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, Twin, TwinConfig};
 
 fn twin(seed: u64) -> Twin {
     let elastic = EffectKind::PreloadElastic;

@@ -30,7 +30,7 @@ use rpkm_core::diagnose::{self, VerdictKind};
 use rpkm_core::effects::{self, Effect, EffectSet};
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{index_of, Params, NAMES, N_PARAMS};
-use rpkm_core::twin::{
+use rpkm_twin::{
     EffectKind, ProductionConfig, ProductionSample, ProductionStream, StepChange, ThermalPhysics,
     TimeCreep, Twin, TwinConfig,
 };

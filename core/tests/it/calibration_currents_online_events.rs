@@ -12,7 +12,7 @@ use rpkm_core::calib::online::{
 };
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{index_of, Params, NAMES};
-use rpkm_core::twin::{
+use rpkm_twin::{
     Creep, EffectKind, ProductionConfig, ProductionStream, StepChange, ThermalPhysics, Twin,
     TwinConfig,
 };

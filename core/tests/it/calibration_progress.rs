@@ -14,8 +14,8 @@ use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs::Step;
 use rpkm_core::params::Params;
-use rpkm_core::twin::{Twin, TwinConfig};
 use rpkm_core::variance::NoiseEstimate;
+use rpkm_twin::{Twin, TwinConfig};
 
 /// What the observer heard, in order.
 #[derive(Debug, Clone, PartialEq)]

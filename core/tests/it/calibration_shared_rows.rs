@@ -6,7 +6,7 @@ use rpkm_core::calib::{calibrate, Calibration, Options, Request, SharedRows, War
 use rpkm_core::campaign::Instrument;
 use rpkm_core::effects::{self, Effect, EffectSet};
 use rpkm_core::params::{Params, N_PARAMS};
-use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, Twin, TwinConfig};
 
 /// Whether two calibrations are the same to the bit: parameters, effect parameters, every
 /// row's value, χ², leverages, iterations.

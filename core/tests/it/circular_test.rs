@@ -6,7 +6,7 @@ use rpkm_core::campaign::Instrument;
 use rpkm_core::circular;
 use rpkm_core::design::CIRCLE_RADIUS_MM;
 use rpkm_core::params::Params;
-use rpkm_core::twin::{Twin, TwinConfig};
+use rpkm_twin::{Twin, TwinConfig};
 
 #[test]
 fn circle_on_an_erroneous_machine_deviates_and_on_a_nominal_one_does_not() {

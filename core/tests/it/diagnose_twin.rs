@@ -13,7 +13,7 @@ use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::diagnose::{self, Diagnosis, Options, VerdictKind};
 use rpkm_core::effects::{self, Effect};
 use rpkm_core::noise::{NoiseModel, N_GROUPS};
-use rpkm_core::twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
 
 /// A twin's conventions that the model must not assume: its noise, every group's level drawn
 /// from 0.6x to 2.5x the spec's figures (the diagnosis starts from the spec's).
@@ -40,7 +40,7 @@ fn campaigns_with(config: TwinConfig) -> (Campaign, Campaign, f64) {
         noise: None,
         ..config
     });
-    let floor = rpkm_core::twin::reading_error_rms_um(&val, &clean);
+    let floor = rpkm_twin::reading_error_rms_um(&val, &clean);
     (cal, val, floor)
 }
 
@@ -258,7 +258,7 @@ fn expected_floor_um(val: &Campaign, noise: &NoiseModel) -> f64 {
 /// noise of a reading less its setup's zero (√2 of it).
 #[test]
 fn noisy_resets_estimate_one_readings_noise() {
-    use rpkm_core::twin::ResetReading;
+    use rpkm_twin::ResetReading;
     for seed in 11..=13 {
         let noise = drawn_noise(seed);
         let mut twin = Twin::new(TwinConfig {

@@ -10,7 +10,7 @@ use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs::Form;
 use rpkm_core::obs::{self, Step};
 use rpkm_core::params::{Model, Params};
-use rpkm_core::twin::{effects::ALPHA_PER_K, EffectKind, Twin, TwinConfig};
+use rpkm_twin::{effects::ALPHA_PER_K, EffectKind, Twin, TwinConfig};
 
 fn twin_campaign(hidden: &[(EffectKind, f64)], instruments: &[Instrument]) -> (Twin, Campaign) {
     let mut twin = Twin::new(TwinConfig {

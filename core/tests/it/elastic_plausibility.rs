@@ -18,7 +18,7 @@ use rpkm_core::elastic::{
 };
 use rpkm_core::geometry::{fgm, igm};
 use rpkm_core::params::{self, Model, Params};
-use rpkm_core::twin::{Twin, TwinConfig};
+use rpkm_twin::{Twin, TwinConfig};
 
 const DEMO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../bags/demo/campaign.csv");
 

@@ -10,7 +10,7 @@ use rpkm_core::diagnose::{self, Options};
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::separate::{self, Hypothesis, Pair};
 use rpkm_core::plan::{self, Unknowns};
-use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, Twin, TwinConfig};
 
 /// The lost motion, mm (10 µm: 20 times the encoders' σ).
 const LOST_MM: f64 = 0.01;

@@ -5,7 +5,7 @@ use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::design::PlannedPose;
 use rpkm_core::geometry::{fgm, rgm};
 use rpkm_core::params::Model;
-use rpkm_core::twin::{EffectKind, Twin, TwinConfig, TwinError};
+use rpkm_twin::{EffectKind, Twin, TwinConfig, TwinError};
 
 fn twin(seed: u64, effects: Vec<(EffectKind, f64)>, noise: bool) -> Twin {
     Twin::new(TwinConfig {
@@ -266,7 +266,7 @@ fn deterministic_and_typed_errors() {
     ));
     let truth = t.truth();
     let json = serde_json::to_string(&truth).expect("json");
-    let back: rpkm_core::twin::Truth = serde_json::from_str(&json).expect("back");
+    let back: rpkm_twin::Truth = serde_json::from_str(&json).expect("back");
     assert_eq!(back, truth);
 }
 

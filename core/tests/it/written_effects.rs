@@ -8,7 +8,7 @@ use rpkm_core::diagnose::{self, Diagnosis, Options, VerdictKind};
 use rpkm_core::effects::written::{Spec, WrittenParam};
 use rpkm_core::effects::{Delta, Effect, EncoderScale, Written};
 use rpkm_core::params::Params;
-use rpkm_core::twin::{EffectKind, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, Twin, TwinConfig};
 
 fn param(name: &str, unit: &str, prior: f64) -> WrittenParam {
     WrittenParam {
@@ -54,7 +54,7 @@ fn twin_campaigns(seed: u64, hidden: &[(EffectKind, f64)]) -> (Campaign, Campaig
         noise: None,
         ..config
     });
-    let floor = rpkm_core::twin::reading_error_rms_um(&val, &clean);
+    let floor = rpkm_twin::reading_error_rms_um(&val, &clean);
     (cal, val, floor)
 }
 

@@ -3,8 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
+use super::bag_files::open;
 use anyhow::{Context, Result};
-use rpkm_transport::bag::{recover, BagOpenError, BagReader, StopReason};
+use rpkm_transport::bag::{recover, StopReason};
 
 /// Inspect and repair rosbag2 MCAP bags (folders with metadata.yaml and one .mcap file).
 #[derive(clap::Args, Debug, Clone)]
@@ -52,18 +53,6 @@ pub fn run(args: &BagArgs) -> Result<()> {
         BagCommand::Recover { bag, out } => recover_cmd(bag, out.as_deref()),
         BagCommand::Campaign { bag, out } => campaign(bag, out),
     }
-}
-
-/// Opens a bag; a bad or unfinished bag is bad input (exit code 2).
-pub fn open(path: &Path) -> Result<BagReader> {
-    BagReader::open(path).map_err(|e| match e {
-        BagOpenError::Io { .. } => anyhow::Error::new(e),
-        BagOpenError::Truncated { .. } => super::bad_input(format!(
-            "{e}\n  (run `rpkm bag recover {}`)",
-            path.display()
-        )),
-        other => super::bad_input(other.to_string()),
-    })
 }
 
 fn info(path: &Path) -> Result<()> {

@@ -12,7 +12,7 @@ use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::diagnose::{self, Options, Prediction, VerdictKind};
 use rpkm_core::effects::{self, Effect};
 use rpkm_core::noise::{NoiseModel, N_GROUPS};
-use rpkm_core::twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
@@ -240,7 +240,7 @@ fn draw(seed: u64, i: usize) -> (TwinConfig, Hidden) {
             rng.gen_range(1.25..2.0)
         };
     }
-    let cyclic = (hidden.class == Class::Cyclic).then(|| rpkm_core::twin::CyclicScale {
+    let cyclic = (hidden.class == Class::Cyclic).then(|| rpkm_twin::CyclicScale {
         carrier: rng.gen_range(0..4),
         amplitude_mm: rng.gen_range(1e-3..5e-3),
         pitch_mm: log_uniform(&mut rng, 10.0, 200.0),
@@ -278,7 +278,7 @@ fn measure(config: &TwinConfig) -> Result<(Campaign, Campaign, f64)> {
         noise: None,
         ..config.clone()
     })?;
-    let floor = rpkm_core::twin::reading_error_rms_um(&val, &clean);
+    let floor = rpkm_twin::reading_error_rms_um(&val, &clean);
     Ok((cal, val, floor))
 }
 

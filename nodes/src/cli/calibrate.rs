@@ -1,5 +1,6 @@
 //! `rpkm calibrate`: identify the geometric parameters from a campaign file.
 
+use super::summary::print_noise_groups;
 use super::{bad_input, read_campaign, write_json};
 use crate::effects_file::EffectsFile;
 use rpkm_core::calib::{self, Calibration, Options, Request, Scaling, Selection};
@@ -7,7 +8,7 @@ use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS};
-use rpkm_core::variance::{self, NoiseEstimate};
+use rpkm_core::variance::NoiseEstimate;
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -140,11 +141,11 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     };
     let opts = options(args, model)?;
     // The geometry comes out of the model with the effects (what --json hands to the nodes).
-    let file = super::diagnose::read_effects_file(
+    let file = super::effect_stages::read_effects_file(
         args.effects_file.as_deref(),
         &[Some(&campaign), validation.as_ref()],
     )?;
-    let effects = super::diagnose::parse_effects(&args.effects, file.as_ref())?;
+    let effects = super::effect_stages::parse_effects(&args.effects, file.as_ref())?;
     let refs: Vec<&dyn Effect> = effects.iter().map(AsRef::as_ref).collect();
     let set = EffectSet::bind(&refs, &campaign, &start)
         .map_err(|e| bad_input(format!("--effects: {e}")))?;
@@ -289,29 +290,6 @@ pub fn print_noise(noise: &NoiseEstimate) {
     print_noise_groups(&noise.groups, "  ");
 }
 
-/// The rows of the noise table, each line starting with `indent`.
-pub fn print_noise_groups(groups: &[variance::GroupNoise], indent: &str) {
-    println!(
-        "{indent}{:<14} {:>10} {:>10} {:>8}  unit",
-        "group", "stated", "estimated", "dof"
-    );
-    for g in groups {
-        println!(
-            "{indent}{:<14} {:>10.3} {:>10.3} {:>8.1}  {}{}",
-            g.group,
-            g.assumed,
-            g.estimated,
-            g.dof,
-            g.unit,
-            if g.estimated_from_data {
-                ""
-            } else {
-                "  (too few degrees of freedom: stated level kept)"
-            }
-        );
-    }
-}
-
 /// One row of the effect-by-effect table.
 #[derive(serde::Serialize)]
 struct Stage {
@@ -350,11 +328,11 @@ fn write_report(
 ) -> anyhow::Result<std::path::PathBuf> {
     use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
-    let offer = super::diagnose::offered(file, &[]);
+    let offer = super::effect_stages::offered(file, &[]);
     let offer = offer.as_slice();
     let before = diagnose::diagnose_among(campaign, validation, &[], offer, &opts)?;
     let after = if refs.is_empty() {
-        super::diagnose::with_named_effect(campaign, validation, (&[], offer), &opts, &before)?
+        super::effect_stages::with_named_effect(campaign, validation, (&[], offer), &opts, &before)?
     } else {
         Some(diagnose::diagnose(campaign, validation, refs, &opts)?)
     };
@@ -368,7 +346,7 @@ fn write_report(
             chi2_per_dof: s.chi2_per_dof,
         })
         .collect();
-    super::diagnose::write_report(
+    super::summary::write_report(
         dir,
         "rpkm calibrate",
         campaign,

@@ -2,7 +2,7 @@
 //! hidden effect): the thesis's simple model against the measurements, where it fails, the
 //! test that says something is missing, the effect added, the held-out error falling.
 
-use super::diagnose::{print_summary, um, write_report};
+use super::summary::{print_summary, um, write_report};
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::{self, Options};

@@ -2,16 +2,15 @@
 //! error once it is added. Physics in `rpkm_core::diagnose`; here the terminal summary, the
 //! JSON and the HTML report.
 
+use super::effect_stages::{offered, parse_effects, read_effects_file, with_named_effect};
+use super::summary::{print_summary, print_written, write_report};
 use super::{bad_input, read_campaign, write_json};
-use crate::effects_file::{self, EffectsFile};
-use crate::report::{Report, Stage};
-use crate::words;
+use crate::effects_file::{self};
 use anyhow::Context;
-use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::{self, Diagnosis, Options};
-use rpkm_core::effects::{self, Effect};
+use rpkm_core::diagnose::{self, Options};
+use rpkm_core::effects::Effect;
 use rpkm_core::params::Model;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Find the physical effect the model is missing.
 ///
@@ -87,44 +86,6 @@ pub struct DiagnoseArgs {
     pub no_screen: bool,
 }
 
-/// Effects of a comma-separated list (the library's, or the file's), or a bad-input error
-/// naming the option.
-pub fn parse_effects(
-    list: &str,
-    file: Option<&EffectsFile>,
-) -> anyhow::Result<Vec<Box<dyn Effect>>> {
-    effects_file::parse_list(list, file).map_err(|e| bad_input(format!("--effects: {e}")))
-}
-
-/// The effects file of --effects-file, read and checked against the campaigns it will meet
-/// (bad input, exit 2, naming its file, line and column).
-pub fn read_effects_file(
-    path: Option<&Path>,
-    campaigns: &[Option<&Campaign>],
-) -> anyhow::Result<Option<EffectsFile>> {
-    let Some(path) = path else {
-        return Ok(None);
-    };
-    let mut columns: Vec<String> = Vec::new();
-    for c in campaigns.iter().flatten() {
-        columns.extend(c.covariate_names.iter().cloned());
-    }
-    let file = effects_file::read(path, &columns).map_err(|e| bad_input(e.to_string()))?;
-    for c in campaigns.iter().flatten() {
-        file.check(c).map_err(|e| bad_input(e.to_string()))?;
-    }
-    Ok(Some(file))
-}
-
-/// The file's effects not in the model: the candidates it offers.
-pub fn offered<'a>(file: Option<&'a EffectsFile>, in_model: &[&dyn Effect]) -> Vec<&'a dyn Effect> {
-    file.map(EffectsFile::all)
-        .unwrap_or_default()
-        .into_iter()
-        .filter(|e| !in_model.iter().any(|m| m.name() == e.name()))
-        .collect()
-}
-
 pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let model = Model::from_number(args.model)
         .ok_or_else(|| bad_input(format!("--model {}: expected 24 or 29", args.model)))?;
@@ -188,198 +149,4 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         println!("report: {}", page.display());
     }
     Ok(())
-}
-
-/// A µm value to one decimal, `-` when absent (no held-out data).
-pub fn um(v: Option<f64>) -> String {
-    v.map_or("-".to_owned(), |v| format!("{v:.1}"))
-}
-
-/// The terminal summary.
-pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
-    let b = &d.baseline;
-    let with = if d.effects_in_model.is_empty() {
-        String::new()
-    } else {
-        format!(" + {}", d.effects_in_model.join(" + "))
-    };
-    println!(
-        "Diagnosis of {} ({} poses) with {}{with}",
-        campaign.source,
-        campaign.poses.len(),
-        d.model
-    );
-    println!(
-        "\n1. The current model against the measurements\n   calibration RMS {:.1} um, held-out RMS {} um, noise floor {:.1} um",
-        b.cal_rms_um,
-        um(b.val_rms_um),
-        b.noise_floor_um
-    );
-    println!(
-        "   against the stated noise: chi2/dof {:.2} over {:.0} dof, p = {:.2e} (the verdict does not rest on it)",
-        b.chi2_per_dof, b.dof, b.p_value,
-    );
-    if let Some((n, of)) = d.determined {
-        println!(
-            "   the campaign determined {n} of {of} parameter combinations better than their \
-             tolerance; the rest stayed at the prior"
-        );
-    }
-    print_groups(d);
-    print_effects(d);
-    let kind = serde_json::to_value(d.verdict_kind)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_owned))
-        .unwrap_or_default();
-    println!("\n3. Verdict ({kind}): {}", words::verdict(d));
-    if let Some(u) = &d.unexplained {
-        println!("\n4. Unexplained structure: {}", words::follows(u));
-        for t in &u.also {
-            println!(
-                "   also: {} {} follows {} (r = {:.2})",
-                t.instrument, t.direction, t.feature, t.r
-            );
-        }
-    }
-    println!("\n({})", words::test(&d.test));
-}
-
-/// The noise per group, the residual per instrument and direction, the worst rows.
-fn print_groups(d: &Diagnosis) {
-    if !d.noise_groups.is_empty() {
-        let with = if d.noise_estimated_with.is_empty() {
-            String::new()
-        } else {
-            format!(" (the model with {})", d.noise_estimated_with.join(" and "))
-        };
-        println!("\n   noise per group, estimated from the residuals{with}:");
-        super::calibrate::print_noise_groups(&d.noise_groups, "   ");
-    }
-    println!(
-        "\n   {:<6} {:<14} {:>5} {:>10} {:>10} {:>9}",
-        "instr", "direction", "rows", "RMS", "noise", "chi2/row"
-    );
-    for g in &d.groups {
-        println!(
-            "   {:<6} {:<14} {:>5} {:>10.2} {:>10.2} {:>9.1}",
-            g.instrument, g.direction, g.rows, g.rms, g.noise, g.chi2_per_row
-        );
-    }
-    println!("   (um; urad for psi)\n   worst residuals:");
-    for p in d.points.iter().take(3) {
-        println!(
-            "     line {:>5} {:<5} {:<10} {:>9.2} ({:.1} sigma) at x {:.0}, y {:.0} mm",
-            p.line,
-            p.instrument,
-            p.direction,
-            p.value,
-            p.value / p.sigma,
-            p.x,
-            p.y
-        );
-    }
-}
-
-/// Every effect tried, best first, and those not tried.
-fn print_effects(d: &Diagnosis) {
-    println!("\n2. Effects tried (best first)");
-    println!(
-        "   {:<22} {:>6} {:>9} {:>11} {:>10} {:>10}",
-        "effect", "signif", "explained", "chi2/dof", "val before", "val after"
-    );
-    for c in &d.candidates {
-        println!(
-            "   {:<22} {:>6} {:>8.0}% {:>11.2} {:>10} {:>10}",
-            c.effect,
-            if c.significant { "yes" } else { "no" },
-            100.0 * c.explained_fraction,
-            c.chi2_per_dof_after,
-            um(c.val_rms_before_um),
-            um(c.val_rms_after_um)
-        );
-    }
-    for s in &d.skipped {
-        println!("   {:<22} not tried: {}", s.effect, s.reason);
-    }
-    if let Some(c) = d.candidates.first() {
-        println!("   evidence for {}: {}", c.effect, words::evidence(c));
-    }
-}
-
-/// The file's effects as written, under the summary: what the candidates of the file were.
-fn print_written(file: &EffectsFile) {
-    println!("\n   effects of {}:", file.file);
-    for e in &file.effects {
-        let s = e.spec();
-        let exprs: Vec<String> = s
-            .targets
-            .iter()
-            .map(|(t, x)| format!("{t} = {x}"))
-            .collect();
-        println!("     {:<20} {}", s.name, exprs.join("; "));
-    }
-}
-
-/// The diagnosis with the effect `d` names added to the model (diagnosed again), if it names
-/// one: the "after" of the report. `offered` are the written effects tried besides the
-/// library (the named one may be one of them).
-pub fn with_named_effect(
-    campaign: &Campaign,
-    validation: Option<&Campaign>,
-    (in_model, offered): (&[&dyn Effect], &[&dyn Effect]),
-    opts: &Options,
-    d: &Diagnosis,
-) -> anyhow::Result<Option<Diagnosis>> {
-    let Some(missing) = &d.missing_effect else {
-        return Ok(None);
-    };
-    let from_library;
-    let effect: &dyn Effect = if let Some(e) = offered.iter().copied().find(|e| e.name() == missing)
-    {
-        e
-    } else {
-        from_library = effects::by_name(missing)?;
-        from_library.as_ref()
-    };
-    let mut with: Vec<&dyn Effect> = in_model.to_vec();
-    with.push(effect);
-    let rest: Vec<&dyn Effect> = offered
-        .iter()
-        .copied()
-        .filter(|e| e.name() != missing)
-        .collect();
-    let after = diagnose::diagnose_among(campaign, validation, &with, &rest, opts)
-        .with_context(|| format!("diagnosing with {missing} added"))?;
-    Ok(Some(after))
-}
-
-/// The HTML report (and the numbers of its error-vector maps as JSON) of `before` and, when
-/// an effect was added, `after`; `stages` the models' table (empty: the two diagnoses');
-/// `written` the effects of an effects file with their expressions
-/// ([`effects_file::expressions`]). Returns the page's path.
-pub fn write_report(
-    dir: &Path,
-    command: &str,
-    campaign: &Campaign,
-    before: &Diagnosis,
-    after: Option<&Diagnosis>,
-    (stages, written): (Vec<Stage>, Vec<(String, String)>),
-) -> anyhow::Result<PathBuf> {
-    let stages = if stages.is_empty() {
-        std::iter::once(before)
-            .chain(after)
-            .map(Report::stage_of)
-            .collect()
-    } else {
-        stages
-    };
-    Report {
-        command,
-        campaign,
-        before,
-        after,
-        stages,
-        written,
-    }
-    .write(dir)
 }

@@ -1,12 +1,9 @@
 //! `rpkm ingest CAMPAIGN.csv --out BAG`: a campaign file as a bag of ROS messages.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
+use super::bag_files::write_campaign_bag;
 use anyhow::Result;
-use rpkm_core::campaign::Campaign;
-use rpkm_transport::bag::{BagCompression, BagWriter, BagWriterOptions};
-
-use crate::campaign_bag::{campaign_messages, write_campaign, CampaignTopics};
 
 /// Convert a campaign CSV (spec format, mm) into a rosbag2 MCAP bag of ROS messages (SI):
 /// /rpkm/campaign_info (source, comments, covariate names), then per pose one
@@ -42,27 +39,4 @@ pub fn run(args: &IngestArgs) -> Result<()> {
         c.setups().len()
     );
     Ok(())
-}
-
-/// Bag options of the commands that write campaigns: default chunks, optional zstd.
-pub fn bag_options(zstd: bool) -> BagWriterOptions {
-    BagWriterOptions {
-        compression: if zstd {
-            BagCompression::Zstd
-        } else {
-            BagCompression::None
-        },
-        ..BagWriterOptions::default()
-    }
-}
-
-/// Writes campaign `c` as a new bag folder `out`; returns the number of messages. Nothing is
-/// created for a campaign the messages cannot hold (bad input, exit code 2).
-pub fn write_campaign_bag(c: &Campaign, out: &Path, zstd: bool) -> Result<u64> {
-    let messages = campaign_messages(c).map_err(|e| super::bad_input(e.to_string()))?;
-    let mut bag = BagWriter::create(out, bag_options(zstd))?;
-    let topics = CampaignTopics::add(&mut bag)?;
-    let count = write_campaign(&mut bag, &topics, &messages)?;
-    bag.finish()?;
-    Ok(count)
 }

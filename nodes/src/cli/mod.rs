@@ -2,10 +2,12 @@
 
 pub mod analyze;
 pub mod bag;
+pub(crate) mod bag_files;
 pub mod bench;
 pub mod calibrate;
 pub mod demo;
 pub mod diagnose;
+mod effect_stages;
 pub mod ingest;
 pub mod monitor;
 pub mod plan;
@@ -13,7 +15,8 @@ pub mod preload;
 pub mod record;
 pub mod replay;
 pub mod simulate;
-pub mod simulate_bag;
+mod summary;
+mod transport_args;
 
 use anyhow::Context;
 use std::path::Path;

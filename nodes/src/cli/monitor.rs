@@ -16,7 +16,7 @@ use ratatui::crossterm::event::{self, Event, KeyCode, KeyEventKind, KeyModifiers
 use ratatui::Terminal;
 use rpkm_transport::{topic, IpcMessage, Subscriber, Transport, TransportError};
 
-use super::record::{stop_flag, TransportArgs};
+use super::transport_args::{stop_flag, TransportArgs};
 use crate::monitor::{draw, ThresholdSource, Thresholds, Watch, WatchConfig};
 use crate::node::params::NodeParams;
 

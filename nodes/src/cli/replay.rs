@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 use anyhow::Result;
 use rpkm_transport::bag::{BagReadError, BagReader};
 
-use super::record::{stop_flag, TransportArgs};
+use super::transport_args::{stop_flag, TransportArgs};
 use crate::topics::{self, ReplayPort};
 
 /// Publish the rpkm topics of a bag through the transport, in the bag's log-time order
@@ -73,7 +73,7 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
             args.wait
         )));
     }
-    let bag = super::bag::open(&args.bag)?;
+    let bag = super::bag_files::open(&args.bag)?;
     let Selected {
         names: selected,
         port_of_topic,

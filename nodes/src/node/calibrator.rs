@@ -1448,7 +1448,7 @@ mod tests {
     use super::*;
     use crate::campaign_bag::pose_messages;
     use rpkm_core::params::{Model, Params};
-    use rpkm_core::twin::{Twin, TwinConfig};
+    use rpkm_twin::{Twin, TwinConfig};
 
     /// The calibrator with an effects file: the twin's lost motion of carrier 4 (20 µm) is
     /// calibrated with the geometry, and the Parameters carry it (SI) within 0.1 µm of the
@@ -1456,7 +1456,7 @@ mod tests {
     #[test]
     fn parameters_carry_the_written_effects_parameters() -> anyhow::Result<()> {
         use rpkm_core::campaign::Instrument;
-        use rpkm_core::twin::EffectKind;
+        use rpkm_twin::EffectKind;
         let b_true = 0.02;
         let mut twin = Twin::new(TwinConfig {
             seed: 8,
@@ -1665,9 +1665,7 @@ mod tests {
     /// moved by the crash (the twin's truth), and nothing is reported as a step before it.
     #[test]
     fn the_online_tracker_warns_of_a_crash_by_name() -> anyhow::Result<()> {
-        use rpkm_core::twin::{
-            EffectKind, ProductionConfig, ProductionStream, StepChange as Crash,
-        };
+        use rpkm_twin::{EffectKind, ProductionConfig, ProductionStream, StepChange as Crash};
         let elastic = EffectKind::PreloadElastic;
         let twin = Twin::new(TwinConfig {
             seed: 5,

@@ -23,12 +23,9 @@ pub mod names;
 pub mod pubsub;
 pub mod topic;
 
-/// The ROS 2 namespace of every rpkm node (`/rpkm/ingest`, `/rpkm/tcp_estimator`, ...).
-pub const NODE_NAMESPACE: &str = "/rpkm";
-
 pub use error::TransportError;
 pub use ipc::IpcMessage;
-pub use names::{NameError, Names};
+pub use names::{NameError, Names, NODE_NAMESPACE};
 pub use pubsub::{Backend, Publisher, Subscriber, Transport, TransportConfig};
 pub use topic::{Durability, Qos, Reliability, Topic};
 pub mod bag;

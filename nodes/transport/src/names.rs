@@ -12,7 +12,8 @@
 use std::collections::HashSet;
 use std::sync::{Mutex, PoisonError};
 
-use crate::NODE_NAMESPACE;
+/// The ROS 2 namespace of every rpkm node (`/rpkm/ingest`, `/rpkm/tcp_estimator`, ...).
+pub const NODE_NAMESPACE: &str = "/rpkm";
 
 /// A namespace or remapping rule that ROS 2 would refuse.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use rpkm_core::campaign::{Campaign, Instrument, Pose};
 use rpkm_core::elastic::Stiffness;
 use rpkm_core::params::{Params, NAMES};
-use rpkm_core::twin::{EffectKind, MachineState, Twin, TwinConfig};
+use rpkm_twin::{EffectKind, MachineState, Twin, TwinConfig};
 
 pub fn rpkm() -> &'static str {
     env!("CARGO_BIN_EXE_rpkm")

@@ -9,67 +9,13 @@
 //! never solved into garbage. Reactions are K·u − f on the full matrix.
 
 use super::beam::{self, Axis, Section, M6, V6};
-use super::FeError;
+use super::error::{Component, DofLabel, FeError, Label};
 use nalgebra::{DMatrix, DVector, Vector2, Vector3};
-use std::fmt;
 
 /// A Cholesky pivot below this fraction of its diagonal entry means the dof is not held (the
 /// structure is a mechanism there). Well-posed structures here stay above 1e-3; a true
 /// mechanism falls to round-off (1e-16).
 pub const PIVOT_RATIO_MIN: f64 = 1e-11;
-
-/// Name of a node, beam or dof, for errors and reports: a kind and a 1-based number
-/// ("rod 2", "carrier 4"); number 0 for a part there is one of ("TCP").
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Label {
-    pub kind: &'static str,
-    pub number: usize,
-}
-
-impl Label {
-    pub const fn new(kind: &'static str, number: usize) -> Label {
-        Label { kind, number }
-    }
-}
-
-impl fmt::Display for Label {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.number == 0 {
-            write!(f, "{}", self.kind)
-        } else {
-            write!(f, "{} {}", self.kind, self.number)
-        }
-    }
-}
-
-/// Which component of a node a dof is. In a rotated nodal frame, `U1`/`U2` are along its axes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Component {
-    U1,
-    U2,
-    Rotation,
-    /// A dof that belongs to no node (e.g. the far end of a drive spring).
-    Scalar,
-}
-
-/// A dof's name.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct DofLabel {
-    pub owner: Label,
-    pub component: Component,
-}
-
-impl fmt::Display for DofLabel {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let c = match self.component {
-            Component::U1 => "u1",
-            Component::U2 => "u2",
-            Component::Rotation => "rotation",
-            Component::Scalar => "displacement",
-        };
-        write!(f, "{} of {}", c, self.owner)
-    }
-}
 
 pub type NodeId = usize;
 pub type DofId = usize;

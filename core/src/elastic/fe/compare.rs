@@ -3,9 +3,9 @@
 //! (e.g. 10 µm on l2 or l3, as the thesis's figures 6.18-6.19 and table 6.2), and each model
 //! predicts where the TCP ends up and, where it knows stiffness, the drive forces.
 
+use super::error::FeError;
 use super::machine::FeStiffness;
 use super::methods::{FeModel, Method};
-use super::FeError;
 use crate::elastic::baseline;
 use crate::elastic::guarded::fegm;
 use crate::elastic::spring::{ElasticError, Stiffness, ALL_ACTIVE};

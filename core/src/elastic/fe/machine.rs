@@ -14,9 +14,10 @@
 //! - drives: the carrier's along-guide dof prescribed (rigid drive) or tied to a prescribed
 //!   drive dof by a spring (compliant drive); a follower's carrier slides freely.
 
-use super::assembly::{BeamId, DofId, Label, NodeId, Structure};
+use super::assembly::{BeamId, DofId, NodeId, Structure};
 use super::beam::{Section, STEEL_E_N_PER_MM2};
-use super::FeError;
+use super::error::FeError;
+use super::error::Label;
 use crate::elastic::spring::{Followers, Stiffness};
 use crate::geometry::{carrier_joint, guide_frame, platform_joint};
 use crate::params::{Params, RODS};

@@ -2,8 +2,8 @@
 //! parameters do not fit together, and the reusable model that solves either.
 
 use super::assembly::{Solver, Structure};
+use super::error::FeError;
 use super::machine::{build, FeStiffness, Layout, Placement};
-use super::FeError;
 use crate::elastic::spring::{Followers, NOMINAL_DRIVE_FORCE_N};
 use crate::geometry::{self, carrier_joint, platform_joint, Solution, Subsystem};
 use crate::params::{Model, Params, RODS};

@@ -22,30 +22,13 @@
 pub mod assembly;
 pub mod beam;
 pub mod compare;
+mod error;
 pub mod machine;
 pub mod methods;
 
-pub use assembly::{DofLabel, Label};
 pub use beam::Section;
 pub use compare::{compare_methods, Comparison, ComparisonError, MethodResult, RedundantModel};
+pub use error::FeError;
+pub use error::{DofLabel, Label};
 pub use machine::{FeStiffness, Joint};
 pub use methods::{fe_solve, FeEquilibrium, FeModel, Method};
-
-use crate::geometry::GeometryError;
-
-/// A finite-element solve that failed.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum FeError {
-    #[error("rigid reference configuration: {0}")]
-    Reference(#[from] GeometryError),
-    #[error("no pair of active drives among the viable subsystems: the platform is not held")]
-    NotHeld,
-    #[error("non-finite input or stiffness")]
-    NonFinite,
-    #[error("{what} has a non-positive stiffness {value}")]
-    BadStiffness { what: Label, value: f64 },
-    #[error("{beam} has zero length: its two nodes coincide")]
-    DegenerateBeam { beam: Label },
-    #[error("singular stiffness at the {dof} (pivot ratio {ratio:.2e}): the structure is a mechanism there")]
-    Singular { dof: DofLabel, ratio: f64 },
-}

@@ -23,7 +23,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::diagnose::{self, Options};
-use rpkm_core::twin::{Twin, TwinConfig};
+use rpkm_twin::{Twin, TwinConfig};
 
 use crate::cli::bad_input;
 

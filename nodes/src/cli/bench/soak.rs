@@ -16,9 +16,9 @@ use std::process::{Child, ChildStdin, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use rpkm_core::twin::{Twin, TwinConfig};
 use rpkm_msgs::{ActuatorState, DiagnosticArray, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::{topic, Subscriber, Transport, TransportConfig};
+use rpkm_twin::{Twin, TwinConfig};
 
 use crate::cli::bad_input;
 use crate::node::inputs::SeqGaps;

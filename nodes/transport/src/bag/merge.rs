@@ -19,9 +19,11 @@ use std::thread::JoinHandle;
 
 use mcap::records::Record;
 
+use super::error::BagDecodeError;
 use super::error::BagReadError;
 use super::reader::{BagMessage, BagReader, ChunkIndex, Segment};
 use super::records::{read_segment, SegmentError};
+use rpkm_msgs::RosMessage;
 
 /// A message read from a segment, not yet handed out.
 struct Pending {
@@ -360,5 +362,34 @@ impl<'a> Iterator for Messages<'a> {
         };
         self.index += 1;
         Some(Ok(message))
+    }
+}
+
+/// Reading a bag's messages: the merge of its segments, here where the merge is.
+impl BagReader {
+    /// All messages in log-time order (ties in file order), read from the files as they go.
+    pub fn messages(&self) -> Messages<'_> {
+        Messages::new(self)
+    }
+
+    /// Decodes every message of `topic` as `T`, with its log time, in log-time order.
+    pub fn decode_topic<T: RosMessage>(
+        &self,
+        topic: &str,
+    ) -> Result<Vec<(u64, T)>, BagDecodeError> {
+        if self.topic(topic).is_none() {
+            return Err(BagDecodeError::NoSuchTopic {
+                topic: topic.to_owned(),
+            });
+        }
+        let mut decoded = Vec::new();
+        for message in self.messages() {
+            let message = message?;
+            // every type under that name: a second type is a mismatch, not skipped
+            if message.topic == topic {
+                decoded.push((message.log_time, message.decode::<T>()?));
+            }
+        }
+        Ok(decoded)
     }
 }

@@ -126,7 +126,7 @@ impl BagMetadata {
         let message_count = topics.iter().map(|t| t.count).sum();
         Self {
             version: METADATA_VERSION,
-            storage_identifier: super::STORAGE_IDENTIFIER.to_owned(),
+            storage_identifier: super::format::STORAGE_IDENTIFIER.to_owned(),
             duration,
             starting_time,
             message_count,
@@ -136,7 +136,7 @@ impl BagMetadata {
                     topic_metadata: TopicMetadata {
                         name: t.name.to_owned(),
                         type_name: t.type_name.to_owned(),
-                        serialization_format: super::MESSAGE_ENCODING.to_owned(),
+                        serialization_format: super::format::MESSAGE_ENCODING.to_owned(),
                         offered_qos_profiles: serde_yaml::Value::String(t.qos_yaml.to_owned()),
                         type_description_hash: t.type_hash.unwrap_or_default().to_owned(),
                     },

@@ -16,6 +16,7 @@
 
 mod cdr;
 mod error;
+mod format;
 mod merge;
 mod metadata;
 mod qos;
@@ -28,6 +29,10 @@ pub use cdr::{decode_cdr, encode_cdr};
 pub use error::{
     BagDecodeError, BagOpenError, BagReadError, BagWriteError, CdrError, RecoverError,
 };
+pub use format::{
+    MESSAGE_ENCODING, PROFILE, QOS_METADATA_KEY, SCHEMA_ENCODING, STORAGE_IDENTIFIER,
+    TYPE_HASH_METADATA_KEY,
+};
 pub use merge::Messages;
 pub use metadata::{BagMetadata, METADATA_VERSION};
 pub use qos::{Durability, History, Liveliness, QosProfile, Reliability};
@@ -36,16 +41,3 @@ pub use recover::{recover, FileRecovery, RecoveryReport, StopReason};
 pub use writer::{
     BagCompression, BagSummary, BagWriter, BagWriterOptions, RawTopic, RawTopicHandle, TopicHandle,
 };
-
-/// MCAP header profile of ROS 2 bags.
-pub const PROFILE: &str = "ros2";
-/// Schema encoding of ROS 2 `.msg` definitions.
-pub const SCHEMA_ENCODING: &str = "ros2msg";
-/// Message encoding of CDR payloads.
-pub const MESSAGE_ENCODING: &str = "cdr";
-/// `storage_identifier` in `metadata.yaml`.
-pub const STORAGE_IDENTIFIER: &str = "mcap";
-/// Channel metadata key holding the offered QoS profiles (YAML string), as rosbag2 writes it.
-pub const QOS_METADATA_KEY: &str = "offered_qos_profiles";
-/// Channel metadata key holding the type description hash (`RIHS01_...`), when known.
-pub const TYPE_HASH_METADATA_KEY: &str = "topic_type_hash";

@@ -9,7 +9,6 @@ use std::sync::Arc;
 use rpkm_msgs::RosMessage;
 
 use super::error::{BagDecodeError, BagOpenError};
-use super::merge::Messages;
 use super::metadata::{BagMetadata, METADATA_FILE};
 use super::records::{walk_data_section, DataItem, SectionEnd, WalkError};
 
@@ -202,32 +201,6 @@ impl BagReader {
         self.time_bounds
     }
 
-    /// All messages in log-time order (ties in file order), read from the files as they go.
-    pub fn messages(&self) -> Messages<'_> {
-        Messages::new(self)
-    }
-
-    /// Decodes every message of `topic` as `T`, with its log time, in log-time order.
-    pub fn decode_topic<T: RosMessage>(
-        &self,
-        topic: &str,
-    ) -> Result<Vec<(u64, T)>, BagDecodeError> {
-        if self.topic(topic).is_none() {
-            return Err(BagDecodeError::NoSuchTopic {
-                topic: topic.to_owned(),
-            });
-        }
-        let mut decoded = Vec::new();
-        for message in self.messages() {
-            let message = message?;
-            // every type under that name: a second type is a mismatch, not skipped
-            if message.topic == topic {
-                decoded.push((message.log_time, message.decode::<T>()?));
-            }
-        }
-        Ok(decoded)
-    }
-
     pub(super) fn index(&self) -> &Arc<ChunkIndex> {
         &self.index
     }
@@ -343,8 +316,8 @@ impl Survey {
             message_encoding: channel.message_encoding.clone(),
             schema_encoding,
             definition,
-            offered_qos_profiles: metadata(super::QOS_METADATA_KEY).unwrap_or_default(),
-            type_hash: metadata(super::TYPE_HASH_METADATA_KEY),
+            offered_qos_profiles: metadata(super::format::QOS_METADATA_KEY).unwrap_or_default(),
+            type_hash: metadata(super::format::TYPE_HASH_METADATA_KEY),
             message_count: 0,
         });
         self.topics.len() - 1
@@ -387,7 +360,7 @@ fn storage_files(path: &Path) -> Result<(Vec<PathBuf>, Option<BagMetadata>), Bag
     }
     if path.join(METADATA_FILE).is_file() {
         let metadata = BagMetadata::read_from(path)?;
-        if metadata.storage_identifier != super::STORAGE_IDENTIFIER {
+        if metadata.storage_identifier != super::format::STORAGE_IDENTIFIER {
             return Err(BagOpenError::UnsupportedStorage {
                 path: path.to_path_buf(),
                 storage: metadata.storage_identifier,

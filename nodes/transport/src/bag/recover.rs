@@ -138,10 +138,13 @@ fn recover_file(path: &Path, writer: &mut BagWriter) -> Result<FileRecovery, Rec
                         definition,
                         offered_qos_yaml: channel
                             .metadata
-                            .get(super::QOS_METADATA_KEY)
+                            .get(super::format::QOS_METADATA_KEY)
                             .cloned()
                             .unwrap_or_default(),
-                        type_hash: channel.metadata.get(super::TYPE_HASH_METADATA_KEY).cloned(),
+                        type_hash: channel
+                            .metadata
+                            .get(super::format::TYPE_HASH_METADATA_KEY)
+                            .cloned(),
                     })?;
                     channels.insert(channel.id, handle);
                 }

@@ -198,7 +198,7 @@ impl BagWriter {
         // buffered in memory until closed (`disable_seeking`): the file never holds a
         // half-written chunk, only complete ones followed by their message indexes.
         let write_options = mcap::WriteOptions::new()
-            .profile(super::PROFILE)
+            .profile(super::format::PROFILE)
             .library(concat!("rpkm-transport/", env!("CARGO_PKG_VERSION")))
             .compression(compression)
             .chunk_size(None)
@@ -286,21 +286,29 @@ impl BagWriter {
             .mcap
             .add_schema(
                 &topic.type_name,
-                super::SCHEMA_ENCODING,
+                super::format::SCHEMA_ENCODING,
                 topic.definition.as_bytes(),
             )
             .map_err(mcap_err)?;
         let mut metadata = BTreeMap::new();
         metadata.insert(
-            super::QOS_METADATA_KEY.to_owned(),
+            super::format::QOS_METADATA_KEY.to_owned(),
             topic.offered_qos_yaml.clone(),
         );
         if let Some(hash) = &topic.type_hash {
-            metadata.insert(super::TYPE_HASH_METADATA_KEY.to_owned(), hash.clone());
+            metadata.insert(
+                super::format::TYPE_HASH_METADATA_KEY.to_owned(),
+                hash.clone(),
+            );
         }
         let channel_id = inner
             .mcap
-            .add_channel(schema_id, &topic.name, super::MESSAGE_ENCODING, &metadata)
+            .add_channel(
+                schema_id,
+                &topic.name,
+                super::format::MESSAGE_ENCODING,
+                &metadata,
+            )
             .map_err(mcap_err)?;
         inner.topics.push(Topic {
             raw: topic,

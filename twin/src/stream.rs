@@ -3,7 +3,7 @@
 //! own (its encoders, its thermometer), drawn from a generator seeded apart from the
 //! campaign's draws so that adding a stream does not change the campaign measured before it.
 
-use super::{gauss, Twin, TwinError, TEMP_SENSOR_K};
+use super::machine::{gauss, Twin, TwinError, TEMP_SENSOR_K};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 

@@ -5,7 +5,7 @@ use std::str::FromStr;
 
 // One error for an effect name, whichever list it is looked up in (the model's library here
 // lists the simulator's kinds).
-use crate::effects::UnknownEffect;
+use rpkm_core::effects::UnknownEffect;
 
 /// Thermal expansion coefficient of steel, 1/K.
 pub const ALPHA_PER_K: f64 = 11.5e-6;

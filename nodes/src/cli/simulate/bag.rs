@@ -4,13 +4,13 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use rpkm_core::campaign::Campaign;
-use rpkm_core::twin::Twin;
 use rpkm_msgs::CampaignInfo;
 use rpkm_transport::bag::BagWriter;
+use rpkm_twin::Twin;
 
-use super::ingest::{bag_options, write_campaign_bag};
-use super::simulate::SimulateArgs;
+use super::args::SimulateArgs;
 use crate::campaign_bag::{campaign_messages, stamp_ns, write_campaign, CampaignTopics};
+use crate::cli::bag_files::{bag_options, write_campaign_bag};
 use crate::stream::{self, StreamSpec};
 
 /// Seconds between the end of the campaign (or the twin's start) and the stream.
@@ -28,7 +28,7 @@ pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
     let (campaign, validation) = campaigns(args, twin, names)?;
     let spec = stream_spec(args, twin, campaign.as_ref())?;
     let messages = match &campaign {
-        Some(c) => Some(campaign_messages(c).map_err(|e| super::bad_input(e.to_string()))?),
+        Some(c) => Some(campaign_messages(c).map_err(|e| crate::cli::bad_input(e.to_string()))?),
         None => None,
     };
 
@@ -81,7 +81,7 @@ pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
         if let (Some(spec), Some(obj)) = (&spec, truth.as_object_mut()) {
             obj.insert("stream".into(), serde_json::to_value(spec)?);
         }
-        super::write_json(path, &truth)?;
+        crate::cli::write_json(path, &truth)?;
     }
     Ok(())
 }
@@ -133,7 +133,7 @@ fn stream_spec(
             first_seq: campaign.map_or(0, |c| c.poses.len() as u64),
         }),
         None if args.fault.is_some() => {
-            return Err(super::bad_input(
+            return Err(crate::cli::bad_input(
                 "--fault acts on the stream: give --stream-hz too".into(),
             ))
         }

@@ -6,13 +6,13 @@
 //! carries the truth beside the readings: the true parameters at that time (thermal expansion
 //! and step included) and the true TCP.
 
-use super::{gauss, Twin, TwinError, TEMP_SENSOR_K};
-use crate::design::{X_RANGE, Y_RANGE};
-use crate::elastic::{self, Equilibrium, ALL_ACTIVE};
-use crate::geometry;
-use crate::params::{Model, Params};
+use super::machine::{gauss, Twin, TwinError, TEMP_SENSOR_K};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use rpkm_core::design::{X_RANGE, Y_RANGE};
+use rpkm_core::elastic::{self, Equilibrium, ALL_ACTIVE};
+use rpkm_core::geometry;
+use rpkm_core::params::{Model, Params};
 
 /// A step change of one parameter (a crash that bends a rod).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -118,7 +118,7 @@ impl ProductionConfig {
 
     /// Number of samples.
     pub fn samples(&self) -> usize {
-        crate::convert::round_count(self.seconds * self.rate_hz)
+        rpkm_core::convert::round_count(self.seconds * self.rate_hz)
     }
 }
 

@@ -1,0 +1,194 @@
+//! What `rpkm diagnose`, `rpkm calibrate` and the demo print and write of a diagnosis: the
+//! summary on the terminal, the noise per group, the HTML report.
+
+use crate::effects_file::EffectsFile;
+use crate::report::{Report, Stage};
+use crate::words;
+use rpkm_core::campaign::Campaign;
+use rpkm_core::diagnose::Diagnosis;
+use rpkm_core::variance;
+use std::path::{Path, PathBuf};
+
+/// A µm value to one decimal, `-` when absent (no held-out data).
+pub fn um(v: Option<f64>) -> String {
+    v.map_or("-".to_owned(), |v| format!("{v:.1}"))
+}
+
+/// The terminal summary.
+pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
+    let b = &d.baseline;
+    let with = if d.effects_in_model.is_empty() {
+        String::new()
+    } else {
+        format!(" + {}", d.effects_in_model.join(" + "))
+    };
+    println!(
+        "Diagnosis of {} ({} poses) with {}{with}",
+        campaign.source,
+        campaign.poses.len(),
+        d.model
+    );
+    println!(
+        "\n1. The current model against the measurements\n   calibration RMS {:.1} um, held-out RMS {} um, noise floor {:.1} um",
+        b.cal_rms_um,
+        um(b.val_rms_um),
+        b.noise_floor_um
+    );
+    println!(
+        "   against the stated noise: chi2/dof {:.2} over {:.0} dof, p = {:.2e} (the verdict does not rest on it)",
+        b.chi2_per_dof, b.dof, b.p_value,
+    );
+    if let Some((n, of)) = d.determined {
+        println!(
+            "   the campaign determined {n} of {of} parameter combinations better than their \
+             tolerance; the rest stayed at the prior"
+        );
+    }
+    print_groups(d);
+    print_effects(d);
+    let kind = serde_json::to_value(d.verdict_kind)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_default();
+    println!("\n3. Verdict ({kind}): {}", words::verdict(d));
+    if let Some(u) = &d.unexplained {
+        println!("\n4. Unexplained structure: {}", words::follows(u));
+        for t in &u.also {
+            println!(
+                "   also: {} {} follows {} (r = {:.2})",
+                t.instrument, t.direction, t.feature, t.r
+            );
+        }
+    }
+    println!("\n({})", words::test(&d.test));
+}
+
+/// The noise per group, the residual per instrument and direction, the worst rows.
+fn print_groups(d: &Diagnosis) {
+    if !d.noise_groups.is_empty() {
+        let with = if d.noise_estimated_with.is_empty() {
+            String::new()
+        } else {
+            format!(" (the model with {})", d.noise_estimated_with.join(" and "))
+        };
+        println!("\n   noise per group, estimated from the residuals{with}:");
+        print_noise_groups(&d.noise_groups, "   ");
+    }
+    println!(
+        "\n   {:<6} {:<14} {:>5} {:>10} {:>10} {:>9}",
+        "instr", "direction", "rows", "RMS", "noise", "chi2/row"
+    );
+    for g in &d.groups {
+        println!(
+            "   {:<6} {:<14} {:>5} {:>10.2} {:>10.2} {:>9.1}",
+            g.instrument, g.direction, g.rows, g.rms, g.noise, g.chi2_per_row
+        );
+    }
+    println!("   (um; urad for psi)\n   worst residuals:");
+    for p in d.points.iter().take(3) {
+        println!(
+            "     line {:>5} {:<5} {:<10} {:>9.2} ({:.1} sigma) at x {:.0}, y {:.0} mm",
+            p.line,
+            p.instrument,
+            p.direction,
+            p.value,
+            p.value / p.sigma,
+            p.x,
+            p.y
+        );
+    }
+}
+
+/// Every effect tried, best first, and those not tried.
+fn print_effects(d: &Diagnosis) {
+    println!("\n2. Effects tried (best first)");
+    println!(
+        "   {:<22} {:>6} {:>9} {:>11} {:>10} {:>10}",
+        "effect", "signif", "explained", "chi2/dof", "val before", "val after"
+    );
+    for c in &d.candidates {
+        println!(
+            "   {:<22} {:>6} {:>8.0}% {:>11.2} {:>10} {:>10}",
+            c.effect,
+            if c.significant { "yes" } else { "no" },
+            100.0 * c.explained_fraction,
+            c.chi2_per_dof_after,
+            um(c.val_rms_before_um),
+            um(c.val_rms_after_um)
+        );
+    }
+    for s in &d.skipped {
+        println!("   {:<22} not tried: {}", s.effect, s.reason);
+    }
+    if let Some(c) = d.candidates.first() {
+        println!("   evidence for {}: {}", c.effect, words::evidence(c));
+    }
+}
+
+/// The file's effects as written, under the summary: what the candidates of the file were.
+pub fn print_written(file: &EffectsFile) {
+    println!("\n   effects of {}:", file.file);
+    for e in &file.effects {
+        let s = e.spec();
+        let exprs: Vec<String> = s
+            .targets
+            .iter()
+            .map(|(t, x)| format!("{t} = {x}"))
+            .collect();
+        println!("     {:<20} {}", s.name, exprs.join("; "));
+    }
+}
+
+/// The HTML report (and the numbers of its error-vector maps as JSON) of `before` and, when
+/// an effect was added, `after`; `stages` the models' table (empty: the two diagnoses');
+/// `written` the effects of an effects file with their expressions
+/// ([`effects_file::expressions`]). Returns the page's path.
+pub fn write_report(
+    dir: &Path,
+    command: &str,
+    campaign: &Campaign,
+    before: &Diagnosis,
+    after: Option<&Diagnosis>,
+    (stages, written): (Vec<Stage>, Vec<(String, String)>),
+) -> anyhow::Result<PathBuf> {
+    let stages = if stages.is_empty() {
+        std::iter::once(before)
+            .chain(after)
+            .map(Report::stage_of)
+            .collect()
+    } else {
+        stages
+    };
+    Report {
+        command,
+        campaign,
+        before,
+        after,
+        stages,
+        written,
+    }
+    .write(dir)
+}
+
+/// The rows of the noise table, each line starting with `indent`.
+pub fn print_noise_groups(groups: &[variance::GroupNoise], indent: &str) {
+    println!(
+        "{indent}{:<14} {:>10} {:>10} {:>8}  unit",
+        "group", "stated", "estimated", "dof"
+    );
+    for g in groups {
+        println!(
+            "{indent}{:<14} {:>10.3} {:>10.3} {:>8.1}  {}{}",
+            g.group,
+            g.assumed,
+            g.estimated,
+            g.dof,
+            g.unit,
+            if g.estimated_from_data {
+                ""
+            } else {
+                "  (too few degrees of freedom: stated level kept)"
+            }
+        );
+    }
+}

@@ -1,0 +1,178 @@
+//! The twin's machine: how it is configured, the state it keeps and how it fails. Every file
+//! of the twin reads this one; it reads only the effects it is configured with.
+
+use super::effects::{EffectKind, ALPHA_PER_K, REFERENCE_TEMP_C};
+use rand::rngs::StdRng;
+use rand_distr::{Distribution, StandardNormal};
+use rpkm_core::elastic::{ElasticError, Stiffness};
+use rpkm_core::geometry::GeometryError;
+use rpkm_core::noise::NoiseModel;
+use rpkm_core::params::Params;
+use std::collections::BTreeMap;
+
+/// Time per pose, s.
+pub const SECONDS_PER_POSE: f64 = 3.0;
+/// Time between setups, s.
+pub const SECONDS_BETWEEN_SETUPS: f64 = 120.0;
+/// Noise of the machine temperature sensor, K.
+pub const TEMP_SENSOR_K: f64 = 0.01;
+
+/// Configuration of a twin.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TwinConfig {
+    /// Seed of every random draw (parameter errors, noise, alignment angles).
+    pub seed: u64,
+    /// Hidden effects and their magnitudes (units: [`EffectKind::unit`]).
+    pub effects: Vec<(EffectKind, f64)>,
+    /// σ of the true parameters' length errors, mm.
+    pub length_sigma_mm: f64,
+    /// σ of the true parameters' angle errors, rad.
+    pub angle_sigma_rad: f64,
+    /// Parameters the controller commands igm with (nominal by default).
+    pub controller: Params,
+    /// Stiffness of the true machine (used under `preload_elastic`).
+    pub stiffness: Stiffness,
+    /// What expands under the `thermal` effect, by how much, from which reference: the
+    /// twin's own physics, which a test varies (a machine whose rods alone expand).
+    pub thermal: ThermalPhysics,
+    /// The noise of the twin's instruments and encoders (None: noiseless). Its own value:
+    /// a test makes the machine noisier, or otherwise noisy, than the calibration assumes.
+    pub noise: Option<NoiseModel>,
+    /// What a relative instrument is zeroed on.
+    pub reset: ResetReading,
+    /// A periodic error of one carrier's scale (None: none).
+    pub cyclic: Option<CyclicScale>,
+}
+
+/// A periodic error of one carrier's scale (a linear scale's or an encoder's interpolation
+/// error, a ball screw's pitch error): the carrier stands at its reading plus
+/// `amplitude_mm` · sin(2π · reading / `pitch_mm` + `phase`). Not in the model's library: the
+/// diagnosis must find it without a term made for it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CyclicScale {
+    /// Carrier 0..=3 (q1..q4).
+    pub carrier: usize,
+    pub amplitude_mm: f64,
+    pub pitch_mm: f64,
+    /// rad.
+    pub phase: f64,
+}
+
+impl CyclicScale {
+    /// Carrier position minus reading at `reading` (mm).
+    pub fn offset(&self, reading: f64) -> f64 {
+        self.amplitude_mm * (std::f64::consts::TAU * reading / self.pitch_mm + self.phase).sin()
+    }
+}
+
+/// What a relative instrument (tracker, grid encoder, interferometer) is zeroed on at its
+/// setup's reset pose.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ResetReading {
+    /// A reading with the instrument's noise, as a real instrument is: its error is in
+    /// every reading of the setup.
+    #[default]
+    Noisy,
+    /// The true position: readings independent of each other.
+    Exact,
+}
+
+impl Default for TwinConfig {
+    fn default() -> Self {
+        TwinConfig {
+            seed: 1,
+            effects: Vec::new(),
+            length_sigma_mm: 0.1,
+            angle_sigma_rad: 2e-4,
+            controller: Params::nominal(),
+            stiffness: Stiffness::default(),
+            noise: Some(NoiseModel::default()),
+            thermal: ThermalPhysics::default(),
+            reset: ResetReading::default(),
+            cyclic: None,
+        }
+    }
+}
+
+/// Expansion coefficients (1/K) of the parts of the twin under `thermal`, and the temperature
+/// its true parameters hold at.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ThermalPhysics {
+    /// Rod lengths l1..l5.
+    pub rods_per_k: f64,
+    /// Guide positions d1, d2 (the frame).
+    pub frame_per_k: f64,
+    /// Linear scales (carrier position per encoder reading).
+    pub scales_per_k: f64,
+    pub reference_c: f64,
+}
+
+impl Default for ThermalPhysics {
+    /// An all-steel machine: everything expands at 11.5 ppm/K from 20 °C.
+    fn default() -> Self {
+        ThermalPhysics {
+            rods_per_k: ALPHA_PER_K,
+            frame_per_k: ALPHA_PER_K,
+            scales_per_k: ALPHA_PER_K,
+            reference_c: REFERENCE_TEMP_C,
+        }
+    }
+}
+
+/// A twin that could not be built or could not drive a pose.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TwinError {
+    #[error("effect {0} given twice")]
+    DuplicateEffect(EffectKind),
+    #[error("effect {effect}: magnitude {magnitude} is not a finite number{extra}")]
+    BadMagnitude {
+        effect: EffectKind,
+        magnitude: f64,
+        extra: &'static str,
+    },
+    #[error("setup {setup}, target ({x}, {y}) mm: controller igm: {source}")]
+    Controller {
+        setup: String,
+        x: f64,
+        y: f64,
+        source: GeometryError,
+    },
+    #[error("setup {setup}, target ({x}, {y}) mm: true machine: {source}")]
+    Machine {
+        setup: String,
+        x: f64,
+        y: f64,
+        source: GeometryError,
+    },
+    #[error("setup {setup}, target ({x}, {y}) mm: elastic model: {source}")]
+    Elastic {
+        setup: String,
+        x: f64,
+        y: f64,
+        source: ElasticError,
+    },
+    #[error("setup {setup}: pose before its reset pose")]
+    NoReset { setup: String },
+    #[error("unknown campaign {0:?}, expected lt, kgm, dbb, li_x, li_y, li_psi, self, circle or validation")]
+    UnknownCampaign(String),
+}
+
+/// The digital twin.
+#[derive(Clone, Debug)]
+pub struct Twin {
+    pub(super) config: TwinConfig,
+    pub(super) truth_params: Params,
+    pub(super) rng: StdRng,
+    /// The drive forces' noise: its own stream, so that the other readings draw the same
+    /// numbers whether forces are recorded or not.
+    pub(super) force_rng: StdRng,
+    /// The readings the relative setups are zeroed on: their own stream, so that every other
+    /// draw is the same whether resets are noisy or exact.
+    pub(super) reset_rng: StdRng,
+    pub(super) t: f64,
+    pub(super) alignment: BTreeMap<String, f64>,
+}
+
+pub(super) fn gauss(rng: &mut StdRng) -> f64 {
+    StandardNormal.sample(rng)
+}
