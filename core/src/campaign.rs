@@ -48,6 +48,7 @@
 //! [`CampaignReader`] reads a stream line by line with the same rules (the ingest node).
 
 mod error;
+pub mod motion;
 mod parse;
 pub mod plausible;
 mod write;
@@ -57,6 +58,7 @@ use std::fmt;
 use std::str::FromStr;
 
 pub use error::CampaignError;
+pub use motion::{Motion, MotionCovariates};
 pub use parse::CampaignReader;
 
 /// The required columns, in the order [`Campaign::to_csv`] writes them.
@@ -361,46 +363,23 @@ impl Campaign {
     /// since the first pose). [`Campaign::covariate`] offers them under these names when the
     /// file has no column of that name.
     pub fn derived_covariates(&self) -> Vec<(String, Vec<f64>)> {
-        let n = self.poses.len();
-        let mut dir = vec![[1.0; 4]; n];
-        let mut travel = vec![[0.0; 4]; n];
-        for i in 1..n {
-            let (prev_q, now_q) = (self.poses[i - 1].q, self.poses[i].q);
-            for a in 0..4 {
-                let dq = now_q[a] - prev_q[a];
-                // a carrier that did not move keeps the direction of its last move
-                let d = if dq.abs() > 1e-9 {
-                    dq.signum()
-                } else {
-                    dir[i - 1][a]
-                };
-                dir[i][a] = d;
-                travel[i][a] = if d.total_cmp(&dir[i - 1][a]).is_eq() {
-                    travel[i - 1][a] + dq.abs()
-                } else {
-                    dq.abs()
-                };
-            }
-        }
-        let t0 = self.poses.first().map_or(0.0, |p| p.t);
+        let mut motion = Motion::default();
+        let at: Vec<MotionCovariates> = self.poses.iter().map(|p| motion.next(p.q, p.t)).collect();
         let mut out: Vec<(String, Vec<f64>)> = (0..4)
             .map(|a| {
                 (
                     format!("dir_q{}", a + 1),
-                    dir.iter().map(|d| d[a]).collect(),
+                    at.iter().map(|m| m.dir[a]).collect(),
                 )
             })
             .collect();
         out.extend((0..4).map(|a| {
             (
                 format!("travel_q{}", a + 1),
-                travel.iter().map(|d| d[a]).collect(),
+                at.iter().map(|m| m.travel[a]).collect(),
             )
         }));
-        out.push((
-            "t_run".to_owned(),
-            self.poses.iter().map(|p| p.t - t0).collect(),
-        ));
+        out.push(("t_run".to_owned(), at.iter().map(|m| m.t_run).collect()));
         out
     }
 

@@ -285,6 +285,7 @@ fn negated(mut s: InputSensitivity) -> InputSensitivity {
     s.dp = -s.dp;
     s.dq = s.dq.map(|v| -v);
     s.dm = -s.dm;
+    s.dpsi = -s.dpsi;
     s.dk = -s.dk;
     s
 }
@@ -1196,14 +1197,17 @@ fn forward_rows(
                     _ => (PSI, pose.psi, Direction::Psi(a_of(sub), b_of(sub)), None),
                 };
                 let Some(m) = measured else { return Ok(()) };
-                let dm = w.map_or(0.0, |k| dpose.dm[k]);
+                // the reading's correction: x or y of dm, or dpsi for the angle
+                let dm = w.map_or(dpose.dpsi, |k| dpose.dm[k]);
                 (direction, d(v) - m - dm, [(v, 1.0), (v, 0.0)], w, var(v))
             }
             _ => return Ok(()),
         };
         let mut at_pose = input_sensitivity(&now, sub, &g);
-        if let Some(k) = w {
-            at_pose.dm[k] = -1.0;
+        match (w, direction) {
+            (Some(k), _) => at_pose.dm[k] = -1.0,
+            (None, Direction::Psi(..)) => at_pose.dpsi = -1.0,
+            (None, _) => {}
         }
         let at_reset = negated(input_sensitivity(zero, sub, &g));
         let parts = noise::add(

@@ -504,8 +504,12 @@ pub fn expressions(file: Option<&EffectsFile>) -> Vec<(String, String)> {
 
 /// The file's effects as JSON: name, summary, parameters and expressions as written.
 pub fn to_json(file: &EffectsFile) -> serde_json::Value {
-    let effects: Vec<serde_json::Value> = file
-        .effects
+    effects_json(&file.file, &file.effects.iter().collect::<Vec<_>>())
+}
+
+/// Effects `effects` of the file `file` as JSON (see [`to_json`]).
+pub fn effects_json(file: &str, effects: &[&Written]) -> serde_json::Value {
+    let effects: Vec<serde_json::Value> = effects
         .iter()
         .map(|e| {
             let s = e.spec();
@@ -525,5 +529,16 @@ pub fn to_json(file: &EffectsFile) -> serde_json::Value {
             })
         })
         .collect();
-    serde_json::json!({"file": file.file, "effects": effects})
+    serde_json::json!({"file": file, "effects": effects})
+}
+
+/// SI per unit of an effect parameter's value on a topic: lengths in mm or µm and angles in
+/// mrad or µrad become m and rad; any other unit stays as the effect states it (`ppm/K`, `1`).
+/// The calibrator publishes with it and the nodes that apply the effects read back with it.
+pub fn si_per_unit(unit: &str) -> f64 {
+    match unit {
+        "mm" | "mrad" => 1e-3,
+        "um" | "µm" | "urad" | "µrad" => 1e-6,
+        _ => 1.0,
+    }
 }

@@ -45,6 +45,7 @@ fn is_bad_input(c: &(dyn std::error::Error + 'static)) -> bool {
         || c.is::<rpkm_core::plan::csv::PlanCsvError>()
         || c.is::<rpkm_transport::bag::BagOpenError>()
         || c.is::<rpkm_transport::bag::BagDecodeError>()
+        || c.is::<rpkm_transport::security::SecurityError>()
 }
 
 /// Exit code of an error: 2 for bad input anywhere in the chain (see [`is_bad_input`]),

@@ -11,6 +11,7 @@ pub mod monitor;
 pub mod node;
 pub mod plot;
 pub mod report;
+pub mod security;
 pub mod stream;
 pub mod topics;
 pub mod words;

@@ -49,6 +49,9 @@ enum Command {
     Launch(rpkm::launch::LaunchArgs),
     /// Benchmarks of the product as a user meets it (`rpkm bench discovery --help`).
     Bench(cli::bench::BenchArgs),
+    /// SROS2 keystores for DDS security: CA, governance, an enclave per program
+    /// (`rpkm security keystore --help`).
+    Security(cli::security::SecurityArgs),
 }
 
 impl Command {
@@ -100,6 +103,7 @@ fn main() {
         Command::Node(a) => rpkm::node::run(a),
         Command::Launch(a) => rpkm::launch::run(a),
         Command::Bench(a) => cli::bench::run(a),
+        Command::Security(a) => cli::security::run(a),
     };
     if let Err(e) = result {
         eprintln!("error: {}", cli::error_chain(&e));

@@ -70,6 +70,7 @@ fn calibrate_diagnose_and_the_calibrator_node_give_the_same_parameters() {
                 model: Model::M29,
                 stiffness: rpkm_core::elastic::Stiffness::default(),
                 source: "nominal".into(),
+                effects: rpkm::node::effects::NodeEffects::default(),
             },
             validation_prefix: String::new(),
             selection: "map".into(),

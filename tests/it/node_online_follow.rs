@@ -303,6 +303,27 @@ fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash()
         .find(|d| d.level == DiagnosticStatus::WARN && d.message.contains("step change"))
         .unwrap_or_else(|| panic!("a step WARN on /diagnostics: {:?}", obs.calibrator));
     assert!(warn.message.contains("l3"), "{}", warn.message);
+    if warn.message.contains("l3 or l1") {
+        // a tie comes with the motion that separates it (issue 28), its pose in SI
+        assert!(
+            warn.message.contains("to tell them apart drive to x = "),
+            "{}",
+            warn.message
+        );
+        let value = |k: &str| {
+            warn.values
+                .iter()
+                .find(|v| v.key == k)
+                .and_then(|v| v.value.parse::<f64>().ok())
+                .unwrap_or_else(|| panic!("{k} in {:?}", warn.values))
+        };
+        let (x, y) = (value("separating_x_m"), value("separating_y_m"));
+        let (xr, yr) = (rpkm_core::design::X_RANGE, rpkm_core::design::Y_RANGE);
+        assert!(
+            (xr.0..=xr.1).contains(&(x * 1e3)) && (yr.0..=yr.1).contains(&(y * 1e3)),
+            "({x}, {y}) m"
+        );
+    }
 
     // windows of stream time: before the crash, its first second (nothing can have been
     // named yet: a step needs ten held samples), the last ten seconds (followed)

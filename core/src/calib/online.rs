@@ -151,6 +151,11 @@ pub struct StepChange {
     /// workspace: their force columns are 0.985 to 0.996 parallel over two minutes of path,
     /// 0.9999 over any ten seconds), and the step is "this or that".
     pub alternative: Option<usize>,
+    /// With an alternative, the motion that tells the two apart: the pose of the workspace
+    /// grid (all four drives position-controlled, as the tracker reads them) where their force
+    /// signatures part most ([`OnlineEstimator::separating_pose`], issue 28); None without an
+    /// alternative, or where either is the stiffness.
+    pub separating: Option<SeparatingPose>,
 }
 
 /// A pose that tells two parameters apart in the drive forces (see
@@ -703,6 +708,14 @@ impl OnlineEstimator {
         if step.margin >= self.opts.step_margin {
             step.alternative = None;
         }
+        // the motion that would tell the tie apart, at the estimate before the step (where
+        // the held samples were linearised)
+        step.separating = step
+            .alternative
+            .filter(|&b| step.param < N_PARAMS && b < N_PARAMS)
+            .and_then(|b| {
+                self.separating_pose((step.param, b), step.change, &crate::design::grid_231())
+            });
         // the step itself, then the held samples through the filter with the parameter's
         // variance opened by a fifth of it (a one-parameter fit of a few poses is close,
         // not exact): spreading the whole step over every parameter the forces see alike
@@ -754,6 +767,7 @@ impl OnlineEstimator {
             margin: gain(best) / gain(next).max(f64::MIN_POSITIVE),
             // the runner-up, kept by the caller only while the margin is not clear
             alternative: (next != best).then_some(next),
+            separating: None,
         }
     }
 

@@ -82,6 +82,8 @@ pub struct Delta {
     pub dq: [f64; 4],
     /// True − recorded instrument (x, y), mm.
     pub dm: Vector2<f64>,
+    /// True − recorded platform-angle reading (the angle interferometer's ψ), rad.
+    pub dpsi: f64,
     /// Relative change of the machine's stiffness (the drive-force rows' springs are
     /// k · (1 + dk)); no other row depends on it.
     pub dk: f64,
@@ -93,6 +95,7 @@ impl Default for Delta {
             dp: Row::zeros(),
             dq: [0.0; 4],
             dm: Vector2::zeros(),
+            dpsi: 0.0,
             dk: 0.0,
         }
     }
@@ -104,6 +107,7 @@ impl Delta {
         s.dp.dot(&self.dp)
             + (0..4).map(|a| s.dq[a] * self.dq[a]).sum::<f64>()
             + s.dm.dot(&self.dm)
+            + s.dpsi * self.dpsi
             + s.dk * self.dk
     }
 }
@@ -115,6 +119,8 @@ pub struct InputSensitivity {
     pub dp: Row,
     pub dq: [f64; 4],
     pub dm: Vector2<f64>,
+    /// ... to its recorded platform angle (angle rows only),
+    pub dpsi: f64,
     /// ... and to the relative stiffness change (drive-force rows only).
     pub dk: f64,
 }
@@ -125,6 +131,7 @@ impl Default for InputSensitivity {
             dp: Row::zeros(),
             dq: [0.0; 4],
             dm: Vector2::zeros(),
+            dpsi: 0.0,
             dk: 0.0,
         }
     }

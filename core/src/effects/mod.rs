@@ -9,7 +9,8 @@
 //! - `dp`: the 29 geometric parameters at this pose (a temperature-dependent rod length, a
 //!   carrier joint offset that follows a bowed guide, a rod stretched by its force);
 //! - `dq`: carrier position minus encoder reading (a scale error);
-//! - `dm`: the true minus the recorded (x, y) of the instrument (a rotated instrument frame).
+//! - `dm`: the true minus the recorded (x, y) of the instrument (a rotated instrument frame);
+//! - `dpsi`: the true minus the recorded platform angle (an angle interferometer's error).
 //!
 //! with their derivatives ∂/∂θ. The model values (`obs`) are evaluated at the corrected inputs
 //! and carry their own sensitivities to p, q and m, so a Jacobian column of θ is the chain rule
@@ -24,6 +25,7 @@ mod encoder_scale;
 pub mod expr;
 mod guide_straightness;
 mod instrument_alignment;
+pub mod live;
 mod parallelogram;
 mod preload_elastic;
 pub mod stiffness_factor;
@@ -34,6 +36,7 @@ pub use effect::{Bound, Delta, Effect, EffectParam, InputSensitivity, NotApplica
 pub use encoder_scale::EncoderScale;
 pub use guide_straightness::GuideStraightness;
 pub use instrument_alignment::InstrumentAlignment;
+pub use live::{LiveEffects, LiveError, LiveState};
 pub use parallelogram::Parallelogram;
 pub use preload_elastic::PreloadElastic;
 pub use stiffness_factor::StiffnessFactor;

@@ -5,7 +5,8 @@
 //!
 //! What an expression may change ([`Target`]): a carrier position (`dq1`..`dq4`, carrier minus
 //! encoder, mm), the recorded (x, y) of the 2-D instruments (`dx`, `dy`, true minus recorded,
-//! mm) and any geometric parameter at the pose (`dp.l3`, mm or rad). What it may read
+//! mm), the recorded platform angle (`dpsi`, true minus recorded, rad) and any geometric
+//! parameter at the pose (`dp.l3`, mm or rad). What it may read
 //! ([`VARIABLES`]): the pose's carrier positions and forces, time, the derived covariates
 //! (`dir_q4`, `travel_q4`, `t_run`), the campaign's `temp_*` and other covariate columns and
 //! the nominal TCP (`x`, `y`).
@@ -60,6 +61,8 @@ pub enum Target {
     Dx,
     /// True minus recorded y, mm.
     Dy,
+    /// True minus recorded platform angle (the angle interferometer's reading), rad.
+    Dpsi,
     /// Geometric parameter `i` at the pose, mm or rad.
     Dp(usize),
 }
@@ -84,6 +87,7 @@ impl Target {
             "dq4" => Some(Target::Dq(3)),
             "dx" => Some(Target::Dx),
             "dy" => Some(Target::Dy),
+            "dpsi" => Some(Target::Dpsi),
             _ => None,
         }
     }
@@ -106,9 +110,11 @@ pub struct Spec {
 pub enum SpecError {
     #[error("the name must be a word of letters, digits and `_`, found {0:?}")]
     Name(String),
-    #[error("no expression: give at least one of dq1..dq4, dx, dy, dp.NAME")]
+    #[error("no expression: give at least one of dq1..dq4, dx, dy, dpsi, dp.NAME")]
     NoTarget,
-    #[error("unknown target `{name}`: expected dq1..dq4, dx, dy or dp.NAME of the 29 parameters")]
+    #[error(
+        "unknown target `{name}`: expected dq1..dq4, dx, dy, dpsi or dp.NAME of the 29 parameters"
+    )]
     UnknownTarget { target: usize, name: String },
     #[error("target `{name}` given twice")]
     DuplicateTarget { target: usize, name: String },
@@ -367,17 +373,13 @@ fn covariate(campaign: &Campaign, name: &str) -> Result<Vec<f64>, NotApplicable>
         .collect()
 }
 
-/// Where each pose is: the nominal forward model of its (q1, q4), mm (NaN where it cannot be
-/// solved: an expression of it is then not finite there).
+/// Where each pose is: the nominal forward model of its (q1, q4), mm.
 fn nominal_tcp(campaign: &Campaign) -> Vec<(f64, f64)> {
     let nominal = Params::nominal();
     campaign
         .poses
         .iter()
-        .map(|p| {
-            geometry::fgm(&nominal, Model::M29, p.q[0], p.q[3])
-                .map_or((f64::NAN, f64::NAN), |s| (s.x(), s.y()))
-        })
+        .map(|p| nominal_xy(&nominal, &p.q))
         .collect()
 }
 
@@ -521,21 +523,14 @@ impl Bound for BoundWritten {
     }
 }
 
-fn add(d: &mut Delta, target: Target, v: f64) {
+pub(super) fn add(d: &mut Delta, target: Target, v: f64) {
     match target {
         Target::Dq(a) => d.dq[a] += v,
         Target::Dx => d.dm.x += v,
         Target::Dy => d.dm.y += v,
+        Target::Dpsi => d.dpsi += v,
         Target::Dp(i) => d.dp[i] += v,
     }
-}
-
-/// A variable a live pose does not have.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("effect `{effect}` reads `{variable}`, which the live pose does not have")]
-pub struct MissingVariable {
-    pub effect: String,
-    pub variable: String,
 }
 
 impl Written {
@@ -544,34 +539,15 @@ impl Written {
         &self.vars
     }
 
-    /// The change of one pose's inputs at parameters `theta` (the live estimator's: a pose
-    /// outside any campaign), its variables read by name from `var`. The 2-D instruments'
-    /// `dx`, `dy` are left out: a live pose has no instrument reading.
-    pub fn delta_at(
-        &self,
-        var: &dyn Fn(&str) -> Option<f64>,
-        theta: &[f64],
-    ) -> Result<Delta, MissingVariable> {
-        let vars = self
-            .vars
-            .iter()
-            .map(|v| {
-                var(v).ok_or_else(|| MissingVariable {
-                    effect: self.spec.name.clone(),
-                    variable: v.clone(),
-                })
-            })
-            .collect::<Result<Vec<f64>, _>>()?;
-        let mut out = Delta::default();
-        let mut grad = vec![0.0; theta.len()];
-        let mut stack = Vec::new();
-        for (target, program) in &self.targets {
-            if matches!(target, Target::Dx | Target::Dy) {
-                continue;
-            }
-            let v = program.eval(&vars, theta, &mut grad, &mut stack);
-            add(&mut out, *target, v);
-        }
-        Ok(out)
+    /// Each target with its expression, in the spec's order (the programs read the
+    /// variables in [`Written::variables`] order).
+    pub(super) fn programs(&self) -> &[(Target, Program)] {
+        &self.targets
     }
+}
+
+/// The nominal forward model of the carriers `q` (mm), NaN where it cannot be solved (an
+/// expression of `x`, `y` is then not finite there).
+pub(super) fn nominal_xy(nominal: &Params, q: &[f64; 4]) -> (f64, f64) {
+    geometry::fgm(nominal, Model::M29, q[0], q[3]).map_or((f64::NAN, f64::NAN), |s| (s.x(), s.y()))
 }

@@ -9,6 +9,7 @@
 
 use super::types::{CandidateSetup, PlanError, Unknowns};
 use crate::analysis;
+use crate::campaign::motion::next_direction;
 use crate::campaign::Campaign;
 use crate::design::PlannedPose;
 use crate::effects::Corrections;
@@ -251,20 +252,6 @@ fn pose_rows(
             }
         })
         .collect())
-}
-
-/// Directions of each carrier's last move along a sequence of drive positions, as
-/// [`Campaign::derived_covariates`] writes `dir_q1`..`dir_q4` (+1 before any move; a carrier
-/// that does not move keeps its direction).
-fn next_direction(dir: [f64; 4], from: &[f64; 4], to: &[f64; 4]) -> [f64; 4] {
-    let mut out = dir;
-    for a in 0..4 {
-        let dq = to[a] - from[a];
-        if dq.abs() > 1e-9 {
-            out[a] = dq.signum();
-        }
-    }
-    out
 }
 
 /// How far campaign `c` (at parameters `p`, weighted by `noise`) tells the pair apart, the

@@ -142,6 +142,61 @@ fn a_crash_of_rod_3_is_named_with_rod_1_that_the_forces_cannot_tell_from_it() {
         "l3 or l1: {step:?}"
     );
     assert!(step.margin < OnlineOptions::default().step_margin);
+    // the motion that separates them (issue 28): a pose where the named change leaves what
+    // the other cannot reproduce, checked by the elastic model itself (a change of the
+    // named rod by the step, the other's best size fitted to it), not the tracker's Jacobian
+    let at = step.separating.expect("a separating pose with the tie");
+    let other = step.alternative.expect("the tie");
+    let left = left_by_other(&twin(41), (step.param, other), step.change, (at.x, at.y));
+    eprintln!("separating pose {at:?}; the elastic model leaves {left:.1} σ there");
+    assert!(
+        (left / at.sigma - 1.0).abs() < 0.2,
+        "{at:?}: the elastic model leaves {left:.1} σ"
+    );
+    assert!(
+        left > 10.0,
+        "{left:.1} σ: one sample there tells them apart"
+    );
+    let centre = left_by_other(
+        &twin(41),
+        (step.param, other),
+        step.change,
+        rpkm_core::design::CENTRE,
+    );
+    assert!(
+        centre < 0.5 * left,
+        "at the centre {centre:.1} σ, there {left:.1} σ"
+    );
+}
+
+/// What a change `change` of parameter `a` leaves in the drive forces at the pose (x, y)
+/// (all drives position-controlled) that no change of `b` reproduces, in σ of the forces of
+/// one sample (the tracker's stated σ): the twin's true machine, the elastic model solved
+/// at each size, `b`'s column by a central difference.
+fn left_by_other(twin: &Twin, (a, b): (usize, usize), change: f64, (x, y): (f64, f64)) -> f64 {
+    use rpkm_core::elastic::{fegm, ALL_ACTIVE};
+    use rpkm_core::geometry::igm;
+    let p = *twin.true_params();
+    let k = twin.stiffness();
+    let q = igm(&p, rpkm_core::params::Model::M29, x, y)
+        .expect("reachable")
+        .q();
+    let forces = |i: usize, d: f64| {
+        let mut moved = p;
+        moved[i] += d;
+        fegm(&moved, &k, q, ALL_ACTIVE)
+            .expect("equilibrium")
+            .drive_force
+    };
+    let base = forces(a, 0.0);
+    let step: Vec<f64> = (0..4).map(|r| forces(a, change)[r] - base[r]).collect();
+    let h = 1e-4;
+    let (up, down) = (forces(b, h), forces(b, -h));
+    let col: Vec<f64> = (0..4).map(|r| (up[r] - down[r]) / (2.0 * h)).collect();
+    let dot = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(p, q)| p * q).sum::<f64>();
+    let size = dot(&col, &step) / dot(&col, &col);
+    let rest: Vec<f64> = (0..4).map(|r| step[r] - size * col[r]).collect();
+    dot(&rest, &rest).sqrt() / OnlineOptions::default().force_sigma_n
 }
 
 /// The candidates a drift WARN names with their changes: "l3 +19.5 µm" or "l1 +10.3 µm,

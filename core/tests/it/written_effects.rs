@@ -123,6 +123,80 @@ fn partials_match_finite_differences() {
     }
 }
 
+/// `dpsi` (true minus recorded platform angle) beside `dx`, on the angle interferometer's and
+/// the 2-D instruments' rows: every row's parameter Jacobian against a central difference of
+/// its value, and the angle rows' against the derivative by hand (the recorded angle enters
+/// each angle row with −1: ∂/∂a = −(1 + q1/1000)).
+#[test]
+fn dpsi_rows_match_finite_differences() {
+    use rpkm_core::effects::EffectSet;
+    use rpkm_core::noise::NoiseModel;
+    use rpkm_core::obs::{self, Form, Step};
+    use rpkm_core::params::Model;
+    let mut twin = Twin::new(TwinConfig {
+        seed: 4,
+        noise: Some(NoiseModel::default()),
+        ..Default::default()
+    })
+    .expect("twin");
+    let c = twin
+        .campaign(&[Instrument::LiPsi, Instrument::LiX, Instrument::Lt])
+        .expect("campaign");
+    let e = written(
+        "angle",
+        vec![param("a", "rad", 1e-5), param("c", "mm", 0.01)],
+        &[
+            ("dpsi", "a * (1 + q1 / 1000) + c^2 * 1e-3"),
+            ("dx", "c * sin(q4 / 100)"),
+        ],
+    );
+    let p = Params::nominal();
+    let set = EffectSet::bind(&[&e], &c, &p).expect("binds");
+    let rows = |theta: &[f64]| {
+        obs::residuals_in(
+            &c,
+            &p,
+            Model::M29,
+            Step::Direct,
+            &p,
+            &set.corrections(theta),
+            &NoiseModel::default(),
+            Form::Thesis,
+        )
+        .expect("rows")
+    };
+    let theta = [3e-5, 0.02];
+    let at = rows(&theta);
+    for (k, prior) in [1e-5, 0.01].into_iter().enumerate() {
+        let h = 1e-3 * prior;
+        let (mut up, mut down) = (theta, theta);
+        up[k] += h;
+        down[k] -= h;
+        let (ru, rd) = (rows(&up), rows(&down));
+        for (i, r) in at.iter().enumerate() {
+            let fd = (ru[i].value - rd[i].value) / (2.0 * h);
+            assert!(
+                (fd - r.d_theta[k]).abs() <= 1e-6 * r.d_theta[k].abs().max(1.0),
+                "θ{k} row {i} ({} {}): exact {}, finite difference {fd}",
+                r.instrument,
+                r.direction,
+                r.d_theta[k]
+            );
+        }
+    }
+    let angle: Vec<_> = at.iter().filter(|r| r.direction.is_angle()).collect();
+    assert!(angle.len() > 10, "{} angle rows", angle.len());
+    for r in angle {
+        let by_hand = -(1.0 + c.poses[r.pose].q[0] / 1000.0);
+        assert!(
+            (r.d_theta[0] - by_hand).abs() < 1e-12,
+            "pose {}: {} against {by_hand}",
+            r.pose,
+            r.d_theta[0]
+        );
+    }
+}
+
 /// The library's `encoder_scale` (ppm per guide: guide 1 carries q2, q3, guide 2 q1, q4) and
 /// the same written as expressions: the same parameters, to 1e-6 relative.
 #[test]

@@ -41,7 +41,7 @@ pub struct DiagnoseArgs {
     #[arg(long, default_value = "")]
     pub effects: String,
     /// Effects written as data (YAML: name, summary, params with unit and prior, expressions
-    /// of dq1..dq4, dx, dy, dp.NAME; docs/effects.md): tried as candidates beside the
+    /// of dq1..dq4, dx, dy, dpsi, dp.NAME; docs/effects.md): tried as candidates beside the
     /// library's, and named by --effects. Example:
     ///   rpkm diagnose c.csv --effects-file mine.yaml --validate v.csv
     #[arg(long)]

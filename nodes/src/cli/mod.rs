@@ -14,6 +14,7 @@ pub mod plan;
 pub mod preload;
 pub mod record;
 pub mod replay;
+pub mod security;
 pub mod simulate;
 mod summary;
 mod transport_args;

@@ -239,7 +239,7 @@ fn spawn_receiver(
             // Unique: several monitors may watch one set.
             let name = format!("rpkm_monitor_{}", std::process::id());
             let ports = transport_args
-                .open(&name)
+                .open(&name, "/rpkm/monitor")
                 .and_then(|t| Ports::open(t, &transport_args));
             let mut ports = match ports {
                 Ok(p) => {

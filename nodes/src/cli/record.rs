@@ -63,7 +63,7 @@ const IDLE_SLEEP: Duration = Duration::from_micros(100);
 pub fn run(args: &RecordArgs) -> Result<()> {
     let names = checked_topics(args)?;
     let stop = stop_flag()?;
-    let transport = args.transport.open("rpkm_record")?;
+    let transport = args.transport.open("rpkm_record", "/rpkm/record")?;
     let out = args
         .out
         .clone()

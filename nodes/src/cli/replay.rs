@@ -80,7 +80,7 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
         total,
     } = select_topics(args, &bag)?;
     let stop = stop_flag()?;
-    let transport = args.transport.open("rpkm_replay")?;
+    let transport = args.transport.open("rpkm_replay", "/rpkm/replay")?;
     let mut ports: Vec<Box<dyn ReplayPort>> = Vec::with_capacity(selected.len());
     for name in &selected {
         ports.push(topics::publisher(

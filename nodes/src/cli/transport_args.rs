@@ -26,6 +26,10 @@ pub struct TransportArgs {
     /// `NS/tcp_estimate`, ... (default /rpkm).
     #[arg(long, default_value = rpkm_transport::NODE_NAMESPACE)]
     pub namespace: String,
+    /// SROS2 enclave of the DDS participant, used when ROS_SECURITY_ENABLE=true (default
+    /// /rpkm/record, /rpkm/replay, /rpkm/monitor: the enclaves `rpkm security enclave` makes).
+    #[arg(long)]
+    pub enclave: Option<String>,
 }
 
 /// `ipc`, `dds` or `both`.
@@ -39,18 +43,25 @@ pub fn parse_backend(s: &str) -> Result<rpkm_transport::Backend, String> {
 }
 
 impl TransportArgs {
-    /// Opens the transport as node `name`.
-    pub fn open(&self, name: &str) -> Result<Transport> {
+    /// Opens the transport as node `name`, in `--enclave` or else `default_enclave`.
+    pub fn open(&self, name: &str, default_enclave: &str) -> Result<Transport> {
         let prefix = match &self.ipc_prefix {
             Some(p) => p.clone(),
             None => std::env::var("RPKM_IPC_PREFIX").unwrap_or_default(),
         };
         let names = rpkm_transport::Names::new(&self.namespace, &[])
             .map_err(|e| crate::error::bad_input(format!("--namespace: {e}")))?;
+        let enclave = self.enclave.as_deref().unwrap_or(default_enclave);
+        if let Some(why) = rpkm_transport::security::enclave_name_error(enclave) {
+            return Err(crate::error::bad_input(format!(
+                "--enclave {enclave:?}: {why}"
+            )));
+        }
         let config = TransportConfig::new(name)
             .backend(self.backend)
             .ipc_prefix(prefix)
-            .names(names);
+            .names(names)
+            .enclave(enclave);
         Transport::new(&config).with_context(|| format!("opening the transport of {name}"))
     }
 }

@@ -99,7 +99,8 @@ fn fqn(spec: &NodeSpec) -> String {
 fn transport(desc: &LaunchDescription) -> anyhow::Result<Transport> {
     let mut config = TransportConfig::new(format!("rpkm_launch_{}", std::process::id()))
         .backend(Backend::Dds)
-        .names(Names::default());
+        .names(Names::default())
+        .enclave("/rpkm/launch");
     if let Some((_, d)) = desc.env.iter().rev().find(|(k, _)| k == "ROS_DOMAIN_ID") {
         let domain = d
             .parse()

@@ -18,6 +18,8 @@
 //!       managed: true                # started unconfigured, configured and activated by
 //!                                    # the launch in file order (default false: active)
 //!       remap: [{from: tcp_estimate, to: /cell/estimate_a}]   # topic remapping
+//!       enclave: /rpkm/tcp_estimator # SROS2 enclave (default /rpkm/<name>), used with
+//!                                    # ROS_SECURITY_ENABLE=true
 //!   - set_env: {name: ROS_DOMAIN_ID, value: "7"}
 //!   - executable:                    # another rpkm command, e.g. the recorder
 //!       cmd: rpkm record --out $(var bag) --topics /rpkm/tcp_estimate,/diagnostics
@@ -136,6 +138,8 @@ pub struct NodeSpec {
     pub namespace: Option<String>,
     /// Topic remapping rules (`remap: [{from, to}]`), in order.
     pub remaps: Vec<(String, String)>,
+    /// Its SROS2 enclave (`enclave:`), when not the node's default `/rpkm/<name>`.
+    pub enclave: Option<String>,
     /// Started unconfigured and brought up (configure, activate) by the launch, in file
     /// order (`managed: true`).
     pub managed: bool,
@@ -160,12 +164,13 @@ pub struct LaunchDescription {
 
 /// The keys each kind of entry takes: anything else is a typo (`If:`, `respwan:`) that
 /// would otherwise silently change what runs.
-const NODE_KEYS: [&str; 12] = [
+const NODE_KEYS: [&str; 13] = [
     "pkg",
     "exec",
     "name",
     "namespace",
     "remap",
+    "enclave",
     "managed",
     "param",
     "args",
@@ -630,6 +635,7 @@ fn executable(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, Lau
         args: words.collect(),
         namespace: None,
         remaps: Vec::new(),
+        enclave: None,
         managed: false,
         respawn,
         respawn_delay,
@@ -702,6 +708,7 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
     let managed = managed(ctx, body, &name)?;
     Ok(NodeSpec {
         program: Program::Node,
+        enclave: enclave(ctx, body, &name)?,
         exec,
         name,
         param_files,
@@ -738,6 +745,25 @@ fn flag(
 /// A node entry's `managed:` (every rpkm node is a managed node).
 fn managed(ctx: &Ctx<'_>, body: &serde_yaml::Mapping, name: &str) -> Result<bool, LaunchError> {
     flag(ctx, body, "managed", &format!("node {name}"))
+}
+
+/// A node entry's `enclave:`, checked as the node checks it (an absolute ROS 2 namespace).
+fn enclave(
+    ctx: &Ctx<'_>,
+    body: &serde_yaml::Mapping,
+    name: &str,
+) -> Result<Option<String>, LaunchError> {
+    let Some(v) = get(body, "enclave") else {
+        return Ok(None);
+    };
+    let enclave = ctx.string(v, &format!("node {name} enclave"))?;
+    match rpkm_transport::security::enclave_name_error(&enclave) {
+        Some(why) => Err(ctx.err_at(
+            "enclave",
+            format!("node {name}: enclave {enclave:?}: {why}"),
+        )),
+        None => Ok(Some(enclave)),
+    }
 }
 
 /// Topic remapping rules, (FROM, TO) in order.
@@ -812,12 +838,15 @@ impl NodeSpec {
         }
         argv.extend(self.args.iter().map(OsString::from));
         // last: `--ros-args` takes every word after it
-        if self.namespace.is_some() || !self.remaps.is_empty() {
+        if self.namespace.is_some() || !self.remaps.is_empty() || self.enclave.is_some() {
             argv.push("--ros-args".into());
             let rules = self.namespace.iter().map(|ns| format!("__ns:={ns}"));
             let rules = rules.chain(self.remaps.iter().map(|(f, t)| format!("{f}:={t}")));
             for rule in rules {
                 argv.extend(["-r".into(), OsString::from(rule)]);
+            }
+            if let Some(e) = &self.enclave {
+                argv.extend(["--enclave".into(), OsString::from(e)]);
             }
         }
         argv
@@ -1069,8 +1098,31 @@ launch:
         }
     }
 
+    /// `enclave:` reaches the node as rcl's `--ros-args --enclave`.
+    #[test]
+    fn an_enclave_goes_to_the_node_as_ros_args() -> Result<(), LaunchError> {
+        let d = LaunchDescription::parse(
+            "launch:\n  - node:\n      pkg: rpkm\n      exec: tcp_estimator\n      \
+             enclave: /cell/estimator_a\n",
+            "n.yaml",
+            Path::new("."),
+            &[],
+        )?;
+        let argv: Vec<String> = d.nodes[0]
+            .argv()
+            .iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            argv[argv.len() - 3..],
+            ["--ros-args", "--enclave", "/cell/estimator_a"]
+        );
+        Ok(())
+    }
+
     /// `namespace:` and `remap:` reach the node as rcl's `--ros-args -r`, last on its line;
-    /// a name ROS 2 would refuse is refused with its key's line, as an unusable node name is.
+    /// a name ROS 2 would refuse is refused with its key's line, as an unusable node name is
+    /// (an enclave too).
     #[test]
     fn namespace_and_remap_go_to_the_node_as_ros_args() -> Result<(), LaunchError> {
         let entry = "launch:\n  - node:\n      pkg: rpkm\n      exec: tcp_estimator\n";
@@ -1114,6 +1166,10 @@ launch:
             (
                 &format!("      name: {}\n", "a".repeat(5000)),
                 "n.yaml:5: node name \"aaaa",
+            ),
+            (
+                "      enclave: rpkm/estimator\n",
+                "n.yaml:5: node tcp_estimator: enclave \"rpkm/estimator\": expected an absolute",
             ),
         ] {
             let e =

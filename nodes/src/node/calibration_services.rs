@@ -78,34 +78,41 @@ fn answer(ctx: &NodeContext, success: bool, message: String) -> Response {
     Response { success, message }
 }
 
-/// The geometry of `current` with the parameters of the calibration JSON at `path` (the
-/// node's model and stiffness stay).
+/// The geometry of `current` with the parameters and the effects of the calibration JSON at
+/// `path` (the node's model, stiffness and effects file stay).
 fn load(current: &Geometry, path: &Path) -> anyhow::Result<Geometry> {
     let mut params = crate::input::read_params(path)?;
     if current.model == Model::M24 {
         params = params.with_perfect_parallelogram();
     }
+    let effects = current.effects.read_calibration(path)?;
     Ok(Geometry {
         params,
         model: current.model,
         stiffness: current.stiffness,
-        source: path.display().to_string(),
+        source: format!("{}{}", path.display(), effects.describe()),
+        effects,
     })
 }
 
-/// Writes `g` as calibration JSON (`model`, `parameters` in mm and rad, `source`), the file
-/// [`load`] and `geometry_file` read.
+/// Writes `g` as calibration JSON (`model`, `parameters` in mm and rad, `source`, and the
+/// applied effects' `effects` and `effects_file` as `rpkm calibrate --json` writes them), the
+/// file [`load`] and `geometry_file` read.
 fn save(g: &Geometry, path: &Path) -> anyhow::Result<String> {
     let parameters: serde_json::Map<String, serde_json::Value> = NAMES
         .iter()
         .enumerate()
         .map(|(i, name)| ((*name).to_owned(), serde_json::Value::from(g.params[i])))
         .collect();
-    let doc = serde_json::json!({
+    let mut doc = serde_json::json!({
         "model": g.model.number(),
         "source": g.source,
         "parameters": parameters,
     });
+    if let Some((effects, file)) = g.effects.to_json() {
+        doc["effects"] = effects;
+        doc["effects_file"] = file;
+    }
     let text = serde_json::to_string_pretty(&doc)?;
     std::fs::write(path, text + "\n")
         .map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", path.display()))?;

@@ -25,6 +25,7 @@
 use super::calibrate_action::{noise_si, CalibrateAction, Running};
 use super::lifecycle::Lifecycle;
 use std::collections::VecDeque;
+use std::fmt::Write as _;
 use std::time::{Duration, Instant};
 
 use nalgebra::SMatrix;
@@ -191,7 +192,7 @@ pub struct CalibratorOptions {
     pub noise: rpkm_core::noise::NoiseModel,
     /// Effects written as data (`effects_file`, docs/effects.md): every one of the file is in
     /// the model, its parameters published with the geometry.
-    pub effects: Option<crate::effects_file::EffectsFile>,
+    pub effects: Option<std::sync::Arc<crate::effects_file::EffectsFile>>,
     /// How the rows are weighted: the levels estimated from the campaign (default, as
     /// `rpkm calibrate`), or the stated ones.
     pub weighting: calib::Noise,
@@ -245,22 +246,23 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<Outcome
     let named;
     let effects: Vec<&dyn rpkm_core::effects::Effect> = match job.effects {
         Some(list) => {
-            named = crate::effects_file::parse_list(list, o.effects.as_ref())
+            named = crate::effects_file::parse_list(list, o.effects.as_deref())
                 .map_err(|e| bad_input(format!("effects: {e}")))?;
             named.iter().map(AsRef::as_ref).collect()
         }
-        None => o
-            .effects
-            .as_ref()
-            .map(crate::effects_file::EffectsFile::all)
-            .unwrap_or_default(),
+        None => o.effects.as_ref().map(|f| f.all()).unwrap_or_default(),
     };
     if let Some(file) = &o.effects {
         file.check(&cal_part)
             .map_err(|e| bad_input(e.to_string()))?;
     }
+    let named_by = if job.effects.is_some() {
+        "effects"
+    } else {
+        "effects_file"
+    };
     let set = rpkm_core::effects::EffectSet::bind(&effects, &cal_part, &o.start.params)
-        .map_err(|e| bad_input(format!("effects: {e}")))?;
+        .map_err(|e| bad_input(format!("{named_by}: {e}")))?;
     let theta0 = vec![0.0; set.n_params()];
     // the calibration every command shares: tolerance prior, noise estimated from the data
     let (cal, noise) = calib::calibrate(&calib::Request {
@@ -357,11 +359,7 @@ fn effect_parameters(msg: &mut Parameters, effects: &[calib::EffectEstimate]) {
         if !msg.active_effects.contains(&e.effect) {
             msg.active_effects.push(e.effect.clone());
         }
-        let to_si = match e.unit.as_str() {
-            "mm" | "mrad" => 1e-3,
-            "um" | "µm" | "urad" | "µrad" => 1e-6,
-            _ => 1.0,
-        };
+        let to_si = crate::effects_file::si_per_unit(&e.unit);
         msg.effect_parameter_names
             .push(format!("{}.{}", e.effect, e.name));
         msg.effect_parameter_values.push(e.value * to_si);
@@ -816,12 +814,26 @@ pub fn report_warning(r: &OnlineReport, temp_name: &str) -> Option<String> {
             ),
             None => (name(step.param).to_owned(), "next best"),
         };
-        return Some(format!(
+        let mut line = format!(
             "step change at t = {:.1} s: {who} {:+.0} µm ({why}: explains {:.2}x less)",
             step.since_s,
             step.change * 1e3,
             step.margin
-        ));
+        );
+        if let (Some(at), Some(other)) = (&step.separating, step.alternative) {
+            let _ = write!(
+                line,
+                "; to tell them apart drive to x = {:.0}, y = {:.0} mm with all four drives \
+                 position-controlled: there a sample leaves {:.0} σ of the step that {} cannot \
+                 reproduce (their forces {:.3} alike)",
+                at.x,
+                at.y,
+                at.sigma,
+                name(other),
+                at.cos.abs()
+            );
+        }
+        return Some(line);
     }
     r.drift
         .as_ref()
@@ -845,9 +857,11 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
             "selection: expected map or auto, found {selection}"
         )));
     }
+    let start = Geometry::from_params(p)?;
     Ok(Settings {
         options: CalibratorOptions {
-            start: Geometry::from_params(p)?,
+            effects: start.effects.file().cloned(),
+            start,
             validation_prefix: p.string("validation_prefix", "val").map_err(bad_param)?,
             selection,
             max_condition: p.positive("max_condition", 100.0).map_err(bad_param)?,
@@ -855,7 +869,6 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
                 .f64_in("outlier_sigma", 0.0, super::params::OUTLIER_SIGMA, " σ")
                 .map_err(bad_param)?,
             noise: rpkm_core::noise::NoiseModel::default(),
-            effects: effects_file(p)?,
             weighting: if p.bool("noise_estimation", true).map_err(bad_param)? {
                 calib::Noise::ESTIMATE
             } else {
@@ -871,18 +884,6 @@ fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
     })
 }
 
-/// The effects file of the `effects_file` parameter (none where empty), read with every
-/// mistake told at its file, line and column (bad input: the node exits 2).
-fn effects_file(p: &NodeParams) -> anyhow::Result<Option<crate::effects_file::EffectsFile>> {
-    let path = p.string("effects_file", "").map_err(bad_param)?;
-    if path.is_empty() {
-        return Ok(None);
-    }
-    crate::effects_file::read(std::path::Path::new(&path), &[])
-        .map(Some)
-        .map_err(|e| bad_input(e.to_string()))
-}
-
 /// The calibrator's parameters on its ROS 2 parameter services: what the next calibration
 /// uses and when a campaign ends are live; the buffer and the online tracker need a restart.
 fn specs() -> Vec<Spec> {
@@ -894,7 +895,7 @@ fn specs() -> Vec<Spec> {
         range,
         ..Spec::fixed(key, default, description)
     };
-    let [model, _, geometry_file, _] = super::geometry_specs();
+    let [model, _, geometry_file, _, _] = super::geometry_specs();
     vec![
         Spec {
             description: "model of the next calibration: 24 or 29 parameters",
@@ -1101,7 +1102,13 @@ impl Calibrator {
             if let Some(warning) = report_warning(&r, &self.temp_name) {
                 ctx.log(&warning);
                 self.last = (DiagnosticStatus::WARN, warning);
-                let t = vec![("online_t_s", format!("{:.3}", r.t))];
+                let mut t = vec![("online_t_s", format!("{:.3}", r.t))];
+                // the motion that separates a tie, SI as on every topic
+                if let Some(at) = r.step.as_ref().and_then(|s| s.separating) {
+                    t.push(("separating_x_m", format!("{}", at.x / MM_PER_M)));
+                    t.push(("separating_y_m", format!("{}", at.y / MM_PER_M)));
+                    t.push(("separating_sigma", format!("{:.1}", at.sigma)));
+                }
                 out.diagnostics.publish(&diagnostic_array(status(
                     self.last.0,
                     &ctx.status_name,
@@ -1477,13 +1484,14 @@ mod tests {
                 model: Model::M29,
                 stiffness: rpkm_core::elastic::Stiffness::default(),
                 source: "nominal".into(),
+                effects: crate::node::effects::NodeEffects::default(),
             },
             validation_prefix: "val".into(),
             selection: "map".into(),
             max_condition: 100.0,
             outlier_sigma: 0.0,
             noise: rpkm_core::noise::NoiseModel::default(),
-            effects: Some(file),
+            effects: Some(std::sync::Arc::new(file)),
             weighting: calib::Noise::ESTIMATE,
         };
         let msg = calibrate_campaign(&c, &o)?.parameters;
@@ -1521,6 +1529,7 @@ mod tests {
                 model: Model::M29,
                 stiffness: rpkm_core::elastic::Stiffness::default(),
                 source: "nominal".into(),
+                effects: crate::node::effects::NodeEffects::default(),
             },
             validation_prefix: "val".into(),
             selection: "map".into(),
@@ -1602,6 +1611,7 @@ mod tests {
                 model: Model::M29,
                 stiffness: rpkm_core::elastic::Stiffness::default(),
                 source: "nominal".into(),
+                effects: crate::node::effects::NodeEffects::default(),
             },
             validation_prefix: "val".into(),
             selection: "map".into(),
@@ -1712,9 +1722,51 @@ mod tests {
         assert!(tracker.error.is_none(), "{:?}", tracker.error);
         let (t, w, moved) = warned.ok_or_else(|| anyhow::anyhow!("no step reported"))?;
         assert!(t - 30.0 <= 10.0, "reported at {t} s");
-        // l3, alone or with l1 that the forces cannot tell from it
+        // l3, alone or with l1 that the forces cannot tell from it, and then with the
+        // motion that would
         assert!(w.contains("l3 +") || w.contains("l3 or l1 +"), "{w}");
+        if w.contains("l3 or l1 +") {
+            assert!(w.contains("to tell them apart drive to x = "), "{w}");
+        }
         assert!((moved - 0.1).abs() < 0.02, "l3 moved {moved} mm");
         Ok(())
+    }
+
+    /// A tie is reported with the motion that separates it (its pose in mm, its drive mode,
+    /// what a sample there leaves), and the same pose in SI on /diagnostics.
+    #[test]
+    fn a_tie_is_reported_with_the_motion_that_separates_it() {
+        use rpkm_core::calib::online::SeparatingPose;
+        use rpkm_core::params::{L1, L3};
+        let step = StepChange {
+            param: L3,
+            change: 0.1,
+            sigma: 0.001,
+            since_s: 20.0,
+            margin: 1.02,
+            alternative: Some(L1),
+            separating: Some(SeparatingPose {
+                x: -150.0,
+                y: 1700.0,
+                cos: 0.98,
+                sigma: 210.0,
+            }),
+        };
+        let r = OnlineReport {
+            params: Params::nominal(),
+            sigma: [0.0; N_PARAMS],
+            t: 21.0,
+            step: Some(step),
+            drift: None,
+        };
+        assert_eq!(
+            report_warning(&r, "temp_machine").as_deref(),
+            Some(
+                "step change at t = 20.0 s: l3 or l1 +100 µm (the path cannot tell them apart: \
+                 explains 1.02x less); to tell them apart drive to x = -150, y = 1700 mm with \
+                 all four drives position-controlled: there a sample leaves 210 σ of the step \
+                 that l1 cannot reproduce (their forces 0.980 alike)"
+            )
+        );
     }
 }

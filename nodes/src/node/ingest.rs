@@ -32,6 +32,9 @@ mod output;
 pub mod report;
 pub mod validate;
 
+/// The controller's DDS topics ingest reads by default (its `dds` source).
+pub use dds::{ACTUATOR_TOPIC as ACTUATOR_INPUT, MEASUREMENT_TOPIC as MEASUREMENT_INPUT};
+
 use std::time::Duration;
 
 use rpkm_transport::dds_params::ParamRange;

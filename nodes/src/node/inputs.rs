@@ -1,13 +1,47 @@
 //! What the servo-rate nodes (`tcp_estimator`, `preload_monitor`) share about their inputs:
-//! gaps in the actuator stream ([`SeqGaps`]) and following new Parameters while they run
-//! ([`ParameterFollower`]).
+//! gaps in the actuator stream ([`SeqGaps`]), following new Parameters while they run
+//! ([`ParameterFollower`]) and the model's inputs of a drive state under the geometry's
+//! calibrated effects ([`StreamMotion`]).
 
 use std::time::Duration;
 
-use rpkm_msgs::Parameters;
+use rpkm_core::campaign::Motion;
+use rpkm_core::effects::LiveState;
+use rpkm_core::params::Params;
+use rpkm_msgs::{ActuatorState, Parameters};
 use rpkm_transport::{topic, Subscriber};
 
-use super::{bad_param, Every, Geometry, NodeContext};
+use super::{bad_param, Every, Geometry, NodeContext, MM_PER_M};
+use crate::campaign_bag::seconds_from_stamp;
+
+/// How the carriers of one actuator stream moved (the direction of each one's last move, its
+/// travel since its last reversal, the time since the stream's first state: the covariates a
+/// calibrated effect may read, by the definition of the campaign's own), followed at every
+/// state whether an effect reads them or not.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StreamMotion {
+    motion: Motion,
+}
+
+impl StreamMotion {
+    /// The parameters and carrier positions (mm, rad) the model is evaluated at for state
+    /// `s` under the calibrated effects of `g` (its own parameters and the encoders without
+    /// any).
+    pub fn model_inputs(&mut self, g: &mut Geometry, s: &ActuatorState) -> (Params, [f64; 4]) {
+        let q = s.position.map(|p| p * MM_PER_M);
+        let t = seconds_from_stamp(s.stamp);
+        let motion = self.motion.next(q, t);
+        g.effects.apply(
+            &g.params,
+            &LiveState {
+                q,
+                f: s.force,
+                t,
+                motion,
+            },
+        )
+    }
+}
 
 /// Gaps in a stream whose `seq` counts up by one per sample (ingest's ActuatorState): the
 /// actuator topic is best effort, so a subscriber that falls more than its queue behind

@@ -85,7 +85,7 @@ impl Spec {
 }
 
 /// The parameters every node declares.
-pub fn common_specs() -> [Spec; 3] {
+pub fn common_specs() -> [Spec; 4] {
     [
         Spec::fixed(
             "backend",
@@ -101,6 +101,11 @@ pub fn common_specs() -> [Spec; 3] {
             "diagnostics_period_s",
             Default::F64(1.0),
             "period of the /diagnostics report, s (0.001 to 3600)",
+        ),
+        Spec::fixed(
+            "enclave",
+            Default::Str(""),
+            "SROS2 enclave of the node's DDS participant (default /rpkm/<name>)",
         ),
     ]
 }
@@ -175,6 +180,7 @@ impl LiveParams {
             match d.name.as_str() {
                 "backend" => d.value = ParameterValue::String(name(ctx.output).into()),
                 "input_backend" => d.value = ParameterValue::String(name(ctx.input).into()),
+                "enclave" => d.value = ParameterValue::String(ctx.enclave.clone()),
                 _ => {}
             }
         }

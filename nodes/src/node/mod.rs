@@ -10,6 +10,7 @@
 pub mod calibrate_action;
 pub mod calibration_services;
 pub mod calibrator;
+pub mod effects;
 pub mod ingest;
 pub mod inputs;
 pub mod lifecycle;
@@ -145,8 +146,8 @@ pub struct CommonArgs {
     #[arg(long)]
     pub unconfigured: bool,
     /// ROS 2 arguments, last on the line: `--ros-args -r __ns:=/machine_a -r __node:=NAME
-    /// -r FROM:=TO -p KEY:=VALUE --params-file FILE` (namespace, name, topic remapping,
-    /// parameters).
+    /// -r FROM:=TO -p KEY:=VALUE --params-file FILE --enclave /rpkm/NAME` (namespace, name,
+    /// topic remapping, parameters, SROS2 enclave).
     #[arg(long = "ros-args", num_args = 0.., allow_hyphen_values = true, value_name = "ARGS")]
     pub ros_args: Vec<String>,
 }
@@ -179,6 +180,7 @@ impl CommonArgs {
             names,
             files,
             overrides,
+            enclave: ros.enclave,
         })
     }
 }
@@ -211,6 +213,8 @@ pub struct Identity {
     pub files: Vec<PathBuf>,
     /// `key=value` overrides, in order.
     pub overrides: Vec<String>,
+    /// `--ros-args --enclave E`.
+    pub enclave: Option<String>,
 }
 
 impl Identity {
@@ -239,6 +243,8 @@ pub struct RosArgs {
     pub params: Vec<String>,
     /// `--params-file FILE`.
     pub param_files: Vec<PathBuf>,
+    /// `-e E` / `--enclave E`: the SROS2 enclave.
+    pub enclave: Option<String>,
 }
 
 impl RosArgs {
@@ -268,10 +274,11 @@ impl RosArgs {
                     out.params.push(format!("{key}={val}"));
                 }
                 "--params-file" => out.param_files.push(PathBuf::from(value(words.next())?)),
+                "-e" | "--enclave" => out.enclave = Some(value(words.next())?),
                 other => {
                     return Err(format!(
                         "--ros-args: unknown argument {other:?} (-r FROM:=TO, -r __ns:=NS, \
-                         -r __node:=NAME, -p KEY:=VALUE, --params-file FILE)"
+                         -r __node:=NAME, -p KEY:=VALUE, --params-file FILE, --enclave E)"
                     ))
                 }
             }
@@ -293,12 +300,18 @@ impl RosArgs {
 }
 
 /// Parameter keys every node declares.
-pub const COMMON_KEYS: [&str; 3] = ["backend", "input_backend", "diagnostics_period_s"];
+pub const COMMON_KEYS: [&str; 4] = [
+    "backend",
+    "input_backend",
+    "diagnostics_period_s",
+    "enclave",
+];
 /// Parameter keys of the nodes that evaluate the model ([`Geometry::from_params`]).
-pub const GEOMETRY_KEYS: [&str; 5] = [
+pub const GEOMETRY_KEYS: [&str; 6] = [
     "model",
     "stiffness_factor",
     "geometry_file",
+    "effects_file",
     "geometry.",
     "follow_parameters",
 ];
@@ -313,7 +326,7 @@ pub fn is_geometry_key(key: &str) -> bool {
 /// The geometry parameters on the ROS 2 parameter services: model and stiffness live (the
 /// next sample uses them), the file and following read-only. `geometry.<name>` overrides
 /// (SI) are set in the parameter file.
-pub fn geometry_specs() -> [live::Spec; 4] {
+pub fn geometry_specs() -> [live::Spec; 5] {
     use live::{Default, Spec};
     [
         Spec::live(
@@ -338,6 +351,11 @@ pub fn geometry_specs() -> [live::Spec; 4] {
             Default::Bool(true),
             "replace the geometry by every /rpkm/parameters message",
         ),
+        Spec::fixed(
+            "effects_file",
+            Default::Str(""),
+            "effects written as data (YAML, docs/effects.md) whose calibrated values apply",
+        ),
     ]
 }
 
@@ -355,6 +373,8 @@ pub struct NodeContext {
     pub output: Backend,
     /// Backend of the subscribers (iceoryx2 or DDS).
     pub input: Backend,
+    /// SROS2 enclave of its DDS participant.
+    pub enclave: String,
 }
 
 /// A node's configuration as its command line and parameter files give it, checked, before
@@ -372,6 +392,8 @@ pub struct NodeSetup {
     pub input: Backend,
     /// Every backend the transport needs.
     pub transport: Backend,
+    /// SROS2 enclave: `--ros-args --enclave`, else parameter `enclave`, else `/rpkm/<name>`.
+    pub enclave: String,
 }
 
 fn union(a: Backend, b: Backend) -> Backend {
@@ -437,7 +459,12 @@ impl NodeSetup {
         declared: &[&str],
         extra_input: Option<Backend>,
     ) -> anyhow::Result<Self> {
-        let Identity { name, names, .. } = args.identity(kind)?;
+        let Identity {
+            name,
+            names,
+            enclave,
+            ..
+        } = args.identity(kind)?;
         let params = args.identity(kind)?.params().map_err(bad_param)?;
         let mut all: Vec<&str> = declared.to_vec();
         all.extend(COMMON_KEYS);
@@ -481,6 +508,7 @@ impl NodeSetup {
             transport = union(transport, extra);
         }
         diagnostics_period(&params)?;
+        let enclave = node_enclave(enclave, &params, &name)?;
         Ok(Self {
             name,
             names,
@@ -488,7 +516,33 @@ impl NodeSetup {
             output,
             input,
             transport,
+            enclave,
         })
+    }
+}
+
+/// The node's SROS2 enclave: `--ros-args --enclave` wins over parameter `enclave`; by
+/// default `/rpkm/<name>`, the enclave `rpkm security enclave` makes for each node.
+fn node_enclave(
+    from_args: Option<String>,
+    params: &NodeParams,
+    name: &str,
+) -> anyhow::Result<String> {
+    let (enclave, what) = match from_args {
+        Some(e) => (e, "--ros-args --enclave".to_owned()),
+        None if params.has("enclave") => (
+            params.string("enclave", "").map_err(bad_param)?,
+            params
+                .origin("enclave")
+                .map_or_else(|| "enclave".to_owned(), |o| format!("{o}/enclave")),
+        ),
+        None => return Ok(format!("{}/{name}", rpkm_transport::NODE_NAMESPACE)),
+    };
+    match rpkm_transport::security::enclave_name_error(&enclave) {
+        Some(why) => Err(crate::error::bad_input(format!(
+            "{what} {enclave:?}: {why}"
+        ))),
+        None => Ok(enclave),
     }
 }
 
@@ -524,7 +578,8 @@ impl NodeContext {
         let mut config = TransportConfig::new(&name)
             .backend(setup.transport)
             .ipc_prefix(prefix)
-            .names(setup.names);
+            .names(setup.names)
+            .enclave(&setup.enclave);
         if let Some(d) = args.domain {
             config = config.dds_domain(d);
         }
@@ -550,6 +605,7 @@ impl NodeContext {
             transport,
             output: setup.output,
             input: setup.input,
+            enclave: setup.enclave,
         })
     }
 
@@ -636,6 +692,9 @@ pub struct Geometry {
     pub stiffness: Stiffness,
     /// Where the parameters came from, for messages.
     pub source: String,
+    /// The calibrated effects applied at each state, and those the node knows
+    /// (`effects_file`).
+    pub effects: effects::NodeEffects,
 }
 
 /// A Parameters message that cannot be used.
@@ -649,6 +708,8 @@ pub enum ParametersMsgError {
     Name(String),
     #[error("/rpkm/parameters: parameter {name}: {value} is not finite")]
     NonFinite { name: String, value: f64 },
+    #[error("/rpkm/parameters: {0}")]
+    Effects(#[from] effects::EffectsError),
 }
 
 /// Length parameters: mm in the core, m on topics and in YAML.
@@ -679,12 +740,15 @@ impl Geometry {
             })?;
         let factor = p.positive("stiffness_factor", 1.0).map_err(bad_param)?;
         let file = p.string("geometry_file", "").map_err(bad_param)?;
-        let (mut params, mut source) = if file.is_empty() {
-            (Params::nominal(), "nominal parameters".to_owned())
+        let known = effects::NodeEffects::from_params(p)?;
+        let (mut params, mut source, effects) = if file.is_empty() {
+            (Params::nominal(), "nominal parameters".to_owned(), known)
         } else {
+            let path = std::path::Path::new(&file);
             (
-                crate::input::read_params(std::path::Path::new(&file))?,
+                crate::input::read_params(path)?,
                 file.clone(),
+                known.read_calibration(path)?,
             )
         };
         let overrides = p.group("geometry.").map_err(bad_param)?;
@@ -703,11 +767,13 @@ impl Geometry {
         if model == Model::M24 {
             params = params.with_perfect_parallelogram();
         }
+        source.push_str(&effects.describe());
         Ok(Self {
             params,
             model,
             stiffness: Stiffness::default().scaled(factor),
             source,
+            effects,
         })
     }
 
@@ -736,15 +802,18 @@ impl Geometry {
         if model == Model::M24 {
             params = params.with_perfect_parallelogram();
         }
+        let effects = self.effects.of_message(msg)?;
         Ok(Self {
             params,
             model,
             stiffness: self.stiffness,
             source: format!(
-                "/rpkm/parameters (model {}, {} measurements)",
+                "/rpkm/parameters (model {}, {} measurements){}",
                 model.number(),
-                msg.measurement_count
+                msg.measurement_count,
+                effects.describe()
             ),
+            effects,
         })
     }
 }
@@ -906,11 +975,15 @@ mod tests {
             ("-r", "expected a value"),
             ("-r nope", "expected FROM:=TO"),
             ("-p model=24", "expected KEY:=VALUE"),
-            ("--enclave x", "unknown argument \"--enclave\""),
+            ("--enclave", "expected a value"),
+            ("--log-level debug", "unknown argument \"--log-level\""),
         ] {
             let e = RosArgs::parse(&words(bad)).expect_err(bad);
             assert!(e.contains(says), "{bad}: {e}");
         }
+        // rcl's enclave flag, long and short; the last one wins
+        let r = RosArgs::parse(&words("--enclave /cell/a -e /cell/b"))?;
+        assert_eq!(r.enclave.as_deref(), Some("/cell/b"));
         Ok(())
     }
 

@@ -25,7 +25,7 @@ use rpkm_transport::topic;
 
 use rpkm_transport::dds_params::ParamRange;
 
-use super::inputs::{ParameterFollower, SeqGaps};
+use super::inputs::{ParameterFollower, SeqGaps, StreamMotion};
 use super::live::{self, LiveParams, Spec};
 use super::{
     bad_param, diagnostic_array, status, CommonArgs, Every, Geometry, Idle, NodeContext,
@@ -125,6 +125,8 @@ pub struct Monitor {
     pub last: Option<Evaluation>,
     /// Gaps in the input's seq (states lost before they reached the monitor).
     pub input: SeqGaps,
+    /// How the stream's carriers moved (what a calibrated effect may read).
+    motion: StreamMotion,
 }
 
 impl Monitor {
@@ -143,6 +145,7 @@ impl Monitor {
             implausible: 0,
             last: None,
             input: SeqGaps::default(),
+            motion: StreamMotion::default(),
         }
     }
 
@@ -172,11 +175,12 @@ impl Monitor {
     /// (counted as unsolved or implausible; the held level stays as it was).
     pub fn evaluate(&mut self, s: &ActuatorState) -> Option<Evaluation> {
         self.input.next(s.seq);
+        // the carriers and parameters under the calibrated effects
+        let (params, q) = self.motion.model_inputs(&mut self.geometry, s);
         let g = &self.geometry;
-        let q = s.position.map(|p| p * MM_PER_M);
         let prev = self.previous.as_ref();
         let limits = Limits::default();
-        let solved = fegm_checked_after(&g.params, &g.stiffness, q, s.follower, prev, &limits);
+        let solved = fegm_checked_after(&params, &g.stiffness, q, s.follower, prev, &limits);
         let eq = match solved {
             Ok(solved) => {
                 self.previous = Some(solved);
@@ -213,7 +217,7 @@ impl Monitor {
         let t = self.thresholds;
         let mut sample_level = level_by(worst, t.warn_percent, t.error_percent);
         if s.follower[1] && s.follower[2] {
-            if let Ok([q2, q3]) = rgm(&g.params, g.model, q[0], q[3]) {
+            if let Ok([q2, q3]) = rgm(&params, g.model, q[0], q[3]) {
                 st.dq2 = (q2 - q[1]) / MM_PER_M;
                 st.dq3 = (q3 - q[2]) / MM_PER_M;
                 let dq = st.dq2.abs().max(st.dq3.abs());
@@ -588,6 +592,7 @@ mod tests {
                 model: Model::M29,
                 stiffness: Stiffness::default(),
                 source: "test".into(),
+                effects: crate::node::effects::NodeEffects::default(),
             },
             Thresholds {
                 debounce_samples: debounce,
@@ -665,6 +670,54 @@ mod tests {
         // and a plausible state afterwards is evaluated as usual
         let ok = m.evaluate(&state(0.0)?).ok_or("unsolved")?;
         assert_eq!(ok.sample_level, PreloadLevel::Ok);
+        Ok(())
+    }
+
+    /// A calibrated lost motion of carrier 4 (`dq4 = -b * dir_q4`, b = 0.05 mm, from a
+    /// Parameters message in SI): the monitor predicts the forces of carrier 4 standing b
+    /// behind its encoder (the core's elastic model at the shifted carrier), where the
+    /// geometry alone predicts none.
+    #[test]
+    fn predicted_forces_include_a_calibrated_effect() -> Result<(), Box<dyn std::error::Error>> {
+        let file = crate::effects_file::parse(
+            "effects:\n  - name: lost_motion_q4\n    summary: s\n    \
+             params: {b: {unit: mm, prior: 0.01}}\n    dq4: \"-b * dir_q4\"\n",
+            "lost.yaml",
+            &[],
+        )?;
+        let mut m = monitor(1);
+        let mut g = m.geometry().clone();
+        g.effects = crate::node::effects::NodeEffects::known(Some(file));
+        let msg = rpkm_msgs::Parameters {
+            model: 29,
+            active_effects: vec!["lost_motion_q4".into()],
+            effect_parameter_names: vec!["lost_motion_q4.b".into()],
+            effect_parameter_values: vec![0.05e-3],
+            ..Default::default()
+        };
+        m.set_geometry(g.updated(&msg)?);
+        let p = Params::nominal();
+        let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
+        let s = ActuatorState {
+            position: q.map(|v| v / MM_PER_M),
+            ..Default::default()
+        };
+        // the first state of the stream: carrier 4's last move counts as +1
+        let e = m.evaluate(&s).ok_or("unsolved")?;
+        let mut shifted = q;
+        shifted[3] -= 0.05;
+        let truth = fegm(&p, &Stiffness::default(), shifted, ALL_ACTIVE)?;
+        for i in 0..4 {
+            let want = truth.drive_force[i] / NOMINAL_DRIVE_FORCE_N * 100.0;
+            assert!(
+                (e.status.predicted_current[i] - want).abs() < 1e-6,
+                "drive {}: {} %, the core's {want} %",
+                i + 1,
+                e.status.predicted_current[i]
+            );
+        }
+        let largest = truth.drive_force.iter().fold(0.0f64, |a, f| a.max(f.abs()));
+        assert!(largest > 100.0, "0.05 mm preloads the drives: {largest} N");
         Ok(())
     }
 }

@@ -24,11 +24,11 @@ use std::time::Duration;
 
 use rpkm_core::elastic::{fegm_checked_after, wrap_angle, Checked, ElasticError, Limits, Reason};
 use rpkm_core::geometry::{self, carrier_joint, platform_joint};
-use rpkm_core::params::{Model, RODS};
+use rpkm_core::params::{Model, Params, RODS};
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
-use super::inputs::{ParameterFollower, SeqGaps};
+use super::inputs::{ParameterFollower, SeqGaps, StreamMotion};
 use super::lifecycle::Lifecycle;
 use super::live::{self, LiveParams, Spec};
 use super::views::{self, TcpViews};
@@ -89,6 +89,8 @@ pub struct Estimator {
     pub last_warm_rejection: Option<Reason>,
     /// Gaps in the input's seq (states lost before they reached the estimator).
     pub input: SeqGaps,
+    /// How the stream's carriers moved (what a calibrated effect may read).
+    motion: StreamMotion,
 }
 
 /// The reason an elastic failure counts under.
@@ -110,6 +112,7 @@ impl Estimator {
             last_error: None,
             last_warm_rejection: None,
             input: SeqGaps::default(),
+            motion: StreamMotion::default(),
         }
     }
 
@@ -128,17 +131,12 @@ impl Estimator {
     /// solves it.
     pub fn estimate(&mut self, state: &ActuatorState) -> Option<TcpEstimate> {
         self.input.next(state.seq);
+        // the carriers and parameters under the calibrated effects
+        let (params, q) = self.motion.model_inputs(&mut self.geometry, state);
         let g = &self.geometry;
-        let q = state.position.map(|p| p * MM_PER_M);
         let prev = self.previous.as_ref();
-        let solved = fegm_checked_after(
-            &g.params,
-            &g.stiffness,
-            q,
-            state.follower,
-            prev,
-            &self.limits,
-        );
+        let solved =
+            fegm_checked_after(&params, &g.stiffness, q, state.follower, prev, &self.limits);
         let model = match g.model {
             Model::M24 => TcpEstimate::MODEL_24,
             Model::M29 => TcpEstimate::MODEL_29,
@@ -172,20 +170,20 @@ impl Estimator {
                 est.drive_forces = eq.drive_force;
                 est.iterations = u32::try_from(eq.iterations).unwrap_or(u32::MAX);
                 est.converged = true;
-                est.loop_residuals = loop_residuals(g, &q, eq.x, eq.y, eq.psi);
+                est.loop_residuals = loop_residuals((&params, g.model), &q, eq.x, eq.y, eq.psi);
             }
-            Err(e) => return self.rigid_fallback(e, &q, est),
+            Err(e) => return self.rigid_fallback(e, (&params, &q), est),
         }
         self.counts.estimates += 1;
         Some(est)
     }
 
-    /// No plausible elastic equilibrium: the rigid model of (q1, q4), flagged
-    /// `converged = false`, or no estimate when that fails too.
+    /// No plausible elastic equilibrium: the rigid model of (q1, q4) at `params` (under the
+    /// effects), flagged `converged = false`, or no estimate when that fails too.
     fn rigid_fallback(
         &mut self,
         e: ElasticError,
-        q: &[f64; 4],
+        (params, q): (&Params, &[f64; 4]),
         mut est: TcpEstimate,
     ) -> Option<TcpEstimate> {
         let c = &mut self.counts;
@@ -195,8 +193,8 @@ impl Estimator {
             c.reject(v.reason);
         }
         self.previous = None;
-        let g = &self.geometry;
-        let rigid = geometry::fgm(&g.params, g.model, q[0], q[3]);
+        let model = self.geometry.model;
+        let rigid = geometry::fgm(params, model, q[0], q[3]);
         self.last_error = Some(e);
         let Ok(rigid) = rigid else {
             self.counts.unsolved += 1;
@@ -213,7 +211,7 @@ impl Estimator {
         est.outcome = TcpEstimate::OUTCOME_RIGID_FALLBACK;
         est.reason = self.last_error.as_ref().map_or(0, |e| reason_of(e).code());
         est.iterations = 0;
-        est.loop_residuals = loop_residuals(g, q, rigid.x(), rigid.y(), rigid.psi());
+        est.loop_residuals = loop_residuals((params, model), q, rigid.x(), rigid.y(), rigid.psi());
         self.counts.estimates += 1;
         Some(est)
     }
@@ -301,18 +299,24 @@ const REJECTION_KEYS: [&str; 6] = [
     "rejected_far_from_rigid",
 ];
 
-/// |A_i − B_i| − l_i of rods 1..5 at pose (x, y, ψ) (mm) and actuator readings `q` (mm), in m;
-/// rod 5 is 0 for model 24.
-fn loop_residuals(g: &Geometry, q: &[f64; 4], x: f64, y: f64, psi: f64) -> [f64; 5] {
+/// |A_i − B_i| − l_i of rods 1..5 of parameters `p` at pose (x, y, ψ) (mm) and carrier
+/// positions `q` (mm), in m; rod 5 is 0 for model 24.
+fn loop_residuals(
+    (p, model): (&Params, Model),
+    q: &[f64; 4],
+    x: f64,
+    y: f64,
+    psi: f64,
+) -> [f64; 5] {
     let mut out = [0.0; 5];
-    let rods = match g.model {
+    let rods = match model {
         Model::M24 => 4,
         Model::M29 => 5,
     };
     for (slot, rod) in out.iter_mut().zip(&RODS[..rods]) {
-        let a = platform_joint(&g.params, rod, x, y, psi);
-        let b = carrier_joint(&g.params, rod, q[rod.actuator]);
-        *slot = ((a - b).norm() - g.params[rod.l]) / MM_PER_M;
+        let a = platform_joint(p, rod, x, y, psi);
+        let b = carrier_joint(p, rod, q[rod.actuator]);
+        *slot = ((a - b).norm() - p[rod.l]) / MM_PER_M;
     }
     out
 }
@@ -486,6 +490,7 @@ mod tests {
             model: Model::M29,
             stiffness: Stiffness::default(),
             source: "test".into(),
+            effects: crate::node::effects::NodeEffects::default(),
         }
     }
 

@@ -1,6 +1,6 @@
 //! The sections of the report page.
 
-use super::Report;
+use super::contents::Report;
 use crate::plot::machine::Machine;
 use crate::plot::maps::{self, Arrow, MapPoint, View};
 use crate::plot::{self, escape, BarOptions, Marker, Series};

@@ -184,16 +184,29 @@ impl std::fmt::Debug for DdsNode {
 
 impl DdsNode {
     /// Joins `domain` with a node `<namespace>/<name>`, with a `/rosout` writer ([`Self::rosout`])
-    /// and a `/parameter_events` writer. The parameter services are rpkm's own
+    /// and a `/parameter_events` writer; with DDS Security where `credentials` are given
+    /// (SROS2's enclave folder). The parameter services are rpkm's own
     /// ([`crate::dds_params`]), started by [`Self::serve_parameters`].
-    pub fn new(name: &str, namespace: &str, domain: u16) -> Result<Arc<Self>, TransportError> {
+    pub fn new(
+        name: &str,
+        namespace: &str,
+        domain: u16,
+        credentials: Option<&crate::security::Credentials>,
+    ) -> Result<Arc<Self>, TransportError> {
         let err = |reason: String| TransportError::DdsNode {
             node: name.to_owned(),
             domain,
             reason,
         };
-        let context = Context::with_options(ContextOptions::new().domain_id(domain))
-            .map_err(|e| err(e.to_string()))?;
+        let mut options = ContextOptions::new().domain_id(domain);
+        if let Some(c) = credentials {
+            // sros2 writes the private key unencrypted (PKCS#8), as rmw expects it.
+            options = options.enable_security(&c.dir, String::new());
+        }
+        let context = Context::with_options(options).map_err(|e| match credentials {
+            Some(c) => err(format!("DDS security with enclave {}: {e}", c.enclave)),
+            None => err(e.to_string()),
+        })?;
         let node_name = NodeName::new(namespace, name).map_err(|e| err(format!("{e:?}")))?;
         let node = context
             .new_node(

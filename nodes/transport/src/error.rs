@@ -14,6 +14,15 @@ pub enum TransportError {
         /// The value found in the environment.
         value: String,
     },
+    /// SROS2 credentials are missing (`Enforce`) or invalid.
+    #[error("node {node}: DDS security: {source}")]
+    Security {
+        /// Node name.
+        node: String,
+        /// Which file, and what is wrong.
+        #[source]
+        source: crate::security::SecurityError,
+    },
     /// The iceoryx2 node could not be created.
     #[error("cannot create the iceoryx2 node {node:?}: {reason}")]
     IpcNode {

@@ -21,6 +21,7 @@ pub mod error;
 pub mod ipc;
 pub mod names;
 pub mod pubsub;
+pub mod security;
 pub mod topic;
 
 pub use error::TransportError;

@@ -7,6 +7,7 @@ use crate::dds::{domain_id_from_env, DdsNode, DdsPublisher, DdsSubscriber};
 use crate::error::TransportError;
 use crate::ipc::{IpcMessage, IpcNode, IpcRecv, IpcSend};
 use crate::names::Names;
+use crate::security::Credentials;
 use crate::topic::Topic;
 
 /// Which middleware a port uses.
@@ -49,6 +50,9 @@ pub struct TransportConfig {
     pub dds_domain: Option<u16>,
     /// Namespace and remapping rules: every topic's name goes through them.
     pub names: Names,
+    /// SROS2 enclave of the DDS participant, used when `ROS_SECURITY_ENABLE` is `true`
+    /// (default `/rpkm/<node_name>`).
+    pub enclave: String,
 }
 
 impl TransportConfig {
@@ -60,7 +64,19 @@ impl TransportConfig {
             ipc_prefix: String::new(),
             dds_domain: None,
             names: Names::default(),
+            enclave: String::new(),
         }
+        .default_enclave()
+    }
+    fn default_enclave(mut self) -> Self {
+        self.enclave = format!("{}/{}", crate::names::NODE_NAMESPACE, self.node_name);
+        self
+    }
+    /// Sets the SROS2 enclave (`/rpkm/tcp_estimator`).
+    #[must_use]
+    pub fn enclave(mut self, enclave: impl Into<String>) -> Self {
+        self.enclave = enclave.into();
+        self
     }
     /// Sets the backend.
     #[must_use]
@@ -88,6 +104,29 @@ impl TransportConfig {
     }
 }
 
+/// The SROS2 credentials of `config`'s enclave where the environment switches security on;
+/// `None` without (or, under `Permissive`, where the enclave has none: said on the log).
+fn security(config: &TransportConfig) -> Result<Option<Credentials>, TransportError> {
+    let err = |source| TransportError::Security {
+        node: config.node_name.clone(),
+        source,
+    };
+    let Some(env) = crate::security::env().map_err(err)? else {
+        return Ok(None);
+    };
+    let credentials = crate::security::credentials(&env, &config.enclave).map_err(err)?;
+    if credentials.is_none() {
+        log::warn!(
+            "node {}: no SROS2 credentials for enclave {} in {} \
+             (ROS_SECURITY_STRATEGY=Permissive): joining DDS without security",
+            config.node_name,
+            config.enclave,
+            env.keystore.display()
+        );
+    }
+    Ok(credentials)
+}
+
 /// The nodes of the configured backends; creates [`Publisher`]s and [`Subscriber`]s.
 #[derive(Debug)]
 pub struct Transport {
@@ -111,10 +150,12 @@ impl Transport {
                 Some(d) => d,
                 None => domain_id_from_env()?,
             };
+            let credentials = security(config)?;
             Some(DdsNode::new(
                 &config.node_name,
                 config.names.namespace(),
                 domain,
+                credentials.as_ref(),
             )?)
         } else {
             None

@@ -45,6 +45,7 @@ fn node_status(dq3: f64, followers: bool) -> (DiagnosticStatus, PreloadStatus) {
             model: Model::M29,
             stiffness: Stiffness::default(),
             source: "test".into(),
+            effects: crate::node::effects::NodeEffects::default(),
         },
         NodeThresholds {
             warn_percent: 30.0,
@@ -105,6 +106,7 @@ fn thresholds_are_read_from_the_reports_values_before_any_drive_state() {
             model: Model::M29,
             stiffness: Stiffness::default(),
             source: "test".into(),
+            effects: crate::node::effects::NodeEffects::default(),
         },
         NodeThresholds {
             warn_percent: 27.5,

@@ -10,9 +10,9 @@ use crate::error::bad_input;
 use crate::node::{bad_param, shutdown, Idle, NodeContext};
 
 /// Default DDS topic of the controller's drive states.
-pub(super) const ACTUATOR_TOPIC: &str = "/rpkm/controller/actuator_state";
+pub const ACTUATOR_TOPIC: &str = "/rpkm/controller/actuator_state";
 /// Default DDS topic of the controller's measurements.
-pub(super) const MEASUREMENT_TOPIC: &str = "/rpkm/controller/tcp_measurement";
+pub const MEASUREMENT_TOPIC: &str = "/rpkm/controller/tcp_measurement";
 
 /// A topic name that lives as long as the node (the transport keeps `&'static str` names).
 fn leak(s: String) -> &'static str {
