@@ -14,6 +14,7 @@
 
 pub mod actuator_state;
 pub mod builtin_interfaces;
+pub mod calibrate_action;
 pub mod calibration_srv;
 pub mod campaign_info;
 pub mod cdr;

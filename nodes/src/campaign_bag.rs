@@ -265,7 +265,7 @@ pub fn pose_messages(
 /// assert_eq!(rebuilt.poses[1].covariates, vec![None]);
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct CampaignAssembler {
     info: Option<CampaignInfo>,
     /// Drive states not yet paired, by stamp (ns), in arrival order per stamp.

@@ -8,6 +8,11 @@
 //! inactive again. Drive states stream over iceoryx2 all along, stamped with the wall clock
 //! that the events' timestamps use too.
 //!
+//! ingest alike, on a campaign file: started `--unconfigured`, no drive state reaches the
+//! client before the activate request, states stream while it is active, and none is
+//! received later than a quarter of a second (delivery) after the node became inactive: the
+//! file waits where it is.
+//!
 //! Needs the venv; without it SKIPPED, under RPKM_REQUIRE_PYTHON=1 a failure.
 
 use crate::node_support;
@@ -26,6 +31,42 @@ use rpkm_transport::{topic, Transport, TransportConfig};
 use serde_json::{json, Value};
 
 const DOMAIN: &str = "77";
+const DOMAIN_INGEST: &str = "80";
+
+/// Runs the lifecycle peer on `node` through configure, activate, deactivate, cleanup,
+/// shutdown (1.5 s in each state), watching `watch`; its report, checked for the answers and
+/// the ten events.
+fn drive(py: &Path, domain: &str, node: &str, watch: &str) -> (Value, String) {
+    let peer = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/lifecycle_peer.py");
+    let out = Command::new(py)
+        .arg(peer)
+        .args(["--domain", domain, "--node", node, "--dwell", "1.5"])
+        .args(["--watch", watch])
+        .args(["configure", "activate", "deactivate", "cleanup", "shutdown"])
+        .stderr(Stdio::inherit())
+        .output()
+        .expect("run the peer");
+    let text = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "peer: {text}");
+    let report: Value = serde_json::from_str(text.trim()).expect("JSON report");
+    assert_eq!(report["initial_state"], 1, "{text}");
+    // (transition, success, state after, transitions offered there)
+    let steps: Vec<Value> = report["steps"].as_array().expect("steps").clone();
+    assert_eq!(
+        steps,
+        [
+            json!({"transition": "configure", "success": true, "state": 2, "offered": [2, 3, 6]}),
+            json!({"transition": "activate", "success": true, "state": 3, "offered": [4, 7]}),
+            json!({"transition": "deactivate", "success": true, "state": 2, "offered": [2, 3, 6]}),
+            json!({"transition": "cleanup", "success": true, "state": 1, "offered": [1, 5]}),
+            json!({"transition": "shutdown", "success": true, "state": 4, "offered": []}),
+        ],
+        "{text}"
+    );
+    check_events(report["events"].as_array().expect("events"), &text);
+    assert_eq!(report["estimates_before_activate"], 0, "{text}");
+    (report, text)
+}
 
 /// Wall-clock now as a message stamp, and in ns.
 fn now() -> (Time, u64) {
@@ -62,43 +103,10 @@ fn a_lifecycle_client_drives_the_estimator_through_every_transition() {
     );
     let done = Arc::new(AtomicBool::new(false));
     let streaming = stream(states, Arc::clone(&done));
-    let peer = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/lifecycle_peer.py");
-    let out = Command::new(&py)
-        .arg(peer)
-        .args([
-            "--domain",
-            DOMAIN,
-            "--node",
-            "/rpkm/tcp_estimator",
-            "--dwell",
-            "1.5",
-        ])
-        .args(["configure", "activate", "deactivate", "cleanup", "shutdown"])
-        .stderr(Stdio::inherit())
-        .output()
-        .expect("run the peer");
+    let (report, _) = drive(&py, DOMAIN, "/rpkm/tcp_estimator", "tcp_estimate");
     done.store(true, Ordering::Relaxed);
     streaming.join().expect("streaming thread");
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "peer: {text}");
-    let report: Value = serde_json::from_str(text.trim()).expect("JSON report");
-    assert_eq!(report["initial_state"], 1, "{text}");
-    // (transition, success, state after, transitions offered there)
-    let steps: Vec<Value> = report["steps"].as_array().expect("steps").clone();
-    assert_eq!(
-        steps,
-        [
-            json!({"transition": "configure", "success": true, "state": 2, "offered": [2, 3, 6]}),
-            json!({"transition": "activate", "success": true, "state": 3, "offered": [4, 7]}),
-            json!({"transition": "deactivate", "success": true, "state": 2, "offered": [2, 3, 6]}),
-            json!({"transition": "cleanup", "success": true, "state": 1, "offered": [1, 5]}),
-            json!({"transition": "shutdown", "success": true, "state": 4, "offered": []}),
-        ],
-        "{text}"
-    );
     let events = report["events"].as_array().expect("events");
-    check_events(events, &text);
-    assert_eq!(report["estimates_before_activate"], 0, "{text}");
     // the node became inactive at the end of deactivating; no state sent after it was
     // estimated
     let inactive_at = events[5]["timestamp"].as_u64().expect("timestamp");
@@ -114,6 +122,50 @@ fn a_lifecycle_client_drives_the_estimator_through_every_transition() {
     assert_eq!(
         late, 0,
         "estimates of states sent after the node became inactive"
+    );
+}
+
+#[test]
+fn a_lifecycle_client_drives_ingest_through_every_transition() {
+    let Some(py) = python() else { return };
+    let campaign = Path::new(env!("CARGO_MANIFEST_DIR")).join("bags/demo/campaign.csv");
+    let _node = Proc(
+        Command::new(rpkm())
+            .args(["node", "ingest", "--unconfigured", "--backend", "dds"])
+            .arg("--source")
+            .arg(&campaign)
+            // 194 poses at 40 Hz: about 5 s, longer than the 1.5 s the node is active
+            .args(["--param", "rate_hz=40", "--param", "start_delay_s=0"])
+            .env("ROS_DOMAIN_ID", DOMAIN_INGEST)
+            .spawn()
+            .expect("start ingest"),
+    );
+    let (report, text) = drive(&py, DOMAIN_INGEST, "/rpkm/ingest", "actuator_state");
+    let events = report["events"].as_array().expect("events");
+    let inactive_at = events[5]["timestamp"].as_u64().expect("timestamp");
+    let received: Vec<u64> = report["received_ns"]
+        .as_array()
+        .expect("received")
+        .iter()
+        .filter_map(Value::as_u64)
+        .collect();
+    let while_active = received.iter().filter(|&&t| t < inactive_at).count();
+    assert!(
+        while_active > 20,
+        "{while_active} states while active: {text}"
+    );
+    // a state published before the node became inactive may still be on its way
+    let late = received
+        .iter()
+        .filter(|&&t| t > inactive_at + 250_000_000)
+        .count();
+    assert_eq!(
+        late, 0,
+        "states received after the node became inactive: {text}"
+    );
+    eprintln!(
+        "ingest: {while_active} drive states while active, {} in all",
+        received.len()
     );
 }
 

@@ -1,8 +1,9 @@
 //! msgs/ is a ROS 2 interface package: tests/python/build_interface_package.py builds it as
 //! colcon would, with the rosidl generators Debian ships (rosidl-core, ament-cmake) and small
 //! stand-ins for rosidl_default_generators/runtime and builtin_interfaces, then compiles a
-//! package that finds rpkm_msgs and uses every message from C++. A package.xml without the
-//! interface-package declarations, or a CMakeLists.txt that leaves out a .msg, must fail.
+//! package that finds rpkm_msgs and uses every message and the action's types from C++. A
+//! package.xml without the interface-package declarations, or a CMakeLists.txt that leaves
+//! out a .msg, must fail.
 //!
 //! Without the tooling the test is skipped with the reason, except under
 //! `RPKM_REQUIRE_PYTHON` (set by .ci/run, which installs it), where it fails.
@@ -54,9 +55,9 @@ fn text(out: &Output) -> String {
 fn broken_copy(dir: &Path, file: &str, edit: impl Fn(&str) -> String) -> PathBuf {
     let copy = dir.join(format!("broken-{}", file.replace('.', "-")));
     let msgs = repo().join("msgs");
-    for folder in ["msg", "srv"] {
+    for folder in ["msg", "srv", "action"] {
         std::fs::create_dir_all(copy.join(folder)).expect("dir");
-        for entry in std::fs::read_dir(msgs.join(folder)).expect("msg/, srv/") {
+        for entry in std::fs::read_dir(msgs.join(folder)).expect("msg/, srv/, action/") {
             let path = entry.expect("entry").path();
             std::fs::copy(
                 &path,
@@ -102,17 +103,31 @@ fn msgs_builds_as_a_ros2_interface_package_with_rosidl() {
         expected.push(format!("srv/{stem}_Request.msg"));
         expected.push(format!("srv/{stem}_Response.msg"));
     }
+    // an action as itself
+    for e in std::fs::read_dir(repo().join("msgs/action")).expect("action/") {
+        let name = e.expect("entry").file_name().to_string_lossy().into_owned();
+        expected.push(format!("action/{name}"));
+    }
     expected.sort();
+    assert!(expected.contains(&"action/Calibrate.action".to_owned()));
     assert_eq!(report["interfaces"], serde_json::json!(expected));
-    assert_eq!(report["depends"], serde_json::json!(["builtin_interfaces"]));
+    assert_eq!(
+        report["depends"],
+        serde_json::json!(["action_msgs", "builtin_interfaces"])
+    );
 
-    // a message left out of rosidl_generate_interfaces
+    // a message left out of rosidl_generate_interfaces (one no other interface uses: a left
+    // out Parameters.msg fails earlier, when the action's result is compiled)
     let unlisted = broken_copy(&dir, "CMakeLists.txt", |t| {
-        t.replace("  \"msg/Parameters.msg\"\n", "")
+        t.replace("  \"msg/PreloadStatus.msg\"\n", "")
     });
     let out = build(&unlisted, &workspace).expect("python3 runs");
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-    assert!(text(&out).contains("msg/ and srv/ hold"), "{}", text(&out));
+    assert!(
+        text(&out).contains("msg/, srv/ and action/ hold"),
+        "{}",
+        text(&out)
+    );
 
     // not in the rosidl_interface_packages group (colcon would not order it before users)
     let ungrouped = broken_copy(&dir, "package.xml", |t| {

@@ -5,16 +5,18 @@
 `lifecycle_msgs::srv::dds_::X_Request_` / `_Response_`, rmw_cyclonedds's 16-byte header
 first) and the topic `~/transition_event` (`lifecycle_msgs::msg::dds_::TransitionEvent_`),
 written from the .msg/.srv definitions of ROS 2's lifecycle_msgs; besides, the node's
-estimates on `/rpkm/tcp_estimate`.
+estimates on `/rpkm/tcp_estimate` (or, `--watch actuator_state`, ingest's drive states on
+`/rpkm/actuator_state`).
 
   lifecycle_peer.py --domain D --node /rpkm/tcp_estimator --dwell S --timeout S \
-      configure activate deactivate cleanup shutdown
+      [--watch tcp_estimate|actuator_state] configure activate deactivate cleanup shutdown
 
 For each transition, in order: ChangeState by id, then GetState and GetAvailableTransitions,
 then S seconds in that state. Prints one JSON object: "steps" (transition, success, state
 after, transitions offered), "events" (every TransitionEvent of the node: transition id and
 label, start and goal state ids, timestamp), "estimates_before_activate" (estimates received
-before the activate request was sent), "estimate_stamps" (ns of every estimate received).
+before the activate request was sent), "estimate_stamps" (ns of every estimate received),
+"received_ns" (the wall-clock ns at which each was received).
 Exit 0, or 2 on a timeout.
 """
 
@@ -35,7 +37,7 @@ from cyclonedds.sub import DataReader  # noqa: E402
 from cyclonedds.topic import Topic  # noqa: E402
 from cyclonedds.util import duration  # noqa: E402
 
-from cyclone_peer import TcpEstimate  # noqa: E402
+from cyclone_peer import ActuatorState, TcpEstimate  # noqa: E402
 
 MSG = "lifecycle_msgs::msg::dds_::"
 SRV = "lifecycle_msgs::srv::dds_::"
@@ -114,7 +116,7 @@ class GetTransitionsResponse(IdlStruct, typename=SRV + "GetAvailableTransitions_
 
 
 class Peer:
-    def __init__(self, domain, node, deadline):
+    def __init__(self, domain, node, deadline, watch="tcp_estimate"):
         self.dp = DomainParticipant(domain)
         self.deadline = deadline
         self.seq = 0
@@ -134,10 +136,15 @@ class Peer:
                                                 TransitionEvent), qos=events)
         estimates = Qos(Policy.Reliability.Reliable(duration(seconds=1)),
                         Policy.History.KeepLast(1024))
-        self.estimates = DataReader(self.dp, Topic(self.dp, "rt/rpkm/tcp_estimate", TcpEstimate),
+        self.watched = {"tcp_estimate": TcpEstimate, "actuator_state": ActuatorState}[watch]
+        if watch == "actuator_state":
+            # the drive states go out best effort (a reliable reader would not match)
+            estimates = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1024))
+        self.estimates = DataReader(self.dp, Topic(self.dp, f"rt/rpkm/{watch}", self.watched),
                                     qos=estimates)
         self.seen_events = []
         self.stamps = []
+        self.received = []
 
     def poll(self):
         for e in self.events.take(N=64):
@@ -147,7 +154,8 @@ class Peer:
                     "start": e.start_state.id, "goal": e.goal_state.id,
                     "timestamp": e.timestamp})
         for m in self.estimates.take(N=1024):
-            if isinstance(m, TcpEstimate):
+            if isinstance(m, self.watched):
+                self.received.append(time.time_ns())
                 self.stamps.append(m.stamp.sec * 1_000_000_000 + m.stamp.nanosec)
 
     def call(self, name, make_request):
@@ -182,9 +190,10 @@ def main():
     ap.add_argument("--node", required=True)
     ap.add_argument("--dwell", type=float, default=1.5)
     ap.add_argument("--timeout", type=float, default=60.0)
+    ap.add_argument("--watch", choices=["tcp_estimate", "actuator_state"], default="tcp_estimate")
     ap.add_argument("transitions", nargs="+")
     a = ap.parse_args()
-    peer = Peer(a.domain, a.node, time.monotonic() + a.timeout)
+    peer = Peer(a.domain, a.node, time.monotonic() + a.timeout, a.watch)
     out = {"steps": [], "estimates_before_activate": None}
     state = peer.call("get_state", lambda q: GetStateRequest(CLIENT_ID, q, 0)).current_state.id
     out["initial_state"] = state
@@ -207,6 +216,7 @@ def main():
     peer.poll()
     out["events"] = peer.seen_events
     out["estimate_stamps"] = peer.stamps
+    out["received_ns"] = peer.received
     print(json.dumps(out))
 
 

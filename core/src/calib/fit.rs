@@ -3,6 +3,7 @@
 
 use super::lm::{Final, Keep, Lm};
 use super::plan::{before_table, Plan};
+use super::progress::Observer;
 use super::report;
 use super::request::Request;
 use super::rows::{dependency, reduced_jacobian, Columns, Key, Problem};
@@ -33,6 +34,7 @@ pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
         theta0,
         warm,
         shared,
+        progress,
         ..
     } = *req;
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
@@ -59,6 +61,7 @@ pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
         init,
         (warm.is_some(), warm.is_some_and(|w| w.screen)),
         view.as_ref(),
+        progress,
     )?;
     // the corrections at the fit's θ: only a large campaign's leverages and step 2 read them
     let corr = OnceCell::new();
@@ -76,7 +79,7 @@ pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
     let mut covariance = SMatrix::<f64, N_PARAMS, N_PARAMS>::from_fn(|i, j| {
         0.5 * (s1.cov_p1[(i, j)] + s1.cov_p1[(j, i)])
     });
-    if let Some(s2) = step2(&pb, &plan, &fit, &corr, &s1.cov_p1)? {
+    if let Some(s2) = step2(&pb, &plan, &fit, &corr, &s1.cov_p1, progress)? {
         p = s2.p;
         iterations += s2.iterations;
         s2.widen(&mut covariance);
@@ -218,6 +221,7 @@ pub(super) fn step1(
     init: State,
     (warm, screen): (bool, bool),
     shared: Option<&View>,
+    progress: Option<Observer>,
 ) -> Result<(Step1Fit, Final), CalibrationError> {
     let opts = pb.opts;
     let mut fit = Step1Fit {
@@ -259,7 +263,7 @@ pub(super) fn step1(
                 .is_none()
                 .then(|| (plan.theta0.as_slice(), plan.corr0(pb))),
         };
-        let res = lm.run(&fit.state)?;
+        let res = lm.run(&fit.state, progress)?;
         fit.state = res.state;
         fit.iterations += res.iterations;
         fit.screened = res.screened;
@@ -377,6 +381,7 @@ pub(super) fn step2<'c>(
     fit: &Step1Fit,
     corr: &dyn Fn() -> &'c Corrections,
     cov_p1: &DMatrix<f64>,
+    progress: Option<Observer>,
 ) -> Result<Option<Step2Fit>, CalibrationError> {
     if plan.step2_wanted.is_empty() {
         return Ok(None);
@@ -421,7 +426,7 @@ pub(super) fn step2<'c>(
         shared: None,
         made: None,
     };
-    let res = lm.run(&fit.state)?;
+    let res = lm.run(&fit.state, progress)?;
     let p = res.state.p;
     let after_rows = virtual_rows(&p)?;
     let (cov, cross) = step2_covariance(&after_rows, &ids2, &prior2, cov_p1)?;

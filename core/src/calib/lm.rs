@@ -38,6 +38,7 @@ pub const SCREEN_RHO: f64 = 0.02;
 /// diagonal, where [`TAU`]'s damping would hold the step back).
 pub const SCREEN_TAU: f64 = 1e-15;
 
+use super::progress::{Flow, Observer, Progress};
 use super::rows::{in_piece_order, thread_count, weighted_values, Key, Problem};
 use super::shared::View;
 use super::types::{CalibrationError, State};
@@ -517,7 +518,13 @@ impl Lm<'_> {
         }
     }
 
-    pub fn run(&self, start: &State) -> Result<LmResult, CalibrationError> {
+    /// Runs from `start` to convergence; `progress` (the caller's observer, not `Sync`: the
+    /// rows are evaluated on other threads) is told of each iteration and may stop the run.
+    pub fn run(
+        &self,
+        start: &State,
+        progress: Option<Observer>,
+    ) -> Result<LmResult, CalibrationError> {
         let cols = self.n_unknowns();
         let mut p = start.clone();
         let Evaluated {
@@ -540,6 +547,7 @@ impl Lm<'_> {
             if Self::gradient_cosine(&nq) <= GTOL {
                 return done(p, it, last);
             }
+            self.observe(progress, it, nq.cost)?;
             let mut damped = nq.a.clone();
             for k in 0..cols {
                 damped[(k, k)] += mu;
@@ -607,6 +615,28 @@ impl Lm<'_> {
             }
         }
         Err(Self::not_converged(self.max_iterations, &nq))
+    }
+
+    /// Tells the observer that iteration `it` (from 0) begins at `cost`: once per iteration
+    /// the run counts (a refused step and a failed factorisation count too).
+    fn observe(
+        &self,
+        progress: Option<Observer>,
+        it: usize,
+        cost: f64,
+    ) -> Result<(), CalibrationError> {
+        let Some(observer) = progress else {
+            return Ok(());
+        };
+        let at = Progress::Iteration {
+            step: self.step,
+            iteration: it + 1,
+            cost,
+        };
+        match observer(&at) {
+            Flow::Continue => Ok(()),
+            Flow::Stop => Err(CalibrationError::Cancelled),
+        }
     }
 
     fn not_converged(iterations: usize, nq: &Normal) -> CalibrationError {

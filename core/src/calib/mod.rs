@@ -7,6 +7,7 @@ mod fit;
 mod lm;
 pub mod online;
 mod plan;
+mod progress;
 mod report;
 mod request;
 mod rounds;
@@ -16,6 +17,7 @@ mod shared;
 mod types;
 mod uncertainty;
 
+pub use progress::{Flow, Observer, Progress};
 pub use report::{gain, rms};
 pub use request::{Noise, Request};
 pub use rounds::calibrate;

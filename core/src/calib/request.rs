@@ -1,6 +1,7 @@
 //! What a calibration is asked for: a [`Request`] says what to calibrate, from where, and how
 //! its rows are weighted ([`Noise`]); [`super::calibrate`] answers it.
 
+use super::progress::Observer;
 use super::shared::SharedRows;
 use super::types::{Calibration, Options, WarmStart};
 use crate::campaign::Campaign;
@@ -45,6 +46,8 @@ pub struct Request<'a> {
     /// with [`Noise::Stated`]. A caller that has it (the diagnosis's first round) does not
     /// pay for it twice; it is not checked to be that calibration.
     pub first_round: Option<&'a Calibration>,
+    /// Told of each LM iteration and noise round; it may stop the calibration (`progress`).
+    pub progress: Option<Observer<'a>>,
 }
 
 impl<'a> Request<'a> {
@@ -59,6 +62,7 @@ impl<'a> Request<'a> {
             warm: None,
             shared: None,
             first_round: None,
+            progress: None,
         }
     }
 }

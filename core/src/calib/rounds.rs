@@ -4,6 +4,7 @@
 //! change of how rows are weighted is made here once.
 
 use super::fit::fit_once;
+use super::progress::{Flow, Progress};
 use super::request::{Noise, Request};
 use super::types::{Calibration, CalibrationError, WarmStart};
 use crate::effects::EffectSet;
@@ -65,8 +66,37 @@ fn estimating(
             rebinds = bound_at_fit.is_some();
         }
         opts.noise = levels.apply(&step, stated);
+        round_ended(req, || {
+            levels.estimate(
+                req.campaign,
+                stated,
+                opts.noise.clone(),
+                &cal.residuals,
+                rounds,
+            )
+        })?;
         last = Some(cal);
     };
     let estimate = levels.estimate(req.campaign, stated, opts.noise, &cal.residuals, rounds);
+    round_ended(req, || estimate.clone())?;
     Ok((cal, estimate))
+}
+
+/// Tells `req`'s observer, if any, that a noise round ended with the estimate `shown` makes
+/// (made only when someone listens).
+fn round_ended(
+    req: &Request,
+    shown: impl FnOnce() -> NoiseEstimate,
+) -> Result<(), CalibrationError> {
+    let Some(observer) = req.progress else {
+        return Ok(());
+    };
+    let estimate = shown();
+    match observer(&Progress::NoiseRound {
+        round: estimate.rounds,
+        estimate: &estimate,
+    }) {
+        Flow::Continue => Ok(()),
+        Flow::Stop => Err(CalibrationError::Cancelled),
+    }
 }

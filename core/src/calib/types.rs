@@ -165,6 +165,9 @@ pub enum CalibrationError {
     },
     #[error("the calibration's result is not a number: {0} (the rows carry non-finite values or weights)")]
     NonFinite(String),
+    /// Its caller's observer asked it to stop (`Flow::Stop`, `progress`): no result.
+    #[error("the calibration was cancelled by its caller")]
+    Cancelled,
 }
 
 /// A row removed as an outlier.

@@ -652,7 +652,7 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
         .unwrap_or_default();
     let (respawn, respawn_delay) = respawn(ctx, body, &format!("node {name}"), true)?;
     let (namespace, remaps) = names(ctx, body, &name)?;
-    let managed = managed(ctx, body, &name, &exec)?;
+    let managed = managed(ctx, body, &name)?;
     Ok(NodeSpec {
         program: Program::Node,
         enclave: enclave(ctx, body, &name)?,
@@ -689,24 +689,9 @@ fn flag(
     }
 }
 
-/// A node entry's `managed:` (ingest is not a managed node).
-fn managed(
-    ctx: &Ctx<'_>,
-    body: &serde_yaml::Mapping,
-    name: &str,
-    exec: &str,
-) -> Result<bool, LaunchError> {
-    let managed = flag(ctx, body, "managed", &format!("node {name}"))?;
-    if managed && exec == "ingest" {
-        return Err(ctx.err_at(
-            "managed",
-            format!(
-                "node {name}: ingest is not a managed node (tcp_estimator, preload_monitor, \
-                 calibrator are)"
-            ),
-        ));
-    }
-    Ok(managed)
+/// A node entry's `managed:` (every rpkm node is a managed node).
+fn managed(ctx: &Ctx<'_>, body: &serde_yaml::Mapping, name: &str) -> Result<bool, LaunchError> {
+    flag(ctx, body, "managed", &format!("node {name}"))
 }
 
 /// A node entry's `enclave:`, checked as the node checks it (an absolute ROS 2 namespace).

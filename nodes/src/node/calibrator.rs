@@ -22,6 +22,7 @@
 //! (+12.0 ± 0.3 µm/K)", or "l1..l5 alike in 2 min, the path cannot tell which: ..." where the
 //! path does not name one rod).
 
+use super::calibrate_action::{noise_si, CalibrateAction, Running};
 use super::lifecycle::Lifecycle;
 use std::collections::VecDeque;
 use std::fmt::Write as _;
@@ -37,10 +38,12 @@ use rpkm_core::campaign::Campaign;
 use rpkm_core::obs;
 use rpkm_core::params::Model;
 use rpkm_core::params::{Params, N_PARAMS};
+use rpkm_msgs::calibrate_action::{CalibrateGoal, CalibrateResult};
 use rpkm_msgs::{
     ActuatorState, CampaignInfo, Diagnosis, DiagnosisCandidate, DiagnosticArray, DiagnosticStatus,
     Parameters, TcpMeasurement,
 };
+use rpkm_transport::dds_actions::GoalEnd;
 use rpkm_transport::{topic, Publisher, Subscriber};
 
 use super::context::{
@@ -76,6 +79,20 @@ pub const KEYS: [&str; 18] = [
 ];
 
 /// The model diagnosis of `rpkm_core::diagnose` on the calibrated campaign (the held-out part
+/// for its validation).
+fn diagnose_model(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    calibration: &Calibration,
+) -> Result<rpkm_core::diagnose::Diagnosis, rpkm_core::diagnose::DiagnoseError> {
+    let opts = rpkm_core::diagnose::Options {
+        model: calibration.model,
+        ..Default::default()
+    };
+    rpkm_core::diagnose::diagnose(campaign, validation, &[], &opts)
+}
+
+/// The model diagnosis of `rpkm_core::diagnose` on the calibrated campaign (the held-out part
 /// for its validation), as the Diagnosis message (SI: µm become m; a validation RMS that
 /// does not exist is NaN).
 pub fn diagnose(
@@ -83,14 +100,14 @@ pub fn diagnose(
     validation: Option<&Campaign>,
     calibration: &Calibration,
 ) -> Result<Diagnosis, rpkm_core::diagnose::DiagnoseError> {
-    let opts = rpkm_core::diagnose::Options {
-        model: calibration.model,
-        ..Default::default()
-    };
-    let d = rpkm_core::diagnose::diagnose(campaign, validation, &[], &opts)?;
+    diagnose_model(campaign, validation, calibration).map(|d| diagnosis_msg(&d))
+}
+
+/// A diagnosis as the Diagnosis message.
+fn diagnosis_msg(d: &rpkm_core::diagnose::Diagnosis) -> Diagnosis {
     let m = |um: Option<f64>| um.map_or(f64::NAN, |v| v * 1e-6);
-    Ok(Diagnosis {
-        missing_effect: d.missing_effect.unwrap_or_default(),
+    Diagnosis {
+        missing_effect: d.missing_effect.clone().unwrap_or_default(),
         candidates: d
             .candidates
             .iter()
@@ -105,7 +122,7 @@ pub fn diagnose(
         baseline_cal_rms: d.baseline.cal_rms_um * 1e-6,
         baseline_val_rms: m(d.baseline.val_rms_um),
         noise_floor: d.baseline.noise_floor_um * 1e-6,
-    })
+    }
 }
 
 /// A finished calibration as messages.
@@ -113,8 +130,47 @@ pub fn diagnose(
 pub struct Outcome {
     /// The identified parameters with campaign statistics.
     pub parameters: Parameters,
-    /// The diagnosis, or why there is none.
-    pub diagnosis: Result<Diagnosis, String>,
+    /// The diagnosis, or why there is none (`None`: not asked for).
+    pub diagnosis: Option<Result<Diagnosis, String>>,
+    /// The diagnosis's verdict: its kind and in words.
+    pub verdict: Option<(rpkm_core::diagnose::VerdictKind, String)>,
+    /// LM iterations of the final fit.
+    pub iterations: usize,
+    /// The noise the rows were weighted by, stated and estimated.
+    pub noise: rpkm_core::variance::NoiseEstimate,
+}
+
+/// What one calibration of the node is asked: the campaign, and what an action's goal adds.
+#[derive(Clone, Copy)]
+pub struct Job<'a> {
+    pub campaign: &'a Campaign,
+    /// A held-out campaign of its own; `None`: the campaign's setups that start with the
+    /// `validation_prefix`.
+    pub validation: Option<&'a Campaign>,
+    /// The effects by name (as `rpkm calibrate --effects`); `None`: every effect of the
+    /// effects file.
+    pub effects: Option<&'a str>,
+    /// Whether the model diagnosis follows the calibration.
+    pub diagnose: bool,
+    /// Told of each LM iteration and noise round; it may stop the calibration.
+    pub progress: Option<calib::Observer<'a>>,
+    /// Called when the calibration is done and the diagnosis begins.
+    pub diagnosing: Option<&'a dyn Fn()>,
+}
+
+impl<'a> Job<'a> {
+    /// The campaign calibrated as the topics ask: its own held-out setups, the effects
+    /// file's effects, diagnosed.
+    pub fn of(campaign: &'a Campaign) -> Self {
+        Self {
+            campaign,
+            validation: None,
+            effects: None,
+            diagnose: true,
+            progress: None,
+            diagnosing: None,
+        }
+    }
 }
 
 /// Options of the calibrator.
@@ -179,23 +235,74 @@ fn calibration_options(o: &CalibratorOptions) -> anyhow::Result<Options> {
 
 /// Calibrates `campaign` (mm, rad) and builds the messages.
 pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow::Result<Outcome> {
-    let (cal_part, val_part) = split(campaign, &o.validation_prefix);
+    calibrate_job(&Job::of(campaign), o)
+}
+
+/// Calibrates as `job` asks and builds the messages; a calibration its observer stopped is
+/// the error `CalibrationError::Cancelled`.
+pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<Outcome> {
+    let (cal_part, own_val) = split(job.campaign, &o.validation_prefix);
+    let val_part = job.validation.cloned().or(own_val);
     let opts = calibration_options(o)?;
-    let written = o.effects.as_ref().map(|f| f.all()).unwrap_or_default();
+    let named;
+    let effects: Vec<&dyn rpkm_core::effects::Effect> = match job.effects {
+        Some(list) => {
+            named = crate::effects_file::parse_list(list, o.effects.as_deref())
+                .map_err(|e| bad_input(format!("effects: {e}")))?;
+            named.iter().map(AsRef::as_ref).collect()
+        }
+        None => o.effects.as_ref().map(|f| f.all()).unwrap_or_default(),
+    };
     if let Some(file) = &o.effects {
         file.check(&cal_part)
             .map_err(|e| bad_input(e.to_string()))?;
     }
-    let set = rpkm_core::effects::EffectSet::bind(&written, &cal_part, &o.start.params)
-        .map_err(|e| bad_input(format!("effects_file: {e}")))?;
+    let named_by = if job.effects.is_some() {
+        "effects"
+    } else {
+        "effects_file"
+    };
+    let set = rpkm_core::effects::EffectSet::bind(&effects, &cal_part, &o.start.params)
+        .map_err(|e| bad_input(format!("{named_by}: {e}")))?;
     let theta0 = vec![0.0; set.n_params()];
     // the calibration every command shares: tolerance prior, noise estimated from the data
-    let (cal, _) = calib::calibrate(&calib::Request {
+    let (cal, noise) = calib::calibrate(&calib::Request {
         noise: o.weighting,
         effects: &set,
         theta0: &theta0,
+        progress: job.progress,
         ..calib::Request::new(&cal_part, &o.start.params, &opts)
     })?;
+    let parameters = parameters_of(&cal, &cal_part, val_part.as_ref());
+    let (diagnosis, verdict) = if job.diagnose {
+        if let Some(diagnosing) = job.diagnosing {
+            diagnosing();
+        }
+        match diagnose_model(&cal_part, val_part.as_ref(), &cal) {
+            Ok(d) => (
+                Some(Ok(diagnosis_msg(&d))),
+                Some((d.verdict_kind, crate::words::verdict(&d))),
+            ),
+            Err(e) => (Some(Err(e.to_string())), None),
+        }
+    } else {
+        (None, None)
+    };
+    Ok(Outcome {
+        parameters,
+        diagnosis,
+        verdict,
+        iterations: cal.iterations,
+        noise,
+    })
+}
+
+/// The Parameters message of a calibration of `cal_part`, its held-out RMS on `val_part`.
+fn parameters_of(
+    cal: &Calibration,
+    cal_part: &Campaign,
+    val_part: Option<&Campaign>,
+) -> Parameters {
     let mut sigmas = [0.0; N_PARAMS];
     for id in &cal.identified {
         sigmas[id.index] = id.sigma;
@@ -224,13 +331,13 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
             .map(|e| e.iter().map(|e| e.2).collect())
             .unwrap_or_default()
     };
-    let cal_errors = tcp(&cal_part);
+    let cal_errors = tcp(cal_part);
     msg.max_abs_residual = if cal_errors.is_empty() {
         f64::NAN
     } else {
         cal_errors.iter().fold(0.0, |m: f64, e| m.max(e.abs())) / MM_PER_M
     };
-    msg.val_rms = match &val_part {
+    msg.val_rms = match val_part {
         Some(v) => {
             let e = tcp(v);
             if e.is_empty() {
@@ -242,11 +349,7 @@ pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow:
         None => f64::NAN,
     };
     msg.condition_number = cal.condition_number;
-    let diagnosis = diagnose(&cal_part, val_part.as_ref(), &cal).map_err(|e| e.to_string());
-    Ok(Outcome {
-        parameters: msg,
-        diagnosis,
-    })
+    msg
 }
 
 /// The calibrated effects' parameters into the message: `effect.parameter`, SI where the
@@ -261,6 +364,67 @@ fn effect_parameters(msg: &mut Parameters, effects: &[calib::EffectEstimate]) {
         msg.effect_parameter_names
             .push(format!("{}.{}", e.effect, e.name));
         msg.effect_parameter_values.push(e.value * to_si);
+    }
+}
+
+/// The node's options with a goal's over them: its selection, its noise weighting, and the
+/// noise the campaign's measurements state.
+fn goal_options(
+    o: &CalibratorOptions,
+    goal: &CalibrateGoal,
+    noise: rpkm_core::noise::NoiseModel,
+) -> anyhow::Result<CalibratorOptions> {
+    let selection = match goal.selection.as_str() {
+        "" => o.selection.clone(),
+        "map" | "auto" => goal.selection.clone(),
+        other => {
+            return Err(bad_input(format!(
+                "selection: expected map, auto or empty (the node's), found {other:?}"
+            )))
+        }
+    };
+    let weighting = match goal.noise {
+        CalibrateGoal::NOISE_NODE => o.weighting,
+        CalibrateGoal::NOISE_ESTIMATE => calib::Noise::ESTIMATE,
+        CalibrateGoal::NOISE_STATED => calib::Noise::Stated,
+        other => {
+            return Err(bad_input(format!(
+                "noise: expected 0 (the node's noise_estimation), 1 (estimate) or 2 (stated), \
+                 found {other}"
+            )))
+        }
+    };
+    Ok(CalibratorOptions {
+        selection,
+        noise,
+        weighting,
+        ..o.clone()
+    })
+}
+
+/// The result of a goal's calibration `o`; `status` is the node's status line of it.
+fn goal_result(o: &Outcome, status: &str) -> CalibrateResult {
+    let (noise_groups, noise_stated, noise_estimated) = noise_si(&o.noise);
+    let verdict = o.verdict.as_ref().map_or(String::new(), |(kind, _)| {
+        serde_json::to_value(kind)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_owned))
+            .unwrap_or_default()
+    });
+    let message = match &o.verdict {
+        Some((_, words)) => format!("{status}; {words}"),
+        None => status.to_owned(),
+    };
+    CalibrateResult {
+        parameters: o.parameters.clone(),
+        val_rms: o.parameters.val_rms,
+        iterations: u32::try_from(o.iterations).unwrap_or(u32::MAX),
+        noise_rounds: u32::try_from(o.noise.rounds).unwrap_or(u32::MAX),
+        noise_groups,
+        noise_stated,
+        noise_estimated,
+        verdict,
+        message,
     }
 }
 
@@ -330,6 +494,15 @@ impl Accumulator {
         self.assembler.push_measurement(m)?;
         self.measurements += 1;
         Ok(true)
+    }
+
+    /// The campaign so far and the noise its measurements state for themselves, the
+    /// accumulator left as it is (an action's goal takes the campaign only when its
+    /// calibration succeeded).
+    pub fn peek(&self) -> anyhow::Result<(Campaign, rpkm_core::noise::NoiseModel)> {
+        let copy = self.assembler.clone();
+        let noise = copy.stated_noise(rpkm_core::noise::NoiseModel::default())?;
+        Ok((copy.finish()?, noise))
     }
 
     /// The campaign so far and the noise its measurements state for themselves (over the
@@ -972,6 +1145,29 @@ impl Calibrator {
         Ok(every > 0 && self.acc.measurements >= every)
     }
 
+    /// Takes the drive states (first: ingest publishes a pose's state before its
+    /// measurement), then the measurements up to a campaign's end; (whether any came,
+    /// whether a campaign ended).
+    fn drain(
+        &mut self,
+        states: &Subscriber<ActuatorState>,
+        measurements: &Subscriber<TcpMeasurement>,
+        every: u64,
+    ) -> anyhow::Result<(bool, bool)> {
+        let mut worked = false;
+        while let Some(s) = states.try_recv()? {
+            self.state(&s);
+            worked = true;
+        }
+        while let Some(m) = measurements.try_recv()? {
+            if self.measurement(&m, states, every)? {
+                return Ok((true, true));
+            }
+            worked = true;
+        }
+        Ok((worked, false))
+    }
+
     /// Whether the campaign so far has been idle for `idle_end` seconds.
     fn idle_ended(&self, idle_end: f64) -> bool {
         idle_end > 0.0
@@ -996,13 +1192,26 @@ impl Calibrator {
             };
             calibrate_campaign(&c, &stated)
         });
+        self.publish(ctx, out, n, result.as_ref())
+    }
+
+    /// Publishes a calibration of `n` measurements (Parameters, Diagnosis) or why it failed,
+    /// and says it on /diagnostics and in the log.
+    fn publish(
+        &mut self,
+        ctx: &NodeContext,
+        out: &Outputs,
+        n: u64,
+        result: Result<&Outcome, &anyhow::Error>,
+    ) -> anyhow::Result<()> {
         self.last = match result {
             Ok(o) => {
                 self.calibrations += 1;
                 out.parameters.publish(&o.parameters)?;
                 match &o.diagnosis {
-                    Ok(d) => out.diagnosis.publish(d)?,
-                    Err(e) => ctx.log(format!("no diagnosis: {e}")),
+                    Some(Ok(d)) => out.diagnosis.publish(d)?,
+                    Some(Err(e)) => ctx.log(format!("no diagnosis: {e}")),
+                    None => {}
                 }
                 (
                     DiagnosticStatus::OK,
@@ -1031,6 +1240,84 @@ impl Calibrator {
             values,
         )))?;
         Ok(())
+    }
+
+    /// Executes a goal of `~/calibrate`: the campaign it names, or the one collected (taken
+    /// only when its calibration succeeds), calibrated by the node's options with the goal's
+    /// over them; a success is published as the end marker's calibration is.
+    fn execute(
+        &mut self,
+        ctx: &NodeContext,
+        out: &Outputs,
+        options: &CalibratorOptions,
+        (running, goal): (Running, CalibrateGoal),
+    ) -> anyhow::Result<()> {
+        let result = self.goal_outcome(options, &running, &goal);
+        let cancelled = running.cancelled()
+            || result.as_ref().err().is_some_and(|e| {
+                matches!(
+                    e.downcast_ref::<calib::CalibrationError>(),
+                    Some(calib::CalibrationError::Cancelled)
+                )
+            });
+        let (end, reply) = match (result, cancelled) {
+            (_, true) => (GoalEnd::Canceled, CalibrateResult::default()),
+            (Ok((o, n)), false) => {
+                if goal.campaign_file.is_empty() {
+                    // the collected campaign is calibrated: the next one starts empty
+                    self.acc.take()?;
+                }
+                self.publish(ctx, out, n, Ok(&o))?;
+                (GoalEnd::Succeeded, goal_result(&o, &self.last.1))
+            }
+            (Err(e), false) => {
+                let reply = CalibrateResult {
+                    message: crate::error::error_chain(&e),
+                    ..CalibrateResult::default()
+                };
+                (GoalEnd::Aborted, reply)
+            }
+        };
+        running.finish(ctx, end, reply);
+        Ok(())
+    }
+
+    /// The calibration a goal asks for, and the number of measurements of its campaign.
+    fn goal_outcome(
+        &self,
+        options: &CalibratorOptions,
+        running: &Running,
+        goal: &CalibrateGoal,
+    ) -> anyhow::Result<(Outcome, u64)> {
+        let (campaign, noise) = if goal.campaign_file.is_empty() {
+            anyhow::ensure!(
+                self.acc.measurements > 0,
+                "no measurements collected since the last calibration: name a campaign_file, \
+                 or publish the campaign first"
+            );
+            self.acc.peek()?
+        } else {
+            let path = std::path::Path::new(&goal.campaign_file);
+            let c = crate::input::read_campaign(path)?;
+            (c, rpkm_core::noise::NoiseModel::default())
+        };
+        let validation = match goal.validation_file.as_str() {
+            "" => None,
+            path => Some(crate::input::read_campaign(std::path::Path::new(path))?),
+        };
+        let o = goal_options(options, goal, noise)?;
+        let observe = |p: &calib::Progress| running.observe(p);
+        let diagnosing = || running.diagnosing();
+        let job = Job {
+            campaign: &campaign,
+            validation: validation.as_ref(),
+            effects: (!goal.effects.is_empty()).then_some(goal.effects.as_str()),
+            diagnose: !goal.skip_diagnosis,
+            progress: Some(&observe),
+            diagnosing: Some(&diagnosing),
+        };
+        let n = u64::try_from(campaign.poses.len()).unwrap_or(u64::MAX);
+        Ok((calibrate_job(&job, &o)?, n))
     }
 
     /// The periodic /diagnostics status: the last message and the counts.
@@ -1106,6 +1393,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let infos = ctx.subscriber(&topic::CAMPAIGN_INFO)?;
     let out = Outputs::open(&ctx)?;
     let services = super::calibration_services::CalibrationServices::open(&ctx)?;
+    let action = CalibrateAction::open(&ctx)?;
     let mut lifecycle = Lifecycle::open(&ctx, super::lifecycle::start(args))?;
     ctx.log(format!(
         "calibrating {} from {}",
@@ -1118,21 +1406,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         while let Some(info) = infos.try_recv()? {
             node.campaign_info(&info);
         }
-        // States first: ingest publishes a pose's state before its measurement.
-        let mut worked = false;
-        while let Some(s) = states.try_recv()? {
-            node.state(&s);
-            worked = true;
-        }
+        let (mut worked, end) = node.drain(&states, &measurements, every)?;
         worked |= node.online_reports(&ctx, &out, options.start.model)?;
-        let mut end = false;
-        while let Some(m) = measurements.try_recv()? {
-            worked = true;
-            end = node.measurement(&m, &states, every)?;
-            if end {
-                break;
-            }
-        }
         // an inactive node collects its campaign and calibrates (publishes) once active
         if (end || node.idle_ended(idle_end)) && node.acc.measurements > 0 && lifecycle.active() {
             node.calibrate(&ctx, &out, &options)?;
@@ -1143,6 +1418,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 .map(|s| (options, every, idle_end) = (s.options, s.every, s.idle_end))
                 .map_err(|e| crate::error::error_chain(&e))
         });
+        // a goal of `~/calibrate`, executed now (the loop waits for it, as for a marker)
+        if let Some(goal) = action
+            .as_ref()
+            .and_then(|a| a.next(&ctx, lifecycle.active()))
+        {
+            node.execute(&ctx, &out, &options, goal)?;
+        }
         // Between calibrations: the next campaign ends and calibrates by the new settings.
         if let Some((p, names)) = live.poll() {
             Settings {
@@ -1219,6 +1501,69 @@ mod tests {
         let b = msg.effect_parameter_values[0] * MM_PER_M;
         eprintln!("published b = {b} mm (truth {b_true})");
         assert!((b - b_true).abs() < 1e-4, "b = {b} mm");
+        Ok(())
+    }
+
+    /// A goal on the campaign collected so far reads it without taking it (a cancelled goal
+    /// leaves it collected); the goal's settings go over the node's, a bad one is refused
+    /// with what was expected.
+    #[test]
+    fn a_goal_reads_the_collected_campaign_and_sets_its_options() -> anyhow::Result<()> {
+        let mut twin = Twin::new(TwinConfig::default())?;
+        let c = twin.campaign_by_names(&["lt"], 0)?;
+        let mut acc = Accumulator::new(8);
+        for (i, pose) in c.poses.iter().enumerate() {
+            let (s, m) = pose_messages(&c, i, pose)?;
+            acc.state(&s);
+            assert!(acc.measurement(&m)?);
+        }
+        let (seen, _) = acc.peek()?;
+        assert_eq!(acc.measurements, c.poses.len() as u64);
+        let (taken, _) = acc.take()?;
+        assert_eq!(seen.poses, taken.poses);
+        assert_eq!(seen.poses.len(), c.poses.len());
+        assert_eq!(acc.measurements, 0);
+
+        let node = CalibratorOptions {
+            start: Geometry {
+                params: Params::nominal(),
+                model: Model::M29,
+                stiffness: rpkm_core::elastic::Stiffness::default(),
+                source: "nominal".into(),
+                effects: crate::node::effects::NodeEffects::default(),
+            },
+            validation_prefix: "val".into(),
+            selection: "map".into(),
+            max_condition: 100.0,
+            outlier_sigma: 0.0,
+            noise: rpkm_core::noise::NoiseModel::default(),
+            effects: None,
+            weighting: calib::Noise::ESTIMATE,
+        };
+        let goal = |selection: &str, noise| CalibrateGoal {
+            selection: selection.into(),
+            noise,
+            ..CalibrateGoal::default()
+        };
+        let noise = rpkm_core::noise::NoiseModel::default;
+        let o = goal_options(&node, &goal("", CalibrateGoal::NOISE_NODE), noise())?;
+        assert_eq!(
+            (o.selection.as_str(), o.weighting),
+            ("map", calib::Noise::ESTIMATE)
+        );
+        let o = goal_options(&node, &goal("auto", CalibrateGoal::NOISE_STATED), noise())?;
+        assert_eq!(
+            (o.selection.as_str(), o.weighting),
+            ("auto", calib::Noise::Stated)
+        );
+        let bad = goal_options(&node, &goal("all", 0), noise()).map(|_| ());
+        let e = bad.expect_err("selection all");
+        assert!(e.to_string().contains("expected map, auto"), "{e}");
+        assert_eq!(crate::error::exit_code(&e), 2);
+        let e = goal_options(&node, &goal("", 7), noise())
+            .map(|_| ())
+            .expect_err("noise 7");
+        assert!(e.to_string().contains("found 7"), "{e}");
         Ok(())
     }
 
@@ -1316,7 +1661,10 @@ mod tests {
             "held-out {} m",
             out.parameters.val_rms
         );
-        let d = out.diagnosis.map_err(anyhow::Error::msg)?;
+        let d = out
+            .diagnosis
+            .ok_or_else(|| anyhow::anyhow!("not diagnosed"))?
+            .map_err(anyhow::Error::msg)?;
         assert_eq!(d.missing_effect, "", "an effect-free twin misses no effect");
         assert!(!d.candidates.is_empty());
         Ok(())

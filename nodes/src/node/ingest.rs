@@ -17,6 +17,12 @@
 //! With `views` on (default with DDS output) every `view_every`-th accepted state is also
 //! published as `sensor_msgs/JointState` on `/joint_states` ([`super::views`]).
 //!
+//! A managed node like the others ([`super::lifecycle`]): started `--unconfigured` it
+//! publishes nothing until configured and activated; while not active a file or stdin source
+//! holds its place (streaming goes on at activation) and a live (dds) source's samples are
+//! taken and counted (`dropped_inactive`), not published; configure reads the parameters
+//! again (limits, `view_every`).
+//!
 //! The flow: a source ([`dds`], or [`csv::Stdin`] / [`csv::FileLines`]) → one validation
 //! loop ([`csv::stream`], or the DDS loop) → [`output::Output`] (publish, count, report).
 
@@ -238,7 +244,7 @@ fn specs(views_default: bool) -> Vec<Spec> {
 }
 
 /// Streams a campaign file at `rate_hz`; a file that cannot be read is bad input.
-fn file(out: &mut Output, path: &str, rate_hz: f64) -> anyhow::Result<bool> {
+fn file(out: &mut Output<'_>, path: &str, rate_hz: f64) -> anyhow::Result<bool> {
     let bytes =
         std::fs::read(path).map_err(|e| bad_input(format!("{path}: cannot read campaign: {e}")))?;
     let comments = csv::FileLines::comments(&bytes, path);
@@ -260,7 +266,7 @@ pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
         .set_from_service("source", serde_yaml::Value::String(s.source.clone()));
     let views_default = matches!(ctx.output, Backend::Dds | Backend::Both);
     let live = live::LiveParams::start(&ctx, &specs(views_default), |p| configure(p).map(|_| ()))?;
-    let mut out = Output::open(&ctx, s.limits, &s.source, live)?;
+    let mut out = Output::open((&ctx, &args.common), s.limits, &s.source, live)?;
     ctx.log(format!(
         "source {}, publishing on {:?}",
         s.source, ctx.output
@@ -286,7 +292,7 @@ pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
             out.tally.rejected_total()
         ));
     }
-    if ended && s.end_marker {
+    if ended && s.end_marker && out.wait_active()?.is_some() {
         out.end_marker()?;
     }
     out.report_now()?;

@@ -7,6 +7,7 @@
 //! (`--backend ipc|dds|both`) and subscribes on one (`--input-backend`), stops cleanly on
 //! SIGINT/SIGTERM ([`shutdown`]) and reports on `/diagnostics`.
 
+pub mod calibrate_action;
 pub mod calibration_services;
 pub mod calibrator;
 pub mod context;

@@ -14,6 +14,7 @@
 //! # Ok(()) }
 //! ```
 pub mod dds;
+pub mod dds_actions;
 pub mod dds_calls;
 pub mod dds_params;
 pub mod error;

@@ -128,6 +128,12 @@ impl Pacer {
         }
     }
 
+    /// Starts the schedule again from now (after the node held its place while inactive).
+    fn restart(&mut self) {
+        self.t0 = Instant::now();
+        self.k = 0;
+    }
+
     fn wait(&mut self) {
         let due = self.t0 + self.period.saturating_mul(self.k);
         self.k = self.k.saturating_add(1);
@@ -154,12 +160,13 @@ pub fn reject_of(e: &CampaignError) -> Reject {
 /// The one validation loop of the CSV sources: each line through the reader, the header's
 /// CampaignInfo (with `comments` when known ahead, else those read so far), each pose
 /// published (paced by `pace`), each reject counted; at the end the rules of the whole input
-/// (a reset pose per setup). Returns whether the input ended (not a shutdown).
+/// (a reset pose per setup). While the node is not active the input waits where it is.
+/// Returns whether the input ended (not a shutdown).
 pub(super) fn stream(
     lines: &mut dyn Lines,
     label: &str,
     comments: Option<&[String]>,
-    out: &mut Output,
+    out: &mut Output<'_>,
     mut pace: Option<Pacer>,
 ) -> anyhow::Result<bool> {
     let mut reader = CampaignReader::new(label);
@@ -168,6 +175,13 @@ pub(super) fn stream(
         ..Default::default()
     };
     loop {
+        // an inactive node holds its place in the input (a line read is published once
+        // active again)
+        match out.wait_active()? {
+            None => return Ok(false),
+            Some(true) => pace.iter_mut().for_each(Pacer::restart),
+            Some(false) => {}
+        }
         if shutdown::requested() {
             return Ok(false);
         }

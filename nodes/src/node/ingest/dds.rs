@@ -20,7 +20,7 @@ fn leak(s: String) -> &'static str {
 }
 
 /// Republishes what the controller sends until shutdown.
-pub(super) fn run(ctx: &NodeContext, out: &mut Output) -> anyhow::Result<()> {
+pub(super) fn run(ctx: &NodeContext, out: &mut Output<'_>) -> anyhow::Result<()> {
     let p = &ctx.params;
     let a_name = leak(
         p.string("input_actuator_topic", ACTUATOR_TOPIC)
@@ -51,7 +51,7 @@ pub(super) fn run(ctx: &NodeContext, out: &mut Output) -> anyhow::Result<()> {
         }
         while let Some(m) = measurements.try_recv()? {
             worked = true;
-            out.measurement(&m, m_name)?;
+            out.live_measurement(&m, m_name)?;
         }
         out.report_if_due()?;
         if worked {

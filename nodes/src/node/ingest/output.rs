@@ -9,12 +9,14 @@ use super::report::Tally;
 use super::validate::{reject, Limits, Reject, RejectKind, Validator};
 use super::END_OF_CAMPAIGN;
 use crate::campaign_bag::{campaign_info, pose_messages};
+use crate::node::lifecycle::{self, Lifecycle};
 use crate::node::live::LiveParams;
 use crate::node::views::JointViews;
-use crate::node::{diagnostic_array, Every, NodeContext};
+use crate::node::{diagnostic_array, shutdown, CommonArgs, Every, NodeContext};
 
-/// The publishers and bookkeeping shared by the sources.
-pub(super) struct Output {
+/// The publishers and bookkeeping shared by the sources, and the node's lifecycle: only an
+/// active ingest publishes samples.
+pub(super) struct Output<'a> {
     states: Publisher<ActuatorState>,
     measurements: Publisher<TcpMeasurement>,
     info: Publisher<CampaignInfo>,
@@ -33,13 +35,17 @@ pub(super) struct Output {
     /// Its status name on /diagnostics.
     status_name: String,
     source: String,
+    lifecycle: Lifecycle,
+    /// What a lifecycle configure reads the parameters again with.
+    ctx: &'a NodeContext,
+    args: &'a CommonArgs,
 }
 
-impl Output {
-    /// The publishers of node `ctx`, validating with `limits`; `source` names the input on
-    /// /diagnostics.
+impl<'a> Output<'a> {
+    /// The publishers of node `ctx` (started as `args` say), validating with `limits`;
+    /// `source` names the input on /diagnostics.
     pub(super) fn open(
-        ctx: &NodeContext,
+        (ctx, args): (&'a NodeContext, &'a CommonArgs),
         limits: Limits,
         source: &str,
         live: LiveParams,
@@ -60,7 +66,59 @@ impl Output {
             node: ctx.name.clone(),
             status_name: ctx.status_name.clone(),
             source: source.to_owned(),
+            lifecycle: Lifecycle::open(ctx, lifecycle::start(args))?,
+            ctx,
+            args,
         })
+    }
+
+    /// Performs the lifecycle transition asked for, if any: configure reads the parameters
+    /// again (the validation limits and `view_every`; the source and pacing stay).
+    fn serve_lifecycle(&mut self) {
+        let (ctx, args) = (self.ctx, self.args);
+        let validator = &mut self.validator;
+        let views = &mut self.views;
+        self.lifecycle.serve(ctx, || {
+            let p = ctx
+                .reread_params(args, "ingest", &super::KEYS)
+                .map_err(|e| crate::error::error_chain(&e))?;
+            let (limits, every) =
+                super::configure(&p).map_err(|e| crate::error::error_chain(&e))?;
+            validator.set_limits(limits);
+            if let Some(v) = views.as_mut() {
+                v.set_every(every);
+            }
+            Ok(())
+        });
+    }
+
+    /// Holds a file or stdin source where it is while the node is not active (unconfigured
+    /// or inactive), serving the lifecycle and reporting; `Ok(None)` when the node is to
+    /// stop, else whether it waited.
+    pub(super) fn wait_active(&mut self) -> anyhow::Result<Option<bool>> {
+        let mut waited = false;
+        loop {
+            self.serve_lifecycle();
+            if self.lifecycle.active() {
+                return Ok(Some(waited));
+            }
+            if shutdown::requested() {
+                return Ok(None);
+            }
+            waited = true;
+            self.report_if_due()?;
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+
+    /// Whether a live source's sample may go out: an inactive node takes it (no backlog at
+    /// activation), counts it and publishes nothing.
+    fn publishing(&mut self) -> bool {
+        let active = self.lifecycle.active();
+        if !active {
+            self.tally.dropped_inactive += 1;
+        }
+        active
     }
 
     /// Counts a reject and logs it: nothing the node drops goes unsaid.
@@ -103,6 +161,9 @@ impl Output {
 
     /// Validates and publishes a drive state from a live source.
     pub(super) fn state(&mut self, s: &ActuatorState, label: &str) -> anyhow::Result<()> {
+        if !self.publishing() {
+            return Ok(());
+        }
         match self.validator.state(s, label) {
             Ok(()) => self.publish_state(s),
             Err(r) => {
@@ -110,6 +171,18 @@ impl Output {
                 Ok(())
             }
         }
+    }
+
+    /// Validates and publishes a measurement of a live source.
+    pub(super) fn live_measurement(
+        &mut self,
+        m: &TcpMeasurement,
+        label: &str,
+    ) -> anyhow::Result<()> {
+        if !self.publishing() {
+            return Ok(());
+        }
+        self.measurement(m, label)
     }
 
     /// Validates and publishes a measurement.
@@ -146,9 +219,11 @@ impl Output {
         Ok(())
     }
 
-    /// Publishes the /diagnostics status when its period has passed, and takes the changes
-    /// the parameter services accepted (between samples: the next one is judged by them).
+    /// Publishes the /diagnostics status when its period has passed, takes the changes the
+    /// parameter services accepted (between samples: the next one is judged by them) and
+    /// performs a lifecycle transition asked for.
     pub(super) fn report_if_due(&mut self) -> anyhow::Result<()> {
+        self.serve_lifecycle();
         if let Some((p, names)) = self.live.poll() {
             let (limits, every) = super::configure(&p)?;
             self.validator.set_limits(limits);

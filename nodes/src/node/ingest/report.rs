@@ -18,6 +18,9 @@ pub struct Tally {
     pub rejected: HashMap<RejectKind, u64>,
     /// The last reject's reason.
     pub last_reject: Option<String>,
+    /// Samples of a live source taken while the node was not active (a managed node
+    /// publishes nothing then).
+    pub dropped_inactive: u64,
     rejected_at_last_report: u64,
 }
 
@@ -63,6 +66,7 @@ impl Tally {
                 self.accepted_measurements.to_string(),
             ),
             ("rejected_total", total.to_string()),
+            ("dropped_inactive", self.dropped_inactive.to_string()),
         ];
         for k in RejectKind::ALL {
             values.push((
