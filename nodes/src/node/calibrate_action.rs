@@ -24,7 +24,7 @@ use rpkm_core::variance::NoiseEstimate;
 use rpkm_msgs::calibrate_action::{CalibrateFeedback, CalibrateGoal, CalibrateResult, CALIBRATE};
 use rpkm_transport::dds_actions::{ActionServer, ActionType, GoalEnd, GoalHandle};
 
-use super::NodeContext;
+use super::context::NodeContext;
 
 /// The action of one calibrator.
 pub struct CalibrateAction {
