@@ -55,6 +55,12 @@ const LIFECYCLE_SERVICES: [&str; 4] = [
 /// (`nodes/src/node/calibration_services.rs`).
 const CALIBRATION_SERVICES: [&str; 2] = ["load_calibration", "save_calibration"];
 
+/// The calibrator's action `~/calibrate` (`nodes/src/node/calibrate_action.rs`): its three
+/// services and its two topics, as ROS 2 names an action's parts.
+const CALIBRATE_ACTION: &str = "calibrate";
+const ACTION_SERVICES: [&str; 3] = ["send_goal", "cancel_goal", "get_result"];
+const ACTION_TOPICS: [&str; 2] = ["feedback", "status"];
+
 /// The topics ros2-client opens in every participant: the ROS graph (`ros_discovery_info`,
 /// written and read), the node's log and parameter events, and the `/clock` topic it creates
 /// for simulated time.
@@ -105,15 +111,26 @@ impl Builder {
             self.grant.subscribe.insert(format!("rr{fqn}Reply"));
         }
     }
-    /// A node's own parameter services; for the nodes that hold a geometry (all but
-    /// ingest) the lifecycle services, `~/transition_event` and the calibration services.
+    /// A node's own parameter and lifecycle services and `~/transition_event` (every node is
+    /// a managed node); for the nodes that hold a geometry (all but ingest) the calibration
+    /// services.
     fn node(&mut self, node: &str, holds_geometry: bool) {
         self.serve(node, &PARAMETER_SERVICES);
+        self.serve(node, &LIFECYCLE_SERVICES);
+        let event = format!("rt{}/{node}/transition_event", self.namespace);
+        self.grant.publish.insert(event);
         if holds_geometry {
-            self.serve(node, &LIFECYCLE_SERVICES);
             self.serve(node, &CALIBRATION_SERVICES);
-            let event = format!("rt{}/{node}/transition_event", self.namespace);
-            self.grant.publish.insert(event);
+        }
+    }
+    /// An action `action` that node `node` serves: its services and its topics.
+    fn serve_action(&mut self, node: &str, action: &str) {
+        let services = ACTION_SERVICES.map(|s| format!("{action}/_action/{s}"));
+        let services: Vec<&str> = services.iter().map(String::as_str).collect();
+        self.serve(node, &services);
+        for t in ACTION_TOPICS {
+            let topic = format!("rt{}/{node}/{action}/_action/{t}", self.namespace);
+            self.grant.publish.insert(topic);
         }
     }
 }
@@ -160,7 +177,7 @@ pub fn grant(program: &str, namespace: &str) -> Result<Grant, PolicyError> {
         "record" | "monitor" => b.subscribe(&every),
         "replay" => b.publish(&every),
         "launch" => {
-            for node in ["tcp_estimator", "calibrator", "preload_monitor"] {
+            for node in ["ingest", "tcp_estimator", "calibrator", "preload_monitor"] {
                 b.call(node, &LIFECYCLE_SERVICES[..2]);
             }
         }
@@ -212,6 +229,7 @@ fn calibrator(b: &mut Builder) {
         topic::DIAGNOSTICS.name(),
     ]);
     b.node("calibrator", true);
+    b.serve_action("calibrator", CALIBRATE_ACTION);
 }
 
 fn preload_monitor(b: &mut Builder) {
@@ -342,6 +360,31 @@ mod tests {
             .contains("rr/rpkm/tcp_estimator/set_parametersReply"));
         // it answers its own services, never calls another node's
         assert!(!g.publish.iter().any(|t| t.starts_with("rq/")));
+    }
+
+    #[test]
+    fn the_calibrator_serves_its_action_and_ingest_its_lifecycle() {
+        let g = grant("calibrator", "/rpkm").expect("grant");
+        for s in ["send_goal", "cancel_goal", "get_result"] {
+            let fqn = format!("/rpkm/calibrator/calibrate/_action/{s}");
+            assert!(g.subscribe.contains(&format!("rq{fqn}Request")), "{s}");
+            assert!(g.publish.contains(&format!("rr{fqn}Reply")), "{s}");
+        }
+        assert!(g
+            .publish
+            .contains("rt/rpkm/calibrator/calibrate/_action/feedback"));
+        assert!(g
+            .publish
+            .contains("rt/rpkm/calibrator/calibrate/_action/status"));
+        let ingest = grant("ingest", "/rpkm").expect("grant");
+        assert!(ingest
+            .subscribe
+            .contains("rq/rpkm/ingest/change_stateRequest"));
+        assert!(ingest.publish.contains("rt/rpkm/ingest/transition_event"));
+        assert!(!ingest
+            .subscribe
+            .iter()
+            .any(|t| t.contains("load_calibration")));
     }
 
     #[test]
