@@ -126,3 +126,29 @@ fn no_subcommand_imports_another() {
     }
     assert!(offences.is_empty(), "{}", offences.join("\n"));
 }
+
+/// The millimetre-per-metre factor between the core and the topics is defined once, in
+/// `nodes/src/units.rs`: no other file of the nodes crate or the transport defines its own.
+#[test]
+fn one_module_defines_the_unit_factor() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    rust_files(&root.join("nodes"), &mut files);
+    let offences: Vec<String> = files
+        .iter()
+        .filter(|f| !f.ends_with("nodes/src/units.rs"))
+        .flat_map(|f| {
+            let text = std::fs::read_to_string(f).expect("read source");
+            text.lines()
+                .enumerate()
+                .filter(|(_, l)| {
+                    let code = l.split("//").next().unwrap_or("");
+                    code.contains("const ") && code.contains("_PER_M") && code.contains("f64 =")
+                })
+                .map(|(n, l)| format!("{}:{}: {}", f.display(), n + 1, l.trim()))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert!(files.len() >= 80, "found only {} files", files.len());
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
+}

@@ -28,8 +28,7 @@ use rpkm_msgs::{ActuatorState, CampaignInfo, TcpMeasurement, Time};
 use rpkm_transport::bag::{BagReader, BagWriteError, BagWriter, TopicHandle};
 use rpkm_transport::topic;
 
-/// Millimetres per metre: the core works in mm, topics in m (REP 103).
-pub const MM_PER_M: f64 = 1000.0;
+pub use crate::units::MM_PER_M;
 const NS_PER_S: i64 = 1_000_000_000;
 
 /// A campaign that cannot be put into messages.

@@ -14,4 +14,5 @@ pub mod report;
 pub mod security;
 pub mod stream;
 pub mod topics;
+pub mod units;
 pub mod words;

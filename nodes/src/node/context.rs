@@ -13,8 +13,7 @@ use rpkm_transport::{
     Backend, IpcMessage, Publisher, Subscriber, Topic, Transport, TransportConfig,
 };
 
-/// Millimetres per metre: the core works in mm, topics in m.
-pub const MM_PER_M: f64 = 1e3;
+pub use crate::units::MM_PER_M;
 
 /// A backend on the command line.
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
