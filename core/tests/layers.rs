@@ -171,42 +171,6 @@ fn crate_references(code: &str) -> Vec<String> {
     names
 }
 
-/// A cycle of the graph, as the modules along it, if any (depth-first search).
-fn find_cycle(graph: &[(String, Vec<String>)]) -> Option<Vec<String>> {
-    fn visit(
-        graph: &[(String, Vec<String>)],
-        node: &str,
-        path: &mut Vec<String>,
-        done: &mut Vec<String>,
-    ) -> Option<Vec<String>> {
-        if let Some(pos) = path.iter().position(|m| m == node) {
-            let mut cycle = path[pos..].to_vec();
-            cycle.push(node.to_owned());
-            return Some(cycle);
-        }
-        if done.iter().any(|m| m == node) {
-            return None;
-        }
-        path.push(node.to_owned());
-        let edges = graph
-            .iter()
-            .find(|(m, _)| m == node)
-            .map(|(_, e)| e.as_slice());
-        for next in edges.unwrap_or_default() {
-            if let Some(cycle) = visit(graph, next, path, done) {
-                return Some(cycle);
-            }
-        }
-        path.pop();
-        done.push(node.to_owned());
-        None
-    }
-    let mut done = Vec::new();
-    graph
-        .iter()
-        .find_map(|(m, _)| visit(graph, m, &mut Vec::new(), &mut done))
-}
-
 #[test]
 fn the_cycle_finder_sees_a_cycle_through_a_group_import() {
     let refs = crate_references(
@@ -219,9 +183,11 @@ fn the_cycle_finder_sees_a_cycle_through_a_group_import() {
             .map(|(m, e)| ((*m).to_owned(), e.iter().map(|s| (*s).to_owned()).collect()))
             .collect()
     };
-    let cycle = find_cycle(&graph(&[("a", &["b"]), ("b", &["c"]), ("c", &["a"])]));
+    let cycle = file_graph::find_cycle(&graph(&[("a", &["b"]), ("b", &["c"]), ("c", &["a"])]));
     assert_eq!(cycle.expect("a -> b -> c -> a").len(), 4);
-    assert!(find_cycle(&graph(&[("a", &["b", "c"]), ("b", &["c"]), ("c", &[])])).is_none());
+    assert!(
+        file_graph::find_cycle(&graph(&[("a", &["b", "c"]), ("b", &["c"]), ("c", &[])])).is_none()
+    );
 }
 
 /// No two modules of the core import each other, directly or around a loop: each layer can be
@@ -242,7 +208,7 @@ fn no_core_module_imports_in_a_circle() {
             (m.clone(), deps)
         })
         .collect();
-    let cycle = find_cycle(&graph);
+    let cycle = file_graph::find_cycle(&graph);
     assert!(
         cycle.is_none(),
         "core modules import each other: {}",
