@@ -300,14 +300,12 @@ fn a_cyclone_peer_receives_pose_tf_and_joint_states_mirroring_the_rpkm_messages(
             .unwrap_or_else(|| panic!("no ActuatorState with the stamp of joint state {v}"));
         check_joint(v, s);
     }
-    // Every third estimate (ingest's seq counts its states from 1; none lost at this rate).
+    // Every third estimate the estimator made: the view counts the estimates it made, so its
+    // phase follows the first drive state that reached the estimator (a state published
+    // before the DDS endpoints matched is lost to it, and shifts the phase, not the spacing).
     assert!(
         pose_seqs.windows(2).all(|w| w[1] - w[0] == POSE_EVERY),
         "pose views at seq {pose_seqs:?}"
-    );
-    assert!(
-        pose_seqs.iter().all(|s| s % POSE_EVERY == 0),
-        "{pose_seqs:?}"
     );
     eprintln!(
         "checked {} poses (ψ {:.6} rad at seq {:?}), {} transforms, {} joint states",
