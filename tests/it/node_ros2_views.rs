@@ -229,10 +229,6 @@ fn all_matched(seen: &Seen) -> bool {
 }
 
 #[test]
-#[expect(
-    clippy::too_many_lines,
-    reason = "an end-to-end scenario, read top to bottom"
-)]
 fn a_cyclone_peer_receives_pose_tf_and_joint_states_mirroring_the_rpkm_messages() {
     let Some(py) = python() else { return };
     let prefix = unique("r2v");
