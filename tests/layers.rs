@@ -2,19 +2,7 @@
 //! do not name the command line (`nodes/src/cli`). Errors, exit codes and file readers they
 //! share with it live in `nodes/src/error.rs` and `nodes/src/input.rs`.
 
-use std::path::{Path, PathBuf};
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
-    for entry in entries.map(|e| e.expect("directory entry")) {
-        let path = entry.path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|x| x == "rs") {
-            out.push(path);
-        }
-    }
-}
+use std::path::Path;
 
 /// The places in `text` that name the command-line module from below it.
 fn upward_references(text: &str) -> Vec<(usize, String)> {
@@ -52,7 +40,7 @@ fn nodes_and_launch_never_name_the_cli() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("nodes/src");
     let mut files = Vec::new();
     for layer in ["node", "launch"] {
-        rust_files(&root.join(layer), &mut files);
+        file_graph::rust_files(&root.join(layer), &mut files);
     }
     assert!(files.len() >= 8, "found only {files:?}");
     let mut offences = Vec::new();
@@ -133,7 +121,7 @@ fn no_subcommand_imports_another() {
 fn one_module_defines_the_unit_factor() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = Vec::new();
-    rust_files(&root.join("nodes"), &mut files);
+    file_graph::rust_files(&root.join("nodes"), &mut files);
     let offences: Vec<String> = files
         .iter()
         .filter(|f| !f.ends_with("nodes/src/units.rs"))

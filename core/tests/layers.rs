@@ -2,19 +2,7 @@
 //! what the model assumes cannot be borrowed from how the twin simulates; and the core stays
 //! free of I/O, async and transport crates.
 
-use std::path::{Path, PathBuf};
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
-    for entry in entries.map(|e| e.expect("directory entry")) {
-        let path = entry.path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|x| x == "rs") {
-            out.push(path);
-        }
-    }
-}
+use std::path::Path;
 
 /// Lines of `text` whose code (not comment) names the twin's crate.
 fn names_twin(text: &str) -> Vec<(usize, String)> {
@@ -51,7 +39,7 @@ fn the_model_never_names_the_twin() {
         .unwrap_or_default();
     assert!(!deps.contains("rpkm-twin"), "the core depends on the twin");
     let mut files = Vec::new();
-    rust_files(&src, &mut files);
+    file_graph::rust_files(&src, &mut files);
     assert!(files.len() >= 40, "found only {files:?}");
     let offences: Vec<String> = files
         .iter()
@@ -113,7 +101,7 @@ fn module_texts(src: &Path) -> Vec<(String, String)> {
         }
         let mut files = Vec::new();
         if path.is_dir() {
-            rust_files(&path, &mut files);
+            file_graph::rust_files(&path, &mut files);
         } else {
             files.push(path.clone());
         }

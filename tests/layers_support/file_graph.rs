@@ -17,19 +17,20 @@ use std::path::{Path, PathBuf};
 /// crate root).
 pub fn crate_files(src: &Path) -> BTreeMap<String, PathBuf> {
     let mut files = Vec::new();
-    collect(src, &mut files);
+    rust_files(src, &mut files);
     // a binary beside the library is a crate of its own: it names the library by its name
     let has_lib = src.join("lib.rs").is_file();
     files.retain(|f| !(has_lib && f.parent() == Some(src) && f.ends_with("main.rs")));
     files.into_iter().map(|f| (module_of(src, &f), f)).collect()
 }
 
-fn collect(dir: &Path, out: &mut Vec<PathBuf>) {
+/// Every `.rs` file under `dir`, depth first.
+pub fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
     for entry in entries.map(|e| e.expect("directory entry")) {
         let path = entry.path();
         if path.is_dir() {
-            collect(&path, out);
+            rust_files(&path, out);
         } else if path.extension().is_some_and(|x| x == "rs") {
             out.push(path);
         }

@@ -1458,6 +1458,18 @@ mod tests {
     use rpkm_core::params::{Model, Params};
     use rpkm_twin::{Twin, TwinConfig};
 
+    /// The calibrator's start in these tests: the nominal model 29, default stiffness, no
+    /// effects.
+    fn nominal_start() -> Geometry {
+        Geometry {
+            params: Params::nominal(),
+            model: Model::M29,
+            stiffness: rpkm_core::elastic::Stiffness::default(),
+            source: "nominal".into(),
+            effects: crate::node::effects::NodeEffects::default(),
+        }
+    }
+
     /// The calibrator with an effects file: the twin's lost motion of carrier 4 (20 µm) is
     /// calibrated with the geometry, and the Parameters carry it (SI) within 0.1 µm of the
     /// truth (its σ on this campaign is 0.02 µm: core/tests/written_effects.rs).
@@ -1480,13 +1492,7 @@ mod tests {
             &[],
         )?;
         let o = CalibratorOptions {
-            start: Geometry {
-                params: Params::nominal(),
-                model: Model::M29,
-                stiffness: rpkm_core::elastic::Stiffness::default(),
-                source: "nominal".into(),
-                effects: crate::node::effects::NodeEffects::default(),
-            },
+            start: nominal_start(),
             validation_prefix: "val".into(),
             selection: "map".into(),
             max_condition: 100.0,
@@ -1525,13 +1531,7 @@ mod tests {
         assert_eq!(acc.measurements, 0);
 
         let node = CalibratorOptions {
-            start: Geometry {
-                params: Params::nominal(),
-                model: Model::M29,
-                stiffness: rpkm_core::elastic::Stiffness::default(),
-                source: "nominal".into(),
-                effects: crate::node::effects::NodeEffects::default(),
-            },
+            start: nominal_start(),
             validation_prefix: "val".into(),
             selection: "map".into(),
             max_condition: 100.0,
@@ -1607,13 +1607,7 @@ mod tests {
         // The messages carry the spec's σ of each instrument: read back, it is the default.
         assert_eq!(stated, rpkm_core::noise::NoiseModel::default());
         let o = CalibratorOptions {
-            start: Geometry {
-                params: Params::nominal(),
-                model: Model::M29,
-                stiffness: rpkm_core::elastic::Stiffness::default(),
-                source: "nominal".into(),
-                effects: crate::node::effects::NodeEffects::default(),
-            },
+            start: nominal_start(),
             validation_prefix: "val".into(),
             selection: "map".into(),
             max_condition: 100.0,
