@@ -34,7 +34,7 @@ pub use machine::{
     SECONDS_PER_POSE, TEMP_SENSOR_K,
 };
 pub use production::{
-    Creep, ProductionConfig, ProductionSample, ProductionStream, StepChange, TimeCreep,
+    Creep, ProductionConfig, ProductionSample, ProductionStream, StepChange, TimeCreep, Visit,
 };
 pub use stream::{DriveSample, DriveStream};
 

@@ -63,6 +63,19 @@ impl TimeCreep {
     }
 }
 
+/// A motion the cell commands in the middle of production: from `at_s` the path heads for
+/// each pose in turn at feed speed, stays at each `dwell_s`, then goes on with its contour
+/// moves (the motion the online tracker asks for to tell a tie apart).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Visit {
+    /// Stream time the cell commands the motion, s.
+    pub at_s: f64,
+    /// The poses (x, y mm), in order.
+    pub poses: Vec<(f64, f64)>,
+    /// How long the machine stays at each, s.
+    pub dwell_s: f64,
+}
+
 /// What the production stream does.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ProductionConfig {
@@ -83,6 +96,7 @@ pub struct ProductionConfig {
     pub step: Option<StepChange>,
     pub creep: Option<Creep>,
     pub time_creep: Option<TimeCreep>,
+    pub visit: Option<Visit>,
     /// Seed of the path and the noise.
     pub seed: u64,
 }
@@ -103,6 +117,7 @@ impl Default for ProductionConfig {
             step: None,
             creep: None,
             time_creep: None,
+            visit: None,
             seed: 1,
         }
     }
@@ -153,6 +168,18 @@ pub struct ProductionStream<'a> {
     target: (f64, f64),
     warm: Option<Equilibrium>,
     encoder_mm: f64,
+    /// Where the commanded visit stands.
+    visit: VisitState,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum VisitState {
+    Pending,
+    /// Heading for the pose of this index.
+    Going(usize),
+    /// At the pose of this index until this stream time.
+    Dwelling(usize, f64),
+    Done,
 }
 
 impl<'a> ProductionStream<'a> {
@@ -174,6 +201,7 @@ impl<'a> ProductionStream<'a> {
             at,
             target,
             warm: None,
+            visit: VisitState::Pending,
         }
     }
 
@@ -197,8 +225,41 @@ impl<'a> ProductionStream<'a> {
         p
     }
 
+    /// Where the path goes from stream time `t`: a commanded visit overrides the contour.
+    fn steer(&mut self, t: f64) {
+        let Some(v) = &self.cfg.visit else { return };
+        let next = |i: usize| v.poses.get(i).copied();
+        self.visit = match self.visit {
+            VisitState::Pending if t >= v.at_s => match next(0) {
+                Some(pose) => {
+                    self.target = pose;
+                    VisitState::Going(0)
+                }
+                None => VisitState::Done,
+            },
+            VisitState::Going(i) if Some(self.at) == next(i) => {
+                VisitState::Dwelling(i, t + v.dwell_s)
+            }
+            VisitState::Dwelling(i, until) if t >= until => match next(i + 1) {
+                Some(pose) => {
+                    self.target = pose;
+                    VisitState::Going(i + 1)
+                }
+                None => {
+                    self.target = random_target(&mut self.path_rng);
+                    VisitState::Done
+                }
+            },
+            state => state,
+        };
+    }
+
     /// Moves the TCP one sample along the path.
     fn advance(&mut self) {
+        self.steer(self.k as f64 / self.cfg.rate_hz);
+        if matches!(self.visit, VisitState::Dwelling(..)) {
+            return;
+        }
         let ds = self.cfg.feed_mm_s / self.cfg.rate_hz;
         let (dx, dy) = (self.target.0 - self.at.0, self.target.1 - self.at.1);
         let d = dx.hypot(dy);

@@ -14,6 +14,7 @@ mod rounds;
 mod rows;
 mod select;
 mod shared;
+pub mod tie;
 mod types;
 mod uncertainty;
 

@@ -20,8 +20,8 @@
 //! figures in docs/calibration.md).
 use rpkm_core::calib;
 use rpkm_core::calib::online::{
-    Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome, DRIFT_FALSE_ALARM,
-    DRIFT_NAME_MARGIN,
+    Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome, TieResolved,
+    DRIFT_FALSE_ALARM, DRIFT_NAME_MARGIN, TIE_EVIDENCE_CHI2, TIE_MOTION_POSES,
 };
 use rpkm_core::calib::{Calibration, Options};
 use rpkm_core::campaign::Instrument;
@@ -32,7 +32,7 @@ use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{index_of, Params, NAMES, N_PARAMS};
 use rpkm_twin::{
     EffectKind, ProductionConfig, ProductionSample, ProductionStream, StepChange, ThermalPhysics,
-    TimeCreep, Twin, TwinConfig,
+    TimeCreep, Twin, TwinConfig, Visit,
 };
 
 fn twin(seed: u64) -> Twin {
@@ -375,7 +375,7 @@ fn the_forces_track_a_drifting_machine_and_name_a_crash() {
     assert!(run.worst_z.len() > 300, "{} checks", run.worst_z.len());
     check_parameters(&run);
     assert_eq!(run.steps.len(), 1, "steps: {:?}", run.steps);
-    let (named_at, step) = run.steps[0];
+    let (named_at, step) = run.steps[0].clone();
     assert_eq!(NAMES[step.param], "l3", "{step:?}");
     assert!(
         (240.0..240.2).contains(&step.since_s),
@@ -513,4 +513,120 @@ fn calibration_currents_online_creep() {
         said * 1e3,
         truth * 1e3
     );
+}
+
+/// What the tracker said over a production stream at 10 Hz: the first step (and when it
+/// was named), the first tie it settled (and when), the evidence still open at the end.
+struct Settled {
+    step: Option<(f64, rpkm_core::calib::online::StepChange)>,
+    resolved: Option<(f64, TieResolved)>,
+    open: Option<f64>,
+}
+
+fn settle(t: &Twin, cal: &Calibration, cfg: ProductionConfig) -> Settled {
+    let mut est = OnlineEstimator::from_calibration(cal, OnlineOptions::default());
+    let mut told = Settled {
+        step: None,
+        resolved: None,
+        open: None,
+    };
+    for s in ProductionStream::new(t, cfg) {
+        let s = s.expect("production sample");
+        let sample = ForceSample {
+            t: s.t,
+            q: s.q,
+            f: s.f,
+        };
+        match est.update(&sample).expect("update") {
+            Outcome::Step(step) if told.step.is_none() => told.step = Some((s.t, step)),
+            Outcome::Resolved(r) if told.resolved.is_none() => told.resolved = Some((s.t, r)),
+            _ => {}
+        }
+    }
+    told.open = est.tie_evidence().map(|e| e.chi2);
+    told
+}
+
+/// Issue 28: a crash the production path moves alike for two rods ("l3 or l1") comes with
+/// the motion that tells them apart; a stream that then runs it names the crashed rod alone
+/// (a crash of l1 as well as of l3: the evidence, not the naming, decides). The start is
+/// issue 15's: a calibration of the instrument and production campaign; the motion is
+/// commanded a second after the step is named, a second's stop at each pose.
+#[test]
+fn a_tied_crash_is_told_apart_by_the_motion_the_tracker_names() {
+    let seed = 41;
+    let mut t = twin(seed);
+    let cal = start_calibration(&mut t, seed);
+    for rod in ["l3", "l1"] {
+        let cfg = ProductionConfig {
+            rate_hz: 10.0,
+            seconds: 90.0,
+            drift_k_per_h: 0.0,
+            step: Some(StepChange {
+                at_s: 30.0,
+                param: index_of(rod).expect("rod"),
+                change: 0.1,
+            }),
+            seed,
+            ..Default::default()
+        };
+        let plain = settle(&t, &cal, cfg.clone());
+        let (named_at, step) = plain.step.clone().expect("a step");
+        let other = step.alternative.expect("a tie on the production path");
+        let motion = step.separating.clone().expect("a motion");
+        eprintln!(
+            "seed {seed}, crash {rod}: named {} or {} {:+.4} mm, margin {:.3}; motion {:?}; \
+             the path alone: {:?} (open {:?})",
+            NAMES[step.param],
+            NAMES[other],
+            step.change,
+            step.margin,
+            motion,
+            plain
+                .resolved
+                .as_ref()
+                .map(|(t, r)| (t - named_at, NAMES[r.param], r.evidence.chi2)),
+            plain.open,
+        );
+        assert!(motion.chi2 >= 4.0 * TIE_EVIDENCE_CHI2, "{motion:?}");
+        assert!(motion.poses.len() <= TIE_MOTION_POSES, "{motion:?}");
+        // the path alone settles slowly if at all, but never wrongly
+        if let Some((_, r)) = &plain.resolved {
+            assert_eq!(NAMES[r.param], rod, "{r:?}");
+        }
+        let visited = settle(
+            &t,
+            &cal,
+            ProductionConfig {
+                visit: Some(Visit {
+                    at_s: named_at + 1.0,
+                    poses: motion.poses.clone(),
+                    dwell_s: 1.0,
+                }),
+                ..cfg
+            },
+        );
+        let (at, r) = visited.resolved.expect("the motion settles the tie");
+        eprintln!(
+            "  with the motion: {} alone {:.1} s after the naming, evidence {:.1} over {} samples, \
+             decisive at {:?}",
+            NAMES[r.param],
+            at - named_at,
+            r.evidence.chi2,
+            r.evidence.counted,
+            r.at
+        );
+        assert_eq!(NAMES[r.param], rod, "{r:?}");
+        assert_eq!(
+            r.ruled_out,
+            if rod == "l3" {
+                index_of("l1")
+            } else {
+                index_of("l3")
+            }
+            .expect("rod")
+        );
+        assert!(r.evidence.chi2.abs() >= TIE_EVIDENCE_CHI2, "{r:?}");
+        assert!((r.change - 0.1).abs() < 0.02, "{r:?}");
+    }
 }

@@ -31,7 +31,7 @@ use std::time::{Duration, Instant};
 use nalgebra::SMatrix;
 use rpkm_core::calib::online::{
     Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome as OnlineOutcome,
-    StepChange,
+    StepChange, TieResolved, TIE_EVIDENCE_CHI2,
 };
 use rpkm_core::calib::{self, Calibration, Options, Selection};
 use rpkm_core::campaign::Campaign;
@@ -541,6 +541,8 @@ pub struct OnlineReport {
     pub t: f64,
     /// A step change found since the last report.
     pub step: Option<StepChange>,
+    /// A step that was "this or that", settled by the samples since.
+    pub resolved: Option<TieResolved>,
     /// The parameter whose creep explains a significant drift since the tracking began (or
     /// since the last step) beyond the threshold.
     pub drift: Option<Drift>,
@@ -589,12 +591,19 @@ impl OnlineTracker {
             }
         };
         self.updates += 1;
-        let step = match outcome {
+        let (step, resolved) = match outcome {
             OnlineOutcome::Step(step) => {
                 self.monitor.rebase();
-                Some(step)
+                (Some(step), None)
             }
-            _ => None,
+            OnlineOutcome::Resolved(r) => {
+                // the estimate moved to the runner-up's change: the drift test starts again
+                if r.swapped {
+                    self.monitor.rebase();
+                }
+                (None, Some(r))
+            }
+            _ => (None, None),
         };
         // the drift test at each point of the history (a second at 10 Hz)
         let mut drift = None;
@@ -608,7 +617,7 @@ impl OnlineTracker {
         // in the estimate's covariance: the forces pin combinations of the parameters whose
         // single σ stay wide
         let moved = self.est.distance(&self.published) > self.settings.publish_sigma;
-        if !(moved || step.is_some() || drift.is_some()) {
+        if !(moved || step.is_some() || resolved.is_some() || drift.is_some()) {
             return None;
         }
         self.published = *self.est.params();
@@ -617,6 +626,7 @@ impl OnlineTracker {
             sigma,
             t: s.t,
             step,
+            resolved,
             drift,
         })
     }
@@ -797,48 +807,114 @@ fn covariance_of(
     Ok(cov)
 }
 
-/// The WARN line of a report: the step, else the drifts (None when nothing moved enough).
+/// A state's name: a parameter's, or the stiffness.
+fn state_name(i: usize) -> &'static str {
+    if i < N_PARAMS {
+        rpkm_core::params::NAMES[i]
+    } else {
+        "stiffness"
+    }
+}
+
+/// The WARN line of a report: the step, else a tie settled, else the drifts (None when
+/// nothing moved enough).
 pub fn report_warning(r: &OnlineReport, temp_name: &str) -> Option<String> {
     if let Some(step) = &r.step {
-        let name = |i: usize| {
-            if i < N_PARAMS {
-                rpkm_core::params::NAMES[i]
-            } else {
-                "stiffness"
-            }
-        };
-        let (who, why) = match step.alternative {
-            // the path so far moved the forces alike for both: say so, do not pick
-            Some(other) => (
-                format!("{} or {}", name(step.param), name(other)),
-                "the path cannot tell them apart",
-            ),
-            None => (name(step.param).to_owned(), "next best"),
-        };
-        let mut line = format!(
-            "step change at t = {:.1} s: {who} {:+.0} µm ({why}: explains {:.2}x less)",
-            step.since_s,
-            step.change * 1e3,
-            step.margin
-        );
-        if let (Some(at), Some(other)) = (&step.separating, step.alternative) {
-            let _ = write!(
-                line,
-                "; to tell them apart drive to x = {:.0}, y = {:.0} mm with all four drives \
-                 position-controlled: there a sample leaves {:.0} σ of the step that {} cannot \
-                 reproduce (their forces {:.3} alike)",
-                at.x,
-                at.y,
-                at.sigma,
-                name(other),
-                at.cos.abs()
-            );
-        }
-        return Some(line);
+        return Some(step_warning(step));
+    }
+    if let Some(settled) = &r.resolved {
+        return Some(settled_warning(settled));
     }
     r.drift
         .as_ref()
         .map(|d| format!("geometry drift: {}", crate::words::drift(d, temp_name)))
+}
+
+fn step_warning(step: &StepChange) -> String {
+    let (who, why) = match step.alternative {
+        // the path so far moved the forces alike for both: say so, do not pick
+        Some(other) => (
+            format!("{} or {}", state_name(step.param), state_name(other)),
+            "the path cannot tell them apart",
+        ),
+        None => (state_name(step.param).to_owned(), "next best"),
+    };
+    let mut line = format!(
+        "step change at t = {:.1} s: {who} {:+.0} µm ({why}: explains {:.2}x less)",
+        step.since_s,
+        step.change * 1e3,
+        step.margin
+    );
+    if let (Some(motion), Some(_)) = (&step.separating, step.alternative) {
+        let poses: Vec<String> = motion
+            .poses
+            .iter()
+            .map(|(x, y)| format!("({x:.0}, {y:.0})"))
+            .collect();
+        let _ = write!(
+            line,
+            "; to tell them apart drive through x, y = {} mm, all four drives \
+             position-controlled, a sample at each: evidence χ² {:.0} expected, {:.1} settles it",
+            poses.join(", "),
+            motion.chi2,
+            TIE_EVIDENCE_CHI2
+        );
+    }
+    line
+}
+
+fn settled_warning(r: &TieResolved) -> String {
+    let mut line = format!(
+        "step change at t = {:.1} s settled: {} alone {:+.0} µm, {} ruled out by the samples \
+         since (evidence χ² {:.1} over {} samples",
+        r.since_s,
+        state_name(r.param),
+        r.change * 1e3,
+        state_name(r.ruled_out),
+        r.evidence.chi2.abs(),
+        r.evidence.counted
+    );
+    if let Some((x, y)) = r.at {
+        let _ = write!(line, ", most at x = {x:.0}, y = {y:.0} mm");
+    }
+    line.push(')');
+    if r.swapped {
+        let _ = write!(
+            line,
+            "; not {} as first named: the estimate now carries {}'s change",
+            state_name(r.ruled_out),
+            state_name(r.param)
+        );
+    }
+    line
+}
+
+/// The /diagnostics values of a tie, SI as on every topic: the motion that separates one
+/// (its first pose alone too, for a cell that goes to one pose), or how one was settled.
+fn tie_values(r: &OnlineReport) -> Vec<(&'static str, String)> {
+    let mut t = Vec::new();
+    if let Some(motion) = r.step.as_ref().and_then(|s| s.separating.as_ref()) {
+        if let Some(&(x, y)) = motion.poses.first() {
+            t.push(("separating_x_m", format!("{}", x / MM_PER_M)));
+            t.push(("separating_y_m", format!("{}", y / MM_PER_M)));
+        }
+        let poses: Vec<String> = motion
+            .poses
+            .iter()
+            .map(|(x, y)| format!("{} {}", x / MM_PER_M, y / MM_PER_M))
+            .collect();
+        t.push(("separating_poses_m", poses.join("; ")));
+        t.push(("separating_chi2", format!("{:.1}", motion.chi2)));
+    }
+    if let Some(settled) = &r.resolved {
+        t.push(("settled", state_name(settled.param).to_owned()));
+        t.push(("ruled_out", state_name(settled.ruled_out).to_owned()));
+        t.push((
+            "evidence_chi2",
+            format!("{:.1}", settled.evidence.chi2.abs()),
+        ));
+    }
+    t
 }
 
 /// What a parameter set changes while the node runs: the options of the next calibration
@@ -1104,12 +1180,7 @@ impl Calibrator {
                 ctx.log(&warning);
                 self.last = (DiagnosticStatus::WARN, warning);
                 let mut t = vec![("online_t_s", format!("{:.3}", r.t))];
-                // the motion that separates a tie, SI as on every topic
-                if let Some(at) = r.step.as_ref().and_then(|s| s.separating) {
-                    t.push(("separating_x_m", format!("{}", at.x / MM_PER_M)));
-                    t.push(("separating_y_m", format!("{}", at.y / MM_PER_M)));
-                    t.push(("separating_sigma", format!("{:.1}", at.sigma)));
-                }
+                t.extend(tie_values(&r));
                 out.diagnostics.publish(&diagnostic_array(status(
                     self.last.0,
                     &ctx.status_name,
@@ -1727,11 +1798,12 @@ mod tests {
         Ok(())
     }
 
-    /// A tie is reported with the motion that separates it (its pose in mm, its drive mode,
-    /// what a sample there leaves), and the same pose in SI on /diagnostics.
+    /// A tie is reported with the motion that separates it (its poses in mm, its drive
+    /// mode, the evidence expected), the same poses in SI on /diagnostics; a tie settled says
+    /// which stands, by how much evidence, and whether the estimate moved.
     #[test]
     fn a_tie_is_reported_with_the_motion_that_separates_it() {
-        use rpkm_core::calib::online::SeparatingPose;
+        use rpkm_core::calib::tie::{Decisive, SeparatingMotion, TieEvidence};
         use rpkm_core::params::{L1, L3};
         let step = StepChange {
             param: L3,
@@ -1740,28 +1812,63 @@ mod tests {
             since_s: 20.0,
             margin: 1.02,
             alternative: Some(L1),
-            separating: Some(SeparatingPose {
-                x: -150.0,
-                y: 1700.0,
-                cos: 0.98,
-                sigma: 210.0,
+            separating: Some(SeparatingMotion {
+                poses: vec![(-150.0, 2000.0), (150.0, 1600.0)],
+                chi2: 118.4,
+                first_chi2: 26.5,
             }),
         };
-        let r = OnlineReport {
+        let mut r = OnlineReport {
             params: Params::nominal(),
             sigma: [0.0; N_PARAMS],
             t: 21.0,
             step: Some(step),
+            resolved: None,
             drift: None,
         };
         assert_eq!(
             report_warning(&r, "temp_machine").as_deref(),
             Some(
                 "step change at t = 20.0 s: l3 or l1 +100 µm (the path cannot tell them apart: \
-                 explains 1.02x less); to tell them apart drive to x = -150, y = 1700 mm with \
-                 all four drives position-controlled: there a sample leaves 210 σ of the step \
-                 that l1 cannot reproduce (their forces 0.980 alike)"
+                 explains 1.02x less); to tell them apart drive through x, y = (-150, 2000), \
+                 (150, 1600) mm, all four drives position-controlled, a sample at each: \
+                 evidence χ² 118 expected, 27.6 settles it"
             )
         );
+        let values = tie_values(&r);
+        let get = |k: &str| values.iter().find(|v| v.0 == k).map(|v| v.1.as_str());
+        assert_eq!(get("separating_x_m"), Some("-0.15"));
+        assert_eq!(get("separating_y_m"), Some("2"));
+        assert_eq!(get("separating_poses_m"), Some("-0.15 2; 0.15 1.6"));
+        r.step = None;
+        r.resolved = Some(TieResolved {
+            param: L1,
+            change: 0.0998,
+            ruled_out: L3,
+            since_s: 20.0,
+            swapped: true,
+            evidence: TieEvidence {
+                chi2: -31.24,
+                counted: 12,
+                neither: 0,
+                decisive: Some(Decisive {
+                    t: 24.0,
+                    q: [0.0; 4],
+                    chi2: -20.0,
+                }),
+            },
+            at: Some((-149.6, 1998.2)),
+        });
+        assert_eq!(
+            report_warning(&r, "temp_machine").as_deref(),
+            Some(
+                "step change at t = 20.0 s settled: l1 alone +100 µm, l3 ruled out by the \
+                 samples since (evidence χ² 31.2 over 12 samples, most at x = -150, y = 1998 \
+                 mm); not l3 as first named: the estimate now carries l1's change"
+            )
+        );
+        let values = tie_values(&r);
+        let get = |k: &str| values.iter().find(|v| v.0 == k).map(|v| v.1.as_str());
+        assert_eq!((get("settled"), get("ruled_out")), (Some("l1"), Some("l3")));
     }
 }
