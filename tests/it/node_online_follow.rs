@@ -208,6 +208,69 @@ fn rms_in(values: &[(usize, f64)], truth: &[Truth], from: f64, to: f64) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
 }
 
+/// The cell runs the motion the WARN named a second after it (the same stream, the
+/// commanded poses a second each: `rpkm simulate --production-visit`), and the calibrator
+/// settles the tie: l3 alone, l1 ruled out, on /diagnostics.
+fn settle_by_the_motion(
+    dir: &TempDir,
+    twin: &[&str],
+    geometry: &Path,
+    motion: &[(f64, f64)],
+    named_at: f64,
+) {
+    let poses: Vec<String> = motion.iter().map(|(x, y)| format!("{x},{y}")).collect();
+    let visit = format!("--production-visit={}@{}", poses.join(";"), named_at + 1.0);
+    // the way there at feed speed (50 mm/s) may cross the workspace: 40 s more
+    let (seconds, decimate) = ((SECONDS + 40.0).to_string(), (1000.0 / ROWS_HZ).to_string());
+    let step = format!("l3={STEP_MM}@{STEP_AT_S}");
+    let prod = [
+        "simulate",
+        "--production-seconds",
+        &seconds,
+        "--production-step",
+        &step,
+        &visit,
+        "--production-decimate",
+        &decimate,
+        "--out",
+        "motion.csv",
+    ];
+    rpkm_in(dir, &[&prod[..], twin].concat());
+    let truth = read_truth(&dir.path("motion.truth.csv"));
+    let obs = observe(
+        &launch_files(dir, &dir.path("motion.csv"), geometry),
+        &truth,
+    );
+    let settled = obs
+        .calibrator
+        .iter()
+        .find(|d| d.message.contains("settled"))
+        .unwrap_or_else(|| panic!("the tie settled on /diagnostics: {:?}", obs.calibrator));
+    let at = settled
+        .values
+        .iter()
+        .find(|v| v.key == "online_t_s")
+        .map_or("?", |v| v.value.as_str());
+    eprintln!(
+        "with the motion {motion:?} from {:.1} s: at {at} s {}",
+        named_at + 1.0,
+        settled.message
+    );
+    assert_eq!(settled.level, DiagnosticStatus::WARN);
+    assert!(settled.message.contains("l3 alone"), "{}", settled.message);
+    let value = |k: &str| {
+        settled
+            .values
+            .iter()
+            .find(|v| v.key == k)
+            .map(|v| v.value.as_str())
+    };
+    assert_eq!(
+        (value("settled"), value("ruled_out")),
+        (Some("l3"), Some("l1"))
+    );
+}
+
 #[test]
 #[expect(
     clippy::too_many_lines,
@@ -303,28 +366,55 @@ fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash()
         .find(|d| d.level == DiagnosticStatus::WARN && d.message.contains("step change"))
         .unwrap_or_else(|| panic!("a step WARN on /diagnostics: {:?}", obs.calibrator));
     assert!(warn.message.contains("l3"), "{}", warn.message);
-    if warn.message.contains("l3 or l1") {
-        // a tie comes with the motion that separates it (issue 28), its pose in SI
-        assert!(
-            warn.message.contains("to tell them apart drive to x = "),
-            "{}",
-            warn.message
-        );
-        let value = |k: &str| {
-            warn.values
-                .iter()
-                .find(|v| v.key == k)
-                .and_then(|v| v.value.parse::<f64>().ok())
-                .unwrap_or_else(|| panic!("{k} in {:?}", warn.values))
-        };
-        let (x, y) = (value("separating_x_m"), value("separating_y_m"));
-        let (xr, yr) = (rpkm_core::design::X_RANGE, rpkm_core::design::Y_RANGE);
-        assert!(
-            (xr.0..=xr.1).contains(&(x * 1e3)) && (yr.0..=yr.1).contains(&(y * 1e3)),
-            "({x}, {y}) m"
-        );
-    }
-
+    // on this path the crash ties l3 with l1 (issue 28): the WARN names the motion that
+    // separates them, its poses in SI
+    assert!(warn.message.contains("l3 or l1"), "{}", warn.message);
+    assert!(
+        warn.message
+            .contains("to tell them apart drive through x, y = "),
+        "{}",
+        warn.message
+    );
+    let value = |k: &str| {
+        warn.values
+            .iter()
+            .find(|v| v.key == k)
+            .map(|v| v.value.clone())
+            .unwrap_or_else(|| panic!("{k} in {:?}", warn.values))
+    };
+    let number = |k: &str| value(k).parse::<f64>().expect("a number");
+    let motion: Vec<(f64, f64)> = value("separating_poses_m")
+        .split("; ")
+        .map(|p| {
+            let (x, y) = p.split_once(' ').expect("x y");
+            (
+                x.parse::<f64>().expect("x") * 1e3,
+                y.parse::<f64>().expect("y") * 1e3,
+            )
+        })
+        .collect();
+    let (xr, yr) = (rpkm_core::design::X_RANGE, rpkm_core::design::Y_RANGE);
+    assert!(
+        motion
+            .iter()
+            .all(|(x, y)| (xr.0..=xr.1).contains(x) && (yr.0..=yr.1).contains(y)),
+        "{motion:?}"
+    );
+    assert_eq!(
+        (
+            number("separating_x_m") * 1e3,
+            number("separating_y_m") * 1e3
+        ),
+        motion[0]
+    );
+    eprintln!(
+        "without the motion, settled: {:?}",
+        obs.calibrator
+            .iter()
+            .find(|d| d.message.contains("settled"))
+            .map(|d| &d.message)
+    );
+    settle_by_the_motion(&dir, &twin, &geometry, &motion, number("online_t_s"));
     // windows of stream time: before the crash, its first second (nothing can have been
     // named yet: a step needs ten held samples), the last ten seconds (followed)
     let window = |v: &[(usize, f64)]| {

@@ -15,7 +15,11 @@
 //! - step changes: a sample whose normalised innovation exceeds the gate (χ²₄ at 1e-6) is
 //!   held back; [`OnlineOptions::step_samples`] in a row are a step (one lone sample is an
 //!   outlier, dropped): the single parameter that best explains the held samples' innovations
-//!   is named, its variance opened by the step's square, and the held samples are applied.
+//!   is named, its variance opened by the step's square, and the held samples are applied;
+//! - ties: a step the path moved alike for two parameters ("l3 or l1") keeps a second
+//!   estimate with the runner-up's change until the two estimates' predictions of the
+//!   samples since tell them apart ([`super::tie`]); [`OnlineEstimator::tie_motion`] plans
+//!   the poses that would.
 //!
 //! The forces determine some combinations of the parameters (`rpkm analyze observability
 //! --method currents`); the start covariance (a calibration's, or the tolerances) holds the

@@ -31,7 +31,10 @@ rpkm simulate --stream-hz 1000 --stream-seconds 2 --stream-motion hold --fault q
 --effect preload_elastic=1 --seed 5 --out preload_fault --truth preload_fault.truth.json\n\n\
 Production stream (CSV, truth in prod.truth.csv):\n  \
 rpkm simulate --production-seconds 600 --production-step l3=0.1@300 --production-decimate 100 \
---effect preload_elastic --seed 3 --out prod.csv"
+--effect preload_elastic --seed 3 --out prod.csv\n  \
+rpkm simulate --production-seconds 600 --production-step l3=0.1@300 \
+--production-visit=-150,2000;150,1600@307 --production-decimate 100 --effect preload_elastic \
+--seed 3 --out prod_motion.csv"
 )]
 pub struct SimulateArgs {
     /// Comma-separated campaigns, measured one after the other into one file (optional for
@@ -101,6 +104,15 @@ pub struct SimulateArgs {
     /// l3=0.1@2400 bends rod 3 by 0.1 mm at 40 min.
     #[arg(long)]
     pub production_step: Option<String>,
+    /// A motion the cell commands during the production stream: X,Y;X,Y;...@SECONDS (mm,
+    /// the workspace's poses in order), e.g. the one the calibrator's WARN names to tell a
+    /// tie apart: -150,2000;150,1600@36.9. The path goes there at feed speed, stays
+    /// --production-dwell at each, then goes on.
+    #[arg(long, requires = "production_seconds")]
+    pub production_visit: Option<String>,
+    /// Seconds at each pose of --production-visit.
+    #[arg(long, default_value_t = 1.0)]
+    pub production_dwell: f64,
     /// Write one production sample in this many.
     #[arg(long, default_value_t = 1)]
     pub production_decimate: usize,

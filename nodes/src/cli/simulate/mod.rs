@@ -172,6 +172,59 @@ fn parse_step(s: &str) -> Result<rpkm_twin::StepChange> {
     })
 }
 
+/// A commanded motion `X,Y;X,Y;...@SECONDS` (mm) with `dwell_s` at each pose.
+fn parse_visit(s: &str, dwell_s: f64) -> Result<rpkm_twin::Visit> {
+    use rpkm_core::design::{X_RANGE, Y_RANGE};
+    let bad = |why: &str| {
+        super::bad_input(format!(
+            "--production-visit {s}: {why}; expected X,Y;X,Y;...@SECONDS in mm, e.g. \
+             -150,2000;150,1600@36.9"
+        ))
+    };
+    let (poses, at) = s.split_once('@').ok_or_else(|| bad("no @SECONDS"))?;
+    let at_s: f64 = at
+        .trim()
+        .parse()
+        .map_err(|_| bad("SECONDS is not a number"))?;
+    if !at_s.is_finite() || at_s < 0.0 {
+        return Err(bad("SECONDS must be 0 or more"));
+    }
+    if !dwell_s.is_finite() || dwell_s < 0.0 {
+        return Err(super::bad_input(format!(
+            "--production-dwell {dwell_s}: seconds, 0 or more"
+        )));
+    }
+    let poses = poses
+        .split(';')
+        .enumerate()
+        .map(|(i, pose)| {
+            let (x, y) = pose
+                .split_once(',')
+                .ok_or_else(|| bad(&format!("pose {} `{pose}` is not X,Y", i + 1)))?;
+            let (x, y): (f64, f64) = match (x.trim().parse(), y.trim().parse()) {
+                (Ok(x), Ok(y)) => (x, y),
+                _ => return Err(bad(&format!("pose {} `{pose}` is not two numbers", i + 1))),
+            };
+            let inside =
+                (X_RANGE.0..=X_RANGE.1).contains(&x) && (Y_RANGE.0..=Y_RANGE.1).contains(&y);
+            if !inside {
+                return Err(bad(&format!(
+                    "pose {} ({x}, {y}) is outside the workspace x {:?}, y {:?} mm",
+                    i + 1,
+                    X_RANGE,
+                    Y_RANGE
+                )));
+            }
+            Ok((x, y))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(rpkm_twin::Visit {
+        at_s,
+        poses,
+        dwell_s,
+    })
+}
+
 /// `--production-seconds`: the stream as a campaign CSV and its truth beside it.
 fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> {
     use rpkm_core::campaign::{Campaign, Instrument, Pose};
@@ -191,6 +244,11 @@ fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> 
             .production_step
             .as_deref()
             .map(parse_step)
+            .transpose()?,
+        visit: args
+            .production_visit
+            .as_deref()
+            .map(|v| parse_visit(v, args.production_dwell))
             .transpose()?,
         seed: args.seed,
         ..Default::default()
