@@ -379,8 +379,7 @@ fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash()
         warn.values
             .iter()
             .find(|v| v.key == k)
-            .map(|v| v.value.clone())
-            .unwrap_or_else(|| panic!("{k} in {:?}", warn.values))
+            .map_or_else(|| panic!("{k} in {:?}", warn.values), |v| v.value.clone())
     };
     let number = |k: &str| value(k).parse::<f64>().expect("a number");
     let motion: Vec<(f64, f64)> = value("separating_poses_m")

@@ -228,30 +228,30 @@ impl<'a> ProductionStream<'a> {
     /// Where the path goes from stream time `t`: a commanded visit overrides the contour.
     fn steer(&mut self, t: f64) {
         let Some(v) = &self.cfg.visit else { return };
-        let next = |i: usize| v.poses.get(i).copied();
+        let (at_s, dwell_s) = (v.at_s, v.dwell_s);
+        let arrived = |i: usize| v.poses.get(i) == Some(&self.at);
         self.visit = match self.visit {
-            VisitState::Pending if t >= v.at_s => match next(0) {
-                Some(pose) => {
-                    self.target = pose;
-                    VisitState::Going(0)
-                }
-                None => VisitState::Done,
-            },
-            VisitState::Going(i) if Some(self.at) == next(i) => {
-                VisitState::Dwelling(i, t + v.dwell_s)
-            }
-            VisitState::Dwelling(i, until) if t >= until => match next(i + 1) {
-                Some(pose) => {
-                    self.target = pose;
-                    VisitState::Going(i + 1)
-                }
-                None => {
-                    self.target = random_target(&mut self.path_rng);
-                    VisitState::Done
-                }
-            },
+            VisitState::Pending if t >= at_s => self.head_for(0),
+            VisitState::Going(i) if arrived(i) => VisitState::Dwelling(i, t + dwell_s),
+            VisitState::Dwelling(i, until) if t >= until => self.head_for(i + 1),
             state => state,
         };
+    }
+
+    /// Heads for the visit's pose `i`, or back to the contour moves after its last.
+    fn head_for(&mut self, i: usize) -> VisitState {
+        let pose = self
+            .cfg
+            .visit
+            .as_ref()
+            .and_then(|v| v.poses.get(i).copied());
+        if let Some(pose) = pose {
+            self.target = pose;
+            VisitState::Going(i)
+        } else {
+            self.target = random_target(&mut self.path_rng);
+            VisitState::Done
+        }
     }
 
     /// Moves the TCP one sample along the path.

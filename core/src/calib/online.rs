@@ -741,23 +741,23 @@ impl OnlineEstimator {
     pub fn update(&mut self, sample: &ForceSample) -> Result<Outcome, ElasticError> {
         let (held, named) = self.predicted(sample)?;
         let Some(mut tie) = self.tie.take() else {
-            return self.decide(sample, held, named.nis);
+            return self.decide(sample, &held, named.nis);
         };
         let Ok((alt_held, runner_up)) = tie.alt.predicted(sample) else {
             // the runner-up's machine has no equilibrium here: it cannot be the machine
             tie.evidence
                 .add(sample.t, sample.q, named, MISSED, GATE_CHI2_4);
-            return self.after_tie(tie, sample, held, named.nis);
+            return self.after_tie(tie, sample, &held, named.nis);
         };
         tie.evidence
             .add(sample.t, sample.q, named, runner_up, GATE_CHI2_4);
         if tie.evidence.verdict(self.opts.tie_evidence_chi2) == Verdict::RunnerUp {
             std::mem::swap(self, &mut tie.alt);
             tie.swapped = true;
-            return self.after_tie(tie, sample, alt_held, runner_up.nis);
+            return self.after_tie(tie, sample, &alt_held, runner_up.nis);
         }
-        tie.alt.decide(sample, alt_held, runner_up.nis)?;
-        self.after_tie(tie, sample, held, named.nis)
+        tie.alt.decide(sample, &alt_held, runner_up.nis)?;
+        self.after_tie(tie, sample, &held, named.nis)
     }
 
     /// The sample through the estimate that stands after the tie's evidence: the resolution
@@ -767,7 +767,7 @@ impl OnlineEstimator {
         &mut self,
         tie: Box<OpenTie>,
         sample: &ForceSample,
-        held: Held,
+        held: &Held,
         nis: f64,
     ) -> Result<Outcome, ElasticError> {
         let verdict = tie.evidence.verdict(self.opts.tie_evidence_chi2);
@@ -826,7 +826,7 @@ impl OnlineEstimator {
     fn decide(
         &mut self,
         sample: &ForceSample,
-        held: Held,
+        held: &Held,
         nis: f64,
     ) -> Result<Outcome, ElasticError> {
         if nis <= GATE_CHI2_4 {
@@ -841,10 +841,10 @@ impl OnlineEstimator {
             self.outliers += self.held.len();
             self.held.clear();
             return Ok(Outcome::Applied {
-                nis: self.apply(&held),
+                nis: self.apply(held),
             });
         }
-        self.held.push(held);
+        self.held.push(*held);
         if self.held.len() < self.opts.step_samples.max(1) {
             return Ok(Outcome::Held { nis });
         }

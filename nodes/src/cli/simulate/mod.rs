@@ -225,18 +225,9 @@ fn parse_visit(s: &str, dwell_s: f64) -> Result<rpkm_twin::Visit> {
     })
 }
 
-/// `--production-seconds`: the stream as a campaign CSV and its truth beside it.
-fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> {
-    use rpkm_core::campaign::{Campaign, Instrument, Pose};
-    use rpkm_core::params::{NAMES, N_PARAMS};
-    use rpkm_twin::{ProductionConfig, ProductionStream};
-    use std::fmt::Write as _;
-    if !(is_csv(&args.out) && seconds > 0.0 && seconds <= 86_400.0) {
-        return Err(super::bad_input(format!(
-            "--production-seconds {seconds}: a CSV --out and 0 < seconds <= 86400"
-        )));
-    }
-    let cfg = ProductionConfig {
+/// The production stream the arguments describe.
+fn production_config(args: &SimulateArgs, seconds: f64) -> Result<rpkm_twin::ProductionConfig> {
+    Ok(rpkm_twin::ProductionConfig {
         rate_hz: args.stream_hz.unwrap_or(1000.0),
         seconds,
         drift_k_per_h: args.production_drift,
@@ -252,7 +243,21 @@ fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> 
             .transpose()?,
         seed: args.seed,
         ..Default::default()
-    };
+    })
+}
+
+/// `--production-seconds`: the stream as a campaign CSV and its truth beside it.
+fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> {
+    use rpkm_core::campaign::{Campaign, Instrument, Pose};
+    use rpkm_core::params::{NAMES, N_PARAMS};
+    use rpkm_twin::ProductionStream;
+    use std::fmt::Write as _;
+    if !(is_csv(&args.out) && seconds > 0.0 && seconds <= 86_400.0) {
+        return Err(super::bad_input(format!(
+            "--production-seconds {seconds}: a CSV --out and 0 < seconds <= 86400"
+        )));
+    }
+    let cfg = production_config(args, seconds)?;
     let every = args.production_decimate.max(1);
     let mut poses = Vec::new();
     let mut truth = String::from("t,x,y,psi,f1,f2,f3,f4");
