@@ -138,8 +138,15 @@ pub struct Baseline {
     pub cal_rms_um: f64,
     pub val_rms_um: Option<f64>,
     /// RMS that noise alone would give on the held-out errors (or, without held-out data, on
-    /// the calibration's length rows), µm, at the estimated noise levels.
+    /// the calibration's length rows), µm, at the estimated noise levels. It counts the
+    /// reading each setup was zeroed on at its variance, but all the poses of a setup share
+    /// that one draw: with few setups the held-out RMS strays from it by that draw.
     pub noise_floor_um: f64,
+    /// The held-out RMS with each setup's zero removed (its errors less their mean, per
+    /// coordinate: what a model can predict), µm, and the RMS noise alone would give there:
+    /// the zero reading cancels, so they compare like with like whatever it drew.
+    pub val_rms_relative_um: Option<f64>,
+    pub noise_floor_relative_um: Option<f64>,
     /// χ² against the stated (not the estimated) noise, its dof and p-value: how the
     /// residual compares with the instruments' rating. Not used by the verdict.
     pub chi2: f64,
@@ -407,6 +414,9 @@ struct Validation<'a> {
     campaign: &'a Campaign,
     /// σ of each held-out TCP error, in [`obs::tcp_errors`] order.
     sigma: Vec<f64>,
+    /// σ of each error less the mean of its setup and coordinate ([`Validation::relative`]):
+    /// the zero reading cancels, the mean's own noise does not.
+    relative_sigma: Vec<f64>,
     /// Each error's setup and coordinate (an index): the errors of one share the reading
     /// their setup was zeroed on.
     zero: Vec<usize>,
@@ -416,10 +426,32 @@ impl Validation<'_> {
     /// The held-out campaign with the noise of each of its TCP errors.
     fn new<'a>(campaign: &'a Campaign, noise: &NoiseModel) -> Result<Validation<'a>, PoseError> {
         let errs = obs::tcp_errors(campaign, &Params::nominal(), Model::M29)?;
+        let variances = validation_variances(campaign, &errs, noise)?;
+        let zero = zero_groups(campaign, &errs);
+        let reading: Vec<f64> = variances.iter().map(|v| v.reading).collect();
+        // var(e_i − ē) = σ_i² (1 − 2/n) + Σ σ_j² / n² over the n errors of the group
+        let groups = zero.iter().max().map_or(0, |m| m + 1);
+        let mut sum = vec![(0.0, 0usize); groups];
+        for (&g, v) in zero.iter().zip(&reading) {
+            sum[g].0 += v;
+            sum[g].1 += 1;
+        }
+        let relative_sigma = zero
+            .iter()
+            .zip(&reading)
+            .map(|(&g, v)| {
+                let n = sum[g].1.max(1) as f64;
+                (v * (1.0 - 2.0 / n) + sum[g].0 / (n * n)).max(0.0).sqrt()
+            })
+            .collect();
         Ok(Validation {
             campaign,
-            sigma: validation_noise(campaign, &errs, noise)?,
-            zero: zero_groups(campaign, &errs),
+            sigma: variances
+                .iter()
+                .map(|v| (v.reading + v.zero).sqrt())
+                .collect(),
+            relative_sigma,
+            zero,
         })
     }
 
@@ -1192,6 +1224,12 @@ fn baseline(
         Some(v) => calib::rms(&v.sigma) * 1e3,
         None => calib::rms(&length_sigmas(&base.rows)) * 1e3,
     };
+    let relative = val.map(|v| {
+        (
+            calib::rms(&base.fit.val_errors) * 1e3,
+            calib::rms(&v.relative_sigma) * 1e3,
+        )
+    });
     // the same rows weighted by the rating: each group's variance part back at its rating
     let ratio2: [f64; N_GROUPS] = std::array::from_fn(|k| {
         let g = Group::ALL[k];
@@ -1210,6 +1248,8 @@ fn baseline(
         cal_rms_um: base.fit.cal_rms_um,
         val_rms_um: base.fit.val_rms_um,
         noise_floor_um,
+        val_rms_relative_um: relative.map(|r| r.0),
+        noise_floor_relative_um: relative.map(|r| r.1),
         chi2: scale,
         dof: base.fit.dof,
         chi2_per_dof: scale / base.fit.dof,
@@ -1614,11 +1654,18 @@ fn held_out_values(
 /// σ of every held-out TCP error, in [`obs::tcp_errors`] order: the instrument's noise at the
 /// pose and at its setup's reset pose (zeroed on a reading as noisy as any other), and the
 /// encoders' at both.
-fn validation_noise(
+/// The variance of one held-out TCP error: its own reading's and the reading its setup was
+/// zeroed on (every error of the setup shares that one draw).
+struct ErrorVariance {
+    reading: f64,
+    zero: f64,
+}
+
+fn validation_variances(
     val: &Campaign,
     errs: &[(usize, &'static str, f64)],
     noise: &NoiseModel,
-) -> Result<Vec<f64>, PoseError> {
+) -> Result<Vec<ErrorVariance>, PoseError> {
     let nominal = Params::nominal();
     let mut reset_of = vec![None; val.poses.len()];
     for setup in val.setups() {
@@ -1647,7 +1694,10 @@ fn validation_noise(
                 Some(r) => variance(r, coordinate)?,
                 None => 0.0,
             };
-            Ok((variance(*i, coordinate)? + zero).sqrt())
+            Ok(ErrorVariance {
+                reading: variance(*i, coordinate)?,
+                zero,
+            })
         })
         .collect()
 }

@@ -54,6 +54,12 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         um(after.baseline.val_rms_um),
         after.baseline.noise_floor_um
     );
+    if let (Some(rms), Some(floor)) = (
+        after.baseline.val_rms_relative_um,
+        after.baseline.noise_floor_relative_um,
+    ) {
+        println!("   with each setup's zero removed: held-out RMS {rms:.1} um, noise floor {floor:.1} um");
+    }
     println!("   verdict now: {}", crate::words::verdict(&after));
     let page = write_report(
         &args.out,

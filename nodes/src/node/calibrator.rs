@@ -1792,7 +1792,10 @@ mod tests {
         // motion that would
         assert!(w.contains("l3 +") || w.contains("l3 or l1 +"), "{w}");
         if w.contains("l3 or l1 +") {
-            assert!(w.contains("to tell them apart drive through x, y = "), "{w}");
+            assert!(
+                w.contains("to tell them apart drive through x, y = "),
+                "{w}"
+            );
         }
         assert!((moved - 0.1).abs() < 0.02, "l3 moved {moved} mm");
         Ok(())

@@ -78,11 +78,22 @@ pub fn summary(r: &Report) -> String {
             s.chi2_per_dof
         );
     }
-    let floor = r.after.unwrap_or(d).baseline.noise_floor_um;
+    let last = &r.after.unwrap_or(d).baseline;
+    let floor = last.noise_floor_um;
     let _ = write!(
         o,
         "<tr><td>noise floor</td><td></td><td>{floor:.1}</td><td>1</td></tr></table>"
     );
+    if let (Some(rms), Some(zero_floor)) = (last.val_rms_relative_um, last.noise_floor_relative_um)
+    {
+        let _ = write!(
+            o,
+            "<p>The held-out errors carry the reading each setup was zeroed on: one draw that all \
+             its poses share, counted in the floor at its variance. With each setup's zero \
+             removed (what a model can predict) the last model's held-out RMS is {rms:.1} µm \
+             against a floor of {zero_floor:.1} µm.</p>"
+        );
+    }
     let mut cats: Vec<String> = r.stages.iter().map(|s| s.model.clone()).collect();
     cats.push("noise floor".to_owned());
     let mut held: Vec<f64> = r

@@ -3,7 +3,8 @@
 //!
 //! - Calibration of twin self-calibration campaigns of about 10³, 10⁴ and 10⁵ poses (the
 //!   thesis's self-calibration design repeated; each run a child `rpkm calibrate` process):
-//!   wall time, LM iterations, peak resident memory (the child's `ru_maxrss`), time per pose.
+//!   wall time, LM iterations, peak resident memory (the child's own `VmHWM`, from its JSON),
+//!   time per pose.
 //! - The same calibrations on one thread (`--threads 1`): the parallel speed-up.
 //! - The cost per setup (issue 30): the same 10⁵ random-target self-calibration poses split
 //!   into 10, 100 and 1,000 setups, and a campaign of the foreign simulator's class of design
@@ -124,8 +125,7 @@ const SETUP_RUNS: usize = 5;
 /// column differs), and a campaign of the foreign simulator's class of design of as many
 /// poses; `rpkm calibrate` with default options on each, every figure against the best.
 fn setups(dir: &Path, seed: u64) -> Result<()> {
-    // the campaigns written and dropped before the first child starts: a child's peak
-    // memory counts what this process held when it started it
+    // the campaigns written and dropped before the first child starts
     let files = write_setup_campaigns(dir, seed)?;
     let mut runs = Vec::new();
     for (what, setups, poses, path) in &files {
@@ -198,8 +198,9 @@ fn write_setup_campaigns(dir: &Path, seed: u64) -> Result<Vec<(String, usize, us
     Ok(files)
 }
 
-/// `rpkm calibrate FILE [EXTRA]` as a child process: wall time, iterations (from its JSON), peak
-/// memory (from wait4's resource usage of that child alone).
+/// `rpkm calibrate FILE [EXTRA]` as a child process: wall time, iterations and peak memory
+/// (both from its JSON: wait4's `ru_maxrss` would count this process's peak, which Linux
+/// carries across the child's `execve`).
 fn calibrate(path: &Path, threads: Option<usize>, extra: &[&str]) -> Result<Run> {
     let json = path.with_extension(format!("t{}.json", threads.unwrap_or(0)));
     let mut cmd = Command::new(std::env::current_exe()?);
@@ -213,10 +214,13 @@ fn calibrate(path: &Path, threads: Option<usize>, extra: &[&str]) -> Result<Run>
     }
     cmd.stdout(std::process::Stdio::null());
     let t0 = Instant::now();
-    let child = cmd.spawn().context("starting rpkm calibrate")?;
-    let (status, max_rss_kb) = wait_with_rusage(child.id())?;
+    let status = cmd
+        .spawn()
+        .context("starting rpkm calibrate")?
+        .wait()
+        .context("waiting for rpkm calibrate")?;
     let seconds = t0.elapsed().as_secs_f64();
-    if status != 0 {
+    if !status.success() {
         anyhow::bail!("rpkm calibrate {} exited {status}", path.display());
     }
     let text =
@@ -229,27 +233,9 @@ fn calibrate(path: &Path, threads: Option<usize>, extra: &[&str]) -> Result<Run>
     Ok(Run {
         seconds,
         iterations,
-        max_rss_mb: max_rss_kb as f64 / 1024.0,
+        // the child's own high-water mark, from its JSON (NaN where the system reports none)
+        max_rss_mb: value["peak_resident_mib"].as_f64().unwrap_or(f64::NAN),
     })
-}
-
-/// Waits for child `pid`; its exit code and its peak resident memory (kB).
-fn wait_with_rusage(pid: u32) -> Result<(i32, i64)> {
-    let mut status = 0;
-    // SAFETY: rusage is plain data; wait4 fills it for the child we spawned and never waited
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    let pid = libc::pid_t::try_from(pid).context("child pid out of range")?;
-    // SAFETY: status and usage point to live locals of the right types
-    let r = unsafe { libc::wait4(pid, &raw mut status, 0, &raw mut usage) };
-    if r != pid {
-        anyhow::bail!("wait4: {}", std::io::Error::last_os_error());
-    }
-    let code = if libc::WIFEXITED(status) {
-        libc::WEXITSTATUS(status)
-    } else {
-        128 + libc::WTERMSIG(status)
-    };
-    Ok((code, usage.ru_maxrss))
 }
 
 /// Diagnosis of a twin campaign of about 1,000 poses (laser tracker, grid encoder and
