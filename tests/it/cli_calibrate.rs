@@ -282,7 +282,9 @@ fn the_json_carries_the_covariance_the_calibrator_starts_from() {
     let identified = value["identified"].as_array().expect("identified");
     assert!(identified.len() > 20, "{} identified", identified.len());
     // the process's own peak memory (the bench's column): a few MiB for this campaign
-    let peak = value["peak_resident_mib"].as_f64().expect("peak_resident_mib");
+    let peak = value["peak_resident_mib"]
+        .as_f64()
+        .expect("peak_resident_mib");
     assert!((1.0..512.0).contains(&peak), "{peak} MiB");
     for id in identified {
         let i = usize::try_from(id["index"].as_u64().expect("index")).expect("index");

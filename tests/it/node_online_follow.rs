@@ -208,6 +208,24 @@ fn rms_in(values: &[(usize, f64)], truth: &[Truth], from: f64, to: f64) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
 }
 
+/// `--production-step` of the crash.
+fn crash() -> String {
+    format!("--production-step=l3={STEP_MM}@{STEP_AT_S}")
+}
+
+/// The twin's production stream of `seconds` into `out` (CSV, its truth beside it), with
+/// `extra` arguments (a crash, a commanded motion).
+fn production(dir: &TempDir, twin: &[&str], seconds: f64, extra: &[&str], out: &str) {
+    let (seconds, decimate) = (seconds.to_string(), (1000.0 / ROWS_HZ).to_string());
+    let args = [
+        &["simulate", "--production-seconds", &seconds][..],
+        extra,
+        &["--production-decimate", &decimate, "--out", out],
+        twin,
+    ];
+    rpkm_in(dir, &args.concat());
+}
+
 /// The cell runs the motion the WARN named a second after it (the same stream, the
 /// commanded poses a second each: `rpkm simulate --production-visit`), and the calibrator
 /// settles the tie: l3 alone, l1 ruled out, on /diagnostics.
@@ -221,21 +239,7 @@ fn settle_by_the_motion(
     let poses: Vec<String> = motion.iter().map(|(x, y)| format!("{x},{y}")).collect();
     let visit = format!("--production-visit={}@{}", poses.join(";"), named_at + 1.0);
     // the way there at feed speed (50 mm/s) may cross the workspace: 40 s more
-    let (seconds, decimate) = ((SECONDS + 40.0).to_string(), (1000.0 / ROWS_HZ).to_string());
-    let step = format!("l3={STEP_MM}@{STEP_AT_S}");
-    let prod = [
-        "simulate",
-        "--production-seconds",
-        &seconds,
-        "--production-step",
-        &step,
-        &visit,
-        "--production-decimate",
-        &decimate,
-        "--out",
-        "motion.csv",
-    ];
-    rpkm_in(dir, &[&prod[..], twin].concat());
+    production(dir, twin, SECONDS + 40.0, &[&crash(), &visit], "motion.csv");
     let truth = read_truth(&dir.path("motion.truth.csv"));
     let obs = observe(
         &launch_files(dir, &dir.path("motion.csv"), geometry),
@@ -251,6 +255,13 @@ fn settle_by_the_motion(
         .iter()
         .find(|v| v.key == "online_t_s")
         .map_or("?", |v| v.value.as_str());
+    let dropped = obs
+        .calibrator
+        .iter()
+        .rev()
+        .find_map(|d| d.values.iter().find(|v| v.key == "online_dropped"))
+        .map_or("?", |v| v.value.as_str());
+    eprintln!("the tracker dropped {dropped} samples");
     eprintln!(
         "with the motion {motion:?} from {:.1} s: at {at} s {}",
         named_at + 1.0,
@@ -307,25 +318,8 @@ fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash()
             "start.json",
         ],
     );
-    let (seconds, decimate) = (SECONDS.to_string(), (1000.0 / ROWS_HZ).to_string());
-    let step = format!("l3={STEP_MM}@{STEP_AT_S}");
-    let prod = [
-        "simulate",
-        "--production-seconds",
-        &seconds,
-        "--production-step",
-        &step,
-        "--production-decimate",
-        &decimate,
-        "--out",
-        "prod.csv",
-    ];
-    rpkm_in(&dir, &[&prod[..], &twin].concat());
-    let mut calm = prod.to_vec();
-    calm.drain(3..5);
-    let last = calm.len() - 1;
-    calm[last] = "calm.csv";
-    rpkm_in(&dir, &[&calm[..], &twin].concat());
+    production(&dir, &twin, SECONDS, &[&crash()], "prod.csv");
+    production(&dir, &twin, SECONDS, &[], "calm.csv");
     let no_crash = read_truth(&dir.path("calm.truth.csv"));
     let csv = dir.path("prod.csv");
     let truth = read_truth(&dir.path("prod.truth.csv"));
