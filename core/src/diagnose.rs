@@ -74,6 +74,9 @@ pub struct Options {
     /// [`SCREEN_P`]) is fitted to convergence. False: every candidate is fitted to
     /// convergence (the same verdicts, several times the time; for comparison).
     pub screen: bool,
+    /// Set from another thread to stop the diagnosis: its fits stop at their next LM
+    /// iteration and it returns [`DiagnoseError::Cancelled`].
+    pub stop: Option<calib::Stop>,
 }
 
 impl Default for Options {
@@ -86,6 +89,7 @@ impl Default for Options {
             prior: Prior::default(),
             threads: 0,
             screen: true,
+            stop: None,
         }
     }
 }
@@ -93,6 +97,8 @@ impl Default for Options {
 /// A diagnosis that could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum DiagnoseError {
+    #[error("cancelled")]
+    Cancelled,
     #[error("calibrating the current model: {0}")]
     Baseline(#[source] CalibrationError),
     #[error("effect in the model: {0}")]
@@ -506,6 +512,23 @@ pub fn diagnose_among(
     offered: &[&dyn Effect],
     opts: &Options,
 ) -> Result<Diagnosis, DiagnoseError> {
+    let diagnosis = rounds(campaign, validation, in_model, offered, opts);
+    // a fit stopped part-way fails as it can (a candidate not fitted, a round's error):
+    // whatever came of it, a stopped diagnosis concludes nothing
+    if opts.stop.as_ref().is_some_and(calib::Stop::requested) {
+        return Err(DiagnoseError::Cancelled);
+    }
+    diagnosis
+}
+
+/// The two rounds of [`diagnose_among`].
+fn rounds(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    in_model: &[&dyn Effect],
+    offered: &[&dyn Effect],
+    opts: &Options,
+) -> Result<Diagnosis, DiagnoseError> {
     let library = effects::library();
     let in_names: Vec<&str> = in_model.iter().map(|e| e.name()).collect();
     let tried: Vec<&dyn Effect> = library
@@ -529,6 +552,9 @@ pub fn diagnose_among(
     // very effect that would explain it.)
     let stated = calib_options(opts);
     let (base1, first, cal1) = search.round(&stated, None)?;
+    if opts.stop.as_ref().is_some_and(calib::Stop::requested) {
+        return Err(DiagnoseError::Cancelled);
+    }
     // noise-free (simulated) data: no noise to estimate, the stated weights stay
     if calib::rms(&length_values(&base1.rows)) < NUMERICAL_RMS_MM {
         let est = NoiseEstimate::assumed(&opts.noise);
@@ -1578,6 +1604,7 @@ pub fn calib_options(opts: &Options) -> calib::Options {
         },
         outlier_sigma: None,
         noise: opts.noise.clone(),
+        stop: opts.stop.clone(),
         ..Default::default()
     }
 }

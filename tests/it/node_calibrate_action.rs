@@ -13,7 +13,10 @@
 //!    core's calibration of that campaign makes. (The demo's whole calibration is 6 LM
 //!    iterations in a few milliseconds, the time of a cancel's round trip: a goal cancelled
 //!    "mid-way" needs iterations that take longer; these take about half a second.)
-//! 3. a third goal (stated noise, no diagnosis) succeeds, and `~/get_state` says active.
+//! 3. a third goal (stated noise, no diagnosis) succeeds;
+//! 4. the 20,000-pose goal again, cancelled at its diagnosis feedback: the diagnosis stops
+//!    part-way ("stopped during the diagnosis"), canceled, no parameters; `~/get_state` then
+//!    says active.
 //!
 //! Needs the venv; without it SKIPPED, under RPKM_REQUIRE_PYTHON=1 a failure.
 
@@ -145,6 +148,7 @@ fn a_cell_controller_calibrates_with_feedback_and_cancels_a_goal() {
     let (_, _, whole) = core_calibration(&large, calib::Noise::ESTIMATE);
     check_cancelled(&goals[1], whole, &text);
     check_stated(&goals[2], &text);
+    check_cancelled_in_the_diagnosis(&goals[3], whole, &text);
     assert_eq!(report["state"], 3, "the node is active after: {text}");
 }
 
@@ -298,6 +302,35 @@ fn check_cancelled(g: &Value, whole: usize, text: &str) {
          the cancel request to the result; {}",
         cancel["ms_to_result"].as_f64().expect("ms"),
         g["result"]["message"]
+    );
+}
+
+/// Goal 4: the same campaign cancelled once its diagnosis began: the diagnosis stops (it
+/// does not run to its end first), the goal is canceled with no parameters, after every
+/// iteration of the calibration.
+fn check_cancelled_in_the_diagnosis(g: &Value, whole: usize, text: &str) {
+    assert_eq!(
+        (&g["accepted"], &g["status"]),
+        (&Value::Bool(true), &Value::from(5)),
+        "{text}"
+    );
+    let feedback = g["feedback"].as_array().expect("feedback");
+    let iterations = feedback.iter().filter(|f| f["phase"] == ITERATION).count();
+    assert!(iterations >= whole, "{iterations} of {whole}: {text}");
+    assert_eq!(
+        feedback.last().map(|f| &f["phase"]),
+        Some(&Value::from(DIAGNOSIS)),
+        "{text}"
+    );
+    assert_eq!(g["result"]["parameters"], serde_json::json!({}), "{text}");
+    let message = g["result"]["message"].as_str().expect("message");
+    assert!(
+        message.starts_with("cancelled") && message.ends_with("stopped during the diagnosis"),
+        "{message}: {text}"
+    );
+    eprintln!(
+        "goal 4: cancelled in the diagnosis, {:.1} ms from the cancel request to the result; {message}",
+        g["cancel"]["ms_to_result"].as_f64().expect("ms"),
     );
 }
 

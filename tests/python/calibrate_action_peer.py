@@ -11,15 +11,16 @@ msgs/action/Calibrate.action and ROS 2's action_msgs and unique_identifier_msgs.
   calibrate_action_peer.py --domain D --node /rpkm/calibrator --campaign CSV \
       --validation CSV --cancel-campaign CSV --timeout S
 
-Three goals in turn, then `~/get_state` of the node:
+Four goals in turn, then `~/get_state` of the node:
 1. the campaign with the validation campaign: every feedback and the result;
 2. the cancel campaign (one whose iterations take longer than a cancel's round trip),
    cancelled at its first iteration feedback (cancel by goal id): its result;
-3. the campaign with the stated noise and no diagnosis: its result.
+3. the campaign with the stated noise and no diagnosis: its result;
+4. the cancel campaign again, cancelled at its diagnosis feedback: its result.
 Prints one JSON object: per goal "accepted", "status" (the result's: 4 succeeded, 5 canceled,
 6 aborted), "result" (its fields; parameter values as given, NaN as null), "feedback" (phase, round, step,
 iteration, cost of each), "noise_feedback" (the levels of each noise round), "statuses" (the goal's states seen on the status topic, in order);
-for goal 2 "cancel" (return code, goals canceling, feedback messages before the cancel was
+for goals 2 and 4 "cancel" (return code, goals canceling, feedback messages before the cancel was
 sent, ms from sending it to the result); "state" (the node's lifecycle state id after).
 Exit 0, or 2 on a timeout.
 """
@@ -48,6 +49,7 @@ from lifecycle_peer import GetStateRequest, GetStateResponse  # noqa: E402
 ACT = "rpkm_msgs::action::dds_::"
 CLIENT_ID = 0x5250_4B4D_6163_7431  # "RPKMact1": any id, echoed by the server
 PHASE_ITERATION = 1
+PHASE_DIAGNOSIS = 3
 
 
 @dataclass
@@ -258,7 +260,7 @@ class Peer:
             time.sleep(0.002)
         return self.pending.pop((name, seq))
 
-    def goal(self, goal, cancel_at_first_iteration=False):
+    def goal(self, goal, cancel_at_phase=None):
         goal_id = UUID(list(os.urandom(16)))
         key = bytes(goal_id.uuid)
         seq = self.send("send_goal", lambda q: SendGoalRequest(CLIENT_ID, q, goal_id, goal))
@@ -270,9 +272,9 @@ class Peer:
         cancel = {}
 
         def maybe_cancel():
-            if not cancel_at_first_iteration or "seq" in cancel:
+            if cancel_at_phase is None or "seq" in cancel:
                 return
-            its = [f for f in self.heard.get(key, []) if f["phase"] == PHASE_ITERATION]
+            its = [f for f in self.heard.get(key, []) if f["phase"] == cancel_at_phase]
             if its:
                 cancel["before"] = len(self.heard[key])
                 cancel["sent"] = time.monotonic()
@@ -329,8 +331,9 @@ def main():
     full = Goal(a.campaign, a.validation, "", "", 1, False)
     out = {"goals": [
         peer.goal(full),
-        peer.goal(Goal(a.cancel_campaign, "", "", "", 1, False), cancel_at_first_iteration=True),
+        peer.goal(Goal(a.cancel_campaign, "", "", "", 1, False), cancel_at_phase=PHASE_ITERATION),
         peer.goal(Goal(a.campaign, "", "map", "", 2, True)),
+        peer.goal(Goal(a.cancel_campaign, "", "", "", 1, False), cancel_at_phase=PHASE_DIAGNOSIS),
     ]}
     seq = peer.send("get_state", lambda q: GetStateRequest(CLIENT_ID, q, 0))
     out["state"] = peer.reply("get_state", seq).current_state.id

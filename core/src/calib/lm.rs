@@ -625,6 +625,15 @@ impl Lm<'_> {
         it: usize,
         cost: f64,
     ) -> Result<(), CalibrationError> {
+        if self
+            .problem
+            .opts
+            .stop
+            .as_ref()
+            .is_some_and(super::Stop::requested)
+        {
+            return Err(CalibrationError::Cancelled);
+        }
         let Some(observer) = progress else {
             return Ok(());
         };

@@ -26,5 +26,5 @@ pub use select::{MIN_EFFECT_OBSERVABILITY, MIN_EFFECT_SIGNAL};
 pub use shared::SharedRows;
 pub use types::{
     Calibration, CalibrationError, DirectionRms, EffectEstimate, Identified, Link, Options,
-    Outlier, Prior, Scaling, Selection, WarmStart,
+    Outlier, Prior, Scaling, Selection, Stop, WarmStart,
 };

@@ -104,6 +104,27 @@ pub struct Options {
     /// Threads the rows are evaluated on (0: every core). The result is the same to the bit
     /// on any number: the rows are summed in fixed pieces, in order.
     pub threads: usize,
+    /// Set from another thread to stop the calibration: it returns
+    /// [`CalibrationError::Cancelled`] at its next LM iteration. Every fit made with these
+    /// options shares it (a diagnosis's, on its own threads, where the caller's
+    /// [`super::Request::progress`] observer cannot go).
+    pub stop: Option<Stop>,
+}
+
+/// A request to stop, shared between the thread that asks and the fits that obey.
+#[derive(Clone, Debug, Default)]
+pub struct Stop(std::sync::Arc<std::sync::atomic::AtomicBool>);
+
+impl Stop {
+    /// Asks every fit that shares this to stop.
+    pub fn request(&self) {
+        self.0.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Whether a stop was asked.
+    pub fn requested(&self) -> bool {
+        self.0.load(std::sync::atomic::Ordering::Relaxed)
+    }
 }
 
 impl Default for Options {
@@ -119,6 +140,7 @@ impl Default for Options {
             max_iterations: 400,
             noise: NoiseModel::default(),
             threads: 0,
+            stop: None,
         }
     }
 }

@@ -181,6 +181,65 @@ fn a_stop_cancels_the_calibration() {
     assert_eq!(calls.into_inner(), (first_round + 1 + 2, 1, 2));
 }
 
+/// A stop asked through the options (`calib::Options::stop`, what a diagnosis's fits on
+/// other threads share) ends the calibration at its next iteration: asked during the 2nd
+/// iteration of round 2, the observer hears that iteration and nothing after it.
+#[test]
+fn a_stop_asked_through_the_options_cancels_at_the_next_iteration() {
+    let c = campaign();
+    let (_, _, rounds) = heard(&c);
+    let stop = calib::Stop::default();
+    let calls = RefCell::new((0usize, 0usize, 0usize));
+    let observe = |p: &Progress| {
+        let mut c = calls.borrow_mut();
+        c.0 += 1;
+        match p {
+            Progress::NoiseRound { .. } => c.1 += 1,
+            Progress::Iteration { .. } if c.1 == 1 => {
+                c.2 += 1;
+                if c.2 == 2 {
+                    stop.request();
+                }
+            }
+            Progress::Iteration { .. } => {}
+        }
+        Flow::Continue
+    };
+    let start = Params::nominal();
+    let opts = Options {
+        stop: Some(stop.clone()),
+        ..Options::default()
+    };
+    let stopped = calib::calibrate(&calib::Request {
+        noise: calib::Noise::ESTIMATE,
+        progress: Some(&observe),
+        ..calib::Request::new(&c, &start, &opts)
+    });
+    assert!(
+        matches!(stopped, Err(CalibrationError::Cancelled)),
+        "{stopped:?}"
+    );
+    assert_eq!(calls.into_inner(), (rounds[0].0.len() + 1 + 2, 1, 2));
+}
+
+/// A diagnosis asked to stop concludes nothing: `DiagnoseError::Cancelled`, not a verdict
+/// from fits that stopped part-way.
+#[test]
+fn a_stopped_diagnosis_is_cancelled() {
+    use rpkm_core::diagnose::{self, DiagnoseError};
+    let c = campaign();
+    let stop = calib::Stop::default();
+    stop.request();
+    let opts = diagnose::Options {
+        stop: Some(stop),
+        ..diagnose::Options::default()
+    };
+    let d = diagnose::diagnose(&c, None, &[], &opts);
+    assert!(matches!(d, Err(DiagnoseError::Cancelled)), "{d:?}");
+    // and the same diagnosis without the stop concludes
+    assert!(diagnose::diagnose(&c, None, &[], &diagnose::Options::default()).is_ok());
+}
+
 /// Within one LM run the iterations count 1, 2, ... and the cost at each start never rises
 /// (the LM accepts only steps that lower it).
 fn check_runs(its: &[Heard]) {

@@ -108,6 +108,8 @@ pub struct Running<'a> {
     round: Cell<u32>,
     iteration: Cell<u32>,
     feedbacks: Cell<u32>,
+    /// The phase of the last feedback sent (0: none yet).
+    phase: Cell<u8>,
     cancel_seen: Cell<Option<Instant>>,
 }
 
@@ -119,7 +121,17 @@ impl<'a> Running<'a> {
             round: Cell::new(1),
             iteration: Cell::new(0),
             feedbacks: Cell::new(0),
+            phase: Cell::new(0),
             cancel_seen: Cell::new(None),
+        }
+    }
+
+    /// Where the goal's work stands, in words (by its last feedback).
+    pub fn stage(&self) -> &'static str {
+        match self.phase.get() {
+            CalibrateFeedback::PHASE_DIAGNOSIS => "the diagnosis",
+            0 => "the start",
+            _ => "the calibration",
         }
     }
 
@@ -161,8 +173,8 @@ impl<'a> Running<'a> {
         }
     }
 
-    /// The calibration is done and the diagnosis begins (it cannot be stopped; a cancel
-    /// that comes meanwhile ends the goal after it).
+    /// The calibration is done and the diagnosis begins (a cancel that comes meanwhile
+    /// stops it: [`Running::cancelled`] is asked while it runs).
     pub fn diagnosing(&self) {
         self.send(CalibrateFeedback {
             phase: CalibrateFeedback::PHASE_DIAGNOSIS,
@@ -173,6 +185,7 @@ impl<'a> Running<'a> {
 
     fn send(&self, feedback: CalibrateFeedback) {
         self.feedbacks.set(self.feedbacks.get() + 1);
+        self.phase.set(feedback.phase);
         self.action.server.feedback(self.goal, feedback);
     }
 
@@ -193,7 +206,12 @@ impl<'a> Running<'a> {
             )
         });
         if end == GoalEnd::Canceled {
-            result.message = format!("cancelled{}", after.clone().unwrap_or_default());
+            let why = std::mem::take(&mut result.message);
+            result.message = format!(
+                "cancelled{}{}{why}",
+                after.clone().unwrap_or_default(),
+                if why.is_empty() { "" } else { ": " }
+            );
         }
         ctx.log(format!(
             "{}{}: goal {} {}: {} feedback messages; {}",

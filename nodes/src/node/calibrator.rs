@@ -84,12 +84,40 @@ fn diagnose_model(
     campaign: &Campaign,
     validation: Option<&Campaign>,
     calibration: &Calibration,
+    stop: Option<calib::Stop>,
 ) -> Result<rpkm_core::diagnose::Diagnosis, rpkm_core::diagnose::DiagnoseError> {
     let opts = rpkm_core::diagnose::Options {
         model: calibration.model,
+        stop,
         ..Default::default()
     };
     rpkm_core::diagnose::diagnose(campaign, validation, &[], &opts)
+}
+
+/// [`diagnose_model`], stopped as soon as `cancelled` says so: the diagnosis runs on a
+/// thread of its own while this one asks `cancelled` (an action server's state, which lives
+/// on this thread) every few milliseconds.
+fn diagnose_until(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    calibration: &Calibration,
+    cancelled: &dyn Fn() -> bool,
+) -> Result<rpkm_core::diagnose::Diagnosis, rpkm_core::diagnose::DiagnoseError> {
+    let stop = calib::Stop::default();
+    std::thread::scope(|scope| {
+        let run = stop.clone();
+        let worker =
+            scope.spawn(move || diagnose_model(campaign, validation, calibration, Some(run)));
+        while !worker.is_finished() {
+            if !stop.requested() && cancelled() {
+                stop.request();
+            }
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        worker
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    })
 }
 
 /// The model diagnosis of `rpkm_core::diagnose` on the calibrated campaign (the held-out part
@@ -100,7 +128,7 @@ pub fn diagnose(
     validation: Option<&Campaign>,
     calibration: &Calibration,
 ) -> Result<Diagnosis, rpkm_core::diagnose::DiagnoseError> {
-    diagnose_model(campaign, validation, calibration).map(|d| diagnosis_msg(&d))
+    diagnose_model(campaign, validation, calibration, None).map(|d| diagnosis_msg(&d))
 }
 
 /// A diagnosis as the Diagnosis message.
@@ -156,6 +184,8 @@ pub struct Job<'a> {
     pub progress: Option<calib::Observer<'a>>,
     /// Called when the calibration is done and the diagnosis begins.
     pub diagnosing: Option<&'a dyn Fn()>,
+    /// Asked while the diagnosis runs: true stops it (it then ends as cancelled).
+    pub cancelled: Option<&'a dyn Fn() -> bool>,
 }
 
 impl<'a> Job<'a> {
@@ -169,6 +199,7 @@ impl<'a> Job<'a> {
             diagnose: true,
             progress: None,
             diagnosing: None,
+            cancelled: None,
         }
     }
 }
@@ -278,7 +309,15 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<Outcome
         if let Some(diagnosing) = job.diagnosing {
             diagnosing();
         }
-        match diagnose_model(&cal_part, val_part.as_ref(), &cal) {
+        let diagnosis = match job.cancelled {
+            Some(cancelled) => diagnose_until(&cal_part, val_part.as_ref(), &cal, cancelled),
+            None => diagnose_model(&cal_part, val_part.as_ref(), &cal, None),
+        };
+        match diagnosis {
+            // a stopped diagnosis is a stopped goal, not a diagnosis that failed
+            Err(rpkm_core::diagnose::DiagnoseError::Cancelled) => {
+                return Err(calib::CalibrationError::Cancelled.into());
+            }
             Ok(d) => (
                 Some(Ok(diagnosis_msg(&d))),
                 Some((d.verdict_kind, crate::words::verdict(&d))),
@@ -1324,15 +1363,30 @@ impl Calibrator {
         (running, goal): (Running, CalibrateGoal),
     ) -> anyhow::Result<()> {
         let result = self.goal_outcome(options, &running, &goal);
-        let cancelled = running.cancelled()
-            || result.as_ref().err().is_some_and(|e| {
-                matches!(
-                    e.downcast_ref::<calib::CalibrationError>(),
-                    Some(calib::CalibrationError::Cancelled)
-                )
-            });
+        // stopped part-way (the calibration or the diagnosis), or done before the cancel
+        // took effect
+        let stopped = result.as_ref().err().is_some_and(|e| {
+            matches!(
+                e.downcast_ref::<calib::CalibrationError>(),
+                Some(calib::CalibrationError::Cancelled)
+            )
+        });
+        let cancelled = running.cancelled() || stopped;
         let (end, reply) = match (result, cancelled) {
-            (_, true) => (GoalEnd::Canceled, CalibrateResult::default()),
+            (_, true) => {
+                let message = if stopped {
+                    format!("stopped during {}", running.stage())
+                } else {
+                    "the work was done when the cancel was seen".to_owned()
+                };
+                (
+                    GoalEnd::Canceled,
+                    CalibrateResult {
+                        message,
+                        ..CalibrateResult::default()
+                    },
+                )
+            }
             (Ok((o, n)), false) => {
                 if goal.campaign_file.is_empty() {
                     // the collected campaign is calibrated: the next one starts empty
@@ -1379,6 +1433,7 @@ impl Calibrator {
         let o = goal_options(options, goal, noise)?;
         let observe = |p: &calib::Progress| running.observe(p);
         let diagnosing = || running.diagnosing();
+        let cancelled = || running.cancelled();
         let job = Job {
             campaign: &campaign,
             validation: validation.as_ref(),
@@ -1386,6 +1441,7 @@ impl Calibrator {
             diagnose: !goal.skip_diagnosis,
             progress: Some(&observe),
             diagnosing: Some(&diagnosing),
+            cancelled: Some(&cancelled),
         };
         let n = u64::try_from(campaign.poses.len()).unwrap_or(u64::MAX);
         Ok((calibrate_job(&job, &o)?, n))
