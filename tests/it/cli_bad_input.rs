@@ -210,3 +210,69 @@ fn diagnose_on_unreachable_poses_exits_2() {
         "{stderr}"
     );
 }
+
+/// A production stream's crash and commanded motion (`rpkm simulate --production-step`,
+/// `--production-visit`) that cannot be read exit 2 saying what was expected, and write no
+/// stream.
+#[test]
+fn a_bad_production_step_or_motion_exits_2_saying_what_was_expected() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("prod.csv");
+    let out = out.display().to_string();
+    let cases: [(&str, &str, &str); 7] = [
+        (
+            "--production-step",
+            "l3=0.1",
+            "expected PARAM=CHANGE@SECONDS",
+        ),
+        ("--production-step", "l9=0.1@5", "unknown parameter `l9`"),
+        ("--production-visit", "-150,2000", "no @SECONDS"),
+        (
+            "--production-visit",
+            "-150,2000@soon",
+            "SECONDS is not a number",
+        ),
+        (
+            "--production-visit",
+            "-150;2000@5",
+            "pose 1 `-150` is not X,Y",
+        ),
+        (
+            "--production-visit",
+            "-150,2000;150,x@5",
+            "pose 2 `150,x` is not two numbers",
+        ),
+        (
+            "--production-visit",
+            "-150,2000;900,1500@5",
+            "pose 2 (900, 1500) is outside the workspace",
+        ),
+    ];
+    for (flag, value, said) in cases {
+        let arg = format!("{flag}={value}");
+        let (code, stderr) = rpkm(&[
+            "simulate",
+            "--production-seconds",
+            "2",
+            &arg,
+            "--production-decimate",
+            "100",
+            "--out",
+            &out,
+        ]);
+        assert_eq!(code, Some(2), "{arg}: {stderr}");
+        assert!(stderr.contains(said), "{arg}: {stderr}");
+        assert!(!Path::new(&out).exists(), "{arg}: a stream was written");
+    }
+    // the motion needs a production stream
+    let (code, stderr) = rpkm(&[
+        "simulate",
+        "--campaign",
+        "lt",
+        "--production-visit=-150,2000@5",
+        "--out",
+        &out,
+    ]);
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(stderr.contains("--production-seconds"), "{stderr}");
+}

@@ -630,7 +630,7 @@ impl Lm<'_> {
             .opts
             .stop
             .as_ref()
-            .is_some_and(super::Stop::requested)
+            .is_some_and(super::types::Stop::requested)
         {
             return Err(CalibrationError::Cancelled);
         }
