@@ -400,13 +400,30 @@ fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash()
         ),
         motion[0]
     );
-    eprintln!(
-        "without the motion, settled: {:?}",
+    // without the motion the tie stays open, and the periodic status says so
+    assert!(
+        !obs.calibrator.iter().any(|d| d.message.contains("settled")),
+        "settled without the motion: {:?}",
         obs.calibrator
-            .iter()
-            .find(|d| d.message.contains("settled"))
-            .map(|d| &d.message)
     );
+    let open = obs
+        .calibrator
+        .iter()
+        .rev()
+        .find_map(|d| {
+            d.values
+                .iter()
+                .find(|v| v.key == "online_tie_evidence_chi2")
+        })
+        .map(|v| v.value.clone());
+    let tie = obs
+        .calibrator
+        .iter()
+        .rev()
+        .find_map(|d| d.values.iter().find(|v| v.key == "online_tie"))
+        .map(|v| v.value.clone());
+    eprintln!("without the motion: {tie:?} open, evidence {open:?}");
+    assert_eq!(tie.as_deref(), Some("l3 or l1"));
     settle_by_the_motion(&dir, &twin, &geometry, &motion, number("online_t_s"));
     // windows of stream time: before the crash, its first second (nothing can have been
     // named yet: a step needs ten held samples), the last ten seconds (followed)

@@ -181,6 +181,16 @@ pub enum Outcome {
     Resolved(TieResolved),
 }
 
+/// A step still "this or that" ([`OnlineEstimator::tie`]).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct TieSoFar {
+    /// The parameter the step was named by, and its runner-up.
+    pub named: usize,
+    pub runner_up: usize,
+    /// The evidence since the step (positive: for the named).
+    pub evidence: TieEvidence,
+}
+
 /// A step told apart from its runner-up by the samples since.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct TieResolved {
@@ -531,9 +541,13 @@ impl OnlineEstimator {
             .map_or(f64::INFINITY, |c| dx.dot(&c.solve(&dx)).max(0.0).sqrt())
     }
 
-    /// The evidence so far on a step that is still "this or that" (None without one).
-    pub fn tie_evidence(&self) -> Option<TieEvidence> {
-        self.tie.as_ref().map(|t| t.evidence)
+    /// A step still "this or that": the two, and the evidence so far (None without one).
+    pub fn tie(&self) -> Option<TieSoFar> {
+        self.tie.as_ref().map(|t| TieSoFar {
+            named: t.named.param,
+            runner_up: t.runner_up,
+            evidence: t.evidence,
+        })
     }
 
     /// Samples applied and outliers dropped so far.
@@ -1532,13 +1546,13 @@ mod tests {
                     f: f.map(|v| v + noise.sample(&mut rng)),
                 };
                 if let Outcome::Resolved(r) = est.update(&sample).expect("update") {
-                    assert!(est.tie_evidence().is_none());
+                    assert!(est.tie().is_none());
                     eprintln!("{motion:?}: {r:?}");
                     return (r, *est.params());
                 }
             }
         }
-        panic!("not settled by {motion:?}: {:?}", est.tie_evidence());
+        panic!("not settled by {motion:?}: {:?}", est.tie());
     }
 
     #[test]

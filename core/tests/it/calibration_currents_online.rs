@@ -543,7 +543,7 @@ fn settle(t: &Twin, cal: &Calibration, cfg: ProductionConfig) -> Settled {
             _ => {}
         }
     }
-    told.open = est.tie_evidence().map(|e| e.chi2);
+    told.open = est.tie().map(|t| t.evidence.chi2);
     told
 }
 

@@ -31,7 +31,7 @@ use std::time::{Duration, Instant};
 use nalgebra::SMatrix;
 use rpkm_core::calib::online::{
     Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome as OnlineOutcome,
-    StepChange, TieResolved, TIE_EVIDENCE_CHI2,
+    StepChange, TieResolved, TieSoFar, TIE_EVIDENCE_CHI2,
 };
 use rpkm_core::calib::{self, Calibration, Options, Selection};
 use rpkm_core::campaign::Campaign;
@@ -582,6 +582,8 @@ pub struct OnlineReport {
     pub step: Option<StepChange>,
     /// A step that was "this or that", settled by the samples since.
     pub resolved: Option<TieResolved>,
+    /// A step still "this or that" at this report, and the evidence so far.
+    pub tie: Option<TieSoFar>,
     /// The parameter whose creep explains a significant drift since the tracking began (or
     /// since the last step) beyond the threshold.
     pub drift: Option<Drift>,
@@ -666,6 +668,7 @@ impl OnlineTracker {
             t: s.t,
             step,
             resolved,
+            tie: self.est.tie(),
             drift,
         })
     }
@@ -1140,6 +1143,8 @@ struct Calibrator {
     calibrations: u64,
     /// The last status: level and message.
     last: (u8, String),
+    /// The online tracker's step still "this or that" at its last report.
+    tie: Option<TieSoFar>,
 }
 
 /// The online tracker's settings from the parameters, if `online` is on.
@@ -1213,6 +1218,7 @@ impl Calibrator {
                     continue;
                 }
             };
+            self.tie = r.tie;
             out.parameters
                 .publish(&parameters_msg(&r.params, model, &r.sigma))?;
             if let Some(warning) = report_warning(&r, &self.temp_name) {
@@ -1470,6 +1476,21 @@ impl Calibrator {
             ("online_samples", online(|w| w.offered)),
             ("online_dropped", online(|w| w.dropped)),
         ]
+        .into_iter()
+        .chain(self.tie.iter().flat_map(|t| {
+            // a tie still open: which two, and how far the evidence has come
+            [
+                (
+                    "online_tie",
+                    format!("{} or {}", state_name(t.named), state_name(t.runner_up)),
+                ),
+                (
+                    "online_tie_evidence_chi2",
+                    format!("{:.1} of {TIE_EVIDENCE_CHI2:.1}", t.evidence.chi2),
+                ),
+            ]
+        }))
+        .collect()
     }
 }
 
@@ -1494,6 +1515,7 @@ impl Calibrator {
             last_measurement: None,
             calibrations: 0,
             last: (DiagnosticStatus::OK, "waiting for measurements".into()),
+            tie: None,
         }
     }
 }
@@ -1883,6 +1905,7 @@ mod tests {
             t: 21.0,
             step: Some(step),
             resolved: None,
+            tie: None,
             drift: None,
         };
         assert_eq!(
@@ -1929,5 +1952,34 @@ mod tests {
         let values = tie_values(&r);
         let get = |k: &str| values.iter().find(|v| v.0 == k).map(|v| v.1.as_str());
         assert_eq!((get("settled"), get("ruled_out")), (Some("l1"), Some("l3")));
+    }
+
+    /// While a tie is open the periodic /diagnostics values say which two and how far the
+    /// evidence has come; once settled they say nothing of it.
+    #[test]
+    fn an_open_tie_is_on_the_periodic_status() {
+        use rpkm_core::calib::tie::TieEvidence;
+        use rpkm_core::params::{L1, L3};
+        let mut c = Calibrator::new(16, None);
+        let has = |c: &Calibrator, k: &str| {
+            c.report_values()
+                .into_iter()
+                .find(|v| v.0 == k)
+                .map(|v| v.1)
+        };
+        assert_eq!(has(&c, "online_tie"), None);
+        c.tie = Some(TieSoFar {
+            named: L3,
+            runner_up: L1,
+            evidence: TieEvidence {
+                chi2: 12.84,
+                ..TieEvidence::default()
+            },
+        });
+        assert_eq!(has(&c, "online_tie").as_deref(), Some("l3 or l1"));
+        assert_eq!(
+            has(&c, "online_tie_evidence_chi2").as_deref(),
+            Some("12.8 of 27.6")
+        );
     }
 }
