@@ -290,9 +290,30 @@ fn rod_igm_at(
     rod: &Rod,
     x: f64,
     y: f64,
+    psi: (f64, f64),
+    frame: (Vector2<f64>, Vector2<f64>, Vector2<f64>),
+) -> Result<f64, GeometryError> {
+    let reach = rod_reach(p, rod, (x, y), psi, frame)?;
+    Ok(reach.we + rod.k * reach.disc.sqrt() - p[rod.yb])
+}
+
+/// Eq. 4.6 for one rod, up to the root: its platform joint A, and along the guide `w·e` and
+/// the discriminant under the root.
+struct Reach {
+    a: Vector2<f64>,
+    we: f64,
+    disc: f64,
+}
+
+/// [`Reach`] of `rod` at the platform pose (x, y) with sin and cos of ψ, in its guide's
+/// frame (origin, along, across); `Unreachable` where the discriminant is negative.
+fn rod_reach(
+    p: &Params,
+    rod: &Rod,
+    (x, y): (f64, f64),
     (s, c): (f64, f64),
     (o, e, n): (Vector2<f64>, Vector2<f64>, Vector2<f64>),
-) -> Result<f64, GeometryError> {
+) -> Result<Reach, GeometryError> {
     let (xa, ya) = (p[rod.xa], p[rod.ya]);
     let a = Vector2::new(x + c * xa - s * ya, y + s * xa + c * ya);
     let w = a - o - n * p[rod.xb];
@@ -305,7 +326,7 @@ fn rod_igm_at(
             discriminant: disc,
         });
     }
-    Ok(we + rod.k * disc.sqrt() - p[rod.yb])
+    Ok(Reach { a, we, disc })
 }
 
 /// Analytic model-24 start for the inverse model: ψ = γ2, each rod by eq. 4.6.
@@ -839,19 +860,9 @@ fn igm24(p: &Params, x: f64, y: f64) -> Result<Option<Solution>, GeometryError> 
             Guide::G1 => (frames[0].0, frames[0].1, frames[0].2, -1.0),
             Guide::G2 => (frames[1].0, frames[1].1, frames[1].2, 1.0),
         };
-        let (xa, ya) = (p[rod.xa], p[rod.ya]);
-        let a = Vector2::new(x + co * xa - s * ya, y + s * xa + co * ya);
-        // eq. 4.6, as rod_igm writes it
-        let w = a - o - n * p[rod.xb];
-        let we = w.dot(&e);
+        // eq. 4.6, as rod_igm solves it
+        let Reach { a, we, disc } = rod_reach(p, rod, (x, y), (s, co), (o, e, n))?;
         let l = p[rod.l];
-        let disc = we * we - w.norm_squared() + l * l;
-        if !(disc >= 0.0) {
-            return Err(GeometryError::Unreachable {
-                rod: rod.number,
-                discriminant: disc,
-            });
-        }
         if disc == 0.0 {
             // tangent: the drive's column of ∂e/∂c vanishes
             return Err(GeometryError::Singular {
