@@ -18,6 +18,7 @@
 //! away. What the drift alone does: the same tracker and a frozen calibration, both started
 //! from the twin's true machine. The full hour: `calibration_currents_online_hour` (ignored;
 //! figures in docs/calibration.md).
+use crate::support::production::twin;
 use rpkm_core::calib;
 use rpkm_core::calib::online::{
     Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome, TieResolved,
@@ -28,30 +29,10 @@ use rpkm_core::campaign::Instrument;
 use rpkm_core::design;
 use rpkm_core::diagnose::{self, VerdictKind};
 use rpkm_core::effects::{self, Effect, EffectSet};
-use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{index_of, Params, NAMES, N_PARAMS};
 use rpkm_twin::{
-    EffectKind, ProductionConfig, ProductionSample, ProductionStream, StepChange, ThermalPhysics,
-    TimeCreep, Twin, TwinConfig, Visit,
+    ProductionConfig, ProductionSample, ProductionStream, StepChange, TimeCreep, Twin, Visit,
 };
-
-fn twin(seed: u64) -> Twin {
-    let elastic = EffectKind::PreloadElastic;
-    Twin::new(TwinConfig {
-        seed,
-        effects: vec![(elastic, elastic.default_magnitude())],
-        thermal: ThermalPhysics {
-            scales_per_k: 0.0,
-            ..Default::default()
-        },
-        noise: Some(NoiseModel {
-            force_n: 3.0,
-            ..NoiseModel::default()
-        }),
-        ..Default::default()
-    })
-    .expect("twin")
-}
 
 /// The start a user makes: the instrument and production campaign at 20 °C, diagnosed until
 /// nothing is missing (what the discovery names goes into the model), then calibrated with

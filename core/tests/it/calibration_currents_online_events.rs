@@ -6,34 +6,13 @@
 //! The tracker starts from the twin's true machine at the start with the tolerance prior's
 //! σ (what it knows without a calibration) and reads the stream at 10 Hz (5 Hz for the
 //! drift: six minutes).
+use crate::support::production::twin;
 use rpkm_core::calib::online::{
     Drift, DriftMonitor, DriftTest, ForceSample, OnlineEstimator, OnlineOptions, Outcome,
     StepChange as Step, TieResolved, DRIFT_FALSE_ALARM, DRIFT_NAME_MARGIN, TIE_EVIDENCE_CHI2,
 };
-use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{index_of, Params, NAMES};
-use rpkm_twin::{
-    Creep, EffectKind, ProductionConfig, ProductionStream, StepChange, ThermalPhysics, Twin,
-    TwinConfig, Visit,
-};
-
-fn twin(seed: u64) -> Twin {
-    let elastic = EffectKind::PreloadElastic;
-    Twin::new(TwinConfig {
-        seed,
-        effects: vec![(elastic, elastic.default_magnitude())],
-        thermal: ThermalPhysics {
-            scales_per_k: 0.0,
-            ..Default::default()
-        },
-        noise: Some(NoiseModel {
-            force_n: 3.0,
-            ..NoiseModel::default()
-        }),
-        ..Default::default()
-    })
-    .expect("twin")
-}
+use rpkm_twin::{Creep, ProductionConfig, ProductionStream, StepChange, ThermalPhysics, Visit};
 
 /// What the tracker said over a stream.
 struct Told {

@@ -3,6 +3,8 @@
 //! q2, q3 followers, instruments and encoders with the noise of `rpkm_core::noise`.
 #![allow(dead_code)]
 
+pub mod production;
+
 use nalgebra::{Cholesky, Vector2};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
