@@ -758,9 +758,9 @@ impl OnlineEstimator {
             return self.decide(sample, &held, named.nis);
         };
         let Ok((alt_held, runner_up)) = tie.alt.predicted(sample) else {
-            // the runner-up's machine has no equilibrium here: it cannot be the machine
-            tie.evidence
-                .add(sample.t, sample.q, named, MISSED, GATE_CHI2_4);
+            // the runner-up's model found no equilibrium here: a solver's failure is no
+            // evidence about the machine, and the sample counts for neither
+            tie.evidence.neither += 1;
             return self.after_tie(tie, sample, &held, named.nis);
         };
         tie.evidence

@@ -45,7 +45,8 @@ pub struct TieEvidence {
     pub chi2: f64,
     /// Samples counted: those at least one of the two predicted within the gate.
     pub counted: usize,
-    /// Samples neither predicted within the gate: no evidence for either.
+    /// Samples neither predicted within the gate, or the runner-up's model could not solve:
+    /// no evidence for either.
     pub neither: usize,
     /// The counted sample with the largest share.
     pub decisive: Option<Decisive>,
