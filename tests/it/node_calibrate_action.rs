@@ -14,9 +14,10 @@
 //!    iterations in a few milliseconds, the time of a cancel's round trip: a goal cancelled
 //!    "mid-way" needs iterations that take longer; these take about half a second.)
 //! 3. a third goal (stated noise, no diagnosis) succeeds;
-//! 4. the 20,000-pose goal again, cancelled at its diagnosis feedback: the diagnosis stops
-//!    part-way ("stopped during the diagnosis"), canceled, no parameters; `~/get_state` then
-//!    says active.
+//! 4. the 20,000-pose goal again: at its diagnosis feedback `~/get_state` is answered while
+//!    the goal runs (active), then the goal is cancelled: the diagnosis stops part-way
+//!    ("stopped during the diagnosis"), canceled, no parameters; `~/get_state` then says
+//!    active.
 //!
 //! Needs the venv; without it SKIPPED, under RPKM_REQUIRE_PYTHON=1 a failure.
 
@@ -307,7 +308,7 @@ fn check_cancelled(g: &Value, whole: usize, text: &str) {
 
 /// Goal 4: the same campaign cancelled once its diagnosis began: the diagnosis stops (it
 /// does not run to its end first), the goal is canceled with no parameters, after every
-/// iteration of the calibration.
+/// iteration of the calibration; the lifecycle's `~/get_state`, asked meanwhile, was answered.
 fn check_cancelled_in_the_diagnosis(g: &Value, whole: usize, text: &str) {
     assert_eq!(
         (&g["accepted"], &g["status"]),
@@ -328,8 +329,13 @@ fn check_cancelled_in_the_diagnosis(g: &Value, whole: usize, text: &str) {
         message.starts_with("cancelled") && message.ends_with("stopped during the diagnosis"),
         "{message}: {text}"
     );
+    // asked while the goal ran, `~/get_state` was answered (active) before the cancel
+    let during = &g["cancel"]["state_during"];
+    assert_eq!(during["id"], 3, "get_state during the goal: {text}");
     eprintln!(
-        "goal 4: cancelled in the diagnosis, {:.1} ms from the cancel request to the result; {message}",
+        "goal 4: get_state answered in {:.1} ms while the goal ran; cancelled in the diagnosis, \
+         {:.1} ms from the cancel request to the result; {message}",
+        during["ms"].as_f64().expect("ms"),
         g["cancel"]["ms_to_result"].as_f64().expect("ms"),
     );
 }

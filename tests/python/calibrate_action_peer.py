@@ -16,7 +16,8 @@ Four goals in turn, then `~/get_state` of the node:
 2. the cancel campaign (one whose iterations take longer than a cancel's round trip),
    cancelled at its first iteration feedback (cancel by goal id): its result;
 3. the campaign with the stated noise and no diagnosis: its result;
-4. the cancel campaign again, cancelled at its diagnosis feedback: its result.
+4. the cancel campaign again: at its diagnosis feedback `~/get_state` is asked, and once
+   answered (while the goal runs) the goal is cancelled: its result and that answer.
 Prints one JSON object: per goal "accepted", "status" (the result's: 4 succeeded, 5 canceled,
 6 aborted), "result" (its fields; parameter values as given, NaN as null), "feedback" (phase, round, step,
 iteration, cost of each), "noise_feedback" (the levels of each noise round), "statuses" (the goal's states seen on the status topic, in order);
@@ -260,7 +261,7 @@ class Peer:
             time.sleep(0.002)
         return self.pending.pop((name, seq))
 
-    def goal(self, goal, cancel_at_phase=None):
+    def goal(self, goal, cancel_at_phase=None, ask_state_first=False):
         goal_id = UUID(list(os.urandom(16)))
         key = bytes(goal_id.uuid)
         seq = self.send("send_goal", lambda q: SendGoalRequest(CLIENT_ID, q, goal_id, goal))
@@ -275,7 +276,22 @@ class Peer:
             if cancel_at_phase is None or "seq" in cancel:
                 return
             its = [f for f in self.heard.get(key, []) if f["phase"] == cancel_at_phase]
-            if its:
+            if its and ask_state_first:
+                # the node's lifecycle state, asked while the goal runs: the cancel waits
+                # for its answer
+                if "state_seq" not in cancel:
+                    cancel["state_sent"] = time.monotonic()
+                    cancel["state_seq"] = self.send(
+                        "get_state", lambda q: GetStateRequest(CLIENT_ID, q, 0))
+                    return
+                answer = self.pending.pop(("get_state", cancel["state_seq"]), None)
+                if answer is None:
+                    return
+                cancel["state_during"] = {
+                    "id": answer.current_state.id,
+                    "ms": (time.monotonic() - cancel["state_sent"]) * 1e3,
+                }
+            if its and (not ask_state_first or "state_during" in cancel):
                 cancel["before"] = len(self.heard[key])
                 cancel["sent"] = time.monotonic()
                 cancel["seq"] = self.send("cancel_goal", lambda q: CancelGoalRequest(
@@ -313,6 +329,7 @@ class Peer:
                 "goals_canceling": [bytes(g.goal_id.uuid) == key for g in answer.goals_canceling],
                 "feedback_before": cancel["before"],
                 "ms_to_result": (done - cancel["sent"]) * 1e3,
+                "state_during": cancel.get("state_during"),
             }
         return out
 
@@ -333,7 +350,8 @@ def main():
         peer.goal(full),
         peer.goal(Goal(a.cancel_campaign, "", "", "", 1, False), cancel_at_phase=PHASE_ITERATION),
         peer.goal(Goal(a.campaign, "", "map", "", 2, True)),
-        peer.goal(Goal(a.cancel_campaign, "", "", "", 1, False), cancel_at_phase=PHASE_DIAGNOSIS),
+        peer.goal(Goal(a.cancel_campaign, "", "", "", 1, False), cancel_at_phase=PHASE_DIAGNOSIS,
+                  ask_state_first=True),
     ]}
     seq = peer.send("get_state", lambda q: GetStateRequest(CLIENT_ID, q, 0))
     out["state"] = peer.reply("get_state", seq).current_state.id

@@ -1367,8 +1367,9 @@ impl Calibrator {
         out: &Outputs,
         options: &CalibratorOptions,
         (running, goal): (Running, CalibrateGoal),
+        meanwhile: &dyn Fn(),
     ) -> anyhow::Result<()> {
-        let result = self.goal_outcome(options, &running, &goal);
+        let result = self.goal_outcome(options, &running, &goal, meanwhile);
         // stopped part-way (the calibration or the diagnosis), or done before the cancel
         // took effect
         let stopped = result.as_ref().err().is_some_and(|e| {
@@ -1419,6 +1420,7 @@ impl Calibrator {
         options: &CalibratorOptions,
         running: &Running,
         goal: &CalibrateGoal,
+        meanwhile: &dyn Fn(),
     ) -> anyhow::Result<(Outcome, u64)> {
         let (campaign, noise) = if goal.campaign_file.is_empty() {
             anyhow::ensure!(
@@ -1437,9 +1439,17 @@ impl Calibrator {
             path => Some(crate::input::read_campaign(std::path::Path::new(path))?),
         };
         let o = goal_options(options, goal, noise)?;
-        let observe = |p: &calib::Progress| running.observe(p);
+        // what the node answers while the goal runs, at each LM iteration and every few
+        // milliseconds of the diagnosis
+        let observe = |p: &calib::Progress| {
+            meanwhile();
+            running.observe(p)
+        };
         let diagnosing = || running.diagnosing();
-        let cancelled = || running.cancelled();
+        let cancelled = || {
+            meanwhile();
+            running.cancelled()
+        };
         let job = Job {
             campaign: &campaign,
             validation: validation.as_ref(),
@@ -1572,7 +1582,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             .as_ref()
             .and_then(|a| a.next(&ctx, lifecycle.active()))
         {
-            node.execute(&ctx, &out, &options, goal)?;
+            // the lifecycle's queries are answered while it runs; a transition waits
+            node.execute(&ctx, &out, &options, goal, &|| lifecycle.answer_queries())?;
         }
         // Between calibrations: the next campaign ends and calibrates by the new settings.
         if let Some((p, names)) = live.poll() {

@@ -276,10 +276,13 @@ impl Lifecycle {
         self.state == Primary::Active
     }
 
-    /// Answers the queries waiting, and returns the next transition asked for that the state
-    /// offers (one it does not offer is refused: `success: false`).
-    pub fn next(&mut self, ctx: &NodeContext) -> Option<Requested> {
-        let s = self.services.as_ref()?;
+    /// Answers the queries waiting (`~/get_state`, `~/get_available_states`,
+    /// `~/get_available_transitions`), and nothing else: what the node can do while it is
+    /// busy (a calibration goal), a transition waiting for the loop.
+    pub fn answer_queries(&self) {
+        let Some(s) = self.services.as_ref() else {
+            return;
+        };
         while let Some(call) = s.get.try_next() {
             call.answer(GetStateResponse {
                 current_state: self.state.state(),
@@ -295,6 +298,13 @@ impl Lifecycle {
                 available_transitions: available(self.state),
             });
         }
+    }
+
+    /// Answers the queries waiting, and returns the next transition asked for that the state
+    /// offers (one it does not offer is refused: `success: false`).
+    pub fn next(&mut self, ctx: &NodeContext) -> Option<Requested> {
+        self.answer_queries();
+        let s = self.services.as_ref()?;
         while let Some(call) = s.change.try_next() {
             let Some(edge) = edge_for(self.state, &call.request.transition) else {
                 ctx.log(format!(
