@@ -770,7 +770,11 @@ impl OnlineEstimator {
             tie.swapped = true;
             return self.after_tie(tie, sample, &alt_held, runner_up.nis);
         }
-        tie.alt.decide(sample, &alt_held, runner_up.nis)?;
+        // the runner-up's estimate failing to take the sample is its own trouble, not the
+        // named estimate's: the tie stays open, the sample counted for neither
+        if tie.alt.decide(sample, &alt_held, runner_up.nis).is_err() {
+            tie.evidence.neither += 1;
+        }
         self.after_tie(tie, sample, &held, named.nis)
     }
 

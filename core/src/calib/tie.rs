@@ -46,7 +46,8 @@ pub struct TieEvidence {
     /// Samples counted: those at least one of the two predicted within the gate.
     pub counted: usize,
     /// Samples neither predicted within the gate, or the runner-up's model could not solve:
-    /// no evidence for either.
+    /// no evidence for either (a counted sample the runner-up's estimate then failed to
+    /// take counts here too).
     pub neither: usize,
     /// The counted sample with the largest share.
     pub decisive: Option<Decisive>,
