@@ -87,6 +87,26 @@ pub struct Run {
     pub drift_warnings: Vec<(f64, Drift)>,
 }
 
+impl Run {
+    /// Keeps what the tracker said at `t` (a step, a tie settled; either restarts the drift
+    /// test); whether it named a step.
+    fn heard(&mut self, t: f64, out: Outcome, monitor: &mut DriftMonitor) -> bool {
+        match out {
+            Outcome::Step(st) => {
+                self.steps.push((t, st));
+                monitor.rebase();
+                true
+            }
+            Outcome::Resolved(r) => {
+                self.settled.push((t, r));
+                monitor.rebase();
+                false
+            }
+            _ => false,
+        }
+    }
+}
+
 /// One window of stream time: the TCP errors against the twin's true TCP (RMS of the xy
 /// error, mm) and the two floors.
 #[derive(Clone, Copy, Debug, Default)]
@@ -205,18 +225,7 @@ fn track(
         if let Outcome::Step(st) = knows.update(&sample).expect("update from the truth") {
             run.floor_steps.push((s.t, st));
         }
-        match out {
-            Outcome::Step(st) => {
-                run.steps.push((s.t, st));
-                named = true;
-                monitor.rebase();
-            }
-            Outcome::Resolved(r) => {
-                run.settled.push((s.t, r));
-                monitor.rebase();
-            }
-            _ => {}
-        }
+        named |= run.heard(s.t, out, &mut monitor);
         if n % (10 * decimate) == 0 {
             if let Some(test) = monitor.record(s.t, s.temp_c, &mut est) {
                 run.drift_tests.push((
