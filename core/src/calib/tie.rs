@@ -199,6 +199,43 @@ mod tests {
         assert_eq!(e.verdict(30.0), Verdict::Open);
     }
 
+    /// The motion's evidence is the batch −2 log-likelihood ratio of its samples,
+    /// Δᵀ (H P Hᵀ + R)⁻¹ Δ: one state of prior variance p read with unit noise, at pose 1
+    /// where the two explanations differ by d and at pose 0 where they agree.
+    /// - Pose 1 twice: 2d² / (2p + 1), not twice one sample's d² / (p + 1) (the two share
+    ///   the state's error).
+    /// - Pose 1, then pose 0: d² (p + 1) / (2p + 1). A pose where both predict the same
+    ///   pins the uncertain state, so that the difference at pose 1 is no longer absorbed;
+    ///   the planner chooses it second, over pose 1 again.
+    #[test]
+    fn a_motion_expects_the_batch_evidence_of_its_samples() {
+        let (p, d) = (4.0, 3.0);
+        let pose = |x: f64, apart: f64| Candidate::<1> {
+            x,
+            y: 0.0,
+            h: SMatrix::<f64, 4, 1>::new(1.0, 0.0, 0.0, 0.0),
+            r: Matrix4::identity(),
+            apart: Vector4::new(apart, 0.0, 0.0, 0.0),
+        };
+        let cov = SMatrix::<f64, 1, 1>::new(p);
+        let plan =
+            |poses: &[Candidate<1>]| plan_motion(poses, &cov, f64::INFINITY, 2).expect("a motion");
+        let twice = plan(&[pose(1.0, d)]);
+        assert_eq!(twice.poses, [(1.0, 0.0), (1.0, 0.0)]);
+        assert!(
+            (twice.first_chi2 - d * d / (p + 1.0)).abs() < 1e-12,
+            "{twice:?}"
+        );
+        assert!(
+            (twice.chi2 - 2.0 * d * d / (2.0 * p + 1.0)).abs() < 1e-12,
+            "{twice:?}"
+        );
+        let pinned = plan(&[pose(0.0, 0.0), pose(1.0, d)]);
+        assert_eq!(pinned.poses, [(1.0, 0.0), (0.0, 0.0)]);
+        let batch = d * d * (p + 1.0) / (2.0 * p + 1.0);
+        assert!((pinned.chi2 - batch).abs() < 1e-12, "{pinned:?}");
+    }
+
     #[test]
     fn the_runner_up_that_predicts_better_wins() {
         let mut e = TieEvidence::default();
