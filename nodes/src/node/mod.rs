@@ -17,6 +17,7 @@ pub mod ingest;
 pub mod inputs;
 pub mod lifecycle;
 pub mod live;
+pub mod online_tracker;
 pub mod params;
 pub mod preload_monitor;
 pub mod realtime;
