@@ -1483,7 +1483,42 @@ mod tests {
     /// it named: the machine's forces from the elastic model at the true parameters (l3
     /// crashed by 0.1 mm), 5 N of noise; the tie built as a step would leave it, the named
     /// estimate with l1's change that best reproduces the crash at the workspace centre.
-    fn settle(named_is_l3: bool) -> (TieResolved, Params) {
+    /// The machine of these tests: forces from the elastic model at the true parameters,
+    /// 5 N of noise, a sample every 0.1 s.
+    struct Machine {
+        truth: Params,
+        rng: StdRng,
+        t: f64,
+    }
+
+    impl Machine {
+        fn new(truth: Params) -> Machine {
+            Machine {
+                truth,
+                rng: StdRng::seed_from_u64(28),
+                t: 0.0,
+            }
+        }
+
+        /// One sample at the pose (x, y mm), commanded by the nominal machine's igm.
+        fn sample(&mut self, (x, y): (f64, f64)) -> ForceSample {
+            let q = crate::geometry::igm(&Params::nominal(), crate::params::Model::M29, x, y)
+                .expect("reachable")
+                .q();
+            let f = crate::elastic::fegm(&self.truth, &Stiffness::default(), q, ALL_ACTIVE)
+                .expect("there")
+                .drive_force;
+            let noise = Normal::new(0.0, 5.0).expect("normal");
+            self.t += 0.1;
+            ForceSample {
+                t: self.t,
+                q,
+                f: f.map(|v| v + noise.sample(&mut self.rng)),
+            }
+        }
+    }
+
+    fn tied(named_is_l3: bool) -> (OnlineEstimator, Params) {
         use crate::params::{L1, L3};
         let start = Params::nominal();
         let mut truth = start;
@@ -1526,30 +1561,21 @@ mod tests {
             evidence: TieEvidence::default(),
             swapped: false,
         }));
+        (est_named, truth)
+    }
+
+    fn settle(named_is_l3: bool) -> (TieResolved, Params) {
+        let (est_named, truth) = tied(named_is_l3);
         let motion = est_named
             .tie_motion(&crate::design::grid_231())
             .expect("a motion");
         assert!(motion.chi2 >= 4.0 * TIE_EVIDENCE_CHI2, "{motion:?}");
-        let mut rng = StdRng::seed_from_u64(28);
-        let noise = Normal::new(0.0, 5.0).expect("normal");
+        let mut machine = Machine::new(truth);
         let mut est = est_named;
-        let mut t = 0.0;
-        for &(x, y) in &motion.poses {
-            let q = crate::geometry::igm(&start, crate::params::Model::M29, x, y)
-                .expect("reachable")
-                .q();
-            let f = crate::elastic::fegm(&truth, &k, q, ALL_ACTIVE)
-                .expect("there")
-                .drive_force;
+        for &pose in &motion.poses {
             // three samples at each pose, as a cell stops there briefly
             for _ in 0..3 {
-                t += 0.1;
-                let sample = ForceSample {
-                    t,
-                    q,
-                    f: f.map(|v| v + noise.sample(&mut rng)),
-                };
-                if let Outcome::Resolved(r) = est.update(&sample).expect("update") {
+                if let Outcome::Resolved(r) = est.update(&machine.sample(pose)).expect("update") {
                     assert!(est.tie().is_none());
                     eprintln!("{motion:?}: {r:?}");
                     return (r, *est.params());
@@ -1557,6 +1583,29 @@ mod tests {
             }
         }
         panic!("not settled by {motion:?}: {:?}", est.tie());
+    }
+
+    /// One pose, however long the machine stays there, does not settle the tie: 50 samples at
+    /// the motion's first pose leave the evidence short of the threshold (both estimates
+    /// absorb the difference with parameters that pose cannot pin), where the motion's
+    /// poses settle it in a few.
+    #[test]
+    fn a_single_pose_does_not_settle_a_tie() {
+        let (mut est, truth) = tied(true);
+        let motion = est
+            .tie_motion(&crate::design::grid_231())
+            .expect("a motion");
+        let mut machine = Machine::new(truth);
+        for _ in 0..50 {
+            let out = est
+                .update(&machine.sample(motion.poses[0]))
+                .expect("update");
+            assert!(!matches!(out, Outcome::Resolved(_)), "{out:?}");
+        }
+        let so_far = est.tie().expect("still open").evidence;
+        eprintln!("50 samples at {:?}: {so_far:?}", motion.poses[0]);
+        assert!(so_far.chi2.abs() < TIE_EVIDENCE_CHI2, "{so_far:?}");
+        assert_eq!(so_far.counted, 50);
     }
 
     #[test]
