@@ -15,7 +15,7 @@ use crate::node_support;
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-use node_support::{unique, Launch, TempDir};
+use node_support::{launch_from_params, unique, Launch, TempDir};
 use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::geometry::fgm;
@@ -52,19 +52,12 @@ fn write_launch(dir: &TempDir, campaign: &Campaign) -> std::path::PathBuf {
         ),
     )
     .expect("params");
-    let launch = dir.path("effects.launch.yaml");
-    std::fs::write(
-        &launch,
-        format!(
-            "launch:\n  - node: {{pkg: rpkm, exec: ingest, param: [{{from: params.yaml}}], args: --source {}}}\n  \
-             - node: {{pkg: rpkm, exec: calibrator, param: [{{from: params.yaml}}]}}\n  \
-             - node: {{pkg: rpkm, exec: tcp_estimator, param: [{{from: params.yaml}}]}}\n  \
-             - node: {{pkg: rpkm, exec: preload_monitor, param: [{{from: params.yaml}}]}}\n",
-            dir.path("cal.csv").display()
-        ),
+    launch_from_params(
+        dir,
+        "effects.launch.yaml",
+        &dir.path("cal.csv"),
+        &["calibrator", "tcp_estimator", "preload_monitor"],
     )
-    .expect("launch file");
-    launch
 }
 
 /// The first Parameters the calibrator publishes.

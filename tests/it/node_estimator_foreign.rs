@@ -16,7 +16,7 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use node_support::{unique, Launch, TempDir};
+use node_support::{launch_from_params, unique, Launch, TempDir};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::geometry::fgm;
 use rpkm_core::params::{Model, Params, NAMES};
@@ -78,17 +78,7 @@ fn write_launch(dir: &TempDir, csv: &Path, geometry: &Path) -> PathBuf {
         ),
     )
     .expect("params");
-    let launch = dir.path("foreign.launch.yaml");
-    std::fs::write(
-        &launch,
-        format!(
-            "launch:\n  - node: {{pkg: rpkm, exec: ingest, param: [{{from: params.yaml}}], args: --source {}}}\n  \
-             - node: {{pkg: rpkm, exec: tcp_estimator, param: [{{from: params.yaml}}]}}\n",
-            csv.display()
-        ),
-    )
-    .expect("launch file");
-    launch
+    launch_from_params(dir, "foreign.launch.yaml", csv, &["tcp_estimator"])
 }
 
 /// Distance (mm) of the nominal geometry's rigid model from the truth, per pose: what a wrong

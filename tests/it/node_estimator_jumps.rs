@@ -13,7 +13,7 @@ use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::time::{Duration, Instant};
 
-use node_support::{unique, Launch, TempDir};
+use node_support::{launch_from_params, unique, Launch, TempDir};
 use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::geometry::fgm;
@@ -40,17 +40,12 @@ fn write_launch(dir: &TempDir) -> std::path::PathBuf {
         ),
     )
     .expect("params");
-    let launch = dir.path("jumps.launch.yaml");
-    std::fs::write(
-        &launch,
-        format!(
-            "launch:\n  - node: {{pkg: rpkm, exec: ingest, param: [{{from: params.yaml}}], args: --source {csv}}}\n  \
-             - node: {{pkg: rpkm, exec: tcp_estimator, param: [{{from: params.yaml}}]}}\n  \
-             - node: {{pkg: rpkm, exec: preload_monitor, param: [{{from: params.yaml}}]}}\n"
-        ),
+    launch_from_params(
+        dir,
+        "jumps.launch.yaml",
+        std::path::Path::new(csv),
+        &["tcp_estimator", "preload_monitor"],
     )
-    .expect("launch file");
-    launch
 }
 
 #[test]

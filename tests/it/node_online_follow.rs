@@ -18,7 +18,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use node_support::{rpkm, unique, Launch, TempDir};
+use node_support::{launch_from_params, rpkm, unique, Launch, TempDir};
 use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, NOMINAL_DRIVE_FORCE_N};
@@ -106,19 +106,12 @@ fn launch_files(dir: &TempDir, csv: &Path, geometry: &Path) -> std::path::PathBu
         ),
     )
     .expect("params");
-    let launch = dir.path("online.launch.yaml");
-    std::fs::write(
-        &launch,
-        format!(
-            "launch:\n  - node: {{pkg: rpkm, exec: ingest, param: [{{from: params.yaml}}], args: --source {}}}\n  \
-             - node: {{pkg: rpkm, exec: calibrator, param: [{{from: params.yaml}}]}}\n  \
-             - node: {{pkg: rpkm, exec: tcp_estimator, param: [{{from: params.yaml}}]}}\n  \
-             - node: {{pkg: rpkm, exec: preload_monitor, param: [{{from: params.yaml}}]}}\n",
-            csv.display()
-        ),
+    launch_from_params(
+        dir,
+        "online.launch.yaml",
+        csv,
+        &["calibrator", "tcp_estimator", "preload_monitor"],
     )
-    .expect("launch file");
-    launch
 }
 
 fn observe(launch: &Path, truth: &[Truth]) -> Observed {

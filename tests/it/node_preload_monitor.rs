@@ -11,7 +11,9 @@ use crate::node_support;
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-use node_support::{twin_stream, unique, write_truth_json, Launch, Stream, TempDir};
+use node_support::{
+    launch_from_params, twin_stream, unique, write_truth_json, Launch, Stream, TempDir,
+};
 use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::elastic::{fegm, ALL_ACTIVE, NOMINAL_DRIVE_FORCE_N};
 use rpkm_msgs::{DiagnosticStatus, PreloadStatus};
@@ -83,17 +85,12 @@ fn run(tag: &str, drift: fn(usize) -> f64) -> (Stream, Observed) {
         ),
     )
     .expect("params");
-    let launch = dir.path("test.launch.yaml");
-    std::fs::write(
-        &launch,
-        format!(
-            "launch:\n  - node: {{pkg: rpkm, exec: ingest, param: [{{from: params.yaml}}], args: --source {}}}\n  \
-             - node: {{pkg: rpkm, exec: tcp_estimator, param: [{{from: params.yaml}}]}}\n  \
-             - node: {{pkg: rpkm, exec: preload_monitor, param: [{{from: params.yaml}}]}}\n",
-            csv.display()
-        ),
-    )
-    .expect("launch file");
+    let launch = launch_from_params(
+        &dir,
+        "test.launch.yaml",
+        &csv,
+        &["tcp_estimator", "preload_monitor"],
+    );
 
     let prefix = unique(tag);
     let t = Transport::new(&TransportConfig::new(unique("obs")).ipc_prefix(&prefix))

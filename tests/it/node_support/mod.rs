@@ -2,6 +2,7 @@
 //! stream as a campaign file, and `rpkm launch` as a child whose `[launch]` lines are read.
 #![allow(dead_code)] // each test file uses a part
 
+use std::fmt::Write as _;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -194,6 +195,25 @@ impl Drop for Launch {
 
 /// A temporary folder removed on drop.
 pub struct TempDir(pub PathBuf);
+
+/// Writes the launch file `name` in `dir`: ingest replaying `source`, then `nodes`, each node
+/// with its parameters from the folder's params.yaml; its path.
+pub fn launch_from_params(dir: &TempDir, name: &str, source: &Path, nodes: &[&str]) -> PathBuf {
+    let mut text = format!(
+        "launch:\n  - node: {{pkg: rpkm, exec: ingest, param: [{{from: params.yaml}}], args: \
+         --source {}}}\n",
+        source.display()
+    );
+    for node in nodes {
+        let _ = writeln!(
+            text,
+            "  - node: {{pkg: rpkm, exec: {node}, param: [{{from: params.yaml}}]}}"
+        );
+    }
+    let launch = dir.path(name);
+    std::fs::write(&launch, text).expect("launch file");
+    launch
+}
 
 impl TempDir {
     pub fn new(tag: &str) -> TempDir {
