@@ -261,8 +261,8 @@ pub fn find_cycle(graph: &[(String, Vec<String>)]) -> Option<Vec<String>> {
 }
 
 /// Every cycle the search meets, each broken at its closing edge before the next search:
-/// the whole list of what imports in a circle, for the message.
-pub fn cycles(graph: &[(String, Vec<String>)]) -> Vec<Vec<String>> {
+/// the whole list of what imports in a circle, a line each (`a -> b -> a`) for the message.
+pub fn cycles(graph: &[(String, Vec<String>)]) -> Vec<String> {
     let mut g = graph.to_vec();
     let mut found = Vec::new();
     while let Some(cycle) = find_cycle(&g) {
@@ -270,7 +270,7 @@ pub fn cycles(graph: &[(String, Vec<String>)]) -> Vec<Vec<String>> {
         if let Some((_, deps)) = g.iter_mut().find(|(m, _)| m == from) {
             deps.retain(|d| d != to);
         }
-        found.push(cycle);
+        found.push(cycle.join(" -> "));
     }
     found
 }
