@@ -12,11 +12,12 @@
 //! Run: `cargo bench -p rpkm-core --bench online`.
 
 use rpkm_core::calib::online::{ForceSample, OnlineEstimator, OnlineOptions, Outcome};
-use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::index_of;
-use rpkm_twin::{
-    EffectKind, ProductionConfig, ProductionStream, StepChange, ThermalPhysics, Twin, TwinConfig,
-};
+use rpkm_twin::{ProductionConfig, ProductionStream, StepChange};
+
+// the online tests' twin, the same file
+#[path = "../tests/it/support/production.rs"]
+mod production;
 use std::time::Instant;
 
 fn median(v: &mut [f64]) -> f64 {
@@ -25,21 +26,7 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 fn main() {
-    let elastic = EffectKind::PreloadElastic;
-    let twin = Twin::new(TwinConfig {
-        seed: 5,
-        effects: vec![(elastic, elastic.default_magnitude())],
-        thermal: ThermalPhysics {
-            scales_per_k: 0.0,
-            ..Default::default()
-        },
-        noise: Some(NoiseModel {
-            force_n: 3.0,
-            ..NoiseModel::default()
-        }),
-        ..Default::default()
-    })
-    .expect("twin");
+    let twin = production::twin(5);
     let cfg = ProductionConfig {
         rate_hz: 10.0,
         seconds: 180.0,
