@@ -262,10 +262,12 @@ pub struct OnlineEstimator {
 #[derive(Clone, Debug)]
 struct OpenTie {
     alt: OnlineEstimator,
-    named: StepChange,
-    runner_up: usize,
-    /// The runner-up's change fitted to the held samples, as `named.change`.
-    runner_up_change: f64,
+    /// The step's first held sample, s.
+    since_s: f64,
+    /// The parameters and their changes: the named one's, and the runner-up's fitted to
+    /// the same held samples.
+    named: (usize, f64),
+    runner_up: (usize, f64),
     evidence: TieEvidence,
     /// Whether `alt` holds the named estimate (the runner-up stood and took its place).
     swapped: bool,
@@ -544,8 +546,8 @@ impl OnlineEstimator {
     /// A step still "this or that": the two, and the evidence so far (None without one).
     pub fn tie(&self) -> Option<TieSoFar> {
         self.tie.as_ref().map(|t| TieSoFar {
-            named: t.named.param,
-            runner_up: t.runner_up,
+            named: t.named.0,
+            runner_up: t.runner_up.0,
             evidence: t.evidence,
         })
     }
@@ -807,19 +809,15 @@ impl OnlineEstimator {
             .and_then(|d| self.tcp(d.q).ok())
             .map(|(x, _)| (x[0], x[1]));
         let (kept, ruled_out) = if tie.swapped {
-            (tie.runner_up, tie.named.param)
+            (tie.runner_up, tie.named)
         } else {
-            (tie.named.param, tie.runner_up)
+            (tie.named, tie.runner_up)
         };
         Ok(Outcome::Resolved(TieResolved {
-            param: kept,
-            change: if tie.swapped {
-                tie.runner_up_change
-            } else {
-                tie.named.change
-            },
-            ruled_out,
-            since_s: tie.named.since_s,
+            param: kept.0,
+            change: kept.1,
+            ruled_out: ruled_out.0,
+            since_s: tie.since_s,
             swapped: tie.swapped,
             evidence: tie.evidence,
             at,
@@ -887,24 +885,21 @@ impl OnlineEstimator {
             let (change, sigma) = self.one_parameter_fit(b);
             let mut alt = self.clone();
             alt.take_step(b, change, sigma);
-            (alt, b, change)
+            (alt, (b, change))
         });
         self.take_step(step.param, step.change, step.sigma);
-        self.tie = alt.map(|(alt, runner_up, runner_up_change)| {
+        self.tie = alt.map(|(alt, runner_up)| {
             Box::new(OpenTie {
                 alt,
-                named: step.clone(),
+                since_s: step.since_s,
+                named: (step.param, step.change),
                 runner_up,
-                runner_up_change,
                 evidence: TieEvidence::default(),
                 swapped: false,
             })
         });
         // the motion that would settle it, from what the two estimates know now
         step.separating = self.tie_motion(&crate::design::grid_231());
-        if let Some(tie) = &mut self.tie {
-            tie.named.separating.clone_from(&step.separating);
-        }
         step
     }
 
@@ -1547,17 +1542,9 @@ mod tests {
         alt.take_step(other.0, other.1, 0.0);
         est_named.tie = Some(Box::new(OpenTie {
             alt,
-            named: StepChange {
-                param: named.0,
-                change: named.1,
-                sigma: 0.0,
-                since_s: 0.0,
-                margin: 1.0,
-                alternative: Some(other.0),
-                separating: None,
-            },
-            runner_up: other.0,
-            runner_up_change: other.1,
+            since_s: 0.0,
+            named,
+            runner_up: other,
             evidence: TieEvidence::default(),
             swapped: false,
         }));
