@@ -79,6 +79,13 @@ pub struct Options {
     pub stop: Option<calib::Stop>,
 }
 
+impl Options {
+    /// Whether the caller asked the diagnosis to stop ([`Options::stop`]).
+    fn stopped(&self) -> bool {
+        self.stop.as_ref().is_some_and(calib::Stop::requested)
+    }
+}
+
 impl Default for Options {
     fn default() -> Self {
         Options {
@@ -436,12 +443,7 @@ impl Validation<'_> {
         let zero = zero_groups(campaign, &errs);
         let reading: Vec<f64> = variances.iter().map(|v| v.reading).collect();
         // var(e_i − ē) = σ_i² (1 − 2/n) + Σ σ_j² / n² over the n errors of the group
-        let groups = zero.iter().max().map_or(0, |m| m + 1);
-        let mut sum = vec![(0.0, 0usize); groups];
-        for (&g, v) in zero.iter().zip(&reading) {
-            sum[g].0 += v;
-            sum[g].1 += 1;
-        }
+        let sum = group_sums(&zero, &reading);
         let relative_sigma = zero
             .iter()
             .zip(&reading)
@@ -465,18 +467,24 @@ impl Validation<'_> {
     /// them (no model predicts the error of the reading a setup was zeroed on, and one that
     /// happens to follow it would beat the truth).
     fn relative(&self, errors: &[f64]) -> Vec<f64> {
-        let n = self.zero.iter().max().map_or(0, |m| m + 1);
-        let mut sum = vec![(0.0, 0usize); n];
-        for (&g, e) in self.zero.iter().zip(errors) {
-            sum[g].0 += e;
-            sum[g].1 += 1;
-        }
+        let sum = group_sums(&self.zero, errors);
         self.zero
             .iter()
             .zip(errors)
             .map(|(&g, e)| e - sum[g].0 / sum[g].1.max(1) as f64)
             .collect()
     }
+}
+
+/// Per group of `zero` (an index per value), the sum of `values` and their count.
+fn group_sums(zero: &[usize], values: &[f64]) -> Vec<(f64, usize)> {
+    let n = zero.iter().max().map_or(0, |m| m + 1);
+    let mut sum = vec![(0.0, 0usize); n];
+    for (&g, v) in zero.iter().zip(values) {
+        sum[g].0 += v;
+        sum[g].1 += 1;
+    }
+    sum
 }
 
 /// Each held-out TCP error's (setup, coordinate) as an index, in [`obs::tcp_errors`] order.
@@ -515,7 +523,7 @@ pub fn diagnose_among(
     let diagnosis = rounds(campaign, validation, in_model, offered, opts);
     // a fit stopped part-way fails as it can (a candidate not fitted, a round's error):
     // whatever came of it, a stopped diagnosis concludes nothing
-    if opts.stop.as_ref().is_some_and(calib::Stop::requested) {
+    if opts.stopped() {
         return Err(DiagnoseError::Cancelled);
     }
     diagnosis
@@ -552,7 +560,7 @@ fn rounds(
     // very effect that would explain it.)
     let stated = calib_options(opts);
     let (base1, first, cal1) = search.round(&stated, None)?;
-    if opts.stop.as_ref().is_some_and(calib::Stop::requested) {
+    if opts.stopped() {
         return Err(DiagnoseError::Cancelled);
     }
     // noise-free (simulated) data: no noise to estimate, the stated weights stay
