@@ -628,7 +628,7 @@ impl OnlineEstimator {
     /// could make of the difference with its uncertain parameters ([`plan_motion`]), until
     /// the evidence expected is four times [`OnlineOptions::tie_evidence_chi2`] (the
     /// evidence a motion gives spreads by about twice its square root: short of the
-    /// threshold once in 10⁴) or [`TIE_MOTION_POSES`] poses. None without an open tie or a
+    /// threshold less than once in 10⁴) or [`TIE_MOTION_POSES`] poses. None without an open tie or a
     /// reachable target.
     pub fn tie_motion(&self, targets: &[(f64, f64)]) -> Option<SeparatingMotion> {
         let tie = self.tie.as_ref()?;
