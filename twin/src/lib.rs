@@ -512,7 +512,8 @@ impl Twin {
         if self.config.thermal.guide_thermometers {
             // their own draws after every other: the readings stay the same with or without
             for (slot, g) in [(1, 0), (2, 1)] {
-                let reading = self.guide_temperature(g, t) + k * TEMP_SENSOR_K * gauss(&mut self.guide_rng);
+                let reading =
+                    self.guide_temperature(g, t) + k * TEMP_SENSOR_K * gauss(&mut self.guide_rng);
                 covariates.insert(slot, Some(reading));
             }
         }

@@ -38,6 +38,73 @@ pub const PLAUSIBLE_SIGMAS: f64 = 3.0;
 /// Bonferroni count of its evidence.
 pub const PART_COMBINATIONS: f64 = 7.0;
 
+/// What a larger model gains over a smaller one it holds: the evidence of both campaigns and
+/// its size. One rule for a candidate against the current model, a model against another,
+/// a family's parts against the whole.
+struct Gain {
+    /// The nested F-test's p-value on the calibration campaign.
+    p_cal: f64,
+    /// RMS of the calibration rows' fall in their own noise, √(Δχ²/n): the size the
+    /// calibration itself sees (a fine instrument there, a noisy one held out).
+    cal_size: f64,
+    /// The prediction (held-out or left-out), and the noise its errors are measured in.
+    prediction: Option<(Prediction, f64)>,
+}
+
+impl Gain {
+    /// The gain of a model with χ² `big` over one with `small`, each (χ², dof), on `rows`
+    /// calibration rows.
+    fn of(
+        big: (f64, f64),
+        small: (f64, f64),
+        rows: usize,
+        prediction: Option<(Prediction, f64)>,
+    ) -> Gain {
+        let k = small.1 - big.1;
+        let dchi2 = (small.0 - big.0).max(0.0);
+        let p_cal = if k > 0.5 {
+            stats::f_upper_tail((dchi2 / k) / (big.0 / big.1), k, big.1)
+        } else {
+            1.0
+        };
+        Gain {
+            p_cal,
+            cal_size: (dchi2 / rows.max(1) as f64).sqrt(),
+            prediction,
+        }
+    }
+
+    /// Fisher's combination of the F-test and the prediction's one-sided test.
+    fn evidence(&self) -> f64 {
+        match self.prediction {
+            Some((p, _)) => stats::fisher_combined(&[self.p_cal, p.p_better()]),
+            None => self.p_cal,
+        }
+    }
+
+    /// The larger of the sizes the two campaigns see, each in its noise.
+    fn size(&self) -> f64 {
+        let predicted = self
+            .prediction
+            .map_or(0.0, |(p, unit)| p.explained() / unit);
+        self.cal_size.max(predicted)
+    }
+
+    fn better(&self) -> bool {
+        self.prediction.is_none_or(|(p, _)| p.better)
+    }
+
+    fn worse(&self) -> bool {
+        self.prediction.is_some_and(|(p, _)| p.worse)
+    }
+
+    /// Whether the larger model is needed: significant on both campaigns together, not
+    /// contradicted, better, by a gain that matters.
+    fn needed(&self, level: f64) -> bool {
+        self.evidence() < level && self.better() && !self.worse() && self.size() >= PRACTICAL_SIZE
+    }
+}
+
 /// The best contenders (by BIC gain) are paired among themselves; the best also with every
 /// other candidate.
 const PAIRED: usize = 3;
@@ -121,7 +188,11 @@ pub(crate) struct Choice {
 pub(crate) fn search<'a>(
     judge: &Judge<'a>,
     (candidates, fits): (&mut [Candidate], &[(String, Fitted)]),
-    (tried, variants, swaps): (&[&'a dyn Effect], &'a [Box<dyn Effect>], &'a [Box<dyn Effect>]),
+    (tried, variants, swaps): (
+        &[&'a dyn Effect],
+        &'a [Box<dyn Effect>],
+        &'a [Box<dyn Effect>],
+    ),
     structure: &sparse::Structure,
 ) -> (Vec<ModelTrial>, Option<Choice>) {
     let mut entries: Vec<Entry<'a>> = Vec::new();
@@ -449,8 +520,12 @@ impl<'j> Judge<'j> {
     /// The best contenders with each other part combination of a family of the current
     /// model (`swaps`: its variants): adding an effect may change the parts a family keeps
     /// (a guide's bow absorbed by the frame's expansion until the bow is in the model).
-    fn add_swaps<'a>(&self, entries: &mut Vec<Entry<'a>>, swaps: &'a [Box<dyn Effect>], singles: usize)
-    where
+    fn add_swaps<'a>(
+        &self,
+        entries: &mut Vec<Entry<'a>>,
+        swaps: &'a [Box<dyn Effect>],
+        singles: usize,
+    ) where
         'j: 'a,
     {
         let settled: Vec<&str> = self.in_model.iter().map(|e| e.name()).collect();
@@ -477,48 +552,39 @@ impl<'j> Judge<'j> {
     /// gain that matters.
     fn beats(&self, big: &Entry, small: &Entry) -> bool {
         let (b, s) = (&big.fitted.fit, &small.fitted.fit);
-        let k = s.dof - b.dof;
-        if k < 0.5 {
-            return false;
+        let prediction = between(small, big).map(|p| (p, self.unit_of(&p)));
+        Gain::of(
+            (b.chi2, b.dof),
+            (s.chi2, s.dof),
+            self.base.rows.len(),
+            prediction,
+        )
+        .needed(self.level)
+    }
+
+    /// The noise a prediction's errors are in: 1 for left-out rows (σ), the held-out floor
+    /// (mm) for held-out errors in mm, in µm for a held-out comparison in µm.
+    fn unit_of(&self, p: &Prediction) -> f64 {
+        match (p.by_setup, p.unit) {
+            (true, _) => 1.0,
+            (false, "um") => self.floor_mm.map_or(1.0, |f| f * 1e3),
+            (false, _) => self.floor_mm.unwrap_or(1.0),
         }
-        let f = ((s.chi2 - b.chi2).max(0.0) / k) / (b.chi2 / b.dof);
-        let p_cal = stats::f_upper_tail(f, k, b.dof);
-        let (evidence, size, better, worse) = match between(small, big) {
-            Some(p) => {
-                let unit = if p.by_setup {
-                    1.0
-                } else {
-                    self.floor_mm.unwrap_or(1.0)
-                };
-                (
-                    stats::fisher_combined(&[p_cal, p.p_better()]),
-                    p.explained() / unit,
-                    p.better,
-                    p.worse,
-                )
-            }
-            None => {
-                let rows = self.base.rows.len().max(1) as f64;
-                (p_cal, ((s.chi2 - b.chi2).max(0.0) / rows).sqrt(), true, false)
-            }
-        };
-        evidence < self.level && better && !worse && size >= PRACTICAL_SIZE
     }
 
     /// The judgement of one entry against the current model: the evidence of both
     /// campaigns, its size, its values.
     fn assess(&self, e: &mut Entry) {
-        let p_pred = e.prediction.map(|p| p.p_better());
-        let evidence_p = match p_pred {
-            Some(p) => stats::fisher_combined(&[e.p_value, p]),
-            None => e.p_value,
-        };
+        let base = &self.base.fit;
+        let prediction = e.prediction.map(|p| (p, self.unit_of(&p)));
+        let gain = Gain::of(
+            (e.fitted.fit.chi2, e.fitted.fit.dof),
+            (base.chi2, base.dof),
+            self.base.rows.len(),
+            prediction,
+        );
+        let (evidence_p, size) = (gain.evidence(), gain.size());
         let rows = self.base.rows.len().max(1) as f64;
-        let size = match e.prediction {
-            Some(p) if p.by_setup || self.floor_mm.is_none() => p.explained(),
-            Some(p) => p.explained() / (self.floor_mm.unwrap_or(1.0) * 1e3),
-            None => ((self.base.fit.chi2 - e.fitted.fit.chi2).max(0.0) / rows).sqrt(),
-        };
         let implausible = implausible(&added_params(&e.fitted.fit.effect_params, &e.added));
         let better = e.prediction.map_or(e.f_statistic > rows.ln(), |p| p.better);
         let outcome = if evidence_p >= self.level {
@@ -622,7 +688,11 @@ pub(crate) fn part_variants(effects: &[&dyn Effect], whole: bool) -> Vec<Box<dyn
     let mut out = Vec::new();
     for family in effects.iter().filter(|e| e.open_family()) {
         let n = family.parts().len();
-        let last = if whole { 1usize << n } else { (1usize << n) - 1 };
+        let last = if whole {
+            1usize << n
+        } else {
+            (1usize << n) - 1
+        };
         for mask in 1..last {
             let parts: Vec<usize> = (0..n).filter(|b| mask & (1 << b) != 0).collect();
             out.extend(family.with_parts(&parts));
@@ -839,7 +909,10 @@ pub(crate) fn settle(
                 Scored::of(campaign, val, with, copts).map(|p| (k, p))
             })
             .collect();
-        let Some(whole) = scored.iter().find(|(k, _)| mask_len(variants[*k].name()) == n) else {
+        let Some(whole) = scored
+            .iter()
+            .find(|(k, _)| mask_len(variants[*k].name()) == n)
+        else {
             continue;
         };
         let floor = val.map(|v| calib::rms(&v.relative_sigma));
@@ -906,7 +979,11 @@ impl<'a> Scored<'a> {
             ..Request::new(campaign, &start, copts)
         })
         .ok()?;
-        let chi2: f64 = cal.residuals.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
+        let chi2: f64 = cal
+            .residuals
+            .iter()
+            .map(|r| (r.value / r.sigma).powi(2))
+            .sum();
         let rows = cal.residuals.len();
         let held = match val {
             Some(v) => {
@@ -955,34 +1032,20 @@ impl<'a> Scored<'a> {
     /// else the left-out rows), not contradicted, a gain that matters (`floor`: the held-out
     /// noise, mm).
     fn needed_over(&self, v: &Scored, fold: Fold, (level, floor): (f64, Option<f64>)) -> bool {
-        let k = v.dof - self.dof;
-        if k < 0.5 {
-            return false;
-        }
-        let f = ((v.chi2 - self.chi2).max(0.0) / k) / (self.chi2 / self.dof);
-        let p_cal = stats::f_upper_tail(f, k, self.dof);
         let held = Prediction::compared(&v.held, &self.held);
-        let (prediction, unit) = match held {
-            Some(p) if p.better || p.worse => (Some(p), floor.unwrap_or(1.0)),
+        let prediction = match held {
+            Some(p) if p.better || p.worse => Some((p, floor.unwrap_or(1.0))),
             _ => match v.left_out(fold).zip(self.left_out(fold)) {
-                Some((a, b)) => (Prediction::compared(a, b), 1.0),
-                None => (held, floor.unwrap_or(1.0)),
+                Some((a, b)) => Prediction::compared(a, b).map(|p| (p, 1.0)),
+                None => held.map(|p| (p, floor.unwrap_or(1.0))),
             },
         };
-        let (evidence, size, better, worse) = match prediction {
-            Some(p) => (
-                stats::fisher_combined(&[p_cal, p.p_better()]),
-                p.explained() / unit,
-                p.better,
-                p.worse,
-            ),
-            None => (
-                p_cal,
-                ((v.chi2 - self.chi2).max(0.0) / self.rows.max(1) as f64).sqrt(),
-                true,
-                false,
-            ),
-        };
-        evidence < level && better && !worse && size >= PRACTICAL_SIZE
+        Gain::of(
+            (self.chi2, self.dof),
+            (v.chi2, v.dof),
+            self.rows,
+            prediction,
+        )
+        .needed(level)
     }
 }

@@ -478,10 +478,12 @@ fn two_hidden_effects_are_found_one_after_the_other() {
             summary(&d1)
         );
         let d2 = run(&cal, &val, &[&first]);
-        let second = d2
-            .missing_effect
-            .clone()
-            .unwrap_or_else(|| panic!("seed {seed}: a second effect after {first}: {}", summary(&d2)));
+        let second = d2.missing_effect.clone().unwrap_or_else(|| {
+            panic!(
+                "seed {seed}: a second effect after {first}: {}",
+                summary(&d2)
+            )
+        });
         assert!(
             names.contains(&second.as_str()) && second != first,
             "seed {seed}: {} then {}",

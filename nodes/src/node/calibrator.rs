@@ -383,10 +383,14 @@ fn parameters_of(
     } else {
         f64::NAN
     };
-    let cal_errors: Vec<f64> =
-        obs::tcp_errors_with(cal_part, &cal.params, cal.model, &set.corrections(&cal.theta))
-            .map(|e| e.iter().map(|e| e.value).collect())
-            .unwrap_or_default();
+    let cal_errors: Vec<f64> = obs::tcp_errors_with(
+        cal_part,
+        &cal.params,
+        cal.model,
+        &set.corrections(&cal.theta),
+    )
+    .map(|e| e.iter().map(|e| e.value).collect())
+    .unwrap_or_default();
     msg.max_abs_residual = if cal_errors.is_empty() {
         f64::NAN
     } else {
