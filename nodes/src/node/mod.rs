@@ -15,6 +15,7 @@ pub mod effects;
 pub mod geometry;
 pub mod ingest;
 pub mod inputs;
+pub mod joint_input;
 pub mod lifecycle;
 pub mod live;
 pub mod online_tracker;
@@ -84,11 +85,11 @@ pub const EXECUTABLES: [&str; 4] = ["ingest", "tcp_estimator", "calibrator", "pr
 /// executable.
 pub fn declared_keys(exec: &str) -> Option<Vec<&'static str>> {
     let (own, geometry): (&[&'static str], bool) = match exec {
-        "ingest" => (&ingest::KEYS, false),
-        "tcp_estimator" => (&tcp_estimator::KEYS, true),
+        "ingest" => return Some(ingest::declared()),
+        "tcp_estimator" => return Some(tcp_estimator::declared()),
         // its own keys name the geometry ones it takes (no stiffness, no follower)
         "calibrator" => (&calibrator::KEYS, false),
-        "preload_monitor" => (&preload_monitor::KEYS, true),
+        "preload_monitor" => return Some(preload_monitor::declared()),
         _ => return None,
     };
     Some(geometry::declared(own, geometry))

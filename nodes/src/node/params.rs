@@ -368,6 +368,24 @@ impl NodeParams {
         }
     }
 
+    /// A value of `key` the node cannot use, with what it expected: the error names where the
+    /// value was set (`defaults` for a default).
+    pub fn invalid(&self, key: &str, expected: &'static str) -> ParamError {
+        match self.values.get(key) {
+            Some(_) => self.type_err(key, expected),
+            None => ParamError::Type {
+                origin: Box::new(Origin {
+                    file: "defaults".into(),
+                    section: self.node.clone(),
+                    specific: true,
+                }),
+                key: key.to_owned(),
+                expected,
+                found: "the default".into(),
+            },
+        }
+    }
+
     /// Whether the key is set.
     pub fn has(&self, key: &str) -> bool {
         self.values.contains_key(key)
@@ -517,6 +535,40 @@ impl NodeParams {
                 .collect(),
             Some(_) => Err(self.type_err(key, "a list of strings")),
         }
+    }
+
+    /// A list of finite doubles (integers accepted), or `default`.
+    pub fn f64s(&self, key: &str, default: &[f64]) -> Result<Vec<f64>, ParamError> {
+        match self.values.get(key) {
+            None => Ok(default.to_vec()),
+            Some((Value::Sequence(items), _)) => items
+                .iter()
+                .map(|i| {
+                    i.as_f64()
+                        .filter(|x| x.is_finite())
+                        .ok_or_else(|| self.type_err(key, "a list of finite numbers"))
+                })
+                .collect(),
+            Some(_) => Err(self.type_err(key, "a list of finite numbers")),
+        }
+    }
+
+    /// The strings of the group `prefix.` (`temperatures.` gives `temp_machine ->
+    /// /cell/frame_temperature`), in name order, with their origins; an empty map (`group:
+    /// {}`) has none.
+    pub fn string_group(&self, prefix: &str) -> Result<Vec<(String, String, Origin)>, ParamError> {
+        let mut out = Vec::new();
+        for (key, (v, origin)) in self.values.range(prefix.to_owned()..) {
+            let Some(name) = key.strip_prefix(prefix) else {
+                break;
+            };
+            let text = match v {
+                Value::String(s) => s.clone(),
+                _ => return Err(self.type_err(key, "a string")),
+            };
+            out.push((name.to_owned(), text, origin.clone()));
+        }
+        Ok(out)
     }
 
     /// The finite doubles of the group `prefix.` (e.g. `geometry.` gives `l1 -> 0.95`), with
