@@ -136,10 +136,9 @@ fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
     let start_delay = p
         .f64_in("start_delay_s", 1.0, DURATION_S, " s")
         .map_err(bad_param)?;
-    let joints = (source == JOINT_STATES)
-        .then(|| JointConfig::from_params(p))
-        .transpose()
-        .map_err(bad_param)?;
+    // checked whatever the source: a bad value is bad before the cell switches to it
+    let joints = JointConfig::from_params(p).map_err(bad_param)?;
+    let joints = (source == JOINT_STATES).then_some(joints);
     let settings = Settings {
         source,
         limits,

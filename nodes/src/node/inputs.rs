@@ -57,19 +57,18 @@ impl DriveInput {
     /// The input parameter `source` names: `actuator_state` (default) or `joint_states`.
     pub fn open(ctx: &NodeContext) -> anyhow::Result<Self> {
         let p = &ctx.params;
+        // checked whatever the source: a bad value is bad before the cell switches to it
+        let config = JointConfig::from_params(p).map_err(bad_param)?;
         match p
             .string("source", ACTUATOR_STATE)
             .map_err(bad_param)?
             .as_str()
         {
             ACTUATOR_STATE => Ok(Self::Actuator(ctx.subscriber(&topic::ACTUATOR_STATE)?)),
-            JOINT_STATES => {
-                let config = JointConfig::from_params(p).map_err(bad_param)?;
-                Ok(Self::Joints {
-                    input: Box::new(JointInput::open(ctx, config)?),
-                    seq: 0,
-                })
-            }
+            JOINT_STATES => Ok(Self::Joints {
+                input: Box::new(JointInput::open(ctx, config)?),
+                seq: 0,
+            }),
             other => Err(bad_input(format!(
                 "{}/source: expected actuator_state or joint_states, found {other:?}",
                 p.origin("source")

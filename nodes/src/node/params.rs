@@ -308,9 +308,12 @@ impl NodeParams {
     pub fn check_declared(&self, declared: &[&str]) -> Result<(), ParamError> {
         self.check_shapes(declared)?;
         for (key, (_, origin)) in &self.values {
-            let known = declared
-                .iter()
-                .any(|d| d == key || (d.ends_with('.') && key.starts_with(d)));
+            // a group is its members, or an empty map under its own name (`group: {}`)
+            let known = declared.iter().any(|d| {
+                d == key
+                    || (d.ends_with('.') && key.starts_with(d))
+                    || d.strip_suffix('.') == Some(key.as_str())
+            });
             if origin.specific && !known {
                 return Err(ParamError::Unknown {
                     origin: Box::new(origin.clone()),
