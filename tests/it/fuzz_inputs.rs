@@ -641,7 +641,10 @@ fn fuzzed_parameter_maps_are_refused_with_their_key() {
         .lines()
         .enumerate()
         .filter(|(_, l)| l.starts_with("    ") && !l.trim_start().starts_with('#'))
-        .filter(|(_, l)| !l.split_once(':').is_some_and(|(_, v)| v.trim_start().starts_with('{')))
+        .filter(|(_, l)| {
+            !l.split_once(':')
+                .is_some_and(|(_, v)| v.trim_start().starts_with('{'))
+        })
         .filter_map(|(i, l)| Some((i, l.split_once(':')?.0.trim().to_owned())))
         .collect();
     assert!(settable.len() > 30, "{settable:?}");

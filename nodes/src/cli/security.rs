@@ -127,9 +127,7 @@ fn enclaves(args: &EnclaveArgs, create: bool) -> Result<()> {
     let ks = Keystore::open(&args.dir).map_err(classify)?;
     for (enclave, program) in args.targets() {
         let grant = policy::grant(&program, &args.namespace)
-            .and_then(|g| {
-                policy::with_topics(g, &args.namespace, (&args.publish, &args.subscribe))
-            })
+            .and_then(|g| policy::with_topics(g, &args.namespace, (&args.publish, &args.subscribe)))
             .map_err(|e| super::bad_input(format!("enclave {enclave}: {e}")))?;
         let written = if create {
             ks.create_enclave(&enclave, &grant)

@@ -272,7 +272,10 @@ pub fn with_topics(
         namespace: namespace.to_owned(),
         reason: e.to_string(),
     })?;
-    for (topics, set) in [(publish, &mut grant.publish), (subscribe, &mut grant.subscribe)] {
+    for (topics, set) in [
+        (publish, &mut grant.publish),
+        (subscribe, &mut grant.subscribe),
+    ] {
         for t in topics {
             if let Some(reason) = rpkm_transport::names::absolute_name_error(t) {
                 return Err(PolicyError::Topic {
