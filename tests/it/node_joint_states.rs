@@ -159,6 +159,7 @@ fn a_cyclone_cell_drives_the_stack_as_the_csv_source_does() {
         cell: &cell,
         readers: 2,
         set_followers_on: &["/rpkm/ingest", DIRECT],
+        poses: n,
         tail: true,
     };
     let script = write_script(&dir.0, &script.text());

@@ -151,7 +151,9 @@ pub struct Script<'a> {
     pub readers: usize,
     /// Nodes whose `followers` the cell sets at the switch; none: no switch.
     pub set_followers_on: &'a [&'a str],
-    /// Whether the refused messages and the silent thermometer follow the campaign.
+    /// How many of the campaign's poses the cell plays.
+    pub poses: usize,
+    /// Whether the refused messages and the silent thermometer follow the poses.
     pub tail: bool,
 }
 
@@ -171,7 +173,7 @@ impl Script<'_> {
         let mut out = format!("MATCH {} /joint_states {THERMOMETER}\n", self.readers);
         let temp = |k: usize| c.poses[k].covariates[0].expect("a temperature");
         out.push_str(&temperature_line(stamp(c, 0), temp(0)));
-        for (k, pose) in c.poses.iter().enumerate() {
+        for (k, pose) in c.poses.iter().enumerate().take(self.poses) {
             if k == split(c) && !self.set_followers_on.is_empty() {
                 // every earlier state has been read before the set
                 out.push_str("WAIT 0.3\n");
