@@ -16,10 +16,6 @@
 //! - then a JointState without q2's joint, one with arrays of unequal length, one with q3 at
 //!   NaN, and the thermometer silent past its timeout: counted and named on /diagnostics,
 //!   nothing published from them, and the next state carries the temperature not measured.
-#![expect(
-    clippy::cast_possible_truncation,
-    reason = "test fixtures: counts far inside the target type's range"
-)]
 
 use crate::joint_states_support::{
     campaign, cell, estimate_gap, launch_dir, reference, split, status_gap, value, write_script,
@@ -143,10 +139,6 @@ fn cell_peer(py: &Path, script: &Path) -> (Proc, std::sync::mpsc::Receiver<Strin
 }
 
 #[test]
-#[expect(
-    clippy::too_many_lines,
-    reason = "an end-to-end scenario, read top to bottom"
-)]
 fn a_cyclone_cell_drives_the_stack_as_the_csv_source_does() {
     let Some(py) = python() else { return };
     let c = campaign();

@@ -19,7 +19,7 @@ use crate::joint_states_support::{
     campaign, cell, launch_dir, reference, write_script, Script, THERMOMETER,
 };
 use crate::node_support::{unique, Launch, TempDir};
-use crate::security_support::{env, keystore, security};
+use crate::security_support::{env, keystore, required, security};
 
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
@@ -32,19 +32,6 @@ const DEMO_POSES: usize = 194;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// Whether `what` is there; a missing tool skips with a word, except in CI
-/// (`RPKM_REQUIRE_PYTHON`, set by .ci/run, which installs it).
-fn required(have: bool, what: &str) -> bool {
-    if !have {
-        assert!(
-            std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
-            "CI: {what} is required (.ci/run installs it)"
-        );
-        eprintln!("SKIPPED: {what} not found");
-    }
-    have
 }
 
 /// The Fast DDS peer: fastddsgen's types and the peer compiled against Debian's Fast DDS,
@@ -133,7 +120,7 @@ fn peer_output(child: Child) -> (Vec<(u64, f64, f64, f64)>, String) {
                 let num = |s: &str| s.parse::<f64>().expect("a number");
                 estimates.push((seq.parse().expect("seq"), num(x), num(y), num(psi)));
             }
-            ["DONE", ..] => done = line.to_owned(),
+            ["DONE", ..] => line.clone_into(&mut done),
             _ => {}
         }
     }

@@ -41,27 +41,7 @@ from cyclonedds.topic import Topic  # noqa: E402
 from cyclonedds.util import duration  # noqa: E402
 
 from ros2_params_peer import Peer  # noqa: E402
-
-
-@dataclass
-class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
-    sec: t.int32
-    nanosec: t.uint32
-
-
-@dataclass
-class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
-    stamp: Time
-    frame_id: str
-
-
-@dataclass
-class JointState(IdlStruct, typename="sensor_msgs::msg::dds_::JointState_"):
-    header: Header
-    name: t.sequence[str]
-    position: t.sequence[t.float64]
-    velocity: t.sequence[t.float64]
-    effort: t.sequence[t.float64]
+from ros2_views_peer import Header, JointState, Time  # noqa: E402
 
 
 @dataclass
