@@ -40,6 +40,7 @@ pub use params::{NodeParams, ParamError};
 #[derive(clap::Args, Debug, Clone)]
 #[command(after_help = "Examples:\n  \
 rpkm node ingest --source campaign.csv --params launch_scripts/params.yaml\n  \
+rpkm node ingest --source joint_states --params cell.yaml --backend dds   # a ros2_control cell\n  \
 rpkm node tcp_estimator --params launch_scripts/params.yaml --backend both\n  \
 rpkm node tcp_estimator --backend dds --param view_every=80   # PoseStamped + /tf at 100 Hz of 8 kHz\n  \
 rpkm node preload_monitor --param warn_percent=20 --param error_percent=50")]
@@ -51,8 +52,9 @@ pub struct NodeArgs {
 /// The four nodes.
 #[derive(clap::Subcommand, Debug, Clone)]
 pub enum NodeKind {
-    /// Validates and republishes ActuatorState/TcpMeasurement from DDS, a CSV stream on stdin
-    /// or a campaign CSV file; rejects are counted on /diagnostics.
+    /// Validates and republishes ActuatorState/TcpMeasurement from DDS, a ros2_control cell's
+    /// JointState, a CSV stream on stdin or a campaign CSV file; rejects are counted on
+    /// /diagnostics.
     #[command(name = "ingest")]
     Ingest(ingest::IngestArgs),
     /// Elasto-geometric TCP estimate for every ActuatorState.
