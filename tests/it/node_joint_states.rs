@@ -23,6 +23,9 @@ use crate::joint_states_support::{
 };
 use crate::node_support::{python, rpkm, unique, Launch, Proc};
 
+use rpkm_core::elastic::{fegm, Stiffness, FOLLOWERS_23};
+use rpkm_core::params::Params;
+
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -260,6 +263,27 @@ fn a_cyclone_cell_drives_the_stack_as_the_csv_source_does() {
         q2_before == 0.0 && q2_after.abs() > 1.0,
         "{q2_before} -> {q2_after} %"
     );
+    // and the estimate is not the one q2, q3 as followers give (the core's solve of the same
+    // drive state): the switch changed its drive forces (q3's preload) and the TCP
+    let pose = &c.poses[split(&c)];
+    let old = fegm(
+        &Params::nominal(),
+        &Stiffness::default(),
+        pose.q,
+        FOLLOWERS_23,
+    )
+    .expect("the core solves the state with q2, q3 following");
+    let e = &seen.estimates[&first];
+    let preload = (0..4)
+        .map(|i| (e.drive_forces[i] - old.drive_force[i]).abs())
+        .fold(0.0f64, f64::max);
+    let moved = (e.x - old.x / 1e3).hypot(e.y - old.y / 1e3);
+    eprintln!(
+        "seq {first}: every drive holding: drive forces {:?} N, with q2, q3 following {:?} N \
+         (TCP {moved:e} m apart)",
+        e.drive_forces, old.drive_force
+    );
+    assert!(preload > 100.0 && moved > 1e-6, "{preload} N, {moved} m");
 
     // temperatures: named in the campaign info, attached, not measured once quiet
     let info = seen.info.as_ref().expect("campaign info");

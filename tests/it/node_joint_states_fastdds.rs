@@ -141,7 +141,12 @@ fn against_reference(got: &[(u64, f64, f64, f64)]) -> f64 {
     let mut gap = 0.0f64;
     for &(seq, x, y, psi) in got {
         let w = &want.estimates[&seq];
-        gap = gap.max((x - w.x).abs().max((y - w.y).abs()).max((psi - w.psi).abs()));
+        gap = gap.max(
+            (x - w.x)
+                .abs()
+                .max((y - w.y).abs())
+                .max((psi - w.psi).abs()),
+        );
     }
     assert!(gap <= 1e-9, "{gap} m from the CSV source's");
     gap
@@ -199,7 +204,10 @@ fn a_fast_dds_cell_drives_the_stack_and_reads_its_estimates() {
     stack.stop();
     eprintln!("Fast DDS peer: {done}");
     let gap = against_reference(&estimates);
-    eprintln!("Fast DDS: {} estimates, largest gap {gap} m", estimates.len());
+    eprintln!(
+        "Fast DDS: {} estimates, largest gap {gap} m",
+        estimates.len()
+    );
 }
 
 #[test]
@@ -241,14 +249,19 @@ fn a_fast_dds_cell_in_an_sros2_enclave_drives_the_secured_stack() {
     let envs: Vec<(&str, &str)> = envs.iter().map(|(a, b)| (a.as_str(), b.as_str())).collect();
     let mut stack = Launch::start(&cell_launch(&dir), &envs);
     let enclave = keys.join("enclaves/cell/fastdds_peer");
-    let (estimates, done) =
-        peer_output(start_peer(&bin, (domain, &script), Some(&enclave), None));
+    let (estimates, done) = peer_output(start_peer(&bin, (domain, &script), Some(&enclave), None));
     stack.stop();
     std::fs::write(&stop, b"").expect("stop file");
     let (outsider_got, outsider_done) = peer_output(outsider);
     eprintln!("secure Fast DDS peer: {done}; without credentials: {outsider_done}");
     let gap = against_reference(&estimates);
-    eprintln!("Fast DDS, SROS2 Enforce: {} estimates, largest gap {gap} m", estimates.len());
-    assert!(outsider_got.is_empty(), "without credentials: {outsider_got:?}");
+    eprintln!(
+        "Fast DDS, SROS2 Enforce: {} estimates, largest gap {gap} m",
+        estimates.len()
+    );
+    assert!(
+        outsider_got.is_empty(),
+        "without credentials: {outsider_got:?}"
+    );
     assert_eq!(outsider_done, "DONE 0 0 0", "matched nothing");
 }

@@ -33,8 +33,10 @@ fn repo() -> PathBuf {
 
 /// The campaign both paths play: `bags/demo/campaign.csv` (194 poses, q2 and q3 followers,
 /// no drive force), then [`TWIN_POSES`] poses of the twin under preload 10 s later (every
-/// drive holding, a 20 µm offset on q3: forces of kN). Read back from its CSV text, so that
-/// the CSV source and the cell's messages start from the same numbers.
+/// drive holding, forces of kN), q3's encoder 50 µm off the position the nominal model
+/// makes compatible (so that the model predicts a preload while q3 holds, none while it
+/// follows). Read back from its CSV text, so that the CSV source and the cell's messages
+/// start from the same numbers.
 pub fn campaign() -> Campaign {
     let demo_text =
         std::fs::read_to_string(repo().join("bags/demo/campaign.csv")).expect("demo campaign");
@@ -46,6 +48,7 @@ pub fn campaign() -> Campaign {
         pose.t += shift;
         pose.setup = "cell".into();
         pose.covariates = vec![Some(20.5 + k as f64 * 1e-3)];
+        pose.q[2] += 0.05;
         c.poses.push(pose);
     }
     Campaign::parse(&c.to_csv(), "joint_states.csv").expect("the campaign reads back")
