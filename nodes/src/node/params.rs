@@ -196,6 +196,11 @@ fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Value)>) {
 fn yaml_text(v: &Value) -> String {
     match v {
         Value::String(s) => format!("{s:?}"),
+        // on one line, as a flow sequence, so that a message stays one line
+        Value::Sequence(items) => {
+            let items: Vec<String> = items.iter().map(yaml_text).collect();
+            format!("[{}]", items.join(", "))
+        }
         other => serde_yaml::to_string(other)
             .map_or_else(|_| format!("{other:?}"), |s| s.trim().to_owned()),
     }
