@@ -475,7 +475,6 @@ fn specs() -> Vec<Spec> {
     specs
 }
 
-/// Runs the node until SIGINT/SIGTERM.
 /// Logs the input's losses since the last report: once per report, not per gap (a stall
 /// loses in bursts).
 fn report_loss(ctx: &NodeContext, monitor: &Monitor, lost_reported: &mut u64) {
@@ -525,6 +524,7 @@ fn report(ctx: &NodeContext, monitor: &Monitor, input: &mut DriveInput) -> Diagn
     diagnostic_array(status)
 }
 
+/// Runs the node until SIGINT/SIGTERM.
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let declared = declared();
     let extra = inputs::extra_backend(args, "preload_monitor")?;
