@@ -182,22 +182,26 @@ pub(crate) struct Choice {
     pub tied_term: Option<String>,
 }
 
+/// What a search draws its models from: the candidates tried, the part combinations of
+/// their families ([`part_variants`]), and those of the current model's families.
+pub(crate) struct Pool<'a> {
+    pub tried: &'a [&'a dyn Effect],
+    pub variants: &'a [Box<dyn Effect>],
+    pub swaps: &'a [Box<dyn Effect>],
+}
+
 /// The trials of a round: every fitted candidate alone (`candidates`, with `fits` by name),
 /// each part of a family on its own, and pairs; their judgements written into the
 /// candidates, the other models returned as trials, and the model chosen.
 pub(crate) fn search<'a>(
     judge: &Judge<'a>,
     (candidates, fits): (&mut [Candidate], &[(String, Fitted)]),
-    (tried, variants, swaps): (
-        &[&'a dyn Effect],
-        &'a [Box<dyn Effect>],
-        &'a [Box<dyn Effect>],
-    ),
+    pool: &Pool<'a>,
     structure: &sparse::Structure,
 ) -> (Vec<ModelTrial>, Option<Choice>) {
     let mut entries: Vec<Entry<'a>> = Vec::new();
     for (i, c) in candidates.iter_mut().enumerate() {
-        let Some(effect) = tried.iter().copied().find(|e| e.name() == c.effect) else {
+        let Some(effect) = pool.tried.iter().copied().find(|e| e.name() == c.effect) else {
             continue;
         };
         let Some(pos) = fits.iter().position(|(n, _)| *n == c.effect) else {
@@ -212,9 +216,9 @@ pub(crate) fn search<'a>(
         entries.push(entry);
     }
     let singles = entries.len();
-    judge.add_parts(&mut entries, variants);
+    judge.add_parts(&mut entries, pool.variants);
     judge.add_pairs(&mut entries, candidates, singles);
-    judge.add_swaps(&mut entries, swaps, singles);
+    judge.add_swaps(&mut entries, pool.swaps, singles);
     for e in &mut entries {
         judge.assess(e);
     }
@@ -625,7 +629,7 @@ fn each_earns_its_place(judge: &Judge, entries: &mut [Entry]) {
             let rest: Vec<&String> = names.iter().filter(|n| *n != member).collect();
             let without = entries.iter().find(|e| {
                 let other = e.names();
-                e.swap.map(|s| s.name()) == entries[k].swap.map(|s| s.name())
+                swapped(e) == swapped(&entries[k])
                     && other.len() == rest.len()
                     && rest.iter().all(|r| other.contains(r))
             });
@@ -654,6 +658,11 @@ fn nothing_left_out_earns(judge: &Judge, entries: &mut [Entry]) {
     }
 }
 
+/// The family variant an entry swaps into the current model, by name.
+fn swapped<'e>(e: &'e Entry) -> Option<&'e str> {
+    e.swap.map(Effect::name)
+}
+
 /// The parts of an effect in a model: those it pins (`thermal:rods`), every part of a family
 /// named whole, none for an effect of one piece.
 fn parts_of(e: &dyn Effect) -> Vec<String> {
@@ -666,7 +675,7 @@ fn parts_of(e: &dyn Effect) -> Vec<String> {
 /// Whether model `big` holds everything of `small` and more: every effect of `small` (or its
 /// family with at least its parts), with the same family swapped in.
 fn covers(big: &Entry, small: &Entry) -> bool {
-    if big.swap.map(|s| s.name()) != small.swap.map(|s| s.name()) {
+    if swapped(big) != swapped(small) {
         return false;
     }
     let holds = |e: &&dyn Effect| {

@@ -60,18 +60,7 @@ fn rounds(
     opts: &Options,
 ) -> Result<Diagnosis, DiagnoseError> {
     let library = effects::library();
-    // a family in the model in any form is not a candidate again
-    let in_families: Vec<&str> = in_model
-        .iter()
-        .map(|e| effects::family_of(e.name()))
-        .collect();
-    let tried: Vec<&dyn Effect> = library
-        .iter()
-        .map(std::convert::AsRef::as_ref)
-        .chain(offered.iter().copied())
-        .filter(|e| !in_families.contains(&effects::family_of(e.name())))
-        .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
-        .collect();
+    let tried = candidates_of(&library, in_model, offered, opts);
     let variants = model::part_variants(&tried, false);
     let swaps = model::part_variants(in_model, true);
     let level = opts.alpha / tried.len().max(1) as f64;
@@ -127,7 +116,11 @@ fn rounds(
     let (trials, choice) = model::search(
         &judge,
         (&mut round.candidates, &round.fits),
-        (&tried, &variants, &swaps),
+        &model::Pool {
+            tried: &tried,
+            variants: &variants,
+            swaps: &swaps,
+        },
         &structure,
     );
     Ok(conclude(Concluded {
@@ -144,6 +137,28 @@ fn rounds(
         level,
         tried: tried.len(),
     }))
+}
+
+/// The effects a diagnosis tries: the library's and the offered, less those whose family is
+/// in the model in any form, and the parallel-holder under model 29 (which has its
+/// parameters already).
+fn candidates_of<'a>(
+    library: &'a [Box<dyn Effect>],
+    in_model: &[&dyn Effect],
+    offered: &[&'a dyn Effect],
+    opts: &Options,
+) -> Vec<&'a dyn Effect> {
+    let in_families: Vec<&str> = in_model
+        .iter()
+        .map(|e| effects::family_of(e.name()))
+        .collect();
+    library
+        .iter()
+        .map(std::convert::AsRef::as_ref)
+        .chain(offered.iter().copied())
+        .filter(|e| !in_families.contains(&effects::family_of(e.name())))
+        .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
+        .collect()
 }
 
 /// The weights the candidates are compared with: the noise estimated under the current model
@@ -208,7 +223,11 @@ fn exact(
     let (trials, choice) = model::search(
         &judge,
         (&mut round.candidates, &round.fits),
-        (first.tried, variants, &[]),
+        &model::Pool {
+            tried: first.tried,
+            variants,
+            swaps: &[],
+        },
         &structure,
     );
     Ok(conclude(Concluded {
