@@ -39,6 +39,7 @@ mod monitor_foxglove_layout;
 mod monitor_tmux;
 mod node_calibrate_action;
 mod node_calibration_services;
+mod node_diagnosis_effects;
 mod node_estimator_effects;
 mod node_estimator_foreign;
 mod node_estimator_jumps;

@@ -5,10 +5,10 @@
 //! calibrate` and the calibrator node as their held-out figures ([`evaluate`]).
 
 use super::figures::length_sigmas;
-use super::held_out::{self, HeldOutCheck, Levels, Model1, Validation};
+use super::held_out::{self, Levels, Model1, Validation};
 use super::model::{self, Settled};
 use super::trials::finish_with;
-use super::types::{Baseline, DiagnoseError, Fit, Fitted, Options};
+use super::types::{Baseline, DiagnoseError, Fit, Fitted, HeldOutCheck, Options};
 use crate::calib::{self, Calibration, Request};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};

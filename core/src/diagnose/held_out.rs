@@ -12,7 +12,7 @@
 //! [`super::structure`] on the held-out residual, with the time since each setup's zero).
 
 use super::structure::Shape;
-use super::types::{DiagnoseError, FitError, Prediction};
+use super::types::{DiagnoseError, FitError, HeldOutCheck, Prediction};
 use crate::calib::{self, Calibration};
 use crate::campaign::{Campaign, Instrument};
 use crate::effects::{Effect, EffectSet};
@@ -158,6 +158,30 @@ pub fn held_out_errors(
         cal,
     }
     .errors(&val)?)
+}
+
+/// The held-out judge on a calibration made outside a diagnosis (`rpkm calibrate`, the
+/// calibrator node): the same errors, floors and tests as the diagnosis's baseline, for the
+/// model with `effects` bound to the calibration's campaign as `cal_set`, the floor of the
+/// noise `noise` estimated with it, at the diagnosis's level `alpha`.
+pub fn judge_calibration(
+    validation: &Campaign,
+    noise: &crate::variance::NoiseEstimate,
+    (effects, cal_set): (&[&dyn Effect], &EffectSet),
+    cal: &Calibration,
+    alpha: f64,
+) -> Result<HeldOutCheck, DiagnoseError> {
+    let val = Validation::new(validation, &noise.model).map_err(DiagnoseError::Validation)?;
+    let model = Model1 {
+        effects,
+        cal_set,
+        cal,
+    };
+    let levels = Levels {
+        variance: alpha,
+        structure: alpha / 3.0,
+    };
+    Ok(judge(&val, &model, &noise.groups, &levels)?)
 }
 
 /// A calibrated model as the held-out judge reads it.
@@ -314,49 +338,6 @@ impl Model1<'_> {
         Ok((0..n)
             .map(|r| jc.row(r).dot(&rel.row(r)).max(0.0))
             .collect())
-    }
-}
-
-/// The figures of one calibrated model on held-out data, and the judge's test of them.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct HeldOutCheck {
-    /// RMS of the held-out TCP errors (µm) as measured, and with each setup's zero removed.
-    pub rms_um: f64,
-    pub rms_relative_um: f64,
-    /// What noise alone gives there (µm): counting each setup's zero reading (which all
-    /// its readings share, so with few setups the raw RMS strays from it by that one draw),
-    /// and with each setup's zero removed.
-    pub noise_floor_um: f64,
-    pub noise_floor_relative_um: f64,
-    /// The floor of this calibrated model with each setup's zero removed (µm): the noise and
-    /// what the calibration's own uncertainty predicts at these poses.
-    pub floor_relative_um: f64,
-    /// Σ (e/σ)² of the zero-removed errors against that floor (scaled to its degrees of
-    /// freedom: the errors less the setups' zeros), and the noise estimate's own degrees of
-    /// freedom (the floor is estimated too; infinite where the noise was stated).
-    pub statistic: f64,
-    pub dof: f64,
-    pub noise_dof: f64,
-    /// P(F ≥ statistic/dof) under a right model: small when the held-out errors are larger
-    /// than the model's floor.
-    pub p_value: f64,
-    /// The RMS is what the model's floor gives (p above the level).
-    pub consistent: bool,
-    /// The held-out residual's structure: the dictionary (with the time since each setup's
-    /// zero and the temperatures), the neighbours along each setup's path, the periods.
-    pub structure_p: f64,
-    pub structured: bool,
-    /// The term the held-out residual follows most, where it follows one.
-    pub follows: Option<super::sparse::Pointer>,
-    /// Held-out errors, each setup's zero removed (mm), for a later comparison.
-    #[serde(skip)]
-    pub errors_relative: Vec<f64>,
-}
-
-impl HeldOutCheck {
-    /// Whether the held-out data agree with the model: at its floor and following nothing.
-    pub fn agrees(&self) -> bool {
-        self.consistent && !self.structured
     }
 }
 

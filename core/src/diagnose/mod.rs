@@ -44,20 +44,11 @@ pub mod types;
 mod verdict;
 
 pub use current::{calib_options, evaluate, Evaluated};
-pub use held_out::{held_out_errors, HeldOutCheck};
+pub use held_out::{held_out_errors, judge_calibration};
 pub use rounds::{diagnose, diagnose_among};
 pub use trials::SCREEN_P;
 pub use types::{
-    Baseline, Candidate, DiagnoseError, Diagnosis, ErrorVector, Fit, GroupRms, Judged, ModelTrial,
-    NoiseReport, Noisier, Options, Outcome, Point, Prediction, Skipped, Test, VerdictKind,
-    NOISIER_THAN_RATED,
+    Baseline, Candidate, DiagnoseError, Diagnosis, ErrorVector, Fit, GroupRms, HeldOutCheck,
+    Judged, ModelTrial, NoiseReport, Noisier, Options, Outcome, Point, Prediction, Skipped, Test,
+    VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM, RELEVANT_FRACTION,
 };
-
-/// Fraction of an effect parameter's plausible magnitude below which a significant estimate
-/// is no missing physics: a model's approximation seen at encoder precision (a bow of
-/// 0.1 µm) is significant on a thousand rows, and irrelevant.
-pub const RELEVANT_FRACTION: f64 = 0.05;
-
-/// RMS (mm) of the length residuals below which the data are taken as noise-free (simulated):
-/// what structure remains is the solvers' round-off, not physics.
-pub const NUMERICAL_RMS_MM: f64 = 1e-6;

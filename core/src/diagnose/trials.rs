@@ -6,8 +6,9 @@
 
 use super::figures::length_values;
 use super::held_out::{Model1, Validation};
+use super::sparse;
+use super::types::RELEVANT_FRACTION;
 use super::types::{Candidate, ErrorVector, Fit, FitError, Fitted, Judged, Prediction, Skipped};
-use super::{sparse, RELEVANT_FRACTION};
 use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Request, SharedRows};
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};

@@ -1,7 +1,6 @@
 //! The diagnosis's vocabulary: its options, errors and results. Every stage reads this file;
 //! it reads none of them.
 
-use super::held_out::HeldOutCheck;
 use super::{neighbours, periodic, sparse};
 use crate::calib::{self, CalibrationError, EffectEstimate, Prior};
 use crate::effects::NotApplicable;
@@ -10,6 +9,15 @@ use crate::obs::{PoseError, RowValue};
 use crate::params::{Model, Params};
 use crate::variance::GroupNoise;
 use std::collections::BTreeMap;
+
+/// Fraction of an effect parameter's plausible magnitude below which a significant estimate
+/// is no missing physics: a model's approximation seen at encoder precision (a bow of
+/// 0.1 µm) is significant on a thousand rows, and irrelevant.
+pub const RELEVANT_FRACTION: f64 = 0.05;
+
+/// RMS (mm) of the length residuals below which the data are taken as noise-free (simulated):
+/// what structure remains is the solvers' round-off, not physics.
+pub const NUMERICAL_RMS_MM: f64 = 1e-6;
 
 /// Options of a diagnosis.
 #[derive(Clone, Debug)]
@@ -500,4 +508,47 @@ pub struct ErrorVector {
     pub reset_y: f64,
     pub dx_um: f64,
     pub dy_um: f64,
+}
+
+/// The figures of one calibrated model on held-out data, and the judge's test of them.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct HeldOutCheck {
+    /// RMS of the held-out TCP errors (µm) as measured, and with each setup's zero removed.
+    pub rms_um: f64,
+    pub rms_relative_um: f64,
+    /// What noise alone gives there (µm): counting each setup's zero reading (which all
+    /// its readings share, so with few setups the raw RMS strays from it by that one draw),
+    /// and with each setup's zero removed.
+    pub noise_floor_um: f64,
+    pub noise_floor_relative_um: f64,
+    /// The floor of this calibrated model with each setup's zero removed (µm): the noise and
+    /// what the calibration's own uncertainty predicts at these poses.
+    pub floor_relative_um: f64,
+    /// Σ (e/σ)² of the zero-removed errors against that floor (scaled to its degrees of
+    /// freedom: the errors less the setups' zeros), and the noise estimate's own degrees of
+    /// freedom (the floor is estimated too; infinite where the noise was stated).
+    pub statistic: f64,
+    pub dof: f64,
+    pub noise_dof: f64,
+    /// P(F ≥ statistic/dof) under a right model: small when the held-out errors are larger
+    /// than the model's floor.
+    pub p_value: f64,
+    /// The RMS is what the model's floor gives (p above the level).
+    pub consistent: bool,
+    /// The held-out residual's structure: the dictionary (with the time since each setup's
+    /// zero and the temperatures), the neighbours along each setup's path, the periods.
+    pub structure_p: f64,
+    pub structured: bool,
+    /// The term the held-out residual follows most, where it follows one.
+    pub follows: Option<sparse::Pointer>,
+    /// Held-out errors, each setup's zero removed (mm), for a later comparison.
+    #[serde(skip)]
+    pub errors_relative: Vec<f64>,
+}
+
+impl HeldOutCheck {
+    /// Whether the held-out data agree with the model: at its floor and following nothing.
+    pub fn agrees(&self) -> bool {
+        self.consistent && !self.structured
+    }
 }

@@ -11,8 +11,8 @@ use super::model::Choice;
 use super::sparse;
 use super::structure::Shape;
 use super::trials::Round;
+use super::types::NUMERICAL_RMS_MM;
 use super::types::{Diagnosis, Fitted, ModelTrial, Options, Test, VerdictKind};
-use super::NUMERICAL_RMS_MM;
 use crate::calib;
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect};
@@ -130,7 +130,7 @@ fn to_add(name: &str) -> String {
 /// (the held-out residual's term where only the held-out data are structured).
 fn kind_of(
     (campaign, base, shape): (&Campaign, &Fitted, &Shape),
-    held_out: Option<&super::held_out::HeldOutCheck>,
+    held_out: Option<&super::types::HeldOutCheck>,
     choice: Option<&Choice>,
     (exact, level): (bool, f64),
 ) -> (VerdictKind, Option<sparse::Pointer>) {

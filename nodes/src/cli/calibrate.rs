@@ -450,26 +450,19 @@ fn write_stage_chart(path: &std::path::Path, stages: &[Stage]) -> anyhow::Result
     Ok(())
 }
 
-/// Held-out TCP errors with the starting and the identified parameters.
+/// Held-out TCP errors with the starting and the identified parameters, and the held-out
+/// judge of the calibrated model (the diagnosis's own: zero removed, the model's floor).
 pub struct Validation {
     pub rms_before_um: f64,
     pub rms_after_um: f64,
     pub gain: f64,
     pub values: usize,
-}
-
-pub fn validate(
-    val: &Campaign,
-    start: &Params,
-    identified: &Params,
-    model: Model,
-) -> anyhow::Result<Validation> {
-    let after = tcp_errors(val, identified, model)?;
-    compare(val, start, model, &after)
+    pub judge: Option<rpkm_core::diagnose::HeldOutCheck>,
 }
 
 /// The held-out TCP errors of the calibration `cal` of the model with the `effects` bound
-/// to its campaign, against the starting parameters without them.
+/// to its campaign (the diagnosis's held-out judge, one evaluation for every command),
+/// against the starting parameters without them.
 fn validate_with(
     val: &Campaign,
     start: &Params,
@@ -477,12 +470,20 @@ fn validate_with(
     noise: &NoiseEstimate,
     (effects, set): (&[&dyn Effect], &EffectSet),
 ) -> anyhow::Result<Validation> {
-    if effects.is_empty() {
-        return validate(val, start, &cal.params, cal.model);
-    }
+    let judge = rpkm_core::diagnose::judge_calibration(
+        val,
+        noise,
+        (effects, set),
+        cal,
+        rpkm_core::diagnose::Options::default().alpha,
+    )
+    .map_err(|e| bad_input(format!("{}: {e}", val.source)))?;
     let after = rpkm_core::diagnose::held_out_errors(val, &noise.model, effects, set, cal)
         .map_err(|e| bad_input(format!("{}: {e}", val.source)))?;
-    compare(val, start, cal.model, &after)
+    Ok(Validation {
+        judge: Some(judge),
+        ..compare(val, start, cal.model, &after)?
+    })
 }
 
 /// The held-out TCP errors (mm) of the parameters `p` in the model without effects.
@@ -513,6 +514,7 @@ fn compare(
         rms_after_um: 1e3 * calib::rms(after),
         gain: calib::gain(&before, after),
         values: before.len(),
+        judge: None,
     })
 }
 
@@ -590,6 +592,17 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
             "\nheld-out TCP RMS ({} values): {:.2} µm before, {:.2} µm after; gain {:.3}",
             v.values, v.rms_before_um, v.rms_after_um, v.gain
         );
+        if let Some(j) = &v.judge {
+            println!(
+                "held-out judge: {}: {}",
+                if j.agrees() {
+                    "the held-out data agree with the model"
+                } else {
+                    "the held-out data do NOT agree with the model"
+                },
+                crate::words::held_out(j)
+            );
+        }
     }
 }
 
@@ -664,6 +677,10 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
         out["val_rms_before_um"] = json!(v.rms_before_um);
         out["val_rms_after_um"] = json!(v.rms_after_um);
         out["gain"] = json!(v.gain);
+        if let Some(j) = &v.judge {
+            out["held_out"] = json!(j);
+            out["held_out"]["judge"] = crate::words::held_out(j).into();
+        }
     }
     out
 }

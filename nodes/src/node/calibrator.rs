@@ -396,15 +396,14 @@ fn parameters_of(
     } else {
         cal_errors.iter().fold(0.0, |m: f64, e| m.max(e.abs())) / MM_PER_M
     };
+    // the diagnosis's held-out judge: `rpkm diagnose` and `rpkm calibrate` report the same
     msg.val_rms = match val_part {
         Some(v) => {
-            let e = rpkm_core::diagnose::held_out_errors(v, &noise.model, effects, set, cal)
-                .map_err(|e| bad_input(format!("held-out setups: {e}")))?;
-            if e.is_empty() {
-                f64::NAN
-            } else {
-                calib::rms(&e) / MM_PER_M
-            }
+            let alpha = rpkm_core::diagnose::Options::default().alpha;
+            let judge =
+                rpkm_core::diagnose::judge_calibration(v, noise, (effects, set), cal, alpha)
+                    .map_err(|e| bad_input(format!("held-out setups: {e}")))?;
+            judge.rms_um * 1e-6
         }
         None => f64::NAN,
     };
