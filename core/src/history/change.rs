@@ -72,7 +72,12 @@ pub struct Change {
 impl Change {
     /// The flagged parameters, the largest change in σ first.
     pub fn flagged(&self) -> Vec<ParamChange> {
-        let mut f: Vec<ParamChange> = self.params.iter().copied().filter(|p| p.flagged()).collect();
+        let mut f: Vec<ParamChange> = self
+            .params
+            .iter()
+            .copied()
+            .filter(|p| p.flagged())
+            .collect();
         f.sort_by(|a, b| {
             let z = |p: &ParamChange| p.z().map_or(0.0, f64::abs);
             z(b).total_cmp(&z(a))
@@ -88,8 +93,7 @@ pub fn change(before: &Estimate, after: &Estimate) -> Change {
         .map(|i| ParamChange {
             param: i,
             change: after.params[i] - before.params[i],
-            sigma: (before.covariance[(i, i)].max(0.0) + after.covariance[(i, i)].max(0.0))
-                .sqrt(),
+            sigma: (before.covariance[(i, i)].max(0.0) + after.covariance[(i, i)].max(0.0)).sqrt(),
             seen: match (before.determined(i), after.determined(i)) {
                 (true, true) => Seen::Both,
                 (true, false) => Seen::Before,

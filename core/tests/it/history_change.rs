@@ -58,7 +58,10 @@ fn a_change_computed_by_hand() {
     assert!(l3.flagged());
     // a large change that the first calibration did not see is unknown, not flagged
     let xa1r = c.params[XA1R];
-    assert_eq!((xa1r.seen, xa1r.z(), xa1r.flagged()), (Seen::After, None, false));
+    assert_eq!(
+        (xa1r.seen, xa1r.z(), xa1r.flagged()),
+        (Seen::After, None, false)
+    );
     assert_eq!(c.params[XA1R + 1].seen, Seen::Neither);
     assert_eq!(
         c.flagged().iter().map(|p| p.param).collect::<Vec<_>>(),
@@ -66,9 +69,17 @@ fn a_change_computed_by_hand() {
     );
     let joint = c.joint.expect("l1 and l3 are determined by both");
     assert_eq!(joint.directions, 2);
-    assert!((joint.chi2 - 0.0488 / 0.000975).abs() < 1e-9, "{}", joint.chi2);
+    assert!(
+        (joint.chi2 - 0.0488 / 0.000975).abs() < 1e-9,
+        "{}",
+        joint.chi2
+    );
     let p = (-joint.chi2 / 2.0).exp();
-    assert!((joint.p_value / p - 1.0).abs() < 1e-6, "{} vs {p}", joint.p_value);
+    assert!(
+        (joint.p_value / p - 1.0).abs() < 1e-6,
+        "{} vs {p}",
+        joint.p_value
+    );
 }
 
 /// The calibration every command makes (tolerance prior, noise estimated) as an estimate.
@@ -123,7 +134,11 @@ fn calibrations_of_one_machine_change_by_their_sigma_and_a_crash_is_l3() {
     }
     assert!(z.len() >= 20, "{} determined changes", z.len());
     let rms = (z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64).sqrt();
-    assert!((0.5..=1.25).contains(&rms), "z RMS {rms:.3} over {}", z.len());
+    assert!(
+        (0.5..=1.25).contains(&rms),
+        "z RMS {rms:.3} over {}",
+        z.len()
+    );
     assert!(z.iter().all(|v| v.abs() < 4.0), "{z:?}");
     assert!(twin.shift(L3, 0.1));
     let crashed = calibrated(&campaign(&mut twin), 7.0 * 86_400.0);
@@ -139,4 +154,3 @@ fn calibrations_of_one_machine_change_by_their_sigma_and_a_crash_is_l3() {
     );
     assert!(c.joint.expect("joint").p_value < 1e-6);
 }
-

@@ -37,9 +37,19 @@ fn a_line_and_its_crossing_by_hand() {
     assert_eq!(c.bound, 5.0);
     assert!((c.t_s / DAY - 4.0).abs() < 1e-9, "{}", c.t_s / DAY);
     let sigma = (0.25 + 2.5_f64.powi(2) * 0.2).sqrt() / 1.3;
-    assert!((c.sigma_s / DAY - sigma).abs() < 1e-9, "{}", c.sigma_s / DAY);
+    assert!(
+        (c.sigma_s / DAY - sigma).abs() < 1e-9,
+        "{}",
+        c.sigma_s / DAY
+    );
     // falling: it leaves by the lower bound
-    let down: Vec<Point> = points.iter().map(|p| Point { value: -p.value, ..*p }).collect();
+    let down: Vec<Point> = points
+        .iter()
+        .map(|p| Point {
+            value: -p.value,
+            ..*p
+        })
+        .collect();
     let c = crossing(&trend(&down).expect("trend"), 0.0, 5.0).expect("crossing");
     assert!(c.bound == -5.0 && (c.t_s / DAY - 4.0).abs() < 1e-9);
 }
@@ -68,8 +78,9 @@ fn the_trend_starts_after_the_last_break() {
 /// Ten points a month apart creeping 20 µm a month (σ 8 µm, the rods of a small campaign),
 /// from −90 µm, tolerance ±100 µm (true crossing 9.5 months after the first): over 4,000
 /// draws the stated σ of the slope and of the crossing date match the scatter of the
-/// estimates (within 10 % and 15 %), and the true date lies within the stated 1σ in about
-/// 68 % of them (the widening by √(χ²/dof) makes it somewhat more).
+/// estimates (within 5 % and 15 %: the date is a ratio, its σ a linearisation), and the true
+/// date lies within the stated 1σ in about 68 % of them (the widening by √(χ²/dof) makes it
+/// somewhat more).
 #[test]
 fn the_stated_sigma_of_slope_and_crossing_hold_over_many_draws() {
     let month = 30.44 * DAY;
@@ -78,7 +89,7 @@ fn the_stated_sigma_of_slope_and_crossing_hold_over_many_draws() {
     let truth = |t: f64| -0.090 + 0.020 * t / month;
     let true_crossing = 9.5 * month;
     let (mut slopes, mut sigma_slope, mut dates, mut sigma_date) = (vec![], vec![], vec![], vec![]);
-    let mut covered = 0;
+    let (mut covered, mut cut) = (0, 0);
     let draws = 4000;
     for _ in 0..draws {
         let points: Vec<Point> = (0..10)
@@ -93,11 +104,17 @@ fn the_stated_sigma_of_slope_and_crossing_hold_over_many_draws() {
             .collect();
         let t = trend(&points).expect("trend");
         let c = crossing(&t, 0.0, 0.1).expect("crossing");
+        covered += usize::from((c.t_s - true_crossing).abs() <= c.sigma_s);
+        // a run cut short by a χ² beyond 1e-3 (about 1 draw in 1,000 per cut tested): its
+        // few points scatter widely, as their σ say, and would dominate the spread below
+        if t.from > 0 {
+            cut += 1;
+            continue;
+        }
         slopes.push(t.slope);
         sigma_slope.push(t.sigma_slope);
         dates.push(c.t_s);
         sigma_date.push(c.sigma_s);
-        covered += usize::from((c.t_s - true_crossing).abs() <= c.sigma_s);
     }
     let spread = |v: &[f64]| {
         let m = v.iter().sum::<f64>() / v.len() as f64;
@@ -111,8 +128,18 @@ fn the_stated_sigma_of_slope_and_crossing_hold_over_many_draws() {
     let ratio_slope = median(&sigma_slope) / spread(&slopes);
     let ratio_date = median(&sigma_date) / spread(&dates);
     let coverage = covered as f64 / f64::from(draws);
-    eprintln!("slope σ / scatter {ratio_slope:.3}, date σ / scatter {ratio_date:.3}, 1σ coverage {coverage:.3}");
-    assert!((0.9..1.1).contains(&ratio_slope), "slope σ / scatter {ratio_slope:.3}");
-    assert!((0.85..1.15).contains(&ratio_date), "date σ / scatter {ratio_date:.3}");
+    eprintln!(
+        "slope σ / scatter {ratio_slope:.3}, date σ / scatter {ratio_date:.3}, 1σ coverage \
+         {coverage:.3}, runs cut {cut}"
+    );
+    assert!(cut <= 20, "{cut} runs cut short of {draws}");
+    assert!(
+        (0.95..1.05).contains(&ratio_slope),
+        "slope σ / scatter {ratio_slope:.3}"
+    );
+    assert!(
+        (0.85..1.15).contains(&ratio_date),
+        "date σ / scatter {ratio_date:.3}"
+    );
     assert!((0.64..0.80).contains(&coverage), "coverage {coverage:.3}");
 }
