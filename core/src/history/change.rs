@@ -76,7 +76,7 @@ impl Change {
             .params
             .iter()
             .copied()
-            .filter(|p| p.flagged())
+            .filter(ParamChange::flagged)
             .collect();
         f.sort_by(|a, b| {
             let z = |p: &ParamChange| p.z().map_or(0.0, f64::abs);

@@ -70,7 +70,7 @@ fn a_change_computed_by_hand() {
     let joint = c.joint.expect("l1 and l3 are determined by both");
     assert_eq!(joint.directions, 2);
     assert!(
-        (joint.chi2 - 0.0488 / 0.000975).abs() < 1e-9,
+        (joint.chi2 - 0.0488 / 0.000_975).abs() < 1e-9,
         "{}",
         joint.chi2
     );
@@ -128,7 +128,11 @@ fn calibrations_of_one_machine_change_by_their_sigma_and_a_crash_is_l3() {
     let mut z = Vec::new();
     for pair in runs.windows(2) {
         let c = change(&pair[0], &pair[1]);
-        z.extend(c.params.iter().filter_map(|p| p.z()));
+        z.extend(
+            c.params
+                .iter()
+                .filter_map(rpkm_core::history::ParamChange::z),
+        );
         let joint = c.joint.expect("determined directions");
         assert!(joint.p_value > 1e-3, "{joint:?}");
     }
