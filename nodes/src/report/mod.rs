@@ -5,10 +5,13 @@
 //! on one colour scale, the error vectors of the 2-D instruments, the residual against time
 //! and against the term the verdict points at, and the effects tried.
 //!
+//! `history`: the page of a machine's history (`rpkm history --report`), in the same style.
+//!
 //! Beside the page, `report.json` holds the numbers behind the error-vector maps, so that a
 //! script (or a test) can check what the arrows show.
 
 mod contents;
+pub mod history;
 mod sections;
 
 pub use contents::{Report, Stage};
