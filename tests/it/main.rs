@@ -16,6 +16,7 @@ pub static KILLS_A_NODE: Mutex<()> = Mutex::new(());
 mod bag_support;
 mod foreign_support;
 mod fuzz_support;
+mod history_support;
 mod node_support;
 mod security_support;
 
@@ -32,6 +33,9 @@ mod cli_foreign;
 mod cli_plan;
 mod cli_scipy_baseline;
 mod fuzz_inputs;
+mod history_kill;
+mod history_postgres;
+mod history_twin;
 mod ingest_grammar;
 mod launch_cell;
 mod monitor_foxglove_layout;

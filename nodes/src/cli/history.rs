@@ -45,6 +45,11 @@ pub struct HistoryArgs {
     /// (empty where that calibration did not determine it).
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Write what the text says as JSON: the calibrations, the change (every parameter's
+    /// change, σ, z, which determined it), each parameter's trend (slope per month, σ, its
+    /// run) and tolerance crossing (UTC Unix seconds and σ).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
     /// Write the report into this folder (history.html: one self-contained page with the
     /// change, every parameter over time with its trend and tolerance, the held-out RMS).
     #[arg(long)]
@@ -124,6 +129,10 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
         std::fs::write(path, crate::history::csv::table(&cals))
             .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
         println!("\nwrote {}", path.display());
+    }
+    if let Some(path) = &args.json {
+        super::write_json(path, &crate::history::to_json(machine, &cals, &analysis))?;
+        println!("wrote {}", path.display());
     }
     if let Some(dir) = &args.report {
         std::fs::create_dir_all(dir)
