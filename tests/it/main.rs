@@ -41,6 +41,7 @@ mod launch_cell;
 mod monitor_foxglove_layout;
 mod monitor_tmux;
 mod node_calibrate_action;
+mod node_calibrator_history;
 mod node_calibration_services;
 mod node_estimator_effects;
 mod node_estimator_foreign;
