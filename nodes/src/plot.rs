@@ -20,7 +20,7 @@ mod series;
 pub use axes::{Axes, Frame};
 pub use bars::{bar_chart, BarOptions};
 pub use scatter::{scatter, Marker, Series};
-pub use series::{time_chart, Dated, TimeChart};
+pub use series::{time_chart, Dated, Line, TimeChart};
 
 /// Colours of the series (Tableau 10: distinct, readable on white and in print).
 const PALETTE: [&str; 10] = [

@@ -31,7 +31,13 @@ fn calibration(k: i64) -> CalibrationRecord {
         model: Model::M29,
         effects: serde_json::json!([]),
         params,
-        covariance: SMatrix::from_fn(|i, j| if i == j { 1e-5 * (1.0 + i as f64) } else { 1e-7 }),
+        covariance: SMatrix::from_fn(|i, j| {
+            if i == j {
+                1e-5 * (1.0 + i as f64)
+            } else {
+                1e-7
+            }
+        }),
         tolerance: [0.1; N_PARAMS],
         determined: Some((14, 29)),
         noise: Vec::new(),
@@ -71,11 +77,19 @@ fn killed_writer() {
 fn killed_mid_record(location: &str) {
     let mut store = Store::open(location).expect("open");
     for k in 0..3 {
-        assert!(store.record_calibration(&calibration(k)).expect("record").is_some());
+        assert!(store
+            .record_calibration(&calibration(k))
+            .expect("record")
+            .is_some());
     }
     drop(store);
     let mut child = Command::new(std::env::current_exe().expect("test binary"))
-        .args(["history_kill::killed_writer", "--exact", "--ignored", "--nocapture"])
+        .args([
+            "history_kill::killed_writer",
+            "--exact",
+            "--ignored",
+            "--nocapture",
+        ])
         .env(LOCATION, location)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -95,7 +109,10 @@ fn killed_mid_record(location: &str) {
     assert_eq!(records, (0..3).map(calibration).collect::<Vec<_>>());
     assert!(store.events("killed").expect("events").is_empty());
     // the killed record was never committed: it goes in now
-    assert!(store.record_calibration(&calibration(3)).expect("record").is_some());
+    assert!(store
+        .record_calibration(&calibration(3))
+        .expect("record")
+        .is_some());
     assert_eq!(store.calibrations("killed").expect("read").len(), 4);
 }
 

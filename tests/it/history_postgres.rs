@@ -25,8 +25,14 @@ fn two_writers_at_once_record_every_calibration_once() {
         .into_iter()
         .flat_map(|w| w.join().expect("writer"))
         .collect();
-    let recorded = said.iter().filter(|s| s.contains("recorded as calibration")).count();
-    let again = said.iter().filter(|s| s.contains("already recorded")).count();
+    let recorded = said
+        .iter()
+        .filter(|s| s.contains("recorded as calibration"))
+        .count();
+    let again = said
+        .iter()
+        .filter(|s| s.contains("already recorded"))
+        .count();
     assert_eq!((recorded, again), (CALIBRATIONS, 2), "{said:?}");
     let dir = tempfile::tempdir().expect("tempdir");
     history_support::check(&url, dir.path());

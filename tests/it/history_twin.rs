@@ -14,20 +14,37 @@ fn twelve_calibrations_name_the_crash_and_the_creep() {
     let db = db.to_string_lossy().into_owned();
     for k in 0..CALIBRATIONS {
         let said = record(&db, k);
-        assert!(said.contains(&format!("recorded as calibration {}", k + 1)), "{said}");
+        assert!(
+            said.contains(&format!("recorded as calibration {}", k + 1)),
+            "{said}"
+        );
     }
     // recording a calibration again (a retried write) keeps it once
     assert!(record(&db, 3).contains("already recorded"));
     history_support::check(&db, dir.path());
     let (csv, report) = (dir.path().join("h.csv"), dir.path().join("report"));
     let out = Command::new(env!("CARGO_BIN_EXE_rpkm"))
-        .args(["history", &db, "--machine", MACHINE, "--from", "1", "--to", "2", "--csv"])
+        .args([
+            "history",
+            &db,
+            "--machine",
+            MACHINE,
+            "--from",
+            "1",
+            "--to",
+            "2",
+            "--csv",
+        ])
         .arg(&csv)
         .arg("--report")
         .arg(&report)
         .output()
         .expect("rpkm history");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     check_csv(&std::fs::read_to_string(&csv).expect("csv"));
     check_report(&std::fs::read_to_string(report.join("history.html")).expect("report"));
 }
@@ -45,8 +62,14 @@ fn check_csv(csv: &str) {
         let v: f64 = row[col("l1")].parse().expect("l1 determined");
         let sigma: f64 = row[col("l1_sigma")].parse().expect("σ");
         let truth = nominal[rpkm_core::params::L1] + s.l1_offset[k];
-        assert!((v - truth).abs() < 4.0 * sigma, "{k}: l1 {v} ± {sigma} vs {truth}");
-        assert!(row[col("held_out_rms_um")].parse::<f64>().is_ok(), "{row:?}");
+        assert!(
+            (v - truth).abs() < 4.0 * sigma,
+            "{k}: l1 {v} ± {sigma} vs {truth}"
+        );
+        assert!(
+            row[col("held_out_rms_um")].parse::<f64>().is_ok(),
+            "{row:?}"
+        );
         // the joints a small campaign cannot see are left empty, not written as values
         assert_eq!(row[col("xa1r")], "", "{row:?}");
     }
@@ -71,7 +94,11 @@ fn check_report(html: &str) {
     assert_eq!(l1.matches("class=\"bound\"").count(), 2);
     let l3 = chart("l3");
     assert_eq!(l3.matches("class=\"point\"").count(), CALIBRATIONS);
-    assert_eq!(l3.matches("class=\"trend\"").count(), 0, "l3 does not creep");
+    assert_eq!(
+        l3.matches("class=\"trend\"").count(),
+        0,
+        "l3 does not creep"
+    );
     assert!(html.contains("Held-out TCP RMS"));
     let flagged: Vec<&str> = html
         .split("<tr class=\"flag\"")

@@ -21,7 +21,12 @@ fn calibrate(dir: &TempDir, k: usize, db: &str) -> String {
         ),
     )
     .expect("params");
-    let launch = launch_from_params(dir, "h.launch.yaml", &scenario().campaign(k), &["calibrator"]);
+    let launch = launch_from_params(
+        dir,
+        "h.launch.yaml",
+        &scenario().campaign(k),
+        &["calibrator"],
+    );
     let prefix = unique("hist");
     let t = Transport::new(&TransportConfig::new(unique("histobs")).ipc_prefix(&prefix))
         .expect("transport");
@@ -62,9 +67,17 @@ fn the_calibrator_records_and_says_what_changed_since_the_previous_calibration()
         .unwrap_or_else(|| panic!("{second}"));
     // "2026-..-.. ..:.. UTC): l3 +0.1xx mm ± 0.0xx (zσ)" and nothing else
     let moved = since.split("): ").nth(1).expect("what moved");
-    assert!(moved.starts_with("l3 +0.1") || moved.starts_with("l3 +0.0"), "{second}");
+    assert!(
+        moved.starts_with("l3 +0.1") || moved.starts_with("l3 +0.0"),
+        "{second}"
+    );
     assert_eq!(moved.matches(" mm ± ").count(), 1, "{second}");
-    let change: f64 = moved[3..].split(' ').next().expect("number").parse().expect("mm");
+    let change: f64 = moved[3..]
+        .split(' ')
+        .next()
+        .expect("number")
+        .parse()
+        .expect("mm");
     assert!((change - 0.1).abs() < 0.03, "{second}");
     let mut store = Store::open(&db).expect("open");
     let cals = store.calibrations("cell-7").expect("read");

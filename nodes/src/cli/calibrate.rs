@@ -206,25 +206,48 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         write_calibration_json(path, &cal, (&noise, file), val.as_ref(), stages.as_deref())?;
         println!("\nwrote {}", path.display());
     }
-    if let (Some(db), Some(machine)) = (&args.history, &args.machine) {
-        let at_s = crate::history::time_of(args.at.as_deref())
-            .map_err(|e| bad_input(format!("--at: {e}")))?;
-        let record = crate::history::record_of(&crate::history::Made {
-            machine,
-            at_s,
-            source: "rpkm calibrate",
-            campaign: &campaign,
-            calibration: &cal,
-            noise: &noise,
-            selection: &opts.selection,
-            held_out_rms_um: val.as_ref().map(|v| v.rms_after_um),
-            verdict,
-        });
-        let mut store = rpkm_history::Store::open(db)?;
-        match store.record_calibration(&record)? {
-            Some(id) => println!("\nrecorded as calibration {id} of {machine} in {}", store.location()),
-            None => println!("\nalready recorded in {} (same machine, time and campaign)", store.location()),
-        }
+    record_history(
+        args,
+        (&campaign, &cal, &noise, &opts.selection),
+        val.as_ref(),
+        verdict,
+    )
+}
+
+/// `--history`: the calibration recorded in the machine's history, with the held-out RMS
+/// and the verdict it had (None: not asked for).
+fn record_history(
+    args: &CalibrateArgs,
+    (campaign, cal, noise, selection): (&Campaign, &Calibration, &NoiseEstimate, &Selection),
+    val: Option<&Validation>,
+    verdict: Option<String>,
+) -> anyhow::Result<()> {
+    let (Some(db), Some(machine)) = (&args.history, &args.machine) else {
+        return Ok(());
+    };
+    let at_s =
+        crate::history::time_of(args.at.as_deref()).map_err(|e| bad_input(format!("--at {e}")))?;
+    let record = crate::history::record_of(&crate::history::Made {
+        machine,
+        at_s,
+        source: "rpkm calibrate",
+        campaign,
+        calibration: cal,
+        noise,
+        selection,
+        held_out_rms_um: val.map(|v| v.rms_after_um),
+        verdict,
+    });
+    let mut store = rpkm_history::Store::open(db)?;
+    match store.record_calibration(&record)? {
+        Some(id) => println!(
+            "\nrecorded as calibration {id} of {machine} in {}",
+            store.location()
+        ),
+        None => println!(
+            "\nalready recorded in {} (same machine, time and campaign)",
+            store.location()
+        ),
     }
     Ok(())
 }

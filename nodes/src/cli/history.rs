@@ -59,9 +59,16 @@ pub struct HistoryArgs {
 /// `--tolerance`: (parameter, band in mm or rad).
 fn tolerances(spec: Option<&str>) -> anyhow::Result<Vec<(usize, f64)>> {
     let mut out = Vec::new();
-    for item in spec.unwrap_or("").split(',').map(str::trim).filter(|s| !s.is_empty()) {
+    for item in spec
+        .unwrap_or("")
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+    {
         let (name, value) = item.split_once('=').ok_or_else(|| {
-            bad_input(format!("--tolerance {item}: expected NAME=VALUE (mm, mrad)"))
+            bad_input(format!(
+                "--tolerance {item}: expected NAME=VALUE (mm, mrad)"
+            ))
         })?;
         let i = index_of(name.trim()).ok_or_else(|| {
             bad_input(format!(
@@ -115,7 +122,10 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     }
     let last = cals.len() - 1;
     let to = args.to.map(|id| position(&cals, id, "--to")).transpose()?;
-    let from = args.from.map(|id| position(&cals, id, "--from")).transpose()?;
+    let from = args
+        .from
+        .map(|id| position(&cals, id, "--from"))
+        .transpose()?;
     let pair = match (from, to) {
         (None, None) => None,
         (f, t) => {
@@ -145,7 +155,8 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
             analysis: &analysis,
         }
         .html();
-        std::fs::write(&page, html).map_err(|e| anyhow::anyhow!("writing {}: {e}", page.display()))?;
+        std::fs::write(&page, html)
+            .map_err(|e| anyhow::anyhow!("writing {}: {e}", page.display()))?;
         println!("report: {}", page.display());
     }
     Ok(())
@@ -167,9 +178,11 @@ fn print_history(machine: &str, cals: &[Stored<CalibrationRecord>], a: &Analysis
             r.campaign.name,
             r.campaign.poses,
             r.model.number(),
-            r.determined.map_or("-".to_owned(), |(n, of)| format!("{n}/{of}")),
+            r.determined
+                .map_or("-".to_owned(), |(n, of)| format!("{n}/{of}")),
             r.chi2_per_dof,
-            r.held_out_rms_um.map_or("-".to_owned(), |v| format!("{v:.2} µm"))
+            r.held_out_rms_um
+                .map_or("-".to_owned(), |v| format!("{v:.2} µm"))
         );
     }
     println!();

@@ -40,7 +40,8 @@ pub fn table(cals: &[Stored<CalibrationRecord>]) -> String {
             r.model.number(),
             r.chi2_per_dof,
             r.held_out_rms_um.map_or(String::new(), |v| v.to_string()),
-            r.determined.map_or(String::new(), |(n, of)| format!("{n}/{of}"))
+            r.determined
+                .map_or(String::new(), |(n, of)| format!("{n}/{of}"))
         );
         for &i in &params {
             if e.determined(i) {

@@ -14,6 +14,7 @@ use rpkm_core::history::{change, crossing, trend, Change, Crossing, Point, Trend
 use rpkm_core::params::Params;
 use rpkm_core::variance::NoiseEstimate;
 use rpkm_history::{CalibrationRecord, CampaignId, NoiseLevel, Stored};
+use std::fmt::Write as _;
 
 /// A calibration as it was made, to be recorded.
 pub struct Made<'a> {
@@ -40,10 +41,13 @@ pub fn campaign_digest(c: &Campaign) -> String {
         source: String::new(),
         ..c.clone()
     };
-    openssl::sha::sha256(bare.to_csv().as_bytes())
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    openssl::sha::sha256(bare.to_csv().as_bytes()).iter().fold(
+        String::with_capacity(64),
+        |mut hex, b| {
+            let _ = write!(hex, "{b:02x}");
+            hex
+        },
+    )
 }
 
 /// The record of a calibration.
@@ -224,7 +228,9 @@ pub fn time_of(at: Option<&str>) -> Result<i64, String> {
         .ok()
         .and_then(|d| d.and_hms_opt(0, 0, 0))
         .map(|t| t.and_utc().timestamp())
-        .ok_or_else(|| format!("{at}: expected RFC 3339 (2026-03-01T10:00:00Z) or a date (2026-03-01)"))
+        .ok_or_else(|| {
+            format!("{at}: expected RFC 3339 (2026-03-01T10:00:00Z) or a date (2026-03-01)")
+        })
 }
 
 /// The analysis as JSON (mm, rad; slopes per month; times UTC Unix seconds): what

@@ -44,7 +44,9 @@ fn rate_unit(param: usize) -> (f64, &'static str) {
 /// "l3 +0.101 mm ± 0.004 (25.3σ)".
 pub fn moved(p: &ParamChange) -> String {
     let (s, u) = change_unit(p.param);
-    let z = p.z().map_or(String::new(), |z| format!(" ({:.1}σ)", z.abs()));
+    let z = p
+        .z()
+        .map_or(String::new(), |z| format!(" ({:.1}σ)", z.abs()));
     format!(
         "{} {:+.3} {u} ± {:.3}{z}",
         NAMES[p.param],

@@ -820,7 +820,10 @@ fn open_history(ctx: &NodeContext) -> anyhow::Result<Option<super::history::Node
     if location.is_empty() {
         return Ok(None);
     }
-    let mut machine = ctx.params.string("history_machine", "").map_err(bad_param)?;
+    let mut machine = ctx
+        .params
+        .string("history_machine", "")
+        .map_err(bad_param)?;
     if machine.is_empty() {
         machine = super::history::default_machine(&ctx.status_name, &ctx.name);
     }
@@ -1087,7 +1090,10 @@ impl Calibrator {
                 }
                 let (level, history) = match recorded {
                     Some(Ok(said)) => (DiagnosticStatus::OK, format!("; history: {said}")),
-                    Some(Err(e)) => (DiagnosticStatus::WARN, format!("; history: not recorded: {e:#}")),
+                    Some(Err(e)) => (
+                        DiagnosticStatus::WARN,
+                        format!("; history: not recorded: {e:#}"),
+                    ),
                     None => (DiagnosticStatus::OK, String::new()),
                 };
                 (

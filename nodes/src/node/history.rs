@@ -93,7 +93,12 @@ impl NodeHistory {
             };
             ("step", who, s.change, Some(s.sigma))
         } else if let Some(t) = &r.resolved {
-            ("tie_settled", state_name(t.param).to_owned(), t.change, None)
+            (
+                "tie_settled",
+                state_name(t.param).to_owned(),
+                t.change,
+                None,
+            )
         } else {
             return Ok(());
         };
@@ -118,7 +123,13 @@ mod tests {
     fn the_machine_is_the_namespace() {
         use super::default_machine;
         assert_eq!(default_machine("rpkm/calibrator", "calibrator"), "rpkm");
-        assert_eq!(default_machine("/machine_a/calibrator", "calibrator"), "machine_a");
-        assert_eq!(default_machine("/plant/cell_2/calibrator", "calibrator"), "plant_cell_2");
+        assert_eq!(
+            default_machine("/machine_a/calibrator", "calibrator"),
+            "machine_a"
+        );
+        assert_eq!(
+            default_machine("/plant/cell_2/calibrator", "calibrator"),
+            "plant_cell_2"
+        );
     }
 }

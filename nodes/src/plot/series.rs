@@ -16,14 +16,21 @@ pub struct Dated {
     pub hover: String,
 }
 
+/// A straight line from (day, value) to (day, value), and its legend.
+#[derive(Clone, Debug)]
+pub struct Line {
+    pub from: (f64, f64),
+    pub to: (f64, f64),
+    pub name: String,
+}
+
 /// What a time chart shows.
 #[derive(Clone, Debug, Default)]
 pub struct TimeChart<'a> {
     pub title: &'a str,
     pub y_label: &'a str,
     pub points: Vec<Dated>,
-    /// A line from (day, value) to (day, value), and its legend.
-    pub line: Option<((f64, f64), (f64, f64), String)>,
+    pub line: Option<Line>,
     /// Horizontal bounds (value, legend).
     pub bounds: Vec<(f64, String)>,
     /// A date and its σ, days (drawn as a vertical band and line), and its legend.
@@ -41,10 +48,8 @@ fn date_tick(day: &f64) -> String {
         reason = "a tick within the axis's few years, rounded to the second"
     )]
     let s = (day * 86_400.0).round() as i64;
-    chrono::DateTime::from_timestamp(s, 0).map_or_else(
-        || format!("{day:.0}"),
-        |d| d.format("%Y-%m-%d").to_string(),
-    )
+    chrono::DateTime::from_timestamp(s, 0)
+        .map_or_else(|| format!("{day:.0}"), |d| d.format("%Y-%m-%d").to_string())
 }
 
 /// The chart as an SVG document.
@@ -53,13 +58,13 @@ pub fn time_chart(c: &TimeChart) -> String {
         .points
         .iter()
         .map(|p| p.day)
-        .chain(c.line.iter().flat_map(|l| [l.0 .0, l.1 .0]))
+        .chain(c.line.iter().flat_map(|l| [l.from.0, l.to.0]))
         .chain(c.date.iter().flat_map(|d| [d.0 - d.1, d.0 + d.1]));
     let values = c
         .points
         .iter()
         .flat_map(|p| [p.value - p.sigma, p.value + p.sigma])
-        .chain(c.line.iter().flat_map(|l| [l.0 .1, l.1 .1]))
+        .chain(c.line.iter().flat_map(|l| [l.from.1, l.to.1]))
         .chain(c.bounds.iter().map(|b| b.0));
     let x = super::range(days, 0.04);
     let y = super::range(values, 0.08);
@@ -97,8 +102,8 @@ pub fn time_chart(c: &TimeChart) -> String {
         );
         legend.push(("#b2182b", name.clone()));
     }
-    if let Some((a, b, name)) = &c.line {
-        let (pa, pb) = (f.at(a.0, a.1), f.at(b.0, b.1));
+    if let Some(Line { from, to, name }) = &c.line {
+        let (pa, pb) = (f.at(from.0, from.1), f.at(to.0, to.1));
         let _ = write!(
             o,
             "<line class=\"trend\" x1=\"{:.1}\" y1=\"{:.1}\" x2=\"{:.1}\" y2=\"{:.1}\" stroke=\"{}\" stroke-width=\"2\"><title>{}</title></line>",
@@ -135,7 +140,10 @@ fn points(o: &mut String, f: &super::Frame, points: &[Dated]) {
     {
         let (px, py) = f.at(p.day, p.value);
         if p.sigma > 0.0 && p.sigma.is_finite() {
-            let (lo, hi) = (f.at(p.day, p.value - p.sigma).1, f.at(p.day, p.value + p.sigma).1);
+            let (lo, hi) = (
+                f.at(p.day, p.value - p.sigma).1,
+                f.at(p.day, p.value + p.sigma).1,
+            );
             let _ = write!(
                 o,
                 "<line x1=\"{px:.1}\" y1=\"{lo:.1}\" x2=\"{px:.1}\" y2=\"{hi:.1}\" stroke=\"#222\"/>"

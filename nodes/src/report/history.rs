@@ -6,7 +6,7 @@
 use super::sections::figure;
 use crate::history::words::{self, change_unit, date};
 use crate::history::{charted, Analysis, ParamTrend};
-use crate::plot::{self, escape, Dated, TimeChart};
+use crate::plot::{self, escape, Dated, Line, TimeChart};
 use rpkm_core::history::Seen;
 use rpkm_core::params::{unit, Params, Unit, NAMES};
 use rpkm_history::{CalibrationRecord, EventRecord, Stored};
@@ -46,7 +46,9 @@ impl HistoryPage<'_> {
     fn summary(&self) -> String {
         let cals = self.calibrations;
         let span = match (cals.first(), cals.last()) {
-            (Some(a), Some(b)) => format!("from {} to {}", date(a.record.at_s), date(b.record.at_s)),
+            (Some(a), Some(b)) => {
+                format!("from {} to {}", date(a.record.at_s), date(b.record.at_s))
+            }
             _ => "none yet".to_owned(),
         };
         let mut o = format!(
@@ -173,11 +175,11 @@ impl HistoryPage<'_> {
         let line = t.trend.filter(|_| t.significant()).and_then(|tr| {
             let first = t.points.get(tr.from)?.1.t_s;
             let last = t.crossing.map_or(now as f64, |c| c.t_s.max(now as f64));
-            Some((
-                (first / DAY_S, (tr.at(first) - nominal) * s),
-                (last / DAY_S, (tr.at(last) - nominal) * s),
-                words::trend(t, self.calibrations).unwrap_or_default(),
-            ))
+            Some(Line {
+                from: (first / DAY_S, (tr.at(first) - nominal) * s),
+                to: (last / DAY_S, (tr.at(last) - nominal) * s),
+                name: words::trend(t, self.calibrations).unwrap_or_default(),
+            })
         });
         let date_of = t.crossing.map(|c| {
             (

@@ -81,13 +81,22 @@ pub fn scenario() -> &'static Scenario {
                 1 => assert!(twin.shift(L3, 0.1)),
                 _ => assert!(twin.shift(L1, CREEP_MM)),
             }
-            let c = twin.campaign_by_names(&["kgm", "li_psi"], 0).expect("campaign");
+            let c = twin
+                .campaign_by_names(&["kgm", "li_psi"], 0)
+                .expect("campaign");
             let v = twin.validation(40).expect("validation");
             std::fs::write(dir.join(format!("c{k:02}.csv")), c.to_csv()).expect("write");
             std::fs::write(dir.join(format!("v{k:02}.csv")), v.to_csv()).expect("write");
             // 8 days between the first two, then 30 days apart
             let k = i64::try_from(k).expect("small");
-            at_s.push(FIRST_S + if k == 0 { 0 } else { 8 * DAY_S + (k - 1) * 30 * DAY_S });
+            at_s.push(
+                FIRST_S
+                    + if k == 0 {
+                        0
+                    } else {
+                        8 * DAY_S + (k - 1) * 30 * DAY_S
+                    },
+            );
             l1_offset.push(twin.true_params()[L1] - nominal[L1]);
         }
         Scenario {
@@ -176,10 +185,16 @@ pub fn check(db: &str, scratch: &Path) {
     // a wider band: l1 has not left it yet; the date ahead against the truth
     let (text, j) = history(db, &["--tolerance", "l1=0.25"], &scratch.join("h25.json"));
     let crossing = &named(&j["trends"], "l1")["crossing"];
-    let (t, sigma) = (crossing["t_s"].as_f64().expect("t"), crossing["sigma_s"].as_f64().expect("σ"));
+    let (t, sigma) = (
+        crossing["t_s"].as_f64().expect("t"),
+        crossing["sigma_s"].as_f64().expect("σ"),
+    );
     let truth = s.l1_crossing_s(0.25);
     assert!(t > s.at_s[CALIBRATIONS - 1] as f64, "{text}");
-    assert!((t - truth).abs() < 2.0 * sigma, "{t} vs {truth} ± {sigma}\n{text}");
+    assert!(
+        (t - truth).abs() < 2.0 * sigma,
+        "{t} vs {truth} ± {sigma}\n{text}"
+    );
     assert!(text.contains("l1 leaves ±0.250 mm in "), "{text}");
 }
 
@@ -195,7 +210,10 @@ fn check_crash(text: &str, j: &Value, s: &Scenario) {
         .collect();
     assert_eq!(flagged, ["l3"], "{text}");
     let l3 = named(&change["params"], "l3");
-    let (d, sigma) = (l3["change"].as_f64().expect("Δ"), l3["sigma"].as_f64().expect("σ"));
+    let (d, sigma) = (
+        l3["change"].as_f64().expect("Δ"),
+        l3["sigma"].as_f64().expect("σ"),
+    );
     assert!((d - s.crash_mm).abs() < 3.0 * sigma, "l3 {d} ± {sigma}");
     assert!(sigma < 0.02, "σ {sigma}");
     let line = format!("l3 {d:+.3} mm ± {sigma:.3}");
@@ -234,10 +252,20 @@ fn check_creep(text: &str, j: &Value, s: &Scenario) {
         .collect();
     assert_eq!(significant, ["l1"], "{text}");
     let crossing = &l1["crossing"];
-    let (t, sigma) = (crossing["t_s"].as_f64().expect("t"), crossing["sigma_s"].as_f64().expect("σ"));
+    let (t, sigma) = (
+        crossing["t_s"].as_f64().expect("t"),
+        crossing["sigma_s"].as_f64().expect("σ"),
+    );
     let truth = s.l1_crossing_s(0.1);
-    assert!((t - truth).abs() < 2.0 * sigma, "{t} vs {truth} ± {sigma}\n{text}");
-    assert!(sigma < 15.0 * DAY_S as f64, "σ {} days", sigma / DAY_S as f64);
+    assert!(
+        (t - truth).abs() < 2.0 * sigma,
+        "{t} vs {truth} ± {sigma}\n{text}"
+    );
+    assert!(
+        sigma < 15.0 * DAY_S as f64,
+        "σ {} days",
+        sigma / DAY_S as f64
+    );
     assert!(text.contains("l1 left ±0.100 mm about "), "{text}");
     eprintln!(
         "l1 crossing: {:.1} days from the truth, σ {:.1} days; slope {:.2} ± {:.2} µm/month",
