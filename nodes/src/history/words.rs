@@ -3,7 +3,7 @@
 //! at all, the trends ("l1 creeps +20.0 µm per month (23σ)") and when a parameter leaves
 //! its tolerance ("l1 leaves ±0.100 mm in 4.5 ± 0.3 months").
 
-use super::{Analysis, ParamTrend};
+use super::analysis::{Analysis, ParamTrend};
 use rpkm_core::history::{Change, ParamChange, Seen, FLAG_SIGMA};
 use rpkm_core::params::{unit, Unit, NAMES};
 use rpkm_history::{CalibrationRecord, Stored};
@@ -136,11 +136,7 @@ pub fn crossing(t: &ParamTrend, now_s: i64) -> Option<String> {
     let (s, u) = change_unit(t.param);
     let name = NAMES[t.param];
     let band = format!("±{:.3} {u}", t.tolerance * s);
-    #[expect(
-        clippy::cast_possible_truncation,
-        reason = "a date within centuries of now, rounded to the second"
-    )]
-    let at = c.t_s.round() as i64;
+    let at = rpkm_core::convert::round_i64(c.t_s);
     let ahead = (c.t_s - now_s as f64) / MONTH_S;
     Some(if ahead >= 0.0 {
         format!(

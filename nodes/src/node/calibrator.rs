@@ -1233,7 +1233,15 @@ impl Calibrator {
     /// Records a calibration in the machine's history, if the node keeps one: what changed
     /// since the previous one, or why it was not recorded.
     fn record_calibration(&mut self, o: &Outcome) -> Option<anyhow::Result<String>> {
-        self.history.as_mut().map(|h| h.calibration(o))
+        self.history.as_mut().map(|h| {
+            h.calibration(&super::history::Calibrated {
+                campaign: &o.campaign,
+                calibration: &o.calibration,
+                noise: &o.noise,
+                val_rms_m: o.parameters.val_rms,
+                verdict: o.verdict.as_ref().map(|v| v.1.as_str()),
+            })
+        })
     }
 
     /// The periodic /diagnostics status: the last message and the counts.

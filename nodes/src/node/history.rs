@@ -5,11 +5,24 @@
 //! tie it settles is recorded as an event. A record that fails is said (WARN), never
 //! retried in silence; the node goes on calibrating.
 
-use super::calibrator::Outcome;
 use super::online_tracker::{state_name, OnlineReport};
 use crate::history::{record_of, words, Made};
-use rpkm_core::calib::{Prior, Selection};
+use rpkm_core::calib::{Calibration, Prior, Selection};
+use rpkm_core::campaign::Campaign;
+use rpkm_core::variance::NoiseEstimate;
 use rpkm_history::{CalibrationRecord, EventRecord, Store};
+
+/// A calibration of the node, as the history records it.
+pub struct Calibrated<'a> {
+    /// The campaign calibrated (without its held-out part).
+    pub campaign: &'a Campaign,
+    pub calibration: &'a Calibration,
+    pub noise: &'a NoiseEstimate,
+    /// TCP RMS on the held-out setups, m (NaN without any: the Parameters message's).
+    pub val_rms_m: f64,
+    /// The diagnosis's verdict in words.
+    pub verdict: Option<&'a str>,
+}
 
 /// The open history of the node's machine.
 pub struct NodeHistory {
@@ -54,19 +67,19 @@ impl NodeHistory {
     }
 
     /// Records a calibration now; what changed since the previous one, in words.
-    pub fn calibration(&mut self, o: &Outcome) -> anyhow::Result<String> {
-        let held_out = o.parameters.val_rms * 1e6;
+    pub fn calibration(&mut self, o: &Calibrated) -> anyhow::Result<String> {
+        let held_out = o.val_rms_m * 1e6;
         let record = record_of(&Made {
             machine: &self.machine,
             at_s: rpkm_history::schema::now_s(),
             source: &self.source,
-            campaign: &o.campaign,
-            calibration: &o.calibration,
-            noise: &o.noise,
+            campaign: o.campaign,
+            calibration: o.calibration,
+            noise: o.noise,
             // the node calibrates under the default tolerance prior, or selects without one
             selection: &Selection::Prior(Prior::default()),
             held_out_rms_um: held_out.is_finite().then_some(held_out),
-            verdict: o.verdict.as_ref().map(|v| v.1.clone()),
+            verdict: o.verdict.map(str::to_owned),
         });
         let id = self.store.record_calibration(&record)?;
         let said = match &self.previous {

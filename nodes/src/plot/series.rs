@@ -43,11 +43,7 @@ pub struct TimeChart<'a> {
     reason = "a plotters label formatter: `&dyn Fn(&f64) -> String`"
 )]
 fn date_tick(day: &f64) -> String {
-    #[expect(
-        clippy::cast_possible_truncation,
-        reason = "a tick within the axis's few years, rounded to the second"
-    )]
-    let s = (day * 86_400.0).round() as i64;
+    let s = rpkm_core::convert::round_i64(day * 86_400.0);
     chrono::DateTime::from_timestamp(s, 0)
         .map_or_else(|| format!("{day:.0}"), |d| d.format("%Y-%m-%d").to_string())
 }
