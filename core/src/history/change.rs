@@ -5,7 +5,7 @@
 //! determined, the answer to "did anything change at all" that 29 separate tests cannot give
 //! without a false alarm now and then.
 
-use super::Estimate;
+use super::estimate::Estimate;
 use crate::params::N_PARAMS;
 use crate::stats::chi2_upper_tail;
 use nalgebra::DMatrix;
