@@ -75,6 +75,18 @@ impl Dialect {
     }
 }
 
+/// Runs `work` in the transaction `open` and commits it with `commit` when `work` succeeds
+/// (dropped uncommitted, it rolls back).
+pub fn commit_after<X: Tx, T>(
+    mut open: X,
+    work: impl FnOnce(&mut dyn Tx) -> Result<T, StoreError>,
+    commit: impl FnOnce(X) -> Result<(), StoreError>,
+) -> Result<T, StoreError> {
+    let out = work(&mut open)?;
+    commit(open)?;
+    Ok(out)
+}
+
 /// `sql` with its `?` placeholders numbered `$1, $2, ...` (PostgreSQL's spelling). The
 /// statements are ours: no `?` stands inside a string literal.
 pub fn numbered(sql: &str) -> String {

@@ -2,7 +2,7 @@
 //! client. Each record is one transaction; the schema's migrations take an advisory lock so
 //! that two writers starting on an empty database migrate it once.
 
-use crate::backend::{numbered, Dialect, Kind, Tx, Value};
+use crate::backend::{commit_after, numbered, Dialect, Kind, Tx, Value};
 use crate::error::StoreError;
 use postgres::types::ToSql;
 use postgres::{Client, NoTls};
@@ -49,13 +49,11 @@ impl Pg {
             source,
         };
         let tx = self.client.transaction().map_err(err)?;
-        let mut open = PgTx {
+        let open = PgTx {
             tx,
             location: &self.location,
         };
-        let out = work(&mut open)?;
-        open.tx.commit().map_err(err)?;
-        Ok(out)
+        commit_after(open, work, |o| o.tx.commit().map_err(err))
     }
 }
 

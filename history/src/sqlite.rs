@@ -2,7 +2,7 @@
 //! killed part-way leaves its transaction unapplied and every commit before it in the file;
 //! writers of other processes wait for each other (busy timeout) instead of failing.
 
-use crate::backend::{Dialect, Kind, Tx, Value};
+use crate::backend::{commit_after, Dialect, Kind, Tx, Value};
 use crate::error::StoreError;
 use rusqlite::types::Value as Sql;
 use rusqlite::{Connection, TransactionBehavior};
@@ -53,13 +53,11 @@ impl Sqlite {
             .conn
             .transaction_with_behavior(TransactionBehavior::Immediate)
             .map_err(err)?;
-        let mut open = SqliteTx {
+        let open = SqliteTx {
             tx,
             location: &self.location,
         };
-        let out = work(&mut open)?;
-        open.tx.commit().map_err(err)?;
-        Ok(out)
+        commit_after(open, work, |o| o.tx.commit().map_err(err))
     }
 }
 

@@ -9,14 +9,9 @@ use rpkm_core::history::{crossing, trend, Point};
 
 const DAY: f64 = 86_400.0;
 
-/// Four points, equal σ 1: t = 0, 1, 2, 3 days, values 0, 1, 2, 4. By hand: t̄ = 1.5 d,
-/// mean 1.75, Σ(t − t̄)² = 5 d², slope = Σ(t − t̄)(v − v̄) / 5 = 6.5 / 5 = 1.3 per day, χ² =
-/// Σ residual² = 0.3 on 2 dof (below 1: σ not widened), σ_slope = 1/√5 per day, σ_value =
-/// 1/2. Crossing nominal 0 ± 5: (5 − 1.75)/1.3 = 2.5 d after t̄, t = 4 d, σ_t =
-/// √(0.25 + 2.5² · 0.2)/1.3 = 0.9013 d.
-#[test]
-fn a_line_and_its_crossing_by_hand() {
-    let points: Vec<Point> = [0.0, 1.0, 2.0, 4.0]
+/// `values` a day apart, each with σ 1.
+fn daily(values: &[f64]) -> Vec<Point> {
+    values
         .iter()
         .enumerate()
         .map(|(k, &v)| Point {
@@ -24,7 +19,17 @@ fn a_line_and_its_crossing_by_hand() {
             value: v,
             sigma: 1.0,
         })
-        .collect();
+        .collect()
+}
+
+/// Four points, equal σ 1: t = 0, 1, 2, 3 days, values 0, 1, 2, 4. By hand: t̄ = 1.5 d,
+/// mean 1.75, Σ(t − t̄)² = 5 d², slope = Σ(t − t̄)(v − v̄) / 5 = 6.5 / 5 = 1.3 per day, χ² =
+/// Σ residual² = 0.3 on 2 dof (below 1: σ not widened), σ_slope = 1/√5 per day, σ_value =
+/// 1/2. Crossing nominal 0 ± 5: (5 − 1.75)/1.3 = 2.5 d after t̄, t = 4 d, σ_t =
+/// √(0.25 + 2.5² · 0.2)/1.3 = 0.9013 d.
+#[test]
+fn a_line_and_its_crossing_by_hand() {
+    let points = daily(&[0.0, 1.0, 2.0, 4.0]);
     let t = trend(&points).expect("a trend");
     assert_eq!((t.from, t.points, t.dof), (0, 4, 2));
     assert!((t.t_mean_s - 1.5 * DAY).abs() < 1e-6);
@@ -59,16 +64,7 @@ fn a_line_and_its_crossing_by_hand() {
 /// a line needs three points.
 #[test]
 fn the_trend_starts_after_the_last_break() {
-    let values = [0.0, 0.0, 0.0, 10.0, 10.0, 10.0, 10.0];
-    let points: Vec<Point> = values
-        .iter()
-        .enumerate()
-        .map(|(k, &v)| Point {
-            t_s: k as f64 * DAY,
-            value: v,
-            sigma: 1.0,
-        })
-        .collect();
+    let points = daily(&[0.0, 0.0, 0.0, 10.0, 10.0, 10.0, 10.0]);
     let t = trend(&points).expect("trend");
     assert_eq!((t.from, t.points), (3, 4));
     assert!(t.slope.abs() < 1e-12 && (t.value - 10.0).abs() < 1e-12);

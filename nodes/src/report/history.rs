@@ -25,15 +25,7 @@ pub struct HistoryPage<'a> {
 impl HistoryPage<'_> {
     /// The page.
     pub fn html(&self) -> String {
-        let mut html = String::new();
-        let _ = write!(
-            html,
-            "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\">\
-             <meta name=\"viewport\" content=\"width=device-width\">\
-             <title>History of {}</title><style>{}</style></head><body>",
-            escape(self.machine),
-            super::CSS
-        );
+        let mut html = super::head(&format!("History of {}", self.machine));
         html.push_str(&self.summary());
         html.push_str(&self.change_table());
         html.push_str(&self.charts());
