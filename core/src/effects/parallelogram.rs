@@ -31,11 +31,7 @@ impl Effect for Parallelogram {
         Ok(Box::new(Bound5 {
             params: ROD5
                 .iter()
-                .map(|(_, n)| EffectParam {
-                    name: (*n).to_owned(),
-                    unit: "mm".into(),
-                    prior: 0.1,
-                })
+                .map(|(_, n)| EffectParam::new(*n, "mm", 0.1))
                 .collect(),
         }))
     }
