@@ -100,6 +100,15 @@ fn position(cals: &[Stored<CalibrationRecord>], id: i64, flag: &str) -> anyhow::
 }
 
 pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
+    // reading: a mistyped path must not become a new, empty history
+    let is_url = args.db.starts_with("postgres://") || args.db.starts_with("postgresql://");
+    if !is_url && !std::path::Path::new(&args.db).exists() {
+        return Err(bad_input(format!(
+            "{}: no such history (an SQLite file that `rpkm calibrate --history` writes, or a \
+             postgres:// URL)",
+            args.db
+        )));
+    }
     let mut store = Store::open(&args.db)?;
     let Some(machine) = &args.machine else {
         let machines = store.machines()?;
@@ -135,6 +144,13 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     };
     let analysis = analyse(&cals, pair, &tolerances(args.tolerance.as_deref())?);
     print_history(machine, &cals, &analysis);
+    if !events.is_empty() {
+        println!("\nonline events:");
+        for e in &events {
+            let r = &e.record;
+            println!("  {}  {:<12} {}", words::date_time(r.at_s), r.kind, r.message);
+        }
+    }
     if let Some(path) = &args.csv {
         std::fs::write(path, crate::history::csv::table(&cals))
             .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
