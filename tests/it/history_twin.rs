@@ -46,6 +46,20 @@ fn twelve_calibrations_name_the_crash_and_the_creep() {
         String::from_utf8_lossy(&out.stderr)
     );
     check_csv(&std::fs::read_to_string(&csv).expect("csv"));
+    // without --machine: the machines recorded; a path that is no history: exit 2
+    let list = Command::new(env!("CARGO_BIN_EXE_rpkm"))
+        .args(["history", &db])
+        .output()
+        .expect("rpkm history");
+    assert_eq!(String::from_utf8_lossy(&list.stdout), "scissors-1: 12 calibrations\n");
+    let missing = dir.path().join("no.db");
+    let out = Command::new(env!("CARGO_BIN_EXE_rpkm"))
+        .arg("history")
+        .arg(&missing)
+        .output()
+        .expect("rpkm history");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(!missing.exists(), "reading made a history");
     check_report(&std::fs::read_to_string(report.join("history.html")).expect("report"));
 }
 
