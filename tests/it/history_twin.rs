@@ -51,7 +51,10 @@ fn twelve_calibrations_name_the_crash_and_the_creep() {
         .args(["history", &db])
         .output()
         .expect("rpkm history");
-    assert_eq!(String::from_utf8_lossy(&list.stdout), "scissors-1: 12 calibrations\n");
+    assert_eq!(
+        String::from_utf8_lossy(&list.stdout),
+        "scissors-1: 12 calibrations\n"
+    );
     let missing = dir.path().join("no.db");
     let out = Command::new(env!("CARGO_BIN_EXE_rpkm"))
         .arg("history")

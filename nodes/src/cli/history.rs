@@ -148,7 +148,12 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
         println!("\nonline events:");
         for e in &events {
             let r = &e.record;
-            println!("  {}  {:<12} {}", words::date_time(r.at_s), r.kind, r.message);
+            println!(
+                "  {}  {:<12} {}",
+                words::date_time(r.at_s),
+                r.kind,
+                r.message
+            );
         }
     }
     if let Some(path) = &args.csv {
