@@ -190,6 +190,10 @@ fn judged(j: &Judged) -> String {
             j.implausible.join("; ")
         ),
         Outcome::Contradicted => ": the held-out data contradict it".to_owned(),
+        Outcome::Incomplete => {
+            ": it leaves out a part or effect that earns its place (a larger model beats it)"
+                .to_owned()
+        }
         Outcome::MemberAddsNothing => {
             ": one of its effects adds nothing to the prediction of the others".to_owned()
         }

@@ -104,7 +104,9 @@ impl Current {
     ) -> Result<Current, DiagnoseError> {
         let (cal, est, copts) = noise_of(campaign, in_model, opts, first)?;
         let val = held_out::held_out(validation, &est.model)?;
-        let settled = model::settle(campaign, val.as_ref(), in_model, &copts);
+        // the evidence a part needs: a candidate's level, over the part combinations
+        let level = opts.alpha / model::PART_COMBINATIONS;
+        let settled = model::settle(campaign, val.as_ref(), in_model, (&copts, level));
         let effects = settled.effects(in_model);
         let cal = if settled.changed() {
             fit_model(campaign, &effects, &copts)?

@@ -34,6 +34,10 @@ pub const PRACTICAL_SIZE: f64 = 0.2;
 /// its σ makes the model implausible: it absorbs something else.
 pub const PLAUSIBLE_SIGMAS: f64 = 3.0;
 
+/// A family's part combinations a settle compares (thermal's three parts: seven), the
+/// Bonferroni count of its evidence.
+pub const PART_COMBINATIONS: f64 = 7.0;
+
 /// The best contenders (by BIC gain) are paired among themselves; the best also with every
 /// other candidate.
 const PAIRED: usize = 3;
@@ -60,6 +64,9 @@ pub(crate) struct Judge<'a> {
 /// One model of the search: the current model with `added`, its fit and how it predicts.
 struct Entry<'a> {
     added: Vec<&'a dyn Effect>,
+    /// A family of the current model with other parts, in place of the settled one (the
+    /// parts a family keeps may change with the effect added).
+    swap: Option<&'a dyn Effect>,
     fitted: Fitted,
     /// Held-out errors with each setup's zero removed (mm), where there are held-out data.
     held: Option<Vec<f64>>,
@@ -112,9 +119,9 @@ pub(crate) struct Choice {
 /// each part of a family on its own, and pairs; their judgements written into the
 /// candidates, the other models returned as trials, and the model chosen.
 pub(crate) fn search<'a>(
-    judge: &Judge,
+    judge: &Judge<'a>,
     (candidates, fits): (&mut [Candidate], &[(String, Fitted)]),
-    (tried, variants): (&[&'a dyn Effect], &'a [Box<dyn Effect>]),
+    (tried, variants, swaps): (&[&'a dyn Effect], &'a [Box<dyn Effect>], &'a [Box<dyn Effect>]),
     structure: &sparse::Structure,
 ) -> (Vec<ModelTrial>, Option<Choice>) {
     let mut entries: Vec<Entry<'a>> = Vec::new();
@@ -126,7 +133,7 @@ pub(crate) fn search<'a>(
             continue;
         };
         let fitted = clone_fitted(&fits[pos].1);
-        let mut entry = judge.entry(vec![effect], fitted, Some(i));
+        let mut entry = judge.entry((vec![effect], None), fitted, Some(i));
         if entry.candidate.is_some() && c.prediction.is_some_and(|p| !p.better && !p.worse) {
             c.cross_validated = entry.prediction.filter(|p| p.by_setup);
         }
@@ -136,10 +143,12 @@ pub(crate) fn search<'a>(
     let singles = entries.len();
     judge.add_parts(&mut entries, variants);
     judge.add_pairs(&mut entries, candidates, singles);
+    judge.add_swaps(&mut entries, swaps, singles);
     for e in &mut entries {
         judge.assess(e);
     }
-    each_earns_its_place(&mut entries);
+    each_earns_its_place(judge, &mut entries);
+    nothing_left_out_earns(judge, &mut entries);
     let chosen = choose(judge, &mut entries, structure);
     for e in &entries {
         if let Some(i) = e.candidate {
@@ -168,6 +177,7 @@ pub(crate) fn search<'a>(
         .filter(|e| e.candidate.is_none())
         .map(|e| ModelTrial {
             added: e.names(),
+            instead: e.swap.map(|s| s.name().to_owned()),
             k: e.k,
             f_statistic: e.f_statistic,
             p_value: e.p_value,
@@ -195,11 +205,11 @@ fn added_params(all: &[EffectEstimate], added: &[&dyn Effect]) -> Vec<EffectEsti
         .collect()
 }
 
-impl Judge<'_> {
+impl<'j> Judge<'j> {
     /// A model's entry: its nested test against the current model and its prediction.
     fn entry<'a>(
         &self,
-        added: Vec<&'a dyn Effect>,
+        (added, swap): (Vec<&'a dyn Effect>, Option<&'a dyn Effect>),
         fitted: Fitted,
         candidate: Option<usize>,
     ) -> Entry<'a> {
@@ -225,6 +235,7 @@ impl Judge<'_> {
             .any(|p| p.value.abs() >= RELEVANT_FRACTION * p.prior);
         let mut entry = Entry {
             added,
+            swap,
             fitted,
             held: None,
             left_out: None,
@@ -262,7 +273,7 @@ impl Judge<'_> {
         if e.p_value >= SCREEN_P || cal_size < 0.5 * PRACTICAL_SIZE {
             return;
         }
-        let Some(rows) = self.left_out(&e.added, &e.fitted) else {
+        let Some(rows) = self.left_out((&e.added, e.swap), &e.fitted) else {
             return;
         };
         let base = self.base_cv.get_or_init(|| {
@@ -286,9 +297,12 @@ impl Judge<'_> {
     }
 
     /// The left-out rows of the model with `added` (cross-validation by setup).
-    fn left_out(&self, added: &[&dyn Effect], fitted: &Fitted) -> Option<Vec<f64>> {
-        let mut with: Vec<&dyn Effect> = self.in_model.to_vec();
-        with.extend(added.iter().copied());
+    fn left_out(
+        &self,
+        (added, swap): (&[&dyn Effect], Option<&dyn Effect>),
+        fitted: &Fitted,
+    ) -> Option<Vec<f64>> {
+        let with = self.model_of(added, swap);
         cross::predicted_rows(
             self.campaign,
             &cross::Fitted {
@@ -300,11 +314,35 @@ impl Judge<'_> {
         )
     }
 
-    /// The current model with `added`, fitted from the current model's minimum (the added
-    /// effects' parameters from `warm` where it has them).
-    fn fit(&self, added: &[&dyn Effect], warm: &[&Fitted]) -> Result<Fitted, FitError> {
-        let mut with: Vec<&dyn Effect> = self.in_model.to_vec();
+    /// The current model with `added`, and `swap` in place of its member of the same family.
+    fn model_of<'e>(
+        &self,
+        added: &[&'e dyn Effect],
+        swap: Option<&'e dyn Effect>,
+    ) -> Vec<&'e dyn Effect>
+    where
+        'j: 'e,
+    {
+        let mut with: Vec<&dyn Effect> = self
+            .in_model
+            .iter()
+            .map(|e| match swap {
+                Some(s) if effects::family_of(s.name()) == effects::family_of(e.name()) => s,
+                _ => *e,
+            })
+            .collect();
         with.extend(added.iter().copied());
+        with
+    }
+
+    /// The current model with `added` (and `swap`), fitted from the current model's minimum
+    /// (the added effects' parameters from `warm` where it has them).
+    fn fit(
+        &self,
+        (added, swap): (&[&dyn Effect], Option<&dyn Effect>),
+        warm: &[&Fitted],
+    ) -> Result<Fitted, FitError> {
+        let with = self.model_of(added, swap);
         let start = Params::nominal();
         let set = EffectSet::bind(&with, self.campaign, &start)?;
         let mut theta = warm_theta(&set, &self.base.fit);
@@ -342,8 +380,8 @@ impl Judge<'_> {
                 .filter(|v| effects::family_of(v.name()) == family)
             {
                 let warm = [&entries[k].fitted];
-                if let Ok(fitted) = self.fit(&[v.as_ref()], &warm) {
-                    let e = self.entry(vec![v.as_ref()], fitted, None);
+                if let Ok(fitted) = self.fit((&[v.as_ref()], None), &warm) {
+                    let e = self.entry((vec![v.as_ref()], None), fitted, None);
                     entries.push(e);
                 }
             }
@@ -401,11 +439,70 @@ impl Judge<'_> {
         for (a, b) in pairs {
             let added = vec![entries[a].added[0], entries[b].added[0]];
             let warm = [&entries[a].fitted, &entries[b].fitted];
-            if let Ok(fitted) = self.fit(&added, &warm) {
-                let e = self.entry(added, fitted, None);
+            if let Ok(fitted) = self.fit((&added, None), &warm) {
+                let e = self.entry((added, None), fitted, None);
                 entries.push(e);
             }
         }
+    }
+
+    /// The best contenders with each other part combination of a family of the current
+    /// model (`swaps`: its variants): adding an effect may change the parts a family keeps
+    /// (a guide's bow absorbed by the frame's expansion until the bow is in the model).
+    fn add_swaps<'a>(&self, entries: &mut Vec<Entry<'a>>, swaps: &'a [Box<dyn Effect>], singles: usize)
+    where
+        'j: 'a,
+    {
+        let settled: Vec<&str> = self.in_model.iter().map(|e| e.name()).collect();
+        let mut contenders: Vec<usize> = (0..singles)
+            .filter(|&k| entries[k].p_value < SCREEN_P && entries[k].relevant)
+            .collect();
+        contenders.sort_by(|&a, &b| entries[a].p_value.total_cmp(&entries[b].p_value));
+        contenders.truncate(PAIRED);
+        for k in contenders {
+            for v in swaps.iter().filter(|v| !settled.contains(&v.name())) {
+                let added = vec![entries[k].added[0]];
+                let warm = [&entries[k].fitted];
+                if let Ok(fitted) = self.fit((&added, Some(v.as_ref())), &warm) {
+                    let e = self.entry((added, Some(v.as_ref())), fitted, None);
+                    entries.push(e);
+                }
+            }
+        }
+    }
+
+    /// Whether model `big` beats model `small` (which it holds) by the evidence a candidate
+    /// needs: the nested F-test between the two with their prediction (held-out where it
+    /// decides, else left-out rows) combined below the level, not contradicted, better, by a
+    /// gain that matters.
+    fn beats(&self, big: &Entry, small: &Entry) -> bool {
+        let (b, s) = (&big.fitted.fit, &small.fitted.fit);
+        let k = s.dof - b.dof;
+        if k < 0.5 {
+            return false;
+        }
+        let f = ((s.chi2 - b.chi2).max(0.0) / k) / (b.chi2 / b.dof);
+        let p_cal = stats::f_upper_tail(f, k, b.dof);
+        let (evidence, size, better, worse) = match between(small, big) {
+            Some(p) => {
+                let unit = if p.by_setup {
+                    1.0
+                } else {
+                    self.floor_mm.unwrap_or(1.0)
+                };
+                (
+                    stats::fisher_combined(&[p_cal, p.p_better()]),
+                    p.explained() / unit,
+                    p.better,
+                    p.worse,
+                )
+            }
+            None => {
+                let rows = self.base.rows.len().max(1) as f64;
+                (p_cal, ((s.chi2 - b.chi2).max(0.0) / rows).sqrt(), true, false)
+            }
+        };
+        evidence < self.level && better && !worse && size >= PRACTICAL_SIZE
     }
 
     /// The judgement of one entry against the current model: the evidence of both
@@ -450,10 +547,9 @@ impl Judge<'_> {
     }
 }
 
-/// A model of several effects is named only where it predicts better than the model
-/// without each of them (by more than the paired standard error): every effect earns its
-/// place.
-fn each_earns_its_place(entries: &mut [Entry]) {
+/// A model of several effects is named only where it beats the model without each of them
+/// ([`Judge::beats`]): every effect earns its place.
+fn each_earns_its_place(judge: &Judge, entries: &mut [Entry]) {
     for k in 0..entries.len() {
         if entries[k].added.len() < 2 || !entries[k].eligible() {
             continue;
@@ -463,9 +559,11 @@ fn each_earns_its_place(entries: &mut [Entry]) {
             let rest: Vec<&String> = names.iter().filter(|n| *n != member).collect();
             let without = entries.iter().find(|e| {
                 let other = e.names();
-                other.len() == rest.len() && rest.iter().all(|r| other.contains(r))
+                e.swap.map(|s| s.name()) == entries[k].swap.map(|s| s.name())
+                    && other.len() == rest.len()
+                    && rest.iter().all(|r| other.contains(r))
             });
-            without.is_none_or(|w| between(w, &entries[k]).is_some_and(|p| p.better))
+            without.is_none_or(|w| judge.beats(&entries[k], w))
         });
         if !earns {
             entries[k].judged.outcome = Outcome::MemberAddsNothing;
@@ -473,13 +571,59 @@ fn each_earns_its_place(entries: &mut [Entry]) {
     }
 }
 
-/// Every proper part combination of each family among `effects` (thermal: rods, frame,
-/// scales, and the pairs of them): what the search tries where a family stands out.
-pub(crate) fn part_variants(effects: &[&dyn Effect]) -> Vec<Box<dyn Effect>> {
+/// A model is named only where no model that holds it and more (another part of a family,
+/// another effect) beats it ([`Judge::beats`]): nothing it leaves out earns a place (a
+/// family's part that the calibration needs and the held-out instrument cannot see).
+fn nothing_left_out_earns(judge: &Judge, entries: &mut [Entry]) {
+    for k in 0..entries.len() {
+        if !entries[k].eligible() {
+            continue;
+        }
+        let incomplete = (0..entries.len())
+            .filter(|&j| j != k && covers(&entries[j], &entries[k]))
+            .any(|j| judge.beats(&entries[j], &entries[k]));
+        if incomplete {
+            entries[k].judged.outcome = Outcome::Incomplete;
+        }
+    }
+}
+
+/// The parts of an effect in a model: those it pins (`thermal:rods`), every part of a family
+/// named whole, none for an effect of one piece.
+fn parts_of(e: &dyn Effect) -> Vec<String> {
+    match e.name().split_once(':') {
+        Some((_, parts)) => parts.split('+').map(str::to_owned).collect(),
+        None => e.parts().iter().map(|p| (*p).to_owned()).collect(),
+    }
+}
+
+/// Whether model `big` holds everything of `small` and more: every effect of `small` (or its
+/// family with at least its parts), with the same family swapped in.
+fn covers(big: &Entry, small: &Entry) -> bool {
+    if big.swap.map(|s| s.name()) != small.swap.map(|s| s.name()) {
+        return false;
+    }
+    let holds = |e: &&dyn Effect| {
+        big.added.iter().any(|b| {
+            effects::family_of(b.name()) == effects::family_of(e.name()) && {
+                let have = parts_of(*b);
+                parts_of(*e).iter().all(|p| have.contains(p))
+            }
+        })
+    };
+    let size = |m: &Entry| -> usize { m.added.iter().map(|e| 1 + parts_of(*e).len()).sum() };
+    small.added.iter().all(holds) && size(big) > size(small)
+}
+
+/// Every proper part combination of each family among `effects` named whole (thermal: rods,
+/// frame, scales, and the pairs of them): what the search tries where a family stands out;
+/// with `whole`, the whole family too (the variants of a family in the current model).
+pub(crate) fn part_variants(effects: &[&dyn Effect], whole: bool) -> Vec<Box<dyn Effect>> {
     let mut out = Vec::new();
     for family in effects.iter().filter(|e| e.open_family()) {
         let n = family.parts().len();
-        for mask in 1..(1usize << n) - 1 {
+        let last = if whole { 1usize << n } else { (1usize << n) - 1 };
+        for mask in 1..last {
             let parts: Vec<usize> = (0..n).filter(|b| mask & (1 << b) != 0).collect();
             out.extend(family.with_parts(&parts));
         }
@@ -512,6 +656,10 @@ fn between(a: &Entry, b: &Entry) -> Option<Prediction> {
         .as_deref()
         .zip(b.left_out.as_deref())
         .and_then(|(x, y)| Prediction::compared(x, y))
+        .map(|p| Prediction {
+            by_setup: true,
+            ..p
+        })
         .or(held)
 }
 
@@ -660,12 +808,15 @@ impl Settled {
     }
 }
 
-/// Settle every family of `in_model` named whole ([`Effect::open_family`]).
+/// Settle every family of `in_model` named whole ([`Effect::open_family`]): the part
+/// combination with the fewest parts that the whole family does not beat by the evidence a
+/// candidate needs (the calibration's F-test with the prediction, not contradicted, a gain
+/// that matters); `level` is that evidence's.
 pub(crate) fn settle(
     campaign: &Campaign,
     val: Option<&Validation>,
     in_model: &[&dyn Effect],
-    copts: &calib::Options,
+    (copts, level): (&calib::Options, f64),
 ) -> Settled {
     let mut settled = Settled::unchanged(in_model);
     for (i, family) in in_model.iter().enumerate() {
@@ -679,20 +830,35 @@ pub(crate) fn settle(
             variants.extend(family.with_parts(&parts));
         }
         let current = settled.effects(in_model);
-        let scored: Vec<(usize, Vec<f64>)> = variants
+        let scored: Vec<(usize, Scored)> = variants
             .iter()
             .enumerate()
             .filter_map(|(k, v)| {
                 let mut with = current.clone();
                 with[i] = v.as_ref();
-                predicted(campaign, val, &with, copts).map(|p| (k, p))
+                Scored::of(campaign, val, with, copts).map(|p| (k, p))
             })
             .collect();
-        let Some(k) = simplest_close(&scored, &variants) else {
+        let Some(whole) = scored.iter().find(|(k, _)| mask_len(variants[*k].name()) == n) else {
+            continue;
+        };
+        let floor = val.map(|v| calib::rms(&v.relative_sigma));
+        let adequate = |v: &Scored| !whole.1.needed_over(v, (campaign, copts), (level, floor));
+        let Some(k) = scored
+            .iter()
+            .filter(|(_, v)| adequate(v))
+            .min_by(|a, b| {
+                let parts = |k: usize| mask_len(variants[k].name());
+                parts(a.0)
+                    .cmp(&parts(b.0))
+                    .then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))
+            })
+            .map(|(k, _)| *k)
+        else {
             continue;
         };
         // the whole family is what the caller has: nothing to own
-        if variants[k].parts().len() == n && mask_len(variants[k].name()) == n {
+        if mask_len(variants[k].name()) == n {
             continue;
         }
         let own = settled.own.len();
@@ -708,59 +874,115 @@ fn mask_len(name: &str) -> usize {
         .map_or(usize::MAX, |(_, parts)| parts.split('+').count())
 }
 
-/// Among scored variants (their predicted errors), the one with the fewest parts within
-/// one standard error of the best.
-fn simplest_close(scored: &[(usize, Vec<f64>)], variants: &[Box<dyn Effect>]) -> Option<usize> {
-    let rms = |e: &[f64]| calib::rms(e);
-    let best = scored
-        .iter()
-        .min_by(|a, b| rms(&a.1).total_cmp(&rms(&b.1)))?;
-    let spread = one_standard_error(&best.1);
-    scored
-        .iter()
-        .filter(|(_, e)| rms(e) - rms(&best.1) <= spread)
-        .min_by(|a, b| {
-            let parts = |k: usize| mask_len(variants[k].name());
-            parts(a.0)
-                .cmp(&parts(b.0))
-                .then(rms(&a.1).total_cmp(&rms(&b.1)))
-        })
-        .map(|(k, _)| *k)
+/// A model of a settle: its calibration χ², and its prediction errors (held-out with each
+/// setup's zero removed, mm; left-out rows, σ, made only where the held-out data cannot tell
+/// or there are none).
+struct Scored<'a> {
+    with: Vec<&'a dyn Effect>,
+    params: Params,
+    theta: Vec<f64>,
+    chi2: f64,
+    dof: f64,
+    rows: usize,
+    held: Vec<f64>,
+    left_out: std::cell::OnceCell<Option<Vec<f64>>>,
 }
 
-/// The model `with` calibrated and its prediction errors: held-out (each setup's zero
-/// removed, mm) or left out by setup (σ); None where it cannot be fitted or nothing
-/// predicts.
-fn predicted(
-    campaign: &Campaign,
-    val: Option<&Validation>,
-    with: &[&dyn Effect],
-    copts: &calib::Options,
-) -> Option<Vec<f64>> {
-    let start = Params::nominal();
-    let set = EffectSet::bind(with, campaign, &start).ok()?;
-    let (cal, _) = calib::calibrate(&Request {
-        effects: &set,
-        ..Request::new(campaign, &start, copts)
-    })
-    .ok()?;
-    if let Some(v) = val {
-        let errors = Model1 {
-            effects: with,
-            cal_set: &set,
-            cal: &cal,
-        }
-        .errors(v)
+/// What a settle's cross-validation needs.
+type Fold<'c> = (&'c Campaign, &'c calib::Options);
+
+impl<'a> Scored<'a> {
+    /// The model `with` calibrated and its held-out errors; None where it cannot be fitted.
+    fn of(
+        campaign: &Campaign,
+        val: Option<&Validation>,
+        with: Vec<&'a dyn Effect>,
+        copts: &calib::Options,
+    ) -> Option<Scored<'a>> {
+        let start = Params::nominal();
+        let set = EffectSet::bind(&with, campaign, &start).ok()?;
+        let (cal, _) = calib::calibrate(&Request {
+            effects: &set,
+            ..Request::new(campaign, &start, copts)
+        })
         .ok()?;
-        return Some(v.relative(&errors));
+        let chi2: f64 = cal.residuals.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
+        let rows = cal.residuals.len();
+        let held = match val {
+            Some(v) => {
+                let errors = Model1 {
+                    effects: &with,
+                    cal_set: &set,
+                    cal: &cal,
+                }
+                .errors(v)
+                .ok()?;
+                v.relative(&errors)
+            }
+            None => Vec::new(),
+        };
+        Some(Scored {
+            with,
+            params: cal.params,
+            theta: cal.theta,
+            chi2,
+            dof: (rows as f64 - cal.dof_model).max(1.0),
+            rows,
+            held,
+            left_out: std::cell::OnceCell::new(),
+        })
     }
-    cross::predicted_rows(
-        campaign,
-        &cross::Fitted {
-            effects: with,
-            params: &cal.params,
-            theta: &cal.theta,
-        },
-        copts,
-    )
+
+    /// The left-out rows (cross-validation by setup), made once.
+    fn left_out(&self, (campaign, copts): Fold) -> Option<&[f64]> {
+        self.left_out
+            .get_or_init(|| {
+                cross::predicted_rows(
+                    campaign,
+                    &cross::Fitted {
+                        effects: &self.with,
+                        params: &self.params,
+                        theta: &self.theta,
+                    },
+                    copts,
+                )
+            })
+            .as_deref()
+    }
+
+    /// Whether this model (the whole family) beats the smaller `v` by the evidence a
+    /// candidate needs: the nested F-test with the prediction (held-out where it decides,
+    /// else the left-out rows), not contradicted, a gain that matters (`floor`: the held-out
+    /// noise, mm).
+    fn needed_over(&self, v: &Scored, fold: Fold, (level, floor): (f64, Option<f64>)) -> bool {
+        let k = v.dof - self.dof;
+        if k < 0.5 {
+            return false;
+        }
+        let f = ((v.chi2 - self.chi2).max(0.0) / k) / (self.chi2 / self.dof);
+        let p_cal = stats::f_upper_tail(f, k, self.dof);
+        let held = Prediction::compared(&v.held, &self.held);
+        let (prediction, unit) = match held {
+            Some(p) if p.better || p.worse => (Some(p), floor.unwrap_or(1.0)),
+            _ => match v.left_out(fold).zip(self.left_out(fold)) {
+                Some((a, b)) => (Prediction::compared(a, b), 1.0),
+                None => (held, floor.unwrap_or(1.0)),
+            },
+        };
+        let (evidence, size, better, worse) = match prediction {
+            Some(p) => (
+                stats::fisher_combined(&[p_cal, p.p_better()]),
+                p.explained() / unit,
+                p.better,
+                p.worse,
+            ),
+            None => (
+                p_cal,
+                ((v.chi2 - self.chi2).max(0.0) / self.rows.max(1) as f64).sqrt(),
+                true,
+                false,
+            ),
+        };
+        evidence < level && better && !worse && size >= PRACTICAL_SIZE
+    }
 }

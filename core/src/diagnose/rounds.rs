@@ -72,7 +72,8 @@ fn rounds(
         .filter(|e| !in_families.contains(&effects::family_of(e.name())))
         .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
         .collect();
-    let variants = model::part_variants(&tried);
+    let variants = model::part_variants(&tried, false);
+    let swaps = model::part_variants(in_model, true);
     let level = opts.alpha / tried.len().max(1) as f64;
     let stated = calib_options(opts);
     let first = Search {
@@ -126,7 +127,7 @@ fn rounds(
     let (trials, choice) = model::search(
         &judge,
         (&mut round.candidates, &round.fits),
-        (&tried, &variants),
+        (&tried, &variants, &swaps),
         &structure,
     );
     Ok(conclude(Concluded {
@@ -207,7 +208,7 @@ fn exact(
     let (trials, choice) = model::search(
         &judge,
         (&mut round.candidates, &round.fits),
-        (first.tried, variants),
+        (first.tried, variants, &[]),
         &structure,
     );
     Ok(conclude(Concluded {

@@ -262,6 +262,9 @@ pub enum Outcome {
     NoBetter,
     /// A model of several effects that predicts no better than without one of them.
     MemberAddsNothing,
+    /// A model that holds it and more (another part of a family, another effect) beats it:
+    /// it leaves out something that earns its place.
+    Incomplete,
     /// Statistically detectable, too small to matter.
     TooSmall,
     /// Fitted values outside what the physics allows: it absorbs something else.
@@ -278,6 +281,10 @@ pub enum Outcome {
 pub struct ModelTrial {
     /// The effects added (a family's parts pinned: `thermal:rods`).
     pub added: Vec<String>,
+    /// A family of the current model fitted with other parts than it settled to, in its
+    /// place (`thermal:rods+frame`): the parts a family keeps may change with the effect
+    /// added.
+    pub instead: Option<String>,
     /// Parameters it adds (effective: what the data determine).
     pub k: f64,
     /// Nested F-test against the current model on the calibration campaign.
