@@ -36,6 +36,7 @@ pub mod diagnose;
 pub mod effects;
 pub mod elastic;
 pub mod geometry;
+pub mod history;
 pub mod noise;
 pub mod obs;
 pub mod observability;

@@ -4,6 +4,7 @@ pub mod campaign_bag;
 pub mod cli;
 pub mod effects_file;
 pub mod error;
+pub mod history;
 pub mod input;
 pub mod launch;
 pub mod logging;

@@ -20,6 +20,9 @@ enum Command {
     Calibrate(cli::calibrate::CalibrateArgs),
     /// Find the physical effect the model is missing (see `rpkm diagnose --help`).
     Diagnose(cli::diagnose::DiagnoseArgs),
+    /// A machine's calibrations as recorded: what changed since the last one and whether it
+    /// is real, trends and tolerance crossings; text, CSV, HTML (see `rpkm history --help`).
+    History(cli::history::HistoryArgs),
     /// Sensitivity and observability of the parameters for a calibration method (thesis 4.2.3-4.3.4).
     Analyze(cli::analyze::AnalyzeArgs),
     /// Simulate measurement campaigns on the digital twin, with hidden effects.
@@ -90,6 +93,7 @@ fn main() {
     let result = match &args.command {
         Command::Calibrate(a) => cli::calibrate::run(a),
         Command::Diagnose(a) => cli::diagnose::run(a),
+        Command::History(a) => cli::history::run(a),
         Command::Analyze(a) => cli::analyze::run(a),
         Command::Simulate(a) => cli::simulate::run(a),
         Command::Plan(a) => cli::plan::run(a),

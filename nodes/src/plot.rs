@@ -4,7 +4,8 @@
 //! grids, captions. What is ours is drawn over its plotting area through [`Frame`]: the
 //! machine from rpkm-core's geometry ([`machine`]), residual maps whose colour scale two panels
 //! share ([`maps`]), error-vector maps, bars and markers that carry a `<title>` (file line,
-//! pose, value, σ) which a browser shows on hover.
+//! pose, value, σ) which a browser shows on hover; quantities over calendar time with their
+//! σ, a fitted line and a tolerance band ([`time_chart`]: a machine's history).
 //!
 //! Output is deterministic (the same data give the same bytes) and text is XML-escaped.
 //! Non-finite values are never written as coordinates: such points are left off.
@@ -14,10 +15,12 @@ mod bars;
 pub mod machine;
 pub mod maps;
 mod scatter;
+mod series;
 
 pub use axes::{Axes, Frame};
 pub use bars::{bar_chart, BarOptions};
 pub use scatter::{scatter, Marker, Series};
+pub use series::{time_chart, Dated, Line, TimeChart};
 
 /// Colours of the series (Tableau 10: distinct, readable on white and in print).
 const PALETTE: [&str; 10] = [

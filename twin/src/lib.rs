@@ -196,6 +196,19 @@ impl Twin {
         &self.truth_params
     }
 
+    /// The machine changes between campaigns: a crash bends a rod, a part wears or creeps.
+    /// Parameter `param`'s true value moves by `by` (mm, rad) for every campaign after this;
+    /// false (nothing moved) for an index that is no parameter.
+    pub fn shift(&mut self, param: usize, by: f64) -> bool {
+        match self.truth_params.0.get_mut(param) {
+            Some(v) => {
+                *v += by;
+                true
+            }
+            None => false,
+        }
+    }
+
     /// The configuration.
     pub fn config(&self) -> &TwinConfig {
         &self.config

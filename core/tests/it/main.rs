@@ -24,6 +24,8 @@ mod elastic_fe;
 mod elastic_plausibility;
 mod elastic_spring;
 mod geometry_round_trip;
+mod history_change;
+mod history_trend;
 mod plan_separate;
 mod plan_thesis;
 mod twin_campaigns;

@@ -105,6 +105,19 @@ pub struct CalibrateArgs {
     /// on any number: the rows are summed in fixed pieces of 256 poses, in order.
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Record the calibration in the machine's history (an SQLite file, made if missing, or
+    /// a PostgreSQL URL) under --machine: `rpkm history DB --machine NAME` then says what
+    /// changed since the last one and how each parameter trends. Example:
+    ///   rpkm calibrate c.csv --validate v.csv --history cell.db --machine cell-1
+    #[arg(long, requires = "machine")]
+    pub history: Option<String>,
+    /// The machine's name in the history (with --history).
+    #[arg(long, requires = "history")]
+    pub machine: Option<String>,
+    /// When the campaign was measured, for the history: RFC 3339 (2026-03-01T10:00:00Z) or
+    /// a date (2026-03-01, midnight UTC); default: now.
+    #[arg(long, requires = "history")]
+    pub at: Option<String>,
 }
 
 /// Parse a parameter list of spec names.
@@ -176,20 +189,65 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             validation.as_ref(),
         )?)
     };
+    let mut verdict = None;
     if let Some(dir) = &args.report {
-        let page = write_report(
+        let (page, said) = write_report(
             dir,
             (args, model, &refs, file.as_ref()),
             &campaign,
             validation.as_ref(),
             stages.as_deref(),
         )?;
+        verdict = Some(said);
         println!("\nreport: {}", page.display());
     }
     if let Some(path) = &args.json {
         let file = file.as_ref().map(crate::effects_file::to_json);
         write_calibration_json(path, &cal, (&noise, file), val.as_ref(), stages.as_deref())?;
         println!("\nwrote {}", path.display());
+    }
+    record_history(
+        args,
+        (&campaign, &cal, &noise, &opts.selection),
+        val.as_ref(),
+        verdict,
+    )
+}
+
+/// `--history`: the calibration recorded in the machine's history, with the held-out RMS
+/// and the verdict it had (None: not asked for).
+fn record_history(
+    args: &CalibrateArgs,
+    (campaign, cal, noise, selection): (&Campaign, &Calibration, &NoiseEstimate, &Selection),
+    val: Option<&Validation>,
+    verdict: Option<String>,
+) -> anyhow::Result<()> {
+    let (Some(db), Some(machine)) = (&args.history, &args.machine) else {
+        return Ok(());
+    };
+    let at_s =
+        crate::history::time_of(args.at.as_deref()).map_err(|e| bad_input(format!("--at {e}")))?;
+    let record = crate::history::record_of(&crate::history::Made {
+        machine,
+        at_s,
+        source: "rpkm calibrate",
+        campaign,
+        calibration: cal,
+        noise,
+        selection,
+        held_out_rms_um: val.map(|v| v.rms_after_um),
+        verdict,
+    });
+    let mut store = rpkm_history::Store::open(db)?;
+    match store.record_calibration(&record)? {
+        Some(id) => println!(
+            "\nrecorded as calibration {id} of {machine} in {}",
+            store.location()
+        ),
+        None => println!(
+            "\nalready recorded in {} (same machine, time and campaign)",
+            store.location()
+        ),
     }
     Ok(())
 }
@@ -319,13 +377,14 @@ fn diagnosis_options(
 
 /// The report of --report: the model without effects diagnosed, against the model with
 /// --effects (or with the effect the diagnosis names); the stages of --effects as its table.
+/// The page, and the verdict on the model calibrated (with --effects: with them) in words.
 fn write_report(
     dir: &std::path::Path,
     (args, model, refs, file): (&CalibrateArgs, Model, &[&dyn Effect], Option<&EffectsFile>),
     campaign: &Campaign,
     validation: Option<&Campaign>,
     stages: Option<&[Stage]>,
-) -> anyhow::Result<std::path::PathBuf> {
+) -> anyhow::Result<(std::path::PathBuf, String)> {
     use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
     let offer = super::effect_stages::offered(file, &[]);
@@ -346,14 +405,21 @@ fn write_report(
             chi2_per_dof: s.chi2_per_dof,
         })
         .collect();
-    super::summary::write_report(
+    let calibrated = if refs.is_empty() {
+        &before
+    } else {
+        after.as_ref().unwrap_or(&before)
+    };
+    let verdict = crate::words::verdict(calibrated);
+    let page = super::summary::write_report(
         dir,
         "rpkm calibrate",
         campaign,
         &before,
         after.as_ref(),
         (stages, crate::effects_file::expressions(file)),
-    )
+    )?;
+    Ok((page, verdict))
 }
 
 /// Calibrate with the effects of --effects added one by one (automatic selection, no outlier

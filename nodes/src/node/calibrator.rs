@@ -56,7 +56,7 @@ use crate::campaign_bag::CampaignAssembler;
 use crate::error::bad_input;
 
 /// Parameter keys of the node.
-pub const KEYS: [&str; 18] = [
+pub const KEYS: [&str; 20] = [
     "model",
     "geometry_file",
     "effects_file",
@@ -75,6 +75,8 @@ pub const KEYS: [&str; 18] = [
     "online_drift_warn_um",
     "online_force_sigma_n",
     "online_encoder_sigma_um",
+    "history",
+    "history_machine",
 ];
 
 /// What the node diagnoses: the calibrated campaign (the held-out part for its validation)
@@ -173,6 +175,10 @@ pub struct Outcome {
     pub iterations: usize,
     /// The noise the rows were weighted by, stated and estimated.
     pub noise: rpkm_core::variance::NoiseEstimate,
+    /// The calibration itself and the campaign it calibrated (without its held-out part):
+    /// what the machine's history records.
+    pub calibration: Calibration,
+    pub campaign: Campaign,
 }
 
 /// What one calibration of the node is asked: the campaign, and what an action's goal adds.
@@ -348,6 +354,8 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<Outcome
         verdict,
         iterations: cal.iterations,
         noise,
+        calibration: cal,
+        campaign: cal_part,
     })
 }
 
@@ -797,7 +805,53 @@ fn specs() -> Vec<Spec> {
     ]
     .into_iter()
     .chain(online_specs())
+    .chain(history_specs())
     .collect()
+}
+
+/// The machine's history (read at start: the store is opened once).
+fn history_specs() -> Vec<Spec> {
+    use live::Default::Str;
+    vec![
+        Spec::fixed(
+            "history",
+            Str(""),
+            "record each calibration and online step here: an SQLite file or a postgres:// URL",
+        ),
+        Spec::fixed(
+            "history_machine",
+            Str(""),
+            "the machine's name in the history (default: the node's namespace, rpkm without)",
+        ),
+    ]
+}
+
+/// Records an online step or settled tie (said as `said`) in the machine's history, if the
+/// node keeps one.
+fn record_event(
+    history: Option<&mut super::history::NodeHistory>,
+    r: &super::online_tracker::OnlineReport,
+    said: &str,
+) -> anyhow::Result<()> {
+    history.map_or(Ok(()), |h| h.event(r, said))
+}
+
+/// The machine's history of the parameters `history`, `history_machine` (None when off).
+fn open_history(ctx: &NodeContext) -> anyhow::Result<Option<super::history::NodeHistory>> {
+    let location = ctx.params.string("history", "").map_err(bad_param)?;
+    if location.is_empty() {
+        return Ok(None);
+    }
+    let mut machine = ctx
+        .params
+        .string("history_machine", "")
+        .map_err(bad_param)?;
+    if machine.is_empty() {
+        machine = super::history::default_machine(&ctx.status_name, &ctx.name);
+    }
+    let h = super::history::NodeHistory::open(&location, &machine, &ctx.status_name)?;
+    ctx.log(format!("history: {}", h.describe()));
+    Ok(Some(h))
 }
 
 /// The online tracker's parameters (read at start: the tracker's thread is set up once).
@@ -865,6 +919,8 @@ struct Calibrator {
     last: (u8, String),
     /// The online tracker's step still "this or that" at its last report.
     tie: Option<TieSoFar>,
+    /// The machine's history, where the node records (parameter `history`).
+    history: Option<super::history::NodeHistory>,
 }
 
 /// The online tracker's settings from the parameters, if `online` is on.
@@ -942,6 +998,10 @@ impl Calibrator {
             out.parameters
                 .publish(&parameters_msg(&r.params, model, &r.sigma))?;
             if let Some(warning) = report_warning(&r, &self.temp_name) {
+                let warning = match record_event(self.history.as_mut(), &r, &warning) {
+                    Ok(()) => warning,
+                    Err(e) => format!("{warning}; history: event not recorded: {e:#}"),
+                };
                 ctx.log(&warning);
                 self.last = (DiagnosticStatus::WARN, warning);
                 let mut t = vec![("online_t_s", format!("{:.3}", r.t))];
@@ -1044,16 +1104,25 @@ impl Calibrator {
             Ok(o) => {
                 self.calibrations += 1;
                 out.parameters.publish(&o.parameters)?;
+                let recorded = self.record_calibration(o);
                 match &o.diagnosis {
                     Some(Ok(d)) => out.diagnosis.publish(d)?,
                     Some(Err(e)) => ctx.log(format!("no diagnosis: {e}")),
                     None => {}
                 }
+                let (level, history) = match recorded {
+                    Some(Ok(said)) => (DiagnosticStatus::OK, format!("; history: {said}")),
+                    Some(Err(e)) => (
+                        DiagnosticStatus::WARN,
+                        format!("; history: not recorded: {e:#}"),
+                    ),
+                    None => (DiagnosticStatus::OK, String::new()),
+                };
                 (
-                    DiagnosticStatus::OK,
+                    level,
                     format!(
                         "calibration {}: {n} measurements ({} calibrated, {} held out), RMS \
-                         {:.2} µm, condition {:.1}",
+                         {:.2} µm, condition {:.1}{history}",
                         self.calibrations,
                         o.parameters.measurement_count,
                         n.saturating_sub(u64::from(o.parameters.measurement_count)),
@@ -1183,6 +1252,20 @@ impl Calibrator {
         Ok((calibrate_job(&job, &o)?, n))
     }
 
+    /// Records a calibration in the machine's history, if the node keeps one: what changed
+    /// since the previous one, or why it was not recorded.
+    fn record_calibration(&mut self, o: &Outcome) -> Option<anyhow::Result<String>> {
+        self.history.as_mut().map(|h| {
+            h.calibration(&super::history::Calibrated {
+                campaign: &o.campaign,
+                calibration: &o.calibration,
+                noise: &o.noise,
+                val_rms_m: o.parameters.val_rms,
+                verdict: o.verdict.as_ref().map(|v| v.1.as_str()),
+            })
+        })
+    }
+
     /// The periodic /diagnostics status: the last message and the counts.
     fn publish_status(&self, ctx: &NodeContext, out: &Outputs) -> anyhow::Result<()> {
         let (level, message) = (self.last.0, self.last.1.clone());
@@ -1237,7 +1320,11 @@ impl Outputs {
 
 impl Calibrator {
     /// A calibrator that keeps `capacity` drive states, with its online tracker if any.
-    fn new(capacity: u64, online: Option<OnlineWorker>) -> Self {
+    fn new(
+        capacity: u64,
+        online: Option<OnlineWorker>,
+        history: Option<super::history::NodeHistory>,
+    ) -> Self {
         Self {
             acc: Accumulator::new(usize::try_from(capacity).unwrap_or(usize::MAX)),
             online,
@@ -1246,6 +1333,7 @@ impl Calibrator {
             calibrations: 0,
             last: (DiagnosticStatus::OK, "waiting for measurements".into()),
             tie: None,
+            history,
         }
     }
 }
@@ -1278,7 +1366,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         "calibrating {} from {}",
         options.start.model, options.start.source
     ));
-    let mut node = Calibrator::new(capacity, online);
+    let history = open_history(&ctx)?;
+    let mut node = Calibrator::new(capacity, online, history);
     let mut idle = Idle::new(Duration::from_millis(50), Duration::from_millis(1));
     let mut report = Every::new(ctx.diagnostics_period()?);
     while !super::shutdown::requested() {
@@ -1550,7 +1639,7 @@ mod tests {
     fn an_open_tie_is_on_the_periodic_status() {
         use rpkm_core::calib::tie::TieEvidence;
         use rpkm_core::params::{L1, L3};
-        let mut c = Calibrator::new(16, None);
+        let mut c = Calibrator::new(16, None, None);
         let has = |c: &Calibrator, k: &str| {
             c.report_values()
                 .into_iter()

@@ -13,6 +13,7 @@ pub mod calibrator;
 pub mod context;
 pub mod effects;
 pub mod geometry;
+pub mod history;
 pub mod ingest;
 pub mod inputs;
 pub mod joint_input;

@@ -5,10 +5,13 @@
 //! on one colour scale, the error vectors of the 2-D instruments, the residual against time
 //! and against the term the verdict points at, and the effects tried.
 //!
+//! `history`: the page of a machine's history (`rpkm history --report`), in the same style.
+//!
 //! Beside the page, `report.json` holds the numbers behind the error-vector maps, so that a
 //! script (or a test) can check what the arrows show.
 
 mod contents;
+pub mod history;
 mod sections;
 
 pub use contents::{Report, Stage};
@@ -60,16 +63,7 @@ impl Report<'_> {
 
     /// The page.
     pub fn html(&self) -> String {
-        let mut html = String::new();
-        let _ = write!(
-            html,
-            "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\">\
-             <meta name=\"viewport\" content=\"width=device-width\">\
-             <title>{} — {}</title><style>{}</style></head><body>",
-            escape(self.command),
-            escape(&self.campaign.source),
-            CSS
-        );
+        let mut html = head(&format!("{} — {}", self.command, self.campaign.source));
         html.push_str(&sections::summary(self));
         html.push_str(&sections::machine(self));
         html.push_str(&sections::instruments(self));
@@ -84,6 +78,16 @@ impl Report<'_> {
         );
         html
     }
+}
+
+/// A page's start: its head with `title` and the style, the body opened.
+fn head(title: &str) -> String {
+    format!(
+        "<!doctype html><html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <meta name=\"viewport\" content=\"width=device-width\">\
+         <title>{}</title><style>{CSS}</style></head><body>",
+        escape(title)
+    )
 }
 
 /// Screen and print: sections start on a new page, figures are never split; in print the

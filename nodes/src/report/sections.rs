@@ -16,7 +16,7 @@ fn um(v: Option<f64>) -> String {
 }
 
 /// A figure with its caption.
-fn figure(svg: &str, caption: &str) -> String {
+pub(super) fn figure(svg: &str, caption: &str) -> String {
     format!(
         "<figure class=\"plot\">{svg}<figcaption>{}</figcaption></figure>",
         escape(caption)
