@@ -15,7 +15,9 @@
 //!   their own noise minus the noise of the reading the instrument was zeroed on (a tracker,
 //!   grid encoder or interferometer is zeroed on a reading as noisy as any other, shared by
 //!   every reading of the setup; [`ResetReading::Exact`] zeroes on the truth); ball-bar r is
-//!   the distance to the pivot (the reset pose's TCP, where the machine stood).
+//!   the distance to the pivot (the reset pose's TCP, where the machine stood). An
+//!   instrument may drift after its zero ([`ZeroDrift`]: its readings carry a rate times the
+//!   time since their setup's reset pose).
 //! - Covariate `temp_machine` (°C) and time `t` (s): 3 s per pose, 120 s between setups; the
 //!   clock runs on across campaigns, so a later validation campaign is later in time.
 //!
@@ -30,8 +32,8 @@ mod stream;
 pub use effects::EffectKind;
 use machine::gauss;
 pub use machine::{
-    CyclicScale, ResetReading, ThermalPhysics, Twin, TwinConfig, TwinError, SECONDS_BETWEEN_SETUPS,
-    SECONDS_PER_POSE, TEMP_SENSOR_K,
+    CyclicScale, ResetReading, ThermalPhysics, Twin, TwinConfig, TwinError, ZeroDrift,
+    SECONDS_BETWEEN_SETUPS, SECONDS_PER_POSE, TEMP_SENSOR_K,
 };
 pub use production::{
     Creep, ProductionConfig, ProductionSample, ProductionStream, StepChange, TimeCreep, Visit,
@@ -70,6 +72,9 @@ pub struct Truth {
     pub reference_temp_c: f64,
     pub thermal_period_s: f64,
     pub thermal: ThermalPhysics,
+    /// The instrument that drifted after its zero, and how fast ([`TwinConfig::drift`]).
+    #[serde(default)]
+    pub drift: Option<ZeroDrift>,
 }
 
 /// One effect of a [`Truth`].
@@ -87,8 +92,19 @@ struct Moved {
     dpsi: f64,
     tcp: Vector2<f64>,
     /// The error of the reading the instrument was zeroed on (x, y; a single coordinate or
-    /// ψ in x), which every reading of the setup carries.
+    /// ψ in x), which every reading of the setup carries, less the instrument's drift since
+    /// ([`ZeroDrift`]): what the reading is short of the move.
     zero: Vector2<f64>,
+}
+
+/// A relative setup's zero: where the machine stood at its reset pose, the error of the
+/// reading it was zeroed on, and when.
+struct Zeroed {
+    setup: String,
+    tcp: Vector2<f64>,
+    psi: f64,
+    error: Vector2<f64>,
+    t: f64,
 }
 
 /// A square root L (L Lᵀ = cov) of a reading's 2 × 2 covariance: its Cholesky factor, or,
@@ -154,6 +170,9 @@ impl Twin {
                     extra: " > 0",
                 });
             }
+        }
+        if let Some(d) = &config.drift {
+            check_drift(d)?;
         }
         let mut rng = StdRng::seed_from_u64(config.seed);
         let mut p = Params::nominal();
@@ -262,6 +281,7 @@ impl Twin {
             reference_temp_c: self.config.thermal.reference_c,
             thermal_period_s: THERMAL_PERIOD_S,
             thermal: self.config.thermal,
+            drift: self.config.drift,
         }
     }
 
@@ -525,7 +545,7 @@ impl Twin {
             None => (0.0, NoiseModel::default()),
         };
         let mut poses = Vec::with_capacity(design.len());
-        let mut reset: Option<(String, Vector2<f64>, f64, Vector2<f64>)> = None;
+        let mut zeroed: Option<Zeroed> = None;
         let mut last_setup: Option<&str> = None;
         let backlash = self.magnitude(EffectKind::Backlash);
         let lost_q4 = self.magnitude(EffectKind::LostMotionQ4);
@@ -560,29 +580,54 @@ impl Twin {
                 *f += k * noise.force_n * gauss(&mut self.force_rng);
             }
             pose.line = n + 2;
-            if plan.reset {
-                let zero = self.zero_error(plan.instrument, st.tcp, &noise, k);
-                reset = Some((plan.setup.clone(), st.tcp, st.psi, zero));
-            }
-            if plan.instrument.takes_reset() {
-                let Some((_, tcp0, psi0, zero)) = reset.as_ref().filter(|r| r.0 == plan.setup)
-                else {
-                    return Err(TwinError::NoReset {
-                        setup: plan.setup.clone(),
-                    });
-                };
-                let theta = self.alignment_angle(&plan.setup);
-                let moved = Moved {
-                    d: Rotation2::new(theta) * (st.tcp - tcp0),
-                    dpsi: st.psi - psi0,
-                    tcp: st.tcp,
-                    zero: *zero,
-                };
-                self.read_instrument(plan, &moved, &noise, k, &mut pose);
-            }
+            self.read_relative(plan, (&st, t), (&noise, k), &mut zeroed, &mut pose)?;
             poses.push(pose);
         }
         Ok(self.campaign_of(source, poses, backlash.is_some()))
+    }
+
+    /// The reading of a relative instrument (or a ball-bar circle's) at a pose in state `st`
+    /// at time `t`: its setup's zero taken at its reset pose (kept in `zeroed`), then the
+    /// move from there, with noise `noise` scaled by `k`.
+    fn read_relative(
+        &mut self,
+        plan: &PlannedPose,
+        (st, t): (&MachineState, f64),
+        (noise, k): (&NoiseModel, f64),
+        zeroed: &mut Option<Zeroed>,
+        pose: &mut Pose,
+    ) -> Result<(), TwinError> {
+        if plan.reset {
+            *zeroed = Some(Zeroed {
+                setup: plan.setup.clone(),
+                tcp: st.tcp,
+                psi: st.psi,
+                error: self.zero_error(plan.instrument, st.tcp, noise, k),
+                t,
+            });
+        }
+        if !plan.instrument.takes_reset() {
+            return Ok(());
+        }
+        let Some(z) = zeroed.as_ref().filter(|z| z.setup == plan.setup) else {
+            return Err(TwinError::NoReset {
+                setup: plan.setup.clone(),
+            });
+        };
+        let drift = self
+            .config
+            .drift
+            .filter(|d| d.instrument == plan.instrument)
+            .map_or([0.0; 2], |d| d.after(t - z.t));
+        let theta = self.alignment_angle(&plan.setup);
+        let moved = Moved {
+            d: Rotation2::new(theta) * (st.tcp - z.tcp),
+            dpsi: st.psi - z.psi,
+            tcp: st.tcp,
+            zero: z.error - Vector2::from(drift),
+        };
+        self.read_instrument(plan, &moved, noise, k, pose);
+        Ok(())
     }
 
     /// The campaign of measured `poses`: its comment names the twin's seed and effects, its
@@ -660,6 +705,23 @@ impl Twin {
         let d = self.validation_design(n);
         self.run(&d, "validation")
     }
+}
+
+/// A drift the twin can apply: a relative instrument's, finite.
+fn check_drift(d: &ZeroDrift) -> Result<(), TwinError> {
+    let bad = |why| {
+        Err(TwinError::BadDrift {
+            instrument: d.instrument,
+            why,
+        })
+    };
+    if !d.instrument.is_relative() {
+        return bad("only a relative instrument (lt, kgm, dbb, li_x, li_y, li_psi) has a zero");
+    }
+    if !d.rate_per_s.iter().all(|v| v.is_finite()) {
+        return bad("the rate is not a finite number");
+    }
+    Ok(())
 }
 
 /// Poses of the `production` campaign of [`Twin::campaign_by_names`].

@@ -4,6 +4,7 @@
 use super::effects::{EffectKind, ALPHA_PER_K, REFERENCE_TEMP_C};
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
+use rpkm_core::campaign::Instrument;
 use rpkm_core::elastic::{ElasticError, Stiffness};
 use rpkm_core::geometry::GeometryError;
 use rpkm_core::noise::NoiseModel;
@@ -42,6 +43,30 @@ pub struct TwinConfig {
     pub reset: ResetReading,
     /// A periodic error of one carrier's scale (None: none).
     pub cyclic: Option<CyclicScale>,
+    /// A relative instrument whose readings drift after its zero (None: none).
+    pub drift: Option<ZeroDrift>,
+}
+
+/// A relative instrument whose readings drift after its zero (a tracker creeping as it warms,
+/// an interferometer's air changing): every reading of a setup of `instrument` carries
+/// `rate_per_s` times the time since the setup's reset pose, which read 0. The model has no
+/// term for it; a return to the reset pose at the setup's end shows it
+/// (`rpkm_core::returns`). A systematic error, not noise: a noiseless twin drifts too.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ZeroDrift {
+    pub instrument: Instrument,
+    /// Drift of the reading per second along x and y, mm/s; a single-coordinate instrument
+    /// (ball-bar r, interferometer x or y, angle optics ψ in rad/s) drifts by the first.
+    /// A tracker creeping 1 µm/min along y: `[0.0, 1e-3 / 60.0]`.
+    pub rate_per_s: [f64; 2],
+}
+
+impl ZeroDrift {
+    /// What a reading taken `seconds` after its setup's zero carries (x, y; a single
+    /// coordinate in x), mm or rad.
+    pub fn after(&self, seconds: f64) -> [f64; 2] {
+        self.rate_per_s.map(|v| v * seconds)
+    }
 }
 
 /// A periodic error of one carrier's scale (a linear scale's or an encoder's interpolation
@@ -90,6 +115,7 @@ impl Default for TwinConfig {
             thermal: ThermalPhysics::default(),
             reset: ResetReading::default(),
             cyclic: None,
+            drift: None,
         }
     }
 }
@@ -150,6 +176,11 @@ pub enum TwinError {
         x: f64,
         y: f64,
         source: ElasticError,
+    },
+    #[error("drift of {instrument}: {why}")]
+    BadDrift {
+        instrument: Instrument,
+        why: &'static str,
     },
     #[error("setup {setup}: pose before its reset pose")]
     NoReset { setup: String },
