@@ -59,7 +59,8 @@ use std::str::FromStr;
 
 pub use error::CampaignError;
 pub use motion::{Motion, MotionCovariates};
-pub use parse::CampaignReader;
+pub use parse::{parse_follower, CampaignReader};
+pub use write::follower_text;
 
 /// The required columns, in the order [`Campaign::to_csv`] writes them.
 pub const REQUIRED_COLUMNS: [&str; 17] = [

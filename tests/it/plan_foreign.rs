@@ -113,13 +113,8 @@ fn with(self_rows: &Campaign, extra: &Campaign, name: &str) -> Campaign {
 
 fn random_design(seed: u64) -> Vec<PlannedPose> {
     let mut rng = StdRng::seed_from_u64(seed);
-    let pose = |reset: bool, x: f64, y: f64| PlannedPose {
-        setup: "random_lt".to_owned(),
-        instrument: Instrument::Lt,
-        reset,
-        x,
-        y,
-    };
+    let pose =
+        |reset: bool, x: f64, y: f64| PlannedPose::new("random_lt", Instrument::Lt, reset, (x, y));
     let mut d = vec![pose(true, CENTRE.0, CENTRE.1)];
     for _ in 1..BUDGET {
         d.push(pose(

@@ -8,7 +8,8 @@
 //! - Drives: q1, q4 position-controlled, q2, q3 followers (rigid geometry: the pose is the true
 //!   fgm(q1, q4), followers read the true rgm); under `preload_elastic` all four are
 //!   position-controlled and pose and drive forces come from the elasto-geometric model.
-//!   `self` poses always switch q2, q3 to followers.
+//!   `self` poses always switch q2, q3 to followers, and so does a pose planned in that mode
+//!   ([`PlannedPose::follower`]).
 //! - Encoders and instruments with the twin's own noise ([`TwinConfig::noise`]), which a test
 //!   sets apart from what the calibration assumes.
 //! - Relative setups: the reset pose records 0, the others true TCP − true reset TCP, plus
@@ -184,10 +185,11 @@ impl Twin {
             p[i] += sigma * gauss(&mut rng);
         }
         p = p.with_perfect_parallelogram();
+        let noise_seed = config.noise_seed.unwrap_or(config.seed);
         let twin = Twin {
-            rng: StdRng::seed_from_u64(config.seed ^ 0x9e37_79b9_7f4a_7c15),
-            force_rng: StdRng::seed_from_u64(config.seed ^ 0xf0e5_c0de_0000_0004),
-            reset_rng: StdRng::seed_from_u64(config.seed ^ 0x7e5e_7000_0000_0005),
+            rng: StdRng::seed_from_u64(noise_seed ^ 0x9e37_79b9_7f4a_7c15),
+            force_rng: StdRng::seed_from_u64(noise_seed ^ 0xf0e5_c0de_0000_0004),
+            reset_rng: StdRng::seed_from_u64(noise_seed ^ 0x7e5e_7000_0000_0005),
             t: 0.0,
             alignment: BTreeMap::new(),
             truth_params: p,
@@ -558,7 +560,7 @@ impl Twin {
             last_setup = Some(&plan.setup);
             self.t += SECONDS_PER_POSE;
             let t = self.t;
-            let self_cal = plan.instrument == Instrument::SelfCal;
+            let self_cal = followers_23(plan)?;
             let mut enc = [0; 4].map(|_| k * noise.encoder_mm * gauss(&mut self.rng));
             let mut covariates = Vec::with_capacity(3);
             if backlash.is_some() || lost_q4.is_some() {
@@ -705,6 +707,21 @@ impl Twin {
         let d = self.validation_design(n);
         self.run(&d, "validation")
     }
+}
+
+/// Whether `plan` is measured with q2, q3 following (self-calibration always; another
+/// instrument where its plan says so): the twin drives that mode or all four active.
+fn followers_23(plan: &PlannedPose) -> Result<bool, TwinError> {
+    if plan.instrument == Instrument::SelfCal || plan.follower == design::FOLLOWERS_23 {
+        return Ok(true);
+    }
+    if plan.follower == [false; 4] {
+        return Ok(false);
+    }
+    Err(TwinError::DriveMode {
+        setup: plan.setup.clone(),
+        follower: rpkm_core::campaign::follower_text(plan.follower),
+    })
 }
 
 /// A drift the twin can apply: a relative instrument's, finite.

@@ -23,6 +23,9 @@ pub const TEMP_SENSOR_K: f64 = 0.01;
 pub struct TwinConfig {
     /// Seed of every random draw (parameter errors, noise, alignment angles).
     pub seed: u64,
+    /// Seed of the readings' noise alone, where it is not `seed`'s: the same machine
+    /// measured again with other noise (a study's noise seeds).
+    pub noise_seed: Option<u64>,
     /// Hidden effects and their magnitudes (units: [`EffectKind::unit`]).
     pub effects: Vec<(EffectKind, f64)>,
     /// σ of the true parameters' length errors, mm.
@@ -106,6 +109,7 @@ impl Default for TwinConfig {
     fn default() -> Self {
         TwinConfig {
             seed: 1,
+            noise_seed: None,
             effects: Vec::new(),
             length_sigma_mm: 0.1,
             angle_sigma_rad: 2e-4,
@@ -177,6 +181,8 @@ pub enum TwinError {
         y: f64,
         source: ElasticError,
     },
+    #[error("setup {setup}: followers `{follower}`: the twin drives q2, q3 as followers (`23`) or all four active (empty)")]
+    DriveMode { setup: String, follower: String },
     #[error("drift of {instrument}: {why}")]
     BadDrift {
         instrument: Instrument,

@@ -163,7 +163,7 @@ impl<'a> Row<'a> {
 
 /// `23` → `[false, true, true, false]`; empty → none; `None` for anything else than distinct
 /// digits 1..4.
-pub(super) fn parse_follower(text: &str) -> Option<[bool; 4]> {
+pub fn parse_follower(text: &str) -> Option<[bool; 4]> {
     let mut follower = [false; 4];
     for c in text.chars() {
         let k = match c {

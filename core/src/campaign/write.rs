@@ -57,7 +57,7 @@ fn optional(v: Option<f64>) -> String {
 }
 
 /// `[false, true, true, false]` → `23`.
-pub(super) fn follower_text(follower: [bool; 4]) -> String {
+pub fn follower_text(follower: [bool; 4]) -> String {
     follower
         .iter()
         .zip(['1', '2', '3', '4'])

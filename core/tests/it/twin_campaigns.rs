@@ -157,13 +157,7 @@ fn thermal_residual_correlates_with_temp_machine() {
     // the drift of q2, q3 there is thermal alone.
     let _ = t.campaign(&[Instrument::SelfCal]).expect("self");
     let hold: Vec<PlannedPose> = (0..800)
-        .map(|_| PlannedPose {
-            setup: "hold".into(),
-            instrument: Instrument::SelfCal,
-            reset: false,
-            x: 0.0,
-            y: 1700.0,
-        })
+        .map(|_| PlannedPose::new("hold", Instrument::SelfCal, false, (0.0, 1700.0)))
         .collect();
     let c = t.run(&hold, "hold").expect("hold");
     let temp: Vec<f64> = c
