@@ -15,8 +15,9 @@ use serde_json::json;
 const RANDOM_DRAWS: usize = 25;
 /// Seed of the random designs: the same comparison every run.
 const RANDOM_SEED: u64 = 0x5eed_0037;
-/// A plan that lowers the expected held-out RMS by less than this share buys nothing.
-const WORTH: f64 = 0.02;
+/// A plan that lowers the TCP's own error (the expected held-out RMS above the readings'
+/// noise) by less than this share of it buys nothing.
+const WORTH: f64 = 0.05;
 /// Instruments a plan may use, in the order they are suggested on a tie.
 const ALL: [Instrument; 5] = [
     Instrument::Lt,
@@ -63,7 +64,7 @@ pub fn run(
         print_budgets(&all);
     }
     let f = last.forecast;
-    if f.now_mm - f.after_mm < WORTH * f.now_mm {
+    if !pays(f.now_mm, f.after_mm, f.floor_mm) {
         print_nothing_to_gain(start, unknowns, (instruments, last.budget), evaluation)?;
     }
     let design = plan::measured_in(last.plan.design(), &drives.mode);
@@ -80,6 +81,10 @@ pub fn run(
                 "after_um": f.after_mm * 1e3,
                 "random_um": last.random_mm * 1e3,
                 "floor_um": f.floor_mm * 1e3,
+            "own_now_um": own(f.now_mm, f.floor_mm) * 1e3,
+            "own_after_um": own(f.after_mm, f.floor_mm) * 1e3,
+            "own_random_um": own(last.random_mm, f.floor_mm) * 1e3,
+            "pays": pays(f.now_mm, f.after_mm, f.floor_mm),
                 "budgets": all.iter().map(|b| json!({
                     "budget": b.budget,
                     "poses": b.plan.design().len(),
@@ -94,40 +99,53 @@ pub fn run(
     )
 }
 
+/// The TCP's own error in an expected held-out RMS `rms` (mm): what is left above the
+/// held-out readings' noise `floor` (in quadrature).
+fn own(rms: f64, floor: f64) -> f64 {
+    (rms * rms - floor * floor).max(0.0).sqrt()
+}
+
+/// Whether a plan from `now` to `after` (expected held-out RMS, mm, over `floor`) buys
+/// something: the TCP's own error lower by [`WORTH`] of itself.
+fn pays(now: f64, after: f64, floor: f64) -> bool {
+    own(now, floor) - own(after, floor) >= WORTH * own(now, floor)
+}
+
 fn print_plan(b: &Budgeted, where_words: &str) {
     let f = b.forecast;
+    let line = |what: &str, rms: f64| {
+        println!(
+            "  {what:<26} {:>8.2} um {:>13.2} um",
+            rms * 1e3,
+            own(rms, f.floor_mm) * 1e3
+        );
+    };
     println!("expected held-out RMS ({where_words}, each setup's zero removed):");
-    println!(
-        "  now                     {:>6.2} um   ({} of {} parameter combinations determined)",
-        f.now_mm * 1e3,
-        b.plan.before.determined,
-        b.plan.before.of
-    );
+    println!("  {:<26} {:>11} {:>16}", "", "held-out", "the TCP's own");
+    line("now", f.now_mm);
     println!("\nplan of {} poses:", b.budget);
     for s in &b.plan.setups {
         println!(
-            "  {:<14} {:<6} {:>3} poses, {}: then {:.2} um",
+            "  {:<14} {:<6} {:>3} poses, {}",
             s.setup.id,
             s.setup.instrument.as_str(),
             s.poses,
             super::setup_words(&s.setup),
-            s.expected_mm.unwrap_or(f64::NAN) * 1e3
         );
     }
+    println!();
+    line("after the plan", f.after_mm);
+    line(&format!("{} random poses instead", b.budget), b.random_mm);
     println!(
-        "\n  after the plan          {:>6.2} um   ({} of {} determined)",
-        f.after_mm * 1e3,
-        b.plan.after().determined,
-        b.plan.after().of
-    );
-    println!(
-        "  {:>3} random poses instead {:>5.2} um   (median of {RANDOM_DRAWS} draws)",
-        b.budget,
-        b.random_mm * 1e3
-    );
-    println!(
-        "  the tracker's own noise {:>6.2} um   (the floor no plan goes below)",
+        "  {:<26} {:>8.2} um   (the floor: the tracker's own noise, zero removed)",
+        "noise alone",
         f.floor_mm * 1e3
+    );
+    println!(
+        "  parameter combinations determined better than their tolerance: {} of {} now, {} after",
+        b.plan.before.determined,
+        b.plan.before.of,
+        b.plan.after().determined
     );
     println!("\n{}", buys_words(b));
 }
@@ -135,45 +153,48 @@ fn print_plan(b: &Budgeted, where_words: &str) {
 /// What the plan buys, in words.
 fn buys_words(b: &Budgeted) -> String {
     let f = b.forecast;
-    let (now, after, random) = (f.now_mm * 1e3, f.after_mm * 1e3, b.random_mm * 1e3);
-    if now - after < WORTH * now {
+    let um = |v: f64| own(v, f.floor_mm) * 1e3;
+    let (now, after, random) = (um(f.now_mm), um(f.after_mm), um(b.random_mm));
+    if !pays(f.now_mm, f.after_mm, f.floor_mm) {
         return format!(
-            "the plan buys nothing: the campaign already predicts the TCP at {now:.2} um \
-             (the tracker's own noise {:.2} um of it), and {} poses of these instruments \
-             would not lower it by {:.0} %",
-            f.floor_mm * 1e3,
-            b.budget,
-            WORTH * 100.0
+            "the plan buys nothing: the TCP's own error would stay at {after:.2} um (now \
+             {now:.2} um, less than {:.0} % lower), under the held-out readings' noise of \
+             {:.2} um",
+            WORTH * 100.0,
+            f.floor_mm * 1e3
         );
     }
     let versus = if after <= random {
-        format!(
-            "{:.0} % of what random poses buy",
-            100.0 * (now - after) / (now - random).max(1e-9)
-        )
+        format!("{} random poses: {random:.2} um", b.budget)
     } else {
-        "random poses would buy more: the plan's figures rest on the model".to_owned()
+        format!(
+            "{} random poses would do better, {random:.2} um: the plan rests on the model",
+            b.budget
+        )
     };
     format!(
-        "the plan buys {:.2} um of held-out RMS ({now:.2} -> {after:.2} um; {versus}); what \
-         is left above the noise floor: {:.2} um",
-        now - after,
-        (after * after - (f.floor_mm * 1e3).powi(2)).max(0.0).sqrt()
+        "the plan lowers the TCP's own error from {now:.2} to {after:.2} um ({versus}); the \
+         held-out RMS from {:.2} to {:.2} um",
+        f.now_mm * 1e3,
+        f.after_mm * 1e3
     )
 }
 
 fn print_budgets(all: &[Budgeted]) {
-    println!("\nby budget (expected held-out RMS):");
+    println!("\nby budget (expected held-out RMS; the TCP's own error):");
     println!(
-        "  {:>6} {:>16} {:>16}",
+        "  {:>6} {:>24} {:>24}",
         "poses", "after the plan", "random poses"
     );
     for b in all {
+        let floor = b.forecast.floor_mm;
         println!(
-            "  {:>6} {:>13.2} um {:>13.2} um",
+            "  {:>6} {:>10.2} um ({:>6.2} um) {:>10.2} um ({:>6.2} um)",
             b.budget,
             b.forecast.after_mm * 1e3,
-            b.random_mm * 1e3
+            own(b.forecast.after_mm, floor) * 1e3,
+            b.random_mm * 1e3,
+            own(b.random_mm, floor) * 1e3
         );
     }
 }
@@ -188,34 +209,37 @@ fn print_nothing_to_gain(
 ) -> anyhow::Result<()> {
     let names: Vec<&str> = instruments.iter().map(|i| super::spelling(*i)).collect();
     let mut better: Vec<(f64, Instrument)> = Vec::new();
-    let mut now = f64::NAN;
     for other in ALL.into_iter().filter(|i| !instruments.contains(i)) {
         let setups: Vec<CandidateSetup> = plan::candidates(&[other])?;
         let planner = AccuracyPlanner::new(start, unknowns, &setups, evaluation)?;
         let (_, f) = planner.plan(budget)?;
-        now = f.now_mm;
-        if f.now_mm - f.after_mm >= WORTH * f.now_mm {
-            better.push((f.after_mm, other));
+        if pays(f.now_mm, f.after_mm, f.floor_mm) {
+            better.push((own(f.after_mm, f.floor_mm), other));
         }
     }
     better.sort_by(|a, b| a.0.total_cmp(&b.0));
     if better.is_empty() {
         println!(
             "nothing to gain with {}, nor with any other instrument in {budget} poses: try \
-             another model (rpkm diagnose: an effect the model lacks) or more poses (--budget)",
+             more poses (--budget), or another model (rpkm diagnose: an effect the model lacks)",
             names.join(", ")
         );
         return Ok(());
     }
     let tries: Vec<String> = better
         .iter()
-        .map(|(mm, i)| format!("--instruments {} ({:.2} um)", super::spelling(*i), mm * 1e3))
+        .map(|(mm, i)| {
+            format!(
+                "--instruments {} (the TCP's own error {:.2} um)",
+                super::spelling(*i),
+                mm * 1e3
+            )
+        })
         .collect();
     println!(
-        "nothing to gain with {}; try {} (from {:.2} um, {budget} poses)",
+        "nothing to gain with {} in {budget} poses; try {}",
         names.join(", "),
-        tries.join(", or "),
-        now * 1e3
+        tries.join(", or ")
     );
     Ok(())
 }

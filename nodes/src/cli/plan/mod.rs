@@ -119,7 +119,17 @@ fn check(args: &PlanArgs, prior: &Prior) -> anyhow::Result<Checked> {
 }
 
 pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
-    let prior = Prior::default();
+    let positive = |flag: &str, v: f64| {
+        if v.is_finite() && v > 0.0 {
+            Ok(v)
+        } else {
+            Err(bad_input(format!("{flag} {v}: expected a positive number")))
+        }
+    };
+    let prior = Prior {
+        length_mm: positive("--tolerance-mm", args.tolerance_mm)?,
+        angle_rad: positive("--tolerance-mrad", args.tolerance_mrad)? * 1e-3,
+    };
     let checked = check(args, &prior)?;
     let model = checked.model;
     let campaign = read_campaign(&args.campaign)?;
