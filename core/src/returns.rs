@@ -134,16 +134,12 @@ fn reading_covariance(
     noise: &NoiseModel,
 ) -> Result<Matrix2<f64>, GeometryError> {
     let encoder = Matrix2::identity() * noise.encoder_mm.powi(2);
-    Ok(match XyInstrument::of(pose.instrument) {
-        Some(xy) => {
-            let sol = geometry::fgm(p, model, pose.q[0], pose.q[3])?;
-            noise.xy_covariance(xy, Vector2::new(sol.x(), sol.y())) + encoder
-        }
-        None => {
-            let s = noise.scalar_sigma(pose.instrument).unwrap_or(0.0);
-            Matrix2::new(s * s, 0.0, 0.0, 0.0) + encoder
-        }
-    })
+    if let Some(xy) = XyInstrument::of(pose.instrument) {
+        let sol = geometry::fgm(p, model, pose.q[0], pose.q[3])?;
+        return Ok(noise.xy_covariance(xy, Vector2::new(sol.x(), sol.y())) + encoder);
+    }
+    let s = noise.scalar_sigma(pose.instrument).unwrap_or(0.0);
+    Ok(Matrix2::new(s * s, 0.0, 0.0, 0.0) + encoder)
 }
 
 /// The return at `pose` of the setup zeroed at `zero`, its TCP errors `errors` (model less

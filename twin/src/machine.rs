@@ -2,6 +2,7 @@
 //! of the twin reads this one; it reads only the effects it is configured with.
 
 use super::effects::{EffectKind, ALPHA_PER_K, REFERENCE_TEMP_C};
+use nalgebra::Vector2;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
 use rpkm_core::campaign::Instrument;
@@ -192,6 +193,20 @@ pub enum TwinError {
     NoReset { setup: String },
     #[error("unknown campaign {0:?}, expected lt, kgm, dbb, li_x, li_y, li_psi, self, circle or validation")]
     UnknownCampaign(String),
+}
+
+/// The true state of the machine at one pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MachineState {
+    /// TCP (mm) and platform angle (rad).
+    pub tcp: Vector2<f64>,
+    pub psi: f64,
+    /// Encoder readings q1..q4 (without noise), mm.
+    pub q: [f64; 4],
+    /// Drive forces, N.
+    pub f: [f64; 4],
+    /// Followers.
+    pub follower: [bool; 4],
 }
 
 /// The digital twin.

@@ -111,7 +111,7 @@ fn each_setup_reports_its_drift_within_three_sigma() {
         if truth[1] > 6e-3 {
             assert!(d.moved(), "{d:?}");
             let rate = d.rate_mm_per_s * 60e3;
-            assert!((rate - 1.0).abs() < 0.5, "{} µm/min", rate);
+            assert!((rate - 1.0).abs() < 0.5, "{rate} µm/min");
         }
     }
     let (_, still) = checks(None);

@@ -2,7 +2,7 @@
 
 use super::args::PlanArgs;
 use anyhow::Context;
-use rpkm_core::design::{PlannedPose, FOLLOWERS_23};
+use rpkm_core::design::PlannedPose;
 use rpkm_core::plan::{csv, DriveMode, DriveModeReason};
 
 /// The drives' mode of a plan and its sentence.
@@ -70,12 +70,11 @@ pub fn mode_words(mode: &DriveMode, preload_modelled: bool) -> String {
     };
     let mut s = format!("external instruments measure with {how} ({why})");
     if mode.all_active() && !preload_modelled {
-        s.push_str(&format!(
+        s.push_str(
             "; the model carries no preload: measured so, the poses carry its deflection \
              (--effects preload_elastic with the drive forces recorded, or --follower 23 \
-             where the cell can switch q2, q3 to followers, as `{}`)",
-            rpkm_core::campaign::follower_text(FOLLOWERS_23)
-        ));
+             where the cell can switch q2, q3 to followers)",
+        );
     }
     s
 }
