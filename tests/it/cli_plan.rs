@@ -22,22 +22,31 @@ fn path(dir: &Path, name: &str) -> String {
     dir.join(name).display().to_string()
 }
 
-#[test]
-fn a_plan_is_written_measured_on_the_twin_and_read_back() {
-    let dir = tempfile::tempdir().expect("a scratch folder");
-    let campaign = path(dir.path(), "self.csv");
-    let (code, _, err) = rpkm(&[
+/// `rpkm simulate --campaign CAMPAIGNS --seed SEED [extra]` into `dir/name`, no held-out
+/// file; its path.
+fn simulated(dir: &Path, name: &str, (campaigns, seed): (&str, &str), extra: &[&str]) -> String {
+    let out = path(dir, name);
+    let mut args = vec![
         "simulate",
         "--campaign",
-        "self",
+        campaigns,
         "--seed",
-        "3",
+        seed,
         "--validation",
         "0",
         "--out",
-        &campaign,
-    ]);
-    assert_eq!(code, Some(0), "{err}");
+        &out,
+    ];
+    args.extend_from_slice(extra);
+    let (code, _, err) = rpkm(&args);
+    assert_eq!(code, Some(0), "{args:?}: {err}");
+    out
+}
+
+#[test]
+fn a_plan_is_written_measured_on_the_twin_and_read_back() {
+    let dir = tempfile::tempdir().expect("a scratch folder");
+    let campaign = simulated(dir.path(), "self.csv", ("self", "3"), &[]);
     let plan = path(dir.path(), "plan.csv");
     let json = path(dir.path(), "plan.json");
     let (code, out, err) = rpkm(&[
@@ -102,34 +111,9 @@ fn json(path: &str) -> serde_json::Value {
 #[test]
 fn the_plan_measures_in_the_campaigns_drive_mode_unless_the_model_carries_the_preload() {
     let dir = tempfile::tempdir().expect("a scratch folder");
-    let loaded = path(dir.path(), "loaded.csv");
-    let (code, _, err) = rpkm(&[
-        "simulate",
-        "--campaign",
-        "lt,self",
-        "--effect",
-        "preload_elastic",
-        "--seed",
-        "4",
-        "--validation",
-        "0",
-        "--out",
-        &loaded,
-    ]);
-    assert_eq!(code, Some(0), "{err}");
-    let following = path(dir.path(), "following.csv");
-    let (code, _, err) = rpkm(&[
-        "simulate",
-        "--campaign",
-        "lt,self",
-        "--seed",
-        "4",
-        "--validation",
-        "0",
-        "--out",
-        &following,
-    ]);
-    assert_eq!(code, Some(0), "{err}");
+    let preload = ["--effect", "preload_elastic"];
+    let loaded = simulated(dir.path(), "loaded.csv", ("lt,self", "4"), &preload);
+    let following = simulated(dir.path(), "following.csv", ("lt,self", "4"), &[]);
     let cases: [(&str, &[&str], &str, &str); 4] = [
         (&loaded, &[], "", "the model carries no preload"),
         (
@@ -167,19 +151,7 @@ fn the_plan_measures_in_the_campaigns_drive_mode_unless_the_model_carries_the_pr
 #[test]
 fn the_summary_says_what_each_budget_buys() {
     let dir = tempfile::tempdir().expect("a scratch folder");
-    let base = path(dir.path(), "self.csv");
-    let (code, _, err) = rpkm(&[
-        "simulate",
-        "--campaign",
-        "self",
-        "--seed",
-        "3",
-        "--validation",
-        "0",
-        "--out",
-        &base,
-    ]);
-    assert_eq!(code, Some(0), "{err}");
+    let base = simulated(dir.path(), "self.csv", ("self", "3"), &[]);
     let j = path(dir.path(), "plan.json");
     let (code, out, err) = rpkm(&[
         "plan", &base, "--budget", "3,5,10", "--noise", "lt=0.005", "--json", &j,
@@ -203,19 +175,7 @@ fn the_summary_says_what_each_budget_buys() {
     );
     assert_eq!(v["drive_mode"]["follower"], "23");
     // lt and self measured already: 3 tracker poses add nothing, another instrument would
-    let full = path(dir.path(), "ltself.csv");
-    let (code, _, err) = rpkm(&[
-        "simulate",
-        "--campaign",
-        "lt,self",
-        "--seed",
-        "4",
-        "--validation",
-        "0",
-        "--out",
-        &full,
-    ]);
-    assert_eq!(code, Some(0), "{err}");
+    let full = simulated(dir.path(), "ltself.csv", ("lt,self", "4"), &[]);
     let (code, out, err) = rpkm(&["plan", &full, "--budget", "3"]);
     assert_eq!(code, Some(0), "{err}");
     assert!(out.contains("the plan buys nothing"), "{out}");
@@ -231,19 +191,7 @@ fn the_summary_says_what_each_budget_buys() {
 #[test]
 fn calibrate_reports_a_drifting_trackers_return() {
     let dir = tempfile::tempdir().expect("a scratch folder");
-    let base = path(dir.path(), "self.csv");
-    let (code, _, err) = rpkm(&[
-        "simulate",
-        "--campaign",
-        "self",
-        "--seed",
-        "5",
-        "--validation",
-        "0",
-        "--out",
-        &base,
-    ]);
-    assert_eq!(code, Some(0), "{err}");
+    let base = simulated(dir.path(), "self.csv", ("self", "5"), &[]);
     let plan = path(dir.path(), "plan.csv");
     let (code, _, err) = rpkm(&["plan", &base, "--budget", "20", "--out", &plan]);
     assert_eq!(code, Some(0), "{err}");

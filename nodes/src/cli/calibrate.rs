@@ -37,12 +37,9 @@ pub struct CalibrateArgs {
     /// a comma-separated list (l1,gamma2,...).
     #[arg(long, default_value = "map")]
     pub params: String,
-    /// Manufacturing tolerance of the lengths (mm, one σ) for --params map.
-    #[arg(long, default_value_t = 0.1)]
-    pub tolerance_mm: f64,
-    /// Manufacturing tolerance of the angles (mrad, one σ) for --params map.
-    #[arg(long, default_value_t = 1.0)]
-    pub tolerance_mrad: f64,
+    /// The tolerances of --params map.
+    #[command(flatten)]
+    pub tolerance: super::prior_args::PriorArgs,
     /// The instruments' stated noise, NAME=VALUE comma-separated or a YAML file (mm, rad for
     /// psi): lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, psi,
     /// encoder, force (N, drive forces), drive_position (the encoders in the force rows),
@@ -204,10 +201,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
 
 /// The calibration's options from the command line, each flag checked.
 fn options(args: &CalibrateArgs, model: Model) -> anyhow::Result<Options> {
-    let prior = calib::Prior {
-        length_mm: positive("--tolerance-mm", args.tolerance_mm)?,
-        angle_rad: positive("--tolerance-mrad", args.tolerance_mrad)? * 1e-3,
-    };
+    let prior = args.tolerance.prior()?;
     let selection = match args.params.as_str() {
         "map" => Selection::Prior(prior),
         "auto" => Selection::Auto {
@@ -277,14 +271,6 @@ fn print_returns(returns: &[rpkm_core::returns::ReturnDrift]) {
     );
     for d in returns {
         println!("  {}", crate::words::return_drift(d));
-    }
-}
-
-fn positive(flag: &str, v: f64) -> anyhow::Result<f64> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(bad_input(format!("{flag} {v}: expected a positive number")))
     }
 }
 

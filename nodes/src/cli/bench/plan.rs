@@ -78,12 +78,12 @@ struct Run {
 
 pub fn run(a: &PlanStudyArgs) -> Result<()> {
     if a.machines == 0 || a.seeds == 0 || a.budgets.iter().any(|&b| b < 2) {
-        return Err(super::bad_input(
+        return Err(crate::cli::bad_input(
             "--machines and --seeds at least 1, every budget at least 2".into(),
         ));
     }
     let noise =
-        NoiseModel::parse(&a.noise).map_err(|e| super::bad_input(format!("--noise: {e}")))?;
+        NoiseModel::parse(&a.noise).map_err(|e| crate::cli::bad_input(format!("--noise: {e}")))?;
     let mut runs = Vec::new();
     for m in 0..a.machines {
         for s in 0..a.seeds {
@@ -94,7 +94,7 @@ pub fn run(a: &PlanStudyArgs) -> Result<()> {
     eprintln!();
     print_table(&runs, a);
     if let Some(path) = &a.json {
-        super::super::write_json(path, &serde_json::to_value(&runs)?)?;
+        crate::cli::write_json(path, &serde_json::to_value(&runs)?)?;
         println!("wrote {}", path.display());
     }
     Ok(())

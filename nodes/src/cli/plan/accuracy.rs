@@ -125,13 +125,7 @@ fn print_plan(b: &Budgeted, where_words: &str) {
     line("now", f.now_mm);
     println!("\nplan of {} poses:", b.budget);
     for s in &b.plan.setups {
-        println!(
-            "  {:<14} {:<6} {:>3} poses, {}",
-            s.setup.id,
-            s.setup.instrument.as_str(),
-            s.poses,
-            super::setup_words(&s.setup),
-        );
+        println!("  {}", super::output::setup_line(s));
     }
     println!();
     line("after the plan", f.after_mm);
@@ -207,7 +201,10 @@ fn print_nothing_to_gain(
     (instruments, budget): (&[Instrument], usize),
     evaluation: &Evaluation,
 ) -> anyhow::Result<()> {
-    let names: Vec<&str> = instruments.iter().map(|i| super::spelling(*i)).collect();
+    let names: Vec<&str> = instruments
+        .iter()
+        .map(|i| super::output::spelling(*i))
+        .collect();
     let mut better: Vec<(f64, Instrument)> = Vec::new();
     for other in ALL.into_iter().filter(|i| !instruments.contains(i)) {
         let setups: Vec<CandidateSetup> = plan::candidates(&[other])?;
@@ -231,7 +228,7 @@ fn print_nothing_to_gain(
         .map(|(mm, i)| {
             format!(
                 "--instruments {} (the TCP's own error {:.2} um)",
-                super::spelling(*i),
+                super::output::spelling(*i),
                 mm * 1e3
             )
         })

@@ -71,14 +71,10 @@ pub struct PlanArgs {
     /// Size of a lost motion the separation is judged at, mm.
     #[arg(long, default_value_t = 0.01)]
     pub lost_motion_mm: f64,
-    /// Manufacturing tolerance of the lengths (mm, one σ): the prior of the calibration and
-    /// of the plan, as `rpkm calibrate --tolerance-mm` (what the campaign leaves unmeasured
-    /// is uncertain by this much: the "now" of the forecast).
-    #[arg(long, default_value_t = 0.1)]
-    pub tolerance_mm: f64,
-    /// Manufacturing tolerance of the angles (mrad, one σ), as `rpkm calibrate`.
-    #[arg(long, default_value_t = 1.0)]
-    pub tolerance_mrad: f64,
+    /// The tolerances of the calibration and of the plan, as `rpkm calibrate`'s: what the
+    /// campaign leaves unmeasured is this uncertain (the "now" of the forecast).
+    #[command(flatten)]
+    pub tolerance: crate::cli::prior_args::PriorArgs,
     /// Stated noise (as `rpkm calibrate --noise`); the campaign re-estimates what it shows.
     #[arg(long)]
     pub noise: Option<String>,

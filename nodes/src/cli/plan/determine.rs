@@ -89,11 +89,8 @@ fn print_determination(p: &DeterminationPlan, calibrated: Option<(usize, usize)>
     println!("\nplan:");
     for s in &p.setups {
         println!(
-            "  {:<14} {:<6} {:>3} poses, {}: then {} of {} determined (effective {:.1})",
-            s.setup.id,
-            s.setup.instrument.as_str(),
-            s.poses,
-            super::setup_words(&s.setup),
+            "  {}: then {} of {} determined (effective {:.1})",
+            super::output::setup_line(s),
             s.after.determined,
             s.after.of,
             s.after.effective

@@ -17,7 +17,7 @@ use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::forecast::targets_of;
 use rpkm_core::plan::separate::{Hypothesis, Pair};
-use rpkm_core::plan::{self, csv, CandidateSetup, Evaluation, Start, Unknowns};
+use rpkm_core::plan::{self, csv, Evaluation, Start, Unknowns};
 use rpkm_core::variance;
 
 /// What a plan is for.
@@ -51,24 +51,6 @@ fn instruments(args: &PlanArgs) -> anyhow::Result<Vec<Instrument>> {
             ))),
         })
         .collect()
-}
-
-/// How `--instruments` spells an instrument.
-fn spelling(i: Instrument) -> &'static str {
-    if i == Instrument::LiPsi {
-        "psi"
-    } else {
-        i.as_str()
-    }
-}
-
-/// "reset at (0, 1700), returns there" / "no reset".
-fn setup_words(s: &CandidateSetup) -> String {
-    match (s.reset, s.return_pose()) {
-        (Some((x, y)), Some(_)) => format!("reset at ({x:.0}, {y:.0}), returns there"),
-        (Some((x, y)), None) => format!("reset at ({x:.0}, {y:.0})"),
-        (None, _) => "no reset".to_owned(),
-    }
 }
 
 /// The arguments checked before the campaign is calibrated.
@@ -119,17 +101,7 @@ fn check(args: &PlanArgs, prior: &Prior) -> anyhow::Result<Checked> {
 }
 
 pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
-    let positive = |flag: &str, v: f64| {
-        if v.is_finite() && v > 0.0 {
-            Ok(v)
-        } else {
-            Err(bad_input(format!("{flag} {v}: expected a positive number")))
-        }
-    };
-    let prior = Prior {
-        length_mm: positive("--tolerance-mm", args.tolerance_mm)?,
-        angle_rad: positive("--tolerance-mrad", args.tolerance_mrad)? * 1e-3,
-    };
+    let prior = args.tolerance.prior()?;
     let checked = check(args, &prior)?;
     let model = checked.model;
     let campaign = read_campaign(&args.campaign)?;
@@ -236,12 +208,7 @@ fn pair(args: &PlanArgs, prior: &Prior) -> anyhow::Result<Pair> {
             args.separate.join(",")
         )));
     };
-    if !(args.lost_motion_mm.is_finite() && args.lost_motion_mm > 0.0) {
-        return Err(bad_input(format!(
-            "--lost-motion-mm {}: expected a positive number",
-            args.lost_motion_mm
-        )));
-    }
+    super::prior_args::positive("--lost-motion-mm", args.lost_motion_mm)?;
     let parse = |s: &str| {
         s.parse::<Hypothesis>()
             .map_err(|e| bad_input(format!("--separate: {e}")))

@@ -2,8 +2,9 @@
 
 use super::args::PlanArgs;
 use anyhow::Context;
+use rpkm_core::campaign::Instrument;
 use rpkm_core::design::PlannedPose;
-use rpkm_core::plan::{csv, DriveMode, DriveModeReason};
+use rpkm_core::plan::{csv, CandidateSetup, DriveMode, DriveModeReason};
 
 /// The drives' mode of a plan and its sentence.
 pub struct Drives {
@@ -33,7 +34,7 @@ pub fn write_outputs(
             "reason": drives.mode.reason,
             "words": drives.words,
         });
-        super::super::write_json(path, &j)?;
+        crate::cli::write_json(path, &j)?;
         println!("wrote {}", path.display());
     }
     Ok(())
@@ -77,4 +78,34 @@ pub fn mode_words(mode: &DriveMode, preload_modelled: bool) -> String {
         );
     }
     s
+}
+
+/// How `--instruments` spells an instrument.
+pub fn spelling(i: Instrument) -> &'static str {
+    if i == Instrument::LiPsi {
+        "psi"
+    } else {
+        i.as_str()
+    }
+}
+
+/// "reset at (0, 1700), returns there" / "no reset".
+pub fn setup_words(s: &CandidateSetup) -> String {
+    match (s.reset, s.return_pose()) {
+        (Some((x, y)), Some(_)) => format!("reset at ({x:.0}, {y:.0}), returns there"),
+        (Some((x, y)), None) => format!("reset at ({x:.0}, {y:.0})"),
+        (None, _) => "no reset".to_owned(),
+    }
+}
+
+/// "plan_lt        lt      10 poses, reset at (0, 1700), returns there": a planned setup
+/// on one line.
+pub fn setup_line(s: &rpkm_core::plan::PlannedSetup) -> String {
+    format!(
+        "{:<14} {:<6} {:>3} poses, {}",
+        s.setup.id,
+        s.setup.instrument.as_str(),
+        s.poses,
+        setup_words(&s.setup)
+    )
 }
