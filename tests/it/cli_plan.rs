@@ -174,6 +174,16 @@ fn the_summary_says_what_each_budget_buys() {
         "{now} {after:?} {floor}"
     );
     assert_eq!(v["drive_mode"]["follower"], "23");
+    // a production path of six poses: the TCP judged there
+    let way = path(dir.path(), "path.csv");
+    std::fs::write(
+        &way,
+        "x,y\n-100,1000\n0,1000\n100,1000\n-100,1100\n0,1100\n100,1100\n",
+    )
+    .expect("written");
+    let (code, out, err) = rpkm(&["plan", &base, "--budget", "5", "--where", &way]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(out.contains("a tracker setup at the 6 poses of"), "{out}");
     // lt and self measured already: 3 tracker poses add nothing, another instrument would
     let full = simulated(dir.path(), "ltself.csv", ("lt,self", "4"), &[]);
     let (code, out, err) = rpkm(&["plan", &full, "--budget", "3"]);

@@ -2,12 +2,16 @@
 
 use std::path::PathBuf;
 
-/// Plan the next measurements: calibrate the campaign (tolerance prior, noise estimated from
-/// it, --effects in the model), then choose the poses that make the TCP most accurate for the
-/// poses spent: the expected held-out RMS after the plan over the workspace grid (or the
-/// poses of --where), each relative setup's shared zero in the noise. The summary says it now,
-/// after the plan, and after as many random poses; with several budgets (--budget 3,5,10,20)
-/// for each, to show where more poses stop paying.
+/// What to measure next: the poses that make the TCP most accurate, and what they buy (see
+/// `rpkm plan --help`).
+///
+/// Calibrates the campaign (tolerance prior, noise estimated from it, --effects in the model),
+/// then chooses the poses that make the TCP most accurate for the poses spent: the expected
+/// held-out RMS after the plan over the workspace grid (or the poses of --where), each
+/// relative setup's shared zero in the noise. The summary says it now, after the plan, and
+/// after as many random poses, with the TCP's own error above the tracker's noise beside it;
+/// with several budgets (--budget 3,5,10,20) for each, to show where more poses stop paying;
+/// where the plan buys nothing, which other instruments would.
 ///
 /// "Held-out RMS" is the diagnosis's (`val_rms_relative_um` in `rpkm diagnose --json`): the
 /// TCP errors (model minus reading) of a held-out tracker setup less their setup's mean per
@@ -23,13 +27,15 @@ use std::path::PathBuf;
 /// --criterion determinant plans for the parameter combinations determined (issue 28's
 /// D-optimal plan); --separate plans the poses that tell two tied explanations apart.
 /// Writes PLAN.csv (the campaign grammar without measured values: setup, instrument, reset,
-/// follower, target x, y) that `rpkm simulate --plan` runs on the twin.
-///
-/// Examples:
-///   rpkm plan self.csv --instruments lt --budget 3,5,10,20 --out plan.csv
-///   rpkm plan cal.csv --effects preload_elastic --where path.csv --budget 8 --out plan.csv
-///   rpkm plan self.csv --separate dir_q2,dir_q4 --budget 60 --out sep.csv --json sep.json
+/// follower, target x, y) that `rpkm simulate --plan` runs on the twin. Methods and figures:
+/// docs/observability.md, "What to measure next".
 #[derive(clap::Args, Debug, Clone)]
+#[command(after_long_help = "Examples:\n  \
+rpkm plan self.csv --instruments lt --budget 3,5,10,20 --out plan.csv\n  \
+rpkm plan cal.csv --effects preload_elastic --where path.csv --budget 8 --out plan.csv\n  \
+rpkm plan self.csv --separate dir_q2,dir_q4 --budget 60 --out sep.csv --json sep.json\n\n\
+Then: rpkm simulate --plan plan.csv --out planned.csv (the twin measures it), and\n  \
+rpkm calibrate with the planned poses: its drift checks report each setup's return.")]
 pub struct PlanArgs {
     /// The campaign measured so far (CSV).
     pub campaign: PathBuf,
