@@ -43,7 +43,7 @@ pub use geometry_msgs::{
 };
 pub use parameters::Parameters;
 pub use preload_status::{PreloadLevel, PreloadStatus};
-pub use sensor_msgs::JointState;
+pub use sensor_msgs::{JointState, Temperature};
 pub use std_msgs::Header;
 pub use tcp_estimate::TcpEstimate;
 pub use tcp_measurement::{Instrument, TcpMeasurement, UnknownInstrument};
@@ -148,6 +148,10 @@ mod tests {
             "tf2_msgs::msg::dds_::TFMessage_"
         );
         assert_eq!(JointState::type_name(), "sensor_msgs/msg/JointState");
+        assert_eq!(
+            Temperature::dds_type_name(),
+            "sensor_msgs::msg::dds_::Temperature_"
+        );
         let def = TfMessage::definition();
         for dep in [
             "geometry_msgs/msg/TransformStamped",

@@ -57,3 +57,34 @@ crate::ros_message!(
     JOINT_STATE_MSG,
     [Header, Time]
 );
+
+/// `sensor_msgs/msg/Temperature`: one thermometer's reading.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Temperature {
+    /// `std_msgs/Header header`: when and where the temperature was measured.
+    pub header: Header,
+    /// `float64 temperature`: °C.
+    pub temperature: f64,
+    /// `float64 variance`: °C²; 0 is "unknown".
+    pub variance: f64,
+}
+
+/// The `.msg` text of `sensor_msgs/msg/Temperature`.
+pub const TEMPERATURE_MSG: &str = "\
+# Single temperature reading.
+
+std_msgs/Header header # timestamp is the time the temperature was measured
+                             # frame_id is the location of the temperature reading
+
+float64 temperature     # Measurement of the Temperature in Degrees Celsius.
+
+float64 variance        # 0 is interpreted as variance unknown.
+";
+
+crate::ros_message!(
+    Temperature,
+    "sensor_msgs",
+    "Temperature",
+    TEMPERATURE_MSG,
+    [Header, Time]
+);

@@ -16,6 +16,7 @@ pub static KILLS_A_NODE: Mutex<()> = Mutex::new(());
 mod bag_support;
 mod foreign_support;
 mod fuzz_support;
+mod joint_states_support;
 mod node_support;
 mod security_support;
 
@@ -42,6 +43,8 @@ mod node_estimator_effects;
 mod node_estimator_foreign;
 mod node_estimator_jumps;
 mod node_ingest_cyclone;
+mod node_joint_states;
+mod node_joint_states_fastdds;
 mod node_launch_restart;
 mod node_lifecycle;
 mod node_netns_dds;

@@ -18,7 +18,7 @@
 
 use crate::bag_support::decode_all;
 use crate::node_support::{python, rpkm, unique, Proc, TempDir};
-use crate::security_support::{env, keystore};
+use crate::security_support::{env, keystore, required};
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -35,19 +35,6 @@ const PLUGINS: &str = "/usr/lib/x86_64-linux-gnu/libddsc0debian";
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// Whether `what` is there (`have`); a missing tool skips with a word, except in CI
-/// (`RPKM_REQUIRE_PYTHON`, set by .ci/run, which installs it).
-fn required(have: bool, what: &str) -> bool {
-    if !have {
-        assert!(
-            std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
-            "CI: {what} is required (.ci/run installs it)"
-        );
-        eprintln!("SKIPPED: {what} not found");
-    }
-    have
 }
 
 /// The secure peer compiled against Debian's Cyclone DDS (idlc for its type), once.

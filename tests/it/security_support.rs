@@ -52,6 +52,19 @@ pub fn env(keystore: &Path, strategy: &str) -> Vec<(String, String)> {
     ]
 }
 
+/// Whether `what` is there (`have`); a missing tool skips with a word, except in CI
+/// (`RPKM_REQUIRE_PYTHON`, set by .ci/run, which installs it).
+pub fn required(have: bool, what: &str) -> bool {
+    if !have {
+        assert!(
+            std::env::var_os("RPKM_REQUIRE_PYTHON").is_none(),
+            "CI: {what} is required (.ci/run installs it)"
+        );
+        eprintln!("SKIPPED: {what} not found");
+    }
+    have
+}
+
 /// Whether the openssl command line is there; `None` skips with a word, except in CI.
 pub fn openssl() -> Option<()> {
     if Command::new("openssl").arg("version").output().is_ok() {

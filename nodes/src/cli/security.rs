@@ -16,6 +16,7 @@ use crate::security::{policy, Created, Keystore, KeystoreError};
 rpkm security keystore cell_keys\n  \
 rpkm security enclave cell_keys --all                 # /rpkm/ingest, /rpkm/tcp_estimator, ...\n  \
 rpkm security enclave cell_keys /rpkm/tcp_estimator\n  \
+rpkm security permissions cell_keys /rpkm/ingest --subscribe /cell/frame_temperature   # a thermometer\n  \
 rpkm security permissions cell_keys /rpkm/tcp_estimator --namespace /machine_a\n  \
 ROS_SECURITY_ENABLE=true ROS_SECURITY_STRATEGY=Enforce ROS_SECURITY_KEYSTORE=$PWD/cell_keys \\\n    \
 rpkm launch launch_scripts/rpkm.launch.yaml backend:=dds")]
@@ -61,6 +62,14 @@ pub struct EnclaveArgs {
     /// Namespace of the node set (`namespace:=` of the launch): its topics and services.
     #[arg(long, default_value = rpkm_transport::NODE_NAMESPACE)]
     pub namespace: String,
+    /// A topic of the cell the enclave also reads (repeatable): a thermometer that ingest's
+    /// joint_states source reads (`--subscribe /cell/frame_temperature`).
+    #[arg(long, value_name = "TOPIC", conflicts_with = "all")]
+    pub subscribe: Vec<String>,
+    /// A topic of the cell the enclave also writes (repeatable): for a cell program with an
+    /// enclave of this keystore (`--publish /joint_states`).
+    #[arg(long, value_name = "TOPIC", conflicts_with = "all")]
+    pub publish: Vec<String>,
 }
 
 impl EnclaveArgs {
@@ -118,6 +127,7 @@ fn enclaves(args: &EnclaveArgs, create: bool) -> Result<()> {
     let ks = Keystore::open(&args.dir).map_err(classify)?;
     for (enclave, program) in args.targets() {
         let grant = policy::grant(&program, &args.namespace)
+            .and_then(|g| policy::with_topics(g, &args.namespace, (&args.publish, &args.subscribe)))
             .map_err(|e| super::bad_input(format!("enclave {enclave}: {e}")))?;
         let written = if create {
             ks.create_enclave(&enclave, &grant)

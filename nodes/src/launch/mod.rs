@@ -827,6 +827,11 @@ fn check_node(spec: &NodeSpec) -> anyhow::Result<()> {
     if geometry {
         Geometry::from_params(&setup.params)?;
     }
+    // the JointState input's settings: read by the three nodes that take drive states
+    if !matches!(args.kind, NodeKind::Calibrator(_)) {
+        crate::node::joint_input::JointConfig::from_params(&setup.params)
+            .map_err(crate::node::bad_param)?;
+    }
     Ok(())
 }
 

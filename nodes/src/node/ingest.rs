@@ -1,6 +1,9 @@
 //! `ingest`: the entry of measurements into the node set. Sources:
 //! - `dds`: ActuatorState / TcpMeasurement from a controller over DDS (parameters
 //!   `input_actuator_topic`, `input_measurement_topic`);
+//! - `joint_states`: ros2_control's `sensor_msgs/JointState` and the cell's
+//!   `sensor_msgs/Temperature` thermometers, no bridge ([`crate::node::joint_input`],
+//!   [`joint_states`]); no measurements;
 //! - `stdin`: a CSV stream in the campaign format (header line first), one row per pose;
 //! - a campaign CSV file (`rpkm_core::campaign::Campaign`), streamed at `rate_hz`.
 //!
@@ -14,7 +17,8 @@
 //! ([`report`]). Nothing in the input stops the node. At the end of a file or of stdin an
 //! end-of-campaign marker follows (see [`END_OF_CAMPAIGN`]).
 //!
-//! With `views` on (default with DDS output) every `view_every`-th accepted state is also
+//! With `views` on (default with DDS output, except with the `joint_states` source, whose
+//! cell publishes `/joint_states` itself) every `view_every`-th accepted state is also
 //! published as `sensor_msgs/JointState` on `/joint_states` ([`super::views`]).
 //!
 //! A managed node like the others ([`super::lifecycle`]): started `--unconfigured` it
@@ -28,6 +32,7 @@
 
 pub mod csv;
 mod dds;
+mod joint_states;
 mod output;
 pub mod report;
 pub mod validate;
@@ -44,6 +49,7 @@ pub use report::Tally;
 pub use validate::{Limits, Reject, RejectKind, Validator};
 
 use super::context::{bad_param, CommonArgs, NodeContext};
+use super::joint_input::{self, JointConfig};
 use super::live::{self, Spec};
 use super::params::NodeParams;
 use super::params::DURATION_S;
@@ -78,8 +84,9 @@ pub struct IngestArgs {
     /// Common node options.
     #[command(flatten)]
     pub common: CommonArgs,
-    /// `dds` (live from a controller), `stdin` (CSV stream) or a campaign CSV file
-    /// (default: parameter `source`, else dds).
+    /// `dds` (live from a controller), `joint_states` (ros2_control's JointState and the
+    /// cell's thermometers), `stdin` (CSV stream) or a campaign CSV file (default: parameter
+    /// `source`, else dds).
     #[arg(long)]
     pub source: Option<String>,
 }
@@ -92,6 +99,17 @@ struct Settings {
     start_delay: Duration,
     end_marker: bool,
     exit_at_end: bool,
+    /// The JointState input's settings (source `joint_states`).
+    joints: Option<JointConfig>,
+}
+
+/// The source that reads ros2_control's JointState.
+const JOINT_STATES: &str = "joint_states";
+
+/// Every parameter key the node declares: its own and the JointState input's (read with
+/// source `joint_states` only, accepted with any).
+pub fn declared() -> Vec<&'static str> {
+    KEYS.iter().chain(&joint_input::KEYS).copied().collect()
 }
 
 /// Opens the node: its source (the option, else parameter `source`, else dds), transport and
@@ -106,8 +124,8 @@ fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
         Some(s) => s.clone(),
         None => pre.string("source", "dds").map_err(bad_param)?,
     };
-    let extra = (source == "dds").then_some(Backend::Dds);
-    let ctx = NodeContext::open("ingest", &args.common, &KEYS, extra)?;
+    let extra = matches!(source.as_str(), "dds" | JOINT_STATES).then_some(Backend::Dds);
+    let ctx = NodeContext::open("ingest", &args.common, &declared(), extra)?;
     let p = &ctx.params;
     let limits = limits(p)?;
     // 1 mHz to 1 MHz: the period 1/rate becomes a `Duration`, which a rate of 1e-300 Hz
@@ -118,6 +136,9 @@ fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
     let start_delay = p
         .f64_in("start_delay_s", 1.0, DURATION_S, " s")
         .map_err(bad_param)?;
+    // checked whatever the source: a bad value is bad before the cell switches to it
+    let joints = JointConfig::from_params(p).map_err(bad_param)?;
+    let joints = (source == JOINT_STATES).then_some(joints);
     let settings = Settings {
         source,
         limits,
@@ -125,6 +146,7 @@ fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
         start_delay: Duration::from_secs_f64(start_delay),
         end_marker: p.bool("end_marker", true).map_err(bad_param)?,
         exit_at_end: p.bool("exit_at_end", false).map_err(bad_param)?,
+        joints,
     };
     Ok((ctx, settings))
 }
@@ -155,8 +177,10 @@ fn limits(p: &NodeParams) -> anyhow::Result<Limits> {
     Ok(l)
 }
 
-/// What a parameter set changes while the node runs: the limits and `view_every`.
+/// What a parameter set changes while the node runs: the limits and `view_every` (and the
+/// followers of the `joint_states` source, which it applies itself: checked here).
 fn configure(p: &NodeParams) -> anyhow::Result<(Limits, u64)> {
+    joint_input::followers(p).map_err(bad_param)?;
     let every = p
         .u64_in(
             "view_every",
@@ -180,7 +204,11 @@ fn specs(views_default: bool) -> Vec<Spec> {
     let limit =
         |key, default, description| Spec::live(key, F64(default), description, ParamRange::None);
     vec![
-        Spec::fixed("source", Str("dds"), "dds, stdin or a campaign CSV file"),
+        Spec::fixed(
+            "source",
+            Str("dds"),
+            "dds, joint_states, stdin or a campaign CSV file",
+        ),
         fixed_in(
             "rate_hz",
             F64(1000.0),
@@ -258,30 +286,52 @@ fn file(out: &mut Output<'_>, path: &str, rate_hz: f64) -> anyhow::Result<bool> 
     )
 }
 
+/// The JointState view, off by default with the `joint_states` source (the cell publishes
+/// `/joint_states` itself); on, it must not go where the source reads.
+fn views(ctx: &NodeContext, s: &Settings) -> anyhow::Result<Option<super::views::JointViews>> {
+    let default_on = super::views::on_by_default(ctx) && s.joints.is_none();
+    let views = super::views::JointViews::open(ctx, default_on)?;
+    if let (Some(v), Some(j)) = (&views, &s.joints) {
+        if v.topic() == j.topic {
+            return Err(bad_input(format!(
+                "ingest: views: true publishes on {}, the topic source joint_states reads; \
+                 set views false or another joint_states_topic",
+                j.topic
+            )));
+        }
+    }
+    Ok(views)
+}
+
 /// Runs the node until its input ends (and `exit_at_end`) or SIGINT/SIGTERM.
 pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
     let (mut ctx, s) = open(args)?;
     // The source in use (the option may have chosen it) is the one the services report.
     ctx.params
         .set_from_service("source", serde_yaml::Value::String(s.source.clone()));
-    let views_default = matches!(ctx.output, Backend::Dds | Backend::Both);
-    let live = live::LiveParams::start(&ctx, &specs(views_default), |p| configure(p).map(|_| ()))?;
-    let mut out = Output::open((&ctx, &args.common), s.limits, &s.source, live)?;
+    let views = views(&ctx, &s)?;
+    let mut service_specs = specs(views.is_some());
+    if s.joints.is_some() {
+        service_specs.extend(joint_input::specs());
+    }
+    let live = live::LiveParams::start(&ctx, &service_specs, |p| configure(p).map(|_| ()))?;
+    let mut out = Output::open((&ctx, &args.common), s.limits, &s.source, (live, views))?;
     ctx.log(format!(
         "source {}, publishing on {:?}",
         s.source, ctx.output
     ));
     std::thread::sleep(s.start_delay);
-    let ended = match s.source.as_str() {
-        "dds" => dds::run(&ctx, &mut out).map(|()| false)?,
-        "stdin" | "-" => csv::stream(
+    let ended = match (s.source.as_str(), s.joints.clone()) {
+        (_, Some(joints)) => joint_states::run(&ctx, &mut out, joints).map(|()| false)?,
+        ("dds", _) => dds::run(&ctx, &mut out).map(|()| false)?,
+        ("stdin" | "-", _) => csv::stream(
             &mut csv::Stdin::spawn(&ctx.name),
             "stdin",
             None,
             &mut out,
             None,
         )?,
-        path => file(&mut out, path, s.rate_hz)?,
+        (path, _) => file(&mut out, path, s.rate_hz)?,
     };
     if ended {
         ctx.log(format_args!(

@@ -1,19 +1,165 @@
 //! What the servo-rate nodes (`tcp_estimator`, `preload_monitor`) share about their inputs:
-//! gaps in the actuator stream ([`SeqGaps`]), following new Parameters while they run
-//! ([`ParameterFollower`]) and the model's inputs of a drive state under the geometry's
-//! calibrated effects ([`StreamMotion`]).
+//! where their drive states come from ([`DriveInput`]: ingest's ActuatorState, or the cell's
+//! JointState directly), gaps in the actuator stream ([`SeqGaps`]), following new Parameters
+//! while they run ([`ParameterFollower`]) and the model's inputs of a drive state under the
+//! geometry's calibrated effects ([`StreamMotion`]).
 
 use std::time::Duration;
 
 use rpkm_core::campaign::Motion;
 use rpkm_core::effects::LiveState;
 use rpkm_core::params::Params;
-use rpkm_msgs::{ActuatorState, Parameters};
-use rpkm_transport::{topic, Subscriber};
+use rpkm_msgs::{ActuatorState, DiagnosticStatus, Parameters};
+use rpkm_transport::{topic, Backend, Subscriber};
 
-use super::context::{bad_param, Every, NodeContext, MM_PER_M};
+use super::context::{bad_param, CommonArgs, Every, Idle, NodeContext, MM_PER_M};
 use super::geometry::Geometry;
+use super::joint_input::{self, JointConfig, JointInput, RefusalLevel};
+use super::live::{self, LiveParams, Spec};
+use super::params::NodeParams;
 use crate::campaign_bag::seconds_from_stamp;
+use crate::error::bad_input;
+
+/// Parameter `source` of a servo-rate node: ingest's ActuatorState (default).
+const ACTUATOR_STATE: &str = "actuator_state";
+/// Parameter `source` of a servo-rate node: the cell's JointState, on DDS.
+const JOINT_STATES: &str = "joint_states";
+
+/// `keys` with the drive input's: `source` and the JointState input's.
+pub fn with_drive_input_keys(mut keys: Vec<&'static str>) -> Vec<&'static str> {
+    keys.push("source");
+    keys.extend(joint_input::KEYS);
+    keys
+}
+
+/// The backend a node of kind `kind` subscribes on besides its input: DDS with `source:
+/// joint_states` (the cell's topics are DDS topics), else none.
+pub fn extra_backend(args: &CommonArgs, kind: &str) -> anyhow::Result<Option<Backend>> {
+    let p = args.identity(kind)?.params().map_err(bad_param)?;
+    let source = p.string("source", ACTUATOR_STATE).map_err(bad_param)?;
+    Ok((source == JOINT_STATES).then_some(Backend::Dds))
+}
+
+/// Where a servo-rate node's drive states come from.
+pub enum DriveInput {
+    /// Ingest's ActuatorState on the node's input backend.
+    Actuator(Subscriber<ActuatorState>),
+    /// ros2_control's JointState and the cell's thermometers on DDS, numbered here.
+    Joints {
+        /// The readers.
+        input: Box<JointInput>,
+        /// The seq of the last state.
+        seq: u64,
+    },
+}
+
+impl DriveInput {
+    /// The input parameter `source` names: `actuator_state` (default) or `joint_states`.
+    pub fn open(ctx: &NodeContext) -> anyhow::Result<Self> {
+        let p = &ctx.params;
+        // checked whatever the source: a bad value is bad before the cell switches to it
+        let config = JointConfig::from_params(p).map_err(bad_param)?;
+        match p
+            .string("source", ACTUATOR_STATE)
+            .map_err(bad_param)?
+            .as_str()
+        {
+            ACTUATOR_STATE => Ok(Self::Actuator(ctx.subscriber(&topic::ACTUATOR_STATE)?)),
+            JOINT_STATES => Ok(Self::Joints {
+                input: Box::new(JointInput::open(ctx, config)?),
+                seq: 0,
+            }),
+            other => Err(bad_input(format!(
+                "{}/source: expected actuator_state or joint_states, found {other:?}",
+                p.origin("source")
+                    .map(ToString::to_string)
+                    .unwrap_or_default()
+            ))),
+        }
+    }
+
+    /// The input's parameters on the node's parameter services.
+    pub fn specs(&self) -> Vec<Spec> {
+        let joints = matches!(self, Self::Joints { .. });
+        let mut specs = vec![Spec::fixed(
+            "source",
+            live::Default::Str(if joints { JOINT_STATES } else { ACTUATOR_STATE }),
+            "drive states: actuator_state (ingest's) or joint_states (the cell's JointState, DDS)",
+        )];
+        if joints {
+            specs.extend(joint_input::specs());
+        }
+        specs
+    }
+
+    /// The node's parameter services with `specs` and the input's; a set passes
+    /// `configure` (the node's check) and the input's check of `followers`.
+    pub fn start_params(
+        &self,
+        ctx: &NodeContext,
+        mut specs: Vec<Spec>,
+        configure: impl Fn(&NodeParams) -> anyhow::Result<()> + Send + 'static,
+    ) -> anyhow::Result<LiveParams> {
+        specs.extend(self.specs());
+        LiveParams::start(ctx, &specs, move |p| {
+            joint_input::followers(p).map_err(bad_param)?;
+            configure(p)
+        })
+    }
+
+    /// The parameter set to apply before the next state: with the JointState input every
+    /// accepted set is taken before each state (its `followers` apply from the next state
+    /// on); else `None`, and the node takes sets between samples.
+    pub fn set_before_state(&self, live: &mut LiveParams) -> Option<(NodeParams, Vec<String>)> {
+        match self {
+            Self::Joints { .. } => live.poll_now(),
+            Self::Actuator(_) => None,
+        }
+    }
+
+    /// Applies a parameter set the services accepted: the followers of the JointState
+    /// input, from the next state on (logged).
+    pub fn configure(&mut self, ctx: &NodeContext, p: &NodeParams) -> anyhow::Result<()> {
+        match self {
+            Self::Actuator(_) => Ok(()),
+            Self::Joints { input, seq } => input.take_followers(ctx, p, *seq + 1),
+        }
+    }
+
+    /// The next drive state, `None` when none is queued. A JointState that cannot be read is
+    /// logged and counted (on /diagnostics through [`Self::annotate`]), never passed on.
+    pub fn next(&mut self, ctx: &NodeContext) -> anyhow::Result<Option<ActuatorState>> {
+        match self {
+            Self::Actuator(sub) => Ok(sub.try_recv()?),
+            Self::Joints { input, seq } => loop {
+                match input.next(ctx)? {
+                    None => return Ok(None),
+                    Some(Ok(mut state)) => {
+                        *seq += 1;
+                        state.seq = *seq;
+                        return Ok(Some(state));
+                    }
+                    Some(Err(r)) => ctx.log(format!("WARN: rejected: {}: {r}", input.topic())),
+                }
+            },
+        }
+    }
+
+    /// Waits for the next state as `idle` says.
+    pub fn wait(&self, idle: &Idle) -> anyhow::Result<()> {
+        match self {
+            Self::Actuator(sub) => Ok(idle.wait_for(sub)?),
+            Self::Joints { input, .. } => input.wait(idle),
+        }
+    }
+
+    /// Adds the JointState input's values and warnings to the node's status.
+    pub fn annotate(&mut self, status: &mut DiagnosticStatus) {
+        if let Self::Joints { input, .. } = self {
+            input.annotate(status, RefusalLevel::Raise);
+        }
+    }
+}
 
 /// How the carriers of one actuator stream moved (the direction of each one's last move, its
 /// travel since its last reversal, the time since the stream's first state: the covariates a

@@ -31,6 +31,10 @@ pub enum Default {
     Bool(bool),
     /// A string.
     Str(&'static str),
+    /// A list of strings.
+    Strs(&'static [&'static str]),
+    /// A list of doubles.
+    F64s(&'static [f64]),
 }
 
 /// One parameter of a node: key, default, description with unit, range, and whether the node
@@ -81,6 +85,8 @@ impl Spec {
             }
             Default::Bool(d) => ParameterValue::Boolean(p.bool(self.key, d).map_err(bad)?),
             Default::Str(d) => ParameterValue::String(p.string(self.key, d).map_err(bad)?),
+            Default::Strs(d) => ParameterValue::StringArray(p.strings(self.key, d).map_err(bad)?),
+            Default::F64s(d) => ParameterValue::DoubleArray(p.f64s(self.key, d).map_err(bad)?),
         })
     }
 }
@@ -120,6 +126,9 @@ fn yaml(v: &ParameterValue) -> Value {
         ParameterValue::String(s) => Value::String(s.clone()),
         ParameterValue::StringArray(a) => {
             Value::Sequence(a.iter().cloned().map(Value::String).collect())
+        }
+        ParameterValue::DoubleArray(a) => {
+            Value::Sequence(a.iter().map(|x| Value::Number((*x).into())).collect())
         }
         other => Value::String(format!("{other:?}")),
     }
@@ -212,10 +221,17 @@ impl LiveParams {
     /// The node's parameters after the changes accepted since the last call, with their
     /// names; `None` when there were none. At most one look per [`CHANGE_CHECK`].
     pub fn poll(&mut self) -> Option<(NodeParams, Vec<String>)> {
-        let server = self.server.as_ref()?;
-        if !self.check.due() {
+        if self.server.is_none() || !self.check.due() {
             return None;
         }
+        self.poll_now()
+    }
+
+    /// [`Self::poll`] without waiting for its period: for a parameter that applies from the
+    /// next sample on (the services queue a change before they reply, so a sample sent after
+    /// the reply finds it queued). One atomic load when nothing changed.
+    pub fn poll_now(&mut self) -> Option<(NodeParams, Vec<String>)> {
+        let server = self.server.as_ref()?;
         let changes = server.changes();
         if changes.is_empty() {
             return None;

@@ -15,6 +15,7 @@ pub mod effects;
 pub mod geometry;
 pub mod ingest;
 pub mod inputs;
+pub mod joint_input;
 pub mod lifecycle;
 pub mod live;
 pub mod online_tracker;
@@ -39,6 +40,7 @@ pub use params::{NodeParams, ParamError};
 #[derive(clap::Args, Debug, Clone)]
 #[command(after_help = "Examples:\n  \
 rpkm node ingest --source campaign.csv --params launch_scripts/params.yaml\n  \
+rpkm node ingest --source joint_states --params cell.yaml --backend dds   # a ros2_control cell\n  \
 rpkm node tcp_estimator --params launch_scripts/params.yaml --backend both\n  \
 rpkm node tcp_estimator --backend dds --param view_every=80   # PoseStamped + /tf at 100 Hz of 8 kHz\n  \
 rpkm node preload_monitor --param warn_percent=20 --param error_percent=50")]
@@ -50,8 +52,9 @@ pub struct NodeArgs {
 /// The four nodes.
 #[derive(clap::Subcommand, Debug, Clone)]
 pub enum NodeKind {
-    /// Validates and republishes ActuatorState/TcpMeasurement from DDS, a CSV stream on stdin
-    /// or a campaign CSV file; rejects are counted on /diagnostics.
+    /// Validates and republishes ActuatorState/TcpMeasurement from DDS, a ros2_control cell's
+    /// JointState, a CSV stream on stdin or a campaign CSV file; rejects are counted on
+    /// /diagnostics.
     #[command(name = "ingest")]
     Ingest(ingest::IngestArgs),
     /// Elasto-geometric TCP estimate for every ActuatorState.
@@ -84,11 +87,11 @@ pub const EXECUTABLES: [&str; 4] = ["ingest", "tcp_estimator", "calibrator", "pr
 /// executable.
 pub fn declared_keys(exec: &str) -> Option<Vec<&'static str>> {
     let (own, geometry): (&[&'static str], bool) = match exec {
-        "ingest" => (&ingest::KEYS, false),
-        "tcp_estimator" => (&tcp_estimator::KEYS, true),
+        "ingest" => return Some(ingest::declared()),
+        "tcp_estimator" => return Some(tcp_estimator::declared()),
         // its own keys name the geometry ones it takes (no stiffness, no follower)
         "calibrator" => (&calibrator::KEYS, false),
-        "preload_monitor" => (&preload_monitor::KEYS, true),
+        "preload_monitor" => return Some(preload_monitor::declared()),
         _ => return None,
     };
     Some(geometry::declared(own, geometry))

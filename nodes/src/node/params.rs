@@ -196,6 +196,11 @@ fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Value)>) {
 fn yaml_text(v: &Value) -> String {
     match v {
         Value::String(s) => format!("{s:?}"),
+        // on one line, as a flow sequence, so that a message stays one line
+        Value::Sequence(items) => {
+            let items: Vec<String> = items.iter().map(yaml_text).collect();
+            format!("[{}]", items.join(", "))
+        }
         other => serde_yaml::to_string(other)
             .map_or_else(|_| format!("{other:?}"), |s| s.trim().to_owned()),
     }
@@ -308,9 +313,12 @@ impl NodeParams {
     pub fn check_declared(&self, declared: &[&str]) -> Result<(), ParamError> {
         self.check_shapes(declared)?;
         for (key, (_, origin)) in &self.values {
-            let known = declared
-                .iter()
-                .any(|d| d == key || (d.ends_with('.') && key.starts_with(d)));
+            // a group is its members, or an empty map under its own name (`group: {}`)
+            let known = declared.iter().any(|d| {
+                d == key
+                    || (d.ends_with('.') && key.starts_with(d))
+                    || d.strip_suffix('.') == Some(key.as_str())
+            });
             if origin.specific && !known {
                 return Err(ParamError::Unknown {
                     origin: Box::new(origin.clone()),
@@ -365,6 +373,24 @@ impl NodeParams {
             key: key.to_owned(),
             expected,
             found: yaml_text(v),
+        }
+    }
+
+    /// A value of `key` the node cannot use, with what it expected: the error names where the
+    /// value was set (`defaults` for a default).
+    pub fn invalid(&self, key: &str, expected: &'static str) -> ParamError {
+        match self.values.get(key) {
+            Some(_) => self.type_err(key, expected),
+            None => ParamError::Type {
+                origin: Box::new(Origin {
+                    file: "defaults".into(),
+                    section: self.node.clone(),
+                    specific: true,
+                }),
+                key: key.to_owned(),
+                expected,
+                found: "the default".into(),
+            },
         }
     }
 
@@ -517,6 +543,40 @@ impl NodeParams {
                 .collect(),
             Some(_) => Err(self.type_err(key, "a list of strings")),
         }
+    }
+
+    /// A list of finite doubles (integers accepted), or `default`.
+    pub fn f64s(&self, key: &str, default: &[f64]) -> Result<Vec<f64>, ParamError> {
+        match self.values.get(key) {
+            None => Ok(default.to_vec()),
+            Some((Value::Sequence(items), _)) => items
+                .iter()
+                .map(|i| {
+                    i.as_f64()
+                        .filter(|x| x.is_finite())
+                        .ok_or_else(|| self.type_err(key, "a list of finite numbers"))
+                })
+                .collect(),
+            Some(_) => Err(self.type_err(key, "a list of finite numbers")),
+        }
+    }
+
+    /// The strings of the group `prefix.` (`temperatures.` gives `temp_machine ->
+    /// /cell/frame_temperature`), in name order, with their origins; an empty map (`group:
+    /// {}`) has none.
+    pub fn string_group(&self, prefix: &str) -> Result<Vec<(String, String, Origin)>, ParamError> {
+        let mut out = Vec::new();
+        for (key, (v, origin)) in self.values.range(prefix.to_owned()..) {
+            let Some(name) = key.strip_prefix(prefix) else {
+                break;
+            };
+            let text = match v {
+                Value::String(s) => s.clone(),
+                _ => return Err(self.type_err(key, "a string")),
+            };
+            out.push((name.to_owned(), text, origin.clone()));
+        }
+        Ok(out)
     }
 
     /// The finite doubles of the group `prefix.` (e.g. `geometry.` gives `l1 -> 0.95`), with

@@ -20,7 +20,7 @@ use rpkm_core::elastic::{
     fegm_checked_after, Checked, ElasticError, Limits, NOMINAL_DRIVE_FORCE_N,
 };
 use rpkm_core::geometry::rgm;
-use rpkm_msgs::{ActuatorState, DiagnosticStatus, PreloadLevel, PreloadStatus};
+use rpkm_msgs::{ActuatorState, DiagnosticArray, DiagnosticStatus, PreloadLevel, PreloadStatus};
 use rpkm_transport::topic;
 
 use rpkm_transport::dds_params::ParamRange;
@@ -29,8 +29,8 @@ use super::context::{
     bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M,
 };
 use super::geometry::Geometry;
-use super::inputs::{ParameterFollower, SeqGaps, StreamMotion};
-use super::live::{self, LiveParams, Spec};
+use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
+use super::live::{self, Spec};
 use super::params::NodeParams;
 
 /// Parameter keys of the node.
@@ -475,7 +475,6 @@ fn specs() -> Vec<Spec> {
     specs
 }
 
-/// Runs the node until SIGINT/SIGTERM.
 /// Logs the input's losses since the last report: once per report, not per gap (a stall
 /// loses in bursts).
 fn report_loss(ctx: &NodeContext, monitor: &Monitor, lost_reported: &mut u64) {
@@ -495,9 +494,41 @@ fn reconfigure(args: &CommonArgs, ctx: &NodeContext, declared: &[&str]) -> Resul
         .map_err(|e| crate::error::error_chain(&e))
 }
 
+/// Every parameter key the node declares.
+pub fn declared() -> Vec<&'static str> {
+    inputs::with_drive_input_keys(super::geometry::declared(&KEYS, true))
+}
+
+/// Applies a parameter set the services accepted: thresholds, `status_every`, the geometry,
+/// the drive input's followers.
+fn apply_set(
+    ctx: &NodeContext,
+    (p, names): (NodeParams, Vec<String>),
+    (monitor, status_every, input): (&mut Monitor, &mut u64, &mut DriveInput),
+) -> anyhow::Result<()> {
+    let c = configure(&p)?;
+    monitor.set_thresholds(c.thresholds);
+    *status_every = c.status_every;
+    if names.iter().any(|k| super::geometry::is_geometry_key(k)) {
+        monitor.set_geometry(c.geometry);
+    }
+    input.configure(ctx, &p)?;
+    ctx.log(format!("parameters set: {}", names.join(", ")));
+    Ok(())
+}
+
+/// The node's /diagnostics status with its input's.
+fn report(ctx: &NodeContext, monitor: &Monitor, input: &mut DriveInput) -> DiagnosticArray {
+    let mut status = monitor.status(&ctx.status_name);
+    input.annotate(&mut status);
+    diagnostic_array(status)
+}
+
+/// Runs the node until SIGINT/SIGTERM.
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
-    let declared = super::geometry::declared(&KEYS, true);
-    let ctx = NodeContext::open("preload_monitor", args, &declared, None)?;
+    let declared = declared();
+    let extra = inputs::extra_backend(args, "preload_monitor")?;
+    let ctx = NodeContext::open("preload_monitor", args, &declared, extra)?;
     let p = &ctx.params;
     let Config {
         thresholds,
@@ -507,8 +538,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let busy = p
         .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
         .map_err(bad_param)?;
-    let mut live = LiveParams::start(&ctx, &specs(), |p| configure(p).map(|_| ()))?;
-    let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
+    let mut input = DriveInput::open(&ctx)?;
+    let mut live = input.start_params(&ctx, specs(), |p| configure(p).map(|_| ()))?;
     let mut parameters = ParameterFollower::open(&ctx)?;
     let statuses = ctx.publisher(&topic::PRELOAD_STATUS)?;
     let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
@@ -524,7 +555,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         Duration::from_secs_f64(busy * 1e-3),
         Duration::from_millis(20),
     );
-    let mut report = Every::new(ctx.diagnostics_period()?);
+    let mut report_due = Every::new(ctx.diagnostics_period()?);
     let mut n = 0u64;
     let mut lost_reported = 0;
     while !super::shutdown::requested() {
@@ -538,7 +569,10 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         if let Some(g) = parameters.poll(&ctx, monitor.geometry())? {
             monitor.set_geometry(g);
         }
-        if let Some(s) = states.try_recv()? {
+        if let Some(set) = input.set_before_state(&mut live) {
+            apply_set(&ctx, set, (&mut monitor, &mut status_every, &mut input))?;
+        }
+        if let Some(s) = input.next(&ctx)? {
             idle.worked();
             // an inactive node takes its input and publishes nothing
             if let Some(e) = lifecycle.active().then(|| monitor.evaluate(&s)).flatten() {
@@ -548,19 +582,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
                 }
                 if e.changed {
                     ctx.log(monitor.status(&ctx.status_name).message);
-                    diagnostics.publish(&diagnostic_array(monitor.status(&ctx.status_name)))?;
+                    diagnostics.publish(&report(&ctx, &monitor, &mut input))?;
                 }
             }
         } else {
             // Between samples only: a set costs the sample path nothing.
-            if let Some((p, names)) = live.poll() {
-                let c = configure(&p)?;
-                monitor.set_thresholds(c.thresholds);
-                status_every = c.status_every;
-                if names.iter().any(|k| super::geometry::is_geometry_key(k)) {
-                    monitor.set_geometry(c.geometry);
-                }
-                ctx.log(format!("parameters set: {}", names.join(", ")));
+            if let Some(set) = live.poll() {
+                apply_set(&ctx, set, (&mut monitor, &mut status_every, &mut input))?;
             }
             if let Some(g) = services
                 .as_ref()
@@ -568,11 +596,11 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             {
                 monitor.set_geometry(g);
             }
-            if report.due() {
-                diagnostics.publish(&diagnostic_array(monitor.status(&ctx.status_name)))?;
+            if report_due.due() {
+                diagnostics.publish(&report(&ctx, &monitor, &mut input))?;
                 report_loss(&ctx, &monitor, &mut lost_reported);
             }
-            idle.wait_for(&states)?;
+            input.wait(&idle)?;
         }
     }
     ctx.log("stopping");

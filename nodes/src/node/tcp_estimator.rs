@@ -30,9 +30,9 @@ use rpkm_transport::topic;
 
 use super::context::{diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M};
 use super::geometry::Geometry;
-use super::inputs::{ParameterFollower, SeqGaps, StreamMotion};
+use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
 use super::lifecycle::Lifecycle;
-use super::live::{self, LiveParams, Spec};
+use super::live::{self, Spec};
 use super::params::NodeParams;
 use super::views::{self, TcpViews};
 use rpkm_transport::dds_params::ParamRange;
@@ -380,10 +380,35 @@ fn reconfigure(
     Ok(())
 }
 
+/// Every parameter key the node declares.
+pub fn declared() -> Vec<&'static str> {
+    inputs::with_drive_input_keys(super::geometry::declared(&KEYS, true))
+}
+
+/// Applies a parameter set the services accepted: the geometry (solved cold from the next
+/// state), `view_every`, the drive input's followers.
+fn apply_set(
+    ctx: &NodeContext,
+    (p, names): (NodeParams, Vec<String>),
+    (est, views, input): (&mut Estimator, Option<&mut TcpViews>, &mut DriveInput),
+) -> anyhow::Result<()> {
+    let (g, every) = configure(&p)?;
+    if names.iter().any(|k| super::geometry::is_geometry_key(k)) {
+        est.set_geometry(g);
+    }
+    if let Some(v) = views {
+        v.set_every(every);
+    }
+    input.configure(ctx, &p)?;
+    ctx.log(format!("parameters set: {}", names.join(", ")));
+    Ok(())
+}
+
 /// Runs the node until SIGINT/SIGTERM.
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
-    let declared = super::geometry::declared(&KEYS, true);
-    let ctx = NodeContext::open("tcp_estimator", args, &declared, None)?;
+    let declared = declared();
+    let extra = inputs::extra_backend(args, "tcp_estimator")?;
+    let ctx = NodeContext::open("tcp_estimator", args, &declared, extra)?;
     let geometry = Geometry::from_params(&ctx.params)?;
     let busy = ctx
         .params
@@ -395,12 +420,12 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         .params
         .u64_in("rt_priority", 0, super::params::RT_PRIORITY)
         .map_err(super::context::bad_param)?;
-    let states = ctx.subscriber(&topic::ACTUATOR_STATE)?;
+    let mut input = DriveInput::open(&ctx)?;
     let mut parameters = ParameterFollower::open(&ctx)?;
     let estimates = ctx.publisher(&topic::TCP_ESTIMATE)?;
     let mut views = TcpViews::open(&ctx)?;
     let dds = matches!(ctx.output, Backend::Dds | Backend::Both);
-    let mut live = LiveParams::start(&ctx, &specs(dds), |p| configure(p).map(|_| ()))?;
+    let mut live = input.start_params(&ctx, specs(dds), |p| configure(p).map(|_| ()))?;
     let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
     let services = super::calibration_services::CalibrationServices::open(&ctx)?;
     let mut lifecycle = Lifecycle::open(&ctx, super::lifecycle::start(args))?;
@@ -433,7 +458,10 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         if let Some(g) = parameters.poll(&ctx, est.geometry())? {
             est.set_geometry(g);
         }
-        if let Some(state) = states.try_recv()? {
+        if let Some(set) = input.set_before_state(&mut live) {
+            apply_set(&ctx, set, (&mut est, views.as_mut(), &mut input))?;
+        }
+        if let Some(state) = input.next(&ctx)? {
             // an inactive node takes its input (no backlog at activation) and publishes
             // nothing, as rclcpp's lifecycle publishers
             if let Some(e) = lifecycle.active().then(|| est.estimate(&state)).flatten() {
@@ -445,28 +473,23 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             idle.worked();
         } else {
             // Between samples only: a set costs the sample path nothing.
-            if let Some((p, names)) = live.poll() {
-                let (g, every) = configure(&p)?;
-                if names.iter().any(|k| super::geometry::is_geometry_key(k)) {
-                    est.set_geometry(g);
-                }
-                if let Some(v) = views.as_mut() {
-                    v.set_every(every);
-                }
-                ctx.log(format!("parameters set: {}", names.join(", ")));
+            if let Some(set) = live.poll() {
+                apply_set(&ctx, set, (&mut est, views.as_mut(), &mut input))?;
             }
             if let Some(g) = services.as_ref().and_then(|s| s.poll(&ctx, est.geometry())) {
                 est.set_geometry(g);
             }
             if report.due() {
-                diagnostics.publish(&diagnostic_array(est.status(&ctx.status_name)))?;
+                let mut status = est.status(&ctx.status_name);
+                input.annotate(&mut status);
+                diagnostics.publish(&diagnostic_array(status))?;
                 // A loss is logged once per report, not per gap (a stall loses in bursts).
                 if est.input.lost > lost_reported {
                     lost_reported = est.input.lost;
                     ctx.log(format!("WARN: {}", est.input.summary().unwrap_or_default()));
                 }
             }
-            idle.wait_for(&states)?;
+            input.wait(&idle)?;
         }
     }
     ctx.log("stopping");

@@ -66,11 +66,16 @@ impl Decimator {
     }
 }
 
-/// `view_every` if the views are on (parameter `views`, default on with DDS output), else
-/// `None`. Views asked for without DDS are bad configuration: they would go nowhere.
-pub fn settings(ctx: &NodeContext) -> anyhow::Result<Option<u64>> {
-    let dds = matches!(ctx.output, Backend::Dds | Backend::Both);
-    let on = ctx.params.bool("views", dds).map_err(bad_param)?;
+/// Whether the views are on unless parameter `views` says otherwise: with DDS output.
+pub fn on_by_default(ctx: &NodeContext) -> bool {
+    matches!(ctx.output, Backend::Dds | Backend::Both)
+}
+
+/// `view_every` if the views are on (parameter `views`, default `default_on`), else `None`.
+/// Views asked for without DDS are bad configuration: they would go nowhere.
+pub fn settings(ctx: &NodeContext, default_on: bool) -> anyhow::Result<Option<u64>> {
+    let dds = on_by_default(ctx);
+    let on = ctx.params.bool("views", default_on).map_err(bad_param)?;
     let every = ctx
         .params
         .u64_in("view_every", VIEW_EVERY, VIEW_EVERY_RANGE)
@@ -128,7 +133,7 @@ pub struct TcpViews {
 impl TcpViews {
     /// The views' publishers on DDS, or `None` when [`settings`] says off.
     pub fn open(ctx: &NodeContext) -> anyhow::Result<Option<Self>> {
-        let Some(every) = settings(ctx)? else {
+        let Some(every) = settings(ctx, on_by_default(ctx))? else {
             return Ok(None);
         };
         let mut pose = PoseStamped::default();
@@ -177,9 +182,10 @@ pub struct JointViews {
 }
 
 impl JointViews {
-    /// The view's publisher on DDS, or `None` when [`settings`] says off.
-    pub fn open(ctx: &NodeContext) -> anyhow::Result<Option<Self>> {
-        let Some(every) = settings(ctx)? else {
+    /// The view's publisher on DDS, or `None` when [`settings`] says off (`default_on`: the
+    /// setting without parameter `views`).
+    pub fn open(ctx: &NodeContext, default_on: bool) -> anyhow::Result<Option<Self>> {
+        let Some(every) = settings(ctx, default_on)? else {
             return Ok(None);
         };
         let msg = JointState {
@@ -198,6 +204,11 @@ impl JointViews {
     /// A new `view_every` (a parameter set while the node runs); counts again from 0.
     pub fn set_every(&mut self, every: u64) {
         self.every = Decimator::new(every);
+    }
+
+    /// The DDS topic the view goes on.
+    pub fn topic(&self) -> &'static str {
+        self.publisher.topic()
     }
 
     /// Publishes the view of `s` if it is a `view_every`-th state.

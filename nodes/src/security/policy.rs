@@ -12,6 +12,8 @@ use std::fmt::Write as _;
 
 use rpkm_transport::{topic, Names};
 
+use crate::node::joint_input::JOINT_STATES_TOPIC;
+
 /// The programs that have a default grant, by the last part of their enclave's name.
 pub const PROGRAMS: [&str; 8] = [
     "ingest",
@@ -144,6 +146,14 @@ pub enum PolicyError {
         /// The name given.
         program: String,
     },
+    /// A topic given is not an absolute ROS 2 name.
+    #[error("topic {topic:?}: {reason}")]
+    Topic {
+        /// The name given.
+        topic: String,
+        /// rpkm_transport's words.
+        reason: String,
+    },
     /// The namespace is not a ROS 2 namespace.
     #[error("--namespace {namespace:?}: {reason}")]
     Namespace {
@@ -198,16 +208,24 @@ fn ingest(b: &mut Builder) {
         topic::DIAGNOSTICS.name(),
         topic::JOINT_STATES.name(),
     ]);
-    // the controller's topics, ingest's DDS source (parameters input_*_topic)
+    // the controller's topics, ingest's DDS source (parameters input_*_topic), and the
+    // broadcaster's JointState of its joint_states source (a thermometer's topic is the
+    // cell's own: `rpkm security enclave --subscribe TOPIC`)
     b.subscribe(&[
         crate::node::ingest::ACTUATOR_INPUT,
         crate::node::ingest::MEASUREMENT_INPUT,
+        JOINT_STATES_TOPIC,
     ]);
     b.node("ingest", false);
 }
 
 fn tcp_estimator(b: &mut Builder) {
-    b.subscribe(&[topic::ACTUATOR_STATE.name(), topic::PARAMETERS.name()]);
+    // JointState: its drive states read directly (source joint_states)
+    b.subscribe(&[
+        topic::ACTUATOR_STATE.name(),
+        topic::PARAMETERS.name(),
+        JOINT_STATES_TOPIC,
+    ]);
     b.publish(&[
         topic::TCP_ESTIMATE.name(),
         topic::DIAGNOSTICS.name(),
@@ -233,9 +251,42 @@ fn calibrator(b: &mut Builder) {
 }
 
 fn preload_monitor(b: &mut Builder) {
-    b.subscribe(&[topic::ACTUATOR_STATE.name(), topic::PARAMETERS.name()]);
+    b.subscribe(&[
+        topic::ACTUATOR_STATE.name(),
+        topic::PARAMETERS.name(),
+        JOINT_STATES_TOPIC,
+    ]);
     b.publish(&[topic::PRELOAD_STATUS.name(), topic::DIAGNOSTICS.name()]);
     b.node("preload_monitor", true);
+}
+
+/// `grant` with the cell's own topics a program also reads and writes (ROS names, resolved
+/// in `namespace` as the program resolves them): a thermometer ingest reads, the topics of a
+/// cell program that has an enclave of this keystore.
+pub fn with_topics(
+    mut grant: Grant,
+    namespace: &str,
+    (publish, subscribe): (&[String], &[String]),
+) -> Result<Grant, PolicyError> {
+    let names = Names::new(namespace, &[]).map_err(|e| PolicyError::Namespace {
+        namespace: namespace.to_owned(),
+        reason: e.to_string(),
+    })?;
+    for (topics, set) in [
+        (publish, &mut grant.publish),
+        (subscribe, &mut grant.subscribe),
+    ] {
+        for t in topics {
+            if let Some(reason) = rpkm_transport::names::absolute_name_error(t) {
+                return Err(PolicyError::Topic {
+                    topic: t.clone(),
+                    reason,
+                });
+            }
+            set.insert(format!("rt{}", names.resolve(t)));
+        }
+    }
+    Ok(grant)
 }
 
 /// The program an enclave's name stands for: its last part (`/rpkm/tcp_estimator`).
@@ -385,6 +436,25 @@ mod tests {
             .subscribe
             .iter()
             .any(|t| t.contains("load_calibration")));
+    }
+
+    #[test]
+    fn a_cell_reads_its_joint_states_and_thermometers_with_topics_granted() {
+        let ingest = grant("ingest", "/rpkm").expect("grant");
+        assert!(ingest.subscribe.contains("rt/joint_states"));
+        assert!(!ingest.subscribe.contains("rt/cell/frame_temperature"));
+        let cell = with_topics(
+            ingest,
+            "/rpkm",
+            (&[], &["/cell/frame_temperature".to_owned()]),
+        )
+        .expect("topics");
+        assert!(cell.subscribe.contains("rt/cell/frame_temperature"));
+        let bad = with_topics(cell, "/rpkm", (&["cell/t".to_owned()], &[]));
+        assert!(
+            matches!(&bad, Err(PolicyError::Topic { topic, .. }) if topic == "cell/t"),
+            "{bad:?}"
+        );
     }
 
     #[test]

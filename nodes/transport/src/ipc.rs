@@ -25,7 +25,8 @@ use iceoryx2::prelude::*;
 use rpkm_msgs::lifecycle_msgs::TransitionEvent;
 use rpkm_msgs::{
     from_cdr, to_cdr, ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, JointState,
-    Parameters, PoseStamped, PreloadStatus, RosMessage, TcpEstimate, TcpMeasurement, TfMessage,
+    Parameters, PoseStamped, PreloadStatus, RosMessage, TcpEstimate, TcpMeasurement, Temperature,
+    TfMessage,
 };
 
 use crate::error::TransportError;
@@ -632,6 +633,7 @@ as_cdr!(
     PoseStamped,
     TfMessage,
     JointState,
+    Temperature,
     TransitionEvent
 );
 

@@ -49,7 +49,7 @@ impl Default for Names {
 }
 
 /// Why `name` is not an absolute ROS 2 name (`/a/b_2`), or `None`.
-fn absolute_name_error(name: &str) -> Option<String> {
+pub fn absolute_name_error(name: &str) -> Option<String> {
     let Some(rest) = name.strip_prefix('/') else {
         return Some("expected an absolute name starting with `/`".into());
     };

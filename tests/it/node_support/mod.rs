@@ -112,9 +112,15 @@ pub struct Launch {
 
 impl Launch {
     pub fn start(file: &Path, envs: &[(&str, &str)]) -> Launch {
+        Self::start_with(file, &[], envs)
+    }
+
+    /// `rpkm launch FILE ARGS...` (launch arguments `name:=value`).
+    pub fn start_with(file: &Path, args: &[&str], envs: &[(&str, &str)]) -> Launch {
         let mut child = Command::new(rpkm())
             .arg("launch")
             .arg(file)
+            .args(args)
             .envs(envs.iter().copied())
             .stderr(Stdio::piped())
             .spawn()

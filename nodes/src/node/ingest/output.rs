@@ -2,7 +2,9 @@
 //! and the one `/diagnostics` report.
 
 use rpkm_core::campaign::{Campaign, Pose};
-use rpkm_msgs::{ActuatorState, CampaignInfo, DiagnosticArray, TcpMeasurement, Time};
+use rpkm_msgs::{
+    ActuatorState, CampaignInfo, DiagnosticArray, DiagnosticStatus, TcpMeasurement, Time,
+};
 use rpkm_transport::{dds::DdsNode, topic, Publisher};
 
 use super::report::Tally;
@@ -11,6 +13,7 @@ use super::END_OF_CAMPAIGN;
 use crate::campaign_bag::{campaign_info, pose_messages};
 use crate::node::lifecycle::{self, Lifecycle};
 use crate::node::live::LiveParams;
+use crate::node::params::NodeParams;
 use crate::node::views::JointViews;
 use crate::node::{diagnostic_array, shutdown, CommonArgs, Every, NodeContext};
 
@@ -42,20 +45,20 @@ pub(super) struct Output<'a> {
 }
 
 impl<'a> Output<'a> {
-    /// The publishers of node `ctx` (started as `args` say), validating with `limits`;
-    /// `source` names the input on /diagnostics.
+    /// The publishers of node `ctx` (started as `args` say) and its JointState view,
+    /// validating with `limits`; `source` names the input on /diagnostics.
     pub(super) fn open(
         (ctx, args): (&'a NodeContext, &'a CommonArgs),
         limits: Limits,
         source: &str,
-        live: LiveParams,
+        (live, views): (LiveParams, Option<JointViews>),
     ) -> anyhow::Result<Self> {
         Ok(Self {
             states: ctx.publisher(&topic::ACTUATOR_STATE)?,
             measurements: ctx.publisher(&topic::TCP_MEASUREMENT)?,
             info: ctx.publisher(&topic::CAMPAIGN_INFO)?,
             diagnostics: ctx.publisher(&topic::DIAGNOSTICS)?,
-            views: JointViews::open(ctx)?,
+            views,
             validator: Validator::new(limits),
             tally: Tally::default(),
             seq: 0,
@@ -74,13 +77,13 @@ impl<'a> Output<'a> {
 
     /// Performs the lifecycle transition asked for, if any: configure reads the parameters
     /// again (the validation limits and `view_every`; the source and pacing stay).
-    fn serve_lifecycle(&mut self) {
+    pub(super) fn serve_lifecycle(&mut self) {
         let (ctx, args) = (self.ctx, self.args);
         let validator = &mut self.validator;
         let views = &mut self.views;
         self.lifecycle.serve(ctx, || {
             let p = ctx
-                .reread_params(args, "ingest", &super::KEYS)
+                .reread_params(args, "ingest", &super::declared())
                 .map_err(|e| crate::error::error_chain(&e))?;
             let (limits, every) =
                 super::configure(&p).map_err(|e| crate::error::error_chain(&e))?;
@@ -113,7 +116,7 @@ impl<'a> Output<'a> {
 
     /// Whether a live source's sample may go out: an inactive node takes it (no backlog at
     /// activation), counts it and publishes nothing.
-    fn publishing(&mut self) -> bool {
+    pub(super) fn publishing(&mut self) -> bool {
         let active = self.lifecycle.active();
         if !active {
             self.tally.dropped_inactive += 1;
@@ -157,6 +160,28 @@ impl<'a> Output<'a> {
         self.publish_state(&state)?;
         // A bad measurement does not hold back its state, which was fine.
         self.measurement(&measurement, &label)
+    }
+
+    /// The CampaignInfo of a live source that names its covariates.
+    pub(super) fn info_message(&mut self, info: &CampaignInfo) -> anyhow::Result<()> {
+        self.info.publish(info)?;
+        Ok(())
+    }
+
+    /// Numbers a drive state of a live source that has no seq of its own (the next one
+    /// published: a refused state takes no number), then validates and publishes it.
+    pub(super) fn numbered_state(
+        &mut self,
+        mut s: ActuatorState,
+        label: &str,
+    ) -> anyhow::Result<()> {
+        s.seq = self.seq + 1;
+        self.state(&s, label)
+    }
+
+    /// The seq the next published state gets.
+    pub(super) fn next_seq(&self) -> u64 {
+        self.seq + 1
     }
 
     /// Validates and publishes a drive state from a live source.
@@ -219,32 +244,64 @@ impl<'a> Output<'a> {
         Ok(())
     }
 
+    /// Takes the changes the parameter services accepted (`now`: without waiting for the
+    /// check's period): the limits and `view_every` apply here, and the parameters come back
+    /// for what the source applies itself (the followers of a JointState source).
+    pub(super) fn parameter_changes(&mut self, now: bool) -> anyhow::Result<Option<NodeParams>> {
+        let changed = if now {
+            self.live.poll_now()
+        } else {
+            self.live.poll()
+        };
+        let Some((p, names)) = changed else {
+            return Ok(None);
+        };
+        let (limits, every) = super::configure(&p)?;
+        self.validator.set_limits(limits);
+        if let Some(v) = self.views.as_mut() {
+            v.set_every(every);
+        }
+        let text = format!("parameters set: {}", names.join(", "));
+        crate::node::log_line(&self.node, &text);
+        if let Some(dds) = &self.dds {
+            dds.rosout(crate::node::severity(&text), &text, file!(), line!());
+        }
+        Ok(Some(p))
+    }
+
     /// Publishes the /diagnostics status when its period has passed, takes the changes the
     /// parameter services accepted (between samples: the next one is judged by them) and
     /// performs a lifecycle transition asked for.
     pub(super) fn report_if_due(&mut self) -> anyhow::Result<()> {
         self.serve_lifecycle();
-        if let Some((p, names)) = self.live.poll() {
-            let (limits, every) = super::configure(&p)?;
-            self.validator.set_limits(limits);
-            if let Some(v) = self.views.as_mut() {
-                v.set_every(every);
-            }
-            let text = format!("parameters set: {}", names.join(", "));
-            crate::node::log_line(&self.node, &text);
-            if let Some(dds) = &self.dds {
-                dds.rosout(crate::node::severity(&text), &text, file!(), line!());
-            }
-        }
+        self.parameter_changes(false)?;
+        self.report_due_with(|_| {})
+    }
+
+    /// Publishes the /diagnostics status, `annotate`d by the source, when its period has
+    /// passed.
+    pub(super) fn report_due_with(
+        &mut self,
+        annotate: impl FnOnce(&mut DiagnosticStatus),
+    ) -> anyhow::Result<()> {
         if self.report.due() {
-            self.report_now()?;
+            self.report_now_with(annotate)?;
         }
         Ok(())
     }
 
     /// Publishes the /diagnostics status now.
     pub(super) fn report_now(&mut self) -> anyhow::Result<()> {
-        let status = self.tally.status(&self.status_name, &self.source);
+        self.report_now_with(|_| {})
+    }
+
+    /// Publishes the /diagnostics status, `annotate`d by the source, now.
+    pub(super) fn report_now_with(
+        &mut self,
+        annotate: impl FnOnce(&mut DiagnosticStatus),
+    ) -> anyhow::Result<()> {
+        let mut status = self.tally.status(&self.status_name, &self.source);
+        annotate(&mut status);
         self.diagnostics.publish(&diagnostic_array(status))?;
         Ok(())
     }
