@@ -179,32 +179,20 @@ pub fn grid_design(instrument: Instrument) -> Vec<PlannedPose> {
     let setup = format!("grid_{}", instrument.as_str());
     let mut out = Vec::with_capacity(232);
     if relative {
-        out.push(PlannedPose {
-            setup: setup.clone(),
-            instrument,
-            reset: true,
-            x: CENTRE.0,
-            y: CENTRE.1,
-        });
+        out.push(PlannedPose::new(&setup, instrument, true, CENTRE));
     }
     for (x, y) in design::grid_231() {
         if relative && (x - CENTRE.0).abs() < 1e-9 && (y - CENTRE.1).abs() < 1e-9 {
             continue;
         }
-        out.push(PlannedPose {
-            setup: setup.clone(),
-            instrument,
-            reset: false,
-            x,
-            y,
-        });
+        out.push(PlannedPose::new(&setup, instrument, false, (x, y)));
     }
     out
 }
 
 /// The poses of `design` on a machine with parameters `p`: actuator positions from the inverse
 /// model, measured values exactly consistent with `p` (0 at resets; the ball-bar distance from
-/// the reset TCP; ψ relative to the reset's ψ), q2 and q3 as followers for self-calibration.
+/// the reset TCP; ψ relative to the reset's ψ), the drives in the design's modes.
 /// `obs::residuals(&c, p, model, Step::Direct, p)` then has zero values and the calibration
 /// Jacobian of the method at `p`.
 pub fn nominal_campaign(
@@ -238,7 +226,6 @@ pub fn nominal_campaign(
             Some(r) if !pp.reset => (sol.x() - r.x(), sol.y() - r.y(), sol.psi() - r.psi()),
             _ => (0.0, 0.0, 0.0),
         };
-        let follower = pp.instrument == Instrument::SelfCal;
         poses.push(Pose {
             t: i as f64,
             setup: pp.setup.clone(),
@@ -246,7 +233,7 @@ pub fn nominal_campaign(
             reset: pp.reset,
             q: sol.q(),
             f: [0.0; 4],
-            follower: [false, follower, follower, false],
+            follower: pp.follower,
             x: m.x.then_some(dx),
             y: m.y.then_some(dy),
             r: m.r.then_some(dx.hypot(dy)),

@@ -35,6 +35,35 @@ pub struct PlannedPose {
     pub x: f64,
     /// Target TCP y, mm.
     pub y: f64,
+    /// Drives in follower mode while the pose is measured (`follower[i]` for q(i+1), the
+    /// campaign's column): q2, q3 for self-calibration ([`FOLLOWERS_23`]); for an external
+    /// instrument the mode the plan measures in, all four drives active where none follows
+    /// (the spec's empty column).
+    #[serde(default)]
+    pub follower: [bool; 4],
+}
+
+/// q2 and q3 in follower mode, q1 and q4 position-controlled: self-calibration's mode, and
+/// the mode an external instrument measures in where the model carries no preload.
+pub const FOLLOWERS_23: [bool; 4] = [false, true, true, false];
+
+impl PlannedPose {
+    /// A pose of `setup` in the instrument's own mode: q2, q3 following for
+    /// self-calibration, all drives active for any other.
+    pub fn new(setup: &str, instrument: Instrument, reset: bool, (x, y): (f64, f64)) -> Self {
+        PlannedPose {
+            setup: setup.to_owned(),
+            instrument,
+            reset,
+            x,
+            y,
+            follower: if instrument == Instrument::SelfCal {
+                FOLLOWERS_23
+            } else {
+                [false; 4]
+            },
+        }
+    }
 }
 
 /// Clamp a target into the workspace.
@@ -62,14 +91,7 @@ fn raster(a: f64, b: f64, step: f64) -> impl Iterator<Item = f64> {
 }
 
 fn pose(setup: &str, instrument: Instrument, reset: bool, x: f64, y: f64) -> PlannedPose {
-    let (x, y) = clamp_to_workspace(x, y);
-    PlannedPose {
-        setup: setup.to_owned(),
-        instrument,
-        reset,
-        x,
-        y,
-    }
+    PlannedPose::new(setup, instrument, reset, clamp_to_workspace(x, y))
 }
 
 /// A setup: reset pose first, then the points (a point equal to the reset pose is skipped).

@@ -42,5 +42,6 @@ pub mod obs;
 pub mod observability;
 pub mod params;
 pub mod plan;
+pub mod returns;
 pub mod stats;
 pub mod variance;

@@ -335,6 +335,11 @@ pub enum Form {
     /// Decorrelated ([`Direction::Along`], [`Direction::Across`], [`Direction::Compat`]):
     /// the calibration's rows.
     Decorrelated,
+    /// Decorrelated within each pose, the errors a setup's reset pose shares with its rows
+    /// left in each row's [`Residual::reset_gain`] (covariance [`zero_covariance`]): for the
+    /// planner, which adds a setup's poses one by one and marginalises the shared zero
+    /// itself.
+    PerPose,
 }
 
 /// [`residuals`] with the effects' corrections `corr` of every pose.
@@ -529,7 +534,8 @@ impl Evaluation<'_> {
             model: self.model,
             corr: self.corr,
             noise: self.noise,
-            decorrelated: self.form == Form::Decorrelated,
+            decorrelated: self.form != Form::Thesis,
+            shared: self.form == Form::Decorrelated,
             frames: geometry::frames(self.p),
         };
         // one buffer of the forward solves' sensitivities for the piece's poses
@@ -581,9 +587,9 @@ impl Evaluation<'_> {
         }
         // a relative setup is never split between pieces ([`Pieces::new`]): here are all
         // its rows
-        if let Some((_, reset)) = reset.filter(|_| ctx.decorrelated && self.step == Step::Direct) {
-            let cov =
-                reset_covariance(ctx, reset).map_err(|e| PoseError::at(campaign, reset, e))?;
+        if let Some((_, reset)) = reset.filter(|_| ctx.shared && self.step == Step::Direct) {
+            let cov = zero_covariance(ctx.noise, (ctx.p_cal, ctx.model), reset)
+                .map_err(|e| PoseError::at(campaign, reset, e))?;
             share_reset(&mut out[first..], &cov);
         }
         // the reset pose of a forward instrument still yields a virtual q2 measurement,
@@ -610,6 +616,9 @@ struct Ctx<'a> {
     /// Whether a 2-D instrument's q rows are decorrelated (the calibration's form) or kept
     /// as the thesis writes them (its observability tables).
     decorrelated: bool,
+    /// Whether a relative setup's rows are made independent of the zero they share
+    /// ([`share_reset`]; not in [`Form::PerPose`]).
+    shared: bool,
     /// The guides' frames of `p`, once per piece.
     frames: geometry::Frames,
 }
@@ -840,6 +849,7 @@ pub fn force_residuals(
         noise,
         // the four forces as recorded, with the currents' noise alone
         decorrelated: false,
+        shared: false,
         frames: geometry::frames(p),
     };
     let mut out = Vec::with_capacity(4 * campaign.poses.len());
@@ -1028,21 +1038,22 @@ fn combine_into(
 /// ball-bar, whose pivot is where the machine stood) and the reset pose's four encoders.
 /// The reading's at the calibration's fixed `p_cal`, so that the rows' combinations stay put
 /// while the parameters move.
-fn reset_covariance(
-    ctx: &Ctx,
+pub fn zero_covariance(
+    noise: &NoiseModel,
+    (p_cal, model): (&Params, Model),
     reset: &Pose,
 ) -> Result<nalgebra::SMatrix<f64, 6, 6>, GeometryError> {
     let mut cov = nalgebra::SMatrix::<f64, 6, 6>::zeros();
     for k in 2..6 {
-        cov[(k, k)] = ctx.noise.encoder_mm.powi(2);
+        cov[(k, k)] = noise.encoder_mm.powi(2);
     }
     let reading = match (reset.instrument, XyInstrument::of(reset.instrument)) {
         (_, Some(xy)) => {
-            let sol = geometry::fgm(ctx.p_cal, ctx.model, reset.q[0], reset.q[3])?;
-            ctx.noise.xy_covariance(xy, Vector2::new(sol.x(), sol.y()))
+            let sol = geometry::fgm(p_cal, model, reset.q[0], reset.q[3])?;
+            noise.xy_covariance(xy, Vector2::new(sol.x(), sol.y()))
         }
         (Instrument::LiX | Instrument::LiY | Instrument::LiPsi, None) => {
-            let sigma = ctx.noise.scalar_sigma(reset.instrument).unwrap_or(0.0);
+            let sigma = noise.scalar_sigma(reset.instrument).unwrap_or(0.0);
             nalgebra::Matrix2::new(sigma * sigma, 0.0, 0.0, 0.0)
         }
         _ => nalgebra::Matrix2::zeros(),

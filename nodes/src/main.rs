@@ -27,8 +27,7 @@ enum Command {
     Analyze(cli::analyze::AnalyzeArgs),
     /// Simulate measurement campaigns on the digital twin, with hidden effects.
     Simulate(cli::simulate::SimulateArgs),
-    /// What to measure next: the poses that determine what a campaign left, or that separate
-    /// two explanations that tie (see `rpkm plan --help`).
+    // about: the first paragraph of `PlanArgs`' documentation, `--help` all of it
     Plan(cli::plan::PlanArgs),
     /// Predicted rod and drive forces and redundancy current at a pose.
     Preload(cli::preload::PreloadArgs),

@@ -453,6 +453,54 @@ pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
     Ok(v)
 }
 
+/// `value ± sigma` in µm, the value to the digits of σ's two significant ones.
+fn um_with_sigma(value_mm: f64, sigma_mm: f64) -> String {
+    let (v, s) = (value_mm * 1e3, sigma_mm * 1e3);
+    // the decimals that show σ's second significant digit: 1 − ⌊log10 σ⌋, at least 0
+    let digits = if s > 0.0 && s.is_finite() {
+        11usize.saturating_sub(rpkm_core::convert::floor_count(s.log10() + 10.0))
+    } else {
+        1
+    };
+    format!("{v:+.digits$} ± {s:.digits$}")
+}
+
+/// A setup's return to its reset pose, judged: "lt setup 3 moved 9.2 µm during 450 s
+/// (1.2 µm/min; x +1.0 ± 27, y +9.1 ± 7.1 µm; p = 0.003): more than its noise" or "lt setup
+/// 3 returned within its noise after 132 s (...)".
+pub fn return_drift(d: &rpkm_core::returns::ReturnDrift) -> String {
+    let parts: Vec<String> = d
+        .components
+        .iter()
+        .map(|c| format!("{} {}", c.coordinate, um_with_sigma(c.value_mm, c.sigma_mm)))
+        .collect();
+    let detail = format!(
+        "{:.1} µm/min; {} µm; p = {:.2e}",
+        d.rate_mm_per_s * 60e3,
+        parts.join(", "),
+        d.p_value
+    );
+    if d.moved() {
+        format!(
+            "{} setup {} moved {:.1} µm during {:.0} s ({detail}): more than its noise, the \
+             instrument drifted after its zero (line {})",
+            d.instrument,
+            d.setup,
+            d.magnitude_mm * 1e3,
+            d.seconds,
+            d.line
+        )
+    } else {
+        format!(
+            "{} setup {} returned within its noise after {:.0} s ({:.1} µm; {detail})",
+            d.instrument,
+            d.setup,
+            d.seconds,
+            d.magnitude_mm * 1e3
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

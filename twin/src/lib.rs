@@ -8,14 +8,17 @@
 //! - Drives: q1, q4 position-controlled, q2, q3 followers (rigid geometry: the pose is the true
 //!   fgm(q1, q4), followers read the true rgm); under `preload_elastic` all four are
 //!   position-controlled and pose and drive forces come from the elasto-geometric model.
-//!   `self` poses always switch q2, q3 to followers.
+//!   `self` poses always switch q2, q3 to followers, and so does a pose planned in that mode
+//!   ([`PlannedPose::follower`]).
 //! - Encoders and instruments with the twin's own noise ([`TwinConfig::noise`]), which a test
 //!   sets apart from what the calibration assumes.
 //! - Relative setups: the reset pose records 0, the others true TCP − true reset TCP, plus
 //!   their own noise minus the noise of the reading the instrument was zeroed on (a tracker,
 //!   grid encoder or interferometer is zeroed on a reading as noisy as any other, shared by
 //!   every reading of the setup; [`ResetReading::Exact`] zeroes on the truth); ball-bar r is
-//!   the distance to the pivot (the reset pose's TCP, where the machine stood).
+//!   the distance to the pivot (the reset pose's TCP, where the machine stood). An
+//!   instrument may drift after its zero ([`ZeroDrift`]: its readings carry a rate times the
+//!   time since their setup's reset pose).
 //! - Covariate `temp_machine` (°C) and time `t` (s): 3 s per pose, 120 s between setups; the
 //!   clock runs on across campaigns, so a later validation campaign is later in time.
 //!
@@ -23,6 +26,7 @@
 //! encoder reading to carrier position (thermal expansion of the scale, scale error).
 
 pub mod effects;
+mod instrument;
 mod machine;
 pub mod production;
 mod stream;
@@ -30,8 +34,8 @@ mod stream;
 pub use effects::EffectKind;
 use machine::gauss;
 pub use machine::{
-    CyclicScale, ResetReading, ThermalPhysics, Twin, TwinConfig, TwinError, SECONDS_BETWEEN_SETUPS,
-    SECONDS_PER_POSE, TEMP_SENSOR_K,
+    CyclicScale, MachineState, ResetReading, ThermalPhysics, Twin, TwinConfig, TwinError,
+    ZeroDrift, SECONDS_BETWEEN_SETUPS, SECONDS_PER_POSE, TEMP_SENSOR_K,
 };
 pub use production::{
     Creep, ProductionConfig, ProductionSample, ProductionStream, StepChange, TimeCreep, Visit,
@@ -39,14 +43,14 @@ pub use production::{
 pub use stream::{DriveSample, DriveStream};
 
 use effects::{bow, THERMAL_PERIOD_S};
-use nalgebra::{Cholesky, Matrix2, Rotation2, Vector2};
+use nalgebra::Vector2;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rpkm_core::campaign::{Campaign, Instrument, Pose};
 use rpkm_core::design::{self, PlannedPose};
 use rpkm_core::elastic::{self, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::{self};
-use rpkm_core::noise::{NoiseModel, XyInstrument};
+use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS, RODS};
 use std::collections::BTreeMap;
 
@@ -70,6 +74,9 @@ pub struct Truth {
     pub reference_temp_c: f64,
     pub thermal_period_s: f64,
     pub thermal: ThermalPhysics,
+    /// The instrument that drifted after its zero, and how fast ([`TwinConfig::drift`]).
+    #[serde(default)]
+    pub drift: Option<ZeroDrift>,
 }
 
 /// One effect of a [`Truth`].
@@ -78,44 +85,6 @@ pub struct EffectTruth {
     pub effect: EffectKind,
     pub magnitude: f64,
     pub unit: String,
-}
-
-/// How far a pose moved from its setup's reset pose: TCP displacement in the instrument's
-/// frame, platform rotation, and the TCP (where the tracker's beam points).
-struct Moved {
-    d: Vector2<f64>,
-    dpsi: f64,
-    tcp: Vector2<f64>,
-    /// The error of the reading the instrument was zeroed on (x, y; a single coordinate or
-    /// ψ in x), which every reading of the setup carries.
-    zero: Vector2<f64>,
-}
-
-/// A square root L (L Lᵀ = cov) of a reading's 2 × 2 covariance: its Cholesky factor, or,
-/// when one direction has no noise at all (a singular covariance, e.g. a tracker rated 0
-/// across the beam), the symmetric square root from its eigen-decomposition, so that the
-/// other direction's noise is still drawn.
-fn xy_factor(cov: Matrix2<f64>) -> Matrix2<f64> {
-    if let Some(c) = Cholesky::new(cov) {
-        return c.l();
-    }
-    let eig = cov.symmetric_eigen();
-    let root = eig.eigenvalues.map(|v| v.max(0.0).sqrt());
-    eig.eigenvectors * Matrix2::from_diagonal(&root) * eig.eigenvectors.transpose()
-}
-
-/// The true state of the machine at one pose.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MachineState {
-    /// TCP (mm) and platform angle (rad).
-    pub tcp: Vector2<f64>,
-    pub psi: f64,
-    /// Encoder readings q1..q4 (without noise), mm.
-    pub q: [f64; 4],
-    /// Drive forces, N.
-    pub f: [f64; 4],
-    /// Followers.
-    pub follower: [bool; 4],
 }
 
 fn by_name(p: &Params) -> BTreeMap<String, f64> {
@@ -155,6 +124,9 @@ impl Twin {
                 });
             }
         }
+        if let Some(d) = &config.drift {
+            instrument::check_drift(d)?;
+        }
         let mut rng = StdRng::seed_from_u64(config.seed);
         let mut p = Params::nominal();
         for i in 0..N_PARAMS {
@@ -165,11 +137,12 @@ impl Twin {
             p[i] += sigma * gauss(&mut rng);
         }
         p = p.with_perfect_parallelogram();
+        let noise_seed = config.noise_seed.unwrap_or(config.seed);
         let twin = Twin {
-            rng: StdRng::seed_from_u64(config.seed ^ 0x9e37_79b9_7f4a_7c15),
-            force_rng: StdRng::seed_from_u64(config.seed ^ 0xf0e5_c0de_0000_0004),
-            reset_rng: StdRng::seed_from_u64(config.seed ^ 0x7e5e_7000_0000_0005),
-            guide_rng: StdRng::seed_from_u64(config.seed ^ 0x6d1d_e000_0000_0007),
+            rng: StdRng::seed_from_u64(noise_seed ^ 0x9e37_79b9_7f4a_7c15),
+            force_rng: StdRng::seed_from_u64(noise_seed ^ 0xf0e5_c0de_0000_0004),
+            reset_rng: StdRng::seed_from_u64(noise_seed ^ 0x7e5e_7000_0000_0005),
+            guide_rng: StdRng::seed_from_u64(noise_seed ^ 0x6d1d_e000_0000_0007),
             t: 0.0,
             alignment: BTreeMap::new(),
             truth_params: p,
@@ -283,6 +256,7 @@ impl Twin {
             reference_temp_c: self.config.thermal.reference_c,
             thermal_period_s: THERMAL_PERIOD_S,
             thermal: self.config.thermal,
+            drift: self.config.drift,
         }
     }
 
@@ -426,82 +400,6 @@ impl Twin {
         Ok(dir)
     }
 
-    /// The reading of a relative instrument at a pose that moved by `moved` from its setup's
-    /// reset, with noise `noise` scaled by `k` (0: noiseless, the draws still made).
-    fn read_instrument(
-        &mut self,
-        plan: &PlannedPose,
-        moved: &Moved,
-        noise: &NoiseModel,
-        k: f64,
-        pose: &mut Pose,
-    ) {
-        let (d, dpsi) = (moved.d, moved.dpsi);
-        let m = plan.instrument.measures();
-        if plan.reset {
-            pose.x = m.x.then_some(0.0);
-            pose.y = m.y.then_some(0.0);
-            pose.r = m.r.then_some(0.0);
-            pose.psi = m.psi.then_some(0.0);
-            return;
-        }
-        match plan.instrument {
-            Instrument::Lt | Instrument::Kgm => {
-                let xy = if plan.instrument == Instrument::Lt {
-                    XyInstrument::Lt
-                } else {
-                    XyInstrument::Kgm
-                };
-                let cov = noise.xy_covariance(xy, moved.tcp);
-                let e = xy_factor(cov) * Vector2::new(gauss(&mut self.rng), gauss(&mut self.rng));
-                pose.x = Some(d.x + k * e.x - moved.zero.x);
-                pose.y = Some(d.y + k * e.y - moved.zero.y);
-            }
-            Instrument::LiX
-            | Instrument::LiY
-            | Instrument::Dbb
-            | Instrument::Circle
-            | Instrument::LiPsi => {
-                let sigma = noise.scalar_sigma(plan.instrument).unwrap_or(0.0);
-                // a ball-bar's zero is where the machine stood: `zero` is 0 for it
-                let e = k * sigma * gauss(&mut self.rng) - moved.zero.x;
-                match plan.instrument {
-                    Instrument::LiX => pose.x = Some(d.x + e),
-                    Instrument::LiY => pose.y = Some(d.y + e),
-                    Instrument::LiPsi => pose.psi = Some(dpsi + e),
-                    _ => pose.r = Some(d.norm() + e),
-                }
-            }
-            Instrument::SelfCal | Instrument::None => {}
-        }
-    }
-
-    /// The error of the reading a relative instrument is zeroed on at its reset pose (true
-    /// TCP `tcp`), with the instrument's noise scaled by `k` ([`ResetReading::Exact`], and
-    /// an instrument zeroed on no reading, the ball-bar: zero). Drawn from its own stream.
-    fn zero_error(
-        &mut self,
-        instrument: Instrument,
-        tcp: Vector2<f64>,
-        noise: &NoiseModel,
-        k: f64,
-    ) -> Vector2<f64> {
-        if self.config.reset == ResetReading::Exact {
-            return Vector2::zeros();
-        }
-        if let Some(xy) = XyInstrument::of(instrument) {
-            let e = Vector2::new(gauss(&mut self.reset_rng), gauss(&mut self.reset_rng));
-            return k * (xy_factor(noise.xy_covariance(xy, tcp)) * e);
-        }
-        match instrument {
-            Instrument::LiX | Instrument::LiY | Instrument::LiPsi => {
-                let sigma = noise.scalar_sigma(instrument).unwrap_or(0.0);
-                Vector2::new(k * sigma * gauss(&mut self.reset_rng), 0.0)
-            }
-            _ => Vector2::zeros(),
-        }
-    }
-
     /// A pose's drive readings: the commanded positions, the followers' encoders (noise σ
     /// `encoder_mm`), the drive forces and the temperature sensor, with the approach
     /// `covariates` after the temperature. `k` scales the noise (0: noiseless, the draws still
@@ -555,7 +453,7 @@ impl Twin {
             None => (0.0, NoiseModel::default()),
         };
         let mut poses = Vec::with_capacity(design.len());
-        let mut reset: Option<(String, Vector2<f64>, f64, Vector2<f64>)> = None;
+        let mut zeroed: Option<instrument::Zeroed> = None;
         let mut last_setup: Option<&str> = None;
         let backlash = self.magnitude(EffectKind::Backlash);
         let lost_q4 = self.magnitude(EffectKind::LostMotionQ4);
@@ -568,7 +466,7 @@ impl Twin {
             last_setup = Some(&plan.setup);
             self.t += SECONDS_PER_POSE;
             let t = self.t;
-            let self_cal = plan.instrument == Instrument::SelfCal;
+            let self_cal = followers_23(plan)?;
             let mut enc = [0; 4].map(|_| k * noise.encoder_mm * gauss(&mut self.rng));
             let mut covariates = Vec::with_capacity(3);
             if backlash.is_some() || lost_q4.is_some() {
@@ -590,26 +488,7 @@ impl Twin {
                 *f += k * noise.force_n * gauss(&mut self.force_rng);
             }
             pose.line = n + 2;
-            if plan.reset {
-                let zero = self.zero_error(plan.instrument, st.tcp, &noise, k);
-                reset = Some((plan.setup.clone(), st.tcp, st.psi, zero));
-            }
-            if plan.instrument.takes_reset() {
-                let Some((_, tcp0, psi0, zero)) = reset.as_ref().filter(|r| r.0 == plan.setup)
-                else {
-                    return Err(TwinError::NoReset {
-                        setup: plan.setup.clone(),
-                    });
-                };
-                let theta = self.alignment_angle(&plan.setup);
-                let moved = Moved {
-                    d: Rotation2::new(theta) * (st.tcp - tcp0),
-                    dpsi: st.psi - psi0,
-                    tcp: st.tcp,
-                    zero: *zero,
-                };
-                self.read_instrument(plan, &moved, &noise, k, &mut pose);
-            }
+            self.read_relative(plan, (&st, t), (&noise, k), &mut zeroed, &mut pose)?;
             poses.push(pose);
         }
         Ok(self.campaign_of(source, poses, backlash.is_some()))
@@ -693,6 +572,21 @@ impl Twin {
         let d = self.validation_design(n);
         self.run(&d, "validation")
     }
+}
+
+/// Whether `plan` is measured with q2, q3 following (self-calibration always; another
+/// instrument where its plan says so): the twin drives that mode or all four active.
+fn followers_23(plan: &PlannedPose) -> Result<bool, TwinError> {
+    if plan.instrument == Instrument::SelfCal || plan.follower == design::FOLLOWERS_23 {
+        return Ok(true);
+    }
+    if plan.follower == [false; 4] {
+        return Ok(false);
+    }
+    Err(TwinError::DriveMode {
+        setup: plan.setup.clone(),
+        follower: rpkm_core::campaign::follower_text(plan.follower),
+    })
 }
 
 /// Poses of the `production` campaign of [`Twin::campaign_by_names`].

@@ -2,8 +2,10 @@
 //! of the twin reads this one; it reads only the effects it is configured with.
 
 use super::effects::{EffectKind, ALPHA_PER_K, REFERENCE_TEMP_C};
+use nalgebra::Vector2;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
+use rpkm_core::campaign::Instrument;
 use rpkm_core::elastic::{ElasticError, Stiffness};
 use rpkm_core::geometry::GeometryError;
 use rpkm_core::noise::NoiseModel;
@@ -22,6 +24,9 @@ pub const TEMP_SENSOR_K: f64 = 0.01;
 pub struct TwinConfig {
     /// Seed of every random draw (parameter errors, noise, alignment angles).
     pub seed: u64,
+    /// Seed of the readings' noise alone, where it is not `seed`'s: the same machine
+    /// measured again with other noise (a study's noise seeds).
+    pub noise_seed: Option<u64>,
     /// Hidden effects and their magnitudes (units: [`EffectKind::unit`]).
     pub effects: Vec<(EffectKind, f64)>,
     /// σ of the true parameters' length errors, mm.
@@ -42,6 +47,30 @@ pub struct TwinConfig {
     pub reset: ResetReading,
     /// A periodic error of one carrier's scale (None: none).
     pub cyclic: Option<CyclicScale>,
+    /// A relative instrument whose readings drift after its zero (None: none).
+    pub drift: Option<ZeroDrift>,
+}
+
+/// A relative instrument whose readings drift after its zero (a tracker creeping as it warms,
+/// an interferometer's air changing): every reading of a setup of `instrument` carries
+/// `rate_per_s` times the time since the setup's reset pose, which read 0. The model has no
+/// term for it; a return to the reset pose at the setup's end shows it
+/// (`rpkm_core::returns`). A systematic error, not noise: a noiseless twin drifts too.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ZeroDrift {
+    pub instrument: Instrument,
+    /// Drift of the reading per second along x and y, mm/s; a single-coordinate instrument
+    /// (ball-bar r, interferometer x or y, angle optics ψ in rad/s) drifts by the first.
+    /// A tracker creeping 1 µm/min along y: `[0.0, 1e-3 / 60.0]`.
+    pub rate_per_s: [f64; 2],
+}
+
+impl ZeroDrift {
+    /// What a reading taken `seconds` after its setup's zero carries (x, y; a single
+    /// coordinate in x), mm or rad.
+    pub fn after(&self, seconds: f64) -> [f64; 2] {
+        self.rate_per_s.map(|v| v * seconds)
+    }
 }
 
 /// A periodic error of one carrier's scale (a linear scale's or an encoder's interpolation
@@ -81,6 +110,7 @@ impl Default for TwinConfig {
     fn default() -> Self {
         TwinConfig {
             seed: 1,
+            noise_seed: None,
             effects: Vec::new(),
             length_sigma_mm: 0.1,
             angle_sigma_rad: 2e-4,
@@ -90,6 +120,7 @@ impl Default for TwinConfig {
             thermal: ThermalPhysics::default(),
             reset: ResetReading::default(),
             cyclic: None,
+            drift: None,
         }
     }
 }
@@ -161,10 +192,31 @@ pub enum TwinError {
         y: f64,
         source: ElasticError,
     },
+    #[error("setup {setup}: followers `{follower}`: the twin drives q2, q3 as followers (`23`) or all four active (empty)")]
+    DriveMode { setup: String, follower: String },
+    #[error("drift of {instrument}: {why}")]
+    BadDrift {
+        instrument: Instrument,
+        why: &'static str,
+    },
     #[error("setup {setup}: pose before its reset pose")]
     NoReset { setup: String },
     #[error("unknown campaign {0:?}, expected lt, kgm, dbb, li_x, li_y, li_psi, self, circle or validation")]
     UnknownCampaign(String),
+}
+
+/// The true state of the machine at one pose.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MachineState {
+    /// TCP (mm) and platform angle (rad).
+    pub tcp: Vector2<f64>,
+    pub psi: f64,
+    /// Encoder readings q1..q4 (without noise), mm.
+    pub q: [f64; 4],
+    /// Drive forces, N.
+    pub f: [f64; 4],
+    /// Followers.
+    pub follower: [bool; 4],
 }
 
 /// The digital twin.

@@ -1,11 +1,13 @@
 //! PLAN.csv: a planned campaign in the campaign grammar without measured values. One row per
 //! pose to visit: `setup,instrument,reset,follower,x,y`, x and y the target TCP (mm, absolute:
-//! nothing is measured yet), `follower` `23` for self-calibration (q2, q3 followers) and
-//! empty where the cell's drives hold their positions as they do for its other campaigns.
-//! `#` lines are comments (the planner says there what each setup is for). Within a setup
-//! the reset pose comes first, as in [`crate::design`].
+//! nothing is measured yet), `follower` the drives in follower mode as the campaign CSV
+//! writes them: `23` for self-calibration (q2, q3 followers) and for an external instrument
+//! the mode the plan measures in (`23`, or empty: all four drives active, which only a model
+//! with the preload's deflection can represent). `#` lines are comments (the planner says
+//! there what each setup is for and why its drives are in their mode). Within a setup the
+//! reset pose comes first, as in [`crate::design`].
 
-use crate::campaign::Instrument;
+use crate::campaign::{follower_text, parse_follower, Instrument};
 use crate::design::{self, PlannedPose};
 use std::fmt::Write as _;
 
@@ -31,17 +33,13 @@ pub fn to_csv(poses: &[PlannedPose], comments: &[String]) -> String {
     out.push_str(HEADER);
     out.push('\n');
     for p in poses {
-        let follower = if p.instrument == Instrument::SelfCal {
-            "23"
-        } else {
-            ""
-        };
         let _ = writeln!(
             out,
-            "{},{},{},{follower},{},{}",
+            "{},{},{},{},{},{}",
             p.setup,
             p.instrument.as_str(),
             u8::from(p.reset),
+            follower_text(p.follower),
             p.x,
             p.y
         );
@@ -107,16 +105,17 @@ fn parse_row(t: &str) -> Result<PlannedPose, (usize, String)> {
         "1" => true,
         other => return Err((3, format!("reset `{other}`: expected 0 or 1"))),
     };
-    let want = if instrument == Instrument::SelfCal {
-        "23"
-    } else {
-        ""
-    };
-    if f[3] != want {
-        return Err((
+    let follower = parse_follower(f[3]).ok_or_else(|| {
+        (
             4,
-            format!("follower `{}`: expected `{want}` for {instrument}", f[3]),
-        ));
+            format!(
+                "follower `{}`: expected distinct drive digits 1-4 such as `23`, or nothing",
+                f[3]
+            ),
+        )
+    })?;
+    if instrument == Instrument::SelfCal && follower != design::FOLLOWERS_23 {
+        return Err((4, format!("follower `{}`: expected `23` for self", f[3])));
     }
     let number = |col: usize| {
         f[col - 1]
@@ -130,12 +129,81 @@ fn parse_row(t: &str) -> Result<PlannedPose, (usize, String)> {
         return Err((5, format!("target ({x}, {y}) mm is outside the workspace")));
     }
     Ok(PlannedPose {
-        setup: f[0].to_owned(),
-        instrument,
-        reset,
-        x,
-        y,
+        follower,
+        ..PlannedPose::new(f[0], instrument, reset, (x, y))
     })
+}
+
+/// The header of a list of target TCP positions (`--where`).
+pub const TARGETS_HEADER: &str = "x,y";
+
+/// Parses a list of target TCP positions (`x,y` header, then one `x,y` per line, mm, `#`
+/// comments): where the TCP must be right (a production path); every target inside the
+/// workspace, at least one.
+pub fn parse_targets(text: &str, source: &str) -> Result<Vec<(f64, f64)>, PlanCsvError> {
+    let err = |line: usize, column: usize, what: String| PlanCsvError {
+        file: source.to_owned(),
+        line,
+        column,
+        what,
+    };
+    let mut header_seen = false;
+    let mut out = Vec::new();
+    for (k, raw) in text.lines().enumerate() {
+        let t = raw.trim();
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        if !header_seen {
+            if t.replace(' ', "") != TARGETS_HEADER {
+                return Err(err(
+                    k + 1,
+                    1,
+                    format!("expected the header `{TARGETS_HEADER}`"),
+                ));
+            }
+            header_seen = true;
+            continue;
+        }
+        let f: Vec<&str> = t.split(',').map(str::trim).collect();
+        if f.len() != 2 {
+            return Err(err(
+                k + 1,
+                1,
+                format!("expected 2 fields (x,y), found {}", f.len()),
+            ));
+        }
+        let mut v = [0.0; 2];
+        for (c, slot) in v.iter_mut().enumerate() {
+            *slot = f[c]
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    err(
+                        k + 1,
+                        c + 1,
+                        format!("`{}` is not a finite number (mm)", f[c]),
+                    )
+                })?;
+        }
+        if design::clamp_to_workspace(v[0], v[1]) != (v[0], v[1]) {
+            return Err(err(
+                k + 1,
+                1,
+                format!("target ({}, {}) mm is outside the workspace", v[0], v[1]),
+            ));
+        }
+        out.push((v[0], v[1]));
+    }
+    if out.is_empty() {
+        return Err(err(
+            1,
+            1,
+            format!("no target: expected `{TARGETS_HEADER}` then lines of x,y (mm)"),
+        ));
+    }
+    Ok(out)
 }
 
 /// Every setup one instrument, a relative setup's reset first and once, self none; the
@@ -174,6 +242,7 @@ mod tests {
     #[test]
     fn a_plan_reads_back_as_written() {
         let mut poses = design::kgm()[..9].to_vec();
+        poses[3].follower = design::FOLLOWERS_23;
         poses.extend(design::self_cal()[..3].iter().cloned());
         let text = to_csv(&poses, &["what it is for".to_owned()]);
         assert!(text.starts_with("# what it is for\n"));
@@ -181,9 +250,22 @@ mod tests {
     }
 
     #[test]
+    fn targets_read_back_and_a_bad_one_names_its_place() {
+        let t = parse_targets("# path\nx,y\n0,1700\n-150, 700\n", "w.csv").expect("targets");
+        assert_eq!(t, vec![(0.0, 1700.0), (-150.0, 700.0)]);
+        let e = parse_targets("x,y\n0,abc\n", "w.csv").expect_err("number");
+        assert_eq!((e.line, e.column), (2, 2), "{e}");
+        let e = parse_targets("x,y\n0,3000\n", "w.csv").expect_err("outside");
+        assert_eq!(e.line, 2, "{e}");
+        assert!(parse_targets("x,y\n", "w.csv").is_err());
+    }
+
+    #[test]
     fn a_bad_plan_names_line_and_column() {
         let head = format!("# c\n{HEADER}\n");
         let e = parse(&format!("{head}s,self,0,,0,1700\n"), "p.csv").expect_err("follower");
+        assert_eq!((e.line, e.column), (3, 4), "{e}");
+        let e = parse(&format!("{head}s,lt,1,22,0,1700\n"), "p.csv").expect_err("twice");
         assert_eq!((e.line, e.column), (3, 4), "{e}");
         let e = parse(&format!("{head}s,lt,0,,0,1700\n"), "p.csv").expect_err("no reset");
         assert_eq!((e.line, e.column), (3, 1), "{e}");

@@ -43,8 +43,8 @@ fn factor(m: &DMatrix<f64>) -> nalgebra::Cholesky<f64, nalgebra::Dyn> {
 }
 
 /// The poses of `setups` (their points' blocks in `blocks`) that most increase ln det(I + G)
-/// from the information `g0`, within `budget` poses: a relative setup's reset pose is paid
-/// when the setup is first used. Greedy by gain per pose spent, then exchanged: each chosen
+/// from the information `g0`, within `budget` poses: a relative setup's reset and return
+/// poses are paid when the setup is first used. Greedy by gain per pose spent, then exchanged: each chosen
 /// point is swapped for a better point of its own setup while one exists.
 pub fn determine(
     g0: &DMatrix<f64>,
@@ -79,7 +79,7 @@ fn best_next(
     let mut best: Option<(Chosen, usize, f64)> = None;
     for (s, setup) in setups.iter().enumerate() {
         let opened = chosen.iter().any(|c| c.setup == s);
-        let cost = 1 + usize::from(setup.reset.is_some() && !opened);
+        let cost = 1 + if opened { 0 } else { setup.overhead() };
         if cost > left {
             continue;
         }
@@ -216,7 +216,7 @@ fn point_exchange(chosen: &mut [Chosen], blocks: &[Vec<DMatrix<f64>>]) -> bool {
 
 /// One round of whole-setup swaps: each opened setup against every unopened one with as
 /// many points, chosen one by one for the condition number; the best swap that lowers it is
-/// made. The cost stays (one reset for one, as many points). Whether one was made.
+/// made. The cost stays (one reset and return for one, as many points). Whether one was made.
 fn setup_exchange(chosen: &mut Vec<Chosen>, blocks: &[Vec<DMatrix<f64>>]) -> bool {
     let mut opened: Vec<usize> = chosen.iter().map(|c| c.setup).collect();
     opened.sort_unstable();
@@ -318,9 +318,10 @@ fn plan_of(
             }
             PlannedSetup {
                 setup: setups[s].clone(),
-                poses: points.len() + usize::from(setups[s].reset.is_some()),
+                poses: points.len() + setups[s].overhead(),
                 points,
                 after: Determination::of(&g),
+                expected_mm: None,
             }
         })
         .collect();

@@ -9,30 +9,44 @@
 //! better than the tolerance), as [`crate::calib::Calibration::determined`] counts.
 //!
 //! - [`candidates`]: the setups an engineer can mount (instrument, reset pose, the points in
-//!   its travel and range).
+//!   its travel and range); a setup whose instrument was zeroed on a reading ends with a
+//!   return to its reset pose, the drift check ([`crate::returns`]).
+//! - [`accuracy`]: the poses that lower the TCP's expected held-out RMS ([`forecast`]: over
+//!   the workspace grid or the poses the user gives) most per pose spent, each relative
+//!   setup's shared zero counted; what the same number of random poses would give.
 //! - [`determine`]: greedy Bayesian D-optimal choice, ln det(I + G) per pose spent, a setup's
-//!   reset pose paid when the setup is opened, then an exchange pass.
+//!   reset and return poses paid when the setup is opened, then an exchange pass.
+//! - [`mode`]: the drives' mode the external instruments measure in (the campaign's, all
+//!   active only where the model carries the preload).
 //! - [`separate`]: T-optimal discrimination of two hypotheses (a lost motion `dir_qN`, a
 //!   parameter): the next poses where their predictions, after the geometry has absorbed
 //!   what it can, differ most against the noise.
 //! - [`csv`]: PLAN.csv, the campaign grammar without measured values.
 
+pub mod accuracy;
 pub mod csv;
+pub mod forecast;
 mod greedy;
+pub mod mode;
 pub mod separate;
+mod start;
 mod types;
 
+pub use accuracy::{AccuracyPlanner, Forecast};
+pub use forecast::Evaluation;
 pub use greedy::{condition_exchange, determine, normalized_condition, Chosen};
+pub use mode::{drive_mode, DriveMode, DriveModeReason};
+pub use start::{design_rows, Start};
 pub use types::{
-    CandidateSetup, Determination, DeterminationPlan, PlanError, PlannedSetup, Unknowns,
+    returns_to_zero, CandidateSetup, Determination, DeterminationPlan, PlanError, PlannedSetup,
+    Unknowns,
 };
 
 use crate::analysis::{self};
-use crate::campaign::{Campaign, Instrument};
+use crate::campaign::Instrument;
 use crate::design::{self, PlannedPose, CENTRE, DBB_LENGTH_MM, KGM_SQUARE_MM};
-use crate::effects::Corrections;
 use crate::noise::NoiseModel;
-use crate::obs::{self, Residual, Step};
+use crate::obs::Residual;
 use crate::observability::{condition_number, normalize_columns};
 use crate::params::{Model, Params};
 use nalgebra::DMatrix;
@@ -61,12 +75,14 @@ pub fn candidates(instruments: &[Instrument]) -> Result<Vec<CandidateSetup>, Pla
                 instrument: inst,
                 reset: Some(CENTRE),
                 points: off_centre.clone(),
+                returns: returns_to_zero(inst),
             }),
             Instrument::SelfCal => out.push(CandidateSetup {
                 id: "plan_self".to_owned(),
                 instrument: inst,
                 reset: None,
                 points: grid.clone(),
+                returns: false,
             }),
             Instrument::Kgm => out.extend(kgm_candidates()),
             Instrument::Dbb => out.extend(dbb_candidates()),
@@ -95,6 +111,7 @@ fn kgm_candidates() -> Vec<CandidateSetup> {
                 instrument: Instrument::Kgm,
                 reset: Some((xc, yc)),
                 points,
+                returns: true,
             });
         }
     }
@@ -116,29 +133,21 @@ fn dbb_candidates() -> Vec<CandidateSetup> {
                     (r * a.cos(), yc + r * a.sin())
                 })
                 .collect(),
+            returns: false,
         })
         .collect()
 }
 
-/// The calibration rows of a design on a machine with parameters `p` (measured values
-/// consistent with `p`: only the Jacobian and σ matter), weighted with `noise`, as the
-/// calibration writes them (decorrelated), direct rows only.
-pub fn design_rows(
-    design: &[PlannedPose],
-    p: &Params,
-    model: Model,
-    noise: &NoiseModel,
-) -> Result<Vec<Residual>, PlanError> {
-    let c = analysis::nominal_campaign(design, p, model)?;
-    Ok(obs::residuals_with(
-        &c,
-        p,
-        model,
-        Step::Direct,
-        p,
-        &Corrections::default(),
-        noise,
-    )?)
+/// `design` with its external-instrument poses measured in `mode` (self-calibration keeps
+/// q2, q3 following).
+pub fn measured_in(mut design: Vec<PlannedPose>, mode: &DriveMode) -> Vec<PlannedPose> {
+    for p in design
+        .iter_mut()
+        .filter(|p| p.instrument != Instrument::SelfCal)
+    {
+        p.follower = mode.follower;
+    }
+    design
 }
 
 /// Each point of a candidate setup as a block of the information's square root (its rows,
@@ -161,31 +170,6 @@ pub fn point_blocks(
         .collect())
 }
 
-/// What a plan starts from: a campaign calibrated at `params` with the noise it showed.
-#[derive(Clone, Copy, Debug)]
-pub struct Start<'a> {
-    pub campaign: &'a Campaign,
-    pub params: &'a Params,
-    pub model: Model,
-    pub noise: &'a NoiseModel,
-}
-
-impl Start<'_> {
-    /// The campaign's information on `unknowns` (its rows at the calibrated parameters).
-    pub fn information(&self, unknowns: &Unknowns) -> Result<DMatrix<f64>, PlanError> {
-        let rows = obs::residuals_with(
-            self.campaign,
-            self.params,
-            self.model,
-            Step::Direct,
-            self.params,
-            &Corrections::default(),
-            self.noise,
-        )?;
-        Ok(unknowns.information(&rows))
-    }
-}
-
 /// The plan of `budget` poses with `instruments` that determines most of what the campaign
 /// of `start` left undetermined on `unknowns`.
 pub fn plan_determination(
@@ -206,7 +190,7 @@ pub fn plan_determination(
 /// A plan from no campaign of as many poses as `design`, with its instruments, for
 /// `unknowns`, at parameters `p`: what the planner makes of the budget a design spent
 /// (greedy D-optimal, then exchanged for the condition number, as the thesis rates its
-/// designs).
+/// designs; no setup returns to its reset, as none of the thesis's does).
 pub fn plan_like(
     design: &[PlannedPose],
     p: &Params,
@@ -220,7 +204,11 @@ pub fn plan_like(
             instruments.push(d.instrument);
         }
     }
-    let setups = candidates(&instruments)?;
+    // like the thesis's designs, no setup returns to its reset: the same poses to spend
+    let mut setups = candidates(&instruments)?;
+    for s in &mut setups {
+        s.returns = false;
+    }
     let blocks = setups
         .iter()
         .map(|s| point_blocks(s, p, model, noise, unknowns))
@@ -255,6 +243,7 @@ mod tests {
             instrument: Instrument::Lt,
             reset: reset.then_some(CENTRE),
             points: vec![CENTRE; n],
+            returns: reset,
         }
     }
 
@@ -277,22 +266,30 @@ mod tests {
         assert_eq!(p.before.determined, 1);
     }
 
-    /// A relative setup costs its reset: with one pose left only the setup without a reset
-    /// fits, although the other's point would add more.
+    /// A relative setup costs its reset and its return: with two poses left only the setup
+    /// without a reset fits, although the other's point would add more.
     #[test]
-    fn a_reset_is_paid_when_its_setup_is_opened() {
+    fn a_reset_and_a_return_are_paid_when_a_setup_is_opened() {
         let g0 = DMatrix::zeros(1, 1);
         let blocks = vec![
             vec![DMatrix::from_row_slice(1, 1, &[10.0])],
             vec![DMatrix::from_row_slice(1, 1, &[1.0])],
         ];
         let setups = [setup("relative", true, 1), setup("self", false, 1)];
-        let one = determine(&g0, &setups, &blocks, 1);
-        assert_eq!(one.setups.len(), 1);
-        assert_eq!(one.setups[0].setup.id, "self");
         let two = determine(&g0, &setups, &blocks, 2);
-        assert_eq!(two.setups[0].setup.id, "relative");
-        assert_eq!(two.setups[0].poses, 2);
+        assert_eq!(two.setups.len(), 1);
+        assert_eq!(two.setups[0].setup.id, "self");
+        let three = determine(&g0, &setups, &blocks, 3);
+        assert_eq!(three.setups[0].setup.id, "relative");
+        assert_eq!(three.setups[0].poses, 3);
+        let design = three.design();
+        assert_eq!(design.len(), 3, "reset, point, return: {design:?}");
+        assert!(design[0].reset && !design[2].reset);
+        assert_eq!(
+            (design[2].x, design[2].y),
+            CENTRE,
+            "the return at the reset's target"
+        );
     }
 
     /// √(λmax/λmin) of the normalised information: columns (1, 0) and (1, 1) have the

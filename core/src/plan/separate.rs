@@ -291,9 +291,9 @@ impl SeparationPlan {
 }
 
 /// `budget` poses of `setup` (its reset first where it has one, then its points, a point
-/// visited again from another side where that helps), chosen one after the other to
-/// separate the pair most: at each step the point whose move and rows raise the separation
-/// most.
+/// visited again from another side where that helps, and its return to the reset pose where
+/// its instrument was zeroed on a reading), chosen one after the other to separate the pair
+/// most: at each step the point whose move and rows raise the separation most.
 pub fn separate(
     setup: &CandidateSetup,
     p: &Params,
@@ -304,10 +304,14 @@ pub fn separate(
 ) -> Result<SeparationPlan, PlanError> {
     let others = pair.others(unknowns);
     let all: Vec<usize> = (0..setup.points.len()).collect();
-    let design = setup.design(&all);
+    let mut design = setup.design(&all);
+    design.extend(setup.return_pose());
     let c = analysis::nominal_campaign(&design, p, model)?;
     let rows = pose_rows(&c, p, (model, noise), &others, pair)?;
     let first = usize::from(setup.reset.is_some());
+    let points = first..first + setup.points.len();
+    let back = setup.return_pose().map(|_| points.end);
+    let room = budget.saturating_sub(usize::from(back.is_some()));
     let mut sums = Sums::new(others.len());
     let mut dir = [1.0; 4];
     // the reset first where there is one, else the first point
@@ -316,8 +320,9 @@ pub fn separate(
     let mut after_each = Vec::new();
     sums.add(&rows[at].j, &rows[at].signatures(pair, &dir));
     after_each.push(sums.separation());
-    while order.len() < budget {
-        let step = (first..rows.len())
+    while order.len() < room {
+        let step = points
+            .clone()
             .filter(|&k| k != at)
             .map(|k| {
                 let d = next_direction(dir, &rows[at].q, &rows[k].q);
@@ -332,6 +337,12 @@ pub fn separate(
         };
         after_each.push(sep);
         (sums, dir, at) = (trial, d, k);
+        order.push(k);
+    }
+    if let Some(k) = back.filter(|_| order.len() < budget) {
+        let d = next_direction(dir, &rows[at].q, &rows[k].q);
+        sums.add(&rows[k].j, &rows[k].signatures(pair, &d));
+        after_each.push(sums.separation());
         order.push(k);
     }
     Ok(SeparationPlan {

@@ -25,6 +25,16 @@ pub enum PlanError {
     /// Two hypotheses named alike.
     #[error("the two hypotheses are the same (`{0}`)")]
     SameHypothesis(String),
+    /// Nowhere to judge the TCP's accuracy.
+    #[error("no pose to judge the TCP's accuracy at")]
+    NoEvaluationPoses,
+    /// A pose where the TCP is judged that the model cannot reach.
+    #[error("target ({x}, {y}) mm: {error}")]
+    Target {
+        x: f64,
+        y: f64,
+        error: crate::geometry::GeometryError,
+    },
 }
 
 /// The unknowns a plan is made for: parameter indexes and their tolerance (one σ of the
@@ -101,18 +111,30 @@ pub struct CandidateSetup {
     pub instrument: Instrument,
     pub reset: Option<(f64, f64)>,
     pub points: Vec<(f64, f64)>,
+    /// Whether it ends with a return to its reset pose, the drift check (where its
+    /// instrument was zeroed on a reading: [`returns_to_zero`]).
+    pub returns: bool,
 }
 
 impl CandidateSetup {
+    /// The pose that ends the setup where it returns ([`Self::returns`]): its reset pose's
+    /// target, measured as any other pose (not a reset), whose reading is the instrument's
+    /// drift since its zero ([`crate::returns`]). None for a setup that does not return (a
+    /// ball-bar's: zeroed on no reading, its pivot) and one without a reset.
+    pub fn return_pose(&self) -> Option<PlannedPose> {
+        let reset = self.reset.filter(|_| self.returns)?;
+        Some(PlannedPose::new(&self.id, self.instrument, false, reset))
+    }
+
+    /// Poses the setup costs besides its points: its reset and its return.
+    pub fn overhead(&self) -> usize {
+        usize::from(self.reset.is_some()) + usize::from(self.return_pose().is_some())
+    }
+
     /// The setup as a design: the reset first, then `points` (indexes into `self.points`).
     pub fn design(&self, points: &[usize]) -> Vec<PlannedPose> {
-        let pose = |reset: bool, (x, y): (f64, f64)| PlannedPose {
-            setup: self.id.clone(),
-            instrument: self.instrument,
-            reset,
-            x,
-            y,
-        };
+        let pose =
+            |reset: bool, at: (f64, f64)| PlannedPose::new(&self.id, self.instrument, reset, at);
         self.reset
             .map(|r| pose(true, r))
             .into_iter()
@@ -121,22 +143,35 @@ impl CandidateSetup {
     }
 }
 
+/// Whether a setup of `instrument` ends with a return to its reset pose: an instrument
+/// zeroed on a reading (tracker, grid encoder, interferometer, angle optics), whose zero can
+/// drift. A ball-bar's zero is its pivot, which the machine cannot return to with the bar
+/// mounted.
+pub fn returns_to_zero(instrument: Instrument) -> bool {
+    instrument.is_relative() && instrument != Instrument::Dbb
+}
+
 /// The plan of one setup: what it measures and what is determined once it is measured.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PlannedSetup {
     pub setup: CandidateSetup,
     /// Indexes into the candidate's points, in measuring order.
     pub points: Vec<usize>,
-    /// Poses it costs (its points and its reset).
+    /// Poses it costs (its points, its reset and its return).
     pub poses: usize,
     /// The determination after it (and the setups before it).
     pub after: Determination,
+    /// The expected held-out RMS after it (and the setups before it), mm: the accuracy
+    /// criterion's ([`crate::plan::forecast`]); None in a plan for the determinant.
+    pub expected_mm: Option<f64>,
 }
 
 impl PlannedSetup {
-    /// Its poses as a design (reset first).
+    /// Its poses as a design: the reset first, then the points, then the return.
     pub fn design(&self) -> Vec<PlannedPose> {
-        self.setup.design(&self.points)
+        let mut d = self.setup.design(&self.points);
+        d.extend(self.setup.return_pose());
+        d
     }
 }
 

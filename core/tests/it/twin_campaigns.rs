@@ -157,13 +157,7 @@ fn thermal_residual_correlates_with_temp_machine() {
     // the drift of q2, q3 there is thermal alone.
     let _ = t.campaign(&[Instrument::SelfCal]).expect("self");
     let hold: Vec<PlannedPose> = (0..800)
-        .map(|_| PlannedPose {
-            setup: "hold".into(),
-            instrument: Instrument::SelfCal,
-            reset: false,
-            x: 0.0,
-            y: 1700.0,
-        })
+        .map(|_| PlannedPose::new("hold", Instrument::SelfCal, false, (0.0, 1700.0)))
         .collect();
     let c = t.run(&hold, "hold").expect("hold");
     let temp: Vec<f64> = c
@@ -290,4 +284,63 @@ fn a_repeated_campaign_reads_back_as_new_setups() {
     assert!(lt.iter().all(|s| s.reset.is_some()));
     assert_ne!(lt[0].id, lt[1].id);
     assert_eq!(setups.len(), 2 + 16);
+}
+
+/// A tracker creeping 1 µm/min along y after its zero: on a noiseless twin each reading is
+/// the drift-free reading plus 1 µm/min times the time since its setup's reset pose (read
+/// off the campaign's `t`), the grid encoder measured beside it does not drift, and the
+/// truth names the drift.
+#[test]
+fn a_drifting_instrument_reads_its_rate_times_the_time_since_its_zero() {
+    let rate = 1e-3 / 60.0;
+    let measure = |drift: Option<rpkm_twin::ZeroDrift>| {
+        let mut t = Twin::new(TwinConfig {
+            seed: 4,
+            noise: None,
+            drift,
+            ..TwinConfig::default()
+        })
+        .expect("twin");
+        let c = t
+            .campaign(&[Instrument::Lt, Instrument::Kgm])
+            .expect("lt, kgm");
+        (c, t.truth())
+    };
+    let drift = rpkm_twin::ZeroDrift {
+        instrument: Instrument::Lt,
+        rate_per_s: [0.0, rate],
+    };
+    let (still, _) = measure(None);
+    let (moving, truth) = measure(Some(drift));
+    assert_eq!(truth.drift, Some(drift));
+    let zero_t = moving.poses[0].t;
+    let mut largest: f64 = 0.0;
+    for (a, b) in still.poses.iter().zip(&moving.poses) {
+        let (Some(ya), Some(yb), Some(xa), Some(xb)) = (a.y, b.y, a.x, b.x) else {
+            continue;
+        };
+        let want = if b.instrument == Instrument::Lt {
+            rate * (b.t - zero_t)
+        } else {
+            0.0
+        };
+        assert!(
+            (yb - ya - want).abs() < 1e-12,
+            "line {}: {} {}",
+            b.line,
+            yb - ya,
+            want
+        );
+        assert!((xb - xa).abs() < 1e-12, "line {}: x does not drift", b.line);
+        largest = largest.max(yb - ya);
+    }
+    assert!(largest > 1e-3, "the setup lasts minutes: {largest} mm");
+    let bad = Twin::new(TwinConfig {
+        drift: Some(rpkm_twin::ZeroDrift {
+            instrument: Instrument::SelfCal,
+            rate_per_s: [0.0, rate],
+        }),
+        ..TwinConfig::default()
+    });
+    assert!(matches!(bad, Err(TwinError::BadDrift { .. })), "{bad:?}");
 }

@@ -2,6 +2,7 @@
 //! at random, so that a model that only fits our own choices shows it.
 
 mod calibration;
+mod plan;
 mod soak;
 
 use super::bad_input;
@@ -57,6 +58,8 @@ pub enum Bench {
     ///
     /// Example: rpkm bench calibration --repeats 7,67,672
     Calibration(calibration::CalibrationArgs),
+    /// Planned tracker poses against random ones on twin machines (`rpkm bench plan --help`).
+    Plan(plan::PlanStudyArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -103,6 +106,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         Bench::Discovery(a) => discovery(a),
         Bench::Soak(a) => soak::run(a),
         Bench::Calibration(a) => calibration::run(a),
+        Bench::Plan(a) => plan::run(a),
     }
 }
 

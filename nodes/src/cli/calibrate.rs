@@ -37,12 +37,9 @@ pub struct CalibrateArgs {
     /// a comma-separated list (l1,gamma2,...).
     #[arg(long, default_value = "map")]
     pub params: String,
-    /// Manufacturing tolerance of the lengths (mm, one σ) for --params map.
-    #[arg(long, default_value_t = 0.1)]
-    pub tolerance_mm: f64,
-    /// Manufacturing tolerance of the angles (mrad, one σ) for --params map.
-    #[arg(long, default_value_t = 1.0)]
-    pub tolerance_mrad: f64,
+    /// The tolerances of --params map.
+    #[command(flatten)]
+    pub tolerance: super::prior_args::PriorArgs,
     /// The instruments' stated noise, NAME=VALUE comma-separated or a YAML file (mm, rad for
     /// psi): lt (isotropic tracker), lt_along, lt_across, lt_across_per_m, kgm, dbb, li, psi,
     /// encoder, force (N, drive forces), drive_position (the encoders in the force rows),
@@ -178,6 +175,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         .transpose()?;
     print_report(&campaign, &cal, val.as_ref());
     print_noise(&noise);
+    // judged against the stated noise: the estimate's group takes a drift in and hides it
+    let corr = set.corrections(&cal.theta);
+    let returns =
+        rpkm_core::returns::drift_checks(&campaign, (&cal.params, cal.model), &corr, &opts.noise)
+            .map_err(|e| bad_input(e.to_string()))?;
+    print_returns(&returns);
     let stages = if refs.is_empty() {
         None
     } else {
@@ -203,7 +206,9 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     }
     if let Some(path) = &args.json {
         let file = file.as_ref().map(crate::effects_file::to_json);
-        write_calibration_json(path, &cal, (&noise, file), val.as_ref(), stages.as_deref())?;
+        let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_deref())?;
+        out["returns"] = serde_json::to_value(&returns)?;
+        write_json(path, &out)?;
         println!("\nwrote {}", path.display());
     }
     record_history(
@@ -254,10 +259,7 @@ fn record_history(
 
 /// The calibration's options from the command line, each flag checked.
 fn options(args: &CalibrateArgs, model: Model) -> anyhow::Result<Options> {
-    let prior = calib::Prior {
-        length_mm: positive("--tolerance-mm", args.tolerance_mm)?,
-        angle_rad: positive("--tolerance-mrad", args.tolerance_mrad)? * 1e-3,
-    };
+    let prior = args.tolerance.prior()?;
     let selection = match args.params.as_str() {
         "map" => Selection::Prior(prior),
         "auto" => Selection::Auto {
@@ -298,13 +300,12 @@ fn options(args: &CalibrateArgs, model: Model) -> anyhow::Result<Options> {
 }
 
 /// The `--json` file: the calibration, its noise and the effect stages.
-fn write_calibration_json(
-    path: &std::path::Path,
+fn calibration_json(
     cal: &Calibration,
     (noise, file): (&NoiseEstimate, Option<serde_json::Value>),
     val: Option<&Validation>,
     stages: Option<&[Stage]>,
-) -> anyhow::Result<()> {
+) -> anyhow::Result<serde_json::Value> {
     let mut out = report_json(cal, val);
     out["noise"] = serde_json::to_value(&noise.groups)?;
     // the written effects as written: what their parameters in `effects` mean
@@ -315,14 +316,19 @@ fn write_calibration_json(
     if let Some(st) = stages {
         out["effect_stages"] = serde_json::to_value(st)?;
     }
-    write_json(path, &out)
+    Ok(out)
 }
 
-fn positive(flag: &str, v: f64) -> anyhow::Result<f64> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(bad_input(format!("{flag} {v}: expected a positive number")))
+/// The drift checks: each setup's return to its reset pose against its noise.
+fn print_returns(returns: &[rpkm_core::returns::ReturnDrift]) {
+    if returns.is_empty() {
+        return;
+    }
+    println!(
+        "\ndrift checks (each return to a setup's reset pose against the stated noise, --noise):"
+    );
+    for d in returns {
+        println!("  {}", crate::words::return_drift(d));
     }
 }
 

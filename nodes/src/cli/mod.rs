@@ -13,6 +13,7 @@ pub mod ingest;
 pub mod monitor;
 pub mod plan;
 pub mod preload;
+mod prior_args;
 pub mod record;
 pub mod replay;
 pub mod security;

@@ -74,6 +74,12 @@ pub struct SimulateArgs {
     /// the calibration assumes: `--noise encoder=0.0005,lt=0.006`.
     #[arg(long)]
     pub noise: Option<String>,
+    /// A relative instrument whose readings drift after its zero, INSTRUMENT=VX,VY in µm
+    /// per minute along x and y (a single-coordinate instrument takes one value; µrad/min
+    /// for li_psi): every reading carries the rate times the time since its setup's reset
+    /// pose. A tracker creeping 1 µm/min along y: `--drift lt=0,1`.
+    #[arg(long)]
+    pub drift: Option<String>,
     /// Bag only: also write an ActuatorState stream at this rate (Hz) on
     /// /rpkm/actuator_state, after the campaign (if any) on the twin's clock.
     #[arg(long)]

@@ -1,8 +1,9 @@
 //! `rpkm simulate`: measurement campaigns from the digital twin.
 
 use anyhow::{bail, Context, Result};
-use rpkm_core::noise::NoiseModel;
-use rpkm_twin::{EffectKind, Twin, TwinConfig};
+use rpkm_core::campaign::Instrument;
+use rpkm_core::noise::{NoiseModel, XyInstrument};
+use rpkm_twin::{EffectKind, Twin, TwinConfig, ZeroDrift};
 use std::path::{Path, PathBuf};
 
 mod args;
@@ -46,6 +47,43 @@ fn twin_noise(args: &SimulateArgs) -> Result<Option<NoiseModel>> {
         .map_err(|e| super::bad_input(format!("--noise: {e}")))
 }
 
+/// `--drift INSTRUMENT=VX,VY` (µm/min, µrad/min for li_psi; one value for a
+/// single-coordinate instrument) as the twin's drift per second in mm (rad).
+pub fn parse_drift(s: &str) -> Result<ZeroDrift> {
+    let bad = |why: &str| super::bad_input(format!("--drift {s}: {why}"));
+    let (name, rates) = s
+        .split_once('=')
+        .ok_or_else(|| bad("expected INSTRUMENT=VX,VY (µm/min), e.g. lt=0,1"))?;
+    let instrument: Instrument = name
+        .trim()
+        .parse()
+        .ok()
+        .filter(|i: &Instrument| i.is_relative())
+        .ok_or_else(|| bad("expected a relative instrument: lt, kgm, dbb, li_x, li_y or li_psi"))?;
+    let values = rates
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .ok_or_else(|| bad("a rate is not a finite number"))?;
+    let two = XyInstrument::of(instrument).is_some();
+    let rate = match (two, values.as_slice()) {
+        (true, [vx, vy]) => [*vx, *vy],
+        (false, [v]) => [*v, 0.0],
+        (true, _) => return Err(bad("expected two rates VX,VY for a 2-D instrument")),
+        (false, _) => return Err(bad("expected one rate for a single-coordinate instrument")),
+    };
+    // µm/min (µrad/min) → mm/s (rad/s)
+    let per_s = if instrument == Instrument::LiPsi {
+        1e-6 / 60.0
+    } else {
+        1e-3 / 60.0
+    };
+    Ok(ZeroDrift {
+        instrument,
+        rate_per_s: rate.map(|v| v * per_s),
+    })
+}
+
 /// `dir/name.csv` → `dir/name.val.csv`.
 fn validation_path(out: &Path) -> PathBuf {
     let stem = out
@@ -65,6 +103,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         seed: args.seed,
         effects,
         noise: twin_noise(args)?,
+        drift: args.drift.as_deref().map(parse_drift).transpose()?,
         ..TwinConfig::default()
     })?;
     if let Some(seconds) = args.production_seconds {

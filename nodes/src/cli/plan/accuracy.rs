@@ -1,0 +1,273 @@
+//! `rpkm plan` for the TCP (the default criterion): the plan that lowers the expected
+//! held-out RMS most, what it buys against as many random poses, per budget; and where the
+//! instruments asked for can buy nothing, which others would.
+
+use super::args::PlanArgs;
+use super::determine::setups_json;
+use super::output::{write_outputs, Drives};
+use rpkm_core::campaign::Instrument;
+use rpkm_core::plan::{
+    self, AccuracyPlanner, CandidateSetup, DeterminationPlan, Evaluation, Forecast, Start, Unknowns,
+};
+use serde_json::json;
+
+/// Random designs the plan is compared with (the median of their expected RMS).
+const RANDOM_DRAWS: usize = 25;
+/// Seed of the random designs: the same comparison every run.
+const RANDOM_SEED: u64 = 0x5eed_0037;
+/// A plan that lowers the TCP's own error (the expected held-out RMS above the readings'
+/// noise) by less than this share of it buys nothing.
+const WORTH: f64 = 0.05;
+/// Instruments a plan may use, in the order they are suggested on a tie.
+const ALL: [Instrument; 5] = [
+    Instrument::Lt,
+    Instrument::Kgm,
+    Instrument::Dbb,
+    Instrument::LiPsi,
+    Instrument::SelfCal,
+];
+
+/// One budget's plan and what it buys.
+struct Budgeted {
+    budget: usize,
+    plan: DeterminationPlan,
+    forecast: Forecast,
+    random_mm: f64,
+}
+
+/// The plan for each budget of `args`, printed; PLAN.csv and the JSON of the last.
+pub fn run(
+    args: &PlanArgs,
+    (start, unknowns): (&Start, &Unknowns),
+    (instruments, drives): (&[Instrument], &Drives),
+    (evaluation, where_words): (&Evaluation, &str),
+) -> anyhow::Result<()> {
+    let setups = plan::candidates(instruments)?;
+    let planner = AccuracyPlanner::new(start, unknowns, &setups, evaluation)?;
+    let mut all = Vec::with_capacity(args.budget.len());
+    for &budget in &args.budget {
+        let (p, forecast) = planner.plan(budget)?;
+        let random_setup = p.setups.first().map_or(&setups[0], |s| &s.setup);
+        let random_mm = planner.random((random_setup, budget), (RANDOM_DRAWS, RANDOM_SEED))?;
+        all.push(Budgeted {
+            budget,
+            plan: p,
+            forecast,
+            random_mm,
+        });
+    }
+    let Some(last) = all.last() else {
+        return Ok(());
+    };
+    print_plan(last, where_words);
+    if all.len() > 1 {
+        print_budgets(&all);
+    }
+    let f = last.forecast;
+    if !pays(f.now_mm, f.after_mm, f.floor_mm) {
+        print_nothing_to_gain(start, unknowns, (instruments, last.budget), evaluation)?;
+    }
+    let design = plan::measured_in(last.plan.design(), &drives.mode);
+    write_outputs(
+        args,
+        (&design, drives),
+        &comments(last, where_words),
+        || {
+            json!({
+                "kind": "tcp",
+                "held_out": where_words,
+                "budget": last.budget,
+                "now_um": f.now_mm * 1e3,
+                "after_um": f.after_mm * 1e3,
+                "random_um": last.random_mm * 1e3,
+                "floor_um": f.floor_mm * 1e3,
+            "own_now_um": own(f.now_mm, f.floor_mm) * 1e3,
+            "own_after_um": own(f.after_mm, f.floor_mm) * 1e3,
+            "own_random_um": own(last.random_mm, f.floor_mm) * 1e3,
+            "pays": pays(f.now_mm, f.after_mm, f.floor_mm),
+                "budgets": all.iter().map(|b| json!({
+                    "budget": b.budget,
+                    "poses": b.plan.design().len(),
+                    "after_um": b.forecast.after_mm * 1e3,
+                    "random_um": b.random_mm * 1e3,
+                })).collect::<Vec<_>>(),
+                "before": last.plan.before,
+                "after": last.plan.after(),
+                "setups": setups_json(&last.plan),
+            })
+        },
+    )
+}
+
+/// The TCP's own error in an expected held-out RMS `rms` (mm): what is left above the
+/// held-out readings' noise `floor` (in quadrature).
+fn own(rms: f64, floor: f64) -> f64 {
+    (rms * rms - floor * floor).max(0.0).sqrt()
+}
+
+/// Whether a plan from `now` to `after` (expected held-out RMS, mm, over `floor`) buys
+/// something: the TCP's own error lower by [`WORTH`] of itself.
+fn pays(now: f64, after: f64, floor: f64) -> bool {
+    own(now, floor) - own(after, floor) >= WORTH * own(now, floor)
+}
+
+fn print_plan(b: &Budgeted, where_words: &str) {
+    let f = b.forecast;
+    let line = |what: &str, rms: f64| {
+        println!(
+            "  {what:<26} {:>8.2} um {:>13.2} um",
+            rms * 1e3,
+            own(rms, f.floor_mm) * 1e3
+        );
+    };
+    println!("expected held-out RMS ({where_words}, each setup's zero removed):");
+    println!("  {:<26} {:>11} {:>16}", "", "held-out", "the TCP's own");
+    line("now", f.now_mm);
+    println!("\nplan of {} poses:", b.budget);
+    for s in &b.plan.setups {
+        println!("  {}", super::output::setup_line(s));
+    }
+    println!();
+    line("after the plan", f.after_mm);
+    line(&format!("{} random poses instead", b.budget), b.random_mm);
+    println!(
+        "  {:<26} {:>8.2} um   (the floor: the tracker's own noise, zero removed)",
+        "noise alone",
+        f.floor_mm * 1e3
+    );
+    println!(
+        "  parameter combinations determined better than their tolerance: {} of {} now, {} after",
+        b.plan.before.determined,
+        b.plan.before.of,
+        b.plan.after().determined
+    );
+    println!("\n{}", buys_words(b));
+}
+
+/// What the plan buys, in words.
+fn buys_words(b: &Budgeted) -> String {
+    let f = b.forecast;
+    let um = |v: f64| own(v, f.floor_mm) * 1e3;
+    let (now, after, random) = (um(f.now_mm), um(f.after_mm), um(b.random_mm));
+    if !pays(f.now_mm, f.after_mm, f.floor_mm) {
+        return format!(
+            "the plan buys nothing: the TCP's own error would stay at {after:.2} um (now \
+             {now:.2} um, less than {:.0} % lower), under the held-out readings' noise of \
+             {:.2} um",
+            WORTH * 100.0,
+            f.floor_mm * 1e3
+        );
+    }
+    let versus = if after <= random {
+        format!("{} random poses: {random:.2} um", b.budget)
+    } else {
+        format!(
+            "{} random poses would do better, {random:.2} um: the plan rests on the model",
+            b.budget
+        )
+    };
+    format!(
+        "the plan lowers the TCP's own error from {now:.2} to {after:.2} um ({versus}); the \
+         held-out RMS from {:.2} to {:.2} um",
+        f.now_mm * 1e3,
+        f.after_mm * 1e3
+    )
+}
+
+fn print_budgets(all: &[Budgeted]) {
+    println!("\nby budget (expected held-out RMS; the TCP's own error):");
+    println!(
+        "  {:>6} {:>24} {:>24}",
+        "poses", "after the plan", "random poses"
+    );
+    for b in all {
+        let floor = b.forecast.floor_mm;
+        println!(
+            "  {:>6} {:>10.2} um ({:>6.2} um) {:>10.2} um ({:>6.2} um)",
+            b.budget,
+            b.forecast.after_mm * 1e3,
+            own(b.forecast.after_mm, floor) * 1e3,
+            b.random_mm * 1e3,
+            own(b.random_mm, floor) * 1e3
+        );
+    }
+}
+
+/// Where these instruments buy nothing: the other instruments' plans of the same budget,
+/// those that would buy something named best first.
+fn print_nothing_to_gain(
+    start: &Start,
+    unknowns: &Unknowns,
+    (instruments, budget): (&[Instrument], usize),
+    evaluation: &Evaluation,
+) -> anyhow::Result<()> {
+    let names: Vec<&str> = instruments
+        .iter()
+        .map(|i| super::output::spelling(*i))
+        .collect();
+    let mut better: Vec<(f64, Instrument)> = Vec::new();
+    for other in ALL.into_iter().filter(|i| !instruments.contains(i)) {
+        let setups: Vec<CandidateSetup> = plan::candidates(&[other])?;
+        let planner = AccuracyPlanner::new(start, unknowns, &setups, evaluation)?;
+        let (_, f) = planner.plan(budget)?;
+        if pays(f.now_mm, f.after_mm, f.floor_mm) {
+            better.push((own(f.after_mm, f.floor_mm), other));
+        }
+    }
+    better.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if better.is_empty() {
+        println!(
+            "nothing to gain with {}, nor with any other instrument in {budget} poses: try \
+             more poses (--budget), or another model (rpkm diagnose: an effect the model lacks)",
+            names.join(", ")
+        );
+        return Ok(());
+    }
+    let tries: Vec<String> = better
+        .iter()
+        .map(|(mm, i)| {
+            format!(
+                "--instruments {} (the TCP's own error {:.2} um)",
+                super::output::spelling(*i),
+                mm * 1e3
+            )
+        })
+        .collect();
+    println!(
+        "nothing to gain with {} in {budget} poses; try {}",
+        names.join(", "),
+        tries.join(", or ")
+    );
+    Ok(())
+}
+
+fn comments(b: &Budgeted, where_words: &str) -> Vec<String> {
+    let f = b.forecast;
+    let mut out = vec![
+        "rpkm plan: x, y are target TCP positions (mm), nothing measured yet".to_owned(),
+        format!(
+            "expected held-out RMS ({where_words}, each setup's zero removed): now {:.2} um, \
+             after the plan {:.2} um, {} random poses {:.2} um, noise floor {:.2} um",
+            f.now_mm * 1e3,
+            f.after_mm * 1e3,
+            b.budget,
+            b.random_mm * 1e3,
+            f.floor_mm * 1e3
+        ),
+    ];
+    for s in &b.plan.setups {
+        let back = if s.setup.return_pose().is_some() {
+            ", its last pose the return to its reset (drift check)"
+        } else {
+            ""
+        };
+        out.push(format!(
+            "setup {} ({}, {} poses{back}): then {:.2} um",
+            s.setup.id,
+            s.setup.instrument.as_str(),
+            s.poses,
+            s.expected_mm.unwrap_or(f64::NAN) * 1e3
+        ));
+    }
+    out
+}
