@@ -905,7 +905,7 @@ impl Shape {
     ) -> Shape {
         Shape {
             dictionary_p: dictionary.p_value,
-            periodic: periodic::periodogram(campaign, rows),
+            periodic: periodic::periodogram(campaign, rows, level),
             neighbours: neighbours::neighbours(campaign, rows),
             level,
         }
