@@ -29,7 +29,7 @@ pub fn follows(p: &Pointer) -> String {
 }
 
 /// The drift WARN's words, claiming no more than the path identifies: "l3 +48 µm in 6 min
-/// (+12.0 ± 0.3 µm/K), follows temp_machine (r = 0.98)" where one candidate explains it with
+/// (+12.00 ± 0.30 µm/K), follows temp_machine (r = 0.98)" where one candidate explains it with
 /// the margin; else "l1..l5 alike in 2 min, the path cannot tell which: l3 +19 µm, l1 +15 µm,
 /// ..." with the change each would need (they differ in size and sign), and no rate; "; 22
 /// other parameters explain it alike" where parameters outside the candidates do (the
@@ -42,12 +42,16 @@ pub fn drift(d: &Drift, temp_name: &str) -> String {
     };
     let minutes = d.over_s / 60.0;
     let mut s = if d.is_identified() {
+        let base = match rpkm_core::params::unit(d.param) {
+            Unit::Mm => "mm",
+            Unit::Rad => "rad",
+        };
         format!(
-            "{} {:+.0} {unit} in {minutes:.0} min ({:+.1} ± {:.1} {unit}/{per})",
+            "{} {:+.0} {unit} in {minutes:.0} min ({}{})",
             NAMES[d.param],
             d.change * k,
-            d.rate * k,
-            d.rate_sigma * k
+            if d.rate >= 0.0 { "+" } else { "" },
+            with_sigma(d.rate, d.rate_sigma, &format!("{base}/{per}"))
         )
     } else {
         // the best first, the others by name
@@ -93,15 +97,75 @@ fn alike_names(d: &Drift) -> String {
     if named == rods {
         return "l1..l5".to_owned();
     }
-    let mut names: Vec<&str> = d.named().map(|(i, _)| NAMES[i]).collect();
+    let mut names: Vec<String> = d.named().map(|(i, _)| NAMES[i].to_owned()).collect();
     names[1..].sort_unstable();
-    match names.split_last() {
-        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
-        _ => names.concat(),
+    or_list(&names)
+}
+
+/// A value with its standard deviation, the one way every text and report prints them: σ to
+/// two significant digits and the value to the same place, in a unit that shows both (mm as
+/// µm, rad and mrad as µrad, a ratio as ppm): "9.990 ± 0.040 µm", "-0.6 ± 1.3 µm",
+/// "41.8 ± 2.4 ppm", "1230 ± 250 µm". A σ that is not a positive number is said so.
+pub fn with_sigma(value: f64, sigma: f64, unit: &str) -> String {
+    let (k, unit) = display_unit(unit);
+    let (v, s) = (value * k, sigma * k);
+    if !(s > 0.0 && s.is_finite()) {
+        let why = if s == 0.0 { "exact" } else { "σ undetermined" };
+        return format!("{v:.3} {unit} ({why})");
+    }
+    // the place of σ's second significant digit
+    let e = s.log10().floor();
+    let decimals = rpkm_core::convert::floor_count(1.0 - e);
+    let place = 10f64.powf(e - 1.0);
+    let round = |x: f64| (x / place).round() * place;
+    // no "-0.000": a value that rounds to zero has no sign
+    let v = if round(v) == 0.0 { 0.0 } else { round(v) };
+    format!("{v:.decimals$} ± {:.decimals$} {unit}", round(s))
+}
+
+/// The factor from a quantity's unit to the one it is shown in, and that unit.
+fn display_unit(unit: &str) -> (f64, &str) {
+    match unit {
+        "mm" => (1e3, "µm"),
+        "rad" => (1e6, "µrad"),
+        "mrad" => (1e3, "µrad"),
+        "" | "1" => (1e6, "ppm"),
+        "mm/K" => (1e3, "µm/K"),
+        "mm/h" => (1e3, "µm/h"),
+        "rad/K" => (1e6, "µrad/K"),
+        "rad/h" => (1e6, "µrad/h"),
+        "1/K" => (1e6, "ppm/K"),
+        "um" => (1.0, "µm"),
+        "urad" => (1.0, "µrad"),
+        other => (1.0, other),
     }
 }
 
-/// "tracker 2.1x noisier than stated, ..." for every group off its rating.
+/// The identification's condition number for people: the number where it is finite; where it
+/// is not (the JSON's null), what that means: the measurements alone leave some parameter
+/// combinations undetermined, and the prior (the manufacturing tolerances) holds them.
+pub fn condition(number: f64, determined: Option<(usize, usize)>) -> String {
+    if number.is_finite() {
+        return format!("{number:.1}");
+    }
+    let held = match determined {
+        Some((n, of)) => format!(
+            "; {} of {of} parameter combinations are not determined better than their \
+             tolerance, and the prior (the manufacturing tolerances) holds them",
+            of.saturating_sub(n)
+        ),
+        None => String::new(),
+    };
+    format!(
+        "infinite: the measurements alone leave some directions of the parameters \
+         undetermined{held}"
+    )
+}
+
+/// "encoder 2.5x noisier than stated (0.50 µm estimated against 0.20 µm, rpkm's assumption:
+/// the spec gives no encoder noise; --noise encoder=MM states another)", for every group off
+/// its rating: the rating it was compared with, where that rating comes from, and the option
+/// that states another.
 pub fn noise(groups: &[GroupNoise]) -> String {
     let off: Vec<String> = groups
         .iter()
@@ -109,14 +173,72 @@ pub fn noise(groups: &[GroupNoise]) -> String {
         .filter(|g| !RATED_BAND.contains(&(g.estimated / g.assumed)))
         .map(|g| {
             let ratio = g.estimated / g.assumed;
-            if ratio > 1.0 {
-                format!("{} {ratio:.1}x noisier than stated", g.group)
+            let how = if ratio > 1.0 {
+                format!("{ratio:.1}x noisier")
             } else {
-                format!("{} {:.1}x quieter than stated", g.group, 1.0 / ratio)
-            }
+                format!("{:.1}x quieter", 1.0 / ratio)
+            };
+            let (_, unit) = display_unit(g.unit);
+            let (source, option, per) = rating_of(g.group);
+            let source = if g.default_rating {
+                source
+            } else {
+                "as stated with --noise"
+            };
+            format!(
+                "{} {how} than stated ({:.2} {unit} estimated against {:.2} {unit}, {source}; \
+                 --noise {option}={per} states another)",
+                g.group, g.estimated, g.assumed
+            )
         })
         .collect();
     off.join(", ")
+}
+
+/// Who stated a group's level, in a table's few words: "the spec", "rpkm (spec: none)" or
+/// "--noise".
+pub fn rated_by(g: &GroupNoise) -> &'static str {
+    if !g.default_rating {
+        return "--noise";
+    }
+    if rating_of(g.group).0.starts_with("the spec's") {
+        "the spec"
+    } else {
+        "rpkm (spec: none)"
+    }
+}
+
+/// Where a noise group's default rating comes from (`NoiseModel::default`, which follows the
+/// spec's figures where it gives one), the `--noise` name that states another, and its unit.
+fn rating_of(group: &str) -> (&'static str, &'static str, &'static str) {
+    match group {
+        "lt" => ("the spec's 5 µm along the beam", "lt_along", "MM"),
+        "lt_across" => (
+            "the spec's 18 µm + 3 µm/m across the beam at the campaign's mean distance",
+            "lt_across",
+            "MM",
+        ),
+        "kgm" => ("the spec's 1 µm for the grid encoder", "kgm", "MM"),
+        "dbb" => ("the spec's 1 µm for the ball-bar", "dbb", "MM"),
+        "li" => ("the spec's 1 µm for the interferometer", "li", "MM"),
+        "psi" => ("the spec's 1 µrad for the angle optics", "psi", "RAD"),
+        "encoder" => (
+            "rpkm's assumption: the spec gives no encoder noise",
+            "encoder",
+            "MM",
+        ),
+        "drive_position" => (
+            "rpkm's assumption: the spec gives no encoder noise",
+            "drive_position",
+            "MM",
+        ),
+        "force" => (
+            "rpkm's assumption: the spec gives no drive force noise",
+            "force",
+            "N",
+        ),
+        _ => ("the default rating", "NAME", "VALUE"),
+    }
 }
 
 /// What an engineer can check of a candidate: the F-test, its parameters, the covariate
@@ -127,7 +249,7 @@ pub fn evidence(c: &Candidate) -> String {
         .iter()
         .filter(|e| e.identified)
         .take(3)
-        .map(|e| format!("{} = {:.3} ± {:.3} {}", e.name, e.value, e.sigma, e.unit))
+        .map(|e| format!("{} = {}", e.name, with_sigma(e.value, e.sigma, &e.unit)))
         .collect();
     let mut s = format!(
         "chi2/dof {:.2} -> {:.2}, F = {:.1} (p = {:.1e}); {}",
@@ -166,24 +288,89 @@ pub fn evidence(c: &Candidate) -> String {
     s
 }
 
-/// "the kgm along residual follows a 60.0 mm period of carrier 4 (amplitude 2.4 um)".
+/// "the kgm along residual follows a 60.0 mm period of carrier 4 (amplitude 2.40 µm, 85 % of
+/// its variance, p = 9.5e-56)"; carriers that move together on these rows named together
+/// ("of carrier 1 or 4 (they move together on the self-calibration lines: ...)"), and the
+/// stronger periods passed over as aliases of a dictionary term said so.
 pub fn periodic(p: &Periodic) -> String {
     let (scale, unit) = if p.direction.starts_with("psi") {
-        (1e6, "urad")
+        (1e6, "µrad")
     } else {
-        (1e3, "um")
+        (1e3, "µm")
     };
-    format!(
-        "the {} {} residual follows a {:.1} mm period of carrier {} (amplitude {:.2} {unit}, \
-         {:.0} % of its variance, p = {:.1e})",
+    let carriers: Vec<String> = std::iter::once(p.carrier)
+        .chain(p.tied.iter().map(|t| t.carrier))
+        .map(|c| c.to_string())
+        .collect();
+    let tie = if p.tied.is_empty() {
+        String::new()
+    } else {
+        let pitches: Vec<String> = p
+            .tied
+            .iter()
+            .filter(|t| (t.pitch_mm / p.pitch_mm - 1.0).abs() > 0.01)
+            .map(|t| format!("{:.1} mm in carrier {}'s position", t.pitch_mm, t.carrier))
+            .collect();
+        format!(
+            "they move together on {}, so the residual cannot tell whose period it is{}; ",
+            setups_of(&p.instrument),
+            if pitches.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", pitches.join(", "))
+            }
+        )
+    };
+    let mut s = format!(
+        "the {} {} residual follows a {:.1} mm period of carrier {} ({tie}amplitude {:.2} \
+         {unit}, {:.0} % of its variance, p = {:.1e})",
         p.instrument,
         p.direction,
         p.pitch_mm,
-        p.carrier,
+        or_list(&carriers),
         p.amplitude * scale,
         100.0 * p.explained,
         p.p_value
-    )
+    );
+    let aliases: Vec<String> = p
+        .aliases
+        .iter()
+        .map(|a| {
+            format!(
+                "a {:.1} mm period of carrier {} in the {} {} residual follows {}",
+                a.pitch_mm, a.carrier, a.instrument, a.direction, a.term
+            )
+        })
+        .collect();
+    if !aliases.is_empty() {
+        let _ = write!(
+            s,
+            "; passed over as aliases, not periods of their own: {}",
+            aliases.join(", ")
+        );
+    }
+    s
+}
+
+/// "4", "4 or 1", "4, 1 or 2".
+fn or_list(items: &[String]) -> String {
+    match items.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+        _ => items.concat(),
+    }
+}
+
+/// Where an instrument's rows were taken, for "they move together on ...".
+fn setups_of(instrument: &str) -> &'static str {
+    match instrument {
+        "self" => "the self-calibration lines",
+        "kgm" => "the grid encoder's squares",
+        "lt" => "the laser tracker's poses",
+        "dbb" => "the ball-bar's circles",
+        "li_x" | "li_y" => "the interferometer's lines",
+        "li_psi" => "the angle optics' lines",
+        _ => "these poses",
+    }
 }
 
 /// "neighbours along the kgm along paths are alike (autocorrelation 0.62, z = 7.1)".
@@ -290,6 +477,21 @@ fn noisier_words(d: &Diagnosis) -> String {
     )
 }
 
+/// Why a diagnosis's model is not the one `rpkm calibrate`, `rpkm plan` and the nodes default
+/// to (model 29), when it is not: model 24 holds rod 5 to rod 4 so that the imperfect
+/// parallel-holder, rod 5's own five parameters, is a candidate tested like any other effect.
+pub fn model_choice(d: &Diagnosis) -> Option<String> {
+    let freed = d.effects_in_model.iter().any(|e| e == "parallelogram");
+    (d.model == "model 24" && !freed).then(|| {
+        "model 24, where rpkm calibrate, rpkm plan and the nodes default to model 29: the \
+         diagnosis holds rod 5 parallel to rod 4 so that the imperfect parallel-holder (rod 5's \
+         five parameters, model 29) is tested as a candidate, `parallelogram`, like any other \
+         effect; where it is named, calibrate with --model 29 (--model 29 starts the \
+         diagnosis there)"
+            .to_owned()
+    })
+}
+
 /// How the verdict was tested, in one sentence.
 pub fn test(t: &Test) -> String {
     format!(
@@ -307,6 +509,9 @@ pub fn test(t: &Test) -> String {
 pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
     let mut v = serde_json::to_value(d)?;
     v["verdict"] = verdict(d).into();
+    if let Some(why) = model_choice(d) {
+        v["model_choice"] = why.into();
+    }
     v["test_settings"] = serde_json::to_value(d.test)?;
     v["test"] = test(&d.test).into();
     if let Some(cands) = v["candidates"].as_array_mut() {
@@ -320,6 +525,29 @@ pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What the user read as "b4 = 0.010 ± 0.000 mm" and "c1 = -0.0000 ± 0.0001 mm": σ to
+    /// two significant digits, the value to the same place, in µm (µrad, ppm); σ rounded like
+    /// the value (250, not 253); no negative zero.
+    #[test]
+    fn a_value_shows_its_sigma() {
+        assert_eq!(with_sigma(0.00999, 0.00004, "mm"), "9.990 ± 0.040 µm");
+        assert_eq!(with_sigma(-0.000_02, 0.000_13, "mm"), "-0.02 ± 0.13 µm");
+        assert_eq!(with_sigma(-0.000_002, 0.000_13, "mm"), "0.00 ± 0.13 µm");
+        assert_eq!(with_sigma(0.002_41, 0.000_05, "mm"), "2.410 ± 0.050 µm");
+        assert_eq!(with_sigma(1.234, 0.253, "mm"), "1230 ± 250 µm");
+        assert_eq!(with_sigma(0.081, 0.0024, "mrad"), "81.0 ± 2.4 µrad");
+        assert_eq!(with_sigma(41.83, 2.37, "ppm"), "41.8 ± 2.4 ppm");
+        assert_eq!(with_sigma(4.2e-5, 1.1e-6, "1"), "42.0 ± 1.1 ppm");
+        assert_eq!(
+            with_sigma(1.02, 0.013, "x default"),
+            "1.020 ± 0.013 x default"
+        );
+        assert_eq!(
+            with_sigma(0.5, f64::INFINITY, "mm"),
+            "500.000 µm (σ undetermined)"
+        );
+    }
 
     /// The drift WARN's words: one rod with its change and rate only where the path names it
     /// alone; else every rod that explains it alike with the change each would need and no
@@ -369,7 +597,7 @@ mod tests {
         d.temperature_correlation = Some(0.95);
         assert_eq!(
             drift(&d, "temp_machine"),
-            "l3 +19 µm in 2 min (+11.8 ± 0.9 µm/K), follows temp_machine (r = 0.95)"
+            "l3 +19 µm in 2 min (+11.80 ± 0.90 µm/K), follows temp_machine (r = 0.95)"
         );
     }
 }
