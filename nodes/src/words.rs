@@ -148,6 +148,9 @@ pub fn condition(number: f64, determined: Option<(usize, usize)>) -> String {
     if number.is_finite() {
         return format!("{number:.1}");
     }
+    if number.is_nan() {
+        return "none computed".to_owned();
+    }
     let held = match determined {
         Some((n, of)) => format!(
             "; {} of {of} parameter combinations are not determined better than their \

@@ -409,6 +409,12 @@ fn node_lines(w: &Watch, now: f64) -> Vec<Line<'static>> {
             Span::styled("not heard yet (launched)", bold(Color::Yellow)),
         ]));
     }
+    // the launch's executables (the recorder): no nodes, their state as the launch says it
+    for (name, state) in w.launch.iter().flat_map(|l| &l.executables) {
+        lines.push(Line::from(format!(
+            "{name:<16} {state} (executable of the launch)"
+        )));
+    }
     lines
 }
 
@@ -465,14 +471,20 @@ fn calibrator_lines(w: &Watch) -> Vec<Line<'static>> {
                 } else {
                     p.active_effects.join(", ")
                 };
+                let condition = if p.condition_number.is_finite() {
+                    format!("{:.1}", p.condition_number)
+                } else if p.condition_number.is_nan() {
+                    "-".to_owned()
+                } else {
+                    "infinite (the prior holds what the measurements leave)".to_owned()
+                };
                 format!(
                 "Parameters (at {t:.1} s): model {}, {} measurements, {identified} identified, \
-                 cal RMS {}, val RMS {}, condition {:.1}, effects {effects}",
+                 cal RMS {}, val RMS {}, condition {condition}, effects {effects}",
                 p.model,
                 p.measurement_count,
                 um(p.cal_rms),
                 um(p.val_rms),
-                p.condition_number
             )
             });
     let diagnosis =

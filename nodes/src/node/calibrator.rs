@@ -1298,6 +1298,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         }
         if report.due() {
             node.publish_status(&ctx, &out)?;
+            // a subscriber that joined late (rpkm monitor) gets the last Parameters now
+            out.parameters.deliver_history()?;
         }
         if worked {
             idle.worked();

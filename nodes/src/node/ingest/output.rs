@@ -238,6 +238,8 @@ impl<'a> Output<'a> {
         }
         if self.report.due() {
             self.report_now()?;
+            // a subscriber that joined late gets the campaign's info now
+            self.info.deliver_history()?;
         }
         Ok(())
     }
