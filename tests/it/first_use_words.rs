@@ -112,13 +112,13 @@ fn calibrate_shows_sigma_and_says_what_an_infinite_condition_means() {
             .lines()
             .find(|l| l.starts_with(&format!("{name} ")))
             .unwrap_or_else(|| panic!("no {name} row: {text}"));
-        let (_, s, digits) = line
-            .split_whitespace()
-            .collect::<Vec<_>>()
-            .windows(3)
-            .find(|w| w[1] == "±")
-            .map(|w| (w[0], w[2].parse::<f64>().expect("sigma"), w[2]))
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let at = words
+            .iter()
+            .position(|w| *w == "±")
             .unwrap_or_else(|| panic!("no ± in {line}"));
+        let digits = words[at + 1];
+        let s: f64 = digits.parse().expect("sigma");
         assert!(s > 0.0 && two_significant(digits), "{line}");
     }
     let j = json(&out);

@@ -471,13 +471,7 @@ fn calibrator_lines(w: &Watch) -> Vec<Line<'static>> {
                 } else {
                     p.active_effects.join(", ")
                 };
-                let condition = if p.condition_number.is_finite() {
-                    format!("{:.1}", p.condition_number)
-                } else if p.condition_number.is_nan() {
-                    "-".to_owned()
-                } else {
-                    "infinite (the prior holds what the measurements leave)".to_owned()
-                };
+                let condition = crate::words::condition_short(p.condition_number);
                 format!(
                 "Parameters (at {t:.1} s): model {}, {} measurements, {identified} identified, \
                  cal RMS {}, val RMS {}, condition {condition}, effects {effects}",

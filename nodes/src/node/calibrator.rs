@@ -1031,12 +1031,12 @@ impl Calibrator {
                     DiagnosticStatus::OK,
                     format!(
                         "calibration {}: {n} measurements ({} calibrated, {} held out), RMS \
-                         {:.2} µm, condition {:.1}",
+                         {:.2} µm, condition {}",
                         self.calibrations,
                         o.parameters.measurement_count,
                         n.saturating_sub(u64::from(o.parameters.measurement_count)),
                         o.parameters.cal_rms * 1e6,
-                        o.parameters.condition_number
+                        crate::words::condition_short(o.parameters.condition_number)
                     ),
                 )
             }

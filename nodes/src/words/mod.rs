@@ -9,11 +9,13 @@ use rpkm_core::diagnose::periodic::Periodic;
 use rpkm_core::diagnose::sparse::Pointer;
 use rpkm_core::diagnose::{Candidate, Diagnosis, Test, VerdictKind};
 use rpkm_core::params::{unit, Unit, NAMES};
-use rpkm_core::variance::GroupNoise;
 use std::fmt::Write as _;
 
-/// A group's estimated noise is called off its rating outside this ratio band.
-const RATED_BAND: std::ops::RangeInclusive<f64> = 0.77..=1.3;
+mod figures;
+mod noise;
+
+pub use figures::{condition, condition_short, with_sigma};
+pub use noise::{noise, rated_by};
 
 /// "the lt x residual follows temp_machine (r = 0.93, and equally q2)".
 pub fn follows(p: &Pointer) -> String {
@@ -100,148 +102,6 @@ fn alike_names(d: &Drift) -> String {
     let mut names: Vec<String> = d.named().map(|(i, _)| NAMES[i].to_owned()).collect();
     names[1..].sort_unstable();
     or_list(&names)
-}
-
-/// A value with its standard deviation, the one way every text and report prints them: σ to
-/// two significant digits and the value to the same place, in a unit that shows both (mm as
-/// µm, rad and mrad as µrad, a ratio as ppm): "9.990 ± 0.040 µm", "-0.6 ± 1.3 µm",
-/// "41.8 ± 2.4 ppm", "1230 ± 250 µm". A σ that is not a positive number is said so.
-pub fn with_sigma(value: f64, sigma: f64, unit: &str) -> String {
-    let (k, unit) = display_unit(unit);
-    let (v, s) = (value * k, sigma * k);
-    if !(s > 0.0 && s.is_finite()) {
-        let why = if s == 0.0 { "exact" } else { "σ undetermined" };
-        return format!("{v:.3} {unit} ({why})");
-    }
-    // the place of σ's second significant digit
-    let e = s.log10().floor();
-    let decimals = rpkm_core::convert::floor_count(1.0 - e);
-    let place = 10f64.powf(e - 1.0);
-    let round = |x: f64| (x / place).round() * place;
-    // no "-0.000": a value that rounds to zero has no sign
-    let v = if round(v) == 0.0 { 0.0 } else { round(v) };
-    format!("{v:.decimals$} ± {:.decimals$} {unit}", round(s))
-}
-
-/// The factor from a quantity's unit to the one it is shown in, and that unit.
-fn display_unit(unit: &str) -> (f64, &str) {
-    match unit {
-        "mm" => (1e3, "µm"),
-        "rad" => (1e6, "µrad"),
-        "mrad" => (1e3, "µrad"),
-        "" | "1" => (1e6, "ppm"),
-        "mm/K" => (1e3, "µm/K"),
-        "mm/h" => (1e3, "µm/h"),
-        "rad/K" => (1e6, "µrad/K"),
-        "rad/h" => (1e6, "µrad/h"),
-        "1/K" => (1e6, "ppm/K"),
-        "um" => (1.0, "µm"),
-        "urad" => (1.0, "µrad"),
-        other => (1.0, other),
-    }
-}
-
-/// The identification's condition number for people: the number where it is finite; where it
-/// is not (the JSON's null), what that means: the measurements alone leave some parameter
-/// combinations undetermined, and the prior (the manufacturing tolerances) holds them.
-pub fn condition(number: f64, determined: Option<(usize, usize)>) -> String {
-    if number.is_finite() {
-        return format!("{number:.1}");
-    }
-    if number.is_nan() {
-        return "none computed".to_owned();
-    }
-    let held = match determined {
-        Some((n, of)) => format!(
-            "; {} of {of} parameter combinations are not determined better than their \
-             tolerance, and the prior (the manufacturing tolerances) holds them",
-            of.saturating_sub(n)
-        ),
-        None => String::new(),
-    };
-    format!(
-        "infinite: the measurements alone leave some directions of the parameters \
-         undetermined{held}"
-    )
-}
-
-/// "encoder 2.5x noisier than stated (0.50 µm estimated against 0.20 µm, rpkm's assumption:
-/// the spec gives no encoder noise; --noise encoder=MM states another)", for every group off
-/// its rating: the rating it was compared with, where that rating comes from, and the option
-/// that states another.
-pub fn noise(groups: &[GroupNoise]) -> String {
-    let off: Vec<String> = groups
-        .iter()
-        .filter(|g| g.estimated_from_data && g.assumed > 0.0)
-        .filter(|g| !RATED_BAND.contains(&(g.estimated / g.assumed)))
-        .map(|g| {
-            let ratio = g.estimated / g.assumed;
-            let how = if ratio > 1.0 {
-                format!("{ratio:.1}x noisier")
-            } else {
-                format!("{:.1}x quieter", 1.0 / ratio)
-            };
-            let (_, unit) = display_unit(g.unit);
-            let (source, option, per) = rating_of(g.group);
-            let source = if g.default_rating {
-                source
-            } else {
-                "as stated with --noise"
-            };
-            format!(
-                "{} {how} than stated ({:.2} {unit} estimated against {:.2} {unit}, {source}; \
-                 --noise {option}={per} states another)",
-                g.group, g.estimated, g.assumed
-            )
-        })
-        .collect();
-    off.join(", ")
-}
-
-/// Who stated a group's level, in a table's few words: "the spec", "rpkm (spec: none)" or
-/// "--noise".
-pub fn rated_by(g: &GroupNoise) -> &'static str {
-    if !g.default_rating {
-        return "--noise";
-    }
-    if rating_of(g.group).0.starts_with("the spec's") {
-        "the spec"
-    } else {
-        "rpkm (spec: none)"
-    }
-}
-
-/// Where a noise group's default rating comes from (`NoiseModel::default`, which follows the
-/// spec's figures where it gives one), the `--noise` name that states another, and its unit.
-fn rating_of(group: &str) -> (&'static str, &'static str, &'static str) {
-    match group {
-        "lt" => ("the spec's 5 µm along the beam", "lt_along", "MM"),
-        "lt_across" => (
-            "the spec's 18 µm + 3 µm/m across the beam at the campaign's mean distance",
-            "lt_across",
-            "MM",
-        ),
-        "kgm" => ("the spec's 1 µm for the grid encoder", "kgm", "MM"),
-        "dbb" => ("the spec's 1 µm for the ball-bar", "dbb", "MM"),
-        "li" => ("the spec's 1 µm for the interferometer", "li", "MM"),
-        "psi" => ("the spec's 1 µrad for the angle optics", "psi", "RAD"),
-        "encoder" => (
-            "rpkm's assumption: the spec gives no encoder noise",
-            "encoder",
-            "MM",
-        ),
-        "drive_position" => (
-            "rpkm's assumption: the spec gives no encoder noise",
-            "drive_position",
-            "MM",
-        ),
-        "force" => (
-            "rpkm's assumption: the spec gives no drive force noise",
-            "force",
-            "N",
-        ),
-        _ => ("the default rating", "NAME", "VALUE"),
-    }
 }
 
 /// What an engineer can check of a candidate: the F-test, its parameters, the covariate
@@ -528,29 +388,6 @@ pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// What the user read as "b4 = 0.010 ± 0.000 mm" and "c1 = -0.0000 ± 0.0001 mm": σ to
-    /// two significant digits, the value to the same place, in µm (µrad, ppm); σ rounded like
-    /// the value (250, not 253); no negative zero.
-    #[test]
-    fn a_value_shows_its_sigma() {
-        assert_eq!(with_sigma(0.00999, 0.00004, "mm"), "9.990 ± 0.040 µm");
-        assert_eq!(with_sigma(-0.000_02, 0.000_13, "mm"), "-0.02 ± 0.13 µm");
-        assert_eq!(with_sigma(-0.000_002, 0.000_13, "mm"), "0.00 ± 0.13 µm");
-        assert_eq!(with_sigma(0.002_41, 0.000_05, "mm"), "2.410 ± 0.050 µm");
-        assert_eq!(with_sigma(1.234, 0.253, "mm"), "1230 ± 250 µm");
-        assert_eq!(with_sigma(0.081, 0.0024, "mrad"), "81.0 ± 2.4 µrad");
-        assert_eq!(with_sigma(41.83, 2.37, "ppm"), "41.8 ± 2.4 ppm");
-        assert_eq!(with_sigma(4.2e-5, 1.1e-6, "1"), "42.0 ± 1.1 ppm");
-        assert_eq!(
-            with_sigma(1.02, 0.013, "x default"),
-            "1.020 ± 0.013 x default"
-        );
-        assert_eq!(
-            with_sigma(0.5, f64::INFINITY, "mm"),
-            "500.000 µm (σ undetermined)"
-        );
-    }
 
     /// The drift WARN's words: one rod with its change and rate only where the path names it
     /// alone; else every rod that explains it alike with the change each would need and no
