@@ -270,3 +270,58 @@ fn replace_after_errors(
     assert!(sent, "nominal parameters gave no ERROR: {levels:?}");
     levels
 }
+
+/// Item 8: the shipped launch file takes the user's calibration and written effects
+/// (`geometry_file:=`, `effects_file:=`) to the three nodes that evaluate the model, which
+/// read them (`--check` loads every node's parameters as the node does: a missing file is
+/// exit 2 naming it); left empty, nothing is passed and params.yaml's keys stand.
+#[test]
+fn the_launch_file_takes_the_users_geometry_and_effects() {
+    let dir = TempDir::new("fu-launch");
+    let geometry = dir.path("calibrated.json");
+    node_support::write_truth_json(&rpkm_core::params::Params::nominal(), &geometry);
+    let effects = dir.path("mine.yaml");
+    std::fs::write(
+        &effects,
+        "effects:\n  - name: lost_motion_q4\n    summary: carrier 4 lags\n    \
+         params: {b: {unit: mm, prior: 0.02}}\n    dq4: \"-b * dir_q4\"\n",
+    )
+    .expect("effects file");
+    let file = bag_support::repo_root().join("launch_scripts/rpkm.launch.yaml");
+    let check = |args: &[String]| {
+        let out = Command::new(node_support::rpkm())
+            .arg("launch")
+            .arg(&file)
+            .args(args)
+            .arg("--check")
+            .output()
+            .expect("rpkm launch --check");
+        let text = String::from_utf8_lossy(&out.stdout).into_owned()
+            + &String::from_utf8_lossy(&out.stderr);
+        (out.status.code(), text)
+    };
+    let given = [
+        format!("geometry_file:={}", geometry.display()),
+        format!("effects_file:={}", effects.display()),
+    ];
+    let (code, text) = check(&given);
+    assert_eq!(code, Some(0), "{text}");
+    for exec in ["tcp_estimator", "calibrator", "preload_monitor"] {
+        let line = text
+            .lines()
+            .find(|l| l.contains(&format!(": {exec}: rpkm node {exec}")))
+            .unwrap_or_else(|| panic!("no {exec}: {text}"));
+        assert!(
+            line.contains(&format!("--param=geometry_file={}", geometry.display()))
+                && line.contains(&format!("--param=effects_file={}", effects.display())),
+            "{line}"
+        );
+    }
+    let missing = dir.path("nope.json");
+    let (code, text) = check(&[format!("geometry_file:={}", missing.display())]);
+    assert_eq!(code, Some(2), "{text}");
+    assert!(text.contains(&missing.display().to_string()), "{text}");
+    let (code, text) = check(&[]);
+    assert_eq!(code, Some(0), "{text}");
+    assert!(!text.contains("--param=geometry_file"), "{text}");
+}
