@@ -95,6 +95,26 @@ pub fn chi2_upper_tail(x: f64, nu: f64) -> f64 {
     gamma_q(nu / 2.0, x / 2.0)
 }
 
+/// P(Z ≥ z) of a standard normal Z (through erfc(x) = Q(½, x²)).
+pub fn normal_upper_tail(z: f64) -> f64 {
+    if z.is_nan() {
+        return f64::NAN;
+    }
+    let half = 0.5 * gamma_q(0.5, 0.5 * z * z);
+    if z >= 0.0 {
+        half
+    } else {
+        1.0 - half
+    }
+}
+
+/// Fisher's combination of independent p-values: P(χ²_{2k} ≥ −2 Σ ln p_i), the p-value
+/// of the evidence of k independent tests together.
+pub fn fisher_combined(p: &[f64]) -> f64 {
+    let stat: f64 = p.iter().map(|v| -2.0 * v.max(f64::MIN_POSITIVE).ln()).sum();
+    chi2_upper_tail(stat, 2.0 * p.len() as f64)
+}
+
 /// Continued fraction of the incomplete beta function.
 fn beta_cf(a: f64, b: f64, x: f64) -> f64 {
     let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
@@ -155,6 +175,22 @@ pub fn f_upper_tail(f: f64, d1: f64, d2: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn normal_tail_matches_the_tables() {
+        // Abramowitz & Stegun 26.2: Q(1.96) = 0.0249979, Q(3) = 0.0013499, Q(0) = 0.5
+        assert!((normal_upper_tail(1.96) - 0.024_997_9).abs() < 1e-6);
+        assert!((normal_upper_tail(3.0) - 0.001_349_9).abs() < 1e-6);
+        assert!((normal_upper_tail(0.0) - 0.5).abs() < 1e-12);
+        assert!((normal_upper_tail(-1.96) - 0.975_002_1).abs() < 1e-6);
+    }
+
+    #[test]
+    fn fisher_combination_of_two_tests() {
+        // two p-values of 0.01: −2 Σ ln p = 18.42, P(χ²_4 ≥ 18.42) = e^(−9.21)(1 + 9.21)
+        let want = (-9.210_340_4_f64).exp() * (1.0 + 9.210_340_4);
+        assert!((fisher_combined(&[0.01, 0.01]) - want).abs() < 1e-8);
+    }
 
     #[test]
     fn ln_gamma_of_integers_is_log_factorial() {

@@ -17,6 +17,20 @@ pub struct Diagnosis {
     pub baseline_val_rms: f64,
     /// `float64 noise_floor`: noise floor of the measurements (m).
     pub noise_floor: f64,
+    /// `string verdict_kind`: nothing_missing, missing_effect or unexplained_structure.
+    pub verdict_kind: String,
+    /// `string verdict`: the verdict in words.
+    pub verdict: String,
+    /// `string[] missing_effects`: the model named, whole (empty: none).
+    pub missing_effects: Vec<String>,
+    /// `string[] model_effects`: the effects of the model diagnosed, as fitted.
+    pub model_effects: Vec<String>,
+    /// `float64 baseline_val_rms_relative`: held-out RMS, each setup's zero removed (m).
+    pub baseline_val_rms_relative: f64,
+    /// `float64 floor_relative`: the model's floor there (m).
+    pub floor_relative: f64,
+    /// `bool held_out_agrees`: the held-out data agree with the model.
+    pub held_out_agrees: bool,
 }
 
 impl Diagnosis {

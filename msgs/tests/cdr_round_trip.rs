@@ -105,6 +105,13 @@ fn every_type_round_trips() {
         baseline_cal_rms: 1e-5,
         baseline_val_rms: 2e-5,
         noise_floor: 1e-6,
+        verdict_kind: "missing_effect".into(),
+        verdict: "missing effect: thermal".into(),
+        missing_effects: vec!["thermal:rods".into(), "preload_elastic".into()],
+        model_effects: vec!["lost_motion_q4".into()],
+        baseline_val_rms_relative: 1.5e-5,
+        floor_relative: 5e-6,
+        held_out_agrees: false,
     });
     round_trip(&PreloadStatus {
         stamp: stamp(),

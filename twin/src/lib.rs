@@ -169,6 +169,7 @@ impl Twin {
             rng: StdRng::seed_from_u64(config.seed ^ 0x9e37_79b9_7f4a_7c15),
             force_rng: StdRng::seed_from_u64(config.seed ^ 0xf0e5_c0de_0000_0004),
             reset_rng: StdRng::seed_from_u64(config.seed ^ 0x7e5e_7000_0000_0005),
+            guide_rng: StdRng::seed_from_u64(config.seed ^ 0x6d1d_e000_0000_0007),
             t: 0.0,
             alignment: BTreeMap::new(),
             truth_params: p,
@@ -214,6 +215,13 @@ impl Twin {
             }
             None => self.config.thermal.reference_c,
         }
+    }
+
+    /// The true temperature of guide `g` (0: guide 1, 1: guide 2) at time t, °C: the mean's
+    /// departure from the reference scaled by the guide's rate.
+    pub fn guide_temperature(&self, g: usize, t: f64) -> f64 {
+        let th = &self.config.thermal;
+        th.reference_c + th.guide_rates[g] * (self.temperature(t) - th.reference_c)
     }
 
     /// Stiffness of the true machine.
@@ -265,18 +273,18 @@ impl Twin {
         }
     }
 
-    /// Effective parameters at temperature `temp` with guide-2 carriers at s1, s4 (bow), and
-    /// the factor from encoder reading to carrier position on each guide.
-    fn effective(&self, temp: f64, s1: f64, s4: f64) -> Params {
+    /// Effective parameters at time `t` with guide-2 carriers at s1, s4 (bow): the rods at
+    /// the machine's temperature, each half of the frame at its guide's.
+    fn effective(&self, t: f64, s1: f64, s4: f64) -> Params {
         let mut p = self.truth_params;
         let th = self.config.thermal;
-        let dt = temp - th.reference_c;
+        let dt = self.temperature(t) - th.reference_c;
         if dt != 0.0 {
             for rod in &RODS {
                 p[rod.l] *= 1.0 + th.rods_per_k * dt;
             }
-            p[params::D1] *= 1.0 + th.frame_per_k * dt;
-            p[params::D2] *= 1.0 + th.frame_per_k * dt;
+            p[params::D1] *= 1.0 + th.frame_per_k * (self.guide_temperature(0, t) - th.reference_c);
+            p[params::D2] *= 1.0 + th.frame_per_k * (self.guide_temperature(1, t) - th.reference_c);
         }
         if let Some(m) = self.magnitude(EffectKind::GuideStraightness) {
             p[params::XB1R] += bow(m, s1);
@@ -286,11 +294,13 @@ impl Twin {
         p
     }
 
-    /// Factors carrier position / encoder reading of the four drives at temperature `temp`.
-    fn scale(&self, temp: f64) -> [f64; 4] {
-        let th = 1.0 + self.config.thermal.scales_per_k * (temp - self.config.thermal.reference_c);
+    /// Factors carrier position / encoder reading of the four drives at time `t`: each scale
+    /// at its guide's temperature (carriers 2, 3 on guide 1; 1, 4 on guide 2).
+    fn scale(&self, t: f64) -> [f64; 4] {
+        let th = self.config.thermal;
+        let at = |g: usize| 1.0 + th.scales_per_k * (self.guide_temperature(g, t) - th.reference_c);
         let g2 = 1.0 + self.magnitude(EffectKind::EncoderScale).unwrap_or(0.0) * 1e-6;
-        [th * g2, th, th, th * g2]
+        [at(1) * g2, at(0), at(0), at(1) * g2]
     }
 
     /// Drive the true machine to the controller's command for target (x, y) at time t, with
@@ -313,15 +323,14 @@ impl Twin {
                 source,
             })?
             .q();
-        let temp = self.temperature(t);
-        let sc = self.scale(temp);
+        let sc = self.scale(t);
         let elastic_on = self.magnitude(EffectKind::PreloadElastic).is_some() && !followers_23;
         // True carrier positions of the active drives.
         let mut s = [0, 1, 2, 3].map(|i| (cmd[i] + enc[i]) * sc[i]);
         if let Some(c) = self.config.cyclic.filter(|c| c.carrier < 4) {
             s[c.carrier] += c.offset(cmd[c.carrier] + enc[c.carrier]);
         }
-        let p = self.effective(temp, s[0], s[3]);
+        let p = self.effective(t, s[0], s[3]);
         if elastic_on {
             let eq = elastic::fegm(&p, &self.stiffness(), s, ALL_ACTIVE).map_err(|source| {
                 TwinError::Elastic {
@@ -500,6 +509,14 @@ impl Twin {
         }
         let temp = self.temperature(t) + k * TEMP_SENSOR_K * gauss(&mut self.rng);
         covariates.insert(0, Some(temp));
+        if self.config.thermal.guide_thermometers {
+            // their own draws after every other: the readings stay the same with or without
+            for (slot, g) in [(1, 0), (2, 1)] {
+                let reading =
+                    self.guide_temperature(g, t) + k * TEMP_SENSOR_K * gauss(&mut self.guide_rng);
+                covariates.insert(slot, Some(reading));
+            }
+        }
         Pose {
             t,
             setup: plan.setup.clone(),
@@ -595,6 +612,9 @@ impl Twin {
             .map(|(e, m)| format!("{e}={m}"))
             .collect();
         let mut covariate_names = vec!["temp_machine".to_owned()];
+        if self.config.thermal.guide_thermometers {
+            covariate_names.extend(["temp_guide1", "temp_guide2"].map(str::to_owned));
+        }
         if backlash {
             covariate_names.extend(["approach_q1", "approach_q4"].map(str::to_owned));
         }

@@ -105,6 +105,14 @@ pub struct ThermalPhysics {
     /// Linear scales (carrier position per encoder reading).
     pub scales_per_k: f64,
     pub reference_c: f64,
+    /// How fast each guide warms against the machine's mean (guide 1, guide 2): 1 and 1 a
+    /// machine at one temperature; a guide by a motor warms faster. A guide, its scales and
+    /// its half of the frame (d1 for guide 1, d2 for guide 2) expand with its own
+    /// temperature; the rods with the mean.
+    pub guide_rates: [f64; 2],
+    /// Whether each guide carries a thermometer (`temp_guide1`, `temp_guide2` recorded beside
+    /// `temp_machine`).
+    pub guide_thermometers: bool,
 }
 
 impl Default for ThermalPhysics {
@@ -115,6 +123,8 @@ impl Default for ThermalPhysics {
             frame_per_k: ALPHA_PER_K,
             scales_per_k: ALPHA_PER_K,
             reference_c: REFERENCE_TEMP_C,
+            guide_rates: [1.0, 1.0],
+            guide_thermometers: false,
         }
     }
 }
@@ -169,6 +179,9 @@ pub struct Twin {
     /// The readings the relative setups are zeroed on: their own stream, so that every other
     /// draw is the same whether resets are noisy or exact.
     pub(super) reset_rng: StdRng,
+    /// The guides' thermometers: their own stream, so that every other draw is the same
+    /// whether they are recorded or not.
+    pub(super) guide_rng: StdRng,
     pub(super) t: f64,
     pub(super) alignment: BTreeMap<String, f64>,
 }

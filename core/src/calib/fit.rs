@@ -39,14 +39,11 @@ pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
     } = *req;
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
-    let init = match warm {
-        Some(w) => State {
-            p: *w.params,
-            theta: start_theta(campaign, opts, effects, w.theta)?,
-        },
-        None => State {
-            p: *start,
-            theta: theta0.clone(),
+    let init = State {
+        p: warm.map_or(*start, |w| *w.params),
+        theta: match warm {
+            Some(w) => start_theta(campaign, opts, effects, w.theta)?,
+            None => theta0.clone(),
         },
     };
     // rows shared with other calibrations serve a warm start only (a cold one starts from
@@ -110,6 +107,8 @@ pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
         residuals: rows_final,
         leverage: post.leverage,
         covariance,
+        covariance_theta: s1.cov_theta,
+        covariance_p_theta: s1.cov_p_theta,
     })
 }
 
@@ -294,6 +293,10 @@ pub(super) struct Step1Report {
     identified: Vec<Identified>,
     effects: Vec<EffectEstimate>,
     cov_p1: DMatrix<f64>,
+    /// The 29 parameters' covariance with every effect parameter (29 × θ) and the effect
+    /// parameters' own (θ × θ); zero for a parameter held.
+    cov_p_theta: DMatrix<f64>,
+    cov_theta: DMatrix<f64>,
 }
 
 impl Step1Report {
@@ -329,13 +332,22 @@ impl Step1Report {
                     observability: plan.observability[k],
                     identified: free.is_some(),
                     prior: slot.param.prior,
+                    allowed: slot.param.allowed(),
                 }
             })
             .collect();
+        // the free effect parameters' places in θ
+        let n_theta = pb.effects.n_params();
+        let mut place = DMatrix::zeros(n_theta, plan.free_theta.len());
+        for (f, &k) in plan.free_theta.iter().enumerate() {
+            place[(k, f)] = 1.0;
+        }
         Step1Report {
             identified,
             effects,
             cov_p1: &d1 * &cov1 * d1.transpose(),
+            cov_p_theta: &d1 * (&post.cov_cross * s2) * place.transpose(),
+            cov_theta: &place * (&post.cov_theta * s2) * place.transpose(),
         }
     }
 }

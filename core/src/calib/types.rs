@@ -6,7 +6,7 @@
 use crate::noise::NoiseModel;
 use crate::obs::{PoseError, RowValue};
 use crate::params::{self, unit, Model, Params, Unit, N_PARAMS};
-use nalgebra::SMatrix;
+use nalgebra::{DMatrix, SMatrix};
 
 /// Which parameters the calibration identifies.
 #[derive(Clone, Debug, PartialEq)]
@@ -247,6 +247,8 @@ pub struct EffectEstimate {
     pub identified: bool,
     /// The plausible magnitude the effect declares for it (its unit).
     pub prior: f64,
+    /// The values the physics allows ([`crate::effects::EffectParam::allowed`]).
+    pub allowed: (f64, f64),
 }
 
 /// The result of a calibration.
@@ -291,6 +293,12 @@ pub struct Calibration {
     /// tracker) move what the campaign had pinned. Rows and columns of parameters not
     /// identified are zero (held at their start value).
     pub covariance: SMatrix<f64, N_PARAMS, N_PARAMS>,
+    /// The effect parameters' covariance (θ × θ, in [`EffectSet::layout`] order, their
+    /// units) and theirs with the 29 (29 × θ), from step 1: what a prediction's uncertainty
+    /// needs where an effect and the geometry trade off (thermal expansion against the
+    /// lengths it scales). Zero for parameters held.
+    pub covariance_theta: DMatrix<f64>,
+    pub covariance_p_theta: DMatrix<f64>,
 }
 
 /// Where the LM starts when not at the start parameters: the fit of a neighbouring model.

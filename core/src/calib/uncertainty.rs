@@ -20,6 +20,10 @@ pub(super) struct Posterior {
     pub cov1: DMatrix<f64>,
     /// Standard deviations of the free effect parameters.
     pub sig_theta: Vec<f64>,
+    /// Covariance of the free effect parameters with the identified geometric ones
+    /// (`ids` × free) and among themselves (free × free).
+    pub cov_cross: DMatrix<f64>,
+    pub cov_theta: DMatrix<f64>,
     /// tr((JᵀJ + Λ)⁻¹ JᵀJ): the parameters the data determine.
     pub dof_model: f64,
     /// Diagonal of the hat matrix J (JᵀJ + Λ)⁻¹ Jᵀ, one per row.
@@ -94,6 +98,8 @@ pub(super) fn posterior<'c>(
         sig_theta: (0..free.len())
             .map(|k| inv[(n + k, n + k)].max(0.0).sqrt())
             .collect(),
+        cov_cross: inv.view((0, n), (n, free.len())).into_owned(),
+        cov_theta: inv.view((n, n), (free.len(), free.len())).into_owned(),
         dof_model,
         leverage,
         determined,

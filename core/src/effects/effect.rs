@@ -25,7 +25,44 @@ pub struct EffectParam {
     /// Plausible magnitude (prior range), in `unit`: the scaling of the parameter in the
     /// least squares and the size a report compares the estimate with.
     pub prior: f64,
+    /// The values the physics allows, in `unit` (thermal expansion of real materials, a
+    /// compliance that is not negative): an estimate clearly outside absorbs something else.
+    /// None: within ten times [`EffectParam::prior`] either way ([`EffectParam::allowed`]).
+    pub range: Option<(f64, f64)>,
 }
+
+impl EffectParam {
+    /// A parameter with the default range (ten times its prior either way).
+    pub fn new(name: impl Into<String>, unit: impl Into<String>, prior: f64) -> EffectParam {
+        EffectParam {
+            name: name.into(),
+            unit: unit.into(),
+            prior,
+            range: None,
+        }
+    }
+
+    /// The same with the values the physics allows.
+    #[must_use]
+    pub fn within(self, lo: f64, hi: f64) -> EffectParam {
+        EffectParam {
+            range: Some((lo, hi)),
+            ..self
+        }
+    }
+
+    /// The values the physics allows: the stated range, or ten times the prior either way.
+    pub fn allowed(&self) -> (f64, f64) {
+        self.range.unwrap_or((
+            -IMPLAUSIBLE_PRIORS * self.prior,
+            IMPLAUSIBLE_PRIORS * self.prior,
+        ))
+    }
+}
+
+/// An effect parameter estimated beyond this many times its plausible magnitude ([`EffectParam::prior`])
+/// is implausible where the effect states no range of its own.
+pub const IMPLAUSIBLE_PRIORS: f64 = 10.0;
 
 /// A physical effect of the library (see the module documentation).
 pub trait Effect: Send + Sync {
@@ -36,6 +73,25 @@ pub trait Effect: Send + Sync {
     /// Campaign covariate columns the effect needs (`temp_machine`).
     fn covariates(&self) -> &'static [&'static str] {
         &[]
+    }
+    /// The parts of a family whose pieces each stand on their own physically (thermal: rods,
+    /// frame, scales), one parameter each in this order; empty for an effect of one piece.
+    fn parts(&self) -> &'static [&'static str] {
+        &[]
+    }
+    /// The family with only `parts` (indices into [`Effect::parts`], ascending), named
+    /// `family:part+part` (`thermal:rods`): a model that keeps the parts a campaign can tell
+    /// apart. None for an effect of one piece.
+    fn with_parts(&self, parts: &[usize]) -> Option<Box<dyn Effect>> {
+        let _ = parts;
+        None
+    }
+    /// Whether the family is named whole (`thermal`) and its parts are left to the data: the
+    /// diagnosis and the calibration keep the parts that predict (see
+    /// `diagnose::model::settle`). False where the parts are pinned (`thermal:rods`) and for
+    /// an effect of one piece.
+    fn open_family(&self) -> bool {
+        false
     }
     /// Bind the effect to a campaign, with parameters `p` for the geometry it needs to read
     /// its covariates (rod directions for forces): per-pose data are computed once here.

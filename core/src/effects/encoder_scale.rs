@@ -24,10 +24,10 @@ impl Effect for EncoderScale {
         Ok(Box::new(BoundScale {
             params: ["guide1", "guide2"]
                 .iter()
-                .map(|g| EffectParam {
-                    name: format!("scale_{g}"),
-                    unit: "ppm".into(),
-                    prior: 50.0,
+                // a linear scale off by a thousandth reads 1 mm wrong per metre: no scale is
+                // that far out
+                .map(|g| {
+                    EffectParam::new(format!("scale_{g}"), "ppm", 50.0).within(-1000.0, 1000.0)
                 })
                 .collect(),
             q: campaign.poses.iter().map(|p| p.q).collect(),

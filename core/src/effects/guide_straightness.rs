@@ -33,11 +33,8 @@ impl Effect for GuideStraightness {
         Ok(Box::new(BoundBow {
             params: ["guide1", "guide2"]
                 .iter()
-                .map(|g| EffectParam {
-                    name: format!("sagitta_{g}"),
-                    unit: "mm".into(),
-                    prior: 0.05,
-                })
+                // a guide bowed by more than half a millimetre is a broken machine, not a bow
+                .map(|g| EffectParam::new(format!("sagitta_{g}"), "mm", 0.05).within(-0.5, 0.5))
                 .collect(),
             q: campaign.poses.iter().map(|p| p.q).collect(),
         }))

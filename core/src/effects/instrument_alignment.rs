@@ -28,11 +28,7 @@ impl Effect for InstrumentAlignment {
             for &i in &setup.poses {
                 setup_of[i] = Some(params.len());
             }
-            params.push(EffectParam {
-                name: format!("theta_{}", setup.id),
-                unit: "mrad".into(),
-                prior: 0.1,
-            });
+            params.push(EffectParam::new(format!("theta_{}", setup.id), "mrad", 0.1));
         }
         if params.is_empty() {
             return Err(NotApplicable {

@@ -77,15 +77,45 @@ pub fn names() -> Vec<String> {
     all().iter().map(|e| e.name().to_owned()).collect()
 }
 
-/// The effect called `name` (of [`all`]).
+/// The effect called `name` (of [`all`]), or a family's parts `family:part+part`
+/// (`thermal:rods`, `thermal:rods+scales`).
 pub fn by_name(name: &str) -> Result<Box<dyn Effect>, UnknownEffect> {
-    all()
+    let unknown = |known: String| UnknownEffect {
+        name: name.to_owned(),
+        known,
+    };
+    let (family, parts) = match name.trim().split_once(':') {
+        Some((f, p)) => (f.trim(), Some(p)),
+        None => (name.trim(), None),
+    };
+    let effect = all()
         .into_iter()
-        .find(|e| e.name() == name.trim())
-        .ok_or_else(|| UnknownEffect {
-            name: name.to_owned(),
-            known: names().join(", "),
-        })
+        .find(|e| e.name() == family)
+        .ok_or_else(|| unknown(names().join(", ")))?;
+    let Some(parts) = parts else {
+        return Ok(effect);
+    };
+    let known = effect.parts();
+    let with = |list: &str| {
+        format!(
+            "{family}:PART+PART with parts {list}",
+            list = if list.is_empty() { "(none)" } else { list }
+        )
+    };
+    let indices = parts
+        .split('+')
+        .map(|p| known.iter().position(|k| *k == p.trim()))
+        .collect::<Option<Vec<usize>>>()
+        .ok_or_else(|| unknown(with(&known.join(", "))))?;
+    effect
+        .with_parts(&indices)
+        .ok_or_else(|| unknown(with(&known.join(", "))))
+}
+
+/// The family of an effect name: `thermal` for `thermal:rods` (the name itself where it
+/// pins no part).
+pub fn family_of(name: &str) -> &str {
+    name.split_once(':').map_or(name, |(f, _)| f)
 }
 
 /// A list `a,b,c` of effect names.

@@ -31,11 +31,8 @@ impl Effect for Parallelogram {
         Ok(Box::new(Bound5 {
             params: ROD5
                 .iter()
-                .map(|(_, n)| EffectParam {
-                    name: (*n).to_owned(),
-                    unit: "mm".into(),
-                    prior: 0.1,
-                })
+                // a holder off a parallelogram by a centimetre is another mechanism, not an error
+                .map(|(_, n)| EffectParam::new(*n, "mm", 0.1).within(-10.0, 10.0))
                 .collect(),
         }))
     }

@@ -71,11 +71,8 @@ impl Effect for PreloadElastic {
             });
         }
         Ok(Box::new(BoundPreload {
-            params: vec![EffectParam {
-                name: "compliance".to_owned(),
-                unit: "x default".into(),
-                prior: 1.0,
-            }],
+            // a rod cannot be stiffer than rigid: a negative compliance absorbs something else
+            params: vec![EffectParam::new("compliance", "x default", 1.0).within(0.0, 10.0)],
             stretch,
         }))
     }

@@ -40,11 +40,7 @@ impl Effect for StiffnessFactor {
             });
         }
         Ok(Box::new(BoundStiffness {
-            params: vec![EffectParam {
-                name: "change".to_owned(),
-                unit: "x default - 1".into(),
-                prior: PRIOR,
-            }],
+            params: vec![EffectParam::new("change", "x default - 1", PRIOR)],
         }))
     }
 }

@@ -402,6 +402,7 @@ impl Written {
                     name: p.name.clone(),
                     unit: p.unit.clone(),
                     prior: p.prior,
+                    range: p.bounds,
                 })
                 .collect(),
             targets: self.targets.clone(),

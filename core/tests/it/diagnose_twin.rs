@@ -154,17 +154,25 @@ fn summary(d: &Diagnosis) -> String {
                 })
             };
             format!(
-                "{} held-out {} cv {}",
+                "{} held-out {} cv {} ({:?}, size {:.2}{})",
                 c.effect,
                 p(c.prediction),
-                p(c.cross_validated)
+                p(c.cross_validated),
+                c.judged.outcome,
+                c.judged.size.unwrap_or(f64::NAN),
+                c.judged.implausible.join("; ")
             )
         })
         .collect();
     format!(
-        "{:?}, missing {:?}, chi2/dof {:.2}, best candidate {best:?}; judged: {}",
+        "{:?}, missing {:?} (model {:?}, held-out {}), chi2/dof {:.2}, best candidate {best:?}; judged: {}",
         d.verdict_kind,
         d.missing_effect,
+        d.model_effects,
+        d.held_out.as_ref().map_or("-".to_owned(), |h| format!(
+            "{:.2} vs floor {:.2} p {:.1e} structure p {:.1e}",
+            h.rms_relative_um, h.floor_relative_um, h.p_value, h.structure_p
+        )),
         d.chi2_per_dof,
         judged.join("; ")
     )
@@ -394,21 +402,24 @@ fn thermal_variants_keep_the_parts_that_expand() {
             ..Default::default()
         });
         let d = run(&cal, &val, &[]);
-        eprintln!("{label}: {}", summary(&d));
+        eprintln!("{label}: {}, named {:?}", summary(&d), d.missing_effects);
         assert_eq!(d.missing_effect.as_deref(), Some("thermal"), "{label}");
-        let c = d
-            .candidates
-            .iter()
-            .find(|c| c.effect == "thermal")
-            .expect("thermal");
+        // the loop's next step: thermal named whole, its parts settled by the data
+        let next = run(&cal, &val, &["thermal"]);
+        eprintln!(
+            "{label}: fitted as {:?}: {}",
+            next.model_effects,
+            summary(&next)
+        );
+        assert_eq!(next.model_effects, d.missing_effects, "{label}");
         for (part, truth) in [
             ("alpha_rods", rods),
             ("alpha_frame", frame),
             ("alpha_scales", scales),
         ] {
-            let p = c.params.iter().find(|p| p.name == part).expect("part");
+            let p = next.effect_values.iter().find(|p| p.name == part);
             if truth > 0.0 {
-                assert!(p.identified, "{label}: {part} not kept");
+                let p = p.unwrap_or_else(|| panic!("{label}: {part} not kept"));
                 assert!(
                     (p.value - truth * 1e6).abs() <= 3.0 * p.sigma,
                     "{label}: {part} = {} ± {} ppm/K, truth {}",
@@ -417,14 +428,15 @@ fn thermal_variants_keep_the_parts_that_expand() {
                     truth * 1e6
                 );
             } else {
-                assert!(!p.identified, "{label}: {part} kept: {p:?}");
+                assert!(p.is_none(), "{label}: {part} kept: {p:?}");
             }
         }
-        let after = c.val_rms_after_um.expect("held-out after");
+        let after = next.baseline.val_rms_um.expect("held-out after");
         assert!(
             after <= 1.5 * floor,
             "{label}: {after} um, true floor {floor}"
         );
+        assert_eq!(next.verdict_kind, VerdictKind::NothingMissing, "{label}");
     }
 }
 
@@ -466,7 +478,12 @@ fn two_hidden_effects_are_found_one_after_the_other() {
             summary(&d1)
         );
         let d2 = run(&cal, &val, &[&first]);
-        let second = d2.missing_effect.clone().expect("a second effect");
+        let second = d2.missing_effect.clone().unwrap_or_else(|| {
+            panic!(
+                "seed {seed}: a second effect after {first}: {}",
+                summary(&d2)
+            )
+        });
         assert!(
             names.contains(&second.as_str()) && second != first,
             "seed {seed}: {} then {}",

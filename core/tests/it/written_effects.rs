@@ -216,8 +216,12 @@ fn encoder_scale_written_gives_the_librarys_parameters() {
         ],
     );
     let opts = Options::default();
-    let (lib, _) = diagnose::evaluate(&cal, Some(&val), &[&EncoderScale], &opts).expect("library");
-    let (own, _) = diagnose::evaluate(&cal, Some(&val), &[&file], &opts).expect("written");
+    let lib = diagnose::evaluate(&cal, Some(&val), &[&EncoderScale], &opts)
+        .expect("library")
+        .fit;
+    let own = diagnose::evaluate(&cal, Some(&val), &[&file], &opts)
+        .expect("written")
+        .fit;
     assert_eq!(lib.effect_params.len(), 2);
     for (a, b) in lib.effect_params.iter().zip(&own.effect_params) {
         eprintln!(

@@ -369,7 +369,7 @@ fn effect_stages(
     let opts = diagnosis_options(args, model)?;
     let mut stages = Vec::new();
     for k in 0..=effects.len() {
-        let (fit, _) = diagnose::evaluate(campaign, validation, &effects[..k], &opts)?;
+        let fit = diagnose::evaluate(campaign, validation, &effects[..k], &opts)?.fit;
         let name = match k {
             0 => format!("{}", opts.model),
             _ => format!("+ {}", effects[k - 1].name()),

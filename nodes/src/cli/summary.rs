@@ -47,6 +47,32 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
         "   against the stated noise: chi2/dof {:.2} over {:.0} dof, p = {:.2e} (the verdict does not rest on it)",
         b.chi2_per_dof, b.dof, b.p_value,
     );
+    if let Some(h) = &d.held_out {
+        println!(
+            "   held-out judge: {} the model's floor {:.1} um (the noise and the calibration's own \
+             uncertainty), p = {:.1e}{}",
+            if h.agrees() { "at" } else { "NOT at" },
+            h.floor_relative_um,
+            h.p_value,
+            h.follows
+                .as_ref()
+                .map_or(String::new(), |f| format!("; {}", words::follows(f)))
+        );
+    }
+    if d.model_effects != d.effects_in_model {
+        println!(
+            "   fitted as {} (a family keeps the parts the data can tell apart)",
+            d.model_effects.join(" + ")
+        );
+    }
+    for e in d.effect_values.iter().filter(|e| e.identified) {
+        println!(
+            "   {}.{} = {}",
+            e.effect,
+            e.name,
+            words::with_sigma(e.value, e.sigma, &e.unit)
+        );
+    }
     if let Some((n, of)) = d.determined {
         println!(
             "   the campaign determined {n} of {of} parameter combinations better than their \
@@ -75,12 +101,7 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
 /// The noise per group, the residual per instrument and direction, the worst rows.
 fn print_groups(d: &Diagnosis) {
     if !d.noise_groups.is_empty() {
-        let with = if d.noise_estimated_with.is_empty() {
-            String::new()
-        } else {
-            format!(" (the model with {})", d.noise_estimated_with.join(" and "))
-        };
-        println!("\n   noise per group, estimated from the residuals{with}:");
+        println!("\n   noise per group, estimated from the residuals of the current model:");
         print_noise_groups(&d.noise_groups, "   ");
     }
     println!(
@@ -128,6 +149,19 @@ fn print_effects(d: &Diagnosis) {
     }
     for s in &d.skipped {
         println!("   {:<22} not tried: {}", s.effect, s.reason);
+    }
+    if !d.compared_under.is_empty() {
+        println!(
+            "   (compared with the rows weighted by the noise of the model with {}: significant \
+             at the stated noise)",
+            d.compared_under.join(" and ")
+        );
+    }
+    if !d.trials.is_empty() {
+        println!("   models of several effects or parts:");
+        for t in &d.trials {
+            println!("     {}", words::trial(t));
+        }
     }
     if let Some(c) = d.candidates.first() {
         println!("   evidence for {}: {}", c.effect, words::evidence(c));

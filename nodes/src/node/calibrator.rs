@@ -33,6 +33,7 @@ use nalgebra::SMatrix;
 use rpkm_core::calib::online::{OnlineOptions, TieSoFar, TIE_EVIDENCE_CHI2};
 use rpkm_core::calib::{self, Calibration, Options, Selection};
 use rpkm_core::campaign::Campaign;
+use rpkm_core::effects::Effect;
 use rpkm_core::obs;
 use rpkm_core::params::Model;
 use rpkm_core::params::N_PARAMS;
@@ -76,36 +77,44 @@ pub const KEYS: [&str; 18] = [
     "online_encoder_sigma_um",
 ];
 
-/// The model diagnosis of `rpkm_core::diagnose` on the calibrated campaign (the held-out part
-/// for its validation).
+/// What the node diagnoses: the calibrated campaign (the held-out part for its validation)
+/// with the model it calibrated, its effects in the model.
+#[derive(Clone, Copy)]
+struct Diagnosed<'a> {
+    campaign: &'a Campaign,
+    validation: Option<&'a Campaign>,
+    calibration: &'a Calibration,
+    effects: &'a [&'a dyn Effect],
+    /// The stated noise the estimate starts from (as the calibration's).
+    noise: &'a rpkm_core::noise::NoiseModel,
+}
+
+/// The model diagnosis of `rpkm_core::diagnose` with the node's effects in the model: what
+/// `rpkm diagnose --effects ...` says of the same campaign.
 fn diagnose_model(
-    campaign: &Campaign,
-    validation: Option<&Campaign>,
-    calibration: &Calibration,
+    d: Diagnosed,
     stop: Option<calib::Stop>,
 ) -> Result<rpkm_core::diagnose::Diagnosis, rpkm_core::diagnose::DiagnoseError> {
     let opts = rpkm_core::diagnose::Options {
-        model: calibration.model,
+        model: d.calibration.model,
+        noise: d.noise.clone(),
         stop,
         ..Default::default()
     };
-    rpkm_core::diagnose::diagnose(campaign, validation, &[], &opts)
+    rpkm_core::diagnose::diagnose(d.campaign, d.validation, d.effects, &opts)
 }
 
 /// [`diagnose_model`], stopped as soon as `cancelled` says so: the diagnosis runs on a
 /// thread of its own while this one asks `cancelled` (an action server's state, which lives
 /// on this thread) every few milliseconds.
 fn diagnose_until(
-    campaign: &Campaign,
-    validation: Option<&Campaign>,
-    calibration: &Calibration,
+    d: Diagnosed,
     cancelled: &dyn Fn() -> bool,
 ) -> Result<rpkm_core::diagnose::Diagnosis, rpkm_core::diagnose::DiagnoseError> {
     let stop = calib::Stop::default();
     std::thread::scope(|scope| {
         let run = stop.clone();
-        let worker =
-            scope.spawn(move || diagnose_model(campaign, validation, calibration, Some(run)));
+        let worker = scope.spawn(move || diagnose_model(d, Some(run)));
         while !worker.is_finished() {
             if !stop.requested() && cancelled() {
                 stop.request();
@@ -118,21 +127,21 @@ fn diagnose_until(
     })
 }
 
-/// The model diagnosis of `rpkm_core::diagnose` on the calibrated campaign (the held-out part
-/// for its validation), as the Diagnosis message (SI: µm become m; a validation RMS that
-/// does not exist is NaN).
-pub fn diagnose(
-    campaign: &Campaign,
-    validation: Option<&Campaign>,
-    calibration: &Calibration,
-) -> Result<Diagnosis, rpkm_core::diagnose::DiagnoseError> {
-    diagnose_model(campaign, validation, calibration, None).map(|d| diagnosis_msg(&d))
-}
-
 /// A diagnosis as the Diagnosis message.
 fn diagnosis_msg(d: &rpkm_core::diagnose::Diagnosis) -> Diagnosis {
     let m = |um: Option<f64>| um.map_or(f64::NAN, |v| v * 1e-6);
+    let held = d.held_out.as_ref();
     Diagnosis {
+        verdict_kind: serde_json::to_value(d.verdict_kind)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_owned))
+            .unwrap_or_default(),
+        verdict: crate::words::verdict(d),
+        missing_effects: d.missing_effects.clone(),
+        model_effects: d.model_effects.clone(),
+        baseline_val_rms_relative: m(d.baseline.val_rms_relative_um),
+        floor_relative: m(held.map(|h| h.floor_relative_um)),
+        held_out_agrees: held.is_some_and(rpkm_core::diagnose::HeldOutCheck::agrees),
         missing_effect: d.missing_effect.clone().unwrap_or_default(),
         candidates: d
             .candidates
@@ -302,14 +311,22 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<Outcome
         progress: job.progress,
         ..calib::Request::new(&cal_part, &o.start.params, &opts)
     })?;
-    let parameters = parameters_of(&cal, &cal_part, val_part.as_ref());
+    let model = (effects.as_slice(), &set);
+    let parameters = parameters_of(&cal, (&cal_part, val_part.as_ref()), model, &noise)?;
+    let diagnosed = Diagnosed {
+        campaign: &cal_part,
+        validation: val_part.as_ref(),
+        calibration: &cal,
+        effects: &effects,
+        noise: &o.noise,
+    };
     let (diagnosis, verdict) = if job.diagnose {
         if let Some(diagnosing) = job.diagnosing {
             diagnosing();
         }
         let diagnosis = match job.cancelled {
-            Some(cancelled) => diagnose_until(&cal_part, val_part.as_ref(), &cal, cancelled),
-            None => diagnose_model(&cal_part, val_part.as_ref(), &cal, None),
+            Some(cancelled) => diagnose_until(diagnosed, cancelled),
+            None => diagnose_model(diagnosed, None),
         };
         match diagnosis {
             // a stopped diagnosis is a stopped goal, not a diagnosis that failed
@@ -334,12 +351,15 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<Outcome
     })
 }
 
-/// The Parameters message of a calibration of `cal_part`, its held-out RMS on `val_part`.
+/// The Parameters message of a calibration of `cal_part` of the model with `effects` (bound
+/// to it as `set`), its held-out RMS on `val_part` by the diagnosis's own held-out judge (the
+/// effects' corrections in, setup-local parameters re-fitted on the held-out setups).
 fn parameters_of(
     cal: &Calibration,
-    cal_part: &Campaign,
-    val_part: Option<&Campaign>,
-) -> Parameters {
+    (cal_part, val_part): (&Campaign, Option<&Campaign>),
+    (effects, set): (&[&dyn Effect], &rpkm_core::effects::EffectSet),
+    noise: &rpkm_core::variance::NoiseEstimate,
+) -> anyhow::Result<Parameters> {
     let mut sigmas = [0.0; N_PARAMS];
     for id in &cal.identified {
         sigmas[id.index] = id.sigma;
@@ -363,12 +383,14 @@ fn parameters_of(
     } else {
         f64::NAN
     };
-    let tcp = |c: &Campaign| -> Vec<f64> {
-        obs::tcp_errors(c, &cal.params, cal.model)
-            .map(|e| e.iter().map(|e| e.2).collect())
-            .unwrap_or_default()
-    };
-    let cal_errors = tcp(cal_part);
+    let cal_errors: Vec<f64> = obs::tcp_errors_with(
+        cal_part,
+        &cal.params,
+        cal.model,
+        &set.corrections(&cal.theta),
+    )
+    .map(|e| e.iter().map(|e| e.value).collect())
+    .unwrap_or_default();
     msg.max_abs_residual = if cal_errors.is_empty() {
         f64::NAN
     } else {
@@ -376,7 +398,8 @@ fn parameters_of(
     };
     msg.val_rms = match val_part {
         Some(v) => {
-            let e = tcp(v);
+            let e = rpkm_core::diagnose::held_out_errors(v, &noise.model, effects, set, cal)
+                .map_err(|e| bad_input(format!("held-out setups: {e}")))?;
             if e.is_empty() {
                 f64::NAN
             } else {
@@ -386,7 +409,7 @@ fn parameters_of(
         None => f64::NAN,
     };
     msg.condition_number = cal.condition_number;
-    msg
+    Ok(msg)
 }
 
 /// The calibrated effects' parameters into the message: `effect.parameter`, SI where the

@@ -7,7 +7,9 @@ use rpkm_core::calib::online::{Drift, DriftInput, FOLLOWS};
 use rpkm_core::diagnose::neighbours::Neighbours;
 use rpkm_core::diagnose::periodic::Periodic;
 use rpkm_core::diagnose::sparse::Pointer;
-use rpkm_core::diagnose::{Candidate, Diagnosis, Test, VerdictKind};
+use rpkm_core::diagnose::{
+    Candidate, Diagnosis, HeldOutCheck, Judged, ModelTrial, Outcome, Prediction, Test, VerdictKind,
+};
 use rpkm_core::params::{unit, Unit, NAMES};
 use std::fmt::Write as _;
 
@@ -105,40 +107,21 @@ fn alike_names(d: &Drift) -> String {
 }
 
 /// What an engineer can check of a candidate: the F-test, its parameters, the covariate
-/// the residual follows, the held-out RMS before and after.
+/// the residual follows, the held-out RMS before and after, and what the search made of it.
 pub fn evidence(c: &Candidate) -> String {
-    let shown: Vec<String> = c
-        .params
-        .iter()
-        .filter(|e| e.identified)
-        .take(3)
-        .map(|e| format!("{} = {}", e.name, with_sigma(e.value, e.sigma, &e.unit)))
-        .collect();
     let mut s = format!(
         "chi2/dof {:.2} -> {:.2}, F = {:.1} (p = {:.1e}); {}",
         c.chi2_per_dof_before,
         c.chi2_per_dof_after,
         c.f_statistic,
         c.p_value,
-        shown.join(", ")
+        values(&c.params)
     );
     if let Some(f) = &c.follows {
         let _ = write!(s, "; {}", follows(f));
     }
     for p in [c.prediction, c.cross_validated].into_iter().flatten() {
-        let _ = write!(
-            s,
-            "; {} RMS {:.2} -> {:.2} {} (± {:.2})",
-            if p.by_setup {
-                "cross-validated (by setup)"
-            } else {
-                "held-out"
-            },
-            p.rms_before,
-            p.rms_after,
-            p.unit,
-            p.standard_error
-        );
+        let _ = write!(s, "; {}", prediction(&p));
         if p.worse && c.significant && c.relevant {
             s.push_str(": fits the campaign, predicts worse: it absorbs something else");
         }
@@ -147,6 +130,100 @@ pub fn evidence(c: &Candidate) -> String {
         if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
             let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
         }
+    }
+    let _ = write!(s, "{}", judged(&c.judged));
+    s
+}
+
+/// The effect parameters identified, with their σ (three at most).
+fn values(params: &[rpkm_core::calib::EffectEstimate]) -> String {
+    let shown: Vec<String> = params
+        .iter()
+        .filter(|e| e.identified)
+        .take(3)
+        .map(|e| format!("{} = {}", e.name, with_sigma(e.value, e.sigma, &e.unit)))
+        .collect();
+    shown.join(", ")
+}
+
+/// "held-out RMS 17.98 -> 12.69 um (± 2.11)".
+fn prediction(p: &Prediction) -> String {
+    format!(
+        "{} RMS {:.2} -> {:.2} {} (± {:.2})",
+        if p.by_setup {
+            "cross-validated (by setup)"
+        } else {
+            "held-out"
+        },
+        p.rms_before,
+        p.rms_after,
+        p.unit,
+        p.standard_error
+    )
+}
+
+/// The judgement's words where they add to the figures: the evidence of both campaigns,
+/// and why an addition that stood out was not named.
+fn judged(j: &Judged) -> String {
+    let size = j.size.map_or(String::new(), |v| {
+        format!("explains {v:.2} of the noise's RMS")
+    });
+    let why = match j.outcome {
+        Outcome::TooSmall => format!(": statistically detectable, too small to matter ({size})"),
+        Outcome::Implausible => format!(
+            ": implausible values, it absorbs something else ({})",
+            j.implausible.join("; ")
+        ),
+        Outcome::Contradicted => ": the held-out data contradict it".to_owned(),
+        Outcome::Incomplete => {
+            ": it leaves out a part or effect that earns its place (a larger model beats it)"
+                .to_owned()
+        }
+        Outcome::MemberAddsNothing => {
+            ": one of its effects adds nothing to the prediction of the others".to_owned()
+        }
+        Outcome::SimplerNamed => ": predicts as well as a simpler model, which is named".to_owned(),
+        Outcome::OutdoneByTerm => {
+            ": a dictionary term explains as much, and the residual stays structured".to_owned()
+        }
+        _ => String::new(),
+    };
+    format!("; evidence of both campaigns p = {:.1e}{why}", j.evidence_p)
+}
+
+/// A model of the search in words: "thermal:rods + preload_elastic: F = 98.0 (p = 1e-40);
+/// alpha_rods = ...; held-out RMS 9.14 -> 4.60 um (± 0.4); evidence ...".
+pub fn trial(t: &ModelTrial) -> String {
+    let mut s = format!(
+        "{}: F = {:.1} (p = {:.1e}); {}",
+        t.added.join(" + "),
+        t.f_statistic,
+        t.p_value,
+        values(&t.params)
+    );
+    if let Some(p) = &t.prediction {
+        let _ = write!(s, "; {}", prediction(p));
+    }
+    s.push_str(&judged(&t.judged));
+    s
+}
+
+/// The held-out judge in words: "held-out RMS 12.7 um (each setup's zero removed) against
+/// the model's floor 5.4 um (p = 1.2e-30)".
+pub fn held_out(h: &HeldOutCheck) -> String {
+    let mut s = format!(
+        "held-out RMS {:.1} um (each setup's zero removed) against the model's floor {:.1} um \
+         (the noise {:.1} um and the calibration's own uncertainty; p = {:.1e})",
+        h.rms_relative_um, h.floor_relative_um, h.noise_floor_relative_um, h.p_value
+    );
+    if let Some(f) = &h.follows {
+        let _ = write!(
+            s,
+            "; {}",
+            follows(f).replacen("residual", "held-out residual", 1)
+        );
+    } else if h.structured {
+        s.push_str("; the held-out residual is structured (periods or neighbours alike)");
     }
     s
 }
@@ -262,12 +339,13 @@ fn structure_found(d: &Diagnosis) -> Vec<String> {
 }
 
 /// The verdict in one sentence: the missing effect and its evidence, the structure no effect
-/// explains, or that nothing is missing; the noise groups off their rating appended.
+/// explains (in the calibration campaign, or in the held-out data only), or that nothing is
+/// missing; the noise groups off their rating appended.
 pub fn verdict(d: &Diagnosis) -> String {
-    let model = if d.effects_in_model.is_empty() {
+    let model = if d.model_effects.is_empty() {
         "the geometric model".to_owned()
     } else {
-        format!("the model with {}", d.effects_in_model.join(", "))
+        format!("the model with {}", d.model_effects.join(", "))
     };
     let noise_words = noise(&d.noise_groups);
     let noise = if noise_words.is_empty() {
@@ -275,25 +353,39 @@ pub fn verdict(d: &Diagnosis) -> String {
     } else {
         format!("; noise: {noise_words}")
     };
-    let remains = d.unexplained.as_ref().map(follows);
-    let named = d
-        .missing_effect
-        .as_deref()
-        .and_then(|m| d.candidates.iter().find(|c| c.effect == m));
-    let together = d.together_with.as_ref().map_or(String::new(), |t| {
-        format!("; together with {t}: alone each absorbs part of the other and predicts worse, add both")
-    });
+    let remains = d
+        .unexplained
+        .as_ref()
+        .map_or(String::new(), |u| format!("; what remains: {}", follows(u)));
     let tied = d.tied_term.as_ref().map_or(String::new(), |t| {
         format!("; the dictionary term {t} follows the residual as well, but a term cannot predict held-out poses")
     });
-    match (d.verdict_kind, named) {
-        (VerdictKind::MissingEffect, Some(c)) => format!(
-            "missing effect: {} ({}){together}{tied}{}{noise}",
-            c.effect,
-            evidence(c),
-            remains.map_or(String::new(), |u| format!("; what remains: {u}"))
-        ),
-        (VerdictKind::UnexplainedStructure, _) => {
+    let held = d.held_out.as_ref();
+    match d.verdict_kind {
+        VerdictKind::MissingEffect => {
+            let add = d
+                .missing_effect
+                .iter()
+                .chain(&d.together_with)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(",");
+            format!(
+                "missing effect: {} ({}){tied}{remains}; add --effects {add}{noise}",
+                d.missing_effects.join(" with "),
+                named_evidence(d)
+            )
+        }
+        VerdictKind::UnexplainedStructure
+            if held.is_some_and(|h| !h.agrees()) && !cal_structured(d) =>
+        {
+            format!(
+                "{model} explains the calibration campaign but not the held-out data: {}; no \
+                 effect tried predicts them better{noise}",
+                held.map(held_out).unwrap_or_default()
+            )
+        }
+        VerdictKind::UnexplainedStructure => {
             let why = d.candidates.first().map_or(String::new(), |c| {
                 format!(
                     " (the best, {}, p = {:.1e}, BIC gain {:.1})",
@@ -310,16 +402,44 @@ pub fn verdict(d: &Diagnosis) -> String {
                 }
             )
         }
-        _ => {
+        VerdictKind::NothingMissing => {
             let doubt = noisier_words(d);
+            let agree = held.map_or(String::new(), |h| format!("; {}", held_out(h)));
             format!(
                 "nothing is missing that the tests can find: {model} explains the measurements \
                  to their noise (no effect, dictionary term, period or neighbour structure is \
-                 significant; chi2/dof {:.2} at the estimated noise){noise}{doubt}",
+                 significant; chi2/dof {:.2} at the estimated noise){agree}{noise}{doubt}",
                 d.chi2_per_dof
             )
         }
     }
+}
+
+/// Whether the calibration campaign's residual itself is structured (the verdict's own
+/// tests, at their level).
+fn cal_structured(d: &Diagnosis) -> bool {
+    let level = d.test.dictionary_level;
+    d.structure.p_value < level
+        || d.periodic.as_ref().is_some_and(|p| p.p_value < level)
+        || d.neighbours.as_ref().is_some_and(|n| n.p_value < level)
+}
+
+/// The evidence of the model named: its candidate's where it is one effect, else the
+/// search's trial of the combination.
+fn named_evidence(d: &Diagnosis) -> String {
+    if let [one] = d.missing_effects.as_slice() {
+        if let Some(c) = d.candidates.iter().find(|c| &c.effect == one) {
+            return evidence(c);
+        }
+    }
+    d.trials
+        .iter()
+        .find(|t| {
+            t.added.iter().all(|a| d.missing_effects.contains(a))
+                && t.added.len() == d.missing_effects.len()
+        })
+        .map(trial)
+        .unwrap_or_default()
 }
 
 /// "; encoder more than twice its rating: either ..." for the groups estimated above twice
@@ -358,11 +478,19 @@ pub fn model_choice(d: &Diagnosis) -> Option<String> {
 /// How the verdict was tested, in one sentence.
 pub fn test(t: &Test) -> String {
     format!(
-        "noise levels estimated per group from the campaign ({} rounds); candidates by nested \
-         F-test at level {:.2e} (Bonferroni over {}), ranked by BIC gain, named when they beat \
-         the best dictionary term and predict held-out data better; dictionary, periodogram \
-         and neighbour tests each at level {:.2e} (n = {} rows)",
-        t.noise_rounds, t.candidate_level, t.candidates_tried, t.dictionary_level, t.rows
+        "noise levels estimated per group from the campaign ({} rounds); candidates, each part \
+         of a family and pairs by the evidence of both campaigns (nested F-test and held-out \
+         or cross-validated prediction) at level {:.2e} (Bonferroni over {}), named when they \
+         predict better by more than a fifth of the noise, with physical values, the simplest \
+         within one standard error of the best; dictionary, periodogram and neighbour tests \
+         each at level {:.2e} (n = {} rows); held-out data against the model's floor at level \
+         {:.1e}",
+        t.noise_rounds,
+        t.candidate_level,
+        t.candidates_tried,
+        t.dictionary_level,
+        t.rows,
+        t.held_out_level
     )
 }
 
@@ -381,6 +509,14 @@ pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
         for (json, c) in cands.iter_mut().zip(&d.candidates) {
             json["evidence"] = evidence(c).into();
         }
+    }
+    if let Some(trials) = v["trials"].as_array_mut() {
+        for (json, t) in trials.iter_mut().zip(&d.trials) {
+            json["evidence"] = trial(t).into();
+        }
+    }
+    if let Some(h) = &d.held_out {
+        v["held_out"]["judge"] = held_out(h).into();
     }
     Ok(v)
 }

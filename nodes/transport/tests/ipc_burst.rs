@@ -101,6 +101,7 @@ fn cdr_types_travel_over_iceoryx2() {
         baseline_cal_rms: 1e-5,
         baseline_val_rms: 2e-5,
         noise_floor: 1e-6,
+        ..Default::default()
     };
     publisher.publish(&msg).expect("publish");
     let got = subscriber

@@ -1,0 +1,275 @@
+//! The current model as every command evaluates it: its instruments' noise estimated from the
+//! campaign under the model itself (the same whatever candidates a diagnosis is offered),
+//! its families named whole settled to the parts the data can tell apart, calibrated, and
+//! judged on the held-out data. `rpkm diagnose` reports it as its baseline, `rpkm
+//! calibrate` and the calibrator node as their held-out figures ([`evaluate`]).
+
+use super::figures::length_sigmas;
+use super::held_out::{self, HeldOutCheck, Levels, Model1, Validation};
+use super::model::{self, Settled};
+use super::trials::finish_with;
+use super::types::{Baseline, DiagnoseError, Fit, Fitted, Options};
+use crate::calib::{self, Calibration, Request};
+use crate::campaign::Campaign;
+use crate::effects::{Effect, EffectSet};
+use crate::noise::{Group, NoiseModel, N_GROUPS};
+use crate::params::{Model, Params};
+use crate::stats;
+use crate::variance::NoiseEstimate;
+
+/// Calibration options of the diagnosis: the model's links, every parameter under its
+/// tolerance prior, no outlier elimination (the nested tests need the same rows in every
+/// fit). `rpkm calibrate` and the calibrator node calibrate with the same selection.
+pub fn calib_options(opts: &Options) -> calib::Options {
+    calib::Options {
+        model: Model::M29,
+        selection: calib::Selection::Prior(opts.prior),
+        links: match opts.model {
+            Model::M24 => calib::Link::perfect_parallelogram(),
+            Model::M29 => Vec::new(),
+        },
+        outlier_sigma: None,
+        noise: opts.noise.clone(),
+        stop: opts.stop.clone(),
+        ..Default::default()
+    }
+}
+
+/// The model (`effects`) calibrated with `copts` as they are.
+pub(crate) fn fit_model(
+    campaign: &Campaign,
+    effects: &[&dyn Effect],
+    copts: &calib::Options,
+) -> Result<Calibration, DiagnoseError> {
+    let start = Params::nominal();
+    let set = EffectSet::bind(effects, campaign, &start)?;
+    calib::calibrate(&Request {
+        effects: &set,
+        ..Request::new(campaign, &start, copts)
+    })
+    .map(|(cal, _)| cal)
+    .map_err(DiagnoseError::Baseline)
+}
+
+/// The model (`effects`) calibrated with the noise estimated from the campaign, the
+/// estimate, and the calibration options with its weights. `first`: the estimation's first
+/// round where it is at hand (the model calibrated at the stated noise).
+pub(crate) fn noise_of(
+    campaign: &Campaign,
+    effects: &[&dyn Effect],
+    opts: &Options,
+    first: Option<&Calibration>,
+) -> Result<(Calibration, NoiseEstimate, calib::Options), DiagnoseError> {
+    let start = Params::nominal();
+    let set = EffectSet::bind(effects, campaign, &start)?;
+    let mut copts = calib_options(opts);
+    let (cal, est) = calib::calibrate(&Request {
+        effects: &set,
+        noise: opts.weighting,
+        first_round: first,
+        ..Request::new(campaign, &start, &copts)
+    })
+    .map_err(DiagnoseError::Baseline)?;
+    copts.noise = est.model.clone();
+    Ok((cal, est, copts))
+}
+
+/// The current model evaluated: what it is, its fit, the noise it shows, its held-out
+/// figures and their judge.
+pub(crate) struct Current {
+    pub settled: Settled,
+    pub cal: Calibration,
+    pub fitted: Fitted,
+    pub est: NoiseEstimate,
+    pub copts: calib::Options,
+    pub baseline: Baseline,
+    pub held_out: Option<HeldOutCheck>,
+}
+
+/// Level of each structure test: a third of the diagnosis's (three tests, the family's
+/// level stays α).
+pub(crate) fn structure_level(opts: &Options) -> f64 {
+    opts.alpha / 3.0
+}
+
+impl Current {
+    /// The model `in_model` as every command evaluates it (see the module documentation).
+    /// `first`: the model calibrated at the stated noise, where the caller has it.
+    pub fn of(
+        campaign: &Campaign,
+        validation: Option<&Campaign>,
+        in_model: &[&dyn Effect],
+        opts: &Options,
+        first: Option<&Calibration>,
+    ) -> Result<Current, DiagnoseError> {
+        let (cal, est, copts) = noise_of(campaign, in_model, opts, first)?;
+        let val = held_out::held_out(validation, &est.model)?;
+        // the evidence a part needs: a candidate's level, over the part combinations
+        let level = opts.alpha / model::PART_COMBINATIONS;
+        let settled = model::settle(campaign, val.as_ref(), in_model, (&copts, level));
+        let effects = settled.effects(in_model);
+        let cal = if settled.changed() {
+            fit_model(campaign, &effects, &copts)?
+        } else {
+            cal
+        };
+        let set = EffectSet::bind(&effects, campaign, &cal.start)?;
+        let fitted = finish_with(val.as_ref(), &effects, &set, cal.clone(), &copts)?;
+        let baseline = baseline(&fitted, &est.model, val.as_ref(), opts);
+        let held_out = match &val {
+            Some(v) => Some(held_out::judge(
+                v,
+                &Model1 {
+                    effects: &effects,
+                    cal_set: &set,
+                    cal: &cal,
+                },
+                &est.groups,
+                &levels(opts),
+            )?),
+            None => None,
+        };
+        drop(effects);
+        Ok(Current {
+            settled,
+            cal,
+            fitted,
+            est,
+            copts,
+            baseline,
+            held_out,
+        })
+    }
+}
+
+impl Current {
+    /// The current model of noise-free (simulated) data: the stated weights (there is no
+    /// noise to estimate), the families whole.
+    pub fn exact(
+        (campaign, val): (&Campaign, Option<&Validation>),
+        in_model: &[&dyn Effect],
+        cal: Calibration,
+        copts: &calib::Options,
+        opts: &Options,
+    ) -> Result<Current, DiagnoseError> {
+        let est = NoiseEstimate::assumed(&opts.noise);
+        let set = EffectSet::bind(in_model, campaign, &cal.start)?;
+        let fitted = finish_with(val, in_model, &set, cal.clone(), copts)?;
+        let baseline = baseline(&fitted, &est.model, val, opts);
+        let held_out = match val {
+            Some(v) => Some(held_out::judge(
+                v,
+                &Model1 {
+                    effects: in_model,
+                    cal_set: &set,
+                    cal: &cal,
+                },
+                &est.groups,
+                &levels(opts),
+            )?),
+            None => None,
+        };
+        Ok(Current {
+            settled: Settled::unchanged(in_model),
+            cal,
+            fitted,
+            est,
+            copts: copts.clone(),
+            baseline,
+            held_out,
+        })
+    }
+}
+
+/// The levels of the held-out judge: its χ² at the diagnosis's level, each structure test
+/// at a third of it.
+fn levels(opts: &Options) -> Levels {
+    Levels {
+        variance: opts.alpha,
+        structure: structure_level(opts),
+    }
+}
+
+/// The baseline's figures: its fit, the noise floor, and χ² against the stated noise.
+pub(crate) fn baseline(
+    base: &Fitted,
+    estimated: &NoiseModel,
+    val: Option<&Validation>,
+    opts: &Options,
+) -> Baseline {
+    let noise_floor_um = match val {
+        Some(v) => calib::rms(&v.sigma) * 1e3,
+        None => calib::rms(&length_sigmas(&base.rows)) * 1e3,
+    };
+    let relative = val.map(|v| {
+        (
+            calib::rms(&base.fit.val_errors) * 1e3,
+            calib::rms(&v.relative_sigma) * 1e3,
+        )
+    });
+    // the same rows weighted by the rating: each group's variance part back at its rating
+    let ratio2: [f64; N_GROUPS] = std::array::from_fn(|k| {
+        let g = Group::ALL[k];
+        (opts.noise.sigma(g, 1000.0) / estimated.sigma(g, 1000.0)).powi(2)
+    });
+    let scale: f64 = base
+        .rows
+        .iter()
+        .map(|r| {
+            let var: f64 = r.parts.iter().zip(&ratio2).map(|(v, f)| v * f).sum();
+            r.value * r.value / var
+        })
+        .sum();
+    let p_value = stats::chi2_upper_tail(scale, base.fit.dof);
+    Baseline {
+        cal_rms_um: base.fit.cal_rms_um,
+        val_rms_um: base.fit.val_rms_um,
+        noise_floor_um,
+        val_rms_relative_um: relative.map(|r| r.0),
+        noise_floor_relative_um: relative.map(|r| r.1),
+        chi2: scale,
+        dof: base.fit.dof,
+        chi2_per_dof: scale / base.fit.dof,
+        p_value,
+        consistent_with_noise: p_value > opts.alpha,
+        val_errors: base.fit.val_errors.clone(),
+    }
+}
+
+/// One model as `rpkm calibrate`, the calibrator node and the Calibrate action evaluate it:
+/// the same calibration, noise and held-out judge as the diagnosis's baseline.
+#[derive(Clone, Debug)]
+pub struct Evaluated {
+    /// The effects as fitted (a family named whole settled to its parts: `thermal:rods`).
+    pub model_effects: Vec<String>,
+    pub fit: Fit,
+    pub noise: NoiseEstimate,
+    pub calibration: Calibration,
+    pub baseline: Baseline,
+    pub held_out: Option<HeldOutCheck>,
+}
+
+/// Calibrate `campaign` with `effects` in the model as the diagnosis does (noise estimated,
+/// tolerance prior, families settled) and judge it on the held-out data.
+pub fn evaluate(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    effects: &[&dyn Effect],
+    opts: &Options,
+) -> Result<Evaluated, DiagnoseError> {
+    let current = Current::of(campaign, validation, effects, opts, None)?;
+    let model_effects = current
+        .settled
+        .effects(effects)
+        .iter()
+        .map(|e| e.name().to_owned())
+        .collect();
+    Ok(Evaluated {
+        model_effects,
+        fit: current.fitted.fit,
+        noise: current.est,
+        calibration: current.cal,
+        baseline: current.baseline,
+        held_out: current.held_out,
+    })
+}

@@ -1,0 +1,586 @@
+//! The held-out judge: a calibrated model's errors on poses it has not seen, the noise they
+//! would have if the model were right, and whether they agree.
+//!
+//! One evaluation for every command and node ([`evaluate_held_out`]): the model's TCP
+//! errors at the held-out poses with its effects (setup-local effect parameters re-fitted on
+//! the held-out setups), raw and with each setup's zero removed (the reading a relative
+//! setup was zeroed on is in all its readings, and no model predicts it), the floor noise
+//! alone would give, and the floor of the calibrated model itself: the noise plus what the
+//! calibration's own uncertainty predicts at those poses. The errors agree with the model
+//! when their χ² against that floor is what noise gives (an F-test against the estimated
+//! noise's own degrees of freedom) and when they follow nothing (the structure tests of
+//! [`super::structure`] on the held-out residual, with the time since each setup's zero).
+
+use super::structure::Shape;
+use super::types::{DiagnoseError, FitError, Prediction};
+use crate::calib::{self, Calibration};
+use crate::campaign::{Campaign, Instrument};
+use crate::effects::{Effect, EffectSet};
+use crate::geometry;
+use crate::noise::{self, Group, NoiseModel, Parts, XyInstrument, N_GROUPS};
+use crate::obs::{self, Direction, PoseError, RowValue};
+use crate::params::{Model, Params, N_PARAMS};
+use crate::stats;
+use crate::variance::GroupNoise;
+use nalgebra::{DMatrix, DVector, Vector2};
+
+/// Held-out data with their noise.
+pub(crate) struct Validation<'a> {
+    pub campaign: &'a Campaign,
+    /// σ of each held-out TCP error, in [`obs::tcp_errors`] order.
+    pub sigma: Vec<f64>,
+    /// σ of each error less the mean of its setup and coordinate ([`Validation::relative`]):
+    /// the zero reading cancels, the mean's own noise does not.
+    pub relative_sigma: Vec<f64>,
+    /// The variance of each relative error by noise group (what the floor's degrees of
+    /// freedom come from).
+    relative_parts: Vec<Parts>,
+    /// Each error's setup and coordinate (an index): the errors of one share the reading
+    /// their setup was zeroed on.
+    zero: Vec<usize>,
+    /// Each error's pose and coordinate, in order.
+    at: Vec<(usize, &'static str)>,
+}
+
+impl Validation<'_> {
+    /// The held-out campaign with the noise of each of its TCP errors.
+    pub fn new<'a>(
+        campaign: &'a Campaign,
+        noise: &NoiseModel,
+    ) -> Result<Validation<'a>, PoseError> {
+        let errs = obs::tcp_errors(campaign, &Params::nominal(), Model::M29)?;
+        let variances = validation_variances(campaign, &errs, noise)?;
+        let zero = zero_groups(campaign, &errs);
+        // var(e_i − ē) = σ_i² (1 − 2/n) + Σ σ_j² / n² over the n errors of the group, for
+        // each noise group's part alike
+        let count = group_sums(&zero, &vec![1.0; zero.len()]);
+        let mut group_parts = vec![[0.0; N_GROUPS]; count.len()];
+        for (&g, v) in zero.iter().zip(&variances) {
+            for (sum, part) in group_parts[g].iter_mut().zip(&v.reading) {
+                *sum += part;
+            }
+        }
+        let relative_parts: Vec<Parts> = zero
+            .iter()
+            .zip(&variances)
+            .map(|(&g, v)| {
+                let n = count[g].1.max(1) as f64;
+                std::array::from_fn(|k| {
+                    (v.reading[k] * (1.0 - 2.0 / n) + group_parts[g][k] / (n * n)).max(0.0)
+                })
+            })
+            .collect();
+        Ok(Validation {
+            campaign,
+            sigma: variances
+                .iter()
+                .map(|v| (v.reading.iter().sum::<f64>() + v.zero).sqrt())
+                .collect(),
+            relative_sigma: relative_parts
+                .iter()
+                .map(|p| p.iter().sum::<f64>().sqrt())
+                .collect(),
+            relative_parts,
+            zero,
+            at: errs.iter().map(|(i, c, _)| (*i, *c)).collect(),
+        })
+    }
+
+    /// `errors` less the mean of their setup and coordinate: what a model can predict of
+    /// them (no model predicts the error of the reading a setup was zeroed on, and one that
+    /// happens to follow it would beat the truth).
+    pub fn relative(&self, errors: &[f64]) -> Vec<f64> {
+        let sum = group_sums(&self.zero, errors);
+        self.zero
+            .iter()
+            .zip(errors)
+            .map(|(&g, e)| e - sum[g].0 / sum[g].1.max(1) as f64)
+            .collect()
+    }
+
+    /// The number of (setup, coordinate) groups: the degrees of freedom the zero removal
+    /// takes.
+    fn n_groups(&self) -> usize {
+        self.zero.iter().max().map_or(0, |m| m + 1)
+    }
+}
+
+/// Per group of `zero` (an index per value), the sum of `values` and their count.
+pub(crate) fn group_sums(zero: &[usize], values: &[f64]) -> Vec<(f64, usize)> {
+    let n = zero.iter().max().map_or(0, |m| m + 1);
+    let mut sum = vec![(0.0, 0usize); n];
+    for (&g, v) in zero.iter().zip(values) {
+        sum[g].0 += v;
+        sum[g].1 += 1;
+    }
+    sum
+}
+
+/// Each held-out TCP error's (setup, coordinate) as an index, in [`obs::tcp_errors`] order.
+fn zero_groups(val: &Campaign, errs: &[(usize, &'static str, f64)]) -> Vec<usize> {
+    let mut keys: Vec<(&str, &str)> = Vec::new();
+    errs.iter()
+        .map(|(i, coordinate, _)| {
+            let key = (val.poses[*i].setup.as_str(), *coordinate);
+            keys.iter().position(|k| *k == key).unwrap_or_else(|| {
+                keys.push(key);
+                keys.len() - 1
+            })
+        })
+        .collect()
+}
+
+/// The held-out campaign with the noise of each of its TCP errors.
+pub(crate) fn held_out<'a>(
+    validation: Option<&'a Campaign>,
+    noise: &NoiseModel,
+) -> Result<Option<Validation<'a>>, DiagnoseError> {
+    validation
+        .map(|v| Validation::new(v, noise))
+        .transpose()
+        .map_err(DiagnoseError::Validation)
+}
+
+/// The held-out TCP errors (mm, in [`obs::tcp_errors`] order) of a calibration `cal` of the
+/// model with `effects` (bound to the calibration's campaign as `cal_set`), the held-out
+/// rows weighted by `noise`.
+pub fn held_out_errors(
+    validation: &Campaign,
+    noise: &NoiseModel,
+    effects: &[&dyn Effect],
+    cal_set: &EffectSet,
+    cal: &Calibration,
+) -> Result<Vec<f64>, DiagnoseError> {
+    let val = Validation::new(validation, noise).map_err(DiagnoseError::Validation)?;
+    Ok(Model1 {
+        effects,
+        cal_set,
+        cal,
+    }
+    .errors(&val)?)
+}
+
+/// A calibrated model as the held-out judge reads it.
+pub(crate) struct Model1<'a> {
+    pub effects: &'a [&'a dyn Effect],
+    pub cal_set: &'a EffectSet,
+    pub cal: &'a Calibration,
+}
+
+impl Model1<'_> {
+    /// θ on the held-out campaign's layout `set`: machine parameters carried over by name
+    /// (the family's, where a part is pinned: `thermal:rods`'s alpha_rods is `thermal`'s),
+    /// setup-local ones at zero.
+    fn carried_theta(&self, set: &EffectSet) -> Vec<f64> {
+        let cal_layout = self.cal_set.layout();
+        set.layout()
+            .iter()
+            .map(|slot| {
+                if slot.setup_local {
+                    return 0.0;
+                }
+                cal_layout
+                    .iter()
+                    .find(|c| c.effect == slot.effect && c.param.name == slot.param.name)
+                    .map_or(0.0, |c| self.cal.theta[c.index])
+            })
+            .collect()
+    }
+
+    /// The held-out TCP errors (mm) with the calibrated model and effects; the effects'
+    /// setup-local parameters are re-fitted on the held-out setups (Gauss-Newton).
+    pub fn errors(&self, val: &Validation) -> Result<Vec<f64>, FitError> {
+        let (set, theta) = self.held_out_theta(val)?;
+        let errs = obs::tcp_errors_with(
+            val.campaign,
+            &self.cal.params,
+            self.cal.model,
+            &set.corrections(&theta),
+        )?;
+        Ok(errs.iter().map(|e| e.value).collect())
+    }
+
+    /// The effects bound to the held-out campaign and their θ (setup-local parts fitted).
+    fn held_out_theta(&self, val: &Validation) -> Result<(EffectSet, Vec<f64>), FitError> {
+        let (cal, model) = (self.cal, self.cal.model);
+        let set = EffectSet::bind(self.effects, val.campaign, &cal.params)?;
+        let mut theta = self.carried_theta(&set);
+        let local: Vec<usize> = set
+            .layout()
+            .iter()
+            .filter(|slot| slot.setup_local)
+            .map(|slot| slot.index)
+            .collect();
+        let weights: Vec<f64> = val.sigma.iter().map(|s| 1.0 / s).collect();
+        for _ in 0..if local.is_empty() { 0 } else { 5 } {
+            let errs =
+                obs::tcp_errors_with(val.campaign, &cal.params, model, &set.corrections(&theta))?;
+            let j = DMatrix::from_fn(errs.len(), local.len(), |i, k| {
+                errs[i].d_theta[local[k]] * weights[i]
+            });
+            let r = DVector::from_iterator(
+                errs.len(),
+                errs.iter().zip(&weights).map(|(e, w)| e.value * w),
+            );
+            let Some(step) = (j.transpose() * &j)
+                .cholesky()
+                .map(|c| c.solve(&(j.transpose() * r)))
+            else {
+                break;
+            };
+            for (k, &t) in local.iter().enumerate() {
+                theta[t] -= step[k];
+            }
+        }
+        Ok((set, theta))
+    }
+
+    /// The variance (mm²) the calibration's own uncertainty gives each held-out error with
+    /// its setup's zero removed: J Σ Jᵀ over the 29 parameters (central differences) and
+    /// the machine's effect parameters (their analytic sensitivities), with the covariance
+    /// the calibration left between them.
+    pub fn prediction_variance(&self, val: &Validation) -> Result<Vec<f64>, FitError> {
+        let (cal, model) = (self.cal, self.cal.model);
+        let (set, theta) = self.held_out_theta(val)?;
+        let corr = set.corrections(&theta);
+        let at = |p: &Params| obs::tcp_errors_with(val.campaign, p, model, &corr);
+        let base = at(&cal.params)?;
+        let n = base.len();
+        let layout = set.layout();
+        let cal_layout = self.cal_set.layout();
+        // the held-out θ's places in the calibration's θ (machine parameters only)
+        let carried: Vec<(usize, usize)> = layout
+            .iter()
+            .filter(|s| !s.setup_local)
+            .filter_map(|s| {
+                cal_layout
+                    .iter()
+                    .find(|c| c.effect == s.effect && c.param.name == s.param.name)
+                    .map(|c| (s.index, c.index))
+            })
+            .collect();
+        let m = N_PARAMS + carried.len();
+        let mut j = DMatrix::zeros(n, m);
+        for i in 0..N_PARAMS {
+            if cal.covariance[(i, i)] <= 0.0 {
+                continue;
+            }
+            let h = match crate::params::unit(i) {
+                crate::params::Unit::Rad => 1e-7,
+                crate::params::Unit::Mm => 1e-4,
+            };
+            let (mut up, mut down) = (cal.params, cal.params);
+            up[i] += h;
+            down[i] -= h;
+            let (eu, ed) = (at(&up)?, at(&down)?);
+            for r in 0..n {
+                j[(r, i)] = (eu[r].value - ed[r].value) / (2.0 * h);
+            }
+        }
+        for (c, &(k, _)) in carried.iter().enumerate() {
+            for r in 0..n {
+                j[(r, N_PARAMS + c)] = base[r].d_theta.get(k).copied().unwrap_or(0.0);
+            }
+        }
+        let mut cov = DMatrix::zeros(m, m);
+        for a in 0..N_PARAMS {
+            for b in 0..N_PARAMS {
+                cov[(a, b)] = cal.covariance[(a, b)];
+            }
+        }
+        for (c, &(_, kc)) in carried.iter().enumerate() {
+            for a in 0..N_PARAMS {
+                let v = cal.covariance_p_theta.get((a, kc)).copied().unwrap_or(0.0);
+                cov[(a, N_PARAMS + c)] = v;
+                cov[(N_PARAMS + c, a)] = v;
+            }
+            for (d, &(_, kd)) in carried.iter().enumerate() {
+                cov[(N_PARAMS + c, N_PARAMS + d)] =
+                    cal.covariance_theta.get((kc, kd)).copied().unwrap_or(0.0);
+            }
+        }
+        // each error less its setup's mean, in the sensitivities alike
+        let mut rel = j.clone();
+        let count = group_sums(&val.zero, &vec![1.0; n]);
+        for col in 0..m {
+            let column: Vec<f64> = (0..n).map(|r| j[(r, col)]).collect();
+            let sum = group_sums(&val.zero, &column);
+            for r in 0..n {
+                let g = val.zero[r];
+                rel[(r, col)] -= sum[g].0 / count[g].1.max(1) as f64;
+            }
+        }
+        let jc = &rel * &cov;
+        Ok((0..n)
+            .map(|r| jc.row(r).dot(&rel.row(r)).max(0.0))
+            .collect())
+    }
+}
+
+/// The figures of one calibrated model on held-out data, and the judge's test of them.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct HeldOutCheck {
+    /// RMS of the held-out TCP errors (µm) as measured, and with each setup's zero removed.
+    pub rms_um: f64,
+    pub rms_relative_um: f64,
+    /// What noise alone gives there (µm): counting each setup's zero reading (which all
+    /// its readings share, so with few setups the raw RMS strays from it by that one draw),
+    /// and with each setup's zero removed.
+    pub noise_floor_um: f64,
+    pub noise_floor_relative_um: f64,
+    /// The floor of this calibrated model with each setup's zero removed (µm): the noise and
+    /// what the calibration's own uncertainty predicts at these poses.
+    pub floor_relative_um: f64,
+    /// Σ (e/σ)² of the zero-removed errors against that floor (scaled to its degrees of
+    /// freedom: the errors less the setups' zeros), and the noise estimate's own degrees of
+    /// freedom (the floor is estimated too; infinite where the noise was stated).
+    pub statistic: f64,
+    pub dof: f64,
+    pub noise_dof: f64,
+    /// P(F ≥ statistic/dof) under a right model: small when the held-out errors are larger
+    /// than the model's floor.
+    pub p_value: f64,
+    /// The RMS is what the model's floor gives (p above the level).
+    pub consistent: bool,
+    /// The held-out residual's structure: the dictionary (with the time since each setup's
+    /// zero and the temperatures), the neighbours along each setup's path, the periods.
+    pub structure_p: f64,
+    pub structured: bool,
+    /// The term the held-out residual follows most, where it follows one.
+    pub follows: Option<super::sparse::Pointer>,
+    /// Held-out errors, each setup's zero removed (mm), for a later comparison.
+    #[serde(skip)]
+    pub errors_relative: Vec<f64>,
+}
+
+impl HeldOutCheck {
+    /// Whether the held-out data agree with the model: at its floor and following nothing.
+    pub fn agrees(&self) -> bool {
+        self.consistent && !self.structured
+    }
+}
+
+/// Levels of the held-out tests: the χ² against the floor (one test, at the diagnosis's
+/// level), and each structure test (a third of it).
+pub struct Levels {
+    pub variance: f64,
+    pub structure: f64,
+}
+
+/// The held-out judge on a calibrated model: its errors, floors and test; `groups`: the
+/// noise estimate the floor is made of (its degrees of freedom per group).
+pub(crate) fn judge(
+    val: &Validation,
+    model: &Model1,
+    groups: &[GroupNoise],
+    levels: &Levels,
+) -> Result<HeldOutCheck, FitError> {
+    let errors = model.errors(val)?;
+    let relative = val.relative(&errors);
+    let pv = model.prediction_variance(val)?;
+    let n = relative.len();
+    let var: Vec<f64> = val
+        .relative_sigma
+        .iter()
+        .zip(&pv)
+        .map(|(s, p)| s * s + p)
+        .collect();
+    let dof = (n as f64 - val.n_groups() as f64).max(1.0);
+    let chi2: f64 = relative
+        .iter()
+        .zip(&var)
+        .filter(|(_, v)| **v > 0.0)
+        .map(|(e, v)| e * e / v)
+        .sum();
+    let statistic = chi2 * dof / (n.max(1) as f64);
+    let noise_dof = floor_dof(val, &var, groups);
+    let p_value = if noise_dof.is_finite() {
+        stats::f_upper_tail(statistic / dof, dof, noise_dof)
+    } else {
+        stats::chi2_upper_tail(statistic, dof)
+    };
+    let rows = held_out_rows(val, &relative, &var);
+    let shape = Shape::of(val.campaign, &rows, levels.structure);
+    let dictionary = shape.dictionary.clone();
+    let structured = shape.structured();
+    Ok(HeldOutCheck {
+        rms_um: calib::rms(&errors) * 1e3,
+        rms_relative_um: calib::rms(&relative) * 1e3,
+        noise_floor_um: calib::rms(&val.sigma) * 1e3,
+        noise_floor_relative_um: calib::rms(&val.relative_sigma) * 1e3,
+        floor_relative_um: (var.iter().sum::<f64>() / n.max(1) as f64).sqrt() * 1e3,
+        statistic,
+        dof,
+        noise_dof,
+        p_value,
+        consistent: p_value >= levels.variance,
+        structure_p: shape.smallest_p(),
+        structured,
+        follows: structured.then(|| dictionary.pointer.clone()).flatten(),
+        errors_relative: relative,
+    })
+}
+
+/// The floor's degrees of freedom (Satterthwaite): each noise group's share of the floor
+/// with the degrees of freedom of its estimate (a stated level counts as known), the
+/// calibration's own share as known.
+fn floor_dof(val: &Validation, var: &[f64], groups: &[GroupNoise]) -> f64 {
+    let mut share = [0.0; N_GROUPS];
+    for (parts, v) in val.relative_parts.iter().zip(var) {
+        if *v > 0.0 {
+            for k in 0..N_GROUPS {
+                share[k] += parts[k] / v;
+            }
+        }
+    }
+    let total: f64 = var.iter().filter(|v| **v > 0.0).count() as f64;
+    let mut spread = 0.0;
+    for (k, g) in Group::ALL.iter().enumerate() {
+        let estimated = groups
+            .iter()
+            .find(|e| e.group == g.name() && e.estimated_from_data);
+        if let Some(e) = estimated {
+            spread += share[k] * share[k] / e.dof.max(1.0);
+        }
+    }
+    if spread > 0.0 {
+        total * total / spread
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// The held-out errors as residual rows (each in its floor's σ): what the structure tests
+/// read.
+fn held_out_rows(val: &Validation, relative: &[f64], var: &[f64]) -> Vec<RowValue> {
+    val.at
+        .iter()
+        .zip(relative.iter().zip(var))
+        .map(|(&(pose, coordinate), (&e, &v))| RowValue {
+            pose,
+            instrument: val.campaign.poses[pose].instrument,
+            direction: match coordinate {
+                "x" => Direction::X(0, 3),
+                "y" => Direction::Y(0, 3),
+                _ => Direction::R(0, 3),
+            },
+            value: e,
+            sigma: v.sqrt(),
+            parts: [0.0; N_GROUPS],
+        })
+        .collect()
+}
+
+/// The variance of one held-out TCP error by noise group: its own reading's (and its
+/// encoders'), and the reading its setup was zeroed on (every error of the setup shares that
+/// one draw).
+struct ErrorVariance {
+    reading: Parts,
+    zero: f64,
+}
+
+/// The variance of every held-out TCP error, in [`obs::tcp_errors`] order: the instrument's
+/// noise at the pose and at its setup's reset pose (zeroed on a reading as noisy as any
+/// other), and the encoders' at both.
+fn validation_variances(
+    val: &Campaign,
+    errs: &[(usize, &'static str, f64)],
+    noise: &NoiseModel,
+) -> Result<Vec<ErrorVariance>, PoseError> {
+    let nominal = Params::nominal();
+    let mut reset_of = vec![None; val.poses.len()];
+    for setup in val.setups() {
+        for &i in &setup.poses {
+            reset_of[i] = setup.reset;
+        }
+    }
+    let parts = |i: usize, coordinate: &str| -> Result<Parts, PoseError> {
+        let pose = &val.poses[i];
+        let tcp = geometry::fgm(&nominal, Model::M29, pose.q[0], pose.q[3])
+            .map_err(|e| PoseError::at(val, pose, e))?;
+        let at = Vector2::new(tcp.x(), tcp.y());
+        let reading = match (coordinate, XyInstrument::of(pose.instrument)) {
+            ("x", Some(xy)) => noise.xy_parts(xy, at, Vector2::new(1.0, 0.0)),
+            ("y", Some(xy)) => noise.xy_parts(xy, at, Vector2::new(0.0, 1.0)),
+            _ => noise.scalar_parts(pose.instrument, 1.0),
+        };
+        Ok(noise::add(reading, noise.encoder_parts(1.0)))
+    };
+    errs.iter()
+        .map(|(i, coordinate, _)| {
+            // the reading the setup was zeroed on is in every error of the setup (none for a
+            // ball-bar, zeroed on no reading; the reset's encoders for every instrument)
+            let zero = match reset_of[*i] {
+                Some(r) if val.poses[r].instrument == Instrument::Dbb => noise.encoder_mm.powi(2),
+                Some(r) => parts(r, coordinate)?.iter().sum(),
+                None => 0.0,
+            };
+            Ok(ErrorVariance {
+                reading: parts(*i, coordinate)?,
+                zero,
+            })
+        })
+        .collect()
+}
+
+impl Prediction {
+    /// The comparison of the held-out TCP errors `before` and `after` (mm, the same poses in
+    /// the same order); None without poses.
+    pub fn of(before: &[f64], after: &[f64]) -> Option<Prediction> {
+        Self::compared(before, after).map(|p| Prediction {
+            rms_before: p.rms_before * 1e3,
+            rms_after: p.rms_after * 1e3,
+            standard_error: p.standard_error * 1e3,
+            unit: "um",
+            ..p
+        })
+    }
+
+    /// The comparison of errors in any one unit (left-out rows in σ: `unit` sigma).
+    pub(crate) fn compared(before: &[f64], after: &[f64]) -> Option<Prediction> {
+        let n = before.len();
+        if n < 2 || after.len() != n {
+            return None;
+        }
+        let d: Vec<f64> = before
+            .iter()
+            .zip(after)
+            .map(|(b, a)| b * b - a * a)
+            .collect();
+        let mean = d.iter().sum::<f64>() / n as f64;
+        let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        let (rb, ra) = (calib::rms(before), calib::rms(after));
+        // the RMS's fall and its error through d(RMS²) = (RMS_b + RMS_a) d(RMS)
+        let se = (var / n as f64).sqrt() / (rb + ra).max(f64::MIN_POSITIVE);
+        Some(Prediction {
+            rms_before: rb,
+            rms_after: ra,
+            standard_error: se,
+            unit: "sigma",
+            better: rb - ra > se,
+            worse: ra - rb > 2.0 * se,
+            by_setup: false,
+        })
+    }
+
+    /// One-sided p-value of the fall: how often a model no better than the current one
+    /// would predict this much better by chance (normal approximation of the paired mean).
+    pub fn p_better(&self) -> f64 {
+        if !(self.standard_error > 0.0) {
+            return if self.rms_after < self.rms_before {
+                0.0
+            } else {
+                1.0
+            };
+        }
+        stats::normal_upper_tail((self.rms_before - self.rms_after) / self.standard_error)
+    }
+
+    /// RMS of the part of the errors the change explains, √(RMS_b² − RMS_a²), in `unit`
+    /// (0 where it explains nothing).
+    pub fn explained(&self) -> f64 {
+        (self.rms_before.powi(2) - self.rms_after.powi(2))
+            .max(0.0)
+            .sqrt()
+    }
+}

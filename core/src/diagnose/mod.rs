@@ -1,0 +1,63 @@
+//! Model discovery: where the model fails, which physical effect is missing, and what the
+//! held-out error becomes once it is added. No step hinges on an assumed noise level.
+//!
+//! The stages, one file each:
+//!
+//! - [`rounds`]: the flow. Every candidate at the stated noise first (which stand out), the
+//!   current model on its own, then the candidates again under the noise estimated with
+//!   those that stood out.
+//! - [`current`]: the current model as every command evaluates it: its noise estimated from
+//!   the campaign, a family named whole settled to the parts the data can tell apart, its
+//!   held-out figures ([`evaluate`], which `rpkm calibrate` and the calibrator node use).
+//! - [`trials`]: each effect of the library (and the user's written ones) added and fitted,
+//!   screened by one Gauss-Newton step, compared by the nested F-test
+//!   F = (Δχ²/k) / (χ²₁/ν₁), free of the noise's absolute level.
+//! - [`model`]: the model chosen as a whole: the candidates that stand out, each part of a
+//!   family on its own, and pairs, judged by the evidence of both campaigns (the F-test and
+//!   the held-out or cross-validated prediction, combined), by whether the gain matters and
+//!   whether the values are physical; the simplest within one standard error of the best
+//!   predicting is named.
+//! - [`held_out`]: the held-out judge: errors with each setup's zero removed, the model's
+//!   floor (noise and the calibration's own uncertainty), the χ² test against it, the
+//!   structure of the held-out residual.
+//! - [`structure`]: the three structure tests that rest on no noise level: a dictionary of
+//!   smooth terms ([`sparse`]), a periodogram of each carrier's position ([`periodic`]),
+//!   neighbours along each setup's path ([`neighbours`]).
+//! - [`verdict`]: `missing_effect`, `unexplained_structure` (the calibration's residual or
+//!   the held-out data's, with what it follows) or `nothing_missing` (only where the held-out
+//!   data agree).
+//! - [`figures`]: residual tables, maps and error vectors; [`types`]: the vocabulary;
+//!   [`cross`]: prediction without held-out data, cross-validation by setup.
+
+pub mod cross;
+pub mod current;
+mod figures;
+pub mod held_out;
+pub mod model;
+pub mod neighbours;
+pub mod periodic;
+mod rounds;
+pub mod sparse;
+mod structure;
+mod trials;
+pub mod types;
+mod verdict;
+
+pub use current::{calib_options, evaluate, Evaluated};
+pub use held_out::{held_out_errors, HeldOutCheck};
+pub use rounds::{diagnose, diagnose_among};
+pub use trials::SCREEN_P;
+pub use types::{
+    Baseline, Candidate, DiagnoseError, Diagnosis, ErrorVector, Fit, GroupRms, Judged, ModelTrial,
+    NoiseReport, Noisier, Options, Outcome, Point, Prediction, Skipped, Test, VerdictKind,
+    NOISIER_THAN_RATED,
+};
+
+/// Fraction of an effect parameter's plausible magnitude below which a significant estimate
+/// is no missing physics: a model's approximation seen at encoder precision (a bow of
+/// 0.1 µm) is significant on a thousand rows, and irrelevant.
+pub const RELEVANT_FRACTION: f64 = 0.05;
+
+/// RMS (mm) of the length residuals below which the data are taken as noise-free (simulated):
+/// what structure remains is the solvers' round-off, not physics.
+pub const NUMERICAL_RMS_MM: f64 = 1e-6;

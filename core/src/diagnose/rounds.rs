@@ -1,0 +1,322 @@
+//! The rounds of a diagnosis.
+//!
+//! 1. At the stated noise: every candidate added to the current model and tested, to learn
+//!    which stand out (under noise estimated with the current model, its misfit inflates the
+//!    levels and dims the very effect that would explain it).
+//! 2. The current model on its own ([`Current`]): its noise, its families settled, its
+//!    held-out figures: the baseline, the same whatever candidates are offered.
+//! 3. The candidates again, the rows weighted by the noise estimated under the current model
+//!    with round 1's significant candidates (a model that misses an effect counts it as
+//!    noise, and the next step of the loop, weighted otherwise, would judge another
+//!    problem), and the model chosen as a whole ([`model::search`]).
+
+use super::current::{calib_options, noise_of, structure_level, Current};
+use super::figures::{error_vectors, length_values};
+use super::held_out;
+use super::model::{self, Judge};
+use super::trials::{candidates, finish, try_all, Round};
+use super::types::{Candidate, DiagnoseError, Diagnosis, Fitted, Options};
+use super::verdict::{conclude, Concluded};
+use super::{sparse, NUMERICAL_RMS_MM};
+use crate::calib::{self, Calibration};
+use crate::campaign::Campaign;
+use crate::effects::{self, Effect};
+use crate::params::Model;
+
+/// Diagnose `campaign` with `in_model` effects already in the model; `validation` is held out.
+pub fn diagnose(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    in_model: &[&dyn Effect],
+    opts: &Options,
+) -> Result<Diagnosis, DiagnoseError> {
+    diagnose_among(campaign, validation, in_model, &[], opts)
+}
+
+/// [`diagnose`], with the effects `offered` (written ones, `effects::Written`) tried as
+/// candidates beside the library's: the same tests, at the same level for each.
+pub fn diagnose_among(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    in_model: &[&dyn Effect],
+    offered: &[&dyn Effect],
+    opts: &Options,
+) -> Result<Diagnosis, DiagnoseError> {
+    let diagnosis = rounds(campaign, validation, in_model, offered, opts);
+    // a fit stopped part-way fails as it can (a candidate not fitted, a round's error):
+    // whatever came of it, a stopped diagnosis concludes nothing
+    if opts.stopped() {
+        return Err(DiagnoseError::Cancelled);
+    }
+    diagnosis
+}
+
+/// The rounds of [`diagnose_among`] (see the module documentation).
+fn rounds(
+    campaign: &Campaign,
+    validation: Option<&Campaign>,
+    in_model: &[&dyn Effect],
+    offered: &[&dyn Effect],
+    opts: &Options,
+) -> Result<Diagnosis, DiagnoseError> {
+    let library = effects::library();
+    // a family in the model in any form is not a candidate again
+    let in_families: Vec<&str> = in_model
+        .iter()
+        .map(|e| effects::family_of(e.name()))
+        .collect();
+    let tried: Vec<&dyn Effect> = library
+        .iter()
+        .map(std::convert::AsRef::as_ref)
+        .chain(offered.iter().copied())
+        .filter(|e| !in_families.contains(&effects::family_of(e.name())))
+        .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
+        .collect();
+    let variants = model::part_variants(&tried, false);
+    let swaps = model::part_variants(in_model, true);
+    let level = opts.alpha / tried.len().max(1) as f64;
+    let stated = calib_options(opts);
+    let first = Search {
+        campaign,
+        validation,
+        in_model,
+        tried: &tried,
+        level,
+        threads: opts.threads,
+        screen: opts.screen,
+    };
+    let (base1, round1, cal1) = first.round(&stated, None)?;
+    if opts.stopped() {
+        return Err(DiagnoseError::Cancelled);
+    }
+    // noise-free (simulated) data: no noise to estimate, the stated weights stay
+    if calib::rms(&length_values(&base1.rows)) < NUMERICAL_RMS_MM {
+        return exact(&first, (base1, round1, cal1), (&variants, level), opts);
+    }
+    let current = Current::of(campaign, validation, in_model, opts, cal1.as_ref())?;
+    if opts.stopped() {
+        return Err(DiagnoseError::Cancelled);
+    }
+    let settled = current.settled.effects(in_model);
+    let (copts, compared_under, fitted) = comparison_weights(
+        (campaign, opts),
+        &current,
+        &settled,
+        (&round1.candidates, &tried),
+    )?;
+    let second = Search {
+        in_model: &settled,
+        ..first
+    };
+    let (base, mut round, _) = second.round(&copts, fitted)?;
+    let val = held_out::held_out(validation, &copts.noise)?;
+    let judge = Judge {
+        campaign,
+        val: val.as_ref(),
+        in_model: &settled,
+        base: &base,
+        copts: &copts,
+        level,
+        structure_level: structure_level(opts),
+        // the noise the comparisons are weighted with: the current model's own may hold what
+        // it misses
+        floor_mm: val.as_ref().map(|v| calib::rms(&v.relative_sigma)),
+        base_cv: std::cell::OnceCell::new(),
+    };
+    let structure = sparse::structure(campaign, &base.rows);
+    let (trials, choice) = model::search(
+        &judge,
+        (&mut round.candidates, &round.fits),
+        (&tried, &variants, &swaps),
+        &structure,
+    );
+    Ok(conclude(Concluded {
+        campaign,
+        opts,
+        in_model,
+        model_effects: &settled,
+        base: &base,
+        current: &current,
+        round,
+        trials,
+        choice,
+        compared_under,
+        level,
+        tried: tried.len(),
+    }))
+}
+
+/// The weights the candidates are compared with: the noise estimated under the current model
+/// (settled) with round 1's significant candidates (fitted together, else the strongest
+/// alone), the names of those, and the current model's calibration with them where it is
+/// at hand; the current model's own where none stood out.
+fn comparison_weights(
+    (campaign, opts): (&Campaign, &Options),
+    current: &Current,
+    settled: &[&dyn Effect],
+    (round1, tried): (&[Candidate], &[&dyn Effect]),
+) -> Result<(calib::Options, Vec<String>, Option<Calibration>), DiagnoseError> {
+    let under = noise_model(settled, round1, tried, Candidates::Significant);
+    if under.len() == settled.len() {
+        return Ok((current.copts.clone(), Vec::new(), Some(current.cal.clone())));
+    }
+    let (under, copts) = if let Ok((_, _, copts)) = noise_of(campaign, &under, opts, None) {
+        (under, copts)
+    } else {
+        // the significant candidates together cannot be fitted (one absorbs another to a
+        // singular step): the strongest alone
+        let one = noise_model(settled, round1, tried, Candidates::Strongest);
+        let (_, _, copts) = noise_of(campaign, &one, opts, None)?;
+        (one, copts)
+    };
+    let names = under[settled.len()..]
+        .iter()
+        .map(|e| e.name().to_owned())
+        .collect();
+    Ok((copts, names, None))
+}
+
+/// The diagnosis of noise-free (simulated) data: the stated weights, no noise estimated.
+fn exact(
+    first: &Search,
+    (base, mut round, cal): (Fitted, Round, Option<Calibration>),
+    (variants, level): (&[Box<dyn Effect>], f64),
+    opts: &Options,
+) -> Result<Diagnosis, DiagnoseError> {
+    let stated = calib_options(opts);
+    let val = held_out::held_out(first.validation, &opts.noise)?;
+    let cal = base_cal(first, cal, &stated)?;
+    let current = Current::exact(
+        (first.campaign, val.as_ref()),
+        first.in_model,
+        cal,
+        &stated,
+        opts,
+    )?;
+    let judge = Judge {
+        campaign: first.campaign,
+        val: val.as_ref(),
+        in_model: first.in_model,
+        base: &base,
+        copts: &stated,
+        level,
+        structure_level: structure_level(opts),
+        floor_mm: val.as_ref().map(|v| calib::rms(&v.relative_sigma)),
+        base_cv: std::cell::OnceCell::new(),
+    };
+    let structure = sparse::structure(first.campaign, &base.rows);
+    let (trials, choice) = model::search(
+        &judge,
+        (&mut round.candidates, &round.fits),
+        (first.tried, variants, &[]),
+        &structure,
+    );
+    Ok(conclude(Concluded {
+        campaign: first.campaign,
+        opts,
+        in_model: first.in_model,
+        model_effects: first.in_model,
+        base: &base,
+        current: &current,
+        round,
+        trials,
+        choice,
+        compared_under: Vec::new(),
+        level,
+        tried: first.tried.len(),
+    }))
+}
+
+/// The current model's calibration of a round: the one the round made, else made here.
+fn base_cal(
+    search: &Search,
+    cal: Option<Calibration>,
+    copts: &calib::Options,
+) -> Result<Calibration, DiagnoseError> {
+    match cal {
+        Some(cal) => Ok(cal),
+        None => super::current::fit_model(search.campaign, search.in_model, copts),
+    }
+}
+
+/// What every round of a diagnosis shares.
+#[derive(Clone, Copy)]
+pub(crate) struct Search<'a> {
+    pub campaign: &'a Campaign,
+    pub validation: Option<&'a Campaign>,
+    pub in_model: &'a [&'a dyn Effect],
+    pub tried: &'a [&'a dyn Effect],
+    /// Level of each candidate's test (Bonferroni over the candidates).
+    level: f64,
+    /// Threads the candidates are fitted on.
+    threads: usize,
+    /// Whether candidates are screened first ([`Options::screen`]).
+    screen: bool,
+}
+
+impl Search<'_> {
+    /// The current model and every candidate, calibrated with `copts` (its noise weights the
+    /// rows and the held-out errors); the current model's calibration with `copts` when it
+    /// is at hand (`fitted`), else made here and returned.
+    fn round(
+        &self,
+        copts: &calib::Options,
+        fitted: Option<Calibration>,
+    ) -> Result<(Fitted, Round, Option<Calibration>), DiagnoseError> {
+        let val = held_out::held_out(self.validation, &copts.noise)?;
+        let cal = match fitted {
+            Some(cal) => cal,
+            None => super::current::fit_model(self.campaign, self.in_model, copts)?,
+        };
+        // a picture, not a number the verdict rests on: a pose the forward model cannot
+        // solve costs the arrows, not the diagnosis
+        let vectors = error_vectors(self.campaign, self.in_model, &cal, copts.model)
+            .map_err(|e| e.to_string());
+        let made = Some(cal.clone());
+        let base = finish(self.campaign, val.as_ref(), self.in_model, cal, copts)?;
+        let tries = try_all(
+            self.campaign,
+            val.as_ref(),
+            (self.in_model, &base.fit),
+            self.tried,
+            copts,
+            (self.threads, self.screen),
+        );
+        let round = Round {
+            vectors,
+            ..candidates(self.campaign, self.tried, tries, &base, self.level)
+        };
+        Ok((base, round, made))
+    }
+}
+
+/// Which of round 1's candidates join the current model for the noise estimate.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Candidates {
+    /// Every significant one that could be named.
+    Significant,
+    /// The most significant alone.
+    Strongest,
+}
+
+/// The model the noise of the comparisons is estimated under: the current model and round
+/// 1's candidates `which`, most significant first.
+fn noise_model<'a>(
+    in_model: &[&'a dyn Effect],
+    candidates: &[Candidate],
+    tried: &[&'a dyn Effect],
+    which: Candidates,
+) -> Vec<&'a dyn Effect> {
+    let mut open: Vec<&Candidate> = candidates
+        .iter()
+        .filter(|c| c.significant && c.relevant)
+        .collect();
+    open.sort_by(|a, b| a.p_value.total_cmp(&b.p_value));
+    if which == Candidates::Strongest {
+        open.truncate(1);
+    }
+    let added = open
+        .iter()
+        .filter_map(|c| tried.iter().find(|e| e.name() == c.effect).copied());
+    in_model.iter().copied().chain(added).collect()
+}

@@ -1,0 +1,42 @@
+//! The three structure tests of a residual, none resting on the noise's level: the
+//! dictionary of smooth terms ([`super::sparse`]), the periodogram of the carriers'
+//! positions ([`super::periodic`]) and neighbours along the setups' paths
+//! ([`super::neighbours`]). The calibration's residual and the held-out residual are tested
+//! alike.
+
+use super::{neighbours, periodic, sparse};
+use crate::campaign::Campaign;
+use crate::obs::RowValue;
+
+/// What the three tests found in one residual.
+pub(crate) struct Shape {
+    pub dictionary: sparse::Structure,
+    pub periodic: Option<periodic::Periodic>,
+    pub neighbours: Option<neighbours::Neighbours>,
+    /// Each test's level (a third of the diagnosis's: the family's stays α).
+    level: f64,
+}
+
+impl Shape {
+    /// The three tests of the residual `rows` of `campaign`, each at `level`.
+    pub fn of(campaign: &Campaign, rows: &[RowValue], level: f64) -> Shape {
+        Shape {
+            dictionary: sparse::structure(campaign, rows),
+            periodic: periodic::periodogram(campaign, rows, level),
+            neighbours: neighbours::neighbours(campaign, rows),
+            level,
+        }
+    }
+
+    /// Whether any of the three finds structure at its level.
+    pub fn structured(&self) -> bool {
+        self.smallest_p() < self.level
+    }
+
+    /// The smallest of the three p-values (1 where none could be made).
+    pub fn smallest_p(&self) -> f64 {
+        let periodic = self.periodic.as_ref().map_or(1.0, |p| p.p_value);
+        let neighbours = self.neighbours.as_ref().map_or(1.0, |n| n.p_value);
+        self.dictionary.p_value.min(periodic).min(neighbours)
+    }
+}

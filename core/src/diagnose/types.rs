@@ -1,0 +1,503 @@
+//! The diagnosis's vocabulary: its options, errors and results. Every stage reads this file;
+//! it reads none of them.
+
+use super::held_out::HeldOutCheck;
+use super::{neighbours, periodic, sparse};
+use crate::calib::{self, CalibrationError, EffectEstimate, Prior};
+use crate::effects::NotApplicable;
+use crate::noise::NoiseModel;
+use crate::obs::{PoseError, RowValue};
+use crate::params::{Model, Params};
+use crate::variance::GroupNoise;
+use std::collections::BTreeMap;
+
+/// Options of a diagnosis.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// The geometric model (24: rod 5 linked to rod 4).
+    pub model: Model,
+    /// Significance level of the tests (family-wise over the candidates).
+    pub alpha: f64,
+    /// The instruments' stated noise: the start of the estimation, and the rating the
+    /// estimates are compared with.
+    pub noise: NoiseModel,
+    /// How the rows are weighted once the strongest candidate is known: by each noise
+    /// group's level estimated from the campaign (default), or by the stated levels.
+    pub weighting: calib::Noise,
+    /// Manufacturing tolerances of the geometric parameters.
+    pub prior: Prior,
+    /// Threads the candidate effects are fitted on (0: every core). The result does not
+    /// depend on it.
+    pub threads: usize,
+    /// Screen the candidates (default): each first takes one Gauss-Newton step from the
+    /// current model's minimum, and only one that may be significant then (p below
+    /// [`SCREEN_P`]) is fitted to convergence. False: every candidate is fitted to
+    /// convergence (the same verdicts, several times the time; for comparison).
+    pub screen: bool,
+    /// Set from another thread to stop the diagnosis: its fits stop at their next LM
+    /// iteration and it returns [`DiagnoseError::Cancelled`].
+    pub stop: Option<calib::Stop>,
+}
+
+impl Options {
+    /// Whether the caller asked the diagnosis to stop ([`Options::stop`]).
+    pub(crate) fn stopped(&self) -> bool {
+        self.stop.as_ref().is_some_and(calib::Stop::requested)
+    }
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            model: Model::M24,
+            alpha: 0.001,
+            noise: NoiseModel::default(),
+            weighting: calib::Noise::ESTIMATE,
+            prior: Prior::default(),
+            threads: 0,
+            screen: true,
+            stop: None,
+        }
+    }
+}
+
+/// A diagnosis that could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum DiagnoseError {
+    #[error("cancelled")]
+    Cancelled,
+    #[error("calibrating the current model: {0}")]
+    Baseline(#[source] CalibrationError),
+    #[error("effect in the model: {0}")]
+    Effect(#[from] NotApplicable),
+    #[error("held-out data: {0}")]
+    Validation(#[source] PoseError),
+    #[error("TCP error vectors: {0}")]
+    Vectors(#[source] PoseError),
+}
+
+/// The fit of one model (the current one, or with a candidate effect).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Fit {
+    /// χ² = Σ (r/σ)² of the calibration rows, its degrees of freedom (rows less the
+    /// effective number of parameters) and χ²/ν.
+    pub chi2: f64,
+    pub dof: f64,
+    pub chi2_per_dof: f64,
+    /// RMS of the length rows of the calibration (µm).
+    pub cal_rms_um: f64,
+    /// RMS of the held-out TCP errors (µm), if there are held-out data.
+    pub val_rms_um: Option<f64>,
+    /// The held-out TCP errors (mm) less the mean of their setup and coordinate (the zero
+    /// reading's error, which no model predicts), to compare two models pose by pose.
+    #[serde(skip)]
+    pub val_errors: Vec<f64>,
+    /// Effect parameters identified.
+    pub effect_params: Vec<EffectEstimate>,
+    /// Parameter combinations the campaign determined better than their tolerance, of how
+    /// many.
+    pub determined: Option<(usize, usize)>,
+    /// The identified geometric parameters.
+    #[serde(skip)]
+    pub params: Params,
+    /// The effects' parameters (the calibration's θ).
+    #[serde(skip)]
+    pub theta: Vec<f64>,
+}
+
+/// The current model's fit and its test against the stated noise (the JSON's `baseline`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Baseline {
+    pub cal_rms_um: f64,
+    pub val_rms_um: Option<f64>,
+    /// RMS that noise alone would give on the held-out errors (or, without held-out data, on
+    /// the calibration's length rows), µm, at the estimated noise levels. It counts the
+    /// reading each setup was zeroed on at its variance, but all the poses of a setup share
+    /// that one draw: with few setups the held-out RMS strays from it by that draw.
+    pub noise_floor_um: f64,
+    /// The held-out RMS with each setup's zero removed (its errors less their mean, per
+    /// coordinate: what a model can predict), µm, and the RMS noise alone would give there:
+    /// the zero reading cancels, so they compare like with like whatever it drew.
+    pub val_rms_relative_um: Option<f64>,
+    pub noise_floor_relative_um: Option<f64>,
+    /// χ² against the stated (not the estimated) noise, its dof and p-value: how the
+    /// residual compares with the instruments' rating. Not used by the verdict.
+    pub chi2: f64,
+    pub dof: f64,
+    pub chi2_per_dof: f64,
+    /// P(χ²_ν ≥ χ²): small when the residual is more than the rated noise.
+    pub p_value: f64,
+    pub consistent_with_noise: bool,
+    /// The held-out TCP errors (mm) less their setup's zero mean, as candidates are judged:
+    /// to compare the models of successive diagnoses pose by pose ([`Prediction::of`]).
+    #[serde(skip)]
+    pub val_errors: Vec<f64>,
+}
+
+/// An effect tried as an addition to the model.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Candidate {
+    pub effect: String,
+    pub significant: bool,
+    /// Whether its size matters: some identified parameter reaches [`RELEVANT_FRACTION`] of
+    /// the plausible magnitude the effect declares for it.
+    pub relevant: bool,
+    /// Fraction of the calibration's χ² above its degrees of freedom that the effect
+    /// removes, 0..1.
+    pub explained_fraction: f64,
+    pub val_rms_before_um: Option<f64>,
+    pub val_rms_after_um: Option<f64>,
+    pub chi2_per_dof_after: f64,
+    /// Nested F-test of the whole family: statistic, its degrees of freedom and p-value.
+    pub f_statistic: f64,
+    pub f_dof: (f64, f64),
+    pub p_value: f64,
+    /// Improvement of the Bayesian information criterion (Δχ² − k ln n) of the parts kept:
+    /// the ranking.
+    pub bic_gain: f64,
+    /// The effect's parameters as identified (parts the data do not support held at 0,
+    /// `identified` false).
+    pub params: Vec<EffectEstimate>,
+    /// χ²/dof of the current model (at the estimated noise), before the effect.
+    pub chi2_per_dof_before: f64,
+    /// The covariate of the effect the current model's residual follows most, if the effect
+    /// has covariates: the evidence an engineer can check in the data.
+    pub follows: Option<sparse::Pointer>,
+    /// Whether the model predicts better with it: held-out errors compared pose by pose
+    /// (None without held-out data).
+    pub prediction: Option<Prediction>,
+    /// The same judged by cross-validation by setup on the calibration campaign, where the
+    /// held-out data cannot tell (none, or a change within its standard error: an effect the
+    /// held-out instrument does not see, forces, or setup-local parameters), for a candidate
+    /// that could be named.
+    pub cross_validated: Option<Prediction>,
+    /// The evidence of both campaigns, whether it matters, whether its values are physical,
+    /// and what the model search made of it.
+    #[serde(flatten)]
+    pub judged: Judged,
+}
+
+impl Candidate {
+    /// How the candidate alone predicts: the held-out comparison where it decides (better,
+    /// or clearly worse), else cross-validation by setup.
+    pub fn alone(&self) -> Option<Prediction> {
+        self.prediction
+            .filter(|p| p.better || p.worse)
+            .or(self.cross_validated)
+    }
+}
+
+/// Does a candidate make the model predict better? Its held-out RMS against the current
+/// model's, on the same poses: an effect that fits the campaign and predicts worse absorbs
+/// something else, and is never named.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct Prediction {
+    /// RMS of the errors before and after, in `unit`.
+    pub rms_before: f64,
+    pub rms_after: f64,
+    /// Standard error of the fall, from the paired squared errors.
+    pub standard_error: f64,
+    /// `um` (held-out TCP errors) or `sigma` (left-out rows of every instrument, each in its
+    /// own noise).
+    pub unit: &'static str,
+    /// The RMS fell by more than its standard error.
+    pub better: bool,
+    /// The RMS rose by more than twice its standard error: clearly worse (a rise within
+    /// that is a tie, which the held-out data do not decide: an effect they do not see
+    /// would otherwise be refused one time in six by chance).
+    pub worse: bool,
+    /// Judged by cross-validation by setup on the calibration campaign.
+    pub by_setup: bool,
+}
+
+/// How an addition to the model fares on both campaigns (a candidate alone, or a
+/// combination the model search tried).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Judged {
+    /// Fisher's combination of the calibration campaign's F-test and the prediction's
+    /// one-sided test (held-out data, else cross-validation by setup): the evidence of both
+    /// campaigns, compared with the candidates' level. The F-test's p alone where nothing
+    /// predicts.
+    pub evidence_p: f64,
+    /// RMS of the prediction error the addition explains, √(RMS_b² − RMS_a²), over the
+    /// noise there (the held-out floor, or 1 for left-out rows in σ); on the calibration's
+    /// rows where nothing predicts.
+    pub size: Option<f64>,
+    /// Whether it matters: `size` reaches [`super::model::PRACTICAL_SIZE`].
+    pub matters: bool,
+    /// Effect parameters fitted clearly outside the values the physics allows (more than
+    /// 3σ): "alpha_rods = -275 ± 27 ppm/K outside -5..40".
+    pub implausible: Vec<String>,
+    /// What the model search made of it.
+    pub outcome: Outcome,
+}
+
+impl Default for Judged {
+    fn default() -> Self {
+        Judged {
+            evidence_p: 1.0,
+            size: None,
+            matters: false,
+            implausible: Vec::new(),
+            outcome: Outcome::NotSignificant,
+        }
+    }
+}
+
+/// Why an addition to the model was or was not named (JSON: snake case).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    /// The model the diagnosis names (alone or with its partner).
+    Named,
+    /// Predicts within one standard error of the model named, which is simpler.
+    SimplerNamed,
+    /// Predicts worse than the model named by more than a standard error.
+    Outpredicted,
+    /// The evidence of both campaigns is short of the level.
+    NotSignificant,
+    /// The held-out (or left-out) data predict clearly worse with it.
+    Contradicted,
+    /// Significant, but it does not predict better.
+    NoBetter,
+    /// A model of several effects that predicts no better than without one of them.
+    MemberAddsNothing,
+    /// A model that holds it and more (another part of a family, another effect) beats it:
+    /// it leaves out something that earns its place.
+    Incomplete,
+    /// Statistically detectable, too small to matter.
+    TooSmall,
+    /// Fitted values outside what the physics allows: it absorbs something else.
+    Implausible,
+    /// No parameter of it reaches a twentieth of its plausible size.
+    Irrelevant,
+    /// A single term of the residual's dictionary explains as much, and the effect leaves
+    /// structure behind.
+    OutdoneByTerm,
+}
+
+/// One model the search tried: the current model with `added`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ModelTrial {
+    /// The effects added (a family's parts pinned: `thermal:rods`).
+    pub added: Vec<String>,
+    /// A family of the current model fitted with other parts than it settled to, in its
+    /// place (`thermal:rods+frame`): the parts a family keeps may change with the effect
+    /// added.
+    pub instead: Option<String>,
+    /// Parameters it adds (effective: what the data determine).
+    pub k: f64,
+    /// Nested F-test against the current model on the calibration campaign.
+    pub f_statistic: f64,
+    pub p_value: f64,
+    pub chi2_per_dof_after: f64,
+    /// The prediction of held-out (or left-out) data against the current model's.
+    pub prediction: Option<Prediction>,
+    /// The added effects' parameters as fitted.
+    pub params: Vec<EffectEstimate>,
+    #[serde(flatten)]
+    pub judged: Judged,
+}
+
+/// An effect that could not be tried, and why.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Skipped {
+    pub effect: String,
+    pub reason: String,
+}
+
+/// RMS of one instrument direction against its (estimated) noise.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct GroupRms {
+    pub instrument: String,
+    pub direction: String,
+    pub rows: usize,
+    /// µm (µrad for ψ, N for a drive force).
+    pub rms: f64,
+    pub noise: f64,
+    pub chi2_per_row: f64,
+}
+
+/// One calibration residual, located for plots (heat maps over the workspace, against time
+/// and covariates).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Point {
+    pub pose: usize,
+    pub line: usize,
+    pub instrument: String,
+    pub direction: String,
+    /// TCP of the pose (nominal forward model of q1, q4), mm.
+    pub x: f64,
+    pub y: f64,
+    pub t: f64,
+    /// Residual and its σ: µm (µrad for ψ, N for a drive force).
+    pub value: f64,
+    pub sigma: f64,
+}
+
+/// What the diagnosis concludes (the JSON's `verdict_kind`; other tools rely on the names).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum VerdictKind {
+    NothingMissing,
+    MissingEffect,
+    UnexplainedStructure,
+}
+
+/// One noise group in the JSON's `noise` map.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct NoiseReport {
+    pub unit: &'static str,
+    pub assumed: f64,
+    pub estimated: f64,
+    pub dof: f64,
+}
+
+/// The diagnosis (serialises to the JSON other tools read: `verdict_kind`, `missing_effect`,
+/// `noise`, `baseline`, `candidates`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Diagnosis {
+    pub model: String,
+    /// The effects in the model as given (`--effects`).
+    pub effects_in_model: Vec<String>,
+    /// The same as fitted: a family named whole keeps the parts the data can tell apart
+    /// (`thermal` fitted as `thermal:rods`).
+    pub model_effects: Vec<String>,
+    /// The current model's effect parameters as fitted: value, σ and unit.
+    pub effect_values: Vec<EffectEstimate>,
+    pub verdict_kind: VerdictKind,
+    /// The effect to add (`--effects` takes it; a family by its name, its parts left to the
+    /// data), the first of `missing_effects`.
+    pub missing_effect: Option<String>,
+    /// The model the diagnosis names, whole: every effect to add, a family's parts as the
+    /// search chose them (`thermal:rods`, `preload_elastic`).
+    pub missing_effects: Vec<String>,
+    /// χ²/dof of the current model at the estimated noise (near 1 when nothing is missing).
+    pub chi2_per_dof: f64,
+    /// The current model's calibrated geometric parameters (mm, rad) by name: the
+    /// calibration the verdict rests on, the one `rpkm calibrate` makes with the same options.
+    pub parameters: BTreeMap<String, f64>,
+    /// Per group: the stated and the estimated noise, under the current model (the
+    /// baseline's: the same whatever candidates are offered).
+    pub noise: BTreeMap<String, NoiseReport>,
+    /// The candidates were compared with the rows weighted by the noise estimated under the
+    /// current model with these (significant at the stated noise, fitted together): a model
+    /// that misses an effect would count it as noise. Empty: the current model's own noise.
+    pub compared_under: Vec<String>,
+    /// The same, with whether each was estimated from the data.
+    #[serde(skip)]
+    pub noise_groups: Vec<GroupNoise>,
+    /// Parameter combinations the campaign determined better than their tolerance, of how
+    /// many (the rest stayed at the prior).
+    pub determined: Option<(usize, usize)>,
+    pub baseline: Baseline,
+    /// The held-out judge on the current model (None without held-out data): the model
+    /// explains the calibration campaign, and the held-out data agree, or do not.
+    pub held_out: Option<HeldOutCheck>,
+    pub candidates: Vec<Candidate>,
+    /// The models the search tried beyond single candidates: a family's parts, pairs.
+    pub trials: Vec<ModelTrial>,
+    pub skipped: Vec<Skipped>,
+    /// The dictionary test of the current model's residual.
+    pub structure: sparse::Structure,
+    /// The strongest period of the current model's residual in a carrier's position.
+    pub periodic: Option<periodic::Periodic>,
+    /// The direction whose residuals are most alike along the setups' paths.
+    pub neighbours: Option<neighbours::Neighbours>,
+    /// The dictionary term that explained the residual as well as the named effect: the
+    /// effect was preferred because it predicts held-out data, which a term cannot.
+    pub tied_term: Option<String>,
+    /// The second missing effect, where the model named holds two (alone, each absorbs part
+    /// of the other): add both.
+    pub together_with: Option<String>,
+    /// Noise groups estimated more than [`NOISIER_THAN_RATED`] times their rating: either
+    /// the instrument is that noisy or something is missing that the tests cannot see.
+    pub noisier_than_rated: Vec<Noisier>,
+    /// What the residual left by the verdict's model follows, when it is still structured.
+    pub unexplained: Option<sparse::Pointer>,
+    pub groups: Vec<GroupRms>,
+    /// Residuals of the current model, worst (largest |r/σ|) first.
+    pub points: Vec<Point>,
+    /// The current model's TCP error of every tracker and grid-encoder pose as a vector, from
+    /// the same fit as `points`.
+    pub error_vectors: Vec<ErrorVector>,
+    /// Why `error_vectors` is empty although the campaign has such poses, if it is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error_vectors_missing: Option<String>,
+    /// How the verdict was tested.
+    pub test: Test,
+}
+
+/// How a diagnosis tested its verdict.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct Test {
+    /// Rounds of the noise estimation per group.
+    pub noise_rounds: usize,
+    /// Level of each candidate's nested F-test (Bonferroni over the candidates tried).
+    pub candidate_level: f64,
+    pub candidates_tried: usize,
+    /// Level of the dictionary test of the residual.
+    pub dictionary_level: f64,
+    /// Level of the held-out χ² test against the model's floor.
+    pub held_out_level: f64,
+    /// Rows of the calibration.
+    pub rows: usize,
+}
+
+/// A fit that failed.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum FitError {
+    #[error(transparent)]
+    Calibration(#[from] CalibrationError),
+    #[error(transparent)]
+    Effect(#[from] NotApplicable),
+    #[error(transparent)]
+    Validation(#[from] PoseError),
+}
+
+impl From<FitError> for DiagnoseError {
+    /// A failed fit of the model being diagnosed.
+    fn from(e: FitError) -> Self {
+        match e {
+            FitError::Calibration(c) => DiagnoseError::Baseline(c),
+            FitError::Effect(n) => DiagnoseError::Effect(n),
+            FitError::Validation(v) => DiagnoseError::Validation(v),
+        }
+    }
+}
+
+/// What one fit produced: its final rows and statistics.
+pub(crate) struct Fitted {
+    pub rows: Vec<RowValue>,
+    pub fit: Fit,
+}
+
+/// A noise estimate this many times the stated level (the rating, or the spec's default) is
+/// never taken silently.
+pub const NOISIER_THAN_RATED: f64 = 2.0;
+
+/// A noise group estimated well above its rating.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Noisier {
+    pub group: String,
+    /// Estimated over stated level.
+    pub ratio: f64,
+}
+
+/// The TCP error of one pose of a 2-D relative instrument (laser tracker, grid encoder) as a
+/// vector: the model's TCP displacement from the setup's reset pose minus the instrument's
+/// reading (µm), where the pose and its reset pose are (nominal forward model, mm). The
+/// classic picture of a calibration: an arrow per pose over the workspace.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ErrorVector {
+    pub pose: usize,
+    pub line: usize,
+    pub instrument: String,
+    pub setup: String,
+    pub x: f64,
+    pub y: f64,
+    pub reset_x: f64,
+    pub reset_y: f64,
+    pub dx_um: f64,
+    pub dy_um: f64,
+}
