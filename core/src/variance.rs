@@ -45,6 +45,9 @@ pub struct GroupNoise {
     /// Degrees of freedom of the estimate (the group's share of the redundancy).
     pub dof: f64,
     pub estimated_from_data: bool,
+    /// Whether `assumed` is the default rating, [`NoiseModel::default`]'s (the spec's figure,
+    /// or rpkm's own where the spec gives none), rather than one stated with `--noise`.
+    pub default_rating: bool,
 }
 
 /// The noise a campaign shows.
@@ -144,6 +147,7 @@ impl Levels {
         rounds: usize,
     ) -> NoiseEstimate {
         let distance = mean_tracker_distance(campaign, stated);
+        let default = NoiseModel::default();
         let groups = Group::ALL
             .iter()
             .filter(|g| rows.iter().any(|r| r.parts[g.index()] > 0.0))
@@ -157,6 +161,10 @@ impl Levels {
                     estimated: weighted.sigma(g, distance) * scale,
                     dof: self.dof[k],
                     estimated_from_data: self.dof[k] >= MIN_DOF,
+                    default_rating: {
+                        let (a, b) = (stated.sigma(g, distance), default.sigma(g, distance));
+                        (a - b).abs() <= 1e-9 * b.abs()
+                    },
                 }
             })
             .collect();

@@ -194,6 +194,8 @@ pub trait ReplayPort {
     fn topic(&self) -> &'static str;
     /// Decodes `cdr` (with encapsulation header) and publishes it.
     fn publish(&self, cdr: &[u8]) -> Result<(), ReplayError>;
+    /// Hands the last samples of a transient-local topic to subscribers that joined since.
+    fn deliver_history(&self) -> Result<(), ReplayError>;
 }
 
 /// A payload that cannot be published.
@@ -225,6 +227,9 @@ impl<T: IpcMessage> ReplayPort for Replayer<T> {
             source,
         })?;
         Ok(self.publisher.publish(&msg)?)
+    }
+    fn deliver_history(&self) -> Result<(), ReplayError> {
+        Ok(self.publisher.deliver_history()?)
     }
 }
 

@@ -22,7 +22,7 @@ impl Shape {
     pub fn of(campaign: &Campaign, rows: &[RowValue], level: f64) -> Shape {
         Shape {
             dictionary: sparse::structure(campaign, rows),
-            periodic: periodic::periodogram(campaign, rows),
+            periodic: periodic::periodogram(campaign, rows, level),
             neighbours: neighbours::neighbours(campaign, rows),
             level,
         }

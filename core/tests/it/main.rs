@@ -18,6 +18,7 @@ mod calibration_shared_rows;
 mod campaign_proptest;
 mod campaign_reader;
 mod circular_test;
+mod diagnose_periodic;
 mod diagnose_twin;
 mod effects_jacobian;
 mod elastic_fe;

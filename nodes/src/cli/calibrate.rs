@@ -488,8 +488,10 @@ fn print_stages(stages: &[Stage]) {
     if let Some(last) = stages.last() {
         for e in last.effect_params.iter().filter(|e| e.identified) {
             println!(
-                "  {}.{} = {:.4} ± {:.4} {}",
-                e.effect, e.name, e.value, e.sigma, e.unit
+                "  {}.{} = {}",
+                e.effect,
+                e.name,
+                crate::words::with_sigma(e.value, e.sigma, &e.unit)
             );
         }
     }
@@ -606,22 +608,22 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
         campaign.source, cal.model, cal.rows, cal.iterations
     );
     println!(
-        "\n{:<8} {:>14} {:>14} {:>11} {:>6}",
-        "param", "nominal", "identified", "sigma", "step"
+        "\n{:<8} {:>14} {:>14} {:>6}   {:<5} identified - nominal",
+        "param", "nominal", "identified", "step", "unit"
     );
     for id in &cal.identified {
-        let (s, u) = if params::unit(id.index) == params::Unit::Rad {
-            (1e3, "mrad")
+        let (s, u, base) = if params::unit(id.index) == params::Unit::Rad {
+            (1e3, "mrad", "rad")
         } else {
-            (1.0, "mm")
+            (1.0, "mm", "mm")
         };
         println!(
-            "{:<8} {:>14.6} {:>14.6} {:>11.2e} {:>6}   {u}",
+            "{:<8} {:>14.6} {:>14.6} {:>6}   {u:<5} {}",
             id.name,
             id.nominal * s,
             id.value * s,
-            id.sigma * s,
-            id.step
+            id.step,
+            crate::words::with_sigma(id.value - id.nominal, id.sigma, base)
         );
     }
     print_effects(&cal.effects);
@@ -641,8 +643,8 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
         );
     }
     println!(
-        "\ncondition number of the identification: {:.1}",
-        cal.condition_number
+        "\ncondition number of the identification: {}",
+        crate::words::condition(cal.condition_number, cal.determined)
     );
     println!(
         "chi-square per degree of freedom: {:.2} (1 = residual at the instruments' noise)",
@@ -682,11 +684,9 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
 fn print_effects(effects: &[calib::EffectEstimate]) {
     for e in effects {
         println!(
-            "{:<24} {:>14.6} {:>11.2e} {}{}",
+            "{:<24} {}{}",
             format!("{}.{}", e.effect, e.name),
-            e.value,
-            e.sigma,
-            e.unit,
+            crate::words::with_sigma(e.value, e.sigma, &e.unit),
             if e.identified {
                 ""
             } else {
@@ -723,7 +723,9 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
         "parameters": parameters,
         "identified": cal.identified,
         "rms": cal.rms,
+        // null where infinite; the words say what that means
         "condition_number": cal.condition_number,
+        "condition": crate::words::condition(cal.condition_number, cal.determined),
         "chi2_per_dof": cal.chi2_per_dof,
         "iterations": cal.iterations,
         "rows": cal.rows,

@@ -101,6 +101,7 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
     let mut counts = vec![0u64; ports.len()];
     let mut t0: Option<u64> = None;
     let start = Instant::now();
+    let mut last_history = start;
     // The bag is read as it goes, a chunk at a time (memory: a chunk, not the bag).
     for message in bag.messages() {
         let message = message.map_err(|e| match e {
@@ -134,6 +135,7 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
             }
         })?;
         counts[port] += 1;
+        deliver_history(&ports, &mut last_history)?;
     }
     let seconds = start.elapsed().as_secs_f64();
     let published: u64 = counts.iter().sum();
@@ -143,6 +145,23 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
     );
     for (port, count) in ports.iter().zip(&counts) {
         eprintln!("  {}: {count}", port.topic());
+    }
+    Ok(())
+}
+
+/// How often the replay hands transient-local history to subscribers that joined late.
+const HISTORY_EVERY: Duration = Duration::from_millis(100);
+
+/// A subscriber that joined since the last look (a monitor started during the replay) gets
+/// the bag's Parameters and CampaignInfo, as from the nodes that published them.
+fn deliver_history(ports: &[Box<dyn topics::ReplayPort>], last: &mut Instant) -> Result<()> {
+    if last.elapsed() < HISTORY_EVERY {
+        return Ok(());
+    }
+    *last = Instant::now();
+    for p in ports {
+        p.deliver_history()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", p.topic()))?;
     }
     Ok(())
 }

@@ -28,6 +28,9 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
         campaign.poses.len(),
         d.model
     );
+    if let Some(why) = words::model_choice(d) {
+        println!("   ({why})");
+    }
     println!(
         "\n1. The current model against the measurements\n   calibration RMS {:.1} um, held-out RMS {} um, noise floor {:.1} um",
         b.cal_rms_um,
@@ -64,8 +67,10 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
     }
     for e in d.effect_values.iter().filter(|e| e.identified) {
         println!(
-            "   {}.{} = {:.4} ± {:.4} {}",
-            e.effect, e.name, e.value, e.sigma, e.unit
+            "   {}.{} = {}",
+            e.effect,
+            e.name,
+            words::with_sigma(e.value, e.sigma, &e.unit)
         );
     }
     if let Some((n, of)) = d.determined {
@@ -208,20 +213,22 @@ pub fn write_report(
     .write(dir)
 }
 
-/// The rows of the noise table, each line starting with `indent`.
+/// The rows of the noise table, each line starting with `indent`: each group's stated level
+/// with where it comes from (the spec, rpkm's own where the spec gives none, or `--noise`).
 pub fn print_noise_groups(groups: &[variance::GroupNoise], indent: &str) {
     println!(
-        "{indent}{:<14} {:>10} {:>10} {:>8}  unit",
-        "group", "stated", "estimated", "dof"
+        "{indent}{:<14} {:>10} {:>10} {:>8}  {:<5} stated by",
+        "group", "stated", "estimated", "dof", "unit"
     );
     for g in groups {
         println!(
-            "{indent}{:<14} {:>10.3} {:>10.3} {:>8.1}  {}{}",
+            "{indent}{:<14} {:>10.3} {:>10.3} {:>8.1}  {:<5} {}{}",
             g.group,
             g.assumed,
             g.estimated,
             g.dof,
             g.unit,
+            words::rated_by(g),
             if g.estimated_from_data {
                 ""
             } else {

@@ -11,6 +11,7 @@
 //!       param:
 //!         - from: params.yaml        # relative to this file's folder
 //!         - {name: model, value: 29}
+//!         - {name: geometry_file, value: $(var geometry_file)}   # not passed when empty
 //!       args: --backend $(var backend)
 //!       respawn: true                # default true: restarted with backoff when it crashes
 //!       respawn_delay: 0.2           # s, doubled per quick crash, at most 5 s
@@ -30,6 +31,9 @@
 //!
 //! The recorder stops with the launch: SIGTERM makes `rpkm record` write what is queued and
 //! close its bag (metadata.yaml and summary).
+//!
+//! A `{name, value}` parameter whose value is empty after substitution is not passed: a launch
+//! argument left at an empty default (`geometry_file:=`) leaves the parameter files' value.
 //!
 //! Keys other than these are errors naming the key and its line (a typo such as `If:` would
 //! otherwise switch a recorder on). `respawn_delay` is bounded to 0..=3600 s. Every error
@@ -643,7 +647,10 @@ fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, LaunchErr
                         .map(|s| s.trim().to_owned())
                         .map_err(|e| ctx.err(format!("node {name}: param {key}: {e}")))?,
                 };
-                params.push(format!("{key}={value}"));
+                // empty (`$(var geometry_file)` at its default): the files' value stands
+                if !value.is_empty() {
+                    params.push(format!("{key}={value}"));
+                }
             }
         }
     }

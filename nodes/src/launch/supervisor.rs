@@ -67,14 +67,20 @@ struct Supervised<'a> {
 
 impl Supervised<'_> {
     /// Its state as the launch's /diagnostics status says it (`rpkm monitor` reads it).
+    /// An executable (`rpkm record`) is marked so: it is no node and says nothing itself.
     fn state_text(&self) -> String {
-        use crate::monitor::state::{DONE, GONE};
-        match (&self.state, &self.last_exit) {
+        use crate::monitor::state::{DONE, EXECUTABLE, GONE};
+        let state = match (&self.state, &self.last_exit) {
             (State::Running { .. }, _) => "running".to_owned(),
             (State::Waiting { .. }, _) => "restarting".to_owned(),
             (State::Done, Some((how, true))) => format!("{DONE}{how}"),
             (State::Done, Some((how, false))) => format!("{GONE}{how}"),
             (State::Done, None) => format!("{GONE}stopped"),
+        };
+        if self.spec.program == super::description::Program::Command {
+            state + EXECUTABLE
+        } else {
+            state
         }
     }
 }

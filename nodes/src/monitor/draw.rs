@@ -409,6 +409,12 @@ fn node_lines(w: &Watch, now: f64) -> Vec<Line<'static>> {
             Span::styled("not heard yet (launched)", bold(Color::Yellow)),
         ]));
     }
+    // the launch's executables (the recorder): no nodes, their state as the launch says it
+    for (name, state) in w.launch.iter().flat_map(|l| &l.executables) {
+        lines.push(Line::from(format!(
+            "{name:<16} {state} (executable of the launch)"
+        )));
+    }
     lines
 }
 
@@ -465,14 +471,14 @@ fn calibrator_lines(w: &Watch) -> Vec<Line<'static>> {
                 } else {
                     p.active_effects.join(", ")
                 };
+                let condition = crate::words::condition_short(p.condition_number);
                 format!(
                 "Parameters (at {t:.1} s): model {}, {} measurements, {identified} identified, \
-                 cal RMS {}, val RMS {}, condition {:.1}, effects {effects}",
+                 cal RMS {}, val RMS {}, condition {condition}, effects {effects}",
                 p.model,
                 p.measurement_count,
                 um(p.cal_rms),
                 um(p.val_rms),
-                p.condition_number
             )
             });
     let diagnosis =

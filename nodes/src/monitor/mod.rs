@@ -4,6 +4,7 @@
 //! and thresholds come from their messages); it only counts, times and remembers.
 
 pub mod draw;
+pub mod rate;
 pub mod state;
 
 pub use state::{ThresholdSource, Thresholds, Watch, WatchConfig};

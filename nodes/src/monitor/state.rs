@@ -4,6 +4,7 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
+pub use super::rate::RateMeter;
 use rpkm_msgs::{
     ActuatorState, CampaignInfo, Diagnosis, DiagnosticArray, DiagnosticStatus, Parameters,
     PreloadStatus, TcpEstimate, TcpMeasurement,
@@ -98,40 +99,6 @@ pub fn parse_thresholds(message: &str, unit: &str) -> Option<(f64, f64)> {
     })
 }
 
-/// Messages per second over the last full window of 1 s (0 once a window passed empty).
-#[derive(Debug, Clone, Default)]
-pub struct RateMeter {
-    window_start: Option<f64>,
-    in_window: u64,
-    rate_hz: f64,
-}
-
-impl RateMeter {
-    const WINDOW_S: f64 = 1.0;
-
-    pub fn count(&mut self, now: f64) {
-        self.tick(now);
-        self.window_start.get_or_insert(now);
-        self.in_window += 1;
-    }
-
-    /// Closes the window when it is over.
-    pub fn tick(&mut self, now: f64) {
-        if let Some(start) = self.window_start {
-            let span = now - start;
-            if span >= Self::WINDOW_S {
-                self.rate_hz = self.in_window as f64 / span;
-                self.in_window = 0;
-                self.window_start = Some(now);
-            }
-        }
-    }
-
-    pub fn rate_hz(&self) -> f64 {
-        self.rate_hz
-    }
-}
-
 /// What the monitor knows of one node.
 #[derive(Debug, Clone, Default)]
 pub struct NodeHealth {
@@ -154,12 +121,12 @@ impl NodeHealth {
 
 /// The topics a node publishes, by the node's default name: a message on one of them is a
 /// sign of life of that node. `/rpkm/actuator_state` is not here: a replayed bag publishes
-/// it as well as ingest.
-pub const NODE_TOPICS: [(&str, &str); 4] = [
+/// it as well as ingest; nor are the calibrator's `/rpkm/parameters` and `/rpkm/diagnosis`,
+/// which a replayed bag carries too (`rpkm simulate --record-parameters`, a recording): the
+/// calibrator is heard by its /diagnostics.
+pub const NODE_TOPICS: [(&str, &str); 2] = [
     ("/rpkm/tcp_estimate", "tcp_estimator"),
     ("/rpkm/preload_status", "preload_monitor"),
-    ("/rpkm/parameters", "calibrator"),
-    ("/rpkm/diagnosis", "calibrator"),
 ];
 
 /// The /diagnostics status name under which `rpkm launch` reports its nodes (after the
@@ -171,24 +138,33 @@ pub const LAUNCH_STATUS: &str = "launch";
 pub const GONE: &str = "gone: ";
 /// Prefix of the state of a node that finished (exit 0): `done: exited with code 0`.
 pub const DONE: &str = "done: ";
+/// End of the state of an executable of the launch (`rpkm record`), which is no node: it
+/// says nothing on /diagnostics and is not waited for (`running (executable)`).
+pub const EXECUTABLE: &str = " (executable)";
 
 /// What `rpkm launch` says of its nodes, in launch-file order.
 #[derive(Debug, Clone, Default)]
 pub struct LaunchView {
     /// Node name and state.
     pub nodes: Vec<(String, String)>,
+    /// The executables of the launch (the recorder), name and state: no nodes, never heard.
+    pub executables: Vec<(String, String)>,
     /// When the report came, s.
     pub heard_s: f64,
 }
 
 impl LaunchView {
     fn from_status(st: &DiagnosticStatus, now: f64) -> Self {
+        let (mut nodes, mut executables) = (Vec::new(), Vec::new());
+        for kv in &st.values {
+            match kv.value.strip_suffix(EXECUTABLE) {
+                Some(state) => executables.push((kv.key.clone(), state.to_owned())),
+                None => nodes.push((kv.key.clone(), kv.value.clone())),
+            }
+        }
         Self {
-            nodes: st
-                .values
-                .iter()
-                .map(|kv| (kv.key.clone(), kv.value.clone()))
-                .collect(),
+            nodes,
+            executables,
             heard_s: now,
         }
     }
@@ -278,6 +254,11 @@ pub struct Watch {
     pub measurement_count: u64,
     pub campaign: Option<CampaignInfo>,
     pub parameters: Option<(Parameters, f64)>,
+    /// When Parameters other than the first heard replaced the model, s: the WARN and
+    /// ERROR raised before were the old model's, and are cleared then.
+    pub model_replaced_s: Option<f64>,
+    /// The model preload_monitor last said it predicts with.
+    preload_model: Option<String>,
     pub diagnosis: Option<(Diagnosis, f64)>,
     /// Nodes heard so far, by name (`rpkm/<name>` on /diagnostics, or the publisher of a
     /// topic of [`NODE_TOPICS`]).
@@ -315,6 +296,8 @@ impl Watch {
             measurement_count: 0,
             campaign: None,
             parameters: None,
+            model_replaced_s: None,
+            preload_model: None,
             diagnosis: None,
             nodes: BTreeMap::new(),
             launch: None,
@@ -409,9 +392,41 @@ impl Watch {
         self.campaign = Some(c);
     }
 
+    /// New Parameters replace the model the nodes predict with: the alarms the old model
+    /// raised are cleared ([`Watch::model_replaced`]). The same set again changes nothing.
     pub fn on_parameters(&mut self, p: Parameters, now: f64) {
         self.heard_topic("/rpkm/parameters", now);
+        if self.parameters.as_ref().is_some_and(|(old, _)| *old != p) {
+            self.model_replaced(now);
+        }
         self.parameters = Some((p, now));
+    }
+
+    /// The preload monitor predicts with another model now: the first WARN, first ERROR and
+    /// level counts were the old model's, and are cleared; the next statuses are the new
+    /// model's.
+    fn model_replaced(&mut self, now: f64) {
+        self.model_replaced_s = Some(now);
+        self.first_warn_s = None;
+        self.first_error_s = None;
+        self.level_counts = [0; 3];
+    }
+
+    /// The model preload_monitor says it predicts with (its status's `parameters`: "nominal
+    /// parameters", "/rpkm/parameters (model 29, ...)"): a change replaces the model, also
+    /// where the first Parameters replace the nominal ones the node started with.
+    fn preload_model_from_status(&mut self, st: &DiagnosticStatus, now: f64) {
+        let Some(model) = st.values.iter().find(|v| v.key == "parameters") else {
+            return;
+        };
+        if self
+            .preload_model
+            .as_ref()
+            .is_some_and(|old| *old != model.value)
+        {
+            self.model_replaced(now);
+        }
+        self.preload_model = Some(model.value.clone());
     }
 
     pub fn on_diagnosis(&mut self, d: Diagnosis, now: f64) {
@@ -434,6 +449,7 @@ impl Watch {
             }
             if name == "preload_monitor" {
                 self.thresholds_from_status(&st);
+                self.preload_model_from_status(&st, now);
             }
             let node = self.nodes.entry(name).or_default();
             if let Some((_, at)) = node.diagnostic {
@@ -495,17 +511,20 @@ impl Watch {
         self.estimate_rate.tick(now);
     }
 
-    /// The launched nodes that are gone (exited and not restarted), with how they ended.
+    /// The launched nodes and executables that are gone (exited with an error and not
+    /// restarted), with how they ended.
     pub fn gone(&self) -> Vec<(&str, &str)> {
         self.launch.as_ref().map_or_else(Vec::new, |l| {
             l.nodes
                 .iter()
+                .chain(&l.executables)
                 .filter_map(|(name, state)| Some((name.as_str(), state.strip_prefix(GONE)?)))
                 .collect()
         })
     }
 
-    /// The launched nodes that run (or restart) and have not been heard yet.
+    /// The launched nodes that run (or restart) and have not been heard yet; the launch's
+    /// executables (the recorder) are no nodes and are never waited for.
     pub fn not_heard(&self) -> Vec<&str> {
         self.launch.as_ref().map_or_else(Vec::new, |l| {
             l.nodes
@@ -611,11 +630,16 @@ impl Watch {
             "last_receive_error": self.last_receive_error.as_ref().map(|(e, _)| e.clone()),
             "silent": self.silent(now).iter().map(|(n, _)| *n).collect::<Vec<_>>(),
             "launch": self.launch.as_ref().map(|l| {
+                let entry = |(name, state): &(String, String), executable: bool| {
+                    json!({"name": name, "state": state, "executable": executable})
+                };
                 l.nodes
                     .iter()
-                    .map(|(name, state)| json!({"name": name, "state": state}))
+                    .map(|n| entry(n, false))
+                    .chain(l.executables.iter().map(|e| entry(e, true)))
                     .collect::<Vec<_>>()
             }),
+            "model_replaced_s": self.model_replaced_s,
             "gone": self
                 .gone()
                 .iter()
@@ -721,6 +745,7 @@ fn parameters_json(p: &Parameters) -> Value {
         "val_rms_m": num(p.val_rms),
         "max_abs_residual_m": num(p.max_abs_residual),
         "condition_number": num(p.condition_number),
+        "condition": crate::words::condition(p.condition_number, None),
         "active_effects": p.active_effects,
         "identified": p.names.iter().zip(&p.sigmas).filter(|(_, s)| **s > 0.0).count(),
     })

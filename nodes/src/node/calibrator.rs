@@ -1122,12 +1122,12 @@ impl Calibrator {
                     level,
                     format!(
                         "calibration {}: {n} measurements ({} calibrated, {} held out), RMS \
-                         {:.2} µm, condition {:.1}{history}",
+                         {:.2} µm, condition {}{history}",
                         self.calibrations,
                         o.parameters.measurement_count,
                         n.saturating_sub(u64::from(o.parameters.measurement_count)),
                         o.parameters.cal_rms * 1e6,
-                        o.parameters.condition_number
+                        crate::words::condition_short(o.parameters.condition_number)
                     ),
                 )
             }
@@ -1409,6 +1409,8 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         }
         if report.due() {
             node.publish_status(&ctx, &out)?;
+            // a subscriber that joined late (rpkm monitor) gets the last Parameters now
+            out.parameters.deliver_history()?;
         }
         if worked {
             idle.worked();

@@ -156,6 +156,9 @@ fn create_err(topic: &str, port: &'static str, e: impl Debug) -> TransportError 
 #[doc(hidden)]
 pub trait IpcSend<T>: Send + Sync {
     fn send(&self, msg: &T) -> Result<(), TransportError>;
+    /// Connects the subscribers that joined since the last send and hands them the topic's
+    /// history (iceoryx2 delivers it only when the publisher looks: at a send, or here).
+    fn deliver_history(&self) -> Result<(), TransportError>;
 }
 
 /// Subscriber half of the iceoryx2 backend for one message type.
@@ -462,6 +465,11 @@ impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcSend<T> for ZcPu
             .map_err(|e| self.side.publish_err(e))?;
         self.side.sent(sample.write_payload(*msg).send())
     }
+    fn deliver_history(&self) -> Result<(), TransportError> {
+        self.publisher
+            .update_connections()
+            .map_err(|e| self.side.publish_err(e))
+    }
 }
 
 impl<T: ZeroCopySend + Debug + Copy + Send + Sync + 'static> IpcRecv<T> for ZcSub<T> {
@@ -554,6 +562,11 @@ impl<T: RosMessage> IpcSend<T> for CdrPub {
             .loan_slice_uninit(bytes.len())
             .map_err(|e| self.side.publish_err(e))?;
         self.side.sent(sample.write_from_slice(&bytes).send())
+    }
+    fn deliver_history(&self) -> Result<(), TransportError> {
+        self.publisher
+            .update_connections()
+            .map_err(|e| self.side.publish_err(e))
     }
 }
 

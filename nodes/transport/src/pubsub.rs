@@ -312,6 +312,14 @@ impl<T: IpcMessage> Publisher<T> {
         ipc.and(dds)
     }
 
+    /// Hands a transient-local topic's last samples to the subscribers that joined since the
+    /// last publish (a monitor started after the calibration): iceoryx2 delivers history only
+    /// when the publisher looks, so a node that publishes such a topic rarely calls this in
+    /// its loop. DDS delivers it itself.
+    pub fn deliver_history(&self) -> Result<(), TransportError> {
+        self.ipc.as_ref().map_or(Ok(()), |p| p.deliver_history())
+    }
+
     /// The ROS 2 topic name.
     pub fn topic(&self) -> &'static str {
         self.topic

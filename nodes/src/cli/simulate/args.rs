@@ -125,4 +125,11 @@ pub struct SimulateArgs {
     /// Bag only: compress chunks with zstd.
     #[arg(long)]
     pub zstd: bool,
+    /// Bag only: record the machine's geometry on /rpkm/parameters at the twin's start, as
+    /// the calibrator publishes a calibration that found it (the twin's true parameters,
+    /// model 29, σ 0): a replay gives the nodes that follow /rpkm/parameters (the estimator,
+    /// the preload monitor) and `rpkm monitor` the machine, as a recording of a calibrated
+    /// machine does. Example: --stream-hz 1000 --fault q3=0.8 --record-parameters
+    #[arg(long)]
+    pub record_parameters: bool,
 }

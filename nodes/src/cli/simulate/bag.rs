@@ -35,6 +35,9 @@ pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
     let mut bag = BagWriter::create(&args.out, bag_options(args.zstd))?;
     let topics = CampaignTopics::add(&mut bag)?;
     let mut count = 0;
+    if args.record_parameters {
+        count += write_parameters(&mut bag, twin)?;
+    }
     if let Some(m) = &messages {
         count += write_campaign(&mut bag, &topics, m)?;
     } else {
@@ -84,6 +87,26 @@ pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
         crate::cli::write_json(path, &truth)?;
     }
     Ok(())
+}
+
+/// The twin's true parameters on /rpkm/parameters at its clock's start (before the campaign
+/// and the stream), as a calibrator that found them exactly publishes them.
+fn write_parameters(bag: &mut BagWriter, twin: &Twin) -> Result<u64> {
+    let handle = crate::topics::add_bag_topic(bag, &rpkm_transport::topic::PARAMETERS)?;
+    let model = rpkm_core::params::Model::M29;
+    let sigmas = [0.0; rpkm_core::params::N_PARAMS];
+    let msg = rpkm_msgs::Parameters {
+        // no calibration's statistics: none was made
+        cal_rms: f64::NAN,
+        val_rms: f64::NAN,
+        max_abs_residual: f64::NAN,
+        condition_number: f64::NAN,
+        ..crate::node::geometry::parameters_msg(twin.true_params(), model, &sigmas)
+    };
+    let t = crate::campaign_bag::stamp_from_seconds(twin.time())
+        .map_or(0, |t| u64::try_from(stamp_ns(t)).unwrap_or(0));
+    bag.write(&handle, t, &msg)?;
+    Ok(1)
 }
 
 /// The main campaign `names` asks for (or the validation alone), and the validation poses

@@ -116,9 +116,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if !is_csv(&args.out) {
         return bag::run(args, &mut twin, &names);
     }
-    if args.stream_hz.is_some() || args.fault.is_some() {
+    if args.stream_hz.is_some() || args.fault.is_some() || args.record_parameters {
         return Err(super::bad_input(format!(
-            "--stream-hz and --fault need a bag: --out {} ends in .csv",
+            "--stream-hz, --fault and --record-parameters need a bag: --out {} ends in .csv",
             args.out.display()
         )));
     }

@@ -383,3 +383,125 @@ fn level_history_is_bounded_and_remembers_the_first_crossings() {
     assert!(snap["thresholds"]["warn_percent"].is_null());
     assert_eq!(snap["thresholds"]["source"], "unknown");
 }
+
+/// Issue 41: "drive states 2000 at 1 Hz" beside "estimates 2000 at 403 Hz". Two streams that
+/// arrived alike (1 kHz for 2 s), one with a stray early message: each read over the same
+/// last second at a redraw, they read alike (before, each over its own window, whose phase
+/// the stray message had moved: 833 against 1000 Hz here), and both fall to 0 once stopped.
+#[test]
+fn streams_that_arrive_alike_read_alike() {
+    let mut w = watch();
+    w.on_estimate(&TcpEstimate::default(), 0.1);
+    for k in 0..2000u32 {
+        let t = 0.6 + f64::from(k) * 0.001;
+        w.on_state(&ActuatorState::default(), t);
+        w.on_estimate(&TcpEstimate::default(), t + 0.0002);
+    }
+    w.tick(2.8);
+    let (s, e) = (w.state_rate.rate_hz(), w.estimate_rate.rate_hz());
+    // arrivals in (1.8, 2.8]: 800 of each, within a bucket of the window's edge
+    assert!(
+        (s - 800.0).abs() <= 10.0 && (e - s).abs() <= 10.0,
+        "{s} {e}"
+    );
+    w.tick(4.0);
+    assert_eq!(
+        (w.state_rate.rate_hz(), w.estimate_rate.rate_hz()),
+        (0.0, 0.0)
+    );
+}
+
+/// A launch status as `rpkm launch` sends it: node name, state.
+fn launch_status(entries: &[(&str, &str)]) -> DiagnosticArray {
+    DiagnosticArray {
+        status: vec![DiagnosticStatus {
+            level: 0,
+            name: format!("rpkm/{LAUNCH_STATUS}"),
+            message: String::new(),
+            hardware_id: String::new(),
+            values: entries
+                .iter()
+                .map(|(k, v)| KeyValue {
+                    key: (*k).to_owned(),
+                    value: (*v).to_owned(),
+                })
+                .collect(),
+        }],
+        ..DiagnosticArray::default()
+    }
+}
+
+/// Issue 41: "NOT HEARD: recorder" whenever record:=true. The launch marks its executables;
+/// one is never waited for, a node still is, and an executable that died is GONE.
+#[test]
+fn the_recorder_is_an_executable_not_a_node_never_heard() {
+    let mut w = watch();
+    let running = format!("running{EXECUTABLE}");
+    w.on_diagnostics(
+        launch_status(&[("tcp_estimator", "running"), ("recorder", &running)]),
+        1.0,
+    );
+    assert_eq!(w.not_heard(), ["tcp_estimator"]);
+    let snap = w.snapshot(1.0);
+    assert_eq!(snap["launch"][1]["name"], "recorder");
+    assert_eq!(snap["launch"][1]["executable"], true);
+    assert_eq!(snap["launch"][1]["state"], "running");
+    let died = format!("{GONE}exited with code 1{EXECUTABLE}");
+    w.on_diagnostics(
+        launch_status(&[("tcp_estimator", "running"), ("recorder", &died)]),
+        2.0,
+    );
+    assert_eq!(w.gone(), [("recorder", "exited with code 1")]);
+}
+
+/// preload_monitor's status naming the model it predicts with.
+fn predicting_with(model: &str) -> DiagnosticArray {
+    let mut a = diag("preload_monitor", 2, "ERROR: drive q1 deviates");
+    a.status[0].values = vec![KeyValue {
+        key: "parameters".into(),
+        value: model.into(),
+    }];
+    a
+}
+
+/// Issue 41: an alarm of the nominal parameters stayed after a calibration replaced them.
+/// Once preload_monitor says it predicts with another model (the first Parameters after the
+/// nominal ones) or other Parameters come, the old model's first WARN/ERROR are cleared; the
+/// same Parameters again (a late joiner's history) clear nothing.
+#[test]
+fn an_alarm_goes_with_the_model_that_raised_it() {
+    let mut w = watch();
+    let error = PreloadStatus {
+        level: PreloadStatus::ERROR,
+        ..PreloadStatus::default()
+    };
+    w.on_diagnostics(predicting_with("nominal parameters"), 0.5);
+    w.on_preload(&error, 1.0);
+    assert_eq!(w.first_error_s, Some(1.0));
+    let calibrated = Parameters {
+        model: 29,
+        measurement_count: 194,
+        ..Parameters::default()
+    };
+    w.on_parameters(calibrated.clone(), 2.0);
+    w.on_diagnostics(
+        predicting_with("/rpkm/parameters (model 29, 194 measurements)"),
+        2.1,
+    );
+    assert_eq!((w.first_warn_s, w.first_error_s), (None, None));
+    assert_eq!(w.model_replaced_s, Some(2.1));
+    assert_eq!(w.snapshot(3.0)["model_replaced_s"], 2.1);
+    // the new model's own alarm is kept, and the same set again clears nothing
+    w.on_preload(&error, 3.0);
+    w.on_parameters(calibrated.clone(), 3.5);
+    assert_eq!(w.first_error_s, Some(3.0));
+    // other Parameters: cleared again
+    w.on_parameters(
+        Parameters {
+            measurement_count: 300,
+            ..calibrated
+        },
+        4.0,
+    );
+    assert_eq!((w.first_error_s, w.model_replaced_s), (None, Some(4.0)));
+}

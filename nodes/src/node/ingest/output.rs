@@ -286,6 +286,8 @@ impl<'a> Output<'a> {
     ) -> anyhow::Result<()> {
         if self.report.due() {
             self.report_now_with(annotate)?;
+            // a subscriber that joined late gets the campaign's info now
+            self.info.deliver_history()?;
         }
         Ok(())
     }

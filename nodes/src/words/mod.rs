@@ -11,11 +11,13 @@ use rpkm_core::diagnose::{
     Candidate, Diagnosis, HeldOutCheck, Judged, ModelTrial, Outcome, Prediction, Test, VerdictKind,
 };
 use rpkm_core::params::{unit, Unit, NAMES};
-use rpkm_core::variance::GroupNoise;
 use std::fmt::Write as _;
 
-/// A group's estimated noise is called off its rating outside this ratio band.
-const RATED_BAND: std::ops::RangeInclusive<f64> = 0.77..=1.3;
+mod figures;
+mod noise;
+
+pub use figures::{condition, condition_short, with_sigma};
+pub use noise::{noise, rated_by};
 
 /// "the lt x residual follows temp_machine (r = 0.93, and equally q2)".
 pub fn follows(p: &Pointer) -> String {
@@ -31,7 +33,7 @@ pub fn follows(p: &Pointer) -> String {
 }
 
 /// The drift WARN's words, claiming no more than the path identifies: "l3 +48 µm in 6 min
-/// (+12.0 ± 0.3 µm/K), follows temp_machine (r = 0.98)" where one candidate explains it with
+/// (+12.00 ± 0.30 µm/K), follows temp_machine (r = 0.98)" where one candidate explains it with
 /// the margin; else "l1..l5 alike in 2 min, the path cannot tell which: l3 +19 µm, l1 +15 µm,
 /// ..." with the change each would need (they differ in size and sign), and no rate; "; 22
 /// other parameters explain it alike" where parameters outside the candidates do (the
@@ -44,12 +46,16 @@ pub fn drift(d: &Drift, temp_name: &str) -> String {
     };
     let minutes = d.over_s / 60.0;
     let mut s = if d.is_identified() {
+        let base = match rpkm_core::params::unit(d.param) {
+            Unit::Mm => "mm",
+            Unit::Rad => "rad",
+        };
         format!(
-            "{} {:+.0} {unit} in {minutes:.0} min ({:+.1} ± {:.1} {unit}/{per})",
+            "{} {:+.0} {unit} in {minutes:.0} min ({}{})",
             NAMES[d.param],
             d.change * k,
-            d.rate * k,
-            d.rate_sigma * k
+            if d.rate >= 0.0 { "+" } else { "" },
+            with_sigma(d.rate, d.rate_sigma, &format!("{base}/{per}"))
         )
     } else {
         // the best first, the others by name
@@ -95,30 +101,9 @@ fn alike_names(d: &Drift) -> String {
     if named == rods {
         return "l1..l5".to_owned();
     }
-    let mut names: Vec<&str> = d.named().map(|(i, _)| NAMES[i]).collect();
+    let mut names: Vec<String> = d.named().map(|(i, _)| NAMES[i].to_owned()).collect();
     names[1..].sort_unstable();
-    match names.split_last() {
-        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
-        _ => names.concat(),
-    }
-}
-
-/// "tracker 2.1x noisier than stated, ..." for every group off its rating.
-pub fn noise(groups: &[GroupNoise]) -> String {
-    let off: Vec<String> = groups
-        .iter()
-        .filter(|g| g.estimated_from_data && g.assumed > 0.0)
-        .filter(|g| !RATED_BAND.contains(&(g.estimated / g.assumed)))
-        .map(|g| {
-            let ratio = g.estimated / g.assumed;
-            if ratio > 1.0 {
-                format!("{} {ratio:.1}x noisier than stated", g.group)
-            } else {
-                format!("{} {:.1}x quieter than stated", g.group, 1.0 / ratio)
-            }
-        })
-        .collect();
-    off.join(", ")
+    or_list(&names)
 }
 
 /// What an engineer can check of a candidate: the F-test, its parameters, the covariate
@@ -156,7 +141,7 @@ fn values(params: &[rpkm_core::calib::EffectEstimate]) -> String {
         .iter()
         .filter(|e| e.identified)
         .take(3)
-        .map(|e| format!("{} = {:.3} ± {:.3} {}", e.name, e.value, e.sigma, e.unit))
+        .map(|e| format!("{} = {}", e.name, with_sigma(e.value, e.sigma, &e.unit)))
         .collect();
     shown.join(", ")
 }
@@ -243,24 +228,89 @@ pub fn held_out(h: &HeldOutCheck) -> String {
     s
 }
 
-/// "the kgm along residual follows a 60.0 mm period of carrier 4 (amplitude 2.4 um)".
+/// "the kgm along residual follows a 60.0 mm period of carrier 4 (amplitude 2.40 µm, 85 % of
+/// its variance, p = 9.5e-56)"; carriers that move together on these rows named together
+/// ("of carrier 1 or 4 (they move together on the self-calibration lines: ...)"), and the
+/// stronger periods passed over as aliases of a dictionary term said so.
 pub fn periodic(p: &Periodic) -> String {
     let (scale, unit) = if p.direction.starts_with("psi") {
-        (1e6, "urad")
+        (1e6, "µrad")
     } else {
-        (1e3, "um")
+        (1e3, "µm")
     };
-    format!(
-        "the {} {} residual follows a {:.1} mm period of carrier {} (amplitude {:.2} {unit}, \
-         {:.0} % of its variance, p = {:.1e})",
+    let carriers: Vec<String> = std::iter::once(p.carrier)
+        .chain(p.tied.iter().map(|t| t.carrier))
+        .map(|c| c.to_string())
+        .collect();
+    let tie = if p.tied.is_empty() {
+        String::new()
+    } else {
+        let pitches: Vec<String> = p
+            .tied
+            .iter()
+            .filter(|t| (t.pitch_mm / p.pitch_mm - 1.0).abs() > 0.01)
+            .map(|t| format!("{:.1} mm in carrier {}'s position", t.pitch_mm, t.carrier))
+            .collect();
+        format!(
+            "they move together on {}, so the residual cannot tell whose period it is{}; ",
+            setups_of(&p.instrument),
+            if pitches.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", pitches.join(", "))
+            }
+        )
+    };
+    let mut s = format!(
+        "the {} {} residual follows a {:.1} mm period of carrier {} ({tie}amplitude {:.2} \
+         {unit}, {:.0} % of its variance, p = {:.1e})",
         p.instrument,
         p.direction,
         p.pitch_mm,
-        p.carrier,
+        or_list(&carriers),
         p.amplitude * scale,
         100.0 * p.explained,
         p.p_value
-    )
+    );
+    let aliases: Vec<String> = p
+        .aliases
+        .iter()
+        .map(|a| {
+            format!(
+                "a {:.1} mm period of carrier {} in the {} {} residual follows {}",
+                a.pitch_mm, a.carrier, a.instrument, a.direction, a.term
+            )
+        })
+        .collect();
+    if !aliases.is_empty() {
+        let _ = write!(
+            s,
+            "; passed over as aliases, not periods of their own: {}",
+            aliases.join(", ")
+        );
+    }
+    s
+}
+
+/// "4", "4 or 1", "4, 1 or 2".
+fn or_list(items: &[String]) -> String {
+    match items.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+        _ => items.concat(),
+    }
+}
+
+/// Where an instrument's rows were taken, for "they move together on ...".
+fn setups_of(instrument: &str) -> &'static str {
+    match instrument {
+        "self" => "the self-calibration lines",
+        "kgm" => "the grid encoder's squares",
+        "lt" => "the laser tracker's poses",
+        "dbb" => "the ball-bar's circles",
+        "li_x" | "li_y" => "the interferometer's lines",
+        "li_psi" => "the angle optics' lines",
+        _ => "these poses",
+    }
 }
 
 /// "neighbours along the kgm along paths are alike (autocorrelation 0.62, z = 7.1)".
@@ -410,6 +460,21 @@ fn noisier_words(d: &Diagnosis) -> String {
     )
 }
 
+/// Why a diagnosis's model is not the one `rpkm calibrate`, `rpkm plan` and the nodes default
+/// to (model 29), when it is not: model 24 holds rod 5 to rod 4 so that the imperfect
+/// parallel-holder, rod 5's own five parameters, is a candidate tested like any other effect.
+pub fn model_choice(d: &Diagnosis) -> Option<String> {
+    let freed = d.effects_in_model.iter().any(|e| e == "parallelogram");
+    (d.model == "model 24" && !freed).then(|| {
+        "model 24, where rpkm calibrate, rpkm plan and the nodes default to model 29: the \
+         diagnosis holds rod 5 parallel to rod 4 so that the imperfect parallel-holder (rod 5's \
+         five parameters, model 29) is tested as a candidate, `parallelogram`, like any other \
+         effect; where it is named, calibrate with --model 29 (--model 29 starts the \
+         diagnosis there)"
+            .to_owned()
+    })
+}
+
 /// How the verdict was tested, in one sentence.
 pub fn test(t: &Test) -> String {
     format!(
@@ -435,6 +500,9 @@ pub fn test(t: &Test) -> String {
 pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
     let mut v = serde_json::to_value(d)?;
     v["verdict"] = verdict(d).into();
+    if let Some(why) = model_choice(d) {
+        v["model_choice"] = why.into();
+    }
     v["test_settings"] = serde_json::to_value(d.test)?;
     v["test"] = test(&d.test).into();
     if let Some(cands) = v["candidates"].as_array_mut() {
@@ -553,7 +621,7 @@ mod tests {
         d.temperature_correlation = Some(0.95);
         assert_eq!(
             drift(&d, "temp_machine"),
-            "l3 +19 µm in 2 min (+11.8 ± 0.9 µm/K), follows temp_machine (r = 0.95)"
+            "l3 +19 µm in 2 min (+11.80 ± 0.90 µm/K), follows temp_machine (r = 0.95)"
         );
     }
 }
