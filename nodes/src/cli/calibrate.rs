@@ -199,14 +199,14 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             (args, model, &refs, file.as_ref()),
             &campaign,
             validation.as_ref(),
-            stages.as_deref(),
+            stages.as_ref(),
         )?;
         verdict = Some(said);
         println!("\nreport: {}", page.display());
     }
     if let Some(path) = &args.json {
         let file = file.as_ref().map(crate::effects_file::to_json);
-        let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_deref())?;
+        let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_ref())?;
         out["returns"] = serde_json::to_value(&returns)?;
         write_json(path, &out)?;
         println!("\nwrote {}", path.display());
@@ -304,7 +304,7 @@ fn calibration_json(
     cal: &Calibration,
     (noise, file): (&NoiseEstimate, Option<serde_json::Value>),
     val: Option<&Validation>,
-    stages: Option<&[Stage]>,
+    stages: Option<&Stages>,
 ) -> anyhow::Result<serde_json::Value> {
     let mut out = report_json(cal, val);
     out["noise"] = serde_json::to_value(&noise.groups)?;
@@ -314,7 +314,8 @@ fn calibration_json(
     }
     out["determined"] = serde_json::to_value(cal.determined)?;
     if let Some(st) = stages {
-        out["effect_stages"] = serde_json::to_value(st)?;
+        out["effect_stages"] = serde_json::to_value(&st.rows)?;
+        out["effect_stages_chi2_under"] = st.chi2_under.clone().into();
     }
     Ok(out)
 }
@@ -358,10 +359,23 @@ pub fn print_noise(noise: &NoiseEstimate) {
 #[derive(serde::Serialize)]
 struct Stage {
     model: String,
+    /// χ²/ν with the rows weighted by the table's one noise ([`Stages::chi2_under`]): each
+    /// model under its own estimate would read about 1 on every row.
     chi2_per_dof: f64,
+    /// χ²/ν at the stated noise (the instruments' ratings, --noise).
+    chi2_per_dof_stated: f64,
     cal_rms_um: f64,
     val_rms_um: Option<f64>,
+    /// The held-out RMS with each setup's zero removed (what a model can predict), µm.
+    val_rms_relative_um: Option<f64>,
     effect_params: Vec<rpkm_core::calib::EffectEstimate>,
+}
+
+/// The effect-by-effect table: its rows, and the noise their χ² are under (the one
+/// estimated with the last model, which holds every effect: the models compare under it).
+struct Stages {
+    rows: Vec<Stage>,
+    chi2_under: String,
 }
 
 /// The diagnosis's calibration: tolerance prior, noise estimated, no outlier elimination.
@@ -389,7 +403,7 @@ fn write_report(
     (args, model, refs, file): (&CalibrateArgs, Model, &[&dyn Effect], Option<&EffectsFile>),
     campaign: &Campaign,
     validation: Option<&Campaign>,
-    stages: Option<&[Stage]>,
+    stages: Option<&Stages>,
 ) -> anyhow::Result<(std::path::PathBuf, String)> {
     use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
@@ -401,16 +415,19 @@ fn write_report(
     } else {
         Some(diagnose::diagnose(campaign, validation, refs, &opts)?)
     };
-    let stages = stages
-        .unwrap_or_default()
-        .iter()
-        .map(|s| crate::report::Stage {
-            model: s.model.clone(),
-            cal_rms_um: s.cal_rms_um,
-            val_rms_um: s.val_rms_um,
-            chi2_per_dof: s.chi2_per_dof,
-        })
-        .collect();
+    let stages = stages.map(|st| crate::report::Stages {
+        rows: st
+            .rows
+            .iter()
+            .map(|s| crate::report::Stage {
+                model: s.model.clone(),
+                cal_rms_um: s.cal_rms_um,
+                val_rms_um: s.val_rms_um,
+                chi2_per_dof: s.chi2_per_dof,
+            })
+            .collect(),
+        chi2_under: st.chi2_under.clone(),
+    });
     let calibrated = if refs.is_empty() {
         &before
     } else {
@@ -436,55 +453,77 @@ fn effect_stages(
     effects: &[&dyn Effect],
     campaign: &Campaign,
     validation: Option<&Campaign>,
-) -> anyhow::Result<Vec<Stage>> {
+) -> anyhow::Result<Stages> {
     use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
-    let mut stages = Vec::new();
-    for k in 0..=effects.len() {
-        let fit = diagnose::evaluate(campaign, validation, &effects[..k], &opts)?.fit;
-        let name = match k {
-            0 => format!("{}", opts.model),
-            _ => format!("+ {}", effects[k - 1].name()),
-        };
-        stages.push(Stage {
-            model: name,
-            chi2_per_dof: fit.chi2_per_dof,
-            cal_rms_um: fit.cal_rms_um,
-            val_rms_um: fit.val_rms_um,
-            effect_params: fit.effect_params,
-        });
-    }
+    let evaluated = (0..=effects.len())
+        .map(|k| diagnose::evaluate(campaign, validation, &effects[..k], &opts))
+        .collect::<Result<Vec<_>, _>>()?;
+    // one noise for every row, so that the χ² compare the models: the last model's estimate
+    let last = evaluated.last().map(|e| e.noise.model.clone());
+    let under = last.unwrap_or_else(|| opts.noise.clone());
+    let rows = evaluated
+        .into_iter()
+        .enumerate()
+        .map(|(k, e)| Stage {
+            model: match k {
+                0 => format!("{}", opts.model),
+                _ => format!("+ {}", effects[k - 1].name()),
+            },
+            chi2_per_dof: e.chi2_per_dof_under(&under),
+            chi2_per_dof_stated: e.baseline.chi2_per_dof,
+            cal_rms_um: e.fit.cal_rms_um,
+            val_rms_um: e.fit.val_rms_um,
+            val_rms_relative_um: e.baseline.val_rms_relative_um,
+            effect_params: e.fit.effect_params,
+        })
+        .collect();
+    let names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
+    let stages = Stages {
+        rows,
+        chi2_under: format!(
+            "the noise estimated with the last model, {} + {}",
+            opts.model,
+            names.join(" + ")
+        ),
+    };
     print_stages(&stages);
     if let Some(path) = &args.chart {
-        write_stage_chart(path, &stages)?;
+        write_stage_chart(path, &stages.rows)?;
     }
     Ok(stages)
 }
 
 /// The table of the stages, and the identified effect parameters of the last.
-fn print_stages(stages: &[Stage]) {
-    println!("\nThe error effect by effect:");
+fn print_stages(stages: &Stages) {
     println!(
-        "  {:<24} {:>10} {:>12} {:>12}",
-        "model", "chi2/dof", "cal RMS um", "held-out um"
+        "\nThe error effect by effect (chi2/dof: every model's rows weighted by one noise, {}; \
+         the model that explains the data reads near 1):",
+        stages.chi2_under
     );
-    let top = stages
-        .iter()
-        .filter_map(|s| s.val_rms_um)
-        .fold(0.0, f64::max);
-    for s in stages {
-        let bar = s
-            .val_rms_um
+    println!(
+        "  {:<24} {:>10} {:>10} {:>12} {:>12} {:>13}",
+        "model", "chi2/dof", "at stated", "cal RMS um", "held-out um", "zero removed"
+    );
+    // the bar: the held-out error a model can predict (each setup's zero removed) where known
+    let shown = |s: &Stage| s.val_rms_relative_um.or(s.val_rms_um);
+    let top = stages.rows.iter().filter_map(shown).fold(0.0, f64::max);
+    let opt = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.1}"));
+    for s in &stages.rows {
+        let bar = shown(s)
             .map(|v| "#".repeat(rpkm_core::convert::round_count(40.0 * v / top.max(1e-9))))
             .unwrap_or_default();
         println!(
-            "  {:<24} {:>10.2} {:>12.1} {:>12} {bar}",
+            "  {:<24} {:>10.2} {:>10.2} {:>12.1} {:>12} {:>13} {bar}",
             s.model,
             s.chi2_per_dof,
+            s.chi2_per_dof_stated,
             s.cal_rms_um,
-            s.val_rms_um.map_or("-".to_owned(), |v| format!("{v:.1}"))
+            opt(s.val_rms_um),
+            opt(s.val_rms_relative_um)
         );
     }
+    let stages = &stages.rows;
     if let Some(last) = stages.last() {
         for e in last.effect_params.iter().filter(|e| e.identified) {
             println!(
