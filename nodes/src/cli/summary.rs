@@ -48,10 +48,19 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
         b.chi2_per_dof, b.dof, b.p_value,
     );
     if let Some(h) = &d.held_out {
+        // at the floor and structured is no pass, and no excess either: say which test failed
+        let structured = if h.structured {
+            format!(
+                ", but the held-out residual is structured (p = {:.1e}), so the model does not pass",
+                h.structure_p
+            )
+        } else {
+            String::new()
+        };
         println!(
             "   held-out judge: {} the model's floor {:.1} um (the noise and the calibration's own \
-             uncertainty), p = {:.1e}{}",
-            if h.agrees() { "at" } else { "NOT at" },
+             uncertainty), p = {:.1e}{structured}{}",
+            if h.consistent { "at" } else { "NOT at" },
             h.floor_relative_um,
             h.p_value,
             h.follows
