@@ -105,8 +105,10 @@ fn block_at(lines: &[String], at: usize) -> std::ops::Range<usize> {
     let end = lines[at + 1..]
         .iter()
         .position(|l| l.starts_with("```"))
-        .map(|k| at + 1 + k)
-        .unwrap_or_else(|| panic!("line {}: the block is not closed", at + 1));
+        .map_or_else(
+            || panic!("line {}: the block is not closed", at + 1),
+            |k| at + 1 + k,
+        );
     at + 1..end
 }
 
@@ -203,11 +205,10 @@ fn number_after(text: &str, key: &str) -> f64 {
 }
 
 fn block<'a>(w: &'a Walk, name: &str) -> &'a str {
-    w.blocks
-        .iter()
-        .find(|(n, _)| n == name)
-        .map(|(_, b)| b.as_str())
-        .unwrap_or_else(|| panic!("the page has no output block `{name}`"))
+    w.blocks.iter().find(|(n, _)| n == name).map_or_else(
+        || panic!("the page has no output block `{name}`"),
+        |(_, b)| b.as_str(),
+    )
 }
 
 #[test]

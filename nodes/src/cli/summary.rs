@@ -5,7 +5,7 @@ use crate::effects_file::EffectsFile;
 use crate::report::{Report, Stages};
 use crate::words;
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::Diagnosis;
+use rpkm_core::diagnose::{Diagnosis, HeldOutCheck};
 use rpkm_core::variance;
 use std::path::{Path, PathBuf};
 
@@ -48,25 +48,7 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
         b.chi2_per_dof, b.dof, b.p_value,
     );
     if let Some(h) = &d.held_out {
-        // at the floor and structured is no pass, and no excess either: say which test failed
-        let structured = if h.structured {
-            format!(
-                ", but the held-out residual is structured (p = {:.1e}), so the model does not pass",
-                h.structure_p
-            )
-        } else {
-            String::new()
-        };
-        println!(
-            "   held-out judge: {} the model's floor {:.1} um (the noise and the calibration's own \
-             uncertainty), p = {:.1e}{structured}{}",
-            if h.consistent { "at" } else { "NOT at" },
-            h.floor_relative_um,
-            h.p_value,
-            h.follows
-                .as_ref()
-                .map_or(String::new(), |f| format!("; {}", words::follows(f)))
-        );
+        println!("   {}", held_out_judge(h));
     }
     if d.model_effects != d.effects_in_model {
         println!(
@@ -136,6 +118,29 @@ fn print_groups(d: &Diagnosis) {
             p.y
         );
     }
+}
+
+/// The held-out judge's line: at the model's floor or not, and, where it fails on the
+/// residual's structure rather than its size, that it does.
+fn held_out_judge(h: &HeldOutCheck) -> String {
+    let structured = if h.structured {
+        format!(
+            ", but the held-out residual is structured (p = {:.1e}), so the model does not pass",
+            h.structure_p
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "held-out judge: {} the model's floor {:.1} um (the noise and the calibration's own \
+         uncertainty), p = {:.1e}{structured}{}",
+        if h.consistent { "at" } else { "NOT at" },
+        h.floor_relative_um,
+        h.p_value,
+        h.follows
+            .as_ref()
+            .map_or(String::new(), |f| format!("; {}", words::follows(f)))
+    )
 }
 
 /// Every effect tried, best first, and those not tried.
