@@ -243,6 +243,7 @@ fn the_walk_through_shows_what_the_commands_print() {
     );
     the_story_holds(&w);
     the_table_compares_models(&w, dir.path());
+    the_reports_table_compares_models(dir.path());
 }
 
 /// The figures the page's story rests on, against the twin's truth
@@ -335,5 +336,36 @@ fn the_table_compares_models(w: &Walk, dir: &Path) {
                 .as_str()
                 .is_some_and(|s| s.contains("lost_motion_q4")),
         "the JSON's stages: {stages:?}"
+    );
+}
+
+/// The report's table (`rpkm calibrate --report`) is the text table's: the χ²/dof of its
+/// models under the one noise its page names.
+fn the_reports_table_compares_models(dir: &Path) {
+    run(
+        dir,
+        "rpkm calibrate bags/first_campaign/campaign.csv --validate \
+         bags/first_campaign/campaign.val.csv --effects-file lost_motion.yaml --effects \
+         lost_motion_q4 --report report",
+    );
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("report/report.json")).expect("report.json"),
+    )
+    .expect("report JSON");
+    let chi2: Vec<f64> = json["stages"]
+        .as_array()
+        .expect("stages")
+        .iter()
+        .map(|s| s["chi2_per_dof"].as_f64().expect("χ²/dof"))
+        .collect();
+    let under = json["stages_chi2_under"].as_str().expect("the noise named");
+    assert!(
+        chi2.len() == 2 && chi2[0] > 10.0 && (chi2[1] - 1.0).abs() < 0.2,
+        "{chi2:?} under {under}"
+    );
+    let page = std::fs::read_to_string(dir.join("report/report.html")).expect("report.html");
+    assert!(
+        page.contains("χ²/dof under one noise") && page.contains(under),
+        "the page names the noise its χ²/dof are under: {under}"
     );
 }
