@@ -1,5 +1,6 @@
 //! `rpkm calibrate`: identify the geometric parameters from a campaign file.
 
+use super::effect_stages::Stages;
 use super::summary::print_noise_groups;
 use super::{bad_input, read_campaign, write_json};
 use crate::effects_file::EffectsFile;
@@ -355,29 +356,6 @@ pub fn print_noise(noise: &NoiseEstimate) {
     print_noise_groups(&noise.groups, "  ");
 }
 
-/// One row of the effect-by-effect table.
-#[derive(serde::Serialize)]
-struct Stage {
-    model: String,
-    /// χ²/ν with the rows weighted by the table's one noise ([`Stages::chi2_under`]): each
-    /// model under its own estimate would read about 1 on every row.
-    chi2_per_dof: f64,
-    /// χ²/ν at the stated noise (the instruments' ratings, --noise).
-    chi2_per_dof_stated: f64,
-    cal_rms_um: f64,
-    val_rms_um: Option<f64>,
-    /// The held-out RMS with each setup's zero removed (what a model can predict), µm.
-    val_rms_relative_um: Option<f64>,
-    effect_params: Vec<rpkm_core::calib::EffectEstimate>,
-}
-
-/// The effect-by-effect table: its rows, and the noise their χ² are under (the one
-/// estimated with the last model, which holds every effect: the models compare under it).
-struct Stages {
-    rows: Vec<Stage>,
-    chi2_under: String,
-}
-
 /// The diagnosis's calibration: tolerance prior, noise estimated, no outlier elimination.
 fn diagnosis_options(
     args: &CalibrateArgs,
@@ -445,8 +423,8 @@ fn write_report(
     Ok((page, verdict))
 }
 
-/// Calibrate with the effects of --effects added one by one (automatic selection, no outlier
-/// elimination: the same rows in every model), print the table and write the chart.
+/// Calibrate with the effects of --effects added one by one, the diagnosis's way (its
+/// options), print the table and write the chart.
 fn effect_stages(
     args: &CalibrateArgs,
     model: Model,
@@ -454,113 +432,13 @@ fn effect_stages(
     campaign: &Campaign,
     validation: Option<&Campaign>,
 ) -> anyhow::Result<Stages> {
-    use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
-    let evaluated = (0..=effects.len())
-        .map(|k| diagnose::evaluate(campaign, validation, &effects[..k], &opts))
-        .collect::<Result<Vec<_>, _>>()?;
-    // one noise for every row, so that the χ² compare the models: the last model's estimate
-    let last = evaluated.last().map(|e| e.noise.model.clone());
-    let under = last.unwrap_or_else(|| opts.noise.clone());
-    let rows = evaluated
-        .into_iter()
-        .enumerate()
-        .map(|(k, e)| Stage {
-            model: match k {
-                0 => format!("{}", opts.model),
-                _ => format!("+ {}", effects[k - 1].name()),
-            },
-            chi2_per_dof: e.chi2_per_dof_under(&under),
-            chi2_per_dof_stated: e.baseline.chi2_per_dof,
-            cal_rms_um: e.fit.cal_rms_um,
-            val_rms_um: e.fit.val_rms_um,
-            val_rms_relative_um: e.baseline.val_rms_relative_um,
-            effect_params: e.fit.effect_params,
-        })
-        .collect();
-    let names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
-    let stages = Stages {
-        rows,
-        chi2_under: format!(
-            "the noise estimated with the last model, {} + {}",
-            opts.model,
-            names.join(" + ")
-        ),
-    };
-    print_stages(&stages);
+    let stages = Stages::of(campaign, validation, effects, &opts)?;
+    stages.print();
     if let Some(path) = &args.chart {
-        write_stage_chart(path, &stages.rows)?;
+        stages.write_chart(path)?;
     }
     Ok(stages)
-}
-
-/// The table of the stages, and the identified effect parameters of the last.
-fn print_stages(stages: &Stages) {
-    println!(
-        "\nThe error effect by effect (chi2/dof: every model's rows weighted by one noise, {}; \
-         the model that explains the data reads near 1):",
-        stages.chi2_under
-    );
-    println!(
-        "  {:<24} {:>10} {:>10} {:>12} {:>12} {:>13}",
-        "model", "chi2/dof", "at stated", "cal RMS um", "held-out um", "zero removed"
-    );
-    // the bar: the held-out error a model can predict (each setup's zero removed) where known
-    let shown = |s: &Stage| s.val_rms_relative_um.or(s.val_rms_um);
-    let top = stages.rows.iter().filter_map(shown).fold(0.0, f64::max);
-    let opt = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.1}"));
-    for s in &stages.rows {
-        let bar = shown(s)
-            .map(|v| "#".repeat(rpkm_core::convert::round_count(40.0 * v / top.max(1e-9))))
-            .unwrap_or_default();
-        println!(
-            "  {:<24} {:>10.2} {:>10.2} {:>12.1} {:>12} {:>13} {bar}",
-            s.model,
-            s.chi2_per_dof,
-            s.chi2_per_dof_stated,
-            s.cal_rms_um,
-            opt(s.val_rms_um),
-            opt(s.val_rms_relative_um)
-        );
-    }
-    let stages = &stages.rows;
-    if let Some(last) = stages.last() {
-        for e in last.effect_params.iter().filter(|e| e.identified) {
-            println!(
-                "  {}.{} = {}",
-                e.effect,
-                e.name,
-                crate::words::with_sigma(e.value, e.sigma, &e.unit)
-            );
-        }
-    }
-}
-
-/// The chart of the held-out and calibration RMS per stage (SVG).
-fn write_stage_chart(path: &std::path::Path, stages: &[Stage]) -> anyhow::Result<()> {
-    let cats: Vec<String> = stages.iter().map(|s| s.model.clone()).collect();
-    let svg = crate::plot::bar_chart(
-        "Held-out TCP RMS per added effect",
-        "RMS (µm)",
-        &cats,
-        &[
-            (
-                "held-out".to_owned(),
-                stages
-                    .iter()
-                    .map(|s| s.val_rms_um.unwrap_or(f64::NAN))
-                    .collect(),
-            ),
-            (
-                "calibration".to_owned(),
-                stages.iter().map(|s| s.cal_rms_um).collect(),
-            ),
-        ],
-        &crate::plot::BarOptions::default(),
-    );
-    std::fs::write(path, svg)?;
-    println!("  chart: {}", path.display());
-    Ok(())
 }
 
 /// Held-out TCP errors with the starting and the identified parameters, and the held-out
