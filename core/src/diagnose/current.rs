@@ -6,7 +6,7 @@
 
 use super::figures::length_sigmas;
 use super::held_out::{self, Levels, Model1, Validation};
-use super::model::{self, Settled};
+use super::settle::{self, Settled};
 use super::trials::finish_with;
 use super::types::{Baseline, DiagnoseError, Fit, Fitted, HeldOutCheck, Options};
 use crate::calib::{self, Calibration, Request};
@@ -106,8 +106,8 @@ impl Current {
         let (cal, est, copts) = noise_of(campaign, in_model, opts, first)?;
         let val = held_out::held_out(validation, &est.model)?;
         // the evidence a part needs: a candidate's level, over the part combinations
-        let level = opts.alpha / model::PART_COMBINATIONS;
-        let settled = model::settle(campaign, val.as_ref(), in_model, (&copts, level));
+        let level = opts.alpha / settle::PART_COMBINATIONS;
+        let settled = settle::settle(campaign, val.as_ref(), in_model, (&copts, level));
         let effects = settled.effects(in_model);
         let cal = if settled.changed() {
             fit_model(campaign, &effects, &copts)?
