@@ -320,6 +320,7 @@ fn diagnosis_at_scale(seed: u64) -> Result<()> {
             .as_ref()
             .map_or(String::new(), |e| format!(", names {e}"))
     );
+    println!("  {}", crate::words::verdict(&d));
     Ok(())
 }
 

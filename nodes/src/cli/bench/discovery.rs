@@ -319,6 +319,12 @@ fn print_table(all: &[Outcome]) {
         println!("  {:<16} {ok} of {n}", format!("{class:?}"));
     }
     print_rises(all);
+    print_totals(all);
+}
+
+/// The share right, the false alarms, the verdicts the held-out data contradict, and how
+/// far the loop ends from the floor.
+fn print_totals(all: &[Outcome]) {
     let correct = all.iter().filter(|o| o.correct).count();
     let nothing: Vec<&Outcome> = all.iter().filter(|o| o.hidden.is_empty()).collect();
     let alarms = nothing.iter().filter(|o| !o.correct).count();

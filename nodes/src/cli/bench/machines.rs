@@ -9,6 +9,7 @@ use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::noise::{NoiseModel, N_GROUPS};
 use rpkm_twin::{EffectKind, ThermalPhysics, Twin, TwinConfig, ZeroDrift};
 use std::collections::BTreeMap;
+use std::fmt::Write;
 
 /// The kinds of machine the bench draws, each reported on its own line.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
@@ -286,11 +287,12 @@ pub(super) fn offered(m: &Machine, columns: &[String]) -> Result<Option<EffectsF
     }
     if let (Class::TwoOutside, Some(c)) = (m.hidden.class, &m.config.cyclic) {
         let (q, pitch) = (c.carrier + 1, c.pitch_mm);
-        text.push_str(&format!(
+        write!(
+            text,
             "  - name: cyclic_scale\n    summary: a periodic error of carrier {q}'s scale\n    \
              params: {{a: {{unit: mm, prior: 0.005}}, c: {{unit: mm, prior: 0.005}}}}\n    \
              dq{q}: \"a * sin(2*pi*q{q}/{pitch}) + c * cos(2*pi*q{q}/{pitch})\"\n"
-        ));
+        )?;
     }
     if text.is_empty() {
         return Ok(None);
