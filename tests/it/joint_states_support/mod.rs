@@ -236,16 +236,25 @@ pub fn launch_dir(tag: &str) -> (TempDir, PathBuf) {
     )
     .expect("test.yaml");
     let launch = std::fs::read_to_string(shipped.join("rpkm.launch.yaml")).expect("launch");
-    let from = "param: [{from: params.yaml}]";
+    // every node reads params.yaml, in the flow form or as the first of a block list
+    let (flow, block) = (
+        "param: [{from: params.yaml}]",
+        "        - from: params.yaml\n",
+    );
     assert_eq!(
-        launch.matches(from).count(),
+        launch.matches(flow).count() + launch.matches(block).count(),
         4,
         "the shipped launch's nodes"
     );
-    let launch = launch.replace(
-        from,
-        "param: [{from: params.yaml}, {from: cell.yaml}, {from: test.yaml}]",
-    );
+    let launch = launch
+        .replace(
+            flow,
+            "param: [{from: params.yaml}, {from: cell.yaml}, {from: test.yaml}]",
+        )
+        .replace(
+            block,
+            "        - from: params.yaml\n        - from: cell.yaml\n        - from: test.yaml\n",
+        );
     let file = dir.path("rpkm.launch.yaml");
     std::fs::write(&file, launch).expect("launch file");
     (dir, file)
