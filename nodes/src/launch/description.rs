@@ -1,5 +1,5 @@
 //! What a launch file describes: the processes to run and how, and the environment they get.
-//! Parsed by `mod.rs`, run by the supervisor and the managed bring-up.
+//! Parsed by `parse.rs`, run by the supervisor and the managed bring-up.
 
 use std::ffi::OsString;
 use std::path::PathBuf;
