@@ -1,6 +1,6 @@
 //! `rpkm launch --check`: every node's command line and configuration as it would start.
 
-use super::description::{LaunchDescription, NodeSpec, Program};
+use super::description::{LaunchDescription, LaunchProgram, NodeSpec};
 use crate::node::{declared_keys, Geometry, NodeArgs, NodeKind, NodeSetup};
 
 /// `rpkm launch --check`: every node's command line and configuration as it would start,
@@ -12,7 +12,7 @@ pub(super) fn check(desc: &LaunchDescription) -> anyhow::Result<()> {
             .iter()
             .map(|a| a.to_string_lossy().into_owned())
             .collect();
-        if spec.program == Program::Node {
+        if spec.program == LaunchProgram::Node {
             check_node(spec).map_err(|e| {
                 crate::error::bad_input(format!(
                     "{}:{}: node {}: {}",

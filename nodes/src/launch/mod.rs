@@ -78,7 +78,7 @@ pub mod supervisor;
 mod tests;
 
 pub use args::{LaunchArgs, LaunchError};
-pub use description::{LaunchDescription, NodeSpec, Program, COMMANDS};
+pub use description::{LaunchDescription, LaunchProgram, NodeSpec, COMMANDS};
 
 use check::check;
 

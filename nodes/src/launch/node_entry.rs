@@ -1,7 +1,7 @@
 //! A `node` entry: lifecycle management, SROS2 enclave, name, namespace and remappings.
 
 use super::args::LaunchError;
-use super::description::{NodeSpec, Program};
+use super::description::{LaunchProgram, NodeSpec};
 use super::fields::{flag, get, respawn, PARAM_KEYS, REMAP_KEYS};
 use super::place::Ctx;
 use crate::node::EXECUTABLES;
@@ -75,7 +75,7 @@ pub(super) fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec
     let (namespace, remaps) = names(ctx, body, &name)?;
     let managed = managed(ctx, body, &name)?;
     Ok(NodeSpec {
-        program: Program::Node,
+        program: LaunchProgram::Node,
         enclave: enclave(ctx, body, &name)?,
         exec,
         name,

@@ -2,7 +2,7 @@
 //! entries.
 
 use super::args::LaunchError;
-use super::description::{LaunchDescription, NodeSpec, Program, COMMANDS};
+use super::description::{LaunchDescription, LaunchProgram, NodeSpec, COMMANDS};
 use super::fields::{condition, get, respawn, ARG_KEYS, EXECUTABLE_KEYS, NODE_KEYS, SET_ENV_KEYS};
 use super::node_entry::node;
 use super::place::{entry_lines, unlocated_error_line, utf8_error_place, Ctx};
@@ -208,7 +208,7 @@ fn executable(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec, Lau
         .unwrap_or_else(|| exec.clone());
     let (respawn, respawn_delay) = respawn(ctx, body, &name, false)?;
     Ok(NodeSpec {
-        program: Program::Command,
+        program: LaunchProgram::Command,
         exec,
         name,
         param_files: Vec::new(),

@@ -45,7 +45,7 @@ fn parses_nodes_args_and_substitutions() -> Result<(), LaunchError> {
     let r = &d.nodes[2];
     assert_eq!(
         (r.program, r.exec.as_str(), r.name.as_str(), r.respawn),
-        (Program::Command, "record", "record", false)
+        (LaunchProgram::Command, "record", "record", false)
     );
     assert_eq!(
         r.args,

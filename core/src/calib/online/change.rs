@@ -108,7 +108,7 @@ impl ChangeTrack {
 
 /// The parameters' change since the reference and its covariance had nothing moved (mm, rad).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Change {
+pub struct EstimateChange {
     /// Time of the reference, s (None before the first sample).
     pub since_s: Option<f64>,
     /// Estimate now minus the estimate at the reference.

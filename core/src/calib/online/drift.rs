@@ -1,7 +1,7 @@
 //! The drift test: whether a candidate's creep explains the change beyond noise, and the creep
 //! named.
 
-use super::change::{Change, DriftInput};
+use super::change::{DriftInput, EstimateChange};
 use super::options::scale;
 use crate::params::{unit, Params, Unit, N_PARAMS};
 use nalgebra::{SMatrix, SVector};
@@ -144,7 +144,7 @@ pub(super) struct Whitened {
 }
 
 impl Whitened {
-    pub(super) fn new(c: &Change) -> Whitened {
+    pub(super) fn new(c: &EstimateChange) -> Whitened {
         let d = scale();
         let cov = SMatrix::<f64, N_PARAMS, N_PARAMS>::from_fn(|i, j| c.cov[(i, j)] / (d[i] * d[j]));
         let eig = cov.symmetric_eigen();

@@ -1,7 +1,7 @@
 //! The estimator's state and results: construction from a calibration, the random-walk
 //! prediction, the readings of the estimate.
 
-use super::change::{Change, ChangeTrack};
+use super::change::{ChangeTrack, EstimateChange};
 use super::force_noise::ForceNoise;
 use super::options::{scale, Covariance, OnlineOptions, Rows, STIFFNESS};
 use crate::calib::tie::{SeparatingMotion, TieEvidence};
@@ -12,7 +12,7 @@ use nalgebra::{Matrix4, SMatrix, SVector, Vector3, Vector4};
 
 /// A step change found in the forces.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct StepChange {
+pub struct DetectedStep {
     /// State index of the parameter that explains it best ([`STIFFNESS`] for the stiffness).
     pub param: usize,
     /// Its change, mm or rad (relative for the stiffness), and that estimate's σ.
@@ -38,13 +38,13 @@ pub struct StepChange {
 
 /// What one sample did.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Outcome {
+pub enum UpdateOutcome {
     /// Applied, with its normalised innovation.
     Applied { nis: f64 },
     /// Held back (innovation beyond the gate): an outlier or the start of a step.
     Held { nis: f64 },
     /// The held samples were a step: named, and applied.
-    Step(StepChange),
+    Step(DetectedStep),
     /// The sample (applied, or held) settled a step that was "this or that".
     Resolved(TieResolved),
 }
@@ -252,11 +252,11 @@ impl OnlineEstimator {
     /// start error the forces go on correcting and the force noise, through the gains the
     /// filter used; its random walk's growth not included: that is what a drift would be),
     /// and the estimate's response to a creep of each parameter (see [`ChangeTrack`]).
-    pub fn change(&self) -> Change {
+    pub fn change(&self) -> EstimateChange {
         let d = scale();
         let c = &self.change;
         let cov = c.covariance();
-        Change {
+        EstimateChange {
             since_s: c.t,
             dp: SVector::from_fn(|i, _| self.p[i] - c.p[i]),
             cov: SMatrix::from_fn(|i, j| cov[(i, j)] * d[i] * d[j]),

@@ -1,6 +1,6 @@
 //! One sample in: the forces linearised at the estimate, gated, applied in information form.
 
-use super::estimator::{ForceSample, Held, OnlineEstimator, Outcome};
+use super::estimator::{ForceSample, Held, OnlineEstimator, UpdateOutcome};
 use super::force_noise::ForceNoise;
 use super::options::{scale, Covariance, Rows, GATE_CHI2_4, N_STATE, STIFFNESS};
 use crate::calib::tie::Verdict;
@@ -99,8 +99,8 @@ impl OnlineEstimator {
 
     /// One decimated sample of the drives: predict, gate, update (or hold, or find a step);
     /// while a step is "this or that", both estimates predict the sample first and the
-    /// evidence may tell them apart ([`Outcome::Resolved`]).
-    pub fn update(&mut self, sample: &ForceSample) -> Result<Outcome, ElasticError> {
+    /// evidence may tell them apart ([`UpdateOutcome::Resolved`]).
+    pub fn update(&mut self, sample: &ForceSample) -> Result<UpdateOutcome, ElasticError> {
         let (held, named) = self.predicted(sample)?;
         let Some(mut tie) = self.tie.take() else {
             return self.decide(sample, &held, named.nis);

@@ -65,12 +65,14 @@ mod step;
 mod tests;
 mod ties;
 
-pub use change::{Change, DriftInput};
+pub use change::{DriftInput, EstimateChange};
 pub use drift::{
     Drift, DriftTest, DRIFT_FALSE_ALARM, DRIFT_NAME_MARGIN, DRIFT_SETTLE_AFTER_STEP_S,
     DRIFT_SETTLE_S, FOLLOWS,
 };
-pub use estimator::{ForceSample, OnlineEstimator, Outcome, StepChange, TieResolved, TieSoFar};
+pub use estimator::{
+    DetectedStep, ForceSample, OnlineEstimator, TieResolved, TieSoFar, UpdateOutcome,
+};
 pub use monitor::DriftMonitor;
 pub use options::{
     Covariance, OnlineOptions, StepCandidates, GATE_CHI2_4, N_STATE, STIFFNESS, TIE_EVIDENCE_CHI2,

@@ -1,6 +1,6 @@
 //! The drift monitor: the estimate's history, its settling times and the drift test run on it.
 
-use super::change::Change;
+use super::change::EstimateChange;
 use super::drift::{
     candidates_p, creep_fits, expansion_directions, project_out, CreepFit, Drift, DriftTest,
     Whitened, DRIFT_NAME_MARGIN, DRIFT_SETTLE_AFTER_STEP_S, DRIFT_SETTLE_S,
@@ -84,7 +84,7 @@ impl DriftMonitor {
     /// The drift test of `change` (the estimator's, [`OnlineEstimator::change`]): its χ² once
     /// the expansion of the rods and the frame is taken out, and the single parameter whose
     /// creep explains the rest best, with its track's correlation with the temperature.
-    fn test(&self, change: &Change) -> DriftTest {
+    fn test(&self, change: &EstimateChange) -> DriftTest {
         let w = Whitened::new(change);
         let p0 = self.reference.map_or_else(Params::nominal, |r| r.1);
         let mut basis: Vec<SVector<f64, N_PARAMS>> = Vec::with_capacity(2);
@@ -126,7 +126,13 @@ impl DriftMonitor {
 
     /// The candidate whose creep explains the rest of the change best (`fits` from
     /// [`creep_fits`], `chi2` the rest's).
-    fn name(&self, w: &Whitened, fits: &[CreepFit], chi2: f64, change: &Change) -> Option<Drift> {
+    fn name(
+        &self,
+        w: &Whitened,
+        fits: &[CreepFit],
+        chi2: f64,
+        change: &EstimateChange,
+    ) -> Option<Drift> {
         let mut order: Vec<usize> = self
             .candidates
             .states()

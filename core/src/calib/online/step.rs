@@ -1,7 +1,7 @@
 //! Step changes: the held samples' innovations attributed to the one parameter that best
 //! explains them.
 
-use super::estimator::{OnlineEstimator, OpenTie, StepChange};
+use super::estimator::{DetectedStep, OnlineEstimator, OpenTie};
 use super::options::{scale, N_STATE};
 use crate::calib::tie::TieEvidence;
 
@@ -9,7 +9,7 @@ impl OnlineEstimator {
     /// Names the step of the held samples, applies it, and the held samples after it; with
     /// a runner-up, a second estimate carrying the runner-up's change instead is kept until
     /// the evidence tells the two apart.
-    pub(super) fn step_found(&mut self) -> StepChange {
+    pub(super) fn step_found(&mut self) -> DetectedStep {
         // a new step ends any tie still open
         self.tie = None;
         let mut step = self.attribute_step();
@@ -80,7 +80,7 @@ impl OnlineEstimator {
     /// left the comparison to the combinations the currents' noise alone enters, where the
     /// rods' signatures are more alike (seed 7's crash of l4: 1.39x better than l5 that
     /// way, 1.78x in N).
-    pub(super) fn attribute_step(&self) -> StepChange {
+    pub(super) fn attribute_step(&self) -> DetectedStep {
         let mut g = [0.0; N_STATE];
         let mut c = [0.0; N_STATE];
         for h in &self.held {
@@ -97,7 +97,7 @@ impl OnlineEstimator {
         let best = order[0];
         let next = order.get(1).copied().unwrap_or(best);
         let d = scale()[best];
-        StepChange {
+        DetectedStep {
             param: best,
             change: g[best] / c[best] * d,
             sigma: c[best].powf(-0.5) * d,

@@ -100,7 +100,7 @@ fn settle(named_is_l3: bool) -> (TieResolved, Params) {
     for &pose in &motion.poses {
         // three samples at each pose, as a cell stops there briefly
         for _ in 0..3 {
-            if let Outcome::Resolved(r) = est.update(&machine.sample(pose)).expect("update") {
+            if let UpdateOutcome::Resolved(r) = est.update(&machine.sample(pose)).expect("update") {
                 assert!(est.tie().is_none());
                 eprintln!("{motion:?}: {r:?}");
                 return (r, *est.params());
@@ -125,7 +125,7 @@ fn a_single_pose_does_not_settle_a_tie() {
         let out = est
             .update(&machine.sample(motion.poses[0]))
             .expect("update");
-        assert!(!matches!(out, Outcome::Resolved(_)), "{out:?}");
+        assert!(!matches!(out, UpdateOutcome::Resolved(_)), "{out:?}");
     }
     let so_far = est.tie().expect("still open").evidence;
     eprintln!("50 samples at {:?}: {so_far:?}", motion.poses[0]);

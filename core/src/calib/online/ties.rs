@@ -1,13 +1,13 @@
 //! Ties: a step explained alike by two parameters, the two estimates' predictions until the
 //! evidence parts them, and the motion that would.
 
-use super::estimator::{ForceSample, Held, OnlineEstimator, OpenTie, Outcome, TieResolved};
+use super::estimator::{ForceSample, Held, OnlineEstimator, OpenTie, TieResolved, UpdateOutcome};
 use super::options::{GATE_CHI2_4, N_STATE, TIE_MOTION_POSES};
-use crate::calib::tie::{plan_motion, Candidate, Prediction, SeparatingMotion, Verdict};
+use crate::calib::tie::{plan_motion, SeparatingMotion, TieCandidate, TiePrediction, Verdict};
 use crate::elastic::{ElasticError, ALL_ACTIVE};
 
 /// A prediction that missed: the estimate has no innovation covariance for the sample.
-const MISSED: Prediction = Prediction {
+const MISSED: TiePrediction = TiePrediction {
     nis: f64::INFINITY,
     ln_det: 0.0,
 };
@@ -25,7 +25,7 @@ impl OnlineEstimator {
         let mut named = self.clone();
         named.tie = None;
         let t = self.last_t.unwrap_or(0.0);
-        let candidates: Vec<Candidate<N_STATE>> = targets
+        let candidates: Vec<TieCandidate<N_STATE>> = targets
             .iter()
             .filter_map(|&(x, y)| {
                 let q = crate::geometry::igm(&self.p, crate::params::Model::M29, x, y)
@@ -37,7 +37,7 @@ impl OnlineEstimator {
                 // linearised against the runner-up's forces: the innovation is what the
                 // named estimate's prediction misses of them
                 let held = named.linearise(&ForceSample { t, q, f: other }).ok()?;
-                Some(Candidate {
+                Some(TieCandidate {
                     x,
                     y,
                     h: held.h,
@@ -65,14 +65,14 @@ impl OnlineEstimator {
         sample: &ForceSample,
         held: &Held,
         nis: f64,
-    ) -> Result<Outcome, ElasticError> {
+    ) -> Result<UpdateOutcome, ElasticError> {
         let verdict = tie.evidence.verdict(self.opts.tie_evidence_chi2);
         if verdict == Verdict::Open {
             self.tie = Some(tie);
             return self.decide(sample, held, nis);
         }
         let out = self.decide(sample, held, nis)?;
-        if matches!(out, Outcome::Step(_)) {
+        if matches!(out, UpdateOutcome::Step(_)) {
             return Ok(out);
         }
         // the estimate moved where the runner-up stood: the drift test starts again
@@ -89,7 +89,7 @@ impl OnlineEstimator {
         } else {
             (tie.named, tie.runner_up)
         };
-        Ok(Outcome::Resolved(TieResolved {
+        Ok(UpdateOutcome::Resolved(TieResolved {
             param: kept.0,
             change: kept.1,
             ruled_out: ruled_out.0,
@@ -105,12 +105,12 @@ impl OnlineEstimator {
     pub(super) fn predicted(
         &mut self,
         sample: &ForceSample,
-    ) -> Result<(Held, Prediction), ElasticError> {
+    ) -> Result<(Held, TiePrediction), ElasticError> {
         self.predict(sample.t);
         let held = self.linearise(sample)?;
         let s = self.innovation_cov(&held);
         let s = (s + s.transpose()) * 0.5;
-        let prediction = s.cholesky().map_or(MISSED, |c| Prediction {
+        let prediction = s.cholesky().map_or(MISSED, |c| TiePrediction {
             nis: held.y.dot(&c.solve(&held.y)),
             ln_det: 2.0 * c.l().diagonal().iter().map(|v| v.ln()).sum::<f64>(),
         });
@@ -123,30 +123,30 @@ impl OnlineEstimator {
         sample: &ForceSample,
         held: &Held,
         nis: f64,
-    ) -> Result<Outcome, ElasticError> {
+    ) -> Result<UpdateOutcome, ElasticError> {
         if nis <= GATE_CHI2_4 {
             if self.held.len() >= self.opts.step_samples.max(1) {
                 // a step the path has moved away from: named with what was held
                 let step = self.step_found();
                 let again = self.linearise(sample)?;
                 self.apply(&again);
-                return Ok(Outcome::Step(step));
+                return Ok(UpdateOutcome::Step(step));
             }
             // fewer gated samples than a step: outliers
             self.outliers += self.held.len();
             self.held.clear();
-            return Ok(Outcome::Applied {
+            return Ok(UpdateOutcome::Applied {
                 nis: self.apply(held),
             });
         }
         self.held.push(*held);
         if self.held.len() < self.opts.step_samples.max(1) {
-            return Ok(Outcome::Held { nis });
+            return Ok(UpdateOutcome::Held { nis });
         }
         let margin = self.attribute_step().margin;
         if margin < self.opts.step_margin && self.held.len() < self.opts.step_max_samples {
-            return Ok(Outcome::Held { nis });
+            return Ok(UpdateOutcome::Held { nis });
         }
-        Ok(Outcome::Step(self.step_found()))
+        Ok(UpdateOutcome::Step(self.step_found()))
     }
 }

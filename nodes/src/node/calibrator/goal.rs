@@ -1,6 +1,6 @@
 //! A Calibrate goal's options and its result.
 
-use super::job::{CalibratorOptions, Outcome};
+use super::job::{CalibratorOptions, JobOutcome};
 use crate::error::bad_input;
 use crate::node::calibrate_action::noise_si;
 use rpkm_core::calib;
@@ -42,7 +42,7 @@ pub(super) fn goal_options(
 }
 
 /// The result of a goal's calibration `o`; `status` is the node's status line of it.
-pub(super) fn goal_result(o: &Outcome, status: &str) -> CalibrateResult {
+pub(super) fn goal_result(o: &JobOutcome, status: &str) -> CalibrateResult {
     let (noise_groups, noise_stated, noise_estimated) = noise_si(&o.noise);
     let verdict = o.verdict.as_ref().map_or(String::new(), |(kind, _)| {
         serde_json::to_value(kind)

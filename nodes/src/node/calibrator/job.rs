@@ -11,7 +11,7 @@ use rpkm_msgs::{Diagnosis, Parameters};
 
 /// A finished calibration as messages.
 #[derive(Debug, Clone)]
-pub struct Outcome {
+pub struct JobOutcome {
     /// The identified parameters with campaign statistics.
     pub parameters: Parameters,
     /// The diagnosis, or why there is none (`None`: not asked for).
@@ -125,13 +125,16 @@ fn calibration_options(o: &CalibratorOptions) -> anyhow::Result<Options> {
 }
 
 /// Calibrates `campaign` (mm, rad) and builds the messages.
-pub fn calibrate_campaign(campaign: &Campaign, o: &CalibratorOptions) -> anyhow::Result<Outcome> {
+pub fn calibrate_campaign(
+    campaign: &Campaign,
+    o: &CalibratorOptions,
+) -> anyhow::Result<JobOutcome> {
     calibrate_job(&Job::of(campaign), o)
 }
 
 /// Calibrates as `job` asks and builds the messages; a calibration its observer stopped is
 /// the error `CalibrationError::Cancelled`.
-pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<Outcome> {
+pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<JobOutcome> {
     let (cal_part, own_val) = split(job.campaign, &o.validation_prefix);
     let val_part = job.validation.cloned().or(own_val);
     let opts = calibration_options(o)?;
@@ -195,7 +198,7 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<Outcome
     } else {
         (None, None)
     };
-    Ok(Outcome {
+    Ok(JobOutcome {
         parameters,
         diagnosis,
         verdict,

@@ -51,7 +51,7 @@ mod start_covariance;
 mod tests;
 
 pub use accumulator::Accumulator;
-pub use job::{calibrate_campaign, calibrate_job, CalibratorOptions, Job, Outcome};
+pub use job::{calibrate_campaign, calibrate_job, CalibratorOptions, Job, JobOutcome};
 pub use node::run;
 pub use params::KEYS;
 pub use start_covariance::start_covariance;

@@ -3,7 +3,7 @@
 
 use super::accumulator::Accumulator;
 use super::goal::{goal_options, goal_result};
-use super::job::{calibrate_campaign, calibrate_job, CalibratorOptions, Job, Outcome};
+use super::job::{calibrate_campaign, calibrate_job, CalibratorOptions, Job, JobOutcome};
 use super::params::{configure, online_settings, specs, Settings, KEYS};
 use crate::node::calibrate_action::{CalibrateAction, Running};
 use crate::node::context::{
@@ -217,7 +217,7 @@ impl Calibrator {
         ctx: &NodeContext,
         out: &Outputs,
         n: u64,
-        result: Result<&Outcome, &anyhow::Error>,
+        result: Result<&JobOutcome, &anyhow::Error>,
     ) -> anyhow::Result<()> {
         self.last = match result {
             Ok(o) => {
@@ -329,7 +329,7 @@ impl Calibrator {
         running: &Running,
         goal: &CalibrateGoal,
         meanwhile: &dyn Fn(),
-    ) -> anyhow::Result<(Outcome, u64)> {
+    ) -> anyhow::Result<(JobOutcome, u64)> {
         let (campaign, noise) = if goal.campaign_file.is_empty() {
             anyhow::ensure!(
                 self.acc.measurements > 0,
@@ -373,7 +373,7 @@ impl Calibrator {
 
     /// Records a calibration in the machine's history, if the node keeps one: what changed
     /// since the previous one, or why it was not recorded.
-    fn record_calibration(&mut self, o: &Outcome) -> Option<anyhow::Result<String>> {
+    fn record_calibration(&mut self, o: &JobOutcome) -> Option<anyhow::Result<String>> {
         self.history.as_mut().map(|h| {
             h.calibration(&crate::node::history::Calibrated {
                 campaign: &o.campaign,

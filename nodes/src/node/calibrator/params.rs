@@ -5,7 +5,7 @@ use super::job::CalibratorOptions;
 use super::start_covariance::start_covariance;
 use crate::node::context::bad_param;
 use crate::node::geometry::Geometry;
-use crate::node::live::{self, Spec};
+use crate::node::live::{self, ParamSpec};
 use crate::node::online_tracker::OnlineSettings;
 use crate::node::params::NodeParams;
 use rpkm_core::calib;
@@ -86,64 +86,64 @@ pub(super) fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
 
 /// The calibrator's parameters on its ROS 2 parameter services: what the next calibration
 /// uses and when a campaign ends are live; the buffer and the online tracker need a restart.
-pub(super) fn specs() -> Vec<Spec> {
+pub(super) fn specs() -> Vec<ParamSpec> {
     use live::Default::{Bool, Str, F64, U64};
     use rpkm_transport::dds_params::ParamRange;
     let int = ParamRange::count;
     let float = |(lo, hi): (f64, f64)| ParamRange::Float(lo, hi);
-    let fixed_in = |key, default, description, range| Spec {
+    let fixed_in = |key, default, description, range| ParamSpec {
         range,
-        ..Spec::fixed(key, default, description)
+        ..ParamSpec::fixed(key, default, description)
     };
     let [model, _, geometry_file, _, _] = crate::node::geometry::geometry_specs();
     vec![
-        Spec {
+        ParamSpec {
             description: "model of the next calibration: 24 or 29 parameters",
             ..model
         },
         geometry_file,
-        Spec::fixed(
+        ParamSpec::fixed(
             "effects_file",
             Str(""),
             "effects written as data (YAML, docs/effects.md) calibrated with the geometry",
         ),
-        Spec::live(
+        ParamSpec::live(
             "calibrate_every",
             U64(0),
             "calibrate after N measurements, 0 for at the end marker only",
             int(crate::node::params::MEASUREMENT_COUNT),
         ),
-        Spec::live(
+        ParamSpec::live(
             "idle_end_s",
             F64(0.0),
             "end a campaign after this long without a measurement, s (0: never)",
             float(crate::node::params::DURATION_S),
         ),
-        Spec::live(
+        ParamSpec::live(
             "validation_prefix",
             Str("val"),
             "setups whose name starts with this are held out for validation",
             ParamRange::None,
         ),
-        Spec::live(
+        ParamSpec::live(
             "selection",
             Str("map"),
             "map (every parameter under its tolerance) or auto (the thesis's selection)",
             ParamRange::None,
         ),
-        Spec::live(
+        ParamSpec::live(
             "max_condition",
             F64(100.0),
             "condition-number limit of selection auto (> 0)",
             ParamRange::None,
         ),
-        Spec::live(
+        ParamSpec::live(
             "outlier_sigma",
             F64(0.0),
             "outlier threshold, sigma (0: keep all)",
             float(crate::node::params::OUTLIER_SIGMA),
         ),
-        Spec::live(
+        ParamSpec::live(
             "noise_estimation",
             Bool(true),
             "weight the rows by the noise the campaign shows (false: the stated noise)",
@@ -163,15 +163,15 @@ pub(super) fn specs() -> Vec<Spec> {
 }
 
 /// The machine's history (read at start: the store is opened once).
-fn history_specs() -> Vec<Spec> {
+fn history_specs() -> Vec<ParamSpec> {
     use live::Default::Str;
     vec![
-        Spec::fixed(
+        ParamSpec::fixed(
             "history",
             Str(""),
             "record each calibration and online step here: an SQLite file or a postgres:// URL",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "history_machine",
             Str(""),
             "the machine's name in the history (default: the node's namespace, rpkm without)",
@@ -180,17 +180,17 @@ fn history_specs() -> Vec<Spec> {
 }
 
 /// The online tracker's parameters (read at start: the tracker's thread is set up once).
-fn online_specs() -> Vec<Spec> {
+fn online_specs() -> Vec<ParamSpec> {
     use live::Default::{Bool, F64, U64};
     use rpkm_transport::dds_params::ParamRange;
     // the tracker's noise levels default to the core's (the calibration's stated ones)
     let tracker = OnlineOptions::default();
-    let fixed_in = |key, default, description, range| Spec {
+    let fixed_in = |key, default, description, range| ParamSpec {
         range,
-        ..Spec::fixed(key, default, description)
+        ..ParamSpec::fixed(key, default, description)
     };
     vec![
-        Spec::fixed(
+        ParamSpec::fixed(
             "online",
             Bool(false),
             "track the geometry live from the drive forces",
@@ -201,7 +201,7 @@ fn online_specs() -> Vec<Spec> {
             "online tracker: every N-th drive state",
             ParamRange::count((1, 1_000_000)),
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "online_publish_sigma",
             F64(1.0),
             "online tracker: publish when a parameter moved by this many sigma (> 0)",
@@ -212,7 +212,7 @@ fn online_specs() -> Vec<Spec> {
             "online tracker: WARN from this drift, um",
             ParamRange::Float(0.1, 10_000.0),
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "online_force_sigma_n",
             F64(tracker.force_sigma_n),
             "online tracker: drive force noise, N (> 0)",
