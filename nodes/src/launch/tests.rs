@@ -9,20 +9,20 @@ launch:
   - arg: {name: rate}
   - set_env: {name: ROS_DOMAIN_ID, value: \"7\"}
   - node:
-  pkg: rpkm
-  exec: tcp_estimator
-  name: estimator_a
-  param:
-    - from: params.yaml
-    - {name: model, value: 24}
-    - {name: source, value: $(dirname)/c.csv}
-  args: --backend $(var backend) --param rate_hz=$(var rate)
-  respawn: \"false\"
+      pkg: rpkm
+      exec: tcp_estimator
+      name: estimator_a
+      param:
+        - from: params.yaml
+        - {name: model, value: 24}
+        - {name: source, value: $(dirname)/c.csv}
+      args: --backend $(var backend) --param rate_hz=$(var rate)
+      respawn: \"false\"
   - node: {pkg: rpkm, exec: ingest}
   - node: {pkg: rpkm, exec: calibrator, unless: \"$(var rate)\"}
   - executable:
-  cmd: rpkm record --out $(dirname)/bag --topics /rpkm/tcp_estimate
-  if: \"1\"
+      cmd: rpkm record --out $(dirname)/bag --topics /rpkm/tcp_estimate
+      if: \"1\"
 ";
 
 #[test]
@@ -63,7 +63,7 @@ fn unknown_keys_in_a_launch_entry_are_rejected_with_the_line() {
         ),
         (
             "launch:\n  - node: {pkg: rpkm, exec: ingest}\n  \
-             - executable: {cmd: rpkm record, respwan: false}\n",
+                 - executable: {cmd: rpkm record, respwan: false}\n",
             "z.yaml:3: executable: unknown key \"respwan\"",
         ),
         (
@@ -138,7 +138,7 @@ fn every_error_names_the_line_of_its_entry_or_key() {
     for (text, says) in [
         (
             "# c\nlaunch:\n  - arg: {name: a, default: x}\n\n  - node:\n      pkg: rpkm\n      \
-             exec: talker\n",
+                 exec: talker\n",
             "z.yaml:7: node exec \"talker\"",
         ),
         (
@@ -151,7 +151,7 @@ fn every_error_names_the_line_of_its_entry_or_key() {
         ),
         (
             "launch:\n  - node: {pkg: rpkm, exec: ingest}\n  - node: {pkg: rpkm, exec: ingest}\n  \
-             - executable:\n      cmd: rpkm record\n      unless: 2\n",
+                 - executable:\n      cmd: rpkm record\n      unless: 2\n",
             "z.yaml:6: executable unless: \"2\"",
         ),
         (
@@ -182,7 +182,7 @@ fn every_error_names_the_line_of_its_entry_or_key() {
 fn an_enclave_goes_to_the_node_as_ros_args() -> Result<(), LaunchError> {
     let d = LaunchDescription::parse(
         "launch:\n  - node:\n      pkg: rpkm\n      exec: tcp_estimator\n      \
-         enclave: /cell/estimator_a\n",
+             enclave: /cell/estimator_a\n",
         "n.yaml",
         Path::new("."),
         &[],
@@ -208,7 +208,7 @@ fn namespace_and_remap_go_to_the_node_as_ros_args() -> Result<(), LaunchError> {
     let d = LaunchDescription::parse(
         &format!(
             "{entry}      namespace: /machine_a\n      \
-             remap: [{{from: tcp_estimate, to: /cell/estimate_a}}]\n"
+                 remap: [{{from: tcp_estimate, to: /cell/estimate_a}}]\n"
         ),
         "n.yaml",
         Path::new("."),

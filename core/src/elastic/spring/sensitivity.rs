@@ -15,7 +15,7 @@ pub fn platform_balance(p: &Params, eq: &Equilibrium) -> [f64; 3] {
 /// The rods' lengths |A − B| at an equilibrium's pose and carriers, and the platform's
 /// balance ([`platform_balance`]), in one pass with the trigonometry once (three sin_cos for
 /// the five rods): what the plausibility checks read.
-pub(in crate::elastic) fn lengths_and_balance(
+pub(crate) fn lengths_and_balance(
     p: &Params,
     fr: &Frames,
     eq: &Equilibrium,

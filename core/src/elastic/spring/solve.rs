@@ -10,7 +10,7 @@ use crate::params::{Model, Params};
 /// Rigid start: the model-29 forward model of the first viable subsystem whose two drives are
 /// active, at the commanded positions; its secant in ψ from `psi_warm` where given (the
 /// previous sample's rigid ψ, never the elastic one: the same pose, in fewer closures).
-pub(in crate::elastic) fn rigid_start(
+pub(crate) fn rigid_start(
     p: &Params,
     fr: &Frames,
     (q, fol): (&[f64; 4], Followers),
@@ -55,11 +55,7 @@ pub fn fegm_unchecked(
 }
 
 /// The previous equilibrium with the active carriers moved to their new commands.
-pub(in crate::elastic) fn warm_start(
-    q: &[f64; 4],
-    followers: Followers,
-    previous: &Equilibrium,
-) -> V7 {
+pub(crate) fn warm_start(q: &[f64; 4], followers: Followers, previous: &Equilibrium) -> V7 {
     let mut z0 = previous.z();
     for j in 0..4 {
         if !followers[j] {
@@ -73,13 +69,13 @@ pub(in crate::elastic) fn warm_start(
 /// rods that computes its forces ([`finish`]): what the plausibility checks read, which
 /// [`lengths_and_balance`] would compute again from the equilibrium's fields, the same rods
 /// at the same state.
-pub(in crate::elastic) struct Solved {
-    pub(in crate::elastic) eq: Equilibrium,
-    pub(in crate::elastic) lengths: [f64; 5],
-    pub(in crate::elastic) balance: [f64; 3],
+pub(crate) struct Solved {
+    pub(crate) eq: Equilibrium,
+    pub(crate) lengths: [f64; 5],
+    pub(crate) balance: [f64; 3],
 }
 
-pub(in crate::elastic) fn solve_from(
+pub(crate) fn solve_from(
     p: &Params,
     fr: &Frames,
     k: &Stiffness,

@@ -43,7 +43,7 @@ fn parameters_carry_the_written_effects_parameters() -> anyhow::Result<()> {
     let c = twin.campaign(&[Instrument::Lt, Instrument::Kgm, Instrument::SelfCal])?;
     let file = crate::effects_file::parse(
         "effects:\n  - name: lost_motion_q4\n    summary: carrier 4 lags\n    \
-         params: {b: {unit: mm, prior: 0.01}}\n    dq4: \"-b * dir_q4\"\n",
+             params: {b: {unit: mm, prior: 0.01}}\n    dq4: \"-b * dir_q4\"\n",
         "lost.yaml",
         &[],
     )?;
