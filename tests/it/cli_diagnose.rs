@@ -224,18 +224,19 @@ fn bench_machine(i: usize) -> serde_json::Value {
     serde_json::from_str(&out[at..]).expect("outcome JSON")
 }
 
-/// The two machines whose loop once named an effect that raised the held-out error: 50
-/// (thermal and encoder_scale hidden; the model with encoder_scale alone predicted 35.5 µm in
-/// one diagnosis and 1522 µm in the next, weighted by another noise estimate) and 19
-/// (preload and thermal; thermal's supported part predicted better, its whole family worse).
-/// Each step of the loop now predicts at least as well as the last, within twice the
-/// standard error of the paired held-out errors, and the loop names exactly what the twin
-/// hid and ends at its floor.
+/// Two machines with two library effects hidden, of the kinds whose loop once named an
+/// effect that raised the held-out error (thermal with encoder_scale: the model with
+/// encoder_scale alone predicted 35.5 µm in one diagnosis and 1522 µm in the next, weighted
+/// by another noise estimate; preload with thermal: thermal's supported part predicted
+/// better, its whole family worse): 149 and 113 of the series of seed 1. Each step of the
+/// loop now predicts at least as well as the last, within twice the standard error of the
+/// paired held-out errors, and the loop names exactly what the twin hid, the two together,
+/// and ends at its floor.
 #[test]
 fn no_step_of_the_loop_raises_the_held_out_error() {
     for (machine, hidden) in [
-        (50, ["encoder_scale", "thermal"]),
-        (19, ["preload_elastic", "thermal"]),
+        (149, ["encoder_scale", "thermal"]),
+        (113, ["preload_elastic", "thermal"]),
     ] {
         let o = bench_machine(machine);
         let mut named: Vec<&str> = o["named"]
@@ -263,8 +264,10 @@ fn no_step_of_the_loop_raises_the_held_out_error() {
             .collect();
         // one diagnosis per named effect, or one for a pair named together, then the last
         assert!((2..=3).contains(&path.len()), "machine {machine}: {o}");
+        // each step lowers the error; where it ends is the floor (below), not a fraction
+        // of the start (a noisy tracker's floor may be half the start or more)
         assert!(
-            path[path.len() - 1] < path[0] / 2.0,
+            path.windows(2).all(|w| w[1] < w[0]),
             "machine {machine}: {o}"
         );
         let over_floor = o["held_out_over_floor"].as_f64().expect("ratio");

@@ -33,6 +33,7 @@ mod cli_effects_file;
 mod cli_foreign;
 mod cli_plan;
 mod cli_scipy_baseline;
+mod first_campaign_doc;
 mod first_use_nodes;
 mod first_use_period;
 mod first_use_words;

@@ -6,13 +6,14 @@
 
 use super::figures::length_sigmas;
 use super::held_out::{self, Levels, Model1, Validation};
-use super::model::{self, Settled};
+use super::settle::{self, Settled};
 use super::trials::finish_with;
 use super::types::{Baseline, DiagnoseError, Fit, Fitted, HeldOutCheck, Options};
 use crate::calib::{self, Calibration, Request};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};
 use crate::noise::{Group, NoiseModel, N_GROUPS};
+use crate::obs::RowValue;
 use crate::params::{Model, Params};
 use crate::stats;
 use crate::variance::NoiseEstimate;
@@ -105,8 +106,8 @@ impl Current {
         let (cal, est, copts) = noise_of(campaign, in_model, opts, first)?;
         let val = held_out::held_out(validation, &est.model)?;
         // the evidence a part needs: a candidate's level, over the part combinations
-        let level = opts.alpha / model::PART_COMBINATIONS;
-        let settled = model::settle(campaign, val.as_ref(), in_model, (&copts, level));
+        let level = opts.alpha / settle::PART_COMBINATIONS;
+        let settled = settle::settle(campaign, val.as_ref(), in_model, (&copts, level));
         let effects = settled.effects(in_model);
         let cal = if settled.changed() {
             fit_model(campaign, &effects, &copts)?
@@ -207,19 +208,8 @@ pub(crate) fn baseline(
             calib::rms(&v.relative_sigma) * 1e3,
         )
     });
-    // the same rows weighted by the rating: each group's variance part back at its rating
-    let ratio2: [f64; N_GROUPS] = std::array::from_fn(|k| {
-        let g = Group::ALL[k];
-        (opts.noise.sigma(g, 1000.0) / estimated.sigma(g, 1000.0)).powi(2)
-    });
-    let scale: f64 = base
-        .rows
-        .iter()
-        .map(|r| {
-            let var: f64 = r.parts.iter().zip(&ratio2).map(|(v, f)| v * f).sum();
-            r.value * r.value / var
-        })
-        .sum();
+    // the same rows weighted by the rating
+    let scale = chi2_reweighted(&base.rows, estimated, &opts.noise);
     let p_value = stats::chi2_upper_tail(scale, base.fit.dof);
     Baseline {
         cal_rms_um: base.fit.cal_rms_um,
@@ -236,6 +226,22 @@ pub(crate) fn baseline(
     }
 }
 
+/// χ² of a fit's rows weighted by another noise than the one they were fitted under (`from`):
+/// each group's part of a row's variance rescaled to that group's level in `to`. Under one
+/// noise the χ² of several models compare; each under its own estimate reads about 1.
+fn chi2_reweighted(rows: &[RowValue], from: &NoiseModel, to: &NoiseModel) -> f64 {
+    let ratio2: [f64; N_GROUPS] = std::array::from_fn(|k| {
+        let g = Group::ALL[k];
+        (to.sigma(g, 1000.0) / from.sigma(g, 1000.0)).powi(2)
+    });
+    rows.iter()
+        .map(|r| {
+            let var: f64 = r.parts.iter().zip(&ratio2).map(|(v, f)| v * f).sum();
+            r.value * r.value / var
+        })
+        .sum()
+}
+
 /// One model as `rpkm calibrate`, the calibrator node and the Calibrate action evaluate it:
 /// the same calibration, noise and held-out judge as the diagnosis's baseline.
 #[derive(Clone, Debug)]
@@ -247,6 +253,17 @@ pub struct Evaluated {
     pub calibration: Calibration,
     pub baseline: Baseline,
     pub held_out: Option<HeldOutCheck>,
+    /// The calibration's rows as fitted, weighted by `noise`.
+    pub rows: Vec<RowValue>,
+}
+
+impl Evaluated {
+    /// χ²/ν of this model's calibration with its rows weighted by `noise` (another model's
+    /// estimate, or the stated noise) instead of its own estimate: the figure that compares
+    /// models, where each under its own estimate reads about 1.
+    pub fn chi2_per_dof_under(&self, noise: &NoiseModel) -> f64 {
+        chi2_reweighted(&self.rows, &self.noise.model, noise) / self.fit.dof
+    }
 }
 
 /// Calibrate `campaign` with `effects` in the model as the diagnosis does (noise estimated,
@@ -271,5 +288,6 @@ pub fn evaluate(
         calibration: current.cal,
         baseline: current.baseline,
         held_out: current.held_out,
+        rows: current.fitted.rows,
     })
 }

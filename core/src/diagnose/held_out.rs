@@ -259,11 +259,16 @@ impl Model1<'_> {
         Ok((set, theta))
     }
 
-    /// The variance (mm²) the calibration's own uncertainty gives each held-out error with
-    /// its setup's zero removed: J Σ Jᵀ over the 29 parameters (central differences) and
-    /// the machine's effect parameters (their analytic sensitivities), with the covariance
-    /// the calibration left between them.
-    pub fn prediction_variance(&self, val: &Validation) -> Result<Vec<f64>, FitError> {
+    /// The covariance (mm²) the calibration's own uncertainty gives the held-out errors with
+    /// their setups' zeros removed, J Σ Jᵀ in full: errors near each other share it.
+    pub fn prediction_covariance(&self, val: &Validation) -> Result<DMatrix<f64>, FitError> {
+        let (rel, cov) = self.sensitivities(val)?;
+        Ok(&rel * cov * rel.transpose())
+    }
+
+    /// The held-out errors' sensitivities to the calibrated parameters (each less its
+    /// setup's mean) and the calibration's covariance of those parameters.
+    fn sensitivities(&self, val: &Validation) -> Result<(DMatrix<f64>, DMatrix<f64>), FitError> {
         let (cal, model) = (self.cal, self.cal.model);
         let (set, theta) = self.held_out_theta(val)?;
         let corr = set.corrections(&theta);
@@ -334,10 +339,7 @@ impl Model1<'_> {
                 rel[(r, col)] -= sum[g].0 / count[g].1.max(1) as f64;
             }
         }
-        let jc = &rel * &cov;
-        Ok((0..n)
-            .map(|r| jc.row(r).dot(&rel.row(r)).max(0.0))
-            .collect())
+        Ok((rel, cov))
     }
 }
 
@@ -358,7 +360,8 @@ pub(crate) fn judge(
 ) -> Result<HeldOutCheck, FitError> {
     let errors = model.errors(val)?;
     let relative = val.relative(&errors);
-    let pv = model.prediction_variance(val)?;
+    let pc = model.prediction_covariance(val)?;
+    let pv: Vec<f64> = pc.diagonal().iter().map(|v| v.max(0.0)).collect();
     let n = relative.len();
     let var: Vec<f64> = val
         .relative_sigma
@@ -380,7 +383,8 @@ pub(crate) fn judge(
     } else {
         stats::chi2_upper_tail(statistic, dof)
     };
-    let rows = held_out_rows(val, &relative, &var);
+    let (own, noise) = beyond_calibration(val, &relative, &pc);
+    let rows = held_out_rows(val, &own, &noise);
     let shape = Shape::of(val.campaign, &rows, levels.structure);
     let dictionary = shape.dictionary.clone();
     let structured = shape.structured();
@@ -428,6 +432,35 @@ fn floor_dof(val: &Validation, var: &[f64], groups: &[GroupNoise]) -> f64 {
         total * total / spread
     } else {
         f64::INFINITY
+    }
+}
+
+/// The held-out errors less what the calibration's own uncertainty most likely put there
+/// (r − P V⁻¹ r, P = J Σ Jᵀ, V = P + the readings' noise), with the noise's variances: a
+/// calibration's parameter error is smooth over the poses and would read as structure (a
+/// self-calibration leaves the tracker's poses a y² its scale cannot fix). Where V cannot be
+/// factored, the errors as they are.
+fn beyond_calibration(
+    val: &Validation,
+    relative: &[f64],
+    pc: &DMatrix<f64>,
+) -> (Vec<f64>, Vec<f64>) {
+    let noise: Vec<f64> = val.relative_sigma.iter().map(|s| s * s).collect();
+    let n = relative.len();
+    if pc.nrows() != n || noise.len() != n {
+        return (relative.to_vec(), noise);
+    }
+    let mut v = pc.clone();
+    for (k, s2) in noise.iter().enumerate() {
+        v[(k, k)] += s2;
+    }
+    let r = nalgebra::DVector::from_column_slice(relative);
+    match v.cholesky() {
+        Some(c) => {
+            let x = c.solve(&r);
+            ((0..n).map(|k| noise[k] * x[k]).collect(), noise)
+        }
+        None => (relative.to_vec(), noise),
     }
 }
 

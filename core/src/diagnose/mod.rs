@@ -16,7 +16,11 @@
 //!   family on its own, and pairs, judged by the evidence of both campaigns (the F-test and
 //!   the held-out or cross-validated prediction, combined), by whether the gain matters and
 //!   whether the values are physical; the simplest within one standard error of the best
-//!   predicting is named.
+//!   predicting is named. Its files: [`entry`] (one model, fitted and predicting), [`pool`]
+//!   (the models tried beside the single candidates), [`gain`] (the rule a gain must meet:
+//!   significant on both campaigns, not contradicted, better by a practical amount, physical
+//!   values). [`settle`]: a family of the current model named whole keeps the parts the
+//!   evidence needs, by the same rule.
 //! - [`held_out`]: the held-out judge: errors with each setup's zero removed, the model's
 //!   floor (noise and the calibration's own uncertainty), the χ² test against it, the
 //!   structure of the held-out residual.
@@ -31,12 +35,16 @@
 
 pub mod cross;
 pub mod current;
+mod entry;
 mod figures;
+pub mod gain;
 pub mod held_out;
-pub mod model;
+mod model;
 pub mod neighbours;
 pub mod periodic;
+mod pool;
 mod rounds;
+mod settle;
 pub mod sparse;
 mod structure;
 mod trials;

@@ -11,9 +11,11 @@
 //!    problem), and the model chosen as a whole ([`model::search`]).
 
 use super::current::{calib_options, noise_of, structure_level, Current};
+use super::entry::Judge;
 use super::figures::{error_vectors, length_values};
 use super::held_out;
-use super::model::{self, Judge};
+use super::model;
+use super::pool::{self, Pool};
 use super::sparse;
 use super::trials::{candidates, finish, try_all, Round};
 use super::types::NUMERICAL_RMS_MM;
@@ -62,8 +64,8 @@ fn rounds(
 ) -> Result<Diagnosis, DiagnoseError> {
     let library = effects::library();
     let tried = candidates_of(&library, in_model, offered, opts);
-    let variants = model::part_variants(&tried, false);
-    let swaps = model::part_variants(in_model, true);
+    let variants = pool::part_variants(&tried, false);
+    let swaps = pool::part_variants(in_model, true);
     let level = opts.alpha / tried.len().max(1) as f64;
     let stated = calib_options(opts);
     let first = Search {
@@ -117,7 +119,7 @@ fn rounds(
     let (trials, choice) = model::search(
         &judge,
         (&mut round.candidates, &round.fits),
-        &model::Pool {
+        &Pool {
             tried: &tried,
             variants: &variants,
             swaps: &swaps,
@@ -224,7 +226,7 @@ fn exact(
     let (trials, choice) = model::search(
         &judge,
         (&mut round.candidates, &round.fits),
-        &model::Pool {
+        &Pool {
             tried: first.tried,
             variants,
             swaps: &[],

@@ -394,6 +394,7 @@ pub(crate) fn finish_with(
         determined: cal.determined,
         params: cal.params,
         theta: cal.theta,
+        covariance_theta: cal.covariance_theta,
     };
     Ok(Fitted { rows, fit })
 }

@@ -111,6 +111,10 @@ pub struct Fit {
     /// The effects' parameters (the calibration's θ).
     #[serde(skip)]
     pub theta: Vec<f64>,
+    /// Covariance of `theta` (zero rows and columns where a parameter is not identified):
+    /// the Wald test of the parameters added ([`super::gain`]).
+    #[serde(skip)]
+    pub covariance_theta: nalgebra::DMatrix<f64>,
 }
 
 /// The current model's fit and its test against the stated noise (the JSON's `baseline`).
@@ -231,7 +235,7 @@ pub struct Judged {
     /// noise there (the held-out floor, or 1 for left-out rows in σ); on the calibration's
     /// rows where nothing predicts.
     pub size: Option<f64>,
-    /// Whether it matters: `size` reaches [`super::model::PRACTICAL_SIZE`].
+    /// Whether it matters: `size` reaches [`super::gain::PRACTICAL_SIZE`].
     pub matters: bool,
     /// Effect parameters fitted clearly outside the values the physics allows (more than
     /// 3σ): "alpha_rods = -275 ± 27 ppm/K outside -5..40".

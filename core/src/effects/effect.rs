@@ -88,7 +88,7 @@ pub trait Effect: Send + Sync {
     }
     /// Whether the family is named whole (`thermal`) and its parts are left to the data: the
     /// diagnosis and the calibration keep the parts that predict (see
-    /// `diagnose::model::settle`). False where the parts are pinned (`thermal:rods`) and for
+    /// `diagnose::settle::settle`). False where the parts are pinned (`thermal:rods`) and for
     /// an effect of one piece.
     fn open_family(&self) -> bool {
         false

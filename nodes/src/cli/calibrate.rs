@@ -1,5 +1,6 @@
 //! `rpkm calibrate`: identify the geometric parameters from a campaign file.
 
+use super::effect_stages::Stages;
 use super::summary::print_noise_groups;
 use super::{bad_input, read_campaign, write_json};
 use crate::effects_file::EffectsFile;
@@ -199,14 +200,14 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             (args, model, &refs, file.as_ref()),
             &campaign,
             validation.as_ref(),
-            stages.as_deref(),
+            stages.as_ref(),
         )?;
         verdict = Some(said);
         println!("\nreport: {}", page.display());
     }
     if let Some(path) = &args.json {
         let file = file.as_ref().map(crate::effects_file::to_json);
-        let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_deref())?;
+        let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_ref())?;
         out["returns"] = serde_json::to_value(&returns)?;
         write_json(path, &out)?;
         println!("\nwrote {}", path.display());
@@ -304,7 +305,7 @@ fn calibration_json(
     cal: &Calibration,
     (noise, file): (&NoiseEstimate, Option<serde_json::Value>),
     val: Option<&Validation>,
-    stages: Option<&[Stage]>,
+    stages: Option<&Stages>,
 ) -> anyhow::Result<serde_json::Value> {
     let mut out = report_json(cal, val);
     out["noise"] = serde_json::to_value(&noise.groups)?;
@@ -314,7 +315,8 @@ fn calibration_json(
     }
     out["determined"] = serde_json::to_value(cal.determined)?;
     if let Some(st) = stages {
-        out["effect_stages"] = serde_json::to_value(st)?;
+        out["effect_stages"] = serde_json::to_value(&st.rows)?;
+        out["effect_stages_chi2_under"] = st.chi2_under.clone().into();
     }
     Ok(out)
 }
@@ -354,16 +356,6 @@ pub fn print_noise(noise: &NoiseEstimate) {
     print_noise_groups(&noise.groups, "  ");
 }
 
-/// One row of the effect-by-effect table.
-#[derive(serde::Serialize)]
-struct Stage {
-    model: String,
-    chi2_per_dof: f64,
-    cal_rms_um: f64,
-    val_rms_um: Option<f64>,
-    effect_params: Vec<rpkm_core::calib::EffectEstimate>,
-}
-
 /// The diagnosis's calibration: tolerance prior, noise estimated, no outlier elimination.
 fn diagnosis_options(
     args: &CalibrateArgs,
@@ -389,7 +381,7 @@ fn write_report(
     (args, model, refs, file): (&CalibrateArgs, Model, &[&dyn Effect], Option<&EffectsFile>),
     campaign: &Campaign,
     validation: Option<&Campaign>,
-    stages: Option<&[Stage]>,
+    stages: Option<&Stages>,
 ) -> anyhow::Result<(std::path::PathBuf, String)> {
     use rpkm_core::diagnose;
     let opts = diagnosis_options(args, model)?;
@@ -401,16 +393,19 @@ fn write_report(
     } else {
         Some(diagnose::diagnose(campaign, validation, refs, &opts)?)
     };
-    let stages = stages
-        .unwrap_or_default()
-        .iter()
-        .map(|s| crate::report::Stage {
-            model: s.model.clone(),
-            cal_rms_um: s.cal_rms_um,
-            val_rms_um: s.val_rms_um,
-            chi2_per_dof: s.chi2_per_dof,
-        })
-        .collect();
+    let stages = stages.map(|st| crate::report::Stages {
+        rows: st
+            .rows
+            .iter()
+            .map(|s| crate::report::Stage {
+                model: s.model.clone(),
+                cal_rms_um: s.cal_rms_um,
+                val_rms_um: s.val_rms_um,
+                chi2_per_dof: s.chi2_per_dof,
+            })
+            .collect(),
+        chi2_under: st.chi2_under.clone(),
+    });
     let calibrated = if refs.is_empty() {
         &before
     } else {
@@ -428,100 +423,22 @@ fn write_report(
     Ok((page, verdict))
 }
 
-/// Calibrate with the effects of --effects added one by one (automatic selection, no outlier
-/// elimination: the same rows in every model), print the table and write the chart.
+/// Calibrate with the effects of --effects added one by one, the diagnosis's way (its
+/// options), print the table and write the chart.
 fn effect_stages(
     args: &CalibrateArgs,
     model: Model,
     effects: &[&dyn Effect],
     campaign: &Campaign,
     validation: Option<&Campaign>,
-) -> anyhow::Result<Vec<Stage>> {
-    use rpkm_core::diagnose;
+) -> anyhow::Result<Stages> {
     let opts = diagnosis_options(args, model)?;
-    let mut stages = Vec::new();
-    for k in 0..=effects.len() {
-        let fit = diagnose::evaluate(campaign, validation, &effects[..k], &opts)?.fit;
-        let name = match k {
-            0 => format!("{}", opts.model),
-            _ => format!("+ {}", effects[k - 1].name()),
-        };
-        stages.push(Stage {
-            model: name,
-            chi2_per_dof: fit.chi2_per_dof,
-            cal_rms_um: fit.cal_rms_um,
-            val_rms_um: fit.val_rms_um,
-            effect_params: fit.effect_params,
-        });
-    }
-    print_stages(&stages);
+    let stages = Stages::of(campaign, validation, effects, &opts)?;
+    stages.print();
     if let Some(path) = &args.chart {
-        write_stage_chart(path, &stages)?;
+        stages.write_chart(path)?;
     }
     Ok(stages)
-}
-
-/// The table of the stages, and the identified effect parameters of the last.
-fn print_stages(stages: &[Stage]) {
-    println!("\nThe error effect by effect:");
-    println!(
-        "  {:<24} {:>10} {:>12} {:>12}",
-        "model", "chi2/dof", "cal RMS um", "held-out um"
-    );
-    let top = stages
-        .iter()
-        .filter_map(|s| s.val_rms_um)
-        .fold(0.0, f64::max);
-    for s in stages {
-        let bar = s
-            .val_rms_um
-            .map(|v| "#".repeat(rpkm_core::convert::round_count(40.0 * v / top.max(1e-9))))
-            .unwrap_or_default();
-        println!(
-            "  {:<24} {:>10.2} {:>12.1} {:>12} {bar}",
-            s.model,
-            s.chi2_per_dof,
-            s.cal_rms_um,
-            s.val_rms_um.map_or("-".to_owned(), |v| format!("{v:.1}"))
-        );
-    }
-    if let Some(last) = stages.last() {
-        for e in last.effect_params.iter().filter(|e| e.identified) {
-            println!(
-                "  {}.{} = {}",
-                e.effect,
-                e.name,
-                crate::words::with_sigma(e.value, e.sigma, &e.unit)
-            );
-        }
-    }
-}
-
-/// The chart of the held-out and calibration RMS per stage (SVG).
-fn write_stage_chart(path: &std::path::Path, stages: &[Stage]) -> anyhow::Result<()> {
-    let cats: Vec<String> = stages.iter().map(|s| s.model.clone()).collect();
-    let svg = crate::plot::bar_chart(
-        "Held-out TCP RMS per added effect",
-        "RMS (µm)",
-        &cats,
-        &[
-            (
-                "held-out".to_owned(),
-                stages
-                    .iter()
-                    .map(|s| s.val_rms_um.unwrap_or(f64::NAN))
-                    .collect(),
-            ),
-            (
-                "calibration".to_owned(),
-                stages.iter().map(|s| s.cal_rms_um).collect(),
-            ),
-        ],
-        &crate::plot::BarOptions::default(),
-    );
-    std::fs::write(path, svg)?;
-    println!("  chart: {}", path.display());
-    Ok(())
 }
 
 /// Held-out TCP errors with the starting and the identified parameters, and the held-out

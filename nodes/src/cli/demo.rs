@@ -47,7 +47,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let after = diagnose::diagnose(&campaign, Some(&val), &[effect.as_ref()], &opts)
         .context("diagnosing with the effect added")?;
     println!(
-        "   chi2/dof {:.2} -> {:.2}; held-out RMS {} -> {} um (noise floor {:.1} um)",
+        "   chi2/dof at the stated noise {:.2} -> {:.2}; held-out RMS {} -> {} um (noise floor {:.1} um)",
         before.baseline.chi2_per_dof,
         after.baseline.chi2_per_dof,
         um(before.baseline.val_rms_um),
@@ -67,7 +67,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         &campaign,
         &before,
         Some(&after),
-        (Vec::new(), Vec::new()),
+        (None, Vec::new()),
     )?;
     println!("\nreport: {}", page.display());
     Ok(())

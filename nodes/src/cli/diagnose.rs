@@ -144,7 +144,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             &campaign,
             &d,
             after.as_ref(),
-            (Vec::new(), effects_file::expressions(file.as_ref())),
+            (None, effects_file::expressions(file.as_ref())),
         )?;
         println!("report: {}", page.display());
     }

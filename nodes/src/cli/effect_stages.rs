@@ -1,5 +1,6 @@
 //! The effects a command takes (`--effects`, `--effects-file`) and the diagnosis again with
-//! the named one added: what `rpkm diagnose`, `rpkm calibrate` and the demo share.
+//! the named one added: what `rpkm diagnose`, `rpkm calibrate` and the demo share; and the
+//! table of `rpkm calibrate --effects`, the model with its effects added one by one.
 
 use super::bad_input;
 use crate::effects_file::{self, EffectsFile};
@@ -78,4 +79,140 @@ pub fn with_named_effect(
     let after = diagnose::diagnose_among(campaign, validation, &with, &rest, opts)
         .with_context(|| format!("diagnosing with {missing} added"))?;
     Ok(Some(after))
+}
+
+/// One row of the effect-by-effect table.
+#[derive(serde::Serialize)]
+pub struct Stage {
+    pub model: String,
+    /// χ²/ν with the rows weighted by the table's one noise ([`Stages::chi2_under`]): each
+    /// model under its own estimate would read about 1 on every row.
+    pub chi2_per_dof: f64,
+    /// χ²/ν at the stated noise (the instruments' ratings, --noise).
+    pub chi2_per_dof_stated: f64,
+    pub cal_rms_um: f64,
+    pub val_rms_um: Option<f64>,
+    /// The held-out RMS with each setup's zero removed (what a model can predict), µm.
+    pub val_rms_relative_um: Option<f64>,
+    pub effect_params: Vec<rpkm_core::calib::EffectEstimate>,
+}
+
+/// The effect-by-effect table of `rpkm calibrate --effects`: its rows, and the noise their χ²
+/// are under (the one estimated with the last model, which holds every effect: the models
+/// compare under it).
+pub struct Stages {
+    pub rows: Vec<Stage>,
+    pub chi2_under: String,
+}
+
+impl Stages {
+    /// The model with `effects` added one by one, each evaluated as the diagnosis evaluates
+    /// its current model (noise estimated, tolerance prior, no outlier elimination: the same
+    /// rows in every model).
+    pub fn of(
+        campaign: &Campaign,
+        validation: Option<&Campaign>,
+        effects: &[&dyn Effect],
+        opts: &Options,
+    ) -> anyhow::Result<Stages> {
+        let evaluated = (0..=effects.len())
+            .map(|k| diagnose::evaluate(campaign, validation, &effects[..k], opts))
+            .collect::<Result<Vec<_>, _>>()?;
+        // one noise for every row, so that the χ² compare the models: the last model's
+        let last = evaluated.last().map(|e| e.noise.model.clone());
+        let under = last.unwrap_or_else(|| opts.noise.clone());
+        let rows = evaluated
+            .into_iter()
+            .enumerate()
+            .map(|(k, e)| Stage {
+                model: match k {
+                    0 => format!("{}", opts.model),
+                    _ => format!("+ {}", effects[k - 1].name()),
+                },
+                chi2_per_dof: e.chi2_per_dof_under(&under),
+                chi2_per_dof_stated: e.baseline.chi2_per_dof,
+                cal_rms_um: e.fit.cal_rms_um,
+                val_rms_um: e.fit.val_rms_um,
+                val_rms_relative_um: e.baseline.val_rms_relative_um,
+                effect_params: e.fit.effect_params,
+            })
+            .collect();
+        let names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
+        Ok(Stages {
+            rows,
+            chi2_under: format!(
+                "the noise estimated with the last model, {} + {}",
+                opts.model,
+                names.join(" + ")
+            ),
+        })
+    }
+
+    /// The table, and the identified effect parameters of the last model.
+    pub fn print(&self) {
+        println!(
+            "\nThe error effect by effect (chi2/dof: every model's rows weighted by one noise, {}; \
+             the model that explains the data reads near 1):",
+            self.chi2_under
+        );
+        println!(
+            "  {:<24} {:>10} {:>10} {:>12} {:>12} {:>13}",
+            "model", "chi2/dof", "at stated", "cal RMS um", "held-out um", "zero removed"
+        );
+        // the bar: the held-out error a model can predict (each setup's zero removed)
+        let shown = |s: &Stage| s.val_rms_relative_um.or(s.val_rms_um);
+        let top = self.rows.iter().filter_map(shown).fold(0.0, f64::max);
+        let opt = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.1}"));
+        for s in &self.rows {
+            let bar = shown(s)
+                .map(|v| "#".repeat(rpkm_core::convert::round_count(40.0 * v / top.max(1e-9))))
+                .unwrap_or_default();
+            println!(
+                "  {:<24} {:>10.2} {:>10.2} {:>12.1} {:>12} {:>13} {bar}",
+                s.model,
+                s.chi2_per_dof,
+                s.chi2_per_dof_stated,
+                s.cal_rms_um,
+                opt(s.val_rms_um),
+                opt(s.val_rms_relative_um)
+            );
+        }
+        if let Some(last) = self.rows.last() {
+            for e in last.effect_params.iter().filter(|e| e.identified) {
+                println!(
+                    "  {}.{} = {}",
+                    e.effect,
+                    e.name,
+                    crate::words::with_sigma(e.value, e.sigma, &e.unit)
+                );
+            }
+        }
+    }
+
+    /// The chart of the held-out and calibration RMS per stage (SVG).
+    pub fn write_chart(&self, path: &Path) -> anyhow::Result<()> {
+        let cats: Vec<String> = self.rows.iter().map(|s| s.model.clone()).collect();
+        let svg = crate::plot::bar_chart(
+            "Held-out TCP RMS per added effect",
+            "RMS (µm)",
+            &cats,
+            &[
+                (
+                    "held-out".to_owned(),
+                    self.rows
+                        .iter()
+                        .map(|s| s.val_rms_um.unwrap_or(f64::NAN))
+                        .collect(),
+                ),
+                (
+                    "calibration".to_owned(),
+                    self.rows.iter().map(|s| s.cal_rms_um).collect(),
+                ),
+            ],
+            &crate::plot::BarOptions::default(),
+        );
+        std::fs::write(path, svg)?;
+        println!("  chart: {}", path.display());
+        Ok(())
+    }
 }

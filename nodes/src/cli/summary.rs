@@ -2,10 +2,10 @@
 //! summary on the terminal, the noise per group, the HTML report.
 
 use crate::effects_file::EffectsFile;
-use crate::report::{Report, Stage};
+use crate::report::{Report, Stages};
 use crate::words;
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::Diagnosis;
+use rpkm_core::diagnose::{Diagnosis, HeldOutCheck};
 use rpkm_core::variance;
 use std::path::{Path, PathBuf};
 
@@ -48,16 +48,7 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
         b.chi2_per_dof, b.dof, b.p_value,
     );
     if let Some(h) = &d.held_out {
-        println!(
-            "   held-out judge: {} the model's floor {:.1} um (the noise and the calibration's own \
-             uncertainty), p = {:.1e}{}",
-            if h.agrees() { "at" } else { "NOT at" },
-            h.floor_relative_um,
-            h.p_value,
-            h.follows
-                .as_ref()
-                .map_or(String::new(), |f| format!("; {}", words::follows(f)))
-        );
+        println!("   {}", held_out_judge(h));
     }
     if d.model_effects != d.effects_in_model {
         println!(
@@ -129,6 +120,29 @@ fn print_groups(d: &Diagnosis) {
     }
 }
 
+/// The held-out judge's line: at the model's floor or not, and, where it fails on the
+/// residual's structure rather than its size, that it does.
+fn held_out_judge(h: &HeldOutCheck) -> String {
+    let structured = if h.structured {
+        format!(
+            ", but the held-out residual is structured (p = {:.1e}), so the model does not pass",
+            h.structure_p
+        )
+    } else {
+        String::new()
+    };
+    format!(
+        "held-out judge: {} the model's floor {:.1} um (the noise and the calibration's own \
+         uncertainty), p = {:.1e}{structured}{}",
+        if h.consistent { "at" } else { "NOT at" },
+        h.floor_relative_um,
+        h.p_value,
+        h.follows
+            .as_ref()
+            .map_or(String::new(), |f| format!("; {}", words::follows(f)))
+    )
+}
+
 /// Every effect tried, best first, and those not tried.
 fn print_effects(d: &Diagnosis) {
     println!("\n2. Effects tried (best first)");
@@ -150,10 +164,15 @@ fn print_effects(d: &Diagnosis) {
     for s in &d.skipped {
         println!("   {:<22} not tried: {}", s.effect, s.reason);
     }
-    if !d.compared_under.is_empty() {
+    if d.compared_under.is_empty() {
         println!(
-            "   (compared with the rows weighted by the noise of the model with {}: significant \
-             at the stated noise)",
+            "   (chi2/dof of every row under one noise: the current model's, estimated from the \
+             campaign)"
+        );
+    } else {
+        println!(
+            "   (chi2/dof of every row under one noise, compared with the rows weighted by the \
+             noise of the model with {}: significant at the stated noise)",
             d.compared_under.join(" and ")
         );
     }
@@ -183,7 +202,8 @@ pub fn print_written(file: &EffectsFile) {
 }
 
 /// The HTML report (and the numbers of its error-vector maps as JSON) of `before` and, when
-/// an effect was added, `after`; `stages` the models' table (empty: the two diagnoses');
+/// an effect was added, `after`; `stages` the models' table (None: the two diagnoses', at
+/// the stated noise);
 /// `written` the effects of an effects file with their expressions
 /// ([`effects_file::expressions`]). Returns the page's path.
 pub fn write_report(
@@ -192,22 +212,22 @@ pub fn write_report(
     campaign: &Campaign,
     before: &Diagnosis,
     after: Option<&Diagnosis>,
-    (stages, written): (Vec<Stage>, Vec<(String, String)>),
+    (stages, written): (Option<Stages>, Vec<(String, String)>),
 ) -> anyhow::Result<PathBuf> {
-    let stages = if stages.is_empty() {
-        std::iter::once(before)
+    let stages = stages.unwrap_or_else(|| Stages {
+        rows: std::iter::once(before)
             .chain(after)
             .map(Report::stage_of)
-            .collect()
-    } else {
-        stages
-    };
+            .collect(),
+        chi2_under: "the stated noise (the instruments' ratings, --noise)".to_owned(),
+    });
     Report {
         command,
         campaign,
         before,
         after,
-        stages,
+        stages: stages.rows,
+        chi2_under: stages.chi2_under,
         written,
     }
     .write(dir)

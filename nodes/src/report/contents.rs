@@ -10,7 +10,16 @@ pub struct Stage {
     pub model: String,
     pub cal_rms_um: f64,
     pub val_rms_um: Option<f64>,
+    /// χ²/ν with the rows weighted by the table's one noise ([`Stages::chi2_under`]).
     pub chi2_per_dof: f64,
+}
+
+/// The models' table as a command made it: its rows, and the one noise their χ² are under
+/// (each model under its own estimate would read about 1 on every row).
+pub struct Stages {
+    pub rows: Vec<Stage>,
+    /// The noise, in words: "the stated noise", "the noise estimated with the last model".
+    pub chi2_under: String,
 }
 
 /// What the report shows: the diagnosis of the current model and, when an effect was added,
@@ -23,6 +32,8 @@ pub struct Report<'a> {
     pub after: Option<&'a Diagnosis>,
     /// The models in the order they were fitted (the first is `before`'s).
     pub stages: Vec<Stage>,
+    /// The one noise the stages' χ² are under, in words.
+    pub chi2_under: String,
     /// The effects of an effects file: (name, its expressions as written).
     pub written: Vec<(String, String)>,
 }

@@ -14,7 +14,7 @@ mod contents;
 pub mod history;
 mod sections;
 
-pub use contents::{Report, Stage};
+pub use contents::{Report, Stage, Stages};
 
 use crate::plot::escape;
 use anyhow::Context;
@@ -50,6 +50,7 @@ impl Report<'_> {
             "effects_before": self.before.effects_in_model,
             "effects_after": self.after.map(|a| a.effects_in_model.clone()),
             "stages": self.stages,
+            "stages_chi2_under": self.chi2_under,
             "error_vectors": {
                 "before": self.before.error_vectors,
                 "after": self.after.map_or(&[][..], |a| &a.error_vectors[..]),

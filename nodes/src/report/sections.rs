@@ -67,7 +67,7 @@ pub fn summary(r: &Report) -> String {
             a,
         ));
     }
-    o.push_str("<h3>The error, effect by effect</h3><div class=\"row\"><table><tr><th>model</th><th>calibration RMS µm</th><th>held-out RMS µm</th><th>χ²/dof</th></tr>");
+    o.push_str("<h3>The error, effect by effect</h3><div class=\"row\"><table><tr><th>model</th><th>calibration RMS µm</th><th>held-out RMS µm</th><th>χ²/dof under one noise</th></tr>");
     for s in &r.stages {
         let _ = write!(
             o,
@@ -82,7 +82,10 @@ pub fn summary(r: &Report) -> String {
     let floor = last.noise_floor_um;
     let _ = write!(
         o,
-        "<tr><td>noise floor</td><td></td><td>{floor:.1}</td><td>1</td></tr></table>"
+        "<tr><td>noise floor</td><td></td><td>{floor:.1}</td><td>1</td></tr></table>\
+         <p class=\"muted\">χ²/dof: every model's rows weighted by one noise, {}, so that the \
+         models compare (under its own estimate each would read about 1).</p>",
+        escape(&r.chi2_under)
     );
     if let (Some(rms), Some(zero_floor)) = (last.val_rms_relative_um, last.noise_floor_relative_um)
     {

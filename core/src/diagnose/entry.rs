@@ -1,0 +1,348 @@
+//! One model of a search ([`Entry`]): the current model with effects added (and a family of
+//! it swapped for other parts), fitted, tested against the current model and predicting; and
+//! what every judgement of a search shares ([`Judge`]): fitting such a model, its prediction
+//! (held-out data where they decide, else the setups cross-validation leaves out), and
+//! whether one model beats another it holds.
+
+use super::cross;
+use super::gain::{wald_p, Gain, PRACTICAL_SIZE};
+use super::held_out::Validation;
+use super::trials::{finish_with, warm_theta, SCREEN_P};
+use super::types::RELEVANT_FRACTION;
+use super::types::{FitError, Fitted, Judged, Outcome, Prediction};
+use crate::calib::{self, EffectEstimate, Request};
+use crate::campaign::Campaign;
+use crate::effects::{self, Effect, EffectSet};
+use crate::params::Params;
+use crate::stats;
+
+/// What every judgement of a search shares: the current model, its fit and its predictions.
+pub(crate) struct Judge<'a> {
+    pub campaign: &'a Campaign,
+    pub val: Option<&'a Validation<'a>>,
+    pub in_model: &'a [&'a dyn Effect],
+    pub base: &'a Fitted,
+    pub copts: &'a calib::Options,
+    /// Level of the evidence (Bonferroni over the candidates).
+    pub level: f64,
+    /// Level of the structure tests (a term that explains as much as an effect).
+    pub structure_level: f64,
+    /// The held-out floor with each setup's zero removed, mm: the noise a prediction's
+    /// explained part is measured in (left-out rows are in σ already).
+    pub floor_mm: Option<f64>,
+    /// The current model's left-out rows (cross-validation by setup), made once when first
+    /// needed.
+    pub base_cv: std::cell::OnceCell<Option<Vec<f64>>>,
+}
+
+/// One model of the search: the current model with `added`, its fit and how it predicts.
+pub(crate) struct Entry<'a> {
+    pub(super) added: Vec<&'a dyn Effect>,
+    /// A family of the current model with other parts, in place of the settled one (the
+    /// parts a family keeps may change with the effect added).
+    pub(super) swap: Option<&'a dyn Effect>,
+    pub(super) fitted: Fitted,
+    /// Held-out errors with each setup's zero removed (mm), where there are held-out data.
+    pub(super) held: Option<Vec<f64>>,
+    /// Left-out rows (σ), where the held-out data do not decide against the current model.
+    pub(super) left_out: Option<Vec<f64>>,
+    pub(super) prediction: Option<Prediction>,
+    pub(super) p_value: f64,
+    pub(super) f_statistic: f64,
+    pub(super) k: f64,
+    pub(super) judged: Judged,
+    pub(super) relevant: bool,
+    /// Index of the single candidate this entry is (None: a part subset or a pair).
+    pub(super) candidate: Option<usize>,
+}
+
+impl Entry<'_> {
+    pub(super) fn names(&self) -> Vec<String> {
+        self.added.iter().map(|e| e.name().to_owned()).collect()
+    }
+
+    /// How simple it is: effects added, then parameters.
+    pub(super) fn complexity(&self) -> (usize, usize) {
+        let params = self
+            .fitted
+            .fit
+            .effect_params
+            .iter()
+            .filter(|p| self.added.iter().any(|e| e.name() == p.effect))
+            .count();
+        (self.added.len(), params)
+    }
+
+    /// Whether it could be named.
+    pub(super) fn eligible(&self) -> bool {
+        matches!(self.judged.outcome, Outcome::Outpredicted)
+    }
+}
+
+pub(super) fn clone_fitted(f: &Fitted) -> Fitted {
+    Fitted {
+        rows: f.rows.clone(),
+        fit: f.fit.clone(),
+    }
+}
+
+/// The parameters of the effects `added` among a fit's.
+pub(super) fn added_params(all: &[EffectEstimate], added: &[&dyn Effect]) -> Vec<EffectEstimate> {
+    all.iter()
+        .filter(|p| added.iter().any(|e| e.name() == p.effect))
+        .cloned()
+        .collect()
+}
+
+impl<'j> Judge<'j> {
+    /// A model's entry: its nested test against the current model and its prediction.
+    pub(super) fn entry<'a>(
+        &self,
+        (added, swap): (Vec<&'a dyn Effect>, Option<&'a dyn Effect>),
+        fitted: Fitted,
+        candidate: Option<usize>,
+    ) -> Entry<'a> {
+        let base = &self.base.fit;
+        let k = (base.dof - fitted.fit.dof).max(0.0);
+        let dchi2 = base.chi2 - fitted.fit.chi2;
+        let f_statistic = if k > 0.5 {
+            (dchi2 / k) / (fitted.fit.chi2 / fitted.fit.dof)
+        } else {
+            0.0
+        };
+        let names: Vec<&str> = added.iter().map(|e| e.name()).collect();
+        let p_value = if k > 0.5 {
+            // the likelihood ratio, and the added parameters themselves (the Wald test)
+            stats::f_upper_tail(f_statistic, k, fitted.fit.dof).max(wald_p(&fitted.fit, &names))
+        } else {
+            1.0
+        };
+        let relevant = fitted
+            .fit
+            .effect_params
+            .iter()
+            .filter(|p| added.iter().any(|e| e.name() == p.effect))
+            .filter(|p| p.identified && p.prior > 0.0)
+            .any(|p| p.value.abs() >= RELEVANT_FRACTION * p.prior);
+        let mut entry = Entry {
+            added,
+            swap,
+            fitted,
+            held: None,
+            left_out: None,
+            prediction: None,
+            p_value,
+            f_statistic,
+            k,
+            judged: Judged::default(),
+            relevant,
+            candidate,
+        };
+        self.predict(&mut entry);
+        entry
+    }
+
+    /// The entry's prediction against the current model's: held-out data where they decide
+    /// (better, or clearly worse), else the setups cross-validation leaves out, for a model
+    /// that may matter.
+    pub(super) fn predict(&self, e: &mut Entry) {
+        let held = self
+            .val
+            .and_then(|_| Prediction::of(&self.base.fit.val_errors, &e.fitted.fit.val_errors));
+        if held.is_some() {
+            e.held = Some(e.fitted.fit.val_errors.clone());
+        }
+        e.prediction = held;
+        if held.is_some_and(|p| p.better || p.worse) {
+            return;
+        }
+        // left-out rows only where the calibration itself says it may matter: on a hundred
+        // thousand rows a fold's refit is costly, and an addition whose signature in the rows
+        // is a tenth of their noise cannot predict them better by a fifth
+        let rows = self.base.rows.len().max(1) as f64;
+        let cal_size = ((self.base.fit.chi2 - e.fitted.fit.chi2).max(0.0) / rows).sqrt();
+        if e.p_value >= SCREEN_P || cal_size < 0.5 * PRACTICAL_SIZE {
+            return;
+        }
+        let Some(rows) = self.left_out((&e.added, e.swap), &e.fitted) else {
+            return;
+        };
+        let base = self.base_cv.get_or_init(|| {
+            cross::predicted_rows(
+                self.campaign,
+                &cross::Fitted {
+                    effects: self.in_model,
+                    params: &self.base.fit.params,
+                    theta: &self.base.fit.theta,
+                },
+                self.copts,
+            )
+        });
+        if let Some(b) = base {
+            e.prediction = Prediction::compared(b, &rows).map(|p| Prediction {
+                by_setup: true,
+                ..p
+            });
+            e.left_out = Some(rows);
+        }
+    }
+
+    /// The left-out rows of the model with `added` (cross-validation by setup).
+    pub(super) fn left_out(
+        &self,
+        (added, swap): (&[&dyn Effect], Option<&dyn Effect>),
+        fitted: &Fitted,
+    ) -> Option<Vec<f64>> {
+        let with = self.model_of(added, swap);
+        cross::predicted_rows(
+            self.campaign,
+            &cross::Fitted {
+                effects: &with,
+                params: &fitted.fit.params,
+                theta: &fitted.fit.theta,
+            },
+            self.copts,
+        )
+    }
+
+    /// The current model with `added`, and `swap` in place of its member of the same family.
+    pub(super) fn model_of<'e>(
+        &self,
+        added: &[&'e dyn Effect],
+        swap: Option<&'e dyn Effect>,
+    ) -> Vec<&'e dyn Effect>
+    where
+        'j: 'e,
+    {
+        let mut with: Vec<&dyn Effect> = self
+            .in_model
+            .iter()
+            .map(|e| match swap {
+                Some(s) if effects::family_of(s.name()) == effects::family_of(e.name()) => s,
+                _ => *e,
+            })
+            .collect();
+        with.extend(added.iter().copied());
+        with
+    }
+
+    /// The current model with `added` (and `swap`), fitted from the current model's minimum
+    /// (the added effects' parameters from `warm` where it has them).
+    pub(super) fn fit(
+        &self,
+        (added, swap): (&[&dyn Effect], Option<&dyn Effect>),
+        warm: &[&Fitted],
+    ) -> Result<Fitted, FitError> {
+        let with = self.model_of(added, swap);
+        let start = Params::nominal();
+        let set = EffectSet::bind(&with, self.campaign, &start)?;
+        let mut theta = warm_theta(&set, &self.base.fit);
+        for w in warm {
+            for (t, v) in theta.iter_mut().zip(warm_theta(&set, &w.fit)) {
+                if *t == 0.0 {
+                    *t = v;
+                }
+            }
+        }
+        let (cal, _) = calib::calibrate(&Request {
+            effects: &set,
+            warm: Some(calib::WarmStart {
+                params: &self.base.fit.params,
+                theta: &theta,
+                screen: false,
+            }),
+            ..Request::new(self.campaign, &start, self.copts)
+        })?;
+        finish_with(self.val, &with, &set, cal, self.copts)
+    }
+
+    /// Whether model `big` beats model `small` (which it holds) by the evidence a candidate
+    /// needs: the nested F-test between the two with their prediction (held-out where it
+    /// decides, else left-out rows) combined below the level, not contradicted, better, by a
+    /// gain that matters.
+    pub(super) fn beats(&self, big: &Entry, small: &Entry) -> bool {
+        let (b, s) = (&big.fitted.fit, &small.fitted.fit);
+        let prediction = between(small, big).map(|p| (p, self.unit_of(&p)));
+        Gain::of(
+            (b.chi2, b.dof),
+            (s.chi2, s.dof),
+            self.base.rows.len(),
+            prediction,
+        )
+        .needed(self.level)
+    }
+
+    /// The noise a prediction's errors are in: 1 for left-out rows (σ), the held-out floor
+    /// (mm) for held-out errors in mm, in µm for a held-out comparison in µm.
+    pub(super) fn unit_of(&self, p: &Prediction) -> f64 {
+        match (p.by_setup, p.unit) {
+            (true, _) => 1.0,
+            (false, "um") => self.floor_mm.map_or(1.0, |f| f * 1e3),
+            (false, _) => self.floor_mm.unwrap_or(1.0),
+        }
+    }
+}
+
+/// The errors models are ranked by: held-out where there are held-out data, else left-out
+/// rows.
+pub(super) fn ranked<'e>(e: &'e Entry) -> Option<&'e [f64]> {
+    e.held.as_deref().or(e.left_out.as_deref())
+}
+
+pub(super) fn rms_of(e: &Entry) -> f64 {
+    ranked(e).map_or(f64::INFINITY, calib::rms)
+}
+
+/// Model `b` against model `a`: on the held-out data where they decide between the two,
+/// else on the left-out rows where both have them, else the held-out tie.
+pub(super) fn between(a: &Entry, b: &Entry) -> Option<Prediction> {
+    let held = a
+        .held
+        .as_deref()
+        .zip(b.held.as_deref())
+        .and_then(|(x, y)| Prediction::compared(x, y));
+    if held.is_some_and(|p| p.better || p.worse) {
+        return held;
+    }
+    a.left_out
+        .as_deref()
+        .zip(b.left_out.as_deref())
+        .and_then(|(x, y)| Prediction::compared(x, y))
+        .map(|p| Prediction {
+            by_setup: true,
+            ..p
+        })
+        .or(held)
+}
+
+/// The family variant an entry swaps into the current model, by name.
+pub(super) fn swapped<'e>(e: &'e Entry) -> Option<&'e str> {
+    e.swap.map(Effect::name)
+}
+
+/// The parts of an effect in a model: those it pins (`thermal:rods`), every part of a family
+/// named whole, none for an effect of one piece.
+pub(super) fn parts_of(e: &dyn Effect) -> Vec<String> {
+    match e.name().split_once(':') {
+        Some((_, parts)) => parts.split('+').map(str::to_owned).collect(),
+        None => e.parts().iter().map(|p| (*p).to_owned()).collect(),
+    }
+}
+
+/// Whether model `big` holds everything of `small` and more: every effect of `small` (or its
+/// family with at least its parts), with the same family swapped in.
+pub(super) fn covers(big: &Entry, small: &Entry) -> bool {
+    if swapped(big) != swapped(small) {
+        return false;
+    }
+    let holds = |e: &&dyn Effect| {
+        big.added.iter().any(|b| {
+            effects::family_of(b.name()) == effects::family_of(e.name()) && {
+                let have = parts_of(*b);
+                parts_of(*e).iter().all(|p| have.contains(p))
+            }
+        })
+    };
+    let size = |m: &Entry| -> usize { m.added.iter().map(|e| 1 + parts_of(*e).len()).sum() };
+    small.added.iter().all(holds) && size(big) > size(small)
+}

@@ -1,0 +1,179 @@
+//! What an addition to a model gains: the evidence of both campaigns (the calibration's
+//! nested F-test with the prediction), whether it is better and not contradicted, its size
+//! against the noise, and whether its values are physical. One rule for a candidate against
+//! the current model, a model against another, a family's parts against the whole.
+
+use super::types::Prediction;
+use crate::calib::EffectEstimate;
+use crate::stats;
+
+/// An addition to the model matters when the part of the prediction error it explains,
+/// √(RMS_b² − RMS_a²), reaches this share of the noise there: a fifth of the instruments'
+/// noise, below which it changes the held-out RMS by less than 2 %. Smaller ones are
+/// "statistically detectable, too small to matter" (on a hundred thousand rows every
+/// negligible gain passes a fixed-level test).
+pub const PRACTICAL_SIZE: f64 = 0.2;
+
+/// A fitted effect parameter beyond the values the physics allows by more than this many of
+/// its σ makes the model implausible: it absorbs something else.
+pub const PLAUSIBLE_SIGMAS: f64 = 3.0;
+
+/// What a larger model gains over a smaller one it holds: the evidence of both campaigns and
+/// its size. One rule for a candidate against the current model, a model against another,
+/// a family's parts against the whole.
+pub(super) struct Gain {
+    /// The nested F-test's p-value on the calibration campaign.
+    p_cal: f64,
+    /// RMS of the calibration rows' fall in their own noise, √(Δχ²/n): the size the
+    /// calibration itself sees (a fine instrument there, a noisy one held out).
+    cal_size: f64,
+    /// The prediction (held-out or left-out), and the noise its errors are measured in.
+    prediction: Option<(Prediction, f64)>,
+}
+
+impl Gain {
+    /// The gain of a model with χ² `big` over one with `small`, each (χ², dof), on `rows`
+    /// calibration rows.
+    pub(super) fn of(
+        big: (f64, f64),
+        small: (f64, f64),
+        rows: usize,
+        prediction: Option<(Prediction, f64)>,
+    ) -> Gain {
+        let k = small.1 - big.1;
+        let dchi2 = (small.0 - big.0).max(0.0);
+        let p_cal = if k > 0.5 {
+            stats::f_upper_tail((dchi2 / k) / (big.0 / big.1), k, big.1)
+        } else {
+            1.0
+        };
+        Gain {
+            p_cal,
+            cal_size: (dchi2 / rows.max(1) as f64).sqrt(),
+            prediction,
+        }
+    }
+
+    /// The same gain where the added parameters' own test (`wald_p`) is weaker than the
+    /// likelihood ratio: the calibration's evidence is the weaker of the two.
+    pub(super) fn with_wald(self, wald: f64) -> Gain {
+        Gain {
+            p_cal: self.p_cal.max(wald),
+            ..self
+        }
+    }
+
+    /// Fisher's combination of the F-test and the prediction's one-sided test.
+    pub(super) fn evidence(&self) -> f64 {
+        match self.prediction {
+            Some((p, _)) => stats::fisher_combined(&[self.p_cal, p.p_better()]),
+            None => self.p_cal,
+        }
+    }
+
+    /// The larger of the sizes the two campaigns see, each in its noise.
+    pub(super) fn size(&self) -> f64 {
+        let predicted = self
+            .prediction
+            .map_or(0.0, |(p, unit)| p.explained() / unit);
+        self.cal_size.max(predicted)
+    }
+
+    pub(super) fn better(&self) -> bool {
+        self.prediction.is_none_or(|(p, _)| p.better)
+    }
+
+    pub(super) fn worse(&self) -> bool {
+        self.prediction.is_some_and(|(p, _)| p.worse)
+    }
+
+    /// Whether the larger model is needed: significant on both campaigns together, not
+    /// contradicted, better, by a gain that matters.
+    pub(super) fn needed(&self, level: f64) -> bool {
+        self.evidence() < level && self.better() && !self.worse() && self.size() >= PRACTICAL_SIZE
+    }
+}
+
+/// The parameters fitted clearly outside the values the physics allows.
+pub(super) fn implausible(params: &[EffectEstimate]) -> Vec<String> {
+    params
+        .iter()
+        .filter(|p| p.identified)
+        .filter(|p| {
+            let (lo, hi) = p.allowed;
+            p.value - PLAUSIBLE_SIGMAS * p.sigma > hi || p.value + PLAUSIBLE_SIGMAS * p.sigma < lo
+        })
+        .map(|p| {
+            format!(
+                "{} = {} ± {} {} outside {}..{}",
+                p.name,
+                sig(p.value),
+                sig(p.sigma),
+                p.unit,
+                sig(p.allowed.0),
+                sig(p.allowed.1)
+            )
+        })
+        .collect()
+}
+
+/// A number with three significant digits (the implausibility notes).
+pub(super) fn sig(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    // digits after the point: 2 for 1.23, 0 for 123, 4 for 0.0123
+    let magnitude = v.abs().log10().floor();
+    let prec = if magnitude >= 2.0 {
+        0
+    } else {
+        crate::convert::round_count(2.0 - magnitude)
+    };
+    format!("{v:.prec$}")
+}
+
+/// The standard error of the RMS of prediction errors `e` (the spread of the squared errors
+/// through d(RMS²) = 2 RMS d(RMS)): the "one standard error" of the best model's
+/// prediction, within which a simpler model predicts as well.
+pub(crate) fn one_standard_error(e: &[f64]) -> f64 {
+    let n = e.len();
+    if n < 2 {
+        return 0.0;
+    }
+    let sq: Vec<f64> = e.iter().map(|v| v * v).collect();
+    let mean = sq.iter().sum::<f64>() / n as f64;
+    let var = sq.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    (var / n as f64).sqrt() / (2.0 * mean.sqrt()).max(f64::MIN_POSITIVE)
+}
+
+/// The Wald test of the parameters of the effects `added` in `fit`: p of
+/// θ_Aᵀ Σ_AA⁻¹ θ_A / k against F(k, ν) over the identified ones. A gain whose parameters
+/// are themselves indistinguishable from zero is the geometry's refit from another start,
+/// not the effect's: the likelihood ratio alone would name an effect that does nothing.
+/// 1 where no added parameter is identified.
+pub(super) fn wald_p(fit: &super::types::Fit, added: &[&str]) -> f64 {
+    let idx: Vec<usize> = fit
+        .effect_params
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.identified && p.sigma > 0.0 && added.contains(&p.effect.as_str()))
+        .map(|(k, _)| k)
+        .filter(|&k| k < fit.theta.len() && k < fit.covariance_theta.nrows())
+        .collect();
+    if idx.is_empty() || fit.covariance_theta.ncols() != fit.covariance_theta.nrows() {
+        return 1.0;
+    }
+    let k = idx.len();
+    let theta = nalgebra::DVector::from_iterator(k, idx.iter().map(|&i| fit.theta[i]));
+    let cov = nalgebra::DMatrix::from_fn(k, k, |a, b| fit.covariance_theta[(idx[a], idx[b])]);
+    // Σ_AA is positive definite for identified parameters; where rounding says otherwise,
+    // each parameter alone (the diagonal) is the test
+    let w = match cov.clone().cholesky() {
+        Some(c) => theta.dot(&c.solve(&theta)),
+        None => idx
+            .iter()
+            .map(|&i| (fit.theta[i] / fit.effect_params[i].sigma).powi(2))
+            .sum(),
+    };
+    stats::f_upper_tail(w / k as f64, k as f64, fit.dof)
+}

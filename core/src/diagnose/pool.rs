@@ -1,0 +1,156 @@
+//! What a search draws its models from ([`Pool`]) and the models it adds beside the single
+//! candidates: each part of a family that stands out, pairs, and the current model's
+//! families with other parts.
+
+use super::entry::{Entry, Judge};
+use super::trials::SCREEN_P;
+use super::types::Candidate;
+use crate::effects::{self, Effect};
+
+/// The best contenders (by BIC gain) are paired among themselves; the best also with every
+/// other candidate.
+pub(super) const PAIRED: usize = 3;
+
+/// What a search draws its models from: the candidates tried, the part combinations of
+/// their families ([`part_variants`]), and those of the current model's families.
+pub(crate) struct Pool<'a> {
+    pub tried: &'a [&'a dyn Effect],
+    pub variants: &'a [Box<dyn Effect>],
+    pub swaps: &'a [Box<dyn Effect>],
+}
+
+impl<'j> Judge<'j> {
+    /// Each part of a family that stands out, on its own and in every smaller combination
+    /// (`variants`: [`part_variants`]): the campaign may separate some parts and not others.
+    pub(super) fn add_parts<'a>(
+        &self,
+        entries: &mut Vec<Entry<'a>>,
+        variants: &'a [Box<dyn Effect>],
+    ) {
+        let families: Vec<usize> = (0..entries.len())
+            .filter(|&k| entries[k].added.len() == 1)
+            .filter(|&k| entries[k].added[0].parts().len() > 1)
+            .filter(|&k| entries[k].p_value < SCREEN_P)
+            .collect();
+        for k in families {
+            let family = entries[k].added[0].name().to_owned();
+            for v in variants
+                .iter()
+                .filter(|v| effects::family_of(v.name()) == family)
+            {
+                let warm = [&entries[k].fitted];
+                if let Ok(fitted) = self.fit((&[v.as_ref()], None), &warm) {
+                    let e = self.entry((vec![v.as_ref()], None), fitted, None);
+                    entries.push(e);
+                }
+            }
+        }
+    }
+
+    /// Pairs: the best contenders among themselves, and the best with every other
+    /// candidate (an effect that only works with another may not stand out alone). A family
+    /// takes part by its best-predicting variant.
+    pub(super) fn add_pairs<'a>(
+        &self,
+        entries: &mut Vec<Entry<'a>>,
+        candidates: &[Candidate],
+        singles: usize,
+    ) {
+        let mut contenders: Vec<usize> = (0..singles)
+            .filter(|&k| entries[k].p_value < SCREEN_P && entries[k].relevant)
+            .collect();
+        contenders.sort_by(|&a, &b| {
+            let bic = |k: usize| entries[k].candidate.map_or(0.0, |i| candidates[i].bic_gain);
+            bic(b).total_cmp(&bic(a))
+        });
+        // a family takes part whole and by each of its parts alone: which part works with
+        // the other effect is what the pair finds out (alone, each absorbs part of the other)
+        let variants_of = |k: usize, entries: &[Entry<'a>]| -> Vec<usize> {
+            let family = effects::family_of(entries[k].added[0].name());
+            (0..entries.len())
+                .filter(|&j| j == k || entries[j].candidate.is_none())
+                .filter(|&j| entries[j].added.len() == 1)
+                .filter(|&j| effects::family_of(entries[j].added[0].name()) == family)
+                .filter(|&j| j == k || !entries[j].added[0].name().contains('+'))
+                .collect()
+        };
+        let mut pairs: Vec<(usize, usize)> = Vec::new();
+        let top: Vec<usize> = contenders.iter().copied().take(PAIRED).collect();
+        for (n, &a) in top.iter().enumerate() {
+            for &b in &top[n + 1..] {
+                pairs.push((a, b));
+            }
+        }
+        if let Some(&first) = top.first() {
+            for b in (0..singles).filter(|b| *b != first && !top.contains(b)) {
+                pairs.push((first, b));
+            }
+        }
+        let pairs: Vec<(usize, usize)> = pairs
+            .into_iter()
+            .flat_map(|(a, b)| {
+                let vb = variants_of(b, entries);
+                variants_of(a, entries)
+                    .into_iter()
+                    .flat_map(move |x| vb.clone().into_iter().map(move |y| (x, y)))
+            })
+            .collect();
+        for (a, b) in pairs {
+            let added = vec![entries[a].added[0], entries[b].added[0]];
+            let warm = [&entries[a].fitted, &entries[b].fitted];
+            if let Ok(fitted) = self.fit((&added, None), &warm) {
+                let e = self.entry((added, None), fitted, None);
+                entries.push(e);
+            }
+        }
+    }
+
+    /// The best contenders with each other part combination of a family of the current
+    /// model (`swaps`: its variants): adding an effect may change the parts a family keeps
+    /// (a guide's bow absorbed by the frame's expansion until the bow is in the model).
+    pub(super) fn add_swaps<'a>(
+        &self,
+        entries: &mut Vec<Entry<'a>>,
+        swaps: &'a [Box<dyn Effect>],
+        singles: usize,
+    ) where
+        'j: 'a,
+    {
+        let settled: Vec<&str> = self.in_model.iter().map(|e| e.name()).collect();
+        let mut contenders: Vec<usize> = (0..singles)
+            .filter(|&k| entries[k].p_value < SCREEN_P && entries[k].relevant)
+            .collect();
+        contenders.sort_by(|&a, &b| entries[a].p_value.total_cmp(&entries[b].p_value));
+        contenders.truncate(PAIRED);
+        for k in contenders {
+            for v in swaps.iter().filter(|v| !settled.contains(&v.name())) {
+                let added = vec![entries[k].added[0]];
+                let warm = [&entries[k].fitted];
+                if let Ok(fitted) = self.fit((&added, Some(v.as_ref())), &warm) {
+                    let e = self.entry((added, Some(v.as_ref())), fitted, None);
+                    entries.push(e);
+                }
+            }
+        }
+    }
+}
+
+/// Every proper part combination of each family among `effects` named whole (thermal: rods,
+/// frame, scales, and the pairs of them): what the search tries where a family stands out;
+/// with `whole`, the whole family too (the variants of a family in the current model).
+pub(crate) fn part_variants(effects: &[&dyn Effect], whole: bool) -> Vec<Box<dyn Effect>> {
+    let mut out = Vec::new();
+    for family in effects.iter().filter(|e| e.open_family()) {
+        let n = family.parts().len();
+        let last = if whole {
+            1usize << n
+        } else {
+            (1usize << n) - 1
+        };
+        for mask in 1..last {
+            let parts: Vec<usize> = (0..n).filter(|b| mask & (1 << b) != 0).collect();
+            out.extend(family.with_parts(&parts));
+        }
+    }
+    out
+}

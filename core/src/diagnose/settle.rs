@@ -1,0 +1,224 @@
+//! A family of the current model named whole, settled: it keeps the part combination the
+//! evidence needs ([`settle`]), judged by the same rule as a candidate (`gain`).
+
+use super::cross;
+use super::gain::Gain;
+use super::held_out::{Model1, Validation};
+use super::types::Prediction;
+use crate::calib::{self, Request};
+use crate::campaign::Campaign;
+use crate::effects::{Effect, EffectSet};
+use crate::params::Params;
+
+/// A family's part combinations a settle compares (thermal's three parts: seven), the
+/// Bonferroni count of its evidence.
+pub const PART_COMBINATIONS: f64 = 7.0;
+
+/// The current model with its families named whole settled: each keeps the parts (and
+/// combination of parts) that predicts held-out data best, else the setups cross-validation
+/// leaves out, the simplest within one standard error of the best. A family stays whole
+/// where nothing predicts (one setup, no held-out data).
+pub(crate) struct Settled {
+    /// The part variants made here (the model's other effects are borrowed).
+    pub own: Vec<Box<dyn Effect>>,
+    /// For each effect of the model, whether it is `own[k]` or the caller's.
+    order: Vec<Result<usize, usize>>,
+}
+
+impl Settled {
+    /// The model as fitted, `in_model`'s effects with the settled families in their place.
+    pub fn effects<'a>(&'a self, in_model: &[&'a dyn Effect]) -> Vec<&'a dyn Effect> {
+        self.order
+            .iter()
+            .map(|o| match *o {
+                Ok(k) => self.own[k].as_ref(),
+                Err(i) => in_model[i],
+            })
+            .collect()
+    }
+
+    /// Nothing settled: the model as given.
+    pub fn unchanged(in_model: &[&dyn Effect]) -> Settled {
+        Settled {
+            own: Vec::new(),
+            order: (0..in_model.len()).map(Err).collect(),
+        }
+    }
+
+    /// Whether a family was narrowed to some of its parts.
+    pub fn changed(&self) -> bool {
+        !self.own.is_empty()
+    }
+}
+
+/// Settle every family of `in_model` named whole ([`Effect::open_family`]): the part
+/// combination with the fewest parts that the whole family does not beat by the evidence a
+/// candidate needs (the calibration's F-test with the prediction, not contradicted, a gain
+/// that matters); `level` is that evidence's.
+pub(crate) fn settle(
+    campaign: &Campaign,
+    val: Option<&Validation>,
+    in_model: &[&dyn Effect],
+    (copts, level): (&calib::Options, f64),
+) -> Settled {
+    let mut settled = Settled::unchanged(in_model);
+    for (i, family) in in_model.iter().enumerate() {
+        if !family.open_family() {
+            continue;
+        }
+        let n = family.parts().len();
+        let mut variants: Vec<Box<dyn Effect>> = Vec::new();
+        for mask in 1..(1usize << n) {
+            let parts: Vec<usize> = (0..n).filter(|b| mask & (1 << b) != 0).collect();
+            variants.extend(family.with_parts(&parts));
+        }
+        let current = settled.effects(in_model);
+        let scored: Vec<(usize, Scored)> = variants
+            .iter()
+            .enumerate()
+            .filter_map(|(k, v)| {
+                let mut with = current.clone();
+                with[i] = v.as_ref();
+                Scored::of(campaign, val, with, copts).map(|p| (k, p))
+            })
+            .collect();
+        let Some(whole) = scored
+            .iter()
+            .find(|(k, _)| mask_len(variants[*k].name()) == n)
+        else {
+            continue;
+        };
+        let floor = val.map(|v| calib::rms(&v.relative_sigma));
+        let adequate = |v: &Scored| !whole.1.needed_over(v, (campaign, copts), (level, floor));
+        let Some(k) = scored
+            .iter()
+            .filter(|(_, v)| adequate(v))
+            .min_by(|a, b| {
+                let parts = |k: usize| mask_len(variants[k].name());
+                parts(a.0)
+                    .cmp(&parts(b.0))
+                    .then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))
+            })
+            .map(|(k, _)| *k)
+        else {
+            continue;
+        };
+        // the whole family is what the caller has: nothing to own
+        if mask_len(variants[k].name()) == n {
+            continue;
+        }
+        let own = settled.own.len();
+        settled.own.push(variants.swap_remove(k));
+        settled.order[i] = Ok(own);
+    }
+    settled
+}
+
+/// Parts named in a part variant's name (`thermal:rods+frame`: 2).
+fn mask_len(name: &str) -> usize {
+    name.split_once(':')
+        .map_or(usize::MAX, |(_, parts)| parts.split('+').count())
+}
+
+/// A model of a settle: its calibration χ², and its prediction errors (held-out with each
+/// setup's zero removed, mm; left-out rows, σ, made only where the held-out data cannot tell
+/// or there are none).
+struct Scored<'a> {
+    with: Vec<&'a dyn Effect>,
+    params: Params,
+    theta: Vec<f64>,
+    chi2: f64,
+    dof: f64,
+    rows: usize,
+    held: Vec<f64>,
+    left_out: std::cell::OnceCell<Option<Vec<f64>>>,
+}
+
+/// What a settle's cross-validation needs.
+type Fold<'c> = (&'c Campaign, &'c calib::Options);
+
+impl<'a> Scored<'a> {
+    /// The model `with` calibrated and its held-out errors; None where it cannot be fitted.
+    fn of(
+        campaign: &Campaign,
+        val: Option<&Validation>,
+        with: Vec<&'a dyn Effect>,
+        copts: &calib::Options,
+    ) -> Option<Scored<'a>> {
+        let start = Params::nominal();
+        let set = EffectSet::bind(&with, campaign, &start).ok()?;
+        let (cal, _) = calib::calibrate(&Request {
+            effects: &set,
+            ..Request::new(campaign, &start, copts)
+        })
+        .ok()?;
+        let chi2: f64 = cal
+            .residuals
+            .iter()
+            .map(|r| (r.value / r.sigma).powi(2))
+            .sum();
+        let rows = cal.residuals.len();
+        let held = match val {
+            Some(v) => {
+                let errors = Model1 {
+                    effects: &with,
+                    cal_set: &set,
+                    cal: &cal,
+                }
+                .errors(v)
+                .ok()?;
+                v.relative(&errors)
+            }
+            None => Vec::new(),
+        };
+        Some(Scored {
+            with,
+            params: cal.params,
+            theta: cal.theta,
+            chi2,
+            dof: (rows as f64 - cal.dof_model).max(1.0),
+            rows,
+            held,
+            left_out: std::cell::OnceCell::new(),
+        })
+    }
+
+    /// The left-out rows (cross-validation by setup), made once.
+    fn left_out(&self, (campaign, copts): Fold) -> Option<&[f64]> {
+        self.left_out
+            .get_or_init(|| {
+                cross::predicted_rows(
+                    campaign,
+                    &cross::Fitted {
+                        effects: &self.with,
+                        params: &self.params,
+                        theta: &self.theta,
+                    },
+                    copts,
+                )
+            })
+            .as_deref()
+    }
+
+    /// Whether this model (the whole family) beats the smaller `v` by the evidence a
+    /// candidate needs: the nested F-test with the prediction (held-out where it decides,
+    /// else the left-out rows), not contradicted, a gain that matters (`floor`: the held-out
+    /// noise, mm).
+    fn needed_over(&self, v: &Scored, fold: Fold, (level, floor): (f64, Option<f64>)) -> bool {
+        let held = Prediction::compared(&v.held, &self.held);
+        let prediction = match held {
+            Some(p) if p.better || p.worse => Some((p, floor.unwrap_or(1.0))),
+            _ => match v.left_out(fold).zip(self.left_out(fold)) {
+                Some((a, b)) => Prediction::compared(a, b).map(|p| (p, 1.0)),
+                None => held.map(|p| (p, floor.unwrap_or(1.0))),
+            },
+        };
+        Gain::of(
+            (self.chi2, self.dof),
+            (v.chi2, v.dof),
+            self.rows,
+            prediction,
+        )
+        .needed(level)
+    }
+}

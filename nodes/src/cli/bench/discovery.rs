@@ -1,0 +1,380 @@
+//! `rpkm bench discovery`: the discovery loop on random machines, judged against what each
+//! hides, and the table of what it named.
+
+use super::machines::{self, Class, Hidden, Machine, Measured};
+use super::DiscoveryArgs;
+use crate::cli::bad_input;
+use crate::cli::effect_stages::offered;
+use crate::effects_file::{self, EffectsFile};
+use anyhow::Result;
+use rpkm_core::calib;
+use rpkm_core::diagnose::{self, Diagnosis, Options, Prediction, VerdictKind};
+use rpkm_core::effects::{self, Effect};
+use rpkm_twin::EffectKind;
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+/// What one machine was and what the loop said.
+#[derive(Clone, Debug, serde::Serialize)]
+struct Outcome {
+    machine: usize,
+    class: Class,
+    hidden: Vec<String>,
+    named: Vec<String>,
+    final_verdict: String,
+    correct: bool,
+    /// The largest relative rise of the held-out RMS from one model of the loop to the next
+    /// (0: a named effect never raised it).
+    largest_rise: f64,
+    /// The same rise in standard errors of the fall (paired errors, as a diagnosis judges a
+    /// candidate): above 2, the step predicts worse.
+    largest_rise_se: f64,
+    /// The held-out RMS (µm, each setup's zero removed) of each model of the loop, the first
+    /// without effects.
+    held_out_path_um: Vec<f64>,
+    held_out_over_floor: f64,
+    /// The last diagnosis's held-out RMS with each setup's zero removed over the truth's
+    /// floor of the same (the realised noise, each setup's mean removed).
+    held_out_relative_over_floor: f64,
+    /// `nothing_missing` while that ratio exceeds 1 + 2 SE (SE = 1/√(2(n − g))): a verdict
+    /// the held-out data contradict.
+    nothing_missing_above_floor: bool,
+}
+
+pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
+    if a.machines == 0 || a.threads == 0 {
+        return Err(bad_input(
+            "--machines and --threads: expected at least 1".into(),
+        ));
+    }
+    if let Some(i) = a.only {
+        let o = machine(a.seed, i, true)?;
+        println!("{}", serde_json::to_string_pretty(&o)?);
+        return Ok(());
+    }
+    let next = AtomicUsize::new(0);
+    let done = Mutex::new(Vec::new());
+    std::thread::scope(|s| {
+        for _ in 0..a.threads {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= a.machines {
+                    break;
+                }
+                // a diagnosis that fails counts as a wrong answer, with its error
+                let out = machine(a.seed, i, false).unwrap_or_else(|e| failed(a.seed, i, &e));
+                if let Ok(mut d) = done.lock() {
+                    d.push(out);
+                    eprint!("\r  {} of {} machines", d.len(), a.machines);
+                }
+            });
+        }
+    });
+    eprintln!();
+    let mut all: Vec<Outcome> = done
+        .into_inner()
+        .map_err(|_| anyhow::anyhow!("a worker panicked"))?;
+    all.sort_by_key(|o| o.machine);
+    print_table(&all);
+    if let Some(path) = &a.json {
+        crate::cli::write_json(path, &serde_json::to_value(&all)?)?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// The loop a user runs: diagnose, add the model the diagnosis names (its families by
+/// name, as its words advise), diagnose again, until it names nothing new.
+struct Loop<'a> {
+    measured: &'a Measured,
+    file: Option<&'a EffectsFile>,
+    verbose: bool,
+}
+
+impl Loop<'_> {
+    /// The diagnoses of the loop, the first without effects, and the effects named.
+    fn run(&self) -> Result<(Vec<Diagnosis>, Vec<String>)> {
+        let (mut named, mut all): (Vec<String>, Vec<Diagnosis>) = (Vec::new(), Vec::new());
+        loop {
+            let boxed = effects_file::parse_list(&named.join(","), self.file)
+                .map_err(|e| anyhow::anyhow!(e))?;
+            let refs: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
+            let offer = offered(self.file, &refs);
+            // the bench runs machines in parallel (--threads): each diagnosis on one thread
+            let opts = Options {
+                threads: 1,
+                ..Options::default()
+            };
+            let m = self.measured;
+            let d = diagnose::diagnose_among(&m.cal, Some(&m.val), &refs, &offer, &opts)?;
+            if self.verbose {
+                println!("with {named:?}: {}", crate::words::verdict(&d));
+            }
+            let new: Vec<String> = d
+                .missing_effects
+                .iter()
+                .map(|e| effects::family_of(e).to_owned())
+                .filter(|e| !named.contains(e))
+                .collect();
+            all.push(d);
+            if new.is_empty() || named.len() >= 4 {
+                return Ok((all, named));
+            }
+            named.extend(new);
+        }
+    }
+}
+
+fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
+    let m = machines::draw(seed, i);
+    if verbose {
+        println!(
+            "machine {i}: {:?} {:?}, {:?}, {:?}, {:?}",
+            m.hidden.class,
+            machines::hidden_names(&m.hidden),
+            m.config.thermal,
+            m.config.drift,
+            m.config.cyclic,
+        );
+    }
+    let measured = machines::measure(&m)?;
+    let mut columns = measured.cal.covariate_names.clone();
+    columns.extend(measured.val.covariate_names.iter().cloned());
+    let file = machines::offered(&m, &columns)?;
+    let (diagnoses, named) = Loop {
+        measured: &measured,
+        file: file.as_ref(),
+        verbose,
+    }
+    .run()?;
+    Ok(outcome(i, &m, &measured, &diagnoses, named))
+}
+
+/// What a machine's loop said, judged against what it hides.
+fn outcome(
+    i: usize,
+    m: &Machine,
+    measured: &Measured,
+    diagnoses: &[Diagnosis],
+    named: Vec<String>,
+) -> Outcome {
+    let last = &diagnoses[diagnoses.len() - 1];
+    let kind = last.verdict_kind;
+    let held = last.baseline.val_rms_um.unwrap_or(f64::NAN);
+    let relative = last
+        .held_out
+        .as_ref()
+        .map_or(f64::NAN, |h| h.rms_relative_um / measured.floor_relative_um);
+    let se = 1.0 / (2.0 * measured.relative_dof.max(1) as f64).sqrt();
+    // each step of the loop judged as the diagnosis judges a candidate
+    let steps: Vec<Prediction> = diagnoses
+        .windows(2)
+        .filter_map(|w| Prediction::of(&w[0].baseline.val_errors, &w[1].baseline.val_errors))
+        .collect();
+    let judged = Judged {
+        named: &named,
+        kind,
+        held_over_floor: held / measured.floor_um,
+    };
+    Outcome {
+        machine: i,
+        class: m.hidden.class,
+        hidden: machines::hidden_names(&m.hidden),
+        correct: judged.correct(&m.hidden),
+        largest_rise: steps
+            .iter()
+            .map(|p| p.rms_after / p.rms_before - 1.0)
+            .fold(0.0, f64::max),
+        largest_rise_se: steps
+            .iter()
+            .map(|p| (p.rms_after - p.rms_before) / p.standard_error)
+            .fold(0.0, f64::max),
+        held_out_path_um: diagnoses
+            .iter()
+            .map(|d| calib::rms(&d.baseline.val_errors) * 1e3)
+            .collect(),
+        final_verdict: serde_json::to_value(kind)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_owned))
+            .unwrap_or_default(),
+        named,
+        held_out_over_floor: held / measured.floor_um,
+        held_out_relative_over_floor: relative,
+        nothing_missing_above_floor: kind == VerdictKind::NothingMissing
+            && relative > 1.0 + 2.0 * se,
+    }
+}
+
+/// What the loop ended with.
+struct Judged<'a> {
+    named: &'a [String],
+    kind: VerdictKind,
+    held_over_floor: f64,
+}
+
+/// A small alignment (or a slow drift) counts as found when the held-out RMS without it is
+/// within this of the floor: below it, it hardly matters.
+const SMALL_ENOUGH: f64 = 1.3;
+
+impl Judged<'_> {
+    /// Whether the loop named exactly the hidden effects it can name and ended as it
+    /// should: `nothing_missing`, or `unexplained_structure` for an effect outside the
+    /// library that is not offered (a soft rod may end either way, its preload's effect
+    /// absorbing the rest; so may guides at two temperatures, how the frame between them
+    /// moves being beyond the library; an alignment or a drift too small to matter may go
+    /// unnamed at the floor).
+    fn correct(&self, hidden: &Hidden) -> bool {
+        let mut named: Vec<&str> = self.named.iter().map(String::as_str).collect();
+        named.sort_unstable();
+        let mut want: Vec<String> = machines::hidden_names(hidden)
+            .into_iter()
+            .filter(|e| {
+                e != EffectKind::Backlash.as_str()
+                    && e != "soft_rod"
+                    && !(hidden.class == Class::Cyclic && e == "cyclic_scale")
+            })
+            .collect();
+        want.sort_unstable();
+        let ends = |k: VerdictKind| self.kind == k;
+        let at_floor = ends(VerdictKind::NothingMissing) && self.held_over_floor <= SMALL_ENOUGH;
+        match hidden.class {
+            Class::LostMotion | Class::Cyclic => {
+                named.is_empty() && ends(VerdictKind::UnexplainedStructure)
+            }
+            Class::SoftRod | Class::Gradient => {
+                named == want
+                    && (ends(VerdictKind::NothingMissing)
+                        || ends(VerdictKind::UnexplainedStructure))
+            }
+            Class::SmallAlignment | Class::TrackerDrift if named.is_empty() => at_floor,
+            _ => named == want && ends(VerdictKind::NothingMissing),
+        }
+    }
+}
+
+/// The outcome of a machine whose loop ended in an error.
+fn failed(seed: u64, i: usize, e: &anyhow::Error) -> Outcome {
+    let m = machines::draw(seed, i);
+    Outcome {
+        machine: i,
+        class: m.hidden.class,
+        hidden: machines::hidden_names(&m.hidden),
+        named: Vec::new(),
+        final_verdict: format!("error: {}", crate::cli::error_chain(e)),
+        correct: false,
+        largest_rise: 0.0,
+        largest_rise_se: 0.0,
+        held_out_path_um: Vec::new(),
+        held_out_over_floor: f64::NAN,
+        held_out_relative_over_floor: f64::NAN,
+        nothing_missing_above_floor: false,
+    }
+}
+
+/// The loops whose held-out error rose at a step: beyond twice its standard error (what a
+/// diagnosis calls predicting worse), and within it.
+fn print_rises(all: &[Outcome]) {
+    let rose: Vec<&Outcome> = all.iter().filter(|o| o.largest_rise > 0.0).collect();
+    let worse = rose.iter().filter(|o| o.largest_rise_se > 2.0).count();
+    let largest = |f: fn(&Outcome) -> f64| rose.iter().map(|o| f(o)).fold(0.0, f64::max);
+    println!(
+        "machines where a named effect raised the held-out RMS: {worse} by more than twice \
+         its standard error; {} within it (the largest {:.2} %, {:.2} standard errors)",
+        rose.len() - worse,
+        100.0 * largest(|o| o.largest_rise),
+        largest(|o| o.largest_rise_se)
+    );
+}
+
+fn print_table(all: &[Outcome]) {
+    let label = |v: &[String]| {
+        if v.is_empty() {
+            "-".to_owned()
+        } else {
+            v.join("+")
+        }
+    };
+    let mut matrix: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+    for o in all {
+        *matrix
+            .entry(label(&o.hidden))
+            .or_default()
+            .entry(format!("{} [{}]", label(&o.named), o.final_verdict))
+            .or_default() += 1;
+    }
+    println!("hidden -> named [final verdict]: machines");
+    for (hidden, row) in &matrix {
+        let cells: Vec<String> = row.iter().map(|(k, n)| format!("{k}: {n}")).collect();
+        println!("  {hidden:<40} {}", cells.join(", "));
+    }
+    println!("\nper class: correct of machines");
+    let mut classes: BTreeMap<Class, (usize, usize)> = BTreeMap::new();
+    for o in all {
+        let e = classes.entry(o.class).or_default();
+        e.0 += usize::from(o.correct);
+        e.1 += 1;
+    }
+    for (class, (ok, n)) in &classes {
+        println!("  {:<16} {ok} of {n}", format!("{class:?}"));
+    }
+    print_rises(all);
+    print_totals(all);
+}
+
+/// The share right, the false alarms, the verdicts the held-out data contradict, and how
+/// far the loop ends from the floor.
+fn print_totals(all: &[Outcome]) {
+    let correct = all.iter().filter(|o| o.correct).count();
+    let nothing: Vec<&Outcome> = all.iter().filter(|o| o.hidden.is_empty()).collect();
+    let alarms = nothing.iter().filter(|o| !o.correct).count();
+    let mut ratio: Vec<f64> = all
+        .iter()
+        .map(|o| o.held_out_over_floor)
+        .filter(|r| r.is_finite())
+        .collect();
+    ratio.sort_by(f64::total_cmp);
+    let q = |f: f64| {
+        ratio
+            .get(rpkm_core::convert::round_count(
+                (ratio.len() as f64 - 1.0) * f,
+            ))
+            .copied()
+    };
+    println!(
+        "\ncorrect: {correct} of {} ({:.1} %)",
+        all.len(),
+        100.0 * correct as f64 / all.len().max(1) as f64
+    );
+    println!(
+        "false alarms on machines with nothing hidden: {alarms} of {} ({:.1} %)",
+        nothing.len(),
+        100.0 * alarms as f64 / nothing.len().max(1) as f64
+    );
+    let above: Vec<String> = all
+        .iter()
+        .filter(|o| o.nothing_missing_above_floor)
+        .map(|o| {
+            format!(
+                "{} ({:?}, {:.2})",
+                o.machine, o.class, o.held_out_relative_over_floor
+            )
+        })
+        .collect();
+    println!(
+        "nothing_missing with the held-out RMS (zero removed) above its true floor by more \
+         than 2 SE: {} of {}{}",
+        above.len(),
+        all.len(),
+        if above.is_empty() {
+            String::new()
+        } else {
+            format!(": machines {}", above.join(", "))
+        }
+    );
+    if let (Some(m), Some(p90)) = (q(0.5), q(0.9)) {
+        println!(
+            "held-out RMS after the loop / true floor: median {m:.3}, 90th percentile {p90:.3}"
+        );
+    }
+}

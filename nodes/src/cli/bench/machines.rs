@@ -1,0 +1,321 @@
+//! The machines `rpkm bench discovery` draws: a class, its hidden effects and conventions, the
+//! campaign's composition, the written effects a user of that class would offer, and the
+//! held-out floor the truth gives.
+
+use crate::effects_file::{self, EffectsFile};
+use anyhow::Result;
+use rand::{rngs::StdRng, Rng, SeedableRng};
+use rpkm_core::campaign::{Campaign, Instrument};
+use rpkm_core::noise::{NoiseModel, N_GROUPS};
+use rpkm_twin::{EffectKind, ThermalPhysics, Twin, TwinConfig, ZeroDrift};
+use std::collections::BTreeMap;
+use std::fmt::Write;
+
+/// The kinds of machine the bench draws, each reported on its own line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub(super) enum Class {
+    /// Nothing hidden.
+    Nothing,
+    /// One or two effects of the library.
+    Library,
+    /// Lost motion (backlash), outside the library.
+    LostMotion,
+    /// A periodic error of one carrier's scale, 1-5 µm over a pitch of 10-200 mm, outside
+    /// the library.
+    Cyclic,
+    /// All drives active (preload_elastic) and one rod 0.5-0.8x or 1.25-2x as stiff as the
+    /// others.
+    SoftRod,
+    /// An instrument alignment 0.2-1x its default: down to where it hardly matters.
+    SmallAlignment,
+    /// Thermal expansion measured by a tracker and self-calibration only: a campaign that
+    /// cannot separate every part of the family.
+    FamilyApart,
+    /// Thermal expansion with all drives active (preload_elastic): each alone predicts worse,
+    /// the two together at the floor.
+    ThermalPreload,
+    /// The guides warm at rates of their own (0.5-0.85x and 1.15-1.5x the mean), with a
+    /// thermometer on each guide or without.
+    Gradient,
+    /// The tracker's readings creep 0.5-2 µm per minute after each zero; the user offers
+    /// the drift written as data (`dx: "-vx * 1e-3 * t / 60"`).
+    TrackerDrift,
+    /// Lost motion of carrier 4 and a periodic scale error at once, both outside the library
+    /// and both offered written as data.
+    TwoOutside,
+}
+
+/// How many kinds of machine the draw knows (k in `0..KINDS`).
+const KINDS: u32 = 35;
+
+/// What a machine hides: its class and its hidden effects of the twin.
+pub(super) struct Hidden {
+    pub class: Class,
+    pub effects: Vec<EffectKind>,
+}
+
+fn log_uniform(rng: &mut StdRng, lo: f64, hi: f64) -> f64 {
+    (rng.gen_range(lo.ln()..hi.ln())).exp()
+}
+
+/// The class of machine `k` (0..KINDS) and its hidden effects.
+fn hidden_of(k: u32, rng: &mut StdRng) -> Hidden {
+    let library: Vec<EffectKind> = EffectKind::ALL
+        .iter()
+        .copied()
+        .filter(|e| !e.outside_library())
+        .collect();
+    let pick = |rng: &mut StdRng| library[rng.gen_range(0..library.len())];
+    let (class, effects) = match k {
+        0..=5 => (Class::Nothing, Vec::new()),
+        6..=13 => (Class::Library, vec![pick(rng)]),
+        14..=15 => {
+            let first = pick(rng);
+            let mut second = pick(rng);
+            while second == first {
+                second = pick(rng);
+            }
+            (Class::Library, vec![first, second])
+        }
+        16..=17 => (Class::LostMotion, vec![EffectKind::Backlash]),
+        18..=20 => (Class::Cyclic, Vec::new()),
+        21..=22 => (Class::SoftRod, vec![EffectKind::PreloadElastic]),
+        23..=24 => (Class::SmallAlignment, vec![EffectKind::InstrumentAlignment]),
+        25..=26 => (Class::FamilyApart, vec![EffectKind::Thermal]),
+        27..=28 => (
+            Class::ThermalPreload,
+            vec![EffectKind::PreloadElastic, EffectKind::Thermal],
+        ),
+        29..=30 => (Class::Gradient, vec![EffectKind::Thermal]),
+        31..=32 => (Class::TrackerDrift, Vec::new()),
+        _ => (Class::TwoOutside, vec![EffectKind::LostMotionQ4]),
+    };
+    Hidden { class, effects }
+}
+
+/// A machine of the bench: the twin's configuration, what it hides, and the campaign's
+/// instruments.
+pub(super) struct Machine {
+    pub config: TwinConfig,
+    pub hidden: Hidden,
+    pub instruments: Vec<Instrument>,
+}
+
+/// Machine `i` of the series `seed`: its hidden effects and conventions.
+pub(super) fn draw(seed: u64, i: usize) -> Machine {
+    let mut rng = StdRng::seed_from_u64(seed.wrapping_mul(0x9e37_79b9).wrapping_add(i as u64));
+    let k = rng.gen_range(0..KINDS);
+    let hidden = hidden_of(k, &mut rng);
+    let noise: [f64; N_GROUPS] = std::array::from_fn(|_| log_uniform(&mut rng, 0.5, 3.0));
+    let thermal = thermal_of(&mut rng, hidden.class);
+    let (lo, hi) = if hidden.class == Class::SmallAlignment {
+        (0.2, 1.0)
+    } else {
+        (0.3, 3.0)
+    };
+    let effects = hidden
+        .effects
+        .iter()
+        .map(|e| (*e, e.default_magnitude() * log_uniform(&mut rng, lo, hi)))
+        .collect();
+    let mut stiffness = rpkm_core::elastic::Stiffness::default();
+    if hidden.class == Class::SoftRod {
+        let rod = rng.gen_range(0..4);
+        stiffness.rod[rod] *= if rng.gen_bool(0.5) {
+            rng.gen_range(0.5..0.8)
+        } else {
+            rng.gen_range(1.25..2.0)
+        };
+    }
+    let cyclic =
+        matches!(hidden.class, Class::Cyclic | Class::TwoOutside).then(|| rpkm_twin::CyclicScale {
+            carrier: rng.gen_range(0..4),
+            amplitude_mm: rng.gen_range(1e-3..5e-3),
+            pitch_mm: log_uniform(&mut rng, 10.0, 200.0),
+            phase: rng.gen_range(0.0..std::f64::consts::TAU),
+        });
+    let drift = (hidden.class == Class::TrackerDrift).then(|| {
+        let (speed, heading) = (
+            rng.gen_range(0.5e-3..2e-3) / 60.0,
+            rng.gen_range(0.0..std::f64::consts::TAU),
+        );
+        ZeroDrift {
+            instrument: Instrument::Lt,
+            rate_per_s: [speed * heading.cos(), speed * heading.sin()],
+        }
+    });
+    let instruments = if hidden.class == Class::FamilyApart {
+        vec![Instrument::Lt, Instrument::SelfCal]
+    } else {
+        vec![Instrument::Lt, Instrument::Kgm, Instrument::SelfCal]
+    };
+    let config = TwinConfig {
+        stiffness,
+        cyclic,
+        drift,
+        seed: rng.gen(),
+        effects,
+        length_sigma_mm: rng.gen_range(0.05..0.1),
+        angle_sigma_rad: rng.gen_range(1e-4..3e-4),
+        noise: Some(NoiseModel::default().scaled(&noise)),
+        thermal,
+        ..Default::default()
+    };
+    Machine {
+        config,
+        hidden,
+        instruments,
+    }
+}
+
+/// Which thermal parts expand and how fast (5-25 ppm/K each, at least one), and for a
+/// gradient the guides' own rates and whether each has a thermometer.
+fn thermal_of(rng: &mut StdRng, class: Class) -> ThermalPhysics {
+    let mut parts = [0.0; 3];
+    while parts.iter().all(|p| *p == 0.0) {
+        for p in &mut parts {
+            *p = if rng.gen_bool(0.5) {
+                rng.gen_range(5e-6..25e-6)
+            } else {
+                0.0
+            };
+        }
+    }
+    let mut physics = ThermalPhysics {
+        rods_per_k: parts[0],
+        frame_per_k: parts[1],
+        scales_per_k: parts[2],
+        ..Default::default()
+    };
+    if class == Class::Gradient {
+        let (slow, fast) = (rng.gen_range(0.5..0.85), rng.gen_range(1.15..1.5));
+        physics.guide_rates = if rng.gen_bool(0.5) {
+            [slow, fast]
+        } else {
+            [fast, slow]
+        };
+        physics.guide_thermometers = rng.gen_bool(0.5);
+    }
+    physics
+}
+
+/// The calibration and held-out campaigns of a machine, and the held-out floor the truth
+/// gives.
+pub(super) struct Measured {
+    pub cal: Campaign,
+    pub val: Campaign,
+    /// The RMS (µm) of the held-out readings' own errors (the same poses measured without
+    /// noise): what a perfect model predicts, each reading's zero noise included.
+    pub floor_um: f64,
+    /// The same with each setup's mean error removed per coordinate (as the diagnosis
+    /// removes each setup's zero), and the count of values less those means: n − g.
+    pub floor_relative_um: f64,
+    pub relative_dof: usize,
+}
+
+/// Measures a machine's campaigns on its twin, and again without noise for the floor.
+pub(super) fn measure(m: &Machine) -> Result<Measured> {
+    let run = |config: TwinConfig| -> Result<(Campaign, Campaign)> {
+        let mut twin = Twin::new(config)?;
+        let cal = twin.campaign(&m.instruments)?;
+        Ok((cal, twin.validation(100)?))
+    };
+    let (cal, val) = run(m.config.clone())?;
+    let (_, clean) = run(TwinConfig {
+        noise: None,
+        ..m.config.clone()
+    })?;
+    let (floor_relative_um, relative_dof) = relative_floor(&val, &clean);
+    Ok(Measured {
+        floor_um: rpkm_twin::reading_error_rms_um(&val, &clean),
+        cal,
+        val,
+        floor_relative_um,
+        relative_dof,
+    })
+}
+
+/// The held-out readings' own errors with each setup's mean removed per coordinate: their
+/// RMS (µm) and the values' count less the means removed.
+fn relative_floor(noisy: &Campaign, clean: &Campaign) -> (f64, usize) {
+    let mut by_setup: BTreeMap<&str, Vec<[f64; 2]>> = BTreeMap::new();
+    for (p, q) in noisy
+        .poses
+        .iter()
+        .zip(&clean.poses)
+        .filter(|(p, _)| !p.reset)
+    {
+        let (Some(px), Some(py), Some(qx), Some(qy)) = (p.x, p.y, q.x, q.y) else {
+            continue;
+        };
+        by_setup
+            .entry(p.setup.as_str())
+            .or_default()
+            .push([px - qx, py - qy]);
+    }
+    let (mut sum, mut n, mut g) = (0.0, 0usize, 0usize);
+    for errors in by_setup.values() {
+        for c in 0..2 {
+            let mean = errors.iter().map(|e| e[c]).sum::<f64>() / errors.len() as f64;
+            sum += errors.iter().map(|e| (e[c] - mean).powi(2)).sum::<f64>();
+        }
+        n += 2 * errors.len();
+        g += 2;
+    }
+    (1e3 * (sum / n.max(1) as f64).sqrt(), n.saturating_sub(g))
+}
+
+/// The effects a user of this class writes and offers beside the library (none for most):
+/// the tracker's drift, the lost motion and the cyclic scale error of the carrier the
+/// diagnosis's period pointer names, at its pitch.
+pub(super) fn offered(m: &Machine, columns: &[String]) -> Result<Option<EffectsFile>> {
+    let mut text = String::new();
+    if m.hidden.class == Class::TrackerDrift {
+        text.push_str(
+            "  - name: tracker_drift\n    summary: the tracker's readings creep after its zero\n    \
+             params: {vx: {unit: um/min, prior: 1}, vy: {unit: um/min, prior: 1}}\n    \
+             instruments: [lt]\n    dx: \"-vx * 1e-3 * t / 60\"\n    \
+             dy: \"-vy * 1e-3 * t / 60\"\n",
+        );
+    }
+    if m.hidden.class == Class::TwoOutside {
+        text.push_str(
+            "  - name: lost_motion_q4\n    summary: carrier 4 lags behind its last move\n    \
+             params: {b: {unit: mm, prior: 0.01}}\n    dq4: \"-b * dir_q4\"\n",
+        );
+    }
+    if let (Class::TwoOutside, Some(c)) = (m.hidden.class, &m.config.cyclic) {
+        let (q, pitch) = (c.carrier + 1, c.pitch_mm);
+        write!(
+            text,
+            "  - name: cyclic_scale\n    summary: a periodic error of carrier {q}'s scale\n    \
+             params: {{a: {{unit: mm, prior: 0.005}}, c: {{unit: mm, prior: 0.005}}}}\n    \
+             dq{q}: \"a * sin(2*pi*q{q}/{pitch}) + c * cos(2*pi*q{q}/{pitch})\"\n"
+        )?;
+    }
+    if text.is_empty() {
+        return Ok(None);
+    }
+    let file = effects_file::parse(&format!("effects:\n{text}"), "bench", columns)
+        .map_err(|e| anyhow::anyhow!("the bench's written effects: {e}"))?;
+    Ok(Some(file))
+}
+
+/// The hidden effects by name, as the loop should name them: the twin's kinds, and the
+/// conventions outside the library (named by the written effect a user offers, where one
+/// is offered).
+pub(super) fn hidden_names(hidden: &Hidden) -> Vec<String> {
+    let mut out: Vec<String> = hidden
+        .effects
+        .iter()
+        .map(|e| e.as_str().to_owned())
+        .collect();
+    match hidden.class {
+        Class::Cyclic | Class::TwoOutside => out.push("cyclic_scale".to_owned()),
+        Class::SoftRod => out.push("soft_rod".to_owned()),
+        Class::TrackerDrift => out.push("tracker_drift".to_owned()),
+        _ => {}
+    }
+    out
+}
