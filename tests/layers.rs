@@ -173,9 +173,18 @@ fn the_type_name_finder_sees_each_kind() {
     assert_eq!(public_type_names(text), ["A", "C", "E", "F"]);
 }
 
-/// Public names defined twice that are still to be told apart: each pair has one side in a
-/// module being reworked (the diagnosis) or is a ROS message that mirrors its `.msg` name.
-const KNOWN_TWICE: [&str; 5] = ["Diagnosis", "Instrument", "Options", "Point", "Pose"];
+/// Public names defined twice that are still to be told apart: each pair has one side in code
+/// being reworked (the diagnosis, `cli/effect_stages.rs`, `cli/summary.rs`) or is a ROS
+/// message that mirrors its `.msg` name.
+const KNOWN_TWICE: [&str; 7] = [
+    "Diagnosis",
+    "Instrument",
+    "Options",
+    "Point",
+    "Pose",
+    "Stage",
+    "Stages",
+];
 
 /// One name per type across the workspace: a reader who meets `Outcome` or `Spec` knows which
 /// one it is without looking at the imports. The names still defined twice are listed above,
@@ -218,9 +227,6 @@ fn no_public_type_name_is_defined_twice() {
 /// Source files above this, inline tests included, hold more than one job.
 const MAX_FILE_LINES: usize = 800;
 
-/// Files above [`MAX_FILE_LINES`] that are being split in another change.
-const KNOWN_LONG: [&str; 1] = ["core/src/diagnose/model.rs"];
-
 /// No source file over 800 lines: a file that long does several jobs, and becomes a folder
 /// whose files are its jobs.
 #[test]
@@ -236,7 +242,7 @@ fn no_source_file_is_over_800_lines() {
                 .lines()
                 .count();
             let at = f.strip_prefix(root).unwrap_or(&f).display().to_string();
-            if lines > MAX_FILE_LINES && !KNOWN_LONG.contains(&at.as_str()) {
+            if lines > MAX_FILE_LINES {
                 long.push(format!("{at}: {lines} lines"));
             }
         }
