@@ -15,7 +15,7 @@
 //! Run: `cargo bench -p rpkm-core --bench fegm` (needs `[[bench]] name = "fegm"
 //! harness = false` in core/Cargo.toml), or build it as an example.
 
-use rpkm_core::elastic::fe::{FeModel, FeStiffness, Method};
+use rpkm_core::elastic::fe::{FeMethod, FeModel, FeStiffness};
 use rpkm_core::elastic::{fegm, fegm_from, fegm_unchecked, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::{fgm, igm};
 use rpkm_core::params::{Model, Params};
@@ -71,13 +71,13 @@ fn main() {
     let mut model = FeModel::new(FeStiffness::default()).expect("FE stiffness");
     let fe_ad = time("FE model, actuator-displacements", &mut |q| {
         model
-            .solve(&p, *q, ALL_ACTIVE, Method::ActuatorDisplacements)
+            .solve(&p, *q, ALL_ACTIVE, FeMethod::ActuatorDisplacements)
             .expect("fe")
             .x
     });
     let fe_th = time("FE model, thermo-mechanical", &mut |q| {
         model
-            .solve(&p, *q, ALL_ACTIVE, Method::ThermoMechanical)
+            .solve(&p, *q, ALL_ACTIVE, FeMethod::ThermoMechanical)
             .expect("fe")
             .x
     });

@@ -11,7 +11,7 @@
 //!
 //! Run: `cargo bench -p rpkm-core --bench online`.
 
-use rpkm_core::calib::online::{ForceSample, OnlineEstimator, OnlineOptions, Outcome};
+use rpkm_core::calib::online::{ForceSample, OnlineEstimator, OnlineOptions, UpdateOutcome};
 use rpkm_core::params::index_of;
 use rpkm_twin::{ProductionConfig, ProductionStream, StepChange};
 
@@ -56,7 +56,9 @@ fn main() {
         let out = est.update(s).expect("update");
         let us = t0.elapsed().as_secs_f64() * 1e6;
         match out {
-            Outcome::Step(step) => named = Some((us, step.separating.map_or(0, |m| m.poses.len()))),
+            UpdateOutcome::Step(step) => {
+                named = Some((us, step.separating.map_or(0, |m| m.poses.len())));
+            }
             _ if open => tied.push(us),
             _ if s.t < 60.0 => plain.push(us),
             _ => {}

@@ -6,7 +6,7 @@
 //! Run: `cargo run -p rpkm-core --example elastic_methods`
 
 use rpkm_core::elastic::fe::{
-    compare_methods, fe_solve, Comparison, FeStiffness, Joint, Method, RedundantModel,
+    compare_methods, fe_solve, Comparison, FeMethod, FeStiffness, RedundantModel, RodEndJoint,
 };
 use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::igm;
@@ -149,29 +149,37 @@ fn print_fe_variants(nominal: &Params) -> Result<(), Box<dyn std::error::Error>>
     };
     line("spring fegm", [sp.x, sp.y, sp.psi], sp.drive_force);
     let d = FeStiffness::default();
-    let variants: [(&str, FeStiffness, Method); 6] = [
-        ("FE default (pinned rods)", d, Method::ActuatorDisplacements),
-        ("FE default, thermo-mechanical", d, Method::ThermoMechanical),
+    let variants: [(&str, FeStiffness, FeMethod); 6] = [
+        (
+            "FE default (pinned rods)",
+            d,
+            FeMethod::ActuatorDisplacements,
+        ),
+        (
+            "FE default, thermo-mechanical",
+            d,
+            FeMethod::ThermoMechanical,
+        ),
         (
             "FE platform and carriers ×10⁴ stiffer",
             d.with_stiff_frame(1e4),
-            Method::ActuatorDisplacements,
+            FeMethod::ActuatorDisplacements,
         ),
         (
             "FE welded rod ends, actuator-displacements",
             FeStiffness {
-                joint: Joint::Rigid,
+                joint: RodEndJoint::Rigid,
                 ..d
             },
-            Method::ActuatorDisplacements,
+            FeMethod::ActuatorDisplacements,
         ),
         (
             "FE welded rod ends, thermo-mechanical",
             FeStiffness {
-                joint: Joint::Rigid,
+                joint: RodEndJoint::Rigid,
                 ..d
             },
-            Method::ThermoMechanical,
+            FeMethod::ThermoMechanical,
         ),
         (
             "FE drives 40 kN/mm along their guides",
@@ -179,7 +187,7 @@ fn print_fe_variants(nominal: &Params) -> Result<(), Box<dyn std::error::Error>>
                 drive: [Some(40_000.0); 4],
                 ..d
             },
-            Method::ActuatorDisplacements,
+            FeMethod::ActuatorDisplacements,
         ),
     ];
     for (name, k, m) in variants {

@@ -3,7 +3,7 @@
 //!
 //! A design is the list of target TCP positions a campaign visits, grouped in setups, with the
 //! reset pose of each relative setup marked. Designs are pure data: the digital twin
-//! ([`crate::twin`]) drives them on a simulated machine, a real cell drives them on the machine.
+//! (`rpkm-twin`) drives them on a simulated machine, a real cell drives them on the machine.
 //! Every target lies in the workspace x ∈ [−150, 150] mm, y ∈ [700, 2700] mm
 //! ([`clamp_to_workspace`]).
 //!

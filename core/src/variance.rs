@@ -91,24 +91,24 @@ pub fn factor_terms(rows: &[RowValue], leverage: &[f64]) -> [(f64, f64); N_GROUP
 /// The rounds' running state: each group's level as a factor of its stated one, and the
 /// degrees of freedom of its last estimate.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Levels {
+pub struct GroupLevels {
     pub total: [f64; N_GROUPS],
     pub dof: [f64; N_GROUPS],
 }
 
-impl Default for Levels {
+impl Default for GroupLevels {
     fn default() -> Self {
-        Levels {
+        GroupLevels {
             total: [1.0; N_GROUPS],
             dof: [0.0; N_GROUPS],
         }
     }
 }
 
-impl Levels {
+impl GroupLevels {
     /// One round's re-weighting from the fit's `rows` and `leverage`: each group's step
     /// factor (1 where the group has too few degrees of freedom), kept inside
-    /// [`FACTOR_RANGE`] of the stated level. Returns the steps; [`Levels::apply`] takes them.
+    /// [`FACTOR_RANGE`] of the stated level. Returns the steps; [`GroupLevels::apply`] takes them.
     pub fn step(&mut self, rows: &[RowValue], leverage: &[f64]) -> [f64; N_GROUPS] {
         let terms = factor_terms(rows, leverage);
         std::array::from_fn(|k| {

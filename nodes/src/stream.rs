@@ -22,7 +22,7 @@ pub const CIRCLE_PERIOD_S: f64 = 2.0;
 /// Path of the commanded TCP during a stream.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Motion {
+pub enum StreamPath {
     /// The circular test's circle: radius 100 mm around (0, 1700) mm, one turn every 2 s,
     /// starting at (100, 1700) mm.
     Circle,
@@ -67,7 +67,7 @@ pub struct StreamSpec {
     pub hz: f64,
     /// Length, s.
     pub seconds: f64,
-    pub motion: Motion,
+    pub motion: StreamPath,
     pub fault: Option<Fault>,
     /// Twin time of the first sample, s.
     pub start_s: f64,
@@ -89,8 +89,8 @@ impl StreamSpec {
     /// Commanded TCP of sample `k`, mm.
     pub fn target(&self, k: u64) -> (f64, f64) {
         match self.motion {
-            Motion::Hold => CENTRE,
-            Motion::Circle => {
+            StreamPath::Hold => CENTRE,
+            StreamPath::Circle => {
                 let a = std::f64::consts::TAU * (k as f64 / self.hz) / CIRCLE_PERIOD_S;
                 (
                     CENTRE.0 + CIRCLE_RADIUS_MM * a.cos(),
@@ -181,7 +181,7 @@ mod tests {
         let spec = StreamSpec {
             hz: 1000.0,
             seconds: 2.0,
-            motion: Motion::Hold,
+            motion: StreamPath::Hold,
             fault: Some(f),
             start_s: 1.0,
             first_seq: 0,

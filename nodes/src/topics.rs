@@ -6,8 +6,7 @@ use std::time::{SystemTime, UNIX_EPOCH};
 
 use rpkm_msgs::RosMessage;
 use rpkm_transport::bag::{
-    self, BagWriteError, BagWriter, Durability as BagDurability, History, QosProfile,
-    Reliability as BagReliability, TopicHandle,
+    self, BagDurability, BagReliability, BagWriteError, BagWriter, History, QosProfile, TopicHandle,
 };
 use rpkm_transport::{
     topic, Durability, IpcMessage, Publisher, Qos, Reliability, Subscriber, Topic, Transport,

@@ -229,7 +229,7 @@ fn preload_fault_bag_through_the_monitor_matches_the_core() {
     );
 }
 
-/// The calibration bag in recorded order (nodes/src/node/calibrator.rs): each poll drains the states,
+/// The calibration bag in recorded order (nodes/src/node/calibrator/node.rs): each poll drains the states,
 /// then the measurements; the calibrator pairs them by stamp whatever order they arrive in
 /// (it keeps an unpaired measurement until its state has come).
 #[test]

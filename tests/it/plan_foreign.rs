@@ -288,7 +288,7 @@ fn poses_planned_for_the_tcp_pay_on_the_foreign_machine() {
     };
     let unknowns = Unknowns::of_model(MODEL, |i| Prior::default().sigma(i));
     let evaluation =
-        plan::Evaluation::grid(&d.params, (MODEL, &d.noise), &unknowns).expect("the grid");
+        plan::TargetForecast::grid(&d.params, (MODEL, &d.noise), &unknowns).expect("the grid");
     let setups = plan::candidates(&[Instrument::Lt]).expect("lt");
     let planner =
         plan::AccuracyPlanner::new(&start, &unknowns, &setups, &evaluation).expect("rows");

@@ -8,7 +8,7 @@ use super::progress::{Flow, Progress};
 use super::request::{Noise, Request};
 use super::types::{Calibration, CalibrationError, WarmStart};
 use crate::effects::EffectSet;
-use crate::variance::{Levels, NoiseEstimate};
+use crate::variance::{GroupLevels, NoiseEstimate};
 
 /// Calibrate as `req` asks. With [`Noise::Stated`] the estimate is the stated model as it is.
 pub fn calibrate(req: &Request) -> Result<(Calibration, NoiseEstimate), CalibrationError> {
@@ -26,7 +26,7 @@ fn estimating(
 ) -> Result<(Calibration, NoiseEstimate), CalibrationError> {
     let stated = &req.options.noise;
     let mut opts = req.options.clone();
-    let mut levels = Levels::default();
+    let mut levels = GroupLevels::default();
     let mut rounds = 0;
     let mut last: Option<Calibration> = None;
     // the effects bound at the last round's parameters (`EffectSet::rebound`)
@@ -53,7 +53,7 @@ fn estimating(
         // a fit whose effects were bound at the start has a model error the next round,
         // bound at this fit, removes: settled weights alone do not end the rounds
         let bound_here = !rebinds || bound_at_fit.is_some();
-        if (Levels::settled(&step) && bound_here) || rounds >= max_rounds {
+        if (GroupLevels::settled(&step) && bound_here) || rounds >= max_rounds {
             break cal;
         }
         if rebinds {

@@ -15,12 +15,12 @@ use serde::Serialize;
 /// How well one estimate predicted a sample: the normalised innovation and the log
 /// determinant of its covariance (−2 log-likelihood up to a constant).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Prediction {
+pub struct TiePrediction {
     pub nis: f64,
     pub ln_det: f64,
 }
 
-impl Prediction {
+impl TiePrediction {
     fn misses(&self) -> f64 {
         self.nis + self.ln_det
     }
@@ -71,8 +71,8 @@ impl TieEvidence {
         &mut self,
         t: f64,
         q: [f64; 4],
-        named: Prediction,
-        runner_up: Prediction,
+        named: TiePrediction,
+        runner_up: TiePrediction,
         gate: f64,
     ) {
         let finite = named.misses().is_finite() || runner_up.misses().is_finite();
@@ -105,7 +105,7 @@ impl TieEvidence {
 
 /// A pose the machine could be driven to, as the two estimates see it.
 #[derive(Clone, Copy, Debug)]
-pub struct Candidate<const N: usize> {
+pub struct TieCandidate<const N: usize> {
     /// The pose, mm.
     pub x: f64,
     pub y: f64,
@@ -136,7 +136,7 @@ pub struct SeparatingMotion {
 /// exactly the expected −2 log-likelihood ratio of the two over the motion. None without
 /// candidates.
 pub fn plan_motion<const N: usize>(
-    candidates: &[Candidate<N>],
+    candidates: &[TieCandidate<N>],
     cov: &SMatrix<f64, N, N>,
     enough: f64,
     max_poses: usize,
@@ -150,7 +150,7 @@ pub fn plan_motion<const N: usize>(
         first_chi2: 0.0,
     };
     while motion.poses.len() < max_poses && motion.chi2 < enough {
-        let gain = |c: &Candidate<N>| {
+        let gain = |c: &TieCandidate<N>| {
             let s = c.h * cov * c.h.transpose() + c.r;
             let left = c.apart - c.h * known;
             s.cholesky().map_or(0.0, |ch| left.dot(&ch.solve(&left)))
@@ -186,8 +186,8 @@ pub fn plan_motion<const N: usize>(
 mod tests {
     use super::*;
 
-    fn p(nis: f64) -> Prediction {
-        Prediction { nis, ln_det: 0.0 }
+    fn p(nis: f64) -> TiePrediction {
+        TiePrediction { nis, ln_det: 0.0 }
     }
 
     #[test]
@@ -210,7 +210,7 @@ mod tests {
     #[test]
     fn a_motion_expects_the_batch_evidence_of_its_samples() {
         let (p, d) = (4.0, 3.0);
-        let pose = |x: f64, apart: f64| Candidate::<1> {
+        let pose = |x: f64, apart: f64| TieCandidate::<1> {
             x,
             y: 0.0,
             h: SMatrix::<f64, 4, 1>::new(1.0, 0.0, 0.0, 0.0),
@@ -218,8 +218,9 @@ mod tests {
             apart: Vector4::new(apart, 0.0, 0.0, 0.0),
         };
         let cov = SMatrix::<f64, 1, 1>::new(p);
-        let plan =
-            |poses: &[Candidate<1>]| plan_motion(poses, &cov, f64::INFINITY, 2).expect("a motion");
+        let plan = |poses: &[TieCandidate<1>]| {
+            plan_motion(poses, &cov, f64::INFINITY, 2).expect("a motion")
+        };
         let twice = plan(&[pose(1.0, d)]);
         assert_eq!(twice.poses, [(1.0, 0.0), (1.0, 0.0)]);
         assert!(

@@ -7,7 +7,7 @@ use crate::params::{Model, Params};
 
 /// A redundant forward model's answer: TCP (mm) and platform angle (rad).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Pose {
+pub struct RedundantPose {
     pub x: f64,
     pub y: f64,
     pub psi: f64,
@@ -16,7 +16,7 @@ pub struct Pose {
 /// Statistical method (5.1, [Marquet 03]): the weighted mean of the forward models of the
 /// viable non-redundant subsystems, weights 1 / condition number of each subsystem's Jacobian
 /// ∂(x, y)/∂(q_a, q_b). Subsystems that are singular at this pose are skipped.
-pub fn statistical(p: &Params, model: Model, q: [f64; 4]) -> Result<Pose, ElasticError> {
+pub fn statistical(p: &Params, model: Model, q: [f64; 4]) -> Result<RedundantPose, ElasticError> {
     let (mut sw, mut sx, mut sy, mut spsi) = (0.0, 0.0, 0.0, 0.0);
     let mut last_err = None;
     for sub in Subsystem::VIABLE {
@@ -60,7 +60,7 @@ pub fn statistical(p: &Params, model: Model, q: [f64; 4]) -> Result<Pose, Elasti
             None => ElasticError::NotHeld,
         });
     }
-    Ok(Pose {
+    Ok(RedundantPose {
         x: sx / sw,
         y: sy / sw,
         psi: spsi / sw,
@@ -70,13 +70,13 @@ pub fn statistical(p: &Params, model: Model, q: [f64; 4]) -> Result<Pose, Elasti
 /// Least-squares method (5.2, [Marquet 03]): the pose minimising ½ Σ r_i² over the five
 /// loop closures with r_i = |A_i − B_i| − l_i and all four actuators at `q`. This is the
 /// spring model with equal rod stiffness and rigid carriers, solved by the same Newton.
-pub fn least_squares(p: &Params, q: [f64; 4]) -> Result<Pose, ElasticError> {
+pub fn least_squares(p: &Params, q: [f64; 4]) -> Result<RedundantPose, ElasticError> {
     let unit = Stiffness {
         rod: [1.0; 5],
         carrier: [None; 4],
     };
     let eq = fegm(p, &unit, q, ALL_ACTIVE)?;
-    Ok(Pose {
+    Ok(RedundantPose {
         x: eq.x,
         y: eq.y,
         psi: eq.psi,

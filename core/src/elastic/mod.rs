@@ -26,7 +26,7 @@ pub mod plausibility;
 pub mod preload;
 pub mod spring;
 
-pub use fe::{fe_solve, FeEquilibrium, FeError, FeModel, FeStiffness, Method};
+pub use fe::{fe_solve, FeEquilibrium, FeError, FeMethod, FeModel, FeStiffness};
 pub use guarded::{fegm, fegm_checked, fegm_checked_after, fegm_from, Checked};
 pub use limits::{wrap_angle, Limits, Reason, RigidPose, Violation};
 pub use preload::{compatibility, offset_effect, preload_offsets, Compatibility, PreloadPlan};

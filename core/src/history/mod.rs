@@ -17,4 +17,4 @@ mod trend;
 
 pub use change::{change, Change, Joint, ParamChange, Seen, FLAG_SIGMA};
 pub use estimate::Estimate;
-pub use trend::{crossing, trend, Crossing, Point, Trend, LINE_P_VALUE, MIN_POINTS};
+pub use trend::{crossing, trend, Crossing, Trend, TrendPoint, LINE_P_VALUE, MIN_POINTS};

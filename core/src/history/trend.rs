@@ -19,7 +19,7 @@ pub const MIN_POINTS: usize = 3;
 
 /// One calibration's value of a parameter.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct Point {
+pub struct TrendPoint {
     /// s, any origin.
     pub t_s: f64,
     /// mm, rad.
@@ -70,7 +70,7 @@ pub struct Crossing {
 
 /// The weighted line through `points`, σ widened by √(χ²/dof) where that exceeds 1; None
 /// for fewer than [`MIN_POINTS`], a σ that is not positive, or a run of one instant.
-fn fit(points: &[Point]) -> Option<Trend> {
+fn fit(points: &[TrendPoint]) -> Option<Trend> {
     if points.len() < MIN_POINTS
         || points
             .iter()
@@ -78,7 +78,7 @@ fn fit(points: &[Point]) -> Option<Trend> {
     {
         return None;
     }
-    let w = |p: &Point| 1.0 / (p.sigma * p.sigma);
+    let w = |p: &TrendPoint| 1.0 / (p.sigma * p.sigma);
     let sw: f64 = points.iter().map(w).sum();
     let t_mean = points.iter().map(|p| w(p) * p.t_s).sum::<f64>() / sw;
     let value = points.iter().map(|p| w(p) * p.value).sum::<f64>() / sw;
@@ -112,7 +112,7 @@ fn fit(points: &[Point]) -> Option<Trend> {
 
 /// The trend of `points` (in time order) over the longest recent run a line explains; None
 /// when fewer than [`MIN_POINTS`] recent points lie on a line.
-pub fn trend(points: &[Point]) -> Option<Trend> {
+pub fn trend(points: &[TrendPoint]) -> Option<Trend> {
     (0..points.len().saturating_sub(MIN_POINTS - 1)).find_map(|from| {
         let t = fit(&points[from..])?;
         (chi2_upper_tail(t.chi2, t.dof as f64) >= LINE_P_VALUE).then_some(Trend { from, ..t })

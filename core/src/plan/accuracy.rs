@@ -9,7 +9,7 @@
 //! the inverse. The calibration marginalises the same errors ([`obs::Form::Decorrelated`]);
 //! the plan's figures are recomputed from its rows that way ([`AccuracyPlanner::plan`]).
 
-use super::forecast::{posterior, Evaluation};
+use super::forecast::{posterior, TargetForecast};
 use super::start::{design_rows, Start};
 use super::types::{
     CandidateSetup, Determination, DeterminationPlan, PlanError, PlannedSetup, Unknowns,
@@ -220,7 +220,7 @@ fn extended(c: &DMatrix<f64>) -> DMatrix<f64> {
 struct Ground<'a> {
     setups: &'a [CandidateSetup],
     rows: &'a [SetupRows],
-    evaluation: &'a Evaluation,
+    evaluation: &'a TargetForecast,
 }
 
 impl Ground<'_> {
@@ -307,7 +307,7 @@ pub fn choose(
     g0: &DMatrix<f64>,
     setups: &[CandidateSetup],
     rows: &[SetupRows],
-    evaluation: &Evaluation,
+    evaluation: &TargetForecast,
     budget: usize,
 ) -> DeterminationPlan {
     let ground = Ground {
@@ -405,7 +405,7 @@ pub struct AccuracyPlanner<'a> {
     start: &'a Start<'a>,
     unknowns: &'a Unknowns,
     setups: &'a [CandidateSetup],
-    evaluation: &'a Evaluation,
+    evaluation: &'a TargetForecast,
     rows: Vec<SetupRows>,
     g0: DMatrix<f64>,
 }
@@ -416,7 +416,7 @@ impl<'a> AccuracyPlanner<'a> {
         start: &'a Start<'a>,
         unknowns: &'a Unknowns,
         setups: &'a [CandidateSetup],
-        evaluation: &'a Evaluation,
+        evaluation: &'a TargetForecast,
     ) -> Result<Self, PlanError> {
         let at = (start.model, start.noise);
         let rows = setups

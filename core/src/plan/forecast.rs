@@ -21,7 +21,7 @@ use nalgebra::{DMatrix, DVector, Vector2};
 
 /// Where the TCP must be right, and what a held-out tracker setup there would read.
 #[derive(Clone, Debug)]
-pub struct Evaluation {
+pub struct TargetForecast {
     /// The held-out targets (x, y), mm.
     pub targets: Vec<(f64, f64)>,
     /// A: the mean of ā āᵀ over the held-out values (tolerance units, mm²).
@@ -31,7 +31,7 @@ pub struct Evaluation {
     pub floor_mm: f64,
 }
 
-impl Evaluation {
+impl TargetForecast {
     /// The held-out setup over `targets` on a machine at `p` (the calibrated parameters),
     /// its readings' noise `noise`, for `unknowns`.
     pub fn new(
@@ -39,7 +39,7 @@ impl Evaluation {
         p: &Params,
         (model, noise): (Model, &NoiseModel),
         unknowns: &Unknowns,
-    ) -> Result<Evaluation, PlanError> {
+    ) -> Result<TargetForecast, PlanError> {
         if targets.is_empty() {
             return Err(PlanError::NoEvaluationPoses);
         }
@@ -69,7 +69,7 @@ impl Evaluation {
             }
         }
         let floor2: f64 = variance.iter().map(|v| relative_variance_sum(v)).sum();
-        Ok(Evaluation {
+        Ok(TargetForecast {
             targets,
             weight,
             floor_mm: (floor2 / values).sqrt(),
@@ -81,8 +81,8 @@ impl Evaluation {
         p: &Params,
         at: (Model, &NoiseModel),
         unknowns: &Unknowns,
-    ) -> Result<Evaluation, PlanError> {
-        Evaluation::new(crate::design::grid_231(), p, at, unknowns)
+    ) -> Result<TargetForecast, PlanError> {
+        TargetForecast::new(crate::design::grid_231(), p, at, unknowns)
     }
 
     /// tr(A C): the mean square the parameters' uncertainty `c` (tolerance units) leaves on
@@ -171,7 +171,7 @@ mod tests {
         let noise = NoiseModel::default();
         let unknowns = Unknowns::of_model(Model::M29, |_| 0.1);
         let targets = vec![(0.0, 1000.0), (100.0, 1700.0), (-120.0, 2500.0)];
-        let e = Evaluation::new(targets.clone(), &p, (Model::M29, &noise), &unknowns)
+        let e = TargetForecast::new(targets.clone(), &p, (Model::M29, &noise), &unknowns)
             .expect("reachable");
         // independent: finite differences of the TCP of each target's (q1, q4)
         let k = 3; // one parameter, its tolerance 0.1

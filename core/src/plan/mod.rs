@@ -33,7 +33,7 @@ mod start;
 mod types;
 
 pub use accuracy::{AccuracyPlanner, Forecast};
-pub use forecast::Evaluation;
+pub use forecast::TargetForecast;
 pub use greedy::{condition_exchange, determine, normalized_condition, Chosen};
 pub use mode::{drive_mode, DriveMode, DriveModeReason};
 pub use start::{design_rows, Start};

@@ -21,7 +21,7 @@
 use crate::support::production::twin;
 use rpkm_core::calib;
 use rpkm_core::calib::online::{
-    Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome, TieResolved,
+    Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, TieResolved, UpdateOutcome,
     DRIFT_FALSE_ALARM, DRIFT_NAME_MARGIN, TIE_EVIDENCE_CHI2, TIE_MOTION_POSES,
 };
 use rpkm_core::calib::{Calibration, Options};
@@ -74,13 +74,13 @@ pub struct Run {
     /// Largest |estimate − truth| / σ over the 29 parameters at each check, with its time.
     pub worst_z: Vec<(f64, f64, usize)>,
     /// Steps found: time named, the step.
-    pub steps: Vec<(f64, rpkm_core::calib::online::StepChange)>,
+    pub steps: Vec<(f64, rpkm_core::calib::online::DetectedStep)>,
     /// Ties settled: time, what stood.
     pub settled: Vec<(f64, TieResolved)>,
     /// RMS TCP error per window of `window_s`, mm.
     pub windows: Vec<Window>,
     /// Steps the tracker started from the truth found.
-    pub floor_steps: Vec<(f64, rpkm_core::calib::online::StepChange)>,
+    pub floor_steps: Vec<(f64, rpkm_core::calib::online::DetectedStep)>,
     /// The drift test at every check (1 s): time, P(noise alone), χ², dof, the χ²'s own P;
     /// and the drift WARNs it raised (`online_drift_warn_um` at its default, 10 µm).
     pub drift_tests: Vec<(f64, f64, f64, usize, f64)>,
@@ -90,14 +90,14 @@ pub struct Run {
 impl Run {
     /// Keeps what the tracker said at `t` (a step, a tie settled; either restarts the drift
     /// test); whether it named a step.
-    fn heard(&mut self, t: f64, out: Outcome, monitor: &mut DriftMonitor) -> bool {
+    fn heard(&mut self, t: f64, out: UpdateOutcome, monitor: &mut DriftMonitor) -> bool {
         match out {
-            Outcome::Step(st) => {
+            UpdateOutcome::Step(st) => {
                 self.steps.push((t, st));
                 monitor.rebase();
                 true
             }
-            Outcome::Resolved(r) => {
+            UpdateOutcome::Resolved(r) => {
                 self.settled.push((t, r));
                 monitor.rebase();
                 false
@@ -222,7 +222,7 @@ fn track(
         };
         est.set_temperature(s.temp_c);
         let out = est.update(&sample).expect("update");
-        if let Outcome::Step(st) = knows.update(&sample).expect("update from the truth") {
+        if let UpdateOutcome::Step(st) = knows.update(&sample).expect("update from the truth") {
             run.floor_steps.push((s.t, st));
         }
         named |= run.heard(s.t, out, &mut monitor);
@@ -535,7 +535,7 @@ fn calibration_currents_online_creep() {
 /// What the tracker said over a production stream at 10 Hz: the first step (and when it
 /// was named), the first tie it settled (and when), the evidence still open at the end.
 struct Settled {
-    step: Option<(f64, rpkm_core::calib::online::StepChange)>,
+    step: Option<(f64, rpkm_core::calib::online::DetectedStep)>,
     resolved: Option<(f64, TieResolved)>,
     open: Option<f64>,
 }
@@ -555,8 +555,8 @@ fn settle(t: &Twin, cal: &Calibration, cfg: ProductionConfig) -> Settled {
             f: s.f,
         };
         match est.update(&sample).expect("update") {
-            Outcome::Step(step) if told.step.is_none() => told.step = Some((s.t, step)),
-            Outcome::Resolved(r) if told.resolved.is_none() => told.resolved = Some((s.t, r)),
+            UpdateOutcome::Step(step) if told.step.is_none() => told.step = Some((s.t, step)),
+            UpdateOutcome::Resolved(r) if told.resolved.is_none() => told.resolved = Some((s.t, r)),
             _ => {}
         }
     }

@@ -8,8 +8,9 @@
 //! drift: six minutes).
 use crate::support::production::twin;
 use rpkm_core::calib::online::{
-    Drift, DriftMonitor, DriftTest, ForceSample, OnlineEstimator, OnlineOptions, Outcome,
-    StepChange as Step, TieResolved, DRIFT_FALSE_ALARM, DRIFT_NAME_MARGIN, TIE_EVIDENCE_CHI2,
+    DetectedStep as Step, Drift, DriftMonitor, DriftTest, ForceSample, OnlineEstimator,
+    OnlineOptions, TieResolved, UpdateOutcome, DRIFT_FALSE_ALARM, DRIFT_NAME_MARGIN,
+    TIE_EVIDENCE_CHI2,
 };
 use rpkm_core::params::{index_of, Params, NAMES};
 use rpkm_twin::{Creep, ProductionConfig, ProductionStream, StepChange, ThermalPhysics, Visit};
@@ -57,11 +58,11 @@ fn run(seed: u64, cfg: ProductionConfig, opts: OnlineOptions, warn_mm: f64) -> T
             })
             .expect("update");
         match out {
-            Outcome::Step(step) => {
+            UpdateOutcome::Step(step) => {
                 told.steps.push((s.t, step));
                 monitor.rebase();
             }
-            Outcome::Resolved(r) => {
+            UpdateOutcome::Resolved(r) => {
                 told.resolved.push((s.t, r));
                 monitor.rebase();
             }

@@ -5,8 +5,8 @@
 //! redundant forward models (docs/elastic-methods.md).
 
 use rpkm_core::elastic::fe::{
-    compare_methods, fe_solve, FeEquilibrium, FeError, FeStiffness, Joint, Method, RedundantModel,
-    Section,
+    compare_methods, fe_solve, FeEquilibrium, FeError, FeMethod, FeStiffness, RedundantModel,
+    RodEndJoint, Section,
 };
 use rpkm_core::elastic::{
     fegm, platform_balance, Equilibrium, Followers, Stiffness, ALL_ACTIVE, FOLLOWERS_23,
@@ -20,7 +20,7 @@ const POSES: [(f64, f64); 4] = [
     (-150.0, 2700.0),
     (150.0, 700.0),
 ];
-const METHODS: [Method; 2] = [Method::ThermoMechanical, Method::ActuatorDisplacements];
+const METHODS: [FeMethod; 2] = [FeMethod::ThermoMechanical, FeMethod::ActuatorDisplacements];
 
 fn compatible_q(p: &Params, x: f64, y: f64) -> [f64; 4] {
     igm(p, Model::M29, x, y).expect("igm").q()
@@ -122,7 +122,7 @@ fn compatible_inputs_give_no_force_and_no_displacement() {
                 ([q[0], q2 + 0.3, q3 - 0.2, q[3]], FOLLOWERS_23),
             ];
             for (qq, fol) in cases {
-                for joint in [Joint::Pinned, Joint::Rigid] {
+                for joint in [RodEndJoint::Pinned, RodEndJoint::Rigid] {
                     let k = FeStiffness {
                         joint,
                         ..FeStiffness::default()
@@ -149,7 +149,7 @@ fn compatible_inputs_give_no_force_and_no_displacement() {
 fn forces_scale_linearly_and_flip_sign_with_the_incompatibility() {
     let p = perturbed();
     let q = compatible_q(&p, 30.0, 1500.0);
-    let at = |d: f64, m: Method| {
+    let at = |d: f64, m: FeMethod| {
         fe_solve(
             &p,
             &FeStiffness::default(),
@@ -160,8 +160,8 @@ fn forces_scale_linearly_and_flip_sign_with_the_incompatibility() {
         .expect("fe")
     };
     for (m, tol) in [
-        (Method::ActuatorDisplacements, 1e-9),
-        (Method::ThermoMechanical, 5e-4),
+        (FeMethod::ActuatorDisplacements, 1e-9),
+        (FeMethod::ThermoMechanical, 5e-4),
     ] {
         let (one, two, neg) = (at(0.1, m), at(0.2, m), at(-0.1, m));
         assert!(one.max_current() > 10.0, "{one:?}");
@@ -205,7 +205,11 @@ fn platform_and_carriers_are_in_equilibrium() {
     let p = perturbed();
     let q = compatible_q(&p, -70.0, 2100.0);
     let q = [q[0], q[1] + 0.15, q[2] - 0.25, q[3]];
-    for joint in [Joint::Pinned, Joint::Rotational(5e7), Joint::Rigid] {
+    for joint in [
+        RodEndJoint::Pinned,
+        RodEndJoint::Rotational(5e7),
+        RodEndJoint::Rigid,
+    ] {
         let k = FeStiffness {
             joint,
             ..FeStiffness::default()
@@ -215,7 +219,7 @@ fn platform_and_carriers_are_in_equilibrium() {
             let b = fe.platform_balance;
             assert!(amax(&b) < 1e-6, "{joint:?} {m:?}: {b:?}");
             assert!(fe.max_current() > 20.0, "{fe:?}");
-            if joint == Joint::Pinned {
+            if joint == RodEndJoint::Pinned {
                 axial_forces_balance(&p, &fe);
             }
         }
@@ -260,7 +264,7 @@ fn axial_forces_balance(p: &Params, fe: &FeEquilibrium) {
 #[test]
 fn thermo_mechanical_and_actuator_displacements_agree_with_revolute_joints() {
     let p = perturbed();
-    let gap = |joint: Joint, d: f64, x: f64, y: f64| -> f64 {
+    let gap = |joint: RodEndJoint, d: f64, x: f64, y: f64| -> f64 {
         let k = FeStiffness {
             joint,
             drive: [None, Some(50_000.0), None, None],
@@ -268,8 +272,8 @@ fn thermo_mechanical_and_actuator_displacements_agree_with_revolute_joints() {
         };
         let q = compatible_q(&p, x, y);
         let q = [q[0], q[1] + d, q[2] - 0.6 * d, q[3]];
-        let th = fe_solve(&p, &k, q, ALL_ACTIVE, Method::ThermoMechanical).expect("th");
-        let ad = fe_solve(&p, &k, q, ALL_ACTIVE, Method::ActuatorDisplacements).expect("ad");
+        let th = fe_solve(&p, &k, q, ALL_ACTIVE, FeMethod::ThermoMechanical).expect("th");
+        let ad = fe_solve(&p, &k, q, ALL_ACTIVE, FeMethod::ActuatorDisplacements).expect("ad");
         let f = max_diff(&th.drive_force, &ad.drive_force) / amax(&ad.drive_force);
         let u = max_diff(&th.tcp_displacement[..2], &ad.tcp_displacement[..2])
             / amax(&ad.tcp_displacement[..2]);
@@ -277,8 +281,8 @@ fn thermo_mechanical_and_actuator_displacements_agree_with_revolute_joints() {
     };
     for (x, y) in POSES {
         let (coarse, fine) = (
-            gap(Joint::Pinned, 0.05, x, y),
-            gap(Joint::Pinned, 0.005, x, y),
+            gap(RodEndJoint::Pinned, 0.05, x, y),
+            gap(RodEndJoint::Pinned, 0.005, x, y),
         );
         assert!(coarse < 1e-3 && fine < 1e-4, "({x}, {y}) {coarse} {fine}");
         assert!(
@@ -286,8 +290,8 @@ fn thermo_mechanical_and_actuator_displacements_agree_with_revolute_joints() {
             "({x}, {y}) second order: {coarse} {fine}"
         );
         let (rc, rf) = (
-            gap(Joint::Rigid, 0.05, x, y),
-            gap(Joint::Rigid, 0.005, x, y),
+            gap(RodEndJoint::Rigid, 0.05, x, y),
+            gap(RodEndJoint::Rigid, 0.005, x, y),
         );
         eprintln!(
             "({x}, {y}) relative gap pinned {coarse:.1e} / {fine:.1e}, welded {rc:.1e} / {rf:.1e}"
@@ -307,7 +311,7 @@ fn default_fe_stiffness_gives_about_100_percent_for_0_4_mm() {
         &FeStiffness::default(),
         [q[0], q[1], q[2] + 0.4, q[3]],
         ALL_ACTIVE,
-        Method::ActuatorDisplacements,
+        FeMethod::ActuatorDisplacements,
     )
     .expect("fe");
     eprintln!("FE q3 + 0.4 mm: currents {:.1?} %", fe.current());
@@ -324,7 +328,7 @@ fn bad_inputs_are_typed_errors() {
     let k = FeStiffness::default();
     let all_free = [true; 4];
     assert_eq!(
-        fe_solve(&p, &k, q, all_free, Method::ThermoMechanical),
+        fe_solve(&p, &k, q, all_free, FeMethod::ThermoMechanical),
         Err(FeError::NotHeld)
     );
     assert_eq!(
@@ -333,20 +337,20 @@ fn bad_inputs_are_typed_errors() {
             &k,
             [f64::NAN, q[1], q[2], q[3]],
             ALL_ACTIVE,
-            Method::ThermoMechanical
+            FeMethod::ThermoMechanical
         ),
         Err(FeError::NonFinite)
     );
     let mut soft = k;
     soft.rod[2] = Section { ea: 1e8, ei: 0.0 };
     assert!(matches!(
-        fe_solve(&p, &soft, q, ALL_ACTIVE, Method::ThermoMechanical),
+        fe_solve(&p, &soft, q, ALL_ACTIVE, FeMethod::ThermoMechanical),
         Err(FeError::BadStiffness { .. })
     ));
     let mut merged = p;
     merged[params::XA5R] = p[params::XA4R];
     merged[params::YA5R] = p[params::YA4R];
-    let err = fe_solve(&merged, &k, q, ALL_ACTIVE, Method::ThermoMechanical);
+    let err = fe_solve(&merged, &k, q, ALL_ACTIVE, FeMethod::ThermoMechanical);
     assert!(
         matches!(
             err,

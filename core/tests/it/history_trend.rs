@@ -5,16 +5,16 @@
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
-use rpkm_core::history::{crossing, trend, Point};
+use rpkm_core::history::{crossing, trend, TrendPoint};
 
 const DAY: f64 = 86_400.0;
 
 /// `values` a day apart, each with σ 1.
-fn daily(values: &[f64]) -> Vec<Point> {
+fn daily(values: &[f64]) -> Vec<TrendPoint> {
     values
         .iter()
         .enumerate()
-        .map(|(k, &v)| Point {
+        .map(|(k, &v)| TrendPoint {
             t_s: k as f64 * DAY,
             value: v,
             sigma: 1.0,
@@ -48,9 +48,9 @@ fn a_line_and_its_crossing_by_hand() {
         c.sigma_s / DAY
     );
     // falling: it leaves by the lower bound
-    let down: Vec<Point> = points
+    let down: Vec<TrendPoint> = points
         .iter()
-        .map(|p| Point {
+        .map(|p| TrendPoint {
             value: -p.value,
             ..*p
         })
@@ -88,10 +88,10 @@ fn the_stated_sigma_of_slope_and_crossing_hold_over_many_draws() {
     let (mut covered, mut cut) = (0, 0);
     let draws = 4000;
     for _ in 0..draws {
-        let points: Vec<Point> = (0..10)
+        let points: Vec<TrendPoint> = (0..10)
             .map(|k| {
                 let t = f64::from(k) * month;
-                Point {
+                TrendPoint {
                     t_s: t,
                     value: truth(t) + noise.sample(&mut rng),
                     sigma: 0.008,

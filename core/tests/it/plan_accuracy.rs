@@ -11,7 +11,7 @@ use rpkm_core::design;
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs;
 use rpkm_core::params::{Model, Params};
-use rpkm_core::plan::{self, AccuracyPlanner, Evaluation, Start, Unknowns};
+use rpkm_core::plan::{self, AccuracyPlanner, Start, TargetForecast, Unknowns};
 use rpkm_twin::{Twin, TwinConfig};
 
 const MODEL: Model = Model::M29;
@@ -99,7 +99,7 @@ fn the_expected_held_out_rms_is_what_the_machine_gives() {
             noise: &est,
         };
         let unknowns = Unknowns::of_model(MODEL, |i| Prior::default().sigma(i));
-        let evaluation = Evaluation::grid(&cal.params, (MODEL, &est), &unknowns).expect("grid");
+        let evaluation = TargetForecast::grid(&cal.params, (MODEL, &est), &unknowns).expect("grid");
         let setups = plan::candidates(&[Instrument::Lt]).expect("lt");
         let planner = AccuracyPlanner::new(&start, &unknowns, &setups, &evaluation).expect("rows");
         let (p, forecast) = planner.plan(BUDGET).expect("a plan");

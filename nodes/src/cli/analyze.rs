@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 /// Which analysis.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kind {
+pub enum AnalysisKind {
     /// Sensitivity of each measurement direction to each parameter (eq. 3.16, µm or mrad for
     /// 0.1 mm / 1° of parameter variation) on the 231-point grid.
     Sensitivity,
@@ -63,7 +63,7 @@ rpkm analyze observability --method currents --campaign prod.csv"
 pub struct AnalyzeArgs {
     /// sensitivity or observability.
     #[arg(value_enum)]
-    pub kind: Kind,
+    pub kind: AnalysisKind,
     /// Calibration method: lt, kgm, dbb, li, psi, self, currents.
     #[arg(long, value_parser = parse_method)]
     pub method: Method,
@@ -155,7 +155,7 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
         model.number()
     );
     match args.kind {
-        Kind::Sensitivity => {
+        AnalysisKind::Sensitivity => {
             let rows = rows_of(args, &p, model, true)?;
             let t = analysis::sensitivity_of_rows(&rows, args.method, model);
             say(&sensitivity_text(&t));
@@ -167,7 +167,7 @@ pub fn run(args: &AnalyzeArgs) -> Result<()> {
                 super::write_json(j, &sensitivity_json(&t))?;
             }
         }
-        Kind::Observability => {
+        AnalysisKind::Observability => {
             let mut exclude = Vec::new();
             for name in &args.exclude {
                 exclude.push(params::index_of(name).ok_or_else(|| {
@@ -208,10 +208,10 @@ fn say(text: &str) {
     let _ = std::io::stdout().lock().write_all(text.as_bytes());
 }
 
-fn kind_name(k: Kind) -> &'static str {
+fn kind_name(k: AnalysisKind) -> &'static str {
     match k {
-        Kind::Sensitivity => "sensitivity",
-        Kind::Observability => "observability",
+        AnalysisKind::Sensitivity => "sensitivity",
+        AnalysisKind::Observability => "observability",
     }
 }
 

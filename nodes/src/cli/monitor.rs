@@ -17,7 +17,7 @@ use ratatui::Terminal;
 use rpkm_transport::{topic, IpcMessage, Subscriber, Transport, TransportError};
 
 use super::transport_args::{stop_flag, TransportArgs};
-use crate::monitor::{draw, ThresholdSource, Thresholds, Watch, WatchConfig};
+use crate::monitor::{draw, MonitorThresholds, ThresholdSource, Watch, WatchConfig};
 use crate::node::params::NodeParams;
 
 /// Watch a running node set: per drive the measured and predicted redundancy current as bars
@@ -120,15 +120,15 @@ fn check_args(args: &MonitorArgs) -> Result<()> {
 
 /// preload_monitor's thresholds as a node started with `files` takes them (its defaults
 /// where the files say nothing); unknown without files.
-fn thresholds_from_params(files: &[PathBuf]) -> Result<Thresholds> {
+fn thresholds_from_params(files: &[PathBuf]) -> Result<MonitorThresholds> {
     if files.is_empty() {
-        return Ok(Thresholds::unknown());
+        return Ok(MonitorThresholds::unknown());
     }
     let p = NodeParams::load("preload_monitor", files, &[]).map_err(crate::node::bad_param)?;
     let d = crate::node::preload_monitor::Thresholds::default();
     let read = |key: &str, default: f64| p.positive(key, default).map_err(crate::node::bad_param);
     let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
-    Ok(Thresholds {
+    Ok(MonitorThresholds {
         warn_percent: read("warn_percent", d.warn_percent)?,
         error_percent: read("error_percent", d.error_percent)?,
         dq_m: Some((

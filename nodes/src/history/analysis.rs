@@ -1,7 +1,9 @@
 //! A machine's records analysed: what changed between two of them, each parameter's trend
 //! and when it leaves its tolerance (the arithmetic is `rpkm_core::history`'s).
 
-use rpkm_core::history::{change, crossing, trend, Change, Crossing, Point, Trend, FLAG_SIGMA};
+use rpkm_core::history::{
+    change, crossing, trend, Change, Crossing, Trend, TrendPoint, FLAG_SIGMA,
+};
 use rpkm_core::params::Params;
 use rpkm_history::{CalibrationRecord, Stored};
 
@@ -13,7 +15,7 @@ pub const TREND_SIGMA: f64 = FLAG_SIGMA;
 pub struct ParamTrend {
     pub param: usize,
     /// The calibrations that determined it (indices into the history) and their values.
-    pub points: Vec<(usize, Point)>,
+    pub points: Vec<(usize, TrendPoint)>,
     /// Its line over the run a line explains (`from` indexes `points`).
     pub trend: Option<Trend>,
     /// When a significant trend leaves nominal ± `tolerance`.
@@ -82,7 +84,7 @@ fn param_trend(
     nominal: f64,
     tolerance: f64,
 ) -> ParamTrend {
-    let points: Vec<(usize, Point)> = cals
+    let points: Vec<(usize, TrendPoint)> = cals
         .iter()
         .enumerate()
         .filter(|(_, c)| c.record.estimate().determined(i))
@@ -90,7 +92,7 @@ fn param_trend(
             let e = c.record.estimate();
             (
                 k,
-                Point {
+                TrendPoint {
                     t_s: e.t_s,
                     value: e.params[i],
                     sigma: e.sigma(i),
@@ -98,7 +100,7 @@ fn param_trend(
             )
         })
         .collect();
-    let plain: Vec<Point> = points.iter().map(|p| p.1).collect();
+    let plain: Vec<TrendPoint> = points.iter().map(|p| p.1).collect();
     let line = trend(&plain);
     let crossing = line
         .filter(|t| t.z().abs() >= TREND_SIGMA)

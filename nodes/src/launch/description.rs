@@ -1,12 +1,12 @@
 //! What a launch file describes: the processes to run and how, and the environment they get.
-//! Parsed by `mod.rs`, run by the supervisor and the managed bring-up.
+//! Parsed by `parse.rs`, run by the supervisor and the managed bring-up.
 
 use std::ffi::OsString;
 use std::path::PathBuf;
 
 /// What a launched process runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Program {
+pub enum LaunchProgram {
     /// `rpkm node EXEC --name NAME --params ... ARGS`: a node of [`EXECUTABLES`].
     Node,
     /// `rpkm EXEC ARGS`: one of [`COMMANDS`] (an `executable` entry).
@@ -20,7 +20,7 @@ pub const COMMANDS: [&str; 2] = ["record", "replay"];
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeSpec {
     /// A node or an rpkm command.
-    pub program: Program,
+    pub program: LaunchProgram,
     /// Node executable (one of [`EXECUTABLES`]) or rpkm command (one of [`COMMANDS`]).
     pub exec: String,
     /// Node name.
@@ -63,7 +63,7 @@ impl NodeSpec {
     /// The arguments after the rpkm binary that start it.
     pub fn argv(&self) -> Vec<OsString> {
         let mut argv: Vec<OsString> = Vec::new();
-        if self.program == Program::Node {
+        if self.program == LaunchProgram::Node {
             // `--name=`, `--param=`: a value that starts with `-` stays a value
             let name = format!("--name={}", self.name);
             argv.extend(["node", &self.exec, &name].map(OsString::from));

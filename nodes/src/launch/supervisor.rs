@@ -77,7 +77,7 @@ impl Supervised<'_> {
             (State::Done, Some((how, false))) => format!("{GONE}{how}"),
             (State::Done, None) => format!("{GONE}stopped"),
         };
-        if self.spec.program == super::description::Program::Command {
+        if self.spec.program == super::description::LaunchProgram::Command {
             state + EXECUTABLE
         } else {
             state

@@ -9,7 +9,7 @@ use ratatui::widgets::{Block, Paragraph, Wrap};
 use ratatui::Frame;
 use rpkm_msgs::PreloadStatus;
 
-use super::state::{level_name, reason_name, ThresholdSource, Thresholds, Watch};
+use super::state::{level_name, reason_name, MonitorThresholds, ThresholdSource, Watch};
 
 /// Below this size the monitor shows a short summary instead of its panels.
 pub const MIN_WIDTH: u16 = 60;
@@ -130,7 +130,7 @@ fn silence_line(w: &Watch, now: f64) -> Line<'static> {
     Line::styled(text, bold(Color::Green))
 }
 
-fn thresholds_text(t: &Thresholds) -> String {
+fn thresholds_text(t: &MonitorThresholds) -> String {
     match &t.source {
         ThresholdSource::Unknown => {
             "thresholds unknown (no report of preload_monitor yet; --params FILE)".to_owned()
@@ -213,7 +213,7 @@ fn drive_line(i: usize, m: f64, p: f64, d: f64, level: Option<u8>) -> Line<'stat
 
 /// Half-width of the current axis, %: every drive's measured current and its ERROR band fit,
 /// in steps of 50 % so that the scale stays put while the values move.
-pub fn axis_range(drives: &[(f64, f64, f64, Option<u8>); 4], t: &Thresholds) -> f64 {
+pub fn axis_range(drives: &[(f64, f64, f64, Option<u8>); 4], t: &MonitorThresholds) -> f64 {
     let band = if t.error_percent.is_finite() {
         t.error_percent
     } else {
@@ -260,7 +260,7 @@ impl Cell {
 /// The axis of one drive, `width` cells over −range..+range %: the bar from 0 to the measured
 /// current, ticks at the predicted current and at predicted ± WARN and ± ERROR. The bar
 /// crossing a tick is the deviation crossing that threshold.
-pub fn axis_cells(width: usize, range: f64, m: f64, p: f64, t: &Thresholds) -> Vec<Cell> {
+pub fn axis_cells(width: usize, range: f64, m: f64, p: f64, t: &MonitorThresholds) -> Vec<Cell> {
     if width < 3 || !(range > 0.0) {
         return Vec::new();
     }

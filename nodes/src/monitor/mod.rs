@@ -7,4 +7,4 @@ pub mod draw;
 pub mod rate;
 pub mod state;
 
-pub use state::{ThresholdSource, Thresholds, Watch, WatchConfig};
+pub use state::{MonitorThresholds, ThresholdSource, Watch, WatchConfig};

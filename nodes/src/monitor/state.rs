@@ -46,7 +46,7 @@ pub enum ThresholdSource {
 
 /// The preload monitor's thresholds on |measured − predicted| current (%) and |Δq| (m).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Thresholds {
+pub struct MonitorThresholds {
     pub warn_percent: f64,
     pub error_percent: f64,
     /// Follower-mode compatibility thresholds, when known.
@@ -54,8 +54,8 @@ pub struct Thresholds {
     pub source: ThresholdSource,
 }
 
-impl Thresholds {
-    /// Thresholds not known yet (NaN: no drive is judged against them).
+impl MonitorThresholds {
+    /// MonitorThresholds not known yet (NaN: no drive is judged against them).
     pub fn unknown() -> Self {
         Self {
             warn_percent: f64::NAN,
@@ -230,7 +230,7 @@ impl Latency {
 #[derive(Debug, Clone)]
 pub struct Watch {
     pub config: WatchConfig,
-    pub thresholds: Thresholds,
+    pub thresholds: MonitorThresholds,
     /// Last PreloadStatus and when it arrived.
     pub preload: Option<(PreloadStatus, f64)>,
     pub preload_count: u64,
@@ -274,7 +274,7 @@ pub struct Watch {
 }
 
 impl Watch {
-    pub fn new(config: WatchConfig, thresholds: Thresholds) -> Self {
+    pub fn new(config: WatchConfig, thresholds: MonitorThresholds) -> Self {
         Self {
             config,
             thresholds,

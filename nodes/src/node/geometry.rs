@@ -31,32 +31,32 @@ pub fn is_geometry_key(key: &str) -> bool {
 /// The geometry parameters on the ROS 2 parameter services: model and stiffness live (the
 /// next sample uses them), the file and following read-only. `geometry.<name>` overrides
 /// (SI) are set in the parameter file.
-pub fn geometry_specs() -> [live::Spec; 5] {
-    use live::{Default, Spec};
+pub fn geometry_specs() -> [live::ParamSpec; 5] {
+    use live::{Default, ParamSpec};
     [
-        Spec::live(
+        ParamSpec::live(
             "model",
             Default::U64(29),
             "geometric model: 24 or 29 parameters",
             rpkm_transport::dds_params::ParamRange::Integer(24, 29),
         ),
-        Spec::live(
+        ParamSpec::live(
             "stiffness_factor",
             Default::F64(1.0),
             "scale of the spring model's stiffnesses (> 0)",
             rpkm_transport::dds_params::ParamRange::None,
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "geometry_file",
             Default::Str(""),
             "JSON of parameter name -> value (mm, rad) as rpkm calibrate --json writes",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "follow_parameters",
             Default::Bool(true),
             "replace the geometry by every /rpkm/parameters message",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "effects_file",
             Default::Str(""),
             "effects written as data (YAML, docs/effects.md) whose calibrated values apply",

@@ -46,11 +46,11 @@ use rpkm_transport::dds_params::ParamRange;
 use rpkm_transport::Backend;
 
 pub use report::Tally;
-pub use validate::{Limits, Reject, RejectKind, Validator};
+pub use validate::{InputLimits, Reject, RejectKind, Validator};
 
 use super::context::{bad_param, CommonArgs, NodeContext};
 use super::joint_input::{self, JointConfig};
-use super::live::{self, Spec};
+use super::live::{self, ParamSpec};
 use super::params::NodeParams;
 use super::params::DURATION_S;
 use super::shutdown;
@@ -80,7 +80,7 @@ pub const KEYS: [&str; 13] = [
 
 /// `rpkm node ingest`.
 #[derive(clap::Args, Debug, Clone)]
-pub struct IngestArgs {
+pub struct IngestNodeArgs {
     /// Common node options.
     #[command(flatten)]
     pub common: CommonArgs,
@@ -94,7 +94,7 @@ pub struct IngestArgs {
 /// What the node reads from its parameters besides the common ones.
 struct Settings {
     source: String,
-    limits: Limits,
+    limits: InputLimits,
     rate_hz: f64,
     start_delay: Duration,
     end_marker: bool,
@@ -114,7 +114,7 @@ pub fn declared() -> Vec<&'static str> {
 
 /// Opens the node: its source (the option, else parameter `source`, else dds), transport and
 /// settings; every bad value is bad input (exit 2) naming the key.
-fn open(args: &IngestArgs) -> anyhow::Result<(NodeContext, Settings)> {
+fn open(args: &IngestNodeArgs) -> anyhow::Result<(NodeContext, Settings)> {
     let pre = args
         .common
         .identity("ingest")?
@@ -156,15 +156,15 @@ const RATE_HZ: (f64, f64) = (1e-3, 1e6);
 
 /// The validation limits of a parameter set (at start-up and for every set on the parameter
 /// services): forces and measurements above 0, positions an interval.
-fn limits(p: &NodeParams) -> anyhow::Result<Limits> {
-    let d = Limits::default();
+fn limits(p: &NodeParams) -> anyhow::Result<InputLimits> {
+    let d = InputLimits::default();
     let (position_min_m, position_max_m) = p
         .interval(
             ("position_min_m", d.position_min_m),
             ("position_max_m", d.position_max_m),
         )
         .map_err(bad_param)?;
-    let l = Limits {
+    let l = InputLimits {
         position_min_m,
         position_max_m,
         force_max_n: p
@@ -179,7 +179,7 @@ fn limits(p: &NodeParams) -> anyhow::Result<Limits> {
 
 /// What a parameter set changes while the node runs: the limits and `view_every` (and the
 /// followers of the `joint_states` source, which it applies itself: checked here).
-fn configure(p: &NodeParams) -> anyhow::Result<(Limits, u64)> {
+fn configure(p: &NodeParams) -> anyhow::Result<(InputLimits, u64)> {
     joint_input::followers(p).map_err(bad_param)?;
     let every = p
         .u64_in(
@@ -194,17 +194,18 @@ fn configure(p: &NodeParams) -> anyhow::Result<(Limits, u64)> {
 /// The node's parameters on its ROS 2 parameter services: the validation limits and
 /// `view_every` live (the next sample is judged by them); the source, pacing and topics need
 /// a restart. `views_default`: whether the views are on unless a file says otherwise.
-fn specs(views_default: bool) -> Vec<Spec> {
+fn specs(views_default: bool) -> Vec<ParamSpec> {
     use live::Default::{Bool, Str, F64, U64};
-    let d = Limits::default();
-    let fixed_in = |key, default, description, (lo, hi): (f64, f64)| Spec {
+    let d = InputLimits::default();
+    let fixed_in = |key, default, description, (lo, hi): (f64, f64)| ParamSpec {
         range: ParamRange::Float(lo, hi),
-        ..Spec::fixed(key, default, description)
+        ..ParamSpec::fixed(key, default, description)
     };
-    let limit =
-        |key, default, description| Spec::live(key, F64(default), description, ParamRange::None);
+    let limit = |key, default, description| {
+        ParamSpec::live(key, F64(default), description, ParamRange::None)
+    };
     vec![
-        Spec::fixed(
+        ParamSpec::fixed(
             "source",
             Str("dds"),
             "dds, joint_states, stdin or a campaign CSV file",
@@ -221,12 +222,12 @@ fn specs(views_default: bool) -> Vec<Spec> {
             "wait before the first sample, s",
             DURATION_S,
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "end_marker",
             Bool(true),
             "send the end-of-campaign marker at the end of the input",
         ),
-        Spec::fixed("exit_at_end", Bool(false), "exit at the end of the input"),
+        ParamSpec::fixed("exit_at_end", Bool(false), "exit at the end of the input"),
         limit(
             "position_min_m",
             d.position_min_m,
@@ -247,22 +248,22 @@ fn specs(views_default: bool) -> Vec<Spec> {
             d.measurement_max_m,
             "largest accepted |x|, |y|, |r| of a measurement, m (> 0)",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "input_actuator_topic",
             Str(dds::ACTUATOR_TOPIC),
             "DDS topic of the drive states (source dds)",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "input_measurement_topic",
             Str(dds::MEASUREMENT_TOPIC),
             "DDS topic of the measurements (source dds)",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "views",
             Bool(views_default),
             "publish /joint_states (JointState) on DDS",
         ),
-        Spec::live(
+        ParamSpec::live(
             "view_every",
             U64(super::views::VIEW_EVERY),
             "publish the joint states of every N-th accepted state",
@@ -304,7 +305,7 @@ fn views(ctx: &NodeContext, s: &Settings) -> anyhow::Result<Option<super::views:
 }
 
 /// Runs the node until its input ends (and `exit_at_end`) or SIGINT/SIGTERM.
-pub fn run(args: &IngestArgs) -> anyhow::Result<()> {
+pub fn run(args: &IngestNodeArgs) -> anyhow::Result<()> {
     let (mut ctx, s) = open(args)?;
     // The source in use (the option may have chosen it) is the one the services report.
     ctx.params

@@ -15,7 +15,7 @@ use rpkm_transport::{topic, Backend, Subscriber};
 use super::context::{bad_param, CommonArgs, Every, Idle, NodeContext, MM_PER_M};
 use super::geometry::Geometry;
 use super::joint_input::{self, JointConfig, JointInput, RefusalLevel};
-use super::live::{self, LiveParams, Spec};
+use super::live::{self, LiveParams, ParamSpec};
 use super::params::NodeParams;
 use crate::campaign_bag::seconds_from_stamp;
 use crate::error::bad_input;
@@ -79,9 +79,9 @@ impl DriveInput {
     }
 
     /// The input's parameters on the node's parameter services.
-    pub fn specs(&self) -> Vec<Spec> {
+    pub fn specs(&self) -> Vec<ParamSpec> {
         let joints = matches!(self, Self::Joints { .. });
-        let mut specs = vec![Spec::fixed(
+        let mut specs = vec![ParamSpec::fixed(
             "source",
             live::Default::Str(if joints { JOINT_STATES } else { ACTUATOR_STATE }),
             "drive states: actuator_state (ingest's) or joint_states (the cell's JointState, DDS)",
@@ -97,7 +97,7 @@ impl DriveInput {
     pub fn start_params(
         &self,
         ctx: &NodeContext,
-        mut specs: Vec<Spec>,
+        mut specs: Vec<ParamSpec>,
         configure: impl Fn(&NodeParams) -> anyhow::Result<()> + Send + 'static,
     ) -> anyhow::Result<LiveParams> {
         specs.extend(self.specs());

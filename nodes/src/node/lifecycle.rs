@@ -52,7 +52,7 @@ impl Primary {
 
 /// What a node does in a transition.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Step {
+pub enum TransitionStep {
     /// Re-read its parameters and set itself up from them.
     Configure,
     /// Forget its configuration.
@@ -71,7 +71,7 @@ pub enum Step {
 struct Edge {
     id: u8,
     label: &'static str,
-    step: Step,
+    step: TransitionStep,
     from: Primary,
     via: (u8, &'static str),
     to: Primary,
@@ -83,7 +83,7 @@ const EDGES: [Edge; 7] = [
     Edge {
         id: Transition::TRANSITION_CONFIGURE,
         label: "configure",
-        step: Step::Configure,
+        step: TransitionStep::Configure,
         from: Primary::Unconfigured,
         via: (State::TRANSITION_STATE_CONFIGURING, "configuring"),
         to: Primary::Inactive,
@@ -92,7 +92,7 @@ const EDGES: [Edge; 7] = [
     Edge {
         id: Transition::TRANSITION_CLEANUP,
         label: "cleanup",
-        step: Step::Cleanup,
+        step: TransitionStep::Cleanup,
         from: Primary::Inactive,
         via: (State::TRANSITION_STATE_CLEANINGUP, "cleaningup"),
         to: Primary::Unconfigured,
@@ -101,7 +101,7 @@ const EDGES: [Edge; 7] = [
     Edge {
         id: Transition::TRANSITION_ACTIVATE,
         label: "activate",
-        step: Step::Activate,
+        step: TransitionStep::Activate,
         from: Primary::Inactive,
         via: (State::TRANSITION_STATE_ACTIVATING, "activating"),
         to: Primary::Active,
@@ -110,7 +110,7 @@ const EDGES: [Edge; 7] = [
     Edge {
         id: Transition::TRANSITION_DEACTIVATE,
         label: "deactivate",
-        step: Step::Deactivate,
+        step: TransitionStep::Deactivate,
         from: Primary::Active,
         via: (State::TRANSITION_STATE_DEACTIVATING, "deactivating"),
         to: Primary::Inactive,
@@ -119,7 +119,7 @@ const EDGES: [Edge; 7] = [
     Edge {
         id: Transition::TRANSITION_UNCONFIGURED_SHUTDOWN,
         label: "shutdown",
-        step: Step::Shutdown,
+        step: TransitionStep::Shutdown,
         from: Primary::Unconfigured,
         via: (State::TRANSITION_STATE_SHUTTINGDOWN, "shuttingdown"),
         to: Primary::Finalized,
@@ -128,7 +128,7 @@ const EDGES: [Edge; 7] = [
     Edge {
         id: Transition::TRANSITION_INACTIVE_SHUTDOWN,
         label: "shutdown",
-        step: Step::Shutdown,
+        step: TransitionStep::Shutdown,
         from: Primary::Inactive,
         via: (State::TRANSITION_STATE_SHUTTINGDOWN, "shuttingdown"),
         to: Primary::Finalized,
@@ -137,7 +137,7 @@ const EDGES: [Edge; 7] = [
     Edge {
         id: Transition::TRANSITION_ACTIVE_SHUTDOWN,
         label: "shutdown",
-        step: Step::Shutdown,
+        step: TransitionStep::Shutdown,
         from: Primary::Active,
         via: (State::TRANSITION_STATE_SHUTTINGDOWN, "shuttingdown"),
         to: Primary::Finalized,
@@ -212,7 +212,7 @@ pub struct Requested {
 
 impl Requested {
     /// What the node does.
-    pub fn step(&self) -> Step {
+    pub fn step(&self) -> TransitionStep {
         self.edge.step
     }
 }
@@ -355,7 +355,7 @@ impl Lifecycle {
     /// parameters read again (the other transitions change only what it publishes).
     pub fn serve(&mut self, ctx: &NodeContext, configure: impl FnOnce() -> Result<(), String>) {
         if let Some(r) = self.next(ctx) {
-            let outcome = if r.step() == Step::Configure {
+            let outcome = if r.step() == TransitionStep::Configure {
                 configure()
             } else {
                 Ok(())

@@ -40,7 +40,7 @@ pub enum Default {
 /// One parameter of a node: key, default, description with unit, range, and whether the node
 /// takes a change while it runs.
 #[derive(Debug, Clone, Copy)]
-pub struct Spec {
+pub struct ParamSpec {
     pub key: &'static str,
     pub default: Default,
     pub description: &'static str,
@@ -48,7 +48,7 @@ pub struct Spec {
     pub live: bool,
 }
 
-impl Spec {
+impl ParamSpec {
     /// A parameter the node applies while it runs.
     pub const fn live(
         key: &'static str,
@@ -92,24 +92,24 @@ impl Spec {
 }
 
 /// The parameters every node declares.
-pub fn common_specs() -> [Spec; 4] {
+pub fn common_specs() -> [ParamSpec; 4] {
     [
-        Spec::fixed(
+        ParamSpec::fixed(
             "backend",
             Default::Str("ipc"),
             "where the node publishes: ipc, dds or both",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "input_backend",
             Default::Str(""),
             "where the node subscribes: ipc or dds (empty: from backend)",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "diagnostics_period_s",
             Default::F64(1.0),
             "period of the /diagnostics report, s (0.001 to 3600)",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "enclave",
             Default::Str(""),
             "SROS2 enclave of the node's DDS participant (default /rpkm/<name>)",
@@ -165,7 +165,7 @@ impl LiveParams {
     /// with its message.
     pub fn start(
         ctx: &NodeContext,
-        specs: &[Spec],
+        specs: &[ParamSpec],
         configure: impl Fn(&NodeParams) -> anyhow::Result<()> + Send + 'static,
     ) -> anyhow::Result<Self> {
         let mut decls = Vec::new();

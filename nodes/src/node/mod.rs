@@ -57,7 +57,7 @@ pub enum NodeKind {
     /// JointState, a CSV stream on stdin or a campaign CSV file; rejects are counted on
     /// /diagnostics.
     #[command(name = "ingest")]
-    Ingest(ingest::IngestArgs),
+    Ingest(ingest::IngestNodeArgs),
     /// Elasto-geometric TCP estimate for every ActuatorState.
     #[command(name = "tcp_estimator")]
     TcpEstimator(CommonArgs),

@@ -8,8 +8,8 @@ use std::fmt::Write as _;
 
 use nalgebra::SMatrix;
 use rpkm_core::calib::online::{
-    Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, Outcome as OnlineOutcome,
-    StepChange, TieResolved, TieSoFar, TIE_EVIDENCE_CHI2,
+    DetectedStep, Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, TieResolved,
+    TieSoFar, UpdateOutcome as OnlineOutcome, TIE_EVIDENCE_CHI2,
 };
 use rpkm_core::params::{Params, N_PARAMS};
 use rpkm_msgs::ActuatorState;
@@ -37,7 +37,7 @@ pub struct OnlineReport {
     /// Stream time, s.
     pub t: f64,
     /// A step change found since the last report.
-    pub step: Option<StepChange>,
+    pub step: Option<DetectedStep>,
     /// A step that was "this or that", settled by the samples since.
     pub resolved: Option<TieResolved>,
     /// A step still "this or that" at this report, and the evidence so far.
@@ -229,7 +229,7 @@ pub fn report_warning(r: &OnlineReport, temp_name: &str) -> Option<String> {
         .map(|d| format!("geometry drift: {}", crate::words::drift(d, temp_name)))
 }
 
-fn step_warning(step: &StepChange) -> String {
+fn step_warning(step: &DetectedStep) -> String {
     let (who, why) = match step.alternative {
         // the path so far moved the forces alike for both: say so, do not pick
         Some(other) => (
@@ -397,7 +397,7 @@ mod tests {
     fn a_tie_is_reported_with_the_motion_that_separates_it() {
         use rpkm_core::calib::tie::{Decisive, SeparatingMotion, TieEvidence};
         use rpkm_core::params::{L1, L3};
-        let step = StepChange {
+        let step = DetectedStep {
             param: L3,
             change: 0.1,
             sigma: 0.001,

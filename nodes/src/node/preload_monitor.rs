@@ -30,7 +30,7 @@ use super::context::{
 };
 use super::geometry::Geometry;
 use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
-use super::live::{self, Spec};
+use super::live::{self, ParamSpec};
 use super::params::NodeParams;
 
 /// Parameter keys of the node.
@@ -95,7 +95,7 @@ fn level_u8(l: PreloadLevel) -> u8 {
 
 /// One evaluated sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Evaluation {
+pub struct EvaluatedSample {
     /// The message (its `level` is the held level).
     pub status: PreloadStatus,
     /// Level of this sample alone.
@@ -123,7 +123,7 @@ pub struct Monitor {
     /// States whose only elastic solutions failed the plausibility checks (skipped).
     pub implausible: u64,
     /// The last evaluation.
-    pub last: Option<Evaluation>,
+    pub last: Option<EvaluatedSample>,
     /// Gaps in the input's seq (states lost before they reached the monitor).
     pub input: SeqGaps,
     /// How the stream's carriers moved (what a calibrated effect may read).
@@ -174,7 +174,7 @@ impl Monitor {
 
     /// Evaluates one state; `None` when the model has no plausible prediction for it
     /// (counted as unsolved or implausible; the held level stays as it was).
-    pub fn evaluate(&mut self, s: &ActuatorState) -> Option<Evaluation> {
+    pub fn evaluate(&mut self, s: &ActuatorState) -> Option<EvaluatedSample> {
         self.input.next(s.seq);
         // the carriers and parameters under the calibrated effects
         let (params, q) = self.motion.model_inputs(&mut self.geometry, s);
@@ -229,7 +229,7 @@ impl Monitor {
         let changed = held != self.level;
         self.level = held;
         st.level = level_u8(held);
-        let e = Evaluation {
+        let e = EvaluatedSample {
             status: st,
             sample_level,
             worst_drive,
@@ -424,48 +424,48 @@ fn level_by(value: f64, warn: f64, error: f64) -> PreloadLevel {
 }
 
 /// The node's parameters on its ROS 2 parameter services (thresholds and model live).
-fn specs() -> Vec<Spec> {
+fn specs() -> Vec<ParamSpec> {
     let d = Thresholds::default();
     // > 0 without an upper bound: no descriptor range, the node's check says it.
     let positive = ParamRange::None;
     let mut specs = vec![
-        Spec::live(
+        ParamSpec::live(
             "warn_percent",
             live::Default::F64(d.warn_percent),
             "WARN from this |measured - predicted| redundancy current, % of 8,600 N (> 0)",
             positive,
         ),
-        Spec::live(
+        ParamSpec::live(
             "error_percent",
             live::Default::F64(d.error_percent),
             "ERROR from this deviation, % (>= warn_percent)",
             positive,
         ),
-        Spec::live(
+        ParamSpec::live(
             "dq_warn_m",
             live::Default::F64(d.dq_warn_m),
             "WARN from this |dq2|, |dq3| of the followers, m (> 0)",
             positive,
         ),
-        Spec::live(
+        ParamSpec::live(
             "dq_error_m",
             live::Default::F64(d.dq_error_m),
             "ERROR from this |dq2|, |dq3|, m (>= dq_warn_m)",
             positive,
         ),
-        Spec::live(
+        ParamSpec::live(
             "debounce_samples",
             live::Default::U64(u64::from(d.debounce_samples)),
             "consecutive samples before a level is taken",
             ParamRange::count(super::params::SAMPLE_COUNT),
         ),
-        Spec::live(
+        ParamSpec::live(
             "status_every",
             live::Default::U64(1),
             "PreloadStatus every this many samples (and at every level change)",
             ParamRange::count(super::params::SAMPLE_COUNT),
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "busy_poll_ms",
             live::Default::F64(0.0),
             "yield-polling time after a sample before sleeping, ms (0 to 1000)",

@@ -32,7 +32,7 @@ use super::context::{diagnostic_array, status, CommonArgs, Every, Idle, NodeCont
 use super::geometry::Geometry;
 use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
 use super::lifecycle::Lifecycle;
-use super::live::{self, Spec};
+use super::live::{self, ParamSpec};
 use super::params::NodeParams;
 use super::views::{self, TcpViews};
 use rpkm_transport::dds_params::ParamRange;
@@ -324,24 +324,24 @@ fn loop_residuals(
 /// The node's parameters on its ROS 2 parameter services: model, stiffness and `view_every`
 /// live (taken between samples; a new geometry is solved cold), the rest need a restart.
 /// `views_default`: whether the views are on unless a file says otherwise (DDS output).
-fn specs(views_default: bool) -> Vec<Spec> {
+fn specs(views_default: bool) -> Vec<ParamSpec> {
     let mut specs = vec![
-        Spec::fixed(
+        ParamSpec::fixed(
             "busy_poll_ms",
             live::Default::F64(0.0),
             "yield-polling time after a sample before sleeping, ms (0 to 1000)",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "rt_priority",
             live::Default::U64(0),
             "SCHED_FIFO priority of the estimating thread, 0 for none (0 to 99)",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "views",
             live::Default::Bool(views_default),
             "publish /rpkm/tcp_pose (PoseStamped) and /tf (machine -> platform) on DDS",
         ),
-        Spec::live(
+        ParamSpec::live(
             "view_every",
             live::Default::U64(views::VIEW_EVERY),
             "publish the views of every N-th estimate",

@@ -57,16 +57,16 @@ struct Dof {
 
 /// The structure: built by the `add_*` calls, cleared and rebuilt without reallocating.
 #[derive(Clone, Debug, Default)]
-pub struct Structure {
+pub struct AssemblyStructure {
     nodes: Vec<Node>,
     beams: Vec<Beam>,
     springs: Vec<Spring>,
     dofs: Vec<Dof>,
 }
 
-impl Structure {
-    pub fn new() -> Structure {
-        Structure::default()
+impl AssemblyStructure {
+    pub fn new() -> AssemblyStructure {
+        AssemblyStructure::default()
     }
 
     /// Empties the structure, keeping its storage.
@@ -244,7 +244,7 @@ impl Solver {
     }
 
     /// Solves the structure: displacements of every dof and reactions at prescribed dofs.
-    pub fn solve(&mut self, s: &Structure) -> Result<(), FeError> {
+    pub fn solve(&mut self, s: &AssemblyStructure) -> Result<(), FeError> {
         let n = s.n_dofs();
         self.reset(n);
         self.assemble(s)?;
@@ -267,7 +267,7 @@ impl Solver {
         Ok(())
     }
 
-    fn assemble(&mut self, s: &Structure) -> Result<(), FeError> {
+    fn assemble(&mut self, s: &AssemblyStructure) -> Result<(), FeError> {
         for b in &s.beams {
             let axis = s.beam_axis(b)?;
             let (dofs, g) = s.beam_map(b);
@@ -300,7 +300,7 @@ impl Solver {
 
     /// Symmetric elimination: u_p moves to the right-hand side, row and column p become the
     /// identity, so the free block stays symmetric positive definite.
-    fn eliminate_prescribed(&mut self, s: &Structure) {
+    fn eliminate_prescribed(&mut self, s: &AssemblyStructure) {
         self.factor.copy_from(&self.k);
         self.u.copy_from(&self.f);
         let n = s.n_dofs();
@@ -332,7 +332,7 @@ impl Solver {
     }
 
     /// Displacement of a node in the global frame: (u_x, u_y, θ).
-    pub fn node_displacement(&self, s: &Structure, node: NodeId) -> Vector3<f64> {
+    pub fn node_displacement(&self, s: &AssemblyStructure, node: NodeId) -> Vector3<f64> {
         let nd = s.node(node);
         let (sn, c) = nd.frame.sin_cos();
         let (u1, u2) = (self.u[nd.dofs[0]], self.u[nd.dofs[1]]);
@@ -340,7 +340,7 @@ impl Solver {
     }
 
     /// A beam's global end displacements (u_xa, u_ya, θ_a, u_xb, u_yb, θ_b).
-    fn beam_displacements(&self, s: &Structure, b: &Beam) -> V6 {
+    fn beam_displacements(&self, s: &AssemblyStructure, b: &Beam) -> V6 {
         let (dofs, g) = s.beam_map(b);
         let u = V6::from(dofs.map(|d| self.u[d]));
         match g {
@@ -350,7 +350,7 @@ impl Solver {
     }
 
     /// Axial force of a beam, N, positive in tension.
-    pub fn axial_force(&self, s: &Structure, beam: BeamId) -> Result<f64, FeError> {
+    pub fn axial_force(&self, s: &AssemblyStructure, beam: BeamId) -> Result<f64, FeError> {
         let b = s.beam(beam);
         let axis = s.beam_axis(b)?;
         let u = self.beam_displacements(s, b);
@@ -359,7 +359,7 @@ impl Solver {
 
     /// Forces and moments (global) the beam exerts on its nodes a and b: (F_xa, F_ya, M_a,
     /// F_xb, F_yb, M_b).
-    pub fn beam_loads_on_nodes(&self, s: &Structure, beam: BeamId) -> Result<V6, FeError> {
+    pub fn beam_loads_on_nodes(&self, s: &AssemblyStructure, beam: BeamId) -> Result<V6, FeError> {
         let b = s.beam(beam);
         let axis = s.beam_axis(b)?;
         let u = self.beam_displacements(s, b);
@@ -432,7 +432,7 @@ mod tests {
         (a - b).abs() / b.abs()
     }
 
-    fn clamp(s: &mut Structure, node: NodeId) {
+    fn clamp(s: &mut AssemblyStructure, node: NodeId) {
         for d in s.node(node).dofs {
             s.prescribe(d, 0.0);
         }
@@ -451,7 +451,7 @@ mod tests {
         let across = Vector2::new(-dir.y, dir.x);
         let p = 2500.0;
         for (load, axial) in [(across, false), (dir, true)] {
-            let mut s = Structure::new();
+            let mut s = AssemblyStructure::new();
             let a = s.add_node(Vector2::new(10.0, 20.0), 0.0, Label::new("clamp", 0));
             let m = s.add_node(
                 Vector2::new(10.0, 20.0) + dir * (0.3 * l),
@@ -493,7 +493,7 @@ mod tests {
     #[test]
     fn held_bar_with_initial_elongation_is_compressed() {
         let sec = Section::steel_round(20.0);
-        let mut s = Structure::new();
+        let mut s = AssemblyStructure::new();
         let a = s.add_node(Vector2::new(0.0, 0.0), 0.0, Label::new("a", 0));
         let b = s.add_node(Vector2::new(300.0, 400.0), 0.0, Label::new("b", 0));
         let bar = s.add_beam(a, b, sec, 0.05, Label::new("bar", 1));
@@ -521,7 +521,7 @@ mod tests {
         };
         let (l, phi, c, delta) = (500.0, 0.3_f64, 4.0e4, 0.02);
         let beam_dir = Vector2::new(1.0, 0.0);
-        let mut s = Structure::new();
+        let mut s = AssemblyStructure::new();
         let clamp_node = s.add_node(Vector2::zeros(), 0.0, Label::new("clamp", 0));
         let carrier = s.add_node(beam_dir * l, phi, Label::new("carrier", 1));
         s.add_beam(clamp_node, carrier, sec, 0.0, Label::new("arm", 1));
@@ -548,7 +548,7 @@ mod tests {
 
     #[test]
     fn a_mechanism_is_a_singular_error_and_a_zero_length_beam_is_degenerate() {
-        let mut s = Structure::new();
+        let mut s = AssemblyStructure::new();
         let a = s.add_node(Vector2::zeros(), 0.0, Label::new("a", 0));
         let b = s.add_node(Vector2::new(100.0, 0.0), 0.0, Label::new("b", 0));
         s.add_beam(a, b, Section::steel_round(10.0), 0.0, Label::new("bar", 1));
@@ -559,13 +559,13 @@ mod tests {
         let mut solver = Solver::new();
         assert!(matches!(solver.solve(&s), Err(FeError::Singular { .. })));
         // an unconnected hinge has no rotational stiffness at all
-        let mut s2 = Structure::new();
+        let mut s2 = AssemblyStructure::new();
         let a = s2.add_node(Vector2::zeros(), 0.0, Label::new("a", 0));
         clamp(&mut s2, a);
         s2.add_hinge(a, Label::new("hinge", 7));
         let err = solver.solve(&s2).expect_err("singular");
         assert!(err.to_string().contains("rotation of hinge 7"), "{err}");
-        let mut s3 = Structure::new();
+        let mut s3 = AssemblyStructure::new();
         let a = s3.add_node(Vector2::zeros(), 0.0, Label::new("a", 0));
         let b = s3.add_node(Vector2::zeros(), 0.0, Label::new("b", 0));
         s3.add_beam(a, b, Section::steel_round(10.0), 0.0, Label::new("stub", 3));

@@ -5,7 +5,7 @@
 
 use super::error::FeError;
 use super::machine::FeStiffness;
-use super::methods::{FeModel, Method};
+use super::methods::{FeMethod, FeModel};
 use crate::elastic::baseline;
 use crate::elastic::guarded::fegm;
 use crate::elastic::spring::{ElasticError, Stiffness, ALL_ACTIVE};
@@ -122,8 +122,8 @@ pub fn compare_methods(
     let ls = baseline::least_squares(&machine, q)?;
     let sp = fegm(&machine, spring, q, ALL_ACTIVE)?;
     let mut model = FeModel::new(*fe)?;
-    let th = model.solve(&machine, q, ALL_ACTIVE, Method::ThermoMechanical)?;
-    let ad = model.solve(&machine, q, ALL_ACTIVE, Method::ActuatorDisplacements)?;
+    let th = model.solve(&machine, q, ALL_ACTIVE, FeMethod::ThermoMechanical)?;
+    let ad = model.solve(&machine, q, ALL_ACTIVE, FeMethod::ActuatorDisplacements)?;
     let results = [
         MethodResult {
             model: RedundantModel::Statistical,

@@ -10,11 +10,11 @@
 //!   rod joint B_i it carries, and the edge B4–B5 on carrier 4 (the parallel-holder's two
 //!   joints);
 //! - rods: one beam from its platform joint to its carrier joint, hinged at both ends as
-//!   [`Joint`] says;
+//!   [`RodEndJoint`] says;
 //! - drives: the carrier's along-guide dof prescribed (rigid drive) or tied to a prescribed
 //!   drive dof by a spring (compliant drive); a follower's carrier slides freely.
 
-use super::assembly::{BeamId, DofId, NodeId, Structure};
+use super::assembly::{AssemblyStructure, BeamId, DofId, NodeId};
 use super::beam::{Section, STEEL_E_N_PER_MM2};
 use super::error::FeError;
 use super::error::Label;
@@ -28,7 +28,7 @@ pub const NOMINAL_ROD_LENGTH_MM: f64 = 950.0;
 
 /// Rod-end joints.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub enum Joint {
+pub enum RodEndJoint {
     /// Ideal revolute joint: the rod turns freely, no moment is transmitted (the real machine).
     Pinned,
     /// Revolute joint with a rotational spring, N·mm/rad (friction or a flexure).
@@ -47,7 +47,7 @@ pub struct FeStiffness {
     /// Section of every carrier member (arms and carrier 4's edge).
     pub carrier: Section,
     /// Joints at both ends of every rod.
-    pub joint: Joint,
+    pub joint: RodEndJoint,
     /// Along-guide stiffness of drives 1..=4 (servo and transmission), N/mm; `None` = the
     /// carrier sits exactly at its commanded position (integral action).
     pub drive: [Option<f64>; 4],
@@ -91,7 +91,7 @@ impl FeStiffness {
                 Self::DEFAULT_CARRIER_WIDTH_MM,
                 Self::DEFAULT_CARRIER_THICKNESS_MM,
             ),
-            joint: Joint::Pinned,
+            joint: RodEndJoint::Pinned,
             drive: spring.carrier,
         }
     }
@@ -122,7 +122,7 @@ impl FeStiffness {
         bad(Label::new("platform E·I", 0), self.platform.ei)?;
         bad(Label::new("carrier E·A", 0), self.carrier.ea)?;
         bad(Label::new("carrier E·I", 0), self.carrier.ei)?;
-        if let Joint::Rotational(k) = self.joint {
+        if let RodEndJoint::Rotational(k) = self.joint {
             bad(Label::new("joint rotational stiffness", 0), k)?;
         }
         for (j, c) in self.drive.iter().enumerate() {
@@ -166,7 +166,7 @@ pub(crate) struct Layout {
 
 /// Builds the frame of `p` in `placement` into `s` (cleared first).
 pub(crate) fn build(
-    s: &mut Structure,
+    s: &mut AssemblyStructure,
     p: &Params,
     k: &FeStiffness,
     placement: &Placement,
@@ -207,7 +207,7 @@ pub(crate) fn build(
 }
 
 fn build_platform(
-    s: &mut Structure,
+    s: &mut AssemblyStructure,
     k: &FeStiffness,
     p: &Params,
     tcp: NodeId,
@@ -242,7 +242,7 @@ fn build_platform(
 /// Carrier guide nodes, arms and drives; returns the carrier joint node of each rod and the
 /// drive dofs.
 fn build_carriers(
-    s: &mut Structure,
+    s: &mut AssemblyStructure,
     k: &FeStiffness,
     p: &Params,
     placement: &Placement,
@@ -298,11 +298,11 @@ fn build_carriers(
 
 /// The node a rod attaches to at `joint`: a hinge (own rotation) for a revolute joint, with a
 /// rotational spring to the joint node when it has one; the joint node itself when rigid.
-fn rod_end(s: &mut Structure, kind: Joint, joint: NodeId, label: Label) -> NodeId {
+fn rod_end(s: &mut AssemblyStructure, kind: RodEndJoint, joint: NodeId, label: Label) -> NodeId {
     match kind {
-        Joint::Rigid => joint,
-        Joint::Pinned => s.add_hinge(joint, label),
-        Joint::Rotational(kr) => {
+        RodEndJoint::Rigid => joint,
+        RodEndJoint::Pinned => s.add_hinge(joint, label),
+        RodEndJoint::Rotational(kr) => {
             let h = s.add_hinge(joint, label);
             let (rj, rh) = (s.node(joint).dofs[2], s.node(h).dofs[2]);
             s.add_spring(rj, Some(rh), kr);

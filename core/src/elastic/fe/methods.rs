@@ -1,7 +1,7 @@
 //! The two ways the thesis adapts the finite-element model to a redundant mechanism whose
 //! parameters do not fit together, and the reusable model that solves either.
 
-use super::assembly::{Solver, Structure};
+use super::assembly::{AssemblyStructure, Solver};
 use super::error::FeError;
 use super::machine::{build, FeStiffness, Layout, Placement};
 use crate::elastic::spring::{Followers, NOMINAL_DRIVE_FORCE_N};
@@ -11,7 +11,7 @@ use nalgebra::Vector2;
 
 /// How the incompatibility enters the linear model.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-pub enum Method {
+pub enum FeMethod {
     /// Carriers at their commanded positions; a rod that does not fit its gap gets the misfit
     /// l_i − |A_i − B_i| as an initial elongation (a "thermal" strain).
     ThermoMechanical,
@@ -23,7 +23,7 @@ pub enum Method {
 /// A finite-element equilibrium.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FeEquilibrium {
-    pub method: Method,
+    pub method: FeMethod,
     /// Rigid pose the mesh lies on (model-29 fgm of the first viable active pair): x, y (mm),
     /// ψ (rad).
     pub reference: [f64; 3],
@@ -65,7 +65,7 @@ impl FeEquilibrium {
 #[derive(Clone, Debug)]
 pub struct FeModel {
     stiffness: FeStiffness,
-    structure: Structure,
+    structure: AssemblyStructure,
     solver: Solver,
 }
 
@@ -74,7 +74,7 @@ impl FeModel {
         stiffness.validate()?;
         Ok(FeModel {
             stiffness,
-            structure: Structure::new(),
+            structure: AssemblyStructure::new(),
             solver: Solver::new(),
         })
     }
@@ -84,7 +84,7 @@ impl FeModel {
     }
 
     /// The structure of the last solve (for inspection).
-    pub fn structure(&self) -> &Structure {
+    pub fn structure(&self) -> &AssemblyStructure {
         &self.structure
     }
 
@@ -95,7 +95,7 @@ impl FeModel {
         p: &Params,
         q: [f64; 4],
         followers: Followers,
-        method: Method,
+        method: FeMethod,
     ) -> Result<FeEquilibrium, FeError> {
         if !(q.iter().all(|v| v.is_finite()) && p.0.iter().all(|v| v.is_finite())) {
             return Err(FeError::NonFinite);
@@ -109,7 +109,7 @@ impl FeModel {
 
     fn finish(
         &self,
-        method: Method,
+        method: FeMethod,
         placement: &Placement,
         layout: &Layout,
     ) -> Result<FeEquilibrium, FeError> {
@@ -156,7 +156,7 @@ pub fn fe_solve(
     k: &FeStiffness,
     q: [f64; 4],
     followers: Followers,
-    method: Method,
+    method: FeMethod,
 ) -> Result<FeEquilibrium, FeError> {
     FeModel::new(*k)?.solve(p, q, followers, method)
 }
@@ -182,7 +182,7 @@ fn place(
     q: &[f64; 4],
     followers: Followers,
     rigid: &Solution,
-    method: Method,
+    method: FeMethod,
 ) -> Placement {
     let fit = rigid.q();
     let pose = [rigid.x(), rigid.y(), rigid.psi()];
@@ -198,11 +198,11 @@ fn place(
             continue;
         }
         match method {
-            Method::ActuatorDisplacements => placement.drive_displacement[j] = q[j] - fit[j],
-            Method::ThermoMechanical => placement.carrier[j] = q[j],
+            FeMethod::ActuatorDisplacements => placement.drive_displacement[j] = q[j] - fit[j],
+            FeMethod::ThermoMechanical => placement.carrier[j] = q[j],
         }
     }
-    if method == Method::ThermoMechanical {
+    if method == FeMethod::ThermoMechanical {
         for (i, rod) in RODS.iter().enumerate() {
             let a = platform_joint(p, rod, pose[0], pose[1], pose[2]);
             let b: Vector2<f64> = carrier_joint(p, rod, placement.carrier[rod.actuator]);

@@ -6,7 +6,7 @@
 //!
 //! The mesh is laid on the rigid configuration of a non-redundant pair of active drives
 //! (nodes at the joint positions of that assembled pose); the redundant drives' parameter
-//! incompatibility is then imposed in one of the thesis's two ways ([`Method`]):
+//! incompatibility is then imposed in one of the thesis's two ways ([`FeMethod`]):
 //! - thermo-mechanical: the carriers sit at their commanded positions and each rod whose length
 //!   does not fit the gap gets the misfit as an initial ("thermal") elongation;
 //! - actuator-displacements: the carriers sit where the rods fit (rgm), and each redundant
@@ -30,5 +30,5 @@ pub use beam::Section;
 pub use compare::{compare_methods, Comparison, ComparisonError, MethodResult, RedundantModel};
 pub use error::FeError;
 pub use error::{DofLabel, Label};
-pub use machine::{FeStiffness, Joint};
-pub use methods::{fe_solve, FeEquilibrium, FeModel, Method};
+pub use machine::{FeStiffness, RodEndJoint};
+pub use methods::{fe_solve, FeEquilibrium, FeMethod, FeModel};

@@ -12,7 +12,7 @@ use rpkm_core::design::{self, PlannedPose, CENTRE, X_RANGE, Y_RANGE};
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs;
 use rpkm_core::params::{Model, Params};
-use rpkm_core::plan::{self, AccuracyPlanner, Evaluation, Start, Unknowns};
+use rpkm_core::plan::{self, AccuracyPlanner, Start, TargetForecast, Unknowns};
 use rpkm_twin::{Twin, TwinConfig};
 use std::collections::BTreeMap;
 
@@ -200,7 +200,7 @@ fn machine_runs(a: &PlanStudyArgs, noise: &NoiseModel, machine: u64, s: u64) -> 
         noise: &estimated,
     };
     let unknowns = Unknowns::of_model(MODEL, |i| prior.sigma(i));
-    let evaluation = Evaluation::grid(&cal.params, (MODEL, &estimated), &unknowns)?;
+    let evaluation = TargetForecast::grid(&cal.params, (MODEL, &estimated), &unknowns)?;
     let setups = plan::candidates(&[Instrument::Lt])?;
     let planner = AccuracyPlanner::new(&start, &unknowns, &setups, &evaluation)?;
     let mode = plan::drive_mode(&base, false, None);

@@ -22,7 +22,7 @@ use rpkm_twin::{Twin, TwinConfig};
 
 use crate::cli::bad_input;
 use crate::node::inputs::SeqGaps;
-use crate::stream::{Motion, StreamSpec, CIRCLE_PERIOD_S};
+use crate::stream::{StreamPath, StreamSpec, CIRCLE_PERIOD_S};
 
 #[derive(clap::Args, Debug)]
 pub struct SoakArgs {
@@ -162,7 +162,7 @@ impl Rows {
         let spec = StreamSpec {
             hz: rate_hz,
             seconds: CIRCLE_PERIOD_S,
-            motion: Motion::Circle,
+            motion: StreamPath::Circle,
             fault: None,
             start_s: 0.0,
             first_seq: 1,

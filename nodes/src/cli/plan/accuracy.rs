@@ -7,7 +7,8 @@ use super::determine::setups_json;
 use super::output::{write_outputs, Drives};
 use rpkm_core::campaign::Instrument;
 use rpkm_core::plan::{
-    self, AccuracyPlanner, CandidateSetup, DeterminationPlan, Evaluation, Forecast, Start, Unknowns,
+    self, AccuracyPlanner, CandidateSetup, DeterminationPlan, Forecast, Start, TargetForecast,
+    Unknowns,
 };
 use serde_json::json;
 
@@ -40,7 +41,7 @@ pub fn run(
     args: &PlanArgs,
     (start, unknowns): (&Start, &Unknowns),
     (instruments, drives): (&[Instrument], &Drives),
-    (evaluation, where_words): (&Evaluation, &str),
+    (evaluation, where_words): (&TargetForecast, &str),
 ) -> anyhow::Result<()> {
     let setups = plan::candidates(instruments)?;
     let planner = AccuracyPlanner::new(start, unknowns, &setups, evaluation)?;
@@ -199,7 +200,7 @@ fn print_nothing_to_gain(
     start: &Start,
     unknowns: &Unknowns,
     (instruments, budget): (&[Instrument], usize),
-    evaluation: &Evaluation,
+    evaluation: &TargetForecast,
 ) -> anyhow::Result<()> {
     let names: Vec<&str> = instruments
         .iter()

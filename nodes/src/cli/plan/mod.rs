@@ -17,7 +17,7 @@ use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::forecast::targets_of;
 use rpkm_core::plan::separate::{Hypothesis, Pair};
-use rpkm_core::plan::{self, csv, Evaluation, Start, Unknowns};
+use rpkm_core::plan::{self, csv, Start, TargetForecast, Unknowns};
 use rpkm_core::variance;
 
 /// What a plan is for.
@@ -155,10 +155,10 @@ fn evaluation(
     args: &PlanArgs,
     start: &Start,
     unknowns: &Unknowns,
-) -> anyhow::Result<(Evaluation, String)> {
+) -> anyhow::Result<(TargetForecast, String)> {
     let at = (start.model, start.noise);
     let Some(path) = &args.where_ else {
-        let e = Evaluation::grid(start.params, at, unknowns)?;
+        let e = TargetForecast::grid(start.params, at, unknowns)?;
         return Ok((
             e,
             "a tracker setup at the workspace's 231 grid poses".to_owned(),
@@ -179,7 +179,7 @@ fn evaluation(
         targets_of(&c, start.params, start.model).map_err(|e| bad_input(e.to_string()))?
     };
     let n = targets.len();
-    let e = Evaluation::new(targets, start.params, at, unknowns)
+    let e = TargetForecast::new(targets, start.params, at, unknowns)
         .map_err(|e| bad_input(format!("{source}: {e}")))?;
     Ok((e, format!("a tracker setup at the {n} poses of {source}")))
 }

@@ -88,8 +88,8 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 1.0)]
     pub stream_seconds: f64,
     /// Commanded path during the stream.
-    #[arg(long, value_enum, default_value_t = crate::stream::Motion::Circle)]
-    pub stream_motion: crate::stream::Motion,
+    #[arg(long, value_enum, default_value_t = crate::stream::StreamPath::Circle)]
+    pub stream_motion: crate::stream::StreamPath,
     /// A drive whose carrier drifts from its encoder during the stream, qN=MM, ramped from 0
     /// to MM (e.g. q3=0.8: with preload_elastic the drives then fight, the redundancy
     /// current grows; 0.4 mm on q3 is about 100 %).

@@ -10,8 +10,8 @@ use ratatui::backend::TestBackend;
 use ratatui::Terminal;
 use rpkm_msgs::{DiagnosticArray, DiagnosticStatus, TcpEstimate};
 
-fn thresholds() -> Thresholds {
-    Thresholds {
+fn thresholds() -> MonitorThresholds {
+    MonitorThresholds {
         warn_percent: 30.0,
         error_percent: 80.0,
         dq_m: None,

@@ -18,7 +18,7 @@ use rpkm_core::params::{Model, Params};
 use rpkm_msgs::{DiagnosticStatus, KeyValue};
 
 fn watch() -> Watch {
-    Watch::new(WatchConfig::default(), Thresholds::unknown())
+    Watch::new(WatchConfig::default(), MonitorThresholds::unknown())
 }
 
 fn diag(name: &str, level: u8, message: &str) -> DiagnosticArray {
@@ -166,7 +166,7 @@ fn follower_thresholds_come_from_the_follower_message() {
 fn a_params_file_wins_over_the_report() {
     let mut w = Watch::new(
         WatchConfig::default(),
-        Thresholds {
+        MonitorThresholds {
             warn_percent: 20.0,
             error_percent: 50.0,
             dq_m: None,
@@ -206,7 +206,7 @@ fn drive_levels_against_the_thresholds_match_the_node() {
     assert_eq!(t.level_of(-30.0), Some(PreloadStatus::WARN));
     assert_eq!(t.level_of(79.99), Some(PreloadStatus::WARN));
     assert_eq!(t.level_of(-80.0), Some(PreloadStatus::ERROR));
-    assert_eq!(Thresholds::unknown().level_of(500.0), None);
+    assert_eq!(MonitorThresholds::unknown().level_of(500.0), None);
 }
 
 #[test]
@@ -346,7 +346,7 @@ fn level_history_is_bounded_and_remembers_the_first_crossings() {
             history_bucket_s: 0.5,
             ..WatchConfig::default()
         },
-        Thresholds::unknown(),
+        MonitorThresholds::unknown(),
     );
     // Two statuses per second: both land in the same half-second mark, the worst kept.
     for (k, level) in [0u8, 0, 1, 1, 2, 2, 1, 0].iter().enumerate() {

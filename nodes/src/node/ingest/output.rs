@@ -8,7 +8,7 @@ use rpkm_msgs::{
 use rpkm_transport::{dds::DdsNode, topic, Publisher};
 
 use super::report::Tally;
-use super::validate::{reject, Limits, Reject, RejectKind, Validator};
+use super::validate::{reject, InputLimits, Reject, RejectKind, Validator};
 use super::END_OF_CAMPAIGN;
 use crate::campaign_bag::{campaign_info, pose_messages};
 use crate::node::lifecycle::{self, Lifecycle};
@@ -49,7 +49,7 @@ impl<'a> Output<'a> {
     /// validating with `limits`; `source` names the input on /diagnostics.
     pub(super) fn open(
         (ctx, args): (&'a NodeContext, &'a CommonArgs),
-        limits: Limits,
+        limits: InputLimits,
         source: &str,
         (live, views): (LiveParams, Option<JointViews>),
     ) -> anyhow::Result<Self> {

@@ -49,7 +49,7 @@ pub(super) fn reject(kind: RejectKind, detail: String) -> Reject {
 
 /// Accepted ranges (SI).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Limits {
+pub struct InputLimits {
     /// Actuator positions, m.
     pub position_min_m: f64,
     /// Actuator positions, m.
@@ -60,7 +60,7 @@ pub struct Limits {
     pub measurement_max_m: f64,
 }
 
-impl Default for Limits {
+impl Default for InputLimits {
     fn default() -> Self {
         Self {
             position_min_m: -0.5,
@@ -74,14 +74,14 @@ impl Default for Limits {
 /// Checks every sample and remembers the last accepted stamps and seq.
 #[derive(Debug, Clone, Default)]
 pub struct Validator {
-    limits: Limits,
+    limits: InputLimits,
     last_state: Option<(Time, u64)>,
     last_measurement: Option<Time>,
 }
 
 impl Validator {
     /// A validator with `limits`.
-    pub fn new(limits: Limits) -> Self {
+    pub fn new(limits: InputLimits) -> Self {
         Self {
             limits,
             ..Default::default()
@@ -89,7 +89,7 @@ impl Validator {
     }
 
     /// Judges the next samples by `limits` (the order of stamps and seq stays).
-    pub fn set_limits(&mut self, limits: Limits) {
+    pub fn set_limits(&mut self, limits: InputLimits) {
         self.limits = limits;
     }
 
@@ -235,7 +235,7 @@ mod tests {
 
     #[test]
     fn validator_rejects_each_kind() {
-        let mut v = Validator::new(Limits::default());
+        let mut v = Validator::new(InputLimits::default());
         assert_eq!(v.state(&state(1, 10), "t"), Ok(()));
         let mut nan = state(2, 11);
         nan.position[2] = f64::NAN;

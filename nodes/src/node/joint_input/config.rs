@@ -9,7 +9,7 @@ use rpkm_msgs::actuator_state::MAX_COVARIATES;
 use rpkm_transport::dds_params::ParamRange;
 use rpkm_transport::names::absolute_name_error;
 
-use crate::node::live::{Default as Value, Spec};
+use crate::node::live::{Default as Value, ParamSpec};
 use crate::node::params::{NodeParams, ParamError};
 
 /// Parameter keys of the JointState input (`temperatures.` is a group: covariate name →
@@ -183,35 +183,35 @@ pub fn followers_text(followers: [bool; 4]) -> String {
 
 /// The input's parameters on the node's ROS 2 parameter services: `followers` live (from the
 /// next state on), the rest need a restart.
-pub fn specs() -> Vec<Spec> {
+pub fn specs() -> Vec<ParamSpec> {
     vec![
-        Spec::fixed(
+        ParamSpec::fixed(
             "joint_states_topic",
             Value::Str(JOINT_STATES_TOPIC),
             "sensor_msgs/JointState topic of the drives (ros2_control's joint_state_broadcaster)",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "joint_states_qos",
             Value::Str("reliable"),
             "reliability of the JointState reader: reliable (the broadcaster's) or best_effort",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "joint_names",
             Value::Strs(&JOINT_NAMES),
             "the joints of drives q1, q2, q3, q4; other joints of the message are ignored",
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "effort_sign",
             Value::F64s(&EFFORT_SIGN),
             "drive force = sign x joint effort, per drive (1 or -1; rpkm: positive towards larger q)",
         ),
-        Spec::live(
+        ParamSpec::live(
             "followers",
             Value::Str(""),
             "drives in follower mode, e.g. \"23\" (\"\": none); applies from the next state",
             ParamRange::None,
         ),
-        Spec::fixed(
+        ParamSpec::fixed(
             "temperature_timeout_s",
             Value::F64(TEMPERATURE_TIMEOUT_S),
             "a thermometer silent this long is not measured, s (0.001 to 3600)",

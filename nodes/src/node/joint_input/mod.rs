@@ -29,7 +29,7 @@ pub use config::{
     KEYS,
 };
 pub use convert::{drive_state, JointReject};
-pub use thermometers::{Change, Thermometers};
+pub use thermometers::{ThermometerChange, Thermometers};
 
 use super::context::{bad_param, Idle, NodeContext};
 use super::params::NodeParams;

@@ -9,7 +9,7 @@ use super::config::Thermometer;
 
 /// What changed about a thermometer since the last state: for the log.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Change {
+pub enum ThermometerChange {
     /// It went quiet: the states carry its covariate as not measured from now on.
     Quiet {
         /// Covariate name.
@@ -28,7 +28,7 @@ pub enum Change {
     },
 }
 
-impl std::fmt::Display for Change {
+impl std::fmt::Display for ThermometerChange {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Quiet {
@@ -114,7 +114,7 @@ impl Thermometers {
 
     /// The covariates of a state at `now` into `out` (NaN: not measured), and the
     /// thermometers that went quiet or spoke again since the last state.
-    pub fn covariates(&mut self, now: Instant, out: &mut [f64]) -> Vec<Change> {
+    pub fn covariates(&mut self, now: Instant, out: &mut [f64]) -> Vec<ThermometerChange> {
         let mut changes = Vec::new();
         for (i, slot) in out.iter_mut().enumerate().take(self.list.len()) {
             let value = self.fresh(i, now);
@@ -128,14 +128,14 @@ impl Thermometers {
                 let t = &self.list[i];
                 let (covariate, topic) = (t.covariate.clone(), t.topic.clone());
                 changes.push(if quiet {
-                    Change::Quiet {
+                    ThermometerChange::Quiet {
                         covariate,
                         topic,
                         for_s: self.latest[i]
                             .map(|(_, at)| now.saturating_duration_since(at).as_secs_f64()),
                     }
                 } else {
-                    Change::Back { covariate, topic }
+                    ThermometerChange::Back { covariate, topic }
                 });
             }
         }
@@ -260,7 +260,7 @@ mod tests {
         assert_eq!(c[1], 31.5);
         assert_eq!(
             changes,
-            [Change::Quiet {
+            [ThermometerChange::Quiet {
                 covariate: "temp_machine".into(),
                 topic: "/cell/frame".into(),
                 for_s: Some(0.7)

@@ -35,7 +35,7 @@ pub use format::{
 };
 pub use merge::Messages;
 pub use metadata::{BagMetadata, METADATA_VERSION};
-pub use qos::{Durability, History, Liveliness, QosProfile, Reliability};
+pub use qos::{BagDurability, BagReliability, History, Liveliness, QosProfile};
 pub use reader::{BagMessage, BagReader, TopicInfo};
 pub use recover::{recover, FileRecovery, RecoveryReport, StopReason};
 pub use writer::{

@@ -11,18 +11,18 @@ pub enum History {
     KeepAll,
 }
 
-/// Reliability policy.
+/// Reliability policy of a recorded topic (rosbag2 offered QoS).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Reliability {
+pub enum BagReliability {
     /// `RELIABLE` (1).
     Reliable,
     /// `BEST_EFFORT` (2).
     BestEffort,
 }
 
-/// Durability policy.
+/// Durability policy of a recorded topic (rosbag2 offered QoS).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Durability {
+pub enum BagDurability {
     /// `TRANSIENT_LOCAL` (1).
     TransientLocal,
     /// `VOLATILE` (2).
@@ -48,8 +48,8 @@ pub struct QosProfile {
     pub history: History,
     /// Queue depth for [`History::KeepLast`].
     pub depth: u32,
-    pub reliability: Reliability,
-    pub durability: Durability,
+    pub reliability: BagReliability,
+    pub durability: BagDurability,
     /// Deadline in ns, `None` = infinite.
     pub deadline_ns: Option<u64>,
     /// Lifespan in ns, `None` = infinite.
@@ -66,8 +66,8 @@ impl Default for QosProfile {
         Self {
             history: History::KeepLast,
             depth: 10,
-            reliability: Reliability::Reliable,
-            durability: Durability::Volatile,
+            reliability: BagReliability::Reliable,
+            durability: BagDurability::Volatile,
             deadline_ns: None,
             lifespan_ns: None,
             liveliness: Liveliness::Automatic,
@@ -82,7 +82,7 @@ impl QosProfile {
     pub fn sensor_data() -> Self {
         Self {
             depth: 5,
-            reliability: Reliability::BestEffort,
+            reliability: BagReliability::BestEffort,
             ..Self::default()
         }
     }
@@ -98,12 +98,12 @@ impl QosProfile {
             History::KeepAll => 2,
         };
         let reliability = match self.reliability {
-            Reliability::Reliable => 1,
-            Reliability::BestEffort => 2,
+            BagReliability::Reliable => 1,
+            BagReliability::BestEffort => 2,
         };
         let durability = match self.durability {
-            Durability::TransientLocal => 1,
-            Durability::Volatile => 2,
+            BagDurability::TransientLocal => 1,
+            BagDurability::Volatile => 2,
         };
         let liveliness = match self.liveliness {
             Liveliness::Automatic => 1,

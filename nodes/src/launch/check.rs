@@ -1,0 +1,68 @@
+//! `rpkm launch --check`: every node's command line and configuration as it would start.
+
+use super::description::{LaunchDescription, LaunchProgram, NodeSpec};
+use crate::node::{declared_keys, Geometry, NodeArgs, NodeKind, NodeSetup};
+
+/// `rpkm launch --check`: every node's command line and configuration as it would start,
+/// nothing started. An `executable` entry's command line is checked when it starts.
+pub(super) fn check(desc: &LaunchDescription) -> anyhow::Result<()> {
+    for spec in &desc.nodes {
+        let argv: Vec<String> = spec
+            .argv()
+            .iter()
+            .map(|a| a.to_string_lossy().into_owned())
+            .collect();
+        if spec.program == LaunchProgram::Node {
+            check_node(spec).map_err(|e| {
+                crate::error::bad_input(format!(
+                    "{}:{}: node {}: {}",
+                    desc.file,
+                    spec.line,
+                    spec.name,
+                    crate::error::error_chain(&e)
+                ))
+            })?;
+        }
+        println!(
+            "{}:{}: {}: rpkm {}",
+            desc.file,
+            spec.line,
+            spec.name,
+            argv.join(" ")
+        );
+    }
+    Ok(())
+}
+
+/// Parses a node's command line as `rpkm node` would and loads and checks its parameters:
+/// files, declared keys, backends, diagnostics period, geometry.
+fn check_node(spec: &NodeSpec) -> anyhow::Result<()> {
+    use clap::{Args, FromArgMatches};
+    // `node` stands where clap expects the binary's name
+    let args = NodeArgs::augment_args(clap::Command::new("rpkm node"))
+        .try_get_matches_from(spec.argv())
+        .and_then(|m| NodeArgs::from_arg_matches(&m))
+        .map_err(|e| {
+            let text = e.render().to_string();
+            let first = text.lines().next().unwrap_or_default();
+            anyhow::anyhow!("args: {}", first.trim_start_matches("error: "))
+        })?;
+    let kind = args.kind.exec_name();
+    let declared = declared_keys(kind).unwrap_or_default();
+    let (common, geometry) = match &args.kind {
+        NodeKind::Ingest(a) => (&a.common, false),
+        NodeKind::TcpEstimator(c) | NodeKind::Calibrator(c) | NodeKind::PreloadMonitor(c) => {
+            (c, true)
+        }
+    };
+    let setup = NodeSetup::load(kind, common, &declared, None)?;
+    if geometry {
+        Geometry::from_params(&setup.params)?;
+    }
+    // the JointState input's settings: read by the three nodes that take drive states
+    if !matches!(args.kind, NodeKind::Calibrator(_)) {
+        crate::node::joint_input::JointConfig::from_params(&setup.params)
+            .map_err(crate::node::bad_param)?;
+    }
+    Ok(())
+}
