@@ -17,19 +17,23 @@ Used by nodes/transport/tests/bag_python_readers.rs and benches/bag_replay.rs.
 
 import dataclasses
 import json
+import math
 import sys
 import time
 from pathlib import Path
 
 
 def plain(value):
-    """A decoded message (either reader's representation) as plain JSON data."""
+    """A decoded message (either reader's representation) as plain JSON data; a float that is
+    not finite (a Parameters' val_rms without held-out data) as null, as rpkm's JSON has it."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
     if value is None or isinstance(value, (bool, int, float, str)):
         return value
     if isinstance(value, (bytes, bytearray)):
         return list(value)
     if hasattr(value, "tolist"):  # numpy arrays and scalars (rosbags)
-        return value.tolist()
+        return plain(value.tolist())
     if isinstance(value, (list, tuple)):
         return [plain(v) for v in value]
     if dataclasses.is_dataclass(value):  # rosbags messages
