@@ -187,7 +187,8 @@ fn a_monitor_started_late_shows_the_calibration() {
     let prefix = unique("fulate");
     let launched = Launch::start(&file, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
     launched.wait_for("calibration 1:", Duration::from_secs(120));
-    let snap = snapshot(monitor(&prefix, 1.5));
+    // a window long enough for a loaded host to join and hear the late Parameters
+    let snap = snapshot(monitor(&prefix, 3.0));
     drop(launched);
     let p = &snap["parameters"];
     assert_eq!(p["model"], 29, "{snap}");
