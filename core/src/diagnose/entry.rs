@@ -48,6 +48,9 @@ pub(crate) struct Entry<'a> {
     pub(super) left_out: Option<Vec<f64>>,
     pub(super) prediction: Option<Prediction>,
     pub(super) p_value: f64,
+    /// The Wald test of the added parameters alone ([`wald_p`]): part of `p_value`, and of the
+    /// calibration's evidence in the judgement.
+    pub(super) wald_p: f64,
     pub(super) f_statistic: f64,
     pub(super) k: f64,
     pub(super) judged: Judged,
@@ -111,9 +114,10 @@ impl<'j> Judge<'j> {
             0.0
         };
         let names: Vec<&str> = added.iter().map(|e| e.name()).collect();
+        let wald_p = wald_p(&fitted.fit, &names);
         let p_value = if k > 0.5 {
             // the likelihood ratio, and the added parameters themselves (the Wald test)
-            stats::f_upper_tail(f_statistic, k, fitted.fit.dof).max(wald_p(&fitted.fit, &names))
+            stats::f_upper_tail(f_statistic, k, fitted.fit.dof).max(wald_p)
         } else {
             1.0
         };
@@ -132,6 +136,7 @@ impl<'j> Judge<'j> {
             left_out: None,
             prediction: None,
             p_value,
+            wald_p,
             f_statistic,
             k,
             judged: Judged::default(),

@@ -14,7 +14,7 @@
 //! already in the model and named whole: it keeps the parts that predict.
 
 use super::entry::{added_params, clone_fitted, covers, ranked, rms_of, swapped, Entry, Judge};
-use super::gain::{implausible, one_standard_error, wald_p, Gain, PRACTICAL_SIZE};
+use super::gain::{implausible, one_standard_error, Gain, PRACTICAL_SIZE};
 use super::pool::Pool;
 use super::sparse;
 use super::types::{Candidate, Fitted, Judged, ModelTrial, Outcome};
@@ -110,7 +110,6 @@ impl Judge<'_> {
     /// campaigns, its size, its values.
     fn assess(&self, e: &mut Entry) {
         let base = &self.base.fit;
-        let names: Vec<&str> = e.added.iter().map(|a| a.name()).collect();
         let prediction = e.prediction.map(|p| (p, self.unit_of(&p)));
         let gain = Gain::of(
             (e.fitted.fit.chi2, e.fitted.fit.dof),
@@ -118,7 +117,7 @@ impl Judge<'_> {
             self.base.rows.len(),
             prediction,
         )
-        .with_wald(wald_p(&e.fitted.fit, &names));
+        .with_wald(e.wald_p);
         let (evidence_p, size) = (gain.evidence(), gain.size());
         let rows = self.base.rows.len().max(1) as f64;
         let implausible = implausible(&added_params(&e.fitted.fit.effect_params, &e.added));

@@ -161,7 +161,7 @@ fn outcome(
 ) -> Outcome {
     let last = &diagnoses[diagnoses.len() - 1];
     let kind = last.verdict_kind;
-    let held = last.baseline.val_rms_um.unwrap_or(f64::NAN);
+    let held_over_floor = last.baseline.val_rms_um.unwrap_or(f64::NAN) / measured.floor_um;
     let relative = last
         .held_out
         .as_ref()
@@ -175,7 +175,7 @@ fn outcome(
     let judged = Judged {
         named: &named,
         kind,
-        held_over_floor: held / measured.floor_um,
+        held_over_floor,
     };
     Outcome {
         machine: i,
@@ -199,7 +199,7 @@ fn outcome(
             .and_then(|v| v.as_str().map(str::to_owned))
             .unwrap_or_default(),
         named,
-        held_out_over_floor: held / measured.floor_um,
+        held_out_over_floor: held_over_floor,
         held_out_relative_over_floor: relative,
         nothing_missing_above_floor: kind == VerdictKind::NothingMissing
             && relative > 1.0 + 2.0 * se,
