@@ -8,35 +8,22 @@
 
 use crate::node_support;
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use node_support::{launch_from_params, rpkm, unique, Launch, TempDir};
+use node_support::{first_message, launch_from_params, rpkm, unique, Launch, TempDir};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_msgs::{Diagnosis, Parameters};
 use rpkm_transport::{topic, Subscriber, Transport, TransportConfig};
 use rpkm_twin::{EffectKind, Twin, TwinConfig};
+
+/// How long the node may take to calibrate and diagnose.
+const WITHIN: Duration = Duration::from_secs(240);
 
 /// The twin's lost motion of carrier 4, mm.
 const B_MM: f64 = 0.02;
 const EFFECTS: &str = "effects:\n  - name: lost_motion_q4\n    summary: carrier 4 lags behind \
                        its last move\n    params: {b: {unit: mm, prior: 0.01}}\n    \
                        dq4: \"-b * dir_q4\"\n";
-
-/// The first message on `sub` within 240 s.
-fn first<T: rpkm_transport::IpcMessage>(sub: &Subscriber<T>, launched: &Launch, what: &str) -> T {
-    let deadline = Instant::now() + Duration::from_secs(240);
-    loop {
-        if let Some(m) = sub.try_recv().expect("recv") {
-            return m;
-        }
-        assert!(
-            Instant::now() < deadline,
-            "no {what} within 240 s: {:?}",
-            launched.log.lock().map(|l| l.clone()).unwrap_or_default()
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
-}
 
 #[test]
 fn the_calibrator_diagnoses_its_model_as_the_command_line_does() {
@@ -82,29 +69,20 @@ fn the_calibrator_diagnoses_its_model_as_the_command_line_does() {
     let parameters: Subscriber<Parameters> = t.subscriber(&topic::PARAMETERS).expect("sub");
     let diagnosis: Subscriber<Diagnosis> = t.subscriber(&topic::DIAGNOSIS).expect("sub");
     let mut launched = Launch::start(&launch, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
-    let p = first(&parameters, &launched, "Parameters");
-    let d = first(&diagnosis, &launched, "Diagnosis");
+    let p = first_message(&parameters, &launched, "Parameters", WITHIN);
+    let d = first_message(&diagnosis, &launched, "Diagnosis", WITHIN);
     launched.stop();
 
-    let json = dir.path("d.json");
-    let out = std::process::Command::new(rpkm())
-        .args(["diagnose", "--model", "29", "--effects", "lost_motion_q4"])
-        .arg("--effects-file")
-        .arg(dir.path("lost.yaml"))
-        .arg(dir.path("cal.csv"))
-        .arg("--validate")
-        .arg(dir.path("val.csv"))
-        .arg("--json")
-        .arg(&json)
-        .output()
-        .expect("rpkm diagnose");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let cli = diagnose(
+        &dir,
+        &[
+            "--effects",
+            "lost_motion_q4",
+            "--effects-file",
+            &dir.path("lost.yaml").display().to_string(),
+        ],
+        "d.json",
     );
-    let cli: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("json");
     let cli_val_um = cli["baseline"]["val_rms_um"]
         .as_f64()
         .expect("held-out RMS");
@@ -137,23 +115,7 @@ fn the_calibrator_diagnoses_its_model_as_the_command_line_does() {
         );
     }
     // and the effect is in it: the geometry alone, as the node had it, predicts worse
-    let alone = dir.path("alone.json");
-    let out = std::process::Command::new(rpkm())
-        .args(["diagnose", "--model", "29"])
-        .arg(dir.path("cal.csv"))
-        .arg("--validate")
-        .arg(dir.path("val.csv"))
-        .arg("--json")
-        .arg(&alone)
-        .output()
-        .expect("rpkm diagnose");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let alone: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&alone).expect("json")).expect("json");
+    let alone = diagnose(&dir, &[], "alone.json");
     let alone_um = alone["baseline"]["val_rms_relative_um"]
         .as_f64()
         .expect("RMS");
@@ -171,4 +133,25 @@ fn the_calibrator_diagnoses_its_model_as_the_command_line_does() {
         (b - B_MM).abs() < 1e-3,
         "published b = {b} mm, the twin's {B_MM} mm"
     );
+}
+
+/// `rpkm diagnose --model 29 EXTRA cal.csv --validate val.csv` in `dir`, its JSON.
+fn diagnose(dir: &TempDir, extra: &[&str], name: &str) -> serde_json::Value {
+    let json = dir.path(name);
+    let out = std::process::Command::new(rpkm())
+        .args(["diagnose", "--model", "29"])
+        .args(extra)
+        .arg(dir.path("cal.csv"))
+        .arg("--validate")
+        .arg(dir.path("val.csv"))
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .expect("rpkm diagnose");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("json")
 }

@@ -62,18 +62,7 @@ fn write_launch(dir: &TempDir, campaign: &Campaign) -> std::path::PathBuf {
 
 /// The first Parameters the calibrator publishes.
 fn published(parameters: &Subscriber<Parameters>, launched: &Launch) -> Parameters {
-    let deadline = Instant::now() + Duration::from_secs(180);
-    loop {
-        if let Some(p) = parameters.try_recv().expect("recv") {
-            return p;
-        }
-        assert!(
-            Instant::now() < deadline,
-            "no Parameters within 180 s: {:?}",
-            launched.log.lock().map(|l| l.clone()).unwrap_or_default()
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    node_support::first_message(parameters, launched, "Parameters", Duration::from_secs(180))
 }
 
 /// Waits until node `node` logged that it took Parameters with the effect; the line.

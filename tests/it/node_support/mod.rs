@@ -269,3 +269,25 @@ impl Drop for Proc {
         let _ = self.0.wait();
     }
 }
+
+/// The first message on `sub` within `within`; fails naming `what` with the launch's log.
+pub fn first_message<T: rpkm_transport::IpcMessage>(
+    sub: &rpkm_transport::Subscriber<T>,
+    launched: &Launch,
+    what: &str,
+    within: std::time::Duration,
+) -> T {
+    let deadline = std::time::Instant::now() + within;
+    loop {
+        if let Some(m) = sub.try_recv().expect("recv") {
+            return m;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "no {what} within {} s: {:?}",
+            within.as_secs(),
+            launched.log.lock().map(|l| l.clone()).unwrap_or_default()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+}
