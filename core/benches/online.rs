@@ -11,7 +11,7 @@
 //!
 //! Run: `cargo bench -p rpkm-core --bench online`.
 
-use rpkm_core::calib::online::{ForceSample, OnlineEstimator, OnlineOptions, UpdateOutcome};
+use rpkm_core::online::{ForceSample, OnlineEstimator, OnlineOptions, UpdateOutcome};
 use rpkm_core::params::index_of;
 use rpkm_twin::{ProductionConfig, ProductionStream, StepChange};
 

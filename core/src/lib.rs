@@ -18,6 +18,8 @@
 //!   Jacobian: what calibration minimises and diagnosis inspects.
 //! - **Calibration** ([`calib`]): the parameters (and effect parameters) that make the rows
 //!   smallest, under a manufacturing-tolerance prior, with their uncertainties.
+//! - **Online tracking** ([`online`]): the calibration carried on from the drive forces of a
+//!   machine at work, steps and drifts named as they come.
 //! - **Effect** ([`effects::Effect`]): a physical cause the geometric model lacks (thermal
 //!   expansion, a bowed guide...), bound to a campaign, with its own parameters.
 //! - **Diagnosis** ([`diagnose`]): which effect the rows ask for, if any: `missing_effect`,
@@ -40,6 +42,7 @@ pub mod history;
 pub mod noise;
 pub mod obs;
 pub mod observability;
+pub mod online;
 pub mod params;
 pub mod plan;
 pub mod returns;

@@ -252,3 +252,31 @@ fn no_core_file_imports_in_a_circle() {
         cycles.join("\n")
     );
 }
+
+/// The online tracker is a module beside `calib`, one layer above it: it starts from a
+/// calibration and settles its ties with `calib::tie`, while the calibration knows nothing of
+/// the tracker (a calibration that named it could not be read without it).
+#[test]
+fn the_online_tracker_sits_above_calib() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    assert!(
+        !src.join("calib/online").exists(),
+        "core/src/calib/online is back"
+    );
+    let modules = module_texts(&src);
+    let refs = |name: &str| -> Vec<String> {
+        let (_, code) = modules
+            .iter()
+            .find(|(m, _)| m == name)
+            .unwrap_or_else(|| panic!("core/src/{name} not found"));
+        crate_references(code)
+    };
+    assert!(
+        refs("online").iter().any(|d| d == "calib"),
+        "online names calib"
+    );
+    assert!(
+        !refs("calib").iter().any(|d| d == "online"),
+        "calib names the online tracker"
+    );
+}

@@ -5,7 +5,6 @@
 
 mod fit;
 mod lm;
-pub mod online;
 mod plan;
 mod progress;
 mod report;

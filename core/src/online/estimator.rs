@@ -5,7 +5,7 @@ use super::change::{ChangeTrack, EstimateChange};
 use super::force_noise::ForceNoise;
 use super::options::{scale, Covariance, OnlineOptions, Rows, STIFFNESS};
 use crate::calib::tie::{SeparatingMotion, TieEvidence};
-use crate::calib::types::Prior;
+use crate::calib::Prior;
 use crate::elastic::{sensitivity, ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
 use crate::params::{unit, Params, Unit, N_PARAMS};
 use nalgebra::{Matrix4, SMatrix, SVector, Vector3, Vector4};

@@ -1,6 +1,9 @@
 //! Calibration that never stops (issue 15): the 29 parameters and the stiffness factor
 //! tracked from the drive forces of a machine at work, all four drives position-controlled.
 //!
+//! A module beside [`crate::calib`], one layer above it: it starts from a calibration's
+//! estimate and covariance and settles its ties with `calib::tie`; `calib` never names it.
+//!
 //! An extended Kalman filter over the state (p, dk), dk the relative change of the default
 //! stiffness, fed by decimated drive samples (q, f1..f4):
 //!

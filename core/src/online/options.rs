@@ -1,7 +1,7 @@
 //! The state's layout, the options of the filter, the step test and the tie test, and their
 //! defaults.
 
-use crate::calib::types::Prior;
+use crate::calib::Prior;
 use crate::noise::{DriveNoise, NoiseModel};
 use crate::params::N_PARAMS;
 use nalgebra::{SMatrix, SVector};

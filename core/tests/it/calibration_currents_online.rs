@@ -20,15 +20,15 @@
 //! figures in docs/calibration.md).
 use crate::support::production::twin;
 use rpkm_core::calib;
-use rpkm_core::calib::online::{
-    Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, TieResolved, UpdateOutcome,
-    DRIFT_FALSE_ALARM, DRIFT_NAME_MARGIN, TIE_EVIDENCE_CHI2, TIE_MOTION_POSES,
-};
 use rpkm_core::calib::{Calibration, Options};
 use rpkm_core::campaign::Instrument;
 use rpkm_core::design;
 use rpkm_core::diagnose::{self, VerdictKind};
 use rpkm_core::effects::{self, Effect, EffectSet};
+use rpkm_core::online::{
+    Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, TieResolved, UpdateOutcome,
+    DRIFT_FALSE_ALARM, DRIFT_NAME_MARGIN, TIE_EVIDENCE_CHI2, TIE_MOTION_POSES,
+};
 use rpkm_core::params::{index_of, Params, NAMES, N_PARAMS};
 use rpkm_twin::{
     ProductionConfig, ProductionSample, ProductionStream, StepChange, TimeCreep, Twin, Visit,
@@ -74,13 +74,13 @@ pub struct Run {
     /// Largest |estimate − truth| / σ over the 29 parameters at each check, with its time.
     pub worst_z: Vec<(f64, f64, usize)>,
     /// Steps found: time named, the step.
-    pub steps: Vec<(f64, rpkm_core::calib::online::DetectedStep)>,
+    pub steps: Vec<(f64, rpkm_core::online::DetectedStep)>,
     /// Ties settled: time, what stood.
     pub settled: Vec<(f64, TieResolved)>,
     /// RMS TCP error per window of `window_s`, mm.
     pub windows: Vec<Window>,
     /// Steps the tracker started from the truth found.
-    pub floor_steps: Vec<(f64, rpkm_core::calib::online::DetectedStep)>,
+    pub floor_steps: Vec<(f64, rpkm_core::online::DetectedStep)>,
     /// The drift test at every check (1 s): time, P(noise alone), χ², dof, the χ²'s own P;
     /// and the drift WARNs it raised (`online_drift_warn_um` at its default, 10 µm).
     pub drift_tests: Vec<(f64, f64, f64, usize, f64)>,
@@ -535,7 +535,7 @@ fn calibration_currents_online_creep() {
 /// What the tracker said over a production stream at 10 Hz: the first step (and when it
 /// was named), the first tie it settled (and when), the evidence still open at the end.
 struct Settled {
-    step: Option<(f64, rpkm_core::calib::online::DetectedStep)>,
+    step: Option<(f64, rpkm_core::online::DetectedStep)>,
     resolved: Option<(f64, TieResolved)>,
     open: Option<f64>,
 }

@@ -7,7 +7,7 @@
 //! σ (what it knows without a calibration) and reads the stream at 10 Hz (5 Hz for the
 //! drift: six minutes).
 use crate::support::production::twin;
-use rpkm_core::calib::online::{
+use rpkm_core::online::{
     DetectedStep as Step, Drift, DriftMonitor, DriftTest, ForceSample, OnlineEstimator,
     OnlineOptions, TieResolved, UpdateOutcome, DRIFT_FALSE_ALARM, DRIFT_NAME_MARGIN,
     TIE_EVIDENCE_CHI2,

@@ -1,4 +1,4 @@
-//! The calibrator's online tracker (issue 15) as the node runs it: `rpkm_core::calib::online`
+//! The calibrator's online tracker (issue 15) as the node runs it: `rpkm_core::online`
 //! on a worker thread fed every `online_decimation`-th drive state, its reports (Parameters
 //! when a parameter moved, a step, a tie settled, a drift), and their words on /diagnostics:
 //! the WARN line, and the values of a tie (the motion that separates it, how it was
@@ -7,7 +7,7 @@
 use std::fmt::Write as _;
 
 use nalgebra::SMatrix;
-use rpkm_core::calib::online::{
+use rpkm_core::online::{
     DetectedStep, Drift, DriftMonitor, ForceSample, OnlineEstimator, OnlineOptions, TieResolved,
     TieSoFar, UpdateOutcome as OnlineOutcome, TIE_EVIDENCE_CHI2,
 };

@@ -3,13 +3,13 @@
 //! figures (`rpkm_core::diagnose`); the words and their units live here, once, for the
 //! terminal, the HTML report and the JSON's text fields alike.
 
-use rpkm_core::calib::online::{Drift, DriftInput, FOLLOWS};
 use rpkm_core::diagnose::neighbours::Neighbours;
 use rpkm_core::diagnose::periodic::Periodic;
 use rpkm_core::diagnose::sparse::Pointer;
 use rpkm_core::diagnose::{
     Candidate, Diagnosis, HeldOutCheck, Judged, ModelTrial, Outcome, Prediction, Test, VerdictKind,
 };
+use rpkm_core::online::{Drift, DriftInput, FOLLOWS};
 use rpkm_core::params::{unit, Unit, NAMES};
 use std::fmt::Write as _;
 

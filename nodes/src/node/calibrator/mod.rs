@@ -14,7 +14,7 @@
 //! With `online: true` it also tracks the geometry live from the drive forces (issue 15,
 //! [`crate::node::online_tracker`]):
 //! every `online_decimation`-th ActuatorState with all four drives position-controlled goes
-//! to `rpkm_core::calib::online` on a worker thread (the loop hands it over without waiting;
+//! to `rpkm_core::online` on a worker thread (the loop hands it over without waiting;
 //! a full hand-over queue is counted, never waited on), which publishes Parameters with their
 //! σ when a parameter moved by `online_publish_sigma` σ since the last, and a WARN on
 //! /diagnostics naming a step change, or a drift: a rod's creep explaining the change since

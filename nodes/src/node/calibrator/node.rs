@@ -15,7 +15,7 @@ use crate::node::lifecycle::Lifecycle;
 use crate::node::live::LiveParams;
 use crate::node::online_tracker::{report_warning, state_name, tie_values, OnlineWorker};
 use rpkm_core::calib;
-use rpkm_core::calib::online::{TieSoFar, TIE_EVIDENCE_CHI2};
+use rpkm_core::online::{TieSoFar, TIE_EVIDENCE_CHI2};
 use rpkm_core::params::Model;
 use rpkm_msgs::calibrate_action::{CalibrateGoal, CalibrateResult};
 use rpkm_msgs::{

@@ -9,7 +9,7 @@ use crate::node::live::{self, ParamSpec};
 use crate::node::online_tracker::OnlineSettings;
 use crate::node::params::NodeParams;
 use rpkm_core::calib;
-use rpkm_core::calib::online::OnlineOptions;
+use rpkm_core::online::OnlineOptions;
 
 /// Parameter keys of the node.
 pub const KEYS: [&str; 20] = [
