@@ -1,6 +1,9 @@
-//! Layers never call upward: the nodes and the launcher (`nodes/src/node`, `nodes/src/launch`)
-//! do not name the command line (`nodes/src/cli`). Errors, exit codes and file readers they
-//! share with it live in `nodes/src/error.rs` and `nodes/src/input.rs`.
+//! Layers never call upward: the node set (the crate `rpkm-nodes`, `nodes/src`) cannot name the
+//! command line (the `rpkm` package, `src/`) by construction, and links none of what only the
+//! command line needs (the charts, the terminal monitor, the keystore writer); the launcher
+//! (`src/launch`) does not name the subcommands (`src/cli`). Errors, exit codes and file
+//! readers the nodes share with the command line live in `nodes/src/error.rs` and
+//! `nodes/src/input.rs`.
 
 use std::path::Path;
 
@@ -37,12 +40,12 @@ fn the_detector_sees_each_spelling() {
 
 #[test]
 fn nodes_and_launch_never_name_the_cli() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("nodes/src");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = Vec::new();
-    for layer in ["node", "launch"] {
+    for layer in ["nodes/src", "src/launch"] {
         file_graph::rust_files(&root.join(layer), &mut files);
     }
-    assert!(files.len() >= 8, "found only {files:?}");
+    assert!(files.len() >= 60, "found only {files:?}");
     let mut offences = Vec::new();
     for file in &files {
         let text = std::fs::read_to_string(file).expect("read source");
@@ -60,15 +63,15 @@ fn nodes_and_launch_never_name_the_cli() {
 #[path = "layers_support/file_graph.rs"]
 mod file_graph;
 
-/// No file of the nodes crate or of the transport imports a file that imports it, directly or
-/// around a loop: what two subcommands share lives in a module both call
+/// No file of the command line, the nodes' crate or the transport imports a file that imports
+/// it, directly or around a loop: what two subcommands share lives in a module both call
 /// (`cli/effect_stages.rs`, `cli/summary.rs`, `cli/transport_args.rs`, `cli/bag_files.rs`),
 /// never in one of them; what every node is made of in `node/context.rs` and
 /// `node/geometry.rs`, never in `node/mod.rs`, which runs them.
 #[test]
 fn no_file_of_the_nodes_or_the_transport_imports_in_a_circle() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for (src, at_least) in [("nodes/src", 60), ("nodes/transport/src", 10)] {
+    for (src, at_least) in [("src", 60), ("nodes/src", 50), ("nodes/transport/src", 10)] {
         let graph = file_graph::graph(&root.join(src));
         assert!(graph.len() >= at_least, "{src}: only {} files", graph.len());
         let cycles = file_graph::cycles(&graph);
@@ -84,7 +87,7 @@ fn no_file_of_the_nodes_or_the_transport_imports_in_a_circle() {
 /// with a `run`; what they share is a module without one).
 #[test]
 fn no_subcommand_imports_another() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("nodes/src");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let graph = file_graph::graph(&root);
     let files = file_graph::crate_files(&root);
     let subcommand = |m: &str| {
@@ -113,12 +116,15 @@ fn no_subcommand_imports_another() {
 }
 
 /// The millimetre-per-metre factor between the core and the topics is defined once, in
-/// `nodes/src/units.rs`: no other file of the nodes crate or the transport defines its own.
+/// `nodes/src/units.rs`: no other file of the nodes, the command line or the transport
+/// defines its own.
 #[test]
 fn one_module_defines_the_unit_factor() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = Vec::new();
-    file_graph::rust_files(&root.join("nodes"), &mut files);
+    for dir in ["nodes", "src", "benches"] {
+        file_graph::rust_files(&root.join(dir), &mut files);
+    }
     let offences: Vec<String> = files
         .iter()
         .filter(|f| !f.ends_with("nodes/src/units.rs"))
@@ -138,10 +144,11 @@ fn one_module_defines_the_unit_factor() {
     assert!(offences.is_empty(), "{}", offences.join("\n"));
 }
 
-/// The crates' sources: the core, the nodes and the command line, the transport, the messages,
+/// The crates' sources: the core, the command line, the nodes, the transport, the messages,
 /// the history's store and the twin.
-const CRATE_SOURCES: [&str; 6] = [
+const CRATE_SOURCES: [&str; 7] = [
     "core/src",
+    "src",
     "nodes/src",
     "nodes/transport/src",
     "msgs/src",
@@ -248,4 +255,60 @@ fn no_source_file_is_over_800_lines() {
         }
     }
     assert!(long.is_empty(), "{}", long.join("\n"));
+}
+
+/// What only the command line links: the report's charts, the terminal monitor, the SROS2
+/// keystore writer (OpenSSL's keys, X.509 certificates and S/MIME signatures).
+const COMMAND_LINE_ONLY: [&str; 3] = ["plotters", "ratatui", "crossterm"];
+
+/// The OpenSSL the keystore writer uses; a node reads a keystore through the transport
+/// (`rpkm_transport::security`) and needs none of it.
+const KEYSTORE_OPENSSL: [&str; 6] = [
+    "openssl::x509",
+    "openssl::pkcs7",
+    "openssl::ec",
+    "openssl::pkey",
+    "openssl::asn1",
+    "openssl::bn",
+];
+
+/// The node set links none of the command line's crates (their absence from `cargo tree -p
+/// rpkm-nodes`, transitive ones included, is `.ci/run`'s check) and writes no keystore: a
+/// node process stays as small as what it runs.
+#[test]
+fn the_nodes_link_no_charts_monitor_or_keystore_writer() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let manifest =
+        std::fs::read_to_string(root.join("nodes/Cargo.toml")).expect("nodes/Cargo.toml");
+    let deps = manifest
+        .split("[dependencies]")
+        .nth(1)
+        .and_then(|rest| rest.split("\n[").next())
+        .expect("nodes/Cargo.toml has [dependencies]");
+    let names: Vec<&str> = deps
+        .lines()
+        .map(|l| l.split(['=', ' ', '.']).next().unwrap_or("").trim())
+        .filter(|n| !n.is_empty() && !n.starts_with('#'))
+        .collect();
+    assert!(names.contains(&"rpkm-transport"), "{names:?}");
+    let linked: Vec<&&str> = COMMAND_LINE_ONLY
+        .iter()
+        .filter(|c| names.contains(c))
+        .collect();
+    assert!(linked.is_empty(), "rpkm-nodes depends on {linked:?}");
+    let mut files = Vec::new();
+    file_graph::rust_files(&root.join("nodes/src"), &mut files);
+    let offences: Vec<String> = files
+        .iter()
+        .flat_map(|f| {
+            let code = file_graph::code_of(&std::fs::read_to_string(f).expect("read source"));
+            KEYSTORE_OPENSSL
+                .iter()
+                .chain(&["security::keystore", "plotters::", "ratatui::"])
+                .filter(|k| code.contains(*k))
+                .map(|k| format!("{}: {k}", f.display()))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
 }

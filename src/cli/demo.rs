@@ -11,8 +11,8 @@ use std::path::PathBuf;
 
 /// The embedded campaign: laser tracker + self-calibration on the twin, with a hidden
 /// imperfect parallel-holder (see bags/README.md for the command that made it).
-const CAMPAIGN: &str = include_str!("../../../bags/demo/campaign.csv");
-const VALIDATION: &str = include_str!("../../../bags/demo/campaign.val.csv");
+const CAMPAIGN: &str = include_str!("../../bags/demo/campaign.csv");
+const VALIDATION: &str = include_str!("../../bags/demo/campaign.val.csv");
 
 /// Run the demonstration on the embedded data and write an HTML report.
 ///
