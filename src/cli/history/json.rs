@@ -1,7 +1,6 @@
 //! The analysis as `rpkm history --json` writes it.
 
-use super::analysis::Analysis;
-use super::words;
+use crate::history::{words, Analysis};
 use rpkm_history::{CalibrationRecord, Stored};
 
 /// The analysis as JSON (mm, rad; slopes per month; times UTC Unix seconds): what

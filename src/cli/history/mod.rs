@@ -2,6 +2,9 @@
 //! calibrator node's `history`), what changed between two of them and whether it is real,
 //! the trends and when a parameter leaves its tolerance; as text, CSV and an HTML report.
 
+mod csv;
+mod json;
+
 use super::bad_input;
 use crate::history::{analyse, words, Analysis};
 use crate::report::history::HistoryPage;
@@ -157,12 +160,12 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
         }
     }
     if let Some(path) = &args.csv {
-        std::fs::write(path, crate::history::csv::table(&cals))
+        std::fs::write(path, csv::table(&cals))
             .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
         println!("\nwrote {}", path.display());
     }
     if let Some(path) = &args.json {
-        super::write_json(path, &crate::history::to_json(machine, &cals, &analysis))?;
+        super::write_json(path, &json::to_json(machine, &cals, &analysis))?;
         println!("wrote {}", path.display());
     }
     if let Some(dir) = &args.report {
