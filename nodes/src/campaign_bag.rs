@@ -246,7 +246,7 @@ pub fn pose_messages(
 /// Rebuilds a campaign from messages in the order they were published or recorded.
 ///
 /// ```
-/// use rpkm::campaign_bag::{campaign_info, pose_messages, CampaignAssembler};
+/// use rpkm_nodes::campaign_bag::{campaign_info, pose_messages, CampaignAssembler};
 /// use rpkm_core::campaign::Campaign;
 /// let text = "t,setup,instrument,reset,q1,q2,q3,q4,f1,f2,f3,f4,follower,x,y,r,psi,temp\n\
 ///             3,A,lt,1,2611,2611,789,789,0,0,0,0,23,0,0,,,20.5\n\
