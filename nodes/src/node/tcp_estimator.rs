@@ -29,17 +29,28 @@ use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
 use super::context::{diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M};
+use super::declare::{keys, served, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
+use super::geometry::GEOMETRY;
 use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
 use super::lifecycle::Lifecycle;
-use super::live::{self, ParamSpec};
 use super::params::NodeParams;
+use super::realtime::{BUSY_POLL, PRIORITY};
 use super::views::{self, TcpViews};
-use rpkm_transport::dds_params::ParamRange;
 use rpkm_transport::Backend;
 
-/// Parameter keys of the node.
-pub const KEYS: [&str; 4] = ["busy_poll_ms", "rt_priority", "views", "view_every"];
+/// Parameter `views` of the node.
+const VIEWS: ParamSpec = ParamSpec {
+    description: "publish /rpkm/tcp_pose (PoseStamped) and /tf (machine -> platform) on DDS",
+    ..views::VIEWS
+};
+/// Parameter `view_every` of the node.
+const VIEW_EVERY: ParamSpec = ParamSpec {
+    description: "publish the views of every N-th estimate",
+    ..views::VIEW_EVERY_PARAM
+};
+/// The node's own parameters: `view_every` live, the rest need a restart.
+pub const PARAMS: [ParamSpec; 4] = [BUSY_POLL, PRIORITY, VIEWS, VIEW_EVERY];
 
 /// Consecutive estimates without a plausible elastic equilibrium from which /diagnostics
 /// says ERROR instead of WARN: one odd sample is a warning, a stream of them means the
@@ -325,38 +336,18 @@ fn loop_residuals(
 /// live (taken between samples; a new geometry is solved cold), the rest need a restart.
 /// `views_default`: whether the views are on unless a file says otherwise (DDS output).
 fn specs(views_default: bool) -> Vec<ParamSpec> {
-    let mut specs = vec![
-        ParamSpec::fixed(
-            "busy_poll_ms",
-            live::Default::F64(0.0),
-            "yield-polling time after a sample before sleeping, ms (0 to 1000)",
-        ),
-        ParamSpec::fixed(
-            "rt_priority",
-            live::Default::U64(0),
-            "SCHED_FIFO priority of the estimating thread, 0 for none (0 to 99)",
-        ),
-        ParamSpec::fixed(
-            "views",
-            live::Default::Bool(views_default),
-            "publish /rpkm/tcp_pose (PoseStamped) and /tf (machine -> platform) on DDS",
-        ),
-        ParamSpec::live(
-            "view_every",
-            live::Default::U64(views::VIEW_EVERY),
-            "publish the views of every N-th estimate",
-            ParamRange::count(views::VIEW_EVERY_RANGE),
-        ),
-    ];
-    specs.extend(super::geometry::geometry_specs());
+    let mut specs = served(&[&PARAMS, &GEOMETRY]);
+    for s in &mut specs {
+        if s.key == VIEWS.key {
+            s.default = ParamDefault::Bool(views_default);
+        }
+    }
     specs
 }
 
 /// What a parameter set changes while the node runs: the geometry and `view_every`.
 fn configure(p: &NodeParams) -> anyhow::Result<(Geometry, u64)> {
-    let every = p
-        .u64_in("view_every", views::VIEW_EVERY, views::VIEW_EVERY_RANGE)
-        .map_err(super::context::bad_param)?;
+    let every = VIEW_EVERY.u64(p).map_err(super::context::bad_param)?;
     Ok((Geometry::from_params(p)?, every))
 }
 
@@ -380,9 +371,14 @@ fn reconfigure(
     Ok(())
 }
 
-/// Every parameter key the node declares.
+/// Every parameter the node declares besides the common ones.
+pub fn declarations() -> Vec<ParamSpec> {
+    inputs::with_drive_input([PARAMS.as_slice(), &GEOMETRY].concat())
+}
+
+/// Every parameter key the node declares besides the common ones.
 pub fn declared() -> Vec<&'static str> {
-    inputs::with_drive_input_keys(super::geometry::declared(&KEYS, true))
+    keys(&[&declarations()])
 }
 
 /// Applies a parameter set the services accepted: the geometry (solved cold from the next
@@ -410,15 +406,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let extra = inputs::extra_backend(args, "tcp_estimator")?;
     let ctx = NodeContext::open("tcp_estimator", args, &declared, extra)?;
     let geometry = Geometry::from_params(&ctx.params)?;
-    let busy = ctx
-        .params
-        .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
+    let busy = BUSY_POLL
+        .f64(&ctx.params)
         .map_err(super::context::bad_param)?;
     // Bounded where read: an invalid priority is bad configuration (exit 2), not a node that
     // says so in its log and runs at normal priority.
-    let rt_priority = ctx
-        .params
-        .u64_in("rt_priority", 0, super::params::RT_PRIORITY)
+    let rt_priority = PRIORITY
+        .u64(&ctx.params)
         .map_err(super::context::bad_param)?;
     let mut input = DriveInput::open(&ctx)?;
     let mut parameters = ParameterFollower::open(&ctx)?;

@@ -53,5 +53,5 @@ mod tests;
 pub use accumulator::Accumulator;
 pub use job::{calibrate_campaign, calibrate_job, CalibratorOptions, Job, JobOutcome};
 pub use node::run;
-pub use params::KEYS;
+pub use params::{declarations, declared, PARAMS};
 pub use start_covariance::start_covariance;
