@@ -3,7 +3,7 @@
 
 use super::sparse;
 use super::types::{
-    DiagnoseError, ErrorVector, GroupRms, NoiseReport, Noisier, Point, NOISIER_THAN_RATED,
+    DiagnoseError, ErrorVector, GroupRms, NoiseReport, Noisier, ResidualPoint, NOISIER_THAN_RATED,
 };
 use crate::calib::Calibration;
 use crate::campaign::Campaign;
@@ -144,14 +144,14 @@ pub(crate) fn groups(rows: &[RowValue]) -> Vec<GroupRms> {
 }
 
 /// Every residual located, worst (largest |r/σ|) first.
-pub(crate) fn points(campaign: &Campaign, rows: &[RowValue]) -> Vec<Point> {
+pub(crate) fn points(campaign: &Campaign, rows: &[RowValue]) -> Vec<ResidualPoint> {
     let tcp = sparse::nominal_tcp(campaign);
-    let mut out: Vec<Point> = rows
+    let mut out: Vec<ResidualPoint> = rows
         .iter()
         .map(|r| {
             let pose = &campaign.poses[r.pose];
             let (x, y) = tcp[r.pose];
-            Point {
+            ResidualPoint {
                 pose: r.pose,
                 line: pose.line,
                 instrument: r.instrument.as_str().to_owned(),

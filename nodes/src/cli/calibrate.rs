@@ -360,8 +360,8 @@ pub fn print_noise(noise: &NoiseEstimate) {
 fn diagnosis_options(
     args: &CalibrateArgs,
     model: Model,
-) -> anyhow::Result<rpkm_core::diagnose::Options> {
-    Ok(rpkm_core::diagnose::Options {
+) -> anyhow::Result<rpkm_core::diagnose::DiagnosisOptions> {
+    Ok(rpkm_core::diagnose::DiagnosisOptions {
         model: if args.perfect_parallelogram {
             Model::M24
         } else {
@@ -466,7 +466,7 @@ fn validate_with(
         noise,
         (effects, set),
         cal,
-        rpkm_core::diagnose::Options::default().alpha,
+        rpkm_core::diagnose::DiagnosisOptions::default().alpha,
     )
     .map_err(|e| bad_input(format!("{}: {e}", val.source)))?;
     let after = rpkm_core::diagnose::held_out_errors(val, &noise.model, effects, set, cal)

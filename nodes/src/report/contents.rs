@@ -2,7 +2,7 @@
 //! models' table. The page (`mod.rs`) and its sections read it.
 
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::Diagnosis;
+use rpkm_core::diagnose::ModelDiagnosis;
 
 /// One model of the story: its name and how it fits.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -28,8 +28,8 @@ pub struct Report<'a> {
     /// The command that made it (`rpkm diagnose`, `rpkm demo`, `rpkm calibrate`).
     pub command: &'a str,
     pub campaign: &'a Campaign,
-    pub before: &'a Diagnosis,
-    pub after: Option<&'a Diagnosis>,
+    pub before: &'a ModelDiagnosis,
+    pub after: Option<&'a ModelDiagnosis>,
     /// The models in the order they were fitted (the first is `before`'s).
     pub stages: Vec<Stage>,
     /// The one noise the stages' χ² are under, in words.

@@ -18,13 +18,13 @@ pub use contents::{Report, Stage, Stages};
 
 use crate::plot::escape;
 use anyhow::Context;
-use rpkm_core::diagnose::Diagnosis;
+use rpkm_core::diagnose::ModelDiagnosis;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 impl Report<'_> {
     /// The stage of a diagnosis' current model.
-    pub fn stage_of(d: &Diagnosis) -> Stage {
+    pub fn stage_of(d: &ModelDiagnosis) -> Stage {
         let with = if d.effects_in_model.is_empty() {
             String::new()
         } else {

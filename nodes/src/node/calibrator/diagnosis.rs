@@ -22,8 +22,8 @@ pub(super) struct Diagnosed<'a> {
 pub(super) fn diagnose_model(
     d: Diagnosed,
     stop: Option<calib::Stop>,
-) -> Result<rpkm_core::diagnose::Diagnosis, rpkm_core::diagnose::DiagnoseError> {
-    let opts = rpkm_core::diagnose::Options {
+) -> Result<rpkm_core::diagnose::ModelDiagnosis, rpkm_core::diagnose::DiagnoseError> {
+    let opts = rpkm_core::diagnose::DiagnosisOptions {
         model: d.calibration.model,
         noise: d.noise.clone(),
         stop,
@@ -38,7 +38,7 @@ pub(super) fn diagnose_model(
 pub(super) fn diagnose_until(
     d: Diagnosed,
     cancelled: &dyn Fn() -> bool,
-) -> Result<rpkm_core::diagnose::Diagnosis, rpkm_core::diagnose::DiagnoseError> {
+) -> Result<rpkm_core::diagnose::ModelDiagnosis, rpkm_core::diagnose::DiagnoseError> {
     let stop = calib::Stop::default();
     std::thread::scope(|scope| {
         let run = stop.clone();
@@ -56,7 +56,7 @@ pub(super) fn diagnose_until(
 }
 
 /// A diagnosis as the Diagnosis message.
-pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::Diagnosis) -> Diagnosis {
+pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::ModelDiagnosis) -> Diagnosis {
     let m = |um: Option<f64>| um.map_or(f64::NAN, |v| v * 1e-6);
     let held = d.held_out.as_ref();
     Diagnosis {

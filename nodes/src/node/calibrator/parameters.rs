@@ -58,7 +58,7 @@ pub(super) fn parameters_of(
     // the diagnosis's held-out judge: `rpkm diagnose` and `rpkm calibrate` report the same
     msg.val_rms = match val_part {
         Some(v) => {
-            let alpha = rpkm_core::diagnose::Options::default().alpha;
+            let alpha = rpkm_core::diagnose::DiagnosisOptions::default().alpha;
             let judge =
                 rpkm_core::diagnose::judge_calibration(v, noise, (effects, set), cal, alpha)
                     .map_err(|e| bad_input(format!("held-out setups: {e}")))?;
