@@ -11,7 +11,7 @@
 //! its p-value. The figures are here; the sentence ("lt setup 3 moved 9 µm during 450 s") is
 //! the caller's.
 
-use crate::campaign::{Campaign, Instrument, Pose};
+use crate::campaign::{Campaign, Instrument, MeasuredPose};
 use crate::effects::Corrections;
 use crate::geometry::{self, GeometryError};
 use crate::noise::{NoiseModel, XyInstrument};
@@ -88,7 +88,7 @@ pub fn drift_checks(
         if mine.is_empty() {
             continue;
         }
-        let at = |pose: &Pose| {
+        let at = |pose: &MeasuredPose| {
             reading_covariance(pose, (p, model), noise)
                 .map_err(|e| PoseError::at(campaign, pose, e))
         };
@@ -129,7 +129,7 @@ fn return_poses(campaign: &Campaign) -> Vec<(usize, usize)> {
 /// The covariance of one reading's (x, y) error at `pose` (a single coordinate in x), its
 /// encoders' included.
 fn reading_covariance(
-    pose: &Pose,
+    pose: &MeasuredPose,
     (p, model): (&Params, Model),
     noise: &NoiseModel,
 ) -> Result<Matrix2<f64>, GeometryError> {
@@ -144,7 +144,12 @@ fn reading_covariance(
 
 /// The return at `pose` of the setup zeroed at `zero`, its TCP errors `errors` (model less
 /// reading), against the covariance `cov` of the difference of the two readings.
-fn judge(pose: &Pose, zero: &Pose, errors: &[&obs::TcpError], cov: &Matrix2<f64>) -> ReturnDrift {
+fn judge(
+    pose: &MeasuredPose,
+    zero: &MeasuredPose,
+    errors: &[&obs::TcpError],
+    cov: &Matrix2<f64>,
+) -> ReturnDrift {
     let seconds = pose.t - zero.t;
     // the drift is the reading beyond the model's move: minus the error
     let values: Vec<f64> = errors.iter().map(|e| -e.value).collect();

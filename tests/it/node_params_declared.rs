@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use rpkm::node::declare::{Bound, ParamDefault, ParamSpec};
+use rpkm::node::declare::{ParamBound, ParamDefault, ParamSpec};
 use rpkm::node::{declarations, NodeParams, COMMON, EXECUTABLES};
 use rpkm_transport::dds_params::{ParamRange, ParameterValue};
 
@@ -131,11 +131,11 @@ fn descriptors_carry_the_declared_default_range_and_unit_and_defaults_lie_in_bou
             assert_eq!(d.value, want, "{exec}/{}", spec.key);
             assert_eq!(d.read_only, !spec.live, "{exec}/{}", spec.key);
             let range = match spec.bound {
-                Bound::Within(lo, hi) => ParamRange::Float(lo, hi),
-                Bound::Count(lo, hi) => {
+                ParamBound::Within(lo, hi) => ParamRange::Float(lo, hi),
+                ParamBound::Count(lo, hi) => {
                     ParamRange::Integer(i64::try_from(lo).unwrap(), i64::try_from(hi).unwrap())
                 }
-                Bound::Any | Bound::Positive => ParamRange::None,
+                ParamBound::Any | ParamBound::Positive => ParamRange::None,
             };
             assert_eq!(d.range, range, "{exec}/{}", spec.key);
             assert!(

@@ -393,11 +393,11 @@ fn write_report(
     } else {
         Some(diagnose::diagnose(campaign, validation, refs, &opts)?)
     };
-    let stages = stages.map(|st| crate::report::Stages {
+    let stages = stages.map(|st| crate::report::ModelTable {
         rows: st
             .rows
             .iter()
-            .map(|s| crate::report::Stage {
+            .map(|s| crate::report::ModelRow {
                 model: s.model.clone(),
                 cal_rms_um: s.cal_rms_um,
                 val_rms_um: s.val_rms_um,

@@ -2,7 +2,7 @@
 //! summary on the terminal, the noise per group, the HTML report.
 
 use crate::effects_file::EffectsFile;
-use crate::report::{Report, Stages};
+use crate::report::{ModelTable, Report};
 use crate::words;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::{HeldOutCheck, ModelDiagnosis};
@@ -212,9 +212,9 @@ pub fn write_report(
     campaign: &Campaign,
     before: &ModelDiagnosis,
     after: Option<&ModelDiagnosis>,
-    (stages, written): (Option<Stages>, Vec<(String, String)>),
+    (stages, written): (Option<ModelTable>, Vec<(String, String)>),
 ) -> anyhow::Result<PathBuf> {
-    let stages = stages.unwrap_or_else(|| Stages {
+    let stages = stages.unwrap_or_else(|| ModelTable {
         rows: std::iter::once(before)
             .chain(after)
             .map(Report::stage_of)

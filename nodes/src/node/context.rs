@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use super::declare::{Bound, ParamDefault, ParamSpec};
+use super::declare::{ParamBound, ParamDefault, ParamSpec};
 use super::params::{self, NodeParams, ParamError};
 use anyhow::Context;
 use rpkm_msgs::{DiagnosticArray, DiagnosticStatus, Header, KeyValue, Time};
@@ -243,7 +243,7 @@ const DIAGNOSTICS_PERIOD: ParamSpec = ParamSpec::fixed(
     "period of the /diagnostics report",
 )
 .unit("s")
-.bound(Bound::Within(1e-3, params::DURATION_S.1));
+.bound(ParamBound::Within(1e-3, params::DURATION_S.1));
 
 /// The parameters every node declares.
 pub const COMMON: [ParamSpec; 4] = [

@@ -33,7 +33,7 @@ pub enum ParamDefault {
 
 /// What a number must satisfy besides its type.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Bound {
+pub enum ParamBound {
     /// Any finite value (integers: any non-negative one).
     Any,
     /// A double > 0 (no upper bound: the descriptor has no range, the node's check says it).
@@ -54,7 +54,7 @@ pub struct ParamSpec {
     /// Type and default.
     pub default: ParamDefault,
     /// What a number must satisfy.
-    pub bound: Bound,
+    pub bound: ParamBound,
     /// Unit of a number (`s`, `m`, `µm`; empty for a count or a ratio).
     pub unit: &'static str,
     /// What it is, without unit and bound (the descriptor adds them).
@@ -73,7 +73,7 @@ impl ParamSpec {
         Self {
             key,
             default,
-            bound: Bound::Any,
+            bound: ParamBound::Any,
             unit: "",
             description,
             live: false,
@@ -101,7 +101,7 @@ impl ParamSpec {
 
     /// The same parameter bounded by `bound`.
     #[must_use]
-    pub const fn bound(self, bound: Bound) -> Self {
+    pub const fn bound(self, bound: ParamBound) -> Self {
         Self { bound, ..self }
     }
 
@@ -115,9 +115,9 @@ impl ParamSpec {
     /// The range of the ROS 2 descriptor.
     pub fn range(&self) -> ParamRange {
         match self.bound {
-            Bound::Within(lo, hi) => ParamRange::Float(lo, hi),
-            Bound::Count(lo, hi) => ParamRange::count((lo, hi)),
-            Bound::Any | Bound::Positive => ParamRange::None,
+            ParamBound::Within(lo, hi) => ParamRange::Float(lo, hi),
+            ParamBound::Count(lo, hi) => ParamRange::count((lo, hi)),
+            ParamBound::Any | ParamBound::Positive => ParamRange::None,
         }
     }
 
@@ -130,10 +130,10 @@ impl ParamSpec {
             text.push_str(self.unit);
         }
         let bound = match self.bound {
-            Bound::Any => return text,
-            Bound::Positive => "> 0".to_owned(),
-            Bound::Within(lo, hi) => format!("{lo} to {hi}"),
-            Bound::Count(lo, hi) => format!("{lo} to {hi}"),
+            ParamBound::Any => return text,
+            ParamBound::Positive => "> 0".to_owned(),
+            ParamBound::Within(lo, hi) => format!("{lo} to {hi}"),
+            ParamBound::Count(lo, hi) => format!("{lo} to {hi}"),
         };
         format!("{text} ({bound})")
     }
@@ -157,10 +157,10 @@ impl ParamSpec {
             return Err(self.declared_as(p, "a value of its declared type (not a double)"));
         };
         match self.bound {
-            Bound::Any => p.f64(self.key, d),
-            Bound::Positive => p.positive(self.key, d),
-            Bound::Within(lo, hi) => p.f64_in(self.key, d, (lo, hi), &self.unit_suffix()),
-            Bound::Count(..) => Err(self.declared_as(p, "a double (declared as a count)")),
+            ParamBound::Any => p.f64(self.key, d),
+            ParamBound::Positive => p.positive(self.key, d),
+            ParamBound::Within(lo, hi) => p.f64_in(self.key, d, (lo, hi), &self.unit_suffix()),
+            ParamBound::Count(..) => Err(self.declared_as(p, "a double (declared as a count)")),
         }
     }
 
@@ -170,7 +170,7 @@ impl ParamSpec {
             return Err(self.declared_as(p, "a value of its declared type (not an integer)"));
         };
         match self.bound {
-            Bound::Count(lo, hi) => p.u64_in(self.key, d, (lo, hi)),
+            ParamBound::Count(lo, hi) => p.u64_in(self.key, d, (lo, hi)),
             _ => p.u64(self.key, d),
         }
     }
@@ -249,7 +249,7 @@ mod tests {
 
     const RATE: ParamSpec = ParamSpec::fixed("rate_hz", ParamDefault::F64(1000.0), "pace")
         .unit("Hz")
-        .bound(Bound::Within(1e-3, 1e6));
+        .bound(ParamBound::Within(1e-3, 1e6));
 
     #[test]
     fn the_descriptor_says_unit_and_bound_and_the_reader_holds_the_bound() {

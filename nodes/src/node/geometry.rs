@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 
 use super::context::{bad_param, MM_PER_M};
-use super::declare::{Bound, ParamDefault, ParamSpec};
+use super::declare::{ParamBound, ParamDefault, ParamSpec};
 use super::effects;
 use super::params::NodeParams;
 use rpkm_core::elastic::Stiffness;
@@ -17,14 +17,14 @@ pub const MODEL: ParamSpec = ParamSpec::live(
     ParamDefault::U64(29),
     "geometric model: 24 or 29 parameters",
 )
-.bound(Bound::Count(24, 29));
+.bound(ParamBound::Count(24, 29));
 /// Parameter `stiffness_factor`.
 pub const STIFFNESS_FACTOR: ParamSpec = ParamSpec::live(
     "stiffness_factor",
     ParamDefault::F64(1.0),
     "scale of the spring model's stiffnesses",
 )
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 /// Parameter `geometry_file`.
 pub const GEOMETRY_FILE: ParamSpec = ParamSpec::fixed(
     "geometry_file",
@@ -112,7 +112,7 @@ impl Geometry {
     /// `model` (24|29), `stiffness_factor`.
     pub fn from_params(p: &NodeParams) -> anyhow::Result<Self> {
         // the check below says "24 or 29", not a range
-        let model_n = MODEL.bound(Bound::Any).u64(p).map_err(bad_param)?;
+        let model_n = MODEL.bound(ParamBound::Any).u64(p).map_err(bad_param)?;
         // try_from, not `as`: 4294967320 must not wrap around to model 24.
         let model = u32::try_from(model_n)
             .ok()

@@ -48,7 +48,7 @@ pub use report::Tally;
 pub use validate::{InputLimits, Reject, RejectKind, Validator};
 
 use super::context::{bad_param, CommonArgs, NodeContext};
-use super::declare::{keys, served, Bound, ParamDefault, ParamSpec};
+use super::declare::{keys, served, ParamBound, ParamDefault, ParamSpec};
 use super::joint_input::{self, JointConfig};
 use super::live;
 use super::params::NodeParams;
@@ -75,7 +75,7 @@ const RATE: ParamSpec = ParamSpec::fixed(
     "pace of a campaign file",
 )
 .unit("Hz")
-.bound(Bound::Within(1e-3, 1e6));
+.bound(ParamBound::Within(1e-3, 1e6));
 /// Parameter `start_delay_s`.
 const START_DELAY: ParamSpec = ParamSpec::fixed(
     "start_delay_s",
@@ -83,7 +83,7 @@ const START_DELAY: ParamSpec = ParamSpec::fixed(
     "wait before the first sample",
 )
 .unit("s")
-.bound(Bound::Within(DURATION_S.0, DURATION_S.1));
+.bound(ParamBound::Within(DURATION_S.0, DURATION_S.1));
 /// Parameter `end_marker`.
 const END_MARKER: ParamSpec = ParamSpec::fixed(
     "end_marker",

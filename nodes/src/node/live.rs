@@ -14,7 +14,7 @@ use rpkm_transport::dds_params::{ParamDecl, ParamServer, ParameterValue};
 use serde_yaml::Value;
 
 use super::context::{Every, NodeContext, COMMON};
-pub use super::declare::{Bound, ParamDefault, ParamSpec};
+pub use super::declare::{ParamBound, ParamDefault, ParamSpec};
 use super::params::NodeParams;
 
 /// How often a node looks for accepted changes: a person or a tool sets them, and the check

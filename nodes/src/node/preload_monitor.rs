@@ -26,7 +26,7 @@ use rpkm_transport::topic;
 use super::context::{
     bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M,
 };
-use super::declare::{keys, served, Bound, ParamDefault, ParamSpec};
+use super::declare::{keys, served, ParamBound, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
 use super::geometry::GEOMETRY;
 use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
@@ -41,41 +41,41 @@ const WARN_PERCENT: ParamSpec = ParamSpec::live(
     "WARN from this |measured - predicted| redundancy current",
 )
 .unit("% of 8,600 N")
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 const ERROR_PERCENT: ParamSpec = ParamSpec::live(
     "error_percent",
     ParamDefault::F64(50.0),
     "ERROR from this deviation (>= warn_percent)",
 )
 .unit("%")
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 const DQ_WARN: ParamSpec = ParamSpec::live(
     "dq_warn_m",
     ParamDefault::F64(50e-6),
     "WARN from this |dq2|, |dq3| of the followers",
 )
 .unit("m")
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 const DQ_ERROR: ParamSpec = ParamSpec::live(
     "dq_error_m",
     ParamDefault::F64(200e-6),
     "ERROR from this |dq2|, |dq3| (>= dq_warn_m)",
 )
 .unit("m")
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 // Bounded (1 to a million) where read: 0 was silently taken as 1.
 const DEBOUNCE: ParamSpec = ParamSpec::live(
     "debounce_samples",
     ParamDefault::U64(3),
     "consecutive samples before a level is taken",
 )
-.bound(Bound::Count(SAMPLE_COUNT.0, SAMPLE_COUNT.1));
+.bound(ParamBound::Count(SAMPLE_COUNT.0, SAMPLE_COUNT.1));
 const STATUS_EVERY: ParamSpec = ParamSpec::live(
     "status_every",
     ParamDefault::U64(1),
     "PreloadStatus every this many samples (and at every level change)",
 )
-.bound(Bound::Count(SAMPLE_COUNT.0, SAMPLE_COUNT.1));
+.bound(ParamBound::Count(SAMPLE_COUNT.0, SAMPLE_COUNT.1));
 
 /// The node's own parameters (thresholds live, the busy poll needs a restart).
 pub const PARAMS: [ParamSpec; 7] = [

@@ -20,7 +20,7 @@ use rpkm_msgs::{
 use rpkm_transport::{topic, Backend, Publisher};
 
 use super::context::{bad_param, NodeContext};
-use super::declare::{Bound, ParamDefault, ParamSpec};
+use super::declare::{ParamBound, ParamDefault, ParamSpec};
 use crate::error::bad_input;
 
 /// Parameter `views` (tcp_estimator and ingest; each node says what its views are). Its
@@ -36,7 +36,7 @@ pub const VIEW_EVERY_PARAM: ParamSpec = ParamSpec::live(
     ParamDefault::U64(VIEW_EVERY),
     "publish the views of every N-th sample",
 )
-.bound(Bound::Count(VIEW_EVERY_RANGE.0, VIEW_EVERY_RANGE.1));
+.bound(ParamBound::Count(VIEW_EVERY_RANGE.0, VIEW_EVERY_RANGE.1));
 
 /// The fixed frame of the machine: the spec's absolute frame (y along the guides, x across,
 /// z out of the plane), origin as the spec places it.

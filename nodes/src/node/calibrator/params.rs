@@ -4,7 +4,7 @@
 use super::job::CalibratorOptions;
 use super::start_covariance::start_covariance;
 use crate::node::context::bad_param;
-use crate::node::declare::{keys, Bound, ParamDefault, ParamSpec};
+use crate::node::declare::{keys, ParamBound, ParamDefault, ParamSpec};
 use crate::node::geometry::{self, Geometry};
 use crate::node::online_tracker::OnlineSettings;
 use crate::node::params::{self, NodeParams, BUFFER_LEN, DURATION_S, MEASUREMENT_COUNT};
@@ -25,14 +25,14 @@ const CALIBRATE_EVERY: ParamSpec = ParamSpec::live(
     ParamDefault::U64(0),
     "calibrate after N measurements, 0 for at the end marker only",
 )
-.bound(Bound::Count(MEASUREMENT_COUNT.0, MEASUREMENT_COUNT.1));
+.bound(ParamBound::Count(MEASUREMENT_COUNT.0, MEASUREMENT_COUNT.1));
 const IDLE_END: ParamSpec = ParamSpec::live(
     "idle_end_s",
     ParamDefault::F64(0.0),
     "end a campaign after this long without a measurement (0: never)",
 )
 .unit("s")
-.bound(Bound::Within(DURATION_S.0, DURATION_S.1));
+.bound(ParamBound::Within(DURATION_S.0, DURATION_S.1));
 const VALIDATION_PREFIX: ParamSpec = ParamSpec::live(
     "validation_prefix",
     ParamDefault::Str("val"),
@@ -48,14 +48,14 @@ const MAX_CONDITION: ParamSpec = ParamSpec::live(
     ParamDefault::F64(100.0),
     "condition-number limit of selection auto",
 )
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 const OUTLIER_SIGMA: ParamSpec = ParamSpec::live(
     "outlier_sigma",
     ParamDefault::F64(0.0),
     "outlier threshold (0: keep all)",
 )
 .unit("σ")
-.bound(Bound::Within(
+.bound(ParamBound::Within(
     params::OUTLIER_SIGMA.0,
     params::OUTLIER_SIGMA.1,
 ));
@@ -70,7 +70,7 @@ pub(super) const STATE_BUFFER: ParamSpec = ParamSpec::fixed(
     ParamDefault::U64(4096),
     "drive states kept for pairing with measurements",
 )
-.bound(Bound::Count(BUFFER_LEN.0, BUFFER_LEN.1));
+.bound(ParamBound::Count(BUFFER_LEN.0, BUFFER_LEN.1));
 
 // The online tracker's (read at start: the tracker's thread is set up once); its noise
 // levels are the core's defaults (the calibration's stated ones: a test holds them equal).
@@ -84,34 +84,34 @@ const ONLINE_DECIMATION: ParamSpec = ParamSpec::fixed(
     ParamDefault::U64(100),
     "online tracker: every N-th drive state",
 )
-.bound(Bound::Count(1, 1_000_000));
+.bound(ParamBound::Count(1, 1_000_000));
 const ONLINE_PUBLISH_SIGMA: ParamSpec = ParamSpec::fixed(
     "online_publish_sigma",
     ParamDefault::F64(1.0),
     "online tracker: publish when a parameter moved by this many sigma",
 )
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 const ONLINE_DRIFT_WARN: ParamSpec = ParamSpec::fixed(
     "online_drift_warn_um",
     ParamDefault::F64(10.0),
     "online tracker: WARN from this drift",
 )
 .unit("µm")
-.bound(Bound::Within(0.1, 10_000.0));
+.bound(ParamBound::Within(0.1, 10_000.0));
 pub(super) const ONLINE_FORCE_SIGMA: ParamSpec = ParamSpec::fixed(
     "online_force_sigma_n",
     ParamDefault::F64(5.0),
     "online tracker: drive force noise",
 )
 .unit("N")
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 pub(super) const ONLINE_ENCODER_SIGMA: ParamSpec = ParamSpec::fixed(
     "online_encoder_sigma_um",
     ParamDefault::F64(0.2),
     "online tracker: drive encoder noise (the forces move by the rods' stiffness)",
 )
 .unit("µm")
-.bound(Bound::Within(0.0, 100.0));
+.bound(ParamBound::Within(0.0, 100.0));
 
 // The machine's history (read at start: the store is opened once).
 pub(super) const HISTORY: ParamSpec = ParamSpec::fixed(

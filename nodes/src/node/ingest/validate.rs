@@ -3,7 +3,7 @@
 
 use rpkm_msgs::{ActuatorState, TcpMeasurement, Time};
 
-use crate::node::declare::{Bound, ParamDefault, ParamSpec};
+use crate::node::declare::{ParamBound, ParamDefault, ParamSpec};
 use crate::node::params::{NodeParams, ParamError};
 
 /// Why a sample was rejected.
@@ -84,7 +84,7 @@ pub const FORCE_MAX: ParamSpec = ParamSpec::live(
     "largest accepted |drive force|",
 )
 .unit("N")
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 /// Parameter `measurement_max_m`.
 pub const MEASUREMENT_MAX: ParamSpec = ParamSpec::live(
     "measurement_max_m",
@@ -92,7 +92,7 @@ pub const MEASUREMENT_MAX: ParamSpec = ParamSpec::live(
     "largest accepted |x|, |y|, |r| of a measurement",
 )
 .unit("m")
-.bound(Bound::Positive);
+.bound(ParamBound::Positive);
 
 impl Default for InputLimits {
     fn default() -> Self {

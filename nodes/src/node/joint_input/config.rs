@@ -8,7 +8,7 @@ use rpkm_core::campaign::{follower_text, parse_follower};
 use rpkm_msgs::actuator_state::MAX_COVARIATES;
 use rpkm_transport::names::absolute_name_error;
 
-use crate::node::declare::{Bound, ParamDefault as Value, ParamSpec};
+use crate::node::declare::{ParamBound, ParamDefault as Value, ParamSpec};
 use crate::node::params::{NodeParams, ParamError};
 
 /// Default of `joint_states_topic`: the joint_state_broadcaster's.
@@ -54,7 +54,7 @@ const TEMPERATURE_TIMEOUT: ParamSpec = ParamSpec::fixed(
     "a thermometer silent this long is not measured",
 )
 .unit("s")
-.bound(Bound::Within(1e-3, 3600.0));
+.bound(ParamBound::Within(1e-3, 3600.0));
 
 /// The JointState input's parameters: `followers` live (from the next state on), the rest
 /// need a restart (`temperatures.` is a group: covariate name → topic).
