@@ -32,7 +32,7 @@ pub const DRIFT_P_VALUE: f64 = 0.01;
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct DriftComponent {
     /// `x`, `y` or `r`.
-    pub coordinate: &'static str,
+    pub coordinate: obs::TcpDirection,
     /// The reading less the model's move from the zero, mm: how far the instrument drifted.
     pub value_mm: f64,
     /// Its σ from the noise model (the return's reading, the zero's, the encoders'), mm.
@@ -158,9 +158,9 @@ fn judge(
         .zip(&values)
         .map(|(e, &v)| {
             // a single coordinate's variance is the first (reading_covariance)
-            let k = usize::from(e.coordinate == "y" && values.len() == 2);
+            let k = usize::from(e.direction == obs::TcpDirection::Y && values.len() == 2);
             DriftComponent {
-                coordinate: e.coordinate,
+                coordinate: e.direction,
                 value_mm: v,
                 sigma_mm: cov[(k, k)].sqrt(),
             }

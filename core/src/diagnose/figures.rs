@@ -27,10 +27,10 @@ pub(crate) fn error_vectors(
     let mut xy: BTreeMap<usize, [Option<f64>; 2]> = BTreeMap::new();
     for e in &errs {
         let slot = xy.entry(e.pose).or_default();
-        match e.coordinate {
-            "x" => slot[0] = Some(e.value * 1e3),
-            "y" => slot[1] = Some(e.value * 1e3),
-            _ => {}
+        match e.direction {
+            obs::TcpDirection::X => slot[0] = Some(e.value * 1e3),
+            obs::TcpDirection::Y => slot[1] = Some(e.value * 1e3),
+            obs::TcpDirection::R => {}
         }
     }
     let tcp = sparse::nominal_tcp(campaign);

@@ -482,7 +482,7 @@ fn tcp_errors(val: &Campaign, p: &Params, model: Model) -> anyhow::Result<Vec<f6
     Ok(obs::tcp_errors(val, p, model)
         .map_err(|e| bad_input(format!("{e}")))?
         .iter()
-        .map(|e| e.2)
+        .map(|e| e.value)
         .collect())
 }
 

@@ -138,9 +138,50 @@ pub struct IngestNodeArgs {
     pub source: Option<String>,
 }
 
+/// Where the node's samples come from (option `--source`, else parameter `source`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum IngestSource {
+    /// `dds`: a controller's ActuatorState and TcpMeasurement over DDS.
+    Dds,
+    /// `joint_states`: ros2_control's JointState and the cell's thermometers, on DDS.
+    JointStates,
+    /// `stdin` (or `-`): a CSV stream in the campaign format.
+    Stdin,
+    /// Anything else: the path of a campaign CSV file, streamed at `rate_hz`.
+    File(String),
+}
+
+impl IngestSource {
+    /// The source a word names.
+    pub fn parse(text: &str) -> Self {
+        match text {
+            "dds" => Self::Dds,
+            "joint_states" => Self::JointStates,
+            "stdin" | "-" => Self::Stdin,
+            path => Self::File(path.to_owned()),
+        }
+    }
+
+    /// Whether the source is read over DDS (the node needs a DDS participant for it).
+    pub fn is_dds(&self) -> bool {
+        matches!(self, Self::Dds | Self::JointStates)
+    }
+}
+
+impl std::fmt::Display for IngestSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Dds => "dds",
+            Self::JointStates => "joint_states",
+            Self::Stdin => "stdin",
+            Self::File(path) => path,
+        })
+    }
+}
+
 /// What the node reads from its parameters besides the common ones.
 struct Settings {
-    source: String,
+    source: IngestSource,
     limits: InputLimits,
     rate_hz: f64,
     start_delay: Duration,
@@ -149,9 +190,6 @@ struct Settings {
     /// The JointState input's settings (source `joint_states`).
     joints: Option<JointConfig>,
 }
-
-/// The source that reads ros2_control's JointState.
-const JOINT_STATES: &str = "joint_states";
 
 /// Every parameter key the node declares: its own and the JointState input's (read with
 /// source `joint_states` only, accepted with any).
@@ -173,11 +211,11 @@ fn open(args: &IngestNodeArgs) -> anyhow::Result<(NodeContext, Settings)> {
         .identity("ingest")?
         .params()
         .map_err(bad_param)?;
-    let source = match &args.source {
+    let source = IngestSource::parse(&match &args.source {
         Some(s) => s.clone(),
         None => SOURCE.string(&pre).map_err(bad_param)?,
-    };
-    let extra = matches!(source.as_str(), "dds" | JOINT_STATES).then_some(Backend::Dds);
+    });
+    let extra = source.is_dds().then_some(Backend::Dds);
     let ctx = NodeContext::open("ingest", &args.common, &declared(), extra)?;
     let p = &ctx.params;
     let limits = InputLimits::from_params(p).map_err(bad_param)?;
@@ -185,7 +223,7 @@ fn open(args: &IngestNodeArgs) -> anyhow::Result<(NodeContext, Settings)> {
     let start_delay = START_DELAY.f64(p).map_err(bad_param)?;
     // checked whatever the source: a bad value is bad before the cell switches to it
     let joints = JointConfig::from_params(p).map_err(bad_param)?;
-    let joints = (source == JOINT_STATES).then_some(joints);
+    let joints = (source == IngestSource::JointStates).then_some(joints);
     let settings = Settings {
         source,
         limits,
@@ -255,30 +293,34 @@ pub fn run(args: &IngestNodeArgs) -> anyhow::Result<()> {
     let (mut ctx, s) = open(args)?;
     // The source in use (the option may have chosen it) is the one the services report.
     ctx.params
-        .set_from_service("source", serde_yaml::Value::String(s.source.clone()));
+        .set_from_service(SOURCE.key, serde_yaml::Value::String(s.source.to_string()));
     let views = views(&ctx, &s)?;
     let mut service_specs = specs(views.is_some());
     if s.joints.is_some() {
         service_specs.extend(served(&[&joint_input::PARAMS]));
     }
     let live = live::LiveParams::start(&ctx, &service_specs, |p| configure(p).map(|_| ()))?;
-    let mut out = Output::open((&ctx, &args.common), s.limits, &s.source, (live, views))?;
+    let source = s.source.to_string();
+    let mut out = Output::open((&ctx, &args.common), s.limits, &source, (live, views))?;
     ctx.log(format!(
         "source {}, publishing on {:?}",
         s.source, ctx.output
     ));
     std::thread::sleep(s.start_delay);
-    let ended = match (s.source.as_str(), s.joints.clone()) {
+    let ended = match (&s.source, s.joints.clone()) {
         (_, Some(joints)) => joint_states::run(&ctx, &mut out, joints).map(|()| false)?,
-        ("dds", _) => dds::run(&ctx, &mut out).map(|()| false)?,
-        ("stdin" | "-", _) => csv::stream(
+        // joint_states always comes with its settings (the arm above)
+        (IngestSource::Dds | IngestSource::JointStates, _) => {
+            dds::run(&ctx, &mut out).map(|()| false)?
+        }
+        (IngestSource::Stdin, _) => csv::stream(
             &mut csv::Stdin::spawn(&ctx.name),
             "stdin",
             None,
             &mut out,
             None,
         )?,
-        (path, _) => file(&mut out, path, s.rate_hz)?,
+        (IngestSource::File(path), _) => file(&mut out, path, s.rate_hz)?,
     };
     if ended {
         ctx.log(format_args!(

@@ -1,7 +1,7 @@
 //! The node's parameters: keys, ROS descriptors and the typed settings, the online tracker's
 //! among them.
 
-use super::job::CalibratorOptions;
+use super::job::{CalibratorOptions, SelectionRule};
 use super::start_covariance::start_covariance;
 use crate::node::context::bad_param;
 use crate::node::declare::{keys, ParamBound, ParamDefault, ParamSpec};
@@ -172,12 +172,10 @@ pub(super) struct Settings {
 /// The calibrator's settings of a parameter set (at start-up and for every set on the
 /// parameter services, by the same bounded readers).
 pub(super) fn configure(p: &NodeParams) -> anyhow::Result<Settings> {
-    let selection = SELECTION.string(p).map_err(bad_param)?;
-    if !matches!(selection.as_str(), "map" | "auto") {
-        return Err(crate::error::bad_input(format!(
-            "selection: expected map or auto, found {selection}"
-        )));
-    }
+    let text = SELECTION.string(p).map_err(bad_param)?;
+    let selection = SelectionRule::parse(&text).ok_or_else(|| {
+        crate::error::bad_input(format!("selection: expected map or auto, found {text}"))
+    })?;
     let start = Geometry::from_params(p)?;
     Ok(Settings {
         options: CalibratorOptions {

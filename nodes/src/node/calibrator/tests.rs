@@ -50,7 +50,7 @@ fn parameters_carry_the_written_effects_parameters() -> anyhow::Result<()> {
     let o = CalibratorOptions {
         start: nominal_start(),
         validation_prefix: "val".into(),
-        selection: "map".into(),
+        selection: SelectionRule::Map,
         max_condition: 100.0,
         outlier_sigma: 0.0,
         noise: rpkm_core::noise::NoiseModel::default(),
@@ -89,7 +89,7 @@ fn a_goal_reads_the_collected_campaign_and_sets_its_options() -> anyhow::Result<
     let node = CalibratorOptions {
         start: nominal_start(),
         validation_prefix: "val".into(),
-        selection: "map".into(),
+        selection: SelectionRule::Map,
         max_condition: 100.0,
         outlier_sigma: 0.0,
         noise: rpkm_core::noise::NoiseModel::default(),
@@ -104,13 +104,13 @@ fn a_goal_reads_the_collected_campaign_and_sets_its_options() -> anyhow::Result<
     let noise = rpkm_core::noise::NoiseModel::default;
     let o = goal_options(&node, &goal("", CalibrateGoal::NOISE_NODE), noise())?;
     assert_eq!(
-        (o.selection.as_str(), o.weighting),
-        ("map", calib::Noise::ESTIMATE)
+        (o.selection, o.weighting),
+        (SelectionRule::Map, calib::Noise::ESTIMATE)
     );
     let o = goal_options(&node, &goal("auto", CalibrateGoal::NOISE_STATED), noise())?;
     assert_eq!(
-        (o.selection.as_str(), o.weighting),
-        ("auto", calib::Noise::Stated)
+        (o.selection, o.weighting),
+        (SelectionRule::Auto, calib::Noise::Stated)
     );
     let bad = goal_options(&node, &goal("all", 0), noise()).map(|_| ());
     let e = bad.expect_err("selection all");
@@ -165,7 +165,7 @@ fn messages_rebuild_the_campaign_and_calibrate_like_the_core() -> anyhow::Result
     let o = CalibratorOptions {
         start: nominal_start(),
         validation_prefix: "val".into(),
-        selection: "map".into(),
+        selection: SelectionRule::Map,
         max_condition: 100.0,
         outlier_sigma: 0.0,
         noise: stated,
