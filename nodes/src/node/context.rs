@@ -14,8 +14,6 @@ use rpkm_transport::{
     Backend, IpcMessage, Publisher, Subscriber, Topic, Transport, TransportConfig,
 };
 
-pub use crate::units::MM_PER_M;
-
 /// A backend on the command line.
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BackendArg {

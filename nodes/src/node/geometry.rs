@@ -3,10 +3,11 @@
 
 use std::fmt::Write as _;
 
-use super::context::{bad_param, MM_PER_M};
+use super::context::bad_param;
 use super::declare::{ParamBound, ParamDefault, ParamSpec};
 use super::effects;
 use super::params::NodeParams;
+use crate::units::MM_PER_M;
 use rpkm_core::elastic::Stiffness;
 use rpkm_core::params::{self as core_params, Model, Params, NAMES};
 use rpkm_msgs::Parameters;

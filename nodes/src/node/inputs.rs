@@ -12,7 +12,7 @@ use rpkm_core::params::Params;
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, Parameters};
 use rpkm_transport::{topic, Backend, Subscriber};
 
-use super::context::{bad_param, CommonArgs, Every, Idle, NodeContext, MM_PER_M};
+use super::context::{bad_param, CommonArgs, Every, Idle, NodeContext};
 use super::declare::{self, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
 use super::joint_input::{self, JointConfig, JointInput, RefusalLevel};
@@ -20,6 +20,7 @@ use super::live::LiveParams;
 use super::params::NodeParams;
 use crate::campaign_bag::seconds_from_stamp;
 use crate::error::bad_input;
+use crate::units::mm_from_m;
 
 /// Parameter `source` of a servo-rate node: ingest's ActuatorState (default).
 const ACTUATOR_STATE: &str = "actuator_state";
@@ -173,7 +174,7 @@ impl StreamMotion {
     /// `s` under the calibrated effects of `g` (its own parameters and the encoders without
     /// any).
     pub fn model_inputs(&mut self, g: &mut Geometry, s: &ActuatorState) -> (Params, [f64; 4]) {
-        let q = s.position.map(|p| p * MM_PER_M);
+        let q = s.position.map(mm_from_m);
         let t = seconds_from_stamp(s.stamp);
         let motion = self.motion.next(q, t);
         g.effects.apply(

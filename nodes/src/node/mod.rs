@@ -1,7 +1,9 @@
 //! The ROS 2 node set, one subcommand each: `rpkm node ingest|tcp_estimator|calibrator|
 //! preload_monitor`. Thin: topics, parameters, validation and bookkeeping here; every model
 //! evaluation is a call into `rpkm_core`. Units: SI on topics and in parameter YAML (m, rad,
-//! N, s), mm inside the core; the conversion happens in [`Geometry`] and at each message.
+//! N, s), mm inside the core; the Parameters message converts in [`geometry`], every other
+//! message with the named conversions of [`crate::units`] (`mm_from_m`, `m_from_mm`, ...).
+//! Each node's parameters are declared once ([`declare`]).
 //!
 //! Every node reads ROS 2 parameter YAML ([`params`]), publishes on the configured backend
 //! (`--backend ipc|dds|both`) and subscribes on one (`--input-backend`), stops cleanly on
@@ -30,8 +32,7 @@ pub mod views;
 
 pub use context::{
     bad_param, diagnostic_array, log_line, node_name_error, severity, status, BackendArg,
-    CommonArgs, Every, Identity, Idle, NodeContext, NodeSetup, RosArgs, COMMON, MM_PER_M,
-    NODE_NAME_MAX,
+    CommonArgs, Every, Identity, Idle, NodeContext, NodeSetup, RosArgs, COMMON, NODE_NAME_MAX,
 };
 pub use geometry::{is_geometry_key, parameters_msg, Geometry, ParametersMsgError, GEOMETRY};
 pub use params::{NodeParams, ParamError};

@@ -23,9 +23,7 @@ use rpkm_core::geometry::rgm;
 use rpkm_msgs::{ActuatorState, DiagnosticArray, DiagnosticStatus, PreloadLevel, PreloadStatus};
 use rpkm_transport::topic;
 
-use super::context::{
-    bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M,
-};
+use super::context::{bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext};
 use super::declare::{keys, served, ParamBound, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
 use super::geometry::GEOMETRY;
@@ -33,6 +31,7 @@ use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
 use super::params::NodeParams;
 use super::params::SAMPLE_COUNT;
 use super::realtime::BUSY_POLL;
+use crate::units::{m_from_mm, mm_from_m, seconds_from_ms};
 
 // > 0 without an upper bound: no descriptor range, the node's check says it.
 const WARN_PERCENT: ParamSpec = ParamSpec::live(
@@ -264,8 +263,8 @@ impl Monitor {
         let mut sample_level = level_by(worst, t.warn_percent, t.error_percent);
         if s.follower[1] && s.follower[2] {
             if let Ok([q2, q3]) = rgm(&params, g.model, q[0], q[3]) {
-                st.dq2 = (q2 - q[1]) / MM_PER_M;
-                st.dq3 = (q3 - q[2]) / MM_PER_M;
+                st.dq2 = m_from_mm(q2 - q[1]);
+                st.dq3 = m_from_mm(q3 - q[2]);
                 let dq = st.dq2.abs().max(st.dq3.abs());
                 sample_level = sample_level.max(level_by(dq, t.dq_warn_m, t.dq_error_m));
             }
@@ -354,9 +353,9 @@ impl Monitor {
             format!(
                 "{name}: follower q{dq_drive} is {:+.3} mm off the rigid model (thresholds \
                  {} / {} mm); {force}",
-                dq * MM_PER_M,
-                t.dq_warn_m * MM_PER_M,
-                t.dq_error_m * MM_PER_M
+                mm_from_m(dq),
+                mm_from_m(t.dq_warn_m),
+                mm_from_m(t.dq_error_m)
             )
         } else {
             format!("{name}: {force}")
@@ -542,7 +541,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let mut monitor = Monitor::new(geometry, thresholds);
     // As the estimator: sleep until the publisher's wake-up, back at least every 20 ms.
     let mut idle = Idle::new(
-        Duration::from_secs_f64(busy * 1e-3),
+        Duration::from_secs_f64(seconds_from_ms(busy)),
         Duration::from_millis(20),
     );
     let mut report_due = Every::new(ctx.diagnostics_period()?);
@@ -628,7 +627,7 @@ mod tests {
         s[2] += dq3;
         let eq = fegm(&p, &Stiffness::default(), s, ALL_ACTIVE)?;
         Ok(ActuatorState {
-            position: q.map(|v| v / MM_PER_M),
+            position: q.map(m_from_mm),
             force: eq.drive_force,
             ..Default::default()
         })
@@ -663,7 +662,7 @@ mod tests {
         let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
         let mut m = monitor(1);
         let s = ActuatorState {
-            position: [q[0], q[1] + 0.1, q[2] - 0.3, q[3]].map(|v| v / MM_PER_M),
+            position: [q[0], q[1] + 0.1, q[2] - 0.3, q[3]].map(m_from_mm),
             follower: [false, true, true, false],
             ..Default::default()
         };
@@ -718,7 +717,7 @@ mod tests {
         let p = Params::nominal();
         let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
         let s = ActuatorState {
-            position: q.map(|v| v / MM_PER_M),
+            position: q.map(m_from_mm),
             ..Default::default()
         };
         // the first state of the stream: carrier 4's last move counts as +1

@@ -28,7 +28,7 @@ use rpkm_core::params::{Model, Params, RODS};
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
-use super::context::{diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M};
+use super::context::{diagnostic_array, status, CommonArgs, Every, Idle, NodeContext};
 use super::declare::{keys, served, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
 use super::geometry::GEOMETRY;
@@ -37,6 +37,7 @@ use super::lifecycle::Lifecycle;
 use super::params::NodeParams;
 use super::realtime::{BUSY_POLL, PRIORITY};
 use super::views::{self, TcpViews};
+use crate::units::{m_from_mm, seconds_from_ms};
 use rpkm_transport::Backend;
 
 /// Parameter `views` of the node.
@@ -174,8 +175,8 @@ impl Estimator {
                 c.consecutive_failures = 0;
                 let eq = s.eq;
                 self.previous = Some(s);
-                est.x = eq.x / MM_PER_M;
-                est.y = eq.y / MM_PER_M;
+                est.x = m_from_mm(eq.x);
+                est.y = m_from_mm(eq.y);
                 est.psi = wrap_angle(eq.psi);
                 est.rod_forces = eq.rod_force;
                 est.drive_forces = eq.drive_force;
@@ -215,8 +216,8 @@ impl Estimator {
             self.counts.implausible += 1;
         }
         self.counts.rigid_fallbacks += 1;
-        est.x = rigid.x() / MM_PER_M;
-        est.y = rigid.y() / MM_PER_M;
+        est.x = m_from_mm(rigid.x());
+        est.y = m_from_mm(rigid.y());
         est.psi = wrap_angle(rigid.psi());
         est.converged = false;
         est.outcome = TcpEstimate::OUTCOME_RIGID_FALLBACK;
@@ -327,7 +328,7 @@ fn loop_residuals(
     for (slot, rod) in out.iter_mut().zip(&RODS[..rods]) {
         let a = platform_joint(p, rod, x, y, psi);
         let b = carrier_joint(p, rod, q[rod.actuator]);
-        *slot = ((a - b).norm() - p[rod.l]) / MM_PER_M;
+        *slot = m_from_mm((a - b).norm() - p[rod.l]);
     }
     out
 }
@@ -440,7 +441,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     // Between samples the node sleeps until the publisher's wake-up; the 20 ms bound keeps
     // the parameter checks and reports going when no sample comes.
     let mut idle = Idle::new(
-        Duration::from_secs_f64(busy * 1e-3),
+        Duration::from_secs_f64(seconds_from_ms(busy)),
         Duration::from_millis(20),
     );
     let mut report = Every::new(ctx.diagnostics_period()?);
@@ -497,6 +498,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
 )]
 mod tests {
     use super::*;
+    use crate::units::mm_from_m;
     use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, FOLLOWERS_23};
     use rpkm_core::geometry::{fgm, igm};
     use rpkm_core::params::Params;
@@ -514,7 +516,7 @@ mod tests {
     fn state(q_mm: [f64; 4], seq: u64) -> ActuatorState {
         ActuatorState {
             seq,
-            position: q_mm.map(|q| q / MM_PER_M),
+            position: q_mm.map(m_from_mm),
             ..Default::default()
         }
     }
@@ -529,7 +531,7 @@ mod tests {
         let truth = fegm(
             &p,
             &Stiffness::default(),
-            q.map(|v| v / MM_PER_M * MM_PER_M),
+            q.map(|v| mm_from_m(m_from_mm(v))),
             ALL_ACTIVE,
         )?;
         assert_eq!(first.seq, 7);
@@ -538,14 +540,14 @@ mod tests {
             (first.outcome, first.reason),
             (TcpEstimate::OUTCOME_OK, TcpEstimate::REASON_NONE)
         );
-        assert!((first.x - truth.x / MM_PER_M).abs() < 1e-12);
-        assert!((first.y - truth.y / MM_PER_M).abs() < 1e-12);
+        assert!((first.x - m_from_mm(truth.x)).abs() < 1e-12);
+        assert!((first.y - m_from_mm(truth.y)).abs() < 1e-12);
         for i in 0..4 {
             assert!((first.drive_forces[i] - truth.drive_force[i]).abs() < 1e-6);
         }
         // rod elongation = force / stiffness
         for i in 0..5 {
-            let expect = truth.rod_force[i] / Stiffness::default().rod[i] / MM_PER_M;
+            let expect = m_from_mm(truth.rod_force[i] / Stiffness::default().rod[i]);
             assert!(
                 (first.loop_residuals[i] - expect).abs() < 1e-12,
                 "rod {}",
@@ -569,7 +571,7 @@ mod tests {
     /// Distance of an estimate from the rigid model of its own encoders, mm.
     fn off_rigid(e: &TcpEstimate, q_mm: [f64; 4]) -> Result<f64, Box<dyn std::error::Error>> {
         let r = fgm(&Params::nominal(), Model::M29, q_mm[0], q_mm[3])?;
-        Ok((e.x * MM_PER_M - r.x()).hypot(e.y * MM_PER_M - r.y()))
+        Ok((mm_from_m(e.x) - r.x()).hypot(mm_from_m(e.y) - r.y()))
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! The diagnosis of the calibrated model and its Diagnosis message.
 
+use crate::units::m_from_um;
 use rpkm_core::calib::{self, Calibration};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::Effect;
@@ -57,7 +58,7 @@ pub(super) fn diagnose_until(
 
 /// A diagnosis as the Diagnosis message.
 pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::ModelDiagnosis) -> Diagnosis {
-    let m = |um: Option<f64>| um.map_or(f64::NAN, |v| v * 1e-6);
+    let m = |um: Option<f64>| um.map_or(f64::NAN, m_from_um);
     let held = d.held_out.as_ref();
     Diagnosis {
         verdict_kind: serde_json::to_value(d.verdict_kind)
@@ -82,8 +83,8 @@ pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::ModelDiagnosis) -> Diagnosi
                 val_rms_after: m(c.val_rms_after_um),
             })
             .collect(),
-        baseline_cal_rms: d.baseline.cal_rms_um * 1e-6,
+        baseline_cal_rms: m_from_um(d.baseline.cal_rms_um),
         baseline_val_rms: m(d.baseline.val_rms_um),
-        noise_floor: d.baseline.noise_floor_um * 1e-6,
+        noise_floor: m_from_um(d.baseline.noise_floor_um),
     }
 }

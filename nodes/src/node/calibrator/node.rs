@@ -245,7 +245,7 @@ impl Calibrator {
                         self.calibrations,
                         o.parameters.measurement_count,
                         n.saturating_sub(u64::from(o.parameters.measurement_count)),
-                        o.parameters.cal_rms * 1e6,
+                        crate::units::um_from_m(o.parameters.cal_rms),
                         crate::words::condition_short(o.parameters.condition_number)
                     ),
                 )

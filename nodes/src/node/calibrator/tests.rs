@@ -5,8 +5,8 @@ use super::job::split;
 use super::node::Calibrator;
 use super::*;
 use crate::campaign_bag::pose_messages;
-use crate::node::context::MM_PER_M;
 use crate::node::geometry::Geometry;
+use crate::units::{m_from_mm, mm_from_m};
 use rpkm_core::calib::online::TieSoFar;
 use rpkm_core::calib::{self, Options};
 use rpkm_core::params::{Model, Params};
@@ -60,7 +60,7 @@ fn parameters_carry_the_written_effects_parameters() -> anyhow::Result<()> {
     let msg = calibrate_campaign(&c, &o)?.parameters;
     assert_eq!(msg.active_effects, ["lost_motion_q4"]);
     assert_eq!(msg.effect_parameter_names, ["lost_motion_q4.b"]);
-    let b = msg.effect_parameter_values[0] * MM_PER_M;
+    let b = mm_from_m(msg.effect_parameter_values[0]);
     eprintln!("published b = {b} mm (truth {b_true})");
     assert!((b - b_true).abs() < 1e-4, "b = {b} mm");
     Ok(())
@@ -188,12 +188,11 @@ fn messages_rebuild_the_campaign_and_calibrate_like_the_core() -> anyhow::Result
         let i = rpkm_core::params::index_of(name)
             .ok_or("name")
             .map_err(anyhow::Error::msg)?;
-        let expect = direct.params[i]
-            / if rpkm_core::params::unit(i) == rpkm_core::params::Unit::Mm {
-                MM_PER_M
-            } else {
-                1.0
-            };
+        let expect = if rpkm_core::params::unit(i) == rpkm_core::params::Unit::Mm {
+            m_from_mm(direct.params[i])
+        } else {
+            direct.params[i]
+        };
         assert!((v - expect).abs() < 1e-9, "{name}: {v} vs {expect}");
     }
     assert_eq!(out.parameters.model, 29);
