@@ -211,11 +211,18 @@ fn demo_names_the_effect_hidden_in_its_embedded_data() {
     assert!(dir.join("report.html").exists());
 }
 
-/// One machine of `rpkm bench discovery` (seed 1): its loop's outcome, as the bench's JSON.
+/// One machine of `rpkm bench discovery` (seed 1 unless given): its loop's outcome, as the
+/// bench's JSON.
 fn bench_machine(i: usize) -> serde_json::Value {
+    bench_machine_of(1, i)
+}
+
+fn bench_machine_of(seed: u64, i: usize) -> serde_json::Value {
     let out = run_ok(
         rpkm()
-            .args(["bench", "discovery", "--seed", "1", "--only"])
+            .args(["bench", "discovery", "--seed"])
+            .arg(seed.to_string())
+            .arg("--only")
             .arg(i.to_string()),
     );
     let at = out
@@ -273,4 +280,37 @@ fn no_step_of_the_loop_raises_the_held_out_error() {
         let over_floor = o["held_out_over_floor"].as_f64().expect("ratio");
         assert!((0.9..1.1).contains(&over_floor), "machine {machine}: {o}");
     }
+}
+
+/// The names a bench machine's loop named, sorted.
+fn named_of(o: &serde_json::Value) -> Vec<String> {
+    let mut named: Vec<String> = o["named"]
+        .as_array()
+        .expect("named")
+        .iter()
+        .map(|v| v.as_str().expect("name").to_owned())
+        .collect();
+    named.sort_unstable();
+    named
+}
+
+/// Two machines of the benchmark whose models were once chosen wrong as a whole. Machine 124
+/// of seed 1 hides a rod of another stiffness than the others, all drives active: the preload's
+/// pair with `encoder_scale` was named, the guides' scale difference absorbing part of the
+/// rod's force-following residual that a single dictionary term explains better (the rod is
+/// not in the library: `preload_elastic` alone, and the loop says structure is left).
+/// Machine 171 of seed 2 hides thermal expansion of the rods and scales (frame 0) with the
+/// preload: the preload with thermal's rods and scales was never tried together, and the
+/// pair against thermal alone was a tie on the held-out tracker where the setups left out
+/// decide; now the pair is named and nothing is missing.
+#[test]
+fn the_model_is_chosen_whole_where_parts_absorb_each_other() {
+    let soft = bench_machine_of(1, 124);
+    assert_eq!(named_of(&soft), ["preload_elastic"], "{soft}");
+    assert_eq!(soft["final_verdict"], "unexplained_structure", "{soft}");
+    let pair = bench_machine_of(2, 171);
+    assert_eq!(named_of(&pair), ["preload_elastic", "thermal"], "{pair}");
+    assert_eq!(pair["final_verdict"], "nothing_missing", "{pair}");
+    let over_floor = pair["held_out_over_floor"].as_f64().expect("ratio");
+    assert!((0.9..1.1).contains(&over_floor), "{pair}");
 }

@@ -5,8 +5,9 @@
 //! whether one model beats another it holds.
 
 use super::cross;
-use super::gain::{wald_p, Gain, PRACTICAL_SIZE};
+use super::gain::{wald_beyond, wald_p, Gain, PRACTICAL_SIZE};
 use super::held_out::Validation;
+use super::sparse;
 use super::trials::{finish_with, warm_theta, SCREEN_P};
 use super::types::RELEVANT_FRACTION;
 use super::types::{FitError, Fitted, Judged, Outcome, Prediction};
@@ -57,6 +58,11 @@ pub(crate) struct Entry<'a> {
     pub(super) relevant: bool,
     /// Index of the single candidate this entry is (None: a part subset or a pair).
     pub(super) candidate: Option<usize>,
+    /// The dictionary's test of its calibration residual, made once when first needed.
+    structure: std::cell::OnceCell<sparse::Structure>,
+    /// Left-out rows made for a comparison with another model where `left_out` is None
+    /// (the held-out data decided against the current model, not between the two).
+    left_out_later: std::cell::OnceCell<Option<Vec<f64>>>,
 }
 
 impl Entry<'_> {
@@ -74,6 +80,12 @@ impl Entry<'_> {
             .filter(|p| self.added.iter().any(|e| e.name() == p.effect))
             .count();
         (self.added.len(), params)
+    }
+
+    /// The dictionary's test of its calibration residual.
+    pub(super) fn structure(&self, campaign: &Campaign) -> &sparse::Structure {
+        self.structure
+            .get_or_init(|| sparse::structure(campaign, &self.fitted.rows))
     }
 
     /// Whether it could be named.
@@ -142,6 +154,8 @@ impl<'j> Judge<'j> {
             judged: Judged::default(),
             relevant,
             candidate,
+            structure: std::cell::OnceCell::new(),
+            left_out_later: std::cell::OnceCell::new(),
         };
         self.predict(&mut entry);
         entry
@@ -264,17 +278,60 @@ impl<'j> Judge<'j> {
     /// Whether model `big` beats model `small` (which it holds) by the evidence a candidate
     /// needs: the nested F-test between the two with their prediction (held-out where it
     /// decides, else left-out rows) combined below the level, not contradicted, better, by a
-    /// gain that matters.
+    /// gain that matters; the parameters `big` adds must themselves differ from zero (their
+    /// Wald test), as a candidate's must, and their gain must not be one that a single term
+    /// of the dictionary matches while `big` still leaves structure ([`Judge::outdone_by_term`]).
     pub(super) fn beats(&self, big: &Entry, small: &Entry) -> bool {
         let (b, s) = (&big.fitted.fit, &small.fitted.fit);
-        let prediction = between(small, big).map(|p| (p, self.unit_of(&p)));
-        Gain::of(
-            (b.chi2, b.dof),
-            (s.chi2, s.dof),
-            self.base.rows.len(),
-            prediction,
-        )
-        .needed(self.level)
+        let gain = |prediction: Option<Prediction>| {
+            Gain::of(
+                (b.chi2, b.dof),
+                (s.chi2, s.dof),
+                self.base.rows.len(),
+                prediction.map(|p| (p, self.unit_of(&p))),
+            )
+            .with_wald(wald_beyond(b, s))
+        };
+        let held = held_between(small, big);
+        let prediction = match held {
+            Some(p) if p.better || p.worse => held,
+            // the held-out data cannot tell the two apart (a noisy instrument, or an error
+            // neither explains): the setups left out decide, where the calibration alone
+            // would name the larger model
+            _ if gain(None).needed(self.level) => self
+                .left_out_of(small)
+                .zip(self.left_out_of(big))
+                .and_then(|(x, y)| Prediction::compared(x, y))
+                .map(|p| Prediction {
+                    by_setup: true,
+                    ..p
+                })
+                .or(held),
+            _ => held,
+        };
+        gain(prediction).needed(self.level) && !self.outdone_by_term(big, small)
+    }
+
+    /// An entry's left-out rows, made when first needed.
+    fn left_out_of<'e>(&self, e: &'e Entry) -> Option<&'e [f64]> {
+        e.left_out.as_deref().or_else(|| {
+            e.left_out_later
+                .get_or_init(|| self.left_out((&e.added, e.swap), &e.fitted))
+                .as_deref()
+        })
+    }
+
+    /// Whether what `big` adds to `small` is part of something the library lacks: its gain
+    /// (BIC) is no more than the best single dictionary term takes from `small`'s residual,
+    /// and `big` leaves structure behind. The rule a model meets against the current one
+    /// (a soft rod's force-following residual is partly a scale difference of the guides; a
+    /// term of the forces explains more of it, and the structure stays).
+    pub(super) fn outdone_by_term(&self, big: &Entry, small: &Entry) -> bool {
+        let n = self.base.rows.len().max(1) as f64;
+        let k = (small.fitted.fit.dof - big.fitted.fit.dof).max(0.0);
+        let gain = small.fitted.fit.chi2 - big.fitted.fit.chi2 - k * n.ln();
+        let term = small.structure(self.campaign).explained_chi2 - n.ln();
+        gain <= term && big.structure(self.campaign).p_value < self.structure_level
     }
 
     /// The noise a prediction's errors are in: 1 for left-out rows (σ), the held-out floor
@@ -298,26 +355,12 @@ pub(super) fn rms_of(e: &Entry) -> f64 {
     ranked(e).map_or(f64::INFINITY, calib::rms)
 }
 
-/// Model `b` against model `a`: on the held-out data where they decide between the two,
-/// else on the left-out rows where both have them, else the held-out tie.
-pub(super) fn between(a: &Entry, b: &Entry) -> Option<Prediction> {
-    let held = a
-        .held
+/// Model `b` against model `a` on the held-out data.
+fn held_between(a: &Entry, b: &Entry) -> Option<Prediction> {
+    a.held
         .as_deref()
         .zip(b.held.as_deref())
-        .and_then(|(x, y)| Prediction::compared(x, y));
-    if held.is_some_and(|p| p.better || p.worse) {
-        return held;
-    }
-    a.left_out
-        .as_deref()
-        .zip(b.left_out.as_deref())
         .and_then(|(x, y)| Prediction::compared(x, y))
-        .map(|p| Prediction {
-            by_setup: true,
-            ..p
-        })
-        .or(held)
 }
 
 /// The family variant an entry swaps into the current model, by name.

@@ -152,11 +152,30 @@ pub(crate) fn one_standard_error(e: &[f64]) -> f64 {
 /// not the effect's: the likelihood ratio alone would name an effect that does nothing.
 /// 1 where no added parameter is identified.
 pub(super) fn wald_p(fit: &super::types::Fit, added: &[&str]) -> f64 {
+    wald_of(fit, |p| added.contains(&p.effect.as_str()))
+}
+
+/// The Wald test of the parameters `big` has beyond `small` (a model it holds): those whose
+/// family and name `small` lacks. A larger model whose extra parameters are zero within
+/// their σ fits better only by refitting the rest from another start.
+pub(super) fn wald_beyond(big: &super::types::Fit, small: &super::types::Fit) -> f64 {
+    let key = |p: &EffectEstimate| {
+        (
+            crate::effects::family_of(&p.effect).to_owned(),
+            p.name.clone(),
+        )
+    };
+    let held: Vec<(String, String)> = small.effect_params.iter().map(key).collect();
+    wald_of(big, |p| !held.contains(&key(p)))
+}
+
+/// The Wald test over the identified parameters of `fit` that `pick` selects.
+fn wald_of(fit: &super::types::Fit, pick: impl Fn(&EffectEstimate) -> bool) -> f64 {
     let idx: Vec<usize> = fit
         .effect_params
         .iter()
         .enumerate()
-        .filter(|(_, p)| p.identified && p.sigma > 0.0 && added.contains(&p.effect.as_str()))
+        .filter(|(_, p)| p.identified && p.sigma > 0.0 && pick(p))
         .map(|(k, _)| k)
         .filter(|&k| k < fit.theta.len() && k < fit.covariance_theta.nrows())
         .collect();

@@ -49,7 +49,7 @@ impl<'j> Judge<'j> {
 
     /// Pairs: the best contenders among themselves, and the best with every other
     /// candidate (an effect that only works with another may not stand out alone). A family
-    /// takes part by its best-predicting variant.
+    /// takes part whole and by each of its parts alone.
     pub(super) fn add_pairs<'a>(
         &self,
         entries: &mut Vec<Entry<'a>>,

@@ -16,6 +16,22 @@ type Monomial = fn(f64, f64) -> f64;
 /// Fewest rows of a direction worth a correlation.
 const MIN_ROWS: usize = 8;
 
+/// Poses on each side of a thermometer reading whose trend its noise is measured from
+/// ([`reading_noise`]).
+const TREND_HALF_WINDOW: usize = 4;
+
+/// A thermometer points at a direction's residual only where its readings there spread over
+/// more than this many times its own noise ([`reading_noise`]).
+const THERMOMETER_SPAN: f64 = 3.0;
+
+/// A term of the dictionary: its values at every pose, and the noise of a thermometer's
+/// readings (0 for the other terms).
+struct Column {
+    name: String,
+    values: Vec<f64>,
+    noise: f64,
+}
+
 /// A term of the dictionary that the residual follows.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Pointer {
@@ -60,32 +76,50 @@ pub fn nominal_tcp(campaign: &Campaign) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// The dictionary's terms at every pose of a campaign: (name, values).
-fn dictionary(campaign: &Campaign) -> Vec<(String, Vec<f64>)> {
-    let mut out = Vec::new();
+/// The dictionary's terms at every pose of a campaign, a thermometer's (`temp_*`, the spec's
+/// temperatures) with the noise of its readings.
+fn dictionary(campaign: &Campaign) -> Vec<Column> {
+    let mut out: Vec<Column> = Vec::new();
     for (k, name) in campaign.covariate_names.iter().enumerate() {
-        let v: Vec<f64> = campaign
+        let values: Vec<f64> = campaign
             .poses
             .iter()
             .map(|p| p.covariates.get(k).copied().flatten().unwrap_or(f64::NAN))
             .collect();
-        out.push((name.clone(), v));
+        let noise = if name.starts_with("temp_") {
+            reading_noise(campaign, &values)
+        } else {
+            0.0
+        };
+        out.push(Column {
+            name: name.clone(),
+            values,
+            noise,
+        });
     }
+    let mut push = |name: String, values: Vec<f64>| {
+        out.push(Column {
+            name,
+            values,
+            noise: 0.0,
+        });
+    };
     for j in 0..4 {
-        out.push((
+        push(
             format!("f{}", j + 1),
             campaign.poses.iter().map(|p| p.f[j]).collect(),
-        ));
+        );
     }
-    out.push(("t".to_owned(), campaign.poses.iter().map(|p| p.t).collect()));
+    push("t".to_owned(), campaign.poses.iter().map(|p| p.t).collect());
     // direction of motion, travel since reversal, time: what lost motion, friction and
     // drift follow
-    out.extend(
-        campaign
-            .derived_covariates()
-            .into_iter()
-            .filter(|d| d.0 != "t_run" && campaign.covariate_index(&d.0).is_none()),
-    );
+    for (name, values) in campaign
+        .derived_covariates()
+        .into_iter()
+        .filter(|d| d.0 != "t_run" && campaign.covariate_index(&d.0).is_none())
+    {
+        push(name, values);
+    }
     let tcp = nominal_tcp(campaign);
     let poly: [(&str, Monomial); 5] = [
         ("x", |x, _| x),
@@ -95,9 +129,71 @@ fn dictionary(campaign: &Campaign) -> Vec<(String, Vec<f64>)> {
         ("y^2", |_, y| y * y),
     ];
     for (name, f) in poly {
-        out.push((name.to_owned(), tcp.iter().map(|&(x, y)| f(x, y)).collect()));
+        push(name.to_owned(), tcp.iter().map(|&(x, y)| f(x, y)).collect());
     }
     out
+}
+
+/// The noise of a thermometer's readings: their RMS about the straight line in time through
+/// each reading's neighbours in its setup (less the line's two degrees of freedom). A reading
+/// is the slow temperature plus the sensor's noise, and a model that reads it (thermal
+/// expansion) carries that noise into its residual, times the expansion's gain: where the
+/// temperature hardly moves over a direction's rows (a tracker's 44 poses over two minutes:
+/// 0.03 K, against a sensor's 0.01 K) the residual follows the reading closely (r = 0.7) with
+/// nothing missing from the model, and no effect could be told from the sensor's noise there.
+fn reading_noise(campaign: &Campaign, readings: &[f64]) -> f64 {
+    let trend = trend(campaign, readings);
+    let d: Vec<f64> = readings
+        .iter()
+        .zip(&trend)
+        .map(|(r, t)| r - t)
+        .filter(|v| v.is_finite())
+        .collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    let window = (2 * TREND_HALF_WINDOW + 1) as f64;
+    let ms = d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64;
+    (ms * window / (window - 2.0)).sqrt()
+}
+
+/// Each reading's straight line in time through its setup's neighbouring poses, at its time.
+fn trend(campaign: &Campaign, readings: &[f64]) -> Vec<f64> {
+    let mut setups: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
+    for (i, p) in campaign.poses.iter().enumerate() {
+        setups.entry(p.setup.as_str()).or_default().push(i);
+    }
+    let mut out = readings.to_vec();
+    for members in setups.values() {
+        for (j, &i) in members.iter().enumerate() {
+            let lo = j.saturating_sub(TREND_HALF_WINDOW);
+            let hi = (j + TREND_HALF_WINDOW + 1).min(members.len());
+            let window: Vec<(f64, f64)> = members[lo..hi]
+                .iter()
+                .map(|&k| (campaign.poses[k].t, readings[k]))
+                .filter(|(t, v)| t.is_finite() && v.is_finite())
+                .collect();
+            if readings[i].is_finite() && !window.is_empty() {
+                out[i] = line_at(&window, campaign.poses[i].t);
+            }
+        }
+    }
+    out
+}
+
+/// The least-squares line through `points` (t, v) at `t`; their mean where t does not vary.
+fn line_at(points: &[(f64, f64)], t: f64) -> f64 {
+    let n = points.len() as f64;
+    let (mt, mv) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
+    let stt: f64 = points.iter().map(|(x, _)| (x - mt).powi(2)).sum();
+    let stv: f64 = points.iter().map(|(x, y)| (x - mt) * (y - mv)).sum();
+    if stt > 0.0 {
+        mv + stv / stt * (t - mt)
+    } else {
+        mv
+    }
 }
 
 /// Pearson correlation over the pairs where both are finite; None if either is constant.
@@ -129,6 +225,17 @@ fn correlation(a: &[f64], b: &[f64]) -> Option<f64> {
     Some(sab / (saa * sbb).sqrt())
 }
 
+/// The standard deviation of the finite values.
+fn spread(v: &[f64]) -> f64 {
+    let f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if f.len() < 2 {
+        return 0.0;
+    }
+    let n = f.len() as f64;
+    let m = f.iter().sum::<f64>() / n;
+    (f.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+}
+
 /// Every (term, instrument, direction) correlation, scored by the χ² it would explain.
 fn scores(campaign: &Campaign, rows: &[RowValue], only: Option<&[&str]>) -> Vec<Scored> {
     let dict = dictionary(campaign);
@@ -146,15 +253,18 @@ fn scores(campaign: &Campaign, rows: &[RowValue], only: Option<&[&str]>) -> Vec<
         }
         let z: Vec<f64> = g.iter().map(|r| r.value / r.sigma).collect();
         let chi2: f64 = z.iter().map(|v| v * v).sum();
-        for (name, values) in &dict {
-            if only.is_some_and(|o| !o.contains(&name.as_str())) {
+        for column in &dict {
+            if only.is_some_and(|o| !o.contains(&column.name.as_str())) {
                 continue;
             }
-            let v: Vec<f64> = g.iter().map(|r| values[r.pose]).collect();
+            let v: Vec<f64> = g.iter().map(|r| column.values[r.pose]).collect();
+            if column.noise > 0.0 && spread(&v) <= THERMOMETER_SPAN * column.noise {
+                continue;
+            }
             if let Some(r) = correlation(&v, &z) {
                 out.push(Scored {
                     rows: g.len(),
-                    feature: name.clone(),
+                    feature: column.name.clone(),
                     instrument: inst.clone(),
                     direction: dir.clone(),
                     r,
