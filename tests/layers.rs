@@ -144,6 +144,91 @@ fn one_module_defines_the_unit_factor() {
     assert!(offences.is_empty(), "{}", offences.join("\n"));
 }
 
+/// Where a topic's or a bag's SI meets the core's mm: the message adapters. `units.rs` holds
+/// the factors and their named conversions, `campaign_bag.rs` turns campaigns into messages and
+/// back, `node/geometry.rs` the Parameters message into the nodes' geometry and back.
+const UNIT_ADAPTERS: [&str; 3] = [
+    "nodes/src/units.rs",
+    "nodes/src/campaign_bag.rs",
+    "nodes/src/node/geometry.rs",
+];
+
+/// The code that reads or writes topics besides the adapters: the nodes, the streams, the
+/// terminal monitor (the command line's). A length, angle or time factor there is a named conversion of
+/// `units.rs` (`mm_from_m`, `m_from_um`, `seconds_from_ms`, ...), never a bare one.
+const TOPIC_CODE: [&str; 3] = ["nodes/src/node", "nodes/src/stream.rs", "src/monitor"];
+
+/// The code of a Rust file without its tests (a `#[cfg(test)]` module runs to the end of the
+/// file here; a `tests.rs` has none) and without comments, with its line numbers.
+fn non_test_code(path: &Path) -> Vec<(usize, String)> {
+    if path.ends_with("tests.rs") {
+        return Vec::new();
+    }
+    let text = std::fs::read_to_string(path).expect("read source");
+    text.lines()
+        .enumerate()
+        .take_while(|(_, l)| l.trim() != "#[cfg(test)]")
+        .map(|(n, l)| (n + 1, l.split("//").next().unwrap_or("").to_owned()))
+        .collect()
+}
+
+/// A multiplication or division by a bare scale factor in `code` (spaces ignored): `* 1e3`,
+/// `/ 1000.0`, `* 1e-6`, ...
+fn bare_factor(code: &str) -> Option<String> {
+    let code: String = code.chars().filter(|c| !c.is_whitespace()).collect();
+    ["1e3", "1e-3", "1e-6", "1e6", "1000.0", "0.001"]
+        .iter()
+        .flat_map(|f| [format!("*{f}"), format!("/{f}")])
+        .find(|pat| {
+            code.match_indices(pat.as_str()).any(|(i, _)| {
+                !code[i + pat.len()..].starts_with(|c: char| c.is_ascii_digit() || c == '_')
+            })
+        })
+}
+
+#[test]
+fn the_bare_factor_finder_sees_factors_not_bounds() {
+    assert_eq!(bare_factor("let x = v * 1e3;").as_deref(), Some("*1e3"));
+    assert_eq!(bare_factor("um.map(|v| v *1e-6)").as_deref(), Some("*1e-6"));
+    assert_eq!(bare_factor("(w / 1000.0, 1)").as_deref(), Some("/1000.0"));
+    assert_eq!(bare_factor(".bound(Within(1e-3, 3600.0))"), None);
+    assert_eq!(bare_factor("x * 1e30"), None);
+}
+
+/// SI <-> mm only in the message adapters: `MM_PER_M` appears in no other file of the nodes
+/// or the command line, and the code that meets topics converts with named functions, no bare factor.
+#[test]
+fn lengths_convert_only_in_the_message_adapters() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    for dir in ["nodes/src", "src"] {
+        file_graph::rust_files(&root.join(dir), &mut files);
+    }
+    let rel = |f: &Path| f.strip_prefix(root).unwrap_or(f).display().to_string();
+    let mut offences = Vec::new();
+    for f in &files {
+        let name = rel(f);
+        if UNIT_ADAPTERS.contains(&name.as_str()) {
+            continue;
+        }
+        let text = std::fs::read_to_string(f).expect("read source");
+        for (n, l) in text.lines().enumerate() {
+            if l.split("//").next().unwrap_or("").contains("MM_PER_M") {
+                offences.push(format!("{name}:{}: MM_PER_M: {}", n + 1, l.trim()));
+            }
+        }
+        if TOPIC_CODE.iter().any(|t| name.starts_with(t)) {
+            for (n, code) in non_test_code(f) {
+                if let Some(factor) = bare_factor(&code) {
+                    offences.push(format!("{name}:{n}: bare {factor}: {}", code.trim()));
+                }
+            }
+        }
+    }
+    assert!(files.len() >= 80, "found only {} files", files.len());
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
+}
+
 /// The crates' sources: the core, the command line, the nodes, the transport, the messages,
 /// the history's store and the twin.
 const CRATE_SOURCES: [&str; 7] = [
@@ -180,22 +265,10 @@ fn the_type_name_finder_sees_each_kind() {
     assert_eq!(public_type_names(text), ["A", "C", "E", "F"]);
 }
 
-/// Public names defined twice that are still to be told apart: each pair has one side in code
-/// being reworked (the diagnosis, `cli/effect_stages.rs`, `cli/summary.rs`) or is a ROS
-/// message that mirrors its `.msg` name.
-const KNOWN_TWICE: [&str; 7] = [
-    "Diagnosis",
-    "Instrument",
-    "Options",
-    "Point",
-    "Pose",
-    "Stage",
-    "Stages",
-];
-
 /// One name per type across the workspace: a reader who meets `Outcome` or `Spec` knows which
-/// one it is without looking at the imports. The names still defined twice are listed above,
-/// and the list must shrink, never grow.
+/// one it is without looking at the imports. A ROS message keeps its `.msg` name
+/// (`rpkm_msgs::Diagnosis`, `Pose`, `Point`); what the core or the command line holds beside it
+/// takes a name of its own (`ModelDiagnosis`, `MeasuredPose`, `ResidualPoint`).
 #[test]
 fn no_public_type_name_is_defined_twice() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -212,23 +285,12 @@ fn no_public_type_name_is_defined_twice() {
         }
     }
     assert!(defined.len() > 300, "found only {} names", defined.len());
-    let twice: Vec<(&String, &Vec<String>)> =
-        defined.iter().filter(|(_, at)| at.len() > 1).collect();
-    let new: Vec<String> = twice
+    let twice: Vec<String> = defined
         .iter()
-        .filter(|(name, _)| !KNOWN_TWICE.contains(&name.as_str()))
+        .filter(|(_, at)| at.len() > 1)
         .map(|(name, at)| format!("{name}: {}", at.join(", ")))
         .collect();
-    assert!(new.is_empty(), "defined twice:\n{}", new.join("\n"));
-    let gone: Vec<&str> = KNOWN_TWICE
-        .iter()
-        .copied()
-        .filter(|k| !twice.iter().any(|(name, _)| name.as_str() == *k))
-        .collect();
-    assert!(
-        gone.is_empty(),
-        "no longer twice, remove from KNOWN_TWICE: {gone:?}"
-    );
+    assert!(twice.is_empty(), "defined twice:\n{}", twice.join("\n"));
 }
 
 /// Source files above this, inline tests included, hold more than one job.

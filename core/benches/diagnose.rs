@@ -6,7 +6,7 @@
 //! cargo bench -p rpkm-core --bench diagnose [-- RUNS]
 
 use rpkm_core::campaign::Instrument;
-use rpkm_core::diagnose::{self, Options};
+use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_twin::{Twin, TwinConfig};
 use std::time::Instant;
 
@@ -24,7 +24,7 @@ fn main() {
     let cal = twin.campaign(&three.repeat(3)).expect("campaign");
     let val = twin.validation(100).expect("validation");
     for threads in [1, 0] {
-        let opts = Options {
+        let opts = DiagnosisOptions {
             threads,
             ..Default::default()
         };

@@ -4,7 +4,7 @@
 //!
 //!     cargo run --release -p rpkm-core --example diagnose_twin [SEEDS]
 use rpkm_core::campaign::Instrument;
-use rpkm_core::diagnose::{self, Options};
+use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_twin::{EffectKind, Twin, TwinConfig};
 
 fn main() {
@@ -32,8 +32,8 @@ fn main() {
                 .expect("campaign");
             let val = twin.validation(100).expect("validation");
             let t0 = std::time::Instant::now();
-            let d =
-                diagnose::diagnose(&cal, Some(&val), &[], &Options::default()).expect("diagnose");
+            let d = diagnose::diagnose(&cal, Some(&val), &[], &DiagnosisOptions::default())
+                .expect("diagnose");
             let c = d.candidates.first();
             println!(
                 "| {} | {seed} | {:.1} | {:.1} | {:.1} | {:.2} | {} | {} | {} |",

@@ -19,7 +19,7 @@
 //! The default [`ObservabilityOptions`] reproduce the order of table 4.7 (self-calibration,
 //! model 24); see `docs/observability.md` for the comparison with tables 4.4-4.8.
 
-use crate::campaign::{Campaign, Instrument, Pose};
+use crate::campaign::{Campaign, Instrument, MeasuredPose};
 use crate::design::{self, PlannedPose, CENTRE};
 use crate::effects::{Corrections, Delta};
 use crate::geometry::{self, GeometryError};
@@ -37,7 +37,7 @@ use std::str::FromStr;
 pub enum AnalysisError {
     /// A planned pose the inverse model cannot reach at the given parameters.
     #[error("planned pose {index} ({setup}, x = {x} mm, y = {y} mm): {error}")]
-    Pose {
+    MeasuredPose {
         index: usize,
         setup: String,
         x: f64,
@@ -202,13 +202,14 @@ pub fn nominal_campaign(
 ) -> Result<Campaign, AnalysisError> {
     let mut sols = Vec::with_capacity(design.len());
     for (index, pp) in design.iter().enumerate() {
-        let sol = geometry::igm(p, model, pp.x, pp.y).map_err(|error| AnalysisError::Pose {
-            index,
-            setup: pp.setup.clone(),
-            x: pp.x,
-            y: pp.y,
-            error,
-        })?;
+        let sol =
+            geometry::igm(p, model, pp.x, pp.y).map_err(|error| AnalysisError::MeasuredPose {
+                index,
+                setup: pp.setup.clone(),
+                x: pp.x,
+                y: pp.y,
+                error,
+            })?;
         sols.push(sol);
     }
     // reset pose (index) of each setup
@@ -226,7 +227,7 @@ pub fn nominal_campaign(
             Some(r) if !pp.reset => (sol.x() - r.x(), sol.y() - r.y(), sol.psi() - r.psi()),
             _ => (0.0, 0.0, 0.0),
         };
-        poses.push(Pose {
+        poses.push(MeasuredPose {
             t: i as f64,
             setup: pp.setup.clone(),
             instrument: pp.instrument,

@@ -44,7 +44,7 @@
 //! # Ok::<(), rpkm_core::campaign::CampaignError>(())
 //! ```
 //!
-//! Every [`Pose`] keeps its source `line` so that the caller can name `file:line`.
+//! Every [`MeasuredPose`] keeps its source `line` so that the caller can name `file:line`.
 //! [`CampaignReader`] reads a stream line by line with the same rules (the ingest node).
 
 mod error;
@@ -219,7 +219,7 @@ impl FromStr for Instrument {
 
 /// One machine pose: one data row of a campaign file.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Pose {
+pub struct MeasuredPose {
     /// Time of the pose, s.
     pub t: f64,
     /// Setup id; relative measurements share their setup's reset pose.
@@ -249,7 +249,7 @@ pub struct Pose {
     pub line: usize,
 }
 
-impl Pose {
+impl MeasuredPose {
     /// Whether the pose carries drive forces as measurements: all four drives
     /// position-controlled (no follower) and forces recorded.
     pub fn drives_loaded(&self) -> bool {
@@ -267,7 +267,7 @@ pub struct Campaign {
     /// Names of the covariate columns, in header order.
     pub covariate_names: Vec<String>,
     /// The poses, in file order.
-    pub poses: Vec<Pose>,
+    pub poses: Vec<MeasuredPose>,
 }
 
 /// One setup of a campaign (see [`Campaign::setups`]).
@@ -329,7 +329,7 @@ impl Campaign {
     }
 
     /// The poses measured with `instrument`, in file order.
-    pub fn poses_of(&self, instrument: Instrument) -> impl Iterator<Item = &Pose> + '_ {
+    pub fn poses_of(&self, instrument: Instrument) -> impl Iterator<Item = &MeasuredPose> + '_ {
         self.poses
             .iter()
             .filter(move |p| p.instrument == instrument)

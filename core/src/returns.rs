@@ -11,7 +11,7 @@
 //! its p-value. The figures are here; the sentence ("lt setup 3 moved 9 µm during 450 s") is
 //! the caller's.
 
-use crate::campaign::{Campaign, Instrument, Pose};
+use crate::campaign::{Campaign, Instrument, MeasuredPose};
 use crate::effects::Corrections;
 use crate::geometry::{self, GeometryError};
 use crate::noise::{NoiseModel, XyInstrument};
@@ -32,7 +32,7 @@ pub const DRIFT_P_VALUE: f64 = 0.01;
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct DriftComponent {
     /// `x`, `y` or `r`.
-    pub coordinate: &'static str,
+    pub coordinate: obs::TcpDirection,
     /// The reading less the model's move from the zero, mm: how far the instrument drifted.
     pub value_mm: f64,
     /// Its σ from the noise model (the return's reading, the zero's, the encoders'), mm.
@@ -88,7 +88,7 @@ pub fn drift_checks(
         if mine.is_empty() {
             continue;
         }
-        let at = |pose: &Pose| {
+        let at = |pose: &MeasuredPose| {
             reading_covariance(pose, (p, model), noise)
                 .map_err(|e| PoseError::at(campaign, pose, e))
         };
@@ -129,7 +129,7 @@ fn return_poses(campaign: &Campaign) -> Vec<(usize, usize)> {
 /// The covariance of one reading's (x, y) error at `pose` (a single coordinate in x), its
 /// encoders' included.
 fn reading_covariance(
-    pose: &Pose,
+    pose: &MeasuredPose,
     (p, model): (&Params, Model),
     noise: &NoiseModel,
 ) -> Result<Matrix2<f64>, GeometryError> {
@@ -144,7 +144,12 @@ fn reading_covariance(
 
 /// The return at `pose` of the setup zeroed at `zero`, its TCP errors `errors` (model less
 /// reading), against the covariance `cov` of the difference of the two readings.
-fn judge(pose: &Pose, zero: &Pose, errors: &[&obs::TcpError], cov: &Matrix2<f64>) -> ReturnDrift {
+fn judge(
+    pose: &MeasuredPose,
+    zero: &MeasuredPose,
+    errors: &[&obs::TcpError],
+    cov: &Matrix2<f64>,
+) -> ReturnDrift {
     let seconds = pose.t - zero.t;
     // the drift is the reading beyond the model's move: minus the error
     let values: Vec<f64> = errors.iter().map(|e| -e.value).collect();
@@ -153,9 +158,9 @@ fn judge(pose: &Pose, zero: &Pose, errors: &[&obs::TcpError], cov: &Matrix2<f64>
         .zip(&values)
         .map(|(e, &v)| {
             // a single coordinate's variance is the first (reading_covariance)
-            let k = usize::from(e.coordinate == "y" && values.len() == 2);
+            let k = usize::from(e.direction == obs::TcpDirection::Y && values.len() == 2);
             DriftComponent {
-                coordinate: e.coordinate,
+                coordinate: e.direction,
                 value_mm: v,
                 sigma_mm: cov[(k, k)].sqrt(),
             }

@@ -46,7 +46,7 @@ pub use preload_status::{PreloadLevel, PreloadStatus};
 pub use sensor_msgs::{JointState, Temperature};
 pub use std_msgs::Header;
 pub use tcp_estimate::TcpEstimate;
-pub use tcp_measurement::{Instrument, TcpMeasurement, UnknownInstrument};
+pub use tcp_measurement::{InstrumentId, TcpMeasurement, UnknownInstrument};
 pub use tf2_msgs::TfMessage;
 
 /// Package name of the project's own messages.

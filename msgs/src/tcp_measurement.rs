@@ -15,7 +15,7 @@ pub struct TcpMeasurement {
     pub stamp: Time,
     /// `string setup`: setup id; relative measurements share their setup's reset pose.
     pub setup: String,
-    /// `uint8 instrument`: one of the `TcpMeasurement::LT..NONE` constants (see [`Instrument`]).
+    /// `uint8 instrument`: one of the `TcpMeasurement::LT..NONE` constants (see [`InstrumentId`]).
     pub instrument: u8,
     /// `bool reset`: reset pose of the setup (measured values 0).
     pub reset: bool,
@@ -42,7 +42,7 @@ pub struct TcpMeasurement {
 /// The metrology instruments, with their wire values (`uint8` constants of the `.msg`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u8)]
-pub enum Instrument {
+pub enum InstrumentId {
     /// `LT=0`: laser tracker.
     Lt = 0,
     /// `KGM=1`: grid encoder.
@@ -68,7 +68,7 @@ pub enum Instrument {
 #[error("unknown instrument id {0} (expected 0..=8)")]
 pub struct UnknownInstrument(pub u8);
 
-impl TryFrom<u8> for Instrument {
+impl TryFrom<u8> for InstrumentId {
     type Error = UnknownInstrument;
     fn try_from(v: u8) -> Result<Self, Self::Error> {
         Ok(match v {
@@ -86,7 +86,7 @@ impl TryFrom<u8> for Instrument {
     }
 }
 
-impl Instrument {
+impl InstrumentId {
     /// The campaign CSV spelling (`lt`, `kgm`, ...).
     pub fn csv_name(self) -> &'static str {
         match self {
@@ -124,8 +124,8 @@ impl TcpMeasurement {
     pub const NONE: u8 = 8;
 
     /// The instrument, or an error for a value outside the constants.
-    pub fn instrument(&self) -> Result<Instrument, UnknownInstrument> {
-        Instrument::try_from(self.instrument)
+    pub fn instrument(&self) -> Result<InstrumentId, UnknownInstrument> {
+        InstrumentId::try_from(self.instrument)
     }
 }
 
@@ -144,11 +144,11 @@ mod tests {
     #[test]
     fn instrument_ids_match_constants() {
         for v in 0..=8u8 {
-            let i = Instrument::try_from(v).expect("valid id");
+            let i = InstrumentId::try_from(v).expect("valid id");
             assert_eq!(i as u8, v);
         }
-        assert_eq!(Instrument::try_from(9), Err(UnknownInstrument(9)));
-        assert_eq!(Instrument::LiPsi as u8, TcpMeasurement::LI_PSI);
-        assert_eq!(Instrument::None as u8, TcpMeasurement::NONE);
+        assert_eq!(InstrumentId::try_from(9), Err(UnknownInstrument(9)));
+        assert_eq!(InstrumentId::LiPsi as u8, TcpMeasurement::LI_PSI);
+        assert_eq!(InstrumentId::None as u8, TcpMeasurement::NONE);
     }
 }

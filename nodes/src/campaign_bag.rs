@@ -21,7 +21,7 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use rpkm_core::campaign::{Campaign, CampaignError, Instrument, Pose};
+use rpkm_core::campaign::{Campaign, CampaignError, Instrument, MeasuredPose};
 use rpkm_core::noise::{NoiseModel, NoiseSpecError};
 use rpkm_msgs::actuator_state::MAX_COVARIATES;
 use rpkm_msgs::{ActuatorState, CampaignInfo, TcpMeasurement, Time};
@@ -192,7 +192,7 @@ pub fn campaign_info(c: &Campaign) -> Result<CampaignInfo, ToMessagesError> {
 pub fn pose_messages(
     c: &Campaign,
     index: usize,
-    pose: &Pose,
+    pose: &MeasuredPose,
 ) -> Result<(ActuatorState, TcpMeasurement), ToMessagesError> {
     let stamp = stamp_from_seconds(pose.t).ok_or_else(|| ToMessagesError::Time {
         source_label: c.source.clone(),
@@ -272,7 +272,7 @@ pub struct CampaignAssembler {
     state_count: usize,
     /// Most states kept (see [`STATE_HISTORY`]).
     history: usize,
-    poses: Vec<Pose>,
+    poses: Vec<MeasuredPose>,
     /// The σ each measurement states for itself (mm, rad for ψ), by instrument.
     stated_sigma: BTreeMap<Instrument, Vec<f64>>,
 }
@@ -413,7 +413,7 @@ impl CampaignAssembler {
                 .push(measurement.sigma * unit);
         }
         let mm = |v: f64, valid: bool| valid.then_some(v * MM_PER_M);
-        self.poses.push(Pose {
+        self.poses.push(MeasuredPose {
             t: stamp_s,
             setup: measurement.setup.clone(),
             instrument,
@@ -627,7 +627,7 @@ mod tests {
         for i in Instrument::ALL {
             let id = instrument_id(i);
             assert_eq!(instrument_of_id(id), Some(i));
-            let wire = rpkm_msgs::Instrument::try_from(id).expect("msgs knows the id");
+            let wire = rpkm_msgs::InstrumentId::try_from(id).expect("msgs knows the id");
             assert_eq!(wire.csv_name(), i.as_str());
         }
         assert_eq!(instrument_of_id(9), None);

@@ -37,9 +37,14 @@ pub fn check_readings(campaign: &Campaign) -> anyhow::Result<()> {
     else {
         return Ok(());
     };
-    match errors.iter().find(|e| e.2.abs() > READING_OFF_MAX_MM) {
+    match errors.iter().find(|e| e.value.abs() > READING_OFF_MAX_MM) {
         None => Ok(()),
-        Some(&(pose, coordinate, off)) => Err(bad_input(format!(
+        Some(&rpkm_core::obs::TcpError {
+            pose,
+            direction: coordinate,
+            value: off,
+            ..
+        }) => Err(bad_input(format!(
             "{}:{} ({coordinate}): the reading is {:.1} mm from where the machine puts the \
              TCP at this row's actuator positions, expected within {READING_OFF_MAX_MM} mm \
              (a unit mix-up, or a measurement of something else)",

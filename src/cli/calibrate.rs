@@ -360,8 +360,8 @@ pub fn print_noise(noise: &NoiseEstimate) {
 fn diagnosis_options(
     args: &CalibrateArgs,
     model: Model,
-) -> anyhow::Result<rpkm_core::diagnose::Options> {
-    Ok(rpkm_core::diagnose::Options {
+) -> anyhow::Result<rpkm_core::diagnose::DiagnosisOptions> {
+    Ok(rpkm_core::diagnose::DiagnosisOptions {
         model: if args.perfect_parallelogram {
             Model::M24
         } else {
@@ -393,11 +393,11 @@ fn write_report(
     } else {
         Some(diagnose::diagnose(campaign, validation, refs, &opts)?)
     };
-    let stages = stages.map(|st| crate::report::Stages {
+    let stages = stages.map(|st| crate::report::ModelTable {
         rows: st
             .rows
             .iter()
-            .map(|s| crate::report::Stage {
+            .map(|s| crate::report::ModelRow {
                 model: s.model.clone(),
                 cal_rms_um: s.cal_rms_um,
                 val_rms_um: s.val_rms_um,
@@ -466,7 +466,7 @@ fn validate_with(
         noise,
         (effects, set),
         cal,
-        rpkm_core::diagnose::Options::default().alpha,
+        rpkm_core::diagnose::DiagnosisOptions::default().alpha,
     )
     .map_err(|e| bad_input(format!("{}: {e}", val.source)))?;
     let after = rpkm_core::diagnose::held_out_errors(val, &noise.model, effects, set, cal)
@@ -482,7 +482,7 @@ fn tcp_errors(val: &Campaign, p: &Params, model: Model) -> anyhow::Result<Vec<f6
     Ok(obs::tcp_errors(val, p, model)
         .map_err(|e| bad_input(format!("{e}")))?
         .iter()
-        .map(|e| e.2)
+        .map(|e| e.value)
         .collect())
 }
 

@@ -5,7 +5,7 @@
 use super::summary::{print_summary, um, write_report};
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::{self, Options};
+use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_core::effects;
 use std::path::PathBuf;
 
@@ -34,7 +34,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         campaign.poses.len(),
         val.poses.len()
     );
-    let opts = Options::default();
+    let opts = DiagnosisOptions::default();
     let before = diagnose::diagnose(&campaign, Some(&val), &[], &opts)
         .context("diagnosing the embedded campaign")?;
     print_summary(&campaign, &before);

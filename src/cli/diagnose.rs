@@ -7,7 +7,7 @@ use super::summary::{print_summary, print_written, write_report};
 use super::{bad_input, read_campaign, write_json};
 use crate::effects_file::{self};
 use anyhow::Context;
-use rpkm_core::diagnose::{self, Options};
+use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_core::effects::Effect;
 use rpkm_core::params::Model;
 use std::path::PathBuf;
@@ -109,7 +109,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             "--tolerance-mm/--tolerance-mrad: expected positive numbers".to_owned(),
         ));
     }
-    let opts = Options {
+    let opts = DiagnosisOptions {
         model,
         alpha: args.alpha,
         noise: super::parse_noise(args.noise.as_deref())?,

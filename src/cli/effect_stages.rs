@@ -6,7 +6,7 @@ use super::bad_input;
 use crate::effects_file::{self, EffectsFile};
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::{self, Diagnosis, Options};
+use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis};
 use rpkm_core::effects::{self, Effect};
 use std::path::Path;
 
@@ -55,9 +55,9 @@ pub fn with_named_effect(
     campaign: &Campaign,
     validation: Option<&Campaign>,
     (in_model, offered): (&[&dyn Effect], &[&dyn Effect]),
-    opts: &Options,
-    d: &Diagnosis,
-) -> anyhow::Result<Option<Diagnosis>> {
+    opts: &DiagnosisOptions,
+    d: &ModelDiagnosis,
+) -> anyhow::Result<Option<ModelDiagnosis>> {
     let Some(missing) = &d.missing_effect else {
         return Ok(None);
     };
@@ -113,7 +113,7 @@ impl Stages {
         campaign: &Campaign,
         validation: Option<&Campaign>,
         effects: &[&dyn Effect],
-        opts: &Options,
+        opts: &DiagnosisOptions,
     ) -> anyhow::Result<Stages> {
         let evaluated = (0..=effects.len())
             .map(|k| diagnose::evaluate(campaign, validation, &effects[..k], opts))

@@ -2,10 +2,10 @@
 //! summary on the terminal, the noise per group, the HTML report.
 
 use crate::effects_file::EffectsFile;
-use crate::report::{Report, Stages};
+use crate::report::{ModelTable, Report};
 use crate::words;
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::{Diagnosis, HeldOutCheck};
+use rpkm_core::diagnose::{HeldOutCheck, ModelDiagnosis};
 use rpkm_core::variance;
 use std::path::{Path, PathBuf};
 
@@ -15,7 +15,7 @@ pub fn um(v: Option<f64>) -> String {
 }
 
 /// The terminal summary.
-pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
+pub fn print_summary(campaign: &Campaign, d: &ModelDiagnosis) {
     let b = &d.baseline;
     let with = if d.effects_in_model.is_empty() {
         String::new()
@@ -90,7 +90,7 @@ pub fn print_summary(campaign: &Campaign, d: &Diagnosis) {
 }
 
 /// The noise per group, the residual per instrument and direction, the worst rows.
-fn print_groups(d: &Diagnosis) {
+fn print_groups(d: &ModelDiagnosis) {
     if !d.noise_groups.is_empty() {
         println!("\n   noise per group, estimated from the residuals of the current model:");
         print_noise_groups(&d.noise_groups, "   ");
@@ -144,7 +144,7 @@ fn held_out_judge(h: &HeldOutCheck) -> String {
 }
 
 /// Every effect tried, best first, and those not tried.
-fn print_effects(d: &Diagnosis) {
+fn print_effects(d: &ModelDiagnosis) {
     println!("\n2. Effects tried (best first)");
     println!(
         "   {:<22} {:>6} {:>9} {:>11} {:>10} {:>10}",
@@ -210,11 +210,11 @@ pub fn write_report(
     dir: &Path,
     command: &str,
     campaign: &Campaign,
-    before: &Diagnosis,
-    after: Option<&Diagnosis>,
-    (stages, written): (Option<Stages>, Vec<(String, String)>),
+    before: &ModelDiagnosis,
+    after: Option<&ModelDiagnosis>,
+    (stages, written): (Option<ModelTable>, Vec<(String, String)>),
 ) -> anyhow::Result<PathBuf> {
-    let stages = stages.unwrap_or_else(|| Stages {
+    let stages = stages.unwrap_or_else(|| ModelTable {
         rows: std::iter::once(before)
             .chain(after)
             .map(Report::stage_of)

@@ -2,6 +2,7 @@
 //! state: every frame is a function of the watch, the time and the terminal's size, and a
 //! terminal of any size (down to 0×0) gets a frame without a panic.
 
+use crate::units::{mm_from_m, mrad_from_rad, um_from_m};
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::{Line, Span};
@@ -331,12 +332,16 @@ fn follower_line(w: &Watch) -> Line<'static> {
         return Line::from("Δq2/Δq3: q2, q3 position-controlled (no follower compatibility test)");
     }
     let limits = w.thresholds.dq_m.map_or(String::new(), |(a, b)| {
-        format!("  (WARN {:.3} mm, ERROR {:.3} mm)", a * 1e3, b * 1e3)
+        format!(
+            "  (WARN {:.3} mm, ERROR {:.3} mm)",
+            mm_from_m(a),
+            mm_from_m(b)
+        )
     });
     Line::from(format!(
         "followers: Δq2 {:+.4} mm  Δq3 {:+.4} mm{limits}",
-        s.dq2 * 1e3,
-        s.dq3 * 1e3
+        mm_from_m(s.dq2),
+        mm_from_m(s.dq3)
     ))
 }
 
@@ -354,9 +359,9 @@ fn tcp_lines(w: &Watch) -> Vec<Line<'static>> {
     let pose = w.estimate.map_or("no TcpEstimate yet".to_owned(), |e| {
         format!(
             "TCP x {:+.3} mm  y {:+.3} mm  ψ {:+.3} mrad  {}",
-            e.x * 1e3,
-            e.y * 1e3,
-            e.psi * 1e3,
+            mm_from_m(e.x),
+            mm_from_m(e.y),
+            mrad_from_rad(e.psi),
             if e.converged {
                 "converged"
             } else {
@@ -456,7 +461,7 @@ fn heard_node_lines(w: &Watch, now: f64, gone: &[(&str, &str)]) -> Vec<Line<'sta
 fn calibrator_lines(w: &Watch) -> Vec<Line<'static>> {
     let um = |m: f64| {
         if m.is_finite() {
-            format!("{:.1} µm", m * 1e6)
+            format!("{:.1} µm", um_from_m(m))
         } else {
             "-".to_owned()
         }

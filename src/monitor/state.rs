@@ -2,6 +2,7 @@
 //! and when each node last spoke. Times are seconds since the monitor started (`now`), passed
 //! in by the caller, so that the struct is a plain value the unit tests drive without clocks.
 
+use crate::units::{m_from_mm, ms_from_seconds};
 use std::collections::{BTreeMap, VecDeque};
 
 pub use super::rate::RateMeter;
@@ -215,7 +216,7 @@ impl Latency {
         if s != seq {
             return;
         }
-        let ms = (now - t) * 1e3;
+        let ms = ms_from_seconds(now - t);
         self.last_ms = Some(ms);
         self.window_max_ms = self.window_max_ms.max(ms);
         if now - self.window_start >= 1.0 {
@@ -495,7 +496,7 @@ impl Watch {
             self.thresholds.source = ThresholdSource::Diagnostics;
         }
         if let Some((w, e)) = parse_thresholds(message, "mm") {
-            self.thresholds.dq_m = Some((w / 1e3, e / 1e3));
+            self.thresholds.dq_m = Some((m_from_mm(w), m_from_mm(e)));
         }
     }
 

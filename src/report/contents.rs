@@ -2,22 +2,22 @@
 //! models' table. The page (`mod.rs`) and its sections read it.
 
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::Diagnosis;
+use rpkm_core::diagnose::ModelDiagnosis;
 
 /// One model of the story: its name and how it fits.
 #[derive(Clone, Debug, serde::Serialize)]
-pub struct Stage {
+pub struct ModelRow {
     pub model: String,
     pub cal_rms_um: f64,
     pub val_rms_um: Option<f64>,
-    /// χ²/ν with the rows weighted by the table's one noise ([`Stages::chi2_under`]).
+    /// χ²/ν with the rows weighted by the table's one noise ([`ModelTable::chi2_under`]).
     pub chi2_per_dof: f64,
 }
 
 /// The models' table as a command made it: its rows, and the one noise their χ² are under
 /// (each model under its own estimate would read about 1 on every row).
-pub struct Stages {
-    pub rows: Vec<Stage>,
+pub struct ModelTable {
+    pub rows: Vec<ModelRow>,
     /// The noise, in words: "the stated noise", "the noise estimated with the last model".
     pub chi2_under: String,
 }
@@ -28,10 +28,10 @@ pub struct Report<'a> {
     /// The command that made it (`rpkm diagnose`, `rpkm demo`, `rpkm calibrate`).
     pub command: &'a str,
     pub campaign: &'a Campaign,
-    pub before: &'a Diagnosis,
-    pub after: Option<&'a Diagnosis>,
+    pub before: &'a ModelDiagnosis,
+    pub after: Option<&'a ModelDiagnosis>,
     /// The models in the order they were fitted (the first is `before`'s).
-    pub stages: Vec<Stage>,
+    pub stages: Vec<ModelRow>,
     /// The one noise the stages' χ² are under, in words.
     pub chi2_under: String,
     /// The effects of an effects file: (name, its expressions as written).

@@ -14,23 +14,23 @@ mod contents;
 pub mod history;
 mod sections;
 
-pub use contents::{Report, Stage, Stages};
+pub use contents::{ModelRow, ModelTable, Report};
 
 use crate::plot::escape;
 use anyhow::Context;
-use rpkm_core::diagnose::Diagnosis;
+use rpkm_core::diagnose::ModelDiagnosis;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 impl Report<'_> {
     /// The stage of a diagnosis' current model.
-    pub fn stage_of(d: &Diagnosis) -> Stage {
+    pub fn stage_of(d: &ModelDiagnosis) -> ModelRow {
         let with = if d.effects_in_model.is_empty() {
             String::new()
         } else {
             format!(" + {}", d.effects_in_model.join(" + "))
         };
-        Stage {
+        ModelRow {
             model: format!("{}{with}", d.model),
             cal_rms_um: d.baseline.cal_rms_um,
             val_rms_um: d.baseline.val_rms_um,

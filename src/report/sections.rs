@@ -6,7 +6,7 @@ use crate::plot::maps::{self, Arrow, MapPoint, View};
 use crate::plot::{self, escape, BarOptions, Marker, Series};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::sparse::nominal_tcp;
-use rpkm_core::diagnose::{Diagnosis, Point, VerdictKind};
+use rpkm_core::diagnose::{ModelDiagnosis, ResidualPoint, VerdictKind};
 use rpkm_core::params::Params;
 use std::fmt::Write as _;
 
@@ -32,7 +32,7 @@ fn kind(k: VerdictKind) -> &'static str {
     }
 }
 
-fn verdict_box(label: &str, d: &Diagnosis) -> String {
+fn verdict_box(label: &str, d: &ModelDiagnosis) -> String {
     let ok = if d.verdict_kind == VerdictKind::NothingMissing {
         " ok"
     } else {
@@ -128,7 +128,7 @@ pub fn summary(r: &Report) -> String {
 }
 
 /// The noise table and chart: stated against estimated, per group.
-fn noise(d: &Diagnosis) -> String {
+fn noise(d: &ModelDiagnosis) -> String {
     let mut o = String::from("<h3>Noise: what the campaign shows against the rating</h3><div class=\"row\"><table><tr><th>group</th><th>rated</th><th>estimated</th><th>ratio</th><th>dof</th></tr>");
     for g in &d.noise_groups {
         let _ = write!(
@@ -215,16 +215,16 @@ pub fn machine(r: &Report) -> String {
 
 /// The points of one instrument direction.
 fn of<'a>(
-    d: &'a Diagnosis,
+    d: &'a ModelDiagnosis,
     instrument: &'a str,
     direction: &'a str,
-) -> impl Iterator<Item = &'a Point> + Clone {
+) -> impl Iterator<Item = &'a ResidualPoint> + Clone {
     d.points
         .iter()
         .filter(move |p| p.instrument == instrument && p.direction == direction)
 }
 
-fn map_points<'a>(pts: impl Iterator<Item = &'a Point>) -> Vec<MapPoint> {
+fn map_points<'a>(pts: impl Iterator<Item = &'a ResidualPoint>) -> Vec<MapPoint> {
     pts.map(|p| MapPoint {
         x: p.x,
         y: p.y,
@@ -303,7 +303,7 @@ fn direction_maps(r: &Report, inst: &str, dir: &str, view: View) -> String {
         .clone()
         .chain(after.clone().into_iter().flatten())
         .map(|p| p.value)));
-    let rms = |pts: &mut dyn Iterator<Item = &Point>| {
+    let rms = |pts: &mut dyn Iterator<Item = &ResidualPoint>| {
         let (n, s) = pts.fold((0usize, 0.0), |(n, s), p| (n + 1, s + p.value * p.value));
         (s / n.max(1) as f64).sqrt()
     };
@@ -338,7 +338,7 @@ fn direction_maps(r: &Report, inst: &str, dir: &str, view: View) -> String {
 
 /// The arrows of one instrument in `d`, each titled with its line, pose, error and the σ of
 /// its rows along and across the beam (x and y for the grid encoder).
-fn arrows(d: &Diagnosis, inst: &str) -> Vec<Arrow> {
+fn arrows(d: &ModelDiagnosis, inst: &str) -> Vec<Arrow> {
     let mut sigma: std::collections::BTreeMap<usize, [f64; 2]> =
         std::collections::BTreeMap::default();
     for p in d.points.iter().filter(|p| p.instrument == inst) {
@@ -476,7 +476,7 @@ fn spread(values: &[f64]) -> Vec<f64> {
 /// Residual of one direction against a term, before and after.
 fn against_term(r: &Report, inst: &str, dir: &str, term: &str, values: &[f64]) -> String {
     let at = spread(values);
-    let series = |d: &Diagnosis, name: String| Series {
+    let series = |d: &ModelDiagnosis, name: String| Series {
         name,
         markers: of(d, inst, dir)
             .map(|p| Marker {

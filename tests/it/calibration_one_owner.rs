@@ -73,7 +73,7 @@ fn calibrate_diagnose_and_the_calibrator_node_give_the_same_parameters() {
                 effects: rpkm::node::effects::NodeEffects::default(),
             },
             validation_prefix: String::new(),
-            selection: "map".into(),
+            selection: rpkm::node::calibrator::SelectionRule::Map,
             max_condition: 100.0,
             outlier_sigma: 0.0,
             noise: rpkm_core::noise::NoiseModel::default(),

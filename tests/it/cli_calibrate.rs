@@ -85,7 +85,7 @@ fn calibrate_twin_campaign_reaches_the_held_out_noise_floor() {
         rpkm_core::obs::tcp_errors(&val, twin.true_params(), rpkm_core::params::Model::M29)
             .expect("errors")
             .iter()
-            .map(|e| e.2)
+            .map(|e| e.value)
             .collect();
     let floor = 1e3 * rpkm_core::calib::rms(&e);
     assert!(

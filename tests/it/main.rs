@@ -59,6 +59,7 @@ mod node_launch_restart;
 mod node_lifecycle;
 mod node_netns_dds;
 mod node_online_follow;
+mod node_params_declared;
 mod node_preload_monitor;
 mod node_ros2_params;
 mod node_ros2_views;

@@ -181,7 +181,7 @@ fn check_calibrated(g: &Value, text: &str) {
     let errors: Vec<f64> = rpkm_core::obs::tcp_errors(&val, &cal.params, cal.model)
         .expect("tcp errors")
         .iter()
-        .map(|e| e.2)
+        .map(|e| e.value)
         .collect();
     let val_rms = r["val_rms"].as_f64().expect("a held-out RMS");
     assert!(

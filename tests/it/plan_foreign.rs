@@ -242,16 +242,17 @@ fn measured_zeroed(design: &[PlannedPose], truth: &Params, seed: u64) -> Campaig
 fn held_out_um(val: &Campaign, p: &Params) -> f64 {
     let e = rpkm_core::obs::tcp_errors(val, p, MODEL).expect("held-out errors");
     let mut sums = std::collections::BTreeMap::new();
-    for (i, c, v) in &e {
-        let s: &mut (f64, f64) = sums.entry((val.poses[*i].setup.clone(), *c)).or_default();
-        s.0 += v;
+    for x in &e {
+        let key = (val.poses[x.pose].setup.clone(), x.direction);
+        let s: &mut (f64, f64) = sums.entry(key).or_default();
+        s.0 += x.value;
         s.1 += 1.0;
     }
     let ss: f64 = e
         .iter()
-        .map(|(i, c, v)| {
-            let (sum, n) = sums[&(val.poses[*i].setup.clone(), *c)];
-            (v - sum / n).powi(2)
+        .map(|x| {
+            let (sum, n) = sums[&(val.poses[x.pose].setup.clone(), x.direction)];
+            (x.value - sum / n).powi(2)
         })
         .sum();
     1e3 * (ss / e.len() as f64).sqrt()

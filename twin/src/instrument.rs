@@ -3,7 +3,7 @@
 
 use super::machine::{gauss, MachineState, ResetReading, Twin, TwinError, ZeroDrift};
 use nalgebra::{Cholesky, Matrix2, Rotation2, Vector2};
-use rpkm_core::campaign::{Instrument, Pose};
+use rpkm_core::campaign::{Instrument, MeasuredPose};
 use rpkm_core::design::PlannedPose;
 use rpkm_core::noise::{NoiseModel, XyInstrument};
 
@@ -69,7 +69,7 @@ impl Twin {
         (st, t): (&MachineState, f64),
         (noise, k): (&NoiseModel, f64),
         zeroed: &mut Option<Zeroed>,
-        pose: &mut Pose,
+        pose: &mut MeasuredPose,
     ) -> Result<(), TwinError> {
         if plan.reset {
             *zeroed = Some(Zeroed {
@@ -112,7 +112,7 @@ impl Twin {
         moved: &Moved,
         noise: &NoiseModel,
         k: f64,
-        pose: &mut Pose,
+        pose: &mut MeasuredPose,
     ) {
         let (d, dpsi) = (moved.d, moved.dpsi);
         let m = plan.instrument.measures();

@@ -46,7 +46,7 @@ use effects::{bow, THERMAL_PERIOD_S};
 use nalgebra::Vector2;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-use rpkm_core::campaign::{Campaign, Instrument, Pose};
+use rpkm_core::campaign::{Campaign, Instrument, MeasuredPose};
 use rpkm_core::design::{self, PlannedPose};
 use rpkm_core::elastic::{self, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::{self};
@@ -411,7 +411,7 @@ impl Twin {
         st: &MachineState,
         (k, encoder_mm): (f64, f64),
         mut covariates: Vec<Option<f64>>,
-    ) -> Pose {
+    ) -> MeasuredPose {
         let mut q = st.q;
         for (qi, &follower) in q.iter_mut().zip(&st.follower) {
             if follower {
@@ -428,7 +428,7 @@ impl Twin {
                 covariates.insert(slot, Some(reading));
             }
         }
-        Pose {
+        MeasuredPose {
             t,
             setup: plan.setup.clone(),
             instrument: plan.instrument,
@@ -496,7 +496,7 @@ impl Twin {
 
     /// The campaign of measured `poses`: its comment names the twin's seed and effects, its
     /// covariates the temperature and, with backlash, the approach directions.
-    fn campaign_of(&self, source: &str, poses: Vec<Pose>, backlash: bool) -> Campaign {
+    fn campaign_of(&self, source: &str, poses: Vec<MeasuredPose>, backlash: bool) -> Campaign {
         let effects: Vec<String> = self
             .config
             .effects

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use super::error::clip;
 use super::plausible;
-use super::{Campaign, CampaignError, Instrument, Pose, REQUIRED_COLUMNS};
+use super::{Campaign, CampaignError, Instrument, MeasuredPose, REQUIRED_COLUMNS};
 
 // Positions in `REQUIRED_COLUMNS`.
 const T: usize = 0;
@@ -96,7 +96,11 @@ impl<'a> Row<'a> {
         self.number_at(layout.field[k], name(k))
     }
 
-    fn pose(&self, layout: &Layout, covariates: &[(usize, String)]) -> Result<Pose, CampaignError> {
+    fn pose(
+        &self,
+        layout: &Layout,
+        covariates: &[(usize, String)],
+    ) -> Result<MeasuredPose, CampaignError> {
         let t = self.required_number(layout, T)?;
         let setup = self.text(layout.field[SETUP]).to_owned();
         let text = self.text(layout.field[INSTRUMENT]);
@@ -143,7 +147,7 @@ impl<'a> Row<'a> {
             .iter()
             .map(|(i, name)| self.number_at(*i, name))
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Pose {
+        Ok(MeasuredPose {
             t,
             setup,
             instrument,
@@ -286,7 +290,7 @@ impl CampaignReader {
     /// for a comment, a blank line and the header; `Ok(Some(pose))` for a row that keeps
     /// every rule; `Err` names the line (and column, or byte) and what was expected; the
     /// reader then goes on as if the line were absent.
-    pub fn read_line(&mut self, bytes: &[u8]) -> Result<Option<Pose>, CampaignError> {
+    pub fn read_line(&mut self, bytes: &[u8]) -> Result<Option<MeasuredPose>, CampaignError> {
         self.line += 1;
         let offset = self.offset;
         self.offset += bytes.len() + 1;
@@ -370,7 +374,12 @@ fn comment_body(raw: &str) -> String {
 }
 
 /// One data row of a file whose header is `head`.
-fn row(head: &Header, file: &str, line: usize, fields: Vec<&str>) -> Result<Pose, CampaignError> {
+fn row(
+    head: &Header,
+    file: &str,
+    line: usize,
+    fields: Vec<&str>,
+) -> Result<MeasuredPose, CampaignError> {
     let expected = head.layout.field.len() + head.covariates.len();
     if fields.len() != expected {
         return Err(CampaignError::WrongFieldCount {
@@ -510,7 +519,12 @@ impl Checker {
         }
     }
 
-    fn add(&mut self, pose: &Pose, layout: &Layout, file: &str) -> Result<(), CampaignError> {
+    fn add(
+        &mut self,
+        pose: &MeasuredPose,
+        layout: &Layout,
+        file: &str,
+    ) -> Result<(), CampaignError> {
         if let Some((previous, previous_line)) = self.previous {
             if pose.t < previous {
                 return Err(CampaignError::TimeNotMonotonic {
@@ -573,7 +587,7 @@ impl Checker {
 /// A further row of a known setup: the same instrument, no second reset pose.
 fn check_setup(
     setup: &SetupState,
-    pose: &Pose,
+    pose: &MeasuredPose,
     layout: &Layout,
     file: &str,
 ) -> Result<(), CampaignError> {
@@ -602,7 +616,7 @@ fn check_setup(
 
 /// The row's actuator positions are a pose of the machine ([`plausible::reachable`]); the
 /// error names the actuator to blame.
-fn check_reachable(pose: &Pose, layout: &Layout, file: &str) -> Result<(), CampaignError> {
+fn check_reachable(pose: &MeasuredPose, layout: &Layout, file: &str) -> Result<(), CampaignError> {
     plausible::reachable(pose.q).map_err(|u| CampaignError::Unreachable {
         file: file.to_owned(),
         line: pose.line,
@@ -613,7 +627,7 @@ fn check_reachable(pose: &Pose, layout: &Layout, file: &str) -> Result<(), Campa
 }
 
 /// The checks of one row on its own: reset allowed, followers of `self`, measured columns.
-fn check_row(pose: &Pose, layout: &Layout, file: &str) -> Result<(), CampaignError> {
+fn check_row(pose: &MeasuredPose, layout: &Layout, file: &str) -> Result<(), CampaignError> {
     let instrument = pose.instrument;
     if pose.reset && !instrument.takes_reset() {
         return Err(CampaignError::UnexpectedReset {

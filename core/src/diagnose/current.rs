@@ -8,7 +8,7 @@ use super::figures::length_sigmas;
 use super::held_out::{self, Levels, Model1, Validation};
 use super::settle::{self, Settled};
 use super::trials::finish_with;
-use super::types::{Baseline, DiagnoseError, Fit, Fitted, HeldOutCheck, Options};
+use super::types::{Baseline, DiagnoseError, DiagnosisOptions, Fit, Fitted, HeldOutCheck};
 use crate::calib::{self, Calibration, Request};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};
@@ -21,7 +21,7 @@ use crate::variance::NoiseEstimate;
 /// Calibration options of the diagnosis: the model's links, every parameter under its
 /// tolerance prior, no outlier elimination (the nested tests need the same rows in every
 /// fit). `rpkm calibrate` and the calibrator node calibrate with the same selection.
-pub fn calib_options(opts: &Options) -> calib::Options {
+pub fn calib_options(opts: &DiagnosisOptions) -> calib::Options {
     calib::Options {
         model: Model::M29,
         selection: calib::Selection::Prior(opts.prior),
@@ -58,7 +58,7 @@ pub(crate) fn fit_model(
 pub(crate) fn noise_of(
     campaign: &Campaign,
     effects: &[&dyn Effect],
-    opts: &Options,
+    opts: &DiagnosisOptions,
     first: Option<&Calibration>,
 ) -> Result<(Calibration, NoiseEstimate, calib::Options), DiagnoseError> {
     let start = Params::nominal();
@@ -89,7 +89,7 @@ pub(crate) struct Current {
 
 /// Level of each structure test: a third of the diagnosis's (three tests, the family's
 /// level stays α).
-pub(crate) fn structure_level(opts: &Options) -> f64 {
+pub(crate) fn structure_level(opts: &DiagnosisOptions) -> f64 {
     opts.alpha / 3.0
 }
 
@@ -100,7 +100,7 @@ impl Current {
         campaign: &Campaign,
         validation: Option<&Campaign>,
         in_model: &[&dyn Effect],
-        opts: &Options,
+        opts: &DiagnosisOptions,
         first: Option<&Calibration>,
     ) -> Result<Current, DiagnoseError> {
         let (cal, est, copts) = noise_of(campaign, in_model, opts, first)?;
@@ -151,7 +151,7 @@ impl Current {
         in_model: &[&dyn Effect],
         cal: Calibration,
         copts: &calib::Options,
-        opts: &Options,
+        opts: &DiagnosisOptions,
     ) -> Result<Current, DiagnoseError> {
         let est = NoiseEstimate::assumed(&opts.noise);
         let set = EffectSet::bind(in_model, campaign, &cal.start)?;
@@ -184,7 +184,7 @@ impl Current {
 
 /// The levels of the held-out judge: its χ² at the diagnosis's level, each structure test
 /// at a third of it.
-fn levels(opts: &Options) -> Levels {
+fn levels(opts: &DiagnosisOptions) -> Levels {
     Levels {
         variance: opts.alpha,
         structure: structure_level(opts),
@@ -196,7 +196,7 @@ pub(crate) fn baseline(
     base: &Fitted,
     estimated: &NoiseModel,
     val: Option<&Validation>,
-    opts: &Options,
+    opts: &DiagnosisOptions,
 ) -> Baseline {
     let noise_floor_um = match val {
         Some(v) => calib::rms(&v.sigma) * 1e3,
@@ -272,7 +272,7 @@ pub fn evaluate(
     campaign: &Campaign,
     validation: Option<&Campaign>,
     effects: &[&dyn Effect],
-    opts: &Options,
+    opts: &DiagnosisOptions,
 ) -> Result<Evaluated, DiagnoseError> {
     let current = Current::of(campaign, validation, effects, opts, None)?;
     let model_effects = current

@@ -3,7 +3,7 @@
 
 use super::sparse;
 use super::types::{
-    DiagnoseError, ErrorVector, GroupRms, NoiseReport, Noisier, Point, NOISIER_THAN_RATED,
+    DiagnoseError, ErrorVector, GroupRms, NoiseReport, Noisier, ResidualPoint, NOISIER_THAN_RATED,
 };
 use crate::calib::Calibration;
 use crate::campaign::Campaign;
@@ -27,10 +27,10 @@ pub(crate) fn error_vectors(
     let mut xy: BTreeMap<usize, [Option<f64>; 2]> = BTreeMap::new();
     for e in &errs {
         let slot = xy.entry(e.pose).or_default();
-        match e.coordinate {
-            "x" => slot[0] = Some(e.value * 1e3),
-            "y" => slot[1] = Some(e.value * 1e3),
-            _ => {}
+        match e.direction {
+            obs::TcpDirection::X => slot[0] = Some(e.value * 1e3),
+            obs::TcpDirection::Y => slot[1] = Some(e.value * 1e3),
+            obs::TcpDirection::R => {}
         }
     }
     let tcp = sparse::nominal_tcp(campaign);
@@ -144,14 +144,14 @@ pub(crate) fn groups(rows: &[RowValue]) -> Vec<GroupRms> {
 }
 
 /// Every residual located, worst (largest |r/σ|) first.
-pub(crate) fn points(campaign: &Campaign, rows: &[RowValue]) -> Vec<Point> {
+pub(crate) fn points(campaign: &Campaign, rows: &[RowValue]) -> Vec<ResidualPoint> {
     let tcp = sparse::nominal_tcp(campaign);
-    let mut out: Vec<Point> = rows
+    let mut out: Vec<ResidualPoint> = rows
         .iter()
         .map(|r| {
             let pose = &campaign.poses[r.pose];
             let (x, y) = tcp[r.pose];
-            Point {
+            ResidualPoint {
                 pose: r.pose,
                 line: pose.line,
                 instrument: r.instrument.as_str().to_owned(),

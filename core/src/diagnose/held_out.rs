@@ -82,7 +82,10 @@ impl Validation<'_> {
                 .collect(),
             relative_parts,
             zero,
-            at: errs.iter().map(|(i, c, _)| (*i, *c)).collect(),
+            at: errs
+                .iter()
+                .map(|e| (e.pose, e.direction.as_str()))
+                .collect(),
         })
     }
 
@@ -117,11 +120,11 @@ pub(crate) fn group_sums(zero: &[usize], values: &[f64]) -> Vec<(f64, usize)> {
 }
 
 /// Each held-out TCP error's (setup, coordinate) as an index, in [`obs::tcp_errors`] order.
-fn zero_groups(val: &Campaign, errs: &[(usize, &'static str, f64)]) -> Vec<usize> {
-    let mut keys: Vec<(&str, &str)> = Vec::new();
+fn zero_groups(val: &Campaign, errs: &[obs::TcpError]) -> Vec<usize> {
+    let mut keys: Vec<(&str, obs::TcpDirection)> = Vec::new();
     errs.iter()
-        .map(|(i, coordinate, _)| {
-            let key = (val.poses[*i].setup.as_str(), *coordinate);
+        .map(|e| {
+            let key = (val.poses[e.pose].setup.as_str(), e.direction);
             keys.iter().position(|k| *k == key).unwrap_or_else(|| {
                 keys.push(key);
                 keys.len() - 1
@@ -498,7 +501,7 @@ struct ErrorVariance {
 /// other), and the encoders' at both.
 fn validation_variances(
     val: &Campaign,
-    errs: &[(usize, &'static str, f64)],
+    errs: &[obs::TcpError],
     noise: &NoiseModel,
 ) -> Result<Vec<ErrorVariance>, PoseError> {
     let nominal = Params::nominal();
@@ -508,32 +511,38 @@ fn validation_variances(
             reset_of[i] = setup.reset;
         }
     }
-    let parts = |i: usize, coordinate: &str| -> Result<Parts, PoseError> {
+    let parts = |i: usize, direction: obs::TcpDirection| -> Result<Parts, PoseError> {
         let pose = &val.poses[i];
         let tcp = geometry::fgm(&nominal, Model::M29, pose.q[0], pose.q[3])
             .map_err(|e| PoseError::at(val, pose, e))?;
         let at = Vector2::new(tcp.x(), tcp.y());
-        let reading = match (coordinate, XyInstrument::of(pose.instrument)) {
-            ("x", Some(xy)) => noise.xy_parts(xy, at, Vector2::new(1.0, 0.0)),
-            ("y", Some(xy)) => noise.xy_parts(xy, at, Vector2::new(0.0, 1.0)),
+        let reading = match (direction, XyInstrument::of(pose.instrument)) {
+            (obs::TcpDirection::X, Some(xy)) => noise.xy_parts(xy, at, Vector2::new(1.0, 0.0)),
+            (obs::TcpDirection::Y, Some(xy)) => noise.xy_parts(xy, at, Vector2::new(0.0, 1.0)),
             _ => noise.scalar_parts(pose.instrument, 1.0),
         };
         Ok(noise::add(reading, noise.encoder_parts(1.0)))
     };
     errs.iter()
-        .map(|(i, coordinate, _)| {
-            // the reading the setup was zeroed on is in every error of the setup (none for a
-            // ball-bar, zeroed on no reading; the reset's encoders for every instrument)
-            let zero = match reset_of[*i] {
-                Some(r) if val.poses[r].instrument == Instrument::Dbb => noise.encoder_mm.powi(2),
-                Some(r) => parts(r, coordinate)?.iter().sum(),
-                None => 0.0,
-            };
-            Ok(ErrorVariance {
-                reading: parts(*i, coordinate)?,
-                zero,
-            })
-        })
+        .map(
+            |&obs::TcpError {
+                 pose: i, direction, ..
+             }| {
+                // the reading the setup was zeroed on is in every error of the setup (none for a
+                // ball-bar, zeroed on no reading; the reset's encoders for every instrument)
+                let zero = match reset_of[i] {
+                    Some(r) if val.poses[r].instrument == Instrument::Dbb => {
+                        noise.encoder_mm.powi(2)
+                    }
+                    Some(r) => parts(r, direction)?.iter().sum(),
+                    None => 0.0,
+                };
+                Ok(ErrorVariance {
+                    reading: parts(i, direction)?,
+                    zero,
+                })
+            },
+        )
         .collect()
 }
 

@@ -56,7 +56,7 @@ pub use held_out::{held_out_errors, judge_calibration};
 pub use rounds::{diagnose, diagnose_among};
 pub use trials::SCREEN_P;
 pub use types::{
-    Baseline, Candidate, DiagnoseError, Diagnosis, ErrorVector, Fit, GroupRms, HeldOutCheck,
-    Judged, ModelTrial, NoiseReport, Noisier, Options, Outcome, Point, Prediction, Skipped, Test,
-    VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM, RELEVANT_FRACTION,
+    Baseline, Candidate, DiagnoseError, DiagnosisOptions, ErrorVector, Fit, GroupRms, HeldOutCheck,
+    Judged, ModelDiagnosis, ModelTrial, NoiseReport, Noisier, Outcome, Prediction, ResidualPoint,
+    Skipped, Test, VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM, RELEVANT_FRACTION,
 };

@@ -19,7 +19,7 @@ use super::pool::{self, Pool};
 use super::sparse;
 use super::trials::{candidates, finish, try_all, Round};
 use super::types::NUMERICAL_RMS_MM;
-use super::types::{Candidate, DiagnoseError, Diagnosis, Fitted, Options};
+use super::types::{Candidate, DiagnoseError, DiagnosisOptions, Fitted, ModelDiagnosis};
 use super::verdict::{conclude, Concluded};
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
@@ -31,8 +31,8 @@ pub fn diagnose(
     campaign: &Campaign,
     validation: Option<&Campaign>,
     in_model: &[&dyn Effect],
-    opts: &Options,
-) -> Result<Diagnosis, DiagnoseError> {
+    opts: &DiagnosisOptions,
+) -> Result<ModelDiagnosis, DiagnoseError> {
     diagnose_among(campaign, validation, in_model, &[], opts)
 }
 
@@ -43,8 +43,8 @@ pub fn diagnose_among(
     validation: Option<&Campaign>,
     in_model: &[&dyn Effect],
     offered: &[&dyn Effect],
-    opts: &Options,
-) -> Result<Diagnosis, DiagnoseError> {
+    opts: &DiagnosisOptions,
+) -> Result<ModelDiagnosis, DiagnoseError> {
     let diagnosis = rounds(campaign, validation, in_model, offered, opts);
     // a fit stopped part-way fails as it can (a candidate not fitted, a round's error):
     // whatever came of it, a stopped diagnosis concludes nothing
@@ -60,8 +60,8 @@ fn rounds(
     validation: Option<&Campaign>,
     in_model: &[&dyn Effect],
     offered: &[&dyn Effect],
-    opts: &Options,
-) -> Result<Diagnosis, DiagnoseError> {
+    opts: &DiagnosisOptions,
+) -> Result<ModelDiagnosis, DiagnoseError> {
     let library = effects::library();
     let tried = candidates_of(&library, in_model, offered, opts);
     let variants = pool::part_variants(&tried, false);
@@ -149,7 +149,7 @@ fn candidates_of<'a>(
     library: &'a [Box<dyn Effect>],
     in_model: &[&dyn Effect],
     offered: &[&'a dyn Effect],
-    opts: &Options,
+    opts: &DiagnosisOptions,
 ) -> Vec<&'a dyn Effect> {
     let in_families: Vec<&str> = in_model
         .iter()
@@ -169,7 +169,7 @@ fn candidates_of<'a>(
 /// alone), the names of those, and the current model's calibration with them where it is
 /// at hand; the current model's own where none stood out.
 fn comparison_weights(
-    (campaign, opts): (&Campaign, &Options),
+    (campaign, opts): (&Campaign, &DiagnosisOptions),
     current: &Current,
     settled: &[&dyn Effect],
     (round1, tried): (&[Candidate], &[&dyn Effect]),
@@ -199,8 +199,8 @@ fn exact(
     first: &Search,
     (base, mut round, cal): (Fitted, Round, Option<Calibration>),
     (variants, level): (&[Box<dyn Effect>], f64),
-    opts: &Options,
-) -> Result<Diagnosis, DiagnoseError> {
+    opts: &DiagnosisOptions,
+) -> Result<ModelDiagnosis, DiagnoseError> {
     let stated = calib_options(opts);
     let val = held_out::held_out(first.validation, &opts.noise)?;
     let cal = base_cal(first, cal, &stated)?;
@@ -272,7 +272,7 @@ pub(crate) struct Search<'a> {
     level: f64,
     /// Threads the candidates are fitted on.
     threads: usize,
-    /// Whether candidates are screened first ([`Options::screen`]).
+    /// Whether candidates are screened first ([`DiagnosisOptions::screen`]).
     screen: bool,
 }
 

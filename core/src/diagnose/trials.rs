@@ -127,7 +127,7 @@ pub(crate) struct Trials<'a> {
     /// The current model's fit: where each candidate starts, and what it is tested against.
     base: &'a Fit,
     start: Params,
-    /// Whether candidates are screened first ([`Options::screen`]).
+    /// Whether candidates are screened first ([`DiagnosisOptions::screen`]).
     screen: bool,
     copts: calib::Options,
     /// The rows at the start and at the current model's minimum ([`shared_rows`]).

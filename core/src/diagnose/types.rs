@@ -21,7 +21,7 @@ pub const NUMERICAL_RMS_MM: f64 = 1e-6;
 
 /// Options of a diagnosis.
 #[derive(Clone, Debug)]
-pub struct Options {
+pub struct DiagnosisOptions {
     /// The geometric model (24: rod 5 linked to rod 4).
     pub model: Model,
     /// Significance level of the tests (family-wise over the candidates).
@@ -47,16 +47,16 @@ pub struct Options {
     pub stop: Option<calib::Stop>,
 }
 
-impl Options {
-    /// Whether the caller asked the diagnosis to stop ([`Options::stop`]).
+impl DiagnosisOptions {
+    /// Whether the caller asked the diagnosis to stop ([`DiagnosisOptions::stop`]).
     pub(crate) fn stopped(&self) -> bool {
         self.stop.as_ref().is_some_and(calib::Stop::requested)
     }
 }
 
-impl Default for Options {
+impl Default for DiagnosisOptions {
     fn default() -> Self {
-        Options {
+        DiagnosisOptions {
             model: Model::M24,
             alpha: 0.001,
             noise: NoiseModel::default(),
@@ -333,7 +333,7 @@ pub struct GroupRms {
 /// One calibration residual, located for plots (heat maps over the workspace, against time
 /// and covariates).
 #[derive(Clone, Debug, serde::Serialize)]
-pub struct Point {
+pub struct ResidualPoint {
     pub pose: usize,
     pub line: usize,
     pub instrument: String,
@@ -368,7 +368,7 @@ pub struct NoiseReport {
 /// The diagnosis (serialises to the JSON other tools read: `verdict_kind`, `missing_effect`,
 /// `noise`, `baseline`, `candidates`).
 #[derive(Clone, Debug, serde::Serialize)]
-pub struct Diagnosis {
+pub struct ModelDiagnosis {
     pub model: String,
     /// The effects in the model as given (`--effects`).
     pub effects_in_model: Vec<String>,
@@ -429,7 +429,7 @@ pub struct Diagnosis {
     pub unexplained: Option<sparse::Pointer>,
     pub groups: Vec<GroupRms>,
     /// Residuals of the current model, worst (largest |r/σ|) first.
-    pub points: Vec<Point>,
+    pub points: Vec<ResidualPoint>,
     /// The current model's TCP error of every tracker and grid-encoder pose as a vector, from
     /// the same fit as `points`.
     pub error_vectors: Vec<ErrorVector>,

@@ -12,7 +12,7 @@ use super::sparse;
 use super::structure::Shape;
 use super::trials::Round;
 use super::types::NUMERICAL_RMS_MM;
-use super::types::{Diagnosis, Fitted, ModelTrial, Options, Test, VerdictKind};
+use super::types::{DiagnosisOptions, Fitted, ModelDiagnosis, ModelTrial, Test, VerdictKind};
 use crate::calib;
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect};
@@ -20,7 +20,7 @@ use crate::effects::{self, Effect};
 /// What a verdict is concluded from.
 pub(crate) struct Concluded<'a> {
     pub campaign: &'a Campaign,
-    pub opts: &'a Options,
+    pub opts: &'a DiagnosisOptions,
     /// The effects as given, and as fitted (families settled).
     pub in_model: &'a [&'a dyn Effect],
     pub model_effects: &'a [&'a dyn Effect],
@@ -38,7 +38,7 @@ pub(crate) struct Concluded<'a> {
 }
 
 /// The diagnosis from the last round.
-pub(crate) fn conclude(c: Concluded) -> Diagnosis {
+pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
     let Concluded {
         campaign,
         opts,
@@ -78,7 +78,7 @@ pub(crate) fn conclude(c: Concluded) -> Diagnosis {
         rows: base.rows.len(),
     };
     let fit = &current.fitted.fit;
-    Diagnosis {
+    ModelDiagnosis {
         model: format!("{}", opts.model),
         effects_in_model: c.in_model.iter().map(|e| e.name().to_owned()).collect(),
         model_effects: c

@@ -8,7 +8,7 @@
 //! The stiffness is identified with the geometry.
 
 use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
-use crate::campaign::{Campaign, Pose};
+use crate::campaign::{Campaign, MeasuredPose};
 use crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM;
 use crate::geometry::{self, carrier_joint, guide_frame, platform_joint};
 use crate::params::{Model, Params, RODS};
@@ -90,7 +90,7 @@ const DEFORMED_PASSES: usize = 3;
 /// stressed twin, against a stretch the instrument rows determine to 0.03 %). The deformed
 /// pose is the rigid model's with the rods lengthened by T / k (the default stiffness: a
 /// compliance c ≠ 1 moves it by (c − 1) of a second-order term).
-fn rod_forces(p: &Params, pose: &Pose) -> Result<[f64; 5], String> {
+fn rod_forces(p: &Params, pose: &MeasuredPose) -> Result<[f64; 5], String> {
     let mut t = balance_at(p, pose)?;
     for _ in 1..DEFORMED_PASSES {
         let mut stretched = *p;
@@ -104,7 +104,7 @@ fn rod_forces(p: &Params, pose: &Pose) -> Result<[f64; 5], String> {
 
 /// Rod forces that balance the recorded drive forces at the rigid pose of the pose's (q1, q4)
 /// under the parameters `p`: 4 carrier and 3 platform equations, least squares.
-fn balance_at(p: &Params, pose: &Pose) -> Result<[f64; 5], String> {
+fn balance_at(p: &Params, pose: &MeasuredPose) -> Result<[f64; 5], String> {
     let sol = geometry::fgm(p, Model::M29, pose.q[0], pose.q[3])
         .map_err(|e| format!("rigid pose: {e}"))?;
     let (x, y, psi) = (sol.x(), sol.y(), sol.psi());

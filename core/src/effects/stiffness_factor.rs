@@ -12,7 +12,7 @@
 //! (`rpkm analyze observability --method currents` shows both).
 
 use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
-use crate::campaign::{Campaign, Pose};
+use crate::campaign::{Campaign, MeasuredPose};
 use crate::params::Params;
 
 /// See the module documentation.
@@ -29,7 +29,7 @@ impl Effect for StiffnessFactor {
         "the machine's stiffness relative to the model's default (drive-force rows only)"
     }
     fn bind(&self, campaign: &Campaign, _p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
-        if !campaign.poses.iter().any(Pose::drives_loaded) {
+        if !campaign.poses.iter().any(MeasuredPose::drives_loaded) {
             return Err(NotApplicable {
                 effect: "stiffness_factor".into(),
                 reason: format!(

@@ -2,7 +2,7 @@
 //! its reset pose, solved once.
 
 use super::forward_solve::{forward, Forward, FORWARD_SUBSYSTEMS};
-use crate::campaign::{Instrument, Pose};
+use crate::campaign::{Instrument, MeasuredPose};
 use crate::effects::Corrections;
 use crate::geometry;
 use crate::noise::NoiseModel;
@@ -48,7 +48,7 @@ impl AtReset {
     /// subsystem at its corrected inputs `p_r`, `q_r`, and the instrument's other solves.
     pub(super) fn of(
         ctx: &Ctx,
-        reset: &Pose,
+        reset: &MeasuredPose,
         (p_r, q_r): (&Params, &[f64; 4]),
         nr: Forward,
     ) -> AtReset {

@@ -8,7 +8,7 @@ use super::forward_solve::{corrected, forward, Forward};
 use super::inverse::inverse_rows;
 use super::reset::{share_reset, zero_covariance};
 use super::row::{ModelError, PoseError, Residual};
-use crate::campaign::{Campaign, Instrument, Pose};
+use crate::campaign::{Campaign, Instrument, MeasuredPose};
 use crate::effects::Corrections;
 use crate::geometry::{self, Subsystem};
 use crate::noise::{NoiseModel, XyInstrument};
@@ -325,8 +325,8 @@ impl Evaluation<'_> {
 
 fn pose_rows(
     ctx: &Ctx,
-    (i, pose): (usize, &Pose),
-    (reset, at): (Option<(usize, &Pose)>, &AtReset),
+    (i, pose): (usize, &MeasuredPose),
+    (reset, at): (Option<(usize, &MeasuredPose)>, &AtReset),
     f: &mut Forward,
     out: &mut Vec<Residual>,
 ) -> Result<(), ModelError> {

@@ -4,7 +4,7 @@ use super::context::Ctx;
 use super::forward_solve::corrected;
 use super::inverse::combine_into;
 use super::row::{Direction, PoseError, ResetGain, Residual};
-use crate::campaign::{Campaign, Pose};
+use crate::campaign::{Campaign, MeasuredPose};
 use crate::effects::{Corrections, InputSensitivity};
 use crate::elastic::{fegm, fegm_from, ElasticError, Equilibrium, Stiffness, ALL_ACTIVE};
 use crate::geometry;
@@ -71,7 +71,7 @@ pub fn force_jacobian(
 pub(super) fn force_rows(
     ctx: &Ctx,
     i: usize,
-    pose: &Pose,
+    pose: &MeasuredPose,
     out: &mut Vec<Residual>,
 ) -> Result<(), ElasticError> {
     let d = ctx.corr.delta(i);

@@ -6,7 +6,7 @@ use super::forward_solve::{
     corrected, encoder_gain2, forward, input_sensitivity, negated, Forward, FORWARD_SUBSYSTEMS,
 };
 use super::row::{reset_gain, Direction, ResetGain, Residual};
-use crate::campaign::{Instrument, Pose};
+use crate::campaign::{Instrument, MeasuredPose};
 use crate::geometry::{self, q_var, GeometryError, Subsystem, PSI, X, Y};
 use crate::noise;
 use crate::params::Row;
@@ -18,8 +18,8 @@ use nalgebra::Vector2;
 pub(super) fn forward_rows(
     ctx: &Ctx,
     i: usize,
-    pose: &Pose,
-    ((ri, reset), at): ((usize, &Pose), &AtReset),
+    pose: &MeasuredPose,
+    ((ri, reset), at): ((usize, &MeasuredPose), &AtReset),
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
     let (dpose, dreset) = (ctx.corr.delta(i), ctx.corr.delta(ri));
@@ -126,7 +126,7 @@ fn b_of(sub: Subsystem) -> usize {
 /// Self-calibration rows (eq. 4.37): followers q2, q3 against rgm(q1, q4).
 pub(super) fn self_rows(
     ctx: &Ctx,
-    (i, pose): (usize, &Pose),
+    (i, pose): (usize, &MeasuredPose),
     f: &mut Forward,
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
@@ -190,7 +190,7 @@ pub(super) fn self_rows(
 pub(super) fn virtual_q2_row(
     ctx: &Ctx,
     i: usize,
-    pose: &Pose,
+    pose: &MeasuredPose,
     p_cal: &Params,
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {

@@ -5,7 +5,7 @@ use super::context::{AtReset, Ctx};
 use super::forward_solve::{corrected, forward, input_sensitivity};
 use super::reset::complement;
 use super::row::{reset_gain, Direction, ResetGain, Residual};
-use crate::campaign::Pose;
+use crate::campaign::MeasuredPose;
 use crate::effects::InputSensitivity;
 use crate::geometry::{self, q_var, GeometryError, Subsystem, X, Y};
 use crate::noise::{self, NoiseModel, Parts, XyInstrument};
@@ -16,8 +16,8 @@ use nalgebra::Vector2;
 pub(super) fn inverse_rows(
     ctx: &Ctx,
     xy: XyInstrument,
-    (i, pose): (usize, &Pose),
-    ((ri, reset), at): ((usize, &Pose), &AtReset),
+    (i, pose): (usize, &MeasuredPose),
+    ((ri, reset), at): ((usize, &MeasuredPose), &AtReset),
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
     let (Some(mx), Some(my)) = (pose.x, pose.y) else {

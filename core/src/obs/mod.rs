@@ -53,4 +53,4 @@ pub use force::{force_jacobian, force_position_gains, force_residuals};
 pub use forward_solve::FORWARD_SUBSYSTEMS;
 pub use reset::zero_covariance;
 pub use row::{Direction, ModelError, PoseError, ResetGain, Residual, RowValue};
-pub use tcp::{has_forward_instruments, tcp_errors, tcp_errors_with, TcpError};
+pub use tcp::{has_forward_instruments, tcp_errors, tcp_errors_with, TcpDirection, TcpError};

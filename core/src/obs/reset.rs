@@ -2,7 +2,7 @@
 //! rows.
 
 use super::row::Residual;
-use crate::campaign::{Instrument, Pose};
+use crate::campaign::{Instrument, MeasuredPose};
 use crate::geometry::{self, GeometryError};
 use crate::noise::{NoiseModel, XyInstrument};
 use crate::params::Row;
@@ -17,7 +17,7 @@ use nalgebra::Vector2;
 pub fn zero_covariance(
     noise: &NoiseModel,
     (p_cal, model): (&Params, Model),
-    reset: &Pose,
+    reset: &MeasuredPose,
 ) -> Result<nalgebra::SMatrix<f64, 6, 6>, GeometryError> {
     let mut cov = nalgebra::SMatrix::<f64, 6, 6>::zeros();
     for k in 2..6 {

@@ -1,7 +1,7 @@
 //! What a row measures and holds: its direction, value, derivatives and noise parts, and the
 //! model's errors at a pose.
 
-use crate::campaign::{Campaign, Instrument, Pose};
+use crate::campaign::{Campaign, Instrument, MeasuredPose};
 use crate::elastic::ElasticError;
 use crate::geometry::GeometryError;
 use crate::noise::Parts;
@@ -178,7 +178,7 @@ pub enum ModelError {
 
 impl PoseError {
     /// The error `error` of `pose` in `campaign`, located by its file and line.
-    pub fn at(campaign: &Campaign, pose: &Pose, error: impl Into<ModelError>) -> PoseError {
+    pub fn at(campaign: &Campaign, pose: &MeasuredPose, error: impl Into<ModelError>) -> PoseError {
         PoseError {
             source: campaign.source.clone(),
             line: pose.line,

@@ -103,10 +103,10 @@ pub fn drive_mode(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::campaign::Pose;
+    use crate::campaign::MeasuredPose;
 
-    fn pose(instrument: Instrument, follower: [bool; 4], f: f64) -> Pose {
-        Pose {
+    fn pose(instrument: Instrument, follower: [bool; 4], f: f64) -> MeasuredPose {
+        MeasuredPose {
             t: 0.0,
             setup: "s".into(),
             instrument,
@@ -123,7 +123,7 @@ mod tests {
         }
     }
 
-    fn campaign(poses: Vec<Pose>) -> Campaign {
+    fn campaign(poses: Vec<MeasuredPose>) -> Campaign {
         Campaign {
             source: "c".into(),
             comments: Vec::new(),

@@ -15,7 +15,7 @@
 
 use rpkm_core::calib;
 use rpkm_core::calib::{Calibration, Options, Selection};
-use rpkm_core::campaign::{Campaign, Instrument, Pose};
+use rpkm_core::campaign::{Campaign, Instrument, MeasuredPose};
 use rpkm_core::design;
 use rpkm_core::effects::{
     Corrections, Effect, EffectSet, PreloadElastic, StiffnessFactor, Thermal,
@@ -95,7 +95,7 @@ fn the_drive_forces_alone_find_the_true_machine() {
     let production = t
         .run(&design::production(300, 17), "production")
         .expect("production campaign");
-    assert!(production.poses.iter().all(Pose::drives_loaded));
+    assert!(production.poses.iter().all(MeasuredPose::drives_loaded));
     let cal = calibrate(&production);
     let chi2 = cal.chi2_per_dof;
     assert!(
@@ -192,7 +192,7 @@ fn forces_and_followers_in_one_campaign_find_the_stiffness() {
     let mut plan = design::for_instrument(Instrument::SelfCal);
     plan.extend(design::production(300, 29));
     let mixed = t.run(&plan, "self + production").expect("mixed campaign");
-    assert!(mixed.poses.iter().any(Pose::drives_loaded));
+    assert!(mixed.poses.iter().any(MeasuredPose::drives_loaded));
     assert!(mixed
         .poses
         .iter()

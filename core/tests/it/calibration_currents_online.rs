@@ -45,7 +45,7 @@ fn start_calibration(t: &mut Twin, seed: u64) -> Calibration {
     let mut named: Vec<Box<dyn Effect>> = Vec::new();
     loop {
         let in_model: Vec<&dyn Effect> = named.iter().map(AsRef::as_ref).collect();
-        let d = diagnose::diagnose(&c, None, &in_model, &diagnose::Options::default())
+        let d = diagnose::diagnose(&c, None, &in_model, &diagnose::DiagnosisOptions::default())
             .expect("diagnoses");
         let Some(name) = d
             .missing_effect

@@ -20,7 +20,7 @@ fn val_rms_um(val: &Campaign, p: &Params, model: Model) -> f64 {
     let e: Vec<f64> = obs::tcp_errors(val, p, model)
         .expect("validation")
         .iter()
-        .map(|e| e.2)
+        .map(|e| e.value)
         .collect();
     1e3 * calib::rms(&e)
 }

@@ -230,14 +230,14 @@ fn a_stopped_diagnosis_is_cancelled() {
     let c = campaign();
     let stop = calib::Stop::default();
     stop.request();
-    let opts = diagnose::Options {
+    let opts = diagnose::DiagnosisOptions {
         stop: Some(stop),
-        ..diagnose::Options::default()
+        ..diagnose::DiagnosisOptions::default()
     };
     let d = diagnose::diagnose(&c, None, &[], &opts);
     assert!(matches!(d, Err(DiagnoseError::Cancelled)), "{d:?}");
     // and the same diagnosis without the stop concludes
-    assert!(diagnose::diagnose(&c, None, &[], &diagnose::Options::default()).is_ok());
+    assert!(diagnose::diagnose(&c, None, &[], &diagnose::DiagnosisOptions::default()).is_ok());
 }
 
 /// Within one LM run the iterations count 1, 2, ... and the cost at each start never rises

@@ -3,7 +3,7 @@
 //! panic; it answers `Ok` or a typed error that names the file and a line of the text.
 
 use proptest::prelude::*;
-use rpkm_core::campaign::{Campaign, Instrument, Pose, REQUIRED_COLUMNS};
+use rpkm_core::campaign::{Campaign, Instrument, MeasuredPose, REQUIRED_COLUMNS};
 
 const FILE: &str = "prop.csv";
 
@@ -120,7 +120,7 @@ fn campaign() -> impl Strategy<Value = Campaign> {
                         follower[1] = true;
                         follower[2] = true;
                     }
-                    poses.push(Pose {
+                    poses.push(MeasuredPose {
                         t: row.t,
                         setup: format!("{prefix}{k}"),
                         instrument,

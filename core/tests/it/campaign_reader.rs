@@ -5,7 +5,7 @@
     reason = "exact values: parsed, copied or computed without rounding"
 )]
 
-use rpkm_core::campaign::{Campaign, CampaignError, Instrument, Pose};
+use rpkm_core::campaign::{Campaign, CampaignError, Instrument, MeasuredPose};
 
 /// A valid campaign with every instrument. Line numbers matter to the tests below:
 /// line 3 is the header, data rows are lines 4..=19 (t = line - 4).
@@ -85,7 +85,7 @@ fn every_instrument_parses_to_the_right_values() {
     let lt = &c.poses[1];
     assert_eq!(
         *lt,
-        Pose {
+        MeasuredPose {
             t: 1.0,
             setup: "LT1".into(),
             instrument: Instrument::Lt,

@@ -7,7 +7,7 @@
 //! configuration. The quick cases are `tests/it/first_use_period.rs`.
 
 use rpkm_core::campaign::Instrument;
-use rpkm_core::diagnose::{self, Options};
+use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_core::effects::written::{Spec, WrittenParam};
 use rpkm_core::effects::{Effect, Written};
 use rpkm_twin::{CyclicScale, EffectKind, Twin, TwinConfig};
@@ -52,7 +52,8 @@ fn pointer(
     let val = twin.validation(60).expect("held-out poses");
     let lm = lost_motion();
     let with: Vec<&dyn Effect> = if lost { vec![&lm] } else { Vec::new() };
-    let d = diagnose::diagnose(&cal, Some(&val), &with, &Options::default()).expect("diagnose");
+    let d = diagnose::diagnose(&cal, Some(&val), &with, &DiagnosisOptions::default())
+        .expect("diagnose");
     let Some(p) = d.periodic.filter(|p| p.p_value < d.test.dictionary_level) else {
         return (Vec::new(), "no significant period".to_owned());
     };

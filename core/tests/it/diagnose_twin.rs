@@ -10,7 +10,7 @@
 
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rpkm_core::campaign::{Campaign, Instrument};
-use rpkm_core::diagnose::{self, Diagnosis, Options, VerdictKind};
+use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, VerdictKind};
 use rpkm_core::effects::{self, Effect};
 use rpkm_core::noise::{NoiseModel, N_GROUPS};
 use rpkm_twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
@@ -59,13 +59,13 @@ fn campaigns(seed: u64, hidden: &[EffectKind]) -> (Campaign, Campaign, f64) {
     })
 }
 
-fn run(cal: &Campaign, val: &Campaign, in_model: &[&str]) -> Diagnosis {
+fn run(cal: &Campaign, val: &Campaign, in_model: &[&str]) -> ModelDiagnosis {
     let boxed: Vec<Box<dyn Effect>> = in_model
         .iter()
         .map(|n| effects::by_name(n).expect("library effect"))
         .collect();
     let refs: Vec<&dyn Effect> = boxed.iter().map(std::convert::AsRef::as_ref).collect();
-    diagnose::diagnose(cal, Some(val), &refs, &Options::default()).expect("diagnose")
+    diagnose::diagnose(cal, Some(val), &refs, &DiagnosisOptions::default()).expect("diagnose")
 }
 
 fn check_named(effect: EffectKind, seed: u64) {
@@ -141,7 +141,7 @@ named_test!(
 );
 
 /// The verdict in numbers, for failure messages (the sentences are the nodes crate's).
-fn summary(d: &Diagnosis) -> String {
+fn summary(d: &ModelDiagnosis) -> String {
     let best = d
         .candidates
         .first()
@@ -590,9 +590,9 @@ fn lost_motion_is_unexplained_and_points_at_the_direction_of_motion() {
 fn the_diagnosis_does_not_depend_on_the_thread_count() {
     let (cal, val, _) = campaigns(41, &[EffectKind::EncoderScale]);
     let with = |threads| {
-        let opts = Options {
+        let opts = DiagnosisOptions {
             threads,
-            ..Options::default()
+            ..DiagnosisOptions::default()
         };
         let d = diagnose::diagnose(&cal, Some(&val), &[], &opts).expect("diagnose");
         serde_json::to_string(&d).expect("json")
@@ -617,9 +617,9 @@ fn screened_candidates_change_no_conclusion() {
     for (seed, hidden, named) in twins {
         let (cal, val, _) = campaigns(seed, &hidden);
         let with = |screen| {
-            let opts = Options {
+            let opts = DiagnosisOptions {
                 screen,
-                ..Options::default()
+                ..DiagnosisOptions::default()
             };
             diagnose::diagnose(&cal, Some(&val), &[], &opts).expect("diagnose")
         };

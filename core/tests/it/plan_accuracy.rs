@@ -42,14 +42,25 @@ fn calibrate(c: &Campaign) -> (calib::Calibration, NoiseModel) {
 /// definition of the diagnosis's `val_rms_relative_um`, written out here.
 fn held_out_um(val: &Campaign, p: &Params) -> f64 {
     let e = obs::tcp_errors(val, p, MODEL).expect("held-out errors");
-    let mean = |c: &str| {
-        let v: Vec<f64> = e.iter().filter(|x| x.1 == c).map(|x| x.2).collect();
+    let mean = |c: obs::TcpDirection| {
+        let v: Vec<f64> = e
+            .iter()
+            .filter(|x| x.direction == c)
+            .map(|x| x.value)
+            .collect();
         v.iter().sum::<f64>() / v.len() as f64
     };
-    let (mx, my) = (mean("x"), mean("y"));
+    let (mx, my) = (mean(obs::TcpDirection::X), mean(obs::TcpDirection::Y));
     let ss: f64 = e
         .iter()
-        .map(|x| (x.2 - if x.1 == "x" { mx } else { my }).powi(2))
+        .map(|x| {
+            let mean = if x.direction == obs::TcpDirection::X {
+                mx
+            } else {
+                my
+            };
+            (x.value - mean).powi(2)
+        })
         .sum();
     1e3 * (ss / e.len() as f64).sqrt()
 }

@@ -6,7 +6,7 @@
 use rpkm_core::calib::{self, Noise, Prior, Request};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::design;
-use rpkm_core::diagnose::{self, Options};
+use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::separate::{self, Hypothesis, Pair};
 use rpkm_core::plan::{self, Unknowns};
@@ -17,7 +17,7 @@ const LOST_MM: f64 = 0.01;
 const BUDGET: usize = 60;
 
 fn pointer(c: &Campaign) -> diagnose::sparse::Pointer {
-    let d = diagnose::diagnose(c, None, &[], &Options::default())
+    let d = diagnose::diagnose(c, None, &[], &DiagnosisOptions::default())
         .unwrap_or_else(|e| panic!("{}: {e}", c.source));
     d.structure.pointer.expect("a term the residual follows")
 }
@@ -42,7 +42,7 @@ fn the_separating_plan_names_dir_q4_alone() {
         before.feature,
         before.ties
     );
-    let opts = diagnose::calib_options(&Options::default());
+    let opts = diagnose::calib_options(&DiagnosisOptions::default());
     let start = Params::nominal();
     let (cal, noise) = calib::calibrate(&Request {
         noise: Noise::ESTIMATE,

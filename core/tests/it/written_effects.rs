@@ -4,7 +4,7 @@
 //! expression's) found and fitted by `dq4 = -b * dir_q4`. The truth is the twin's.
 
 use rpkm_core::campaign::{Campaign, Instrument};
-use rpkm_core::diagnose::{self, Diagnosis, Options, VerdictKind};
+use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, VerdictKind};
 use rpkm_core::effects::written::{Spec, WrittenParam};
 use rpkm_core::effects::{Delta, Effect, EncoderScale, Written};
 use rpkm_core::params::Params;
@@ -215,7 +215,7 @@ fn encoder_scale_written_gives_the_librarys_parameters() {
             ("dq4", "scale_guide2 * 1e-6 * q4"),
         ],
     );
-    let opts = Options::default();
+    let opts = DiagnosisOptions::default();
     let lib = diagnose::evaluate(&cal, Some(&val), &[&EncoderScale], &opts)
         .expect("library")
         .fit;
@@ -243,7 +243,7 @@ fn encoder_scale_written_gives_the_librarys_parameters() {
     assert!((g2.value - 40.0).abs() < 3.0 * g2.sigma, "{g2:?}");
 }
 
-fn summary(d: &Diagnosis) -> String {
+fn summary(d: &ModelDiagnosis) -> String {
     format!(
         "{:?}, missing {:?}, held-out {:?} um, candidates {:?}",
         d.verdict_kind,
@@ -277,7 +277,7 @@ fn lost_motion_of_carrier_4_is_found_by_a_written_effect() {
         vec![param("b", "mm", 0.01)],
         &[("dq4", "-b * dir_q4")],
     );
-    let opts = Options::default();
+    let opts = DiagnosisOptions::default();
     for seed in [7, 8, 9] {
         let (cal, val, floor) = twin_campaigns(seed, &[(EffectKind::LostMotionQ4, b_true)]);
         let d = diagnose::diagnose_among(&cal, Some(&val), &[], &[&lost], &opts).expect("diagnose");

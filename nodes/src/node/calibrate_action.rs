@@ -15,6 +15,7 @@
 //!   "{campaign_file: /cell/campaign.csv}" --feedback
 //! ```
 
+use crate::units::{m_from_um, ms_from_seconds};
 use std::cell::Cell;
 use std::time::Instant;
 
@@ -202,7 +203,7 @@ impl<'a> Running<'a> {
         let after = self.cancel_seen.get().map(|t| {
             format!(
                 " ({:.1} ms after the cancel request was seen)",
-                t.elapsed().as_secs_f64() * 1e3
+                ms_from_seconds(t.elapsed().as_secs_f64())
             )
         });
         if end == GoalEnd::Canceled {
@@ -240,7 +241,7 @@ pub fn noise_si(estimate: &NoiseEstimate) -> (Vec<String>, Vec<f64>, Vec<f64>) {
     let groups = &estimate.groups;
     (
         groups.iter().map(|g| g.group.to_owned()).collect(),
-        groups.iter().map(|g| g.assumed * 1e-6).collect(),
-        groups.iter().map(|g| g.estimated * 1e-6).collect(),
+        groups.iter().map(|g| m_from_um(g.assumed)).collect(),
+        groups.iter().map(|g| m_from_um(g.estimated)).collect(),
     )
 }

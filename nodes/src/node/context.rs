@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+use super::declare::{ParamBound, ParamDefault, ParamSpec};
 use super::params::{self, NodeParams, ParamError};
 use anyhow::Context;
 use rpkm_msgs::{DiagnosticArray, DiagnosticStatus, Header, KeyValue, Time};
@@ -12,8 +13,6 @@ use rpkm_transport::dds::RosoutLevel;
 use rpkm_transport::{
     Backend, IpcMessage, Publisher, Subscriber, Topic, Transport, TransportConfig,
 };
-
-pub use crate::units::MM_PER_M;
 
 /// A backend on the command line.
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -125,9 +124,9 @@ impl NodeContext {
         declared: &[&str],
     ) -> anyhow::Result<NodeParams> {
         let params = args.identity(kind)?.params().map_err(bad_param)?;
-        let mut all: Vec<&str> = declared.to_vec();
-        all.extend(COMMON_KEYS);
-        params.check_declared(&all).map_err(bad_param)?;
+        params
+            .check_declared(&with_common(declared))
+            .map_err(bad_param)?;
         Ok(params)
     }
 }
@@ -229,13 +228,43 @@ impl RosArgs {
     }
 }
 
-/// Parameter keys every node declares.
-pub const COMMON_KEYS: [&str; 4] = [
-    "backend",
-    "input_backend",
-    "diagnostics_period_s",
+/// Parameter `enclave`.
+const ENCLAVE: ParamSpec = ParamSpec::fixed(
     "enclave",
+    ParamDefault::Str(""),
+    "SROS2 enclave of the node's DDS participant (default /rpkm/<name>)",
+);
+/// Parameter `diagnostics_period_s`.
+const DIAGNOSTICS_PERIOD: ParamSpec = ParamSpec::fixed(
+    "diagnostics_period_s",
+    ParamDefault::F64(1.0),
+    "period of the /diagnostics report",
+)
+.unit("s")
+.bound(ParamBound::Within(1e-3, params::DURATION_S.1));
+
+/// The parameters every node declares.
+pub const COMMON: [ParamSpec; 4] = [
+    ParamSpec::fixed(
+        "backend",
+        ParamDefault::Str("ipc"),
+        "where the node publishes: ipc, dds or both",
+    ),
+    ParamSpec::fixed(
+        "input_backend",
+        ParamDefault::Str(""),
+        "where the node subscribes: ipc or dds (empty: from backend)",
+    ),
+    DIAGNOSTICS_PERIOD,
+    ENCLAVE,
 ];
+
+/// `declared` with the keys every node declares.
+fn with_common<'a>(declared: &[&'a str]) -> Vec<&'a str> {
+    let mut all = declared.to_vec();
+    all.extend(COMMON.iter().map(|s| s.key));
+    all
+}
 
 /// An opened node: its name, parameters and transport.
 pub struct NodeContext {
@@ -326,9 +355,9 @@ impl NodeSetup {
             ..
         } = args.identity(kind)?;
         let params = args.identity(kind)?.params().map_err(bad_param)?;
-        let mut all: Vec<&str> = declared.to_vec();
-        all.extend(COMMON_KEYS);
-        params.check_declared(&all).map_err(bad_param)?;
+        params
+            .check_declared(&with_common(declared))
+            .map_err(bad_param)?;
         let from_param = |key: &str| -> anyhow::Result<Option<BackendArg>> {
             if !params.has(key) {
                 return Ok(None);
@@ -391,7 +420,7 @@ fn node_enclave(
     let (enclave, what) = match from_args {
         Some(e) => (e, "--ros-args --enclave".to_owned()),
         None if params.has("enclave") => (
-            params.string("enclave", "").map_err(bad_param)?,
+            ENCLAVE.string(params).map_err(bad_param)?,
             params
                 .origin("enclave")
                 .map_or_else(|| "enclave".to_owned(), |o| format!("{o}/enclave")),
@@ -408,14 +437,7 @@ fn node_enclave(
 
 /// Period of the regular /diagnostics report, parameter `diagnostics_period_s`.
 fn diagnostics_period(params: &NodeParams) -> anyhow::Result<Duration> {
-    let s = params
-        .f64_in(
-            "diagnostics_period_s",
-            1.0,
-            (1e-3, params::DURATION_S.1),
-            " s",
-        )
-        .map_err(bad_param)?;
+    let s = DIAGNOSTICS_PERIOD.f64(params).map_err(bad_param)?;
     Ok(Duration::from_secs_f64(s))
 }
 

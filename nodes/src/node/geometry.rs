@@ -3,65 +3,69 @@
 
 use std::fmt::Write as _;
 
-use super::context::{bad_param, MM_PER_M};
+use super::context::bad_param;
+use super::declare::{ParamBound, ParamDefault, ParamSpec};
 use super::effects;
-use super::live;
 use super::params::NodeParams;
+use crate::units::MM_PER_M;
 use rpkm_core::elastic::Stiffness;
 use rpkm_core::params::{self as core_params, Model, Params, NAMES};
 use rpkm_msgs::Parameters;
 
-/// Parameter keys of the nodes that evaluate the model ([`Geometry::from_params`]).
-pub const GEOMETRY_KEYS: [&str; 6] = [
+/// Parameter `model`.
+pub const MODEL: ParamSpec = ParamSpec::live(
     "model",
+    ParamDefault::U64(29),
+    "geometric model: 24 or 29 parameters",
+)
+.bound(ParamBound::Count(24, 29));
+/// Parameter `stiffness_factor`.
+pub const STIFFNESS_FACTOR: ParamSpec = ParamSpec::live(
     "stiffness_factor",
+    ParamDefault::F64(1.0),
+    "scale of the spring model's stiffnesses",
+)
+.bound(ParamBound::Positive);
+/// Parameter `geometry_file`.
+pub const GEOMETRY_FILE: ParamSpec = ParamSpec::fixed(
     "geometry_file",
+    ParamDefault::Str(""),
+    "JSON of parameter name -> value (mm, rad) as rpkm calibrate --json writes",
+);
+/// Parameter `effects_file`.
+pub const EFFECTS_FILE: ParamSpec = ParamSpec::fixed(
     "effects_file",
+    ParamDefault::Str(""),
+    "effects written as data (YAML, docs/effects.md) whose calibrated values apply",
+);
+/// Parameter group `geometry.`: single parameters in SI (m, rad), after `geometry_file`.
+pub const GEOMETRY_OVERRIDES: ParamSpec = ParamSpec::group(
     "geometry.",
+    "single geometric parameters in SI (m, rad), applied after geometry_file",
+);
+/// Parameter `follow_parameters`.
+pub const FOLLOW_PARAMETERS: ParamSpec = ParamSpec::fixed(
     "follow_parameters",
+    ParamDefault::Bool(true),
+    "replace the geometry by every /rpkm/parameters message",
+);
+
+/// The parameters of the nodes that evaluate the model ([`Geometry::from_params`]): model and
+/// stiffness live (the next sample uses them), the files and following need a restart.
+pub const GEOMETRY: [ParamSpec; 6] = [
+    MODEL,
+    STIFFNESS_FACTOR,
+    GEOMETRY_FILE,
+    EFFECTS_FILE,
+    GEOMETRY_OVERRIDES,
+    FOLLOW_PARAMETERS,
 ];
 
 /// Whether a parameter key changes the model ([`Geometry::from_params`]).
 pub fn is_geometry_key(key: &str) -> bool {
-    GEOMETRY_KEYS
+    GEOMETRY
         .iter()
-        .any(|g| *g == key || (g.ends_with('.') && key.starts_with(g)))
-}
-
-/// The geometry parameters on the ROS 2 parameter services: model and stiffness live (the
-/// next sample uses them), the file and following read-only. `geometry.<name>` overrides
-/// (SI) are set in the parameter file.
-pub fn geometry_specs() -> [live::ParamSpec; 5] {
-    use live::{Default, ParamSpec};
-    [
-        ParamSpec::live(
-            "model",
-            Default::U64(29),
-            "geometric model: 24 or 29 parameters",
-            rpkm_transport::dds_params::ParamRange::Integer(24, 29),
-        ),
-        ParamSpec::live(
-            "stiffness_factor",
-            Default::F64(1.0),
-            "scale of the spring model's stiffnesses (> 0)",
-            rpkm_transport::dds_params::ParamRange::None,
-        ),
-        ParamSpec::fixed(
-            "geometry_file",
-            Default::Str(""),
-            "JSON of parameter name -> value (mm, rad) as rpkm calibrate --json writes",
-        ),
-        ParamSpec::fixed(
-            "follow_parameters",
-            Default::Bool(true),
-            "replace the geometry by every /rpkm/parameters message",
-        ),
-        ParamSpec::fixed(
-            "effects_file",
-            Default::Str(""),
-            "effects written as data (YAML, docs/effects.md) whose calibrated values apply",
-        ),
-    ]
+        .any(|g| g.key == key || (g.key.ends_with('.') && key.starts_with(g.key)))
 }
 
 /// The model a node evaluates: parameters (mm, rad), model, stiffness.
@@ -108,7 +112,8 @@ impl Geometry {
     /// `rpkm calibrate --json` writes), then `geometry.<name>` overrides in SI (m, rad),
     /// `model` (24|29), `stiffness_factor`.
     pub fn from_params(p: &NodeParams) -> anyhow::Result<Self> {
-        let model_n = p.u64("model", 29).map_err(bad_param)?;
+        // the check below says "24 or 29", not a range
+        let model_n = MODEL.bound(ParamBound::Any).u64(p).map_err(bad_param)?;
         // try_from, not `as`: 4294967320 must not wrap around to model 24.
         let model = u32::try_from(model_n)
             .ok()
@@ -121,8 +126,8 @@ impl Geometry {
                         .unwrap_or_default()
                 ))
             })?;
-        let factor = p.positive("stiffness_factor", 1.0).map_err(bad_param)?;
-        let file = p.string("geometry_file", "").map_err(bad_param)?;
+        let factor = STIFFNESS_FACTOR.f64(p).map_err(bad_param)?;
+        let file = GEOMETRY_FILE.string(p).map_err(bad_param)?;
         let known = effects::NodeEffects::from_params(p)?;
         let (mut params, mut source, effects) = if file.is_empty() {
             (Params::nominal(), "nominal parameters".to_owned(), known)
@@ -134,7 +139,7 @@ impl Geometry {
                 known.read_calibration(path)?,
             )
         };
-        let overrides = p.group("geometry.").map_err(bad_param)?;
+        let overrides = p.group(GEOMETRY_OVERRIDES.key).map_err(bad_param)?;
         for (name, value, origin) in &overrides {
             let i = core_params::index_of(name).ok_or_else(|| {
                 crate::error::bad_input(format!(
@@ -219,14 +224,4 @@ pub fn parameters_msg(
         sigmas: ids.iter().map(|&i| sigmas[i] / si_factor(i)).collect(),
         ..Default::default()
     }
-}
-
-/// The keys a node declares besides the common ones: its own, and the geometry's where it
-/// evaluates the model (`geometry`).
-pub fn declared(own: &[&'static str], geometry: bool) -> Vec<&'static str> {
-    let mut keys = own.to_vec();
-    if geometry {
-        keys.extend(GEOMETRY_KEYS);
-    }
-    keys
 }

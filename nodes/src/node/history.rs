@@ -68,7 +68,7 @@ impl NodeHistory {
 
     /// Records a calibration now; what changed since the previous one, in words.
     pub fn calibration(&mut self, o: &Calibrated) -> anyhow::Result<String> {
-        let held_out = o.val_rms_m * 1e6;
+        let held_out = crate::units::um_from_m(o.val_rms_m);
         let record = record_of(&Made {
             machine: &self.machine,
             at_s: rpkm_history::schema::now_s(),

@@ -42,15 +42,15 @@ pub use dds::{ACTUATOR_TOPIC as ACTUATOR_INPUT, MEASUREMENT_TOPIC as MEASUREMENT
 
 use std::time::Duration;
 
-use rpkm_transport::dds_params::ParamRange;
 use rpkm_transport::Backend;
 
 pub use report::Tally;
 pub use validate::{InputLimits, Reject, RejectKind, Validator};
 
 use super::context::{bad_param, CommonArgs, NodeContext};
+use super::declare::{keys, served, ParamBound, ParamDefault, ParamSpec};
 use super::joint_input::{self, JointConfig};
-use super::live::{self, ParamSpec};
+use super::live;
 use super::params::NodeParams;
 use super::params::DURATION_S;
 use super::shutdown;
@@ -61,21 +61,68 @@ use output::Output;
 /// when it receives one. Any publisher may send it to request a calibration.
 pub const END_OF_CAMPAIGN: &str = "__end_of_campaign__";
 
-/// Parameter keys of the node.
-pub const KEYS: [&str; 13] = [
+/// Parameter `source` (the option `--source` wins over it).
+const SOURCE: ParamSpec = ParamSpec::fixed(
     "source",
+    ParamDefault::Str("dds"),
+    "dds, joint_states, stdin or a campaign CSV file",
+);
+/// Parameter `rate_hz`: 1 mHz to 1 MHz, the period 1/rate becomes a `Duration`, which a
+/// rate of 1e-300 Hz would overflow.
+const RATE: ParamSpec = ParamSpec::fixed(
     "rate_hz",
+    ParamDefault::F64(1000.0),
+    "pace of a campaign file",
+)
+.unit("Hz")
+.bound(ParamBound::Within(1e-3, 1e6));
+/// Parameter `start_delay_s`.
+const START_DELAY: ParamSpec = ParamSpec::fixed(
     "start_delay_s",
+    ParamDefault::F64(1.0),
+    "wait before the first sample",
+)
+.unit("s")
+.bound(ParamBound::Within(DURATION_S.0, DURATION_S.1));
+/// Parameter `end_marker`.
+const END_MARKER: ParamSpec = ParamSpec::fixed(
     "end_marker",
+    ParamDefault::Bool(true),
+    "send the end-of-campaign marker at the end of the input",
+);
+/// Parameter `exit_at_end`.
+const EXIT_AT_END: ParamSpec = ParamSpec::fixed(
     "exit_at_end",
-    "position_min_m",
-    "position_max_m",
-    "force_max_n",
-    "measurement_max_m",
-    "input_actuator_topic",
-    "input_measurement_topic",
-    "views",
-    "view_every",
+    ParamDefault::Bool(false),
+    "exit at the end of the input",
+);
+/// Parameter `views` of the node.
+const VIEWS: ParamSpec = ParamSpec {
+    description: "publish /joint_states (JointState) on DDS",
+    ..super::views::VIEWS
+};
+/// Parameter `view_every` of the node.
+const VIEW_EVERY: ParamSpec = ParamSpec {
+    description: "publish the joint states of every N-th accepted state",
+    ..super::views::VIEW_EVERY_PARAM
+};
+
+/// The node's own parameters: the validation limits and `view_every` live (the next sample
+/// is judged by them); the source, pacing and topics need a restart.
+pub const PARAMS: [ParamSpec; 13] = [
+    SOURCE,
+    RATE,
+    START_DELAY,
+    END_MARKER,
+    EXIT_AT_END,
+    validate::POSITION_MIN,
+    validate::POSITION_MAX,
+    validate::FORCE_MAX,
+    validate::MEASUREMENT_MAX,
+    dds::ACTUATOR_TOPIC_PARAM,
+    dds::MEASUREMENT_TOPIC_PARAM,
+    VIEWS,
+    VIEW_EVERY,
 ];
 
 /// `rpkm node ingest`.
@@ -91,9 +138,50 @@ pub struct IngestNodeArgs {
     pub source: Option<String>,
 }
 
+/// Where the node's samples come from (option `--source`, else parameter `source`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum IngestSource {
+    /// `dds`: a controller's ActuatorState and TcpMeasurement over DDS.
+    Dds,
+    /// `joint_states`: ros2_control's JointState and the cell's thermometers, on DDS.
+    JointStates,
+    /// `stdin` (or `-`): a CSV stream in the campaign format.
+    Stdin,
+    /// Anything else: the path of a campaign CSV file, streamed at `rate_hz`.
+    File(String),
+}
+
+impl IngestSource {
+    /// The source a word names.
+    pub fn parse(text: &str) -> Self {
+        match text {
+            "dds" => Self::Dds,
+            "joint_states" => Self::JointStates,
+            "stdin" | "-" => Self::Stdin,
+            path => Self::File(path.to_owned()),
+        }
+    }
+
+    /// Whether the source is read over DDS (the node needs a DDS participant for it).
+    pub fn is_dds(&self) -> bool {
+        matches!(self, Self::Dds | Self::JointStates)
+    }
+}
+
+impl std::fmt::Display for IngestSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Dds => "dds",
+            Self::JointStates => "joint_states",
+            Self::Stdin => "stdin",
+            Self::File(path) => path,
+        })
+    }
+}
+
 /// What the node reads from its parameters besides the common ones.
 struct Settings {
-    source: String,
+    source: IngestSource,
     limits: InputLimits,
     rate_hz: f64,
     start_delay: Duration,
@@ -103,13 +191,16 @@ struct Settings {
     joints: Option<JointConfig>,
 }
 
-/// The source that reads ros2_control's JointState.
-const JOINT_STATES: &str = "joint_states";
-
 /// Every parameter key the node declares: its own and the JointState input's (read with
 /// source `joint_states` only, accepted with any).
 pub fn declared() -> Vec<&'static str> {
-    KEYS.iter().chain(&joint_input::KEYS).copied().collect()
+    keys(&[&declarations()])
+}
+
+/// Every parameter the node declares besides the common ones: its own and the JointState
+/// input's.
+pub fn declarations() -> Vec<ParamSpec> {
+    [PARAMS.as_slice(), &joint_input::PARAMS].concat()
 }
 
 /// Opens the node: its source (the option, else parameter `source`, else dds), transport and
@@ -120,156 +211,49 @@ fn open(args: &IngestNodeArgs) -> anyhow::Result<(NodeContext, Settings)> {
         .identity("ingest")?
         .params()
         .map_err(bad_param)?;
-    let source = match &args.source {
+    let source = IngestSource::parse(&match &args.source {
         Some(s) => s.clone(),
-        None => pre.string("source", "dds").map_err(bad_param)?,
-    };
-    let extra = matches!(source.as_str(), "dds" | JOINT_STATES).then_some(Backend::Dds);
+        None => SOURCE.string(&pre).map_err(bad_param)?,
+    });
+    let extra = source.is_dds().then_some(Backend::Dds);
     let ctx = NodeContext::open("ingest", &args.common, &declared(), extra)?;
     let p = &ctx.params;
-    let limits = limits(p)?;
-    // 1 mHz to 1 MHz: the period 1/rate becomes a `Duration`, which a rate of 1e-300 Hz
-    // would overflow.
-    let rate_hz = p
-        .f64_in("rate_hz", 1000.0, RATE_HZ, " Hz")
-        .map_err(bad_param)?;
-    let start_delay = p
-        .f64_in("start_delay_s", 1.0, DURATION_S, " s")
-        .map_err(bad_param)?;
+    let limits = InputLimits::from_params(p).map_err(bad_param)?;
+    let rate_hz = RATE.f64(p).map_err(bad_param)?;
+    let start_delay = START_DELAY.f64(p).map_err(bad_param)?;
     // checked whatever the source: a bad value is bad before the cell switches to it
     let joints = JointConfig::from_params(p).map_err(bad_param)?;
-    let joints = (source == JOINT_STATES).then_some(joints);
+    let joints = (source == IngestSource::JointStates).then_some(joints);
     let settings = Settings {
         source,
         limits,
         rate_hz,
         start_delay: Duration::from_secs_f64(start_delay),
-        end_marker: p.bool("end_marker", true).map_err(bad_param)?,
-        exit_at_end: p.bool("exit_at_end", false).map_err(bad_param)?,
+        end_marker: END_MARKER.bool(p).map_err(bad_param)?,
+        exit_at_end: EXIT_AT_END.bool(p).map_err(bad_param)?,
         joints,
     };
     Ok((ctx, settings))
-}
-
-/// Bounds of `rate_hz`, Hz.
-const RATE_HZ: (f64, f64) = (1e-3, 1e6);
-
-/// The validation limits of a parameter set (at start-up and for every set on the parameter
-/// services): forces and measurements above 0, positions an interval.
-fn limits(p: &NodeParams) -> anyhow::Result<InputLimits> {
-    let d = InputLimits::default();
-    let (position_min_m, position_max_m) = p
-        .interval(
-            ("position_min_m", d.position_min_m),
-            ("position_max_m", d.position_max_m),
-        )
-        .map_err(bad_param)?;
-    let l = InputLimits {
-        position_min_m,
-        position_max_m,
-        force_max_n: p
-            .positive("force_max_n", d.force_max_n)
-            .map_err(bad_param)?,
-        measurement_max_m: p
-            .positive("measurement_max_m", d.measurement_max_m)
-            .map_err(bad_param)?,
-    };
-    Ok(l)
 }
 
 /// What a parameter set changes while the node runs: the limits and `view_every` (and the
 /// followers of the `joint_states` source, which it applies itself: checked here).
 fn configure(p: &NodeParams) -> anyhow::Result<(InputLimits, u64)> {
     joint_input::followers(p).map_err(bad_param)?;
-    let every = p
-        .u64_in(
-            "view_every",
-            super::views::VIEW_EVERY,
-            super::views::VIEW_EVERY_RANGE,
-        )
-        .map_err(bad_param)?;
-    Ok((limits(p)?, every))
+    let every = VIEW_EVERY.u64(p).map_err(bad_param)?;
+    Ok((InputLimits::from_params(p).map_err(bad_param)?, every))
 }
 
-/// The node's parameters on its ROS 2 parameter services: the validation limits and
-/// `view_every` live (the next sample is judged by them); the source, pacing and topics need
-/// a restart. `views_default`: whether the views are on unless a file says otherwise.
+/// The node's parameters on its ROS 2 parameter services. `views_default`: whether the views
+/// are on unless a file says otherwise.
 fn specs(views_default: bool) -> Vec<ParamSpec> {
-    use live::Default::{Bool, Str, F64, U64};
-    let d = InputLimits::default();
-    let fixed_in = |key, default, description, (lo, hi): (f64, f64)| ParamSpec {
-        range: ParamRange::Float(lo, hi),
-        ..ParamSpec::fixed(key, default, description)
-    };
-    let limit = |key, default, description| {
-        ParamSpec::live(key, F64(default), description, ParamRange::None)
-    };
-    vec![
-        ParamSpec::fixed(
-            "source",
-            Str("dds"),
-            "dds, joint_states, stdin or a campaign CSV file",
-        ),
-        fixed_in(
-            "rate_hz",
-            F64(1000.0),
-            "pace of a campaign file, Hz",
-            RATE_HZ,
-        ),
-        fixed_in(
-            "start_delay_s",
-            F64(1.0),
-            "wait before the first sample, s",
-            DURATION_S,
-        ),
-        ParamSpec::fixed(
-            "end_marker",
-            Bool(true),
-            "send the end-of-campaign marker at the end of the input",
-        ),
-        ParamSpec::fixed("exit_at_end", Bool(false), "exit at the end of the input"),
-        limit(
-            "position_min_m",
-            d.position_min_m,
-            "lowest accepted drive position, m (below position_max_m)",
-        ),
-        limit(
-            "position_max_m",
-            d.position_max_m,
-            "highest accepted drive position, m",
-        ),
-        limit(
-            "force_max_n",
-            d.force_max_n,
-            "largest accepted |drive force|, N (> 0)",
-        ),
-        limit(
-            "measurement_max_m",
-            d.measurement_max_m,
-            "largest accepted |x|, |y|, |r| of a measurement, m (> 0)",
-        ),
-        ParamSpec::fixed(
-            "input_actuator_topic",
-            Str(dds::ACTUATOR_TOPIC),
-            "DDS topic of the drive states (source dds)",
-        ),
-        ParamSpec::fixed(
-            "input_measurement_topic",
-            Str(dds::MEASUREMENT_TOPIC),
-            "DDS topic of the measurements (source dds)",
-        ),
-        ParamSpec::fixed(
-            "views",
-            Bool(views_default),
-            "publish /joint_states (JointState) on DDS",
-        ),
-        ParamSpec::live(
-            "view_every",
-            U64(super::views::VIEW_EVERY),
-            "publish the joint states of every N-th accepted state",
-            ParamRange::count(super::views::VIEW_EVERY_RANGE),
-        ),
-    ]
+    let mut specs = served(&[&PARAMS]);
+    for s in &mut specs {
+        if s.key == VIEWS.key {
+            s.default = ParamDefault::Bool(views_default);
+        }
+    }
+    specs
 }
 
 /// Streams a campaign file at `rate_hz`; a file that cannot be read is bad input.
@@ -309,30 +293,34 @@ pub fn run(args: &IngestNodeArgs) -> anyhow::Result<()> {
     let (mut ctx, s) = open(args)?;
     // The source in use (the option may have chosen it) is the one the services report.
     ctx.params
-        .set_from_service("source", serde_yaml::Value::String(s.source.clone()));
+        .set_from_service(SOURCE.key, serde_yaml::Value::String(s.source.to_string()));
     let views = views(&ctx, &s)?;
     let mut service_specs = specs(views.is_some());
     if s.joints.is_some() {
-        service_specs.extend(joint_input::specs());
+        service_specs.extend(served(&[&joint_input::PARAMS]));
     }
     let live = live::LiveParams::start(&ctx, &service_specs, |p| configure(p).map(|_| ()))?;
-    let mut out = Output::open((&ctx, &args.common), s.limits, &s.source, (live, views))?;
+    let source = s.source.to_string();
+    let mut out = Output::open((&ctx, &args.common), s.limits, &source, (live, views))?;
     ctx.log(format!(
         "source {}, publishing on {:?}",
         s.source, ctx.output
     ));
     std::thread::sleep(s.start_delay);
-    let ended = match (s.source.as_str(), s.joints.clone()) {
+    let ended = match (&s.source, s.joints.clone()) {
         (_, Some(joints)) => joint_states::run(&ctx, &mut out, joints).map(|()| false)?,
-        ("dds", _) => dds::run(&ctx, &mut out).map(|()| false)?,
-        ("stdin" | "-", _) => csv::stream(
+        // joint_states always comes with its settings (the arm above)
+        (IngestSource::Dds | IngestSource::JointStates, _) => {
+            dds::run(&ctx, &mut out).map(|()| false)?
+        }
+        (IngestSource::Stdin, _) => csv::stream(
             &mut csv::Stdin::spawn(&ctx.name),
             "stdin",
             None,
             &mut out,
             None,
         )?,
-        (path, _) => file(&mut out, path, s.rate_hz)?,
+        (IngestSource::File(path), _) => file(&mut out, path, s.rate_hz)?,
     };
     if ended {
         ctx.log(format_args!(

@@ -12,31 +12,40 @@ use rpkm_core::params::Params;
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, Parameters};
 use rpkm_transport::{topic, Backend, Subscriber};
 
-use super::context::{bad_param, CommonArgs, Every, Idle, NodeContext, MM_PER_M};
+use super::context::{bad_param, CommonArgs, Every, Idle, NodeContext};
+use super::declare::{self, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
 use super::joint_input::{self, JointConfig, JointInput, RefusalLevel};
-use super::live::{self, LiveParams, ParamSpec};
+use super::live::LiveParams;
 use super::params::NodeParams;
 use crate::campaign_bag::seconds_from_stamp;
 use crate::error::bad_input;
+use crate::units::mm_from_m;
 
 /// Parameter `source` of a servo-rate node: ingest's ActuatorState (default).
 const ACTUATOR_STATE: &str = "actuator_state";
 /// Parameter `source` of a servo-rate node: the cell's JointState, on DDS.
 const JOINT_STATES: &str = "joint_states";
 
-/// `keys` with the drive input's: `source` and the JointState input's.
-pub fn with_drive_input_keys(mut keys: Vec<&'static str>) -> Vec<&'static str> {
-    keys.push("source");
-    keys.extend(joint_input::KEYS);
-    keys
+/// Parameter `source` of a servo-rate node.
+pub const SOURCE: ParamSpec = ParamSpec::fixed(
+    "source",
+    ParamDefault::Str(ACTUATOR_STATE),
+    "drive states: actuator_state (ingest's) or joint_states (the cell's JointState, DDS)",
+);
+
+/// `specs` with the drive input's: `source` and the JointState input's.
+pub fn with_drive_input(mut specs: Vec<ParamSpec>) -> Vec<ParamSpec> {
+    specs.push(SOURCE);
+    specs.extend(joint_input::PARAMS);
+    specs
 }
 
 /// The backend a node of kind `kind` subscribes on besides its input: DDS with `source:
 /// joint_states` (the cell's topics are DDS topics), else none.
 pub fn extra_backend(args: &CommonArgs, kind: &str) -> anyhow::Result<Option<Backend>> {
     let p = args.identity(kind)?.params().map_err(bad_param)?;
-    let source = p.string("source", ACTUATOR_STATE).map_err(bad_param)?;
+    let source = SOURCE.string(&p).map_err(bad_param)?;
     Ok((source == JOINT_STATES).then_some(Backend::Dds))
 }
 
@@ -59,11 +68,7 @@ impl DriveInput {
         let p = &ctx.params;
         // checked whatever the source: a bad value is bad before the cell switches to it
         let config = JointConfig::from_params(p).map_err(bad_param)?;
-        match p
-            .string("source", ACTUATOR_STATE)
-            .map_err(bad_param)?
-            .as_str()
-        {
+        match SOURCE.string(p).map_err(bad_param)?.as_str() {
             ACTUATOR_STATE => Ok(Self::Actuator(ctx.subscriber(&topic::ACTUATOR_STATE)?)),
             JOINT_STATES => Ok(Self::Joints {
                 input: Box::new(JointInput::open(ctx, config)?),
@@ -80,16 +85,10 @@ impl DriveInput {
 
     /// The input's parameters on the node's parameter services.
     pub fn specs(&self) -> Vec<ParamSpec> {
-        let joints = matches!(self, Self::Joints { .. });
-        let mut specs = vec![ParamSpec::fixed(
-            "source",
-            live::Default::Str(if joints { JOINT_STATES } else { ACTUATOR_STATE }),
-            "drive states: actuator_state (ingest's) or joint_states (the cell's JointState, DDS)",
-        )];
-        if joints {
-            specs.extend(joint_input::specs());
+        match self {
+            Self::Joints { .. } => declare::served(&[&[SOURCE], &joint_input::PARAMS]),
+            Self::Actuator(_) => vec![SOURCE],
         }
-        specs
     }
 
     /// The node's parameter services with `specs` and the input's; a set passes
@@ -175,7 +174,7 @@ impl StreamMotion {
     /// `s` under the calibrated effects of `g` (its own parameters and the encoders without
     /// any).
     pub fn model_inputs(&mut self, g: &mut Geometry, s: &ActuatorState) -> (Params, [f64; 4]) {
-        let q = s.position.map(|p| p * MM_PER_M);
+        let q = s.position.map(mm_from_m);
         let t = seconds_from_stamp(s.stamp);
         let motion = self.motion.next(q, t);
         g.effects.apply(
@@ -261,9 +260,8 @@ pub struct ParameterFollower {
 impl ParameterFollower {
     /// Reads `follow_parameters` and subscribes when it is true.
     pub fn open(ctx: &NodeContext) -> anyhow::Result<Self> {
-        let follow = ctx
-            .params
-            .bool("follow_parameters", true)
+        let follow = crate::node::geometry::FOLLOW_PARAMETERS
+            .bool(&ctx.params)
             .map_err(bad_param)?;
         let parameters = if follow {
             Some(ctx.subscriber(&topic::PARAMETERS)?)

@@ -10,111 +10,49 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use rpkm_transport::dds_params::{ParamDecl, ParamRange, ParamServer, ParameterValue};
+use rpkm_transport::dds_params::{ParamDecl, ParamServer, ParameterValue};
 use serde_yaml::Value;
 
-use super::context::{Every, NodeContext};
+use super::context::{Every, NodeContext, COMMON};
+pub use super::declare::{ParamBound, ParamDefault, ParamSpec};
 use super::params::NodeParams;
 
 /// How often a node looks for accepted changes: a person or a tool sets them, and the check
 /// must cost the servo loop nothing.
 const CHANGE_CHECK: Duration = Duration::from_millis(20);
 
-/// A parameter's type and default as the node reads it.
-#[derive(Debug, Clone, Copy)]
-pub enum Default {
-    /// A double.
-    F64(f64),
-    /// A non-negative integer.
-    U64(u64),
-    /// A boolean.
-    Bool(bool),
-    /// A string.
-    Str(&'static str),
-    /// A list of strings.
-    Strs(&'static [&'static str]),
-    /// A list of doubles.
-    F64s(&'static [f64]),
-}
-
-/// One parameter of a node: key, default, description with unit, range, and whether the node
-/// takes a change while it runs.
-#[derive(Debug, Clone, Copy)]
-pub struct ParamSpec {
-    pub key: &'static str,
-    pub default: Default,
-    pub description: &'static str,
-    pub range: ParamRange,
-    pub live: bool,
-}
-
 impl ParamSpec {
-    /// A parameter the node applies while it runs.
-    pub const fn live(
-        key: &'static str,
-        default: Default,
-        description: &'static str,
-        range: ParamRange,
-    ) -> Self {
-        Self {
-            key,
-            default,
-            description,
-            range,
-            live: true,
-        }
-    }
-    /// A parameter whose change needs a restart.
-    pub const fn fixed(key: &'static str, default: Default, description: &'static str) -> Self {
-        Self {
-            key,
-            default,
-            description,
-            range: ParamRange::None,
-            live: false,
-        }
-    }
-
+    /// The value the node's parameters give this parameter (its default where not set), as
+    /// the services hold it.
     fn value(&self, p: &NodeParams) -> anyhow::Result<ParameterValue> {
         let bad = super::context::bad_param;
         Ok(match self.default {
-            Default::F64(d) => ParameterValue::Double(p.f64(self.key, d).map_err(bad)?),
-            Default::U64(d) => {
-                let v = p.u64(self.key, d).map_err(bad)?;
+            ParamDefault::F64(_) => ParameterValue::Double(self.f64(p).map_err(bad)?),
+            ParamDefault::U64(_) => {
+                let v = self.u64(p).map_err(bad)?;
                 ParameterValue::Integer(i64::try_from(v).unwrap_or(i64::MAX))
             }
-            Default::Bool(d) => ParameterValue::Boolean(p.bool(self.key, d).map_err(bad)?),
-            Default::Str(d) => ParameterValue::String(p.string(self.key, d).map_err(bad)?),
-            Default::Strs(d) => ParameterValue::StringArray(p.strings(self.key, d).map_err(bad)?),
-            Default::F64s(d) => ParameterValue::DoubleArray(p.f64s(self.key, d).map_err(bad)?),
+            ParamDefault::Bool(_) => ParameterValue::Boolean(self.bool(p).map_err(bad)?),
+            ParamDefault::Str(_) => ParameterValue::String(self.string(p).map_err(bad)?),
+            ParamDefault::Strs(_) => ParameterValue::StringArray(self.strings(p).map_err(bad)?),
+            ParamDefault::F64s(_) => ParameterValue::DoubleArray(self.f64s(p).map_err(bad)?),
+            ParamDefault::Group => ParameterValue::NotSet,
         })
     }
-}
 
-/// The parameters every node declares.
-pub fn common_specs() -> [ParamSpec; 4] {
-    [
-        ParamSpec::fixed(
-            "backend",
-            Default::Str("ipc"),
-            "where the node publishes: ipc, dds or both",
-        ),
-        ParamSpec::fixed(
-            "input_backend",
-            Default::Str(""),
-            "where the node subscribes: ipc or dds (empty: from backend)",
-        ),
-        ParamSpec::fixed(
-            "diagnostics_period_s",
-            Default::F64(1.0),
-            "period of the /diagnostics report, s (0.001 to 3600)",
-        ),
-        ParamSpec::fixed(
-            "enclave",
-            Default::Str(""),
-            "SROS2 enclave of the node's DDS participant (default /rpkm/<name>)",
-        ),
-    ]
+    /// The descriptor and value of this parameter on the services.
+    pub fn decl(&self, p: &NodeParams) -> anyhow::Result<ParamDecl> {
+        let value = self.value(p)?;
+        let description = self.describe();
+        Ok(if self.live {
+            ParamDecl::live(self.key, value, &description, self.range())
+        } else {
+            ParamDecl {
+                range: self.range(),
+                ..ParamDecl::read_only(self.key, value, &description)
+            }
+        })
+    }
 }
 
 /// The value a parameter file would hold for `v`.
@@ -159,7 +97,7 @@ pub struct LiveParams {
 }
 
 impl LiveParams {
-    /// Declares `specs` (with [`common_specs`]) on the node's DDS parameter services; without
+    /// Declares `specs` (with [`COMMON`]) on the node's DDS parameter services; without
     /// DDS there are none (nothing outside rpkm could call them). `configure` builds the
     /// node's configuration from a parameter set, as at start-up: a set it refuses is refused
     /// with its message.
@@ -169,16 +107,8 @@ impl LiveParams {
         configure: impl Fn(&NodeParams) -> anyhow::Result<()> + Send + 'static,
     ) -> anyhow::Result<Self> {
         let mut decls = Vec::new();
-        for s in common_specs().iter().chain(specs) {
-            let value = s.value(&ctx.params)?;
-            decls.push(if s.live {
-                ParamDecl::live(s.key, value, s.description, s.range)
-            } else {
-                ParamDecl {
-                    range: s.range,
-                    ..ParamDecl::read_only(s.key, value, s.description)
-                }
-            });
+        for s in super::declare::served(&[&COMMON, specs]) {
+            decls.push(s.decl(&ctx.params)?);
         }
         // The backends as the command line may have chosen them, not only the files.
         let name = |b: rpkm_transport::Backend| match b {

@@ -1,7 +1,9 @@
 //! The ROS 2 node set, one subcommand each: `rpkm node ingest|tcp_estimator|calibrator|
 //! preload_monitor`. Thin: topics, parameters, validation and bookkeeping here; every model
 //! evaluation is a call into `rpkm_core`. Units: SI on topics and in parameter YAML (m, rad,
-//! N, s), mm inside the core; the conversion happens in [`Geometry`] and at each message.
+//! N, s), mm inside the core; the Parameters message converts in [`geometry`], every other
+//! message with the named conversions of [`crate::units`] (`mm_from_m`, `m_from_mm`, ...).
+//! Each node's parameters are declared once ([`declare`]).
 //!
 //! Every node reads ROS 2 parameter YAML ([`params`]), publishes on the configured backend
 //! (`--backend ipc|dds|both`) and subscribes on one (`--input-backend`), stops cleanly on
@@ -11,6 +13,7 @@ pub mod calibrate_action;
 pub mod calibration_services;
 pub mod calibrator;
 pub mod context;
+pub mod declare;
 pub mod effects;
 pub mod geometry;
 pub mod history;
@@ -29,12 +32,9 @@ pub mod views;
 
 pub use context::{
     bad_param, diagnostic_array, log_line, node_name_error, severity, status, BackendArg,
-    CommonArgs, Every, Identity, Idle, NodeContext, NodeSetup, RosArgs, COMMON_KEYS, MM_PER_M,
-    NODE_NAME_MAX,
+    CommonArgs, Every, Identity, Idle, NodeContext, NodeSetup, RosArgs, COMMON, NODE_NAME_MAX,
 };
-pub use geometry::{
-    geometry_specs, is_geometry_key, parameters_msg, Geometry, ParametersMsgError, GEOMETRY_KEYS,
-};
+pub use geometry::{is_geometry_key, parameters_msg, Geometry, ParametersMsgError, GEOMETRY};
 pub use params::{NodeParams, ParamError};
 
 /// `rpkm node <kind>`: run one node of the set.
@@ -84,18 +84,21 @@ impl NodeKind {
 /// The node executables `rpkm launch` accepts.
 pub const EXECUTABLES: [&str; 4] = ["ingest", "tcp_estimator", "calibrator", "preload_monitor"];
 
-/// The parameter keys node `exec` declares besides [`COMMON_KEYS`]; `None` for an unknown
+/// The parameters node `exec` declares besides [`COMMON`]; `None` for an unknown executable.
+pub fn declarations(exec: &str) -> Option<Vec<declare::ParamSpec>> {
+    match exec {
+        "ingest" => Some(ingest::declarations()),
+        "tcp_estimator" => Some(tcp_estimator::declarations()),
+        "calibrator" => Some(calibrator::declarations()),
+        "preload_monitor" => Some(preload_monitor::declarations()),
+        _ => None,
+    }
+}
+
+/// The parameter keys node `exec` declares besides [`COMMON`]'s; `None` for an unknown
 /// executable.
 pub fn declared_keys(exec: &str) -> Option<Vec<&'static str>> {
-    let (own, geometry): (&[&'static str], bool) = match exec {
-        "ingest" => return Some(ingest::declared()),
-        "tcp_estimator" => return Some(tcp_estimator::declared()),
-        // its own keys name the geometry ones it takes (no stiffness, no follower)
-        "calibrator" => (&calibrator::KEYS, false),
-        "preload_monitor" => return Some(preload_monitor::declared()),
-        _ => return None,
-    };
-    Some(geometry::declared(own, geometry))
+    declarations(exec).map(|d| declare::keys(&[&d]))
 }
 
 /// Runs the node `args` names until SIGINT/SIGTERM (or, for ingest, its end of input).

@@ -14,7 +14,7 @@ use rpkm_core::online::{
 use rpkm_core::params::{Params, N_PARAMS};
 use rpkm_msgs::ActuatorState;
 
-use super::context::MM_PER_M;
+use crate::units::{m_from_mm, mm_from_m, um_from_mm};
 
 /// Settings of the online tracker.
 #[derive(Debug, Clone, Copy)]
@@ -191,7 +191,7 @@ impl OnlineWorker {
         }
         let sample = ForceSample {
             t: f64::from(s.stamp.sec) + f64::from(s.stamp.nanosec) * 1e-9,
-            q: s.position.map(|m| m * MM_PER_M),
+            q: s.position.map(mm_from_m),
             f: s.force,
         };
         let temp = if s.covariate_count > 0 {
@@ -241,7 +241,7 @@ fn step_warning(step: &DetectedStep) -> String {
     let mut line = format!(
         "step change at t = {:.1} s: {who} {:+.0} µm ({why}: explains {:.2}x less)",
         step.since_s,
-        step.change * 1e3,
+        um_from_mm(step.change),
         step.margin
     );
     if let (Some(motion), Some(_)) = (&step.separating, step.alternative) {
@@ -268,7 +268,7 @@ fn settled_warning(r: &TieResolved) -> String {
          since (evidence χ² {:.1} over {} samples",
         r.since_s,
         state_name(r.param),
-        r.change * 1e3,
+        um_from_mm(r.change),
         state_name(r.ruled_out),
         r.evidence.chi2.abs(),
         r.evidence.counted
@@ -294,13 +294,13 @@ pub(super) fn tie_values(r: &OnlineReport) -> Vec<(&'static str, String)> {
     let mut t = Vec::new();
     if let Some(motion) = r.step.as_ref().and_then(|s| s.separating.as_ref()) {
         if let Some(&(x, y)) = motion.poses.first() {
-            t.push(("separating_x_m", format!("{}", x / MM_PER_M)));
-            t.push(("separating_y_m", format!("{}", y / MM_PER_M)));
+            t.push(("separating_x_m", format!("{}", m_from_mm(x))));
+            t.push(("separating_y_m", format!("{}", m_from_mm(y))));
         }
         let poses: Vec<String> = motion
             .poses
             .iter()
-            .map(|(x, y)| format!("{} {}", x / MM_PER_M, y / MM_PER_M))
+            .map(|(x, y)| format!("{} {}", m_from_mm(*x), m_from_mm(*y)))
             .collect();
         t.push(("separating_poses_m", poses.join("; ")));
         t.push(("separating_chi2", format!("{:.1}", motion.chi2)));

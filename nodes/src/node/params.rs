@@ -107,14 +107,13 @@ pub enum ParamError {
     },
     /// A number outside the bounds the node can use (a duration, rate or buffer size that
     /// would overflow a `Duration` or ask for an absurd allocation).
-    #[error("{origin}/{key}: {found} is out of range: expected {lo} to {hi}{unit}")]
+    #[error("{origin}/{key}: {found} is out of range: expected {expected}")]
     Range {
         origin: Box<Origin>,
         key: String,
         found: String,
-        lo: String,
-        hi: String,
-        unit: &'static str,
+        /// The bounds with their unit: `0 to 3600 s`.
+        expected: String,
     },
     /// Two keys that bound an interval, the lower one not below the upper.
     #[error("{origin}/{lo_key}: {lo} must be below {hi_key} {hi}")]
@@ -469,15 +468,13 @@ impl NodeParams {
         }
     }
 
-    fn range_err(&self, key: &str, lo: String, hi: String, unit: &'static str) -> ParamError {
+    fn range_err(&self, key: &str, expected: String) -> ParamError {
         let (v, origin) = &self.values[key];
         ParamError::Range {
             origin: Box::new(origin.clone()),
             key: key.to_owned(),
             found: yaml_text(v),
-            lo,
-            hi,
-            unit,
+            expected,
         }
     }
 
@@ -489,13 +486,13 @@ impl NodeParams {
         key: &str,
         default: f64,
         (lo, hi): (f64, f64),
-        unit: &'static str,
+        unit: &str,
     ) -> Result<f64, ParamError> {
         let v = self.f64(key, default)?;
         if !self.has(key) || (lo..=hi).contains(&v) {
             Ok(v)
         } else {
-            Err(self.range_err(key, lo.to_string(), hi.to_string(), unit))
+            Err(self.range_err(key, format!("{lo} to {hi}{unit}")))
         }
     }
 
@@ -506,7 +503,7 @@ impl NodeParams {
         if !self.has(key) || (lo..=hi).contains(&v) {
             Ok(v)
         } else {
-            Err(self.range_err(key, lo.to_string(), hi.to_string(), ""))
+            Err(self.range_err(key, format!("{lo} to {hi}")))
         }
     }
 

@@ -23,25 +23,68 @@ use rpkm_core::geometry::rgm;
 use rpkm_msgs::{ActuatorState, DiagnosticArray, DiagnosticStatus, PreloadLevel, PreloadStatus};
 use rpkm_transport::topic;
 
-use rpkm_transport::dds_params::ParamRange;
-
-use super::context::{
-    bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M,
-};
+use super::context::{bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext};
+use super::declare::{keys, served, ParamBound, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
+use super::geometry::GEOMETRY;
 use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
-use super::live::{self, ParamSpec};
 use super::params::NodeParams;
+use super::params::SAMPLE_COUNT;
+use super::realtime::BUSY_POLL;
+use crate::units::{m_from_mm, mm_from_m, seconds_from_ms};
 
-/// Parameter keys of the node.
-pub const KEYS: [&str; 7] = [
+// > 0 without an upper bound: no descriptor range, the node's check says it.
+const WARN_PERCENT: ParamSpec = ParamSpec::live(
     "warn_percent",
+    ParamDefault::F64(20.0),
+    "WARN from this |measured - predicted| redundancy current",
+)
+.unit("% of 8,600 N")
+.bound(ParamBound::Positive);
+const ERROR_PERCENT: ParamSpec = ParamSpec::live(
     "error_percent",
+    ParamDefault::F64(50.0),
+    "ERROR from this deviation (>= warn_percent)",
+)
+.unit("%")
+.bound(ParamBound::Positive);
+const DQ_WARN: ParamSpec = ParamSpec::live(
     "dq_warn_m",
+    ParamDefault::F64(50e-6),
+    "WARN from this |dq2|, |dq3| of the followers",
+)
+.unit("m")
+.bound(ParamBound::Positive);
+const DQ_ERROR: ParamSpec = ParamSpec::live(
     "dq_error_m",
+    ParamDefault::F64(200e-6),
+    "ERROR from this |dq2|, |dq3| (>= dq_warn_m)",
+)
+.unit("m")
+.bound(ParamBound::Positive);
+// Bounded (1 to a million) where read: 0 was silently taken as 1.
+const DEBOUNCE: ParamSpec = ParamSpec::live(
     "debounce_samples",
+    ParamDefault::U64(3),
+    "consecutive samples before a level is taken",
+)
+.bound(ParamBound::Count(SAMPLE_COUNT.0, SAMPLE_COUNT.1));
+const STATUS_EVERY: ParamSpec = ParamSpec::live(
     "status_every",
-    "busy_poll_ms",
+    ParamDefault::U64(1),
+    "PreloadStatus every this many samples (and at every level change)",
+)
+.bound(ParamBound::Count(SAMPLE_COUNT.0, SAMPLE_COUNT.1));
+
+/// The node's own parameters (thresholds live, the busy poll needs a restart).
+pub const PARAMS: [ParamSpec; 7] = [
+    WARN_PERCENT,
+    ERROR_PERCENT,
+    DQ_WARN,
+    DQ_ERROR,
+    DEBOUNCE,
+    STATUS_EVERY,
+    BUSY_POLL,
 ];
 
 /// Levels and hold time.
@@ -60,13 +103,14 @@ pub struct Thresholds {
 }
 
 impl Default for Thresholds {
+    /// The parameters' defaults.
     fn default() -> Self {
         Self {
-            warn_percent: 20.0,
-            error_percent: 50.0,
-            dq_warn_m: 50e-6,
-            dq_error_m: 200e-6,
-            debounce_samples: 3,
+            warn_percent: WARN_PERCENT.default_f64(),
+            error_percent: ERROR_PERCENT.default_f64(),
+            dq_warn_m: DQ_WARN.default_f64(),
+            dq_error_m: DQ_ERROR.default_f64(),
+            debounce_samples: u32::try_from(DEBOUNCE.default_u64()).unwrap_or(u32::MAX),
         }
     }
 }
@@ -219,8 +263,8 @@ impl Monitor {
         let mut sample_level = level_by(worst, t.warn_percent, t.error_percent);
         if s.follower[1] && s.follower[2] {
             if let Ok([q2, q3]) = rgm(&params, g.model, q[0], q[3]) {
-                st.dq2 = (q2 - q[1]) / MM_PER_M;
-                st.dq3 = (q3 - q[2]) / MM_PER_M;
+                st.dq2 = m_from_mm(q2 - q[1]);
+                st.dq3 = m_from_mm(q3 - q[2]);
                 let dq = st.dq2.abs().max(st.dq3.abs());
                 sample_level = sample_level.max(level_by(dq, t.dq_warn_m, t.dq_error_m));
             }
@@ -309,9 +353,9 @@ impl Monitor {
             format!(
                 "{name}: follower q{dq_drive} is {:+.3} mm off the rigid model (thresholds \
                  {} / {} mm); {force}",
-                dq * MM_PER_M,
-                t.dq_warn_m * MM_PER_M,
-                t.dq_error_m * MM_PER_M
+                mm_from_m(dq),
+                mm_from_m(t.dq_warn_m),
+                mm_from_m(t.dq_error_m)
             )
         } else {
             format!("{name}: {force}")
@@ -344,28 +388,19 @@ struct Config {
     geometry: Geometry,
 }
 
+/// The thresholds of a parameter set, each value checked against its declaration.
+fn thresholds(p: &NodeParams) -> Result<Thresholds, super::params::ParamError> {
+    Ok(Thresholds {
+        warn_percent: WARN_PERCENT.f64(p)?,
+        error_percent: ERROR_PERCENT.f64(p)?,
+        dq_warn_m: DQ_WARN.f64(p)?,
+        dq_error_m: DQ_ERROR.f64(p)?,
+        debounce_samples: DEBOUNCE.u64(p)?.try_into().unwrap_or(u32::MAX),
+    })
+}
+
 fn configure(p: &NodeParams) -> anyhow::Result<Config> {
-    let d = Thresholds::default();
-    let thresholds = Thresholds {
-        warn_percent: p
-            .positive("warn_percent", d.warn_percent)
-            .map_err(bad_param)?,
-        error_percent: p
-            .positive("error_percent", d.error_percent)
-            .map_err(bad_param)?,
-        dq_warn_m: p.positive("dq_warn_m", d.dq_warn_m).map_err(bad_param)?,
-        dq_error_m: p.positive("dq_error_m", d.dq_error_m).map_err(bad_param)?,
-        // Bounded (1 to a million) where read: 0 was silently taken as 1.
-        debounce_samples: p
-            .u64_in(
-                "debounce_samples",
-                u64::from(d.debounce_samples),
-                super::params::SAMPLE_COUNT,
-            )
-            .map_err(bad_param)?
-            .try_into()
-            .unwrap_or(u32::MAX),
-    };
+    let thresholds = thresholds(p).map_err(bad_param)?;
     if thresholds.error_percent < thresholds.warn_percent {
         return Err(crate::error::bad_input(format!(
             "preload_monitor: error_percent {} below warn_percent {}",
@@ -378,9 +413,7 @@ fn configure(p: &NodeParams) -> anyhow::Result<Config> {
             thresholds.dq_error_m, thresholds.dq_warn_m
         )));
     }
-    let status_every = p
-        .u64_in("status_every", 1, super::params::SAMPLE_COUNT)
-        .map_err(bad_param)?;
+    let status_every = STATUS_EVERY.u64(p).map_err(bad_param)?;
     Ok(Config {
         thresholds,
         status_every,
@@ -425,54 +458,7 @@ fn level_by(value: f64, warn: f64, error: f64) -> PreloadLevel {
 
 /// The node's parameters on its ROS 2 parameter services (thresholds and model live).
 fn specs() -> Vec<ParamSpec> {
-    let d = Thresholds::default();
-    // > 0 without an upper bound: no descriptor range, the node's check says it.
-    let positive = ParamRange::None;
-    let mut specs = vec![
-        ParamSpec::live(
-            "warn_percent",
-            live::Default::F64(d.warn_percent),
-            "WARN from this |measured - predicted| redundancy current, % of 8,600 N (> 0)",
-            positive,
-        ),
-        ParamSpec::live(
-            "error_percent",
-            live::Default::F64(d.error_percent),
-            "ERROR from this deviation, % (>= warn_percent)",
-            positive,
-        ),
-        ParamSpec::live(
-            "dq_warn_m",
-            live::Default::F64(d.dq_warn_m),
-            "WARN from this |dq2|, |dq3| of the followers, m (> 0)",
-            positive,
-        ),
-        ParamSpec::live(
-            "dq_error_m",
-            live::Default::F64(d.dq_error_m),
-            "ERROR from this |dq2|, |dq3|, m (>= dq_warn_m)",
-            positive,
-        ),
-        ParamSpec::live(
-            "debounce_samples",
-            live::Default::U64(u64::from(d.debounce_samples)),
-            "consecutive samples before a level is taken",
-            ParamRange::count(super::params::SAMPLE_COUNT),
-        ),
-        ParamSpec::live(
-            "status_every",
-            live::Default::U64(1),
-            "PreloadStatus every this many samples (and at every level change)",
-            ParamRange::count(super::params::SAMPLE_COUNT),
-        ),
-        ParamSpec::fixed(
-            "busy_poll_ms",
-            live::Default::F64(0.0),
-            "yield-polling time after a sample before sleeping, ms (0 to 1000)",
-        ),
-    ];
-    specs.extend(super::geometry::geometry_specs());
-    specs
+    served(&[&PARAMS, &GEOMETRY])
 }
 
 /// Logs the input's losses since the last report: once per report, not per gap (a stall
@@ -494,9 +480,14 @@ fn reconfigure(args: &CommonArgs, ctx: &NodeContext, declared: &[&str]) -> Resul
         .map_err(|e| crate::error::error_chain(&e))
 }
 
-/// Every parameter key the node declares.
+/// Every parameter the node declares besides the common ones.
+pub fn declarations() -> Vec<ParamSpec> {
+    inputs::with_drive_input([PARAMS.as_slice(), &GEOMETRY].concat())
+}
+
+/// Every parameter key the node declares besides the common ones.
 pub fn declared() -> Vec<&'static str> {
-    inputs::with_drive_input_keys(super::geometry::declared(&KEYS, true))
+    keys(&[&declarations()])
 }
 
 /// Applies a parameter set the services accepted: thresholds, `status_every`, the geometry,
@@ -535,9 +526,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         mut status_every,
         geometry,
     } = configure(p)?;
-    let busy = p
-        .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
-        .map_err(bad_param)?;
+    let busy = BUSY_POLL.f64(p).map_err(bad_param)?;
     let mut input = DriveInput::open(&ctx)?;
     let mut live = input.start_params(&ctx, specs(), |p| configure(p).map(|_| ()))?;
     let mut parameters = ParameterFollower::open(&ctx)?;
@@ -552,7 +541,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let mut monitor = Monitor::new(geometry, thresholds);
     // As the estimator: sleep until the publisher's wake-up, back at least every 20 ms.
     let mut idle = Idle::new(
-        Duration::from_secs_f64(busy * 1e-3),
+        Duration::from_secs_f64(seconds_from_ms(busy)),
         Duration::from_millis(20),
     );
     let mut report_due = Every::new(ctx.diagnostics_period()?);
@@ -638,7 +627,7 @@ mod tests {
         s[2] += dq3;
         let eq = fegm(&p, &Stiffness::default(), s, ALL_ACTIVE)?;
         Ok(ActuatorState {
-            position: q.map(|v| v / MM_PER_M),
+            position: q.map(m_from_mm),
             force: eq.drive_force,
             ..Default::default()
         })
@@ -673,7 +662,7 @@ mod tests {
         let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
         let mut m = monitor(1);
         let s = ActuatorState {
-            position: [q[0], q[1] + 0.1, q[2] - 0.3, q[3]].map(|v| v / MM_PER_M),
+            position: [q[0], q[1] + 0.1, q[2] - 0.3, q[3]].map(m_from_mm),
             follower: [false, true, true, false],
             ..Default::default()
         };
@@ -728,7 +717,7 @@ mod tests {
         let p = Params::nominal();
         let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
         let s = ActuatorState {
-            position: q.map(|v| v / MM_PER_M),
+            position: q.map(m_from_mm),
             ..Default::default()
         };
         // the first state of the stream: carrier 4's last move counts as +1

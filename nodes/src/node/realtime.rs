@@ -5,6 +5,25 @@
 //! (milliseconds). Such a node must block between samples (`busy_poll_ms: 0`): a spinning
 //! FIFO task would take its core until the kernel's real-time throttling stops it.
 
+use super::declare::{ParamBound, ParamDefault, ParamSpec};
+use super::params::{BUSY_POLL_MS, RT_PRIORITY};
+
+/// Parameter `busy_poll_ms` of a servo-rate node.
+pub const BUSY_POLL: ParamSpec = ParamSpec::fixed(
+    "busy_poll_ms",
+    ParamDefault::F64(0.0),
+    "yield-polling time after a sample before sleeping",
+)
+.unit("ms")
+.bound(ParamBound::Within(BUSY_POLL_MS.0, BUSY_POLL_MS.1));
+/// Parameter `rt_priority` of a servo-rate node.
+pub const PRIORITY: ParamSpec = ParamSpec::fixed(
+    "rt_priority",
+    ParamDefault::U64(0),
+    "SCHED_FIFO priority of the estimating thread, 0 for none",
+)
+.bound(ParamBound::Count(RT_PRIORITY.0, RT_PRIORITY.1));
+
 /// Why real-time scheduling could not be set.
 #[derive(Debug, thiserror::Error)]
 pub enum RealtimeError {

@@ -28,18 +28,30 @@ use rpkm_core::params::{Model, Params, RODS};
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
-use super::context::{diagnostic_array, status, CommonArgs, Every, Idle, NodeContext, MM_PER_M};
+use super::context::{diagnostic_array, status, CommonArgs, Every, Idle, NodeContext};
+use super::declare::{keys, served, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
+use super::geometry::GEOMETRY;
 use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
 use super::lifecycle::Lifecycle;
-use super::live::{self, ParamSpec};
 use super::params::NodeParams;
+use super::realtime::{BUSY_POLL, PRIORITY};
 use super::views::{self, TcpViews};
-use rpkm_transport::dds_params::ParamRange;
+use crate::units::{m_from_mm, seconds_from_ms};
 use rpkm_transport::Backend;
 
-/// Parameter keys of the node.
-pub const KEYS: [&str; 4] = ["busy_poll_ms", "rt_priority", "views", "view_every"];
+/// Parameter `views` of the node.
+const VIEWS: ParamSpec = ParamSpec {
+    description: "publish /rpkm/tcp_pose (PoseStamped) and /tf (machine -> platform) on DDS",
+    ..views::VIEWS
+};
+/// Parameter `view_every` of the node.
+const VIEW_EVERY: ParamSpec = ParamSpec {
+    description: "publish the views of every N-th estimate",
+    ..views::VIEW_EVERY_PARAM
+};
+/// The node's own parameters: `view_every` live, the rest need a restart.
+pub const PARAMS: [ParamSpec; 4] = [BUSY_POLL, PRIORITY, VIEWS, VIEW_EVERY];
 
 /// Consecutive estimates without a plausible elastic equilibrium from which /diagnostics
 /// says ERROR instead of WARN: one odd sample is a warning, a stream of them means the
@@ -163,8 +175,8 @@ impl Estimator {
                 c.consecutive_failures = 0;
                 let eq = s.eq;
                 self.previous = Some(s);
-                est.x = eq.x / MM_PER_M;
-                est.y = eq.y / MM_PER_M;
+                est.x = m_from_mm(eq.x);
+                est.y = m_from_mm(eq.y);
                 est.psi = wrap_angle(eq.psi);
                 est.rod_forces = eq.rod_force;
                 est.drive_forces = eq.drive_force;
@@ -204,8 +216,8 @@ impl Estimator {
             self.counts.implausible += 1;
         }
         self.counts.rigid_fallbacks += 1;
-        est.x = rigid.x() / MM_PER_M;
-        est.y = rigid.y() / MM_PER_M;
+        est.x = m_from_mm(rigid.x());
+        est.y = m_from_mm(rigid.y());
         est.psi = wrap_angle(rigid.psi());
         est.converged = false;
         est.outcome = TcpEstimate::OUTCOME_RIGID_FALLBACK;
@@ -316,7 +328,7 @@ fn loop_residuals(
     for (slot, rod) in out.iter_mut().zip(&RODS[..rods]) {
         let a = platform_joint(p, rod, x, y, psi);
         let b = carrier_joint(p, rod, q[rod.actuator]);
-        *slot = ((a - b).norm() - p[rod.l]) / MM_PER_M;
+        *slot = m_from_mm((a - b).norm() - p[rod.l]);
     }
     out
 }
@@ -325,38 +337,18 @@ fn loop_residuals(
 /// live (taken between samples; a new geometry is solved cold), the rest need a restart.
 /// `views_default`: whether the views are on unless a file says otherwise (DDS output).
 fn specs(views_default: bool) -> Vec<ParamSpec> {
-    let mut specs = vec![
-        ParamSpec::fixed(
-            "busy_poll_ms",
-            live::Default::F64(0.0),
-            "yield-polling time after a sample before sleeping, ms (0 to 1000)",
-        ),
-        ParamSpec::fixed(
-            "rt_priority",
-            live::Default::U64(0),
-            "SCHED_FIFO priority of the estimating thread, 0 for none (0 to 99)",
-        ),
-        ParamSpec::fixed(
-            "views",
-            live::Default::Bool(views_default),
-            "publish /rpkm/tcp_pose (PoseStamped) and /tf (machine -> platform) on DDS",
-        ),
-        ParamSpec::live(
-            "view_every",
-            live::Default::U64(views::VIEW_EVERY),
-            "publish the views of every N-th estimate",
-            ParamRange::count(views::VIEW_EVERY_RANGE),
-        ),
-    ];
-    specs.extend(super::geometry::geometry_specs());
+    let mut specs = served(&[&PARAMS, &GEOMETRY]);
+    for s in &mut specs {
+        if s.key == VIEWS.key {
+            s.default = ParamDefault::Bool(views_default);
+        }
+    }
     specs
 }
 
 /// What a parameter set changes while the node runs: the geometry and `view_every`.
 fn configure(p: &NodeParams) -> anyhow::Result<(Geometry, u64)> {
-    let every = p
-        .u64_in("view_every", views::VIEW_EVERY, views::VIEW_EVERY_RANGE)
-        .map_err(super::context::bad_param)?;
+    let every = VIEW_EVERY.u64(p).map_err(super::context::bad_param)?;
     Ok((Geometry::from_params(p)?, every))
 }
 
@@ -380,9 +372,14 @@ fn reconfigure(
     Ok(())
 }
 
-/// Every parameter key the node declares.
+/// Every parameter the node declares besides the common ones.
+pub fn declarations() -> Vec<ParamSpec> {
+    inputs::with_drive_input([PARAMS.as_slice(), &GEOMETRY].concat())
+}
+
+/// Every parameter key the node declares besides the common ones.
 pub fn declared() -> Vec<&'static str> {
-    inputs::with_drive_input_keys(super::geometry::declared(&KEYS, true))
+    keys(&[&declarations()])
 }
 
 /// Applies a parameter set the services accepted: the geometry (solved cold from the next
@@ -410,15 +407,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let extra = inputs::extra_backend(args, "tcp_estimator")?;
     let ctx = NodeContext::open("tcp_estimator", args, &declared, extra)?;
     let geometry = Geometry::from_params(&ctx.params)?;
-    let busy = ctx
-        .params
-        .f64_in("busy_poll_ms", 0.0, super::params::BUSY_POLL_MS, " ms")
+    let busy = BUSY_POLL
+        .f64(&ctx.params)
         .map_err(super::context::bad_param)?;
     // Bounded where read: an invalid priority is bad configuration (exit 2), not a node that
     // says so in its log and runs at normal priority.
-    let rt_priority = ctx
-        .params
-        .u64_in("rt_priority", 0, super::params::RT_PRIORITY)
+    let rt_priority = PRIORITY
+        .u64(&ctx.params)
         .map_err(super::context::bad_param)?;
     let mut input = DriveInput::open(&ctx)?;
     let mut parameters = ParameterFollower::open(&ctx)?;
@@ -446,7 +441,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     // Between samples the node sleeps until the publisher's wake-up; the 20 ms bound keeps
     // the parameter checks and reports going when no sample comes.
     let mut idle = Idle::new(
-        Duration::from_secs_f64(busy * 1e-3),
+        Duration::from_secs_f64(seconds_from_ms(busy)),
         Duration::from_millis(20),
     );
     let mut report = Every::new(ctx.diagnostics_period()?);
@@ -503,6 +498,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
 )]
 mod tests {
     use super::*;
+    use crate::units::mm_from_m;
     use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, FOLLOWERS_23};
     use rpkm_core::geometry::{fgm, igm};
     use rpkm_core::params::Params;
@@ -520,7 +516,7 @@ mod tests {
     fn state(q_mm: [f64; 4], seq: u64) -> ActuatorState {
         ActuatorState {
             seq,
-            position: q_mm.map(|q| q / MM_PER_M),
+            position: q_mm.map(m_from_mm),
             ..Default::default()
         }
     }
@@ -535,7 +531,7 @@ mod tests {
         let truth = fegm(
             &p,
             &Stiffness::default(),
-            q.map(|v| v / MM_PER_M * MM_PER_M),
+            q.map(|v| mm_from_m(m_from_mm(v))),
             ALL_ACTIVE,
         )?;
         assert_eq!(first.seq, 7);
@@ -544,14 +540,14 @@ mod tests {
             (first.outcome, first.reason),
             (TcpEstimate::OUTCOME_OK, TcpEstimate::REASON_NONE)
         );
-        assert!((first.x - truth.x / MM_PER_M).abs() < 1e-12);
-        assert!((first.y - truth.y / MM_PER_M).abs() < 1e-12);
+        assert!((first.x - m_from_mm(truth.x)).abs() < 1e-12);
+        assert!((first.y - m_from_mm(truth.y)).abs() < 1e-12);
         for i in 0..4 {
             assert!((first.drive_forces[i] - truth.drive_force[i]).abs() < 1e-6);
         }
         // rod elongation = force / stiffness
         for i in 0..5 {
-            let expect = truth.rod_force[i] / Stiffness::default().rod[i] / MM_PER_M;
+            let expect = m_from_mm(truth.rod_force[i] / Stiffness::default().rod[i]);
             assert!(
                 (first.loop_residuals[i] - expect).abs() < 1e-12,
                 "rod {}",
@@ -575,7 +571,7 @@ mod tests {
     /// Distance of an estimate from the rigid model of its own encoders, mm.
     fn off_rigid(e: &TcpEstimate, q_mm: [f64; 4]) -> Result<f64, Box<dyn std::error::Error>> {
         let r = fgm(&Params::nominal(), Model::M29, q_mm[0], q_mm[3])?;
-        Ok((e.x * MM_PER_M - r.x()).hypot(e.y * MM_PER_M - r.y()))
+        Ok((mm_from_m(e.x) - r.x()).hypot(mm_from_m(e.y) - r.y()))
     }
 
     #[test]

@@ -20,10 +20,23 @@ use rpkm_msgs::{
 use rpkm_transport::{topic, Backend, Publisher};
 
 use super::context::{bad_param, NodeContext};
+use super::declare::{ParamBound, ParamDefault, ParamSpec};
 use crate::error::bad_input;
 
-/// Parameter keys of the views (tcp_estimator and ingest).
-pub const KEYS: [&str; 2] = ["views", "view_every"];
+/// Parameter `views` (tcp_estimator and ingest; each node says what its views are). Its
+/// default depends on the backend ([`on_by_default`]): the nodes serve it with theirs.
+pub const VIEWS: ParamSpec = ParamSpec::fixed(
+    "views",
+    ParamDefault::Bool(false),
+    "publish the standard views on DDS (default: on with DDS output)",
+);
+/// Parameter `view_every`.
+pub const VIEW_EVERY_PARAM: ParamSpec = ParamSpec::live(
+    "view_every",
+    ParamDefault::U64(VIEW_EVERY),
+    "publish the views of every N-th sample",
+)
+.bound(ParamBound::Count(VIEW_EVERY_RANGE.0, VIEW_EVERY_RANGE.1));
 
 /// The fixed frame of the machine: the spec's absolute frame (y along the guides, x across,
 /// z out of the plane), origin as the spec places it.
@@ -75,11 +88,11 @@ pub fn on_by_default(ctx: &NodeContext) -> bool {
 /// Views asked for without DDS are bad configuration: they would go nowhere.
 pub fn settings(ctx: &NodeContext, default_on: bool) -> anyhow::Result<Option<u64>> {
     let dds = on_by_default(ctx);
-    let on = ctx.params.bool("views", default_on).map_err(bad_param)?;
-    let every = ctx
-        .params
-        .u64_in("view_every", VIEW_EVERY, VIEW_EVERY_RANGE)
+    let on = VIEWS
+        .with_default(ParamDefault::Bool(default_on))
+        .bool(&ctx.params)
         .map_err(bad_param)?;
+    let every = VIEW_EVERY_PARAM.u64(&ctx.params).map_err(bad_param)?;
     if on && !dds {
         return Err(bad_input(format!(
             "node {}: views: true needs DDS output (the standard views are DDS only); \

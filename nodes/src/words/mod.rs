@@ -7,7 +7,8 @@ use rpkm_core::diagnose::neighbours::Neighbours;
 use rpkm_core::diagnose::periodic::Periodic;
 use rpkm_core::diagnose::sparse::Pointer;
 use rpkm_core::diagnose::{
-    Candidate, Diagnosis, HeldOutCheck, Judged, ModelTrial, Outcome, Prediction, Test, VerdictKind,
+    Candidate, HeldOutCheck, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, Test,
+    VerdictKind,
 };
 use rpkm_core::online::{Drift, DriftInput, FOLLOWS};
 use rpkm_core::params::{unit, Unit, NAMES};
@@ -323,7 +324,7 @@ pub fn neighbours(n: &Neighbours) -> String {
 }
 
 /// What a structured residual shows, of the three tests, where each found structure.
-fn structure_found(d: &Diagnosis) -> Vec<String> {
+fn structure_found(d: &ModelDiagnosis) -> Vec<String> {
     let level = d.test.dictionary_level;
     let mut found = Vec::new();
     if let Some(u) = &d.unexplained {
@@ -341,7 +342,7 @@ fn structure_found(d: &Diagnosis) -> Vec<String> {
 /// The verdict in one sentence: the missing effect and its evidence, the structure no effect
 /// explains (in the calibration campaign, or in the held-out data only), or that nothing is
 /// missing; the noise groups off their rating appended.
-pub fn verdict(d: &Diagnosis) -> String {
+pub fn verdict(d: &ModelDiagnosis) -> String {
     let model = if d.model_effects.is_empty() {
         "the geometric model".to_owned()
     } else {
@@ -417,7 +418,7 @@ pub fn verdict(d: &Diagnosis) -> String {
 
 /// Whether the calibration campaign's residual itself is structured (the verdict's own
 /// tests, at their level).
-fn cal_structured(d: &Diagnosis) -> bool {
+fn cal_structured(d: &ModelDiagnosis) -> bool {
     let level = d.test.dictionary_level;
     d.structure.p_value < level
         || d.periodic.as_ref().is_some_and(|p| p.p_value < level)
@@ -426,7 +427,7 @@ fn cal_structured(d: &Diagnosis) -> bool {
 
 /// The evidence of the model named: its candidate's where it is one effect, else the
 /// search's trial of the combination.
-fn named_evidence(d: &Diagnosis) -> String {
+fn named_evidence(d: &ModelDiagnosis) -> String {
     if let [one] = d.missing_effects.as_slice() {
         if let Some(c) = d.candidates.iter().find(|c| &c.effect == one) {
             return evidence(c);
@@ -444,7 +445,7 @@ fn named_evidence(d: &Diagnosis) -> String {
 
 /// "; encoder more than twice its rating: either ..." for the groups estimated above twice
 /// their rating (the ratios themselves are in the noise words before it).
-fn noisier_words(d: &Diagnosis) -> String {
+fn noisier_words(d: &ModelDiagnosis) -> String {
     if d.noisier_than_rated.is_empty() {
         return String::new();
     }
@@ -463,7 +464,7 @@ fn noisier_words(d: &Diagnosis) -> String {
 /// Why a diagnosis's model is not the one `rpkm calibrate`, `rpkm plan` and the nodes default
 /// to (model 29), when it is not: model 24 holds rod 5 to rod 4 so that the imperfect
 /// parallel-holder, rod 5's own five parameters, is a candidate tested like any other effect.
-pub fn model_choice(d: &Diagnosis) -> Option<String> {
+pub fn model_choice(d: &ModelDiagnosis) -> Option<String> {
     let freed = d.effects_in_model.iter().any(|e| e == "parallelogram");
     (d.model == "model 24" && !freed).then(|| {
         "model 24, where rpkm calibrate, rpkm plan and the nodes default to model 29: the \
@@ -497,7 +498,7 @@ pub fn test(t: &Test) -> String {
 /// The diagnosis as the `--json` file has it: the core's figures, and the sentences beside
 /// them (`verdict`, `test`, each candidate's `evidence`; the test's figures are in
 /// `test_settings`).
-pub fn diagnosis_json(d: &Diagnosis) -> serde_json::Result<serde_json::Value> {
+pub fn diagnosis_json(d: &ModelDiagnosis) -> serde_json::Result<serde_json::Value> {
     let mut v = serde_json::to_value(d)?;
     v["verdict"] = verdict(d).into();
     if let Some(why) = model_choice(d) {

@@ -26,7 +26,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use rpkm_core::campaign::{Campaign, Instrument};
-use rpkm_core::diagnose::{self, Options};
+use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_twin::{Twin, TwinConfig};
 
 use crate::cli::bad_input;
@@ -264,9 +264,9 @@ fn diagnosis(seed: u64) -> Result<()> {
     let mut ms = [0.0; 2];
     let mut kinds = Vec::new();
     for (k, screen) in [true, false].into_iter().enumerate() {
-        let opts = Options {
+        let opts = DiagnosisOptions {
             screen,
-            ..Options::default()
+            ..DiagnosisOptions::default()
         };
         let t0 = Instant::now();
         let d = diagnose::diagnose(&cal, Some(&val), &[], &opts)?;
@@ -308,7 +308,7 @@ fn diagnosis_at_scale(seed: u64) -> Result<()> {
     let cal = twin.run(&design, "self, random targets")?;
     let val = twin.validation(100)?;
     let t0 = Instant::now();
-    let d = diagnose::diagnose(&cal, Some(&val), &[], &Options::default())?;
+    let d = diagnose::diagnose(&cal, Some(&val), &[], &DiagnosisOptions::default())?;
     println!(
         "\ndiagnosis at scale, {} poses in {} setups, nothing hidden, 20-24 °C: {:.1} s \
          (verdict: {:?}{})",

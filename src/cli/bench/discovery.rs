@@ -8,7 +8,7 @@ use crate::cli::effect_stages::offered;
 use crate::effects_file::{self, EffectsFile};
 use anyhow::Result;
 use rpkm_core::calib;
-use rpkm_core::diagnose::{self, Diagnosis, Options, Prediction, VerdictKind};
+use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, Prediction, VerdictKind};
 use rpkm_core::effects::{self, Effect};
 use rpkm_twin::EffectKind;
 use std::collections::BTreeMap;
@@ -94,17 +94,17 @@ struct Loop<'a> {
 
 impl Loop<'_> {
     /// The diagnoses of the loop, the first without effects, and the effects named.
-    fn run(&self) -> Result<(Vec<Diagnosis>, Vec<String>)> {
-        let (mut named, mut all): (Vec<String>, Vec<Diagnosis>) = (Vec::new(), Vec::new());
+    fn run(&self) -> Result<(Vec<ModelDiagnosis>, Vec<String>)> {
+        let (mut named, mut all): (Vec<String>, Vec<ModelDiagnosis>) = (Vec::new(), Vec::new());
         loop {
             let boxed = effects_file::parse_list(&named.join(","), self.file)
                 .map_err(|e| anyhow::anyhow!(e))?;
             let refs: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
             let offer = offered(self.file, &refs);
             // the bench runs machines in parallel (--threads): each diagnosis on one thread
-            let opts = Options {
+            let opts = DiagnosisOptions {
                 threads: 1,
-                ..Options::default()
+                ..DiagnosisOptions::default()
             };
             let m = self.measured;
             let d = diagnose::diagnose_among(&m.cal, Some(&m.val), &refs, &offer, &opts)?;
@@ -156,7 +156,7 @@ fn outcome(
     i: usize,
     m: &Machine,
     measured: &Measured,
-    diagnoses: &[Diagnosis],
+    diagnoses: &[ModelDiagnosis],
     named: Vec<String>,
 ) -> Outcome {
     let last = &diagnoses[diagnoses.len() - 1];

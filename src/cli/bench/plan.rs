@@ -128,17 +128,19 @@ fn calibrate(
 /// less their mean per setup and coordinate, as the diagnosis's `val_rms_relative_um`.
 fn held_out_um(val: &Campaign, p: &Params) -> Result<f64> {
     let errors = obs::tcp_errors(val, p, MODEL)?;
-    let mut sums: BTreeMap<(&str, &str), (f64, usize)> = BTreeMap::new();
-    for (i, c, e) in &errors {
-        let s = sums.entry((val.poses[*i].setup.as_str(), c)).or_default();
-        s.0 += e;
+    let mut sums: BTreeMap<(&str, obs::TcpDirection), (f64, usize)> = BTreeMap::new();
+    for e in &errors {
+        let s = sums
+            .entry((val.poses[e.pose].setup.as_str(), e.direction))
+            .or_default();
+        s.0 += e.value;
         s.1 += 1;
     }
     let relative: Vec<f64> = errors
         .iter()
-        .map(|(i, c, e)| {
-            let (sum, n) = sums[&(val.poses[*i].setup.as_str(), *c)];
-            e - sum / n as f64
+        .map(|e| {
+            let (sum, n) = sums[&(val.poses[e.pose].setup.as_str(), e.direction)];
+            e.value - sum / n as f64
         })
         .collect();
     Ok(1e3 * calib::rms(&relative))

@@ -287,7 +287,7 @@ fn production_config(args: &SimulateArgs, seconds: f64) -> Result<rpkm_twin::Pro
 
 /// `--production-seconds`: the stream as a campaign CSV and its truth beside it.
 fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> {
-    use rpkm_core::campaign::{Campaign, Instrument, Pose};
+    use rpkm_core::campaign::{Campaign, Instrument, MeasuredPose};
     use rpkm_core::params::{NAMES, N_PARAMS};
     use rpkm_twin::ProductionStream;
     use std::fmt::Write as _;
@@ -309,7 +309,7 @@ fn run_production(args: &SimulateArgs, twin: &Twin, seconds: f64) -> Result<()> 
         if k % every != 0 {
             continue;
         }
-        poses.push(Pose {
+        poses.push(MeasuredPose {
             t: s.t,
             setup: "production".into(),
             instrument: Instrument::None,

@@ -10,7 +10,7 @@ use std::sync::mpsc::{self, Receiver};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use rpkm_core::campaign::{Campaign, Instrument, Pose};
+use rpkm_core::campaign::{Campaign, Instrument, MeasuredPose};
 use rpkm_core::elastic::Stiffness;
 use rpkm_core::params::{Params, NAMES};
 use rpkm_twin::{EffectKind, MachineState, Twin, TwinConfig};
@@ -56,7 +56,7 @@ pub fn twin_stream(n: usize, rate_hz: f64, q3_drift_mm: impl Fn(usize) -> f64) -
         let st = twin
             .machine_state("stream", x, 1700.0, t, [0.0, 0.0, d, 0.0], false)
             .expect("machine state");
-        poses.push(Pose {
+        poses.push(MeasuredPose {
             t,
             setup: "stream".into(),
             instrument: Instrument::None,

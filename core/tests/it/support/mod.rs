@@ -8,7 +8,7 @@ pub mod production;
 use nalgebra::{Cholesky, Vector2};
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
-use rpkm_core::campaign::{Campaign, Instrument, Pose};
+use rpkm_core::campaign::{Campaign, Instrument, MeasuredPose};
 use rpkm_core::design::PlannedPose;
 use rpkm_core::geometry;
 use rpkm_core::noise;
@@ -34,7 +34,7 @@ fn gauss(rng: &mut StdRng) -> f64 {
 /// What the pose's instrument reads: the TCP's displacement `rel` from its setup's reset pose
 /// (position, angle), with the default noise model's noise times `k`.
 fn read_instrument(
-    pose: &mut Pose,
+    pose: &mut MeasuredPose,
     rel: Option<(Vector2<f64>, f64)>,
     tcp: Vector2<f64>,
     k: f64,
@@ -111,7 +111,7 @@ pub fn measure(
         if plan.reset {
             reset_tcp = Some((plan.setup.clone(), tcp, real.psi()));
         }
-        let mut pose = Pose {
+        let mut pose = MeasuredPose {
             t: n as f64 * 2.0,
             setup: plan.setup.clone(),
             instrument: plan.instrument,

@@ -1,5 +1,6 @@
 //! The diagnosis of the calibrated model and its Diagnosis message.
 
+use crate::units::m_from_um;
 use rpkm_core::calib::{self, Calibration};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::Effect;
@@ -22,8 +23,8 @@ pub(super) struct Diagnosed<'a> {
 pub(super) fn diagnose_model(
     d: Diagnosed,
     stop: Option<calib::Stop>,
-) -> Result<rpkm_core::diagnose::Diagnosis, rpkm_core::diagnose::DiagnoseError> {
-    let opts = rpkm_core::diagnose::Options {
+) -> Result<rpkm_core::diagnose::ModelDiagnosis, rpkm_core::diagnose::DiagnoseError> {
+    let opts = rpkm_core::diagnose::DiagnosisOptions {
         model: d.calibration.model,
         noise: d.noise.clone(),
         stop,
@@ -38,7 +39,7 @@ pub(super) fn diagnose_model(
 pub(super) fn diagnose_until(
     d: Diagnosed,
     cancelled: &dyn Fn() -> bool,
-) -> Result<rpkm_core::diagnose::Diagnosis, rpkm_core::diagnose::DiagnoseError> {
+) -> Result<rpkm_core::diagnose::ModelDiagnosis, rpkm_core::diagnose::DiagnoseError> {
     let stop = calib::Stop::default();
     std::thread::scope(|scope| {
         let run = stop.clone();
@@ -56,8 +57,8 @@ pub(super) fn diagnose_until(
 }
 
 /// A diagnosis as the Diagnosis message.
-pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::Diagnosis) -> Diagnosis {
-    let m = |um: Option<f64>| um.map_or(f64::NAN, |v| v * 1e-6);
+pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::ModelDiagnosis) -> Diagnosis {
+    let m = |um: Option<f64>| um.map_or(f64::NAN, m_from_um);
     let held = d.held_out.as_ref();
     Diagnosis {
         verdict_kind: serde_json::to_value(d.verdict_kind)
@@ -82,8 +83,8 @@ pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::Diagnosis) -> Diagnosis {
                 val_rms_after: m(c.val_rms_after_um),
             })
             .collect(),
-        baseline_cal_rms: d.baseline.cal_rms_um * 1e-6,
+        baseline_cal_rms: m_from_um(d.baseline.cal_rms_um),
         baseline_val_rms: m(d.baseline.val_rms_um),
-        noise_floor: d.baseline.noise_floor_um * 1e-6,
+        noise_floor: m_from_um(d.baseline.noise_floor_um),
     }
 }

@@ -1,6 +1,6 @@
 //! A Calibrate goal's options and its result.
 
-use super::job::{CalibratorOptions, JobOutcome};
+use super::job::{CalibratorOptions, JobOutcome, SelectionRule};
 use crate::error::bad_input;
 use crate::node::calibrate_action::noise_si;
 use rpkm_core::calib;
@@ -14,13 +14,12 @@ pub(super) fn goal_options(
     noise: rpkm_core::noise::NoiseModel,
 ) -> anyhow::Result<CalibratorOptions> {
     let selection = match goal.selection.as_str() {
-        "" => o.selection.clone(),
-        "map" | "auto" => goal.selection.clone(),
-        other => {
-            return Err(bad_input(format!(
+        "" => o.selection,
+        other => SelectionRule::parse(other).ok_or_else(|| {
+            bad_input(format!(
                 "selection: expected map, auto or empty (the node's), found {other:?}"
-            )))
-        }
+            ))
+        })?,
     };
     let weighting = match goal.noise {
         CalibrateGoal::NOISE_NODE => o.weighting,

@@ -64,6 +64,35 @@ impl<'a> Job<'a> {
     }
 }
 
+/// Which parameters the node's calibration identifies (parameter `selection`, a goal's).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SelectionRule {
+    /// `map`: every parameter under its manufacturing tolerance, noise estimated from the
+    /// campaign (what `rpkm calibrate` and `rpkm diagnose` do).
+    Map,
+    /// `auto`: the thesis's observability selection under `max_condition`.
+    Auto,
+}
+
+impl SelectionRule {
+    /// The rule a parameter or a goal names (`map`, `auto`).
+    pub fn parse(text: &str) -> Option<Self> {
+        match text {
+            "map" => Some(Self::Map),
+            "auto" => Some(Self::Auto),
+            _ => None,
+        }
+    }
+
+    /// As the parameter writes it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Map => "map",
+            Self::Auto => "auto",
+        }
+    }
+}
+
 /// Options of the calibrator.
 #[derive(Debug, Clone)]
 pub struct CalibratorOptions {
@@ -71,10 +100,8 @@ pub struct CalibratorOptions {
     pub start: Geometry,
     /// Setups held out for validation start with this.
     pub validation_prefix: String,
-    /// `map`: every parameter under its manufacturing tolerance, noise estimated from the
-    /// campaign (what `rpkm calibrate` and `rpkm diagnose` do); `auto`: the thesis's
-    /// observability selection under `max_condition`.
-    pub selection: String,
+    /// Which parameters the calibration identifies.
+    pub selection: SelectionRule,
     /// Condition-number limit of the automatic selection.
     pub max_condition: f64,
     /// Outlier threshold in σ (0: keep all).
@@ -106,22 +133,21 @@ pub(super) fn split(c: &Campaign, prefix: &str) -> (Campaign, Option<Campaign>) 
     (part(false), (!val.poses.is_empty()).then_some(val))
 }
 
-/// The calibration's options of the node's settings (the selection checked).
-fn calibration_options(o: &CalibratorOptions) -> anyhow::Result<Options> {
-    let selection = match o.selection.as_str() {
-        "map" => Options::default().selection,
-        "auto" => Selection::Auto {
+/// The calibration's options of the node's settings.
+fn calibration_options(o: &CalibratorOptions) -> Options {
+    let selection = match o.selection {
+        SelectionRule::Map => Options::default().selection,
+        SelectionRule::Auto => Selection::Auto {
             max_condition: o.max_condition,
         },
-        other => anyhow::bail!("parameter selection `{other}`: expected `map` or `auto`"),
     };
-    Ok(Options {
+    Options {
         model: o.start.model,
         selection,
         outlier_sigma: (o.outlier_sigma > 0.0).then_some(o.outlier_sigma),
         noise: o.noise.clone(),
         ..Default::default()
-    })
+    }
 }
 
 /// Calibrates `campaign` (mm, rad) and builds the messages.
@@ -137,7 +163,7 @@ pub fn calibrate_campaign(
 pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<JobOutcome> {
     let (cal_part, own_val) = split(job.campaign, &o.validation_prefix);
     let val_part = job.validation.cloned().or(own_val);
-    let opts = calibration_options(o)?;
+    let opts = calibration_options(o);
     let named;
     let effects: Vec<&dyn rpkm_core::effects::Effect> = match job.effects {
         Some(list) => {

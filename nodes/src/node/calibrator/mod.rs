@@ -51,7 +51,9 @@ mod start_covariance;
 mod tests;
 
 pub use accumulator::Accumulator;
-pub use job::{calibrate_campaign, calibrate_job, CalibratorOptions, Job, JobOutcome};
+pub use job::{
+    calibrate_campaign, calibrate_job, CalibratorOptions, Job, JobOutcome, SelectionRule,
+};
 pub use node::run;
-pub use params::KEYS;
+pub use params::{declarations, declared, PARAMS};
 pub use start_covariance::start_covariance;

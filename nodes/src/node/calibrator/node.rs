@@ -4,11 +4,14 @@
 use super::accumulator::Accumulator;
 use super::goal::{goal_options, goal_result};
 use super::job::{calibrate_campaign, calibrate_job, CalibratorOptions, Job, JobOutcome};
-use super::params::{configure, online_settings, specs, Settings, KEYS};
+use super::params::{
+    configure, declared, online_settings, Settings, HISTORY, HISTORY_MACHINE, PARAMS, STATE_BUFFER,
+};
 use crate::node::calibrate_action::{CalibrateAction, Running};
 use crate::node::context::{
     bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext,
 };
+use crate::node::declare::served;
 use crate::node::geometry::parameters_msg;
 use crate::node::ingest::END_OF_CAMPAIGN;
 use crate::node::lifecycle::Lifecycle;
@@ -38,14 +41,11 @@ fn record_event(
 
 /// The machine's history of the parameters `history`, `history_machine` (None when off).
 fn open_history(ctx: &NodeContext) -> anyhow::Result<Option<crate::node::history::NodeHistory>> {
-    let location = ctx.params.string("history", "").map_err(bad_param)?;
+    let location = HISTORY.string(&ctx.params).map_err(bad_param)?;
     if location.is_empty() {
         return Ok(None);
     }
-    let mut machine = ctx
-        .params
-        .string("history_machine", "")
-        .map_err(bad_param)?;
+    let mut machine = HISTORY_MACHINE.string(&ctx.params).map_err(bad_param)?;
     if machine.is_empty() {
         machine = crate::node::history::default_machine(&ctx.status_name, &ctx.name);
     }
@@ -245,7 +245,7 @@ impl Calibrator {
                         self.calibrations,
                         o.parameters.measurement_count,
                         n.saturating_sub(u64::from(o.parameters.measurement_count)),
-                        o.parameters.cal_rms * 1e6,
+                        crate::units::um_from_m(o.parameters.cal_rms),
                         crate::words::condition_short(o.parameters.condition_number)
                     ),
                 )
@@ -458,18 +458,17 @@ impl Calibrator {
 }
 
 pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
-    let ctx = NodeContext::open("calibrator", args, &KEYS, None)?;
+    let declared = declared();
+    let ctx = NodeContext::open("calibrator", args, &declared, None)?;
     let p = &ctx.params;
     let Settings {
         mut options,
         mut every,
         mut idle_end,
     } = configure(p)?;
-    let mut live = LiveParams::start(&ctx, &specs(), |p| configure(p).map(|_| ()))?;
+    let mut live = LiveParams::start(&ctx, &served(&[&PARAMS]), |p| configure(p).map(|_| ()))?;
     // Bounded before the ring is preallocated from it (4294967296 asked for 650 GB).
-    let capacity = p
-        .u64_in("state_buffer", 4096, crate::node::params::BUFFER_LEN)
-        .map_err(bad_param)?;
+    let capacity = STATE_BUFFER.u64(p).map_err(bad_param)?;
     let online = match online_settings(p)? {
         Some(settings) => Some(OnlineWorker::start(options.start.params, &settings)?),
         None => None,
@@ -500,7 +499,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             node.calibrate(&ctx, &out, &options)?;
         }
         lifecycle.serve(&ctx, || {
-            ctx.reread_params(args, "calibrator", &KEYS)
+            ctx.reread_params(args, "calibrator", &declared)
                 .and_then(|p| configure(&p))
                 .map(|s| (options, every, idle_end) = (s.options, s.every, s.idle_end))
                 .map_err(|e| crate::error::error_chain(&e))

@@ -1,8 +1,8 @@
 //! The calibration as a Parameters message, its effects' values included.
 
 use crate::error::bad_input;
-use crate::node::context::MM_PER_M;
 use crate::node::geometry::parameters_msg;
+use crate::units::{m_from_mm, m_from_um};
 use rpkm_core::calib::{self, Calibration};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::Effect;
@@ -38,7 +38,7 @@ pub(super) fn parameters_of(
             (s + r.rms_after.powi(2) * r.rows as f64, n + r.rows)
         });
     msg.cal_rms = if rows > 0 {
-        (sum / rows as f64).sqrt() / MM_PER_M
+        m_from_mm((sum / rows as f64).sqrt())
     } else {
         f64::NAN
     };
@@ -53,16 +53,16 @@ pub(super) fn parameters_of(
     msg.max_abs_residual = if cal_errors.is_empty() {
         f64::NAN
     } else {
-        cal_errors.iter().fold(0.0, |m: f64, e| m.max(e.abs())) / MM_PER_M
+        m_from_mm(cal_errors.iter().fold(0.0, |m: f64, e| m.max(e.abs())))
     };
     // the diagnosis's held-out judge: `rpkm diagnose` and `rpkm calibrate` report the same
     msg.val_rms = match val_part {
         Some(v) => {
-            let alpha = rpkm_core::diagnose::Options::default().alpha;
+            let alpha = rpkm_core::diagnose::DiagnosisOptions::default().alpha;
             let judge =
                 rpkm_core::diagnose::judge_calibration(v, noise, (effects, set), cal, alpha)
                     .map_err(|e| bad_input(format!("held-out setups: {e}")))?;
-            judge.rms_um * 1e-6
+            m_from_um(judge.rms_um)
         }
         None => f64::NAN,
     };

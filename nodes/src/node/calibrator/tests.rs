@@ -5,8 +5,8 @@ use super::job::split;
 use super::node::Calibrator;
 use super::*;
 use crate::campaign_bag::pose_messages;
-use crate::node::context::MM_PER_M;
 use crate::node::geometry::Geometry;
+use crate::units::{m_from_mm, mm_from_m};
 use rpkm_core::calib::{self, Options};
 use rpkm_core::online::TieSoFar;
 use rpkm_core::params::{Model, Params};
@@ -50,7 +50,7 @@ fn parameters_carry_the_written_effects_parameters() -> anyhow::Result<()> {
     let o = CalibratorOptions {
         start: nominal_start(),
         validation_prefix: "val".into(),
-        selection: "map".into(),
+        selection: SelectionRule::Map,
         max_condition: 100.0,
         outlier_sigma: 0.0,
         noise: rpkm_core::noise::NoiseModel::default(),
@@ -60,7 +60,7 @@ fn parameters_carry_the_written_effects_parameters() -> anyhow::Result<()> {
     let msg = calibrate_campaign(&c, &o)?.parameters;
     assert_eq!(msg.active_effects, ["lost_motion_q4"]);
     assert_eq!(msg.effect_parameter_names, ["lost_motion_q4.b"]);
-    let b = msg.effect_parameter_values[0] * MM_PER_M;
+    let b = mm_from_m(msg.effect_parameter_values[0]);
     eprintln!("published b = {b} mm (truth {b_true})");
     assert!((b - b_true).abs() < 1e-4, "b = {b} mm");
     Ok(())
@@ -89,7 +89,7 @@ fn a_goal_reads_the_collected_campaign_and_sets_its_options() -> anyhow::Result<
     let node = CalibratorOptions {
         start: nominal_start(),
         validation_prefix: "val".into(),
-        selection: "map".into(),
+        selection: SelectionRule::Map,
         max_condition: 100.0,
         outlier_sigma: 0.0,
         noise: rpkm_core::noise::NoiseModel::default(),
@@ -104,13 +104,13 @@ fn a_goal_reads_the_collected_campaign_and_sets_its_options() -> anyhow::Result<
     let noise = rpkm_core::noise::NoiseModel::default;
     let o = goal_options(&node, &goal("", CalibrateGoal::NOISE_NODE), noise())?;
     assert_eq!(
-        (o.selection.as_str(), o.weighting),
-        ("map", calib::Noise::ESTIMATE)
+        (o.selection, o.weighting),
+        (SelectionRule::Map, calib::Noise::ESTIMATE)
     );
     let o = goal_options(&node, &goal("auto", CalibrateGoal::NOISE_STATED), noise())?;
     assert_eq!(
-        (o.selection.as_str(), o.weighting),
-        ("auto", calib::Noise::Stated)
+        (o.selection, o.weighting),
+        (SelectionRule::Auto, calib::Noise::Stated)
     );
     let bad = goal_options(&node, &goal("all", 0), noise()).map(|_| ());
     let e = bad.expect_err("selection all");
@@ -165,7 +165,7 @@ fn messages_rebuild_the_campaign_and_calibrate_like_the_core() -> anyhow::Result
     let o = CalibratorOptions {
         start: nominal_start(),
         validation_prefix: "val".into(),
-        selection: "map".into(),
+        selection: SelectionRule::Map,
         max_condition: 100.0,
         outlier_sigma: 0.0,
         noise: stated,
@@ -188,12 +188,11 @@ fn messages_rebuild_the_campaign_and_calibrate_like_the_core() -> anyhow::Result
         let i = rpkm_core::params::index_of(name)
             .ok_or("name")
             .map_err(anyhow::Error::msg)?;
-        let expect = direct.params[i]
-            / if rpkm_core::params::unit(i) == rpkm_core::params::Unit::Mm {
-                MM_PER_M
-            } else {
-                1.0
-            };
+        let expect = if rpkm_core::params::unit(i) == rpkm_core::params::Unit::Mm {
+            m_from_mm(direct.params[i])
+        } else {
+            direct.params[i]
+        };
         assert!((v - expect).abs() < 1e-9, "{name}: {v} vs {expect}");
     }
     assert_eq!(out.parameters.model, 29);

@@ -7,12 +7,26 @@ use rpkm_transport::{topic, Backend, Qos, Topic};
 
 use super::output::Output;
 use crate::error::bad_input;
+use crate::node::declare::{ParamDefault, ParamSpec};
 use crate::node::{bad_param, shutdown, Idle, NodeContext};
 
 /// Default DDS topic of the controller's drive states.
 pub const ACTUATOR_TOPIC: &str = "/rpkm/controller/actuator_state";
 /// Default DDS topic of the controller's measurements.
 pub const MEASUREMENT_TOPIC: &str = "/rpkm/controller/tcp_measurement";
+
+/// Parameter `input_actuator_topic`.
+pub const ACTUATOR_TOPIC_PARAM: ParamSpec = ParamSpec::fixed(
+    "input_actuator_topic",
+    ParamDefault::Str(ACTUATOR_TOPIC),
+    "DDS topic of the drive states (source dds)",
+);
+/// Parameter `input_measurement_topic`.
+pub const MEASUREMENT_TOPIC_PARAM: ParamSpec = ParamSpec::fixed(
+    "input_measurement_topic",
+    ParamDefault::Str(MEASUREMENT_TOPIC),
+    "DDS topic of the measurements (source dds)",
+);
 
 /// A topic name that lives as long as the node (the transport keeps `&'static str` names).
 fn leak(s: String) -> &'static str {
@@ -22,14 +36,8 @@ fn leak(s: String) -> &'static str {
 /// Republishes what the controller sends until shutdown.
 pub(super) fn run(ctx: &NodeContext, out: &mut Output<'_>) -> anyhow::Result<()> {
     let p = &ctx.params;
-    let a_name = leak(
-        p.string("input_actuator_topic", ACTUATOR_TOPIC)
-            .map_err(bad_param)?,
-    );
-    let m_name = leak(
-        p.string("input_measurement_topic", MEASUREMENT_TOPIC)
-            .map_err(bad_param)?,
-    );
+    let a_name = leak(ACTUATOR_TOPIC_PARAM.string(p).map_err(bad_param)?);
+    let m_name = leak(MEASUREMENT_TOPIC_PARAM.string(p).map_err(bad_param)?);
     if ctx.output != Backend::Ipc
         && (a_name == topic::ACTUATOR_STATE.name() || m_name == topic::TCP_MEASUREMENT.name())
     {

@@ -1,7 +1,7 @@
 //! Where every source's samples go: the publishers, the validation of the messages, the counts
 //! and the one `/diagnostics` report.
 
-use rpkm_core::campaign::{Campaign, Pose};
+use rpkm_core::campaign::{Campaign, MeasuredPose};
 use rpkm_msgs::{
     ActuatorState, CampaignInfo, DiagnosticArray, DiagnosticStatus, TcpMeasurement, Time,
 };
@@ -140,7 +140,7 @@ impl<'a> Output<'a> {
     }
 
     /// Validates and publishes one pose of a campaign (state, then its measurement).
-    pub(super) fn pose(&mut self, c: &Campaign, pose: &Pose) -> anyhow::Result<()> {
+    pub(super) fn pose(&mut self, c: &Campaign, pose: &MeasuredPose) -> anyhow::Result<()> {
         let label = format!("{}:{}", c.source, pose.line);
         let (mut state, measurement) =
             match pose_messages(c, usize::try_from(self.seq).unwrap_or(usize::MAX), pose) {

@@ -3,6 +3,9 @@
 
 use rpkm_msgs::{ActuatorState, TcpMeasurement, Time};
 
+use crate::node::declare::{ParamBound, ParamDefault, ParamSpec};
+use crate::node::params::{NodeParams, ParamError};
+
 /// Why a sample was rejected.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum RejectKind {
@@ -60,14 +63,63 @@ pub struct InputLimits {
     pub measurement_max_m: f64,
 }
 
+/// Parameter `position_min_m`.
+pub const POSITION_MIN: ParamSpec = ParamSpec::live(
+    "position_min_m",
+    ParamDefault::F64(-0.5),
+    "lowest accepted drive position (below position_max_m)",
+)
+.unit("m");
+/// Parameter `position_max_m`.
+pub const POSITION_MAX: ParamSpec = ParamSpec::live(
+    "position_max_m",
+    ParamDefault::F64(4.5),
+    "highest accepted drive position",
+)
+.unit("m");
+/// Parameter `force_max_n`: five times a drive's nominal force.
+pub const FORCE_MAX: ParamSpec = ParamSpec::live(
+    "force_max_n",
+    ParamDefault::F64(5.0 * rpkm_core::elastic::NOMINAL_DRIVE_FORCE_N),
+    "largest accepted |drive force|",
+)
+.unit("N")
+.bound(ParamBound::Positive);
+/// Parameter `measurement_max_m`.
+pub const MEASUREMENT_MAX: ParamSpec = ParamSpec::live(
+    "measurement_max_m",
+    ParamDefault::F64(5.0),
+    "largest accepted |x|, |y|, |r| of a measurement",
+)
+.unit("m")
+.bound(ParamBound::Positive);
+
 impl Default for InputLimits {
     fn default() -> Self {
         Self {
-            position_min_m: -0.5,
-            position_max_m: 4.5,
-            force_max_n: 5.0 * rpkm_core::elastic::NOMINAL_DRIVE_FORCE_N,
-            measurement_max_m: 5.0,
+            position_min_m: POSITION_MIN.default_f64(),
+            position_max_m: POSITION_MAX.default_f64(),
+            force_max_n: FORCE_MAX.default_f64(),
+            measurement_max_m: MEASUREMENT_MAX.default_f64(),
         }
+    }
+}
+
+impl InputLimits {
+    /// The limits of a parameter set (at start-up and for every set on the parameter
+    /// services): forces and measurements above 0, positions an interval.
+    pub fn from_params(p: &NodeParams) -> Result<Self, ParamError> {
+        let d = Self::default();
+        let (position_min_m, position_max_m) = p.interval(
+            (POSITION_MIN.key, d.position_min_m),
+            (POSITION_MAX.key, d.position_max_m),
+        )?;
+        Ok(Self {
+            position_min_m,
+            position_max_m,
+            force_max_n: FORCE_MAX.f64(p)?,
+            measurement_max_m: MEASUREMENT_MAX.f64(p)?,
+        })
     }
 }
 

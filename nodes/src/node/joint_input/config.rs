@@ -6,23 +6,10 @@ use std::time::Duration;
 
 use rpkm_core::campaign::{follower_text, parse_follower};
 use rpkm_msgs::actuator_state::MAX_COVARIATES;
-use rpkm_transport::dds_params::ParamRange;
 use rpkm_transport::names::absolute_name_error;
 
-use crate::node::live::{Default as Value, ParamSpec};
+use crate::node::declare::{ParamBound, ParamDefault as Value, ParamSpec};
 use crate::node::params::{NodeParams, ParamError};
-
-/// Parameter keys of the JointState input (`temperatures.` is a group: covariate name →
-/// topic).
-pub const KEYS: [&str; 7] = [
-    "joint_states_topic",
-    "joint_states_qos",
-    "joint_names",
-    "effort_sign",
-    "followers",
-    "temperatures.",
-    "temperature_timeout_s",
-];
 
 /// Default of `joint_states_topic`: the joint_state_broadcaster's.
 pub const JOINT_STATES_TOPIC: &str = "/joint_states";
@@ -30,10 +17,56 @@ pub const JOINT_STATES_TOPIC: &str = "/joint_states";
 pub const JOINT_NAMES: [&str; 4] = ["q1_joint", "q2_joint", "q3_joint", "q4_joint"];
 /// Default of `effort_sign`: a joint's effort is the drive force, positive towards larger q.
 pub const EFFORT_SIGN: [f64; 4] = [1.0; 4];
-/// Default of `temperature_timeout_s`, s: ten periods of a 5 Hz thermometer.
-pub const TEMPERATURE_TIMEOUT_S: f64 = 2.0;
-/// Bounds of `temperature_timeout_s`, s.
-const TEMPERATURE_TIMEOUT: (f64, f64) = (1e-3, 3600.0);
+
+const TOPIC: ParamSpec = ParamSpec::fixed(
+    "joint_states_topic",
+    Value::Str(JOINT_STATES_TOPIC),
+    "sensor_msgs/JointState topic of the drives (ros2_control's joint_state_broadcaster)",
+);
+const QOS: ParamSpec = ParamSpec::fixed(
+    "joint_states_qos",
+    Value::Str("reliable"),
+    "reliability of the JointState reader: reliable (the broadcaster's) or best_effort",
+);
+const NAMES: ParamSpec = ParamSpec::fixed(
+    "joint_names",
+    Value::Strs(&JOINT_NAMES),
+    "the joints of drives q1, q2, q3, q4; other joints of the message are ignored",
+);
+const SIGNS: ParamSpec = ParamSpec::fixed(
+    "effort_sign",
+    Value::F64s(&EFFORT_SIGN),
+    "drive force = sign x joint effort, per drive (1 or -1; rpkm: positive towards larger q)",
+);
+const FOLLOWERS: ParamSpec = ParamSpec::live(
+    "followers",
+    Value::Str(""),
+    "drives in follower mode, e.g. \"23\" (\"\": none); applies from the next state",
+);
+const THERMOMETERS: ParamSpec = ParamSpec::group(
+    "temperatures.",
+    "covariate name -> sensor_msgs/Temperature topic of a thermometer",
+);
+/// A thermometer silent this long is not measured: default ten periods of a 5 Hz one.
+const TEMPERATURE_TIMEOUT: ParamSpec = ParamSpec::fixed(
+    "temperature_timeout_s",
+    Value::F64(2.0),
+    "a thermometer silent this long is not measured",
+)
+.unit("s")
+.bound(ParamBound::Within(1e-3, 3600.0));
+
+/// The JointState input's parameters: `followers` live (from the next state on), the rest
+/// need a restart (`temperatures.` is a group: covariate name → topic).
+pub const PARAMS: [ParamSpec; 7] = [
+    TOPIC,
+    QOS,
+    NAMES,
+    SIGNS,
+    FOLLOWERS,
+    THERMOMETERS,
+    TEMPERATURE_TIMEOUT,
+];
 
 /// One thermometer: the covariate its readings become and the topic they come on.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -63,16 +96,16 @@ pub struct JointConfig {
     pub timeout: Duration,
 }
 
-fn topic(p: &NodeParams, key: &str, default: &str) -> Result<String, ParamError> {
-    let t = p.string(key, default)?;
+fn topic(p: &NodeParams, spec: &ParamSpec) -> Result<String, ParamError> {
+    let t = spec.string(p)?;
     match absolute_name_error(&t) {
         None => Ok(t),
-        Some(_) => Err(p.invalid(key, "an absolute ROS 2 topic name (/joint_states)")),
+        Some(_) => Err(p.invalid(spec.key, "an absolute ROS 2 topic name (/joint_states)")),
     }
 }
 
 fn joints(p: &NodeParams) -> Result<[String; 4], ParamError> {
-    let names = p.strings("joint_names", &JOINT_NAMES)?;
+    let names = NAMES.strings(p)?;
     let distinct = names
         .iter()
         .enumerate()
@@ -87,7 +120,7 @@ fn joints(p: &NodeParams) -> Result<[String; 4], ParamError> {
 }
 
 fn effort_sign(p: &NodeParams) -> Result<[f64; 4], ParamError> {
-    let signs = p.f64s("effort_sign", &EFFORT_SIGN)?;
+    let signs = SIGNS.f64s(p)?;
     let unit = |s: &f64| (s.abs() - 1.0).abs() < 1e-12;
     match <[f64; 4]>::try_from(signs) {
         Ok(four) if four.iter().all(unit) => Ok(four.map(f64::signum)),
@@ -100,7 +133,7 @@ fn effort_sign(p: &NodeParams) -> Result<[f64; 4], ParamError> {
 
 /// Parameter `followers` (`"23"`: q2 and q3 follow; `""`: every drive holds).
 pub fn followers(p: &NodeParams) -> Result<[bool; 4], ParamError> {
-    parse_follower(&p.string("followers", "")?).ok_or_else(|| {
+    parse_follower(&FOLLOWERS.string(p)?).ok_or_else(|| {
         p.invalid(
             "followers",
             "distinct drive digits 1-4 such as \"23\", or \"\" (none)",
@@ -109,7 +142,7 @@ pub fn followers(p: &NodeParams) -> Result<[bool; 4], ParamError> {
 }
 
 fn thermometers(p: &NodeParams) -> Result<Vec<Thermometer>, ParamError> {
-    let group = p.string_group("temperatures.")?;
+    let group = p.string_group(THERMOMETERS.key)?;
     let mut out = Vec::with_capacity(group.len());
     for (covariate, topic, _) in group {
         let key = format!("temperatures.{covariate}");
@@ -135,19 +168,14 @@ impl JointConfig {
     /// The settings of parameter set `p`, every value checked; the error names the key and
     /// where it was set.
     pub fn from_params(p: &NodeParams) -> Result<Self, ParamError> {
-        let reliable = match p.string("joint_states_qos", "reliable")?.as_str() {
+        let reliable = match QOS.string(p)?.as_str() {
             "reliable" => true,
             "best_effort" => false,
             _ => return Err(p.invalid("joint_states_qos", "reliable or best_effort")),
         };
-        let timeout = p.f64_in(
-            "temperature_timeout_s",
-            TEMPERATURE_TIMEOUT_S,
-            TEMPERATURE_TIMEOUT,
-            " s",
-        )?;
+        let timeout = TEMPERATURE_TIMEOUT.f64(p)?;
         Ok(Self {
-            topic: topic(p, "joint_states_topic", JOINT_STATES_TOPIC)?,
+            topic: topic(p, &TOPIC)?,
             reliable,
             joints: joints(p)?,
             effort_sign: effort_sign(p)?,
@@ -179,44 +207,6 @@ pub fn followers_text(followers: [bool; 4]) -> String {
     } else {
         t
     }
-}
-
-/// The input's parameters on the node's ROS 2 parameter services: `followers` live (from the
-/// next state on), the rest need a restart.
-pub fn specs() -> Vec<ParamSpec> {
-    vec![
-        ParamSpec::fixed(
-            "joint_states_topic",
-            Value::Str(JOINT_STATES_TOPIC),
-            "sensor_msgs/JointState topic of the drives (ros2_control's joint_state_broadcaster)",
-        ),
-        ParamSpec::fixed(
-            "joint_states_qos",
-            Value::Str("reliable"),
-            "reliability of the JointState reader: reliable (the broadcaster's) or best_effort",
-        ),
-        ParamSpec::fixed(
-            "joint_names",
-            Value::Strs(&JOINT_NAMES),
-            "the joints of drives q1, q2, q3, q4; other joints of the message are ignored",
-        ),
-        ParamSpec::fixed(
-            "effort_sign",
-            Value::F64s(&EFFORT_SIGN),
-            "drive force = sign x joint effort, per drive (1 or -1; rpkm: positive towards larger q)",
-        ),
-        ParamSpec::live(
-            "followers",
-            Value::Str(""),
-            "drives in follower mode, e.g. \"23\" (\"\": none); applies from the next state",
-            ParamRange::None,
-        ),
-        ParamSpec::fixed(
-            "temperature_timeout_s",
-            Value::F64(TEMPERATURE_TIMEOUT_S),
-            "a thermometer silent this long is not measured, s (0.001 to 3600)",
-        ),
-    ]
 }
 
 #[cfg(test)]

@@ -25,8 +25,7 @@ use rpkm_transport::names::intern;
 use rpkm_transport::{Backend, Qos, Subscriber, Topic};
 
 pub use config::{
-    followers, followers_text, specs, JointConfig, Thermometer, JOINT_NAMES, JOINT_STATES_TOPIC,
-    KEYS,
+    followers, followers_text, JointConfig, Thermometer, JOINT_NAMES, JOINT_STATES_TOPIC, PARAMS,
 };
 pub use convert::{drive_state, JointReject};
 pub use thermometers::{ThermometerChange, Thermometers};
