@@ -7,9 +7,9 @@ use std::time::Duration;
 
 /// Cases per family: a few thousand in all, well within a minute of the debug test build on
 /// two cores (docs/nodes.md has the measured time).
-const CSV_CASES: usize = 1200;
-const BAG_CASES: usize = 1500;
-const PARAM_CASES: usize = 1200;
+const CSV_CASES: usize = 600;
+const BAG_CASES: usize = 750;
+const PARAM_CASES: usize = 600;
 #[test]
 fn fuzzed_campaigns_end_in_0_or_2_naming_their_file() {
     let dir = scratch("csv");

@@ -7,10 +7,10 @@ use crate::fuzz_support::Rng;
 use std::path::Path;
 use std::time::Duration;
 
-const LAUNCH_CASES: usize = 2000;
+const LAUNCH_CASES: usize = 1000;
 /// Cases of the families issue 29 added: launches that run, parameter maps, corrupt bag
 /// payloads, validation campaigns (2,000 in all).
-const LAUNCH_RUN_CASES: usize = 300;
+const LAUNCH_RUN_CASES: usize = 150;
 /// Values a launch entry's field may be mutated to, besides [`ODD_VALUES`]: what a launch
 /// file's author gets wrong.
 const LAUNCH_VALUES: [&str; 16] = [

@@ -6,9 +6,9 @@ use crate::fuzz_support::Rng;
 use std::path::Path;
 use std::time::Duration;
 
-const PARAM_MAP_CASES: usize = 800;
-const BAG_PAYLOAD_CASES: usize = 400;
-const VALIDATION_CASES: usize = 500;
+const PARAM_MAP_CASES: usize = 400;
+const BAG_PAYLOAD_CASES: usize = 200;
+const VALIDATION_CASES: usize = 250;
 
 /// Maps where a parameter's value belongs, block or flow style.
 const MAP_VALUES: [&str; 4] = ["{a: 1}", "{}", "{a: {b: 2}}", "\n      a: 1"];
