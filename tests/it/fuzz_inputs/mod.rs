@@ -1,7 +1,8 @@
 //! Fuzzed input through the real command line, judged against the contract, not the code:
 //! whatever a user hands rpkm, it ends with 0 or 2, never a panic (101), an abort or another
 //! signal, never a hang; and a rejection (2) names its place: the file it read. Eight
-//! families, fixed seeds, 3,950 cases (sized to CI's 15 minutes; raise the counts for a longer run):
+//! families, fixed seeds, 3,950 cases (sized to CI's 15 minutes; raise the counts for a
+//! longer run):
 //! - campaign CSV through `rpkm calibrate` (a small tracker campaign, mutated);
 //! - rosbag2 bags through `rpkm bag info` (the reference calibration bag, bytes flipped,
 //!   cut, metadata.yaml edited);
