@@ -246,14 +246,7 @@ fn no_step_of_the_loop_raises_the_held_out_error() {
         (113, ["preload_elastic", "thermal"]),
     ] {
         let o = bench_machine(machine);
-        let mut named: Vec<&str> = o["named"]
-            .as_array()
-            .expect("named")
-            .iter()
-            .map(|v| v.as_str().expect("name"))
-            .collect();
-        named.sort_unstable();
-        assert_eq!(named, hidden, "machine {machine}: {o}");
+        assert_eq!(named_of(&o), hidden, "machine {machine}: {o}");
         assert_eq!(
             o["final_verdict"], "nothing_missing",
             "machine {machine}: {o}"

@@ -283,6 +283,7 @@ impl<'j> Judge<'j> {
     /// of the dictionary matches while `big` still leaves structure ([`Judge::outdone_by_term`]).
     pub(super) fn beats(&self, big: &Entry, small: &Entry) -> bool {
         let (b, s) = (&big.fitted.fit, &small.fitted.fit);
+        let wald = wald_beyond(b, s);
         let gain = |prediction: Option<Prediction>| {
             Gain::of(
                 (b.chi2, b.dof),
@@ -290,7 +291,7 @@ impl<'j> Judge<'j> {
                 self.base.rows.len(),
                 prediction.map(|p| (p, self.unit_of(&p))),
             )
-            .with_wald(wald_beyond(b, s))
+            .with_wald(wald)
         };
         let held = held_between(small, big);
         let prediction = match held {
@@ -327,11 +328,25 @@ impl<'j> Judge<'j> {
     /// (a soft rod's force-following residual is partly a scale difference of the guides; a
     /// term of the forces explains more of it, and the structure stays).
     pub(super) fn outdone_by_term(&self, big: &Entry, small: &Entry) -> bool {
+        self.term_rivals(
+            &big.fitted.fit,
+            &small.fitted.fit,
+            small.structure(self.campaign),
+        ) && big.structure(self.campaign).p_value < self.structure_level
+    }
+
+    /// Whether the gain (BIC) of the fit `big` over `small` is no more than the best single
+    /// dictionary term takes from `small`'s residual (`term`: its structure), in the same
+    /// currency: a term's one parameter against the added ones.
+    pub(super) fn term_rivals(
+        &self,
+        big: &super::types::Fit,
+        small: &super::types::Fit,
+        term: &sparse::Structure,
+    ) -> bool {
         let n = self.base.rows.len().max(1) as f64;
-        let k = (small.fitted.fit.dof - big.fitted.fit.dof).max(0.0);
-        let gain = small.fitted.fit.chi2 - big.fitted.fit.chi2 - k * n.ln();
-        let term = small.structure(self.campaign).explained_chi2 - n.ln();
-        gain <= term && big.structure(self.campaign).p_value < self.structure_level
+        let k = (small.dof - big.dof).max(0.0);
+        small.chi2 - big.chi2 - k * n.ln() <= term.explained_chi2 - n.ln()
     }
 
     /// The noise a prediction's errors are in: 1 for left-out rows (σ), the held-out floor

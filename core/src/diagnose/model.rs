@@ -190,15 +190,14 @@ fn nothing_left_out_earns(judge: &Judge, entries: &mut [Entry]) {
 }
 
 /// The model named: among the eligible, the simplest within one standard error of the best
-/// predicting (of those as simple, the one that fits the calibration best); one that a single dictionary term explains as well must leave no structure
-/// behind. Returns the entry and the term it was preferred to.
+/// predicting (of those as simple, the one that fits the calibration best); one that a single
+/// dictionary term explains as well must leave no structure behind. Returns the entry and the
+/// term it was preferred to.
 fn choose(
     judge: &Judge,
     entries: &mut [Entry],
     structure: &sparse::Structure,
 ) -> Option<(usize, Option<String>)> {
-    let n_rows = judge.base.rows.len() as f64;
-    let term_bic = structure.explained_chi2 - n_rows.ln();
     loop {
         let eligible: Vec<usize> = (0..entries.len())
             .filter(|&k| entries[k].eligible())
@@ -224,11 +223,9 @@ fn choose(
                     .then(chi2(a).total_cmp(&chi2(b)))
             })?;
         let e = &entries[pick];
-        let gain = judge.base.fit.chi2 - e.fitted.fit.chi2 - e.k * n_rows.ln();
         let mut tied = None;
-        if gain <= term_bic {
-            let clean =
-                sparse::structure(judge.campaign, &e.fitted.rows).p_value >= judge.structure_level;
+        if judge.term_rivals(&e.fitted.fit, &judge.base.fit, structure) {
+            let clean = e.structure(judge.campaign).p_value >= judge.structure_level;
             if !clean {
                 entries[pick].judged.outcome = Outcome::OutdoneByTerm;
                 continue;

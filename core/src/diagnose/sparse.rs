@@ -168,32 +168,39 @@ fn trend(campaign: &Campaign, readings: &[f64]) -> Vec<f64> {
         for (j, &i) in members.iter().enumerate() {
             let lo = j.saturating_sub(TREND_HALF_WINDOW);
             let hi = (j + TREND_HALF_WINDOW + 1).min(members.len());
-            let window: Vec<(f64, f64)> = members[lo..hi]
+            let window = members[lo..hi]
                 .iter()
                 .map(|&k| (campaign.poses[k].t, readings[k]))
-                .filter(|(t, v)| t.is_finite() && v.is_finite())
-                .collect();
-            if readings[i].is_finite() && !window.is_empty() {
-                out[i] = line_at(&window, campaign.poses[i].t);
+                .filter(|(t, v)| t.is_finite() && v.is_finite());
+            if readings[i].is_finite() {
+                if let Some(v) = line_at(window, campaign.poses[i].t) {
+                    out[i] = v;
+                }
             }
         }
     }
     out
 }
 
-/// The least-squares line through `points` (t, v) at `t`; their mean where t does not vary.
-fn line_at(points: &[(f64, f64)], t: f64) -> f64 {
-    let n = points.len() as f64;
+/// The least-squares line through `points` (t, v) at `t`; their mean where t does not vary;
+/// None without points. Passes over the points three times rather than collect them: it
+/// runs once per pose of every thermometer column.
+fn line_at(points: impl Iterator<Item = (f64, f64)> + Clone, t: f64) -> Option<f64> {
+    let n = points.clone().count() as f64;
+    if n == 0.0 {
+        return None;
+    }
     let (mt, mv) = points
-        .iter()
+        .clone()
         .fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
-    let stt: f64 = points.iter().map(|(x, _)| (x - mt).powi(2)).sum();
-    let stv: f64 = points.iter().map(|(x, y)| (x - mt) * (y - mv)).sum();
-    if stt > 0.0 {
+    let (stt, stv) = points.fold((0.0, 0.0), |(a, b), (x, y)| {
+        (a + (x - mt).powi(2), b + (x - mt) * (y - mv))
+    });
+    Some(if stt > 0.0 {
         mv + stv / stt * (t - mt)
     } else {
         mv
-    }
+    })
 }
 
 /// Pearson correlation over the pairs where both are finite; None if either is constant.
