@@ -56,7 +56,7 @@ fn parses_nodes_args_and_substitutions() -> Result<(), LaunchError> {
 
 #[test]
 fn unknown_keys_in_a_launch_entry_are_rejected_with_the_line() {
-    for (text, says) in [
+    refused_with(&[
         (
             "launch:\n  - node:\n      pkg: rpkm\n      exec: ingest\n      If: \"false\"\n",
             "z.yaml:5: node: unknown key \"If\" (known: pkg, exec,",
@@ -74,10 +74,7 @@ fn unknown_keys_in_a_launch_entry_are_rejected_with_the_line() {
             "launch:\n  - node: {pkg: rpkm, exec: ingest, param: [{form: p.yaml}]}\n",
             "z.yaml:2: node ingest param entry: unknown key \"form\"",
         ),
-    ] {
-        let e = LaunchDescription::parse(text, "z.yaml", Path::new("."), &[]).expect_err(text);
-        assert!(e.to_string().starts_with(says), "{text}: {e}");
-    }
+    ]);
 }
 
 #[test]
@@ -135,7 +132,7 @@ fn errors_name_the_problem() {
 
 #[test]
 fn every_error_names_the_line_of_its_entry_or_key() {
-    for (text, says) in [
+    refused_with(&[
         (
             "# c\nlaunch:\n  - arg: {name: a, default: x}\n\n  - node:\n      pkg: rpkm\n      \
                  exec: talker\n",
@@ -171,10 +168,7 @@ fn every_error_names_the_line_of_its_entry_or_key() {
             "# two documents\nlaunch: []\n---\nlaunch: []\n",
             "z.yaml:3:1: not YAML",
         ),
-    ] {
-        let e = LaunchDescription::parse(text, "z.yaml", Path::new("."), &[]).expect_err(text);
-        assert!(e.to_string().starts_with(says), "{text}: {e}");
-    }
+    ]);
 }
 
 /// `enclave:` reaches the node as rcl's `--ros-args --enclave`.
@@ -272,4 +266,12 @@ fn invalid_utf8_names_line_and_byte() {
             file.display()
         )
     );
+}
+
+/// Each launch text is refused, its error starting with what it says (`z.yaml:LINE: ...`).
+fn refused_with(cases: &[(&str, &str)]) {
+    for (text, says) in cases {
+        let e = LaunchDescription::parse(text, "z.yaml", Path::new("."), &[]).expect_err(text);
+        assert!(e.to_string().starts_with(says), "{text}: {e}");
+    }
 }

@@ -1,6 +1,9 @@
 //! Campaign CSV, rosbag2 bags and node parameter files, mutated.
 
-use super::harness::{copy_any, family, judge, keep, mutate_text, rpkm, run, scratch, ODD_VALUES};
+use super::harness::{
+    copy_any, family, judge, keep, mutate_text, rpkm, run, scratch, simulated_lt_campaign,
+    ODD_VALUES,
+};
 use crate::fuzz_support::Rng;
 use std::path::Path;
 use std::time::Duration;
@@ -14,16 +17,7 @@ const PARAM_CASES: usize = 600;
 fn fuzzed_campaigns_end_in_0_or_2_naming_their_file() {
     let dir = scratch("csv");
     let base = dir.join("base.csv");
-    let made = rpkm()
-        .args(["simulate", "--campaign", "lt", "--seed", "3", "--out"])
-        .arg(&base)
-        .output()
-        .expect("rpkm simulate");
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
-    );
+    simulated_lt_campaign(&base, "3");
     let text = std::fs::read_to_string(&base).expect("base campaign");
     let failures = family(CSV_CASES, |case| {
         let mut rng = Rng(0x0c5f_0000 + case as u64 * 7919);

@@ -144,6 +144,20 @@ pub(super) fn rpkm() -> Command {
     cmd
 }
 
+/// A tracker campaign of the twin (seed `seed`) written to `file`: a family's valid start.
+pub(super) fn simulated_lt_campaign(file: &Path, seed: &str) {
+    let made = rpkm()
+        .args(["simulate", "--campaign", "lt", "--seed", seed, "--out"])
+        .arg(file)
+        .output()
+        .expect("rpkm simulate");
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+}
+
 pub(super) fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("rpkm-fuzz-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);

@@ -1,7 +1,7 @@
 //! Parameter maps where values belong, bags with corrupt payloads, validation campaigns with a
 //! reading moved.
 
-use super::harness::{family, judge, keep, mutate_text, rpkm, run, scratch};
+use super::harness::{family, judge, keep, mutate_text, rpkm, run, scratch, simulated_lt_campaign};
 use crate::fuzz_support::Rng;
 use std::path::Path;
 use std::time::Duration;
@@ -203,16 +203,7 @@ fn fuzzed_validation_campaigns_end_in_0_or_2_naming_their_file() {
     let dir = scratch("val");
     let (base, val) = (dir.join("base.csv"), dir.join("val.csv"));
     for (file, seed) in [(&base, "3"), (&val, "4")] {
-        let made = rpkm()
-            .args(["simulate", "--campaign", "lt", "--seed", seed, "--out"])
-            .arg(file)
-            .output()
-            .expect("rpkm simulate");
-        assert!(
-            made.status.success(),
-            "{}",
-            String::from_utf8_lossy(&made.stderr)
-        );
+        simulated_lt_campaign(file, seed);
     }
     let text = std::fs::read_to_string(&val).expect("validation campaign");
     let failures = family(VALIDATION_CASES, |case| {
