@@ -10,10 +10,10 @@
 use crate::node_support;
 
 use std::collections::HashMap;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use node_support::{rpkm, twin_stream, unique, write_truth_json, TempDir};
+use node_support::{rpkm, twin_stream, unique, write_truth_json, Proc, TempDir};
 use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_transport::{topic, Transport, TransportConfig};
 
@@ -74,26 +74,7 @@ impl Drop for Namespaces {
     }
 }
 
-struct Node(Child);
-
-impl Drop for Node {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-TERM", &self.0.id().to_string()])
-            .status();
-        let deadline = Instant::now() + Duration::from_secs(5);
-        while Instant::now() < deadline {
-            if let Ok(Some(_)) = self.0.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-fn in_ns(ns: &str, args: &[&str], prefix: &str) -> Node {
+fn in_ns(ns: &str, args: &[&str], prefix: &str) -> Proc {
     let child = Command::new("ip")
         .args(["netns", "exec", ns, rpkm()])
         .args(args)
@@ -102,7 +83,7 @@ fn in_ns(ns: &str, args: &[&str], prefix: &str) -> Node {
         .stdout(Stdio::null())
         .spawn()
         .expect("ip netns exec");
-    Node(child)
+    Proc(child)
 }
 
 fn skip(reason: &str) {

@@ -258,7 +258,8 @@ pub fn python() -> Option<PathBuf> {
     None
 }
 
-/// A child process stopped with SIGTERM (its clean shutdown) when the test lets go of it.
+/// A child process stopped with SIGTERM (its clean shutdown) when the test lets go of it,
+/// killed where it has not ended 5 s later (a test never hangs on a node that will not stop).
 pub struct Proc(pub Child);
 
 impl Drop for Proc {
@@ -266,6 +267,14 @@ impl Drop for Proc {
         let _ = Command::new("kill")
             .args(["-TERM", &self.0.id().to_string()])
             .status();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+        while std::time::Instant::now() < deadline {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let _ = self.0.kill();
         let _ = self.0.wait();
     }
 }
