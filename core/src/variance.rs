@@ -61,6 +61,16 @@ pub struct NoiseEstimate {
 }
 
 impl NoiseEstimate {
+    /// How many times the estimate exceeds the stated noise at most (at least 1): the
+    /// [`crate::calib::Options::noise_inflation`] of a calibration weighted by it.
+    pub fn inflation(&self) -> f64 {
+        self.groups
+            .iter()
+            .filter(|g| g.assumed > 0.0)
+            .map(|g| g.estimated / g.assumed)
+            .fold(1.0, f64::max)
+    }
+
     /// The assumed model, taken as it is (no estimation).
     pub fn assumed(model: &NoiseModel) -> NoiseEstimate {
         NoiseEstimate {
@@ -134,6 +144,11 @@ impl GroupLevels {
             *t *= s;
         }
         stated.scaled(&self.total)
+    }
+
+    /// How many times the levels exceed the stated noise at most (at least 1).
+    pub fn inflation(&self) -> f64 {
+        self.total.iter().copied().fold(1.0, f64::max)
     }
 
     /// The estimate to report: `stated` against `weighted` (the levels of the last round)

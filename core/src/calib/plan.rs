@@ -82,7 +82,8 @@ impl Plan {
             .filter(|&k| {
                 let (frac, signal) = observability[k];
                 frac >= MIN_EFFECT_OBSERVABILITY
-                    && signal * layout[k].param.prior >= MIN_EFFECT_SIGNAL
+                    && signal * layout[k].param.prior * opts.noise_inflation.max(1.0)
+                        >= MIN_EFFECT_SIGNAL
             })
             .collect();
         let h_theta = DVector::from_iterator(

@@ -66,6 +66,7 @@ fn estimating(
             rebinds = bound_at_fit.is_some();
         }
         opts.noise = levels.apply(&step, stated);
+        opts.noise_inflation = req.options.noise_inflation * levels.inflation();
         round_ended(req, || {
             levels.estimate(
                 req.campaign,

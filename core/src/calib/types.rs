@@ -101,6 +101,12 @@ pub struct Options {
     pub max_iterations: usize,
     /// The instruments' and encoders' noise: the rows' weights.
     pub noise: NoiseModel,
+    /// How many times `noise` exceeds the instruments' stated noise at most (1: the stated
+    /// noise itself). An effect parameter is held where a value of its prior size would not
+    /// move the fit by one standard deviation of what the instruments resolve: a noise
+    /// estimated under a model that misses an effect holds that misfit too, and judged
+    /// against it the very effect that explains the misfit would look too small to see.
+    pub noise_inflation: f64,
     /// Threads the rows are evaluated on (0: every core). The result is the same to the bit
     /// on any number: the rows are summed in fixed pieces, in order.
     pub threads: usize,
@@ -139,6 +145,7 @@ impl Default for Options {
             // takes the LM longer; a good one stops in a handful
             max_iterations: 400,
             noise: NoiseModel::default(),
+            noise_inflation: 1.0,
             threads: 0,
             stop: None,
         }
