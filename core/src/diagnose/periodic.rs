@@ -379,6 +379,49 @@ fn less_term(z: &[f64], x: &[f64], q: &[f64], setups: &[&str]) -> (Vec<f64>, usi
     (out, fitted)
 }
 
+/// Rows whose phasors [`Sums::over`] turns side by side: one row's turns wait on each other,
+/// several rows' overlap (each frequency's sums still take the rows in order, so the sums are
+/// those of one row at a time to the bit).
+const LANES: usize = 4;
+
+/// One row's phasor on the frequency grid: its value at the current frequency, and the turn
+/// of one grid step.
+struct Phasor {
+    z: f64,
+    s: f64,
+    c: f64,
+    ds: f64,
+    dc: f64,
+}
+
+impl Phasor {
+    /// The row (z, q) at the grid's first frequency (`f0`, step `df`).
+    fn at((z, q): (f64, f64), (f0, df, _): (f64, f64, usize)) -> Phasor {
+        let tau = std::f64::consts::TAU;
+        let (s, c) = (tau * f0 * q).sin_cos();
+        let (ds, dc) = (tau * df * q).sin_cos();
+        Phasor { z, s, c, ds, dc }
+    }
+
+    /// Add the row to a frequency's sums `a`, turned one step first where `turn`.
+    fn add_to(&mut self, a: &mut [f64; 7], turn: bool) {
+        if turn {
+            (self.s, self.c) = (
+                self.s * self.dc + self.c * self.ds,
+                self.c * self.dc - self.s * self.ds,
+            );
+        }
+        let (s, c, z) = (self.s, self.c, self.z);
+        a[0] += s;
+        a[1] += c;
+        a[2] += s * s;
+        a[3] += c * c;
+        a[4] += s * c;
+        a[5] += z * s;
+        a[6] += z * c;
+    }
+}
+
 /// Per frequency of a uniform grid: the sums a two-term fit (sine, cosine and an offset)
 /// needs, accumulated row by row with each row's phasor turned by one step of the grid (no
 /// sine evaluated per frequency).
@@ -390,23 +433,22 @@ struct Sums {
 }
 
 impl Sums {
-    fn over(z: &[f64], q: &[f64], (f0, df, n_freq): (f64, f64, usize)) -> Sums {
-        let mut acc = vec![[0.0; 7]; n_freq];
-        for (&zi, &qi) in z.iter().zip(q) {
-            let tau = std::f64::consts::TAU;
-            let (mut s, mut c) = (tau * f0 * qi).sin_cos();
-            let (ds, dc) = (tau * df * qi).sin_cos();
+    fn over(z: &[f64], q: &[f64], grid: (f64, f64, usize)) -> Sums {
+        let mut acc = vec![[0.0; 7]; grid.2];
+        let rows: Vec<(f64, f64)> = z.iter().copied().zip(q.iter().copied()).collect();
+        let mut chunks = rows.chunks_exact(LANES);
+        for chunk in chunks.by_ref() {
+            let mut lanes: [Phasor; LANES] = std::array::from_fn(|l| Phasor::at(chunk[l], grid));
             for (k, a) in acc.iter_mut().enumerate() {
-                if k > 0 {
-                    (s, c) = (s * dc + c * ds, c * dc - s * ds);
+                for p in &mut lanes {
+                    p.add_to(a, k > 0);
                 }
-                a[0] += s;
-                a[1] += c;
-                a[2] += s * s;
-                a[3] += c * c;
-                a[4] += s * c;
-                a[5] += zi * s;
-                a[6] += zi * c;
+            }
+        }
+        for &row in chunks.remainder() {
+            let mut p = Phasor::at(row, grid);
+            for (k, a) in acc.iter_mut().enumerate() {
+                p.add_to(a, k > 0);
             }
         }
         Sums {
