@@ -5,7 +5,7 @@
 //! whether one model beats another it holds.
 
 use super::cross;
-use super::gain::{wald_beyond, wald_p, Gain, PRACTICAL_SIZE};
+use super::gain::{relevant_beyond, wald_beyond, wald_p, Gain, PRACTICAL_SIZE};
 use super::held_out::Validation;
 use super::sparse;
 use super::trials::{finish_with, warm_theta, SCREEN_P};
@@ -310,7 +310,9 @@ impl<'j> Judge<'j> {
                 .or(held),
             _ => held,
         };
-        gain(prediction).needed(self.level) && !self.outdone_by_term(big, small)
+        gain(prediction).needed(self.level)
+            && relevant_beyond(b, s)
+            && !self.outdone_by_term(big, small)
     }
 
     /// An entry's left-out rows, made when first needed.

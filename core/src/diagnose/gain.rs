@@ -159,6 +159,24 @@ pub(super) fn wald_p(fit: &super::types::Fit, added: &[&str]) -> f64 {
 /// family and name `small` lacks. A larger model whose extra parameters are zero within
 /// their σ fits better only by refitting the rest from another start.
 pub(super) fn wald_beyond(big: &super::types::Fit, small: &super::types::Fit) -> f64 {
+    let beyond = beyond(small);
+    wald_of(big, |p| beyond(p))
+}
+
+/// Whether some parameter `big` has beyond `small` (a model it holds) reaches
+/// [`super::types::RELEVANT_FRACTION`] of its plausible magnitude: what a larger model adds
+/// must matter as a candidate's parameters must (a guides' scale difference of 2 ± 1 ppm
+/// beside a soft rod's preload absorbs a residual the library does not have).
+pub(super) fn relevant_beyond(big: &super::types::Fit, small: &super::types::Fit) -> bool {
+    let beyond = beyond(small);
+    big.effect_params
+        .iter()
+        .filter(|p| beyond(p) && p.identified && p.prior > 0.0)
+        .any(|p| p.value.abs() >= super::types::RELEVANT_FRACTION * p.prior)
+}
+
+/// Whether an effect parameter is one `small` lacks (by family and name).
+fn beyond(small: &super::types::Fit) -> impl Fn(&EffectEstimate) -> bool {
     let key = |p: &EffectEstimate| {
         (
             crate::effects::family_of(&p.effect).to_owned(),
@@ -166,7 +184,7 @@ pub(super) fn wald_beyond(big: &super::types::Fit, small: &super::types::Fit) ->
         )
     };
     let held: Vec<(String, String)> = small.effect_params.iter().map(key).collect();
-    wald_of(big, |p| !held.contains(&key(p)))
+    move |p| !held.contains(&key(p))
 }
 
 /// The Wald test over the identified parameters of `fit` that `pick` selects.
