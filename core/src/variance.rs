@@ -58,25 +58,19 @@ pub struct NoiseEstimate {
     /// Only the groups the campaign has rows of.
     pub groups: Vec<GroupNoise>,
     pub rounds: usize,
+    /// How many times `model` exceeds the stated noise at most (at least 1): the
+    /// [`crate::calib::Options::noise_inflation`] of a calibration weighted by it.
+    pub inflation: f64,
 }
 
 impl NoiseEstimate {
-    /// How many times the estimate exceeds the stated noise at most (at least 1): the
-    /// [`crate::calib::Options::noise_inflation`] of a calibration weighted by it.
-    pub fn inflation(&self) -> f64 {
-        self.groups
-            .iter()
-            .filter(|g| g.assumed > 0.0)
-            .map(|g| g.estimated / g.assumed)
-            .fold(1.0, f64::max)
-    }
-
     /// The assumed model, taken as it is (no estimation).
     pub fn assumed(model: &NoiseModel) -> NoiseEstimate {
         NoiseEstimate {
             model: model.clone(),
             groups: Vec::new(),
             rounds: 0,
+            inflation: 1.0,
         }
     }
 }
@@ -187,6 +181,7 @@ impl GroupLevels {
             model: weighted,
             groups,
             rounds,
+            inflation: self.inflation(),
         }
     }
 }

@@ -72,7 +72,7 @@ pub(crate) fn noise_of(
     })
     .map_err(DiagnoseError::Baseline)?;
     copts.noise = est.model.clone();
-    copts.noise_inflation = est.inflation();
+    copts.noise_inflation = est.inflation;
     Ok((cal, est, copts))
 }
 

@@ -5,11 +5,10 @@
 //! whether one model beats another it holds.
 
 use super::cross;
-use super::gain::{relevant_beyond, wald_beyond, wald_p, Gain, PRACTICAL_SIZE};
+use super::gain::{relevant, relevant_beyond, wald_beyond, wald_p, Gain, PRACTICAL_SIZE};
 use super::held_out::Validation;
 use super::sparse;
 use super::trials::{finish_with, warm_theta, SCREEN_P};
-use super::types::RELEVANT_FRACTION;
 use super::types::{FitError, Fitted, Judged, Outcome, Prediction};
 use crate::calib::{self, EffectEstimate, Request};
 use crate::campaign::Campaign;
@@ -133,13 +132,13 @@ impl<'j> Judge<'j> {
         } else {
             1.0
         };
-        let relevant = fitted
-            .fit
-            .effect_params
-            .iter()
-            .filter(|p| added.iter().any(|e| e.name() == p.effect))
-            .filter(|p| p.identified && p.prior > 0.0)
-            .any(|p| p.value.abs() >= RELEVANT_FRACTION * p.prior);
+        let relevant = relevant(
+            fitted
+                .fit
+                .effect_params
+                .iter()
+                .filter(|p| added.iter().any(|e| e.name() == p.effect)),
+        );
         let mut entry = Entry {
             added,
             swap,
@@ -279,7 +278,8 @@ impl<'j> Judge<'j> {
     /// needs: the nested F-test between the two with their prediction (held-out where it
     /// decides, else left-out rows) combined below the level, not contradicted, better, by a
     /// gain that matters; the parameters `big` adds must themselves differ from zero (their
-    /// Wald test), as a candidate's must, and their gain must not be one that a single term
+    /// Wald test) and reach a relevant size ([`relevant_beyond`]), as a candidate's must, and
+    /// their gain must not be one that a single term
     /// of the dictionary matches while `big` still leaves structure ([`Judge::outdone_by_term`]).
     pub(super) fn beats(&self, big: &Entry, small: &Entry) -> bool {
         let (b, s) = (&big.fitted.fit, &small.fitted.fit);

@@ -169,9 +169,16 @@ pub(super) fn wald_beyond(big: &super::types::Fit, small: &super::types::Fit) ->
 /// beside a soft rod's preload absorbs a residual the library does not have).
 pub(super) fn relevant_beyond(big: &super::types::Fit, small: &super::types::Fit) -> bool {
     let beyond = beyond(small);
-    big.effect_params
-        .iter()
-        .filter(|p| beyond(p) && p.identified && p.prior > 0.0)
+    relevant(big.effect_params.iter().filter(|p| beyond(p)))
+}
+
+/// Whether some identified parameter of `params` reaches
+/// [`super::types::RELEVANT_FRACTION`] of its plausible magnitude (its prior): the size a
+/// candidate's, a model's additions and what a larger model adds must have to matter.
+pub(super) fn relevant<'a>(params: impl IntoIterator<Item = &'a EffectEstimate>) -> bool {
+    params
+        .into_iter()
+        .filter(|p| p.identified && p.prior > 0.0)
         .any(|p| p.value.abs() >= super::types::RELEVANT_FRACTION * p.prior)
 }
 

@@ -435,17 +435,21 @@ struct Sums {
 impl Sums {
     fn over(z: &[f64], q: &[f64], grid: (f64, f64, usize)) -> Sums {
         let mut acc = vec![[0.0; 7]; grid.2];
-        let rows: Vec<(f64, f64)> = z.iter().copied().zip(q.iter().copied()).collect();
-        let mut chunks = rows.chunks_exact(LANES);
-        for chunk in chunks.by_ref() {
-            let mut lanes: [Phasor; LANES] = std::array::from_fn(|l| Phasor::at(chunk[l], grid));
+        let n = z.len().min(q.len());
+        let whole = n - n % LANES;
+        for (zs, qs) in z[..whole]
+            .chunks_exact(LANES)
+            .zip(q[..whole].chunks_exact(LANES))
+        {
+            let mut lanes: [Phasor; LANES] =
+                std::array::from_fn(|l| Phasor::at((zs[l], qs[l]), grid));
             for (k, a) in acc.iter_mut().enumerate() {
                 for p in &mut lanes {
                     p.add_to(a, k > 0);
                 }
             }
         }
-        for &row in chunks.remainder() {
+        for row in z[whole..n].iter().copied().zip(q[whole..n].iter().copied()) {
             let mut p = Phasor::at(row, grid);
             for (k, a) in acc.iter_mut().enumerate() {
                 p.add_to(a, k > 0);

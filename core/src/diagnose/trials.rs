@@ -7,7 +7,6 @@
 use super::figures::length_values;
 use super::held_out::{Model1, Validation};
 use super::sparse;
-use super::types::RELEVANT_FRACTION;
 use super::types::{Candidate, ErrorVector, Fit, FitError, Fitted, Judged, Prediction, Skipped};
 use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Request, SharedRows};
 use crate::campaign::Campaign;
@@ -434,10 +433,7 @@ fn compare(
         .cloned()
         .collect();
     let follows = sparse::follows(campaign, &base.rows, effect.covariates());
-    let relevant = params
-        .iter()
-        .filter(|p| p.identified && p.prior > 0.0)
-        .any(|p| p.value.abs() >= RELEVANT_FRACTION * p.prior);
+    let relevant = super::gain::relevant(&params);
     Some(Candidate {
         effect: name.to_owned(),
         significant: p_value < level,
