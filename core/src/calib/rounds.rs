@@ -61,7 +61,7 @@ fn estimating(
             // a singular configuration) keeps its binding at the start
             bound_at_fit = req
                 .effects
-                .rebound(req.campaign, &cal.params)
+                .rebound(req.campaign, &cal.params, &cal.theta)
                 .and_then(Result::ok);
             rebinds = bound_at_fit.is_some();
         }

@@ -232,6 +232,11 @@ impl Model1<'_> {
         let (cal, model) = (self.cal, self.cal.model);
         let set = EffectSet::bind(self.effects, val.campaign, &cal.params)?;
         let mut theta = self.carried_theta(&set);
+        // bound among the carried effects, as the calibration's last round was
+        let set = match set.rebound(val.campaign, &cal.params, &theta) {
+            Some(rebound) => rebound?,
+            None => set,
+        };
         let local: Vec<usize> = set
             .layout()
             .iter()

@@ -300,22 +300,28 @@ impl EffectSet {
         self.bound.iter().any(|b| b.1.rebinds_from().is_some())
     }
 
-    /// The set bound again to `campaign` at the parameters `p` (a fit's) where a binding
-    /// reads the geometry ([`EffectSet::rebinds`]), the others and the held parameters kept;
-    /// None where none does.
+    /// The set bound again to `campaign` at the parameters `p` and effect parameters `theta`
+    /// (a fit's) where a binding reads the geometry ([`EffectSet::rebinds`]): it reads it as
+    /// the other effects at `theta` change each pose ([`Effect::bind_among`]). The others and
+    /// the held parameters are kept; None where no binding reads the geometry.
     pub fn rebound(
         &self,
         campaign: &Campaign,
         p: &Params,
+        theta: &[f64],
     ) -> Option<Result<EffectSet, NotApplicable>> {
         if !self.rebinds() {
             return None;
         }
+        let moved = self.moved_by_others(theta);
         let bound = self
             .bound
             .iter()
             .map(|(name, b)| match b.rebinds_from() {
-                Some(e) => Ok((name.clone(), Arc::<dyn Bound>::from(e.bind(campaign, p)?))),
+                Some(e) => Ok((
+                    name.clone(),
+                    Arc::<dyn Bound>::from(e.bind_among(campaign, p, &moved)?),
+                )),
                 None => Ok((name.clone(), Arc::clone(b))),
             })
             .collect::<Result<Vec<_>, NotApplicable>>();
@@ -324,6 +330,27 @@ impl EffectSet {
             n_poses: self.n_poses,
             held: self.held.clone(),
         }))
+    }
+
+    /// Per pose, the change the bindings that read no geometry make at `theta`: the inputs
+    /// a binding that reads it is bound among.
+    fn moved_by_others(&self, theta: &[f64]) -> Vec<Delta> {
+        let mut scratch = Vec::new();
+        (0..self.n_poses)
+            .map(|i| {
+                let mut value = Delta::default();
+                let mut k = 0;
+                for (_, b) in &self.bound {
+                    let m = b.params().len();
+                    if b.rebinds_from().is_none() {
+                        scratch.resize(m, Delta::default());
+                        b.correct(i, &theta[k..k + m], &mut value, &mut scratch[..m]);
+                    }
+                    k += m;
+                }
+                value
+            })
+            .collect()
     }
 
     /// Hold parameter `k` (θ order) at zero: the calibration does not identify it.

@@ -32,10 +32,21 @@ impl Effect for PreloadElastic {
         &["f1", "f2", "f3", "f4"]
     }
     fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
+        self.bind_among(campaign, p, &[])
+    }
+    /// The rod forces of each pose balanced on the geometry the model gives it: `p` changed by
+    /// the other effects' `moved` parameters, the carriers at the encoder readings changed by
+    /// their `moved` positions.
+    fn bind_among(
+        &self,
+        campaign: &Campaign,
+        p: &Params,
+        moved: &[Delta],
+    ) -> Result<Box<dyn Bound>, NotApplicable> {
         let mut stretch = Vec::with_capacity(campaign.poses.len());
         let mut loaded = 0;
         let mut first_force_row = None;
-        for pose in &campaign.poses {
+        for (i, pose) in campaign.poses.iter().enumerate() {
             let active = pose.follower.iter().all(|f| !f) && pose.f.iter().any(|f| *f != 0.0);
             if !active || pose.instrument == crate::campaign::Instrument::None {
                 // a force row's elastic model stretches the rods by its own forces already:
@@ -47,7 +58,8 @@ impl Effect for PreloadElastic {
                 continue;
             }
             loaded += 1;
-            let t = rod_forces(p, pose).map_err(|reason| NotApplicable {
+            let (p, q) = inputs_at(p, pose, moved.get(i));
+            let t = rod_forces(&p, &q, &pose.f).map_err(|reason| NotApplicable {
                 effect: "preload_elastic".into(),
                 reason: format!("{}:{}: {reason}", campaign.source, pose.line),
             })?;
@@ -78,6 +90,18 @@ impl Effect for PreloadElastic {
     }
 }
 
+/// The parameters and carrier positions (q1..q4) of `pose` under `p`, changed by `moved`.
+fn inputs_at(p: &Params, pose: &MeasuredPose, moved: Option<&Delta>) -> (Params, [f64; 4]) {
+    let Some(d) = moved else {
+        return (*p, pose.q);
+    };
+    let mut at = *p;
+    for (k, v) in d.dp.iter().enumerate() {
+        at[k] += v;
+    }
+    (at, std::array::from_fn(|a| pose.q[a] + d.dq[a]))
+}
+
 /// Passes of the balance at the deformed pose: the first at the rigid pose, then at the pose
 /// of the rods stretched by the last pass's forces.
 const DEFORMED_PASSES: usize = 3;
@@ -90,23 +114,22 @@ const DEFORMED_PASSES: usize = 3;
 /// stressed twin, against a stretch the instrument rows determine to 0.03 %). The deformed
 /// pose is the rigid model's with the rods lengthened by T / k (the default stiffness: a
 /// compliance c ≠ 1 moves it by (c − 1) of a second-order term).
-fn rod_forces(p: &Params, pose: &MeasuredPose) -> Result<[f64; 5], String> {
-    let mut t = balance_at(p, pose)?;
+fn rod_forces(p: &Params, q: &[f64; 4], f: &[f64; 4]) -> Result<[f64; 5], String> {
+    let mut t = balance_at(p, q, f)?;
     for _ in 1..DEFORMED_PASSES {
         let mut stretched = *p;
         for (rod, ti) in RODS.iter().zip(t) {
             stretched[rod.l] += ti / DEFAULT_ROD_STIFFNESS_N_PER_MM;
         }
-        t = balance_at(&stretched, pose)?;
+        t = balance_at(&stretched, q, f)?;
     }
     Ok(t)
 }
 
-/// Rod forces that balance the recorded drive forces at the rigid pose of the pose's (q1, q4)
+/// Rod forces that balance the drive forces `f` at the rigid pose of the carriers' (q1, q4)
 /// under the parameters `p`: 4 carrier and 3 platform equations, least squares.
-fn balance_at(p: &Params, pose: &MeasuredPose) -> Result<[f64; 5], String> {
-    let sol = geometry::fgm(p, Model::M29, pose.q[0], pose.q[3])
-        .map_err(|e| format!("rigid pose: {e}"))?;
+fn balance_at(p: &Params, q: &[f64; 4], f: &[f64; 4]) -> Result<[f64; 5], String> {
+    let sol = geometry::fgm(p, Model::M29, q[0], q[3]).map_err(|e| format!("rigid pose: {e}"))?;
     let (x, y, psi) = (sol.x(), sol.y(), sol.psi());
     let mut a = SMatrix::<f64, 7, 5>::zeros();
     let mut b = SVector::<f64, 7>::zeros();
@@ -124,7 +147,7 @@ fn balance_at(p: &Params, pose: &MeasuredPose) -> Result<[f64; 5], String> {
         a[(6, i)] = -(arm.x * u.y - arm.y * u.x) / MOMENT_ARM_MM;
     }
     for j in 0..4 {
-        b[j] = pose.f[j];
+        b[j] = f[j];
     }
     let n = a.transpose() * a;
     let t = n

@@ -13,6 +13,7 @@ mod calibration_currents_online;
 mod calibration_currents_online_events;
 mod calibration_instruments;
 mod calibration_pieces;
+mod calibration_preload_among;
 mod calibration_progress;
 mod calibration_shared_rows;
 mod campaign_proptest;
