@@ -23,7 +23,7 @@
 //!   evidence needs, by the same rule.
 //! - [`held_out`]: the held-out judge: errors with each setup's zero removed, the model's
 //!   floor (noise and the calibration's own uncertainty), the χ² test against it, the
-//!   structure of the held-out residual.
+//!   structure of the held-out residual; [`validation`]: the held-out data with their noise.
 //! - [`structure`]: the three structure tests that rest on no noise level: a dictionary of
 //!   smooth terms ([`sparse`]), a periodogram of each carrier's position ([`periodic`]),
 //!   neighbours along each setup's path ([`neighbours`]).
@@ -49,6 +49,7 @@ pub mod sparse;
 mod structure;
 mod trials;
 pub mod types;
+mod validation;
 mod verdict;
 
 pub use current::{calib_options, evaluate, Evaluated};

@@ -40,6 +40,9 @@ struct Outcome {
     /// `nothing_missing` while that ratio exceeds 1 + 2 SE (SE = 1/√(2(n − g))): a verdict
     /// the held-out data contradict.
     nothing_missing_above_floor: bool,
+    /// The last diagnosis's held-out judge: P(the errors this far above the model's floor)
+    /// under a right model. Uniform on machines with nothing hidden where the judge is honest.
+    held_out_p: f64,
 }
 
 pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
@@ -203,6 +206,7 @@ fn outcome(
         held_out_relative_over_floor: relative,
         nothing_missing_above_floor: kind == VerdictKind::NothingMissing
             && relative > 1.0 + 2.0 * se,
+        held_out_p: last.held_out.as_ref().map_or(f64::NAN, |h| h.p_value),
     }
 }
 
@@ -269,6 +273,7 @@ fn failed(seed: u64, i: usize, e: &anyhow::Error) -> Outcome {
         held_out_over_floor: f64::NAN,
         held_out_relative_over_floor: f64::NAN,
         nothing_missing_above_floor: false,
+        held_out_p: f64::NAN,
     }
 }
 
@@ -372,9 +377,31 @@ fn print_totals(all: &[Outcome]) {
             format!(": machines {}", above.join(", "))
         }
     );
+    print_judge_tails(&nothing);
     if let (Some(m), Some(p90)) = (q(0.5), q(0.9)) {
         println!(
             "held-out RMS after the loop / true floor: median {m:.3}, 90th percentile {p90:.3}"
         );
     }
+}
+
+/// How often the held-out judge's p-value falls in each tail on machines with nothing hidden,
+/// against what an honest judge gives (its p-values uniform there).
+fn print_judge_tails(nothing: &[&Outcome]) {
+    let p: Vec<f64> = nothing
+        .iter()
+        .map(|o| o.held_out_p)
+        .filter(|p| p.is_finite())
+        .collect();
+    let n = p.len() as f64;
+    let count = |f: &dyn Fn(f64) -> bool| p.iter().filter(|&&x| f(x)).count();
+    println!(
+        "held-out judge on machines with nothing hidden: p < 0.05 on {} of {} ({:.1} due), \
+         p > 0.95 on {} ({:.1} due)",
+        count(&|x| x < 0.05),
+        p.len(),
+        0.05 * n,
+        count(&|x| x > 0.95),
+        0.05 * n
+    );
 }
