@@ -5,10 +5,11 @@
 //! calibrate` and the calibrator node as their held-out figures ([`evaluate`]).
 
 use super::figures::length_sigmas;
-use super::held_out::{self, Levels, Model1, Validation};
+use super::held_out::{self, Levels, Model1};
 use super::settle::{self, Settled};
 use super::trials::finish_with;
 use super::types::{Baseline, DiagnoseError, DiagnosisOptions, Fit, Fitted, HeldOutCheck};
+use super::validation::{self, Validation};
 use crate::calib::{self, Calibration, Request};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};
@@ -105,7 +106,7 @@ impl Current {
         first: Option<&Calibration>,
     ) -> Result<Current, DiagnoseError> {
         let (cal, est, copts) = noise_of(campaign, in_model, opts, first)?;
-        let val = held_out::held_out(validation, &est.model)?;
+        let val = validation::held_out(validation, &est.model)?;
         // the evidence a part needs: a candidate's level, over the part combinations
         let level = opts.alpha / settle::PART_COMBINATIONS;
         let settled = settle::settle(campaign, val.as_ref(), in_model, (&copts, level));

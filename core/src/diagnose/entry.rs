@@ -6,10 +6,10 @@
 
 use super::cross;
 use super::gain::{relevant, relevant_beyond, wald_beyond, wald_p, Gain, PRACTICAL_SIZE};
-use super::held_out::Validation;
 use super::sparse;
 use super::trials::{finish_with, warm_theta, SCREEN_P};
 use super::types::{FitError, Fitted, Judged, Outcome, Prediction};
+use super::validation::Validation;
 use crate::calib::{self, EffectEstimate, Request};
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet};

@@ -13,7 +13,7 @@
 
 use super::structure::Shape;
 use super::types::{DiagnoseError, FitError, HeldOutCheck, Prediction};
-pub(crate) use super::validation::{group_sums, held_out, Validation};
+use super::validation::{group_sums, Validation};
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};

@@ -13,13 +13,13 @@
 use super::current::{calib_options, noise_of, structure_level, Current};
 use super::entry::Judge;
 use super::figures::{error_vectors, length_values};
-use super::held_out;
 use super::model;
 use super::pool::{self, Pool};
 use super::sparse;
 use super::trials::{candidates, finish, try_all, Round};
 use super::types::NUMERICAL_RMS_MM;
 use super::types::{Candidate, DiagnoseError, DiagnosisOptions, Fitted, ModelDiagnosis};
+use super::validation;
 use super::verdict::{conclude, Concluded};
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
@@ -101,7 +101,7 @@ fn rounds(
         ..first
     };
     let (base, mut round, _) = second.round(&copts, fitted)?;
-    let val = held_out::held_out(validation, &copts.noise)?;
+    let val = validation::held_out(validation, &copts.noise)?;
     let judge = Judge {
         campaign,
         val: val.as_ref(),
@@ -202,7 +202,7 @@ fn exact(
     opts: &DiagnosisOptions,
 ) -> Result<ModelDiagnosis, DiagnoseError> {
     let stated = calib_options(opts);
-    let val = held_out::held_out(first.validation, &opts.noise)?;
+    let val = validation::held_out(first.validation, &opts.noise)?;
     let cal = base_cal(first, cal, &stated)?;
     let current = Current::exact(
         (first.campaign, val.as_ref()),
@@ -285,7 +285,7 @@ impl Search<'_> {
         copts: &calib::Options,
         fitted: Option<Calibration>,
     ) -> Result<(Fitted, Round, Option<Calibration>), DiagnoseError> {
-        let val = held_out::held_out(self.validation, &copts.noise)?;
+        let val = validation::held_out(self.validation, &copts.noise)?;
         let cal = match fitted {
             Some(cal) => cal,
             None => super::current::fit_model(self.campaign, self.in_model, copts)?,

@@ -3,8 +3,9 @@
 
 use super::cross;
 use super::gain::Gain;
-use super::held_out::{Model1, Validation};
+use super::held_out::Model1;
 use super::types::Prediction;
+use super::validation::Validation;
 use crate::calib::{self, Request};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};

@@ -5,9 +5,10 @@
 //! compared with the current model by the nested F-test ([`compare`]).
 
 use super::figures::length_values;
-use super::held_out::{Model1, Validation};
+use super::held_out::Model1;
 use super::sparse;
 use super::types::{Candidate, ErrorVector, Fit, FitError, Fitted, Judged, Prediction, Skipped};
+use super::validation::Validation;
 use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Request, SharedRows};
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};

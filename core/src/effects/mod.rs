@@ -335,22 +335,35 @@ impl EffectSet {
     /// Per pose, the change the bindings that read no geometry make at `theta`: the inputs
     /// a binding that reads it is bound among.
     fn moved_by_others(&self, theta: &[f64]) -> Vec<Delta> {
-        let mut scratch = Vec::new();
+        let others: Vec<(&dyn Bound, &[f64])> = self
+            .with_theta(theta)
+            .filter(|(b, _, _)| b.rebinds_from().is_none())
+            .map(|(b, own, _)| (b, own))
+            .collect();
+        // the partials are not read: one scratch of the widest binding serves every call
+        let widest = others.iter().map(|(_, own)| own.len()).max().unwrap_or(0);
+        let mut scratch = vec![Delta::default(); widest];
         (0..self.n_poses)
             .map(|i| {
                 let mut value = Delta::default();
-                let mut k = 0;
-                for (_, b) in &self.bound {
-                    let m = b.params().len();
-                    if b.rebinds_from().is_none() {
-                        scratch.resize(m, Delta::default());
-                        b.correct(i, &theta[k..k + m], &mut value, &mut scratch[..m]);
-                    }
-                    k += m;
+                for (b, own) in &others {
+                    b.correct(i, own, &mut value, &mut scratch[..own.len()]);
                 }
                 value
             })
             .collect()
+    }
+
+    /// Each binding with its parameters' slice of `theta` and where that slice starts.
+    fn with_theta<'a>(
+        &'a self,
+        theta: &'a [f64],
+    ) -> impl Iterator<Item = (&'a dyn Bound, &'a [f64], usize)> {
+        self.bound.iter().scan(0, move |k, (_, b)| {
+            let start = *k;
+            *k += b.params().len();
+            Some((b.as_ref(), &theta[start..*k], start))
+        })
     }
 
     /// Hold parameter `k` (θ order) at zero: the calibration does not identify it.
@@ -426,16 +439,13 @@ impl EffectSet {
         let mut scratch = vec![Delta::default(); n];
         for i in 0..self.n_poses {
             let mut value = Delta::default();
-            let mut k = 0;
-            for (_, b) in &self.bound {
-                let m = b.params().len();
+            for (b, own_theta, k) in self.with_theta(theta) {
                 let touched = b.touched(i);
-                let own = &mut scratch[k..k + m];
+                let own = &mut scratch[k..k + own_theta.len()];
                 own[touched.clone()].fill(Delta::default());
-                b.correct(i, &theta[k..k + m], &mut value, own);
+                b.correct(i, own_theta, &mut value, own);
                 out.partials
                     .extend(touched.map(|j| (k + j, scratch[k + j])));
-                k += m;
             }
             out.values.push(value);
             out.starts.push(out.partials.len());

@@ -8,7 +8,7 @@
 //! The stiffness is identified with the geometry.
 
 use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
-use crate::campaign::{Campaign, MeasuredPose};
+use crate::campaign::Campaign;
 use crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM;
 use crate::geometry::{self, carrier_joint, guide_frame, platform_joint};
 use crate::params::{Model, Params, RODS};
@@ -58,7 +58,7 @@ impl Effect for PreloadElastic {
                 continue;
             }
             loaded += 1;
-            let (p, q) = inputs_at(p, pose, moved.get(i));
+            let (p, q) = moved.get(i).map_or((*p, pose.q), |d| d.applied(p, &pose.q));
             let t = rod_forces(&p, &q, &pose.f).map_err(|reason| NotApplicable {
                 effect: "preload_elastic".into(),
                 reason: format!("{}:{}: {reason}", campaign.source, pose.line),
@@ -88,18 +88,6 @@ impl Effect for PreloadElastic {
             stretch,
         }))
     }
-}
-
-/// The parameters and carrier positions (q1..q4) of `pose` under `p`, changed by `moved`.
-fn inputs_at(p: &Params, pose: &MeasuredPose, moved: Option<&Delta>) -> (Params, [f64; 4]) {
-    let Some(d) = moved else {
-        return (*p, pose.q);
-    };
-    let mut at = *p;
-    for (k, v) in d.dp.iter().enumerate() {
-        at[k] += v;
-    }
-    (at, std::array::from_fn(|a| pose.q[a] + d.dq[a]))
 }
 
 /// Passes of the balance at the deformed pose: the first at the rigid pose, then at the pose

@@ -4,7 +4,7 @@
 use super::context::{AtReset, Ctx};
 use super::force::force_rows;
 use super::forward::{forward_rows, self_rows, virtual_q2_row};
-use super::forward_solve::{corrected, forward, Forward};
+use super::forward_solve::{forward, Forward};
 use super::inverse::inverse_rows;
 use super::reset::{share_reset, zero_covariance};
 use super::row::{ModelError, PoseError, Residual};
@@ -281,7 +281,7 @@ impl Evaluation<'_> {
         // a reset pose that cannot be solved is blamed on its own line, not on the first
         // pose measured relative to it
         if let Some((ri, reset)) = reset.filter(|(_, r)| r.instrument.is_relative()) {
-            let (p_r, q_r) = corrected(self.p, &reset.q, &self.corr.delta(ri));
+            let (p_r, q_r) = self.corr.delta(ri).applied(self.p, &reset.q);
             let nr = forward(&p_r, self.model, Subsystem::NR, &q_r)
                 .map_err(|e| PoseError::at(campaign, reset, e))?;
             if self.step == Step::Direct {

@@ -1,7 +1,6 @@
 //! The drive-force rows (currents), their Jacobian and the force-position gains.
 
 use super::context::Ctx;
-use super::forward_solve::corrected;
 use super::inverse::combine_into;
 use super::row::{Direction, PoseError, ResetGain, Residual};
 use crate::campaign::{Campaign, MeasuredPose};
@@ -75,7 +74,7 @@ pub(super) fn force_rows(
     out: &mut Vec<Residual>,
 ) -> Result<(), ElasticError> {
     let d = ctx.corr.delta(i);
-    let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
+    let (p_i, q_i) = d.applied(ctx.p, &pose.q);
     let k = Stiffness::default().scaled(1.0 + d.dk);
     let (eq, dp) = force_jacobian(&p_i, &k, q_i, None)?;
     let mut sens = [InputSensitivity::default(); 4];

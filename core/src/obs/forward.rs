@@ -3,7 +3,7 @@
 
 use super::context::{AtReset, Ctx};
 use super::forward_solve::{
-    corrected, encoder_gain2, forward, input_sensitivity, negated, Forward, FORWARD_SUBSYSTEMS,
+    encoder_gain2, forward, input_sensitivity, negated, Forward, FORWARD_SUBSYSTEMS,
 };
 use super::row::{reset_gain, Direction, ResetGain, Residual};
 use crate::campaign::{Instrument, MeasuredPose};
@@ -23,8 +23,8 @@ pub(super) fn forward_rows(
     out: &mut Vec<Residual>,
 ) -> Result<(), GeometryError> {
     let (dpose, dreset) = (ctx.corr.delta(i), ctx.corr.delta(ri));
-    let (p_i, q_i) = corrected(ctx.p, &pose.q, &dpose);
-    let (p_r, q_r) = corrected(ctx.p, &reset.q, &dreset);
+    let (p_i, q_i) = dpose.applied(ctx.p, &pose.q);
+    let (p_r, q_r) = dreset.applied(ctx.p, &reset.q);
     for (sub, solved) in FORWARD_SUBSYSTEMS.into_iter().zip(&at.subs) {
         let now = forward(&p_i, ctx.model, sub, &q_i)?;
         let own;
@@ -136,7 +136,7 @@ pub(super) fn self_rows(
     let (p_i, q_i) = if ctx.corr.is_empty() {
         (ctx.p, pose.q)
     } else {
-        own = corrected(ctx.p, &pose.q, &ctx.corr.delta(i));
+        own = ctx.corr.delta(i).applied(ctx.p, &pose.q);
         (&own.0, own.1)
     };
     // the guides' frames of the piece's machine where the correction leaves its guides as
@@ -199,8 +199,8 @@ pub(super) fn virtual_q2_row(
         return Ok(());
     }
     let d = ctx.corr.delta(i);
-    let (p_i, q_i) = corrected(ctx.p, &pose.q, &d);
-    let (p_cal_i, _) = corrected(p_cal, &pose.q, &d);
+    let (p_i, q_i) = d.applied(ctx.p, &pose.q);
+    let (p_cal_i, _) = d.applied(p_cal, &pose.q);
     let model = ctx.model;
     let xe = geometry::fgm(&p_cal_i, model, q_i[0], q_i[3])?;
     let xe_sens = geometry::sensitivity(&p_cal_i, model, Subsystem::NR, &xe)?;

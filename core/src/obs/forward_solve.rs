@@ -1,9 +1,9 @@
 //! The forward solves behind a pose's rows: a subsystem's configuration under the effects'
 //! corrections, and its sensitivities.
 
-use crate::effects::{Delta, InputSensitivity};
+use crate::effects::InputSensitivity;
 use crate::geometry::{self, GeometryError, Solution, Subsystem};
-use crate::params::{Model, Params, N_PARAMS};
+use crate::params::{Model, Params};
 
 /// The forward subsystems used by forward calibration rows (thesis 4.2.1).
 pub const FORWARD_SUBSYSTEMS: [Subsystem; 2] =
@@ -53,15 +53,6 @@ fn solve_forward(
         unreachable!("forward rows use actuator subsystems")
     };
     geometry::solve(p, model, sub, [q[a], q[b]])
-}
-
-/// Parameters and carrier positions of a pose under its effect correction.
-pub(super) fn corrected(p: &Params, q: &[f64; 4], d: &Delta) -> (Params, [f64; 4]) {
-    let mut pc = *p;
-    for k in 0..N_PARAMS {
-        pc[k] += d.dp[k];
-    }
-    (pc, [0, 1, 2, 3].map(|a| q[a] + d.dq[a]))
 }
 
 /// Sensitivity to the pose's inputs of Σ g_v · c_v of a forward solve through `sub`.

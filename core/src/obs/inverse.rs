@@ -2,7 +2,7 @@
 //! the drives' gains.
 
 use super::context::{AtReset, Ctx};
-use super::forward_solve::{corrected, forward, input_sensitivity};
+use super::forward_solve::{forward, input_sensitivity};
 use super::reset::complement;
 use super::row::{reset_gain, Direction, ResetGain, Residual};
 use crate::campaign::MeasuredPose;
@@ -28,12 +28,12 @@ pub(super) fn inverse_rows(
     let r = if let Some(r) = &at.nr {
         r
     } else {
-        let (p_r, q_r) = corrected(ctx.p, &reset.q, &ctx.corr.delta(ri));
+        let (p_r, q_r) = ctx.corr.delta(ri).applied(ctx.p, &reset.q);
         own = forward(&p_r, ctx.model, Subsystem::NR, &q_r)?;
         &own
     };
     let (x, y) = (mx + dpose.dm.x + r.sol.c[X], my + dpose.dm.y + r.sol.c[Y]);
-    let (p_i, q_i) = corrected(ctx.p, &pose.q, &dpose);
+    let (p_i, q_i) = dpose.applied(ctx.p, &pose.q);
     let inv = geometry::solve(&p_i, ctx.model, Subsystem::Tcp, [x, y])?;
     let s = geometry::sensitivity(&p_i, ctx.model, Subsystem::Tcp, &inv)?;
     let first = out.len();

@@ -1,6 +1,6 @@
 //! Held-out TCP errors of the relative instruments, with their sensitivities to the effects.
 
-use super::forward_solve::{corrected, forward, input_sensitivity, negated};
+use super::forward_solve::{forward, input_sensitivity, negated};
 use super::row::PoseError;
 use crate::campaign::{Campaign, Instrument};
 use crate::effects::Corrections;
@@ -91,8 +91,8 @@ pub fn tcp_errors_with(
                 continue;
             }
             let (dpose, dreset) = (corr.delta(i), corr.delta(ri));
-            let (p_i, q_i) = corrected(p, &pose.q, &dpose);
-            let (p_r, q_r) = corrected(p, &reset.q, &dreset);
+            let (p_i, q_i) = dpose.applied(p, &pose.q);
+            let (p_r, q_r) = dreset.applied(p, &reset.q);
             let now = forward(&p_i, model, Subsystem::NR, &q_i)
                 .map_err(|e| PoseError::at(campaign, pose, e))?;
             // a reset pose that cannot be solved is blamed on its own line
