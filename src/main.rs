@@ -83,7 +83,29 @@ fn quiet_broken_pipe() {
     }
 }
 
+/// Keeps freed memory in the process for the next allocation. A calibration or diagnosis of
+/// 10⁵ poses allocates and frees row buffers of tens of MB per fit, dozens of fits per
+/// diagnosis; by default glibc gives such blocks back to the kernel (mmap/munmap, and a
+/// trimmed heap) and the next fit faults every page in again: a third of the page faults and
+/// a tenth of the time of the 10⁵-pose diagnosis (docs/diagnosis.md, "At scale"). A process
+/// holds its peak instead, which the same fits reach anyway.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn keep_freed_memory() {
+    // the largest threshold glibc accepts (half its heap size, 32 MB), then no trimming
+    const MMAP_THRESHOLD: libc::c_int = 1 << 30;
+    // SAFETY: mallopt(3) with valid parameters, called from main before any thread is
+    // started; a value glibc refuses leaves its default (return value 0), nothing else.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, libc::c_int::MAX);
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn keep_freed_memory() {}
+
 fn main() {
+    keep_freed_memory();
     let args = Cli::parse();
     if args.command.writes_reports() {
         quiet_broken_pipe();

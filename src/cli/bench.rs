@@ -74,6 +74,11 @@ pub struct DiscoveryArgs {
     /// one the table counts wrong).
     #[arg(long)]
     pub only: Option<usize>,
+    /// With --only: write that machine's campaigns (cal.csv, val.csv), the effects a user
+    /// offers (effects.yaml, where the class offers any) and what it hides (machine.txt)
+    /// into this folder, to run `rpkm diagnose DIR/cal.csv --validate DIR/val.csv` on.
+    #[arg(long, requires = "only")]
+    pub write: Option<std::path::PathBuf>,
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {

@@ -27,9 +27,6 @@ pub(crate) struct Judge<'a> {
     pub level: f64,
     /// Level of the structure tests (a term that explains as much as an effect).
     pub structure_level: f64,
-    /// The held-out floor with each setup's zero removed, mm: the noise a prediction's
-    /// explained part is measured in (left-out rows are in σ already).
-    pub floor_mm: Option<f64>,
     /// The current model's left-out rows (cross-validation by setup), made once when first
     /// needed.
     pub base_cv: std::cell::OnceCell<Option<Vec<f64>>>,
@@ -166,9 +163,9 @@ impl<'j> Judge<'j> {
     pub(super) fn predict(&self, e: &mut Entry) {
         let held = self
             .val
-            .and_then(|_| Prediction::of(&self.base.fit.val_errors, &e.fitted.fit.val_errors));
+            .and_then(|_| Prediction::scaled(&self.base.fit, &e.fitted.fit));
         if held.is_some() {
-            e.held = Some(e.fitted.fit.val_errors.clone());
+            e.held = Some(e.fitted.fit.val_scaled.clone());
         }
         e.prediction = held;
         if held.is_some_and(|p| p.better || p.worse) {
@@ -197,9 +194,15 @@ impl<'j> Judge<'j> {
             )
         });
         if let Some(b) = base {
+            // a left-out setup's own parameters are the whole fit's, its rows among them
+            let refit = e
+                .fitted
+                .fit
+                .setup_params
+                .saturating_sub(self.base.fit.setup_params);
             e.prediction = Prediction::compared(b, &rows).map(|p| Prediction {
                 by_setup: true,
-                ..p
+                ..p.refit(refit, rows.len())
             });
             e.left_out = Some(rows);
         }
@@ -289,7 +292,7 @@ impl<'j> Judge<'j> {
                 (b.chi2, b.dof),
                 (s.chi2, s.dof),
                 self.base.rows.len(),
-                prediction.map(|p| (p, self.unit_of(&p))),
+                prediction.map(|p| (p, 1.0)),
             )
             .with_wald(wald)
         };
@@ -302,10 +305,11 @@ impl<'j> Judge<'j> {
             _ if gain(None).needed(self.level) => self
                 .left_out_of(small)
                 .zip(self.left_out_of(big))
-                .and_then(|(x, y)| Prediction::compared(x, y))
-                .map(|p| Prediction {
-                    by_setup: true,
-                    ..p
+                .and_then(|(x, y)| {
+                    Prediction::compared(x, y).map(|p| Prediction {
+                        by_setup: true,
+                        ..p.refit(b.setup_params.saturating_sub(s.setup_params), y.len())
+                    })
                 })
                 .or(held),
             _ => held,
@@ -350,16 +354,6 @@ impl<'j> Judge<'j> {
         let k = (small.dof - big.dof).max(0.0);
         small.chi2 - big.chi2 - k * n.ln() <= term.explained_chi2 - n.ln()
     }
-
-    /// The noise a prediction's errors are in: 1 for left-out rows (σ), the held-out floor
-    /// (mm) for held-out errors in mm, in µm for a held-out comparison in µm.
-    pub(super) fn unit_of(&self, p: &Prediction) -> f64 {
-        match (p.by_setup, p.unit) {
-            (true, _) => 1.0,
-            (false, "um") => self.floor_mm.map_or(1.0, |f| f * 1e3),
-            (false, _) => self.floor_mm.unwrap_or(1.0),
-        }
-    }
 }
 
 /// The errors models are ranked by: held-out where there are held-out data, else left-out
@@ -375,9 +369,9 @@ pub(super) fn rms_of(e: &Entry) -> f64 {
 /// Model `b` against model `a` on the held-out data.
 fn held_between(a: &Entry, b: &Entry) -> Option<Prediction> {
     a.held
-        .as_deref()
-        .zip(b.held.as_deref())
-        .and_then(|(x, y)| Prediction::compared(x, y))
+        .as_ref()
+        .and(b.held.as_ref())
+        .and_then(|_| Prediction::scaled(&a.fitted.fit, &b.fitted.fit))
 }
 
 /// The family variant an entry swaps into the current model, by name.

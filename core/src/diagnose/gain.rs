@@ -63,10 +63,12 @@ impl Gain {
         }
     }
 
-    /// Fisher's combination of the F-test and the prediction's one-sided test.
+    /// Fisher's combination of the F-test and the prediction's: whether the predicted errors
+    /// support the change the larger model makes ([`Prediction::p_confirmed`]; that it makes
+    /// them smaller is [`Gain::better`]'s).
     pub(super) fn evidence(&self) -> f64 {
         match self.prediction {
-            Some((p, _)) => stats::fisher_combined(&[self.p_cal, p.p_better()]),
+            Some((p, _)) => stats::fisher_combined(&[self.p_cal, p.p_confirmed()]),
             None => self.p_cal,
         }
     }

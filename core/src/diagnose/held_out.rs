@@ -12,7 +12,7 @@
 //! [`super::structure`] on the held-out residual, with the time since each setup's zero).
 
 use super::structure::Shape;
-use super::types::{DiagnoseError, FitError, HeldOutCheck, Prediction};
+use super::types::{DiagnoseError, Fit, FitError, HeldOutCheck, Prediction};
 use super::validation::{group_sums, Validation};
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
@@ -97,6 +97,12 @@ impl Model1<'_> {
     /// The held-out TCP errors (mm) with the calibrated model and effects; the effects'
     /// setup-local parameters are re-fitted on the held-out setups (Gauss-Newton).
     pub fn errors(&self, val: &Validation) -> Result<Vec<f64>, FitError> {
+        self.errors_refit(val).map(|(errors, _)| errors)
+    }
+
+    /// [`Model1::errors`], and the number of the effects' parameters fitted on the held-out
+    /// setups themselves.
+    pub fn errors_refit(&self, val: &Validation) -> Result<(Vec<f64>, usize), FitError> {
         let (set, theta) = self.held_out_theta(val)?;
         let errs = obs::tcp_errors_with(
             val.campaign,
@@ -104,7 +110,8 @@ impl Model1<'_> {
             self.cal.model,
             &set.corrections(&theta),
         )?;
-        Ok(errs.iter().map(|e| e.value).collect())
+        let refit = set.layout().iter().filter(|s| s.setup_local).count();
+        Ok((errs.iter().map(|e| e.value).collect(), refit))
     }
 
     /// The effects bound to the held-out campaign and their θ (setup-local parts fitted).
@@ -123,17 +130,24 @@ impl Model1<'_> {
             .filter(|slot| slot.setup_local)
             .map(|slot| slot.index)
             .collect();
-        let weights: Vec<f64> = val.sigma.iter().map(|s| 1.0 / s).collect();
+        // fitted to the errors as they are judged: each setup's zero removed (no parameter of
+        // the model predicts the reading it was zeroed on), each in its own noise
+        let weights: Vec<f64> = val
+            .relative_sigma
+            .iter()
+            .map(|s| 1.0 / s.max(f64::MIN_POSITIVE))
+            .collect();
         for _ in 0..if local.is_empty() { 0 } else { 5 } {
             let errs =
                 obs::tcp_errors_with(val.campaign, &cal.params, model, &set.corrections(&theta))?;
-            let j = DMatrix::from_fn(errs.len(), local.len(), |i, k| {
-                errs[i].d_theta[local[k]] * weights[i]
-            });
-            let r = DVector::from_iterator(
-                errs.len(),
-                errs.iter().zip(&weights).map(|(e, w)| e.value * w),
-            );
+            let columns: Vec<Vec<f64>> = local
+                .iter()
+                .map(|&k| val.relative(&errs.iter().map(|e| e.d_theta[k]).collect::<Vec<_>>()))
+                .collect();
+            let j = DMatrix::from_fn(errs.len(), local.len(), |i, k| columns[k][i] * weights[i]);
+            let values = val.relative(&errs.iter().map(|e| e.value).collect::<Vec<_>>());
+            let r =
+                DVector::from_iterator(errs.len(), values.iter().zip(&weights).map(|(e, w)| e * w));
             let Some(step) = (j.transpose() * &j)
                 .cholesky()
                 .map(|c| c.solve(&(j.transpose() * r)))
@@ -386,8 +400,66 @@ impl Prediction {
         })
     }
 
+    /// The held-out comparison of two fits of one round: the RMS (µm, each setup's zero
+    /// removed) and its standard error as a user reads them, better or worse as judged on
+    /// the errors each in its own noise (`Fit::val_scaled`, what the model search compares);
+    /// None without held-out data.
+    pub(crate) fn held_out(before: &Fit, after: &Fit) -> Option<Prediction> {
+        let judged = Self::scaled(before, after)?;
+        Self::of(&before.val_errors, &after.val_errors).map(|p| Prediction {
+            better: judged.better,
+            worse: judged.worse,
+            support_p: judged.support_p,
+            refitted: judged.refitted,
+            ..p
+        })
+    }
+
+    /// The held-out comparison of two fits of one round as models are judged: its support
+    /// and size in the errors' own noise (σ); whether it is better or worse, which decides
+    /// whether the held-out data have their say or the setups left out do, on the TCP
+    /// errors in µm, as the user reads them (in σ a tie sent a soft rod's frame expansion
+    /// to the left-out setups, which share the calibration's misfit and named it). None
+    /// without held-out data.
+    pub(crate) fn scaled(before: &Fit, after: &Fit) -> Option<Prediction> {
+        let n = after.val_scaled.len();
+        let read = Self::compared(&before.val_errors, &after.val_errors)?;
+        Self::compared(&before.val_scaled, &after.val_scaled).map(|p| Prediction {
+            better: read.better,
+            worse: read.worse,
+            ..p.refit(after.val_refit.saturating_sub(before.val_refit), n)
+        })
+    }
+
+    /// This comparison where the larger model has `k` more parameters fitted with the `n`
+    /// errors compared themselves (an alignment refitted on the held-out setup; a left-out
+    /// setup's own angle, the whole fit's): its change follows them by construction, so its
+    /// support is the fall of their mean square (in σ) beyond the k/n that fitting k
+    /// parameters to noise takes, in the fall's standard error. Conservative on noise (a
+    /// fitted change's fall is smallest where its standard error is), and not a χ² test of
+    /// the gain: held-out errors carry the calibration's own smooth uncertainty, part of
+    /// which a refitted angle takes beyond what independent noise would give.
+    #[must_use]
+    pub fn refit(self, k: usize, n: usize) -> Prediction {
+        if k == 0 {
+            return self;
+        }
+        let (b, a) = (self.rms_before, self.rms_after);
+        let beyond = b * b - a * a - k as f64 / n.max(1) as f64;
+        let z = beyond / (self.standard_error * (b + a));
+        Prediction {
+            support_p: if z.is_nan() {
+                1.0
+            } else {
+                stats::normal_upper_tail(z)
+            },
+            refitted: k,
+            ..self
+        }
+    }
+
     /// The comparison of errors in any one unit (left-out rows in σ: `unit` sigma).
-    pub(crate) fn compared(before: &[f64], after: &[f64]) -> Option<Prediction> {
+    pub fn compared(before: &[f64], after: &[f64]) -> Option<Prediction> {
         let n = before.len();
         if n < 2 || after.len() != n {
             return None;
@@ -407,23 +479,18 @@ impl Prediction {
             rms_after: ra,
             standard_error: se,
             unit: "sigma",
+            support_p: support(before, after),
+            refitted: 0,
             better: rb - ra > se,
             worse: ra - rb > 2.0 * se,
             by_setup: false,
         })
     }
 
-    /// One-sided p-value of the fall: how often a model no better than the current one
-    /// would predict this much better by chance (normal approximation of the paired mean).
-    pub fn p_better(&self) -> f64 {
-        if !(self.standard_error > 0.0) {
-            return if self.rms_after < self.rms_before {
-                0.0
-            } else {
-                1.0
-            };
-        }
-        stats::normal_upper_tail((self.rms_before - self.rms_after) / self.standard_error)
+    /// [`Prediction::support_p`]: how often errors that do not hold the change would
+    /// support it this strongly.
+    pub fn p_confirmed(&self) -> f64 {
+        self.support_p
     }
 
     /// RMS of the part of the errors the change explains, √(RMS_b² − RMS_a²), in `unit`
@@ -432,5 +499,24 @@ impl Prediction {
         (self.rms_before.powi(2) - self.rms_after.powi(2))
             .max(0.0)
             .sqrt()
+    }
+}
+
+/// The one-sided p-value of the t-value of `before` regressed on the change to `after`
+/// (Δ = before − after, what the larger model takes away): Σ bΔ / (s √ΣΔ²), with s the
+/// errors' own RMS (not their rated noise: a model that misses something else leaves more,
+/// and the test must not read that excess as support). 1 where nothing changes.
+fn support(before: &[f64], after: &[f64]) -> f64 {
+    let (mut follow, mut size) = (0.0, 0.0);
+    for (b, a) in before.iter().zip(after) {
+        let change = b - a;
+        follow += b * change;
+        size += change * change;
+    }
+    let scale = calib::rms(before) * size.sqrt();
+    if scale > 0.0 {
+        stats::normal_upper_tail(follow / scale)
+    } else {
+        1.0
     }
 }

@@ -110,7 +110,7 @@ impl Judge<'_> {
     /// campaigns, its size, its values.
     fn assess(&self, e: &mut Entry) {
         let base = &self.base.fit;
-        let prediction = e.prediction.map(|p| (p, self.unit_of(&p)));
+        let prediction = e.prediction.map(|p| (p, 1.0));
         let gain = Gain::of(
             (e.fitted.fit.chi2, e.fitted.fit.dof),
             (base.chi2, base.dof),

@@ -112,7 +112,6 @@ fn rounds(
         structure_level: structure_level(opts),
         // the noise the comparisons are weighted with: the current model's own may hold what
         // it misses
-        floor_mm: val.as_ref().map(|v| calib::rms(&v.relative_sigma)),
         base_cv: std::cell::OnceCell::new(),
     };
     let structure = sparse::structure(campaign, &base.rows);
@@ -219,7 +218,6 @@ fn exact(
         copts: &stated,
         level,
         structure_level: structure_level(opts),
-        floor_mm: val.as_ref().map(|v| calib::rms(&v.relative_sigma)),
         base_cv: std::cell::OnceCell::new(),
     };
     let structure = sparse::structure(first.campaign, &base.rows);

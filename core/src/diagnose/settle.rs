@@ -89,8 +89,7 @@ pub(crate) fn settle(
         else {
             continue;
         };
-        let floor = val.map(|v| calib::rms(&v.relative_sigma));
-        let adequate = |v: &Scored| !whole.1.needed_over(v, (campaign, copts), (level, floor));
+        let adequate = |v: &Scored| !whole.1.needed_over(v, (campaign, copts), level);
         let Some(k) = scored
             .iter()
             .filter(|(_, v)| adequate(v))
@@ -122,7 +121,7 @@ fn mask_len(name: &str) -> usize {
 }
 
 /// A model of a settle: its calibration χ², and its prediction errors (held-out with each
-/// setup's zero removed, mm; left-out rows, σ, made only where the held-out data cannot tell
+/// setup's zero removed, σ; left-out rows, σ, made only where the held-out data cannot tell
 /// or there are none).
 struct Scored<'a> {
     with: Vec<&'a dyn Effect>,
@@ -168,7 +167,7 @@ impl<'a> Scored<'a> {
                 }
                 .errors(v)
                 .ok()?;
-                v.relative(&errors)
+                v.scaled(&errors)
             }
             None => Vec::new(),
         };
@@ -203,15 +202,14 @@ impl<'a> Scored<'a> {
 
     /// Whether this model (the whole family) beats the smaller `v` by the evidence a
     /// candidate needs: the nested F-test with the prediction (held-out where it decides,
-    /// else the left-out rows), not contradicted, a gain that matters (`floor`: the held-out
-    /// noise, mm).
-    fn needed_over(&self, v: &Scored, fold: Fold, (level, floor): (f64, Option<f64>)) -> bool {
+    /// else the left-out rows, both in σ), not contradicted, a gain that matters.
+    fn needed_over(&self, v: &Scored, fold: Fold, level: f64) -> bool {
         let held = Prediction::compared(&v.held, &self.held);
         let prediction = match held {
-            Some(p) if p.better || p.worse => Some((p, floor.unwrap_or(1.0))),
+            Some(p) if p.better || p.worse => Some((p, 1.0)),
             _ => match v.left_out(fold).zip(self.left_out(fold)) {
                 Some((a, b)) => Prediction::compared(a, b).map(|p| (p, 1.0)),
-                None => held.map(|p| (p, floor.unwrap_or(1.0))),
+                None => held.map(|p| (p, 1.0)),
             },
         };
         Gain::of(

@@ -374,10 +374,15 @@ pub(crate) fn finish_with(
                 cal_set: set,
                 cal: &cal,
             }
-            .errors(v)
+            .errors_refit(v)
         })
         .transpose()?;
+    let (val_errors, val_refit) = match val_errors {
+        Some((e, refit)) => (Some(e), refit),
+        None => (None, 0),
+    };
     let val_rms_um = val_errors.as_ref().map(|e| calib::rms(e) * 1e3);
+    let val_scaled = val.zip(val_errors.as_ref()).map(|(v, e)| v.scaled(e));
     let val_errors = val.zip(val_errors).map(|(v, e)| v.relative(&e));
     // The calibration is spent here: its rows and parameters move into the fit.
     let rows = cal.residuals;
@@ -390,6 +395,9 @@ pub(crate) fn finish_with(
         cal_rms_um: calib::rms(&length_values(&rows)) * 1e3,
         val_rms_um,
         val_errors: val_errors.unwrap_or_default(),
+        val_scaled: val_scaled.unwrap_or_default(),
+        setup_params: set.layout().iter().filter(|s| s.setup_local).count(),
+        val_refit,
         effect_params: cal.effects,
         determined: cal.determined,
         params: cal.params,
@@ -452,7 +460,7 @@ fn compare(
         follows,
         // judged as the loop will add it: the whole family (the next diagnosis fits every
         // part), not the parts this campaign supports
-        prediction: Prediction::of(&base.fit.val_errors, &full.fit.val_errors),
+        prediction: Prediction::held_out(&base.fit, &full.fit),
         cross_validated: None,
         judged: Judged::default(),
     })

@@ -100,6 +100,17 @@ pub struct Fit {
     /// reading's error, which no model predicts), to compare two models pose by pose.
     #[serde(skip)]
     pub val_errors: Vec<f64>,
+    /// The same errors each in its own noise (σ, [`super::validation::Validation::scaled`]):
+    /// what the predictions of two models are compared on.
+    #[serde(skip)]
+    pub val_scaled: Vec<f64>,
+    /// Effect parameters of each setup (an instrument's alignment in that mounting): on the
+    /// held-out campaign they are fitted to its own readings.
+    #[serde(skip)]
+    pub setup_params: usize,
+    /// Of them, those fitted on the held-out setups (their count there).
+    #[serde(skip)]
+    pub val_refit: usize,
     /// Effect parameters identified.
     pub effect_params: Vec<EffectEstimate>,
     /// Parameter combinations the campaign determined better than their tolerance, of how
@@ -209,9 +220,22 @@ pub struct Prediction {
     pub rms_after: f64,
     /// Standard error of the fall, from the paired squared errors.
     pub standard_error: f64,
-    /// `um` (held-out TCP errors) or `sigma` (left-out rows of every instrument, each in its
-    /// own noise).
+    /// `um` (held-out TCP errors) or `sigma` (held-out errors or left-out rows of every
+    /// instrument, each in its own noise).
     pub unit: &'static str,
+    /// How strongly the errors before support the change the larger model makes to them,
+    /// as a one-sided p-value: the errors regressed on that change (one coefficient), whose
+    /// t-value is N(0, 1) where the change is not in the data (it comes from the other
+    /// campaign, or other setups) and large where the data show it, even where the change's
+    /// size, fitted on the calibration campaign, is still uncertain. Where the larger model
+    /// fits parameters of its own to the compared setups (`refitted`), its change there is
+    /// partly fitted to the very errors and follows them by construction: the fall of their
+    /// mean square beyond what fitting that many parameters to noise takes, in its standard
+    /// error, instead ([`Prediction::refit`]).
+    pub support_p: f64,
+    /// Parameters of the larger model fitted to the compared errors themselves (the
+    /// held-out setups' own alignment, say); 0 for none.
+    pub refitted: usize,
     /// The RMS fell by more than its standard error.
     pub better: bool,
     /// The RMS rose by more than twice its standard error: clearly worse (a rise within

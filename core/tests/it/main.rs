@@ -20,6 +20,7 @@ mod campaign_proptest;
 mod campaign_reader;
 mod circular_test;
 mod diagnose_periodic;
+mod diagnose_prediction;
 mod diagnose_twin;
 mod effects_jacobian;
 mod elastic_fe;

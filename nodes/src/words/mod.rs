@@ -147,10 +147,21 @@ fn values(params: &[rpkm_core::calib::EffectEstimate]) -> String {
     shown.join(", ")
 }
 
-/// "held-out RMS 17.98 -> 12.69 um (± 2.11)".
+/// "held-out RMS 17.98 -> 12.69 um (± 2.11; the errors follow the change, p = 3.2e-8)", or
+/// "(± 2.11; 1 parameter fitted with them, the fall beyond what that takes from noise p =
+/// 2.0e-9)".
 fn prediction(p: &Prediction) -> String {
+    let support = match p.refitted {
+        0 => format!("the errors follow the change, p = {:.1e}", p.support_p),
+        k => format!(
+            "{k} parameter{} fitted with them, the fall beyond what that takes from noise \
+             p = {:.1e}",
+            if k == 1 { "" } else { "s" },
+            p.support_p
+        ),
+    };
     format!(
-        "{} RMS {:.2} -> {:.2} {} (± {:.2})",
+        "{} RMS {:.2} -> {:.2} {} (± {:.2}; {support})",
         if p.by_setup {
             "cross-validated (by setup)"
         } else {

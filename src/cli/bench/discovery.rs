@@ -6,12 +6,13 @@ use super::DiscoveryArgs;
 use crate::cli::bad_input;
 use crate::cli::effect_stages::offered;
 use crate::effects_file::{self, EffectsFile};
-use anyhow::Result;
+use anyhow::{Context, Result};
 use rpkm_core::calib;
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, Prediction, VerdictKind};
 use rpkm_core::effects::{self, Effect};
 use rpkm_twin::EffectKind;
 use std::collections::BTreeMap;
+use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
@@ -52,7 +53,7 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
         ));
     }
     if let Some(i) = a.only {
-        let o = machine(a.seed, i, true)?;
+        let o = machine(a.seed, i, true, a.write.as_deref())?;
         println!("{}", serde_json::to_string_pretty(&o)?);
         return Ok(());
     }
@@ -66,7 +67,7 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
                     break;
                 }
                 // a diagnosis that fails counts as a wrong answer, with its error
-                let out = machine(a.seed, i, false).unwrap_or_else(|e| failed(a.seed, i, &e));
+                let out = machine(a.seed, i, false, None).unwrap_or_else(|e| failed(a.seed, i, &e));
                 if let Ok(mut d) = done.lock() {
                     d.push(out);
                     eprint!("\r  {} of {} machines", d.len(), a.machines);
@@ -129,7 +130,7 @@ impl Loop<'_> {
     }
 }
 
-fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
+fn machine(seed: u64, i: usize, verbose: bool, write: Option<&Path>) -> Result<Outcome> {
     let m = machines::draw(seed, i);
     if verbose {
         println!(
@@ -145,6 +146,9 @@ fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
     let mut columns = measured.cal.covariate_names.clone();
     columns.extend(measured.val.covariate_names.iter().cloned());
     let file = machines::offered(&m, &columns)?;
+    if let Some(dir) = write {
+        write_machine(dir, &m, &measured)?;
+    }
     let (diagnoses, named) = Loop {
         measured: &measured,
         file: file.as_ref(),
@@ -152,6 +156,33 @@ fn machine(seed: u64, i: usize, verbose: bool) -> Result<Outcome> {
     }
     .run()?;
     Ok(outcome(i, &m, &measured, &diagnoses, named))
+}
+
+/// A machine's campaigns, offered effects and truth as files under `dir` (`--write`).
+fn write_machine(dir: &Path, m: &Machine, measured: &Measured) -> Result<()> {
+    let put = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))
+    };
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    put("cal.csv", &measured.cal.to_csv())?;
+    put("val.csv", &measured.val.to_csv())?;
+    let offered = machines::offered_text(m)?;
+    if !offered.is_empty() {
+        put("effects.yaml", &offered)?;
+    }
+    put(
+        "machine.txt",
+        &format!(
+            "hides: {:?}\nheld-out floor: {:.3} um ({:.3} um with each setup's zero removed)\n\n{:#?}\n",
+            machines::hidden_names(&m.hidden),
+            measured.floor_um,
+            measured.floor_relative_um,
+            m.config
+        ),
+    )?;
+    println!("wrote {}", dir.display());
+    Ok(())
 }
 
 /// What a machine's loop said, judged against what it hides.

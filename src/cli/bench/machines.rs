@@ -270,6 +270,17 @@ fn relative_floor(noisy: &Campaign, clean: &Campaign) -> (f64, usize) {
 /// the tracker's drift, the lost motion and the cyclic scale error of the carrier the
 /// diagnosis's period pointer names, at its pitch.
 pub(super) fn offered(m: &Machine, columns: &[String]) -> Result<Option<EffectsFile>> {
+    let text = offered_text(m)?;
+    if text.is_empty() {
+        return Ok(None);
+    }
+    let file = effects_file::parse(&text, "bench", columns)
+        .map_err(|e| anyhow::anyhow!("the bench's written effects: {e}"))?;
+    Ok(Some(file))
+}
+
+/// [`offered`]'s effects file as a user writes it (empty where nothing is offered).
+pub(super) fn offered_text(m: &Machine) -> Result<String> {
     let mut text = String::new();
     if m.hidden.class == Class::TrackerDrift {
         text.push_str(
@@ -294,12 +305,11 @@ pub(super) fn offered(m: &Machine, columns: &[String]) -> Result<Option<EffectsF
              dq{q}: \"a * sin(2*pi*q{q}/{pitch}) + c * cos(2*pi*q{q}/{pitch})\"\n"
         )?;
     }
-    if text.is_empty() {
-        return Ok(None);
-    }
-    let file = effects_file::parse(&format!("effects:\n{text}"), "bench", columns)
-        .map_err(|e| anyhow::anyhow!("the bench's written effects: {e}"))?;
-    Ok(Some(file))
+    Ok(if text.is_empty() {
+        text
+    } else {
+        format!("effects:\n{text}")
+    })
 }
 
 /// The hidden effects by name, as the loop should name them: the twin's kinds, and the
