@@ -386,27 +386,19 @@ fn a_drift_along_the_beam_is_named_in_its_own_noise() {
         "{}",
         d["verdict"]
     );
+    let (v, s, unit) = crate::diagnosis_support::candidate_param(&d, "tracker_drift", "vy");
+    assert_eq!(unit, "um/min");
+    assert!(
+        (v - truth_vy).abs() <= 3.0 * s,
+        "vy = {v} ± {s} um/min, the twin's {truth_vy}"
+    );
+    // its held-out support is the regression's, far beyond what the fall alone showed
     let drift = d["candidates"]
         .as_array()
         .expect("candidates")
         .iter()
         .find(|c| c["effect"] == "tracker_drift")
         .expect("the drift among the candidates");
-    let vy = drift["params"]
-        .as_array()
-        .expect("params")
-        .iter()
-        .find(|p| p["name"] == "vy")
-        .expect("vy");
-    let (v, s) = (
-        vy["value"].as_f64().expect("v"),
-        vy["sigma"].as_f64().expect("σ"),
-    );
-    assert!(
-        (v - truth_vy).abs() <= 3.0 * s,
-        "vy = {v} ± {s} um/min, the twin's {truth_vy}"
-    );
-    // its held-out support is the regression's, far beyond what the fall alone showed
     let support = drift["prediction"]["support_p"]
         .as_f64()
         .expect("support_p");

@@ -304,23 +304,8 @@ fn a_drifting_tracker_written_as_data_is_named_and_closes_at_the_floor() {
         "{}",
         d["verdict"]
     );
-    let named = d["candidates"]
-        .as_array()
-        .expect("candidates")
-        .iter()
-        .find(|c| c["effect"] == "tracker_drift")
-        .expect("the written effect among the candidates");
-    let vy = named["params"]
-        .as_array()
-        .expect("params")
-        .iter()
-        .find(|p| p["name"] == "vy")
-        .expect("vy");
-    let (v, s) = (
-        vy["value"].as_f64().expect("v"),
-        vy["sigma"].as_f64().expect("σ"),
-    );
-    assert_eq!(vy["unit"], "um/min");
+    let (v, s, unit) = crate::diagnosis_support::candidate_param(&d, "tracker_drift", "vy");
+    assert_eq!(unit, "um/min");
     assert!(
         (v - 2.0).abs() <= 3.0 * s,
         "vy = {v} ± {s} um/min, the twin's 2"

@@ -14,6 +14,7 @@ use std::sync::Mutex;
 pub static KILLS_A_NODE: Mutex<()> = Mutex::new(());
 
 mod bag_support;
+mod diagnosis_support;
 mod foreign_support;
 mod fuzz_support;
 mod history_support;

@@ -1,0 +1,23 @@
+//! Reading a diagnosis's JSON (`rpkm diagnose --json`) the way the tests check it.
+
+/// The fitted parameter `name` of the candidate `effect` of diagnosis `d`: its value, σ and
+/// unit, or a failure naming what is missing.
+pub fn candidate_param(d: &serde_json::Value, effect: &str, name: &str) -> (f64, f64, String) {
+    let candidate = d["candidates"]
+        .as_array()
+        .expect("candidates")
+        .iter()
+        .find(|c| c["effect"] == effect)
+        .unwrap_or_else(|| panic!("{effect} among the candidates"));
+    let p = candidate["params"]
+        .as_array()
+        .expect("params")
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap_or_else(|| panic!("{effect}'s {name}"));
+    (
+        p["value"].as_f64().expect("value"),
+        p["sigma"].as_f64().expect("σ"),
+        p["unit"].as_str().expect("unit").to_owned(),
+    )
+}
