@@ -86,12 +86,13 @@ fn quiet_broken_pipe() {
 /// Keeps freed memory in the process for the next allocation. A calibration or diagnosis of
 /// 10⁵ poses allocates and frees row buffers of tens of MB per fit, dozens of fits per
 /// diagnosis; by default glibc gives such blocks back to the kernel (mmap/munmap, and a
-/// trimmed heap) and the next fit faults every page in again: a third of the page faults and
-/// a tenth of the time of the 10⁵-pose diagnosis (docs/diagnosis.md, "At scale"). A process
-/// holds its peak instead, which the same fits reach anyway.
+/// trimmed heap) and the next fit faults every page in again. Kept, the 10⁵-pose diagnosis
+/// faulted 0.75 M pages instead of 1.17 M and took 8.3 s instead of 8.9 (medians, alternated;
+/// docs/diagnosis.md, "At scale"); the process holds its peak, 1.55 GB there against 1.06.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 fn keep_freed_memory() {
-    // the largest threshold glibc accepts (half its heap size, 32 MB), then no trimming
+    // blocks up to 1 GB from the heap, not mmap (the row buffers are tens of MB: at 32 MB
+    // the diagnosis took 8.5-8.6 s, at 1 GB 7.8-8.0 s, one day's runs), and no trimming
     const MMAP_THRESHOLD: libc::c_int = 1 << 30;
     // SAFETY: mallopt(3) with valid parameters, called from main before any thread is
     // started; a value glibc refuses leaves its default (return value 0), nothing else.

@@ -393,12 +393,7 @@ fn a_drift_along_the_beam_is_named_in_its_own_noise() {
         "vy = {v} ± {s} um/min, the twin's {truth_vy}"
     );
     // its held-out support is the regression's, far beyond what the fall alone showed
-    let drift = d["candidates"]
-        .as_array()
-        .expect("candidates")
-        .iter()
-        .find(|c| c["effect"] == "tracker_drift")
-        .expect("the drift among the candidates");
+    let drift = crate::diagnosis_support::candidate(&d, "tracker_drift");
     let support = drift["prediction"]["support_p"]
         .as_f64()
         .expect("support_p");

@@ -292,7 +292,7 @@ impl<'j> Judge<'j> {
                 (b.chi2, b.dof),
                 (s.chi2, s.dof),
                 self.base.rows.len(),
-                prediction.map(|p| (p, 1.0)),
+                prediction,
             )
             .with_wald(wald)
         };

@@ -27,8 +27,8 @@ pub(super) struct Gain {
     /// RMS of the calibration rows' fall in their own noise, √(Δχ²/n): the size the
     /// calibration itself sees (a fine instrument there, a noisy one held out).
     cal_size: f64,
-    /// The prediction (held-out or left-out), and the noise its errors are measured in.
-    prediction: Option<(Prediction, f64)>,
+    /// The prediction (held-out or left-out), its errors each in its own noise (σ).
+    prediction: Option<Prediction>,
 }
 
 impl Gain {
@@ -38,7 +38,7 @@ impl Gain {
         big: (f64, f64),
         small: (f64, f64),
         rows: usize,
-        prediction: Option<(Prediction, f64)>,
+        prediction: Option<Prediction>,
     ) -> Gain {
         let k = small.1 - big.1;
         let dchi2 = (small.0 - big.0).max(0.0);
@@ -64,29 +64,27 @@ impl Gain {
     }
 
     /// Fisher's combination of the F-test and the prediction's: whether the predicted errors
-    /// support the change the larger model makes ([`Prediction::p_confirmed`]; that it makes
+    /// support the change the larger model makes ([`Prediction::support_p`]; that it makes
     /// them smaller is [`Gain::better`]'s).
     pub(super) fn evidence(&self) -> f64 {
         match self.prediction {
-            Some((p, _)) => stats::fisher_combined(&[self.p_cal, p.p_confirmed()]),
+            Some(p) => stats::fisher_combined(&[self.p_cal, p.support_p]),
             None => self.p_cal,
         }
     }
 
     /// The larger of the sizes the two campaigns see, each in its noise.
     pub(super) fn size(&self) -> f64 {
-        let predicted = self
-            .prediction
-            .map_or(0.0, |(p, unit)| p.explained() / unit);
+        let predicted = self.prediction.map_or(0.0, |p| p.explained());
         self.cal_size.max(predicted)
     }
 
     pub(super) fn better(&self) -> bool {
-        self.prediction.is_none_or(|(p, _)| p.better)
+        self.prediction.is_none_or(|p| p.better)
     }
 
     pub(super) fn worse(&self) -> bool {
-        self.prediction.is_some_and(|(p, _)| p.worse)
+        self.prediction.is_some_and(|p| p.worse)
     }
 
     /// Whether the larger model is needed: significant on both campaigns together, not

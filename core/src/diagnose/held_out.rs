@@ -400,15 +400,12 @@ impl Prediction {
         })
     }
 
-    /// The held-out comparison of two fits of one round: the RMS (µm, each setup's zero
-    /// removed) and its standard error as a user reads them, better or worse as judged on
-    /// the errors each in its own noise (`Fit::val_scaled`, what the model search compares);
-    /// None without held-out data.
+    /// The held-out comparison of two fits of one round as a user reads it: the RMS (µm,
+    /// each setup's zero removed), its standard error, better or worse; with the support
+    /// [`Prediction::scaled`] judges in the errors' own noise. None without held-out data.
     pub(crate) fn held_out(before: &Fit, after: &Fit) -> Option<Prediction> {
         let judged = Self::scaled(before, after)?;
         Self::of(&before.val_errors, &after.val_errors).map(|p| Prediction {
-            better: judged.better,
-            worse: judged.worse,
             support_p: judged.support_p,
             refitted: judged.refitted,
             ..p
@@ -485,12 +482,6 @@ impl Prediction {
             worse: ra - rb > 2.0 * se,
             by_setup: false,
         })
-    }
-
-    /// [`Prediction::support_p`]: how often errors that do not hold the change would
-    /// support it this strongly.
-    pub fn p_confirmed(&self) -> f64 {
-        self.support_p
     }
 
     /// RMS of the part of the errors the change explains, √(RMS_b² − RMS_a²), in `unit`

@@ -110,12 +110,11 @@ impl Judge<'_> {
     /// campaigns, its size, its values.
     fn assess(&self, e: &mut Entry) {
         let base = &self.base.fit;
-        let prediction = e.prediction.map(|p| (p, 1.0));
         let gain = Gain::of(
             (e.fitted.fit.chi2, e.fitted.fit.dof),
             (base.chi2, base.dof),
             self.base.rows.len(),
-            prediction,
+            e.prediction,
         )
         .with_wald(e.wald_p);
         let (evidence_p, size) = (gain.evidence(), gain.size());

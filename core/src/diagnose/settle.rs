@@ -206,10 +206,10 @@ impl<'a> Scored<'a> {
     fn needed_over(&self, v: &Scored, fold: Fold, level: f64) -> bool {
         let held = Prediction::compared(&v.held, &self.held);
         let prediction = match held {
-            Some(p) if p.better || p.worse => Some((p, 1.0)),
+            Some(p) if p.better || p.worse => Some(p),
             _ => match v.left_out(fold).zip(self.left_out(fold)) {
-                Some((a, b)) => Prediction::compared(a, b).map(|p| (p, 1.0)),
-                None => held.map(|p| (p, 1.0)),
+                Some((a, b)) => Prediction::compared(a, b),
+                None => held,
             },
         };
         Gain::of(

@@ -1,15 +1,19 @@
 //! Reading a diagnosis's JSON (`rpkm diagnose --json`) the way the tests check it.
 
-/// The fitted parameter `name` of the candidate `effect` of diagnosis `d`: its value, σ and
-/// unit, or a failure naming what is missing.
-pub fn candidate_param(d: &serde_json::Value, effect: &str, name: &str) -> (f64, f64, String) {
-    let candidate = d["candidates"]
+/// The candidate `effect` of diagnosis `d`, or a failure naming it.
+pub fn candidate<'d>(d: &'d serde_json::Value, effect: &str) -> &'d serde_json::Value {
+    d["candidates"]
         .as_array()
         .expect("candidates")
         .iter()
         .find(|c| c["effect"] == effect)
-        .unwrap_or_else(|| panic!("{effect} among the candidates"));
-    let p = candidate["params"]
+        .unwrap_or_else(|| panic!("{effect} among the candidates"))
+}
+
+/// The fitted parameter `name` of the candidate `effect` of diagnosis `d`: its value, σ and
+/// unit, or a failure naming what is missing.
+pub fn candidate_param(d: &serde_json::Value, effect: &str, name: &str) -> (f64, f64, String) {
+    let p = candidate(d, effect)["params"]
         .as_array()
         .expect("params")
         .iter()
