@@ -177,7 +177,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     print_report(&campaign, &cal, val.as_ref());
     print_noise(&noise);
     // judged against the stated noise: the estimate's group takes a drift in and hides it
-    let corr = set.corrections(&cal.theta);
+    let corr = set.corrections(&cal.theta, &cal.params);
     let returns =
         rpkm_core::returns::drift_checks(&campaign, (&cal.params, cal.model), &corr, &opts.noise)
             .map_err(|e| bad_input(e.to_string()))?;

@@ -62,7 +62,7 @@ pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
     )?;
     // the corrections at the fit's θ: only a large campaign's leverages and step 2 read them
     let corr = OnceCell::new();
-    let corr = || corr.get_or_init(|| effects.corrections(&fit.state.theta));
+    let corr = || corr.get_or_init(|| effects.corrections(&fit.state.theta, &fit.state.p));
     let (rows_final, post) = posterior(&pb, &plan, (&fit.state.p, &corr, &fit.drop), last)?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
     let chi2: f64 = rows_final.iter().map(|r| (r.value / r.sigma).powi(2)).sum();

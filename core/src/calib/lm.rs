@@ -339,13 +339,13 @@ impl Lm<'_> {
         let pb = self.problem;
         let made = self
             .made
-            .filter(|(theta, _)| same_bits(theta, &x.theta))
+            .filter(|(theta, corr)| same_bits(theta, &x.theta) && corr.hold_at(&x.p))
             .map(|(_, corr)| corr);
         let own;
         let corr = if let Some(corr) = made {
             corr
         } else {
-            own = pb.effects.corrections(&x.theta);
+            own = pb.effects.corrections(&x.theta, &x.p);
             &own
         };
         let terms = self.column_terms();

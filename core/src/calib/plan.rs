@@ -49,7 +49,7 @@ impl Plan {
     /// The effects' corrections at θ₀, made the first time they are read.
     pub(super) fn corr0(&self, pb: &Problem) -> &Corrections {
         self.corr0
-            .get_or_init(|| pb.effects.corrections(&self.theta0))
+            .get_or_init(|| pb.effects.corrections(&self.theta0, &pb.start))
     }
 
     pub(super) fn new(
@@ -63,7 +63,7 @@ impl Plan {
         let source = if let Some(view) = shared {
             Source::Shared(view)
         } else {
-            Source::Evaluated(corr0.get_or_init(|| pb.effects.corrections(theta0)))
+            Source::Evaluated(corr0.get_or_init(|| pb.effects.corrections(theta0, &pb.start)))
         };
         let start = StartRows::of(pb, source, cold)?;
         let linked: HashSet<usize> = opts.links.iter().map(|l| l.param).collect();

@@ -54,7 +54,7 @@ impl SharedRows {
         let none = HashSet::new();
         let zero = vec![0.0; union.n_params()];
         let at = |p: &Params, theta: &[f64]| {
-            let corr = union.corrections(theta);
+            let corr = union.corrections(theta, p);
             pb.map_pieces(Step::Direct, p, start, &corr, &none, <[Residual]>::to_vec)
         };
         Ok(SharedRows {

@@ -80,7 +80,7 @@ pub fn predicted_rows(
             copts.model,
             Step::Direct,
             &start,
-            &whole.corrections(&theta),
+            &whole.corrections(&theta, &cal.params),
             &copts.noise,
             Form::Decorrelated,
         )

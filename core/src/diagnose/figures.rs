@@ -22,8 +22,13 @@ pub(crate) fn error_vectors(
     model: Model,
 ) -> Result<Vec<ErrorVector>, DiagnoseError> {
     let set = EffectSet::bind(effects, campaign, &cal.start)?;
-    let errs = obs::tcp_errors_with(campaign, &cal.params, model, &set.corrections(&cal.theta))
-        .map_err(DiagnoseError::Vectors)?;
+    let errs = obs::tcp_errors_with(
+        campaign,
+        &cal.params,
+        model,
+        &set.corrections(&cal.theta, &cal.params),
+    )
+    .map_err(DiagnoseError::Vectors)?;
     let mut xy: BTreeMap<usize, [Option<f64>; 2]> = BTreeMap::new();
     for e in &errs {
         let slot = xy.entry(e.pose).or_default();

@@ -108,7 +108,7 @@ impl Model1<'_> {
             val.campaign,
             &self.cal.params,
             self.cal.model,
-            &set.corrections(&theta),
+            &set.corrections(&theta, &self.cal.params),
         )?;
         let refit = set.layout().iter().filter(|s| s.setup_local).count();
         Ok((errs.iter().map(|e| e.value).collect(), refit))
@@ -138,8 +138,12 @@ impl Model1<'_> {
             .map(|s| 1.0 / s.max(f64::MIN_POSITIVE))
             .collect();
         for _ in 0..if local.is_empty() { 0 } else { 5 } {
-            let errs =
-                obs::tcp_errors_with(val.campaign, &cal.params, model, &set.corrections(&theta))?;
+            let errs = obs::tcp_errors_with(
+                val.campaign,
+                &cal.params,
+                model,
+                &set.corrections(&theta, &cal.params),
+            )?;
             let columns: Vec<Vec<f64>> = local
                 .iter()
                 .map(|&k| val.relative(&errs.iter().map(|e| e.d_theta[k]).collect::<Vec<_>>()))
@@ -173,8 +177,9 @@ impl Model1<'_> {
     fn sensitivities(&self, val: &Validation) -> Result<(DMatrix<f64>, DMatrix<f64>), FitError> {
         let (cal, model) = (self.cal, self.cal.model);
         let (set, theta) = self.held_out_theta(val)?;
-        let corr = set.corrections(&theta);
-        let at = |p: &Params| obs::tcp_errors_with(val.campaign, p, model, &corr);
+        // the corrections at each p: a binding that reads the geometry changes with it
+        let at =
+            |p: &Params| obs::tcp_errors_with(val.campaign, p, model, &set.corrections(&theta, p));
         let base = at(&cal.params)?;
         let n = base.len();
         let layout = set.layout();

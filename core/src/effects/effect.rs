@@ -127,6 +127,26 @@ pub trait Bound: Send + Sync {
     /// Add the correction of pose `pose` for parameter values `theta` (this effect's, in the
     /// order of [`Bound::params`]) to `value`, and its derivatives to `partials[k]` = ∂/∂θ_k.
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]);
+    /// [`Bound::correct`] at the geometric parameters `p`, for a correction that reads the
+    /// geometry (the preload's rod forces balance through the rods' directions): it also
+    /// pushes ∂value/∂p to `slopes`, as (index into [`Delta::dp`], its gradient over the
+    /// 29 parameters). Left out of the fit's Jacobian, that dependence was a model error
+    /// the fit could not see: the parallelogram rods' forces turn by 0.3 % per 0.1 mm of
+    /// geometry, a few tenths of a micrometre of stretch against compatibility rows of a
+    /// third of one, and rebinding between rounds chased it without converging. The
+    /// default reads no geometry.
+    fn correct_at(
+        &self,
+        pose: usize,
+        theta: &[f64],
+        p: &Params,
+        value: &mut Delta,
+        partials: &mut [Delta],
+        slopes: &mut Vec<(usize, Row)>,
+    ) {
+        let _ = (p, slopes);
+        self.correct(pose, theta, value, partials);
+    }
     /// The parameters (indices in [`Bound::params`]) whose partials [`Bound::correct`] may
     /// make non-zero at pose `pose`; it writes no other. An instrument's alignment angle
     /// moves only its own setup's poses: the corrections keep 1 partial per pose instead of

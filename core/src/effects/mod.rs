@@ -149,6 +149,18 @@ pub struct Corrections {
     /// and ∂/∂θ of the change.
     partials: Vec<(usize, Delta)>,
     pub n_params: usize,
+    /// Where the changes read the geometry ([`Bound::correct_at`]): the parameters they
+    /// were made at, per pose where its slopes start in `slopes` (one more entry: the end),
+    /// and the slopes, (index into [`Delta::dp`], ∂/∂p). None where no change reads it.
+    geometry: Option<GeometrySlopes>,
+}
+
+/// The slopes of corrections that read the geometry (see [`Corrections`]).
+#[derive(Clone, Debug)]
+struct GeometrySlopes {
+    at: Params,
+    starts: Vec<usize>,
+    slopes: Vec<(usize, Row)>,
 }
 
 impl Corrections {
@@ -197,6 +209,35 @@ impl Corrections {
             (Some(&a), Some(&b)) => &self.partials[a..b],
             _ => &[],
         }
+    }
+
+    /// Whether these corrections hold at the parameters `p`: made there, or reading no
+    /// geometry.
+    pub fn hold_at(&self, p: &Params) -> bool {
+        self.geometry.as_ref().is_none_or(|g| {
+            g.at.0
+                .iter()
+                .zip(&p.0)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        })
+    }
+
+    /// ∂value/∂p through the corrections, over the 29 parameters, of a value with input
+    /// sensitivities `at` (as [`Corrections::theta_row`]): the part of the value's Jacobian
+    /// a change that reads the geometry adds to its direct one. Zero where none reads it.
+    pub fn p_row(&self, at: &[(usize, InputSensitivity)]) -> Row {
+        let mut out = Row::zeros();
+        let Some(g) = &self.geometry else {
+            return out;
+        };
+        for (i, s) in at {
+            if let (Some(&a), Some(&b)) = (g.starts.get(*i), g.starts.get(i + 1)) {
+                for (k, slope) in &g.slopes[a..b] {
+                    out.axpy(s.dp[*k], slope, 1.0);
+                }
+            }
+        }
+        out
     }
 
     /// ∂value/∂θ over every effect parameter of a value with input sensitivities `at`
@@ -414,8 +455,9 @@ impl EffectSet {
         out
     }
 
-    /// The corrections of every pose for θ.
-    pub fn corrections(&self, theta: &[f64]) -> Corrections {
+    /// The corrections of every pose for θ, at the geometric parameters `p` (read only by
+    /// a binding that reads the geometry, [`Bound::correct_at`]).
+    pub fn corrections(&self, theta: &[f64], p: &Params) -> Corrections {
         let n = self.n_params();
         if self.bound.is_empty() {
             return Corrections::default();
@@ -433,8 +475,11 @@ impl EffectSet {
             starts: Vec::with_capacity(self.n_poses + 1),
             partials: Vec::with_capacity(touched),
             n_params: n,
+            geometry: None,
         };
         out.starts.push(0);
+        let mut slopes = Vec::new();
+        let mut slope_starts = vec![0];
         // one pose's partials, of which each effect zeroes and reads only those it touches
         let mut scratch = vec![Delta::default(); n];
         for i in 0..self.n_poses {
@@ -443,12 +488,20 @@ impl EffectSet {
                 let touched = b.touched(i);
                 let own = &mut scratch[k..k + own_theta.len()];
                 own[touched.clone()].fill(Delta::default());
-                b.correct(i, own_theta, &mut value, own);
+                b.correct_at(i, own_theta, p, &mut value, own, &mut slopes);
                 out.partials
                     .extend(touched.map(|j| (k + j, scratch[k + j])));
             }
             out.values.push(value);
             out.starts.push(out.partials.len());
+            slope_starts.push(slopes.len());
+        }
+        if !slopes.is_empty() {
+            out.geometry = Some(GeometrySlopes {
+                at: *p,
+                starts: slope_starts,
+                slopes,
+            });
         }
         out
     }

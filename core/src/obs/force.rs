@@ -97,7 +97,7 @@ pub(super) fn force_rows(
         value: eq.drive_force[a] - pose.f[a],
         sigma: noise::sigma_of(&parts),
         parts,
-        jacobian: sens[a].dp,
+        jacobian: sens[a].dp + ctx.corr.p_row(&[(i, sens[a])]),
         d_pcal: None,
         d_theta: ctx.corr.theta_row(&[(i, sens[a])]),
         reset_gain: ResetGain::zeros(),

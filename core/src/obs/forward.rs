@@ -91,7 +91,7 @@ pub(super) fn forward_rows(
             value,
             sigma: noise::sigma_of(&parts),
             parts,
-            jacobian: at_pose.dp + at_reset.dp,
+            jacobian: at_pose.dp + at_reset.dp + ctx.corr.p_row(&[(i, at_pose), (ri, at_reset)]),
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
             // an interferometer is zeroed on a reading; a ball-bar's pivot is where the
@@ -162,12 +162,15 @@ pub(super) fn self_rows(
         let parts = ctx.noise.encoder_parts(1.0 + encoder_gain2(f, v));
         // the sensitivity to the pose's inputs only where effects read it: without, the
         // row's derivatives are the solve's own (1.2 kB less copied per row)
-        let d_theta = if ctx.corr.n_params == 0 {
-            Vec::new()
+        let (d_theta, through) = if ctx.corr.n_params == 0 {
+            (Vec::new(), Row::zeros())
         } else {
             let mut at_pose = input_sensitivity(f, Subsystem::NR, &[(v, 1.0)]);
             at_pose.dq[a] -= 1.0;
-            ctx.corr.theta_row(&[(i, at_pose)])
+            (
+                ctx.corr.theta_row(&[(i, at_pose)]),
+                ctx.corr.p_row(&[(i, at_pose)]),
+            )
         };
         out.push(Residual {
             pose: i,
@@ -176,7 +179,7 @@ pub(super) fn self_rows(
             value: f.sol.c[v] - q_i[a],
             sigma: noise::sigma_of(&parts),
             parts,
-            jacobian: f.sens.dc_dp.row(v).transpose(),
+            jacobian: f.sens.dc_dp.row(v).transpose() + through,
             d_pcal: None,
             d_theta,
             reset_gain: ResetGain::zeros(),

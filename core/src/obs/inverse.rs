@@ -59,7 +59,7 @@ pub(super) fn inverse_rows(
             value: inv.c[v] - q_a,
             sigma: noise::sigma_of(&parts),
             parts,
-            jacobian: at_pose.dp + at_reset.dp,
+            jacobian: at_pose.dp + at_reset.dp + ctx.corr.p_row(&[(i, at_pose), (ri, at_reset)]),
             d_pcal: None,
             d_theta: ctx.corr.theta_row(&[(i, at_pose), (ri, at_reset)]),
             // the reset's reading error enters as the pose's own does, through X

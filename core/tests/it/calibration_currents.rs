@@ -253,7 +253,7 @@ fn effect_columns_of_the_force_rows_match_finite_differences() {
             Model::M29,
             Step::Direct,
             &p,
-            &set.corrections(theta),
+            &set.corrections(theta, &p),
             &NoiseModel::default(),
         )
         .expect("force rows")

@@ -9,7 +9,7 @@ use rpkm_core::effects::{self, Corrections, EffectSet};
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs::Form;
 use rpkm_core::obs::{self, Step};
-use rpkm_core::params::{Model, Params};
+use rpkm_core::params::{Model, Params, GAMMA1, GAMMA2};
 use rpkm_twin::{effects::ALPHA_PER_K, EffectKind, Twin, TwinConfig};
 
 fn twin_campaign(hidden: &[(EffectKind, f64)], instruments: &[Instrument]) -> (Twin, Campaign) {
@@ -77,13 +77,13 @@ fn effect_jacobians_match_finite_differences() {
         let n = set.n_params();
         // a point away from zero, so that nonlinear effects are tested off their origin
         let theta: Vec<f64> = set.layout().iter().map(|l| 0.7 * l.param.prior).collect();
-        let (rows, errs) = rows_and_tcp_errors(&c, &p, &set.corrections(&theta));
+        let (rows, errs) = rows_and_tcp_errors(&c, &p, &set.corrections(&theta, &p));
         for k in 0..n {
             let h = 1e-3 * set.layout()[k].param.prior;
             let at = |d: f64| {
                 let mut t = theta.clone();
                 t[k] += d;
-                rows_and_tcp_errors(&c, &p, &set.corrections(&t))
+                rows_and_tcp_errors(&c, &p, &set.corrections(&t, &p))
             };
             let (rp, ep) = at(h);
             let (rm, em) = at(-h);
@@ -115,6 +115,66 @@ fn effect_jacobians_match_finite_differences() {
             rows.len()
         );
     }
+}
+
+/// The preload's rod forces balance through the rods' directions, so its stretch moves with
+/// the geometry: the rows' Jacobian over the 29 parameters carries that slope. Against
+/// central differences of the rows with the forces balanced again at each displaced point
+/// (the exact dependence), and large enough that a Jacobian without it fails.
+#[test]
+fn the_preloads_stretch_moves_with_the_geometry_in_the_jacobian() {
+    let (twin, c) = twin_campaign(
+        &[(EffectKind::PreloadElastic, 0.765)],
+        &[Instrument::Lt, Instrument::Kgm, Instrument::SelfCal],
+    );
+    let p = *twin.true_params();
+    let theta = [1.0];
+    let bound_at = |q: &Params| {
+        EffectSet::bind(&[&effects::PreloadElastic as &dyn effects::Effect], &c, q).expect("bind")
+    };
+    let set = bound_at(&p);
+    let frozen = set.corrections(&theta, &p);
+    let (rows, _) = rows_and_tcp_errors(&c, &p, &frozen);
+    let (mut worst, mut slope_part) = (0.0_f64, 0.0_f64);
+    for j in 0..rpkm_core::params::N_PARAMS {
+        let h = if j == GAMMA1 || j == GAMMA2 {
+            1e-7
+        } else {
+            1e-4
+        };
+        let moved = |d: f64| {
+            let mut q = p;
+            q[j] += d;
+            q
+        };
+        let (pp, pm) = (moved(h), moved(-h));
+        let exact = |q: &Params| rows_and_tcp_errors(&c, q, &bound_at(q).corrections(&theta, q)).0;
+        // the stretch held where it was balanced: what the Jacobian missed before
+        let held = |q: &Params| rows_and_tcp_errors(&c, q, &frozen).0;
+        let (ep, em) = (exact(&pp), exact(&pm));
+        let (hp, hm) = (held(&pp), held(&pm));
+        for (i, r) in rows.iter().enumerate() {
+            let fd = (ep[i].value - em[i].value) / (2.0 * h);
+            let fd_held = (hp[i].value - hm[i].value) / (2.0 * h);
+            // relative to the row's own sensitivity: a guide's angle moves a row by metres
+            // per radian, and the central difference keeps 1e-8 of that
+            let scale = r.jacobian[j].abs().max(1.0);
+            worst = worst.max((fd - r.jacobian[j]).abs() / scale);
+            slope_part = slope_part.max((fd - fd_held).abs() / scale);
+        }
+    }
+    eprintln!(
+        "largest difference from the balance made again: {worst:.2e} of the row's sensitivity; \
+         the slope's part up to {slope_part:.2e}"
+    );
+    assert!(
+        worst < 1e-4,
+        "analytic Jacobian off the exact one by {worst:e} of it"
+    );
+    assert!(
+        slope_part > 100.0 * worst,
+        "the slope's part {slope_part:e} is not above the test's resolution {worst:e}"
+    );
 }
 
 /// Calibrate model 24 (rod 5 linked) plus `effect` on a campaign where the twin hid it; the

@@ -159,7 +159,7 @@ fn dpsi_rows_match_finite_differences() {
             Model::M29,
             Step::Direct,
             &p,
-            &set.corrections(theta),
+            &set.corrections(theta, &p),
             &NoiseModel::default(),
             Form::Thesis,
         )

@@ -46,7 +46,7 @@ pub(super) fn parameters_of(
         cal_part,
         &cal.params,
         cal.model,
-        &set.corrections(&cal.theta),
+        &set.corrections(&cal.theta, &cal.params),
     )
     .map(|e| e.iter().map(|e| e.value).collect())
     .unwrap_or_default();
