@@ -127,24 +127,24 @@ pub trait Bound: Send + Sync {
     /// Add the correction of pose `pose` for parameter values `theta` (this effect's, in the
     /// order of [`Bound::params`]) to `value`, and its derivatives to `partials[k]` = ∂/∂θ_k.
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]);
-    /// [`Bound::correct`] at the geometric parameters `p`, for a correction that reads the
-    /// geometry (the preload's rod forces balance through the rods' directions): it also
-    /// pushes ∂value/∂p to `slopes`, as (index into [`Delta::dp`], its gradient over the
-    /// 29 parameters). Left out of the fit's Jacobian, that dependence was a model error
-    /// the fit could not see: the parallelogram rods' forces turn by 0.3 % per 0.1 mm of
-    /// geometry, a few tenths of a micrometre of stretch against compatibility rows of a
-    /// third of one, and rebinding between rounds chased it without converging. The
-    /// default reads no geometry.
+    /// [`Bound::correct`] at the geometric parameters `p`, the other effects having changed
+    /// the pose's inputs by `moved`, for a correction that reads the geometry (the preload's
+    /// rod forces balance through the rods' directions): it also pushes how the correction
+    /// moves with the pose's parameters and carrier positions to `slopes`. Left out of the
+    /// fit's Jacobian, that dependence was a model error the fit could not see: the
+    /// parallelogram rods' forces turn by 0.3 % per 0.1 mm of geometry, a few tenths of a
+    /// micrometre of stretch against compatibility rows of a third of one, and rebinding
+    /// between rounds chased it without converging. The default reads no geometry.
     fn correct_at(
         &self,
         pose: usize,
         theta: &[f64],
-        p: &Params,
+        (p, moved): (&Params, &Delta),
         value: &mut Delta,
         partials: &mut [Delta],
-        slopes: &mut Vec<(usize, Row)>,
+        slopes: &mut Vec<Slope>,
     ) {
-        let _ = (p, slopes);
+        let _ = (p, moved, slopes);
         self.correct(pose, theta, value, partials);
     }
     /// The parameters (indices in [`Bound::params`]) whose partials [`Bound::correct`] may
@@ -161,6 +161,25 @@ pub trait Bound: Send + Sync {
     /// reads no geometry, or too little to matter).
     fn rebinds_from(&self) -> Option<&dyn Effect> {
         None
+    }
+}
+
+/// How one geometric input of a pose's correction (`value.dp[param]`) moves with the pose's
+/// parameters and carrier positions ([`Bound::correct_at`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Slope {
+    /// Index into [`Delta::dp`].
+    pub param: usize,
+    /// ∂/∂p over the 29 parameters ...
+    pub dp: Row,
+    /// ... and ∂/∂q over the four carrier positions.
+    pub dq: [f64; 4],
+}
+
+impl Slope {
+    /// The change this input makes for a change `d` of the pose's inputs.
+    pub fn of(&self, d: &Delta) -> f64 {
+        self.dp.dot(&d.dp) + (0..4).map(|a| self.dq[a] * d.dq[a]).sum::<f64>()
     }
 }
 

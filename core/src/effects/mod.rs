@@ -32,7 +32,7 @@ pub mod stiffness_factor;
 mod thermal;
 pub mod written;
 
-pub use effect::{Bound, Delta, Effect, EffectParam, InputSensitivity, NotApplicable};
+pub use effect::{Bound, Delta, Effect, EffectParam, InputSensitivity, NotApplicable, Slope};
 pub use encoder_scale::EncoderScale;
 pub use guide_straightness::GuideStraightness;
 pub use instrument_alignment::InstrumentAlignment;
@@ -151,8 +151,17 @@ pub struct Corrections {
     pub n_params: usize,
     /// Where the changes read the geometry ([`Bound::correct_at`]): the parameters they
     /// were made at, per pose where its slopes start in `slopes` (one more entry: the end),
-    /// and the slopes, (index into [`Delta::dp`], ∂/∂p). None where no change reads it.
+    /// and the slopes ([`Slope`]). None where no change reads it.
     geometry: Option<GeometrySlopes>,
+}
+
+/// A partial of a binding that reads no geometry, chained through the slopes of one pose's
+/// bindings that read it: its change of the pose's inputs moves the pose they read.
+fn chain_through(d: &mut Delta, slopes: &[Slope]) {
+    let added: Vec<(usize, f64)> = slopes.iter().map(|g| (g.param, g.of(d))).collect();
+    for (l, v) in added {
+        d.dp[l] += v;
+    }
 }
 
 /// The slopes of corrections that read the geometry (see [`Corrections`]).
@@ -160,7 +169,7 @@ pub struct Corrections {
 struct GeometrySlopes {
     at: Params,
     starts: Vec<usize>,
-    slopes: Vec<(usize, Row)>,
+    slopes: Vec<Slope>,
 }
 
 impl Corrections {
@@ -232,8 +241,8 @@ impl Corrections {
         };
         for (i, s) in at {
             if let (Some(&a), Some(&b)) = (g.starts.get(*i), g.starts.get(i + 1)) {
-                for (k, slope) in &g.slopes[a..b] {
-                    out.axpy(s.dp[*k], slope, 1.0);
+                for slope in &g.slopes[a..b] {
+                    out.axpy(s.dp[slope.param], &slope.dp, 1.0);
                 }
             }
         }
@@ -484,13 +493,34 @@ impl EffectSet {
         let mut scratch = vec![Delta::default(); n];
         for i in 0..self.n_poses {
             let mut value = Delta::default();
-            for (b, own_theta, k) in self.with_theta(theta) {
-                let touched = b.touched(i);
-                let own = &mut scratch[k..k + own_theta.len()];
-                own[touched.clone()].fill(Delta::default());
-                b.correct_at(i, own_theta, p, &mut value, own, &mut slopes);
-                out.partials
-                    .extend(touched.map(|j| (k + j, scratch[k + j])));
+            // the bindings that read no geometry first: one that reads it reads the pose
+            // where they put the machine (as it was bound, `EffectSet::rebound`)
+            for reads in [false, true] {
+                for (b, own_theta, k) in self.with_theta(theta) {
+                    if b.rebinds_from().is_some() != reads {
+                        continue;
+                    }
+                    let touched = b.touched(i);
+                    let own = &mut scratch[k..k + own_theta.len()];
+                    own[touched].fill(Delta::default());
+                    if reads {
+                        let moved = value;
+                        b.correct_at(i, own_theta, (p, &moved), &mut value, own, &mut slopes);
+                    } else {
+                        b.correct(i, own_theta, &mut value, own);
+                    }
+                }
+            }
+            let first_slope = *slope_starts.last().unwrap_or(&0);
+            for (b, _, k) in self.with_theta(theta) {
+                for j in b.touched(i) {
+                    let mut d = scratch[k + j];
+                    if b.rebinds_from().is_none() {
+                        // the others' parameters move the pose the stretch was read at
+                        chain_through(&mut d, &slopes[first_slope..]);
+                    }
+                    out.partials.push((k + j, d));
+                }
             }
             out.values.push(value);
             out.starts.push(out.partials.len());

@@ -7,7 +7,7 @@
 //! [`crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM`]), scales the stretch: dl = c · T / k.
 //! The stiffness is identified with the geometry.
 
-use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
+use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable, Slope};
 use crate::campaign::Campaign;
 use crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM;
 use crate::geometry::{self, carrier_joint, guide_frame, platform_joint};
@@ -43,8 +43,7 @@ impl Effect for PreloadElastic {
         p: &Params,
         moved: &[Delta],
     ) -> Result<Box<dyn Bound>, NotApplicable> {
-        let mut stretch = Vec::with_capacity(campaign.poses.len());
-        let mut slope = Vec::with_capacity(campaign.poses.len());
+        let mut poses = Vec::with_capacity(campaign.poses.len());
         let mut loaded = 0;
         let mut first_force_row = None;
         for (i, pose) in campaign.poses.iter().enumerate() {
@@ -55,19 +54,19 @@ impl Effect for PreloadElastic {
                 if active {
                     first_force_row.get_or_insert(pose.line);
                 }
-                stretch.push([0.0; 5]);
-                slope.push([Row::zeros(); 5]);
+                poses.push(None);
                 continue;
             }
             loaded += 1;
-            let (p, q) = moved.get(i).map_or((*p, pose.q), |d| d.applied(p, &pose.q));
-            let not_applicable = |reason: String| NotApplicable {
-                effect: "preload_elastic".into(),
-                reason: format!("{}:{}: {reason}", campaign.source, pose.line),
-            };
-            let t = rod_forces(&p, &q, &pose.f).map_err(not_applicable)?;
-            slope.push(stretch_slope(&p, &q, &pose.f, &t).map_err(not_applicable)?);
-            stretch.push(t.map(|t| t / DEFAULT_ROD_STIFFNESS_N_PER_MM));
+            let by_others = moved.get(i).copied().unwrap_or_default();
+            let (p, q) = by_others.applied(p, &pose.q);
+            let at = Loaded::balanced(&p, &q, &pose.f, by_others.dq).map_err(|reason| {
+                NotApplicable {
+                    effect: "preload_elastic".into(),
+                    reason: format!("{}:{}: {reason}", campaign.source, pose.line),
+                }
+            })?;
+            poses.push(Some(Box::new(at)));
         }
         if loaded == 0 {
             return Err(NotApplicable {
@@ -89,9 +88,7 @@ impl Effect for PreloadElastic {
         Ok(Box::new(BoundPreload {
             // a rod cannot be stiffer than rigid: a negative compliance absorbs something else
             params: vec![EffectParam::new("compliance", "x default", 1.0).within(0.0, 10.0)],
-            at: *p,
-            stretch,
-            slope,
+            poses,
         }))
     }
 }
@@ -126,26 +123,60 @@ fn rod_forces(p: &Params, q: &[f64; 4], f: &[f64; 4]) -> Result<[f64; 5], String
 const SLOPE_STEP_MM: f64 = 1e-3;
 const SLOPE_STEP_RAD: f64 = 1e-6;
 
-/// ∂(stretch)/∂p of each rod at the default stiffness (mm per parameter unit), the forces
-/// `t` balanced at `p`: forward differences of the whole balance, its passes at the
-/// deformed pose included (differentiated at the last pass alone, the slope of a
-/// parallelogram rod came out 0.14 % short, and a row's, a difference of rods, 2 %).
-fn stretch_slope(p: &Params, q: &[f64; 4], f: &[f64; 4], t: &[f64; 5]) -> Result<[Row; 5], String> {
-    let mut slope = [Row::zeros(); 5];
-    for j in 0..N_PARAMS {
-        let h = if j == GAMMA1 || j == GAMMA2 {
-            SLOPE_STEP_RAD
-        } else {
-            SLOPE_STEP_MM
-        };
-        let mut moved = *p;
-        moved[j] += h;
-        let tj = rod_forces(&moved, q, f)?;
-        for (r, s) in slope.iter_mut().enumerate() {
-            s[j] = (tj[r] - t[r]) / h / DEFAULT_ROD_STIFFNESS_N_PER_MM;
+/// One loaded pose as bound: where its forces were balanced, the rods' stretch there and
+/// how it moves with the pose's parameters and carrier positions.
+struct Loaded {
+    /// The parameters the forces were balanced at (the fit's, changed by the other
+    /// effects) and the other effects' change of the carrier positions.
+    p: Params,
+    dq: [f64; 4],
+    /// Rod stretch at the default stiffness, mm ...
+    stretch: [f64; 5],
+    /// ... and its slopes: forward differences of the whole balance, its passes at the
+    /// deformed pose included (differentiated at the last pass alone, the slope of a
+    /// parallelogram rod came out 0.14 % short, and a row's, a difference of rods, 2 %).
+    over_p: [Row; 5],
+    over_q: [[f64; 4]; 5],
+}
+
+impl Loaded {
+    /// The pose of parameters `p`, carriers at `q` and drive forces `f` balanced, the other
+    /// effects having moved its carriers by `dq`.
+    fn balanced(p: &Params, q: &[f64; 4], f: &[f64; 4], dq: [f64; 4]) -> Result<Loaded, String> {
+        let t = rod_forces(p, q, f)?;
+        let stretch_of = |t: [f64; 5]| t.map(|t| t / DEFAULT_ROD_STIFFNESS_N_PER_MM);
+        let stretch = stretch_of(t);
+        let mut over_p = [Row::zeros(); 5];
+        for j in 0..N_PARAMS {
+            let h = if j == GAMMA1 || j == GAMMA2 {
+                SLOPE_STEP_RAD
+            } else {
+                SLOPE_STEP_MM
+            };
+            let mut moved = *p;
+            moved[j] += h;
+            let s = stretch_of(rod_forces(&moved, q, f)?);
+            for (r, g) in over_p.iter_mut().enumerate() {
+                g[j] = (s[r] - stretch[r]) / h;
+            }
         }
+        let mut over_q = [[0.0; 4]; 5];
+        for a in 0..4 {
+            let mut moved = *q;
+            moved[a] += SLOPE_STEP_MM;
+            let s = stretch_of(rod_forces(p, &moved, f)?);
+            for (r, g) in over_q.iter_mut().enumerate() {
+                g[a] = (s[r] - stretch[r]) / SLOPE_STEP_MM;
+            }
+        }
+        Ok(Loaded {
+            p: *p,
+            dq,
+            stretch,
+            over_p,
+            over_q,
+        })
     }
-    Ok(slope)
 }
 
 /// Rod forces that balance the drive forces `f` at the rigid pose of the carriers' (q1, q4)
@@ -181,12 +212,8 @@ fn balance_at(p: &Params, q: &[f64; 4], f: &[f64; 4]) -> Result<[f64; 5], String
 
 struct BoundPreload {
     params: Vec<EffectParam>,
-    /// The parameters the forces were balanced at.
-    at: Params,
-    /// Rod stretch at the default stiffness, mm, per pose, ...
-    stretch: Vec<[f64; 5]>,
-    /// ... and its slope over the parameters at `at` (zero where the pose is not loaded).
-    slope: Vec<[Row; 5]>,
+    /// Per pose, None where it is not loaded.
+    poses: Vec<Option<Box<Loaded>>>,
 }
 
 impl Bound for BoundPreload {
@@ -200,32 +227,40 @@ impl Bound for BoundPreload {
         Some(&PreloadElastic)
     }
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
-        for (i, rod) in RODS.iter().enumerate() {
-            let s = self.stretch[pose][i];
-            value.dp[rod.l] += theta[0] * s;
-            partials[0].dp[rod.l] += s;
+        let Some(at) = &self.poses[pose] else {
+            return;
+        };
+        for (r, rod) in RODS.iter().enumerate() {
+            value.dp[rod.l] += theta[0] * at.stretch[r];
+            partials[0].dp[rod.l] += at.stretch[r];
         }
     }
-    /// The stretch at `p` to first order from where the forces were balanced.
+    /// The stretch at `p` changed by `moved` to first order from where the forces were
+    /// balanced.
     fn correct_at(
         &self,
         pose: usize,
         theta: &[f64],
-        p: &Params,
+        (p, moved): (&Params, &Delta),
         value: &mut Delta,
         partials: &mut [Delta],
-        slopes: &mut Vec<(usize, Row)>,
+        slopes: &mut Vec<Slope>,
     ) {
-        let dp = Row::from_fn(|j, _| p[j] - self.at[j]);
-        for (i, rod) in RODS.iter().enumerate() {
-            let g = &self.slope[pose][i];
-            if g.iter().all(|v| *v == 0.0) {
-                continue;
-            }
-            let s = self.stretch[pose][i] + g.dot(&dp);
+        let Some(at) = &self.poses[pose] else {
+            return;
+        };
+        let dp = Row::from_fn(|j, _| p[j] + moved.dp[j] - at.p[j]);
+        let dq: [f64; 4] = std::array::from_fn(|a| moved.dq[a] - at.dq[a]);
+        for (r, rod) in RODS.iter().enumerate() {
+            let moves = (0..4).map(|a| at.over_q[r][a] * dq[a]).sum::<f64>();
+            let s = at.stretch[r] + at.over_p[r].dot(&dp) + moves;
             value.dp[rod.l] += theta[0] * s;
             partials[0].dp[rod.l] += s;
-            slopes.push((rod.l, theta[0] * g));
+            slopes.push(Slope {
+                param: rod.l,
+                dp: theta[0] * at.over_p[r],
+                dq: at.over_q[r].map(|g| theta[0] * g),
+            });
         }
     }
 }

@@ -177,6 +177,72 @@ fn the_preloads_stretch_moves_with_the_geometry_in_the_jacobian() {
     );
 }
 
+/// The preload's forces balance where the other effects put the machine: a parallel-holder's
+/// parameters move the pose its stretch is read at, so their Jacobian carries the preload's
+/// reaction. Against central differences with the set bound again at each displaced θ
+/// (`EffectSet::rebound`, the exact dependence), and large enough that the parallel-holder's
+/// own Jacobian alone fails.
+#[test]
+fn another_effects_parameters_move_the_preloads_stretch_in_the_jacobian() {
+    let (twin, c) = twin_campaign(
+        &[(EffectKind::PreloadElastic, 0.765)],
+        &[Instrument::Lt, Instrument::Kgm, Instrument::SelfCal],
+    );
+    let p = *twin.true_params();
+    let with: [&dyn effects::Effect; 2] = [&effects::Parallelogram, &effects::PreloadElastic];
+    let alone: [&dyn effects::Effect; 1] = [&effects::Parallelogram];
+    let bind = |e: &[&dyn effects::Effect]| EffectSet::bind(e, &c, &p).expect("bind");
+    let set = bind(&with);
+    let n_par = bind(&alone).n_params();
+    // the parallel-holder off its perfect shape (θ in its units), the preload as twin's
+    let theta: Vec<f64> = set
+        .layout()
+        .iter()
+        .map(|l| {
+            if l.effect == "preload_elastic" {
+                1.0
+            } else {
+                0.7 * l.param.prior
+            }
+        })
+        .collect();
+    let set = set
+        .rebound(&c, &p, &theta)
+        .expect("reads the geometry")
+        .expect("binds");
+    let (rows, _) = rows_and_tcp_errors(&c, &p, &set.corrections(&theta, &p));
+    let (own, _) = rows_and_tcp_errors(&c, &p, &bind(&alone).corrections(&theta[..n_par], &p));
+    let (mut worst, mut reaction) = (0.0_f64, 0.0_f64);
+    for k in 0..n_par {
+        let h = 1e-3 * set.layout()[k].param.prior;
+        let at = |d: f64| {
+            let mut t = theta.clone();
+            t[k] += d;
+            let again = set.rebound(&c, &p, &t).expect("reads").expect("binds");
+            rows_and_tcp_errors(&c, &p, &again.corrections(&t, &p)).0
+        };
+        let (rp, rm) = (at(h), at(-h));
+        for (i, r) in rows.iter().enumerate() {
+            let fd = (rp[i].value - rm[i].value) / (2.0 * h);
+            let scale = r.d_theta[k].abs().max(1.0);
+            worst = worst.max((fd - r.d_theta[k]).abs() / scale);
+            reaction = reaction.max((fd - own[i].d_theta[k]).abs() / scale);
+        }
+    }
+    eprintln!(
+        "largest difference from the set bound again: {worst:.2e} of the row's sensitivity; \
+         the preload's reaction up to {reaction:.2e}"
+    );
+    assert!(
+        worst < 1e-4,
+        "analytic θ-Jacobian off the exact one by {worst:e} of it"
+    );
+    assert!(
+        reaction > 100.0 * worst,
+        "the preload's reaction {reaction:e} is not above the test's resolution {worst:e}"
+    );
+}
+
 /// Calibrate model 24 (rod 5 linked) plus `effect` on a campaign where the twin hid it; the
 /// named parameter's estimate and σ.
 fn identified(hidden: EffectKind, magnitude: f64, effect: &str, param: &str) -> (f64, f64) {
