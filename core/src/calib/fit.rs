@@ -17,7 +17,7 @@ use super::uncertainty::{posterior, step2_covariance, Posterior, KEEP_JACOBIAN_P
 use crate::campaign::Campaign;
 use crate::effects::{Corrections, EffectSet};
 use crate::obs::{Residual, RowValue, Step};
-use crate::params::{Params, NAMES, N_PARAMS};
+use crate::params::{Model, Params, NAMES, N_PARAMS};
 use nalgebra::{DMatrix, DVector, SMatrix};
 use std::cell::OnceCell;
 use std::collections::HashSet;
@@ -190,6 +190,16 @@ pub(super) fn start_theta(
             bound: effects.n_poses(),
             poses: campaign.poses.len(),
         });
+    }
+    if opts.model == Model::M24 {
+        let probe = vec![1.0; effects.n_params()];
+        if let Some(k) = effects.corrections(&probe, &Params::nominal()).rod5_apart() {
+            let slot = &effects.layout()[k];
+            return Err(CalibrationError::Rod5OfItsOwn {
+                effect: slot.effect.clone(),
+                why: format!("its {} changes rod 5 by its own amount", slot.param.name),
+            });
+        }
     }
     match theta0.len() {
         0 => Ok(vec![0.0; effects.n_params()]),

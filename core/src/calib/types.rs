@@ -169,6 +169,13 @@ pub enum CalibrationError {
     StartThetaLength { given: usize, expected: usize },
     #[error("parameter {0} does not belong to {1}")]
     NotInModel(&'static str, Model),
+    #[error(
+        "{effect} moves rod 5 otherwise than rod 4 ({why}), and model 24's perfect parallel-holder \
+         (platform angle = gamma2) has no rod 5 of its own to carry that: calibrate model 29 with \
+         rod 5 tied to rod 4 (rpkm calibrate --model 29 --perfect-parallelogram; what rpkm diagnose \
+         calls model 24)"
+    )]
+    Rod5OfItsOwn { effect: String, why: String },
     #[error("parameter {0} has no influence on these measurements (zero Jacobian column)")]
     Unobservable(&'static str),
     #[error("no parameter is observable with this campaign")]

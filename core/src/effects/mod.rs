@@ -249,6 +249,29 @@ impl Corrections {
         out
     }
 
+    /// The θ index of the first parameter that moves rod 5 otherwise than rod 4 (its length
+    /// or a joint by another amount), where any does: a change model 24's perfect
+    /// parallel-holder (ψ ≡ γ2, no rod 5 of its own) cannot carry.
+    pub fn rod5_apart(&self) -> Option<usize> {
+        use crate::params::{L4, L5, XA4R, XA5R, XB4R, XB5R, YA4R, YA5R, YB4R, YB5R};
+        const PAIRS: [(usize, usize); 5] = [
+            (L4, L5),
+            (XA4R, XA5R),
+            (YA4R, YA5R),
+            (XB4R, XB5R),
+            (YB4R, YB5R),
+        ];
+        self.partials
+            .iter()
+            .find(|(_, d)| {
+                PAIRS.iter().any(|&(four, five)| {
+                    let (a, b) = (d.dp[four], d.dp[five]);
+                    (a - b).abs() > 1e-9 * a.abs().max(b.abs())
+                })
+            })
+            .map(|(k, _)| *k)
+    }
+
     /// ∂value/∂θ over every effect parameter of a value with input sensitivities `at`
     /// (pairs of pose index and sensitivity: the pose and, for relative instruments, its
     /// setup's reset pose). The partials left out are zero: they would add a zero.
