@@ -158,8 +158,8 @@ impl<'j> Judge<'j> {
     }
 
     /// The entry's prediction against the current model's: held-out data where they decide
-    /// (better, or clearly worse), else the setups cross-validation leaves out, for a model
-    /// that may matter.
+    /// (better, clearly worse, or a change they resolve and do not follow), else the setups
+    /// cross-validation leaves out, for a model that may matter.
     pub(super) fn predict(&self, e: &mut Entry) {
         let held = self
             .val
@@ -168,7 +168,7 @@ impl<'j> Judge<'j> {
             e.held = Some(e.fitted.fit.val_scaled.clone());
         }
         e.prediction = held;
-        if held.is_some_and(|p| p.better || p.worse) {
+        if held.is_some_and(|p| p.better || p.worse || p.resolves()) {
             return;
         }
         // left-out rows only where the calibration itself says it may matter: on a hundred

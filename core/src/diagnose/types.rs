@@ -244,6 +244,10 @@ pub struct Prediction {
     pub worse: bool,
     /// Judged by cross-validation by setup on the calibration campaign.
     pub by_setup: bool,
+    /// How clearly the compared errors would follow the change if it were right: its size
+    /// over the errors' RMS, √ΣΔ² / s, the regression's expected t-value under the change
+    /// (0 where nothing changes).
+    pub resolution: f64,
 }
 
 /// How an addition to the model fares on both campaigns (a candidate alone, or a

@@ -143,3 +143,86 @@ fn a_change_fitted_to_the_errors_is_judged_by_its_fall_beyond_the_fit() {
         share(held_below)
     );
 }
+
+/// A change's resolution is the regression's expected t-value were the change right: the
+/// errors holding a change of √ΣΔ² = 4 s, the regression's z-value (from its p) averages 4
+/// over 2,000 trials (normal theory: mean 4, SD 1), and the change is resolved; drawn apart
+/// from the errors, the same change is resolved as well (the held-out data decide it: they
+/// do not follow it, its p-values uniform), while a change of 1.5 s is left to the setups
+/// left out.
+#[test]
+fn a_change_the_errors_would_follow_at_three_standard_errors_is_theirs_to_decide() {
+    let mut g = Normal(23);
+    let (trials, n): (usize, usize) = (2_000, 200);
+    let shaped = |g: &mut Normal, size: f64| {
+        let c = g.draws(n);
+        let norm = c.iter().map(|v| v * v).sum::<f64>().sqrt();
+        c.iter().map(|v| v * size / norm).collect::<Vec<f64>>()
+    };
+    let (mut z_sum, mut resolved, mut apart_resolved) = (0.0, 0, 0);
+    for _ in 0..trials {
+        let noise = g.draws(n);
+        let s = (noise.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+        let change = shaped(&mut g, 4.0 * s);
+        // the errors hold the change: before = noise + change, after = noise
+        let before: Vec<f64> = noise.iter().zip(&change).map(|(e, c)| e + c).collect();
+        let p = Prediction::compared(&before, &noise).expect("compared");
+        z_sum += normal_quantile_upper(p.support_p);
+        resolved += usize::from(p.resolves());
+        // drawn apart: the same change taken from errors that do not hold it
+        let after: Vec<f64> = noise.iter().zip(&change).map(|(e, c)| e - c).collect();
+        let apart = Prediction::compared(&noise, &after).expect("compared");
+        apart_resolved += usize::from(apart.resolves());
+        let small = shaped(&mut g, 1.5 * s);
+        let after: Vec<f64> = noise.iter().zip(&small).map(|(e, c)| e - c).collect();
+        let small = Prediction::compared(&noise, &after).expect("compared");
+        assert!(!small.resolves(), "resolution {}", small.resolution);
+    }
+    let z_mean = z_sum / trials as f64;
+    // the errors' RMS before includes the change: √(1 + 16/200) of the noise's
+    let expected = 4.0 / (1.0_f64 + 16.0 / n as f64).sqrt();
+    assert!(
+        (z_mean - expected).abs() < 0.1,
+        "mean z {z_mean} against {expected}"
+    );
+    assert_eq!(resolved, trials);
+    assert_eq!(apart_resolved, trials);
+}
+
+/// The upper-tail normal quantile of `p` (bisection on erfc): the test's own, not the
+/// model's.
+fn normal_quantile_upper(p: f64) -> f64 {
+    let upper = |z: f64| 0.5 * libm_erfc(z / std::f64::consts::SQRT_2);
+    let (mut lo, mut hi) = (-10.0, 40.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if upper(mid) > p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// erfc by Numerical Recipes' erfcc approximation (relative error below 1.2e-7).
+fn libm_erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let r = t
+        * (-z * z - 1.265_512_23
+            + t * (1.000_023_68
+                + t * (0.374_091_96
+                    + t * (0.096_784_18
+                        + t * (-0.186_288_06
+                            + t * (0.278_868_07
+                                + t * (-1.135_203_98
+                                    + t * (1.488_515_87
+                                        + t * (-0.822_152_23 + t * 0.170_872_77)))))))))
+            .exp();
+    if x >= 0.0 {
+        r
+    } else {
+        2.0 - r
+    }
+}
