@@ -168,7 +168,7 @@ impl<'j> Judge<'j> {
             e.held = Some(e.fitted.fit.val_scaled.clone());
         }
         e.prediction = held;
-        if held.is_some_and(|p| p.better || p.worse || p.resolves()) {
+        if held.is_some_and(|p| p.better || p.worse || p.contradicted()) {
             return;
         }
         // left-out rows only where the calibration itself says it may matter: on a hundred

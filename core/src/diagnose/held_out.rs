@@ -490,15 +490,16 @@ impl Prediction {
         })
     }
 
-    /// Whether the compared errors resolve the change: were it right, they would follow it
-    /// at [`RESOLVED`] standard errors or more. Where they resolve it and it is not better,
-    /// they have the last word: the left-out setups share the calibration's misfit, and on
-    /// the foreign `soft_rod` they supported a frame expansion (1.42 -> 1.14 σ) that the
-    /// held-out tracker resolved at 4.9 and did not follow (0.82 -> 0.89 σ, p = 0.45). A
-    /// change fitted to the compared errors themselves (`refitted`) follows them by
-    /// construction and is never resolved this way.
-    pub fn resolves(&self) -> bool {
-        self.refitted == 0 && self.resolution >= RESOLVED
+    /// Whether the compared errors contradict the change: they resolve it (were it right,
+    /// they would follow it at [`RESOLVED`] standard errors or more) and do not follow it
+    /// (its support's p-value at least [`NOT_FOLLOWED`]). There they have the last word even
+    /// where their RMS neither clearly falls nor rises: the left-out setups share the
+    /// calibration's misfit, and on the foreign `soft_rod` they supported a frame expansion
+    /// (1.42 -> 1.14 σ) that the held-out tracker resolved at 4.9 and did not follow
+    /// (0.82 -> 0.89 σ, p = 0.45). A change fitted to the compared errors themselves
+    /// (`refitted`) follows them by construction and is never contradicted this way.
+    pub fn contradicted(&self) -> bool {
+        self.refitted == 0 && self.resolution >= RESOLVED && self.support_p >= NOT_FOLLOWED
     }
 
     /// RMS of the part of the errors the change explains, √(RMS_b² − RMS_a²), in `unit`
@@ -511,8 +512,12 @@ impl Prediction {
 }
 
 /// The expected t-value of the held-out regression on a change, were it right, from which
-/// the held-out data decide it ([`Prediction::resolves`]): three standard errors.
-pub const RESOLVED: f64 = 3.0;
+/// the held-out data resolve it ([`Prediction::contradicted`]): four standard errors, where
+/// a right change reads below [`NOT_FOLLOWED`] once in 80.
+pub const RESOLVED: f64 = 4.0;
+
+/// The support's p-value from which resolved errors do not follow a change (z below 1.64).
+pub const NOT_FOLLOWED: f64 = 0.05;
 
 /// The change from `before` to `after` over the errors' RMS (see
 /// [`Prediction::resolution`]).
