@@ -242,6 +242,9 @@ pub struct Prediction {
     /// that is a tie, which the held-out data do not decide: an effect they do not see
     /// would otherwise be refused one time in six by chance).
     pub worse: bool,
+    /// The RMS's fall as `better` and `worse` read it (in µm where the rest compares the
+    /// held-out errors in σ): not above zero where it did not fall at all.
+    pub fall_read: f64,
     /// Judged by cross-validation by setup on the calibration campaign.
     pub by_setup: bool,
     /// How clearly the compared errors would follow the change if it were right: its size
