@@ -394,15 +394,6 @@ fn model_24_refuses_an_effect_that_moves_rod_5_on_its_own() {
         serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("parses");
     let chi2 = out["chi2_per_dof"].as_f64().expect("chi2_per_dof");
     assert!((0.8..1.25).contains(&chi2), "chi2/dof {chi2}");
-    let c = out["effects"]
-        .as_array()
-        .expect("effects")
-        .iter()
-        .find(|e| e["name"] == "compliance")
-        .expect("the compliance");
-    let (v, s) = (
-        c["value"].as_f64().expect("v"),
-        c["sigma"].as_f64().expect("σ"),
-    );
+    let (v, s) = crate::diagnosis_support::effect_value(&out["effects"], "compliance");
     assert!((v - 1.0).abs() <= 3.0 * s, "compliance {v} ± {s}");
 }

@@ -446,16 +446,7 @@ fn a_preloaded_machine_is_fitted_to_its_minimum() {
         "{}",
         d["verdict"]
     );
-    let compliance = d["effect_values"]
-        .as_array()
-        .expect("effect values")
-        .iter()
-        .find(|e| e["name"] == "compliance")
-        .expect("the compliance");
-    let (v, s) = (
-        compliance["value"].as_f64().expect("value"),
-        compliance["sigma"].as_f64().expect("σ"),
-    );
+    let (v, s) = crate::diagnosis_support::effect_value(&d["effect_values"], "compliance");
     assert!((v - 1.0).abs() <= 3.0 * s, "compliance {v} ± {s}");
     for (seed, machine, hidden) in [
         (7, 122, vec!["preload_elastic"]),

@@ -339,7 +339,10 @@ impl Lm<'_> {
         let pb = self.problem;
         let made = self
             .made
-            .filter(|(theta, corr)| same_bits(theta, &x.theta) && corr.hold_at(&x.p))
+            .filter(|(theta, corr)| {
+                same_bits(theta, &x.theta)
+                    && corr.made_at().is_none_or(|at| same_bits(&at.0, &x.p.0))
+            })
             .map(|(_, corr)| corr);
         let own;
         let corr = if let Some(corr) = made {

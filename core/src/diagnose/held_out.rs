@@ -110,7 +110,7 @@ impl Model1<'_> {
             self.cal.model,
             &set.corrections(&theta, &self.cal.params),
         )?;
-        let refit = set.layout().iter().filter(|s| s.setup_local).count();
+        let refit = set.setup_local_params();
         Ok((errs.iter().map(|e| e.value).collect(), refit))
     }
 
@@ -492,13 +492,19 @@ impl Prediction {
         })
     }
 
+    /// Whether the compared errors decide between the two models: the RMS clearly falls or
+    /// rises. Where they do not, the setups left out do.
+    pub fn decides(&self) -> bool {
+        self.better || self.worse
+    }
+
     /// Whether the compared errors contradict the change: they resolve it (were it right,
     /// they would follow it at [`RESOLVED`] standard errors or more), do not follow it (its
     /// support's p-value at least [`NOT_FOLLOWED`]) and their RMS, read as the user reads it,
     /// does not fall (a soft rod's preload lowered a noisy tracker's 29.73 to 29.46 µm, not
-    /// followed at p = 0.099 in σ, and the setups left out confirmed it). There they have
-    /// the last word even
-    /// where their RMS neither clearly falls nor rises: the left-out setups share the
+    /// followed at p = 0.099 in σ, and the setups left out confirmed it). There a candidate's
+    /// held-out data have the last word even where their RMS neither clearly falls nor
+    /// rises: the left-out setups share the
     /// calibration's misfit, and on the foreign `soft_rod` they supported a frame expansion
     /// (1.42 -> 1.14 σ) that the held-out tracker resolved at 4.9 and did not follow
     /// (0.82 -> 0.89 σ, p = 0.45). A change fitted to the compared errors themselves
@@ -521,7 +527,7 @@ impl Prediction {
 
 /// The expected t-value of the held-out regression on a change, were it right, from which
 /// the held-out data resolve it ([`Prediction::contradicted`]): four standard errors, where
-/// a right change reads below [`NOT_FOLLOWED`] once in 80.
+/// a right change reads below [`NOT_FOLLOWED`] in 0.9 % (N(4, 1) below 1.64).
 pub const RESOLVED: f64 = 4.0;
 
 /// The support's p-value from which resolved errors do not follow a change (z below 1.64).

@@ -49,7 +49,7 @@ pub(crate) fn search<'a>(
         };
         let fitted = clone_fitted(&fits[pos].1);
         let mut entry = judge.entry((vec![effect], None), fitted, Some(i));
-        if entry.candidate.is_some() && c.prediction.is_some_and(|p| !p.better && !p.worse) {
+        if entry.candidate.is_some() && c.prediction.is_some_and(|p| !p.decides()) {
             c.cross_validated = entry.prediction.filter(|p| p.by_setup);
         }
         entry.relevant = c.relevant;

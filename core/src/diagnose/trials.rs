@@ -396,7 +396,7 @@ pub(crate) fn finish_with(
         val_rms_um,
         val_errors: val_errors.unwrap_or_default(),
         val_scaled: val_scaled.unwrap_or_default(),
-        setup_params: set.layout().iter().filter(|s| s.setup_local).count(),
+        setup_params: set.setup_local_params(),
         val_refit,
         effect_params: cal.effects,
         determined: cal.determined,

@@ -205,7 +205,7 @@ impl Candidate {
     /// or clearly worse), else cross-validation by setup.
     pub fn alone(&self) -> Option<Prediction> {
         self.prediction
-            .filter(|p| p.better || p.worse)
+            .filter(Prediction::decides)
             .or(self.cross_validated)
     }
 }

@@ -158,9 +158,9 @@ pub struct Corrections {
 /// A partial of a binding that reads no geometry, chained through the slopes of one pose's
 /// bindings that read it: its change of the pose's inputs moves the pose they read.
 fn chain_through(d: &mut Delta, slopes: &[Slope]) {
-    let added: Vec<(usize, f64)> = slopes.iter().map(|g| (g.param, g.of(d))).collect();
-    for (l, v) in added {
-        d.dp[l] += v;
+    let before = *d;
+    for g in slopes {
+        d.dp[g.param] += g.of(&before);
     }
 }
 
@@ -220,15 +220,10 @@ impl Corrections {
         }
     }
 
-    /// Whether these corrections hold at the parameters `p`: made there, or reading no
-    /// geometry.
-    pub fn hold_at(&self, p: &Params) -> bool {
-        self.geometry.as_ref().is_none_or(|g| {
-            g.at.0
-                .iter()
-                .zip(&p.0)
-                .all(|(a, b)| a.to_bits() == b.to_bits())
-        })
+    /// The parameters these corrections were made at, where a change reads the geometry
+    /// (elsewhere they hold at any).
+    pub fn made_at(&self) -> Option<&Params> {
+        self.geometry.as_ref().map(|g| &g.at)
     }
 
     /// ∂value/∂p through the corrections, over the 29 parameters, of a value with input
@@ -253,18 +248,18 @@ impl Corrections {
     /// or a joint by another amount), where any does: a change model 24's perfect
     /// parallel-holder (ψ ≡ γ2, no rod 5 of its own) cannot carry.
     pub fn rod5_apart(&self) -> Option<usize> {
-        use crate::params::{L4, L5, XA4R, XA5R, XB4R, XB5R, YA4R, YA5R, YB4R, YB5R};
-        const PAIRS: [(usize, usize); 5] = [
-            (L4, L5),
-            (XA4R, XA5R),
-            (YA4R, YA5R),
-            (XB4R, XB5R),
-            (YB4R, YB5R),
+        let (four, five) = (&crate::params::RODS[3], &crate::params::RODS[4]);
+        let pairs = [
+            (four.l, five.l),
+            (four.xa, five.xa),
+            (four.ya, five.ya),
+            (four.xb, five.xb),
+            (four.yb, five.yb),
         ];
         self.partials
             .iter()
             .find(|(_, d)| {
-                PAIRS.iter().any(|&(four, five)| {
+                pairs.iter().any(|&(four, five)| {
                     let (a, b) = (d.dp[four], d.dp[five]);
                     (a - b).abs() > 1e-9 * a.abs().max(b.abs())
                 })
@@ -471,6 +466,11 @@ impl EffectSet {
         self.bound.iter().map(|b| b.0.as_str()).collect()
     }
 
+    /// How many effect parameters belong to the campaign's setups ([`Slot::setup_local`]).
+    pub fn setup_local_params(&self) -> usize {
+        self.layout().iter().filter(|s| s.setup_local).count()
+    }
+
     /// Every effect parameter's place in θ, in θ order.
     pub fn layout(&self) -> Vec<Slot> {
         let mut out = Vec::new();
@@ -512,21 +512,27 @@ impl EffectSet {
         out.starts.push(0);
         let mut slopes = Vec::new();
         let mut slope_starts = vec![0];
+        // which bindings read the geometry: they are corrected after the others
+        let reads: Vec<bool> = self
+            .bound
+            .iter()
+            .map(|b| b.1.rebinds_from().is_some())
+            .collect();
         // one pose's partials, of which each effect zeroes and reads only those it touches
         let mut scratch = vec![Delta::default(); n];
         for i in 0..self.n_poses {
             let mut value = Delta::default();
             // the bindings that read no geometry first: one that reads it reads the pose
             // where they put the machine (as it was bound, `EffectSet::rebound`)
-            for reads in [false, true] {
-                for (b, own_theta, k) in self.with_theta(theta) {
-                    if b.rebinds_from().is_some() != reads {
+            for pass in [false, true] {
+                for ((b, own_theta, k), &reading) in self.with_theta(theta).zip(&reads) {
+                    if reading != pass {
                         continue;
                     }
                     let touched = b.touched(i);
                     let own = &mut scratch[k..k + own_theta.len()];
                     own[touched].fill(Delta::default());
-                    if reads {
+                    if reading {
                         let moved = value;
                         b.correct_at(i, own_theta, (p, &moved), &mut value, own, &mut slopes);
                     } else {
@@ -535,10 +541,10 @@ impl EffectSet {
                 }
             }
             let first_slope = *slope_starts.last().unwrap_or(&0);
-            for (b, _, k) in self.with_theta(theta) {
+            for ((b, _, k), &reading) in self.with_theta(theta).zip(&reads) {
                 for j in b.touched(i) {
                     let mut d = scratch[k + j];
-                    if b.rebinds_from().is_none() {
+                    if !reading {
                         // the others' parameters move the pose the stretch was read at
                         chain_through(&mut d, &slopes[first_slope..]);
                     }

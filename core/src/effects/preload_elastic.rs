@@ -117,9 +117,9 @@ fn rod_forces(p: &Params, q: &[f64; 4], f: &[f64; 4]) -> Result<[f64; 5], String
     Ok(t)
 }
 
-/// Steps of the slope's differences: a micrometre of a length, a microradian of a guide's
-/// angle. The balance is smooth over millimetres: the step's curvature error is 1e-6 of
-/// the slope, its round-off 1e-9 of it.
+/// Steps of the slope's forward differences: a micrometre of a length, a microradian of a
+/// guide's angle. With them the rows' Jacobian is within 2.4e-5 of their sensitivity of the
+/// balance made again at each displaced point (core/tests/it/effects_jacobian.rs).
 const SLOPE_STEP_MM: f64 = 1e-3;
 const SLOPE_STEP_RAD: f64 = 1e-6;
 

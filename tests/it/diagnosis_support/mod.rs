@@ -10,6 +10,21 @@ pub fn candidate<'d>(d: &'d serde_json::Value, effect: &str) -> &'d serde_json::
         .unwrap_or_else(|| panic!("{effect} among the candidates"))
 }
 
+/// The effect parameter `name` of a list of them (a diagnosis's `effect_values`, a
+/// calibration's `effects`): its value and σ, or a failure naming what is missing.
+pub fn effect_value(list: &serde_json::Value, name: &str) -> (f64, f64) {
+    let p = list
+        .as_array()
+        .expect("effect parameters")
+        .iter()
+        .find(|e| e["name"] == name)
+        .unwrap_or_else(|| panic!("the effect parameter {name}"));
+    (
+        p["value"].as_f64().expect("value"),
+        p["sigma"].as_f64().expect("σ"),
+    )
+}
+
 /// The fitted parameter `name` of the candidate `effect` of diagnosis `d`: its value, σ and
 /// unit, or a failure naming what is missing.
 pub fn candidate_param(d: &serde_json::Value, effect: &str, name: &str) -> (f64, f64, String) {
