@@ -19,7 +19,10 @@ use std::path::PathBuf;
 /// 2. Tries every effect of the library not yet in the model: parallelogram, preload_elastic,
 ///    thermal, encoder_scale, guide_straightness, instrument_alignment; for each, its
 ///    parameters, a nested F-test, the fraction of the residual above the noise it explains
-///    and the held-out RMS after adding it. Ranked best first (BIC).
+///    and the held-out RMS after adding it. Ranked best first (BIC). A family's parts
+///    (thermal:rods) and an effect's refinements (preload_elastic:rod3, a rod of another
+///    stiffness with a compliance of its own) are tried where the family or effect stands
+///    out, and the model is chosen whole.
 /// 3. Names the missing effect, or says that nothing is missing.
 /// 4. When a structured residual remains that no effect explains, points at the covariate,
 ///    drive force, time or workspace term it follows.

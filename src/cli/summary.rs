@@ -52,7 +52,8 @@ pub fn print_summary(campaign: &Campaign, d: &ModelDiagnosis) {
     }
     if d.model_effects != d.effects_in_model {
         println!(
-            "   fitted as {} (a family keeps the parts the data can tell apart)",
+            "   fitted as {} (a family keeps the parts the data can tell apart, an effect the \
+             refinement they need: a rod of its own stiffness)",
             d.model_effects.join(" + ")
         );
     }

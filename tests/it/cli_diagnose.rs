@@ -290,8 +290,9 @@ fn named_of(o: &serde_json::Value) -> Vec<String> {
 /// Two machines of the benchmark whose models were once chosen wrong as a whole. Machine 124
 /// of seed 1 hides a rod of another stiffness than the others, all drives active: the preload's
 /// pair with `encoder_scale` was named, the guides' scale difference absorbing part of the
-/// rod's force-following residual that a single dictionary term explains better (the rod is
-/// not in the library: `preload_elastic` alone, and the loop says structure is left).
+/// rod's force-following residual. Then `preload_elastic` was named alone and the loop said
+/// structure was left; with a rod of its own compliance (`preload_elastic:rodN`) nothing is
+/// missing at the floor.
 /// Machine 171 of seed 2 hides thermal expansion of the rods and scales (frame 0) with the
 /// preload: the preload with thermal's rods and scales was never tried together, and the
 /// pair against thermal alone was a tie on the held-out tracker where the setups left out
@@ -304,7 +305,9 @@ fn the_model_is_chosen_whole_where_parts_absorb_each_other() {
     for (seed, machine) in [(1, 124), (2, 0)] {
         let soft = bench_machine_of(seed, machine);
         assert_eq!(named_of(&soft), ["preload_elastic"], "{soft}");
-        assert_eq!(soft["final_verdict"], "unexplained_structure", "{soft}");
+        assert_eq!(soft["final_verdict"], "nothing_missing", "{soft}");
+        let over_floor = soft["held_out_over_floor"].as_f64().expect("ratio");
+        assert!((0.9..1.1).contains(&over_floor), "{soft}");
     }
     let pair = bench_machine_of(2, 171);
     assert_eq!(named_of(&pair), ["preload_elastic", "thermal"], "{pair}");
@@ -448,6 +451,8 @@ fn a_preloaded_machine_is_fitted_to_its_minimum() {
     );
     let (v, s) = crate::diagnosis_support::effect_value(&d["effect_values"], "compliance");
     assert!((v - 1.0).abs() <= 3.0 * s, "compliance {v} ± {s}");
+    // its rods are alike: none is given a compliance of its own
+    assert_eq!(d["model_effects"], serde_json::json!(["preload_elastic"]));
     for (seed, machine, hidden) in [
         (7, 122, vec!["preload_elastic"]),
         (2, 90, vec!["parallelogram", "preload_elastic"]),
@@ -459,4 +464,74 @@ fn a_preloaded_machine_is_fitted_to_its_minimum() {
             "seed {seed} machine {machine}: {o}"
         );
     }
+}
+
+/// A rod 30 % stiffer than the others, all drives active: it takes another share of the
+/// preload, and a compliance for all rods leaves its misfit. The guides' scale difference
+/// beside the preload absorbed part of it and was named (13 such machines of the benchmark's
+/// seven seeds). The preload's refinement with a compliance of its own for rod 3 is named
+/// instead, the next diagnosis settles `preload_elastic` to it, and both compliances are the
+/// twin's: the others' 1, rod 3's the default stiffness over its own.
+#[test]
+fn a_rod_of_another_stiffness_is_given_its_own_compliance() {
+    let dir = scratch("stiff-rod");
+    let (cal, truth) = (dir.join("c.csv"), dir.join("t.json"));
+    run_ok(
+        rpkm()
+            .args([
+                "simulate",
+                "--campaign",
+                "lt,kgm,self",
+                "--effect",
+                "preload_elastic=0.765",
+                "--rod-stiffness",
+                "3=1.3",
+                "--seed",
+                "4",
+                "--out",
+            ])
+            .arg(&cal)
+            .arg("--truth")
+            .arg(&truth),
+    );
+    let rods = json(&truth)["stiffness"]["rod"].clone();
+    let k = |r: usize| rods[r].as_f64().expect("stiffness");
+    let diagnose = |effects: &[&str], out: &str| {
+        let report = dir.join(out);
+        let mut cmd = rpkm();
+        cmd.arg("diagnose")
+            .arg(&cal)
+            .arg("--validate")
+            .arg(cal.with_extension("val.csv"));
+        if !effects.is_empty() {
+            cmd.args(["--effects", &effects.join(",")]);
+        }
+        run_ok(cmd.arg("--json").arg(&report));
+        json(&report)
+    };
+    let first = diagnose(&[], "d0.json");
+    assert_eq!(
+        first["missing_effects"],
+        serde_json::json!(["preload_elastic:rod3"]),
+        "{}",
+        first["verdict"]
+    );
+    assert_eq!(first["missing_effect"], "preload_elastic");
+    let d = diagnose(&["preload_elastic"], "d1.json");
+    assert_eq!(
+        d["model_effects"],
+        serde_json::json!(["preload_elastic:rod3"])
+    );
+    assert_eq!(d["verdict_kind"], "nothing_missing", "{}", d["verdict"]);
+    let values = &d["effect_values"];
+    let (common, s) = crate::diagnosis_support::effect_value(values, "compliance");
+    // rods 1, 2, 4 and 5 at the model's default stiffness, rod 3 at its own
+    assert!((common - 1.0).abs() <= 3.0 * s, "compliance {common} ± {s}");
+    let (own, s) = crate::diagnosis_support::effect_value(values, "compliance_rod3");
+    let want = k(0) / k(2);
+    assert!(
+        (own - want).abs() <= 3.0 * s,
+        "rod 3: {own} ± {s}, twin {want}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -187,7 +187,9 @@ fn foreign_cyclic_error_is_found_by_its_period() {
 }
 
 /// All drives active and rod 2 softer than the others: the preload's effect is named and
-/// nothing else (thermal and encoder_scale fitted the campaign and predicted worse).
+/// nothing else (thermal and encoder_scale fitted the campaign and predicted worse); it
+/// settles to the soft rod's own compliance, the simulator's stiffness factor's inverse, and
+/// nothing is missing.
 #[test]
 fn foreign_soft_rod_names_the_preload_alone() {
     let Some(root) = foreign() else { return };
@@ -197,7 +199,29 @@ fn foreign_soft_rod_names_the_preload_alone() {
     let (named, d) = discovery_loop(&ds, &scratch);
     eprintln!("soft_rod: {}", d["verdict"]);
     assert_eq!(named, ["preload_elastic"], "{}", d["verdict"]);
-    assert_ne!(d["verdict_kind"], "missing_effect", "{}", d["verdict"]);
+    assert_eq!(d["verdict_kind"], "nothing_missing", "{}", d["verdict"]);
+    let factors = json(&ds.join("truth.json"))["hidden_effects"]["soft_rod"].clone();
+    let factors: Vec<f64> = factors
+        .as_array()
+        .expect("soft_rod's stiffness factors")
+        .iter()
+        .map(|f| f.as_f64().expect("factor"))
+        .collect();
+    let rod = factors
+        .iter()
+        .position(|f| (f - 1.0).abs() > 1e-9)
+        .expect("a soft rod");
+    let own = format!("compliance_rod{}", rod + 1);
+    assert_eq!(
+        d["model_effects"],
+        serde_json::json!([format!("preload_elastic:rod{}", rod + 1)])
+    );
+    let (c, s) = crate::diagnosis_support::effect_value(&d["effect_values"], &own);
+    let want = 1.0 / factors[rod];
+    assert!(
+        (c - want).abs() <= 3.0 * s,
+        "{own} {c} ± {s}, simulator {want}"
+    );
     let val = d["baseline"]["val_rms_um"].as_f64().expect("held-out RMS");
     let floor = true_floor_um(&ds);
     assert!(

@@ -111,10 +111,15 @@ impl Current {
         let level = opts.alpha / settle::PART_COMBINATIONS;
         let settled = settle::settle(campaign, val.as_ref(), in_model, (&copts, level));
         let effects = settled.effects(in_model);
-        let cal = if settled.changed() {
-            fit_model(campaign, &effects, &copts)?
+        // the noise is the settled model's: estimated under the model named, a rod of another
+        // stiffness left its misfit in the noise (a tracker 29x its stated noise where the
+        // settled model leaves it at 1.1x)
+        let (cal, est, copts, val) = if settled.changed() {
+            let (cal, est, copts) = noise_of(campaign, &effects, opts, None)?;
+            let val = validation::held_out(validation, &est.model)?;
+            (cal, est, copts, val)
         } else {
-            cal
+            (cal, est, copts, val)
         };
         let set = EffectSet::bind(&effects, campaign, &cal.start)?;
         let fitted = finish_with(val.as_ref(), &effects, &set, cal.clone(), &copts)?;

@@ -20,8 +20,10 @@ pub(crate) struct Pool<'a> {
 }
 
 impl<'j> Judge<'j> {
-    /// Each part of a family that stands out, on its own and in every smaller combination
-    /// (`variants`: [`part_variants`]): the campaign may separate some parts and not others.
+    /// Each part of a family that stands out, on its own and in every smaller combination,
+    /// and each refinement of an effect that stands out (`variants`: [`part_variants`]): the
+    /// campaign may separate some parts and not others, and a rod of another stiffness is
+    /// what another effect beside the preload would absorb otherwise.
     pub(super) fn add_parts<'a>(
         &self,
         entries: &mut Vec<Entry<'a>>,
@@ -29,7 +31,10 @@ impl<'j> Judge<'j> {
     ) {
         let families: Vec<usize> = (0..entries.len())
             .filter(|&k| entries[k].added.len() == 1)
-            .filter(|&k| entries[k].added[0].parts().len() > 1)
+            .filter(|&k| {
+                let e = entries[k].added[0];
+                e.parts().len() > 1 || !e.refinements().is_empty()
+            })
             .filter(|&k| entries[k].p_value < SCREEN_P)
             .collect();
         for k in families {
@@ -136,10 +141,15 @@ impl<'j> Judge<'j> {
 }
 
 /// Every proper part combination of each family among `effects` named whole (thermal: rods,
-/// frame, scales, and the pairs of them): what the search tries where a family stands out;
-/// with `whole`, the whole family too (the variants of a family in the current model).
+/// frame, scales, and the pairs of them), and without `whole` each effect's refinements
+/// ([`Effect::refinements`]): what the search tries where a family stands out; with `whole`,
+/// the whole family too (the variants of a family in the current model, whose refinements
+/// the current model settles itself).
 pub(crate) fn part_variants(effects: &[&dyn Effect], whole: bool) -> Vec<Box<dyn Effect>> {
     let mut out = Vec::new();
+    if !whole {
+        out.extend(effects.iter().flat_map(|e| e.refinements()));
+    }
     for family in effects.iter().filter(|e| e.open_family()) {
         let n = family.parts().len();
         let last = if whole {

@@ -404,7 +404,8 @@ pub struct ModelDiagnosis {
     /// The effects in the model as given (`--effects`).
     pub effects_in_model: Vec<String>,
     /// The same as fitted: a family named whole keeps the parts the data can tell apart
-    /// (`thermal` fitted as `thermal:rods`).
+    /// (`thermal` fitted as `thermal:rods`), an effect the refinement they need
+    /// (`preload_elastic` as `preload_elastic:rod3`).
     pub model_effects: Vec<String>,
     /// The current model's effect parameters as fitted: value, σ and unit.
     pub effect_values: Vec<EffectEstimate>,

@@ -93,6 +93,12 @@ pub trait Effect: Send + Sync {
     fn open_family(&self) -> bool {
         false
     }
+    /// Richer variants of the effect, each a parameter more, that the data may need beyond it
+    /// (`preload_elastic:rod2`: a rod with a compliance of its own): the diagnosis keeps one
+    /// only where the data need it (`diagnose::settle`). None, the default, for most.
+    fn refinements(&self) -> Vec<Box<dyn Effect>> {
+        Vec::new()
+    }
     /// Bind the effect to a campaign, with parameters `p` for the geometry it needs to read
     /// its covariates (rod directions for forces): per-pose data are computed once here.
     fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable>;

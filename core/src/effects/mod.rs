@@ -54,7 +54,7 @@ pub use crate::params::Row;
 pub fn library() -> Vec<Box<dyn Effect>> {
     vec![
         Box::new(Parallelogram),
-        Box::new(PreloadElastic),
+        Box::new(PreloadElastic::default()),
         Box::new(Thermal::default()),
         Box::new(EncoderScale),
         Box::new(GuideStraightness),
@@ -77,8 +77,9 @@ pub fn names() -> Vec<String> {
     all().iter().map(|e| e.name().to_owned()).collect()
 }
 
-/// The effect called `name` (of [`all`]), or a family's parts `family:part+part`
-/// (`thermal:rods`, `thermal:rods+scales`).
+/// The effect called `name` (of [`all`]), a family's parts `family:part+part`
+/// (`thermal:rods`, `thermal:rods+scales`), or an effect's refinement
+/// (`preload_elastic:rod2`, [`Effect::refinements`]).
 pub fn by_name(name: &str) -> Result<Box<dyn Effect>, UnknownEffect> {
     let unknown = |known: String| UnknownEffect {
         name: name.to_owned(),
@@ -95,6 +96,15 @@ pub fn by_name(name: &str) -> Result<Box<dyn Effect>, UnknownEffect> {
     let Some(parts) = parts else {
         return Ok(effect);
     };
+    let refinements = effect.refinements();
+    if !refinements.is_empty() {
+        let wanted = format!("{family}:{}", parts.trim());
+        let names: Vec<String> = refinements.iter().map(|r| r.name().to_owned()).collect();
+        return refinements
+            .into_iter()
+            .find(|r| r.name() == wanted)
+            .ok_or_else(|| unknown(names.join(", ")));
+    }
     let known = effect.parts();
     let with = |list: &str| {
         format!(

@@ -6,6 +6,11 @@
 //! the effect's one parameter, the compliance factor c (1 = the default rod stiffness of
 //! [`crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM`]), scales the stretch: dl = c · T / k.
 //! The stiffness is identified with the geometry.
+//!
+//! A rod of another stiffness than the others (its section, a joint's play, a carrier's
+//! guide) stretches by another share: `preload_elastic:rod2` gives rod 2 a compliance of its
+//! own beside the others' common one. These are the effect's refinements: the diagnosis
+//! keeps one only where the data need it (`diagnose::settle`).
 
 use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable, Slope};
 use crate::campaign::Campaign;
@@ -19,17 +24,84 @@ use nalgebra::{SMatrix, SVector};
 const MOMENT_ARM_MM: f64 = 100.0;
 
 /// See the module documentation.
-pub struct PreloadElastic;
+#[derive(Clone, Debug)]
+pub struct PreloadElastic {
+    /// The rods (indices into [`RODS`], ascending) with a compliance of their own; the
+    /// others share one.
+    own: Vec<usize>,
+    /// `preload_elastic`, or `preload_elastic:rod2` with rod 2 of its own.
+    name: String,
+}
+
+const NAME: &str = "preload_elastic";
+
+/// A rod with a compliance of its own, by name.
+const PARTS: [&str; 5] = ["rod1", "rod2", "rod3", "rod4", "rod5"];
+
+impl Default for PreloadElastic {
+    fn default() -> Self {
+        PreloadElastic {
+            own: Vec::new(),
+            name: NAME.to_owned(),
+        }
+    }
+}
+
+impl PreloadElastic {
+    /// Rod `rod` (index into [`RODS`]) with a compliance of its own.
+    fn with_own(rod: usize) -> PreloadElastic {
+        PreloadElastic {
+            name: format!("{NAME}:{}", PARTS[rod]),
+            own: vec![rod],
+        }
+    }
+
+    /// Per rod, the index of the parameter that scales its stretch.
+    fn param_of_rod(&self) -> [usize; 5] {
+        let common = usize::from(self.own.len() < RODS.len());
+        std::array::from_fn(|r| {
+            self.own
+                .iter()
+                .position(|&o| o == r)
+                .map_or(0, |k| common + k)
+        })
+    }
+
+    fn params(&self) -> Vec<EffectParam> {
+        // a rod cannot be stiffer than rigid: a negative compliance absorbs something else
+        let compliance = |name: String| EffectParam::new(name, "x default", 1.0).within(0.0, 10.0);
+        let mut params = Vec::new();
+        if self.own.len() < RODS.len() {
+            params.push(compliance("compliance".to_owned()));
+        }
+        params.extend(
+            self.own
+                .iter()
+                .map(|&r| compliance(format!("compliance_{}", PARTS[r]))),
+        );
+        params
+    }
+}
 
 impl Effect for PreloadElastic {
-    fn name(&self) -> &'static str {
-        "preload_elastic"
+    fn name(&self) -> &str {
+        &self.name
     }
     fn summary(&self) -> &'static str {
-        "elastic deformation under internal preload, from the measured drive forces"
+        "elastic deformation under internal preload, from the measured drive forces (a rod \
+         of another stiffness with a compliance of its own)"
     }
     fn covariates(&self) -> &'static [&'static str] {
         &["f1", "f2", "f3", "f4"]
+    }
+    /// A rod with a compliance of its own, each rod in turn (none where one has it).
+    fn refinements(&self) -> Vec<Box<dyn Effect>> {
+        if !self.own.is_empty() {
+            return Vec::new();
+        }
+        (0..RODS.len())
+            .map(|r| Box::new(PreloadElastic::with_own(r)) as Box<dyn Effect>)
+            .collect()
     }
     fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
         self.bind_among(campaign, p, &[])
@@ -62,7 +134,7 @@ impl Effect for PreloadElastic {
             let (p, q) = by_others.applied(p, &pose.q);
             let at = Loaded::balanced(&p, &q, &pose.f, by_others.dq).map_err(|reason| {
                 NotApplicable {
-                    effect: "preload_elastic".into(),
+                    effect: self.name.clone(),
                     reason: format!("{}:{}: {reason}", campaign.source, pose.line),
                 }
             })?;
@@ -70,7 +142,7 @@ impl Effect for PreloadElastic {
         }
         if loaded == 0 {
             return Err(NotApplicable {
-                effect: "preload_elastic".into(),
+                effect: self.name.clone(),
                 reason: match first_force_row {
                     Some(line) => format!(
                         "{}:{line}: only drive-force rows (instrument none) are loaded: their \
@@ -86,8 +158,9 @@ impl Effect for PreloadElastic {
             });
         }
         Ok(Box::new(BoundPreload {
-            // a rod cannot be stiffer than rigid: a negative compliance absorbs something else
-            params: vec![EffectParam::new("compliance", "x default", 1.0).within(0.0, 10.0)],
+            params: self.params(),
+            of_rod: self.param_of_rod(),
+            effect: self.clone(),
             poses,
         }))
     }
@@ -212,6 +285,10 @@ fn balance_at(p: &Params, q: &[f64; 4], f: &[f64; 4]) -> Result<[f64; 5], String
 
 struct BoundPreload {
     params: Vec<EffectParam>,
+    /// Per rod, the parameter that scales its stretch.
+    of_rod: [usize; 5],
+    /// What it was bound from, to bind again.
+    effect: PreloadElastic,
     /// Per pose, None where it is not loaded.
     poses: Vec<Option<Box<Loaded>>>,
 }
@@ -224,15 +301,16 @@ impl Bound for BoundPreload {
     /// 0.1 mm of parameter error turns them by 1e-4, their 1-10 kN by 0.3 %, a third of a
     /// micrometre of stretch on rods the instrument rows measure to a few hundredths.
     fn rebinds_from(&self) -> Option<&dyn Effect> {
-        Some(&PreloadElastic)
+        Some(&self.effect)
     }
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
         let Some(at) = &self.poses[pose] else {
             return;
         };
         for (r, rod) in RODS.iter().enumerate() {
-            value.dp[rod.l] += theta[0] * at.stretch[r];
-            partials[0].dp[rod.l] += at.stretch[r];
+            let k = self.of_rod[r];
+            value.dp[rod.l] += theta[k] * at.stretch[r];
+            partials[k].dp[rod.l] += at.stretch[r];
         }
     }
     /// The stretch at `p` changed by `moved` to first order from where the forces were
@@ -254,12 +332,13 @@ impl Bound for BoundPreload {
         for (r, rod) in RODS.iter().enumerate() {
             let moves = (0..4).map(|a| at.over_q[r][a] * dq[a]).sum::<f64>();
             let s = at.stretch[r] + at.over_p[r].dot(&dp) + moves;
-            value.dp[rod.l] += theta[0] * s;
-            partials[0].dp[rod.l] += s;
+            let (k, c) = (self.of_rod[r], theta[self.of_rod[r]]);
+            value.dp[rod.l] += c * s;
+            partials[k].dp[rod.l] += s;
             slopes.push(Slope {
                 param: rod.l,
-                dp: theta[0] * at.over_p[r],
-                dq: at.over_q[r].map(|g| theta[0] * g),
+                dp: c * at.over_p[r],
+                dq: at.over_q[r].map(|g| c * g),
             });
         }
     }

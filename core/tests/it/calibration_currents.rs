@@ -292,7 +292,8 @@ fn preload_elastic_is_refused_on_force_rows() {
     let c = t
         .run(&design::production(5, 37), "production")
         .expect("production");
-    let err = EffectSet::bind(&[&PreloadElastic], &c, &Params::nominal()).expect_err("refused");
+    let err = EffectSet::bind(&[&PreloadElastic::default()], &c, &Params::nominal())
+        .expect_err("refused");
     assert_eq!(err.effect, "preload_elastic");
     assert!(
         err.reason.contains("production:2") && err.reason.contains("only drive-force rows"),

@@ -34,7 +34,7 @@ fn a_preload_is_balanced_on_the_parallel_holder_the_model_fits() {
     let campaign = twin
         .campaign(&[Instrument::Lt, Instrument::Kgm, Instrument::SelfCal])
         .expect("campaign");
-    let effects: [&dyn Effect; 2] = [&Parallelogram, &PreloadElastic];
+    let effects: [&dyn Effect; 2] = [&Parallelogram, &PreloadElastic::default()];
     let set = EffectSet::bind(&effects, &campaign, &Params::nominal()).expect("binds");
     // the diagnosis's model: rod 5 linked to rod 4, the effect frees it
     let options = calib_options(&DiagnosisOptions::default());

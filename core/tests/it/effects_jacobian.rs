@@ -72,7 +72,11 @@ fn effect_jacobians_match_finite_differences() {
         &all,
     );
     let p = Params::nominal();
-    for effect in effects::library() {
+    // and a refinement: rod 3's own compliance beside the others' common one, each θ
+    // differentiated on its own
+    let mut under_test = effects::library();
+    under_test.push(effects::by_name("preload_elastic:rod3").expect("a refinement"));
+    for effect in under_test {
         let set = EffectSet::bind(&[effect.as_ref()], &c, &p).expect("bind");
         let n = set.n_params();
         // a point away from zero, so that nonlinear effects are tested off their origin
@@ -130,7 +134,12 @@ fn the_preloads_stretch_moves_with_the_geometry_in_the_jacobian() {
     let p = *twin.true_params();
     let theta = [1.0];
     let bound_at = |q: &Params| {
-        EffectSet::bind(&[&effects::PreloadElastic as &dyn effects::Effect], &c, q).expect("bind")
+        EffectSet::bind(
+            &[&effects::PreloadElastic::default() as &dyn effects::Effect],
+            &c,
+            q,
+        )
+        .expect("bind")
     };
     let set = bound_at(&p);
     let frozen = set.corrections(&theta, &p);
@@ -189,7 +198,8 @@ fn another_effects_parameters_move_the_preloads_stretch_in_the_jacobian() {
         &[Instrument::Lt, Instrument::Kgm, Instrument::SelfCal],
     );
     let p = *twin.true_params();
-    let with: [&dyn effects::Effect; 2] = [&effects::Parallelogram, &effects::PreloadElastic];
+    let with: [&dyn effects::Effect; 2] =
+        [&effects::Parallelogram, &effects::PreloadElastic::default()];
     let alone: [&dyn effects::Effect; 1] = [&effects::Parallelogram];
     let bind = |e: &[&dyn effects::Effect]| EffectSet::bind(e, &c, &p).expect("bind");
     let set = bind(&with);

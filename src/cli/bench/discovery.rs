@@ -23,6 +23,9 @@ struct Outcome {
     class: Class,
     hidden: Vec<String>,
     named: Vec<String>,
+    /// The last model as fitted: a family's parts, an effect's refinement
+    /// (`preload_elastic:rod3`).
+    fitted_as: Vec<String>,
     final_verdict: String,
     correct: bool,
     /// The largest relative rise of the held-out RMS from one model of the loop to the next
@@ -210,6 +213,7 @@ fn outcome(
         named: &named,
         kind,
         held_over_floor,
+        own_rod: own_rod_right(m, &last.model_effects),
     };
     Outcome {
         machine: i,
@@ -233,6 +237,7 @@ fn outcome(
             .and_then(|v| v.as_str().map(str::to_owned))
             .unwrap_or_default(),
         named,
+        fitted_as: last.model_effects.clone(),
         held_out_over_floor: held_over_floor,
         held_out_relative_over_floor: relative,
         nothing_missing_above_floor: kind == VerdictKind::NothingMissing
@@ -246,6 +251,24 @@ struct Judged<'a> {
     named: &'a [String],
     kind: VerdictKind,
     held_over_floor: f64,
+    /// Whether the model as fitted gives the rod of another stiffness, where the machine has
+    /// one, its own compliance (`preload_elastic:rodN`), and no other rod one.
+    own_rod: bool,
+}
+
+/// See [`Judged::own_rod`].
+fn own_rod_right(m: &Machine, fitted_as: &[String]) -> bool {
+    let default = rpkm_core::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM;
+    let want: Vec<String> = (m.config.stiffness.rod.iter())
+        .enumerate()
+        .filter(|(_, k)| (**k / default - 1.0).abs() > 1e-9)
+        .map(|(r, _)| format!("preload_elastic:rod{}", r + 1))
+        .collect();
+    let have: Vec<&String> = fitted_as
+        .iter()
+        .filter(|e| e.starts_with("preload_elastic:"))
+        .collect();
+    have.len() == want.len() && want.iter().all(|w| have.contains(&w))
 }
 
 /// A small alignment (or a slow drift) counts as found when the held-out RMS without it is
@@ -254,11 +277,11 @@ const SMALL_ENOUGH: f64 = 1.3;
 
 impl Judged<'_> {
     /// Whether the loop named exactly the hidden effects it can name and ended as it
-    /// should: `nothing_missing`, or `unexplained_structure` for an effect outside the
-    /// library that is not offered (a soft rod may end either way, its preload's effect
-    /// absorbing the rest; so may guides at two temperatures, how the frame between them
-    /// moves being beyond the library; an alignment or a drift too small to matter may go
-    /// unnamed at the floor).
+    /// should: `nothing_missing` (a soft rod too, with its own compliance and no other rod
+    /// given one: the preload's refinement), or `unexplained_structure` for an effect outside the library that is
+    /// not offered (guides at two temperatures may end either way, how the frame between
+    /// them moves being beyond the library; an alignment or a drift too small to matter may
+    /// go unnamed at the floor).
     fn correct(&self, hidden: &Hidden) -> bool {
         let mut named: Vec<&str> = self.named.iter().map(String::as_str).collect();
         named.sort_unstable();
@@ -277,13 +300,13 @@ impl Judged<'_> {
             Class::LostMotion | Class::Cyclic => {
                 named.is_empty() && ends(VerdictKind::UnexplainedStructure)
             }
-            Class::SoftRod | Class::Gradient => {
+            Class::Gradient => {
                 named == want
                     && (ends(VerdictKind::NothingMissing)
                         || ends(VerdictKind::UnexplainedStructure))
             }
             Class::SmallAlignment | Class::TrackerDrift if named.is_empty() => at_floor,
-            _ => named == want && ends(VerdictKind::NothingMissing),
+            _ => named == want && ends(VerdictKind::NothingMissing) && self.own_rod,
         }
     }
 }
@@ -296,6 +319,7 @@ fn failed(seed: u64, i: usize, e: &anyhow::Error) -> Outcome {
         class: m.hidden.class,
         hidden: machines::hidden_names(&m.hidden),
         named: Vec::new(),
+        fitted_as: Vec::new(),
         final_verdict: format!("error: {}", crate::cli::error_chain(e)),
         correct: false,
         largest_rise: 0.0,

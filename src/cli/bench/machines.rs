@@ -25,7 +25,8 @@ pub(super) enum Class {
     /// the library.
     Cyclic,
     /// All drives active (preload_elastic) and one rod 0.5-0.8x or 1.25-2x as stiff as the
-    /// others.
+    /// others: `preload_elastic` named, settled to the rod's own compliance
+    /// (`preload_elastic:rodN`), and nothing missing.
     SoftRod,
     /// An instrument alignment 0.2-1x its default: down to where it hardly matters.
     SmallAlignment,

@@ -52,6 +52,12 @@ pub struct SimulateArgs {
     /// Hidden effects, NAME or NAME=MAGNITUDE, comma-separated (default magnitude if none).
     #[arg(long, value_delimiter = ',')]
     pub effect: Vec<String>,
+    /// Rods of another stiffness than the model's default, ROD=FACTOR comma-separated (rod
+    /// 1..5, the factor on the default axial stiffness): a rod 30 % stiffer than the others,
+    /// `--rod-stiffness 3=1.3`. With all drives active (`--effect preload_elastic`) it takes
+    /// another share of the preload; `rpkm diagnose` names it `preload_elastic:rod3`.
+    #[arg(long, value_delimiter = ',')]
+    pub rod_stiffness: Vec<String>,
     /// Seed of the true machine, the noise and the validation poses.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

@@ -84,6 +84,31 @@ pub fn parse_drift(s: &str) -> Result<ZeroDrift> {
     })
 }
 
+/// The twin's stiffness from `--rod-stiffness ROD=FACTOR,...`.
+pub fn parse_rod_stiffness(items: &[String]) -> Result<rpkm_core::elastic::Stiffness> {
+    let mut stiffness = rpkm_core::elastic::Stiffness::default();
+    for item in items.iter().filter(|s| !s.trim().is_empty()) {
+        let bad = |why: &str| super::bad_input(format!("--rod-stiffness {item}: {why}"));
+        let (rod, factor) = item
+            .split_once('=')
+            .ok_or_else(|| bad("expected ROD=FACTOR, e.g. 3=1.3"))?;
+        let rod: usize = rod
+            .trim()
+            .parse()
+            .ok()
+            .filter(|r| (1..=5).contains(r))
+            .ok_or_else(|| bad("the rod is a number 1..5"))?;
+        let factor: f64 = factor
+            .trim()
+            .parse()
+            .ok()
+            .filter(|f: &f64| f.is_finite() && *f > 0.0)
+            .ok_or_else(|| bad("the factor is a positive number"))?;
+        stiffness.rod[rod - 1] *= factor;
+    }
+    Ok(stiffness)
+}
+
 /// `dir/name.csv` → `dir/name.val.csv`.
 fn validation_path(out: &Path) -> PathBuf {
     let stem = out
@@ -104,6 +129,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         effects,
         noise: twin_noise(args)?,
         drift: args.drift.as_deref().map(parse_drift).transpose()?,
+        stiffness: parse_rod_stiffness(&args.rod_stiffness)?,
         ..TwinConfig::default()
     })?;
     if let Some(seconds) = args.production_seconds {
