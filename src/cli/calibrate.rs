@@ -317,6 +317,10 @@ fn calibration_json(
     if let Some(st) = stages {
         out["effect_stages"] = serde_json::to_value(&st.rows)?;
         out["effect_stages_chi2_under"] = st.chi2_under.clone().into();
+        // the stages' last model as the data settle it, where not as given
+        if let Some(fitted) = &st.settled_as {
+            out["effect_stages_settled_as"] = serde_json::to_value(fitted)?;
+        }
     }
     Ok(out)
 }

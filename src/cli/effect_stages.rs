@@ -103,6 +103,9 @@ pub struct Stage {
 pub struct Stages {
     pub rows: Vec<Stage>,
     pub chi2_under: String,
+    /// The last model as the data settle it, where that is not the effects as given
+    /// (`preload_elastic` as `preload_elastic:rod3`).
+    pub settled_as: Option<Vec<String>>,
 }
 
 impl Stages {
@@ -120,13 +123,20 @@ impl Stages {
             .collect::<Result<Vec<_>, _>>()?;
         // one noise for every row, so that the χ² compare the models: the last model's
         let last = evaluated.last().map(|e| e.noise.model.clone());
+        let given: Vec<String> = effects.iter().map(|e| e.name().to_owned()).collect();
+        let settled_as = evaluated
+            .last()
+            .map(|e| e.model_effects.clone())
+            .filter(|fitted| *fitted != given);
         let under = last.unwrap_or_else(|| opts.noise.clone());
         let rows = evaluated
             .into_iter()
             .enumerate()
             .map(|(k, e)| Stage {
-                model: match k {
-                    0 => format!("{}", opts.model),
+                // as fitted: a family or an effect the data settle (thermal:rods)
+                model: match (k, e.model_effects.get(k.saturating_sub(1))) {
+                    (0, _) => format!("{}", opts.model),
+                    (_, Some(fitted)) => format!("+ {fitted}"),
                     _ => format!("+ {}", effects[k - 1].name()),
                 },
                 chi2_per_dof: e.chi2_per_dof_under(&under),
@@ -140,6 +150,7 @@ impl Stages {
         let names: Vec<&str> = effects.iter().map(|e| e.name()).collect();
         Ok(Stages {
             rows,
+            settled_as,
             chi2_under: format!(
                 "the noise estimated with the last model, {} + {}",
                 opts.model,
@@ -175,6 +186,13 @@ impl Stages {
                 s.cal_rms_um,
                 opt(s.val_rms_um),
                 opt(s.val_rms_relative_um)
+            );
+        }
+        if let Some(fitted) = &self.settled_as {
+            println!(
+                "  (the table's models as the data settle them; the calibration above fits the \
+                 effects as given: --effects {} fits the settled model)",
+                fitted.join(",")
             );
         }
         if let Some(last) = self.rows.last() {

@@ -533,5 +533,32 @@ fn a_rod_of_another_stiffness_is_given_its_own_compliance() {
         (own - want).abs() <= 3.0 * s,
         "rod 3: {own} ± {s}, twin {want}"
     );
+    // `rpkm calibrate` fits the effects as given and says what the data settle them to;
+    // given the settled refinement, it finds the twin's compliance
+    let calibrate = |effects: &str, out: &str| {
+        let report = dir.join(out);
+        run_ok(
+            rpkm()
+                .arg("calibrate")
+                .arg(&cal)
+                .args(["--model", "29", "--effects", effects, "--validate"])
+                .arg(cal.with_extension("val.csv"))
+                .arg("--json")
+                .arg(&report),
+        );
+        json(&report)
+    };
+    let plain = calibrate("preload_elastic", "c0.json");
+    assert_eq!(
+        plain["effect_stages_settled_as"],
+        serde_json::json!(["preload_elastic:rod3"])
+    );
+    let settled = calibrate("preload_elastic:rod3", "c1.json");
+    assert!(settled.get("effect_stages_settled_as").is_none());
+    let (own, s) = crate::diagnosis_support::effect_value(&settled["effects"], "compliance_rod3");
+    assert!(
+        (own - want).abs() <= 3.0 * s,
+        "calibrated rod 3: {own} ± {s}, twin {want}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
