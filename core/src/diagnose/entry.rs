@@ -168,7 +168,7 @@ impl<'j> Judge<'j> {
             e.held = Some(e.fitted.fit.val_scaled.clone());
         }
         e.prediction = held;
-        if held.is_some_and(|p| p.decides() || p.contradicted()) {
+        if held.is_some_and(|p| p.last_word()) {
             return;
         }
         // left-out rows only where the calibration itself says it may matter: on a hundred
@@ -298,7 +298,7 @@ impl<'j> Judge<'j> {
         };
         let held = held_between(small, big);
         let prediction = match held {
-            Some(p) if p.decides() => held,
+            Some(p) if p.last_word() => held,
             // the held-out data cannot tell the two apart (a noisy instrument, or an error
             // neither explains): the setups left out decide, where the calibration alone
             // would name the larger model

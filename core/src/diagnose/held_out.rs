@@ -498,6 +498,14 @@ impl Prediction {
         self.better || self.worse
     }
 
+    /// Whether the compared errors have the last word on the change: they decide it
+    /// ([`Prediction::decides`]) or contradict it ([`Prediction::contradicted`]). Where they do
+    /// not, the setups left out are asked. One rule for a candidate against the current model,
+    /// a model against another, and a family's parts against the whole.
+    pub fn last_word(&self) -> bool {
+        self.decides() || self.contradicted()
+    }
+
     /// Whether the compared errors contradict the change: they resolve it (were it right,
     /// they would follow it at [`RESOLVED`] standard errors or more), do not follow it (its
     /// support's p-value at least [`NOT_FOLLOWED`]) and their RMS, read as the user reads it,

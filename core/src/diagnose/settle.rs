@@ -246,7 +246,7 @@ impl<'a> Scored<'a> {
     fn needed_over(&self, v: &Scored, fold: Fold, level: f64) -> bool {
         let held = Prediction::compared(&v.held, &self.held);
         let prediction = match held {
-            Some(p) if p.decides() => Some(p),
+            Some(p) if p.last_word() => Some(p),
             _ => match v.left_out(fold).zip(self.left_out(fold)) {
                 Some((a, b)) => Prediction::compared(a, b),
                 None => held,
