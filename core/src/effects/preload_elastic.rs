@@ -26,9 +26,9 @@ const MOMENT_ARM_MM: f64 = 100.0;
 /// See the module documentation.
 #[derive(Clone, Debug)]
 pub struct PreloadElastic {
-    /// The rods (indices into [`RODS`], ascending) with a compliance of their own; the
-    /// others share one.
-    own: Vec<usize>,
+    /// The rod (index into [`RODS`]) with a compliance of its own, if any; the others share
+    /// one.
+    own: Option<usize>,
     /// `preload_elastic`, or `preload_elastic:rod2` with rod 2 of its own.
     name: String,
 }
@@ -41,7 +41,7 @@ const PARTS: [&str; 5] = ["rod1", "rod2", "rod3", "rod4", "rod5"];
 impl Default for PreloadElastic {
     fn default() -> Self {
         PreloadElastic {
-            own: Vec::new(),
+            own: None,
             name: NAME.to_owned(),
         }
     }
@@ -52,34 +52,26 @@ impl PreloadElastic {
     fn with_own(rod: usize) -> PreloadElastic {
         PreloadElastic {
             name: format!("{NAME}:{}", PARTS[rod]),
-            own: vec![rod],
+            own: Some(rod),
         }
     }
 
-    /// Per rod, the index of the parameter that scales its stretch.
+    /// Per rod, the index of the parameter that scales its stretch: the common one (0), or
+    /// the rod's own (1).
     fn param_of_rod(&self) -> [usize; 5] {
-        let common = usize::from(self.own.len() < RODS.len());
-        std::array::from_fn(|r| {
-            self.own
-                .iter()
-                .position(|&o| o == r)
-                .map_or(0, |k| common + k)
-        })
+        std::array::from_fn(|r| usize::from(self.own == Some(r)))
     }
 
+    /// The common compliance, and the own rod's.
     fn params(&self) -> Vec<EffectParam> {
         // a rod cannot be stiffer than rigid: a negative compliance absorbs something else
         let compliance = |name: String| EffectParam::new(name, "x default", 1.0).within(0.0, 10.0);
-        let mut params = Vec::new();
-        if self.own.len() < RODS.len() {
-            params.push(compliance("compliance".to_owned()));
-        }
-        params.extend(
-            self.own
-                .iter()
-                .map(|&r| compliance(format!("compliance_{}", PARTS[r]))),
-        );
-        params
+        std::iter::once(compliance("compliance".to_owned()))
+            .chain(
+                self.own
+                    .map(|r| compliance(format!("compliance_{}", PARTS[r]))),
+            )
+            .collect()
     }
 }
 
@@ -96,7 +88,7 @@ impl Effect for PreloadElastic {
     }
     /// A rod with a compliance of its own, each rod in turn (none where one has it).
     fn refinements(&self) -> Vec<Box<dyn Effect>> {
-        if !self.own.is_empty() {
+        if self.own.is_some() {
             return Vec::new();
         }
         (0..RODS.len())
