@@ -418,31 +418,11 @@ fn a_drift_along_the_beam_is_named_in_its_own_noise() {
 fn a_preloaded_machine_is_fitted_to_its_minimum() {
     let dir = scratch("preload-minimum");
     let cal = dir.join("c.csv");
-    run_ok(
-        rpkm()
-            .args([
-                "simulate",
-                "--campaign",
-                "lt,kgm,self",
-                "--effect",
-                "preload_elastic=0.765",
-                "--seed",
-                "4",
-                "--out",
-            ])
-            .arg(&cal),
-    );
-    let report = dir.join("d.json");
-    run_ok(
-        rpkm()
-            .arg("diagnose")
-            .arg(&cal)
-            .arg("--validate")
-            .arg(cal.with_extension("val.csv"))
-            .args(["--effects", "preload_elastic", "--json"])
-            .arg(&report),
-    );
-    let d = json(&report);
+    simulate_preloaded(&cal, &[]);
+    let mut args: Vec<OsString> = vec!["diagnose".into(), (&cal).into()];
+    args.extend(["--validate".into(), cal.with_extension("val.csv").into()]);
+    args.extend(["--effects", "preload_elastic"].map(OsString::from));
+    let d = rpkm_json(&dir.join("d.json"), &args);
     assert_eq!(d["verdict_kind"], "nothing_missing", "{}", d["verdict"]);
     let candidates = d["candidates"].as_array().expect("candidates");
     assert!(
@@ -477,23 +457,14 @@ fn a_preloaded_machine_is_fitted_to_its_minimum() {
 fn a_rod_of_another_stiffness_is_given_its_own_compliance() {
     let dir = scratch("stiff-rod");
     let (cal, truth) = (dir.join("c.csv"), dir.join("t.json"));
-    run_ok(
-        rpkm()
-            .args([
-                "simulate",
-                "--campaign",
-                "lt,kgm,self",
-                "--effect",
-                "preload_elastic=0.765",
-                "--rod-stiffness",
-                "3=1.3",
-                "--seed",
-                "4",
-                "--out",
-            ])
-            .arg(&cal)
-            .arg("--truth")
-            .arg(&truth),
+    simulate_preloaded(
+        &cal,
+        &[
+            "--rod-stiffness".into(),
+            "3=1.3".into(),
+            "--truth".into(),
+            (&truth).into(),
+        ],
     );
     let rods = json(&truth)["stiffness"]["rod"].clone();
     let k = |r: usize| rods[r].as_f64().expect("stiffness");
@@ -550,6 +521,18 @@ fn a_rod_of_another_stiffness_is_given_its_own_compliance() {
     assert!(settled.get("effect_stages_settled_as").is_none());
     rod3(&settled["effects"]);
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A tracker, a grid encoder and self-calibration of a twin with all drives active, its
+/// controller's parameter error 0.765 (the preload's scale; 0.3 by default), with `extra`
+/// options (its held-out poses beside `cal`).
+fn simulate_preloaded(cal: &std::path::Path, extra: &[OsString]) {
+    let mut cmd = rpkm();
+    cmd.args(["simulate", "--campaign", "lt,kgm,self", "--effect"])
+        .args(["preload_elastic=0.765", "--seed", "4", "--out"])
+        .arg(cal)
+        .args(extra);
+    run_ok(&mut cmd);
 }
 
 /// `rpkm ARGS --json REPORT`, its JSON read back.

@@ -47,7 +47,7 @@ impl Settled {
         }
     }
 
-    /// Whether a family was narrowed to some of its parts.
+    /// Whether a family was narrowed to some of its parts, or an effect refined.
     pub fn changed(&self) -> bool {
         !self.own.is_empty()
     }
@@ -56,7 +56,8 @@ impl Settled {
 /// Settle every family of `in_model` named whole ([`Effect::open_family`]): the part
 /// combination with the fewest parts that the whole family does not beat by the evidence a
 /// candidate needs (the calibration's F-test with the prediction, not contradicted, a gain
-/// that matters); `level` is that evidence's.
+/// that matters); and every effect with refinements to the one that evidence needs, if any
+/// ([`refine`]). `level` is that evidence's.
 pub(crate) fn settle(
     campaign: &Campaign,
     val: Option<&Validation>,
@@ -65,65 +66,70 @@ pub(crate) fn settle(
 ) -> Settled {
     let mut settled = Settled::unchanged(in_model);
     for (i, family) in in_model.iter().enumerate() {
-        let refinements = family.refinements();
-        if !refinements.is_empty() {
-            let current = settled.effects(in_model);
-            if let Some(refined) = refine(campaign, val, (current, i), refinements, (copts, level))
-            {
-                let own = settled.own.len();
-                settled.own.push(refined);
-                settled.order[i] = Ok(own);
+        let chosen = {
+            let current = (settled.effects(in_model), i);
+            let refinements = family.refinements();
+            if !refinements.is_empty() {
+                refine(campaign, val, current, refinements, (copts, level))
+            } else if family.open_family() {
+                narrow(campaign, val, current, *family, (copts, level))
+            } else {
+                None
             }
-            continue;
-        }
-        if !family.open_family() {
-            continue;
-        }
-        let n = family.parts().len();
-        let mut variants: Vec<Box<dyn Effect>> = Vec::new();
-        for mask in 1..(1usize << n) {
-            let parts: Vec<usize> = (0..n).filter(|b| mask & (1 << b) != 0).collect();
-            variants.extend(family.with_parts(&parts));
-        }
-        let current = settled.effects(in_model);
-        let scored: Vec<(usize, Scored)> = variants
-            .iter()
-            .enumerate()
-            .filter_map(|(k, v)| {
-                let mut with = current.clone();
-                with[i] = v.as_ref();
-                Scored::of(campaign, val, with, copts).map(|p| (k, p))
-            })
-            .collect();
-        let Some(whole) = scored
-            .iter()
-            .find(|(k, _)| mask_len(variants[*k].name()) == n)
-        else {
-            continue;
         };
-        let adequate = |v: &Scored| !whole.1.needed_over(v, (campaign, copts), level);
-        let Some(k) = scored
-            .iter()
-            .filter(|(_, v)| adequate(v))
-            .min_by(|a, b| {
-                let parts = |k: usize| mask_len(variants[k].name());
-                parts(a.0)
-                    .cmp(&parts(b.0))
-                    .then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))
-            })
-            .map(|(k, _)| *k)
-        else {
-            continue;
-        };
-        // the whole family is what the caller has: nothing to own
-        if mask_len(variants[k].name()) == n {
-            continue;
+        if let Some(effect) = chosen {
+            let own = settled.own.len();
+            settled.own.push(effect);
+            settled.order[i] = Ok(own);
         }
-        let own = settled.own.len();
-        settled.own.push(variants.swap_remove(k));
-        settled.order[i] = Ok(own);
     }
     settled
+}
+
+/// The part combination of the family `current[i]` named whole that the evidence needs (see
+/// [`settle`]); None where the whole family is it, or nothing predicts.
+fn narrow(
+    campaign: &Campaign,
+    val: Option<&Validation>,
+    (current, i): (Vec<&dyn Effect>, usize),
+    family: &dyn Effect,
+    (copts, level): (&calib::Options, f64),
+) -> Option<Box<dyn Effect>> {
+    let n = family.parts().len();
+    let mut variants: Vec<Box<dyn Effect>> = Vec::new();
+    for mask in 1..(1usize << n) {
+        let parts: Vec<usize> = (0..n).filter(|b| mask & (1 << b) != 0).collect();
+        variants.extend(family.with_parts(&parts));
+    }
+    let scored: Vec<(usize, Scored)> = variants
+        .iter()
+        .enumerate()
+        .filter_map(|(k, v)| {
+            let mut with = current.clone();
+            with[i] = v.as_ref();
+            Scored::of(campaign, val, with, copts).map(|p| (k, p))
+        })
+        .collect();
+    let whole = scored
+        .iter()
+        .find(|(k, _)| mask_len(variants[*k].name()) == n)?;
+    let adequate = |v: &Scored| !whole.1.needed_over(v, (campaign, copts), level);
+    let k = scored
+        .iter()
+        .filter(|(_, v)| adequate(v))
+        .min_by(|a, b| {
+            let parts = |k: usize| mask_len(variants[k].name());
+            parts(a.0)
+                .cmp(&parts(b.0))
+                .then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))
+        })
+        .map(|(k, _)| *k)?;
+    // the whole family is what the caller has: nothing to own
+    if mask_len(variants[k].name()) == n {
+        return None;
+    }
+    drop(scored);
+    Some(variants.swap_remove(k))
 }
 
 /// The refinement of the model's effect `current[i]` ([`Effect::refinements`]: a rod with a

@@ -278,10 +278,10 @@ const SMALL_ENOUGH: f64 = 1.3;
 impl Judged<'_> {
     /// Whether the loop named exactly the hidden effects it can name and ended as it
     /// should: `nothing_missing` (a soft rod too, with its own compliance and no other rod
-    /// given one: the preload's refinement), or `unexplained_structure` for an effect outside the library that is
-    /// not offered (guides at two temperatures may end either way, how the frame between
-    /// them moves being beyond the library; an alignment or a drift too small to matter may
-    /// go unnamed at the floor).
+    /// given one: the preload's refinement), or `unexplained_structure` for an effect
+    /// outside the library that is not offered (guides at two temperatures may end either
+    /// way, how the frame between them moves being beyond the library; an alignment or a
+    /// drift too small to matter may go unnamed at the floor).
     fn correct(&self, hidden: &Hidden) -> bool {
         let mut named: Vec<&str> = self.named.iter().map(String::as_str).collect();
         named.sort_unstable();

@@ -13,30 +13,30 @@ pub fn candidate<'d>(d: &'d serde_json::Value, effect: &str) -> &'d serde_json::
 /// The effect parameter `name` of a list of them (a diagnosis's `effect_values`, a
 /// calibration's `effects`): its value and σ, or a failure naming what is missing.
 pub fn effect_value(list: &serde_json::Value, name: &str) -> (f64, f64) {
-    let p = list
-        .as_array()
-        .expect("effect parameters")
-        .iter()
-        .find(|e| e["name"] == name)
-        .unwrap_or_else(|| panic!("the effect parameter {name}"));
+    value_and_sigma(param_in(list, name, "the effect parameters"))
+}
+
+/// A parameter's value and σ.
+fn value_and_sigma(p: &serde_json::Value) -> (f64, f64) {
     (
         p["value"].as_f64().expect("value"),
         p["sigma"].as_f64().expect("σ"),
     )
 }
 
+/// The parameter `name` of a list of them, or a failure naming it and `whose` list.
+fn param_in<'l>(list: &'l serde_json::Value, name: &str, whose: &str) -> &'l serde_json::Value {
+    list.as_array()
+        .unwrap_or_else(|| panic!("{whose}"))
+        .iter()
+        .find(|p| p["name"] == name)
+        .unwrap_or_else(|| panic!("{name} among {whose}"))
+}
+
 /// The fitted parameter `name` of the candidate `effect` of diagnosis `d`: its value, σ and
 /// unit, or a failure naming what is missing.
 pub fn candidate_param(d: &serde_json::Value, effect: &str, name: &str) -> (f64, f64, String) {
-    let p = candidate(d, effect)["params"]
-        .as_array()
-        .expect("params")
-        .iter()
-        .find(|p| p["name"] == name)
-        .unwrap_or_else(|| panic!("{effect}'s {name}"));
-    (
-        p["value"].as_f64().expect("value"),
-        p["sigma"].as_f64().expect("σ"),
-        p["unit"].as_str().expect("unit").to_owned(),
-    )
+    let p = param_in(&candidate(d, effect)["params"], name, effect);
+    let (value, sigma) = value_and_sigma(p);
+    (value, sigma, p["unit"].as_str().expect("unit").to_owned())
 }
