@@ -522,6 +522,52 @@ impl NodeContext {
     pub fn diagnostics_period(&self) -> anyhow::Result<Duration> {
         diagnostics_period(&self.params)
     }
+
+    /// The node's /diagnostics report: its status `s`, and where a service of the node met
+    /// requests it could not read (or replies whose client's reader never matched) a WARN
+    /// status `<status name>/services` naming each service, the count and the last reason.
+    pub fn diagnostics(&self, s: DiagnosticStatus) -> DiagnosticArray {
+        let mut array = diagnostic_array(s);
+        if let Some(services) = self.services_status() {
+            array.status.push(services);
+        }
+        array
+    }
+
+    fn services_status(&self) -> Option<DiagnosticStatus> {
+        let unread = self.transport.dds_node()?.unread_requests();
+        if unread.is_empty() {
+            return None;
+        }
+        let message = unread
+            .iter()
+            .map(|u| {
+                let mut said = Vec::new();
+                if u.count > 0 {
+                    said.push(format!("{} requests not read ({})", u.count, u.reason));
+                }
+                if u.replies_lost > 0 {
+                    said.push(format!(
+                        "{} replies lost (the client's reader never matched)",
+                        u.replies_lost
+                    ));
+                }
+                format!("{}: {}", u.service, said.join(", "))
+            })
+            .collect::<Vec<_>>()
+            .join("; ");
+        let values = unread
+            .iter()
+            .flat_map(|u| {
+                [
+                    ("requests_not_read", format!("{} {}", u.service, u.count)),
+                    ("replies_lost", format!("{} {}", u.service, u.replies_lost)),
+                ]
+            })
+            .collect();
+        let name = format!("{}/services", self.status_name);
+        Some(status(DiagnosticStatus::WARN, &name, message, values))
+    }
 }
 
 /// The `/rosout` severity of a node's log line: the nodes write levels as a prefix.

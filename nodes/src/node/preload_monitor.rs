@@ -23,7 +23,7 @@ use rpkm_core::geometry::rgm;
 use rpkm_msgs::{ActuatorState, DiagnosticArray, DiagnosticStatus, PreloadLevel, PreloadStatus};
 use rpkm_transport::topic;
 
-use super::context::{bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext};
+use super::context::{bad_param, status, CommonArgs, Every, Idle, NodeContext};
 use super::declare::{keys, served, ParamBound, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
 use super::geometry::GEOMETRY;
@@ -512,7 +512,7 @@ fn apply_set(
 fn report(ctx: &NodeContext, monitor: &Monitor, input: &mut DriveInput) -> DiagnosticArray {
     let mut status = monitor.status(&ctx.status_name);
     input.annotate(&mut status);
-    diagnostic_array(status)
+    ctx.diagnostics(status)
 }
 
 /// Runs the node until SIGINT/SIGTERM.

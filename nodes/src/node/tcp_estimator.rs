@@ -28,7 +28,7 @@ use rpkm_core::params::{Model, Params, RODS};
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, TcpEstimate};
 use rpkm_transport::topic;
 
-use super::context::{diagnostic_array, status, CommonArgs, Every, Idle, NodeContext};
+use super::context::{status, CommonArgs, Every, Idle, NodeContext};
 use super::declare::{keys, served, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
 use super::geometry::GEOMETRY;
@@ -477,7 +477,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
             if report.due() {
                 let mut status = est.status(&ctx.status_name);
                 input.annotate(&mut status);
-                diagnostics.publish(&diagnostic_array(status))?;
+                diagnostics.publish(&ctx.diagnostics(status))?;
                 // A loss is logged once per report, not per gap (a stall loses in bursts).
                 if est.input.lost > lost_reported {
                     lost_reported = est.input.lost;

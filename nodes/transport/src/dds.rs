@@ -171,6 +171,10 @@ pub struct DdsNode {
     /// its queue while the node still exists.
     runtime: DdsRuntime,
     pub(crate) node: Mutex<Node>,
+    /// The participant the services' own readers and writers join ([`crate::dds_rpc`]).
+    participant: ros2_client::dds::rustdds::DomainParticipant,
+    /// Requests of this node's services that could not be read, for its /diagnostics.
+    unread: crate::dds_rpc::Ledger,
     domain: u16,
 }
 
@@ -231,6 +235,8 @@ impl DdsNode {
         Ok(Arc::new(Self {
             runtime,
             node: Mutex::new(node),
+            participant: context.domain_participant(),
+            unread: crate::dds_rpc::Ledger::default(),
             domain,
         }))
     }
@@ -238,6 +244,40 @@ impl DdsNode {
     /// The node's tokio runtime, for its non-real-time DDS tasks.
     pub(crate) fn runtime(&self) -> &tokio::runtime::Handle {
         &self.runtime.handle
+    }
+
+    /// The server of this node's service `~/<service>` (`/rpkm/ingest/<service>`), for
+    /// clients of either request mapping.
+    pub(crate) fn rpc_server<Q, R>(
+        &self,
+        service: &str,
+        types: &crate::dds_rpc::RpcTypes,
+    ) -> Result<crate::dds_rpc::RpcServer<Q, R>, String>
+    where
+        Q: serde::de::DeserializeOwned,
+        R: Serialize,
+    {
+        let fqn = self
+            .node
+            .lock()
+            .map_err(|_| "the DDS node mutex is poisoned".to_owned())?
+            .fully_qualified_name();
+        let name = format!("{}/{service}", fqn.trim_end_matches('/'));
+        // ROS 2's rules for the name, checked as ros2-client checks a service's.
+        Name::parse(&name).map_err(|e| format!("~/{service}: {e:?}"))?;
+        crate::dds_rpc::RpcServer::new(&self.participant, &name, types, self.unread.clone())
+    }
+
+    /// The participant, for the readers and writers ros2-client does not make.
+    pub(crate) fn participant(&self) -> &ros2_client::dds::rustdds::DomainParticipant {
+        &self.participant
+    }
+
+    /// The requests of this node's services that could not be read (neither request
+    /// mapping decodes them as the service's type), per service, and the replies dropped
+    /// because a client's reply reader was never matched.
+    pub fn unread_requests(&self) -> Vec<crate::dds_rpc::Unread> {
+        self.unread.lock().map(|u| u.clone()).unwrap_or_default()
     }
 
     /// The DDS domain id.

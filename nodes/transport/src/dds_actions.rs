@@ -1,8 +1,8 @@
-//! Actions a node serves from its own loop (the calibrator's `~/calibrate`): ros2-client's
-//! action server (the services `~/<action>/_action/send_goal`, `cancel_goal`, `get_result`
-//! and the topics `feedback`, `status`, named and typed as rclcpp's, on the Cyclone service
-//! mapping as [`crate::dds_calls`]), with the goals' states kept here and polled by the node:
-//! no task, nothing waits. The node takes a goal as it comes ([`ActionServer::next_goal`]:
+//! Actions a node serves from its own loop (the calibrator's `~/calibrate`): the services
+//! `~/<action>/_action/send_goal`, `cancel_goal`, `get_result` (each answering either ROS 2
+//! request mapping, [`crate::dds_rpc`], so that an action client on rmw_fastrtps or
+//! rmw_cyclonedds gets its replies) and the topics `feedback`, `status`, named and typed as
+//! rclcpp's, with the goals' states kept here and polled by the node: no task, nothing waits. The node takes a goal as it comes ([`ActionServer::next_goal`]:
 //! accept or reject), publishes feedback while it works and asks whether the goal is being
 //! cancelled ([`ActionServer::canceling`]), and ends it with its result
 //! ([`ActionServer::finish`]); the result goes to every client that asked for it, also to
@@ -16,19 +16,19 @@ use std::cell::RefCell;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 
-use ros2_client::action::{
-    self, ActionServerQosPolicies, GetResultResponse, GoalId, GoalInfo, GoalStatusEnum,
-    SendGoalResponse,
-};
+use ros2_client::action::{GoalId, GoalInfo, GoalStatusEnum, SendGoalResponse};
 use ros2_client::action_msgs::{
     CancelGoalResponse, CancelGoalResponseEnum, GoalStatus, GoalStatusArray,
 };
 use ros2_client::builtin_interfaces::Time;
-use ros2_client::{ActionTypeName, Name, QosProfile, RmwRequestId, ServiceMapping};
+use ros2_client::dds::rustdds::TopicKind;
+use ros2_client::{Publisher, QosProfile};
+use serde::{Deserialize, Serialize};
 
 use rpkm_msgs::RosMessage;
 
-use crate::dds::{DdsNode, Wire};
+use crate::dds::DdsNode;
+use crate::dds_rpc::{Caller, RpcServer, RpcTypes};
 use crate::error::TransportError;
 
 /// Finished goals whose results are kept for a late `get_result`.
@@ -49,7 +49,40 @@ pub struct ActionType {
 #[derive(Clone, Copy)]
 pub struct NewGoal {
     id: GoalId,
-    request: RmwRequestId,
+    request: Caller,
+}
+
+/// `<action>_SendGoal_Request`: the goal's id and the goal.
+#[derive(Serialize, Deserialize)]
+struct GoalRequest<G> {
+    goal_id: GoalId,
+    goal: G,
+}
+
+/// `<action>_GetResult_Request`.
+#[derive(Serialize, Deserialize)]
+struct ResultRequest {
+    goal_id: GoalId,
+}
+
+/// `<action>_GetResult_Response`.
+#[derive(Serialize, Deserialize)]
+struct ResultReply<R> {
+    status: GoalStatusEnum,
+    result: R,
+}
+
+/// `action_msgs/CancelGoal_Request`: a goal id, or every goal accepted at or before a stamp.
+#[derive(Serialize, Deserialize)]
+struct CancelRequest {
+    goal_info: GoalInfo,
+}
+
+/// `<action>_FeedbackMessage`.
+#[derive(Debug, Serialize, Deserialize)]
+struct FeedbackMessage<F> {
+    goal_id: GoalId,
+    feedback: F,
 }
 
 /// An accepted goal.
@@ -85,12 +118,16 @@ struct Goal<R> {
 struct Goals<R> {
     all: BTreeMap<GoalId, Goal<R>>,
     finished: VecDeque<GoalId>,
-    waiting: Vec<(GoalId, RmwRequestId)>,
+    waiting: Vec<(GoalId, Caller)>,
 }
 
 /// One action of a node: `~/<action>` of type `<package>/action/<type>`.
 pub struct ActionServer<G: RosMessage, R: RosMessage + Default, F: RosMessage> {
-    server: action::ActionServer<Wire<G>, Wire<R>, Wire<F>>,
+    goal: RpcServer<GoalRequest<G>, SendGoalResponse>,
+    cancel: RpcServer<CancelRequest, CancelGoalResponse>,
+    result: RpcServer<ResultRequest, ResultReply<R>>,
+    feedback: Publisher<FeedbackMessage<F>>,
+    status: Publisher<GoalStatusArray>,
     goals: RefCell<Goals<R>>,
     name: String,
 }
@@ -124,41 +161,89 @@ impl DdsNode {
             port: "action server",
             reason,
         };
-        let mut node = self
-            .node
-            .lock()
-            .map_err(|_| err("node mutex poisoned".into()))?;
-        let fqn = node.fully_qualified_name();
-        let name = Name::new(&fqn, action).map_err(|e| err(format!("{e:?}")))?;
+        let (package, type_name) = (kind.package, kind.name);
+        let service = |name: &str| format!("{action}/_action/{name}");
+        let goal = self
+            .rpc_server(
+                &service("send_goal"),
+                &RpcTypes::new(package, "action", &format!("{type_name}_SendGoal")),
+            )
+            .map_err(err)?;
+        let cancel = self
+            .rpc_server(
+                &service("cancel_goal"),
+                &RpcTypes::new("action_msgs", "srv", "CancelGoal"),
+            )
+            .map_err(err)?;
+        let result = self
+            .rpc_server(
+                &service("get_result"),
+                &RpcTypes::new(package, "action", &format!("{type_name}_GetResult")),
+            )
+            .map_err(err)?;
         let keep = |depth| {
             QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth })
         };
-        // rcl_action's: services reliable, volatile, last 10; the status transient-local,
-        // last 1 (a late client reads the goals' states)
-        let qos = ActionServerQosPolicies {
-            goal_service: keep(10),
-            result_service: keep(10),
-            cancel_service: keep(10),
-            feedback_publisher: keep(FEEDBACK_DEPTH),
-            status_publisher: keep(1).durability(ros2_client::qos::Durability::TransientLocal),
-        };
-        let server = node
-            .create_action_server::<Wire<G>, Wire<R>, Wire<F>>(
-                ServiceMapping::Cyclone,
-                &name,
-                &ActionTypeName::new(kind.package, kind.name),
-                qos,
+        // rcl_action's: feedback reliable, volatile; the status transient-local, last 1 (a
+        // late client reads the goals' states)
+        let feedback = self
+            .action_publisher(
+                &service("feedback"),
+                &format!("{package}::action::dds_::{type_name}_FeedbackMessage_"),
+                keep(FEEDBACK_DEPTH),
             )
-            .map_err(|e| err(e.to_string()))?;
+            .map_err(err)?;
+        let status = self
+            .action_publisher(
+                &service("status"),
+                "action_msgs::msg::dds_::GoalStatusArray_",
+                keep(1).durability(ros2_client::qos::Durability::TransientLocal),
+            )
+            .map_err(err)?;
+        let name = goal
+            .name()
+            .trim_end_matches("/_action/send_goal")
+            .to_owned();
         Ok(ActionServer {
-            server,
+            goal,
+            cancel,
+            result,
+            feedback,
+            status,
             goals: RefCell::new(Goals {
                 all: BTreeMap::new(),
                 finished: VecDeque::new(),
                 waiting: Vec::new(),
             }),
-            name: format!("{fqn}/{action}"),
+            name,
         })
+    }
+
+    /// A writer of this node's topic `~/<topic>` of DDS type `dds_type` (an action's
+    /// feedback or status, whose types are not messages of a package's `msg`).
+    fn action_publisher<M: Serialize>(
+        &self,
+        topic: &str,
+        dds_type: &str,
+        qos: QosProfile,
+    ) -> Result<Publisher<M>, String> {
+        let mut node = self
+            .node
+            .lock()
+            .map_err(|_| "the DDS node mutex is poisoned".to_owned())?;
+        let name = format!("rt{}/{topic}", node.fully_qualified_name());
+        let dds_qos = ros2_client::dds::rustdds::QosPolicies::from(&qos);
+        let topic = self
+            .participant()
+            .create_topic(
+                name.clone(),
+                dds_type.to_owned(),
+                &dds_qos,
+                TopicKind::NoKey,
+            )
+            .map_err(|e| format!("{name}: {e}"))?;
+        node.create_publisher(&topic, Some(qos))
+            .map_err(|e| format!("{name}: {e}"))
     }
 }
 
@@ -168,10 +253,14 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
         &self.name
     }
 
-    /// Answers the cancel and result requests waiting.
+    /// Answers the cancel and result requests waiting, and sends the replies whose readers
+    /// have matched since.
     pub fn poll(&self) {
         self.serve_cancels();
         self.serve_results();
+        self.goal.flush();
+        self.cancel.flush();
+        self.result.flush();
     }
 
     /// The next goal a client sent and what it asks, if any; the node accepts or rejects it
@@ -179,20 +268,13 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
     /// request).
     pub fn next_goal(&self) -> Option<(NewGoal, G)> {
         loop {
-            let (request, sent) = match self.server.receive_goal() {
-                Ok(Some(got)) => got,
-                Ok(None) => return None,
-                Err(e) => {
-                    log::warn!("action {}: bad goal request: {e:?}", self.name);
-                    return None;
-                }
-            };
+            let (request, sent) = self.goal.try_next()?;
             let goal = NewGoal {
                 id: sent.goal_id,
                 request,
             };
             if !self.goals.borrow().all.contains_key(&goal.id) {
-                return Some((goal, sent.goal.0));
+                return Some((goal, sent.goal));
             }
             self.reject(goal);
         }
@@ -223,7 +305,11 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
 
     /// Publishes `feedback` of the goal `h`.
     pub fn feedback(&self, h: GoalHandle, feedback: F) {
-        if let Err(e) = self.server.send_feedback(h.0, Wire(feedback)) {
+        let message = FeedbackMessage {
+            goal_id: h.0,
+            feedback,
+        };
+        if let Err(e) = self.feedback.publish(message) {
             log::warn!("action {}: feedback not sent: {e}", self.name);
         }
     }
@@ -276,23 +362,13 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
         self.serve_results();
     }
 
-    fn reply_goal(&self, request: RmwRequestId, accepted: bool, stamp: Time) {
-        if let Err(e) = self
-            .server
-            .send_goal_response(request, SendGoalResponse { accepted, stamp })
-        {
-            log::warn!("action {}: goal reply not sent: {e:?}", self.name);
-        }
+    fn reply_goal(&self, request: Caller, accepted: bool, stamp: Time) {
+        self.goal
+            .reply(request, &SendGoalResponse { accepted, stamp });
     }
 
-    fn send_result(&self, request: RmwRequestId, status: GoalStatusEnum, result: R) {
-        let reply = GetResultResponse {
-            status,
-            result: Wire(result),
-        };
-        if let Err(e) = self.server.send_result(request, reply) {
-            log::warn!("action {}: result not sent: {e:?}", self.name);
-        }
+    fn send_result(&self, request: Caller, status: GoalStatusEnum, result: R) {
+        self.result.reply(request, &ResultReply { status, result });
     }
 
     fn set_status(&self, id: GoalId, status: GoalStatusEnum) {
@@ -317,26 +393,15 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
                 status: g.status,
             })
             .collect();
-        if let Err(e) = self
-            .server
-            .send_goal_statuses(GoalStatusArray { status_list })
-        {
-            log::warn!("action {}: status not published: {e:?}", self.name);
+        if let Err(e) = self.status.publish(GoalStatusArray { status_list }) {
+            log::warn!("action {}: status not published: {e}", self.name);
         }
     }
 
     /// Answers the result requests waiting: a finished goal's result now, a running goal's
     /// when it ends, an unknown goal's as rclcpp does (status unknown, an empty result).
     fn serve_results(&self) {
-        loop {
-            let (request, asked) = match self.server.receive_result_request() {
-                Ok(Some(got)) => got,
-                Ok(None) => return,
-                Err(e) => {
-                    log::warn!("action {}: bad result request: {e:?}", self.name);
-                    return;
-                }
-            };
+        while let Some((request, asked)) = self.result.try_next() {
             let known = self
                 .goals
                 .borrow()
@@ -357,33 +422,17 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
 
     /// Answers the cancel requests waiting; the goals they name start canceling.
     fn serve_cancels(&self) {
-        loop {
-            let (request, cancel) = match self.server.receive_cancel_request() {
-                Ok(Some(got)) => got,
-                Ok(None) => return,
-                Err(e) => {
-                    log::warn!("action {}: bad cancel request: {e:?}", self.name);
-                    return;
-                }
-            };
-            let response = match cancel_target(&cancel) {
-                Some(target) => self.cancel(&target),
-                None => CancelGoalResponse {
-                    return_code: CancelGoalResponseEnum::Rejected,
-                    goals_canceling: Vec::new(),
-                },
-            };
+        while let Some((request, cancel)) = self.cancel.try_next() {
+            let response = self.cancel_goals(&cancel.goal_info);
             if !response.goals_canceling.is_empty() {
                 self.publish_status();
             }
-            if let Err(e) = self.server.send_cancel_response(request, response) {
-                log::warn!("action {}: cancel reply not sent: {e:?}", self.name);
-            }
+            self.cancel.reply(request, &response);
         }
     }
 
     /// The goals `target` names start canceling (rcl_action's rules); the reply.
-    fn cancel(&self, target: &GoalInfo) -> CancelGoalResponse {
+    fn cancel_goals(&self, target: &GoalInfo) -> CancelGoalResponse {
         let by_id = target.goal_id != GoalId::ZERO;
         let by_time = target.stamp != Time::ZERO;
         let mut goals = self.goals.borrow_mut();
@@ -421,43 +470,5 @@ impl<G: RosMessage, R: RosMessage + Default, F: RosMessage> ActionServer<G, R, F
             return_code,
             goals_canceling,
         }
-    }
-}
-
-/// The goal a cancel request names: ros2-client keeps the request's field crate-private, its
-/// serde form is public, so it is read back through CDR.
-fn cancel_target(request: &action::CancelGoalRequest) -> Option<GoalInfo> {
-    #[derive(serde::Deserialize)]
-    struct Target {
-        goal_info: GoalInfo,
-    }
-    let bytes = cdr_encoding::to_vec::<_, byteorder::LittleEndian>(request).ok()?;
-    cdr_encoding::from_bytes::<Target, byteorder::LittleEndian>(&bytes)
-        .ok()
-        .map(|(t, _)| t.goal_info)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A cancel request as a client writes it (goal id, stamp) is read back whole.
-    #[test]
-    fn a_cancel_request_names_its_goal() {
-        #[derive(serde::Serialize)]
-        struct Written {
-            goal_info: GoalInfo,
-        }
-        let goal_id = GoalId::new_random();
-        let stamp = Time::new(1_700_000_000, 250);
-        let bytes = cdr_encoding::to_vec::<_, byteorder::LittleEndian>(&Written {
-            goal_info: GoalInfo { goal_id, stamp },
-        })
-        .expect("encode");
-        let (request, _) =
-            cdr_encoding::from_bytes::<action::CancelGoalRequest, byteorder::LittleEndian>(&bytes)
-                .expect("decode");
-        let target = cancel_target(&request).expect("a target");
-        assert_eq!((target.goal_id, target.stamp), (goal_id, stamp));
     }
 }

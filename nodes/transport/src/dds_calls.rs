@@ -1,8 +1,9 @@
-//! Services a node answers from its own loop (`~/load_calibration`, `~/save_calibration`):
-//! a task on the node's DDS runtime receives each request (the Cyclone service mapping, as
-//! the parameter services of [`crate::dds_params`], so that `ros2 service call` over
-//! rmw_cyclonedds gets its reply) and hands it to the node as a [`Call`]; the node answers
-//! when its loop comes by, and the task sends the reply. The node's loop never waits for DDS.
+//! Services a node answers from its own loop (`~/load_calibration`, `~/save_calibration`,
+//! the lifecycle's): a task on the node's DDS runtime receives each request (in either ROS 2
+//! request mapping, [`crate::dds_rpc`], so that `ros2 service call` over rmw_fastrtps and
+//! rmw_cyclonedds both get their reply) and hands it to the node as a [`Call`]; the node
+//! answers when its loop comes by, and the task sends the reply. The node's loop never waits
+//! for DDS.
 
 use std::sync::mpsc;
 use std::sync::Arc;
@@ -14,6 +15,7 @@ use ros2_client::{Name, QosProfile, ServiceMapping, ServiceTypeName};
 use rpkm_msgs::RosMessage;
 
 use crate::dds::{DdsNode, Wire};
+use crate::dds_rpc::{reply_timer, RpcServer, RpcTypes};
 use crate::error::TransportError;
 
 /// A request a node received, and the way to answer it.
@@ -79,49 +81,29 @@ pub struct ServiceType {
 
 impl DdsNode {
     /// Answers `~/<service>` (relative to this node: `/rpkm/tcp_estimator/<service>`) of
-    /// type `kind`; the requests come out of [`CallServer::try_next`].
+    /// type `kind`, for clients of either request mapping ([`crate::dds_rpc`]); the requests
+    /// come out of [`CallServer::try_next`].
     pub fn serve_calls<Q, R>(
         self: &Arc<Self>,
         service: &str,
         kind: ServiceType,
     ) -> Result<CallServer<Q, R>, TransportError>
     where
-        // shared with the runtime's thread while a request is read
-        Q: RosMessage + Sync,
-        R: RosMessage + Sync,
+        Q: RosMessage,
+        R: RosMessage,
     {
-        let err = |reason: String| TransportError::CreatePort {
-            topic: format!("~/{service}"),
-            backend: "dds",
-            port: "server",
-            reason,
-        };
-        let (server, name) = {
-            let mut node = self
-                .node
-                .lock()
-                .map_err(|_| err("node mutex poisoned".into()))?;
-            let fqn = node.fully_qualified_name();
-            let name = Name::new(&fqn, service).map_err(|e| err(format!("{e:?}")))?;
-            // rmw's service QoS: reliable, volatile, keep last 10.
-            let qos = QosProfile::publisher_default()
-                .history(ros2_client::qos::History::KeepLast { depth: 10 });
-            let server = node
-                .create_server::<Wire<Q>, Wire<R>>(
-                    ServiceMapping::Cyclone,
-                    &name,
-                    &ServiceTypeName::new(kind.package, kind.name),
-                    qos.clone(),
-                    qos,
-                )
-                .map_err(|e| err(e.to_string()))?;
-            (server, format!("{fqn}/{service}"))
-        };
+        let server = self
+            .rpc_server::<Q, R>(service, &RpcTypes::new(kind.package, "srv", kind.name))
+            .map_err(|reason| TransportError::CreatePort {
+                topic: format!("~/{service}"),
+                backend: "dds",
+                port: "server",
+                reason,
+            })?;
+        let name = server.name().to_owned();
         let (tx, rx) = mpsc::channel();
         let (stop_tx, stop_rx) = futures::channel::oneshot::channel();
-        let task = self
-            .runtime()
-            .spawn(serve(server, tx, stop_rx, name.clone()));
+        let task = self.runtime().spawn(serve(server, tx, stop_rx));
         Ok(CallServer {
             calls: rx,
             stop: Some(stop_tx),
@@ -131,37 +113,36 @@ impl DdsNode {
     }
 }
 
-async fn serve<Q: RosMessage + Sync, R: RosMessage + Sync>(
-    server: ros2_client::Server<Wire<Q>, Wire<R>>,
+async fn serve<Q: RosMessage, R: RosMessage>(
+    server: RpcServer<Q, R>,
     calls: mpsc::Sender<Call<Q, R>>,
     stop: futures::channel::oneshot::Receiver<()>,
-    name: String,
 ) {
     let mut stop = stop.fuse();
-    let requests = server.receive_request_stream();
+    let requests = server.stream().fuse();
     futures::pin_mut!(requests);
+    let matches = server.matches().fuse();
+    futures::pin_mut!(matches);
     let mut pending = FuturesUnordered::new();
     loop {
+        let mut flush = reply_timer(server.waiting());
         futures::select! {
             _ = stop => break,
-            r = requests.select_next_some() => match r {
-                Ok((id, Wire(request))) => {
-                    let (reply, answer) = futures::channel::oneshot::channel();
-                    if calls.send(Call { request, reply }).is_err() {
-                        break;
-                    }
-                    pending.push(answer.map(move |r| (id, r)));
+            (caller, request) = requests.select_next_some() => {
+                let (reply, answer) = futures::channel::oneshot::channel();
+                if calls.send(Call { request, reply }).is_err() {
+                    break;
                 }
-                Err(e) => log::warn!("service {name}: bad request: {e:?}"),
+                pending.push(answer.map(move |r| (caller, r)));
             },
-            (id, answer) = pending.select_next_some() => match answer {
-                Ok(response) => {
-                    if let Err(e) = server.send_response(id, Wire(response)) {
-                        log::warn!("service {name}: reply not sent: {e:?}");
-                    }
-                }
-                Err(_) => log::warn!("service {name}: the node dropped a request unanswered"),
+            (caller, answer) = pending.select_next_some() => match answer {
+                Ok(response) => server.reply(caller, &response),
+                Err(_) => log::warn!(
+                    "service {}: the node dropped a request unanswered", server.name()
+                ),
             },
+            () = matches.select_next_some() => {},
+            () = flush => server.flush(),
         }
     }
 }

@@ -4,14 +4,12 @@
 //! parameter's descriptor (type, description, range, read-only), and a
 //! `rcl_interfaces/ParameterEvent` on `/parameter_events` for every accepted change.
 //!
-//! Why our own servers and not ros2-client's (`start_parameter_services(true)`): its servers
-//! use the RTPS "Enhanced" service mapping, which reads the request id from the inline QoS
-//! (related sample identity). rmw_cyclonedds puts the request id in the payload instead, as a
-//! 16-byte header (client GUID, sequence number) before the request; the Enhanced server
-//! decodes that header as the request itself, so `ros2 param` over Cyclone got garbage or
-//! nothing (ros2-client issues 24, 35). These servers use the Cyclone mapping, which echoes
-//! that header in the reply. Its descriptors also carried no range, read-only flag or
-//! description. Checked with an independent Cyclone DDS peer (tests/it/node_ros2_params.rs).
+//! Why our own servers and not ros2-client's (`start_parameter_services(true)`): each of its
+//! servers speaks one request mapping, and a ROS 2 cell may speak either: rmw_fastrtps (the
+//! default middleware) the enhanced one, rmw_cyclonedds a header in the payload (ros2-client
+//! issues 24, 35). These servers answer both, decided per request ([`crate::dds_rpc`]); their
+//! descriptors also carry the range, read-only flag and description. Checked with independent
+//! Cyclone DDS and Fast DDS peers (tests/it/node_ros2_params.rs and the Fast DDS service tests).
 //!
 //! A set passes, in order: the parameter exists, its type is the declared one, it is not
 //! read-only, it lies in its range, and the node's own check of the whole resulting set
@@ -29,12 +27,12 @@ use ros2_client::rcl_interfaces::{
     GetParameterTypesResponse, GetParametersRequest, GetParametersResponse, ListParametersRequest,
     ListParametersResponse, ListParametersResult, SetParametersRequest, SetParametersResponse,
 };
-use ros2_client::{Name, Node, QosProfile, RmwRequestId, ServiceMapping, ServiceTypeName};
 use serde::{Deserialize, Serialize};
 
 pub use ros2_client::ParameterValue;
 
 use crate::dds::DdsNode;
+use crate::dds_rpc::{reply_timer, RpcServer, RpcTypes};
 use crate::error::TransportError;
 
 /// The numeric range of a parameter, inclusive (`rcl_interfaces/FloatingPointRange`,
@@ -198,19 +196,17 @@ impl Drop for ParamServer {
     }
 }
 
-type Server<Q, R> = ros2_client::Server<Q, R>;
+type Server<Q, R> = RpcServer<Q, R>;
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 struct SetAtomicRequest {
     parameter: Vec<raw::Parameter>,
 }
-impl ros2_client::Message for SetAtomicRequest {}
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
 struct SetAtomicResponse {
     result: raw::SetParametersResult,
 }
-impl ros2_client::Message for SetAtomicResponse {}
 
 struct Servers {
     list: Server<ListParametersRequest, ListParametersResponse>,
@@ -221,27 +217,36 @@ struct Servers {
     set_atomic: Server<SetAtomicRequest, SetAtomicResponse>,
 }
 
-fn create<Q, R>(node: &mut Node, service: &str, kind: &str) -> Result<Server<Q, R>, String>
-where
-    Q: ros2_client::Message + Clone + 'static,
-    R: ros2_client::Message + 'static,
-{
-    let fqn = node.fully_qualified_name();
-    let name = Name::new(&fqn, service).map_err(|e| format!("{service}: {e:?}"))?;
-    // rmw's service QoS: reliable, volatile, keep last 10.
-    let qos =
-        QosProfile::publisher_default().history(ros2_client::qos::History::KeepLast { depth: 10 });
-    node.create_server(
-        ServiceMapping::Cyclone,
-        &name,
-        &ServiceTypeName::new("rcl_interfaces", kind),
-        qos.clone(),
-        qos,
-    )
-    .map_err(|e| format!("{service}: {e}"))
+impl Servers {
+    /// Sends the replies whose readers have matched since.
+    fn flush(&self) {
+        self.list.flush();
+        self.describe.flush();
+        self.get.flush();
+        self.types.flush();
+        self.set.flush();
+        self.set_atomic.flush();
+    }
+
+    fn waiting(&self) -> bool {
+        self.list.waiting()
+            || self.describe.waiting()
+            || self.get.waiting()
+            || self.types.waiting()
+            || self.set.waiting()
+            || self.set_atomic.waiting()
+    }
 }
 
-fn servers(node: &mut Node) -> Result<Servers, String> {
+fn create<Q, R>(node: &DdsNode, service: &str, kind: &str) -> Result<Server<Q, R>, String>
+where
+    Q: serde::de::DeserializeOwned,
+    R: Serialize,
+{
+    node.rpc_server(service, &RpcTypes::new("rcl_interfaces", "srv", kind))
+}
+
+fn servers(node: &DdsNode) -> Result<Servers, String> {
     Ok(Servers {
         list: create(node, "list_parameters", "ListParameters")?,
         describe: create(node, "describe_parameters", "DescribeParameters")?,
@@ -382,83 +387,61 @@ impl Service {
     }
 }
 
-fn reply<Q: ros2_client::Message + 'static, R: ros2_client::Message + 'static>(
-    server: &Server<Q, R>,
-    id: RmwRequestId,
-    response: R,
-    service: &str,
-) {
-    if let Err(e) = server.send_response(id, response) {
-        log::warn!("parameter service {service}: reply not sent: {e:?}");
-    }
-}
-
-fn request_err(service: &str, e: impl std::fmt::Debug) {
-    log::warn!("parameter service {service}: bad request: {e:?}");
-}
-
 async fn serve(s: Servers, mut svc: Service, stop: futures::channel::oneshot::Receiver<()>) {
     let mut stop = stop.fuse();
-    let list = s.list.receive_request_stream();
+    let list = s.list.stream().fuse();
     futures::pin_mut!(list);
-    let describe = s.describe.receive_request_stream();
+    let describe = s.describe.stream().fuse();
     futures::pin_mut!(describe);
-    let get = s.get.receive_request_stream();
+    let get = s.get.stream().fuse();
     futures::pin_mut!(get);
-    let types = s.types.receive_request_stream();
+    let types = s.types.stream().fuse();
     futures::pin_mut!(types);
-    let set = s.set.receive_request_stream();
+    let set = s.set.stream().fuse();
     futures::pin_mut!(set);
-    let set_atomic = s.set_atomic.receive_request_stream();
+    let set_atomic = s.set_atomic.stream().fuse();
     futures::pin_mut!(set_atomic);
+    // The reply writers' match events: a reply waiting for its client's reader goes out
+    // when the reader matches.
+    let mut matches = futures::stream::select_all([
+        s.list.matches().boxed(),
+        s.describe.matches().boxed(),
+        s.get.matches().boxed(),
+        s.types.matches().boxed(),
+        s.set.matches().boxed(),
+        s.set_atomic.matches().boxed(),
+    ])
+    .fuse();
     loop {
+        let mut flush = reply_timer(s.waiting());
         futures::select! {
             _ = stop => break,
-            r = list.select_next_some() => match r {
-                Ok((id, req)) => {
-                    let result = svc.store.list(&req);
-                    reply(&s.list, id, ListParametersResponse { result }, "list_parameters");
-                }
-                Err(e) => request_err("list_parameters", e),
+            (caller, req) = list.select_next_some() => {
+                let result = svc.store.list(&req);
+                s.list.reply(caller, &ListParametersResponse { result });
             },
-            r = describe.select_next_some() => match r {
-                Ok((id, req)) => {
-                    let values = svc.describe(&req.names);
-                    reply(&s.describe, id, DescribeParametersResponse { values },
-                        "describe_parameters");
-                }
-                Err(e) => request_err("describe_parameters", e),
+            (caller, req) = describe.select_next_some() => {
+                let values = svc.describe(&req.names);
+                s.describe.reply(caller, &DescribeParametersResponse { values });
             },
-            r = get.select_next_some() => match r {
-                Ok((id, req)) => {
-                    let values = svc.get(&req.names);
-                    reply(&s.get, id, GetParametersResponse { values }, "get_parameters");
-                }
-                Err(e) => request_err("get_parameters", e),
+            (caller, req) = get.select_next_some() => {
+                let values = svc.get(&req.names);
+                s.get.reply(caller, &GetParametersResponse { values });
             },
-            r = types.select_next_some() => match r {
-                Ok((id, req)) => {
-                    let values = svc.get(&req.names).iter().map(|v| v.ptype).collect();
-                    reply(&s.types, id, GetParameterTypesResponse { values },
-                        "get_parameter_types");
-                }
-                Err(e) => request_err("get_parameter_types", e),
+            (caller, req) = types.select_next_some() => {
+                let values = svc.get(&req.names).iter().map(|v| v.ptype).collect();
+                s.types.reply(caller, &GetParameterTypesResponse { values });
             },
-            r = set.select_next_some() => match r {
-                Ok((id, req)) => {
-                    let results = req.parameter.into_iter().map(|p| svc.set(vec![p])).collect();
-                    reply(&s.set, id, SetParametersResponse { results }, "set_parameters");
-                }
-                Err(e) => request_err("set_parameters", e),
+            (caller, req) = set.select_next_some() => {
+                let results = req.parameter.into_iter().map(|p| svc.set(vec![p])).collect();
+                s.set.reply(caller, &SetParametersResponse { results });
             },
-            r = set_atomic.select_next_some() => match r {
-                Ok((id, req)) => {
-                    let result = svc.set(req.parameter);
-                    reply(&s.set_atomic, id, SetAtomicResponse { result },
-                        "set_parameters_atomically");
-                }
-                Err(e) => request_err("set_parameters_atomically", e),
+            (caller, req) = set_atomic.select_next_some() => {
+                let result = svc.set(req.parameter);
+                s.set_atomic.reply(caller, &SetAtomicResponse { result });
             },
+            () = matches.select_next_some() => {},
+            () = flush => s.flush(),
         }
     }
 }
@@ -478,13 +461,7 @@ impl DdsNode {
             port: "server",
             reason,
         };
-        let servers = {
-            let mut node = self
-                .node
-                .lock()
-                .map_err(|_| err("node mutex poisoned".into()))?;
-            servers(&mut node).map_err(err)?
-        };
+        let servers = servers(self).map_err(err)?;
         // The declarations, as rclcpp announces them: one event with every new parameter.
         for d in &decls {
             self.publish_parameter(&d.name, d.value.clone());

@@ -17,6 +17,7 @@ pub mod dds;
 pub mod dds_actions;
 pub mod dds_calls;
 pub mod dds_params;
+mod dds_rpc;
 pub mod error;
 pub mod ipc;
 pub mod names;
@@ -24,6 +25,7 @@ pub mod pubsub;
 pub mod security;
 pub mod topic;
 
+pub use dds_rpc::Unread;
 pub use error::TransportError;
 pub use ipc::IpcMessage;
 pub use names::{NameError, Names, NODE_NAMESPACE};

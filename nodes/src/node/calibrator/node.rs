@@ -8,9 +8,7 @@ use super::params::{
     configure, declared, online_settings, Settings, HISTORY, HISTORY_MACHINE, PARAMS, STATE_BUFFER,
 };
 use crate::node::calibrate_action::{CalibrateAction, Running};
-use crate::node::context::{
-    bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext,
-};
+use crate::node::context::{bad_param, status, CommonArgs, Every, Idle, NodeContext};
 use crate::node::declare::served;
 use crate::node::geometry::parameters_msg;
 use crate::node::ingest::END_OF_CAMPAIGN;
@@ -125,7 +123,7 @@ impl Calibrator {
                 self.last = (DiagnosticStatus::WARN, warning);
                 let mut t = vec![("online_t_s", format!("{:.3}", r.t))];
                 t.extend(tie_values(&r));
-                out.diagnostics.publish(&diagnostic_array(status(
+                out.diagnostics.publish(&ctx.diagnostics(status(
                     self.last.0,
                     &ctx.status_name,
                     self.last.1.clone(),
@@ -257,7 +255,7 @@ impl Calibrator {
         };
         ctx.log(&self.last.1);
         let values = vec![("calibrations", self.calibrations.to_string())];
-        out.diagnostics.publish(&diagnostic_array(status(
+        out.diagnostics.publish(&ctx.diagnostics(status(
             self.last.0,
             &ctx.status_name,
             self.last.1.clone(),
@@ -388,7 +386,7 @@ impl Calibrator {
     /// The periodic /diagnostics status: the last message and the counts.
     fn publish_status(&self, ctx: &NodeContext, out: &Outputs) -> anyhow::Result<()> {
         let (level, message) = (self.last.0, self.last.1.clone());
-        out.diagnostics.publish(&diagnostic_array(status(
+        out.diagnostics.publish(&ctx.diagnostics(status(
             level,
             &ctx.status_name,
             message,

@@ -15,7 +15,7 @@ use crate::node::lifecycle::{self, Lifecycle};
 use crate::node::live::LiveParams;
 use crate::node::params::NodeParams;
 use crate::node::views::JointViews;
-use crate::node::{diagnostic_array, shutdown, CommonArgs, Every, NodeContext};
+use crate::node::{shutdown, CommonArgs, Every, NodeContext};
 
 /// The publishers and bookkeeping shared by the sources, and the node's lifecycle: only an
 /// active ingest publishes samples.
@@ -304,7 +304,7 @@ impl<'a> Output<'a> {
     ) -> anyhow::Result<()> {
         let mut status = self.tally.status(&self.status_name, &self.source);
         annotate(&mut status);
-        self.diagnostics.publish(&diagnostic_array(status))?;
+        self.diagnostics.publish(&self.ctx.diagnostics(status))?;
         Ok(())
     }
 }
