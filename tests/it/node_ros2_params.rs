@@ -305,6 +305,31 @@ fn a_cyclone_peer_reads_and_sets_the_estimators_parameters() {
     assert_eq!(rosout["rosout"]["name"], "rpkm.tcp_estimator");
 }
 
+/// Issue 51: a one-shot client's first call gets its reply. 100 fresh clients (each a new
+/// request writer and reply reader, as each `ros2 param get` is) call get_parameters once,
+/// as soon as both are matched, with no resend: the reply must wait for the client's reply
+/// reader, whose discovery by the server races the request (before, about 1 in 10 was lost).
+#[test]
+fn a_hundred_fresh_clients_each_get_the_reply_to_their_one_call() {
+    let Some(py) = python() else { return };
+    let dir = TempDir::new("ros2params_first");
+    let prefix = unique("r2pf");
+    let _node = Proc(
+        Command::new(rpkm())
+            .args(["node", "tcp_estimator", "--backend", "both"])
+            .args(["--input-backend", "ipc", "--param", "view_every=7"])
+            .args(["--param", "follow_parameters=false"])
+            .env("RPKM_IPC_PREFIX", &prefix)
+            .env("ROS_DOMAIN_ID", DOMAIN)
+            .spawn()
+            .expect("start tcp_estimator"),
+    );
+    let script = serde_json::json!([{"first_calls": 100, "get": ["view_every"]}]);
+    let (_peer, rx) = peer(&py, &dir, "/rpkm/tcp_estimator", &script);
+    let calls = next_line(&rx, "first calls");
+    assert_eq!(calls["first_calls"], serde_json::json!([100, 100]), "{calls}");
+}
+
 /// A CSV row of ingest's stdin at `t` s: the nominal machine at (0, 1700) mm, drive forces
 /// `f` N (the validator judges their size, not their physics).
 fn ingest_row(t: f64, f: [f64; 4]) -> String {

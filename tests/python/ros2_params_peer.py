@@ -12,6 +12,10 @@ of each struct, and a reply is taken only when both match.
 
 SCRIPT is a list of steps, each {"get": [names]} or {"set": {name: value}} or
 {"set_atomically": {name: value}} or {"describe": [names]} or {"list": true}, or
+{"first_calls": N, "get": [names]} (N fresh clients, each a participant of its own with a
+new request writer and reply reader, calling get_parameters ONCE as soon as both are
+matched, as a one-shot `ros2 param get` process does: no resend; prints how many got their
+reply within 3 s), or
 {"await_event": name} (a /parameter_events message of the node changing `name`) or
 {"await_rosout": text} (a /rosout record of the node whose msg contains `text`).
 Values: a Python float is a double, int an integer, bool a bool, str a string. One JSON
@@ -223,6 +227,7 @@ def plain(pv):
 class Peer:
     def __init__(self, domain, node, deadline):
         self.dp = DomainParticipant(domain)
+        self.domain = domain
         self.node = node
         self.deadline = deadline
         self.seq = 0
@@ -299,7 +304,37 @@ class Peer:
             time.sleep(0.01)
         raise TimeoutError(f"no /rosout record containing {text!r}")
 
+    def first_calls(self, n, names):
+        """N one-shot clients: a reply lost to the race between our reply reader's discovery
+        and the server's reply counts as lost (no resend)."""
+        reliable = Qos(Policy.Reliability.Reliable(duration(seconds=1)),
+                       Policy.History.KeepLast(10))
+        replied = 0
+        for i in range(n):
+            client = CLIENT_ID + 1 + i
+            dp = DomainParticipant(self.domain)
+            rq = Topic(dp, f"rq{self.node}/get_parametersRequest", GetRequest)
+            rr = Topic(dp, f"rr{self.node}/get_parametersReply", GetResponse)
+            w = DataWriter(dp, rq, qos=reliable)
+            r = DataReader(dp, rr, qos=reliable)
+            while not (w.get_matched_subscriptions() and r.get_matched_publications()):
+                if time.monotonic() > self.deadline:
+                    raise TimeoutError(f"first call {i}: the service was not discovered")
+                time.sleep(0.001)
+            w.write(GetRequest(client, 1, names))
+            until = time.monotonic() + 3.0
+            got = False
+            while not got and time.monotonic() < until:
+                got = any(getattr(x, "client", None) == client and x.seq == 1
+                          for x in r.take(N=16))
+                time.sleep(0.002)
+            replied += got
+            del w, r, rq, rr, dp
+        return [replied, n]
+
     def step(self, s):
+        if "first_calls" in s:
+            return {"first_calls": self.first_calls(s["first_calls"], s["get"])}
         if "get" in s:
             reply = self.call("get_parameters", lambda q: GetRequest(CLIENT_ID, q, s["get"]))
             return {"get": dict(zip(s["get"], (plain(v) for v in reply.values)))}
