@@ -36,9 +36,9 @@
 #include <fastdds/dds/subscriber/SampleInfo.hpp>
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
-#include <fastrtps/utils/IPLocator.h>
 
 #include "fastdds_cell.h"
+#include "fastdds_participant.hpp"
 #include "fastdds_cellPubSubTypes.h"
 
 using namespace eprosima::fastdds::dds;
@@ -62,33 +62,6 @@ std::vector<double> numbers(const std::string &s) {
   std::vector<double> out;
   for (const auto &v : split(s, ',')) out.push_back(std::strtod(v.c_str(), nullptr));
   return out;
-}
-
-// The participant: loopback discovery as the Cyclone peers (127.0.0.1 as initial peer), and
-// DDS Security from an SROS2 enclave when one is given.
-DomainParticipantQos participant_qos(const char *enclave) {
-  DomainParticipantQos qos = PARTICIPANT_QOS_DEFAULT;
-  qos.name("fastdds_peer");
-  eprosima::fastrtps::rtps::Locator_t peer;
-  eprosima::fastrtps::rtps::IPLocator::setIPv4(peer, 127, 0, 0, 1);
-  qos.wire_protocol().builtin.initialPeersList.push_back(peer);
-  if (enclave != nullptr) {
-    std::string dir = std::string("file://") + enclave + "/";
-    auto &p = qos.properties().properties();
-    p.emplace_back("dds.sec.auth.plugin", "builtin.PKI-DH");
-    p.emplace_back("dds.sec.auth.builtin.PKI-DH.identity_ca", dir + "identity_ca.cert.pem");
-    p.emplace_back("dds.sec.auth.builtin.PKI-DH.identity_certificate", dir + "cert.pem");
-    p.emplace_back("dds.sec.auth.builtin.PKI-DH.private_key", dir + "key.pem");
-    p.emplace_back("dds.sec.access.plugin", "builtin.Access-Permissions");
-    p.emplace_back("dds.sec.access.builtin.Access-Permissions.permissions_ca",
-                   dir + "permissions_ca.cert.pem");
-    p.emplace_back("dds.sec.access.builtin.Access-Permissions.governance",
-                   dir + "governance.p7s");
-    p.emplace_back("dds.sec.access.builtin.Access-Permissions.permissions",
-                   dir + "permissions.p7s");
-    p.emplace_back("dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC");
-  }
-  return qos;
 }
 
 struct Peer {
@@ -224,7 +197,7 @@ int main(int argc, char **argv) {
   peer.deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
                                      std::chrono::duration<double>(std::atof(argv[4])));
   peer.participant = DomainParticipantFactory::get_instance()->create_participant(
-      domain, participant_qos(argc == 6 ? argv[5] : nullptr));
+      domain, participant_qos("fastdds_peer", argc == 6 ? argv[5] : nullptr));
   if (peer.participant == nullptr) {
     std::fprintf(stderr, "fastdds_peer: the participant cannot be created\n");
     return 3;

@@ -15,6 +15,7 @@ pub static KILLS_A_NODE: Mutex<()> = Mutex::new(());
 
 mod bag_support;
 mod diagnosis_support;
+mod fastdds_support;
 mod foreign_support;
 mod fuzz_support;
 mod history_support;
@@ -64,6 +65,7 @@ mod node_params_declared;
 mod node_preload_monitor;
 mod node_ros2_params;
 mod node_ros2_views;
+mod node_services_fastdds;
 mod node_soak;
 mod plan_foreign;
 mod report_alignment;

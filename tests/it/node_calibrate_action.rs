@@ -49,7 +49,7 @@ fn demo(name: &str) -> PathBuf {
 /// The core's calibration of `campaign` with the node's default options (every parameter
 /// under its tolerance, no outlier elimination, `noise`), and its LM iterations over all
 /// its rounds.
-fn core_calibration(
+pub(crate) fn core_calibration(
     campaign: &Path,
     noise: calib::Noise,
 ) -> (

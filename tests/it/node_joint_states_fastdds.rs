@@ -19,9 +19,8 @@ use crate::joint_states_support::{
     campaign, cell, launch_dir, reference, write_script, Script, THERMOMETER,
 };
 use crate::node_support::{unique, Launch, TempDir};
-use crate::security_support::{env, keystore, required, security};
+use crate::security_support::{env, keystore, security};
 
-use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::OnceLock;
@@ -30,63 +29,12 @@ use std::sync::OnceLock;
 /// follower switch through the parameter services, which the Cyclone cell makes).
 const DEMO_POSES: usize = 194;
 
-fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// The Fast DDS peer: fastddsgen's types and the peer compiled against Debian's Fast DDS,
-/// once per test run, kept in target/tmp under the hash of its sources (a rerun with the same
-/// sources builds nothing).
-fn fastdds_peer() -> Option<PathBuf> {
+/// The Fast DDS peer (tests/cpp/fastdds_peer.cpp, fastdds_cell.idl), built once per test
+/// run.
+pub(crate) fn fastdds_peer() -> Option<PathBuf> {
     static PEER: OnceLock<Option<PathBuf>> = OnceLock::new();
-    PEER.get_or_init(|| {
-        let have = Path::new("/usr/include/fastdds/dds/domain/DomainParticipant.hpp").is_file()
-            && Command::new("fastddsgen").arg("-version").output().is_ok()
-            && Command::new("g++").arg("--version").output().is_ok();
-        if !required(have, "Fast DDS (libfastrtps-dev, fastddsgen) and g++") {
-            return None;
-        }
-        let sources = ["tests/cpp/fastdds_peer.cpp", "tests/cpp/fastdds_cell.idl"];
-        let mut hash = std::collections::hash_map::DefaultHasher::new();
-        for s in sources {
-            std::fs::read(repo().join(s)).expect(s).hash(&mut hash);
-        }
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
-            .join(format!("fastdds_peer-{:016x}", hash.finish()));
-        let bin = dir.join("fastdds_peer");
-        if bin.is_file() {
-            return Some(bin);
-        }
-        let building = dir.with_extension(unique("building"));
-        std::fs::create_dir_all(&building).expect("build dir");
-        let idl = building.join("fastdds_cell.idl");
-        std::fs::copy(repo().join(sources[1]), &idl).expect("idl");
-        let ok = Command::new("fastddsgen")
-            .args(["-replace", "fastdds_cell.idl"])
-            .current_dir(&building)
-            .stdout(Stdio::null())
-            .status()
-            .expect("fastddsgen runs");
-        assert!(ok.success(), "fastddsgen {}", idl.display());
-        let ok = Command::new("g++")
-            .args(["-O1", "-std=c++17", "-I"])
-            .arg(&building)
-            .arg("-o")
-            .arg(building.join("fastdds_peer"))
-            .arg(repo().join(sources[0]))
-            .arg(building.join("fastdds_cell.cxx"))
-            .arg(building.join("fastdds_cellPubSubTypes.cxx"))
-            .args(["-lfastrtps", "-lfastcdr"])
-            .status()
-            .expect("g++ runs");
-        assert!(ok.success(), "fastdds_peer.cpp does not compile");
-        // a finished build only, under its final name (a concurrent run may have won)
-        if std::fs::rename(&building, &dir).is_err() {
-            let _ = std::fs::remove_dir_all(&building);
-        }
-        Some(bin)
-    })
-    .clone()
+    PEER.get_or_init(|| crate::fastdds_support::build("fastdds_peer", "fastdds_cell"))
+        .clone()
 }
 
 /// ingest reading the cell and tcp_estimator publishing on DDS too, with the parameter files
@@ -108,7 +56,7 @@ fn cell_launch(dir: &TempDir) -> PathBuf {
 }
 
 /// A Fast DDS peer's estimates (`E seq x y psi` lines) and its closing `DONE` line.
-fn peer_output(child: Child) -> (Vec<(u64, f64, f64, f64)>, String) {
+pub(crate) fn peer_output(child: Child) -> (Vec<(u64, f64, f64, f64)>, String) {
     let out = child.wait_with_output().expect("fastdds_peer ends");
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     let mut estimates = Vec::new();
