@@ -8,6 +8,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use crate::shared_support;
+
 /// Lost motion of carrier 4 written as data (docs/effects.md).
 const LOST_MOTION: &str = "effects:
   - name: lost_motion_q4
@@ -225,16 +227,11 @@ fn diagnose_says_why_model_24_and_what_the_encoder_was_compared_with() {
 /// actuator encoders (the words say so: "rpkm's assumption").
 #[test]
 fn the_default_ratings_are_the_specs() {
-    let spec = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/spec/scissors-kinematics.md");
-    let Ok(text) = std::fs::read_to_string(&spec) else {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI: {} is missing",
-            spec.display()
-        );
-        eprintln!("skipped: no {}", spec.display());
+    let Some(spec) = shared_support::path("spec/scissors-kinematics.md", "the specification")
+    else {
         return;
     };
+    let text = std::fs::read_to_string(&spec).expect("the specification, a UTF-8 file");
     let text = text.split_whitespace().collect::<Vec<_>>().join(" ");
     let n = rpkm_core::noise::NoiseModel::default();
     let um = |mm: f64| format!("{}", 1e3 * mm);

@@ -17,29 +17,55 @@ const FILES: usize = 240;
 use crate::fuzz_support;
 use fuzz_support::Rng;
 
-/// The base: setups of every instrument from the foreign null campaign, 8 rows each.
-fn base() -> Vec<Vec<u8>> {
-    let path =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/campaigns/foreign/null/cal.csv");
-    let text = std::fs::read_to_string(&path).expect("the foreign null campaign");
+/// The base: the first setup of each instrument the twin measures with (tracker, grid
+/// encoder, ball-bar, self-calibration), 8 rows each, from `rpkm simulate` (the repository's
+/// own campaign source: the test needs no data beside the clone). It must read cleanly, so
+/// that every reject below is a mutation's.
+fn base(dir: &Path) -> Vec<Vec<u8>> {
+    let path = dir.join("base.csv");
+    let out = Command::new(env!("CARGO_BIN_EXE_rpkm"))
+        .args([
+            "simulate",
+            "--campaign",
+            "lt,kgm,dbb,self",
+            "--validation",
+            "0",
+        ])
+        .args(["--seed", "11", "--out"])
+        .arg(&path)
+        .output()
+        .expect("run rpkm simulate");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&path).expect("the simulated campaign");
     let mut lines: Vec<Vec<u8>> = Vec::new();
-    let mut kept: Vec<(String, usize)> = Vec::new();
+    let mut kept: Vec<(String, String, usize)> = Vec::new();
     for (n, line) in text.lines().enumerate() {
         if n < 2 {
             lines.push(line.as_bytes().to_vec());
             continue;
         }
-        let setup = line.split(',').nth(1).unwrap_or("").to_owned();
-        let wanted = ["lt", "kgm01", "dbb1", "self_y700"].contains(&setup.as_str());
-        match kept.iter_mut().find(|(s, _)| *s == setup) {
-            Some((_, count)) if *count < 8 => *count += 1,
-            None if wanted => kept.push((setup, 1)),
+        let mut fields = line.split(',').skip(1);
+        let setup = fields.next().unwrap_or("").to_owned();
+        let instrument = fields.next().unwrap_or("").to_owned();
+        let first_of_its_instrument = !kept.iter().any(|(_, i, _)| *i == instrument);
+        match kept.iter_mut().find(|(s, _, _)| *s == setup) {
+            Some((_, _, count)) if *count < 8 => *count += 1,
+            None if first_of_its_instrument => kept.push((setup, instrument, 1)),
             Some(_) | None => continue,
         }
         lines.push(line.as_bytes().to_vec());
     }
-    assert_eq!(kept.len(), 4, "a setup of each instrument: {kept:?}");
+    let instruments: Vec<&str> = kept.iter().map(|(_, i, _)| i.as_str()).collect();
+    assert_eq!(instruments, ["lt", "kgm", "dbb", "self"], "{kept:?}");
     assert_eq!(lines.len(), 2 + 4 * 8);
+    let bytes = [lines.join(&b"\n"[..]), b"\n".to_vec()].concat();
+    if let Err(e) = Campaign::parse_bytes(&bytes, "base") {
+        panic!("the unmutated base is rejected: {e}");
+    }
     lines
 }
 
@@ -144,7 +170,7 @@ fn ingest(source: &str, bytes: &[u8], tag: usize) -> Vec<String> {
 #[test]
 fn ingest_and_calibrate_reject_the_same_rows_with_the_same_message() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let base = base();
+    let base = base(dir.path());
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let (mut rejected_files, mut rows_rejected, mut calibrated) = (0, 0, 0);
     for n in 0..FILES {

@@ -22,6 +22,7 @@ mod history_support;
 mod joint_states_support;
 mod node_support;
 mod security_support;
+mod shared_support;
 
 mod bag_nodes;
 mod bag_reference;
@@ -35,6 +36,7 @@ mod cli_effects_file;
 mod cli_foreign;
 mod cli_plan;
 mod cli_scipy_baseline;
+mod docs_in_repo;
 mod first_campaign_doc;
 mod first_use_nodes;
 mod first_use_period;

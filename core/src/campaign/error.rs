@@ -77,7 +77,7 @@ pub enum CampaignError {
     },
     /// A number past what any machine can measure (see the module `plausible`: |q| ≤ 1e5 mm,
     /// |f| ≤ 8.6e6 N, |ψ| ≤ 2π, |t| and covariates ≤ 1e10).
-    #[error("{file}:{line}:{column} ({name}): {} {unit} is beyond any machine, expected |{name}| <= {} {unit}", number(*.value), number(*.limit))]
+    #[error("{file}:{line}:{column} ({name}): {} is beyond any machine, expected |{name}| <= {}", quantity(*.value, unit), quantity(*.limit, unit))]
     OutOfRange {
         file: String,
         line: usize,
@@ -214,6 +214,16 @@ pub enum CampaignError {
         first: Instrument,
         first_line: usize,
     },
+}
+
+/// A number with its unit (`-1e300 mm`), or alone where it has none (a covariate's), so that
+/// a message never carries a doubled or trailing space.
+fn quantity(value: f64, unit: &str) -> String {
+    if unit.is_empty() {
+        number(value)
+    } else {
+        format!("{} {unit}", number(value))
+    }
 }
 
 impl CampaignError {

@@ -1,26 +1,22 @@
-//! The independent simulator's campaigns (`../shared/campaigns/foreign`, beside the clone):
-//! where they are, required under CI and skipped with a word elsewhere.
+//! The independent simulator's campaigns (`../shared/campaigns/foreign`, beside the clone,
+//! not in the repository): where they are; whether a test runs without them is
+//! `shared_support`'s decision.
 #![allow(dead_code)] // each test file uses a part
 
 use std::path::{Path, PathBuf};
 
+use crate::shared_support;
+
 /// The folder of the foreign data set `name` (`null`, `thermal`, `alignment`), or the whole
-/// collection for `""`; `None` (skipped, said on stderr) where it is not beside the clone,
-/// a failure under CI, where it must be.
+/// collection for `""`; `None` where it is not beside the clone (skipped or, under `CI=true`,
+/// failed by `shared_support`).
 pub fn dataset(name: &str) -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/campaigns/foreign")
-        .join(name);
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    assert!(
-        std::env::var_os("CI").is_none(),
-        "CI: {} is missing",
-        dir.display()
-    );
-    eprintln!("skipped: no {}", dir.display());
-    None
+    let relative = if name.is_empty() {
+        "campaigns/foreign".to_owned()
+    } else {
+        format!("campaigns/foreign/{name}")
+    };
+    shared_support::path(&relative, "the development campaigns")
 }
 
 /// A JSON file of the data set (truth.json), or a failure naming it.
