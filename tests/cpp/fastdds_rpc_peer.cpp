@@ -710,5 +710,8 @@ int main(int argc, char **argv) {
   }
   std::printf("DONE %ld %ld %ld\n", peer.calls, peer.replies, peer.ignored);
   std::fflush(stdout);
-  return code;
+  // Fast DDS 2.9 with DDS Security crashes (SIGSEGV) tearing down a participant whose
+  // endpoints are still in use by its event thread; the calls are done and said, so the peer
+  // leaves without running the destructors.
+  std::_Exit(code);
 }
