@@ -2,10 +2,15 @@
 // loopback discovery as the Cyclone peers (127.0.0.1 as an initial peer), and DDS Security
 // from an SROS2 enclave when one is given (cert.pem, key.pem, identity_ca.cert.pem,
 // permissions_ca.cert.pem, governance.p7s, permissions.p7s), the properties rmw_fastrtps
-// sets from it.
+// sets from it. With ROS_LOCALHOST_ONLY=1 in the environment, the transports rmw_fastrtps
+// (Humble) makes then: UDPv4 on 127.0.0.1 only, no builtin transports.
 #pragma once
 
+#include <cstdlib>
+#include <memory>
 #include <string>
+
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 
 #include <fastdds/dds/domain/qos/DomainParticipantQos.hpp>
 #include <fastrtps/utils/IPLocator.h>
@@ -17,6 +22,13 @@ inline eprosima::fastdds::dds::DomainParticipantQos participant_qos(const char *
   eprosima::fastrtps::rtps::Locator_t peer;
   eprosima::fastrtps::rtps::IPLocator::setIPv4(peer, 127, 0, 0, 1);
   qos.wire_protocol().builtin.initialPeersList.push_back(peer);
+  const char *localhost = std::getenv("ROS_LOCALHOST_ONLY");
+  if (localhost != nullptr && std::string(localhost) == "1") {
+    auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+    udp->interfaceWhiteList.emplace_back("127.0.0.1");
+    qos.transport().use_builtin_transports = false;
+    qos.transport().user_transports.push_back(udp);
+  }
   if (enclave != nullptr) {
     std::string dir = std::string("file://") + enclave + "/";
     auto &p = qos.properties().properties();

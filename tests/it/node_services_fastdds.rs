@@ -57,12 +57,24 @@ fn call(
     (domain, script): (&str, &[String]),
     enclave: Option<&Path>,
 ) -> (Vec<String>, bool) {
+    call_in(bin, dir, (domain, script), enclave, &[])
+}
+
+/// [`call`] with the peer's environment extended by `envs`.
+fn call_in(
+    bin: &Path,
+    dir: &TempDir,
+    (domain, script): (&str, &[String]),
+    enclave: Option<&Path>,
+    envs: &[(&str, &str)],
+) -> (Vec<String>, bool) {
     let file = dir.path(&unique("rpc.script"));
     std::fs::write(&file, script.join("\n") + "\n").expect("script");
     let mut cmd = Command::new(bin);
     cmd.arg(domain)
         .arg(&file)
         .arg("15")
+        .envs(envs.iter().copied())
         .stderr(Stdio::inherit());
     if let Some(e) = enclave {
         cmd.arg(e);
@@ -266,6 +278,10 @@ fn demo(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// The client runs as rmw_fastrtps does under `ROS_LOCALHOST_ONLY=1` (UDP on 127.0.0.1): the
+/// result (about 1.5 kB) then goes whole. Through a network interface RustDDS 0.15.1 would
+/// fragment it, and its fragments with inline QoS (the related sample identity this mapping
+/// needs) are malformed (docs/nodes.md, "Samples larger than a datagram").
 #[test]
 fn a_fast_dds_action_client_calibrates_through_the_calibrate_action() {
     let Some(rpc) = rpc_peer() else { return };
@@ -283,7 +299,8 @@ fn a_fast_dds_action_client_calibrates_through_the_calibrate_action() {
         demo("campaign.csv").display(),
         demo("campaign.val.csv").display()
     );
-    let (lines, ok) = call(&rpc, &dir, (domain, &[goal]), None);
+    let localhost = [("ROS_LOCALHOST_ONLY", "1")];
+    let (lines, ok) = call_in(&rpc, &dir, (domain, &[goal]), None, &localhost);
     assert!(ok, "the Fast DDS action client: {lines:?}");
     assert_eq!(said(&lines, "GOAL"), ["accepted"]);
     let (cal, noise, all) = crate::node_calibrate_action::core_calibration(
