@@ -198,3 +198,41 @@ fn the_block_pasted_into_the_shipped_file_is_refused_at_its_line() {
     );
     assert!(text.contains(&want), "{want} in {text}");
 }
+
+/// Without `rpkm-node` beside it, `rpkm` says so and starts the nodes as `rpkm node ...`
+/// (`--check` prints the command line each node would start with).
+#[test]
+fn without_the_node_program_the_launch_says_so_and_runs_rpkm_node() {
+    let dir = TempDir::new("pfsolo");
+    let solo = dir.path("rpkm");
+    std::fs::copy(rpkm(), &solo).expect("copy rpkm alone");
+    let out = Command::new(&solo)
+        .arg("launch")
+        .arg(repo().join("launch_scripts/rpkm.launch.yaml"))
+        .arg("--check")
+        .output()
+        .expect("rpkm launch --check");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{text}");
+    assert!(
+        text.contains(&format!("rpkm-node not found beside {}", solo.display())),
+        "{text}"
+    );
+    assert!(
+        text.contains(": tcp_estimator: rpkm node tcp_estimator --name=tcp_estimator"),
+        "{text}"
+    );
+    // beside it, the node program
+    let out = Command::new(rpkm())
+        .arg("launch")
+        .arg(repo().join("launch_scripts/rpkm.launch.yaml"))
+        .arg("--check")
+        .output()
+        .expect("rpkm launch --check");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(": tcp_estimator: rpkm-node tcp_estimator --name=tcp_estimator"),
+        "{text}"
+    );
+    assert!(!text.contains("not found"), "{text}");
+}
