@@ -15,5 +15,6 @@ pub mod report;
 pub mod security;
 
 pub use rpkm_nodes::{
-    campaign_bag, effects_file, error, history, input, logging, node, stream, topics, units, words,
+    campaign_bag, effects_file, error, history, input, logging, node, program, stream, topics,
+    units, words,
 };

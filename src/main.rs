@@ -83,30 +83,9 @@ fn quiet_broken_pipe() {
     }
 }
 
-/// Keeps freed memory in the process for the next allocation. A calibration or diagnosis of
-/// 10⁵ poses allocates and frees row buffers of tens of MB per fit, dozens of fits per
-/// diagnosis; by default glibc gives such blocks back to the kernel (mmap/munmap, and a
-/// trimmed heap) and the next fit faults every page in again. Kept, the 10⁵-pose diagnosis
-/// faulted 0.75 M pages instead of 1.17 M and took 8.3 s instead of 8.9 (medians, alternated;
-/// docs/diagnosis.md, "At scale"); the process holds its peak, 1.55 GB there against 1.06.
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-fn keep_freed_memory() {
-    // blocks up to 1 GB from the heap, not mmap (the row buffers are tens of MB: at 32 MB
-    // the diagnosis took 8.5-8.6 s, at 1 GB 7.8-8.0 s, one day's runs), and no trimming
-    const MMAP_THRESHOLD: libc::c_int = 1 << 30;
-    // SAFETY: mallopt(3) with valid parameters, called from main before any thread is
-    // started; a value glibc refuses leaves its default (return value 0), nothing else.
-    unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD);
-        libc::mallopt(libc::M_TRIM_THRESHOLD, libc::c_int::MAX);
-    }
-}
-
-#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn keep_freed_memory() {}
-
 fn main() {
-    keep_freed_memory();
+    // as `rpkm-node` does: a node runs here as it runs there
+    rpkm::program::keep_freed_memory();
     let args = Cli::parse();
     if args.command.writes_reports() {
         quiet_broken_pipe();

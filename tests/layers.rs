@@ -336,7 +336,7 @@ const KEYSTORE_OPENSSL: [&str; 6] = [
 
 /// The node set links none of the command line's crates (their absence from `cargo tree -p
 /// rpkm-nodes`, transitive ones included, is `.ci/run`'s check) and writes no keystore: a
-/// node process stays as small as what it runs.
+/// node process stays as small as what it runs (`rpkm-node`: the next test).
 #[test]
 fn the_nodes_link_no_charts_monitor_or_keystore_writer() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -373,4 +373,35 @@ fn the_nodes_link_no_charts_monitor_or_keystore_writer() {
         })
         .collect();
     assert!(offences.is_empty(), "{}", offences.join("\n"));
+}
+
+/// Whether `needle` occurs in `bytes`.
+fn contains(bytes: &[u8], needle: &str) -> bool {
+    bytes.windows(needle.len()).any(|w| w == needle.as_bytes())
+}
+
+/// The node program `rpkm-node` (what `rpkm launch` starts) links the node set alone: its
+/// binary holds no symbol of the charts, the terminal monitor, the keystore writer's OpenSSL
+/// calls or the command line's own crate (`_ZN4rpkm`: `rpkm::report`, `rpkm::security`,
+/// ...), each of which the `rpkm` binary holds; so it is the smaller file.
+#[test]
+fn the_node_program_links_none_of_the_command_line() {
+    let node_path = env!("CARGO_BIN_EXE_rpkm-node");
+    let node = std::fs::read(node_path).expect("the rpkm-node binary");
+    let rpkm = std::fs::read(env!("CARGO_BIN_EXE_rpkm")).expect("the rpkm binary");
+    let names = COMMAND_LINE_ONLY.iter().copied().chain([
+        "X509_sign",
+        "PKCS7_sign",
+        "EC_KEY_generate_key",
+        "_ZN4rpkm",
+    ]);
+    for name in names {
+        assert!(
+            contains(&rpkm, name),
+            "rpkm links no {name}: the check is blind"
+        );
+        assert!(!contains(&node, name), "{node_path} links {name}");
+    }
+    eprintln!("rpkm {} bytes, rpkm-node {} bytes", rpkm.len(), node.len());
+    assert!(node.len() < rpkm.len(), "{} >= {}", node.len(), rpkm.len());
 }

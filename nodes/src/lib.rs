@@ -6,6 +6,8 @@
 //!
 //! - [`node`]: the four nodes (`ingest`, `tcp_estimator`, `preload_monitor`, `calibrator`),
 //!   their parameters, real-time set-up, lifecycle and shutdown; `rpkm node` runs one.
+//! - [`program`]: `rpkm-node`, the nodes as a program of their own (what `rpkm launch`
+//!   starts): this crate alone, none of the command line's crates.
 //! - [`topics`]: the topic names; [`units`]: SI on the topics, mm in the core, converted here.
 //! - [`campaign_bag`]: a campaign as a bag of messages and back; [`stream`]: the actuator
 //!   stream of a campaign.
@@ -23,6 +25,7 @@ pub mod history;
 pub mod input;
 pub mod logging;
 pub mod node;
+pub mod program;
 pub mod stream;
 pub mod topics;
 pub mod units;

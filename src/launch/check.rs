@@ -1,14 +1,22 @@
 //! `rpkm launch --check`: every node's command line and configuration as it would start.
 
 use super::description::{LaunchDescription, LaunchProgram, NodeSpec};
+use super::programs::Programs;
 use crate::node::{declared_keys, Geometry, NodeArgs, NodeKind, NodeSetup};
+use crate::program::NODE_PROGRAM;
 
 /// `rpkm launch --check`: every node's command line and configuration as it would start,
 /// nothing started. An `executable` entry's command line is checked when it starts.
 pub(super) fn check(desc: &LaunchDescription) -> anyhow::Result<()> {
+    let exe = std::env::current_exe()?;
+    let programs = Programs::beside(&exe);
+    if let Some(note) = programs.missing_note() {
+        println!("{note}");
+    }
     for spec in &desc.nodes {
-        let argv: Vec<String> = spec
-            .argv()
+        let (program, argv) = programs.command(spec);
+        let program = program.file_name().unwrap_or_default().to_string_lossy();
+        let argv: Vec<String> = argv
             .iter()
             .map(|a| a.to_string_lossy().into_owned())
             .collect();
@@ -24,7 +32,7 @@ pub(super) fn check(desc: &LaunchDescription) -> anyhow::Result<()> {
             })?;
         }
         println!(
-            "{}:{}: {}: rpkm {}",
+            "{}:{}: {}: {program} {}",
             desc.file,
             spec.line,
             spec.name,
@@ -34,13 +42,13 @@ pub(super) fn check(desc: &LaunchDescription) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Parses a node's command line as `rpkm node` would and loads and checks its parameters:
+/// Parses a node's command line as `rpkm-node` would and loads and checks its parameters:
 /// files, declared keys, backends, diagnostics period, geometry.
 fn check_node(spec: &NodeSpec) -> anyhow::Result<()> {
     use clap::{Args, FromArgMatches};
-    // `node` stands where clap expects the binary's name
-    let args = NodeArgs::augment_args(clap::Command::new("rpkm node"))
-        .try_get_matches_from(spec.argv())
+    let argv = std::iter::once(NODE_PROGRAM.into()).chain(spec.argv());
+    let args = NodeArgs::augment_args(clap::Command::new(NODE_PROGRAM))
+        .try_get_matches_from(argv)
         .and_then(|m| NodeArgs::from_arg_matches(&m))
         .map_err(|e| {
             let text = e.render().to_string();

@@ -7,7 +7,8 @@ use std::path::PathBuf;
 /// What a launched process runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LaunchProgram {
-    /// `rpkm node EXEC --name NAME --params ... ARGS`: a node of [`EXECUTABLES`].
+    /// `rpkm-node EXEC --name NAME --params ... ARGS`: a node of [`EXECUTABLES`], in the
+    /// node program (`rpkm node EXEC ...` where that is missing).
     Node,
     /// `rpkm EXEC ARGS`: one of [`COMMANDS`] (an `executable` entry).
     Command,
@@ -60,13 +61,14 @@ pub struct LaunchDescription {
 }
 
 impl NodeSpec {
-    /// The arguments after the rpkm binary that start it.
+    /// The arguments that start it after its program: `rpkm-node` for a node (after `rpkm
+    /// node` the same), `rpkm` for a command.
     pub fn argv(&self) -> Vec<OsString> {
         let mut argv: Vec<OsString> = Vec::new();
         if self.program == LaunchProgram::Node {
             // `--name=`, `--param=`: a value that starts with `-` stays a value
             let name = format!("--name={}", self.name);
-            argv.extend(["node", &self.exec, &name].map(OsString::from));
+            argv.extend([&self.exec, &name].map(OsString::from));
             if self.managed {
                 argv.push("--unconfigured".into());
             }

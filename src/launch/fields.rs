@@ -29,6 +29,7 @@ pub(super) const EXECUTABLE_KEYS: [&str; 6] =
     ["cmd", "name", "respawn", "respawn_delay", "if", "unless"];
 pub(super) const ARG_KEYS: [&str; 3] = ["name", "default", "description"];
 pub(super) const SET_ENV_KEYS: [&str; 2] = ["name", "value"];
+pub(super) const LET_KEYS: [&str; 4] = ["name", "value", "if", "unless"];
 pub(super) const PARAM_KEYS: [&str; 3] = ["from", "name", "value"];
 pub(super) const REMAP_KEYS: [&str; 2] = ["from", "to"];
 

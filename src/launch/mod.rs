@@ -21,6 +21,7 @@
 //!       remap: [{from: tcp_estimate, to: /cell/estimate_a}]   # topic remapping
 //!       enclave: /rpkm/tcp_estimator # SROS2 enclave (default /rpkm/<name>), used with
 //!                                    # ROS_SECURITY_ENABLE=true
+//!   - let: {name: backend, value: both, if: "$(equals $(var source) joint_states)"}
 //!   - set_env: {name: ROS_DOMAIN_ID, value: "7"}
 //!   - executable:                    # another rpkm command, e.g. the recorder
 //!       cmd: rpkm record --out $(var bag) --topics /rpkm/tcp_estimate,/diagnostics
@@ -44,7 +45,14 @@
 //! transport ([`NodeSetup`] and the geometry); exit 0, or 2 naming the node's line.
 //!
 //! Substitutions in every string: `$(var NAME)` (an `arg`, overridden by `NAME:=VALUE` on the
-//! command line), `$(env NAME)` / `$(env NAME DEFAULT)`, `$(dirname)` (this file's folder).
+//! command line, or a `let`: ROS 2's SetLaunchConfiguration, from its entry on, when its
+//! `if:`/`unless:` say so), `$(env NAME)` / `$(env NAME DEFAULT)`, `$(dirname)` (this file's
+//! folder), `$(equals A B)` (`true`/`false`, as ROS 2's: booleans and numbers compare as
+//! such); a substitution's arguments may be substitutions.
+//!
+//! A `{from: FILE}` parameter file written in the launch file is relative to its folder; one
+//! a substitution gave (`$(var params_file)`) is used as given, relative to the working
+//! directory; empty after substitution, no file.
 //!
 //! Files, one job each:
 //! - `args.rs`: The launcher's command line and its errors.
@@ -60,6 +68,8 @@
 //!   would start.
 //! - `description.rs`: What a launch file describes: the processes, how they run, their
 //!   environment.
+//! - `programs.rs`: Which binary starts each process: `rpkm-node` beside `rpkm` for a node
+//!   (`rpkm node` without it), `rpkm` for a command.
 //! - `supervisor.rs`: The nodes started as processes and supervised: restarts with backoff,
 //!   shutdown on a signal.
 //! - `managed.rs`: The managed nodes brought up in file order through their lifecycle.
@@ -73,6 +83,7 @@ mod managed;
 mod node_entry;
 mod parse;
 mod place;
+mod programs;
 pub mod supervisor;
 #[cfg(test)]
 mod tests;

@@ -47,8 +47,7 @@ pub(super) fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec
                 .ok_or_else(|| ctx.err(format!("node {name}: param entry: expected a map")))?;
             ctx.check_keys(m, &format!("node {name} param entry"), &PARAM_KEYS)?;
             if let Some(from) = get(m, "from") {
-                let f = PathBuf::from(ctx.string(from, "param from")?);
-                param_files.push(if f.is_relative() { ctx.dir.join(f) } else { f });
+                param_files.extend(param_file(ctx, from)?);
             } else {
                 let key = get(m, "name")
                     .ok_or_else(|| ctx.err(format!("node {name}: param without from or name")))?;
@@ -89,6 +88,24 @@ pub(super) fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec
         respawn_delay,
         line: ctx.entry.0,
     })
+}
+
+/// A `param: [{from: FILE}]` entry's file. A path written in the launch file is relative to
+/// its folder; one that a substitution gave (`$(var params_file)`, the user's on the command
+/// line) is used as given, relative to the working directory, as the nodes read
+/// `geometry_file:=`. Empty after substitution (`params_file` left at its default): none.
+fn param_file(ctx: &Ctx<'_>, from: &Value) -> Result<Option<PathBuf>, LaunchError> {
+    let given = ctx.string(from, "param from")?;
+    if given.is_empty() {
+        return Ok(None);
+    }
+    let written = from.as_str().is_some_and(|raw| !raw.contains("$("));
+    let f = PathBuf::from(given);
+    Ok(Some(if f.is_relative() && written {
+        ctx.dir.join(f)
+    } else {
+        f
+    }))
 }
 
 /// A node entry's `managed:` (every rpkm node is a managed node).

@@ -3,7 +3,9 @@
 
 use super::args::LaunchError;
 use super::description::{LaunchDescription, LaunchProgram, NodeSpec, COMMANDS};
-use super::fields::{condition, get, respawn, ARG_KEYS, EXECUTABLE_KEYS, NODE_KEYS, SET_ENV_KEYS};
+use super::fields::{
+    condition, get, respawn, ARG_KEYS, EXECUTABLE_KEYS, LET_KEYS, NODE_KEYS, SET_ENV_KEYS,
+};
 use super::node_entry::node;
 use super::place::{entry_lines, unlocated_error_line, utf8_error_place, Ctx};
 use crate::node::params::parse_yaml;
@@ -95,7 +97,7 @@ impl LaunchDescription {
             ctx.entry = (first, next.unwrap_or(end));
             let map = item.as_mapping().filter(|m| m.len() == 1).ok_or_else(|| {
                 ctx.err(format!(
-                    "launch item {k}: expected one of arg, node, executable, set_env"
+                    "launch item {k}: expected one of arg, let, node, executable, set_env"
                 ))
             })?;
             let (kind, body) = map
@@ -105,30 +107,7 @@ impl LaunchDescription {
             let body = body
                 .as_mapping()
                 .ok_or_else(|| ctx.err(format!("launch item {k}: expected a map")))?;
-            match kind.as_str() {
-                Some("arg") => {
-                    let (name, value) = arg(&ctx, body, k, &given)?;
-                    ctx.vars.insert(name, value);
-                }
-                Some("set_env") => out.env.push(set_env(&ctx, body)?),
-                Some("node") => {
-                    ctx.check_keys(body, "node", &NODE_KEYS)?;
-                    if condition(&ctx, body, "node")? {
-                        out.nodes.push(node(&ctx, body)?);
-                    }
-                }
-                Some("executable") => {
-                    ctx.check_keys(body, "executable", &EXECUTABLE_KEYS)?;
-                    if condition(&ctx, body, "executable")? {
-                        out.nodes.push(executable(&ctx, body)?);
-                    }
-                }
-                _ => {
-                    return Err(ctx.err(format!(
-                        "launch item {k}: unknown kind {kind:?} (arg, node, executable, set_env)"
-                    )))
-                }
-            }
+            out.entry(&mut ctx, k, kind, body, &given)?;
         }
         if let Some(unused) = given.keys().find(|k| !ctx.vars.contains_key(*k)) {
             return Err(argument(format!(
@@ -136,6 +115,48 @@ impl LaunchDescription {
             )));
         }
         Ok(out)
+    }
+
+    /// Item `k` of the `launch:` list, of `kind`: an argument or variable into `ctx`, a
+    /// process or an environment variable into the description.
+    fn entry(
+        &mut self,
+        ctx: &mut Ctx<'_>,
+        k: usize,
+        kind: &Value,
+        body: &serde_yaml::Mapping,
+        given: &BTreeMap<String, String>,
+    ) -> Result<(), LaunchError> {
+        match kind.as_str() {
+            Some("arg") => {
+                let (name, value) = arg(ctx, body, k, given)?;
+                ctx.vars.insert(name, value);
+            }
+            Some("let") => {
+                if let Some((name, value)) = let_entry(ctx, body)? {
+                    ctx.vars.insert(name, value);
+                }
+            }
+            Some("set_env") => self.env.push(set_env(ctx, body)?),
+            Some("node") => {
+                ctx.check_keys(body, "node", &NODE_KEYS)?;
+                if condition(ctx, body, "node")? {
+                    self.nodes.push(node(ctx, body)?);
+                }
+            }
+            Some("executable") => {
+                ctx.check_keys(body, "executable", &EXECUTABLE_KEYS)?;
+                if condition(ctx, body, "executable")? {
+                    self.nodes.push(executable(ctx, body)?);
+                }
+            }
+            _ => {
+                return Err(ctx.err(format!(
+                    "launch item {k}: unknown kind {kind:?} (arg, let, node, executable, set_env)"
+                )))
+            }
+        }
+        Ok(())
     }
 }
 
@@ -161,6 +182,24 @@ fn arg(
         }
     };
     Ok((name, value))
+}
+
+/// A `let` entry (ROS 2's SetLaunchConfiguration): a launch variable set from here on, over
+/// an `arg`'s value, when its `if:`/`unless:` say so (`None` when they do not).
+fn let_entry(
+    ctx: &Ctx<'_>,
+    body: &serde_yaml::Mapping,
+) -> Result<Option<(String, String)>, LaunchError> {
+    ctx.check_keys(body, "let", &LET_KEYS)?;
+    let name = ctx.string(
+        get(body, "name").ok_or_else(|| ctx.err("let: no name".into()))?,
+        "let name",
+    )?;
+    let value = ctx.string(
+        get(body, "value").ok_or_else(|| ctx.err(format!("let {name}: no value")))?,
+        &format!("let {name} value"),
+    )?;
+    Ok(condition(ctx, body, &format!("let {name}"))?.then_some((name, value)))
 }
 
 /// A `set_env` entry: the variable and its value.

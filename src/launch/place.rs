@@ -63,43 +63,51 @@ impl Ctx<'_> {
         Ok(())
     }
 
-    /// Applies `$(var ..)`, `$(env ..)`, `$(dirname)`.
+    /// Applies `$(var ..)`, `$(env ..)`, `$(dirname)` and `$(equals A B)`; a substitution's
+    /// arguments may hold substitutions (`$(equals $(var source) joint_states)`).
     pub(super) fn subst(&self, s: &str) -> Result<String, LaunchError> {
         let mut out = String::new();
         let mut rest = s;
         while let Some(start) = rest.find("$(") {
             out.push_str(&rest[..start]);
             let after = &rest[start + 2..];
-            let end = after
-                .find(')')
+            let end = closing(after)
                 .ok_or_else(|| self.err(format!("unclosed substitution in {s:?}")))?;
-            let words: Vec<&str> = after[..end].split_whitespace().collect();
-            let value =
-                match words.as_slice() {
-                    ["var", name] => self.vars.get(*name).cloned().ok_or_else(|| {
-                        self.err(format!("$(var {name}): no such launch argument"))
-                    })?,
-                    ["env", name] => std::env::var(name).map_err(|_| {
-                        self.err(format!(
-                            "$(env {name}): not set (give a default: $(env {name} x))"
-                        ))
-                    })?,
-                    ["env", name, default] => {
-                        std::env::var(name).unwrap_or_else(|_| (*default).to_owned())
-                    }
-                    ["dirname"] => self.dir.display().to_string(),
-                    other => {
-                        return Err(self.err(format!(
-                            "unknown substitution $({}) (var, env, dirname)",
-                            other.join(" ")
-                        )))
-                    }
-                };
-            out.push_str(&value);
+            out.push_str(&self.substitution(&after[..end])?);
             rest = &after[end + 1..];
         }
         out.push_str(rest);
         Ok(out)
+    }
+
+    /// The value of one substitution, `inner` being what stands between `$(` and `)`.
+    fn substitution(&self, inner: &str) -> Result<String, LaunchError> {
+        let mut words = Vec::new();
+        for w in top_level_words(inner) {
+            words.push(self.subst(w)?);
+        }
+        let words: Vec<&str> = words.iter().map(String::as_str).collect();
+        Ok(match words.as_slice() {
+            ["var", name] => self
+                .vars
+                .get(*name)
+                .cloned()
+                .ok_or_else(|| self.err(format!("$(var {name}): no such launch argument")))?,
+            ["env", name] => std::env::var(name).map_err(|_| {
+                self.err(format!(
+                    "$(env {name}): not set (give a default: $(env {name} x))"
+                ))
+            })?,
+            ["env", name, default] => std::env::var(name).unwrap_or_else(|_| (*default).to_owned()),
+            ["dirname"] => self.dir.display().to_string(),
+            ["equals", a, b] => equals(a, b).to_string(),
+            other => {
+                return Err(self.err(format!(
+                    "unknown substitution $({}) (var, env, dirname, equals A B)",
+                    other.join(" ")
+                )))
+            }
+        })
     }
 
     pub(super) fn string(&self, v: &Value, what: &str) -> Result<String, LaunchError> {
@@ -111,6 +119,70 @@ impl Ctx<'_> {
         };
         self.subst(&s)
     }
+}
+
+/// Where the `)` that closes a substitution lies in `after` (the text after its `$(`),
+/// substitutions inside it skipped.
+fn closing(after: &str) -> Option<usize> {
+    let mut depth = 0usize;
+    let bytes = after.as_bytes();
+    let mut i = 0;
+    while i < bytes.len() {
+        match bytes[i] {
+            b'$' if bytes.get(i + 1) == Some(&b'(') => {
+                depth += 1;
+                i += 1;
+            }
+            b')' if depth == 0 => return Some(i),
+            b')' => depth -= 1,
+            _ => {}
+        }
+        i += 1;
+    }
+    None
+}
+
+/// A substitution's words: split at whitespace outside the substitutions inside it.
+fn top_level_words(inner: &str) -> Vec<&str> {
+    let mut words = Vec::new();
+    let mut rest = inner.trim_start();
+    while !rest.is_empty() {
+        let mut end = rest.len();
+        let mut i = 0;
+        while i < rest.len() {
+            if rest[i..].starts_with("$(") {
+                i += 2 + closing(&rest[i + 2..]).map_or(rest.len() - i - 2, |e| e + 1);
+                continue;
+            }
+            if rest[i..].starts_with(char::is_whitespace) {
+                end = i;
+                break;
+            }
+            i += rest[i..].chars().next().map_or(1, char::len_utf8);
+        }
+        let end = end.min(rest.len());
+        words.push(&rest[..end]);
+        rest = rest[end..].trim_start();
+    }
+    words
+}
+
+/// ROS 2's `$(equals A B)`: booleans (true, false, 1, 0 in any case) compare as booleans,
+/// numbers as numbers (to a relative 1e-9, as Python's `math.isclose`), anything else as
+/// text.
+fn equals(a: &str, b: &str) -> bool {
+    let truth = |s: &str| match s.to_ascii_lowercase().as_str() {
+        "true" | "1" => Some(true),
+        "false" | "0" => Some(false),
+        _ => None,
+    };
+    if let (Some(x), Some(y)) = (truth(a), truth(b)) {
+        return x == y;
+    }
+    if let (Ok(x), Ok(y)) = (a.trim().parse::<f64>(), b.trim().parse::<f64>()) {
+        return x.total_cmp(&y).is_eq() || (x - y).abs() <= 1e-9 * x.abs().max(y.abs());
+    }
+    a == b
 }
 
 /// The 1-based line where `key:` first appears as a mapping key (block or flow style),

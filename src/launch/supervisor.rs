@@ -1,5 +1,6 @@
-//! Starts the nodes of a launch description as processes of this very binary
-//! (`rpkm node <exec> --name <name> --params ...`) and supervises them:
+//! Starts the nodes of a launch description as processes of the node program beside this
+//! binary (`rpkm-node <exec> --name <name> --params ...`, see `programs.rs`) and the
+//! commands (`rpkm record`) as processes of this one, and supervises them:
 //! - a node that dies (non-zero exit or a signal) is restarted when `respawn` is on, after
 //!   `respawn_delay` doubled for every crash within 10 s of its start (at most 5 s); exit
 //!   code 0 (input done) and 2 (bad configuration: restarting cannot help) are final, and
@@ -20,7 +21,6 @@
 
 use std::future::Future;
 use std::os::unix::process::ExitStatusExt;
-use std::path::Path;
 use std::pin::Pin;
 use std::process::ExitStatus;
 use std::task::Poll;
@@ -32,6 +32,7 @@ use tokio::signal::unix::{signal, Signal, SignalKind};
 use tokio::time::Instant;
 
 use super::description::{LaunchDescription, NodeSpec};
+use super::programs::Programs;
 
 /// A node's crash within this time of its start doubles the next restart delay.
 const QUICK_CRASH: Duration = Duration::from_secs(10);
@@ -186,9 +187,10 @@ fn describe(status: ExitStatus) -> String {
     }
 }
 
-fn spawn(exe: &Path, spec: &NodeSpec, env: &[(String, String)]) -> anyhow::Result<Child> {
+fn spawn(programs: &Programs, spec: &NodeSpec, env: &[(String, String)]) -> anyhow::Result<Child> {
+    let (exe, argv) = programs.command(spec);
     let mut cmd = Command::new(exe);
-    cmd.args(spec.argv());
+    cmd.args(argv);
     cmd.envs(env.iter().map(|(k, v)| (k, v)));
     // A launch that ends on an error (or a panic) takes its nodes with it.
     cmd.kill_on_drop(true);
@@ -441,13 +443,13 @@ fn running(child: Child) -> State {
 /// Restarts every waiting node whose time has come.
 fn restart_due(
     nodes: &mut [Supervised<'_>],
-    exe: &Path,
+    programs: &Programs,
     env: &[(String, String)],
 ) -> anyhow::Result<()> {
     let now = Instant::now();
     for n in nodes.iter_mut() {
         if matches!(n.state, State::Waiting { until } if until <= now) {
-            n.state = running(spawn(exe, n.spec, env)?);
+            n.state = running(spawn(programs, n.spec, env)?);
         }
     }
     Ok(())
@@ -466,12 +468,15 @@ pub fn run(desc: &LaunchDescription) -> anyhow::Result<()> {
 
 async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
     let mut signals = StopSignals::new()?;
-    let exe = std::env::current_exe().context("locating the rpkm binary")?;
+    let programs = Programs::beside(&std::env::current_exe().context("locating the rpkm binary")?);
+    if let Some(note) = programs.missing_note() {
+        log(note);
+    }
     cleanup_dead();
     let reporter = Reporter::open(desc);
     let mut nodes: Vec<Supervised<'_>> = Vec::new();
     for spec in &desc.nodes {
-        let child = spawn(&exe, spec, &desc.env)?;
+        let child = spawn(&programs, spec, &desc.env)?;
         nodes.push(Supervised {
             spec,
             state: running(child),
@@ -517,7 +522,7 @@ async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
                 reaped(n, status, lived, &mut failed);
                 reporter.report(&nodes);
             }
-            Event::RestartDue => restart_due(&mut nodes, &exe, &desc.env)?,
+            Event::RestartDue => restart_due(&mut nodes, &programs, &desc.env)?,
         }
     }
     stop_all(&mut nodes).await;

@@ -275,3 +275,81 @@ fn refused_with(cases: &[(&str, &str)]) {
         assert!(e.to_string().starts_with(says), "{text}: {e}");
     }
 }
+
+/// ROS 2's `let` and `$(equals A B)`, nested in a substitution: the shipped launch file's
+/// backend rule (both for a ros2_control cell's source, else ipc, a given backend stands).
+#[test]
+fn let_and_equals_choose_the_backend_by_the_source() -> Result<(), LaunchError> {
+    let file = "launch:\n  - arg: {name: source, default: dds}\n  \
+                - arg: {name: backend, default: auto}\n  \
+                - let: {name: backend, value: both, if: \"$(equals $(var backend)/$(var source) auto/joint_states)\"}\n  \
+                - let: {name: backend, value: ipc, if: \"$(equals $(var backend) auto)\"}\n  \
+                - node: {pkg: rpkm, exec: ingest, args: --backend $(var backend)}\n";
+    for (given, backend) in [
+        (vec!["source:=joint_states"], "both"),
+        (vec![], "ipc"),
+        (vec!["source:=c.csv"], "ipc"),
+        (vec!["source:=joint_states", "backend:=dds"], "dds"),
+        (vec!["source:=dds", "backend:=both"], "both"),
+    ] {
+        let given: Vec<String> = given.into_iter().map(str::to_owned).collect();
+        let d = LaunchDescription::parse(file, "b.yaml", Path::new("/l"), &given)?;
+        assert_eq!(d.nodes[0].args, ["--backend", backend], "{given:?}");
+    }
+    let ctx = |text: &str| {
+        LaunchDescription::parse(
+            &format!("launch:\n  - node: {{pkg: rpkm, exec: ingest, args: \"{text}\"}}\n"),
+            "e.yaml",
+            Path::new("."),
+            &[],
+        )
+        .map(|d| d.nodes[0].args.join(" "))
+    };
+    assert_eq!(
+        ctx("$(equals 1 true) $(equals 2.0 2) $(equals a b)")?,
+        "true true false"
+    );
+    let e = ctx("$(equals a)").expect_err("one argument");
+    assert!(
+        e.to_string().contains("unknown substitution $(equals a)"),
+        "{e}"
+    );
+    Ok(())
+}
+
+/// `{from: $(var params_file)}`: empty (the argument's default) passes no file; a file
+/// given on the command line is used as given (relative to the working directory), one
+/// written in the launch file relative to its folder; files keep their order.
+#[test]
+fn a_parameter_file_of_the_cell_layers_after_the_shipped_one() -> Result<(), LaunchError> {
+    let file = "launch:\n  - arg: {name: params_file, default: \"\"}\n  \
+                - node:\n      pkg: rpkm\n      exec: ingest\n      param:\n        \
+                - from: params.yaml\n        - from: $(var params_file)\n";
+    let d = LaunchDescription::parse(file, "p.yaml", Path::new("/l"), &[])?;
+    assert_eq!(d.nodes[0].param_files, [PathBuf::from("/l/params.yaml")]);
+    let d = LaunchDescription::parse(
+        file,
+        "p.yaml",
+        Path::new("/l"),
+        &["params_file:=cell.yaml".into()],
+    )?;
+    assert_eq!(
+        d.nodes[0].param_files,
+        [PathBuf::from("/l/params.yaml"), PathBuf::from("cell.yaml")]
+    );
+    let argv: Vec<String> = d.nodes[0]
+        .argv()
+        .iter()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(
+        argv[..4],
+        [
+            "ingest",
+            "--name=ingest",
+            "--params=/l/params.yaml",
+            "--params=cell.yaml"
+        ]
+    );
+    Ok(())
+}

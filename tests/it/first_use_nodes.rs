@@ -310,7 +310,7 @@ fn the_launch_file_takes_the_users_geometry_and_effects() {
     for exec in ["tcp_estimator", "calibrator", "preload_monitor"] {
         let line = text
             .lines()
-            .find(|l| l.contains(&format!(": {exec}: rpkm node {exec}")))
+            .find(|l| l.contains(&format!(": {exec}: rpkm-node {exec}")))
             .unwrap_or_else(|| panic!("no {exec}: {text}"));
         assert!(
             line.contains(&format!("--param=geometry_file={}", geometry.display()))

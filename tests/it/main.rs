@@ -47,6 +47,7 @@ mod history_postgres;
 mod history_twin;
 mod ingest_grammar;
 mod launch_cell;
+mod launch_params_file;
 mod monitor_foxglove_layout;
 mod monitor_tmux;
 mod node_calibrate_action;

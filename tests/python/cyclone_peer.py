@@ -9,6 +9,10 @@ XCDR1 little-endian):
       expected_estimate(seq), prints one JSON line per first-seen seq, then "DONE".
       Exit 0 when all N were seen and correct, 1 on a wrong value, 2 on timeout.
 
+  print_estimate  --domain D --count N --timeout S
+      As sub_estimate, reading what a launched stack estimates: every TcpEstimate with seq
+      1..N printed as one JSON line (first seen), no expected values; then "DONE".
+
   pub_actuator  --domain D --count N --timeout S [--topic T] [--bad] [--fresh-rounds]
       Publishes ActuatorState seq 1..N (values from expected_actuator(seq)) on
       /rpkm/actuator_state (or T), the whole set every 50 ms until killed or timeout (exit 0);
@@ -147,7 +151,7 @@ def sub_estimate(args):
                 continue
             d = as_dict(msg)
             print(json.dumps(d), flush=True)
-            if d != as_dict(expected_estimate(msg.seq)):
+            if args.mode == "sub_estimate" and d != as_dict(expected_estimate(msg.seq)):
                 print(f"MISMATCH seq {msg.seq}: {d}", flush=True)
                 return 1
             seen.add(msg.seq)
@@ -203,7 +207,7 @@ def pub_actuator(args):
 
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("mode", choices=["sub_estimate", "pub_actuator"])
+    p.add_argument("mode", choices=["sub_estimate", "print_estimate", "pub_actuator"])
     p.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
     p.add_argument("--count", type=int, default=10)
     p.add_argument("--timeout", type=float, default=20.0)
@@ -215,7 +219,7 @@ def main():
     p.add_argument("--bad", action="store_true",
                    help="pub_actuator: also publish a NaN and an out-of-range sample after the good ones")
     args = p.parse_args()
-    return sub_estimate(args) if args.mode == "sub_estimate" else pub_actuator(args)
+    return pub_actuator(args) if args.mode == "pub_actuator" else sub_estimate(args)
 
 
 if __name__ == "__main__":

@@ -29,6 +29,7 @@ pub mod realtime;
 pub mod shutdown;
 pub mod tcp_estimator;
 pub mod views;
+pub mod yaml;
 
 pub use context::{
     bad_param, diagnostic_array, log_line, node_name_error, severity, status, BackendArg,
@@ -37,14 +38,17 @@ pub use context::{
 pub use geometry::{is_geometry_key, parameters_msg, Geometry, ParametersMsgError, GEOMETRY};
 pub use params::{NodeParams, ParamError};
 
-/// `rpkm node <kind>`: run one node of the set.
+/// `rpkm node <kind>` (and `rpkm-node <kind>`, [`crate::program`]): run one node of the set.
 #[derive(clap::Args, Debug, Clone)]
-#[command(after_help = "Examples:\n  \
+#[command(
+    after_help = "Examples (`rpkm-node NAME ...`, the node program `rpkm launch` \
+starts, is the same as `rpkm node NAME ...`):\n  \
 rpkm node ingest --source campaign.csv --params launch_scripts/params.yaml\n  \
 rpkm node ingest --source joint_states --params cell.yaml --backend dds   # a ros2_control cell\n  \
 rpkm node tcp_estimator --params launch_scripts/params.yaml --backend both\n  \
 rpkm node tcp_estimator --backend dds --param view_every=80   # PoseStamped + /tf at 100 Hz of 8 kHz\n  \
-rpkm node preload_monitor --param warn_percent=20 --param error_percent=50")]
+rpkm node preload_monitor --param warn_percent=20 --param error_percent=50"
+)]
 pub struct NodeArgs {
     #[command(subcommand)]
     pub kind: NodeKind,

@@ -21,6 +21,9 @@ use std::path::{Path, PathBuf};
 
 use serde_yaml::Value;
 
+// The YAML reader with places, shared with the launch files; named here as before.
+pub use super::yaml::{parse_yaml, YamlSyntax};
+
 /// Bounds of a duration read from a parameter, s: an hour is beyond any period, delay or
 /// timeout the nodes use, and far inside what a `Duration` holds.
 pub const DURATION_S: (f64, f64) = (0.0, 3600.0);
@@ -56,29 +59,6 @@ impl std::fmt::Display for Origin {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}: {}/ros__parameters", self.file, self.section)
     }
-}
-
-/// A YAML text that does not parse, with the place (parameter and launch files).
-#[derive(Debug, thiserror::Error)]
-#[error("{file}:{line}:{column}: not YAML: {message}")]
-pub struct YamlSyntax {
-    pub file: String,
-    pub line: usize,
-    pub column: usize,
-    pub message: String,
-}
-
-/// Parses the YAML `text` of `file`.
-pub fn parse_yaml(text: &str, file: &str) -> Result<Value, YamlSyntax> {
-    serde_yaml::from_str(text).map_err(|e| {
-        let (line, column) = e.location().map_or((0, 0), |l| (l.line(), l.column()));
-        YamlSyntax {
-            file: file.to_owned(),
-            line,
-            column,
-            message: e.to_string(),
-        }
-    })
 }
 
 /// A parameter file or value that cannot be used.
