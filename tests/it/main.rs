@@ -34,6 +34,7 @@ mod cli_effects_file;
 mod cli_foreign;
 mod cli_plan;
 mod cli_scipy_baseline;
+mod dds_large_samples;
 mod first_campaign_doc;
 mod first_use_nodes;
 mod first_use_period;

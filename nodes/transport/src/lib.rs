@@ -17,6 +17,7 @@ pub mod dds;
 pub mod dds_actions;
 pub mod dds_calls;
 pub mod dds_params;
+pub mod dds_wire;
 pub mod error;
 pub mod ipc;
 pub mod names;
