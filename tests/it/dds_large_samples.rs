@@ -18,6 +18,7 @@
 use crate::node_support;
 use crate::security_support::required;
 
+use std::fmt::Write as _;
 use std::hash::{Hash, Hasher};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -310,8 +311,11 @@ fn blob(n: usize) -> Blob {
 }
 
 fn blob_line(b: &Blob) -> String {
-    let hex: String = b.data.iter().map(|x| format!("{x:02x}")).collect();
-    format!("B {} {hex}", b.data.len())
+    let mut line = format!("B {} ", b.data.len());
+    for x in &b.data {
+        let _ = write!(line, "{x:02x}");
+    }
+    line
 }
 
 /// Replies of the size of a Calibrate result and larger, written with the options a server
