@@ -37,6 +37,7 @@ mod cli_foreign;
 mod cli_plan;
 mod cli_scipy_baseline;
 mod docs_in_repo;
+mod dds_large_samples;
 mod first_campaign_doc;
 mod first_use_nodes;
 mod first_use_period;

@@ -275,6 +275,8 @@ pub(crate) struct RpcServer<Q, R> {
     /// list of matched subscriptions is not implemented).
     matched: Mutex<BTreeSet<GUID>>,
     pending: Mutex<Vec<Pending>>,
+    /// Whether a fragmented reply on the enhanced mapping was said (once per service).
+    said_fragmented: std::sync::atomic::AtomicBool,
     ledger: Ledger,
     name: String,
     types: PhantomData<fn(Q) -> R>,
@@ -344,6 +346,7 @@ impl<Q: DeserializeOwned, R: Serialize> RpcServer<Q, R> {
             replies,
             matched: Mutex::new(BTreeSet::new()),
             pending: Mutex::new(Vec::new()),
+            said_fragmented: std::sync::atomic::AtomicBool::new(false),
             ledger,
             name: name.to_owned(),
             types: PhantomData,
@@ -539,7 +542,10 @@ impl<Q: DeserializeOwned, R: Serialize> RpcServer<Q, R> {
 
     fn send(&self, p: &Pending) {
         let options = match p.caller {
-            Caller::Identity(id) => WriteOptionsBuilder::new().related_sample_identity(id),
+            Caller::Identity(id) => {
+                self.say_if_fragmented(p.payload.len());
+                WriteOptionsBuilder::new().related_sample_identity(id)
+            }
             Caller::Header { .. } => WriteOptionsBuilder::new(),
         };
         let sample = RawSample {
@@ -548,6 +554,27 @@ impl<Q: DeserializeOwned, R: Serialize> RpcServer<Q, R> {
         };
         if let Err(e) = self.replies.write_with_options(sample, options.build()) {
             log::warn!("service {}: reply not sent: {e}", self.name);
+        }
+    }
+}
+
+impl<Q, R> RpcServer<Q, R> {
+    /// Says once per service when a reply on the enhanced mapping is larger than one datagram
+    /// of this host's network paths: it then goes as fragments with inline QoS, which RustDDS
+    /// 0.15.1 writes malformed ([`crate::dds_wire`]): a client on loopback reads it, one
+    /// reached through a network interface does not.
+    fn say_if_fragmented(&self, body_len: usize) {
+        // the 4-byte encapsulation header goes with the body
+        let len = body_len + 4;
+        let limit = crate::dds_wire::inline_qos_limit();
+        if len > limit && !self.said_fragmented.swap(true, std::sync::atomic::Ordering::Relaxed) {
+            log::warn!(
+                "service {}: a {len}-byte reply to an rmw_fastrtps client is above this host's \
+                 {limit}-byte datagram: through a network interface it goes as fragments whose \
+                 related sample identity RustDDS 0.15.1 writes malformed, and the client does \
+                 not read it (on loopback it goes whole)",
+                self.name
+            );
         }
     }
 }

@@ -18,6 +18,7 @@ pub mod dds_actions;
 pub mod dds_calls;
 pub mod dds_params;
 mod dds_rpc;
+pub mod dds_wire;
 pub mod error;
 pub mod ipc;
 pub mod names;
