@@ -125,13 +125,13 @@ fn cyclone_config(interface: &str) -> String {
 }
 
 /// Cyclone DDS (the peer `cmd` starts) on the machine's network interface, where it has one.
-fn on_network_interface(cmd: &mut Command) {
+pub(crate) fn on_network_interface(cmd: &mut Command) {
     match network_interface() {
         Some(interface) => {
             eprintln!("Cyclone DDS on {interface}");
             cmd.env("CYCLONEDDS_URI", cyclone_config(&interface));
         }
-        None => eprintln!("no network interface but lo: the 81 kB sample is the fragmented one"),
+        None => eprintln!("no network interface but lo: only samples above 64 kB are fragmented"),
     }
 }
 
