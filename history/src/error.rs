@@ -41,7 +41,7 @@ pub enum StoreError {
 
 /// What a failure of the store asks for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Fault {
+pub enum StoreFault {
     /// The settings are wrong: retrying does not help.
     Configuration,
     /// The server cannot be reached or went away (refused, closed, shutting down, starting
@@ -53,11 +53,11 @@ pub enum Fault {
 
 impl StoreError {
     /// What this failure asks for.
-    pub fn fault(&self) -> Fault {
+    pub fn fault(&self) -> StoreFault {
         match self {
-            StoreError::Config { .. } => Fault::Configuration,
+            StoreError::Config { .. } => StoreFault::Configuration,
             StoreError::Postgres { source, .. } => postgres_fault(source),
-            _ => Fault::Other,
+            _ => StoreFault::Other,
         }
     }
 }
@@ -65,14 +65,14 @@ impl StoreError {
 /// PostgreSQL's SQLSTATE classes and codes: 28 (authorization: a bad password, a role or
 /// address refused) and 3D000 (no such database) are configuration; 08 (connection), 57P01..3
 /// (shut down, crashed, starting up) and 53300 (too many connections) are a server away.
-pub(crate) fn postgres_fault(e: &postgres::Error) -> Fault {
+pub(crate) fn postgres_fault(e: &postgres::Error) -> StoreFault {
     if let Some(code) = e.code().map(postgres::error::SqlState::code) {
         return if code.starts_with("28") || code == "3D000" {
-            Fault::Configuration
+            StoreFault::Configuration
         } else if code.starts_with("08") || code.starts_with("57P") || code == "53300" {
-            Fault::Unreachable
+            StoreFault::Unreachable
         } else {
-            Fault::Other
+            StoreFault::Other
         };
     }
     // The client's own error kinds are not public; their words are its Display.
@@ -82,14 +82,14 @@ pub(crate) fn postgres_fault(e: &postgres::Error) -> Fault {
         || said.starts_with("error communicating")
         || said.starts_with("timeout")
     {
-        Fault::Unreachable
+        StoreFault::Unreachable
     } else if said.starts_with("invalid configuration")
         || said.starts_with("invalid connection string")
         || said.starts_with("authentication error")
     {
-        Fault::Configuration
+        StoreFault::Configuration
     } else {
-        Fault::Other
+        StoreFault::Other
     }
 }
 

@@ -12,7 +12,7 @@
 //!
 //! A PostgreSQL URL is completed as libpq completes it ([`libpq`]: the plant's `PGPASSWORD`,
 //! password file, service file), and [`Writer`] keeps records through a server's absence
-//! (a spool file, retries); a failure says what it asks for ([`Fault`]).
+//! (a spool file, retries); a failure says what it asks for ([`StoreFault`]).
 
 mod backend;
 mod error;
@@ -24,10 +24,10 @@ mod sqlite;
 mod store;
 mod writer;
 
-pub use error::{Fault, StoreError};
+pub use error::{StoreError, StoreFault};
 pub use record::{CalibrationRecord, CampaignId, EventRecord, NoiseLevel, Stored};
 pub use store::{is_postgres, Batch, Store};
-pub use writer::{Outcome, Retried, Writer, MAX_RETRY};
+pub use writer::{RecordOutcome, Retried, Writer, MAX_RETRY};
 
 #[cfg(test)]
 mod tests;

@@ -379,7 +379,9 @@ fn apply_service(
         if let Some(keys) = service_section(&text, service) {
             let mut port = None;
             for (line, key, value) in keys {
-                let at = |what: String| config_error(given, format!("{}:{line}: {what}", file.display()));
+                let at = |what: String| {
+                    config_error(given, format!("{}:{line}: {what}", file.display()))
+                };
                 if key == "port" {
                     port = Some(value.parse().map_err(|_| at(format!("port: {value:?}")))?);
                 } else {
@@ -432,7 +434,9 @@ fn apply_key(c: &mut Config, key: &str, value: &str) -> Result<(), String> {
             c.password(value);
         }
         "connect_timeout" if c.get_connect_timeout().is_none() => {
-            c.connect_timeout(parse_timeout(value, "connect_timeout", "").map_err(|e| e.to_string())?);
+            c.connect_timeout(
+                parse_timeout(value, "connect_timeout", "").map_err(|e| e.to_string())?,
+            );
         }
         // no TLS here: a service that asks for it is refused, one that allows plain is not
         "sslmode" if !["disable", "allow", "prefer"].contains(&value) => {

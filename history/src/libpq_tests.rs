@@ -80,7 +80,11 @@ fn the_url_wins_over_the_environment_which_wins_over_the_password_file() {
     let r = resolve("postgres://db-3,db-4:7001/h3", &env).expect("resolves");
     assert_eq!(r.shown, "postgres://cell@db-3:6543/h3");
     assert_eq!(r.config.get_ports(), [6543, 7001]);
-    let without = env_of(&[("PGHOST", "plant-db"), ("PGUSER", "cell"), ("PGPASSFILE", &file)]);
+    let without = env_of(&[
+        ("PGHOST", "plant-db"),
+        ("PGUSER", "cell"),
+        ("PGPASSFILE", &file),
+    ]);
     let r = resolve("postgres:///history", &without).expect("resolves");
     assert_eq!(password(&r).as_deref(), Some("from-file"));
     assert!(r.notes.is_empty());
@@ -120,17 +124,20 @@ fn a_service_fills_what_the_url_leaves_before_the_environment() {
         ("PGSERVICEFILE", &services.to_string_lossy()),
     ]);
     let e = resolve("postgres://", &env).err().expect("no such service");
-    assert_eq!(e.fault(), crate::Fault::Configuration);
+    assert_eq!(e.fault(), crate::StoreFault::Configuration);
 }
 
 #[test]
 fn a_bad_url_or_port_is_a_configuration_error() {
     let env = env_of(&[]);
-    for url in ["postgres://h:notaport/db", "postgres://h/db?sslmode=nonsense"] {
+    for url in [
+        "postgres://h:notaport/db",
+        "postgres://h/db?sslmode=nonsense",
+    ] {
         let Err(e) = resolve(url, &env) else {
             panic!("{url} accepted")
         };
-        assert_eq!(e.fault(), crate::Fault::Configuration, "{e}");
+        assert_eq!(e.fault(), crate::StoreFault::Configuration, "{e}");
     }
     let e = resolve("postgres://h/db", &env_of(&[("PGPORT", "x")]))
         .err()

@@ -4,15 +4,15 @@
 
 use crate::backend::{commit_after, numbered, Dialect, Kind, Tx, Value};
 use crate::error::StoreError;
-use postgres::types::ToSql;
-use crate::error::Fault;
+use crate::error::StoreFault;
 use crate::libpq::{resolve, Env, Resolved};
+use postgres::types::ToSql;
 use postgres::{Client, NoTls};
 
 /// A connection that failed: a configuration fault says what to change (and the password
 /// file ignored, if one was), anything else as the client said it.
 fn connect_error(source: postgres::Error, shown: &str, notes: &[String]) -> StoreError {
-    if crate::error::postgres_fault(&source) == Fault::Configuration {
+    if crate::error::postgres_fault(&source) == StoreFault::Configuration {
         let said = source.to_string();
         let hint = if said.contains("password missing") {
             "; give it in PGPASSWORD, a line of the password file (PGPASSFILE, else \
@@ -35,7 +35,6 @@ fn connect_error(source: postgres::Error, shown: &str, notes: &[String]) -> Stor
         source,
     }
 }
-
 
 /// A connection to a PostgreSQL database.
 pub struct Pg {

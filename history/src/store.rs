@@ -50,7 +50,11 @@ impl Store {
             let shown = pg.location().to_owned();
             (Db::Pg(pg), shown, notes)
         } else {
-            (Db::Sqlite(Sqlite::open(location)?), location.to_owned(), Vec::new())
+            (
+                Db::Sqlite(Sqlite::open(location)?),
+                location.to_owned(),
+                Vec::new(),
+            )
         };
         let mut store = Store {
             db,
@@ -71,9 +75,18 @@ impl Store {
     /// in the history it waited for).
     pub fn remove_calibration(&mut self, id: i64) -> Result<(), StoreError> {
         self.transaction(|tx| {
-            tx.execute("DELETE FROM parameters WHERE calibration_id = ?", &[Value::Int(Some(id))])?;
-            tx.execute("DELETE FROM noise WHERE calibration_id = ?", &[Value::Int(Some(id))])?;
-            tx.execute("DELETE FROM calibrations WHERE id = ?", &[Value::Int(Some(id))])?;
+            tx.execute(
+                "DELETE FROM parameters WHERE calibration_id = ?",
+                &[Value::Int(Some(id))],
+            )?;
+            tx.execute(
+                "DELETE FROM noise WHERE calibration_id = ?",
+                &[Value::Int(Some(id))],
+            )?;
+            tx.execute(
+                "DELETE FROM calibrations WHERE id = ?",
+                &[Value::Int(Some(id))],
+            )?;
             Ok(())
         })
     }

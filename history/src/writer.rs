@@ -6,7 +6,7 @@
 //! settings the server refuses are an error at once, and a record the history refuses is
 //! said as failed, never queued to fail again.
 
-use crate::error::{Fault, StoreError};
+use crate::error::{StoreError, StoreFault};
 use crate::record::{CalibrationRecord, EventRecord};
 use crate::store::{is_postgres, Store};
 use std::path::Path;
@@ -17,7 +17,7 @@ pub const MAX_RETRY: Duration = Duration::from_secs(60);
 
 /// What became of a record.
 #[derive(Debug)]
-pub enum Outcome<T> {
+pub enum RecordOutcome<T> {
     /// In the history: as the store said it (a calibration's id, None where it already
     /// was; whether an event was new).
     Recorded(T),
@@ -131,7 +131,7 @@ impl Writer {
                 self.retry = self.first_retry;
                 Ok(())
             }
-            Err(e) if e.fault() == Fault::Unreachable => {
+            Err(e) if e.fault() == StoreFault::Unreachable => {
                 self.went_away(&e);
                 Ok(())
             }
@@ -184,7 +184,7 @@ impl Writer {
                         spool.remove_calibration(c.id)?;
                         self.queued = self.queued.saturating_sub(1);
                     }
-                    Err(e) if e.fault() == Fault::Unreachable => {
+                    Err(e) if e.fault() == StoreFault::Unreachable => {
                         lost = Some(e);
                         break 'machines;
                     }
@@ -201,7 +201,7 @@ impl Writer {
                             spool.remove_event(ev.id)?;
                             self.queued = self.queued.saturating_sub(1);
                         }
-                        Err(e) if e.fault() == Fault::Unreachable => {
+                        Err(e) if e.fault() == StoreFault::Unreachable => {
                             lost = Some(e);
                             break;
                         }
@@ -219,7 +219,7 @@ impl Writer {
 
     /// Records a calibration: in the history (its id, None where it already was), or
     /// waiting in the spool.
-    pub fn calibration(&mut self, r: &CalibrationRecord) -> Outcome<Option<i64>> {
+    pub fn calibration(&mut self, r: &CalibrationRecord) -> RecordOutcome<Option<i64>> {
         self.write(
             |s| s.record_calibration(r),
             |sp| sp.record_calibration(r).map(|_| ()),
@@ -227,7 +227,7 @@ impl Writer {
     }
 
     /// Records an event: in the history (whether it was new), or waiting in the spool.
-    pub fn event(&mut self, e: &EventRecord) -> Outcome<bool> {
+    pub fn event(&mut self, e: &EventRecord) -> RecordOutcome<bool> {
         self.write(|s| s.record_event(e), |sp| sp.record_event(e).map(|_| ()))
     }
 
@@ -237,47 +237,49 @@ impl Writer {
         &mut self,
         direct: impl Fn(&mut Store) -> Result<T, StoreError>,
         queue: impl FnOnce(&mut Store) -> Result<(), StoreError>,
-    ) -> Outcome<T> {
+    ) -> RecordOutcome<T> {
         // the records waiting go first, and a server away is tried once more now
         if let Err(e) = self.retry(true) {
-            return Outcome::Failed(crate::error::chain(&e));
+            return RecordOutcome::Failed(crate::error::chain(&e));
         }
         for attempt in 0..2 {
             let Some(store) = self.store.as_mut() else {
                 break;
             };
             match direct(store) {
-                Ok(v) => return Outcome::Recorded(v),
-                Err(e) if e.fault() == Fault::Unreachable && self.spool.is_some() => {
+                Ok(v) => return RecordOutcome::Recorded(v),
+                Err(e) if e.fault() == StoreFault::Unreachable && self.spool.is_some() => {
                     self.went_away(&e);
                     if attempt == 0 {
                         if let Err(e) = self.connect() {
-                            return Outcome::Failed(crate::error::chain(&e));
+                            return RecordOutcome::Failed(crate::error::chain(&e));
                         }
                     }
                 }
-                Err(e) => return Outcome::Failed(crate::error::chain(&e)),
+                Err(e) => return RecordOutcome::Failed(crate::error::chain(&e)),
             }
         }
         let why = self.away.clone().unwrap_or_default();
         if self.queued >= self.capacity {
-            return Outcome::Failed(format!(
+            return RecordOutcome::Failed(format!(
                 "{why}; the spool is full ({} records waiting)",
                 self.queued
             ));
         }
         let Some(spool) = self.spool.as_mut() else {
-            return Outcome::Failed(why);
+            return RecordOutcome::Failed(why);
         };
         match queue(spool) {
             Ok(()) => {
                 self.queued += 1;
-                Outcome::Queued {
+                RecordOutcome::Queued {
                     waiting: self.queued,
                     why,
                 }
             }
-            Err(e) => Outcome::Failed(format!("{why}; the spool: {}", crate::error::chain(&e))),
+            Err(e) => {
+                RecordOutcome::Failed(format!("{why}; the spool: {}", crate::error::chain(&e)))
+            }
         }
     }
 }

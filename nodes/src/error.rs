@@ -48,7 +48,7 @@ fn is_bad_input(c: &(dyn std::error::Error + 'static)) -> bool {
         || c.is::<rpkm_transport::bag::BagDecodeError>()
         || c.is::<rpkm_transport::security::SecurityError>()
         || c.downcast_ref::<rpkm_history::StoreError>()
-            .is_some_and(|e| e.fault() == rpkm_history::Fault::Configuration)
+            .is_some_and(|e| e.fault() == rpkm_history::StoreFault::Configuration)
 }
 
 /// Exit code of an error: 2 for bad input anywhere in the chain (see [`is_bad_input`]),

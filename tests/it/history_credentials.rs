@@ -3,7 +3,8 @@
 //! names no password; `PGPASSWORD` records, a password file (`PGPASSFILE`, mode 0600)
 //! records; a wrong password exits 2 naming the user and host, from `rpkm calibrate` and
 //! from the calibrator node; a password file others may read is ignored, and the refusal
-//! says so.
+//! says so. A campaign recorded again is said to be the same campaign (by `rpkm calibrate`
+//! and `rpkm history`).
 
 use crate::history_support::{postgres::server, scenario, MACHINE};
 use crate::node_support::TempDir;
@@ -33,14 +34,23 @@ fn clean(mut c: Command, env: &[(&str, &str)]) -> Command {
     c
 }
 
-/// `rpkm calibrate` of campaign `k` into `url` with `env`.
-fn calibrate(url: &str, k: usize, env: &[(&str, &str)]) -> Output {
+/// `rpkm calibrate` of campaign `k` into `url` with `env`, at the time of campaign `at`.
+fn calibrate_at(url: &str, k: usize, at: usize, env: &[(&str, &str)]) -> Output {
     let s = scenario();
     let mut c = Command::new(env!("CARGO_BIN_EXE_rpkm"));
-    c.arg("calibrate")
-        .arg(s.campaign(k))
-        .args(["--history", url, "--machine", MACHINE, "--at", &s.at(k)]);
+    c.arg("calibrate").arg(s.campaign(k)).args([
+        "--history",
+        url,
+        "--machine",
+        MACHINE,
+        "--at",
+        &s.at(at),
+    ]);
     clean(c, env).output().expect("run rpkm calibrate")
+}
+
+fn calibrate(url: &str, k: usize, env: &[(&str, &str)]) -> Output {
+    calibrate_at(url, k, k, env)
 }
 
 fn said(o: &Output) -> String {
@@ -92,11 +102,35 @@ fn the_password_comes_from_the_environment_or_the_password_file_and_a_wrong_one_
     );
 
     // readable by others: ignored as libpq ignores it, and said
-    let open = pgpass(&dir, "pgpass-open", &format!("*:*:*:{ROLE}:{PASSWORD}\n"), 0o644);
+    let open = pgpass(
+        &dir,
+        "pgpass-open",
+        &format!("*:*:*:{ROLE}:{PASSWORD}\n"),
+        0o644,
+    );
     let o = calibrate(&url, 2, &[("PGPASSFILE", &open)]);
     assert_eq!(o.status.code(), Some(2), "{}", said(&o));
     assert!(
         said(&o).contains("password missing") && said(&o).contains("mode 0644"),
+        "{}",
+        said(&o)
+    );
+
+    // the first campaign again, a month later: recorded, and said to be the same campaign,
+    // here and in the history
+    let o = calibrate_at(&url, 0, 3, &[("PGPASSWORD", PASSWORD)]);
+    assert!(
+        said(&o).contains("the same campaign as calibration 1"),
+        "{}",
+        said(&o)
+    );
+    let mut c = Command::new(env!("CARGO_BIN_EXE_rpkm"));
+    c.args(["history", &url, "--machine", MACHINE]);
+    let o = clean(c, &[("PGPASSWORD", PASSWORD)])
+        .output()
+        .expect("rpkm history");
+    assert!(
+        said(&o).contains("calibration 3 is the same campaign as calibration 1"),
         "{}",
         said(&o)
     );
@@ -110,5 +144,9 @@ fn the_password_comes_from_the_environment_or_the_password_file_and_a_wrong_one_
         .output()
         .expect("run the node");
     assert_eq!(o.status.code(), Some(2), "{}", said(&o));
-    assert!(said(&o).contains(&format!("{ROLE}@127.0.0.1")), "{}", said(&o));
+    assert!(
+        said(&o).contains(&format!("{ROLE}@127.0.0.1")),
+        "{}",
+        said(&o)
+    );
 }

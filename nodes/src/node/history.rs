@@ -14,7 +14,7 @@ use crate::history::{record_of, words, Made};
 use rpkm_core::calib::{Calibration, Prior, Selection};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::variance::NoiseEstimate;
-use rpkm_history::{CalibrationRecord, EventRecord, Outcome, Retried, Writer};
+use rpkm_history::{CalibrationRecord, EventRecord, RecordOutcome, Retried, Writer};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -202,13 +202,13 @@ impl NodeHistory {
         let outcome = self.writer.calibration(&record);
         let said = self.since_previous(&record);
         let (ok, text) = match outcome {
-            Outcome::Recorded(Some(id)) => (true, format!("recorded as {id}; {said}")),
-            Outcome::Recorded(None) => (true, format!("already recorded; {said}")),
-            Outcome::Queued { waiting, why } => (
+            RecordOutcome::Recorded(Some(id)) => (true, format!("recorded as {id}; {said}")),
+            RecordOutcome::Recorded(None) => (true, format!("already recorded; {said}")),
+            RecordOutcome::Queued { waiting, why } => (
                 false,
                 format!("queued, {waiting} waiting for the history ({why}); {said}"),
             ),
-            Outcome::Failed(why) => {
+            RecordOutcome::Failed(why) => {
                 return Said {
                     ok: false,
                     text: format!("not recorded: {why}"),
@@ -269,11 +269,11 @@ impl NodeHistory {
             stream_t_s: Some(r.t),
             message: message.to_owned(),
         }) {
-            Outcome::Recorded(_) => None,
-            Outcome::Queued { waiting, why } => Some(format!(
-                "history: event queued, {waiting} waiting ({why})"
-            )),
-            Outcome::Failed(why) => Some(format!("history: event not recorded: {why}")),
+            RecordOutcome::Recorded(_) => None,
+            RecordOutcome::Queued { waiting, why } => {
+                Some(format!("history: event queued, {waiting} waiting ({why})"))
+            }
+            RecordOutcome::Failed(why) => Some(format!("history: event not recorded: {why}")),
         }
     }
 }

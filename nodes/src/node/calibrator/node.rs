@@ -8,13 +8,13 @@ use super::params::{
     configure, declared, online_settings, Settings, HISTORY, HISTORY_MACHINE, HISTORY_RETRY,
     HISTORY_SPOOL, HISTORY_SPOOL_MAX, PARAMS, STATE_BUFFER,
 };
-use crate::node::history::{HistorySettings, NodeHistory, Said};
 use crate::node::calibrate_action::{CalibrateAction, Running};
 use crate::node::context::{
     bad_param, diagnostic_array, status, CommonArgs, Every, Idle, NodeContext,
 };
 use crate::node::declare::served;
 use crate::node::geometry::parameters_msg;
+use crate::node::history::{HistorySettings, NodeHistory, Said};
 use crate::node::ingest::END_OF_CAMPAIGN;
 use crate::node::lifecycle::Lifecycle;
 use crate::node::live::LiveParams;
@@ -407,7 +407,12 @@ impl Calibrator {
     /// Tries a history server away again when due; says on /diagnostics and in the log
     /// when it answers again (the waiting records recorded) or is found away.
     fn history_retry(&mut self, ctx: &NodeContext, out: &Outputs) -> anyhow::Result<()> {
-        let Some(said) = self.history.as_mut().map(NodeHistory::retry).transpose()?.flatten()
+        let Some(said) = self
+            .history
+            .as_mut()
+            .map(NodeHistory::retry)
+            .transpose()?
+            .flatten()
         else {
             return Ok(());
         };
