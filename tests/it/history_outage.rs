@@ -9,6 +9,7 @@
 //! 4. the server started again: the calibrator says both waiting records are recorded,
 //!    without a new calibration to push them;
 //! 5. one more campaign: recorded at once.
+//!
 //! Afterwards the database holds the four calibrations, once each (four campaign digests), in
 //! order (each with its calibration's measurements); the spool none.
 

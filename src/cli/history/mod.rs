@@ -103,6 +103,15 @@ fn position(cals: &[Stored<CalibrationRecord>], id: i64, flag: &str) -> anyhow::
     })
 }
 
+/// The store at `db`, what opening it noticed said (a password file ignored).
+fn open(db: &str) -> anyhow::Result<Store> {
+    let store = Store::open(db)?;
+    for n in store.notes() {
+        eprintln!("warning: {n}");
+    }
+    Ok(store)
+}
+
 pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     // reading: a mistyped path must not become a new, empty history
     let is_url = args.db.starts_with("postgres://") || args.db.starts_with("postgresql://");
@@ -113,7 +122,7 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
             args.db
         )));
     }
-    let mut store = Store::open(&args.db)?;
+    let mut store = open(&args.db)?;
     let Some(machine) = &args.machine else {
         let machines = store.machines()?;
         if machines.is_empty() {
@@ -187,7 +196,6 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The calibrations, then what the analysis says.
 /// A calibration whose campaign (its SHA-256) an earlier one of the machine already
 /// calibrated: the same measurements recorded again, not a new measurement of the machine,
 /// so that a change between the two (χ² 0.0) says nothing of it.
@@ -196,22 +204,21 @@ fn same_campaigns(cals: &[Stored<CalibrationRecord>]) -> Vec<String> {
     cals.iter()
         .filter_map(|c| {
             let digest = c.record.campaign.digest.as_str();
-            match first.get(digest) {
-                Some(&id) => Some(format!(
+            if let Some(&id) = first.get(digest) {
+                return Some(format!(
                     "calibration {} is the same campaign as calibration {id} (SHA-256 {}...): \
                      recorded again, not an independent measurement",
                     c.id,
                     &digest[..digest.len().min(12)]
-                )),
-                None => {
-                    first.insert(digest, c.id);
-                    None
-                }
+                ));
             }
+            first.insert(digest, c.id);
+            None
         })
         .collect()
 }
 
+/// The calibrations, then what the analysis says.
 fn print_history(machine: &str, cals: &[Stored<CalibrationRecord>], a: &Analysis) {
     println!("History of {machine}: {} calibrations", cals.len());
     println!(

@@ -532,6 +532,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     ));
     let history = open_history(&ctx)?;
     let mut node = Calibrator::new(capacity, online, history);
+    if let Some(why) = node.history.as_ref().and_then(NodeHistory::away) {
+        // said on /diagnostics from the first status on, not only in the log
+        node.last = (
+            DiagnosticStatus::WARN,
+            format!("history: the server is away ({why}): records wait in the spool"),
+        );
+    }
     let mut idle = Idle::new(Duration::from_millis(50), Duration::from_millis(1));
     let mut report = Every::new(ctx.diagnostics_period()?);
     while !crate::node::shutdown::requested() {
