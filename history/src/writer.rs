@@ -30,8 +30,12 @@ pub enum RecordOutcome<T> {
 /// What a retry did.
 #[derive(Debug, PartialEq, Eq)]
 pub enum Retried {
-    /// The server answers again: records moved from the spool into the history.
-    Reconnected { flushed: usize },
+    /// The server answers again: records moved from the spool into the history, and those
+    /// it refused (each said; taken out of the spool, as they would be refused again).
+    Reconnected {
+        flushed: usize,
+        refused: Vec<String>,
+    },
     /// Still away (said once per outage, when it began or the reason changed).
     StillAway(String),
 }
@@ -158,9 +162,9 @@ impl Writer {
             self.connect()?;
         }
         if self.store.is_some() {
-            let flushed = self.flush()?;
+            let (flushed, refused) = self.flush()?;
             if self.store.is_some() {
-                return Ok(Some(Retried::Reconnected { flushed }));
+                return Ok(Some(Retried::Reconnected { flushed, refused }));
             }
         }
         Ok(match &self.away {
@@ -169,52 +173,56 @@ impl Writer {
         })
     }
 
-    /// Moves the spool's records into the history, oldest first; how many. A server that
-    /// goes away meanwhile leaves the rest waiting.
-    fn flush(&mut self) -> Result<usize, StoreError> {
+    /// Moves the spool's records into the history, oldest first: how many, and the ones it
+    /// refused. A server that goes away meanwhile leaves the rest waiting; settings it now
+    /// refuses are an error (the records stay).
+    fn flush(&mut self) -> Result<(usize, Vec<String>), StoreError> {
         let (Some(spool), Some(store)) = (self.spool.as_mut(), self.store.as_mut()) else {
-            return Ok(0);
+            return Ok((0, Vec::new()));
         };
-        let mut moved = 0;
+        let (mut moved, mut refused) = (0, Vec::new());
         let mut lost = None;
-        'machines: for (machine, _) in spool.machines()? {
+        'calibrations: for (machine, _) in spool.machines()? {
             for c in spool.calibrations(&machine)? {
-                match store.record_calibration(&c.record) {
-                    Ok(_) => {
-                        spool.remove_calibration(c.id)?;
-                        self.queued = self.queued.saturating_sub(1);
-                    }
-                    Err(e) if e.fault() == StoreFault::Unreachable => {
+                match settle(store.record_calibration(&c.record).map(|_| ()))? {
+                    Settled::Lost(e) => {
                         lost = Some(e);
-                        break 'machines;
+                        break 'calibrations;
                     }
-                    Err(e) => return Err(e),
+                    Settled::Refused(why) => refused.push(format!(
+                        "the calibration of {machine} at {} s: {why}",
+                        c.record.at_s
+                    )),
+                    Settled::Written => moved += 1,
                 }
-                moved += 1;
+                spool.remove_calibration(c.id)?;
+                self.queued = self.queued.saturating_sub(1);
             }
         }
-        if lost.is_none() {
-            for machine in spool.event_machines()? {
-                for ev in spool.events(&machine)? {
-                    match store.record_event(&ev.record) {
-                        Ok(_) => {
-                            spool.remove_event(ev.id)?;
-                            self.queued = self.queued.saturating_sub(1);
-                        }
-                        Err(e) if e.fault() == StoreFault::Unreachable => {
-                            lost = Some(e);
-                            break;
-                        }
-                        Err(e) => return Err(e),
+        'events: for machine in spool.event_machines()? {
+            if lost.is_some() {
+                break;
+            }
+            for ev in spool.events(&machine)? {
+                match settle(store.record_event(&ev.record).map(|_| ()))? {
+                    Settled::Lost(e) => {
+                        lost = Some(e);
+                        break 'events;
                     }
-                    moved += 1;
+                    Settled::Refused(why) => refused.push(format!(
+                        "the event of {machine} at {} s: {why}",
+                        ev.record.at_s
+                    )),
+                    Settled::Written => moved += 1,
                 }
+                spool.remove_event(ev.id)?;
+                self.queued = self.queued.saturating_sub(1);
             }
         }
         if let Some(e) = lost {
             self.went_away(&e);
         }
-        Ok(moved)
+        Ok((moved, refused))
     }
 
     /// Records a calibration: in the history (its id, None where it already was), or
@@ -292,4 +300,25 @@ fn count(s: &mut Store) -> Result<usize, StoreError> {
         events += s.events(&m)?.len();
     }
     Ok(usize::try_from(calibrations).unwrap_or(usize::MAX) + events)
+}
+
+/// What became of a waiting record offered to the history.
+enum Settled {
+    Written,
+    /// The server went away: it waits on.
+    Lost(StoreError),
+    /// The history refuses it (why): it would be refused again.
+    Refused(String),
+}
+
+/// A waiting record's write settled; settings the server refuses are an error.
+fn settle(r: Result<(), StoreError>) -> Result<Settled, StoreError> {
+    match r {
+        Ok(()) => Ok(Settled::Written),
+        Err(e) => match e.fault() {
+            StoreFault::Unreachable => Ok(Settled::Lost(e)),
+            StoreFault::Configuration => Err(e),
+            StoreFault::Other => Ok(Settled::Refused(crate::error::chain(&e))),
+        },
+    }
 }

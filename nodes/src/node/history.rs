@@ -70,7 +70,7 @@ pub fn default_spool(machine: &str) -> PathBuf {
         })
         .map(|d| d.join("rpkm"))
         .unwrap_or_default();
-    dir.join(format!("history-spool-{machine}.db"))
+    dir.join(format!("history-spool-{}.db", machine.replace('/', "_")))
 }
 
 /// What the history said of a record or of its server: whether all is well, and the words.
@@ -142,14 +142,23 @@ impl NodeHistory {
             return Ok(None);
         };
         Ok(Some(match r {
-            Retried::Reconnected { flushed } => {
+            Retried::Reconnected { flushed, refused } => {
                 // what the history holds now is the previous of the next calibration
                 self.previous_read = false;
                 self.read_previous()?;
+                let dropped = if refused.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        "; {} refused by it and not recorded: {}",
+                        refused.len(),
+                        refused.join("; ")
+                    )
+                };
                 Said {
-                    ok: true,
+                    ok: refused.is_empty(),
                     text: format!(
-                        "history: {} answers again: {flushed} waiting records recorded",
+                        "history: {} answers again: {flushed} waiting records recorded{dropped}",
                         self.writer.describe()
                     ),
                 }
