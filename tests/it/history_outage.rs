@@ -5,7 +5,8 @@
 //! 2. with it stopped (its sessions ended, as a restart ends them): queued, 1 waiting;
 //! 3. the calibrator killed and restarted by the launcher while the server is still down:
 //!    it starts (no crash loop) and says the server is away; a campaign: queued, 2 waiting
-//!    (the first waited through the restart, in the spool file);
+//!    (the first waited through the restart, in the spool file); /diagnostics WARN with
+//!    `history_waiting` 2;
 //! 4. the server started again: the calibrator says both waiting records are recorded,
 //!    without a new calibration to push them;
 //! 5. one more campaign: recorded at once.
@@ -16,11 +17,29 @@
 use crate::history_support::{postgres::OwnServer, scenario};
 use crate::node_support::{rpkm, unique, Launch, TempDir};
 use rpkm_history::Store;
+use rpkm_transport::{topic, Subscriber, Transport, TransportConfig};
 use std::process::Command;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 const MACHINE: &str = "cell-9";
 const WAIT: Duration = Duration::from_secs(120);
+
+/// Waits for the calibrator's /diagnostics status with `key` = `value`; its level.
+fn status_with(diagnostics: &Subscriber<rpkm_msgs::DiagnosticArray>, key: &str, value: &str) -> u8 {
+    let deadline = Instant::now() + WAIT;
+    loop {
+        assert!(Instant::now() < deadline, "no status with {key} = {value}");
+        while let Some(d) = diagnostics.try_recv().expect("recv") {
+            if let Some(s) = d.status.iter().find(|s| {
+                s.name == "rpkm/calibrator"
+                    && s.values.iter().any(|v| v.key == key && v.value == value)
+            }) {
+                return s.level;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
 
 /// The number of measurements a calibrator's line says it calibrated.
 fn measurements(said: &str) -> u64 {
@@ -73,6 +92,9 @@ fn every_calibration_made_before_during_and_after_an_outage_is_recorded() {
     )
     .expect("launch file");
     let prefix = unique("pgout");
+    let t = Transport::new(&TransportConfig::new(unique("pgoutobs")).ipc_prefix(&prefix))
+        .expect("transport");
+    let diagnostics = t.subscriber(&topic::DIAGNOSTICS).expect("sub");
     let launched = Launch::start(&launch, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
     launched.wait_for("history: machine cell-9 in postgres://", WAIT);
 
@@ -96,10 +118,17 @@ fn every_calibration_made_before_during_and_after_an_outage_is_recorded() {
     let said = calibrate(&launched, &dir, &prefix, 2);
     poses.push(measurements(&said));
     assert!(said.contains("history: queued, 2 waiting"), "{said}");
+    // /diagnostics says it too: a WARN, two records waiting
+    let level = status_with(&diagnostics, "history_waiting", "2");
+    assert_eq!(level, rpkm_msgs::DiagnosticStatus::WARN);
 
     server.start();
     let said = launched.wait_for("answers again", WAIT);
     assert!(said.contains("2 waiting records recorded"), "{said}");
+    assert_eq!(
+        status_with(&diagnostics, "history_server", "connected"),
+        rpkm_msgs::DiagnosticStatus::OK
+    );
 
     let said = calibrate(&launched, &dir, &prefix, 3);
     poses.push(measurements(&said));
