@@ -246,12 +246,16 @@ impl Writer {
         direct: impl Fn(&mut Store) -> Result<T, StoreError>,
         queue: impl FnOnce(&mut Store) -> Result<(), StoreError>,
     ) -> RecordOutcome<T> {
-        // the records waiting go first, and a server away is tried once more now
-        if let Err(e) = self.retry(true) {
-            return RecordOutcome::Failed(crate::error::chain(&e));
-        }
+        // the records waiting go first, and a server away is tried once more now; settings
+        // it now refuses (a password changed) make the record wait too, and the next retry
+        // says it as the error it is
+        let mut refused = match self.retry(true) {
+            Ok(_) => None,
+            Err(e) if e.fault() == StoreFault::Configuration => Some(crate::error::chain(&e)),
+            Err(e) => return RecordOutcome::Failed(crate::error::chain(&e)),
+        };
         for attempt in 0..2 {
-            let Some(store) = self.store.as_mut() else {
+            let Some(store) = self.store.as_mut().filter(|_| refused.is_none()) else {
                 break;
             };
             match direct(store) {
@@ -259,15 +263,19 @@ impl Writer {
                 Err(e) if e.fault() == StoreFault::Unreachable && self.spool.is_some() => {
                     self.went_away(&e);
                     if attempt == 0 {
-                        if let Err(e) = self.connect() {
-                            return RecordOutcome::Failed(crate::error::chain(&e));
+                        match self.connect() {
+                            Ok(()) => {}
+                            Err(e) if e.fault() == StoreFault::Configuration => {
+                                refused = Some(crate::error::chain(&e));
+                            }
+                            Err(e) => return RecordOutcome::Failed(crate::error::chain(&e)),
                         }
                     }
                 }
                 Err(e) => return RecordOutcome::Failed(crate::error::chain(&e)),
             }
         }
-        let why = self.away.clone().unwrap_or_default();
+        let why = refused.or_else(|| self.away.clone()).unwrap_or_default();
         if self.queued >= self.capacity {
             return RecordOutcome::Failed(format!(
                 "{why}; the spool is full ({} records waiting)",
