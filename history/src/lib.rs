@@ -9,18 +9,25 @@
 //! plant's database that many cells write to at once (`postgres://user@host/db`). Each record
 //! is one transaction: a writer killed part-way leaves nothing of its record, and everything
 //! committed before it intact.
+//!
+//! A PostgreSQL URL is completed as libpq completes it ([`libpq`]: the plant's `PGPASSWORD`,
+//! password file, service file), and [`Writer`] keeps records through a server's absence
+//! (a spool file, retries); a failure says what it asks for ([`StoreFault`]).
 
 mod backend;
 mod error;
+pub mod libpq;
 mod pg;
 mod record;
 pub mod schema;
 mod sqlite;
 mod store;
+mod writer;
 
-pub use error::StoreError;
+pub use error::{StoreError, StoreFault};
 pub use record::{CalibrationRecord, CampaignId, EventRecord, NoiseLevel, Stored};
-pub use store::{Batch, Store};
+pub use store::{is_postgres, Batch, Store};
+pub use writer::{RecordOutcome, Retried, Writer, MAX_RETRY};
 
 #[cfg(test)]
 mod tests;

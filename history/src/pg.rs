@@ -4,8 +4,37 @@
 
 use crate::backend::{commit_after, numbered, Dialect, Kind, Tx, Value};
 use crate::error::StoreError;
+use crate::error::StoreFault;
+use crate::libpq::{resolve, Env, Resolved};
 use postgres::types::ToSql;
 use postgres::{Client, NoTls};
+
+/// A connection that failed: a configuration fault says what to change (and the password
+/// file ignored, if one was), anything else as the client said it.
+fn connect_error(source: postgres::Error, shown: &str, notes: &[String]) -> StoreError {
+    if crate::error::postgres_fault(&source) == StoreFault::Configuration {
+        let said = source.to_string();
+        let hint = if said.contains("password missing") {
+            "; give it in PGPASSWORD, a line of the password file (PGPASSFILE, else \
+             ~/.pgpass) or the URL"
+        } else {
+            ""
+        };
+        let mut what = format!("{}{hint}", crate::error::chain(&source));
+        for n in notes {
+            what.push_str("; ");
+            what.push_str(n);
+        }
+        return StoreError::Config {
+            location: shown.to_owned(),
+            what,
+        };
+    }
+    StoreError::Postgres {
+        location: shown.to_owned(),
+        source,
+    }
+}
 
 /// A connection to a PostgreSQL database.
 pub struct Pg {
@@ -29,13 +58,29 @@ pub fn without_password(url: &str) -> String {
 }
 
 impl Pg {
-    pub fn open(url: &str) -> Result<Pg, StoreError> {
-        let location = without_password(url);
-        let client = Client::connect(url, NoTls).map_err(|source| StoreError::Postgres {
-            location: location.clone(),
-            source,
-        })?;
-        Ok(Pg { client, location })
+    /// Connects to `url` completed as libpq completes it ([`crate::libpq`]) from `env`;
+    /// also what the completion noticed (a password file ignored).
+    pub fn open(url: &str, env: Env) -> Result<(Pg, Vec<String>), StoreError> {
+        let Resolved {
+            config,
+            shown,
+            notes,
+        } = resolve(url, env)?;
+        let client = config
+            .connect(NoTls)
+            .map_err(|source| connect_error(source, &shown, &notes))?;
+        Ok((
+            Pg {
+                client,
+                location: shown,
+            },
+            notes,
+        ))
+    }
+
+    /// Where it is: `postgres://user@host:port/database`.
+    pub fn location(&self) -> &str {
+        &self.location
     }
 
     /// Runs `work` in one transaction, committed when it succeeds.

@@ -4,7 +4,7 @@
 
 use crate::backend::{Kind, Tx, Value};
 use crate::error::StoreError;
-use crate::pg::{without_password, Pg};
+use crate::pg::Pg;
 use crate::record::{CalibrationRecord, CampaignId, EventRecord, NoiseLevel, Stored};
 use crate::schema;
 use crate::sqlite::Sqlite;
@@ -21,6 +21,12 @@ enum Db {
 pub struct Store {
     db: Db,
     location: String,
+    notes: Vec<String>,
+}
+
+/// Whether `location` names a PostgreSQL database (else an SQLite file).
+pub fn is_postgres(location: &str) -> bool {
+    location.starts_with("postgres://") || location.starts_with("postgresql://")
 }
 
 /// Records written in one transaction ([`Store::batch`]): all of them, or none.
@@ -30,22 +36,67 @@ pub struct Batch<'t> {
 }
 
 impl Store {
-    /// Opens the store at `location`: a `postgres://` or `postgresql://` URL, else the path of
-    /// an SQLite file (made if missing); the schema is migrated to this build's.
+    /// Opens the store at `location`: a `postgres://` or `postgresql://` URL (completed from
+    /// the process's environment and password file as libpq completes it), else the path
+    /// of an SQLite file (made if missing); the schema is migrated to this build's.
     pub fn open(location: &str) -> Result<Store, StoreError> {
-        let is_pg = location.starts_with("postgres://") || location.starts_with("postgresql://");
-        let (db, shown) = if is_pg {
-            (Db::Pg(Pg::open(location)?), without_password(location))
+        Store::open_with(location, &crate::libpq::process_env)
+    }
+
+    /// [`Store::open`] with the environment `env` in place of the process's.
+    pub fn open_with(location: &str, env: crate::libpq::Env) -> Result<Store, StoreError> {
+        let (db, shown, notes) = if is_postgres(location) {
+            let (pg, notes) = Pg::open(location, env)?;
+            let shown = pg.location().to_owned();
+            (Db::Pg(pg), shown, notes)
         } else {
-            (Db::Sqlite(Sqlite::open(location)?), location.to_owned())
+            (
+                Db::Sqlite(Sqlite::open(location)?),
+                location.to_owned(),
+                Vec::new(),
+            )
         };
         let mut store = Store {
             db,
             location: shown,
+            notes,
         };
         let at = store.location.clone();
         store.transaction(|tx| schema::migrate(tx, &at))?;
         Ok(store)
+    }
+
+    /// What opening it noticed and did not refuse (a password file ignored as unsafe).
+    pub fn notes(&self) -> &[String] {
+        &self.notes
+    }
+
+    /// Removes calibration `id` with its parameters and noise (a spool's record once it is
+    /// in the history it waited for).
+    pub fn remove_calibration(&mut self, id: i64) -> Result<(), StoreError> {
+        self.transaction(|tx| {
+            tx.execute(
+                "DELETE FROM parameters WHERE calibration_id = ?",
+                &[Value::Int(Some(id))],
+            )?;
+            tx.execute(
+                "DELETE FROM noise WHERE calibration_id = ?",
+                &[Value::Int(Some(id))],
+            )?;
+            tx.execute(
+                "DELETE FROM calibrations WHERE id = ?",
+                &[Value::Int(Some(id))],
+            )?;
+            Ok(())
+        })
+    }
+
+    /// Removes event `id`.
+    pub fn remove_event(&mut self, id: i64) -> Result<(), StoreError> {
+        self.transaction(|tx| {
+            tx.execute("DELETE FROM events WHERE id = ?", &[Value::Int(Some(id))])?;
+            Ok(())
+        })
     }
 
     /// Where it is (a URL without its password).
@@ -107,6 +158,21 @@ impl Store {
                 let n = r[1].int().and_then(|n| u64::try_from(n).ok());
                 (r[0].text().unwrap_or_default().to_owned(), n.unwrap_or(0))
             })
+            .collect())
+    }
+
+    /// The machines with events recorded.
+    pub fn event_machines(&mut self) -> Result<Vec<String>, StoreError> {
+        let rows = self.transaction(|tx| {
+            tx.query(
+                "SELECT DISTINCT machine FROM events ORDER BY machine",
+                &[],
+                &[Kind::Text],
+            )
+        })?;
+        Ok(rows
+            .iter()
+            .map(|r| r[0].text().unwrap_or_default().to_owned())
             .collect())
     }
 

@@ -31,7 +31,8 @@ pub fn error_chain(e: &anyhow::Error) -> String {
 
 /// Whether an error in a chain is the input's fault: a [`BadInput`], a campaign file the
 /// reader refuses, a bag that cannot be opened or decoded (missing, not a bag, corrupt, a
-/// payload that is not its topic's type), or data the model cannot use (a pose it cannot evaluate, a calibration that
+/// payload that is not its topic's type), history settings the database refuses (a bad URL,
+/// a password missing or wrong), or data the model cannot use (a pose it cannot evaluate, a calibration that
 /// the campaign cannot determine or that diverges on it, a diagnosis that fails on it). The
 /// core's solvers converge on every campaign of the spec's machine, so their failure says the
 /// data are not such a campaign.
@@ -46,6 +47,8 @@ fn is_bad_input(c: &(dyn std::error::Error + 'static)) -> bool {
         || c.is::<rpkm_transport::bag::BagOpenError>()
         || c.is::<rpkm_transport::bag::BagDecodeError>()
         || c.is::<rpkm_transport::security::SecurityError>()
+        || c.downcast_ref::<rpkm_history::StoreError>()
+            .is_some_and(|e| e.fault() == rpkm_history::StoreFault::Configuration)
 }
 
 /// Exit code of an error: 2 for bad input anywhere in the chain (see [`is_bad_input`]),

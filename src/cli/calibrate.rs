@@ -104,7 +104,8 @@ pub struct CalibrateArgs {
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
     /// Record the calibration in the machine's history (an SQLite file, made if missing, or
-    /// a PostgreSQL URL) under --machine: `rpkm history DB --machine NAME` then says what
+    /// a PostgreSQL URL, its password as libpq finds it: PGPASSWORD, ~/.pgpass or
+    /// PGPASSFILE, PGSERVICE) under --machine: `rpkm history DB --machine NAME` then says what
     /// changed since the last one and how each parameter trends. Example:
     ///   rpkm calibrate c.csv --validate v.csv --history cell.db --machine cell-1
     #[arg(long, requires = "machine")]
@@ -245,6 +246,24 @@ fn record_history(
         verdict,
     });
     let mut store = rpkm_history::Store::open(db)?;
+    for n in store.notes() {
+        eprintln!("warning: {n}");
+    }
+    // the same measurements calibrated before: said, as they are no new measurement
+    let same = store
+        .calibrations(machine)?
+        .into_iter()
+        .find(|c| {
+            c.record.campaign.digest == record.campaign.digest && c.record.at_s != record.at_s
+        })
+        .map(|c| c.id);
+    if let Some(id) = same {
+        println!(
+            "\nthe same campaign as calibration {id} (SHA-256 {}...): recorded again, not an \
+             independent measurement of {machine}",
+            &record.campaign.digest[..record.campaign.digest.len().min(12)]
+        );
+    }
     match store.record_calibration(&record)? {
         Some(id) => println!(
             "\nrecorded as calibration {id} of {machine} in {}",

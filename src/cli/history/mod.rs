@@ -28,7 +28,8 @@ use std::path::PathBuf;
 ///   rpkm history postgres://rpkm@plant-db/history --machine cell-1 --from 3 --to 7
 #[derive(clap::Args, Debug)]
 pub struct HistoryArgs {
-    /// The history: an SQLite file, or a PostgreSQL URL (postgres://user@host/db).
+    /// The history: an SQLite file, or a PostgreSQL URL (postgres://user@host/db; the
+    /// password as libpq finds it: PGPASSWORD, ~/.pgpass or PGPASSFILE, PGSERVICE).
     pub db: String,
     /// The machine; without it, the machines recorded are listed.
     #[arg(long)]
@@ -102,6 +103,15 @@ fn position(cals: &[Stored<CalibrationRecord>], id: i64, flag: &str) -> anyhow::
     })
 }
 
+/// The store at `db`, what opening it noticed said (a password file ignored).
+fn open(db: &str) -> anyhow::Result<Store> {
+    let store = Store::open(db)?;
+    for n in store.notes() {
+        eprintln!("warning: {n}");
+    }
+    Ok(store)
+}
+
 pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     // reading: a mistyped path must not become a new, empty history
     let is_url = args.db.starts_with("postgres://") || args.db.starts_with("postgresql://");
@@ -112,7 +122,7 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
             args.db
         )));
     }
-    let mut store = Store::open(&args.db)?;
+    let mut store = open(&args.db)?;
     let Some(machine) = &args.machine else {
         let machines = store.machines()?;
         if machines.is_empty() {
@@ -186,6 +196,28 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A calibration whose campaign (its SHA-256) an earlier one of the machine already
+/// calibrated: the same measurements recorded again, not a new measurement of the machine,
+/// so that a change between the two (χ² 0.0) says nothing of it.
+fn same_campaigns(cals: &[Stored<CalibrationRecord>]) -> Vec<String> {
+    let mut first: std::collections::HashMap<&str, i64> = std::collections::HashMap::new();
+    cals.iter()
+        .filter_map(|c| {
+            let digest = c.record.campaign.digest.as_str();
+            if let Some(&id) = first.get(digest) {
+                return Some(format!(
+                    "calibration {} is the same campaign as calibration {id} (SHA-256 {}...): \
+                     recorded again, not an independent measurement",
+                    c.id,
+                    &digest[..digest.len().min(12)]
+                ));
+            }
+            first.insert(digest, c.id);
+            None
+        })
+        .collect()
+}
+
 /// The calibrations, then what the analysis says.
 fn print_history(machine: &str, cals: &[Stored<CalibrationRecord>], a: &Analysis) {
     println!("History of {machine}: {} calibrations", cals.len());
@@ -208,6 +240,9 @@ fn print_history(machine: &str, cals: &[Stored<CalibrationRecord>], a: &Analysis
             r.held_out_rms_um
                 .map_or("-".to_owned(), |v| format!("{v:.2} µm"))
         );
+    }
+    for line in same_campaigns(cals) {
+        println!("{line}");
     }
     println!();
     for line in words::summary(a, cals) {

@@ -5,12 +5,14 @@ use super::accumulator::Accumulator;
 use super::goal::{goal_options, goal_result};
 use super::job::{calibrate_campaign, calibrate_job, CalibratorOptions, Job, JobOutcome};
 use super::params::{
-    configure, declared, online_settings, Settings, HISTORY, HISTORY_MACHINE, PARAMS, STATE_BUFFER,
+    configure, declared, online_settings, Settings, HISTORY, HISTORY_MACHINE, HISTORY_RETRY,
+    HISTORY_SPOOL, HISTORY_SPOOL_MAX, PARAMS, STATE_BUFFER,
 };
 use crate::node::calibrate_action::{CalibrateAction, Running};
 use crate::node::context::{bad_param, status, CommonArgs, Every, Idle, NodeContext};
 use crate::node::declare::served;
 use crate::node::geometry::parameters_msg;
+use crate::node::history::{HistorySettings, NodeHistory, Said};
 use crate::node::ingest::END_OF_CAMPAIGN;
 use crate::node::lifecycle::Lifecycle;
 use crate::node::live::LiveParams;
@@ -27,28 +29,44 @@ use rpkm_transport::dds_actions::GoalEnd;
 use rpkm_transport::{topic, Publisher, Subscriber};
 use std::time::{Duration, Instant};
 
-/// Records an online step or settled tie (said as `said`) in the machine's history, if the
-/// node keeps one.
-fn record_event(
-    history: Option<&mut crate::node::history::NodeHistory>,
-    r: &crate::node::online_tracker::OnlineReport,
-    said: &str,
-) -> anyhow::Result<()> {
-    history.map_or(Ok(()), |h| h.event(r, said))
-}
-
-/// The machine's history of the parameters `history`, `history_machine` (None when off).
-fn open_history(ctx: &NodeContext) -> anyhow::Result<Option<crate::node::history::NodeHistory>> {
-    let location = HISTORY.string(&ctx.params).map_err(bad_param)?;
+/// The machine's history of the parameters `history`, `history_machine`, `history_spool`,
+/// `history_spool_max`, `history_retry_s` (None when off).
+fn open_history(ctx: &NodeContext) -> anyhow::Result<Option<NodeHistory>> {
+    let p = &ctx.params;
+    let location = HISTORY.string(p).map_err(bad_param)?;
     if location.is_empty() {
         return Ok(None);
     }
-    let mut machine = HISTORY_MACHINE.string(&ctx.params).map_err(bad_param)?;
+    let mut machine = HISTORY_MACHINE.string(p).map_err(bad_param)?;
     if machine.is_empty() {
         machine = crate::node::history::default_machine(&ctx.status_name, &ctx.name);
     }
-    let h = crate::node::history::NodeHistory::open(&location, &machine, &ctx.status_name)?;
+    let spool = match HISTORY_SPOOL.string(p).map_err(bad_param)? {
+        s if s.is_empty() => crate::node::history::default_spool(&machine),
+        s => s.into(),
+    };
+    let settings = HistorySettings {
+        location,
+        machine,
+        source: ctx.status_name.clone(),
+        spool,
+        spool_max: usize::try_from(HISTORY_SPOOL_MAX.u64(p).map_err(bad_param)?)
+            .unwrap_or(usize::MAX),
+        first_retry: Duration::from_secs_f64(HISTORY_RETRY.f64(p).map_err(bad_param)?),
+    };
+    let (h, notes) = NodeHistory::open(&settings)?;
     ctx.log(format!("history: {}", h.describe()));
+    for n in notes {
+        ctx.log(format!("WARN: history: {n}"));
+    }
+    if let Some(why) = h.away() {
+        ctx.log(format!(
+            "WARN: history: the server is away ({why}): records wait in {}, tried again \
+             from {:.1} s on",
+            settings.spool.display(),
+            settings.first_retry.as_secs_f64()
+        ));
+    }
     Ok(Some(h))
 }
 
@@ -71,7 +89,7 @@ pub(super) struct Calibrator {
     /// The online tracker's step still "this or that" at its last report.
     pub(super) tie: Option<TieSoFar>,
     /// The machine's history, where the node records (parameter `history`).
-    history: Option<crate::node::history::NodeHistory>,
+    history: Option<NodeHistory>,
 }
 
 impl Calibrator {
@@ -115,9 +133,9 @@ impl Calibrator {
             out.parameters
                 .publish(&parameters_msg(&r.params, model, &r.sigma))?;
             if let Some(warning) = report_warning(&r, &self.temp_name) {
-                let warning = match record_event(self.history.as_mut(), &r, &warning) {
-                    Ok(()) => warning,
-                    Err(e) => format!("{warning}; history: event not recorded: {e:#}"),
+                let warning = match self.history.as_mut().and_then(|h| h.event(&r, &warning)) {
+                    None => warning,
+                    Some(said) => format!("{warning}; {said}"),
                 };
                 ctx.log(&warning);
                 self.last = (DiagnosticStatus::WARN, warning);
@@ -228,11 +246,12 @@ impl Calibrator {
                     None => {}
                 }
                 let (level, history) = match recorded {
-                    Some(Ok(said)) => (DiagnosticStatus::OK, format!("; history: {said}")),
-                    Some(Err(e)) => (
-                        DiagnosticStatus::WARN,
-                        format!("; history: not recorded: {e:#}"),
-                    ),
+                    Some(Said { ok: true, text }) => {
+                        (DiagnosticStatus::OK, format!("; history: {text}"))
+                    }
+                    Some(Said { ok: false, text }) => {
+                        (DiagnosticStatus::WARN, format!("; history: {text}"))
+                    }
                     None => (DiagnosticStatus::OK, String::new()),
                 };
                 (
@@ -370,8 +389,8 @@ impl Calibrator {
     }
 
     /// Records a calibration in the machine's history, if the node keeps one: what changed
-    /// since the previous one, or why it was not recorded.
-    fn record_calibration(&mut self, o: &JobOutcome) -> Option<anyhow::Result<String>> {
+    /// since the previous one, or that it waits, or why it was not recorded.
+    fn record_calibration(&mut self, o: &JobOutcome) -> Option<Said> {
         self.history.as_mut().map(|h| {
             h.calibration(&crate::node::history::Calibrated {
                 campaign: &o.campaign,
@@ -381,6 +400,32 @@ impl Calibrator {
                 verdict: o.verdict.as_ref().map(|v| v.1.as_str()),
             })
         })
+    }
+
+    /// Tries a history server away again when due; says on /diagnostics and in the log
+    /// when it answers again (the waiting records recorded) or is found away.
+    fn history_retry(&mut self, ctx: &NodeContext, out: &Outputs) -> anyhow::Result<()> {
+        let Some(said) = self
+            .history
+            .as_mut()
+            .map(NodeHistory::retry)
+            .transpose()?
+            .flatten()
+        else {
+            return Ok(());
+        };
+        let level = if said.ok {
+            DiagnosticStatus::OK
+        } else {
+            DiagnosticStatus::WARN
+        };
+        ctx.log(if said.ok {
+            said.text.clone()
+        } else {
+            format!("WARN: {}", said.text)
+        });
+        self.last = (level, said.text);
+        self.publish_status(ctx, out)
     }
 
     /// The periodic /diagnostics status: the last message and the counts.
@@ -407,6 +452,7 @@ impl Calibrator {
             ("online_dropped", online(|w| w.dropped)),
         ]
         .into_iter()
+        .chain(self.history.iter().flat_map(NodeHistory::values))
         .chain(self.tie.iter().flat_map(|t| {
             // a tie still open: which two, and how far the evidence has come
             [
@@ -440,7 +486,7 @@ impl Calibrator {
     pub(super) fn new(
         capacity: u64,
         online: Option<OnlineWorker>,
-        history: Option<crate::node::history::NodeHistory>,
+        history: Option<NodeHistory>,
     ) -> Self {
         Self {
             acc: Accumulator::new(usize::try_from(capacity).unwrap_or(usize::MAX)),
@@ -484,6 +530,13 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     ));
     let history = open_history(&ctx)?;
     let mut node = Calibrator::new(capacity, online, history);
+    if let Some(why) = node.history.as_ref().and_then(NodeHistory::away) {
+        // said on /diagnostics from the first status on, not only in the log
+        node.last = (
+            DiagnosticStatus::WARN,
+            format!("history: the server is away ({why}): records wait in the spool"),
+        );
+    }
     let mut idle = Idle::new(Duration::from_millis(50), Duration::from_millis(1));
     let mut report = Every::new(ctx.diagnostics_period()?);
     while !crate::node::shutdown::requested() {
@@ -492,6 +545,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         }
         let (mut worked, end) = node.drain(&states, &measurements, every)?;
         worked |= node.online_reports(&ctx, &out, options.start.model)?;
+        node.history_retry(&ctx, &out)?;
         // an inactive node collects its campaign and calibrates (publishes) once active
         if (end || node.idle_ended(idle_end)) && node.acc.measurements > 0 && lifecycle.active() {
             node.calibrate(&ctx, &out, &options)?;

@@ -124,11 +124,30 @@ pub(super) const HISTORY_MACHINE: ParamSpec = ParamSpec::fixed(
     ParamDefault::Str(""),
     "the machine's name in the history (default: the node's namespace, rpkm without)",
 );
+pub(super) const HISTORY_SPOOL: ParamSpec = ParamSpec::fixed(
+    "history_spool",
+    ParamDefault::Str(""),
+    "where records wait while a PostgreSQL history is away (default: \
+     $XDG_STATE_HOME/rpkm, else ~/.local/state/rpkm, history-spool-MACHINE.db)",
+);
+pub(super) const HISTORY_SPOOL_MAX: ParamSpec = ParamSpec::fixed(
+    "history_spool_max",
+    ParamDefault::U64(10_000),
+    "records that may wait in the spool; beyond, a record is not recorded and said so",
+)
+.bound(ParamBound::Count(1, 1_000_000));
+pub(super) const HISTORY_RETRY: ParamSpec = ParamSpec::fixed(
+    "history_retry_s",
+    ParamDefault::F64(1.0),
+    "first wait before a PostgreSQL history away is tried again, doubling to 60 s",
+)
+.unit("s")
+.bound(ParamBound::Within(0.01, 60.0));
 
 /// The node's parameters: what the next calibration uses and when a campaign ends are live;
 /// the buffer, the online tracker and the history need a restart. Of the geometry it takes
 /// the model, the files and the overrides (no stiffness, no follower).
-pub const PARAMS: [ParamSpec; 20] = [
+pub const PARAMS: [ParamSpec; 23] = [
     MODEL,
     geometry::GEOMETRY_FILE,
     EFFECTS_FILE,
@@ -149,6 +168,9 @@ pub const PARAMS: [ParamSpec; 20] = [
     ONLINE_ENCODER_SIGMA,
     HISTORY,
     HISTORY_MACHINE,
+    HISTORY_SPOOL,
+    HISTORY_SPOOL_MAX,
+    HISTORY_RETRY,
 ];
 
 /// Every parameter key the node declares besides the common ones.
