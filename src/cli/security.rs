@@ -56,7 +56,10 @@ pub struct EnclaveArgs {
     #[arg(long)]
     pub all: bool,
     /// The program whose permissions the enclave gets: ingest, tcp_estimator, calibrator,
-    /// preload_monitor, record, replay, monitor, launch.
+    /// preload_monitor, record, replay, monitor, launch, or cell (a cell controller: every
+    /// node's parameter, lifecycle and calibration services and the Calibrate action, as
+    /// `ros2 param`, `ros2 lifecycle` and an action client use them:
+    /// `rpkm security enclave KEYS /cell/controller --node cell`).
     #[arg(long, conflicts_with = "all")]
     pub node: Option<String>,
     /// Namespace of the node set (`namespace:=` of the launch): its topics and services.

@@ -14,7 +14,8 @@ use rpkm_transport::{topic, Names};
 
 use crate::node::joint_input::JOINT_STATES_TOPIC;
 
-/// The programs that have a default grant, by the last part of their enclave's name.
+/// rpkm's programs that have a default grant, by the last part of their enclave's name
+/// (`rpkm security enclave --all` makes one enclave for each).
 pub const PROGRAMS: [&str; 8] = [
     "ingest",
     "tcp_estimator",
@@ -25,6 +26,10 @@ pub const PROGRAMS: [&str; 8] = [
     "monitor",
     "launch",
 ];
+
+/// The default grant of a cell controller's enclave (`--node cell`, an enclave named by the
+/// cell: `/cell/controller`): not one of rpkm's programs, so not in [`PROGRAMS`].
+pub const CELL: &str = "cell";
 
 /// The DDS topics a grant allows to publish and to subscribe.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -141,7 +146,7 @@ impl Builder {
 #[derive(Debug, thiserror::Error)]
 pub enum PolicyError {
     /// The program has no default grant.
-    #[error("no default permissions for {program:?}: expected one of {} (--node)", PROGRAMS.join(", "))]
+    #[error("no default permissions for {program:?}: expected one of {}, {CELL} (--node)", PROGRAMS.join(", "))]
     UnknownProgram {
         /// The name given.
         program: String,
@@ -191,6 +196,7 @@ pub fn grant(program: &str, namespace: &str) -> Result<Grant, PolicyError> {
                 b.call(node, &LIFECYCLE_SERVICES[..2]);
             }
         }
+        CELL => cell(&mut b),
         other => {
             return Err(PolicyError::UnknownProgram {
                 program: other.to_owned(),
@@ -198,6 +204,27 @@ pub fn grant(program: &str, namespace: &str) -> Result<Grant, PolicyError> {
         }
     }
     Ok(b.grant)
+}
+
+/// A cell controller driving the set as a ROS 2 cell does: every node's parameter,
+/// lifecycle and calibration services, the calibrator's action (its services, its feedback
+/// and status read), and `/parameter_events` read.
+fn cell(b: &mut Builder) {
+    for node in ["ingest", "tcp_estimator", "calibrator", "preload_monitor"] {
+        b.call(node, &PARAMETER_SERVICES);
+        b.call(node, &LIFECYCLE_SERVICES);
+        if node != "ingest" {
+            b.call(node, &CALIBRATION_SERVICES);
+        }
+    }
+    let services = ACTION_SERVICES.map(|s| format!("{CALIBRATE_ACTION}/_action/{s}"));
+    let services: Vec<&str> = services.iter().map(String::as_str).collect();
+    b.call("calibrator", &services);
+    for t in ACTION_TOPICS {
+        let topic = format!("rt{}/calibrator/{CALIBRATE_ACTION}/_action/{t}", b.namespace);
+        b.grant.subscribe.insert(topic);
+    }
+    b.grant.subscribe.insert("rt/parameter_events".into());
 }
 
 fn ingest(b: &mut Builder) {
@@ -411,6 +438,32 @@ mod tests {
             .contains("rr/rpkm/tcp_estimator/set_parametersReply"));
         // it answers its own services, never calls another node's
         assert!(!g.publish.iter().any(|t| t.starts_with("rq/")));
+    }
+
+    #[test]
+    fn a_cell_controller_calls_what_the_nodes_serve_and_serves_nothing() {
+        let cell = grant(CELL, "/rpkm").expect("grant");
+        let nodes: Vec<Grant> = ["ingest", "tcp_estimator", "calibrator", "preload_monitor"]
+            .iter()
+            .map(|n| grant(n, "/rpkm").expect("grant"))
+            .collect();
+        // every request the cell writes a node reads, every reply it reads a node writes
+        for t in cell.publish.iter().filter(|t| t.starts_with("rq")) {
+            assert!(nodes.iter().any(|g| g.subscribe.contains(t)), "{t} served by none");
+        }
+        for t in cell.subscribe.iter().filter(|t| t.starts_with("rr")) {
+            assert!(nodes.iter().any(|g| g.publish.contains(t)), "{t} written by none");
+        }
+        assert!(cell.publish.contains("rq/rpkm/ingest/set_parametersRequest"));
+        assert!(cell.subscribe.contains("rr/rpkm/ingest/set_parametersReply"));
+        assert!(cell
+            .publish
+            .contains("rq/rpkm/calibrator/calibrate/_action/send_goalRequest"));
+        assert!(cell
+            .subscribe
+            .contains("rt/rpkm/calibrator/calibrate/_action/feedback"));
+        assert!(!cell.subscribe.iter().any(|t| t.starts_with("rq")), "serves nothing");
+        assert!(!cell.publish.iter().any(|t| t.starts_with("rr")), "serves nothing");
     }
 
     #[test]

@@ -17,6 +17,16 @@ fn repo() -> PathBuf {
 /// The header both peers include.
 const PARTICIPANT: &str = "tests/cpp/fastdds_participant.hpp";
 
+/// One node set with Fast DDS peers at a time: two at once on the 2-core machine (a test
+/// harness thread each) made a peer's discovery miss its time (a service or a writer not
+/// matched), where one at a time takes a few seconds.
+static ONE_SET: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Holds the Fast DDS tests' node set for as long as the guard lives.
+pub fn one_set() -> std::sync::MutexGuard<'static, ()> {
+    ONE_SET.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// `tests/cpp/NAME.cpp` built with the types of `tests/cpp/IDL.idl`: the binary, or `None`
 /// (skipped with a word) where Fast DDS, fastddsgen or g++ is missing outside CI.
 pub fn build(name: &str, idl: &str) -> Option<PathBuf> {

@@ -138,6 +138,7 @@ fn start_peer(
 
 #[test]
 fn a_fast_dds_cell_drives_the_stack_and_reads_its_estimates() {
+    let _one = crate::fastdds_support::one_set();
     let Some(bin) = fastdds_peer() else { return };
     let domain = "65";
     reference();
@@ -160,6 +161,7 @@ fn a_fast_dds_cell_drives_the_stack_and_reads_its_estimates() {
 
 #[test]
 fn a_fast_dds_cell_in_an_sros2_enclave_drives_the_secured_stack() {
+    let _one = crate::fastdds_support::one_set();
     let Some(bin) = fastdds_peer() else { return };
     let domain = "66";
     reference();

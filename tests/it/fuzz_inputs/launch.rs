@@ -119,7 +119,7 @@ fn fuzzed_launch_files_end_in_0_or_2_naming_file_and_line() {
     );
     for node in ["ingest", "tcp_estimator", "calibrator", "preload_monitor"] {
         assert!(
-            listed.contains(&format!(": {node}: rpkm node {node} ")),
+            listed.contains(&format!(": {node}: rpkm-node {node} ")),
             "{listed}"
         );
     }
