@@ -15,6 +15,7 @@ use serde_yaml::Value;
 
 use super::context::{Every, NodeContext, COMMON};
 pub use super::declare::{ParamBound, ParamDefault, ParamSpec};
+use super::kept::Kept;
 use super::params::NodeParams;
 
 /// How often a node looks for accepted changes: a person or a tool sets them, and the check
@@ -94,6 +95,9 @@ pub struct LiveParams {
     base: NodeParams,
     initial: BTreeMap<String, ParameterValue>,
     current: BTreeMap<String, ParameterValue>,
+    /// Where the accepted changes are kept for a restart by the launcher, and the node's
+    /// name for the line that says a change could not be kept.
+    kept: Option<(Kept, String)>,
 }
 
 impl LiveParams {
@@ -139,7 +143,13 @@ impl LiveParams {
                 Some(dds.serve_parameters(decls, Box::new(check))?)
             }
         };
+        let kept = Kept::from_env(ctx.transport.names().namespace(), &ctx.name)
+            .map_err(super::context::bad_param)?;
+        for said in kept.iter().flat_map(Kept::said) {
+            ctx.log(said);
+        }
         Ok(Self {
+            kept: kept.map(|k| (k, ctx.name.clone())),
             server,
             check: Every::new(CHANGE_CHECK),
             base: ctx.params.clone(),
@@ -167,10 +177,31 @@ impl LiveParams {
             return None;
         }
         let names = changes.iter().map(|(k, _)| k.clone()).collect();
+        self.keep(&changes);
         self.current.extend(changes);
         Some((
             with_changes(&self.base, &self.initial, &self.current),
             names,
         ))
+    }
+
+    /// Writes the accepted `changes` where the node's restart finds them: a change is rare
+    /// (a person or a cell controller sets it), and the file is a few lines.
+    fn keep(&mut self, changes: &[(String, ParameterValue)]) {
+        let Some((kept, node)) = self.kept.as_mut() else {
+            return;
+        };
+        let values: Vec<(String, Value)> =
+            changes.iter().map(|(k, v)| (k.clone(), yaml(v))).collect();
+        if let Err(e) = kept.record(&values) {
+            let names: Vec<&str> = changes.iter().map(|(k, _)| k.as_str()).collect();
+            super::context::log_line(
+                node,
+                format!(
+                    "WARN: {} not kept for a restart (the files' values would come back): {e}",
+                    names.join(", ")
+                ),
+            );
+        }
     }
 }

@@ -114,7 +114,7 @@ fn list(v: &[f64]) -> String {
 
 /// One script line: a JointState as the broadcaster lists it, the drives shuffled (q3, the
 /// gripper, q1, q4, q2), efforts in the joints' sign (`velocity` empty: not measured).
-fn joint_line(cell: &CellBlock, stamp: Time, q_m: [f64; 4], f: [f64; 4]) -> String {
+pub fn joint_line(cell: &CellBlock, stamp: Time, q_m: [f64; 4], f: [f64; 4]) -> String {
     let order = [2, 4, 0, 3, 1];
     let (mut names, mut pos, mut eff) = (Vec::new(), Vec::new(), Vec::new());
     for i in order {
@@ -138,7 +138,7 @@ fn joint_line(cell: &CellBlock, stamp: Time, q_m: [f64; 4], f: [f64; 4]) -> Stri
     )
 }
 
-fn temperature_line(stamp: Time, celsius: f64) -> String {
+pub fn temperature_line(stamp: Time, celsius: f64) -> String {
     format!(
         "T {THERMOMETER} {} {} {celsius}\n",
         stamp.sec, stamp.nanosec

@@ -193,6 +193,31 @@ impl JointConfig {
             .collect()
     }
 
+    /// What the node says at its start: `joints q1_joint, ..., followers 23 (from the
+    /// parameter files), thermometers temp_machine (/cell/frame_temperature)`; `kept_at`: when
+    /// the followers were set at run time before a restart by the launcher.
+    pub fn started(&self, kept_at: Option<&str>) -> String {
+        let whence = kept_at.map_or_else(
+            || "from the parameter files".to_owned(),
+            |at| format!("kept from the run before the restart, set at {at}"),
+        );
+        let thermometers: Vec<String> = self
+            .thermometers
+            .iter()
+            .map(|t| format!("{} ({})", t.covariate, t.topic))
+            .collect();
+        format!(
+            "joints {} (drives q1 to q4), followers {} ({whence}), thermometers {}",
+            self.joints.join(", "),
+            self.followers_text(),
+            if thermometers.is_empty() {
+                "none".to_owned()
+            } else {
+                thermometers.join(", ")
+            }
+        )
+    }
+
     /// `followers` as the parameter writes it (`23`; `none` for no drive).
     pub fn followers_text(&self) -> String {
         followers_text(self.followers)
