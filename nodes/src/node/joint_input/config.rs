@@ -56,9 +56,19 @@ const TEMPERATURE_TIMEOUT: ParamSpec = ParamSpec::fixed(
 .unit("s")
 .bound(ParamBound::Within(1e-3, 3600.0));
 
+/// JointState silent this long: the input is quiet, WARN by name (a cell publishes at its
+/// controller's rate, 100 Hz to kHz: a second is a hundred states missed).
+const QUIET_TIMEOUT: ParamSpec = ParamSpec::fixed(
+    "joint_states_timeout_s",
+    Value::F64(1.0),
+    "no JointState this long: /diagnostics WARNs that the drive states are quiet",
+)
+.unit("s")
+.bound(ParamBound::Within(1e-3, 3600.0));
+
 /// The JointState input's parameters: `followers` live (from the next state on), the rest
 /// need a restart (`temperatures.` is a group: covariate name → topic).
-pub const PARAMS: [ParamSpec; 7] = [
+pub const PARAMS: [ParamSpec; 8] = [
     TOPIC,
     QOS,
     NAMES,
@@ -66,6 +76,7 @@ pub const PARAMS: [ParamSpec; 7] = [
     FOLLOWERS,
     THERMOMETERS,
     TEMPERATURE_TIMEOUT,
+    QUIET_TIMEOUT,
 ];
 
 /// One thermometer: the covariate its readings become and the topic they come on.
@@ -94,6 +105,8 @@ pub struct JointConfig {
     pub thermometers: Vec<Thermometer>,
     /// After this long without a reading a thermometer's covariate is "not measured".
     pub timeout: Duration,
+    /// After this long without a JointState the drive states are quiet.
+    pub quiet_after: Duration,
 }
 
 fn topic(p: &NodeParams, spec: &ParamSpec) -> Result<String, ParamError> {
@@ -182,6 +195,7 @@ impl JointConfig {
             followers: followers(p)?,
             thermometers: thermometers(p)?,
             timeout: Duration::from_secs_f64(timeout),
+            quiet_after: Duration::from_secs_f64(QUIET_TIMEOUT.f64(p)?),
         })
     }
 
