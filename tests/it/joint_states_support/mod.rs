@@ -429,7 +429,13 @@ pub fn estimate_gap(a: &TcpEstimate, b: &TcpEstimate) -> (f64, f64) {
 /// The largest differences of two preload statuses: (m, N); the levels must agree.
 pub fn status_gap(a: &PreloadStatus, b: &PreloadStatus) -> (f64, f64) {
     assert_eq!((a.stamp, a.level), (b.stamp, b.level));
-    let m = (a.dq2 - b.dq2).abs().max((a.dq3 - b.dq3).abs());
+    // not measured (NaN) on both sides, or the same number
+    let gap = |x: f64, y: f64| match (x.is_nan(), y.is_nan()) {
+        (true, true) => 0.0,
+        (false, false) => (x - y).abs(),
+        _ => f64::INFINITY,
+    };
+    let m = gap(a.dq2, b.dq2).max(gap(a.dq3, b.dq3));
     let n = a
         .measured_current
         .iter()
