@@ -102,7 +102,11 @@ fn followers_set_at_run_time_survive_a_restart_of_ingest() {
     );
 
     let get = dir.path("get.json");
-    std::fs::write(&get, r#"[{"get": ["followers"]}]"#).expect("get script");
+    std::fs::write(
+        &get,
+        r#"[{"get": ["followers", "temperatures.temp_machine"]}]"#,
+    )
+    .expect("get script");
     let got = run_peer(
         &py,
         "ros2_params_peer.py",
@@ -110,6 +114,11 @@ fn followers_set_at_run_time_survive_a_restart_of_ingest() {
     );
     let got: serde_json::Value = serde_json::from_str(got.trim()).expect("one JSON line");
     assert_eq!(got["get"]["followers"], serde_json::json!([4, ""]));
+    // the thermometer map, a group, is listed entry by entry
+    assert_eq!(
+        got["get"]["temperatures.temp_machine"],
+        serde_json::json!([4, "/cell/frame_temperature"])
+    );
 
     // the twin's poses: the cell plays them to the restarted node
     let mut script = String::from("MATCH 1 /joint_states\n");

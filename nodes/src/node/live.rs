@@ -56,6 +56,29 @@ impl ParamSpec {
     }
 }
 
+/// The entries set of group `spec` (`temperatures.temp_machine`, `geometry.l1`), each
+/// read-only (a group is read at the start): a group has no value of its own to list.
+fn group_entries(spec: &ParamSpec, p: &NodeParams) -> anyhow::Result<Vec<ParamDecl>> {
+    let bad = super::context::bad_param;
+    let description = spec.describe();
+    let decl = |name: &str, value| {
+        ParamDecl::read_only(&format!("{}{name}", spec.key), value, &description)
+    };
+    // a group holds strings (thermometer topics) or numbers (geometry in SI)
+    Ok(match p.string_group(spec.key) {
+        Ok(entries) => entries
+            .into_iter()
+            .map(|(name, text, _)| decl(&name, ParameterValue::String(text)))
+            .collect(),
+        Err(_) => p
+            .group(spec.key)
+            .map_err(bad)?
+            .into_iter()
+            .map(|(name, x, _)| decl(&name, ParameterValue::Double(x)))
+            .collect(),
+    })
+}
+
 /// The value a parameter file would hold for `v`.
 fn yaml(v: &ParameterValue) -> Value {
     match v {
@@ -112,7 +135,11 @@ impl LiveParams {
     ) -> anyhow::Result<Self> {
         let mut decls = Vec::new();
         for s in super::declare::served(&[&COMMON, specs]) {
-            decls.push(s.decl(&ctx.params)?);
+            if s.default == ParamDefault::Group {
+                decls.extend(group_entries(&s, &ctx.params)?);
+            } else {
+                decls.push(s.decl(&ctx.params)?);
+            }
         }
         // The backends as the command line may have chosen them, not only the files.
         let name = |b: rpkm_transport::Backend| match b {
