@@ -15,9 +15,11 @@ pub struct PreloadStatus {
     pub predicted_current: [f64; 4],
     /// `float64[4] deviation`: measured - predicted (%).
     pub deviation: [f64; 4],
-    /// `float64 dq2`: follower-mode difference of q2, model - measured (m).
+    /// `float64 dq2`: follower-mode difference of q2, model - measured (m); NaN (not
+    /// measured) unless q2 and q3 both follow.
     pub dq2: f64,
-    /// `float64 dq3`: follower-mode difference of q3, model - measured (m).
+    /// `float64 dq3`: follower-mode difference of q3, model - measured (m); NaN (not
+    /// measured) unless q2 and q3 both follow.
     pub dq3: f64,
     /// `uint8 level`: [`PreloadStatus::OK`], [`PreloadStatus::WARN`] or [`PreloadStatus::ERROR`].
     pub level: u8,

@@ -30,6 +30,10 @@
 //!       if: $(var record)            # node and executable: started only if true (`unless`)
 //! ```
 //!
+//! A node restarted by the launch comes back with the parameter values set at run time through
+//! its parameter services (kept in a folder of the launch's, `RPKM_STATE_DIR`, made fresh at
+//! every launch and removed at its end) and says which at its start.
+//!
 //! The recorder stops with the launch: SIGTERM makes `rpkm record` write what is queued and
 //! close its bag (metadata.yaml and summary).
 //!
@@ -73,6 +77,8 @@
 //! - `supervisor.rs`: The nodes started as processes and supervised: restarts with backoff,
 //!   shutdown on a signal.
 //! - `managed.rs`: The managed nodes brought up in file order through their lifecycle.
+//! - `state_dir.rs`: The folder where the nodes keep the parameter values set at run time
+//!   across their restarts, fresh at every launch.
 //! - `tests.rs`: the module's unit tests.
 
 mod args;
@@ -84,6 +90,7 @@ mod node_entry;
 mod parse;
 mod place;
 mod programs;
+mod state_dir;
 pub mod supervisor;
 #[cfg(test)]
 mod tests;
@@ -100,5 +107,12 @@ pub fn run(args: &LaunchArgs) -> anyhow::Result<()> {
     if args.check {
         return check(&desc);
     }
+    // A node restarted by the launch comes back with the values set at run time; a new
+    // launch starts from the files.
+    let state = state_dir::StateDir::create();
+    let desc = LaunchDescription {
+        env: state.env(&desc.env),
+        ..desc
+    };
     supervisor::run(&desc)
 }

@@ -63,6 +63,8 @@ mod node_estimator_jumps;
 mod node_ingest_cyclone;
 mod node_joint_states;
 mod node_joint_states_fastdds;
+mod node_joint_states_qos;
+mod node_kept_params;
 mod node_launch_restart;
 mod node_lifecycle;
 mod node_netns_dds;

@@ -5,7 +5,9 @@ sensor_msgs/Temperature messages as a joint_state_broadcaster and a thermometer 
 rmw_cyclonedds (topic rt/..., type pkg::msg::dds_::X_, XCDR1), and sets parameters through
 an rpkm node's parameter services as `ros2 param set` does (ros2_params_peer.Peer).
 
-    joint_states_peer.py SCRIPT --domain D [--rate HZ] [--timeout S]
+    joint_states_peer.py SCRIPT --domain D [--rate HZ] [--timeout S] [--best-effort]
+
+--best-effort: the writers offer best effort reliability (a reliable reader matches none).
 
 SCRIPT, one step a line (fields separated by spaces, lists by commas, `-` an empty list):
   J SEC NANOSEC NAMES POSITIONS VELOCITIES EFFORTS   a JointState on /joint_states; the J
@@ -56,13 +58,15 @@ def floats(field):
 
 
 class Cell:
-    def __init__(self, domain, rate, deadline):
+    def __init__(self, domain, rate, deadline, best_effort=False):
         self.dp = DomainParticipant(domain)
         self.period = 1.0 / rate
         self.deadline = deadline
         # the broadcaster's default QoS (SystemDefaultsQoS: reliable, volatile, keep last)
         self.reliable = Qos(Policy.Reliability.Reliable(duration(seconds=1)),
                             Policy.History.KeepLast(1000))
+        if best_effort:
+            self.reliable = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1000))
         self.writers = {}
         self.peers = {}
         self.played = 0
@@ -139,8 +143,9 @@ def main():
     p.add_argument("--domain", type=int, default=int(os.environ.get("ROS_DOMAIN_ID", "0") or 0))
     p.add_argument("--rate", type=float, default=1000.0)
     p.add_argument("--timeout", type=float, default=60.0)
+    p.add_argument("--best-effort", action="store_true")
     args = p.parse_args()
-    cell = Cell(args.domain, args.rate, time.monotonic() + args.timeout)
+    cell = Cell(args.domain, args.rate, time.monotonic() + args.timeout, args.best_effort)
     try:
         with open(args.script) as f:
             for line in f:

@@ -148,13 +148,19 @@ pub struct Identity {
 
 impl Identity {
     /// The merged parameters of this node, from its files and overrides.
+    /// The values set at run time before a restart by the launcher come last
+    /// ([`super::kept`]): the value set last wins.
     pub fn params(&self) -> Result<NodeParams, ParamError> {
-        NodeParams::load_in(
+        let mut params = NodeParams::load_in(
             self.names.namespace(),
             &self.name,
             &self.files,
             &self.overrides,
-        )
+        )?;
+        if let Some(kept) = super::kept::Kept::from_env(self.names.namespace(), &self.name)? {
+            kept.apply(&mut params)?;
+        }
+        Ok(params)
     }
 }
 

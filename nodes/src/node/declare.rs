@@ -234,12 +234,7 @@ pub fn keys(tables: &[&[ParamSpec]]) -> Vec<&'static str> {
 
 /// The specs of `tables` that the parameter services declare (every one but the groups).
 pub fn served(tables: &[&[ParamSpec]]) -> Vec<ParamSpec> {
-    tables
-        .iter()
-        .flat_map(|t| t.iter())
-        .filter(|s| s.default != ParamDefault::Group)
-        .copied()
-        .collect()
+    tables.iter().flat_map(|t| t.iter()).copied().collect()
 }
 
 #[cfg(test)]

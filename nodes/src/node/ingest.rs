@@ -288,6 +288,20 @@ fn views(ctx: &NodeContext, s: &Settings) -> anyhow::Result<Option<super::views:
     Ok(views)
 }
 
+/// The start-up line: the source and the output, and with a cell's JointState the joints,
+/// the followers (and whether they were kept from the run before a restart) and the
+/// thermometers.
+fn started_line(ctx: &NodeContext, s: &Settings) -> anyhow::Result<String> {
+    let mut line = format!("source {}, publishing on {:?}", s.source, ctx.output);
+    if let Some(j) = &s.joints {
+        let kept = super::kept::Kept::from_env(ctx.transport.names().namespace(), &ctx.name)
+            .map_err(super::context::bad_param)?;
+        let at = kept.as_ref().and_then(|k| k.set_at("followers"));
+        line = format!("{line}; {}", j.started(at));
+    }
+    Ok(line)
+}
+
 /// Runs the node until its input ends (and `exit_at_end`) or SIGINT/SIGTERM.
 pub fn run(args: &IngestNodeArgs) -> anyhow::Result<()> {
     let (mut ctx, s) = open(args)?;
@@ -302,10 +316,7 @@ pub fn run(args: &IngestNodeArgs) -> anyhow::Result<()> {
     let live = live::LiveParams::start(&ctx, &service_specs, |p| configure(p).map(|_| ()))?;
     let source = s.source.to_string();
     let mut out = Output::open((&ctx, &args.common), s.limits, &source, (live, views))?;
-    ctx.log(format!(
-        "source {}, publishing on {:?}",
-        s.source, ctx.output
-    ));
+    ctx.log(started_line(&ctx, &s)?);
     std::thread::sleep(s.start_delay);
     let ended = match (&s.source, s.joints.clone()) {
         (_, Some(joints)) => joint_states::run(&ctx, &mut out, joints).map(|()| false)?,

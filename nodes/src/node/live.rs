@@ -15,6 +15,7 @@ use serde_yaml::Value;
 
 use super::context::{Every, NodeContext, COMMON};
 pub use super::declare::{ParamBound, ParamDefault, ParamSpec};
+use super::kept::Kept;
 use super::params::NodeParams;
 
 /// How often a node looks for accepted changes: a person or a tool sets them, and the check
@@ -53,6 +54,29 @@ impl ParamSpec {
             }
         })
     }
+}
+
+/// The entries set of group `spec` (`temperatures.temp_machine`, `geometry.l1`), each
+/// read-only (a group is read at the start): a group has no value of its own to list.
+fn group_entries(spec: &ParamSpec, p: &NodeParams) -> anyhow::Result<Vec<ParamDecl>> {
+    let bad = super::context::bad_param;
+    let description = spec.describe();
+    let decl = |name: &str, value| {
+        ParamDecl::read_only(&format!("{}{name}", spec.key), value, &description)
+    };
+    // a group holds strings (thermometer topics) or numbers (geometry in SI)
+    Ok(match p.string_group(spec.key) {
+        Ok(entries) => entries
+            .into_iter()
+            .map(|(name, text, _)| decl(&name, ParameterValue::String(text)))
+            .collect(),
+        Err(_) => p
+            .group(spec.key)
+            .map_err(bad)?
+            .into_iter()
+            .map(|(name, x, _)| decl(&name, ParameterValue::Double(x)))
+            .collect(),
+    })
 }
 
 /// The value a parameter file would hold for `v`.
@@ -94,6 +118,9 @@ pub struct LiveParams {
     base: NodeParams,
     initial: BTreeMap<String, ParameterValue>,
     current: BTreeMap<String, ParameterValue>,
+    /// Where the accepted changes are kept for a restart by the launcher, and the node's
+    /// name for the line that says a change could not be kept.
+    kept: Option<(Kept, String)>,
 }
 
 impl LiveParams {
@@ -108,7 +135,11 @@ impl LiveParams {
     ) -> anyhow::Result<Self> {
         let mut decls = Vec::new();
         for s in super::declare::served(&[&COMMON, specs]) {
-            decls.push(s.decl(&ctx.params)?);
+            if s.default == ParamDefault::Group {
+                decls.extend(group_entries(&s, &ctx.params)?);
+            } else {
+                decls.push(s.decl(&ctx.params)?);
+            }
         }
         // The backends as the command line may have chosen them, not only the files.
         let name = |b: rpkm_transport::Backend| match b {
@@ -139,7 +170,13 @@ impl LiveParams {
                 Some(dds.serve_parameters(decls, Box::new(check))?)
             }
         };
+        let kept = Kept::from_env(ctx.transport.names().namespace(), &ctx.name)
+            .map_err(super::context::bad_param)?;
+        for said in kept.iter().flat_map(Kept::said) {
+            ctx.log(said);
+        }
         Ok(Self {
+            kept: kept.map(|k| (k, ctx.name.clone())),
             server,
             check: Every::new(CHANGE_CHECK),
             base: ctx.params.clone(),
@@ -167,10 +204,31 @@ impl LiveParams {
             return None;
         }
         let names = changes.iter().map(|(k, _)| k.clone()).collect();
+        self.keep(&changes);
         self.current.extend(changes);
         Some((
             with_changes(&self.base, &self.initial, &self.current),
             names,
         ))
+    }
+
+    /// Writes the accepted `changes` where the node's restart finds them: a change is rare
+    /// (a person or a cell controller sets it), and the file is a few lines.
+    fn keep(&mut self, changes: &[(String, ParameterValue)]) {
+        let Some((kept, node)) = self.kept.as_mut() else {
+            return;
+        };
+        let values: Vec<(String, Value)> =
+            changes.iter().map(|(k, v)| (k.clone(), yaml(v))).collect();
+        if let Err(e) = kept.record(&values) {
+            let names: Vec<&str> = changes.iter().map(|(k, _)| k.as_str()).collect();
+            super::context::log_line(
+                node,
+                format!(
+                    "WARN: {} not kept for a restart (the files' values would come back): {e}",
+                    names.join(", ")
+                ),
+            );
+        }
     }
 }

@@ -20,6 +20,7 @@ pub mod history;
 pub mod ingest;
 pub mod inputs;
 pub mod joint_input;
+pub mod kept;
 pub mod lifecycle;
 pub mod live;
 pub mod online_tracker;

@@ -172,7 +172,7 @@ fn flatten(prefix: &str, v: &Value, out: &mut Vec<(String, Value)>) {
     }
 }
 
-fn yaml_text(v: &Value) -> String {
+pub(super) fn yaml_text(v: &Value) -> String {
     match v {
         Value::String(s) => format!("{s:?}"),
         // on one line, as a flow sequence, so that a message stays one line

@@ -242,8 +242,12 @@ impl Monitor {
         };
         self.samples += 1;
         let to_percent = |f: f64| f / NOMINAL_DRIVE_FORCE_N * 100.0;
+        // dq2, dq3 NaN, "not measured", unless q2 and q3 follow: 0 would read as perfectly
+        // compatible
         let mut st = PreloadStatus {
             stamp: s.stamp,
+            dq2: f64::NAN,
+            dq3: f64::NAN,
             ..Default::default()
         };
         for i in 0..4 {
@@ -639,6 +643,8 @@ mod tests {
         let ok = m.evaluate(&state(0.0)?).ok_or("unsolved")?;
         assert_eq!(ok.sample_level, PreloadLevel::Ok);
         assert!(ok.status.deviation.iter().all(|d| d.abs() < 1e-6));
+        // every drive holds: no follower compatibility measured
+        assert!(ok.status.dq2.is_nan() && ok.status.dq3.is_nan());
         // 0.4 mm on q3 is about 100 % on the most loaded drive (core default stiffness).
         let big = state(0.4)?;
         let first = m.evaluate(&big).ok_or("unsolved")?;

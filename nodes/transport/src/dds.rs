@@ -365,13 +365,16 @@ impl DdsNode {
     ) -> Result<DdsSubscriber<T>, TransportError> {
         let mut node = self.lock(topic.name())?;
         let dds_topic = Self::topic(&mut node, topic)?;
+        let requested = qos_profile(topic.qos());
         let subscription = node
-            .create_subscription::<Wire<T>>(&dds_topic, Some(qos_profile(topic.qos())))
+            .create_subscription::<Wire<T>>(&dds_topic, Some(requested.clone()))
             .map_err(|e| create_err(topic.name(), "subscriber", e))?;
         Ok(DdsSubscriber {
             topic: topic.name(),
+            dds_topic: ros2_client::dds::rustdds::TopicDescription::name(&dds_topic),
+            requested,
             subscription,
-            _node: Arc::clone(self),
+            node: Arc::clone(self),
         })
     }
 
@@ -416,11 +419,39 @@ impl<T: RosMessage> DdsPublisher<T> {
 /// DDS half of a [`crate::Subscriber`].
 pub(crate) struct DdsSubscriber<T: RosMessage> {
     topic: &'static str,
+    /// The DDS topic (`rt/joint_states`), as the discovered writers name theirs.
+    dds_topic: String,
+    /// The QoS this reader requests.
+    requested: QosProfile,
     subscription: ros2_client::Subscription<Wire<T>>,
-    _node: Arc<DdsNode>,
+    node: Arc<DdsNode>,
 }
 
 impl<T: RosMessage> DdsSubscriber<T> {
+    /// The writers of this topic discovered on the domain that offer a QoS this reader's
+    /// request does not accept (DDS's RequestedIncompatibleQos: they are never matched, and
+    /// nothing they write arrives), each as `GUID offers POLICY ...`. A look into the
+    /// discovery database: for a report's period, not for the sample path.
+    pub(crate) fn incompatible_writers(&self) -> Vec<String> {
+        self.node
+            .participant()
+            .discovered_writers()
+            .iter()
+            .filter(|w| w.publication_topic_data.topic_name == self.dds_topic)
+            .filter_map(|w| {
+                let offered = w.publication_topic_data.qos();
+                let requested = ros2_client::dds::rustdds::QosPolicies::from(&self.requested);
+                let policy = offered.compliance_failure_wrt(&requested)?;
+                Some(format!(
+                    "writer {:?} offers {}, this reader requests {} (incompatible {policy:?})",
+                    w.writer_proxy.remote_writer_guid,
+                    qos_text(&QosProfile::from(&offered)),
+                    qos_text(&self.requested),
+                ))
+            })
+            .collect()
+    }
+
     pub(crate) fn try_recv(&self) -> Result<Option<T>, TransportError> {
         match self.subscription.take() {
             Ok(Some((Wire(msg), _info))) => Ok(Some(msg)),
@@ -432,4 +463,18 @@ impl<T: RosMessage> DdsSubscriber<T> {
             }),
         }
     }
+}
+
+/// Reliability and durability of `qos` in ROS 2's words (`best_effort volatile`): the
+/// policies a ROS 2 QoS mismatch is almost always about.
+fn qos_text(qos: &QosProfile) -> String {
+    let reliability = match qos.reliability {
+        RReliability::BestEffort => "best_effort",
+        RReliability::Reliable { .. } => "reliable",
+    };
+    let durability = match qos.durability {
+        RDurability::TransientLocal => "transient_local",
+        RDurability::Volatile => "volatile",
+    };
+    format!("{reliability} {durability}")
 }

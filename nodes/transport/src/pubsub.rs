@@ -352,6 +352,16 @@ impl<T: IpcMessage> Subscriber<T> {
         }
     }
 
+    /// The publishers of this topic that offer a QoS this subscriber does not accept (DDS:
+    /// never matched, nothing they write arrives), named with the policy; none on iceoryx2.
+    /// Looks into the DDS discovery database: call it at a report's period.
+    pub fn incompatible_publishers(&self) -> Vec<String> {
+        match &self.inner {
+            SubInner::Ipc(_) => Vec::new(),
+            SubInner::Dds(s) => s.incompatible_writers(),
+        }
+    }
+
     /// Connects to publishers that appeared since the last call (iceoryx2; a no-op on DDS).
     /// `try_recv` does this too. Reliable iceoryx2 delivery (the publisher waits for queue
     /// space) holds once the subscriber has connected to the publisher; before that a

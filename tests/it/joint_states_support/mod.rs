@@ -114,7 +114,7 @@ fn list(v: &[f64]) -> String {
 
 /// One script line: a JointState as the broadcaster lists it, the drives shuffled (q3, the
 /// gripper, q1, q4, q2), efforts in the joints' sign (`velocity` empty: not measured).
-fn joint_line(cell: &CellBlock, stamp: Time, q_m: [f64; 4], f: [f64; 4]) -> String {
+pub fn joint_line(cell: &CellBlock, stamp: Time, q_m: [f64; 4], f: [f64; 4]) -> String {
     let order = [2, 4, 0, 3, 1];
     let (mut names, mut pos, mut eff) = (Vec::new(), Vec::new(), Vec::new());
     for i in order {
@@ -138,7 +138,7 @@ fn joint_line(cell: &CellBlock, stamp: Time, q_m: [f64; 4], f: [f64; 4]) -> Stri
     )
 }
 
-fn temperature_line(stamp: Time, celsius: f64) -> String {
+pub fn temperature_line(stamp: Time, celsius: f64) -> String {
     format!(
         "T {THERMOMETER} {} {} {celsius}\n",
         stamp.sec, stamp.nanosec
@@ -429,7 +429,13 @@ pub fn estimate_gap(a: &TcpEstimate, b: &TcpEstimate) -> (f64, f64) {
 /// The largest differences of two preload statuses: (m, N); the levels must agree.
 pub fn status_gap(a: &PreloadStatus, b: &PreloadStatus) -> (f64, f64) {
     assert_eq!((a.stamp, a.level), (b.stamp, b.level));
-    let m = (a.dq2 - b.dq2).abs().max((a.dq3 - b.dq3).abs());
+    // not measured (NaN) on both sides, or the same number
+    let gap = |x: f64, y: f64| match (x.is_nan(), y.is_nan()) {
+        (true, true) => 0.0,
+        (false, false) => (x - y).abs(),
+        _ => f64::INFINITY,
+    };
+    let m = gap(a.dq2, b.dq2).max(gap(a.dq3, b.dq3));
     let n = a
         .measured_current
         .iter()

@@ -26,6 +26,22 @@ pub struct JobOutcome {
     /// what the machine's history records.
     pub calibration: Calibration,
     pub campaign: Campaign,
+    /// Measurements held out for validation: the campaign's setups that start with the
+    /// `validation_prefix`, or a validation campaign of the job's own.
+    pub held_out: usize,
+}
+
+impl JobOutcome {
+    /// `196 measurements (194 calibrated, 2 held out)`: the ones held out counted whether
+    /// they came in the campaign or in a validation file.
+    pub fn measurements_text(&self) -> String {
+        let calibrated = self.campaign.poses.len();
+        format!(
+            "{} measurements ({calibrated} calibrated, {} held out)",
+            calibrated + self.held_out,
+            self.held_out
+        )
+    }
 }
 
 /// What one calibration of the node is asked: the campaign, and what an action's goal adds.
@@ -224,7 +240,9 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<JobOutc
     } else {
         (None, None)
     };
+    let held_out = val_part.as_ref().map_or(0, |v| v.poses.len());
     Ok(JobOutcome {
+        held_out,
         parameters,
         diagnosis,
         verdict,

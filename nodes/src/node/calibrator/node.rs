@@ -257,11 +257,9 @@ impl Calibrator {
                 (
                     level,
                     format!(
-                        "calibration {}: {n} measurements ({} calibrated, {} held out), RMS \
-                         {:.2} µm, condition {}{history}",
+                        "calibration {}: {}, RMS {:.2} µm, condition {}{history}",
                         self.calibrations,
-                        o.parameters.measurement_count,
-                        n.saturating_sub(u64::from(o.parameters.measurement_count)),
+                        o.measurements_text(),
                         crate::units::um_from_m(o.parameters.cal_rms),
                         crate::words::condition_short(o.parameters.condition_number)
                     ),

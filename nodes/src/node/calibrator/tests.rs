@@ -247,3 +247,43 @@ fn an_open_tie_is_on_the_periodic_status() {
         Some("12.8 of 27.6")
     );
 }
+
+/// A validation campaign of the job's own (a goal's `validation_file`) is counted held out,
+/// as the campaign's own held-out setups are: the sentence adds up.
+#[test]
+fn a_validation_file_is_counted_held_out() -> anyhow::Result<()> {
+    use rpkm_core::campaign::Instrument;
+    let mut twin = Twin::new(TwinConfig {
+        seed: 5,
+        noise: Some(rpkm_core::noise::NoiseModel::default()),
+        ..Default::default()
+    })?;
+    let c = twin.campaign(&[Instrument::Lt])?;
+    let mut cal = c.clone();
+    let val = rpkm_core::campaign::Campaign {
+        poses: cal.poses.split_off(cal.poses.len() - 7),
+        ..c.clone()
+    };
+    let o = CalibratorOptions {
+        start: nominal_start(),
+        validation_prefix: "val".into(),
+        selection: SelectionRule::Map,
+        max_condition: 100.0,
+        outlier_sigma: 0.0,
+        noise: rpkm_core::noise::NoiseModel::default(),
+        effects: None,
+        weighting: calib::Noise::ESTIMATE,
+    };
+    let job = super::job::Job {
+        validation: Some(&val),
+        ..super::job::Job::of(&cal)
+    };
+    let out = super::job::calibrate_job(&job, &o)?;
+    let n = cal.poses.len();
+    assert_eq!(out.held_out, 7);
+    assert_eq!(
+        out.measurements_text(),
+        format!("{} measurements ({n} calibrated, 7 held out)", n + 7)
+    );
+    Ok(())
+}

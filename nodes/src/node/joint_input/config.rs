@@ -56,9 +56,19 @@ const TEMPERATURE_TIMEOUT: ParamSpec = ParamSpec::fixed(
 .unit("s")
 .bound(ParamBound::Within(1e-3, 3600.0));
 
+/// JointState silent this long: the input is quiet, WARN by name (a cell publishes at its
+/// controller's rate, 100 Hz to kHz: a second is a hundred states missed).
+const QUIET_TIMEOUT: ParamSpec = ParamSpec::fixed(
+    "joint_states_timeout_s",
+    Value::F64(1.0),
+    "no JointState this long: /diagnostics WARNs that the drive states are quiet",
+)
+.unit("s")
+.bound(ParamBound::Within(1e-3, 3600.0));
+
 /// The JointState input's parameters: `followers` live (from the next state on), the rest
 /// need a restart (`temperatures.` is a group: covariate name → topic).
-pub const PARAMS: [ParamSpec; 7] = [
+pub const PARAMS: [ParamSpec; 8] = [
     TOPIC,
     QOS,
     NAMES,
@@ -66,6 +76,7 @@ pub const PARAMS: [ParamSpec; 7] = [
     FOLLOWERS,
     THERMOMETERS,
     TEMPERATURE_TIMEOUT,
+    QUIET_TIMEOUT,
 ];
 
 /// One thermometer: the covariate its readings become and the topic they come on.
@@ -94,6 +105,8 @@ pub struct JointConfig {
     pub thermometers: Vec<Thermometer>,
     /// After this long without a reading a thermometer's covariate is "not measured".
     pub timeout: Duration,
+    /// After this long without a JointState the drive states are quiet.
+    pub quiet_after: Duration,
 }
 
 fn topic(p: &NodeParams, spec: &ParamSpec) -> Result<String, ParamError> {
@@ -182,6 +195,7 @@ impl JointConfig {
             followers: followers(p)?,
             thermometers: thermometers(p)?,
             timeout: Duration::from_secs_f64(timeout),
+            quiet_after: Duration::from_secs_f64(QUIET_TIMEOUT.f64(p)?),
         })
     }
 
@@ -191,6 +205,31 @@ impl JointConfig {
             .iter()
             .map(|t| t.covariate.clone())
             .collect()
+    }
+
+    /// What the node says at its start: `joints q1_joint, ..., followers 23 (from the
+    /// parameter files), thermometers temp_machine (/cell/frame_temperature)`; `kept_at`: when
+    /// the followers were set at run time before a restart by the launcher.
+    pub fn started(&self, kept_at: Option<&str>) -> String {
+        let whence = kept_at.map_or_else(
+            || "from the parameter files".to_owned(),
+            |at| format!("kept from the run before the restart, set at {at}"),
+        );
+        let thermometers: Vec<String> = self
+            .thermometers
+            .iter()
+            .map(|t| format!("{} ({})", t.covariate, t.topic))
+            .collect();
+        format!(
+            "joints {} (drives q1 to q4), followers {} ({whence}), thermometers {}",
+            self.joints.join(", "),
+            self.followers_text(),
+            if thermometers.is_empty() {
+                "none".to_owned()
+            } else {
+                thermometers.join(", ")
+            }
+        )
     }
 
     /// `followers` as the parameter writes it (`23`; `none` for no drive).

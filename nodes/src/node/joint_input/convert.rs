@@ -151,6 +151,7 @@ mod tests {
             followers,
             thermometers: vec![],
             timeout: Duration::from_secs(1),
+            quiet_after: Duration::from_secs(1),
         }
     }
 

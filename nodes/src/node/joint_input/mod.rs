@@ -85,6 +85,12 @@ pub struct JointInput {
     readings: Thermometers,
     received: u64,
     refusals: Refusals,
+    /// When the last JointState arrived (the input's opening before the first).
+    last_received: Instant,
+    /// Whether the input is quiet, as last logged.
+    quiet: bool,
+    /// The node's name, for its log lines.
+    node: String,
 }
 
 impl JointInput {
@@ -120,6 +126,9 @@ impl JointInput {
             readings,
             received: 0,
             refusals: Refusals::default(),
+            last_received: Instant::now(),
+            quiet: false,
+            node: ctx.name.clone(),
         })
     }
 
@@ -185,6 +194,7 @@ impl JointInput {
             return Ok(None);
         };
         self.received += 1;
+        self.last_received = now;
         let mut state = match drive_state(&js, &self.config) {
             Ok(s) => s,
             Err(r) => {
@@ -207,19 +217,55 @@ impl JointInput {
         Ok(idle.wait_for(&self.joint_states)?)
     }
 
+    /// `joint states quiet for 1.2 s (/joint_states)` while no JointState came for
+    /// `joint_states_timeout_s`; the log says when the input went quiet and spoke again.
+    fn quiet_note(&mut self, now: Instant) -> Option<String> {
+        let silent = now.duration_since(self.last_received);
+        let quiet = silent >= self.config.quiet_after;
+        if quiet != self.quiet {
+            self.quiet = quiet;
+            let line = if quiet {
+                format!(
+                    "WARN: joint states quiet: no JointState on {} for {:.1} s",
+                    self.topic,
+                    silent.as_secs_f64()
+                )
+            } else {
+                format!("joint states on {} again", self.topic)
+            };
+            crate::node::context::log_line(&self.node, line);
+        }
+        quiet.then(|| {
+            format!(
+                "joint states quiet for {:.1} s ({})",
+                silent.as_secs_f64(),
+                self.topic
+            )
+        })
+    }
+
     /// Adds the input's values to `status`: what was received and refused per joint, the
     /// followers, each thermometer; WARN while a thermometer is quiet (named in the message),
     /// and with [`RefusalLevel::Raise`] while JointStates are refused.
     pub fn annotate(&mut self, status: &mut DiagnosticStatus, refusals: RefusalLevel) {
         let now = Instant::now();
+        let mut notes: Vec<String> = self.quiet_note(now).into_iter().collect();
         let r = &mut self.refusals;
-        let mut notes = Vec::new();
         let fresh = r.total - r.at_last_report;
         r.at_last_report = r.total;
         if refusals == RefusalLevel::Raise && fresh > 0 {
             notes.push(format!(
                 "{fresh} JointState messages refused since the last report; last: {}",
                 r.last.as_deref().unwrap_or("")
+            ));
+        }
+        let incompatible = self.joint_states.incompatible_publishers();
+        if !incompatible.is_empty() {
+            notes.push(format!(
+                "{} publisher(s) of {} not matched, incompatible QoS (set joint_states_qos): {}",
+                incompatible.len(),
+                self.topic,
+                incompatible.join("; ")
             ));
         }
         if let Some(quiet) = self.readings.quiet_summary(now) {
@@ -232,6 +278,11 @@ impl JointInput {
         let mut values = vec![
             ("joint_states_topic".to_owned(), self.topic.to_owned()),
             ("joint_states_received".into(), self.received.to_string()),
+            (
+                "joint_states_incompatible_qos".into(),
+                incompatible.len().to_string(),
+            ),
+            ("joint_states_quiet".into(), self.quiet.to_string()),
             ("followers".into(), self.config.followers_text()),
             ("joint_unequal_arrays".into(), r.unequal_arrays.to_string()),
         ];
