@@ -221,7 +221,10 @@ fn cell(b: &mut Builder) {
     let services: Vec<&str> = services.iter().map(String::as_str).collect();
     b.call("calibrator", &services);
     for t in ACTION_TOPICS {
-        let topic = format!("rt{}/calibrator/{CALIBRATE_ACTION}/_action/{t}", b.namespace);
+        let topic = format!(
+            "rt{}/calibrator/{CALIBRATE_ACTION}/_action/{t}",
+            b.namespace
+        );
         b.grant.subscribe.insert(topic);
     }
     b.grant.subscribe.insert("rt/parameter_events".into());
@@ -449,21 +452,37 @@ mod tests {
             .collect();
         // every request the cell writes a node reads, every reply it reads a node writes
         for t in cell.publish.iter().filter(|t| t.starts_with("rq")) {
-            assert!(nodes.iter().any(|g| g.subscribe.contains(t)), "{t} served by none");
+            assert!(
+                nodes.iter().any(|g| g.subscribe.contains(t)),
+                "{t} served by none"
+            );
         }
         for t in cell.subscribe.iter().filter(|t| t.starts_with("rr")) {
-            assert!(nodes.iter().any(|g| g.publish.contains(t)), "{t} written by none");
+            assert!(
+                nodes.iter().any(|g| g.publish.contains(t)),
+                "{t} written by none"
+            );
         }
-        assert!(cell.publish.contains("rq/rpkm/ingest/set_parametersRequest"));
-        assert!(cell.subscribe.contains("rr/rpkm/ingest/set_parametersReply"));
+        assert!(cell
+            .publish
+            .contains("rq/rpkm/ingest/set_parametersRequest"));
+        assert!(cell
+            .subscribe
+            .contains("rr/rpkm/ingest/set_parametersReply"));
         assert!(cell
             .publish
             .contains("rq/rpkm/calibrator/calibrate/_action/send_goalRequest"));
         assert!(cell
             .subscribe
             .contains("rt/rpkm/calibrator/calibrate/_action/feedback"));
-        assert!(!cell.subscribe.iter().any(|t| t.starts_with("rq")), "serves nothing");
-        assert!(!cell.publish.iter().any(|t| t.starts_with("rr")), "serves nothing");
+        assert!(
+            !cell.subscribe.iter().any(|t| t.starts_with("rq")),
+            "serves nothing"
+        );
+        assert!(
+            !cell.publish.iter().any(|t| t.starts_with("rr")),
+            "serves nothing"
+        );
     }
 
     #[test]

@@ -70,7 +70,11 @@ fn line(p: &Parameters) -> String {
         if items.is_empty() {
             return "-".into();
         }
-        items.iter().map(AsRef::as_ref).collect::<Vec<_>>().join(",")
+        items
+            .iter()
+            .map(AsRef::as_ref)
+            .collect::<Vec<_>>()
+            .join(",")
     }
     fn bits(v: f64) -> String {
         format!("{:016x}", v.to_bits())
@@ -162,8 +166,11 @@ fn fastdds_parameters_peer() -> Option<PathBuf> {
         }
         let building = dir.with_extension(unique("building"));
         std::fs::create_dir_all(&building).expect("build dir");
-        std::fs::copy(repo().join(sources[1]), building.join("fastdds_parameters.idl"))
-            .expect("idl");
+        std::fs::copy(
+            repo().join(sources[1]),
+            building.join("fastdds_parameters.idl"),
+        )
+        .expect("idl");
         let ok = Command::new("fastddsgen")
             .args(["-replace", "fastdds_parameters.idl"])
             .current_dir(&building)
@@ -250,13 +257,21 @@ fn parameters_of_several_kilobytes_reach_cyclone_and_fast_dds() {
     let mut cyclone = Command::new(py);
     cyclone
         .arg(repo().join("tests/python/large_sample_peer.py"))
-        .args(["--domain", &DOMAIN.to_string(), "--topic", "rt/rpkm/parameters"])
+        .args([
+            "--domain",
+            &DOMAIN.to_string(),
+            "--topic",
+            "rt/rpkm/parameters",
+        ])
         .args(["--count", &SIZES.len().to_string(), "--timeout", "60"]);
     on_network_interface(&mut cyclone);
     let mut fast = Command::new(fastdds);
     fast.args([&DOMAIN.to_string(), "rt/rpkm/parameters", "parameters"])
         .args([SIZES.len().to_string(), "60".into()]);
-    let peers = [Peer::start("cyclone", cyclone), Peer::start("fastdds", fast)];
+    let peers = [
+        Peer::start("cyclone", cyclone),
+        Peer::start("fastdds", fast),
+    ];
 
     let t = Transport::new(
         &TransportConfig::new(unique("frag"))
@@ -304,7 +319,9 @@ struct Blob {
 
 fn blob(n: usize) -> Blob {
     Blob {
-        data: (0..n).map(|i| u8::try_from(i * 7 % 251).expect("below 251")).collect(),
+        data: (0..n)
+            .map(|i| u8::try_from(i * 7 % 251).expect("below 251"))
+            .collect(),
     }
 }
 
@@ -314,6 +331,35 @@ fn blob_line(b: &Blob) -> String {
         let _ = write!(line, "{x:02x}");
     }
     line
+}
+
+/// The Cyclone DDS (on the network interface) and Fast DDS readers of the replies.
+fn reply_peers(py: &Path, fastdds: &Path) -> [Peer; 2] {
+    let count = REPLY_SIZES.len().to_string();
+    let mut cyclone = Command::new(py);
+    cyclone
+        .arg(repo().join("tests/python/large_sample_peer.py"))
+        .args([
+            "--domain",
+            &REPLY_DOMAIN.to_string(),
+            "--topic",
+            REPLY_TOPIC,
+        ])
+        .args(["--count", &count, "--timeout", "60", "--blob", "--volatile"]);
+    on_network_interface(&mut cyclone);
+    let mut fast = Command::new(fastdds);
+    fast.args([
+        &REPLY_DOMAIN.to_string(),
+        REPLY_TOPIC,
+        "blob",
+        &count,
+        "60",
+        "volatile",
+    ]);
+    [
+        Peer::start("cyclone", cyclone),
+        Peer::start("fastdds", fast),
+    ]
 }
 
 /// Replies of the size of a Calibrate result and larger, written as the services write a
@@ -328,17 +374,7 @@ fn replies_of_several_kilobytes_on_the_cyclone_mapping_reach_cyclone_and_fast_dd
     let Some(fastdds) = fastdds_parameters_peer() else {
         return;
     };
-    let count = REPLY_SIZES.len().to_string();
-    let mut cyclone = Command::new(py);
-    cyclone
-        .arg(repo().join("tests/python/large_sample_peer.py"))
-        .args(["--domain", &REPLY_DOMAIN.to_string(), "--topic", REPLY_TOPIC])
-        .args(["--count", &count, "--timeout", "60", "--blob", "--volatile"]);
-    on_network_interface(&mut cyclone);
-    let mut fast = Command::new(fastdds);
-    fast.args([&REPLY_DOMAIN.to_string(), REPLY_TOPIC, "blob", &count, "60", "volatile"]);
-    let peers = [Peer::start("cyclone", cyclone), Peer::start("fastdds", fast)];
-
+    let peers = reply_peers(&py, &fastdds);
     let dp = DomainParticipant::new(REPLY_DOMAIN).expect("participant");
     let qos = QosPolicyBuilder::new()
         .reliability(policy::Reliability::Reliable {
@@ -372,14 +408,21 @@ fn replies_of_several_kilobytes_on_the_cyclone_mapping_reach_cyclone_and_fast_dd
         .count()
         < peers.len()
     {
-        assert!(std::time::Instant::now() < known, "the peers' readers not discovered");
+        assert!(
+            std::time::Instant::now() < known,
+            "the peers' readers not discovered"
+        );
         std::thread::sleep(Duration::from_millis(10));
     }
     std::thread::sleep(Duration::from_millis(200));
     for (k, n) in REPLY_SIZES.into_iter().enumerate() {
         let sent = blob(n);
         let bytes = rpkm_msgs::to_cdr(&sent).expect("cdr").len();
-        assert_ne!(bytes % 4, 0, "{bytes} bytes: the last fragment ends unaligned");
+        assert_ne!(
+            bytes % 4,
+            0,
+            "{bytes} bytes: the last fragment ends unaligned"
+        );
         writer
             .write(sent.clone(), None)
             .unwrap_or_else(|e| panic!("reply {k}: write: {e:?}"));

@@ -24,7 +24,9 @@ static ONE_SET: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// Holds the Fast DDS tests' node set for as long as the guard lives.
 pub fn one_set() -> std::sync::MutexGuard<'static, ()> {
-    ONE_SET.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    ONE_SET
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// `tests/cpp/NAME.cpp` built with the types of `tests/cpp/IDL.idl`: the binary, or `None`

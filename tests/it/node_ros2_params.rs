@@ -327,7 +327,11 @@ fn a_hundred_fresh_clients_each_get_the_reply_to_their_one_call() {
     let script = serde_json::json!([{"first_calls": 100, "get": ["view_every"]}]);
     let (_peer, rx) = peer(&py, &dir, "/rpkm/tcp_estimator", &script);
     let calls = next_line(&rx, "first calls");
-    assert_eq!(calls["first_calls"], serde_json::json!([100, 100]), "{calls}");
+    assert_eq!(
+        calls["first_calls"],
+        serde_json::json!([100, 100]),
+        "{calls}"
+    );
 }
 
 /// A CSV row of ingest's stdin at `t` s: the nominal machine at (0, 1700) mm, drive forces

@@ -156,7 +156,10 @@ fn check_lists(lines: &[String]) {
         assert_eq!(node, format!("/rpkm/{exec}"));
         let names: Vec<&str> = names.split(',').collect();
         let declared = rpkm::node::declarations(exec).expect("a node of the set");
-        let joint_keys: Vec<&str> = rpkm::node::joint_input::PARAMS.iter().map(|p| p.key).collect();
+        let joint_keys: Vec<&str> = rpkm::node::joint_input::PARAMS
+            .iter()
+            .map(|p| p.key)
+            .collect();
         let joint_source = *exec == "ingest";
         for spec in declared.iter().chain(rpkm::node::COMMON.iter()) {
             let served = joint_source || !joint_keys.contains(&spec.key);
@@ -413,14 +416,7 @@ fn a_fast_dds_client_in_an_sros2_enclave_activates_the_secured_estimator() {
     let localhost = [("ROS_LOCALHOST_ONLY", "1")];
     let (lines, ok) = call_in(&rpc, &dir, (domain, &script), Some(&enclave), &localhost);
     assert!(ok, "the secure Fast DDS client's calls: {lines:?}");
-    assert_eq!(said(&lines, "SET"), ["/rpkm/ingest followers ok"], "{lines:?}");
-    assert_eq!(said(&lines, "GET"), ["/rpkm/ingest followers 4 ''"], "{lines:?}");
-    assert_eq!(said(&lines, "GOAL"), ["accepted"], "{lines:?}");
-    let result = said(&lines, "RESULT");
-    assert!(
-        result.first().is_some_and(|r| r.starts_with("4 ")),
-        "the secured goal succeeded: {lines:?}"
-    );
+    check_secured_set_and_goal(&lines);
     assert_eq!(
         said(&lines, "STATE"),
         [
@@ -446,6 +442,26 @@ fn a_fast_dds_client_in_an_sros2_enclave_activates_the_secured_estimator() {
         seqs,
         (1..=POSES as u64).collect::<Vec<_>>(),
         "the activated estimator's estimates, secured"
+    );
+}
+
+/// The secured client's set, read back, and its Calibrate goal's success.
+fn check_secured_set_and_goal(lines: &[String]) {
+    assert_eq!(
+        said(lines, "SET"),
+        ["/rpkm/ingest followers ok"],
+        "{lines:?}"
+    );
+    assert_eq!(
+        said(lines, "GET"),
+        ["/rpkm/ingest followers 4 ''"],
+        "{lines:?}"
+    );
+    assert_eq!(said(lines, "GOAL"), ["accepted"], "{lines:?}");
+    let result = said(lines, "RESULT");
+    assert!(
+        result.first().is_some_and(|r| r.starts_with("4 ")),
+        "the secured goal succeeded: {lines:?}"
     );
 }
 

@@ -567,7 +567,11 @@ impl<Q, R> RpcServer<Q, R> {
         // the 4-byte encapsulation header goes with the body
         let len = body_len + 4;
         let limit = crate::dds_wire::inline_qos_limit();
-        if len > limit && !self.said_fragmented.swap(true, std::sync::atomic::Ordering::Relaxed) {
+        if len > limit
+            && !self
+                .said_fragmented
+                .swap(true, std::sync::atomic::Ordering::Relaxed)
+        {
             log::warn!(
                 "service {}: a {len}-byte reply to an rmw_fastrtps client is above this host's \
                  {limit}-byte datagram: through a network interface it goes as fragments whose \

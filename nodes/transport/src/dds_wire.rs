@@ -91,7 +91,11 @@ mod tests {
         interface(dir.path(), "lo", "unknown", 65536);
         assert_eq!(smallest_path_mtu(dir.path()), 65536, "loopback only");
         interface(dir.path(), "eth0", "up", 9000);
-        assert_eq!(smallest_path_mtu(dir.path()), 1500, "a jumbo interface, readers elsewhere");
+        assert_eq!(
+            smallest_path_mtu(dir.path()),
+            1500,
+            "a jumbo interface, readers elsewhere"
+        );
         interface(dir.path(), "eth1", "up", 1400);
         interface(dir.path(), "ifb0", "down", 1280);
         assert_eq!(smallest_path_mtu(dir.path()), 1400, "eth1; ifb0 is down");
