@@ -34,6 +34,8 @@ use rpkm_transport::{topic, Transport, TransportConfig};
 use serde_json::Value;
 
 const DOMAIN: &str = "71";
+/// The first-calls test's domain.
+const FIRST_CALLS_DOMAIN: &str = "72";
 
 /// The state and its largest |measured − predicted| current, %, from the core.
 fn state_with_deviation() -> (ActuatorState, f64) {
@@ -85,11 +87,21 @@ fn drive_until_level(
 
 /// Runs the peer on `script`; its JSON lines come back through the channel.
 fn peer(py: &Path, dir: &TempDir, node: &str, script: &Value) -> (Proc, mpsc::Receiver<Value>) {
+    peer_on(py, dir, (DOMAIN, node), script)
+}
+
+/// [`peer`] on domain `domain`.
+fn peer_on(
+    py: &Path,
+    dir: &TempDir,
+    (domain, node): (&str, &str),
+    script: &Value,
+) -> (Proc, mpsc::Receiver<Value>) {
     let file = dir.path("script.json");
     std::fs::write(&file, script.to_string()).expect("script");
     let mut child = Command::new(py)
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/ros2_params_peer.py"))
-        .args(["--domain", DOMAIN, "--timeout", "60", "--node", node])
+        .args(["--domain", domain, "--timeout", "60", "--node", node])
         .arg(&file)
         .stdout(Stdio::piped())
         .spawn()
@@ -250,23 +262,27 @@ fn next_line(rx: &mpsc::Receiver<Value>, what: &str) -> Value {
     v
 }
 
+/// A tcp_estimator on DDS (`view_every` 7) in domain `domain`, its iceoryx2 under `prefix`.
+fn estimator(prefix: &str, domain: &str) -> Proc {
+    Proc(
+        Command::new(rpkm())
+            .args(["node", "tcp_estimator", "--backend", "both"])
+            .args(["--input-backend", "ipc", "--param", "view_every=7"])
+            .args(["--param", "follow_parameters=false"])
+            .env("RPKM_IPC_PREFIX", prefix)
+            .env("ROS_DOMAIN_ID", domain)
+            .spawn()
+            .expect("start tcp_estimator"),
+    )
+}
+
 /// tcp_estimator on the same services: `view_every` (the decimation of its standard views)
 /// is set live, `views` and `rt_priority` need a restart and are refused.
 #[test]
 fn a_cyclone_peer_reads_and_sets_the_estimators_parameters() {
     let Some(py) = python() else { return };
     let dir = TempDir::new("ros2params_est");
-    let prefix = unique("r2pe");
-    let _node = Proc(
-        Command::new(rpkm())
-            .args(["node", "tcp_estimator", "--backend", "both"])
-            .args(["--input-backend", "ipc", "--param", "view_every=7"])
-            .args(["--param", "follow_parameters=false"])
-            .env("RPKM_IPC_PREFIX", &prefix)
-            .env("ROS_DOMAIN_ID", DOMAIN)
-            .spawn()
-            .expect("start tcp_estimator"),
-    );
+    let _node = estimator(&unique("r2pe"), DOMAIN);
     let script = serde_json::json!([
         {"get": ["view_every", "views", "model", "rt_priority"]},
         {"describe": ["view_every", "views"]},
@@ -313,19 +329,15 @@ fn a_cyclone_peer_reads_and_sets_the_estimators_parameters() {
 fn a_hundred_fresh_clients_each_get_the_reply_to_their_one_call() {
     let Some(py) = python() else { return };
     let dir = TempDir::new("ros2params_first");
-    let prefix = unique("r2pf");
-    let _node = Proc(
-        Command::new(rpkm())
-            .args(["node", "tcp_estimator", "--backend", "both"])
-            .args(["--input-backend", "ipc", "--param", "view_every=7"])
-            .args(["--param", "follow_parameters=false"])
-            .env("RPKM_IPC_PREFIX", &prefix)
-            .env("ROS_DOMAIN_ID", DOMAIN)
-            .spawn()
-            .expect("start tcp_estimator"),
-    );
+    // a domain of its own: the estimator of the test above has the same name
+    let _node = estimator(&unique("r2pf"), FIRST_CALLS_DOMAIN);
     let script = serde_json::json!([{"first_calls": 100, "get": ["view_every"]}]);
-    let (_peer, rx) = peer(&py, &dir, "/rpkm/tcp_estimator", &script);
+    let (_peer, rx) = peer_on(
+        &py,
+        &dir,
+        (FIRST_CALLS_DOMAIN, "/rpkm/tcp_estimator"),
+        &script,
+    );
     let calls = next_line(&rx, "first calls");
     assert_eq!(
         calls["first_calls"],
