@@ -619,7 +619,7 @@ fn print_effects(effects: &[calib::EffectEstimate]) {
 
 /// The process's peak resident memory so far, MiB (`VmHWM` of /proc/self/status; None where
 /// the system has none).
-fn peak_resident_mib() -> Option<f64> {
+pub(super) fn peak_resident_mib() -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: f64 = line

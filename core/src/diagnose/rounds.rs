@@ -96,6 +96,9 @@ fn rounds(
         &settled,
         (&round1.candidates, &tried),
     )?;
+    // round 1 has told which candidates stand out: its fits (every candidate's rows) are
+    // not held through round 2's
+    drop((base1, round1, cal1));
     let second = Search {
         in_model: &settled,
         ..first

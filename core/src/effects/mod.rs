@@ -24,6 +24,7 @@ mod effect;
 mod encoder_scale;
 pub mod expr;
 mod guide_straightness;
+mod packed;
 mod instrument_alignment;
 pub mod live;
 mod parallelogram;
@@ -156,8 +157,8 @@ pub struct Corrections {
     /// Per pose, where its partials start in `partials` (one more entry: the end).
     starts: Vec<usize>,
     /// The partials of every pose in pose order: parameter index (ascending within a pose)
-    /// and ∂/∂θ of the change.
-    partials: Vec<(usize, Delta)>,
+    /// and ∂/∂θ of the change, packed ([`packed::Packed`]: a few of its 37 fields each).
+    partials: packed::Packed,
     pub n_params: usize,
     /// Where the changes read the geometry ([`Bound::correct_at`]): the parameters they
     /// were made at, per pose where its slopes start in `slopes` (one more entry: the end),
@@ -193,7 +194,9 @@ impl Corrections {
         out.starts.push(0);
         for _ in 0..n_poses {
             out.values.push(value);
-            out.partials.extend(partials.iter().copied().enumerate());
+            for (k, d) in partials.iter().enumerate() {
+                out.partials.push(k, d);
+            }
             out.starts.push(out.partials.len());
         }
         out
@@ -223,11 +226,12 @@ impl Corrections {
     }
 
     /// The partials of pose `i` that may be non-zero (none past the campaign's poses).
-    fn partials_of(&self, i: usize) -> &[(usize, Delta)] {
-        match (self.starts.get(i), self.starts.get(i + 1)) {
-            (Some(&a), Some(&b)) => &self.partials[a..b],
-            _ => &[],
-        }
+    fn partials_of(&self, i: usize) -> impl Iterator<Item = (usize, Delta)> + '_ {
+        let range = match (self.starts.get(i), self.starts.get(i + 1)) {
+            (Some(&a), Some(&b)) => a..b,
+            _ => 0..0,
+        };
+        self.partials.range(range)
     }
 
     /// The parameters these corrections were made at, where a change reads the geometry
@@ -267,14 +271,14 @@ impl Corrections {
             (four.yb, five.yb),
         ];
         self.partials
-            .iter()
+            .range(0..self.partials.len())
             .find(|(_, d)| {
                 pairs.iter().any(|&(four, five)| {
                     let (a, b) = (d.dp[four], d.dp[five]);
                     (a - b).abs() > 1e-9 * a.abs().max(b.abs())
                 })
             })
-            .map(|(k, _)| *k)
+            .map(|(k, _)| k)
     }
 
     /// ∂value/∂θ over every effect parameter of a value with input sensitivities `at`
@@ -284,7 +288,7 @@ impl Corrections {
         let mut out = vec![0.0; self.n_params];
         for (i, s) in at {
             for (k, d) in self.partials_of(*i) {
-                out[*k] += d.chain(s);
+                out[k] += d.chain(s);
             }
         }
         out
@@ -515,7 +519,7 @@ impl EffectSet {
         let mut out = Corrections {
             values: Vec::with_capacity(self.n_poses),
             starts: Vec::with_capacity(self.n_poses + 1),
-            partials: Vec::with_capacity(touched),
+            partials: packed::Packed::with_capacity(touched),
             n_params: n,
             geometry: None,
         };
@@ -558,7 +562,7 @@ impl EffectSet {
                         // the others' parameters move the pose the stretch was read at
                         chain_through(&mut d, &slopes[first_slope..]);
                     }
-                    out.partials.push((k + j, d));
+                    out.partials.push(k + j, &d);
                 }
             }
             out.values.push(value);
