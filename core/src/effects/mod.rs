@@ -152,8 +152,9 @@ pub struct UnknownEffect {
 /// dense partials of 51 setups' angles were 15 MB per evaluation of a 1,000-pose campaign.
 #[derive(Clone, Debug, Default)]
 pub struct Corrections {
-    /// Per pose, the change. Empty when there is no effect.
-    values: Vec<Delta>,
+    /// Per pose (its index), the change, packed as the partials are. Empty when there is
+    /// no effect.
+    values: packed::Packed,
     /// Per pose, where its partials start in `partials` (one more entry: the end).
     starts: Vec<usize>,
     /// The partials of every pose in pose order: parameter index (ascending within a pose)
@@ -193,7 +194,7 @@ impl Corrections {
         };
         out.starts.push(0);
         for _ in 0..n_poses {
-            out.values.push(value);
+            out.values.push(out.values.len(), &value);
             for (k, d) in partials.iter().enumerate() {
                 out.partials.push(k, d);
             }
@@ -216,8 +217,8 @@ impl Corrections {
         if self.values.is_empty() {
             return Delta::default();
         }
-        match self.values.get(i) {
-            Some(d) => *d,
+        match (i < self.values.len()).then(|| self.values.get(i).1) {
+            Some(d) => d,
             None => panic!(
                 "effect corrections of {} poses asked for pose {i}: bound to another campaign",
                 self.values.len()
@@ -517,7 +518,7 @@ impl EffectSet {
             })
             .sum();
         let mut out = Corrections {
-            values: Vec::with_capacity(self.n_poses),
+            values: packed::Packed::with_capacity(self.n_poses),
             starts: Vec::with_capacity(self.n_poses + 1),
             partials: packed::Packed::with_capacity(touched),
             n_params: n,
@@ -565,7 +566,7 @@ impl EffectSet {
                     out.partials.push(k + j, &d);
                 }
             }
-            out.values.push(value);
+            out.values.push(i, &value);
             out.starts.push(out.partials.len());
             slope_starts.push(slopes.len());
         }

@@ -1,4 +1,4 @@
-//! The partials of [`super::Corrections`], packed: each [`Delta`] kept as the fields that
+//! The changes and partials of [`super::Corrections`], packed: each [`Delta`] kept as the fields that
 //! are not zero. A partial is one effect parameter's derivative of one pose's change, and an
 //! effect moves few of a pose's inputs (an encoder's scale one carrier position, thermal
 //! expansion the lengths): whole, a partial is 37 numbers (296 bytes), and the partials of a
@@ -14,7 +14,7 @@ const DM: usize = DQ + 4;
 const DPSI: usize = DM + 2;
 const DK: usize = DPSI + 1;
 
-/// Partials, each its θ index and its fields that are not +0.0 (a −0.0 is kept: the
+/// Changes (or partials), each its index (a pose's, or a θ index) and its fields that are not +0.0 (a −0.0 is kept: the
 /// unpacked value is the packed one to the bit).
 #[derive(Clone, Debug, Default)]
 pub(super) struct Packed {
@@ -40,6 +40,10 @@ impl Packed {
     /// How many partials.
     pub fn len(&self) -> usize {
         self.index.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.index.is_empty()
     }
 
     /// Appends the partial `d` of θ index `k`.
