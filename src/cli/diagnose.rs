@@ -136,7 +136,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         if let Some(f) = &file {
             json["effects_file"] = effects_file::to_json(f);
         }
-        if let Some(mib) = super::calibrate::peak_resident_mib() {
+        if let Some(mib) = super::peak_resident_mib() {
             // the process's own high-water mark so far (`rpkm bench calibration` reads it)
             json["peak_resident_mib"] = serde_json::json!(mib);
         }
