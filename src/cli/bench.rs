@@ -3,6 +3,7 @@
 
 mod calibration;
 mod discovery;
+mod growth;
 mod machines;
 mod plan;
 mod soak;

@@ -636,21 +636,6 @@ fn print_effects(effects: &[calib::EffectEstimate]) {
     }
 }
 
-/// The process's peak resident memory so far, MiB (`VmHWM` of /proc/self/status; None where
-/// the system has none).
-fn peak_resident_mib() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: f64 = line
-        .trim_start_matches("VmHWM:")
-        .trim()
-        .trim_end_matches("kB")
-        .trim()
-        .parse()
-        .ok()?;
-    Some(kb / 1024.0)
-}
-
 fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value {
     let parameters: serde_json::Map<String, serde_json::Value> = cal
         .model
@@ -684,7 +669,7 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
     }
     // this process's own peak (the high-water mark of its memory since it started: a
     // parent's peak does not count, as it does in wait4's ru_maxrss after execve)
-    if let Some(mib) = peak_resident_mib() {
+    if let Some(mib) = super::peak_resident_mib() {
         out["peak_resident_mib"] = json!(mib);
     }
     if let Some(v) = val {

@@ -136,6 +136,10 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         if let Some(f) = &file {
             json["effects_file"] = effects_file::to_json(f);
         }
+        if let Some(mib) = super::peak_resident_mib() {
+            // the process's own high-water mark so far (`rpkm bench calibration` reads it)
+            json["peak_resident_mib"] = serde_json::json!(mib);
+        }
         write_json(path, &json)?;
         println!("\nwrote {}", path.display());
     }

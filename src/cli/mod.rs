@@ -56,3 +56,18 @@ pub fn write_json(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> 
     let text = serde_json::to_string_pretty(value)?;
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
+
+/// The process's peak resident memory so far, MiB (`VmHWM` of /proc/self/status; None where
+/// the system has none).
+pub(crate) fn peak_resident_mib() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line
+        .trim_start_matches("VmHWM:")
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()?;
+    Some(kb / 1024.0)
+}

@@ -295,6 +295,6 @@ pub fn evaluate(
         calibration: current.cal,
         baseline: current.baseline,
         held_out: current.held_out,
-        rows: current.fitted.rows,
+        rows: std::sync::Arc::unwrap_or_clone(current.fitted.rows),
     })
 }

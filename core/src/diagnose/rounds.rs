@@ -77,7 +77,7 @@ fn rounds(
         threads: opts.threads,
         screen: opts.screen,
     };
-    let (base1, round1, cal1) = first.round(&stated, None)?;
+    let (base1, round1, cal1) = first.round(&stated, None, true)?;
     if opts.stopped() {
         return Err(DiagnoseError::Cancelled);
     }
@@ -96,11 +96,14 @@ fn rounds(
         &settled,
         (&round1.candidates, &tried),
     )?;
+    // round 1 has told which candidates stand out: its fits (every candidate's rows) are
+    // not held through round 2's
+    drop((base1, round1, cal1));
     let second = Search {
         in_model: &settled,
         ..first
     };
-    let (base, mut round, _) = second.round(&copts, fitted)?;
+    let (base, mut round, _) = second.round(&copts, fitted, false)?;
     let val = validation::held_out(validation, &copts.noise)?;
     let judge = Judge {
         campaign,
@@ -131,6 +134,7 @@ fn rounds(
         in_model,
         model_effects: &settled,
         base: &base,
+        structure: &structure,
         current: &current,
         round,
         trials,
@@ -237,6 +241,7 @@ fn exact(
         in_model: first.in_model,
         model_effects: first.in_model,
         base: &base,
+        structure: &structure,
         current: &current,
         round,
         trials,
@@ -277,11 +282,13 @@ pub(crate) struct Search<'a> {
 impl Search<'_> {
     /// The current model and every candidate, calibrated with `copts` (its noise weights the
     /// rows and the held-out errors); the current model's calibration with `copts` when it
-    /// is at hand (`fitted`), else made here and returned.
+    /// is at hand (`fitted`), else made here and returned where `keep` (a copy of its rows
+    /// held through the candidates' fits only where a later step reads it).
     fn round(
         &self,
         copts: &calib::Options,
         fitted: Option<Calibration>,
+        keep: bool,
     ) -> Result<(Fitted, Round, Option<Calibration>), DiagnoseError> {
         let val = validation::held_out(self.validation, &copts.noise)?;
         let cal = match fitted {
@@ -292,7 +299,7 @@ impl Search<'_> {
         // solve costs the arrows, not the diagnosis
         let vectors = error_vectors(self.campaign, self.in_model, &cal, copts.model)
             .map_err(|e| e.to_string());
-        let made = Some(cal.clone());
+        let made = keep.then(|| cal.clone());
         let base = finish(self.campaign, val.as_ref(), self.in_model, cal, copts)?;
         let tries = try_all(
             self.campaign,

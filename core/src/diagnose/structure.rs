@@ -20,8 +20,18 @@ pub(crate) struct Shape {
 impl Shape {
     /// The three tests of the residual `rows` of `campaign`, each at `level`.
     pub fn of(campaign: &Campaign, rows: &[RowValue], level: f64) -> Shape {
+        Self::with(campaign, rows, level, sparse::structure(campaign, rows))
+    }
+
+    /// [`Shape::of`], the dictionary's test already made (`dictionary`: of the same rows).
+    pub fn with(
+        campaign: &Campaign,
+        rows: &[RowValue],
+        level: f64,
+        dictionary: sparse::Structure,
+    ) -> Shape {
         Shape {
-            dictionary: sparse::structure(campaign, rows),
+            dictionary,
             periodic: periodic::periodogram(campaign, rows, level),
             neighbours: neighbours::neighbours(campaign, rows),
             level,

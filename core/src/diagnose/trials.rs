@@ -94,10 +94,17 @@ pub(crate) fn try_all(
     out.into_iter().flatten().collect()
 }
 
+/// Most poses whose rows every candidate shares ([`shared_rows`]). The shared rows hold two
+/// evaluations of every row with the effect columns of every candidate, and their making the
+/// corrections of every pose with all of them at once: on 10⁵ self-calibration poses some
+/// 0.6 GB at the diagnosis's peak, where the candidates' own evaluations (on the cores' few
+/// fits at a time) hold a fraction of it; the rows are the same either way.
+const SHARED_ROWS_MAX_POSES: usize = 20_000;
+
 /// The rows at the start and at the current model's minimum with the effect columns of
 /// every candidate that binds (`bound`), evaluated once for all of them; None where they
 /// cannot be evaluated (each candidate then evaluates its own rows and reports why that
-/// failed).
+/// failed) or where the campaign is larger than [`SHARED_ROWS_MAX_POSES`].
 fn shared_rows(
     campaign: &Campaign,
     (in_model, base): (&[&dyn Effect], &Fit),
@@ -105,6 +112,9 @@ fn shared_rows(
     bound: &[Result<EffectSet, NotApplicable>],
     copts: &calib::Options,
 ) -> Option<SharedRows> {
+    if campaign.poses.len() > SHARED_ROWS_MAX_POSES {
+        return None;
+    }
     let start = Params::nominal();
     let mut union: Vec<&dyn Effect> = in_model.to_vec();
     union.extend(
@@ -404,7 +414,10 @@ pub(crate) fn finish_with(
         theta: cal.theta,
         covariance_theta: cal.covariance_theta,
     };
-    Ok(Fitted { rows, fit })
+    Ok(Fitted {
+        rows: std::sync::Arc::new(rows),
+        fit,
+    })
 }
 
 /// The candidate's comparison with the current model (the F-test on the whole family

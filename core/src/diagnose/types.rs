@@ -512,7 +512,10 @@ impl From<FitError> for DiagnoseError {
 
 /// What one fit produced: its final rows and statistics.
 pub(crate) struct Fitted {
-    pub rows: Vec<RowValue>,
+    /// The calibration's rows, shared by the entries of a search that hold the same fit (a
+    /// candidate, its kept parts where none were dropped, its entry in the model search):
+    /// one copy per fit, not per holder.
+    pub rows: std::sync::Arc<Vec<RowValue>>,
     pub fit: Fit,
 }
 

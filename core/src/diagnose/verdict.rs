@@ -24,8 +24,10 @@ pub(crate) struct Concluded<'a> {
     /// The effects as given, and as fitted (families settled).
     pub in_model: &'a [&'a dyn Effect],
     pub model_effects: &'a [&'a dyn Effect],
-    /// The current model's fit under the comparisons' weights.
+    /// The current model's fit under the comparisons' weights, and the dictionary's test
+    /// of its residual (made for the search: the same rows, the same test).
     pub base: &'a Fitted,
+    pub structure: &'a sparse::Structure,
     /// The current model on its own: the baseline and the held-out judge.
     pub current: &'a Current,
     pub round: Round,
@@ -54,12 +56,12 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
     } = c.round;
     candidates.sort_by(|a, b| b.bic_gain.total_cmp(&a.bic_gain));
     let level = structure_level(opts);
-    let structure = sparse::structure(campaign, &base.rows);
+    let structure = c.structure.clone();
     let exact = calib::rms(&length_values(&base.rows)) < NUMERICAL_RMS_MM;
-    let shape = Shape::of(campaign, &base.rows, level);
+    let shape = Shape::with(campaign, &base.rows, level, structure.clone());
     let held_out = current.held_out.clone();
     let (verdict_kind, unexplained) = kind_of(
-        (campaign, base, &shape),
+        (campaign, &shape),
         held_out.as_ref(),
         c.choice.as_ref(),
         (exact, level),
@@ -129,7 +131,7 @@ fn to_add(name: &str) -> String {
 /// The verdict's kind, and what the residual left by its model follows while structured
 /// (the held-out residual's term where only the held-out data are structured).
 fn kind_of(
-    (campaign, base, shape): (&Campaign, &Fitted, &Shape),
+    (campaign, shape): (&Campaign, &Shape),
     held_out: Option<&super::types::HeldOutCheck>,
     choice: Option<&Choice>,
     (exact, level): (bool, f64),
@@ -148,8 +150,11 @@ fn kind_of(
     if kind == VerdictKind::UnexplainedStructure && !structured {
         return (kind, held_out.and_then(|h| h.follows.clone()));
     }
-    let remaining = choice.map_or(base, |ch| &ch.fitted);
-    let left = sparse::structure(campaign, &remaining.rows);
+    // without a model named, the residual left is the current model's, tested already
+    let left = match choice {
+        Some(ch) => &sparse::structure(campaign, &ch.fitted.rows),
+        None => &shape.dictionary,
+    };
     (
         kind,
         (left.p_value < level)

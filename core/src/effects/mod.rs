@@ -24,6 +24,7 @@ mod effect;
 mod encoder_scale;
 pub mod expr;
 mod guide_straightness;
+mod packed;
 mod instrument_alignment;
 pub mod live;
 mod parallelogram;
@@ -151,13 +152,14 @@ pub struct UnknownEffect {
 /// dense partials of 51 setups' angles were 15 MB per evaluation of a 1,000-pose campaign.
 #[derive(Clone, Debug, Default)]
 pub struct Corrections {
-    /// Per pose, the change. Empty when there is no effect.
-    values: Vec<Delta>,
+    /// Per pose (its index), the change, packed as the partials are. Empty when there is
+    /// no effect.
+    values: packed::Packed,
     /// Per pose, where its partials start in `partials` (one more entry: the end).
     starts: Vec<usize>,
     /// The partials of every pose in pose order: parameter index (ascending within a pose)
-    /// and ∂/∂θ of the change.
-    partials: Vec<(usize, Delta)>,
+    /// and ∂/∂θ of the change, packed ([`packed::Packed`]: a few of its 37 fields each).
+    partials: packed::Packed,
     pub n_params: usize,
     /// Where the changes read the geometry ([`Bound::correct_at`]): the parameters they
     /// were made at, per pose where its slopes start in `slopes` (one more entry: the end),
@@ -192,8 +194,10 @@ impl Corrections {
         };
         out.starts.push(0);
         for _ in 0..n_poses {
-            out.values.push(value);
-            out.partials.extend(partials.iter().copied().enumerate());
+            out.values.push(out.values.len(), &value);
+            for (k, d) in partials.iter().enumerate() {
+                out.partials.push(k, d);
+            }
             out.starts.push(out.partials.len());
         }
         out
@@ -213,8 +217,8 @@ impl Corrections {
         if self.values.is_empty() {
             return Delta::default();
         }
-        match self.values.get(i) {
-            Some(d) => *d,
+        match (i < self.values.len()).then(|| self.values.get(i).1) {
+            Some(d) => d,
             None => panic!(
                 "effect corrections of {} poses asked for pose {i}: bound to another campaign",
                 self.values.len()
@@ -223,11 +227,12 @@ impl Corrections {
     }
 
     /// The partials of pose `i` that may be non-zero (none past the campaign's poses).
-    fn partials_of(&self, i: usize) -> &[(usize, Delta)] {
-        match (self.starts.get(i), self.starts.get(i + 1)) {
-            (Some(&a), Some(&b)) => &self.partials[a..b],
-            _ => &[],
-        }
+    fn partials_of(&self, i: usize) -> impl Iterator<Item = (usize, Delta)> + '_ {
+        let range = match (self.starts.get(i), self.starts.get(i + 1)) {
+            (Some(&a), Some(&b)) => a..b,
+            _ => 0..0,
+        };
+        self.partials.range(range)
     }
 
     /// The parameters these corrections were made at, where a change reads the geometry
@@ -267,14 +272,14 @@ impl Corrections {
             (four.yb, five.yb),
         ];
         self.partials
-            .iter()
+            .range(0..self.partials.len())
             .find(|(_, d)| {
                 pairs.iter().any(|&(four, five)| {
                     let (a, b) = (d.dp[four], d.dp[five]);
                     (a - b).abs() > 1e-9 * a.abs().max(b.abs())
                 })
             })
-            .map(|(k, _)| *k)
+            .map(|(k, _)| k)
     }
 
     /// ∂value/∂θ over every effect parameter of a value with input sensitivities `at`
@@ -284,7 +289,7 @@ impl Corrections {
         let mut out = vec![0.0; self.n_params];
         for (i, s) in at {
             for (k, d) in self.partials_of(*i) {
-                out[*k] += d.chain(s);
+                out[k] += d.chain(s);
             }
         }
         out
@@ -513,9 +518,9 @@ impl EffectSet {
             })
             .sum();
         let mut out = Corrections {
-            values: Vec::with_capacity(self.n_poses),
+            values: packed::Packed::with_capacity(self.n_poses),
             starts: Vec::with_capacity(self.n_poses + 1),
-            partials: Vec::with_capacity(touched),
+            partials: packed::Packed::with_capacity(touched),
             n_params: n,
             geometry: None,
         };
@@ -558,10 +563,10 @@ impl EffectSet {
                         // the others' parameters move the pose the stretch was read at
                         chain_through(&mut d, &slopes[first_slope..]);
                     }
-                    out.partials.push((k + j, d));
+                    out.partials.push(k + j, &d);
                 }
             }
-            out.values.push(value);
+            out.values.push(i, &value);
             out.starts.push(out.partials.len());
             slope_starts.push(slopes.len());
         }

@@ -16,6 +16,8 @@
 //! - Diagnosis at scale: 10⁵ random-target self-calibration poses in 1,000 setups of a machine
 //!   with nothing hidden whose temperature swings between 20 and 24 °C (nothing expands), in
 //!   process, on every core: its time and verdict (issue 36: `nothing_missing` in under 10 s).
+//! - The diagnosis's growth with the rows ([`super::growth`]): 100 to 1,000 setups of 100
+//!   self-calibration poses, with and without a validation file, whole processes.
 //! - When Python with scipy is there: the plain `scipy.optimize.least_squares` script of
 //!   tests/python on the smallest campaign against rpkm's fit of the same problem alone (in
 //!   process) and against whole `rpkm calibrate` processes: both ratios in one run.
@@ -51,6 +53,11 @@ pub struct CalibrationArgs {
     /// hidden, the temperature swinging between 20 and 24 °C).
     #[arg(long)]
     pub scale_only: bool,
+    /// Only the diagnosis's growth with the rows: campaigns of 100 to 1,000 setups of 100
+    /// self-calibration poses, `rpkm diagnose` with and without a validation file against
+    /// `rpkm calibrate` of the same file; with --dir, their files stay there to profile.
+    #[arg(long)]
+    pub growth_only: bool,
 }
 
 /// One `rpkm calibrate` process: its wall time, the LM's iterations, peak memory.
@@ -77,6 +84,9 @@ pub fn run(a: &CalibrationArgs) -> Result<()> {
     if a.scale_only {
         return diagnosis_at_scale(a.seed);
     }
+    if a.growth_only {
+        return super::growth::run(&dir, a.seed);
+    }
     println!(
         "{:>9} {:>9} {:>7} {:>10} {:>9} {:>10} {:>9}",
         "poses", "rows", "iters", "time (s)", "µs/pose", "1 thread", "peak MB"
@@ -102,6 +112,7 @@ pub fn run(a: &CalibrationArgs) -> Result<()> {
     setups(&dir, a.seed)?;
     diagnosis(a.seed)?;
     diagnosis_at_scale(a.seed)?;
+    super::growth::run(&dir, a.seed)?;
     if let Some(path) = smallest {
         scipy_baseline(&path)?;
     }
