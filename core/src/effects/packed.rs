@@ -52,13 +52,12 @@ impl Packed {
             self.starts.push(0);
         }
         self.index.push(k);
-        let fields = d
-            .dp
-            .iter()
-            .chain(&d.dq)
-            .chain(d.dm.iter())
-            .chain([&d.dpsi, &d.dk])
-            .enumerate();
+        let fields =
+            d.dp.iter()
+                .chain(&d.dq)
+                .chain(d.dm.iter())
+                .chain([&d.dpsi, &d.dk])
+                .enumerate();
         for (f, &v) in fields {
             if v.to_bits() != 0 {
                 // DK + 1 = 37 fields: an index fits a byte

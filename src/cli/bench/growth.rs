@@ -96,16 +96,30 @@ pub fn run(dir: &Path, seed: u64) -> Result<()> {
         "\nthe diagnosis's growth with the rows ({PER_SETUP} random-target self-calibration \
          poses per setup, nothing hidden, 20-24 °C; whole processes):\n  {:>6} {:>7} {:>9} \
          {:>8} | {:>9} {:>8} {:>6} {:>7} {:>7} | {:>9} {:>8} {:>6} {:>7}",
-        "setups", "poses", "calib s", "MB",
-        "no val s", "MB", "/ cal", "growth", "per row",
-        "val s", "MB", "/ cal", "growth"
+        "setups",
+        "poses",
+        "calib s",
+        "MB",
+        "no val s",
+        "MB",
+        "/ cal",
+        "growth",
+        "per row",
+        "val s",
+        "MB",
+        "/ cal",
+        "growth"
     );
     let mut last: Option<(f64, f64)> = None;
     let mut verdicts = Vec::new();
     for (n, (path, val_path)) in &files {
         let cal = child("calibrate", path, &[])?;
         let alone = child("diagnose", path, &[])?;
-        let with = child("diagnose", path, &["--validate".as_ref(), val_path.as_os_str()])?;
+        let with = child(
+            "diagnose",
+            path,
+            &["--validate".as_ref(), val_path.as_os_str()],
+        )?;
         let rows = 2 * n * PER_SETUP;
         let growth = |now: f64, before: Option<f64>| {
             before.map_or("-".to_owned(), |b| format!("{:.2}x", now / b))
