@@ -136,6 +136,41 @@ fn start_peer(
     cmd.spawn().expect("start fastdds_peer")
 }
 
+/// A keystore for a secured Fast DDS cell in `dir`: the cell peer's enclave
+/// `/cell/fastdds_peer` (the monitor's grant, writing the joint states and the thermometer),
+/// ingest allowed the thermometer, and each of `more` (enclave name, program) beside them.
+pub(crate) fn cell_keystore(dir: &Path, more: &[(&str, &str)]) -> std::path::PathBuf {
+    let keys = keystore(dir, &[]);
+    let k = keys.to_str().expect("utf-8 path");
+    let mut commands = vec![
+        vec![
+            "enclave",
+            k,
+            "/cell/fastdds_peer",
+            "--node",
+            "monitor",
+            "--publish",
+            "/joint_states",
+            "--publish",
+            THERMOMETER,
+        ],
+        vec!["permissions", k, "/rpkm/ingest", "--subscribe", THERMOMETER],
+    ];
+    commands.extend(
+        more.iter()
+            .map(|(name, node)| vec!["enclave", k, name, "--node", node]),
+    );
+    for args in commands {
+        let out = security(&args);
+        assert!(
+            out.status.success(),
+            "rpkm security {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    keys
+}
+
 #[test]
 fn a_fast_dds_cell_drives_the_stack_and_reads_its_estimates() {
     let _one = crate::fastdds_support::one_set();
@@ -167,29 +202,7 @@ fn a_fast_dds_cell_in_an_sros2_enclave_drives_the_secured_stack() {
     reference();
     let (dir, _) = launch_dir("js_fds");
     let script = demo_script(&dir);
-    let keys = keystore(&dir.0, &[]);
-    let k = keys.to_str().expect("utf-8 path");
-    for args in [
-        vec![
-            "enclave",
-            k,
-            "/cell/fastdds_peer",
-            "--node",
-            "monitor",
-            "--publish",
-            "/joint_states",
-            "--publish",
-            THERMOMETER,
-        ],
-        vec!["permissions", k, "/rpkm/ingest", "--subscribe", THERMOMETER],
-    ] {
-        let out = security(&args);
-        assert!(
-            out.status.success(),
-            "rpkm security {args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
+    let keys = cell_keystore(&dir.0, &[]);
     let stop = dir.path("outsider.stop");
     let outsider = start_peer(&bin, (domain, Path::new("-")), None, Some(&stop));
     let prefix = unique("jsfds");

@@ -28,12 +28,10 @@
 //! takes seconds. Every call has 60 s; the peer stops at the first one not
 //! answered and the test names it.
 
-use crate::joint_states_support::{
-    campaign, cell, launch_dir, write_script, Observer, Script, THERMOMETER,
-};
+use crate::joint_states_support::{campaign, cell, launch_dir, write_script, Observer, Script};
 use crate::node_joint_states_fastdds::{fastdds_peer, peer_output};
 use crate::node_support::{rpkm, unique, Launch, Proc, TempDir};
-use crate::security_support::{env, keystore, security};
+use crate::security_support::env;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -372,30 +370,8 @@ fn a_fast_dds_client_in_an_sros2_enclave_activates_the_secured_estimator() {
     };
     let domain = "87";
     let (dir, _) = launch_dir("svc_fds");
-    let keys = keystore(&dir.0, &[]);
-    let k = keys.to_str().expect("utf-8 path");
-    for args in [
-        vec!["enclave", k, "/cell/fastdds_rpc", "--node", "cell"],
-        vec![
-            "enclave",
-            k,
-            "/cell/fastdds_peer",
-            "--node",
-            "monitor",
-            "--publish",
-            "/joint_states",
-            "--publish",
-            THERMOMETER,
-        ],
-        vec!["permissions", k, "/rpkm/ingest", "--subscribe", THERMOMETER],
-    ] {
-        let out = security(&args);
-        assert!(
-            out.status.success(),
-            "rpkm security {args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
+    let keys =
+        crate::node_joint_states_fastdds::cell_keystore(&dir.0, &[("/cell/fastdds_rpc", "cell")]);
     let prefix = unique("svcfds");
     let mut envs: Vec<(String, String)> = env(&keys, "Enforce");
     envs.push(("RPKM_IPC_PREFIX".into(), prefix));
