@@ -303,18 +303,7 @@ fn diagnosis(seed: u64) -> Result<()> {
 /// gain too small to matter must not be named at that size. In process, on every core.
 fn diagnosis_at_scale(seed: u64) -> Result<()> {
     use rpkm_core::design::random_setups;
-    let mut twin = Twin::new(TwinConfig {
-        seed,
-        effects: vec![(rpkm_twin::EffectKind::Thermal, 2.0)],
-        thermal: rpkm_twin::ThermalPhysics {
-            rods_per_k: 0.0,
-            frame_per_k: 0.0,
-            scales_per_k: 0.0,
-            reference_c: 22.0,
-            ..Default::default()
-        },
-        ..Default::default()
-    })?;
+    let mut twin = super::growth::still_machine(seed)?;
     let design = random_setups(Instrument::SelfCal, 1_000, 100, seed);
     let cal = twin.run(&design, "self, random targets")?;
     let val = twin.validation(100)?;

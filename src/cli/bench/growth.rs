@@ -29,9 +29,10 @@ struct Child {
     verdict: String,
 }
 
-/// The campaigns' files: the calibration campaign and its validation file.
-fn write_campaign(dir: &Path, seed: u64, setups: usize) -> Result<(PathBuf, PathBuf)> {
-    let mut twin = Twin::new(TwinConfig {
+/// The twin of a machine with nothing hidden whose temperature swings between 20 and 24 °C
+/// while nothing expands (the diagnosis benches' machine).
+pub(super) fn still_machine(seed: u64) -> Result<Twin> {
+    Ok(Twin::new(TwinConfig {
         seed,
         effects: vec![(rpkm_twin::EffectKind::Thermal, 2.0)],
         thermal: rpkm_twin::ThermalPhysics {
@@ -42,7 +43,12 @@ fn write_campaign(dir: &Path, seed: u64, setups: usize) -> Result<(PathBuf, Path
             ..Default::default()
         },
         ..Default::default()
-    })?;
+    })?)
+}
+
+/// The campaigns' files: the calibration campaign and its validation file.
+fn write_campaign(dir: &Path, seed: u64, setups: usize) -> Result<(PathBuf, PathBuf)> {
+    let mut twin = still_machine(seed)?;
     let design = random_setups(Instrument::SelfCal, setups, PER_SETUP, seed);
     let cal = twin.run(&design, "self, random targets")?;
     let val = twin.validation(VALIDATION)?;
