@@ -327,7 +327,7 @@ fn effect_spec(item: &Node) -> Result<(Spec, Places), Fault> {
     Ok((spec, places))
 }
 
-/// `params: {NAME: {unit: U, prior: σ, bounds: [lo, hi]}}`.
+/// `params: {NAME: {unit: U, prior: σ, bounds: [lo, hi], start: v}}`.
 fn params(v: &Node) -> Result<Vec<WrittenParam>, Fault> {
     let Node::Map(entries, _) = v else {
         return Err((
@@ -344,19 +344,20 @@ fn params(v: &Node) -> Result<Vec<WrittenParam>, Fault> {
                 format!("parameter `{name}`: expected {{unit: U, prior: σ}}"),
             ));
         };
-        let (mut unit, mut prior, mut bounds) = (None, None, None);
+        let (mut unit, mut prior, mut bounds, mut start) = (None, None, None, 0.0);
         for (fk, fv) in fields {
             match scalar(fk) {
                 Some("unit") => unit = Some(text(fv, "unit")?),
                 Some("prior") => prior = Some(number(fv, "prior")?),
                 Some("bounds") => bounds = Some(two_numbers(fv)?),
+                Some("start") => start = number(fv, "start")?,
                 _ => {
                     return Err((
                         fk.place(),
                         format!(
-                            "parameter `{name}`: unknown key {}: expected unit, prior, bounds",
-                            shown(fk)
-                        ),
+                        "parameter `{name}`: unknown key {}: expected unit, prior, bounds, start",
+                        shown(fk)
+                    ),
                     ))
                 }
             }
@@ -366,6 +367,7 @@ fn params(v: &Node) -> Result<Vec<WrittenParam>, Fault> {
             unit: unit.ok_or_else(|| missing("unit"))?,
             prior: prior.ok_or_else(|| missing("prior"))?,
             bounds,
+            start,
             name,
         });
     }

@@ -567,6 +567,14 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
         );
     }
     print_effects(&cal.effects);
+    for tau in calib::time_constants(cal) {
+        println!(
+            "{:<24} {}  (lag_{p} / alpha_{p}: positive where the thermometer lags the {p})",
+            tau.name,
+            crate::words::with_sigma(tau.value, tau.sigma, "s"),
+            p = tau.part
+        );
+    }
     println!(
         "\n{:<8} {:<14} {:>6} {:>12} {:>12}",
         "instr.", "direction", "rows", "RMS before", "RMS after"
@@ -627,11 +635,9 @@ fn print_effects(effects: &[calib::EffectEstimate]) {
             "{:<24} {}{}",
             format!("{}.{}", e.effect, e.name),
             crate::words::with_sigma(e.value, e.sigma, &e.unit),
-            if e.identified {
-                ""
-            } else {
-                "  (held: the campaign cannot tell it from the geometry)"
-            }
+            e.held
+                .as_ref()
+                .map_or(String::new(), |why| format!("  (not fitted: {why})"))
         );
     }
 }
@@ -666,6 +672,7 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
     });
     if !cal.effects.is_empty() {
         out["effects"] = json!(cal.effects);
+        out["time_constants"] = json!(calib::time_constants(cal));
     }
     // this process's own peak (the high-water mark of its memory since it started: a
     // parent's peak does not count, as it does in wait4's ru_maxrss after execve)

@@ -57,13 +57,16 @@ pub fn print_summary(campaign: &Campaign, d: &ModelDiagnosis) {
             d.model_effects.join(" + ")
         );
     }
-    for e in d.effect_values.iter().filter(|e| e.identified) {
-        println!(
-            "   {}.{} = {}",
-            e.effect,
-            e.name,
-            words::with_sigma(e.value, e.sigma, &e.unit)
-        );
+    for e in &d.effect_values {
+        match &e.held {
+            None => println!(
+                "   {}.{} = {}",
+                e.effect,
+                e.name,
+                words::with_sigma(e.value, e.sigma, &e.unit)
+            ),
+            Some(why) => println!("   {}.{}: not fitted: {why}", e.effect, e.name),
+        }
     }
     if let Some((n, of)) = d.determined {
         println!(

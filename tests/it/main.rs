@@ -34,6 +34,7 @@ mod cli_calibrate;
 mod cli_diagnose;
 mod cli_effects_file;
 mod cli_foreign;
+mod cli_lag;
 mod cli_plan;
 mod cli_scipy_baseline;
 mod dds_large_samples;

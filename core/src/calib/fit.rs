@@ -171,7 +171,8 @@ pub(super) fn check_finite(
     }
 }
 
-/// The effect parameters to start from (`theta0`, all zero when it is empty; any other
+/// The effect parameters to start from (`theta0`, each parameter's own start when it is
+/// empty, [`crate::effects::EffectParam::start`]: zero for most; any other
 /// length is an error), after checking that the options and the effects fit the campaign.
 pub(super) fn start_theta(
     campaign: &Campaign,
@@ -202,7 +203,7 @@ pub(super) fn start_theta(
         }
     }
     match theta0.len() {
-        0 => Ok(vec![0.0; effects.n_params()]),
+        0 => Ok(effects.layout().iter().map(|s| s.param.start).collect()),
         n if n == effects.n_params() => Ok(theta0.to_vec()),
         given => Err(CalibrationError::StartThetaLength {
             given,
@@ -341,6 +342,7 @@ impl Step1Report {
                     sigma: free.map_or(0.0, |f| post.sig_theta[f] * s2.sqrt()),
                     observability: plan.observability[k],
                     identified: free.is_some(),
+                    held: plan.why_held[k].clone(),
                     prior: slot.param.prior,
                     allowed: slot.param.allowed(),
                 }

@@ -4,6 +4,7 @@
 //! procedure of the forward instruments.
 
 mod fit;
+mod lags;
 mod lm;
 mod plan;
 mod progress;
@@ -17,6 +18,7 @@ pub mod tie;
 mod types;
 mod uncertainty;
 
+pub use lags::{time_constants, TimeConstant};
 pub use progress::{Flow, Observer, Progress};
 pub use report::{gain, rms};
 pub use request::{Noise, Request};

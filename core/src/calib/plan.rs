@@ -36,6 +36,8 @@ pub(super) struct Plan {
     pub(super) free_theta: Vec<usize>,
     pub(super) h_theta: DVector<f64>,
     pub(super) observability: Vec<f64>,
+    /// Why each effect parameter is not fitted (None: it is).
+    pub(super) why_held: Vec<Option<String>>,
     /// Rows at the start (the cap on outliers is a share of them).
     pub(super) n_rows0: usize,
     /// Their RMS table per piece: the report's "before" (taken once it is used).
@@ -77,14 +79,35 @@ impl Plan {
         }
         let layout = pb.effects.layout();
         let observability = effect_observability(&start.columns, &ids, &opts.links, pb.effects);
-        let free_theta: Vec<usize> = (0..pb.effects.n_params())
-            .filter(|&k| !pb.effects.is_held(k))
-            .filter(|&k| {
-                let (frac, signal) = observability[k];
-                frac >= MIN_EFFECT_OBSERVABILITY
-                    && signal * layout[k].param.prior * opts.noise_inflation.max(1.0)
-                        >= MIN_EFFECT_SIGNAL
+        let why_held: Vec<Option<String>> = (0..pb.effects.n_params())
+            .map(|k| {
+                if pb.effects.is_held(k) {
+                    return Some("held at zero: a part the data do not support".to_owned());
+                }
+                let (frac, signal, whole) = observability[k];
+                let param = &layout[k].param;
+                let size = signal * param.prior * opts.noise_inflation.max(1.0);
+                if !(whole > 0.0) {
+                    Some(format!(
+                        "no sensitivity at its start {} {} (give it a start: where it moves \
+                         the model)",
+                        param.start, param.unit
+                    ))
+                } else if frac < MIN_EFFECT_OBSERVABILITY {
+                    Some("the campaign cannot tell it from the geometry".to_owned())
+                } else if size < MIN_EFFECT_SIGNAL {
+                    Some(format!(
+                        "at its prior {} {} it would move the rows by {size:.2} σ beyond what \
+                         the geometry absorbs, less than one",
+                        param.prior, param.unit
+                    ))
+                } else {
+                    None
+                }
             })
+            .collect();
+        let free_theta: Vec<usize> = (0..pb.effects.n_params())
+            .filter(|&k| why_held[k].is_none())
             .collect();
         let h_theta = DVector::from_iterator(
             free_theta.len(),
@@ -107,6 +130,7 @@ impl Plan {
             free_theta,
             h_theta,
             observability: observability.iter().map(|o| o.0).collect(),
+            why_held,
             n_rows0: start.n_rows,
             before: start.before,
         })

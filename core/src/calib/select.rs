@@ -146,13 +146,13 @@ pub(super) fn select_geometric(
 /// For each effect parameter, the fraction of its weighted column that lies outside the span
 /// of the identified geometric columns and of the effect columns before it (Gram-Schmidt in
 /// layout order: 1 = fully distinct, 0 = a geometric error in disguise), and the norm of that
-/// outside part (σ units per unit of the parameter).
+/// outside part (σ units per unit of the parameter), and the norm of the whole column.
 pub(super) fn effect_observability(
     columns: &Columns,
     ids: &[usize],
     links: &[Link],
     effects: &EffectSet,
-) -> Vec<(f64, f64)> {
+) -> Vec<(f64, f64, f64)> {
     let n = effects.n_params();
     if n == 0 {
         return Vec::new();
@@ -161,10 +161,10 @@ pub(super) fn effect_observability(
     let all: Vec<usize> = (0..n).collect();
     let jt = columns.theta(&all);
     let mut basis: Vec<DVector<f64>> = Vec::new();
-    let add = |v: DVector<f64>, basis: &mut Vec<DVector<f64>>| -> (f64, f64) {
+    let add = |v: DVector<f64>, basis: &mut Vec<DVector<f64>>| -> (f64, f64, f64) {
         let norm0 = v.norm();
         if !(norm0 > 0.0) {
-            return (0.0, 0.0);
+            return (0.0, 0.0, 0.0);
         }
         let mut w = v;
         // twice: classical Gram-Schmidt loses orthogonality on near-dependent columns
@@ -178,7 +178,7 @@ pub(super) fn effect_observability(
         if rest / norm0 > 1e-12 {
             basis.push(w.unscale(rest));
         }
-        (rest / norm0, rest)
+        (rest / norm0, rest, norm0)
     };
     for k in 0..jg.ncols() {
         add(jg.column(k).into_owned(), &mut basis);

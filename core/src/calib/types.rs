@@ -259,6 +259,9 @@ pub struct EffectEstimate {
     pub observability: f64,
     /// Whether it was identified (false: held, unobservable with this campaign).
     pub identified: bool,
+    /// Why it was not identified, in a sentence (`no sensitivity at its start 0 s ...`);
+    /// None where it was.
+    pub held: Option<String>,
     /// The plausible magnitude the effect declares for it (its unit).
     pub prior: f64,
     /// The values the physics allows ([`crate::effects::EffectParam::allowed`]).

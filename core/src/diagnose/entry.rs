@@ -7,7 +7,7 @@
 use super::cross;
 use super::gain::{relevant, relevant_beyond, wald_beyond, wald_p, Gain, PRACTICAL_SIZE};
 use super::sparse;
-use super::trials::{finish_with, warm_theta, SCREEN_P};
+use super::trials::{finish_with, warm_theta_among, SCREEN_P};
 use super::types::{FitError, Fitted, Judged, Outcome, Prediction};
 use super::validation::Validation;
 use crate::calib::{self, EffectEstimate, Request};
@@ -257,14 +257,10 @@ impl<'j> Judge<'j> {
         let with = self.model_of(added, swap);
         let start = Params::nominal();
         let set = EffectSet::bind(&with, self.campaign, &start)?;
-        let mut theta = warm_theta(&set, &self.base.fit);
-        for w in warm {
-            for (t, v) in theta.iter_mut().zip(warm_theta(&set, &w.fit)) {
-                if *t == 0.0 {
-                    *t = v;
-                }
-            }
-        }
+        let fits: Vec<&super::types::Fit> = std::iter::once(&self.base.fit)
+            .chain(warm.iter().map(|w| &w.fit))
+            .collect();
+        let theta = warm_theta_among(&set, &fits);
         let (cal, _) = calib::calibrate(&Request {
             effects: &set,
             warm: Some(calib::WarmStart {

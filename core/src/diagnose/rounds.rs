@@ -146,7 +146,8 @@ fn rounds(
 }
 
 /// The effects a diagnosis tries: the library's and the offered, less those whose family is
-/// in the model in any form, and the parallel-holder under model 29 (which has its
+/// in the model in any form, those that refine a family not in it ([`Effect::beside`]:
+/// `thermal_lag` without `thermal`), and the parallel-holder under model 29 (which has its
 /// parameters already).
 fn candidates_of<'a>(
     library: &'a [Box<dyn Effect>],
@@ -163,6 +164,7 @@ fn candidates_of<'a>(
         .map(std::convert::AsRef::as_ref)
         .chain(offered.iter().copied())
         .filter(|e| !in_families.contains(&effects::family_of(e.name())))
+        .filter(|e| e.beside().is_none_or(|f| in_families.contains(&f)))
         .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
         .collect()
 }

@@ -310,18 +310,32 @@ fn screen_p_value(base: &Fit, screened: &Fit) -> f64 {
 
 /// The effect parameters of a fit (`base`) laid out for `set`: each slot takes the value of
 /// the slot of the same family and name (`thermal:rods`'s alpha_rods starts at `thermal`'s),
-/// a slot the fit does not have starts at zero.
+/// a slot the fit does not have starts at its parameter's start (zero for most).
 pub(crate) fn warm_theta(set: &EffectSet, base: &Fit) -> Vec<f64> {
+    warm_theta_among(set, &[base])
+}
+
+/// [`warm_theta`] from the first of `fits` where the slot is not zero (zero where each fit
+/// that has it holds it there, its start where none has it).
+pub(crate) fn warm_theta_among(set: &EffectSet, fits: &[&Fit]) -> Vec<f64> {
     set.layout()
         .iter()
         .map(|slot| {
-            base.effect_params
+            let values: Vec<f64> = fits
                 .iter()
-                .find(|e| {
-                    effects::family_of(&e.effect) == effects::family_of(&slot.effect)
-                        && e.name == slot.param.name
+                .filter_map(|fit| {
+                    fit.effect_params.iter().find(|e| {
+                        effects::family_of(&e.effect) == effects::family_of(&slot.effect)
+                            && e.name == slot.param.name
+                    })
                 })
-                .map_or(0.0, |e| e.value)
+                .map(|e| e.value)
+                .collect();
+            match values.iter().find(|v| **v != 0.0) {
+                Some(v) => *v,
+                None if values.is_empty() => slot.param.start,
+                None => 0.0,
+            }
         })
         .collect()
 }

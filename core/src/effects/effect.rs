@@ -29,6 +29,8 @@ pub struct EffectParam {
     /// compliance that is not negative): an estimate clearly outside absorbs something else.
     /// None: within ten times [`EffectParam::prior`] either way ([`EffectParam::allowed`]).
     pub range: Option<(f64, f64)>,
+    /// Where a fit starts, in `unit` (0 for most: no effect).
+    pub start: f64,
 }
 
 impl EffectParam {
@@ -39,7 +41,14 @@ impl EffectParam {
             unit: unit.into(),
             prior,
             range: None,
+            start: 0.0,
         }
+    }
+
+    /// The same starting at `start` (its unit).
+    #[must_use]
+    pub fn starting(self, start: f64) -> EffectParam {
+        EffectParam { start, ..self }
     }
 
     /// The same with the values the physics allows.
@@ -98,6 +107,11 @@ pub trait Effect: Send + Sync {
     /// only where the data need it (`diagnose::settle`). None, the default, for most.
     fn refinements(&self) -> Vec<Box<dyn Effect>> {
         Vec::new()
+    }
+    /// The family this effect refines (`thermal` for `thermal_lag`): the diagnosis tries it
+    /// only where that family is in the model. None, the default, for an effect of its own.
+    fn beside(&self) -> Option<&'static str> {
+        None
     }
     /// Bind the effect to a campaign, with parameters `p` for the geometry it needs to read
     /// its covariates (rod directions for forces): per-pose data are computed once here.

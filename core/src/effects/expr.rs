@@ -9,7 +9,11 @@
 //!
 //! Grammar: numbers (`2`, `0.5`, `1e-3`), names, `pi`, `+ - * / ^` (`^` binds tighter than a
 //! sign and to the right: `-a^2` is `-(a^2)`), parentheses and the functions `sin cos exp ln
-//! sqrt abs sign tanh` (one argument) and `min max` (two).
+//! sqrt abs sign tanh` (one argument) and `min max` (two). Two more read a covariate along
+//! the campaign's time rather than the row alone ([`super::memory`]): `rate(NAME)`, the
+//! column's rate per second, and `lag(NAME, TAU)` with `TAU` a parameter or a number
+//! (seconds). The resolver is asked for them by their text (`rate(temp_machine)`,
+//! `lag(temp_machine,tau)`).
 
 /// A function an expression may call.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -56,6 +60,9 @@ pub enum Name {
     Var(usize),
     /// Parameter `k` of the effect.
     Param(usize),
+    /// Lag `slot` of the effect (`lag(NAME, TAU)`), its time constant parameter `tau` (None:
+    /// a number).
+    Lag { slot: usize, tau: Option<usize> },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -63,6 +70,7 @@ enum Op {
     Const(f64),
     Var(usize),
     Param(usize),
+    Lag { slot: usize, tau: Option<usize> },
     Neg,
     Add,
     Sub,
@@ -310,7 +318,7 @@ impl Parser<'_> {
             match (self.resolve)(name) {
                 Some(Name::Var(k)) => Op::Var(k),
                 Some(Name::Param(k)) => Op::Param(k),
-                None => {
+                Some(Name::Lag { .. }) | None => {
                     return Err(ExprError {
                         at,
                         kind: ExprErrorKind::UnknownName(name.to_owned()),
@@ -323,6 +331,9 @@ impl Parser<'_> {
     }
 
     fn call(&mut self, name: &str, at: usize) -> Result<(), ExprError> {
+        if name == "rate" || name == "lag" {
+            return self.memory(name, at);
+        }
         let Some(func) = Func::ALL.iter().find(|f| f.0 == name).map(|f| f.1) else {
             return Err(ExprError {
                 at,
@@ -355,12 +366,65 @@ impl Parser<'_> {
         self.ops.push(Op::Call(func));
         Ok(())
     }
+
+    /// `rate(NAME)` or `lag(NAME, TAU)`, the current token the `(`.
+    fn memory(&mut self, name: &str, at: usize) -> Result<(), ExprError> {
+        self.advance()?;
+        let Token::Ident(column) = self.token.clone() else {
+            return Err(self.error(ExprErrorKind::Syntax(format!(
+                "`{name}` reads a covariate column by its name, found {}",
+                describe(&self.token)
+            ))));
+        };
+        self.advance()?;
+        let text = if name == "lag" {
+            self.expect(',')?;
+            let negative = self.token == Token::Sym('-');
+            if negative {
+                self.advance()?;
+            }
+            let tau = match self.token.clone() {
+                Token::Ident(p) if !negative => p,
+                Token::Num(v) => format!("{}", if negative { -v } else { v }),
+                other => {
+                    return Err(self.error(ExprErrorKind::Syntax(format!(
+                        "`lag`'s time constant is a parameter or a number of seconds, found {}",
+                        describe(&other)
+                    ))))
+                }
+            };
+            self.advance()?;
+            format!("lag({column},{tau})")
+        } else {
+            format!("rate({column})")
+        };
+        self.expect(')')?;
+        let op = match (self.resolve)(&text) {
+            Some(Name::Var(k)) => Op::Var(k),
+            Some(Name::Lag { slot, tau }) => Op::Lag { slot, tau },
+            _ => {
+                return Err(ExprError {
+                    at,
+                    kind: ExprErrorKind::UnknownName(text),
+                })
+            }
+        };
+        self.ops.push(op);
+        Ok(())
+    }
 }
 
 impl Program {
-    /// The value at variables `vars` and parameters `theta`, its gradient by the parameters
-    /// written to `grad` (`theta.len()` entries). `stack` is scratch space kept between calls.
-    pub fn eval(&self, vars: &[f64], theta: &[f64], grad: &mut [f64], stack: &mut Vec<f64>) -> f64 {
+    /// The value at variables `vars`, lags `lags` (value and derivative by its time constant,
+    /// per slot, at `theta`) and parameters `theta`, its gradient by the parameters written to
+    /// `grad` (`theta.len()` entries). `stack` is scratch space kept between calls.
+    pub fn eval(
+        &self,
+        (vars, lags): (&[f64], &[(f64, f64)]),
+        theta: &[f64],
+        grad: &mut [f64],
+        stack: &mut Vec<f64>,
+    ) -> f64 {
         // each stack entry: the value, then its gradient
         let w = 1 + theta.len();
         stack.clear();
@@ -369,6 +433,14 @@ impl Program {
                 Op::Const(c) => push(stack, w, c, None),
                 Op::Var(k) => push(stack, w, vars[k], None),
                 Op::Param(k) => push(stack, w, theta[k], Some(k)),
+                Op::Lag { slot, tau } => {
+                    let (value, slope) = lags[slot];
+                    push(stack, w, value, None);
+                    if let Some(k) = tau {
+                        let n = stack.len();
+                        stack[n - w + 1 + k] = slope;
+                    }
+                }
                 Op::Neg => {
                     let n = stack.len();
                     stack[n - w..].iter_mut().for_each(|v| *v = -*v);
@@ -475,7 +547,7 @@ mod tests {
     fn eval(text: &str, vars: &[f64], theta: &[f64]) -> (f64, Vec<f64>) {
         let p = parse(text, &names).expect("parses");
         let mut g = vec![0.0; theta.len()];
-        let v = p.eval(vars, theta, &mut g, &mut Vec::new());
+        let v = p.eval((vars, &[]), theta, &mut g, &mut Vec::new());
         (v, g)
     }
 

@@ -149,6 +149,12 @@ impl LiveEffects {
                     found: theta.len(),
                 });
             }
+            if let Some(lag) = w.lags().first() {
+                return Err(LiveError::NotLive {
+                    effect: name,
+                    variable: format!("lag({}, ..)", lag.column),
+                });
+            }
             let sources = w
                 .variables()
                 .iter()
@@ -208,7 +214,7 @@ impl LiveEffects {
                 if matches!(target, Target::Dx | Target::Dy | Target::Dpsi) {
                     continue;
                 }
-                let v = program.eval(&sc.vars, &a.theta, &mut sc.grad, &mut sc.stack);
+                let v = program.eval((&sc.vars, &[]), &a.theta, &mut sc.grad, &mut sc.stack);
                 written::add(&mut out, *target, v);
             }
         }

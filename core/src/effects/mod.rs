@@ -26,6 +26,7 @@ pub mod expr;
 mod guide_straightness;
 mod instrument_alignment;
 pub mod live;
+pub mod memory;
 mod packed;
 mod parallelogram;
 mod preload_elastic;
@@ -57,6 +58,7 @@ pub fn library() -> Vec<Box<dyn Effect>> {
         Box::new(Parallelogram),
         Box::new(PreloadElastic::default()),
         Box::new(Thermal::default()),
+        Box::new(Thermal::lag()),
         Box::new(EncoderScale),
         Box::new(GuideStraightness),
         Box::new(InstrumentAlignment),

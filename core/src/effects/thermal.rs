@@ -15,8 +15,19 @@
 //! the parts to the data (a campaign of a tracker and self-calibration cannot tell the rods'
 //! expansion from the frame's and the scales', and the three fitted together come out as
 //! numbers no material has), `thermal:rods` or `thermal:rods+scales` pins them.
+//!
+//! `thermal_lag` is the same three parts read through their thermometers' rate: a
+//! thermometer that lags the part it stands for by a first-order time constant τ reads
+//! `T_part − τ · dT/dt`, so the part's strain is `α · (T − T_ref) + α·τ · dT/dt`. Its
+//! parameters are the products `lag_PART` = α·τ (ppm·s/K), linear in the rows like the
+//! coefficients (a time constant of its own would move nothing while α is zero); beside
+//! `thermal`, τ = lag/α. The rate is the thermometer's along the campaign's time
+//! ([`super::memory::rate`]). A part that lags its thermometer has a negative τ (to first
+//! order in τ; a written `lag(temp_machine, tau)` is exact both ways, docs/effects.md). It
+//! is a candidate only beside `thermal` ([`Effect::beside`]).
 
 use super::effect::{covariate_column, Bound, Delta, Effect, EffectParam, NotApplicable};
+use super::memory::{self, Timeline};
 use crate::campaign::Campaign;
 use crate::params::{Params, D1, D2, RODS};
 
@@ -36,6 +47,17 @@ pub struct Thermal {
     open: bool,
     /// `thermal`, or `thermal:rods+frame` with pinned parts.
     name: String,
+    /// What the strain follows: the temperature, or its rate (`thermal_lag`).
+    reads: Reads,
+}
+
+/// What a [`Thermal`]'s strain follows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reads {
+    /// α · (T − T_ref): `thermal`.
+    Temperature,
+    /// α·τ · dT/dt: `thermal_lag`.
+    Rate,
 }
 
 impl Default for Thermal {
@@ -45,11 +67,36 @@ impl Default for Thermal {
             parts: (0..PARTS.len()).collect(),
             open: true,
             name: NAME.to_owned(),
+            reads: Reads::Temperature,
+        }
+    }
+}
+
+impl Thermal {
+    /// `thermal_lag`, its parts left to the data.
+    pub fn lag() -> Thermal {
+        Thermal {
+            name: LAG_NAME.to_owned(),
+            reads: Reads::Rate,
+            ..Thermal::default()
+        }
+    }
+
+    fn family(&self) -> &'static str {
+        match self.reads {
+            Reads::Temperature => NAME,
+            Reads::Rate => LAG_NAME,
         }
     }
 }
 
 const NAME: &str = "thermal";
+const LAG_NAME: &str = "thermal_lag";
+
+/// The lag's product α·τ: its scale in the fit (10 ppm/K for ten minutes), and what real
+/// coefficients and lags of minutes to four hours make, either way.
+const LAG_PRIOR: f64 = 6000.0;
+const LAG_RANGE: f64 = 40.0 * 4.0 * 3600.0;
 
 /// The three parts: name, parameter, and the temperature column each reads when the campaign
 /// has it (the scales read their guide's).
@@ -69,8 +116,20 @@ impl Effect for Thermal {
         &self.name
     }
     fn summary(&self) -> &'static str {
-        "thermal expansion of rods, frame (guide positions) and scales, each with its own \
-         coefficient and temperature"
+        match self.reads {
+            Reads::Temperature => {
+                "thermal expansion of rods, frame (guide positions) and scales, each with its \
+                 own coefficient and temperature"
+            }
+            Reads::Rate => {
+                "thermometers that lag (or lead) the rods, frame and scales they stand for: \
+                 the expansion of each part's temperature rate times its coefficient and lag \
+                 (beside thermal)"
+            }
+        }
+    }
+    fn beside(&self) -> Option<&'static str> {
+        (self.reads == Reads::Rate).then_some(NAME)
     }
     fn covariates(&self) -> &'static [&'static str] {
         &[COVARIATE]
@@ -88,9 +147,10 @@ impl Effect for Thermal {
         let names: Vec<&str> = parts.iter().map(|&k| PARTS[k].0).collect();
         Some(Box::new(Thermal {
             reference_c: self.reference_c,
-            name: format!("{NAME}:{}", names.join("+")),
+            name: format!("{}:{}", self.family(), names.join("+")),
             parts,
             open: false,
+            reads: self.reads,
         }))
     }
     fn open_family(&self) -> bool {
@@ -104,9 +164,15 @@ impl Effect for Thermal {
         let params = self
             .parts
             .iter()
-            .map(|&k| {
-                let (lo, hi) = ALPHA_RANGE_PPM_PER_K;
-                EffectParam::new(PARTS[k].1, "ppm/K", 10.0).within(lo, hi)
+            .map(|&k| match self.reads {
+                Reads::Temperature => {
+                    let (lo, hi) = ALPHA_RANGE_PPM_PER_K;
+                    EffectParam::new(PARTS[k].1, "ppm/K", 10.0).within(lo, hi)
+                }
+                Reads::Rate => {
+                    let name = PARTS[k].1.replace("alpha", "lag");
+                    EffectParam::new(name, "ppm·s/K", LAG_PRIOR).within(-LAG_RANGE, LAG_RANGE)
+                }
             })
             .collect();
         Ok(Box::new(BoundThermal {
@@ -127,8 +193,29 @@ impl Effect for Thermal {
 
 impl Thermal {
     /// (T − T_ref) · 1e-6 per pose from column `name`, or `temp_machine` without it: the
-    /// strain per ppm/K.
+    /// strain per ppm/K; for `thermal_lag`, dT/dt · 1e-6, the strain per ppm·s/K.
     fn strain_column(&self, campaign: &Campaign, name: &str) -> Result<Vec<f64>, NotApplicable> {
+        let temps = self.temperatures(campaign, name)?;
+        if self.reads == Reads::Temperature {
+            return Ok(temps
+                .iter()
+                .map(|t| (t - self.reference_c) * 1e-6)
+                .collect());
+        }
+        let t: Vec<f64> = campaign.poses.iter().map(|p| p.t).collect();
+        let line = Timeline::new(&t).map_err(|e| NotApplicable {
+            effect: self.name.clone(),
+            reason: format!("the thermometers' rate {e} in {}", campaign.source),
+        })?;
+        Ok(memory::rate(&line, &temps)
+            .iter()
+            .map(|r| r * 1e-6)
+            .collect())
+    }
+
+    /// The temperature part `name` reads at every pose (`temp_machine` where the campaign
+    /// has no column `name`), °C.
+    fn temperatures(&self, campaign: &Campaign, name: &str) -> Result<Vec<f64>, NotApplicable> {
         let column = if campaign.covariate_index(name).is_some() {
             name
         } else {
@@ -139,14 +226,13 @@ impl Thermal {
             .iter()
             .enumerate()
             .map(|(i, t)| {
-                t.map(|t| (t - self.reference_c) * 1e-6)
-                    .ok_or_else(|| NotApplicable {
-                        effect: "thermal".into(),
-                        reason: format!(
-                            "{}:{}: no {column} value",
-                            campaign.source, campaign.poses[i].line
-                        ),
-                    })
+                t.ok_or_else(|| NotApplicable {
+                    effect: self.family().into(),
+                    reason: format!(
+                        "{}:{}: no {column} value",
+                        campaign.source, campaign.poses[i].line
+                    ),
+                })
             })
             .collect()
     }

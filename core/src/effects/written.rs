@@ -8,11 +8,13 @@
 //! mm), the recorded platform angle (`dpsi`, true minus recorded, rad) and any geometric
 //! parameter at the pose (`dp.l3`, mm or rad). What it may read
 //! ([`VARIABLES`]): the pose's carrier positions and forces, time, the derived covariates
-//! (`dir_q4`, `travel_q4`, `t_run`), the campaign's `temp_*` and other covariate columns and
-//! the nominal TCP (`x`, `y`).
+//! (`dir_q4`, `travel_q4`, `t_run`), the campaign's `temp_*` and other covariate columns, the
+//! nominal TCP (`x`, `y`), and a covariate's rate and lag along the campaign's time
+//! (`rate(temp_machine)`, `lag(temp_machine, tau)`: [`super::memory`]).
 
 use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use super::expr::{self, ExprError, Name, Program};
+use super::memory::{self, Lagged, Timeline};
 use crate::campaign::{Campaign, Instrument};
 use crate::geometry;
 use crate::params::{self, Model, Params};
@@ -50,6 +52,9 @@ pub struct WrittenParam {
     pub prior: f64,
     /// Plausible range, in `unit`: the expressions must be finite over it.
     pub bounds: Option<(f64, f64)>,
+    /// Where the fit starts, in `unit` (0 unless written: a parameter the data do not move
+    /// there, a time constant multiplying an amplitude that starts at 0, needs another).
+    pub start: f64,
 }
 
 /// An input of the pose an expression changes.
@@ -140,7 +145,18 @@ pub struct Written {
     targets: Vec<(Target, Program)>,
     /// The variables the expressions read, in the programs' `Name::Var` order.
     vars: Vec<String>,
+    /// The lags the expressions read, in the programs' `Name::Lag` order.
+    lags: Vec<LagSlot>,
     instruments: Vec<Instrument>,
+}
+
+/// One `lag(NAME, TAU)` of a written effect.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LagSlot {
+    /// The column lagged.
+    pub column: String,
+    /// Its time constant: parameter `k`, or seconds.
+    pub tau: Result<usize, f64>,
 }
 
 /// Whether `name` is a word: letters, digits, `_`, not starting with a digit.
@@ -152,9 +168,17 @@ fn is_word(name: &str) -> bool {
 }
 
 /// Whether `name` may be a variable: one of [`VARIABLES`], a `temp_*` column or one of the
-/// campaign's covariate columns `columns`.
+/// campaign's covariate columns `columns`, or the rate of one (`rate(temp_machine)`).
 fn is_variable(name: &str, columns: &[String]) -> bool {
-    VARIABLES.contains(&name) || name.starts_with("temp_") || columns.iter().any(|c| c == name)
+    if let Some(inner) = name.strip_prefix("rate(").and_then(|n| n.strip_suffix(')')) {
+        return is_column(inner, columns);
+    }
+    VARIABLES.contains(&name) || is_column(name, columns)
+}
+
+/// Whether `name` is a covariate column a campaign may have.
+fn is_column(name: &str, columns: &[String]) -> bool {
+    name.starts_with("temp_") || columns.iter().any(|c| c == name)
 }
 
 impl Written {
@@ -169,9 +193,34 @@ impl Written {
             return Err(SpecError::NoTarget);
         }
         let vars = std::cell::RefCell::new(Vec::<String>::new());
+        let lags = std::cell::RefCell::new(Vec::<LagSlot>::new());
         let resolve = |name: &str| {
             if let Some(k) = spec.params.iter().position(|p| p.name == name) {
                 return Some(Name::Param(k));
+            }
+            if let Some(args) = name.strip_prefix("lag(").and_then(|n| n.strip_suffix(')')) {
+                let (column, tau) = args.split_once(',')?;
+                let param = spec.params.iter().position(|p| p.name == tau);
+                let tau = match param {
+                    Some(k) => Ok(k),
+                    None => Err(tau.parse::<f64>().ok().filter(|v| v.is_finite())?),
+                };
+                if !is_column(column, columns) {
+                    return None;
+                }
+                let slot = LagSlot {
+                    column: column.to_owned(),
+                    tau,
+                };
+                let mut lags = lags.borrow_mut();
+                let k = lags.iter().position(|l| *l == slot).unwrap_or_else(|| {
+                    lags.push(slot);
+                    lags.len() - 1
+                });
+                return Some(Name::Lag {
+                    slot: k,
+                    tau: param,
+                });
             }
             if !is_variable(name, columns) {
                 return None;
@@ -202,6 +251,7 @@ impl Written {
         let instruments = instruments(&spec, &targets)?;
         Ok(Written {
             vars: vars.into_inner(),
+            lags: lags.into_inner(),
             spec,
             targets,
             instruments,
@@ -213,18 +263,18 @@ impl Written {
         &self.spec
     }
 
-    /// Each parameter value set to test an expression's finiteness with: zero (where a fit
-    /// starts), each parameter at ± its prior and at its bounds.
+    /// Each parameter value set to test an expression's finiteness with: the starts (where a
+    /// fit starts), each parameter at its start ± its prior and at its bounds.
     fn probes(&self) -> Vec<Vec<f64>> {
-        let n = self.spec.params.len();
-        let mut out = vec![vec![0.0; n]];
+        let start: Vec<f64> = self.spec.params.iter().map(|p| p.start).collect();
+        let mut out = vec![start.clone()];
         for (k, p) in self.spec.params.iter().enumerate() {
-            let mut values = vec![p.prior, -p.prior];
+            let mut values = vec![p.start + p.prior, p.start - p.prior];
             if let Some((lo, hi)) = p.bounds {
                 values.extend([lo, hi]);
             }
             for v in values {
-                let mut theta = vec![0.0; n];
+                let mut theta = start.clone();
                 theta[k] = v;
                 out.push(theta);
             }
@@ -266,6 +316,15 @@ fn check_params(params: &[WrittenParam], columns: &[String]) -> Result<(), SpecE
                     "bounds [{lo}, {hi}]: expected two numbers, the lower first"
                 )));
             }
+            if !(lo..=hi).contains(&p.start) {
+                return Err(bad(format!(
+                    "start {} lies outside its bounds [{lo}, {hi}]",
+                    p.start
+                )));
+            }
+        }
+        if !p.start.is_finite() {
+            return Err(bad(format!("start {} is not a number", p.start)));
         }
     }
     Ok(())
@@ -346,13 +405,30 @@ fn variables(campaign: &Campaign, names: &[String]) -> Result<Vec<Vec<f64>>, Not
                     .map(|p| if f { p.f[a] } else { p.q[a] })
                     .collect()
             }
-            other => covariate(campaign, other)?,
+            other => match other
+                .strip_prefix("rate(")
+                .and_then(|n| n.strip_suffix(')'))
+            {
+                Some(inner) => {
+                    memory::rate(&timeline(campaign, other)?, &covariate(campaign, inner)?)
+                }
+                None => covariate(campaign, other)?,
+            },
         };
         columns.push(column);
     }
     Ok((0..n)
         .map(|i| columns.iter().map(|c| c[i]).collect())
         .collect())
+}
+
+/// The campaign's rows in time order, for `what` (`rate(temp_machine)`) that needs them.
+fn timeline(campaign: &Campaign, what: &str) -> Result<Timeline, NotApplicable> {
+    let t: Vec<f64> = campaign.poses.iter().map(|p| p.t).collect();
+    Timeline::new(&t).map_err(|e| NotApplicable {
+        effect: String::new(),
+        reason: format!("`{what}` {e} in {}", campaign.source),
+    })
 }
 
 /// A covariate column with a value at every pose.
@@ -403,8 +479,10 @@ impl Written {
                     unit: p.unit.clone(),
                     prior: p.prior,
                     range: p.bounds,
+                    start: p.start,
                 })
                 .collect(),
+            lags: self.lagged(campaign).map_err(BindError::Variables)?,
             targets: self.targets.clone(),
             applies: campaign
                 .poses
@@ -417,13 +495,32 @@ impl Written {
         Ok(bound)
     }
 
+    /// Each lag slot's column, ready to be evaluated at any time constant.
+    fn lagged(&self, campaign: &Campaign) -> Result<Vec<LagColumn>, NotApplicable> {
+        self.lags
+            .iter()
+            .map(|slot| {
+                let what = format!("lag({}, ..)", slot.column);
+                let bad = |e: NotApplicable| NotApplicable {
+                    effect: self.spec.name.clone(),
+                    reason: e.reason,
+                };
+                let line = timeline(campaign, &what).map_err(bad)?;
+                let column = covariate(campaign, &slot.column).map_err(bad)?;
+                Ok((Lagged::new(line, &column), slot.tau))
+            })
+            .collect()
+    }
+
     fn check_finite(&self, bound: &BoundWritten, campaign: &Campaign) -> Result<(), BindError> {
         let mut stack = Vec::new();
         let mut grad = vec![0.0; bound.params.len()];
+        let mut lags = Vec::new();
         for theta in self.probes() {
             for (i, pose) in campaign.poses.iter().enumerate() {
+                bound.lag_values(i, &theta, &mut lags);
                 for (index, (_, program)) in bound.targets.iter().enumerate() {
-                    let v = program.eval(&bound.vars[i], &theta, &mut grad, &mut stack);
+                    let v = program.eval((&bound.vars[i], &lags), &theta, &mut grad, &mut stack);
                     let what = if !v.is_finite() {
                         format!("is {v}")
                     } else if let Some(k) = grad.iter().position(|g| !g.is_finite()) {
@@ -502,6 +599,25 @@ pub struct BoundWritten {
     applies: Vec<bool>,
     /// Per pose, the values of the variables.
     vars: Vec<Vec<f64>>,
+    /// Per lag slot, its column and time constant.
+    lags: Vec<LagColumn>,
+}
+
+/// A lag slot's column, and its time constant (parameter `k`, or seconds).
+type LagColumn = (Lagged, Result<usize, f64>);
+
+impl BoundWritten {
+    /// Each lag's value and derivative by its time constant at pose `pose` for `theta`.
+    fn lag_values(&self, pose: usize, theta: &[f64], out: &mut Vec<(f64, f64)>) {
+        out.clear();
+        out.extend(self.lags.iter().map(|(lagged, tau)| {
+            let tau = match *tau {
+                Ok(k) => theta[k],
+                Err(seconds) => seconds,
+            };
+            lagged.at(tau)[pose]
+        }));
+    }
 }
 
 impl Bound for BoundWritten {
@@ -511,11 +627,13 @@ impl Bound for BoundWritten {
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
         let mut stack = Vec::new();
         let mut grad = vec![0.0; theta.len()];
+        let mut lags = Vec::new();
+        self.lag_values(pose, theta, &mut lags);
         for (target, program) in &self.targets {
             if matches!(target, Target::Dx | Target::Dy) && !self.applies[pose] {
                 continue;
             }
-            let v = program.eval(&self.vars[pose], theta, &mut grad, &mut stack);
+            let v = program.eval((&self.vars[pose], &lags), theta, &mut grad, &mut stack);
             add(value, *target, v);
             for (d, g) in partials.iter_mut().zip(&grad) {
                 add(d, *target, *g);
@@ -538,6 +656,11 @@ impl Written {
     /// The variables the expressions read.
     pub fn variables(&self) -> &[String] {
         &self.vars
+    }
+
+    /// The lags the expressions read (`lag(NAME, TAU)`).
+    pub fn lags(&self) -> &[LagSlot] {
+        &self.lags
     }
 
     /// Each target with its expression, in the spec's order (the programs read the

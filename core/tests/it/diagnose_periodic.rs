@@ -22,6 +22,7 @@ fn lost_motion() -> Written {
             unit: "mm".into(),
             prior: 0.02,
             bounds: None,
+            start: 0.0,
         }],
         targets: vec![("dq4".to_owned(), "-b * dir_q4".to_owned())],
         instruments: None,

@@ -16,6 +16,7 @@ fn param(name: &str, unit: &str, prior: f64) -> WrittenParam {
         unit: unit.into(),
         prior,
         bounds: None,
+        start: 0.0,
     }
 }
 

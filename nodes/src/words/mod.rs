@@ -136,15 +136,29 @@ pub fn evidence(c: &Candidate) -> String {
     s
 }
 
-/// The effect parameters identified, with their σ (three at most).
+/// The effect parameters identified, with their σ (three at most), then those not fitted
+/// with the reason.
 fn values(params: &[rpkm_core::calib::EffectEstimate]) -> String {
-    let shown: Vec<String> = params
+    let mut shown: Vec<String> = params
         .iter()
         .filter(|e| e.identified)
         .take(3)
         .map(|e| format!("{} = {}", e.name, with_sigma(e.value, e.sigma, &e.unit)))
         .collect();
+    shown.extend(held(params));
     shown.join(", ")
+}
+
+/// "tau not fitted: no sensitivity at its start 0 s (...)", per effect parameter not fitted.
+pub fn held(params: &[rpkm_core::calib::EffectEstimate]) -> Vec<String> {
+    params
+        .iter()
+        .filter_map(|e| {
+            e.held
+                .as_ref()
+                .map(|why| format!("{} not fitted: {why}", e.name))
+        })
+        .collect()
 }
 
 /// "held-out RMS 17.98 -> 12.69 um (± 2.11; the errors follow the change, p = 3.2e-8)", or

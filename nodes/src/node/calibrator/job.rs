@@ -200,7 +200,8 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<JobOutc
     };
     let set = rpkm_core::effects::EffectSet::bind(&effects, &cal_part, &o.start.params)
         .map_err(|e| bad_input(format!("{named_by}: {e}")))?;
-    let theta0 = vec![0.0; set.n_params()];
+    // each effect parameter from its own start (zero but where the effect says otherwise)
+    let theta0: Vec<f64> = set.layout().iter().map(|s| s.param.start).collect();
     // the calibration every command shares: tolerance prior, noise estimated from the data
     let (cal, noise) = calib::calibrate(&calib::Request {
         noise: o.weighting,

@@ -240,6 +240,9 @@ impl Calibrator {
                 self.calibrations += 1;
                 out.parameters.publish(&o.parameters)?;
                 let recorded = self.record_calibration(o);
+                for held in crate::words::held(&o.calibration.effects) {
+                    ctx.log(format!("WARN: {held}"));
+                }
                 match &o.diagnosis {
                     Some(Ok(d)) => out.diagnosis.publish(d)?,
                     Some(Err(e)) => ctx.log(format!("no diagnosis: {e}")),
