@@ -65,6 +65,10 @@ pub struct DiscoveryArgs {
     pub machines: usize,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Only the machines of this class, the series' first --machines of it (machine i is the
+    /// same machine as without --class). Example: --class thermometer_lag --machines 20
+    #[arg(long)]
+    pub class: Option<machines::Class>,
     /// Worker threads (one machine each at a time).
     #[arg(long, default_value_t = 2)]
     pub threads: usize,

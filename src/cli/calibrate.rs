@@ -80,8 +80,9 @@ pub struct CalibrateArgs {
     /// geometry is calibrated with them (the parameters, σ and covariance printed and in
     /// --json are the model's with the effects, whose own parameters follow), and the output
     /// shows the error falling effect by effect (table; chart with --chart).
-    /// Library: parallelogram, preload_elastic, thermal, encoder_scale, guide_straightness,
-    /// instrument_alignment.
+    /// Library: parallelogram, preload_elastic, thermal, thermal_lag (thermometers that lag
+    /// the parts: beside thermal, the time constant τ = lag/α is printed with its σ),
+    /// encoder_scale, guide_straightness, instrument_alignment.
     #[arg(long, default_value = "")]
     pub effects: String,
     /// Effects written as data (YAML, docs/effects.md) that --effects may name; their

@@ -203,6 +203,32 @@ impl Twin {
         }
     }
 
+    /// What the machine thermometer reads at time t without its noise, °C: the true
+    /// temperature through the thermometers' first-order lag
+    /// ([`ThermalPhysics::thermometer_lag_s`]). For the swing T_ref − a cos ωt from
+    /// equilibrium at t = 0 the lag is exact: the swing's steady response
+    /// −a (cos ωt + ωτ sin ωt)/(1 + ω²τ²) and the transient that starts it at T(0).
+    pub fn thermometer(&self, t: f64) -> f64 {
+        let th = &self.config.thermal;
+        let tau = th.thermometer_lag_s;
+        let Some(a) = self.magnitude(EffectKind::Thermal).filter(|_| tau > 0.0) else {
+            return self.temperature(t);
+        };
+        let w = std::f64::consts::TAU / THERMAL_PERIOD_S;
+        let wt = w * tau;
+        let den = 1.0 + wt * wt;
+        let steady = -a * ((w * t).cos() + wt * (w * t).sin()) / den;
+        let transient = -a * wt * wt / den * (-t / tau).exp();
+        th.reference_c + steady + transient
+    }
+
+    /// What guide `g`'s thermometer reads at time t without its noise, °C (see
+    /// [`Twin::thermometer`]; a guide's departure is the mean's scaled, and so is its lag).
+    pub fn guide_thermometer(&self, g: usize, t: f64) -> f64 {
+        let th = &self.config.thermal;
+        th.reference_c + th.guide_rates[g] * (self.thermometer(t) - th.reference_c)
+    }
+
     /// The true temperature of guide `g` (0: guide 1, 1: guide 2) at time t, °C: the mean's
     /// departure from the reference scaled by the guide's rate.
     pub fn guide_temperature(&self, g: usize, t: f64) -> f64 {
@@ -418,13 +444,13 @@ impl Twin {
                 *qi += k * encoder_mm * gauss(&mut self.rng);
             }
         }
-        let temp = self.temperature(t) + k * TEMP_SENSOR_K * gauss(&mut self.rng);
+        let temp = self.thermometer(t) + k * TEMP_SENSOR_K * gauss(&mut self.rng);
         covariates.insert(0, Some(temp));
         if self.config.thermal.guide_thermometers {
             // their own draws after every other: the readings stay the same with or without
             for (slot, g) in [(1, 0), (2, 1)] {
                 let reading =
-                    self.guide_temperature(g, t) + k * TEMP_SENSOR_K * gauss(&mut self.guide_rng);
+                    self.guide_thermometer(g, t) + k * TEMP_SENSOR_K * gauss(&mut self.guide_rng);
                 covariates.insert(slot, Some(reading));
             }
         }

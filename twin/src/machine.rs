@@ -144,6 +144,11 @@ pub struct ThermalPhysics {
     /// Whether each guide carries a thermometer (`temp_guide1`, `temp_guide2` recorded beside
     /// `temp_machine`).
     pub guide_thermometers: bool,
+    /// The thermometers' first-order time constant behind the temperature they stand for, s
+    /// (0: they read it at once). They are at the machine's temperature at t = 0, where the
+    /// swing starts from rest.
+    #[serde(default)]
+    pub thermometer_lag_s: f64,
 }
 
 impl Default for ThermalPhysics {
@@ -156,6 +161,7 @@ impl Default for ThermalPhysics {
             reference_c: REFERENCE_TEMP_C,
             guide_rates: [1.0, 1.0],
             guide_thermometers: false,
+            thermometer_lag_s: 0.0,
         }
     }
 }

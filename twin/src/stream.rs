@@ -59,7 +59,7 @@ impl<'a> DriveStream<'a> {
                 *qi += self.k * self.encoder_mm * gauss(&mut self.rng);
             }
         }
-        let temp_c = self.twin.temperature(t) + self.k * TEMP_SENSOR_K * gauss(&mut self.rng);
+        let temp_c = self.twin.thermometer(t) + self.k * TEMP_SENSOR_K * gauss(&mut self.rng);
         Ok(DriveSample {
             q,
             force: st.f,

@@ -71,6 +71,8 @@ pub(crate) fn settle(
             let refinements = family.refinements();
             if !refinements.is_empty() {
                 refine(campaign, val, current, refinements, (copts, level))
+            } else if let Some(parts) = parts_beside(&current.0, *family) {
+                family.with_parts(&parts)
             } else if family.open_family() {
                 narrow(campaign, val, current, *family, (copts, level))
             } else {
@@ -86,6 +88,22 @@ pub(crate) fn settle(
     settled
 }
 
+/// The parts of the family `family` named whole refines ([`Effect::beside`]) where that
+/// family is in the model with pinned parts: `thermal_lag` lags the parts `thermal` keeps
+/// (settled on its own, the lag of the frame came out beside the expansion of the scales).
+/// None where it refines nothing, or the family it refines is whole too or absent.
+fn parts_beside(model: &[&dyn Effect], family: &dyn Effect) -> Option<Vec<usize>> {
+    let of = family.beside().filter(|_| family.open_family())?;
+    let refined = model
+        .iter()
+        .find(|e| crate::effects::family_of(e.name()) == of)?;
+    let (_, names) = refined.name().split_once(':')?;
+    names
+        .split('+')
+        .map(|n| family.parts().iter().position(|p| *p == n))
+        .collect()
+}
+
 /// The part combination of the family `current[i]` named whole that the evidence needs (see
 /// [`settle`]); None where the whole family is it, or nothing predicts.
 fn narrow(
@@ -96,40 +114,51 @@ fn narrow(
     (copts, level): (&calib::Options, f64),
 ) -> Option<Box<dyn Effect>> {
     let n = family.parts().len();
-    let mut variants: Vec<Box<dyn Effect>> = Vec::new();
+    // an effect of the model that refines this family whole takes each variant's parts with
+    // it (`thermal_lag` the parts `thermal` is tried with): apart, each absorbs the other
+    let follower = current.iter().position(|e| {
+        e.open_family() && e.beside() == Some(crate::effects::family_of(family.name()))
+    });
+    let mut variants: Vec<(Box<dyn Effect>, Option<Box<dyn Effect>>)> = Vec::new();
     for mask in 1..(1usize << n) {
         let parts: Vec<usize> = (0..n).filter(|b| mask & (1 << b) != 0).collect();
-        variants.extend(family.with_parts(&parts));
+        if let Some(v) = family.with_parts(&parts) {
+            let along = follower.and_then(|j| current[j].with_parts(&parts));
+            variants.push((v, along));
+        }
     }
     let scored: Vec<(usize, Scored)> = variants
         .iter()
         .enumerate()
-        .filter_map(|(k, v)| {
+        .filter_map(|(k, (v, along))| {
             let mut with = current.clone();
             with[i] = v.as_ref();
+            if let (Some(j), Some(a)) = (follower, along) {
+                with[j] = a.as_ref();
+            }
             Scored::of(campaign, val, with, copts).map(|p| (k, p))
         })
         .collect();
     let whole = scored
         .iter()
-        .find(|(k, _)| mask_len(variants[*k].name()) == n)?;
+        .find(|(k, _)| mask_len(variants[*k].0.name()) == n)?;
     let adequate = |v: &Scored| !whole.1.needed_over(v, (campaign, copts), level);
     let k = scored
         .iter()
         .filter(|(_, v)| adequate(v))
         .min_by(|a, b| {
-            let parts = |k: usize| mask_len(variants[k].name());
+            let parts = |k: usize| mask_len(variants[k].0.name());
             parts(a.0)
                 .cmp(&parts(b.0))
                 .then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))
         })
         .map(|(k, _)| *k)?;
     // the whole family is what the caller has: nothing to own
-    if mask_len(variants[k].name()) == n {
+    if mask_len(variants[k].0.name()) == n {
         return None;
     }
     drop(scored);
-    Some(variants.swap_remove(k))
+    Some(variants.swap_remove(k).0)
 }
 
 /// The refinement of the model's effect `current[i]` ([`Effect::refinements`]: a rod with a

@@ -68,32 +68,46 @@ impl Timeline {
     }
 }
 
-/// A rate's slope noise, as a share of the typical rate, that the window is widened to
-/// stay below.
-const RATE_NOISE_SHARE: f64 = 0.05;
-
 /// dx/dt at every row (row order) of `x` read at `line`'s times: see the module
-/// documentation.
+/// documentation. The window's half-width doubles from three rows' steps to half the
+/// campaign; each width's error is its noise (the readings' noise through the fit) and its
+/// bias (a window twice as wide bends four times as much: the change from the narrower
+/// width is three quarters of the wider one's bias), and the width with the least of both
+/// is kept. A lag of τ turns the rate's error into τ times as much temperature.
 pub fn rate(line: &Timeline, x: &[f64]) -> Vec<f64> {
     let xs = line.sorted(x);
     let t = &line.t;
-    let widest = (t[t.len() - 1] - t[0]) / 8.0;
+    let span = t[t.len() - 1] - t[0];
     let narrowest = 3.0 * median_step(t);
-    let typical = rms(&slopes(t, &xs, widest.max(narrowest)));
+    let widest = (span / 2.0).max(narrowest);
     let noise = reading_noise(t, &xs);
     let mut half = narrowest;
-    while half < widest && slope_noise(t, half, noise) > RATE_NOISE_SHARE * typical {
-        half *= 2.0;
+    let (first, spread) = slopes(t, &xs, half);
+    let (mut best, mut best_error) = (first.clone(), (noise * spread).powi(2));
+    let (mut previous, mut previous_noise) = (first, noise * spread);
+    while half < widest {
+        half = (2.0 * half).min(widest);
+        let (slope, spread) = slopes(t, &xs, half);
+        let change: Vec<f64> = slope.iter().zip(&previous).map(|(a, b)| a - b).collect();
+        let bias2 =
+            (rms(&change).powi(2) - previous_noise.powi(2)).max(0.0) * (4.0 / 3.0_f64).powi(2);
+        let error = (noise * spread).powi(2) + bias2;
+        if error < best_error {
+            (best, best_error) = (slope.clone(), error);
+        }
+        (previous, previous_noise) = (slope, noise * spread);
     }
-    line.unsorted(&slopes(t, &xs, half.min(widest.max(narrowest))))
+    line.unsorted(&best)
 }
 
 /// The slope at each time of a quadratic fitted to the readings within `half` of it (at
-/// least the three nearest distinct times).
-fn slopes(t: &[f64], x: &[f64], half: f64) -> Vec<f64> {
+/// least the three nearest distinct times), and the RMS over the rows of each slope's
+/// standard deviation per unit of the readings' noise.
+fn slopes(t: &[f64], x: &[f64], half: f64) -> (Vec<f64>, f64) {
     let n = t.len();
     let (mut lo, mut hi) = (0usize, 0usize);
-    (0..n)
+    let mut spread = 0.0;
+    let slope = (0..n)
         .map(|i| {
             while t[lo] < t[i] - half {
                 lo += 1;
@@ -102,9 +116,12 @@ fn slopes(t: &[f64], x: &[f64], half: f64) -> Vec<f64> {
                 hi += 1;
             }
             let (a, b) = widened(t, i, (lo, hi));
-            quadratic_slope(&t[a..=b], &x[a..=b], t[i])
+            let (s, var) = quadratic_slope(&t[a..=b], &x[a..=b], t[i]);
+            spread += var;
+            s
         })
-        .collect()
+        .collect();
+    (slope, (spread / n.max(1) as f64).sqrt())
 }
 
 /// The window `lo..=hi` around row `i` grown until it holds three distinct times.
@@ -124,24 +141,39 @@ fn widened(t: &[f64], i: usize, (mut lo, mut hi): (usize, usize)) -> (usize, usi
 }
 
 /// The slope at `at` of the least-squares quadratic through (t, x) (a line where the
-/// quadratic is not determined).
-fn quadratic_slope(t: &[f64], x: &[f64], at: f64) -> f64 {
+/// quadratic is not determined), and its variance per unit variance of the readings.
+fn quadratic_slope(t: &[f64], x: &[f64], at: f64) -> (f64, f64) {
     let scale = t
         .iter()
         .map(|v| (v - at).abs())
         .fold(0.0_f64, f64::max)
         .max(f64::MIN_POSITIVE);
-    let m = nalgebra::DMatrix::from_fn(t.len(), 3, |r, c| {
-        let u = (t[r] - at) / scale;
-        [1.0, u, u * u][c]
-    });
-    let y = nalgebra::DVector::from_column_slice(x);
+    // the normal equations from the sums of u^k and x·u^k, u the scaled time
+    let (mut su, mut sx) = ([0.0_f64; 5], [0.0_f64; 3]);
+    for (tk, xk) in t.iter().zip(x) {
+        let u = (tk - at) / scale;
+        let mut p = 1.0;
+        for k in 0..5 {
+            su[k] += p;
+            if k < 3 {
+                sx[k] += xk * p;
+            }
+            p *= u;
+        }
+    }
     let distinct = 1 + t.windows(2).filter(|w| w[1] > w[0]).count();
-    let cols = if distinct >= 3 { 3 } else { 2 };
-    let m = m.columns(0, cols).into_owned();
-    let normal = m.transpose() * &m;
-    let rhs = m.transpose() * y;
-    normal.lu().solve(&rhs).map_or(0.0, |c| c[1] / scale)
+    let solved = if distinct >= 3 {
+        let normal = nalgebra::Matrix3::from_fn(|r, c| su[r + c]);
+        normal
+            .try_inverse()
+            .map(|inv| ((inv * nalgebra::Vector3::from(sx))[1], inv[(1, 1)]))
+    } else {
+        let normal = nalgebra::Matrix2::new(su[0], su[1], su[1], su[2]);
+        normal
+            .try_inverse()
+            .map(|inv| ((inv * nalgebra::Vector2::new(sx[0], sx[1]))[1], inv[(1, 1)]))
+    };
+    solved.map_or((0.0, 0.0), |(s, v)| (s / scale, v / (scale * scale)))
 }
 
 /// The readings' noise: the robust spread of each reading from the line through its two
@@ -159,15 +191,6 @@ fn reading_noise(t: &[f64], x: &[f64]) -> f64 {
     }
     dev.sort_by(f64::total_cmp);
     1.4826 * dev[dev.len() / 2] / 1.5_f64.sqrt()
-}
-
-/// The noise of a slope fitted over ±`half` at the campaign's typical sampling.
-fn slope_noise(t: &[f64], half: f64, noise: f64) -> f64 {
-    let span = t[t.len() - 1] - t[0];
-    let per_second = (t.len() as f64 - 1.0) / span.max(f64::MIN_POSITIVE);
-    let n = (2.0 * half * per_second).max(3.0);
-    // Σ(t − t̄)² of n equally spaced times over 2·half
-    noise / (n * (2.0 * half).powi(2) / 12.0).sqrt()
 }
 
 fn median_step(t: &[f64]) -> f64 {

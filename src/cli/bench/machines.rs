@@ -12,9 +12,10 @@ use std::collections::BTreeMap;
 use std::fmt::Write;
 
 /// The kinds of machine the bench draws, each reported on its own line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
-pub(super) enum Class {
+#[value(rename_all = "snake_case")]
+pub enum Class {
     /// Nothing hidden.
     Nothing,
     /// One or two effects of the library.
@@ -45,10 +46,15 @@ pub(super) enum Class {
     /// Lost motion of carrier 4 and a periodic scale error at once, both outside the library
     /// and both offered written as data.
     TwoOutside,
+    /// Thermal expansion read by thermometers 2-30 minutes behind the parts (a first-order
+    /// lag), measured by a tracker, a grid encoder and self-calibration or by a tracker and
+    /// self-calibration only: `thermal` and `thermal_lag` named, `nothing_missing` (a lag
+    /// too short to matter may go unnamed at the floor).
+    ThermometerLag,
 }
 
 /// How many kinds of machine the draw knows (k in `0..KINDS`).
-const KINDS: u32 = 35;
+const KINDS: u32 = 37;
 
 /// What a machine hides: its class and its hidden effects of the twin.
 pub(super) struct Hidden {
@@ -90,6 +96,7 @@ fn hidden_of(k: u32, rng: &mut StdRng) -> Hidden {
         ),
         29..=30 => (Class::Gradient, vec![EffectKind::Thermal]),
         31..=32 => (Class::TrackerDrift, Vec::new()),
+        35..=36 => (Class::ThermometerLag, vec![EffectKind::Thermal]),
         _ => (Class::TwoOutside, vec![EffectKind::LostMotionQ4]),
     };
     Hidden { class, effects }
@@ -146,7 +153,12 @@ pub(super) fn draw(seed: u64, i: usize) -> Machine {
             rate_per_s: [speed * heading.cos(), speed * heading.sin()],
         }
     });
-    let instruments = if hidden.class == Class::FamilyApart {
+    let apart = match hidden.class {
+        Class::FamilyApart => true,
+        Class::ThermometerLag => rng.gen_bool(0.5),
+        _ => false,
+    };
+    let instruments = if apart {
         vec![Instrument::Lt, Instrument::SelfCal]
     } else {
         vec![Instrument::Lt, Instrument::Kgm, Instrument::SelfCal]
@@ -197,6 +209,9 @@ fn thermal_of(rng: &mut StdRng, class: Class) -> ThermalPhysics {
             [fast, slow]
         };
         physics.guide_thermometers = rng.gen_bool(0.5);
+    }
+    if class == Class::ThermometerLag {
+        physics.thermometer_lag_s = log_uniform(rng, 120.0, 1800.0);
     }
     physics
 }
@@ -326,6 +341,7 @@ pub(super) fn hidden_names(hidden: &Hidden) -> Vec<String> {
         Class::Cyclic | Class::TwoOutside => out.push("cyclic_scale".to_owned()),
         Class::SoftRod => out.push("soft_rod".to_owned()),
         Class::TrackerDrift => out.push("tracker_drift".to_owned()),
+        Class::ThermometerLag => out.push("thermal_lag".to_owned()),
         _ => {}
     }
     out
