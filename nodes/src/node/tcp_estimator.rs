@@ -737,4 +737,47 @@ mod tests {
         assert!(e.psi.abs() < 1e-6, "ψ {}", e.psi);
         Ok(())
     }
+
+    /// Forces not measured (NaN) change no estimate; an effect that reads one leaves the
+    /// state unestimated, counted and named.
+    #[test]
+    fn unmeasured_forces_are_not_read() -> Result<(), Box<dyn std::error::Error>> {
+        let mut q = igm(&Params::nominal(), Model::M29, 20.0, 1650.0)?.q();
+        q[2] += 0.05;
+        let with = Estimator::new(geometry()).estimate(&state(q, 1));
+        let mut without = state(q, 1);
+        without.force = [f64::NAN; 4];
+        let mut est = Estimator::new(geometry());
+        let e = est.estimate(&without).ok_or("no estimate")?;
+        assert_eq!(Some(e), with, "bit for bit");
+        let file = crate::effects_file::parse(
+            "effects:\n  - name: drive_compliance_q1\n    summary: s\n    \
+             params: {c: {unit: mm, prior: 0.01}}\n    dq1: \"c * f1 / 1000\"\n",
+            "compliance.yaml",
+            &[],
+        )?;
+        let mut g = geometry();
+        g.effects = crate::node::effects::NodeEffects::known(Some(file));
+        let msg = rpkm_msgs::Parameters {
+            model: 29,
+            active_effects: vec!["drive_compliance_q1".into()],
+            effect_parameter_names: vec!["drive_compliance_q1.c".into()],
+            effect_parameter_values: vec![0.01e-3],
+            ..Default::default()
+        };
+        est.set_geometry(g.updated(&msg)?);
+        assert!(est.estimate(&without).is_none());
+        assert_eq!(est.counts.forces_not_measured, 1);
+        let st = est.status("e");
+        assert_eq!(st.level, DiagnosticStatus::WARN);
+        assert!(
+            st.message.ends_with(
+                "1 states not estimated: effect `drive_compliance_q1` reads f1, which the \
+                 drive state does not measure (NaN)"
+            ),
+            "{}",
+            st.message
+        );
+        Ok(())
+    }
 }
