@@ -142,19 +142,24 @@ pub fn whole(c: &Change) -> Option<String> {
     Some(line)
 }
 
-/// What changed since the previous calibration, in one line (the calibrator's /diagnostics).
+/// What changed since the previous calibration, in one line (the calibrator's /diagnostics):
+/// the flags, then the whole machine's statement ([`whole`]).
 pub fn since_previous(c: &Change, previous: &CalibrationRecord) -> String {
     let flagged = c.flagged();
     let moved: Vec<String> = flagged.iter().map(moved).collect();
     let when = date_time(previous.at_s);
-    if moved.is_empty() {
+    let mut line = if moved.is_empty() {
         format!("since the previous calibration ({when}): nothing moved beyond {FLAG_SIGMA:.0}σ")
     } else {
         format!(
             "since the previous calibration ({when}): {}",
             moved.join(", ")
         )
+    };
+    if let Some(w) = whole(c) {
+        line = format!("{line}; {w}");
     }
+    line
 }
 
 /// "l1 creeps +20.0 µm per month (23.4σ) over the 11 calibrations since 2026-03-09", or None
