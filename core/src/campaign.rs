@@ -230,7 +230,8 @@ pub struct MeasuredPose {
     pub reset: bool,
     /// Actuator encoder positions q1..q4, mm.
     pub q: [f64; 4],
-    /// Drive forces f1..f4, N (0 for a drive in follower mode).
+    /// Drive forces f1..f4, N (0 for a drive in follower mode; NaN not measured, from a
+    /// live stream only: a campaign file's are numbers).
     pub f: [f64; 4],
     /// Actuators in follower mode: `follower[i]` for q(i+1); `23` in the file sets
     /// `[false, true, true, false]`.
@@ -251,9 +252,12 @@ pub struct MeasuredPose {
 
 impl MeasuredPose {
     /// Whether the pose carries drive forces as measurements: all four drives
-    /// position-controlled (no follower) and forces recorded.
+    /// position-controlled (no follower) and forces recorded (none NaN, "not measured", as a
+    /// live stream from a cell without force sensing has them).
     pub fn drives_loaded(&self) -> bool {
-        self.follower.iter().all(|f| !f) && self.f.iter().any(|f| *f != 0.0)
+        self.follower.iter().all(|f| !f)
+            && self.f.iter().all(|f| !f.is_nan())
+            && self.f.iter().any(|f| *f != 0.0)
     }
 }
 

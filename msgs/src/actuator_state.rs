@@ -24,7 +24,8 @@ pub struct ActuatorState {
     pub seq: u64,
     /// `float64[4] position`: encoder positions q1..q4 (m).
     pub position: [f64; 4],
-    /// `float64[4] force`: drive forces f1..f4 (N), positive towards larger q; 0 in follower mode.
+    /// `float64[4] force`: drive forces f1..f4 (N), positive towards larger q; 0 in follower
+    /// mode; NaN where not measured.
     pub force: [f64; 4],
     /// `bool[4] follower`: drive i is in follower mode (controller off, encoder read only).
     pub follower: [bool; 4],

@@ -71,9 +71,9 @@ impl MonitorThresholds {
     }
 
     /// The level (PreloadStatus::OK/WARN/ERROR) of one drive's deviation, `None` while the
-    /// thresholds are unknown.
+    /// thresholds are unknown or the drive's force is not measured (deviation NaN).
     pub fn level_of(&self, deviation_percent: f64) -> Option<u8> {
-        if !self.known() {
+        if !self.known() || deviation_percent.is_nan() {
             return None;
         }
         let d = deviation_percent.abs();

@@ -64,6 +64,7 @@ mod node_estimator_jumps;
 mod node_ingest_cyclone;
 mod node_joint_states;
 mod node_joint_states_fastdds;
+mod node_joint_states_positions;
 mod node_joint_states_qos;
 mod node_kept_params;
 mod node_launch_restart;

@@ -72,6 +72,13 @@ fn the_calibrator_records_and_says_what_changed_since_the_previous_calibration()
         "{second}"
     );
     assert_eq!(moved.matches(" mm ± ").count(), 1, "{second}");
+    // and the whole machine's statement: the crash is beyond chance either way
+    assert!(
+        moved.contains("; the machine changed: largest single change l3 ")
+            && moved.contains("reaches by chance")
+            && moved.contains("; joint χ² "),
+        "{second}"
+    );
     let change: f64 = moved[3..]
         .split(' ')
         .next()

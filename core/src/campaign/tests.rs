@@ -65,3 +65,31 @@ fn instrument_classes() {
     assert!(!Instrument::SelfCal.takes_reset());
     assert!(!Instrument::None.takes_reset());
 }
+
+/// Forces are measurements only where all four drives hold and every force was measured: a
+/// live stream from a cell without force sensing has them NaN, which is no force row.
+#[test]
+fn drives_are_loaded_only_with_measured_forces() {
+    let mut pose = MeasuredPose {
+        t: 0.0,
+        setup: "cell".into(),
+        instrument: Instrument::None,
+        reset: false,
+        q: [2611.0, 2610.0, 789.0, 788.0],
+        f: [100.0, -50.0, 20.0, -70.0],
+        follower: [false; 4],
+        x: None,
+        y: None,
+        r: None,
+        psi: None,
+        covariates: vec![],
+        line: 0,
+    };
+    assert!(pose.drives_loaded());
+    pose.f[1] = f64::NAN;
+    assert!(!pose.drives_loaded(), "q2's force not measured");
+    pose.f = [f64::NAN; 4];
+    assert!(!pose.drives_loaded());
+    pose.f = [0.0; 4];
+    assert!(!pose.drives_loaded(), "no force recorded");
+}

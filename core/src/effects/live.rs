@@ -193,6 +193,18 @@ impl LiveEffects {
         self.applied.iter().map(|a| (a.name.as_str(), &a.theta[..]))
     }
 
+    /// The first effect that reads a drive force `f` lacks (NaN: not measured, a cell
+    /// without force sensing), with the drive 0..=3: such a state cannot be evaluated under
+    /// the effects, and no value is made up for the force.
+    pub fn unmeasured_force(&self, f: &[f64; 4]) -> Option<(&str, usize)> {
+        self.applied.iter().find_map(|a| {
+            a.sources.iter().find_map(|s| match s {
+                Source::F(d) if f[*d].is_nan() => Some((a.name.as_str(), *d)),
+                _ => None,
+            })
+        })
+    }
+
     /// The change of state `s`'s inputs (its carriers and parameters; no instrument).
     pub fn delta(&mut self, s: &LiveState) -> Delta {
         let mut out = Delta::default();

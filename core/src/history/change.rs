@@ -3,11 +3,14 @@
 //! measurements, so their variances add), flagged beyond [`FLAG_SIGMA`] where both determined
 //! the parameter, unknown where either did not; and one χ² over every direction both
 //! determined, the answer to "did anything change at all" that 29 separate tests cannot give
-//! without a false alarm now and then.
+//! without a false alarm now and then; and the largest single change read as the largest of
+//! the many tested (how often noise alone makes the largest of that many |z| this large), so
+//! that a 3.1σ among 29 is told apart from a 3.1σ alone, and one large change the χ² spreads
+//! over all its directions is still seen. [`Change::verdict`] reads the two together.
 
 use super::estimate::Estimate;
 use crate::params::N_PARAMS;
-use crate::stats::chi2_upper_tail;
+use crate::stats::{chi2_upper_tail, normal_upper_tail};
 use nalgebra::DMatrix;
 
 /// A change beyond this many σ is flagged.
@@ -60,6 +63,39 @@ pub struct Joint {
     pub p_value: f64,
 }
 
+/// A change is real when noise alone gives one this large less often than this (the joint
+/// χ², or the largest single change among those tested).
+pub const CHANGE_P_VALUE: f64 = 1e-3;
+
+/// The largest single change in σ among the parameters both calibrations determined, read
+/// as the largest of that many: a multiple comparison (Šidák: the changes taken as
+/// independent).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct LargestChange {
+    pub param: usize,
+    /// Its change in σ (signed).
+    pub z: f64,
+    /// The changes it is the largest of: the parameters both determined.
+    pub among: usize,
+    /// P(|z| ≥ this) for one parameter alone (two-sided).
+    pub p_single: f64,
+    /// P(the largest of `among` |z| ≥ this | nothing changed) = 1 − (1 − `p_single`)^`among`.
+    pub p_largest: f64,
+}
+
+/// What the joint χ² and the largest single change say together.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ChangeVerdict {
+    /// The joint χ² is beyond noise (p below [`CHANGE_P_VALUE`]).
+    Changed,
+    /// The joint χ² is not, but the largest single change is, even as the largest of many:
+    /// one parameter moved (the χ² spreads it over every direction).
+    OneChanged,
+    /// Neither: what moved is what noise gives among this many parameters.
+    NoChange,
+}
+
 /// The change between two calibrations, parameter by parameter and as a whole.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Change {
@@ -67,6 +103,8 @@ pub struct Change {
     pub params: Vec<ParamChange>,
     /// None when the two share no determined parameter.
     pub joint: Option<Joint>,
+    /// None when the two share no determined parameter.
+    pub largest: Option<LargestChange>,
 }
 
 impl Change {
@@ -84,6 +122,39 @@ impl Change {
         });
         f
     }
+
+    /// The joint test and the largest single change read together; None when the two
+    /// calibrations share no determined parameter.
+    pub fn verdict(&self) -> Option<ChangeVerdict> {
+        let largest = self.largest?;
+        Some(if self.joint.is_some_and(|j| j.p_value < CHANGE_P_VALUE) {
+            ChangeVerdict::Changed
+        } else if largest.p_largest < CHANGE_P_VALUE {
+            ChangeVerdict::OneChanged
+        } else {
+            ChangeVerdict::NoChange
+        })
+    }
+}
+
+/// The largest |z| of `params` where both determined the parameter, as the largest of them.
+fn largest(params: &[ParamChange]) -> Option<LargestChange> {
+    let zs: Vec<(usize, f64)> = params
+        .iter()
+        .filter_map(|p| p.z().map(|z| (p.param, z)))
+        .collect();
+    let &(param, z) = zs.iter().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))?;
+    let p_single = 2.0 * normal_upper_tail(z.abs());
+    // 1 − (1 − p)^n without losing a small p to rounding
+    let n = zs.len() as f64;
+    let p_largest = -(n * (-p_single).ln_1p()).exp_m1();
+    Some(LargestChange {
+        param,
+        z,
+        among: zs.len(),
+        p_single,
+        p_largest,
+    })
 }
 
 /// What changed from `before` to `after`.
@@ -108,7 +179,12 @@ pub fn change(before: &Estimate, after: &Estimate) -> Change {
         .map(|p| p.param)
         .collect();
     let joint = joint(before, after, &both);
-    Change { params, joint }
+    let largest = largest(&params);
+    Change {
+        params,
+        joint,
+        largest,
+    }
 }
 
 /// Relative size below which an eigenvalue of the change's covariance is round-off: a

@@ -15,6 +15,9 @@ mod change;
 mod estimate;
 mod trend;
 
-pub use change::{change, Change, Joint, ParamChange, Seen, FLAG_SIGMA};
+pub use change::{
+    change, Change, ChangeVerdict, Joint, LargestChange, ParamChange, Seen, CHANGE_P_VALUE,
+    FLAG_SIGMA,
+};
 pub use estimate::Estimate;
 pub use trend::{crossing, trend, Crossing, Trend, TrendPoint, LINE_P_VALUE, MIN_POINTS};

@@ -6,7 +6,7 @@
 use nalgebra::SMatrix;
 use rpkm_core::calib::{self, Options, Prior, Request};
 use rpkm_core::campaign::Campaign;
-use rpkm_core::history::{change, Estimate, Seen};
+use rpkm_core::history::{change, ChangeVerdict, Estimate, Seen};
 use rpkm_core::params::{Model, Params, L1, L3, N_PARAMS, XA1R};
 use rpkm_twin::{Twin, TwinConfig};
 
@@ -80,6 +80,18 @@ fn a_change_computed_by_hand() {
         "{} vs {p}",
         joint.p_value
     );
+    // the largest single change, l3 at 5√2 σ, as the largest of the 2 both determined:
+    // 2·Q(5√2) = erfc(5) = 1.5374597944e-12 alone, 1 − (1 − that)² as the largest of two
+    let largest = c.largest.expect("l1 and l3 are determined by both");
+    assert_eq!((largest.param, largest.among), (L3, 2));
+    let erfc5 = 1.537_459_794_4e-12;
+    assert!((largest.p_single / erfc5 - 1.0).abs() < 1e-6, "{largest:?}");
+    let of_two = 2.0 * erfc5 - erfc5 * erfc5;
+    assert!(
+        (largest.p_largest / of_two - 1.0).abs() < 1e-6,
+        "{largest:?}"
+    );
+    assert_eq!(c.verdict(), Some(ChangeVerdict::Changed));
 }
 
 /// The calibration every command makes (tolerance prior, noise estimated) as an estimate.

@@ -1,12 +1,13 @@
 //! The history in sentences: what moved between two calibrations ("l3 +0.101 mm ± 0.004
 //! (25σ) between 2026-03-01 and 2026-03-09"), what cannot be known, whether anything changed
-//! at all, the trends ("l1 creeps +20.0 µm per month (23σ)") and when a parameter leaves
+//! at all (the joint χ² and the largest single change in one statement), the trends ("l1 creeps +20.0 µm per month (23σ)") and when a parameter leaves
 //! its tolerance ("l1 leaves ±0.100 mm in 4.5 ± 0.3 months").
 
 use super::analysis::{Analysis, ParamTrend};
-use rpkm_core::history::{Change, ParamChange, Seen, FLAG_SIGMA};
+use rpkm_core::history::{Change, ChangeVerdict, ParamChange, Seen, CHANGE_P_VALUE, FLAG_SIGMA};
 use rpkm_core::params::{unit, Unit, NAMES};
 use rpkm_history::{CalibrationRecord, Stored};
+use std::fmt::Write as _;
 
 /// Seconds of a mean month (365.25 / 12 days).
 pub const MONTH_S: f64 = 30.4375 * 86_400.0;
@@ -83,33 +84,82 @@ pub fn change(c: &Change, a: &CalibrationRecord, b: &CalibrationRecord) -> Vec<S
             unknown.join(", ")
         ));
     }
-    if let Some(j) = &c.joint {
-        let whole = if j.p_value < 1e-3 {
-            "the machine changed"
-        } else {
-            "no change beyond the noise"
-        };
-        lines.push(format!(
-            "over the {} directions both determined: χ² {:.1}, p = {:.2e}: {whole}",
-            j.directions, j.chi2, j.p_value
-        ));
-    }
+    lines.extend(whole(c));
     lines
 }
 
-/// What changed since the previous calibration, in one line (the calibrator's /diagnostics).
+/// A p-value in two significant digits: "0.033", "0.18", "5.8e-6".
+fn p_text(p: f64) -> String {
+    if p >= 0.1 {
+        format!("{p:.2}")
+    } else if p >= 0.01 {
+        format!("{p:.3}")
+    } else {
+        format!("{p:.1e}")
+    }
+}
+
+/// The whole machine in one statement: the verdict, then the largest single change read as
+/// the largest of the parameters both determined, and the joint χ² over every direction
+/// both determined ("no change beyond the noise: largest single change l4 3.1σ, expected of
+/// the largest of 29 by chance (p = 0.055); joint χ² 12.1 on 24 directions, p = 0.033").
+pub fn whole(c: &Change) -> Option<String> {
+    let (largest, verdict) = (c.largest?, c.verdict()?);
+    let name = NAMES[largest.param];
+    let head = match verdict {
+        ChangeVerdict::Changed => "the machine changed".to_owned(),
+        ChangeVerdict::OneChanged => format!("{name} changed"),
+        ChangeVerdict::NoChange => "no change beyond the noise".to_owned(),
+    };
+    let reading = if largest.p_largest < CHANGE_P_VALUE {
+        "beyond what the largest of"
+    } else {
+        "expected of the largest of"
+    };
+    let by_chance = if largest.p_largest < CHANGE_P_VALUE {
+        "reaches by chance"
+    } else {
+        "by chance"
+    };
+    let mut line = format!(
+        "{head}: largest single change {name} {:.1}σ, {reading} {} {by_chance} (p = {})",
+        largest.z.abs(),
+        largest.among,
+        p_text(largest.p_largest)
+    );
+    if let Some(j) = &c.joint {
+        let _ = write!(
+            line,
+            "; joint χ² {:.1} on {} directions, p = {}",
+            j.chi2,
+            j.directions,
+            p_text(j.p_value)
+        );
+        if verdict == ChangeVerdict::OneChanged {
+            line.push_str(" (one change spread over all of them)");
+        }
+    }
+    Some(line)
+}
+
+/// What changed since the previous calibration, in one line (the calibrator's /diagnostics):
+/// the flags, then the whole machine's statement ([`whole`]).
 pub fn since_previous(c: &Change, previous: &CalibrationRecord) -> String {
     let flagged = c.flagged();
     let moved: Vec<String> = flagged.iter().map(moved).collect();
     let when = date_time(previous.at_s);
-    if moved.is_empty() {
+    let mut line = if moved.is_empty() {
         format!("since the previous calibration ({when}): nothing moved beyond {FLAG_SIGMA:.0}σ")
     } else {
         format!(
             "since the previous calibration ({when}): {}",
             moved.join(", ")
         )
+    };
+    if let Some(w) = whole(c) {
+        line = format!("{line}; {w}");
     }
+    line
 }
 
 /// "l1 creeps +20.0 µm per month (23.4σ) over the 11 calibrations since 2026-03-09", or None
@@ -167,4 +217,76 @@ pub fn summary(a: &Analysis, cals: &[Stored<CalibrationRecord>]) -> Vec<String> 
         }
     }
     lines
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rpkm_core::calib::Prior;
+    use rpkm_core::history::{change as change_of, Estimate};
+    use rpkm_core::params::{Model, Params, L1, L4, N_PARAMS};
+
+    /// Two calibrations of model 29 that determined every parameter to 0.3 of its tolerance,
+    /// the second moved by `z[i]` σ of the change (σ = 0.3 √2 tolerance).
+    fn moved_by(z: &[f64; N_PARAMS]) -> Change {
+        let tol: [f64; N_PARAMS] = std::array::from_fn(|i| Prior::default().sigma(i));
+        let before = Estimate {
+            t_s: 0.0,
+            model: Model::M29,
+            params: Params::nominal(),
+            covariance: nalgebra::SMatrix::from_fn(|i, j| {
+                if i == j {
+                    (0.3 * tol[i]).powi(2)
+                } else {
+                    0.0
+                }
+            }),
+            tolerance: tol,
+        };
+        let mut after = before.clone();
+        for i in 0..N_PARAMS {
+            after.params[i] += z[i] * 0.3 * std::f64::consts::SQRT_2 * tol[i];
+        }
+        change_of(&before, &after)
+    }
+
+    fn alone(param: usize, z: f64) -> [f64; N_PARAMS] {
+        let mut out = [0.0; N_PARAMS];
+        out[param] = z;
+        out
+    }
+
+    /// The reference values (scipy): 2·Q(3.1) = 1.935e-3, 1 − (1 − that)^29 = 0.0546;
+    /// 2·Q(5) = 5.733e-7, as the largest of 29 1.663e-5; 2·Q(1.6) = 0.1096, of 29 0.965;
+    /// P(χ²₂₉ ≥ 9.61) = 0.99973, P(χ²₂₉ ≥ 25) = 0.678, P(χ²₂₉ ≥ 65.56) = 1.197e-4.
+    #[test]
+    fn the_largest_change_and_the_joint_test_are_one_statement() {
+        let c = moved_by(&alone(L4, -3.1));
+        assert_eq!(
+            whole(&c).as_deref(),
+            Some(
+                "no change beyond the noise: largest single change l4 3.1σ, expected of the \
+                 largest of 29 by chance (p = 0.055); joint χ² 9.6 on 29 directions, p = 1.00"
+            )
+        );
+        let c = moved_by(&alone(L4, 5.0));
+        assert_eq!(
+            whole(&c).as_deref(),
+            Some(
+                "l4 changed: largest single change l4 5.0σ, beyond what the largest of 29 \
+                 reaches by chance (p = 1.7e-5); joint χ² 25.0 on 29 directions, p = 0.68 (one \
+                 change spread over all of them)"
+            )
+        );
+        let mut spread = [1.5; N_PARAMS];
+        spread[L1] = 1.6;
+        let c = moved_by(&spread);
+        assert_eq!(
+            whole(&c).as_deref(),
+            Some(
+                "the machine changed: largest single change l1 1.6σ, expected of the largest \
+                 of 29 by chance (p = 0.97); joint χ² 65.6 on 29 directions, p = 1.2e-4"
+            )
+        );
+    }
 }

@@ -120,6 +120,12 @@ impl NodeEffects {
         self.live.is_empty()
     }
 
+    /// The first effect that reads a drive force `f` does not have (NaN: not measured), and
+    /// the drive 0..=3.
+    pub fn unmeasured_force(&self, f: &[f64; 4]) -> Option<(&str, usize)> {
+        self.live.unmeasured_force(f)
+    }
+
     /// The parameters and carrier positions (mm) the model is evaluated at for state `s`.
     pub fn apply(&mut self, p: &Params, s: &LiveState) -> (Params, [f64; 4]) {
         self.live.apply(p, s)

@@ -172,12 +172,23 @@ pub struct StreamMotion {
 impl StreamMotion {
     /// The parameters and carrier positions (mm, rad) the model is evaluated at for state
     /// `s` under the calibrated effects of `g` (its own parameters and the encoders without
-    /// any).
-    pub fn model_inputs(&mut self, g: &mut Geometry, s: &ActuatorState) -> (Params, [f64; 4]) {
+    /// any); `Err` when an effect reads a drive force the state does not measure (NaN).
+    pub fn model_inputs(
+        &mut self,
+        g: &mut Geometry,
+        s: &ActuatorState,
+    ) -> Result<(Params, [f64; 4]), UnmeasuredForce> {
         let q = s.position.map(mm_from_m);
         let t = seconds_from_stamp(s.stamp);
+        // followed at every state, evaluated or not
         let motion = self.motion.next(q, t);
-        g.effects.apply(
+        if let Some((effect, drive)) = g.effects.unmeasured_force(&s.force) {
+            return Err(UnmeasuredForce {
+                effect: effect.to_owned(),
+                drive,
+            });
+        }
+        Ok(g.effects.apply(
             &g.params,
             &LiveState {
                 q,
@@ -185,6 +196,28 @@ impl StreamMotion {
                 t,
                 motion,
             },
+        ))
+    }
+}
+
+/// A drive state the calibrated effects cannot be evaluated at: an effect reads a drive
+/// force the state does not measure (NaN: a cell without force sensing). The model without
+/// the effect is not this machine's, so the state gets no model answer.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnmeasuredForce {
+    /// The effect.
+    pub effect: String,
+    /// The drive, 0..=3.
+    pub drive: usize,
+}
+
+impl std::fmt::Display for UnmeasuredForce {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "effect `{}` reads f{}, which the drive state does not measure (NaN)",
+            self.effect,
+            self.drive + 1
         )
     }
 }

@@ -141,6 +141,9 @@ pub(super) struct OnlineWorker {
     /// Samples the worker was too busy to take (counted on /diagnostics).
     pub(super) dropped: u64,
     pub(super) offered: u64,
+    /// States not offered: a holding drive's force not measured (NaN), which the tracker,
+    /// reading the geometry from the forces, cannot use.
+    pub(super) forces_not_measured: u64,
 }
 
 impl OnlineWorker {
@@ -176,13 +179,18 @@ impl OnlineWorker {
             seen: 0,
             dropped: 0,
             offered: 0,
+            forces_not_measured: 0,
         })
     }
 
-    /// Offers a drive state: every `decimation`-th with all drives active goes to the
-    /// worker, without waiting.
+    /// Offers a drive state: every `decimation`-th with all drives active and their forces
+    /// measured goes to the worker, without waiting.
     pub(super) fn offer(&mut self, s: &ActuatorState) {
         if s.follower.iter().any(|f| *f) {
+            return;
+        }
+        if s.force.iter().any(|f| f.is_nan()) {
+            self.forces_not_measured += 1;
             return;
         }
         self.seen += 1;

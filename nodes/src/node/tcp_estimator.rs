@@ -14,6 +14,9 @@
 //! and which check rejected the elastic solve (`reason`, the core's [`Reason`] code); the
 //! reasons are also counted on /diagnostics (WARN; ERROR while it persists). A state no model can
 //! solve gets no estimate. ψ is published wrapped to (−π, π].
+//! The estimate needs the positions alone: drive forces not measured (NaN, a cell without
+//! force sensing) change nothing, unless a calibrated effect reads them: then the state gets
+//! no estimate, counted (`forces_not_measured`) and named on /diagnostics (WARN).
 //! With `views` on (default with DDS output) every `view_every`-th estimate is also published
 //! as `geometry_msgs/PoseStamped` on `/rpkm/tcp_pose` and `tf2_msgs/TFMessage` on `/tf`
 //! ([`super::views`]).
@@ -32,7 +35,7 @@ use super::context::{status, CommonArgs, Every, Idle, NodeContext};
 use super::declare::{keys, served, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
 use super::geometry::GEOMETRY;
-use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
+use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion, UnmeasuredForce};
 use super::lifecycle::Lifecycle;
 use super::params::NodeParams;
 use super::realtime::{BUSY_POLL, PRIORITY};
@@ -78,6 +81,8 @@ pub struct EstimatorCounts {
     pub consecutive_failures: u64,
     /// Rejections (warm and cold) by [`Reason`], indexed by `code − 1`.
     pub by_reason: [u64; 6],
+    /// States not estimated: a calibrated effect reads a drive force they do not measure.
+    pub forces_not_measured: u64,
 }
 
 impl EstimatorCounts {
@@ -103,6 +108,8 @@ pub struct Estimator {
     pub input: SeqGaps,
     /// How the stream's carriers moved (what a calibrated effect may read).
     motion: StreamMotion,
+    /// Why the last state not estimated for a force it does not measure was not.
+    pub last_unmeasured: Option<UnmeasuredForce>,
 }
 
 /// The reason an elastic failure counts under.
@@ -125,6 +132,7 @@ impl Estimator {
             last_warm_rejection: None,
             input: SeqGaps::default(),
             motion: StreamMotion::default(),
+            last_unmeasured: None,
         }
     }
 
@@ -144,7 +152,14 @@ impl Estimator {
     pub fn estimate(&mut self, state: &ActuatorState) -> Option<TcpEstimate> {
         self.input.next(state.seq);
         // the carriers and parameters under the calibrated effects
-        let (params, q) = self.motion.model_inputs(&mut self.geometry, state);
+        let (params, q) = match self.motion.model_inputs(&mut self.geometry, state) {
+            Ok(inputs) => inputs,
+            Err(e) => {
+                self.counts.forces_not_measured += 1;
+                self.last_unmeasured = Some(e);
+                return None;
+            }
+        };
         let g = &self.geometry;
         let prev = self.previous.as_ref();
         let solved =
@@ -268,6 +283,13 @@ impl Estimator {
             level = level.max(DiagnosticStatus::WARN);
             message = format!("{message}; input: {lost}");
         }
+        if let Some(e) = &self.last_unmeasured {
+            level = level.max(DiagnosticStatus::WARN);
+            message = format!(
+                "{message}; {} states not estimated: {e}",
+                c.forces_not_measured
+            );
+        }
         let mut values = vec![
             ("estimates", c.estimates.to_string()),
             ("cold_starts", c.cold_starts.to_string()),
@@ -282,6 +304,7 @@ impl Estimator {
             ("implausible", c.implausible.to_string()),
             ("unsolved", c.unsolved.to_string()),
             ("consecutive_failures", c.consecutive_failures.to_string()),
+            ("forces_not_measured", c.forces_not_measured.to_string()),
             (
                 "last_reason",
                 last.map_or("none", |e| reason_of(e).as_str()).into(),
@@ -712,6 +735,49 @@ mod tests {
         }
         let e = est.estimate(&state(q, 2)).ok_or("no estimate")?;
         assert!(e.psi.abs() < 1e-6, "ψ {}", e.psi);
+        Ok(())
+    }
+
+    /// Forces not measured (NaN) change no estimate; an effect that reads one leaves the
+    /// state unestimated, counted and named.
+    #[test]
+    fn unmeasured_forces_are_not_read() -> Result<(), Box<dyn std::error::Error>> {
+        let mut q = igm(&Params::nominal(), Model::M29, 20.0, 1650.0)?.q();
+        q[2] += 0.05;
+        let with = Estimator::new(geometry()).estimate(&state(q, 1));
+        let mut without = state(q, 1);
+        without.force = [f64::NAN; 4];
+        let mut est = Estimator::new(geometry());
+        let e = est.estimate(&without).ok_or("no estimate")?;
+        assert_eq!(Some(e), with, "bit for bit");
+        let file = crate::effects_file::parse(
+            "effects:\n  - name: drive_compliance_q1\n    summary: s\n    \
+             params: {c: {unit: mm, prior: 0.01}}\n    dq1: \"c * f1 / 1000\"\n",
+            "compliance.yaml",
+            &[],
+        )?;
+        let mut g = geometry();
+        g.effects = crate::node::effects::NodeEffects::known(Some(file));
+        let msg = rpkm_msgs::Parameters {
+            model: 29,
+            active_effects: vec!["drive_compliance_q1".into()],
+            effect_parameter_names: vec!["drive_compliance_q1.c".into()],
+            effect_parameter_values: vec![0.01e-3],
+            ..Default::default()
+        };
+        est.set_geometry(g.updated(&msg)?);
+        assert!(est.estimate(&without).is_none());
+        assert_eq!(est.counts.forces_not_measured, 1);
+        let st = est.status("e");
+        assert_eq!(st.level, DiagnosticStatus::WARN);
+        assert!(
+            st.message.ends_with(
+                "1 states not estimated: effect `drive_compliance_q1` reads f1, which the \
+                 drive state does not measure (NaN)"
+            ),
+            "{}",
+            st.message
+        );
         Ok(())
     }
 }

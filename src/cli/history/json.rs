@@ -24,6 +24,14 @@ pub fn to_json(
                 "flagged": p.flagged(),
             })).collect::<Vec<_>>(),
             "joint": c.joint,
+            "largest": c.largest.map(|l| serde_json::json!({
+                "name": NAMES[l.param],
+                "z": l.z,
+                "among": l.among,
+                "p_single": l.p_single,
+                "p_largest": l.p_largest,
+            })),
+            "verdict": c.verdict(),
         })
     });
     let trends: Vec<serde_json::Value> = a

@@ -207,6 +207,8 @@ fn drive_levels_against_the_thresholds_match_the_node() {
     assert_eq!(t.level_of(79.99), Some(PreloadStatus::WARN));
     assert_eq!(t.level_of(-80.0), Some(PreloadStatus::ERROR));
     assert_eq!(MonitorThresholds::unknown().level_of(500.0), None);
+    // a drive whose force is not measured (a cell without force sensing) has no level
+    assert_eq!(t.level_of(f64::NAN), None);
 }
 
 #[test]

@@ -221,9 +221,59 @@ fn check_crash(text: &str, j: &Value, s: &Scenario) {
         text.contains(&line) && text.contains("between 2026-03-01 and 2026-03-09"),
         "{line}\n{text}"
     );
+    whole_statement(text, change);
     // the joint parameters a small campaign cannot see are unknown, not zero
     assert_eq!(named(&change["params"], "xa1r")["z"], Value::Null);
     assert!(text.contains("unknown (not determined by both"), "{text}");
+}
+
+/// The printed statement of the whole machine: the largest |z| of the parameters both
+/// determined (from the JSON's per-parameter z, counted here), read as the largest of that
+/// many (1 − (1 − 2·Q(|z|))^n), and the joint χ², in one line with one verdict.
+fn whole_statement(text: &str, change: &Value) {
+    let zs: Vec<(&str, f64)> = change["params"]
+        .as_array()
+        .expect("params")
+        .iter()
+        .filter_map(|p| Some((p["name"].as_str()?, p["z"].as_f64()?)))
+        .collect();
+    let (name, z) = zs
+        .iter()
+        .copied()
+        .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+        .expect("a parameter both determined");
+    let p_one = 2.0 * rpkm_core::stats::normal_upper_tail(z.abs());
+    let p_largest = 1.0 - (1.0 - p_one).powi(i32::try_from(zs.len()).expect("29 at most"));
+    let joint = &change["joint"];
+    let (chi2, p) = (
+        joint["chi2"].as_f64().expect("χ²"),
+        joint["p_value"].as_f64().expect("p"),
+    );
+    let head = if p < 1e-3 {
+        "the machine changed".to_owned()
+    } else if p_largest < 1e-3 {
+        format!("{name} changed")
+    } else {
+        "no change beyond the noise".to_owned()
+    };
+    let start = format!("{head}: largest single change {name} {:.1}σ, ", z.abs());
+    let line = text
+        .lines()
+        .find(|l| l.contains("largest single change"))
+        .unwrap_or_else(|| panic!("no statement of the whole machine in\n{text}"));
+    assert!(line.starts_with(&start), "{start}\n{line}");
+    let among = if p_largest < 1e-3 {
+        format!("beyond what the largest of {} reaches by chance", zs.len())
+    } else {
+        format!("expected of the largest of {} by chance", zs.len())
+    };
+    assert!(line.contains(&among), "{among}\n{line}");
+    let joint_text = format!(
+        "joint χ² {chi2:.1} on {} directions",
+        joint["directions"].as_u64().expect("directions")
+    );
+    assert!(line.contains(&joint_text), "{joint_text}\n{line}");
+    eprintln!("{line} (largest of {}: p = {p_largest:e})", zs.len());
 }
 
 /// The l1 trend and its crossing of ±0.1 mm; no other parameter trends.

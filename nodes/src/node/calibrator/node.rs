@@ -451,6 +451,10 @@ impl Calibrator {
             ("unmeasured_poses", self.acc.unmeasured.to_string()),
             ("online_samples", online(|w| w.offered)),
             ("online_dropped", online(|w| w.dropped)),
+            (
+                "online_forces_not_measured",
+                online(|w| w.forces_not_measured),
+            ),
         ]
         .into_iter()
         .chain(self.history.iter().flat_map(NodeHistory::values))

@@ -11,7 +11,7 @@ use crate::node::params::{NodeParams, ParamError};
 pub enum RejectKind {
     /// Not a row of the campaign format (wrong field count, not a number, unknown name).
     Malformed,
-    /// NaN or infinity where a number is required.
+    /// NaN or infinity where a number is required (a force may be NaN: not measured).
     NonFinite,
     /// Outside the configured ranges.
     OutOfRange,
@@ -150,7 +150,8 @@ impl Validator {
         let l = &self.limits;
         for i in 0..4 {
             let (q, f) = (s.position[i], s.force[i]);
-            if !q.is_finite() || !f.is_finite() {
+            // a NaN force is not measured (a cell without force sensing); infinite is wrong
+            if !q.is_finite() || f.is_infinite() {
                 return Err(reject(
                     RejectKind::NonFinite,
                     format!("{label}: seq {}: q{} = {q}, f{} = {f}", s.seq, i + 1, i + 1),
@@ -301,6 +302,12 @@ mod tests {
             v.state(&far, "t").map_err(|r| r.kind),
             Err(RejectKind::OutOfRange)
         );
+        let mut infinite = state(2, 11);
+        infinite.force[1] = f64::INFINITY;
+        assert_eq!(
+            v.state(&infinite, "t").map_err(|r| r.kind),
+            Err(RejectKind::NonFinite)
+        );
         let mut force = state(2, 11);
         force.force[3] = -1e6;
         assert_eq!(
@@ -317,5 +324,9 @@ mod tests {
         );
         // Rejected samples do not move the order reference.
         assert_eq!(v.state(&state(2, 11), "t"), Ok(()));
+        // forces not measured (NaN) are no reason to refuse a state
+        let mut unmeasured = state(3, 12);
+        unmeasured.force = [f64::NAN; 4];
+        assert_eq!(v.state(&unmeasured, "t"), Ok(()));
     }
 }

@@ -1,7 +1,10 @@
 //! One `sensor_msgs/JointState` read as the drive state it carries: the four named joints
 //! found wherever the message lists them, the others ignored; positions m, efforts turned into
 //! rpkm's drive forces; nothing guessed (a missing joint, arrays of unequal length, a repeated
-//! name, a NaN of a drive: the message is refused, naming why).
+//! name, a drive's position NaN or infinite, an infinite effort: the message is refused,
+//! naming why). A cell without force sensing sends no efforts (an empty `effort` array, as
+//! JointState allows) or NaN efforts: a holding drive's force is then NaN, "not measured",
+//! never 0; the positions are all the estimate needs.
 
 use rpkm_msgs::{ActuatorState, JointState};
 
@@ -19,7 +22,7 @@ pub enum JointReject {
         /// The names the message has.
         names: Vec<String>,
     },
-    /// `position` or `effort` not as long as `name` (or `velocity` neither empty nor as long).
+    /// `position` not as long as `name` (or `velocity`, `effort` neither empty nor as long).
     UnequalArrays {
         /// Lengths of name, position, velocity, effort.
         lengths: [usize; 4],
@@ -29,7 +32,8 @@ pub enum JointReject {
         /// The joint.
         joint: String,
     },
-    /// A drive's position, or a holding drive's effort, is NaN or infinite.
+    /// A drive's position is NaN or infinite, or a holding drive's effort infinite (NaN:
+    /// not measured).
     NonFinite {
         /// The joint.
         joint: String,
@@ -70,7 +74,7 @@ impl std::fmt::Display for JointReject {
             } => write!(
                 f,
                 "arrays of unequal length: name {n}, position {p}, velocity {v}, effort {e} \
-                 (position and effort as long as name, velocity too or empty)"
+                 (position as long as name, velocity and effort too or empty)"
             ),
             Self::RepeatedJoint { joint } => write!(f, "joint {joint} listed twice"),
             Self::NonFinite {
@@ -85,11 +89,13 @@ impl std::fmt::Display for JointReject {
 /// The drive state of `js` under `config` (stamp, positions m, forces N, follower flags),
 /// without seq and covariates (the caller numbers it and attaches the temperatures). A
 /// follower's force is 0, as ActuatorState defines it: its controller is off, whatever the
-/// joint's effort says.
+/// joint's effort says. A holding drive without an effort (the array empty) or with a NaN
+/// one has force NaN: not measured.
 pub fn drive_state(js: &JointState, config: &JointConfig) -> Result<ActuatorState, JointReject> {
     let n = js.name.len();
     let lengths = [n, js.position.len(), js.velocity.len(), js.effort.len()];
-    if lengths[1] != n || lengths[3] != n || (lengths[2] != 0 && lengths[2] != n) {
+    let empty_or_n = |len: usize| len == 0 || len == n;
+    if lengths[1] != n || !empty_or_n(lengths[2]) || !empty_or_n(lengths[3]) {
         return Err(JointReject::UnequalArrays { lengths });
     }
     let mut state = ActuatorState {
@@ -122,10 +128,11 @@ pub fn drive_state(js: &JointState, config: &JointConfig) -> Result<ActuatorStat
         }
         state.position[drive] = position;
         if !config.followers[drive] {
-            let effort = js.effort[i];
-            if !effort.is_finite() {
+            let effort = js.effort.get(i).copied().unwrap_or(f64::NAN);
+            if effort.is_infinite() {
                 return Err(non_finite("effort", effort));
             }
+            // NaN stays NaN: not measured
             state.force[drive] = config.effort_sign[drive] * effort;
         }
     }
@@ -216,9 +223,37 @@ mod tests {
         twice.name[1] = "q1_joint".into();
         let e = drive_state(&twice, &c).expect_err("twice");
         assert_eq!(e.joint(), Some("q1_joint"));
+        let mut infinite = message();
+        infinite.effort[2] = f64::INFINITY;
+        let e = drive_state(&infinite, &c).expect_err("infinite effort");
+        assert_eq!(e.to_string(), "joint q1_joint: effort inf");
         // a NaN effort of a follower is no drive force: the state is read
         let mut follower_nan = message();
         follower_nan.effort[0] = f64::NAN;
         assert!(drive_state(&follower_nan, &config([false, false, true, false])).is_ok());
+    }
+
+    /// A cell without force sensing: no effort array, or NaN efforts. The positions are read;
+    /// a holding drive's force is not measured (NaN), a follower's 0 as ever.
+    #[test]
+    fn without_efforts_the_positions_are_read_and_forces_not_measured() -> Result<(), JointReject> {
+        let mut none = message();
+        none.effort.clear();
+        let mut nan = message();
+        nan.effort = vec![f64::NAN; 5];
+        for js in [none, nan] {
+            let s = drive_state(&js, &config([false, true, true, false]))?;
+            assert_eq!(s.position, [2.611, 2.610, 0.789, 0.788]);
+            assert!(s.force[0].is_nan() && s.force[3].is_nan(), "{:?}", s.force);
+            assert_eq!((s.force[1], s.force[2]), (0.0, 0.0), "followers");
+        }
+        // one drive's effort NaN: that drive alone not measured
+        let mut one = message();
+        one.effort[4] = f64::NAN;
+        let s = drive_state(&one, &config([false; 4]))?;
+        assert_eq!(s.force[0], 10.0);
+        assert!(s.force[1].is_nan());
+        assert_eq!(s.force[2..], [-30.0, 40.0]);
+        Ok(())
     }
 }

@@ -12,6 +12,14 @@
 //! each checked against physics). A state without a plausible prediction is skipped and counted
 //! (`implausible` on /diagnostics): it never sets a level, so a non-physical branch of the
 //! solver (10⁸ N "predicted") cannot raise ERROR on a drive.
+//!
+//! A holding drive whose force is not measured (NaN: a cell without force sensing) has its
+//! measured current and deviation NaN and sets no level; the followers' Δq (positions alone)
+//! is still checked. The node says so once (log and /diagnostics, not an alarm), and every
+//! report names the drives (`forces_not_measured` counts the states). A calibrated effect
+//! that reads an unmeasured force skips the state (`skipped_unmeasured`, named).
+//!
+//! Files: `mod.rs` the monitor and the node, `tests.rs` its tests.
 
 use super::lifecycle::Lifecycle;
 use std::time::Duration;
@@ -27,7 +35,7 @@ use super::context::{bad_param, status, CommonArgs, Every, Idle, NodeContext};
 use super::declare::{keys, served, ParamBound, ParamDefault, ParamSpec};
 use super::geometry::Geometry;
 use super::geometry::GEOMETRY;
-use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion};
+use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion, UnmeasuredForce};
 use super::params::NodeParams;
 use super::params::SAMPLE_COUNT;
 use super::realtime::BUSY_POLL;
@@ -172,6 +180,10 @@ pub struct Monitor {
     pub input: SeqGaps,
     /// How the stream's carriers moved (what a calibrated effect may read).
     motion: StreamMotion,
+    /// States with a holding drive's force not measured (its current not checked).
+    pub forces_not_measured: u64,
+    /// States skipped: a calibrated effect reads a force they do not measure; the last why.
+    pub skipped_unmeasured: (u64, Option<UnmeasuredForce>),
 }
 
 impl Monitor {
@@ -191,6 +203,8 @@ impl Monitor {
             last: None,
             input: SeqGaps::default(),
             motion: StreamMotion::default(),
+            forces_not_measured: 0,
+            skipped_unmeasured: (0, None),
         }
     }
 
@@ -221,7 +235,13 @@ impl Monitor {
     pub fn evaluate(&mut self, s: &ActuatorState) -> Option<EvaluatedSample> {
         self.input.next(s.seq);
         // the carriers and parameters under the calibrated effects
-        let (params, q) = self.motion.model_inputs(&mut self.geometry, s);
+        let (params, q) = match self.motion.model_inputs(&mut self.geometry, s) {
+            Ok(inputs) => inputs,
+            Err(e) => {
+                self.skipped_unmeasured = (self.skipped_unmeasured.0 + 1, Some(e));
+                return None;
+            }
+        };
         let g = &self.geometry;
         let prev = self.previous.as_ref();
         let limits = Limits::default();
@@ -257,11 +277,17 @@ impl Monitor {
                 to_percent(s.force[i])
             };
             st.predicted_current[i] = to_percent(eq.drive_force[i]);
+            // NaN where the force is not measured: no deviation, no level
             st.deviation[i] = st.measured_current[i] - st.predicted_current[i];
         }
+        if st.deviation.iter().any(|d| d.is_nan()) {
+            self.forces_not_measured += 1;
+        }
         let worst_drive = (0..4)
+            .filter(|&i| !st.deviation[i].is_nan())
             .max_by(|&a, &b| st.deviation[a].abs().total_cmp(&st.deviation[b].abs()))
             .unwrap_or(0);
+        // NaN when no drive's force is measured: OK, the Δq below may still raise it
         let worst = st.deviation[worst_drive].abs();
         let t = self.thresholds;
         let mut sample_level = level_by(worst, t.warn_percent, t.error_percent);
@@ -337,7 +363,7 @@ impl Monitor {
         let st = &e.status;
         let k = e.worst_drive;
         let name = ["OK", "WARN", "ERROR"][usize::from(st.level.min(2))];
-        let force = format!(
+        let mut force = format!(
             "drive q{} deviates {:+.1} % (measured {:.1} %, predicted {:.1} %; thresholds \
              {} / {} %)",
             k + 1,
@@ -347,6 +373,9 @@ impl Monitor {
             t.warn_percent,
             t.error_percent
         );
+        if let Some(why) = self.unmeasured_text(st) {
+            force = why;
+        }
         // In follower mode the level may come from the compatibility of q2, q3 instead.
         let (dq_drive, dq) = if st.dq2.abs() >= st.dq3.abs() {
             (2, st.dq2)
@@ -369,6 +398,8 @@ impl Monitor {
             ("samples", self.samples.to_string()),
             ("unsolved", self.unsolved.to_string()),
             ("implausible", self.implausible.to_string()),
+            ("forces_not_measured", self.forces_not_measured.to_string()),
+            ("skipped_unmeasured", self.skipped_unmeasured.0.to_string()),
             ("dq2_m", format!("{:e}", st.dq2)),
             ("dq3_m", format!("{:e}", st.dq3)),
             ("parameters", self.geometry.source.clone()),
@@ -381,6 +412,28 @@ impl Monitor {
             values.push((keys[2], format!("{:.3}", st.deviation[i])));
         }
         status(level, node, message, values)
+    }
+
+    /// Why the currents of `st` are silent, where a holding drive's force is not measured
+    /// (and a state skipped for an effect that reads one); None while every force is.
+    fn unmeasured_text(&self, st: &PreloadStatus) -> Option<String> {
+        let drives: Vec<String> = (0..4)
+            .filter(|&i| st.measured_current[i].is_nan())
+            .map(|i| format!("q{}", i + 1))
+            .collect();
+        let skipped = self
+            .skipped_unmeasured
+            .1
+            .as_ref()
+            .map(|e| format!("; {} states skipped: {e}", self.skipped_unmeasured.0));
+        (!drives.is_empty() || skipped.is_some()).then(|| {
+            format!(
+                "drive forces of {} not measured (a cell without force sensing): their \
+                 redundancy currents are not checked, the followers' Δq still are{}",
+                drives.join(", "),
+                skipped.unwrap_or_default()
+            )
+        })
     }
 }
 
@@ -568,12 +621,15 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
         if let Some(s) = input.next(&ctx)? {
             idle.worked();
             // an inactive node takes its input and publishes nothing
+            let unmeasured_before = monitor.forces_not_measured;
             if let Some(e) = lifecycle.active().then(|| monitor.evaluate(&s)).flatten() {
                 n += 1;
                 if e.changed || n.is_multiple_of(status_every) {
                     statuses.publish(&e.status)?;
                 }
-                if e.changed {
+                // said once: the first state whose forces are not measured
+                let first_unmeasured = unmeasured_before == 0 && monitor.forces_not_measured == 1;
+                if e.changed || first_unmeasured {
                     ctx.log(monitor.status(&ctx.status_name).message);
                     diagnostics.publish(&report(&ctx, &monitor, &mut input))?;
                 }
@@ -601,147 +657,4 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE};
-    use rpkm_core::geometry::igm;
-    use rpkm_core::params::{Model, Params};
-
-    fn monitor(debounce: u32) -> Monitor {
-        Monitor::new(
-            Geometry {
-                params: Params::nominal(),
-                model: Model::M29,
-                stiffness: Stiffness::default(),
-                source: "test".into(),
-                effects: crate::node::effects::NodeEffects::default(),
-            },
-            Thresholds {
-                debounce_samples: debounce,
-                ..Thresholds::default()
-            },
-        )
-    }
-
-    /// A state at (0, 1700) mm whose drive forces are those of q3 offset by `dq3` mm.
-    fn state(dq3: f64) -> Result<ActuatorState, Box<dyn std::error::Error>> {
-        let p = Params::nominal();
-        let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
-        let mut s = q;
-        s[2] += dq3;
-        let eq = fegm(&p, &Stiffness::default(), s, ALL_ACTIVE)?;
-        Ok(ActuatorState {
-            position: q.map(m_from_mm),
-            force: eq.drive_force,
-            ..Default::default()
-        })
-    }
-
-    #[test]
-    fn levels_follow_the_deviation_with_debounce() -> Result<(), Box<dyn std::error::Error>> {
-        let mut m = monitor(2);
-        let ok = m.evaluate(&state(0.0)?).ok_or("unsolved")?;
-        assert_eq!(ok.sample_level, PreloadLevel::Ok);
-        assert!(ok.status.deviation.iter().all(|d| d.abs() < 1e-6));
-        // every drive holds: no follower compatibility measured
-        assert!(ok.status.dq2.is_nan() && ok.status.dq3.is_nan());
-        // 0.4 mm on q3 is about 100 % on the most loaded drive (core default stiffness).
-        let big = state(0.4)?;
-        let first = m.evaluate(&big).ok_or("unsolved")?;
-        assert_eq!(first.sample_level, PreloadLevel::Error);
-        assert_eq!(first.status.level, PreloadStatus::OK, "held for debounce");
-        let second = m.evaluate(&big).ok_or("unsolved")?;
-        assert!(second.changed);
-        assert_eq!(second.status.level, PreloadStatus::ERROR);
-        let f = big.force;
-        let worst = (0..4)
-            .max_by(|&a, &b| f[a].abs().total_cmp(&f[b].abs()))
-            .ok_or("no drive")?;
-        assert_eq!(second.worst_drive, worst);
-        assert!(m.status("m").message.contains(&format!("q{}", worst + 1)));
-        Ok(())
-    }
-
-    #[test]
-    fn follower_mode_reports_the_compatibility_offsets() -> Result<(), Box<dyn std::error::Error>> {
-        let p = Params::nominal();
-        let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
-        let mut m = monitor(1);
-        let s = ActuatorState {
-            position: [q[0], q[1] + 0.1, q[2] - 0.3, q[3]].map(m_from_mm),
-            follower: [false, true, true, false],
-            ..Default::default()
-        };
-        let e = m.evaluate(&s).ok_or("unsolved")?;
-        assert!((e.status.dq2 + 0.1e-3).abs() < 1e-9, "{}", e.status.dq2);
-        assert!((e.status.dq3 - 0.3e-3).abs() < 1e-9, "{}", e.status.dq3);
-        assert_eq!(e.sample_level, PreloadLevel::Error, "0.3 mm > 200 µm");
-        Ok(())
-    }
-
-    #[test]
-    fn an_implausible_prediction_is_skipped_not_compared() -> Result<(), Box<dyn std::error::Error>>
-    {
-        // q3 50 mm off: the elastic model's only answer needs 100x the drives' force. The
-        // measured currents are small; comparing with that answer would raise ERROR.
-        let mut m = monitor(1);
-        let mut s = state(0.0)?;
-        s.position[2] += 0.05;
-        assert!(m.evaluate(&s).is_none());
-        assert_eq!((m.implausible, m.samples), (1, 0));
-        assert_eq!(m.level(), PreloadLevel::Ok);
-        assert!(m.status("m").message.contains("1 implausible"));
-        // and a plausible state afterwards is evaluated as usual
-        let ok = m.evaluate(&state(0.0)?).ok_or("unsolved")?;
-        assert_eq!(ok.sample_level, PreloadLevel::Ok);
-        Ok(())
-    }
-
-    /// A calibrated lost motion of carrier 4 (`dq4 = -b * dir_q4`, b = 0.05 mm, from a
-    /// Parameters message in SI): the monitor predicts the forces of carrier 4 standing b
-    /// behind its encoder (the core's elastic model at the shifted carrier), where the
-    /// geometry alone predicts none.
-    #[test]
-    fn predicted_forces_include_a_calibrated_effect() -> Result<(), Box<dyn std::error::Error>> {
-        let file = crate::effects_file::parse(
-            "effects:\n  - name: lost_motion_q4\n    summary: s\n    \
-             params: {b: {unit: mm, prior: 0.01}}\n    dq4: \"-b * dir_q4\"\n",
-            "lost.yaml",
-            &[],
-        )?;
-        let mut m = monitor(1);
-        let mut g = m.geometry().clone();
-        g.effects = crate::node::effects::NodeEffects::known(Some(file));
-        let msg = rpkm_msgs::Parameters {
-            model: 29,
-            active_effects: vec!["lost_motion_q4".into()],
-            effect_parameter_names: vec!["lost_motion_q4.b".into()],
-            effect_parameter_values: vec![0.05e-3],
-            ..Default::default()
-        };
-        m.set_geometry(g.updated(&msg)?);
-        let p = Params::nominal();
-        let q = igm(&p, Model::M29, 0.0, 1700.0)?.q();
-        let s = ActuatorState {
-            position: q.map(m_from_mm),
-            ..Default::default()
-        };
-        // the first state of the stream: carrier 4's last move counts as +1
-        let e = m.evaluate(&s).ok_or("unsolved")?;
-        let mut shifted = q;
-        shifted[3] -= 0.05;
-        let truth = fegm(&p, &Stiffness::default(), shifted, ALL_ACTIVE)?;
-        for i in 0..4 {
-            let want = truth.drive_force[i] / NOMINAL_DRIVE_FORCE_N * 100.0;
-            assert!(
-                (e.status.predicted_current[i] - want).abs() < 1e-6,
-                "drive {}: {} %, the core's {want} %",
-                i + 1,
-                e.status.predicted_current[i]
-            );
-        }
-        let largest = truth.drive_force.iter().fold(0.0f64, |a, f| a.max(f.abs()));
-        assert!(largest > 100.0, "0.05 mm preloads the drives: {largest} N");
-        Ok(())
-    }
-}
+mod tests;
