@@ -81,7 +81,9 @@ pub struct CalibrateArgs {
     /// --json are the model's with the effects, whose own parameters follow), and the output
     /// shows the error falling effect by effect (table; chart with --chart).
     /// Library: parallelogram, preload_elastic, thermal, encoder_scale, guide_straightness,
-    /// instrument_alignment.
+    /// instrument_alignment. A family named whole fits every part (thermal: rods, frame and
+    /// scales); `thermal:rods` pins one, `thermal:rods+frame` several (the name the
+    /// diagnosis advises).
     #[arg(long, default_value = "")]
     pub effects: String,
     /// Effects written as data (YAML, docs/effects.md) that --effects may name; their
@@ -176,13 +178,20 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         .map(|v| validate_with(v, &start, &cal, &noise, (&refs, &set)))
         .transpose()?;
     print_report(&campaign, &cal, val.as_ref());
+    if let Some(v) = &validation {
+        super::summary::print_coverage(&campaign, v, "");
+    }
     print_noise(&noise);
-    // judged against the stated noise: the estimate's group takes a drift in and hides it
+    // judged against the stated noise (the estimate's group takes a drift in and hides it)
+    // and against the estimated one (where the stated is far too pessimistic, it hides one)
     let corr = set.corrections(&cal.theta, &cal.params);
-    let returns =
-        rpkm_core::returns::drift_checks(&campaign, (&cal.params, cal.model), &corr, &opts.noise)
-            .map_err(|e| bad_input(e.to_string()))?;
-    print_returns(&returns);
+    let returns = [&opts.noise, &noise.model].map(|n| {
+        rpkm_core::returns::drift_checks(&campaign, (&cal.params, cal.model), &corr, n)
+            .map_err(|e| bad_input(e.to_string()))
+    });
+    let [returns, returns_estimated] = returns;
+    let (returns, returns_estimated) = (returns?, returns_estimated?);
+    print_returns(&returns, &returns_estimated);
     let stages = if refs.is_empty() {
         None
     } else {
@@ -210,6 +219,14 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         let file = file.as_ref().map(crate::effects_file::to_json);
         let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_ref())?;
         out["returns"] = serde_json::to_value(&returns)?;
+        out["returns_under_estimated_noise"] = serde_json::to_value(&returns_estimated)?;
+        if let Some(v) = &validation {
+            out["held_out_coverage"] =
+                serde_json::to_value(rpkm_core::diagnose::coverage::coverage(&campaign, v))?;
+            if let Some(j) = val.as_ref().and_then(|x| x.judge.as_ref()) {
+                out["held_out_poses"] = super::held_out_poses::held_out_poses(v, j)?;
+            }
+        }
         write_json(path, &out)?;
         println!("\nwrote {}", path.display());
     }
@@ -344,16 +361,22 @@ fn calibration_json(
     Ok(out)
 }
 
-/// The drift checks: each setup's return to its reset pose against its noise.
-fn print_returns(returns: &[rpkm_core::returns::ReturnDrift]) {
+/// The drift checks: each setup's return to its reset pose against the stated noise, and
+/// against the noise the campaign shows (`estimated`, the same returns in the same order).
+fn print_returns(
+    returns: &[rpkm_core::returns::ReturnDrift],
+    estimated: &[rpkm_core::returns::ReturnDrift],
+) {
     if returns.is_empty() {
         return;
     }
     println!(
-        "\ndrift checks (each return to a setup's reset pose against the stated noise, --noise):"
+        "\ndrift checks (each return to a setup's reset pose against the stated noise, --noise, \
+         then against the noise estimated from the campaign):"
     );
-    for d in returns {
+    for (d, e) in returns.iter().zip(estimated) {
         println!("  {}", crate::words::return_drift(d));
+        println!("    {}", crate::words::return_drift_estimated(e));
     }
 }
 
@@ -603,19 +626,13 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
     }
     if let Some(v) = val {
         println!(
-            "\nheld-out TCP RMS ({} values): {:.2} µm before, {:.2} µm after; gain {:.3}",
+            "\nheld-out TCP RMS as measured ({} values): {:.2} µm with the starting parameters \
+             (no effects), {:.2} µm calibrated; gain {:.3} (the mean over the values of \
+             (|before| - |after|) / |before|: 1 where every error vanished, 0 where none changed)",
             v.values, v.rms_before_um, v.rms_after_um, v.gain
         );
         if let Some(j) = &v.judge {
-            println!(
-                "held-out judge: {}: {}",
-                if j.agrees() {
-                    "the held-out data agree with the model"
-                } else {
-                    "the held-out data do NOT agree with the model"
-                },
-                crate::words::held_out(j)
-            );
+            println!("{}", crate::words::held_out_judge(j));
         }
     }
 }
@@ -634,6 +651,30 @@ fn print_effects(effects: &[calib::EffectEstimate]) {
             }
         );
     }
+}
+
+/// The effects' parameters' covariance, with each other and with the geometry's 29: what a
+/// quantity derived from several of them needs for its σ (a time constant b/α, say).
+fn effects_covariance(cal: &Calibration) -> serde_json::Value {
+    let n = cal.covariance_theta.nrows();
+    let names: Vec<String> = cal
+        .effects
+        .iter()
+        .map(|e| format!("{}.{}", e.effect, e.name))
+        .collect();
+    let matrix: Vec<Vec<f64>> = (0..n)
+        .map(|i| (0..n).map(|j| cal.covariance_theta[(i, j)]).collect())
+        .collect();
+    let with_geometry: Vec<Vec<f64>> = (0..cal.covariance_p_theta.nrows())
+        .map(|i| (0..n).map(|j| cal.covariance_p_theta[(i, j)]).collect())
+        .collect();
+    json!({
+        "names": names,
+        "units": cal.effects.iter().map(|e| e.unit.clone()).collect::<Vec<_>>(),
+        "matrix": matrix,
+        "geometry_names": NAMES,
+        "with_geometry": with_geometry,
+    })
 }
 
 fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value {
@@ -666,6 +707,7 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
     });
     if !cal.effects.is_empty() {
         out["effects"] = json!(cal.effects);
+        out["effects_covariance"] = effects_covariance(cal);
     }
     // this process's own peak (the high-water mark of its memory since it started: a
     // parent's peak does not count, as it does in wait4's ru_maxrss after execve)

@@ -25,10 +25,12 @@ use std::path::{Path, PathBuf};
 impl Report<'_> {
     /// The stage of a diagnosis' current model.
     pub fn stage_of(d: &ModelDiagnosis) -> ModelRow {
-        let with = if d.effects_in_model.is_empty() {
+        // the effects as fitted (a family named whole keeps the parts the data tell apart):
+        // the model whose figures these are
+        let with = if d.model_effects.is_empty() {
             String::new()
         } else {
-            format!(" + {}", d.effects_in_model.join(" + "))
+            format!(" + {}", d.model_effects.join(" + "))
         };
         ModelRow {
             model: format!("{}{with}", d.model),

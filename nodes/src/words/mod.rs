@@ -7,7 +7,7 @@ use rpkm_core::diagnose::neighbours::Neighbours;
 use rpkm_core::diagnose::periodic::Periodic;
 use rpkm_core::diagnose::sparse::Pointer;
 use rpkm_core::diagnose::{
-    Candidate, HeldOutCheck, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, Test,
+    Candidate, EvidenceOf, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, Test,
     VerdictKind,
 };
 use rpkm_core::online::{Drift, DriftInput, FOLLOWS};
@@ -15,10 +15,12 @@ use rpkm_core::params::{unit, Unit, NAMES};
 use std::fmt::Write as _;
 
 mod figures;
+mod held_out;
 mod noise;
 
 pub use figures::{condition, condition_short, with_sigma};
-pub use noise::{noise, rated_by};
+pub use held_out::{coverage, held_out, held_out_judge, return_drift_estimated};
+pub use noise::{estimated_level, noise, rated_by};
 
 /// "the lt x residual follows temp_machine (r = 0.93, and equally q2)".
 pub fn follows(p: &Pointer) -> String {
@@ -111,11 +113,11 @@ fn alike_names(d: &Drift) -> String {
 /// the residual follows, the held-out RMS before and after, and what the search made of it.
 pub fn evidence(c: &Candidate) -> String {
     let mut s = format!(
-        "chi2/dof {:.2} -> {:.2}, F = {:.1} (p = {:.1e}); {}",
+        "chi2/dof {:.2} -> {:.2}, F = {:.1} ({}); {}",
         c.chi2_per_dof_before,
         c.chi2_per_dof_after,
         c.f_statistic,
-        c.p_value,
+        p_is(c.p_value),
         values(&c.params)
     );
     if let Some(f) = &c.follows {
@@ -129,7 +131,7 @@ pub fn evidence(c: &Candidate) -> String {
     }
     if c.prediction.is_none() {
         if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
-            let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
+            let _ = write!(s, "; held-out RMS as measured {b:.1} -> {a:.1} um");
         }
     }
     let _ = write!(s, "{}", judged(&c.judged));
@@ -160,17 +162,14 @@ fn prediction(p: &Prediction) -> String {
             p.support_p
         ),
     };
+    let what = match (p.by_setup, p.unit) {
+        (true, _) => "cross-validated (by setup) RMS, each row in its own noise (sigma),",
+        (false, "sigma") => "held-out RMS, each reading in its own noise (sigma),",
+        (false, _) => "held-out RMS with each setup's zero removed",
+    };
     format!(
-        "{} RMS {:.2} -> {:.2} {} (± {:.2}; {support})",
-        if p.by_setup {
-            "cross-validated (by setup)"
-        } else {
-            "held-out"
-        },
-        p.rms_before,
-        p.rms_after,
-        p.unit,
-        p.standard_error
+        "{what} {:.2} -> {:.2} {} (± {:.2}; {support})",
+        p.rms_before, p.rms_after, p.unit, p.standard_error
     )
 }
 
@@ -200,17 +199,52 @@ fn judged(j: &Judged) -> String {
         }
         _ => String::new(),
     };
-    format!("; evidence of both campaigns p = {:.1e}{why}", j.evidence_p)
+    format!("; {} {}{why}", evidence_of(j.evidence_of), p_is(j.evidence_p))
+}
+
+/// What an addition's evidence combines, in words: both campaigns only where a held-out one
+/// was given.
+fn evidence_of(e: EvidenceOf) -> &'static str {
+    match e {
+        EvidenceOf::FitAndHeldOut => "evidence of both campaigns (fit and held-out prediction)",
+        EvidenceOf::FitAndCrossValidation => {
+            "evidence of the campaign (fit and cross-validation by setup; no held-out campaign \
+             decided)"
+        }
+        EvidenceOf::FitAlone => "evidence of the fit alone (nothing predicted)",
+    }
+}
+
+/// "p = 1.2e-3", or "p < 1e-300" where the p-value underflowed to 0 (it is no probability
+/// of 0).
+pub fn p_is(p: f64) -> String {
+    if p > 0.0 || p.is_nan() {
+        format!("p = {p:.1e}")
+    } else {
+        "p < 1e-300".to_owned()
+    }
 }
 
 /// A model of the search in words: "thermal:rods + preload_elastic: F = 98.0 (p = 1e-40);
 /// alpha_rods = ...; held-out RMS 9.14 -> 4.60 um (± 0.4); evidence ...".
 pub fn trial(t: &ModelTrial) -> String {
+    let added: Vec<String> = t.added.iter().map(|a| with_parts(a)).collect();
+    // the p-value is the larger of the F-test's and the Wald test's: where the Wald test
+    // sets it, a large F beside a large p says the parameters trade off
+    let wald = if t.wald_p > t.f_p {
+        format!(
+            ": the Wald test of its added parameters themselves, which trade off; the F-test's \
+             own {}",
+            p_is(t.f_p)
+        )
+    } else {
+        String::new()
+    };
     let mut s = format!(
-        "{}: F = {:.1} (p = {:.1e}); {}",
-        t.added.join(" + "),
+        "{}: F = {:.1} ({}{wald}); {}",
+        added.join(" + "),
         t.f_statistic,
-        t.p_value,
+        p_is(t.p_value),
         values(&t.params)
     );
     if let Some(p) = &t.prediction {
@@ -220,24 +254,20 @@ pub fn trial(t: &ModelTrial) -> String {
     s
 }
 
-/// The held-out judge in words: "held-out RMS 12.7 um (each setup's zero removed) against
-/// the model's floor 5.4 um (p = 1.2e-30)".
-pub fn held_out(h: &HeldOutCheck) -> String {
-    let mut s = format!(
-        "held-out RMS {:.1} um (each setup's zero removed) against the model's floor {:.1} um \
-         (the noise {:.1} um and the calibration's own uncertainty; p = {:.1e})",
-        h.rms_relative_um, h.floor_relative_um, h.noise_floor_relative_um, h.p_value
-    );
-    if let Some(f) = &h.follows {
-        let _ = write!(
-            s,
-            "; {}",
-            follows(f).replacen("residual", "held-out residual", 1)
-        );
-    } else if h.structured {
-        s.push_str("; the held-out residual is structured (periods or neighbours alike)");
+/// An effect's name with the parts it holds where a family is named whole: "thermal (all its
+/// parts: rods+frame+scales)"; a part or an effect without parts as it is.
+pub fn with_parts(name: &str) -> String {
+    if name.contains(':') {
+        return name.to_owned();
     }
-    s
+    let parts = rpkm_core::effects::by_name(name)
+        .map(|e| e.parts())
+        .unwrap_or_default();
+    if parts.len() > 1 {
+        format!("{name} (all its parts: {})", parts.join("+"))
+    } else {
+        name.to_owned()
+    }
 }
 
 /// "the kgm along residual follows a 60.0 mm period of carrier 4 (amplitude 2.40 µm, 85 % of
@@ -375,13 +405,9 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
     let held = d.held_out.as_ref();
     match d.verdict_kind {
         VerdictKind::MissingEffect => {
-            let add = d
-                .missing_effect
-                .iter()
-                .chain(&d.together_with)
-                .cloned()
-                .collect::<Vec<_>>()
-                .join(",");
+            // what was found, parts and all: `--effects thermal` would fit every part of
+            // the family in rpkm calibrate, not the ones the search chose
+            let add = d.missing_effects.join(",");
             format!(
                 "missing effect: {} ({}){tied}{remains}; add --effects {add}{noise}",
                 d.missing_effects.join(" with "),
