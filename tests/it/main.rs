@@ -36,6 +36,7 @@ mod cli_effects_file;
 mod cli_foreign;
 mod cli_plan;
 mod cli_scipy_baseline;
+mod cli_words;
 mod dds_large_samples;
 mod docs_in_repo;
 mod first_campaign_doc;

@@ -427,6 +427,8 @@ pub struct NoiseReport {
     pub assumed: f64,
     pub estimated: f64,
     pub dof: f64,
+    /// `estimated` is the estimation's cap, not an estimate ([`crate::variance::GroupNoise::capped`]).
+    pub capped: bool,
 }
 
 /// The diagnosis (serialises to the JSON other tools read: `verdict_kind`, `missing_effect`,
@@ -562,6 +564,8 @@ pub struct Noisier {
     pub group: String,
     /// Estimated over stated level.
     pub ratio: f64,
+    /// The estimate is the estimation's cap: the ratio is a lower bound.
+    pub capped: bool,
 }
 
 /// The TCP error of one pose of a 2-D relative instrument (laser tracker, grid encoder) as a

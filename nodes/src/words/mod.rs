@@ -517,8 +517,8 @@ pub fn model_choice(d: &ModelDiagnosis) -> Option<String> {
 pub fn test(t: &Test) -> String {
     format!(
         "noise levels estimated per group from the campaign ({} rounds); candidates, each part \
-         of a family and pairs by the evidence of both campaigns (nested F-test and held-out \
-         or cross-validated prediction) at level {:.2e} (Bonferroni over {}), named when they \
+         of a family and pairs by their evidence (the nested F-test combined with the \
+         prediction of the held-out campaign, or of left-out setups where none decides) at level {:.2e} (Bonferroni over {}), named when they \
          predict better by more than a fifth of the noise, with physical values, the simplest \
          within one standard error of the best; dictionary, periodogram and neighbour tests \
          each at level {:.2e} (n = {} rows); held-out data against the model's floor at level \
