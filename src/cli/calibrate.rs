@@ -182,16 +182,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         super::summary::print_coverage(&campaign, v, "");
     }
     print_noise(&noise);
-    // judged against the stated noise (the estimate's group takes a drift in and hides it)
-    // and against the estimated one (where the stated is far too pessimistic, it hides one)
-    let corr = set.corrections(&cal.theta, &cal.params);
-    let returns = [&opts.noise, &noise.model].map(|n| {
-        rpkm_core::returns::drift_checks(&campaign, (&cal.params, cal.model), &corr, n)
-            .map_err(|e| bad_input(e.to_string()))
-    });
-    let [returns, returns_estimated] = returns;
-    let (returns, returns_estimated) = (returns?, returns_estimated?);
-    print_returns(&returns, &returns_estimated);
+    let returns = drift_checks(&campaign, (&cal, &set), &opts.noise, &noise)?;
+    print_returns(&returns.0, &returns.1);
     let stages = if refs.is_empty() {
         None
     } else {
@@ -218,14 +210,10 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.json {
         let file = file.as_ref().map(crate::effects_file::to_json);
         let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_ref())?;
-        out["returns"] = serde_json::to_value(&returns)?;
-        out["returns_under_estimated_noise"] = serde_json::to_value(&returns_estimated)?;
+        out["returns"] = serde_json::to_value(&returns.0)?;
+        out["returns_under_estimated_noise"] = serde_json::to_value(&returns.1)?;
         if let Some(v) = &validation {
-            out["held_out_coverage"] =
-                serde_json::to_value(rpkm_core::diagnose::coverage::coverage(&campaign, v))?;
-            if let Some(j) = val.as_ref().and_then(|x| x.judge.as_ref()) {
-                out["held_out_poses"] = super::held_out_poses::held_out_poses(v, j)?;
-            }
+            held_out_json(&mut out, (&campaign, v), val.as_ref())?;
         }
         write_json(path, &out)?;
         println!("\nwrote {}", path.display());
@@ -236,6 +224,41 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         val.as_ref(),
         verdict,
     )
+}
+
+/// Every return to a setup's reset pose, judged.
+type Returns = Vec<rpkm_core::returns::ReturnDrift>;
+
+/// The drift checks of every return to a setup's reset pose under the calibrated model:
+/// judged against the `stated` noise (the estimate's group takes a drift in and hides it) and
+/// against the `estimated` one (where the stated is far too pessimistic, it hides one).
+fn drift_checks(
+    campaign: &Campaign,
+    (cal, set): (&Calibration, &EffectSet),
+    stated: &rpkm_core::noise::NoiseModel,
+    estimated: &NoiseEstimate,
+) -> anyhow::Result<(Returns, Returns)> {
+    let corr = set.corrections(&cal.theta, &cal.params);
+    let check = |n| {
+        rpkm_core::returns::drift_checks(campaign, (&cal.params, cal.model), &corr, n)
+            .map_err(|e| bad_input(e.to_string()))
+    };
+    Ok((check(stated)?, check(&estimated.model)?))
+}
+
+/// The held-out campaign in the JSON: against the calibration's ranges
+/// (`held_out_coverage`), and the judge's residual pose by pose (`held_out_poses`).
+fn held_out_json(
+    out: &mut serde_json::Value,
+    (campaign, held_out): (&Campaign, &Campaign),
+    val: Option<&Validation>,
+) -> anyhow::Result<()> {
+    out["held_out_coverage"] =
+        serde_json::to_value(rpkm_core::diagnose::coverage::coverage(campaign, held_out))?;
+    if let Some(j) = val.and_then(|v| v.judge.as_ref()) {
+        out["held_out_poses"] = super::held_out_poses::held_out_poses(held_out, j)?;
+    }
+    Ok(())
 }
 
 /// `--history`: the calibration recorded in the machine's history, with the held-out RMS

@@ -187,7 +187,10 @@ fn held_out_before(d: &ModelDiagnosis, before_um: f64) -> String {
     let weighted = if d.compared_under.is_empty() {
         "the current model's own noise".to_owned()
     } else {
-        format!("the noise of the model with {}", d.compared_under.join(" and "))
+        format!(
+            "the noise of the model with {}",
+            d.compared_under.join(" and ")
+        )
     };
     format!(
         "(held-out after: the held-out RMS as measured, um, with the effect added; before it, \

@@ -47,12 +47,10 @@ fn verdict_box(label: &str, d: &ModelDiagnosis) -> String {
     )
 }
 
-/// Verdict, the error falling effect by effect, the noise against its rating.
-pub fn summary(r: &Report) -> String {
-    let (c, d) = (r.campaign, r.before);
-    // each model's own figure, named: the model with effects determines more (or fewer)
-    // combinations than the one without
-    let determined: Vec<String> = std::iter::once(d)
+/// The parameter combinations each model of the page determined, named by model: the model
+/// with effects determines more (or fewer) than the one without.
+fn determined(r: &Report) -> String {
+    let each: Vec<String> = std::iter::once(r.before)
         .chain(r.after)
         .map(|m| {
             format!(
@@ -63,13 +61,19 @@ pub fn summary(r: &Report) -> String {
             )
         })
         .collect();
+    each.join(", ")
+}
+
+/// Verdict, the error falling effect by effect, the noise against its rating.
+pub fn summary(r: &Report) -> String {
+    let (c, d) = (r.campaign, r.before);
     let mut o = format!(
         "<section id=\"summary\"><h1>Diagnosis of {}</h1><p class=\"muted\">{} poses; {} rows; \
          parameter combinations the campaign determined better than their tolerance: {}.</p>",
         escape(&c.source),
         c.poses.len(),
         d.points.len(),
-        escape(&determined.join(", "))
+        escape(&determined(r))
     );
     o.push_str(&verdict_box("current model", d));
     if let Some(a) = r.after {

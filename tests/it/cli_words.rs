@@ -47,7 +47,14 @@ fn runs() -> Option<&'static Runs> {
             &ds,
             &out,
             "c",
-            &["calibrate", "--model", "24", "--effects", &advised, "--validate"],
+            &[
+                "calibrate",
+                "--model",
+                "24",
+                "--effects",
+                &advised,
+                "--validate",
+            ],
         );
         Some(Runs {
             dir: ds,
@@ -141,7 +148,9 @@ fn a_capped_noise_level_is_shown_as_a_cap() {
     assert_eq!(d.json["noisier_than_rated"][0]["capped"], true);
     let row = line_with(&d.text, "   encoder ");
     assert!(row.contains("≥20.000") && row.contains("cap"), "{row}");
-    assert!(d.text.contains("encoder at the estimation's cap, 100x its stated level"));
+    assert!(d
+        .text
+        .contains("encoder at the estimation's cap, 100x its stated level"));
     assert!(!d.text.contains("100.0x noisier"), "{}", d.text);
 }
 
@@ -245,7 +254,11 @@ fn each_trial_names_the_parts_it_holds() {
         .as_array()
         .expect("trials")
         .iter()
-        .filter(|t| t["added"].as_array().is_some_and(|a| a.iter().any(|n| n == "thermal")))
+        .filter(|t| {
+            t["added"]
+                .as_array()
+                .is_some_and(|a| a.iter().any(|n| n == "thermal"))
+        })
         .collect();
     assert!(!whole.is_empty(), "no trial holds thermal whole");
     let said = d
@@ -279,11 +292,19 @@ fn each_held_out_figure_is_named() {
     assert!(note.contains(&format!(": {before:.1} um;")), "{note}");
     assert!(note.contains(&format!("section 1's {own:.1} um")), "{note}");
     // the walk's unnamed forms of these figures
-    for unnamed in ["held-out RMS 2.72 ->", "held-out RMS 17.05 ->", "(by setup) RMS 6.72 ->"] {
+    for unnamed in [
+        "held-out RMS 2.72 ->",
+        "held-out RMS 17.05 ->",
+        "(by setup) RMS 6.72 ->",
+    ] {
         assert!(!d.text.contains(unnamed), "`{unnamed}` unnamed");
     }
-    assert!(d.text.contains("held-out RMS with each setup's zero removed 17.0"));
-    assert!(d.text.contains("held-out RMS, each reading in its own noise (sigma), 2.7"));
+    assert!(d
+        .text
+        .contains("held-out RMS with each setup's zero removed 17.0"));
+    assert!(d
+        .text
+        .contains("held-out RMS, each reading in its own noise (sigma), 2.7"));
 }
 
 /// Point 9: the held-out residual pose by pose in both JSON files: every non-reset reading
@@ -301,12 +322,20 @@ fn held_out_residuals_pose_by_pose_are_in_the_json() {
     for s in [&r.diagnosed, &r.calibrated] {
         let poses = s.json["held_out_poses"].as_array().expect("held_out_poses");
         assert_eq!(poses.len(), readings);
-        let rms = (poses.iter().map(|p| f(&p["residual_um"]).powi(2)).sum::<f64>()
+        let rms = (poses
+            .iter()
+            .map(|p| f(&p["residual_um"]).powi(2))
+            .sum::<f64>()
             / poses.len() as f64)
             .sqrt();
         let judged = f(&s.json["held_out"]["rms_relative_um"]);
-        assert!((rms - judged).abs() < 1e-6 * judged, "{rms} against {judged}");
-        assert!(poses.iter().all(|p| p["covariates"]["temp_machine"].is_f64()));
+        assert!(
+            (rms - judged).abs() < 1e-6 * judged,
+            "{rms} against {judged}"
+        );
+        assert!(poses
+            .iter()
+            .all(|p| p["covariates"]["temp_machine"].is_f64()));
     }
 }
 
@@ -340,9 +369,15 @@ fn the_effects_covariance_is_in_calibrates_json() {
 fn drift_checks_are_judged_against_the_estimated_noise_too() {
     let Some(r) = runs() else { return };
     let c = &r.calibrated;
-    let (stated, estimated) = (&c.json["returns"][0], &c.json["returns_under_estimated_noise"][0]);
+    let (stated, estimated) = (
+        &c.json["returns"][0],
+        &c.json["returns_under_estimated_noise"][0],
+    );
     let sigma = |d: &serde_json::Value| f(&d["components"][0]["sigma_mm"]);
-    assert!(sigma(estimated) < 0.5 * sigma(stated), "{stated} {estimated}");
+    assert!(
+        sigma(estimated) < 0.5 * sigma(stated),
+        "{stated} {estimated}"
+    );
     let line = line_with(&c.text, "against the estimated noise:");
     let p = number_after(line, "p = ");
     assert!((p / f(&estimated["p_value"]) - 1.0).abs() < 0.01, "{line}");
@@ -356,12 +391,21 @@ fn a_held_out_campaign_outside_the_calibrations_range_is_said() {
     let Some(r) = runs() else { return };
     let fastest = |file: &str| fastest_heating_k_per_min(&r.dir.join(file));
     let (cal, val) = (fastest("cal.csv"), fastest("val.csv"));
-    assert!(val > 2.0 * cal, "{val} {cal}: the campaign is not what it was");
+    assert!(
+        val > 2.0 * cal,
+        "{val} {cal}: the campaign is not what it was"
+    );
     for s in [&r.diagnosed, &r.calibrated] {
         let rate = &s.json["held_out_coverage"]["rates"][0];
         // a 5-min difference quotient of the raw file against the tool's 5-min slope
-        assert!((f(&rate["calibration"][1]) / cal - 1.0).abs() < 0.1, "{rate} {cal}");
-        assert!((f(&rate["held_out"][1]) / val - 1.0).abs() < 0.1, "{rate} {val}");
+        assert!(
+            (f(&rate["calibration"][1]) / cal - 1.0).abs() < 0.1,
+            "{rate} {cal}"
+        );
+        assert!(
+            (f(&rate["held_out"][1]) / val - 1.0).abs() < 0.1,
+            "{rate} {val}"
+        );
         let said = line_with(&s.text, "OUTSIDE the calibration's range");
         let ratio = number_after(said, "/min above, ");
         let truth = f(&rate["held_out"][1]) / f(&rate["calibration"][1]);
@@ -407,7 +451,10 @@ fn several_parts_of_a_family_are_pinned_with_plus() {
         .expect("run rpkm");
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("pinned with +, not a comma: thermal:rods+frame"), "{err}");
+    assert!(
+        err.contains("pinned with +, not a comma: thermal:rods+frame"),
+        "{err}"
+    );
     let help = rpkm().args(["calibrate", "--help"]).output().expect("help");
     assert!(String::from_utf8_lossy(&help.stdout).contains("thermal:rods+frame"));
 }

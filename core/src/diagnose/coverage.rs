@@ -167,19 +167,20 @@ fn range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 mod tests {
     use super::*;
 
-    /// A campaign of lt rows with `temp_machine` `temp(t)` at every 10 s for `seconds`.
-    fn heating(seconds: f64, temp: impl Fn(f64) -> f64) -> Campaign {
+    /// A campaign of `steps` + 1 lt rows 10 s apart with `temp_machine` `temp(t)`.
+    fn heating(steps: u32, temp: impl Fn(f64) -> f64) -> Campaign {
+        use std::fmt::Write as _;
         let mut text = String::from(
             "t,setup,instrument,reset,q1,q2,q3,q4,f1,f2,f3,f4,follower,x,y,r,psi,temp_machine\n",
         );
-        let n = (seconds / 10.0) as usize;
-        for i in 0..=n {
-            let t = i as f64 * 10.0;
-            text.push_str(&format!(
-                "{t},a,lt,{},2612.2,2613.1,788.6,788.8,0,0,0,0,23,0,0,,,{:.3}\n",
+        for i in 0..=steps {
+            let t = f64::from(i) * 10.0;
+            let _ = writeln!(
+                text,
+                "{t},a,lt,{},2612.2,2613.1,788.6,788.8,0,0,0,0,23,0,0,,,{:.3}",
                 u8::from(i == 0),
                 temp(t)
-            ));
+            );
         }
         Campaign::parse(&text, "c").expect("parses")
     }
@@ -188,8 +189,8 @@ mod tests {
     /// as fast and ends 0.5 K warmer is outside by those figures; the poses coincide.
     #[test]
     fn a_faster_warmer_held_out_campaign_is_outside_by_its_figures() {
-        let cal = heating(3600.0, |t| 20.0 + 4.0 * t / 3600.0);
-        let val = heating(900.0, |t| 21.5 + 3.0 * t / 900.0);
+        let cal = heating(360, |t| 20.0 + 4.0 * t / 3600.0);
+        let val = heating(90, |t| 21.5 + 3.0 * t / 900.0);
         let c = coverage(&cal, &val);
         let temp = &c.covariates[0];
         assert!((temp.above - 0.5).abs() < 1e-9, "{temp:?}");

@@ -1,7 +1,7 @@
 //! The held-out data in words: the judge's line and sentence, the held-out campaign against
 //! the calibration's ranges, a setup's return judged against the estimated noise.
 
-use super::{follows, p_is, um_with_sigma};
+use super::figures::{follows, p_is, um_with_sigma};
 use rpkm_core::diagnose::coverage::{Coverage, Span};
 use rpkm_core::diagnose::HeldOutCheck;
 use std::fmt::Write as _;

@@ -5,7 +5,6 @@
 
 use rpkm_core::diagnose::neighbours::Neighbours;
 use rpkm_core::diagnose::periodic::Periodic;
-use rpkm_core::diagnose::sparse::Pointer;
 use rpkm_core::diagnose::{
     Candidate, EvidenceOf, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, Test,
     VerdictKind,
@@ -18,22 +17,10 @@ mod figures;
 mod held_out;
 mod noise;
 
-pub use figures::{condition, condition_short, with_sigma};
+use figures::um_with_sigma;
+pub use figures::{condition, condition_short, follows, p_is, with_sigma};
 pub use held_out::{coverage, held_out, held_out_judge, return_drift_estimated};
 pub use noise::{estimated_level, noise, rated_by};
-
-/// "the lt x residual follows temp_machine (r = 0.93, and equally q2)".
-pub fn follows(p: &Pointer) -> String {
-    let tied = if p.ties.is_empty() {
-        String::new()
-    } else {
-        format!(", and equally {}", p.ties.join(", "))
-    };
-    format!(
-        "the {} {} residual follows {} (r = {:.2}{tied})",
-        p.instrument, p.direction, p.feature, p.r
-    )
-}
 
 /// The drift WARN's words, claiming no more than the path identifies: "l3 +48 µm in 6 min
 /// (+12.00 ± 0.30 µm/K), follows temp_machine (r = 0.98)" where one candidate explains it with
@@ -199,7 +186,11 @@ fn judged(j: &Judged) -> String {
         }
         _ => String::new(),
     };
-    format!("; {} {}{why}", evidence_of(j.evidence_of), p_is(j.evidence_p))
+    format!(
+        "; {} {}{why}",
+        evidence_of(j.evidence_of),
+        p_is(j.evidence_p)
+    )
 }
 
 /// What an addition's evidence combines, in words: both campaigns only where a held-out one
@@ -212,16 +203,6 @@ fn evidence_of(e: EvidenceOf) -> &'static str {
              decided)"
         }
         EvidenceOf::FitAlone => "evidence of the fit alone (nothing predicted)",
-    }
-}
-
-/// "p = 1.2e-3", or "p < 1e-300" where the p-value underflowed to 0 (it is no probability
-/// of 0).
-pub fn p_is(p: f64) -> String {
-    if p > 0.0 || p.is_nan() {
-        format!("p = {p:.1e}")
-    } else {
-        "p < 1e-300".to_owned()
     }
 }
 
@@ -557,18 +538,6 @@ pub fn diagnosis_json(d: &ModelDiagnosis) -> serde_json::Result<serde_json::Valu
         v["held_out"]["judge"] = held_out(h).into();
     }
     Ok(v)
-}
-
-/// `value ± sigma` in µm, the value to the digits of σ's two significant ones.
-fn um_with_sigma(value_mm: f64, sigma_mm: f64) -> String {
-    let (v, s) = (value_mm * 1e3, sigma_mm * 1e3);
-    // the decimals that show σ's second significant digit: 1 − ⌊log10 σ⌋, at least 0
-    let digits = if s > 0.0 && s.is_finite() {
-        11usize.saturating_sub(rpkm_core::convert::floor_count(s.log10() + 10.0))
-    } else {
-        1
-    };
-    format!("{v:+.digits$} ± {s:.digits$}")
 }
 
 /// A setup's return to its reset pose, judged: "lt setup 3 moved 9.2 µm during 450 s
