@@ -484,7 +484,7 @@ fn write_report(
     let page = super::summary::write_report(
         dir,
         "rpkm calibrate",
-        campaign,
+        (campaign, validation),
         &before,
         after.as_ref(),
         (stages, crate::effects_file::expressions(file)),

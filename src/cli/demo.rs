@@ -64,7 +64,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let page = write_report(
         &args.out,
         "rpkm demo",
-        &campaign,
+        (&campaign, Some(&val)),
         &before,
         Some(&after),
         (None, Vec::new()),

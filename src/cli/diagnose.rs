@@ -156,7 +156,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         let page = write_report(
             dir,
             "rpkm diagnose",
-            &campaign,
+            (&campaign, validation.as_ref()),
             &d,
             after.as_ref(),
             (None, effects_file::expressions(file.as_ref())),

@@ -223,7 +223,7 @@ pub fn print_written(file: &EffectsFile) {
 pub fn write_report(
     dir: &Path,
     command: &str,
-    campaign: &Campaign,
+    (campaign, validation): (&Campaign, Option<&Campaign>),
     before: &ModelDiagnosis,
     after: Option<&ModelDiagnosis>,
     (stages, written): (Option<ModelTable>, Vec<(String, String)>),
@@ -238,6 +238,7 @@ pub fn write_report(
     Report {
         command,
         campaign,
+        validation,
         before,
         after,
         stages: stages.rows,

@@ -11,6 +11,7 @@
 //! script (or a test) can check what the arrows show.
 
 mod contents;
+mod held_out;
 pub mod history;
 mod sections;
 
@@ -71,6 +72,7 @@ impl Report<'_> {
         html.push_str(&sections::machine(self));
         html.push_str(&sections::instruments(self));
         html.push_str(&sections::against(self));
+        html.push_str(&held_out::section(self));
         html.push_str(&sections::effects(self));
         let _ = write!(
             html,

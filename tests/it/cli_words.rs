@@ -307,8 +307,8 @@ fn each_held_out_figure_is_named() {
         .contains("held-out RMS, each reading in its own noise (sigma), 2.7"));
 }
 
-/// Point 9: the held-out residual pose by pose in both JSON files: every non-reset reading
-/// of val.csv's two coordinates, whose RMS is the judge's.
+/// Point 9: the held-out residual pose by pose in both JSON files and the report: every
+/// non-reset reading of val.csv's two coordinates, whose RMS is the judge's.
 #[test]
 fn held_out_residuals_pose_by_pose_are_in_the_json() {
     let Some(r) = runs() else { return };
@@ -336,6 +336,19 @@ fn held_out_residuals_pose_by_pose_are_in_the_json() {
         assert!(poses
             .iter()
             .all(|p| p["covariates"]["temp_machine"].is_f64()));
+    }
+    // the report plots them against time and along y: a marker for each, before and after
+    let page = r.calibrated.page.as_deref().expect("calibrate's report");
+    assert!(page.contains("The held-out residual, pose by pose"));
+    for p in r.calibrated.json["held_out_poses"]
+        .as_array()
+        .expect("poses")
+    {
+        let hover = format!("line {}: t {:.0} s", p["line"], f(&p["t"]));
+        assert!(
+            page.matches(&hover).count() >= 4,
+            "{hover}: fewer than 2 plots x 2 models"
+        );
     }
 }
 

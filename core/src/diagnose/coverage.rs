@@ -15,6 +15,12 @@ pub const RATE_WINDOW_S: f64 = 300.0;
 /// Fewest readings in a window for a rate.
 const RATE_MIN_READINGS: usize = 3;
 
+/// A held-out range is said to reach beyond the calibration's only by more than this share
+/// of the calibration's span (and more than three σ of the readings' noise): a thermometer's
+/// last digits at a constant temperature, or a pose a millimetre past the calibration's, are
+/// no extrapolation.
+pub const OUTSIDE_SHARE: f64 = 0.1;
+
 /// One quantity over both campaigns: the calibration's range, the held-out one's, and how
 /// far the held-out one reaches beyond (0 where within).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -30,22 +36,28 @@ pub struct Span {
     pub below: f64,
     /// How far the held-out values lie above the calibration's largest (0 where not).
     pub above: f64,
+    /// How far they may lie beyond and still count as within: [`OUTSIDE_SHARE`] of the
+    /// calibration's span, or three σ of the readings' noise where that is larger.
+    pub tolerance: f64,
 }
 
 impl Span {
-    fn of(name: String, calibration: (f64, f64), held_out: (f64, f64)) -> Span {
+    /// The span of `name`, the readings' noise σ `noise` (0 for exact values).
+    fn of(name: String, calibration: (f64, f64), held_out: (f64, f64), noise: f64) -> Span {
         Span {
             name,
             calibration,
             held_out,
             below: (calibration.0 - held_out.0).max(0.0),
             above: (held_out.1 - calibration.1).max(0.0),
+            tolerance: (OUTSIDE_SHARE * (calibration.1 - calibration.0)).max(3.0 * noise),
         }
     }
 
-    /// Whether the held-out campaign reaches beyond the calibration's range.
+    /// Whether the held-out campaign reaches beyond the calibration's range by more than its
+    /// tolerance.
     pub fn outside(&self) -> bool {
-        self.below > 0.0 || self.above > 0.0
+        self.below > self.tolerance || self.above > self.tolerance
     }
 
     /// The largest magnitude of the held-out values over the calibration's: 4 where the
@@ -88,11 +100,15 @@ pub fn coverage(cal: &Campaign, val: &Campaign) -> Coverage {
         .filter(|n| val.covariate_index(n).is_some())
     {
         let (a, b) = (readings(cal, name), readings(val, name));
+        let noise = reading_noise(&a).max(reading_noise(&b));
         if let (Some(ra), Some(rb)) = (range(a.iter().map(|r| r.1)), range(b.iter().map(|r| r.1))) {
-            covariates.push(Span::of(name.clone(), ra, rb));
+            covariates.push(Span::of(name.clone(), ra, rb, noise));
         }
-        if let (Some(ra), Some(rb)) = (range(rates_of(&a)), range(rates_of(&b))) {
-            rates.push(Span::of(format!("rate({name})"), ra, rb));
+        let (sa, sb) = (rates_of(&a, noise), rates_of(&b, noise));
+        let rate_noise = sa.iter().chain(&sb).map(|r| r.1).fold(0.0, f64::max);
+        if let (Some(ra), Some(rb)) = (range(sa.iter().map(|r| r.0)), range(sb.iter().map(|r| r.0)))
+        {
+            rates.push(Span::of(format!("rate({name})"), ra, rb, rate_noise));
         }
     }
     let (ct, vt) = (nominal_tcp(cal), nominal_tcp(val));
@@ -100,7 +116,7 @@ pub fn coverage(cal: &Campaign, val: &Campaign) -> Coverage {
     for (axis, pick) in [("x", 0), ("y", 1)] {
         let of = |t: &[(f64, f64)]| range(t.iter().map(|p| if pick == 0 { p.0 } else { p.1 }));
         if let (Some(a), Some(b)) = (of(&ct), of(&vt)) {
-            poses.push(Span::of(axis.to_owned(), a, b));
+            poses.push(Span::of(axis.to_owned(), a, b, 0.0));
         }
     }
     Coverage {
@@ -125,32 +141,49 @@ fn readings(c: &Campaign, name: &str) -> Vec<(f64, f64)> {
     out
 }
 
-/// The rate per minute at each reading: the least-squares slope of the readings within
-/// [`RATE_WINDOW_S`] / 2 either side (where at least [`RATE_MIN_READINGS`] at two times or
-/// more).
-fn rates_of(r: &[(f64, f64)]) -> impl Iterator<Item = f64> + '_ {
+/// The rate per minute at each reading, with its σ from the readings' `noise`: the
+/// least-squares slope of the readings within [`RATE_WINDOW_S`] / 2 either side (where at
+/// least [`RATE_MIN_READINGS`] at two times or more).
+fn rates_of(r: &[(f64, f64)], noise: f64) -> Vec<(f64, f64)> {
     let half = RATE_WINDOW_S / 2.0;
-    r.iter().filter_map(move |&(t0, _)| {
-        let near: Vec<(f64, f64)> = r
-            .iter()
-            .copied()
-            .filter(|(t, _)| (t - t0).abs() <= half)
-            .collect();
-        (near.len() >= RATE_MIN_READINGS)
-            .then(|| slope(&near))
-            .flatten()
-            .map(|s| s * 60.0)
-    })
+    r.iter()
+        .filter_map(|&(t0, _)| {
+            let near: Vec<(f64, f64)> = r
+                .iter()
+                .copied()
+                .filter(|(t, _)| (t - t0).abs() <= half)
+                .collect();
+            (near.len() >= RATE_MIN_READINGS)
+                .then(|| slope(&near))
+                .flatten()
+                .map(|(s, stt)| (s * 60.0, noise / stt.sqrt() * 60.0))
+        })
+        .collect()
 }
 
-/// The least-squares slope of value on time, None where the times do not spread.
-fn slope(points: &[(f64, f64)]) -> Option<f64> {
+/// The σ of a covariate's readings about their smooth course: from the second differences
+/// of successive readings (each the sum of three readings' noise, variance 6σ², where a
+/// smooth course adds next to nothing); 0 with fewer than three.
+fn reading_noise(r: &[(f64, f64)]) -> f64 {
+    let d2: Vec<f64> = r
+        .windows(3)
+        .map(|w| w[2].1 - 2.0 * w[1].1 + w[0].1)
+        .collect();
+    if d2.is_empty() {
+        return 0.0;
+    }
+    (d2.iter().map(|d| d * d).sum::<f64>() / (6.0 * d2.len() as f64)).sqrt()
+}
+
+/// The least-squares slope of value on time and the spread of the times, Σ(t − t̄)²; None
+/// where the times do not spread.
+fn slope(points: &[(f64, f64)]) -> Option<(f64, f64)> {
     let n = points.len() as f64;
     let mt = points.iter().map(|p| p.0).sum::<f64>() / n;
     let mv = points.iter().map(|p| p.1).sum::<f64>() / n;
     let stt: f64 = points.iter().map(|p| (p.0 - mt).powi(2)).sum();
     let stv: f64 = points.iter().map(|p| (p.0 - mt) * (p.1 - mv)).sum();
-    (stt > 0.0).then(|| stv / stt)
+    (stt > 0.0).then(|| (stv / stt, stt))
 }
 
 /// The smallest and largest finite value, None where there is none.
@@ -186,7 +219,8 @@ mod tests {
     }
 
     /// A linear heating's rate is its slope per minute, and a held-out campaign that heats 3x
-    /// as fast and ends 0.5 K warmer is outside by those figures; the poses coincide.
+    /// as fast and ends 0.5 K warmer is outside by those figures; the poses coincide; a
+    /// held-out temperature past the calibration's by less than a tenth of its span is not.
     #[test]
     fn a_faster_warmer_held_out_campaign_is_outside_by_its_figures() {
         let cal = heating(360, |t| 20.0 + 4.0 * t / 3600.0);
@@ -203,5 +237,9 @@ mod tests {
         assert!((ratio - 3.0).abs() < 0.05, "{ratio}");
         assert!(c.poses.iter().all(|p| !p.outside()), "{:?}", c.poses);
         assert_eq!(c.outside().count(), 2);
+        let near = heating(90, |t| 20.0 + 4.3 * t / 900.0);
+        let c = coverage(&cal, &near);
+        assert!((c.covariates[0].above - 0.3).abs() < 1e-9);
+        assert!(!c.covariates[0].outside(), "0.3 K past a 4 K span");
     }
 }

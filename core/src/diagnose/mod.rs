@@ -30,6 +30,7 @@
 //! - [`verdict`]: `missing_effect`, `unexplained_structure` (the calibration's residual or
 //!   the held-out data's, with what it follows) or `nothing_missing` (only where the held-out
 //!   data agree).
+//! - [`held_out_poses`]: the judge's residual pose by pose (the JSON, the report's plots).
 //! - [`coverage`]: the held-out campaign's covariates, their rates and its poses against
 //!   the calibration's ranges (an extrapolation said beside the judge).
 //! - [`figures`]: residual tables, maps and error vectors; [`types`]: the vocabulary;
@@ -42,6 +43,7 @@ mod entry;
 mod figures;
 pub mod gain;
 pub mod held_out;
+pub mod held_out_poses;
 mod model;
 pub mod neighbours;
 pub mod periodic;

@@ -21,15 +21,14 @@ pub fn held_out_judge(h: &HeldOutCheck) -> String {
     )
 }
 
-/// The held-out judge in words: "held-out RMS 12.7 um (each setup's zero removed) above
+/// The held-out judge in words: "held-out RMS 12.7 um (each setup's zero removed) against
 /// the model's floor 5.4 um (...; p = 1.2e-30)", and where the residual is structured, that
 /// and its p-value, then what it follows.
 pub fn held_out(h: &HeldOutCheck) -> String {
     let mut s = format!(
-        "held-out RMS {:.1} um (each setup's zero removed) {} the model's floor {:.1} um \
+        "held-out RMS {:.1} um (each setup's zero removed) against the model's floor {:.1} um \
          (the noise {:.1} um and the calibration's own uncertainty; {})",
         h.rms_relative_um,
-        if h.consistent { "at" } else { "above" },
         h.floor_relative_um,
         h.noise_floor_relative_um,
         p_is(h.p_value)
@@ -68,21 +67,21 @@ pub fn coverage(c: &Coverage) -> Option<String> {
 
 /// One span in words, with by how much it reaches beyond.
 fn span(s: &Span) -> String {
-    // a thermometer's column (`temp_*`, the spec's temperatures) reads °C
+    // a thermometer's column (`temp_*`, the spec's temperatures) reads °C, its differences K
     let temperature = s.name.trim_start_matches("rate(").starts_with("temp");
-    let unit = match (s.name.starts_with("rate("), temperature) {
-        (true, true) => " K/min",
-        (true, false) => "/min",
-        (false, true) => " K",
-        (false, false) if s.name == "x" || s.name == "y" => " mm",
-        (false, false) => "",
+    let (unit, by_unit) = match (s.name.starts_with("rate("), temperature) {
+        (true, true) => (" K/min", " K/min"),
+        (true, false) => ("/min", "/min"),
+        (false, true) => (" °C", " K"),
+        (false, false) if s.name == "x" || s.name == "y" => (" mm", " mm"),
+        (false, false) => ("", ""),
     };
     let mut by = Vec::new();
-    if s.below > 0.0 {
-        by.push(format!("{:.2}{unit} below", s.below));
+    if s.below > s.tolerance {
+        by.push(format!("{:.2}{by_unit} below", s.below));
     }
-    if s.above > 0.0 {
-        by.push(format!("{:.2}{unit} above", s.above));
+    if s.above > s.tolerance {
+        by.push(format!("{:.2}{by_unit} above", s.above));
     }
     let ratio = s
         .magnitude_ratio()
