@@ -50,10 +50,10 @@ pub fn held_out(h: &HeldOutCheck) -> String {
     s
 }
 
-/// The held-out campaign against the calibration's: "the held-out data against the
-/// calibration's: temp_machine 21.00..24.50 against 20.00..24.00 (0.50 above);
-/// rate(temp_machine) ... (8.1x the calibration's largest); poses within x ..., y ...".
-/// Those outside first and said so; None where everything lies within.
+/// The held-out campaign against the calibration's, where it reaches beyond: "the held-out
+/// data lie OUTSIDE the calibration's range, the judge extrapolates: rate(temp_machine)
+/// 0.012..0.173 K/min against the calibration's 0.000..0.061 K/min (0.11 K/min above, 2.8x
+/// the calibration's largest magnitude)"; None where everything lies within.
 pub fn coverage(c: &Coverage) -> Option<String> {
     let outside: Vec<String> = c.outside().map(span).collect();
     if outside.is_empty() {
