@@ -29,8 +29,9 @@ pub const MAX_ROUNDS: usize = 8;
 /// A round whose factors all lie within this of 1 ends the iteration.
 const SETTLED: f64 = 0.01;
 /// Bounds of an estimated level relative to the stated one: a noiseless (simulated) campaign
-/// would otherwise drive the weights to infinity.
-const FACTOR_RANGE: (f64, f64) = (1e-2, 1e2);
+/// would otherwise drive the weights to infinity. A level at a bound is a cap, not an
+/// estimate ([`GroupNoise::capped`]).
+pub const FACTOR_RANGE: (f64, f64) = (1e-2, 1e2);
 
 /// One group's level, as assumed and as estimated.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -45,6 +46,10 @@ pub struct GroupNoise {
     /// Degrees of freedom of the estimate (the group's share of the redundancy).
     pub dof: f64,
     pub estimated_from_data: bool,
+    /// Whether the estimate stopped at a bound of [`FACTOR_RANGE`] (100x or 0.01x the stated
+    /// level): the residuals asked for more (or less), so `estimated` is the cap the
+    /// estimation allows, not what the campaign shows.
+    pub capped: bool,
     /// Whether `assumed` is the default rating, [`NoiseModel::default`]'s (the spec's figure,
     /// or rpkm's own where the spec gives none), rather than one stated with `--noise`.
     pub default_rating: bool,
@@ -170,6 +175,7 @@ impl GroupLevels {
                     estimated: weighted.sigma(g, distance) * scale,
                     dof: self.dof[k],
                     estimated_from_data: self.dof[k] >= MIN_DOF,
+                    capped: self.dof[k] >= MIN_DOF && at_bound(self.total[k]),
                     default_rating: {
                         let (a, b) = (stated.sigma(g, distance), default.sigma(g, distance));
                         (a - b).abs() <= 1e-9 * b.abs()
@@ -184,6 +190,12 @@ impl GroupLevels {
             inflation: self.inflation(),
         }
     }
+}
+
+/// Whether a level's factor of its stated one lies at a bound of [`FACTOR_RANGE`] (to the
+/// rounding of the rounds' products).
+fn at_bound(factor: f64) -> bool {
+    factor >= FACTOR_RANGE.1 * (1.0 - 1e-9) || factor <= FACTOR_RANGE.0 * (1.0 + 1e-9)
 }
 
 /// Mean distance (mm) from the tracker to the campaign's laser-tracker poses (nominal

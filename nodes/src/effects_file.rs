@@ -17,6 +17,7 @@
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::written::{BindError, Spec, SpecError, WrittenParam};
 use rpkm_core::effects::{self, Effect, Written};
+use std::fmt::Write as _;
 use std::path::Path;
 use yaml_rust2::parser::{Event, MarkedEventReceiver, Parser};
 use yaml_rust2::scanner::{Marker, TScalarStyle};
@@ -469,21 +470,42 @@ impl EffectsFile {
 
 /// The effects of the list `a,b,c`: the library's, and the file's where one is given.
 pub fn parse_list(list: &str, file: Option<&EffectsFile>) -> Result<Vec<Box<dyn Effect>>, String> {
-    list.split(',')
-        .filter(|s| !s.trim().is_empty())
-        .map(|name| {
+    let names: Vec<&str> = list.split(',').filter(|s| !s.trim().is_empty()).collect();
+    names
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
             if let Some(w) = file.and_then(|f| f.get(name)) {
                 return Ok(Box::new(w.clone()) as Box<dyn Effect>);
             }
-            effects::by_name(name).map_err(|e| match file {
-                Some(f) => {
-                    let own: Vec<&str> = f.effects.iter().map(Effect::name).collect();
-                    format!("{e}, or of {}: {}", f.file, own.join(", "))
+            effects::by_name(name).map_err(|e| {
+                let mut said = match file {
+                    Some(f) => {
+                        let own: Vec<&str> = f.effects.iter().map(Effect::name).collect();
+                        format!("{e}, or of {}: {}", f.file, own.join(", "))
+                    }
+                    None => e.to_string(),
+                };
+                if let Some(pinned) = k.checked_sub(1).and_then(|p| part_after(names[p], name)) {
+                    let _ = write!(
+                        said,
+                        "; several parts of a family are pinned with +, not a comma: {pinned}"
+                    );
                 }
-                None => e.to_string(),
+                said
             })
         })
         .collect()
+}
+
+/// Where `name` is a part of the family `previous` pins (`frame` after `thermal:rods`), the
+/// list it was meant as (`thermal:rods+frame`).
+fn part_after(previous: &str, name: &str) -> Option<String> {
+    let (family, _) = previous.trim().split_once(':')?;
+    let pinned = format!("{}+{}", previous.trim(), name.trim());
+    effects::by_name(&format!("{family}:{}", name.trim()))
+        .is_ok()
+        .then_some(pinned)
 }
 
 /// Each effect of the file (none without one): its name and its expressions as written

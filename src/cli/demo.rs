@@ -37,7 +37,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let opts = DiagnosisOptions::default();
     let before = diagnose::diagnose(&campaign, Some(&val), &[], &opts)
         .context("diagnosing the embedded campaign")?;
-    print_summary(&campaign, &before);
+    print_summary(&campaign, Some(&val), &before);
     let Some(missing) = before.missing_effect.clone() else {
         println!("\nnothing to add: the model explains the data");
         return Ok(());
@@ -64,7 +64,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let page = write_report(
         &args.out,
         "rpkm demo",
-        &campaign,
+        (&campaign, Some(&val)),
         &before,
         Some(&after),
         (None, Vec::new()),

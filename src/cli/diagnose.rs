@@ -40,7 +40,8 @@ pub struct DiagnoseArgs {
     #[arg(long, default_value_t = 24)]
     pub model: u32,
     /// Effects already in the model, comma-separated (e.g. thermal,preload_elastic): the
-    /// library's, or those of --effects-file.
+    /// library's, or those of --effects-file. A family's parts are pinned with `:` and `+`
+    /// (thermal:rods, thermal:rods+frame), as the verdict's advice names them.
     #[arg(long, default_value = "")]
     pub effects: String,
     /// Effects written as data (YAML: name, summary, params with unit and prior, expressions
@@ -127,7 +128,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
     let offer = offered(file.as_ref(), &refs);
     let d = diagnose::diagnose_among(&campaign, validation.as_ref(), &refs, &offer, &opts)
         .with_context(|| format!("diagnosing {}", args.campaign.display()))?;
-    print_summary(&campaign, &d);
+    print_summary(&campaign, validation.as_ref(), &d);
     if let Some(f) = &file {
         print_written(f);
     }
@@ -135,6 +136,13 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         let mut json = crate::words::diagnosis_json(&d)?;
         if let Some(f) = &file {
             json["effects_file"] = effects_file::to_json(f);
+        }
+        if let Some(v) = &validation {
+            json["held_out_coverage"] =
+                serde_json::to_value(rpkm_core::diagnose::coverage::coverage(&campaign, v))?;
+            if let Some(h) = &d.held_out {
+                json["held_out_poses"] = super::held_out_poses::held_out_poses(v, h)?;
+            }
         }
         if let Some(mib) = super::peak_resident_mib() {
             // the process's own high-water mark so far (`rpkm bench calibration` reads it)
@@ -148,7 +156,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         let page = write_report(
             dir,
             "rpkm diagnose",
-            &campaign,
+            (&campaign, validation.as_ref()),
             &d,
             after.as_ref(),
             (None, effects_file::expressions(file.as_ref())),

@@ -8,6 +8,7 @@ pub mod calibrate;
 pub mod demo;
 pub mod diagnose;
 mod effect_stages;
+mod held_out_poses;
 pub mod history;
 pub mod ingest;
 pub mod monitor;

@@ -5,7 +5,7 @@ use crate::effects_file::EffectsFile;
 use crate::report::{ModelTable, Report};
 use crate::words;
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::{HeldOutCheck, ModelDiagnosis};
+use rpkm_core::diagnose::ModelDiagnosis;
 use rpkm_core::variance;
 use std::path::{Path, PathBuf};
 
@@ -14,8 +14,9 @@ pub fn um(v: Option<f64>) -> String {
     v.map_or("-".to_owned(), |v| format!("{v:.1}"))
 }
 
-/// The terminal summary.
-pub fn print_summary(campaign: &Campaign, d: &ModelDiagnosis) {
+/// The terminal summary; `validation` the held-out campaign, whose covariates and poses are
+/// compared with the calibration's beside the judge.
+pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &ModelDiagnosis) {
     let b = &d.baseline;
     let with = if d.effects_in_model.is_empty() {
         String::new()
@@ -48,7 +49,10 @@ pub fn print_summary(campaign: &Campaign, d: &ModelDiagnosis) {
         b.chi2_per_dof, b.dof, b.p_value,
     );
     if let Some(h) = &d.held_out {
-        println!("   {}", held_out_judge(h));
+        println!("   {}", words::held_out_judge(h));
+    }
+    if let Some(val) = validation {
+        print_coverage(campaign, val, "   ");
     }
     if d.model_effects != d.effects_in_model {
         println!(
@@ -124,46 +128,34 @@ fn print_groups(d: &ModelDiagnosis) {
     }
 }
 
-/// The held-out judge's line: at the model's floor or not, and, where it fails on the
-/// residual's structure rather than its size, that it does.
-fn held_out_judge(h: &HeldOutCheck) -> String {
-    let structured = if h.structured {
-        format!(
-            ", but the held-out residual is structured (p = {:.1e}), so the model does not pass",
-            h.structure_p
-        )
-    } else {
-        String::new()
-    };
-    format!(
-        "held-out judge: {} the model's floor {:.1} um (the noise and the calibration's own \
-         uncertainty), p = {:.1e}{structured}{}",
-        if h.consistent { "at" } else { "NOT at" },
-        h.floor_relative_um,
-        h.p_value,
-        h.follows
-            .as_ref()
-            .map_or(String::new(), |f| format!("; {}", words::follows(f)))
-    )
+/// The held-out campaign against the calibration's (covariates, their rates, poses): where
+/// it reaches outside, by how much, each line starting with `indent`.
+pub fn print_coverage(campaign: &Campaign, validation: &Campaign, indent: &str) {
+    let c = rpkm_core::diagnose::coverage::coverage(campaign, validation);
+    if let Some(said) = words::coverage(&c) {
+        println!("{indent}{said}");
+    }
 }
 
 /// Every effect tried, best first, and those not tried.
 fn print_effects(d: &ModelDiagnosis) {
     println!("\n2. Effects tried (best first)");
     println!(
-        "   {:<22} {:>6} {:>9} {:>11} {:>10} {:>10}",
-        "effect", "signif", "explained", "chi2/dof", "val before", "val after"
+        "   {:<22} {:>6} {:>9} {:>11} {:>14}",
+        "effect", "signif", "explained", "chi2/dof", "held-out after"
     );
     for c in &d.candidates {
         println!(
-            "   {:<22} {:>6} {:>8.0}% {:>11.2} {:>10} {:>10}",
+            "   {:<22} {:>6} {:>8.0}% {:>11.2} {:>14}",
             c.effect,
             if c.significant { "yes" } else { "no" },
             100.0 * c.explained_fraction,
             c.chi2_per_dof_after,
-            um(c.val_rms_before_um),
             um(c.val_rms_after_um)
         );
+    }
+    if let Some(before) = d.candidates.iter().find_map(|c| c.val_rms_before_um) {
+        println!("   {}", held_out_before(d, before));
     }
     for s in &d.skipped {
         println!("   {:<22} not tried: {}", s.effect, s.reason);
@@ -191,6 +183,27 @@ fn print_effects(d: &ModelDiagnosis) {
     }
 }
 
+/// What the table's "held-out after" is compared with: the current model's held-out RMS as
+/// measured, fitted as the candidates are (under their one noise), which differs from
+/// section 1's (the current model under its own noise estimate).
+fn held_out_before(d: &ModelDiagnosis, before_um: f64) -> String {
+    let weighted = if d.compared_under.is_empty() {
+        "the current model's own noise".to_owned()
+    } else {
+        format!(
+            "the noise of the model with {}",
+            d.compared_under.join(" and ")
+        )
+    };
+    format!(
+        "(held-out after: the held-out RMS as measured, um, with the effect added; before it, \
+         the current model fitted as the candidates are, under {weighted}: {before_um:.1} um{})",
+        d.baseline.val_rms_um.map_or(String::new(), |own| format!(
+            "; section 1's {own:.1} um is the current model under its own noise estimate"
+        ))
+    )
+}
+
 /// The file's effects as written, under the summary: what the candidates of the file were.
 pub fn print_written(file: &EffectsFile) {
     println!("\n   effects of {}:", file.file);
@@ -213,7 +226,7 @@ pub fn print_written(file: &EffectsFile) {
 pub fn write_report(
     dir: &Path,
     command: &str,
-    campaign: &Campaign,
+    (campaign, validation): (&Campaign, Option<&Campaign>),
     before: &ModelDiagnosis,
     after: Option<&ModelDiagnosis>,
     (stages, written): (Option<ModelTable>, Vec<(String, String)>),
@@ -228,6 +241,7 @@ pub fn write_report(
     Report {
         command,
         campaign,
+        validation,
         before,
         after,
         stages: stages.rows,
@@ -246,14 +260,16 @@ pub fn print_noise_groups(groups: &[variance::GroupNoise], indent: &str) {
     );
     for g in groups {
         println!(
-            "{indent}{:<14} {:>10.3} {:>10.3} {:>8.1}  {:<5} {}{}",
+            "{indent}{:<14} {:>10.3} {:>10} {:>8.1}  {:<5} {}{}",
             g.group,
             g.assumed,
-            g.estimated,
+            words::estimated_level(g),
             g.dof,
             g.unit,
             words::rated_by(g),
-            if g.estimated_from_data {
+            if g.capped {
+                "  (the estimation's cap: a bound, not an estimate)"
+            } else if g.estimated_from_data {
                 ""
             } else {
                 "  (too few degrees of freedom: stated level kept)"

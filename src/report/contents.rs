@@ -28,6 +28,8 @@ pub struct Report<'a> {
     /// The command that made it (`rpkm diagnose`, `rpkm demo`, `rpkm calibrate`).
     pub command: &'a str,
     pub campaign: &'a Campaign,
+    /// The held-out campaign (`--validate`), whose residuals the page plots pose by pose.
+    pub validation: Option<&'a Campaign>,
     pub before: &'a ModelDiagnosis,
     pub after: Option<&'a ModelDiagnosis>,
     /// The models in the order they were fitted (the first is `before`'s).

@@ -11,6 +11,7 @@
 //! script (or a test) can check what the arrows show.
 
 mod contents;
+mod held_out;
 pub mod history;
 mod sections;
 
@@ -25,10 +26,12 @@ use std::path::{Path, PathBuf};
 impl Report<'_> {
     /// The stage of a diagnosis' current model.
     pub fn stage_of(d: &ModelDiagnosis) -> ModelRow {
-        let with = if d.effects_in_model.is_empty() {
+        // the effects as fitted (a family named whole keeps the parts the data tell apart):
+        // the model whose figures these are
+        let with = if d.model_effects.is_empty() {
             String::new()
         } else {
-            format!(" + {}", d.effects_in_model.join(" + "))
+            format!(" + {}", d.model_effects.join(" + "))
         };
         ModelRow {
             model: format!("{}{with}", d.model),
@@ -69,6 +72,7 @@ impl Report<'_> {
         html.push_str(&sections::machine(self));
         html.push_str(&sections::instruments(self));
         html.push_str(&sections::against(self));
+        html.push_str(&held_out::section(self));
         html.push_str(&sections::effects(self));
         let _ = write!(
             html,

@@ -47,18 +47,33 @@ fn verdict_box(label: &str, d: &ModelDiagnosis) -> String {
     )
 }
 
+/// The parameter combinations each model of the page determined, named by model: the model
+/// with effects determines more (or fewer) than the one without.
+fn determined(r: &Report) -> String {
+    let each: Vec<String> = std::iter::once(r.before)
+        .chain(r.after)
+        .map(|m| {
+            format!(
+                "{} in {}",
+                m.determined
+                    .map_or("all".to_owned(), |(n, of)| format!("{n} of {of}")),
+                Report::stage_of(m).model
+            )
+        })
+        .collect();
+    each.join(", ")
+}
+
 /// Verdict, the error falling effect by effect, the noise against its rating.
 pub fn summary(r: &Report) -> String {
     let (c, d) = (r.campaign, r.before);
     let mut o = format!(
         "<section id=\"summary\"><h1>Diagnosis of {}</h1><p class=\"muted\">{} poses; {} rows; \
-         {}; the campaign determined {} parameter combinations better than their tolerance.</p>",
+         parameter combinations the campaign determined better than their tolerance: {}.</p>",
         escape(&c.source),
         c.poses.len(),
         d.points.len(),
-        escape(&Report::stage_of(d).model),
-        d.determined
-            .map_or("all".to_owned(), |(n, of)| format!("{n} of {of}"))
+        escape(&determined(r))
     );
     o.push_str(&verdict_box("current model", d));
     if let Some(a) = r.after {
@@ -122,23 +137,31 @@ pub fn summary(r: &Report) -> String {
         "Held-out RMS: poses the calibration never saw.",
     ));
     o.push_str("</div>");
-    o.push_str(&noise(d));
+    o.push_str(&noise(r.after.unwrap_or(d)));
     o.push_str("</section>");
     o
 }
 
-/// The noise table and chart: stated against estimated, per group.
+/// The noise table and chart of the model `d` (the last of the page: the one calibrated):
+/// stated against estimated, per group, a cap shown as one.
 fn noise(d: &ModelDiagnosis) -> String {
-    let mut o = String::from("<h3>Noise: what the campaign shows against the rating</h3><div class=\"row\"><table><tr><th>group</th><th>rated</th><th>estimated</th><th>ratio</th><th>dof</th></tr>");
+    let model = Report::stage_of(d).model;
+    let mut o = format!("<h3>Noise of {}: what the campaign shows against the rating</h3><div class=\"row\"><table><tr><th>group</th><th>rated</th><th>estimated</th><th>ratio</th><th>dof</th></tr>", escape(&model));
     for g in &d.noise_groups {
         let _ = write!(
             o,
-            "<tr><td>{}</td><td>{:.3} {u}</td><td>{:.3} {u}</td><td>{:.2}{}</td><td>{:.0}</td></tr>",
+            "<tr><td>{}</td><td>{:.3} {u}</td><td>{} {u}</td><td>{:.2}{}</td><td>{:.0}</td></tr>",
             g.group,
             g.assumed,
-            g.estimated,
+            escape(&crate::words::estimated_level(g)),
             g.estimated / g.assumed,
-            if g.estimated_from_data { "" } else { " (not estimated)" },
+            if g.capped {
+                " (the estimation's cap: a bound, not an estimate)"
+            } else if g.estimated_from_data {
+                ""
+            } else {
+                " (not estimated)"
+            },
             g.dof,
             u = g.unit
         );
@@ -167,7 +190,10 @@ fn noise(d: &ModelDiagnosis) -> String {
     );
     o.push_str(&figure(
         &chart,
-        "Estimated from the residuals (variance components); the weights of the final fit.",
+        &format!(
+            "Estimated from the residuals of {model} (variance components): the weights of \
+             its fit."
+        ),
     ));
     o.push_str("</div>");
     o

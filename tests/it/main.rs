@@ -37,6 +37,7 @@ mod cli_foreign;
 mod cli_lag;
 mod cli_plan;
 mod cli_scipy_baseline;
+mod cli_words;
 mod dds_large_samples;
 mod docs_in_repo;
 mod first_campaign_doc;

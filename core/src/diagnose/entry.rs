@@ -48,6 +48,8 @@ pub(crate) struct Entry<'a> {
     /// The Wald test of the added parameters alone ([`wald_p`]): part of `p_value`, and of the
     /// calibration's evidence in the judgement.
     pub(super) wald_p: f64,
+    /// The nested F-test's own p-value: part of `p_value`.
+    pub(super) f_p: f64,
     pub(super) f_statistic: f64,
     pub(super) k: f64,
     pub(super) judged: Judged,
@@ -123,12 +125,13 @@ impl<'j> Judge<'j> {
         };
         let names: Vec<&str> = added.iter().map(|e| e.name()).collect();
         let wald_p = wald_p(&fitted.fit, &names);
-        let p_value = if k > 0.5 {
-            // the likelihood ratio, and the added parameters themselves (the Wald test)
-            stats::f_upper_tail(f_statistic, k, fitted.fit.dof).max(wald_p)
+        let f_p = if k > 0.5 {
+            stats::f_upper_tail(f_statistic, k, fitted.fit.dof)
         } else {
             1.0
         };
+        // the likelihood ratio, and the added parameters themselves (the Wald test)
+        let p_value = if k > 0.5 { f_p.max(wald_p) } else { 1.0 };
         let relevant = relevant(
             fitted
                 .fit
@@ -145,6 +148,7 @@ impl<'j> Judge<'j> {
             prediction: None,
             p_value,
             wald_p,
+            f_p,
             f_statistic,
             k,
             judged: Judged::default(),

@@ -73,6 +73,7 @@ pub(crate) fn noisier(groups: &[GroupNoise]) -> Vec<Noisier> {
         .map(|g| Noisier {
             group: g.group.to_owned(),
             ratio: g.estimated / g.assumed,
+            capped: g.capped,
         })
         .filter(|n| n.ratio > NOISIER_THAN_RATED)
         .collect()
@@ -90,6 +91,7 @@ pub(crate) fn noise_map(groups: &[GroupNoise]) -> BTreeMap<String, NoiseReport> 
                     assumed: g.assumed,
                     estimated: g.estimated,
                     dof: g.dof,
+                    capped: g.capped,
                 },
             )
         })

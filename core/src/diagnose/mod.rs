@@ -30,15 +30,20 @@
 //! - [`verdict`]: `missing_effect`, `unexplained_structure` (the calibration's residual or
 //!   the held-out data's, with what it follows) or `nothing_missing` (only where the held-out
 //!   data agree).
+//! - [`held_out_poses`]: the judge's residual pose by pose (the JSON, the report's plots).
+//! - [`coverage`]: the held-out campaign's covariates, their rates and its poses against
+//!   the calibration's ranges (an extrapolation said beside the judge).
 //! - [`figures`]: residual tables, maps and error vectors; [`types`]: the vocabulary;
 //!   [`cross`]: prediction without held-out data, cross-validation by setup.
 
+pub mod coverage;
 pub mod cross;
 pub mod current;
 mod entry;
 mod figures;
 pub mod gain;
 pub mod held_out;
+pub mod held_out_poses;
 mod model;
 pub mod neighbours;
 pub mod periodic;
@@ -57,7 +62,8 @@ pub use held_out::{held_out_errors, judge_calibration};
 pub use rounds::{diagnose, diagnose_among};
 pub use trials::SCREEN_P;
 pub use types::{
-    Baseline, Candidate, DiagnoseError, DiagnosisOptions, ErrorVector, Fit, GroupRms, HeldOutCheck,
-    Judged, ModelDiagnosis, ModelTrial, NoiseReport, Noisier, Outcome, Prediction, ResidualPoint,
-    Skipped, Test, VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM, RELEVANT_FRACTION,
+    Baseline, Candidate, DiagnoseError, DiagnosisOptions, ErrorVector, EvidenceOf, Fit, GroupRms,
+    HeldOutCheck, Judged, ModelDiagnosis, ModelTrial, NoiseReport, Noisier, Outcome, Prediction,
+    ResidualPoint, Skipped, Test, VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM,
+    RELEVANT_FRACTION,
 };

@@ -17,7 +17,7 @@ use super::entry::{added_params, clone_fitted, covers, ranked, rms_of, swapped, 
 use super::gain::{implausible, one_standard_error, Gain, PRACTICAL_SIZE};
 use super::pool::Pool;
 use super::sparse;
-use super::types::{Candidate, Fitted, Judged, ModelTrial, Outcome};
+use super::types::{Candidate, EvidenceOf, Fitted, Judged, ModelTrial, Outcome};
 use crate::effects;
 
 /// The model the search chose: the effects to add, in the order of their single
@@ -96,6 +96,8 @@ pub(crate) fn search<'a>(
             k: e.k,
             f_statistic: e.f_statistic,
             p_value: e.p_value,
+            wald_p: e.wald_p,
+            f_p: e.f_p,
             chi2_per_dof_after: e.fitted.fit.chi2_per_dof,
             prediction: e.prediction,
             params: added_params(&e.fitted.fit.effect_params, &e.added),
@@ -139,6 +141,7 @@ impl Judge<'_> {
         };
         e.judged = Judged {
             evidence_p,
+            evidence_of: EvidenceOf::of(e.prediction.as_ref()),
             size: Some(size),
             matters: size >= PRACTICAL_SIZE,
             implausible,

@@ -262,6 +262,9 @@ pub struct Judged {
     /// campaigns, compared with the candidates' level. The F-test's p alone where nothing
     /// predicts.
     pub evidence_p: f64,
+    /// What `evidence_p` combines: the fit with the held-out prediction, with the
+    /// cross-validation by setup, or the fit alone.
+    pub evidence_of: EvidenceOf,
     /// RMS of the prediction error the addition explains, √(RMS_b² − RMS_a²), over the
     /// noise there (the held-out floor, or 1 for left-out rows in σ); on the calibration's
     /// rows where nothing predicts.
@@ -279,10 +282,34 @@ impl Default for Judged {
     fn default() -> Self {
         Judged {
             evidence_p: 1.0,
+            evidence_of: EvidenceOf::FitAlone,
             size: None,
             matters: false,
             implausible: Vec::new(),
             outcome: Outcome::NotSignificant,
+        }
+    }
+}
+
+/// The campaigns an addition's evidence rests on (JSON: snake case).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EvidenceOf {
+    /// The calibration's F-test with the prediction of the held-out campaign.
+    FitAndHeldOut,
+    /// The calibration's F-test with the prediction of left-out setups of the same campaign.
+    FitAndCrossValidation,
+    /// The calibration's F-test alone: nothing predicted.
+    FitAlone,
+}
+
+impl EvidenceOf {
+    /// The evidence of a gain with this `prediction` (none: the fit alone).
+    pub fn of(prediction: Option<&Prediction>) -> EvidenceOf {
+        match prediction {
+            Some(p) if p.by_setup => EvidenceOf::FitAndCrossValidation,
+            Some(_) => EvidenceOf::FitAndHeldOut,
+            None => EvidenceOf::FitAlone,
         }
     }
 }
@@ -330,9 +357,15 @@ pub struct ModelTrial {
     pub instead: Option<String>,
     /// Parameters it adds (effective: what the data determine).
     pub k: f64,
-    /// Nested F-test against the current model on the calibration campaign.
+    /// Nested F-test against the current model on the calibration campaign; `p_value` the
+    /// larger of its p-value and `wald_p`.
     pub f_statistic: f64,
     pub p_value: f64,
+    /// The Wald test of the added parameters themselves: large where they trade off against
+    /// each other or the geometry, however large F (the fit improves, no parameter is pinned).
+    pub wald_p: f64,
+    /// The F-test's own p-value.
+    pub f_p: f64,
     pub chi2_per_dof_after: f64,
     /// The prediction of held-out (or left-out) data against the current model's.
     pub prediction: Option<Prediction>,
@@ -394,6 +427,8 @@ pub struct NoiseReport {
     pub assumed: f64,
     pub estimated: f64,
     pub dof: f64,
+    /// `estimated` is the estimation's cap, not an estimate ([`crate::variance::GroupNoise::capped`]).
+    pub capped: bool,
 }
 
 /// The diagnosis (serialises to the JSON other tools read: `verdict_kind`, `missing_effect`,
@@ -529,6 +564,8 @@ pub struct Noisier {
     pub group: String,
     /// Estimated over stated level.
     pub ratio: f64,
+    /// The estimate is the estimation's cap: the ratio is a lower bound.
+    pub capped: bool,
 }
 
 /// The TCP error of one pose of a 2-D relative instrument (laser tracker, grid encoder) as a

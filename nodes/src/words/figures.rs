@@ -1,5 +1,7 @@
 //! A figure with its uncertainty, the one way every text and report prints it, and what a
-//! condition number means where it is no number.
+//! condition number means where it is no number, a p-value, what a residual follows.
+
+use rpkm_core::diagnose::sparse::Pointer;
 
 /// A value with its standard deviation, the one way every text and report prints them: σ to
 /// two significant digits and the value to the same place, in a unit that shows both (mm as
@@ -74,6 +76,41 @@ pub fn condition_short(number: f64) -> String {
     } else {
         "infinite (the prior holds what the measurements leave)".to_owned()
     }
+}
+
+/// "the lt x residual follows temp_machine (r = 0.93, and equally q2)".
+pub fn follows(p: &Pointer) -> String {
+    let tied = if p.ties.is_empty() {
+        String::new()
+    } else {
+        format!(", and equally {}", p.ties.join(", "))
+    };
+    format!(
+        "the {} {} residual follows {} (r = {:.2}{tied})",
+        p.instrument, p.direction, p.feature, p.r
+    )
+}
+
+/// "p = 1.2e-3", or "p < 1e-300" where the p-value underflowed to 0 (it is no probability
+/// of 0).
+pub fn p_is(p: f64) -> String {
+    if p > 0.0 || p.is_nan() {
+        format!("p = {p:.1e}")
+    } else {
+        "p < 1e-300".to_owned()
+    }
+}
+
+/// `value ± sigma` in µm, the value to the digits of σ's two significant ones.
+pub(super) fn um_with_sigma(value_mm: f64, sigma_mm: f64) -> String {
+    let (v, s) = (value_mm * 1e3, sigma_mm * 1e3);
+    // the decimals that show σ's second significant digit: 1 − ⌊log10 σ⌋, at least 0
+    let digits = if s > 0.0 && s.is_finite() {
+        11usize.saturating_sub(rpkm_core::convert::floor_count(s.log10() + 10.0))
+    } else {
+        1
+    };
+    format!("{v:+.digits$} ± {s:.digits$}")
 }
 
 #[cfg(test)]

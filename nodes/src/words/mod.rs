@@ -5,9 +5,8 @@
 
 use rpkm_core::diagnose::neighbours::Neighbours;
 use rpkm_core::diagnose::periodic::Periodic;
-use rpkm_core::diagnose::sparse::Pointer;
 use rpkm_core::diagnose::{
-    Candidate, HeldOutCheck, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, Test,
+    Candidate, EvidenceOf, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, Test,
     VerdictKind,
 };
 use rpkm_core::online::{Drift, DriftInput, FOLLOWS};
@@ -15,23 +14,13 @@ use rpkm_core::params::{unit, Unit, NAMES};
 use std::fmt::Write as _;
 
 mod figures;
+mod held_out;
 mod noise;
 
-pub use figures::{condition, condition_short, with_sigma};
-pub use noise::{noise, rated_by};
-
-/// "the lt x residual follows temp_machine (r = 0.93, and equally q2)".
-pub fn follows(p: &Pointer) -> String {
-    let tied = if p.ties.is_empty() {
-        String::new()
-    } else {
-        format!(", and equally {}", p.ties.join(", "))
-    };
-    format!(
-        "the {} {} residual follows {} (r = {:.2}{tied})",
-        p.instrument, p.direction, p.feature, p.r
-    )
-}
+use figures::um_with_sigma;
+pub use figures::{condition, condition_short, follows, p_is, with_sigma};
+pub use held_out::{coverage, held_out, held_out_judge, return_drift_estimated};
+pub use noise::{estimated_level, noise, rated_by};
 
 /// The drift WARN's words, claiming no more than the path identifies: "l3 +48 µm in 6 min
 /// (+12.00 ± 0.30 µm/K), follows temp_machine (r = 0.98)" where one candidate explains it with
@@ -111,11 +100,11 @@ fn alike_names(d: &Drift) -> String {
 /// the residual follows, the held-out RMS before and after, and what the search made of it.
 pub fn evidence(c: &Candidate) -> String {
     let mut s = format!(
-        "chi2/dof {:.2} -> {:.2}, F = {:.1} (p = {:.1e}); {}",
+        "chi2/dof {:.2} -> {:.2}, F = {:.1} ({}); {}",
         c.chi2_per_dof_before,
         c.chi2_per_dof_after,
         c.f_statistic,
-        c.p_value,
+        p_is(c.p_value),
         values(&c.params)
     );
     if let Some(f) = &c.follows {
@@ -129,7 +118,7 @@ pub fn evidence(c: &Candidate) -> String {
     }
     if c.prediction.is_none() {
         if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
-            let _ = write!(s, "; held-out RMS {b:.1} -> {a:.1} um");
+            let _ = write!(s, "; held-out RMS as measured {b:.1} -> {a:.1} um");
         }
     }
     let _ = write!(s, "{}", judged(&c.judged));
@@ -174,17 +163,14 @@ fn prediction(p: &Prediction) -> String {
             p.support_p
         ),
     };
+    let what = match (p.by_setup, p.unit) {
+        (true, _) => "cross-validated (by setup) RMS, each row in its own noise (sigma),",
+        (false, "sigma") => "held-out RMS, each reading in its own noise (sigma),",
+        (false, _) => "held-out RMS with each setup's zero removed",
+    };
     format!(
-        "{} RMS {:.2} -> {:.2} {} (± {:.2}; {support})",
-        if p.by_setup {
-            "cross-validated (by setup)"
-        } else {
-            "held-out"
-        },
-        p.rms_before,
-        p.rms_after,
-        p.unit,
-        p.standard_error
+        "{what} {:.2} -> {:.2} {} (± {:.2}; {support})",
+        p.rms_before, p.rms_after, p.unit, p.standard_error
     )
 }
 
@@ -214,17 +200,46 @@ fn judged(j: &Judged) -> String {
         }
         _ => String::new(),
     };
-    format!("; evidence of both campaigns p = {:.1e}{why}", j.evidence_p)
+    format!(
+        "; {} {}{why}",
+        evidence_of(j.evidence_of),
+        p_is(j.evidence_p)
+    )
+}
+
+/// What an addition's evidence combines, in words: both campaigns only where a held-out one
+/// was given.
+fn evidence_of(e: EvidenceOf) -> &'static str {
+    match e {
+        EvidenceOf::FitAndHeldOut => "evidence of both campaigns (fit and held-out prediction)",
+        EvidenceOf::FitAndCrossValidation => {
+            "evidence of the campaign (fit and cross-validation by setup; no held-out campaign \
+             decided)"
+        }
+        EvidenceOf::FitAlone => "evidence of the fit alone (nothing predicted)",
+    }
 }
 
 /// A model of the search in words: "thermal:rods + preload_elastic: F = 98.0 (p = 1e-40);
 /// alpha_rods = ...; held-out RMS 9.14 -> 4.60 um (± 0.4); evidence ...".
 pub fn trial(t: &ModelTrial) -> String {
+    let added: Vec<String> = t.added.iter().map(|a| with_parts(a)).collect();
+    // the p-value is the larger of the F-test's and the Wald test's: where the Wald test
+    // sets it, a large F beside a large p says the parameters trade off
+    let wald = if t.wald_p > t.f_p {
+        format!(
+            ": the Wald test of its added parameters themselves, which trade off; the F-test's \
+             own {}",
+            p_is(t.f_p)
+        )
+    } else {
+        String::new()
+    };
     let mut s = format!(
-        "{}: F = {:.1} (p = {:.1e}); {}",
-        t.added.join(" + "),
+        "{}: F = {:.1} ({}{wald}); {}",
+        added.join(" + "),
         t.f_statistic,
-        t.p_value,
+        p_is(t.p_value),
         values(&t.params)
     );
     if let Some(p) = &t.prediction {
@@ -234,24 +249,20 @@ pub fn trial(t: &ModelTrial) -> String {
     s
 }
 
-/// The held-out judge in words: "held-out RMS 12.7 um (each setup's zero removed) against
-/// the model's floor 5.4 um (p = 1.2e-30)".
-pub fn held_out(h: &HeldOutCheck) -> String {
-    let mut s = format!(
-        "held-out RMS {:.1} um (each setup's zero removed) against the model's floor {:.1} um \
-         (the noise {:.1} um and the calibration's own uncertainty; p = {:.1e})",
-        h.rms_relative_um, h.floor_relative_um, h.noise_floor_relative_um, h.p_value
-    );
-    if let Some(f) = &h.follows {
-        let _ = write!(
-            s,
-            "; {}",
-            follows(f).replacen("residual", "held-out residual", 1)
-        );
-    } else if h.structured {
-        s.push_str("; the held-out residual is structured (periods or neighbours alike)");
+/// An effect's name with the parts it holds where a family is named whole: "thermal (all its
+/// parts: rods+frame+scales)"; a part or an effect without parts as it is.
+pub fn with_parts(name: &str) -> String {
+    if name.contains(':') {
+        return name.to_owned();
     }
-    s
+    let parts = rpkm_core::effects::by_name(name)
+        .map(|e| e.parts())
+        .unwrap_or_default();
+    if parts.len() > 1 {
+        format!("{name} (all its parts: {})", parts.join("+"))
+    } else {
+        name.to_owned()
+    }
 }
 
 /// "the kgm along residual follows a 60.0 mm period of carrier 4 (amplitude 2.40 µm, 85 % of
@@ -389,13 +400,9 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
     let held = d.held_out.as_ref();
     match d.verdict_kind {
         VerdictKind::MissingEffect => {
-            let add = d
-                .missing_effect
-                .iter()
-                .chain(&d.together_with)
-                .cloned()
-                .collect::<Vec<_>>()
-                .join(",");
+            // what was found, parts and all: `--effects thermal` would fit every part of
+            // the family in rpkm calibrate, not the ones the search chose
+            let add = d.missing_effects.join(",");
             format!(
                 "missing effect: {} ({}){tied}{remains}; add --effects {add}{noise}",
                 d.missing_effects.join(" with "),
@@ -505,8 +512,8 @@ pub fn model_choice(d: &ModelDiagnosis) -> Option<String> {
 pub fn test(t: &Test) -> String {
     format!(
         "noise levels estimated per group from the campaign ({} rounds); candidates, each part \
-         of a family and pairs by the evidence of both campaigns (nested F-test and held-out \
-         or cross-validated prediction) at level {:.2e} (Bonferroni over {}), named when they \
+         of a family and pairs by their evidence (the nested F-test combined with the \
+         prediction of the held-out campaign, or of left-out setups where none decides) at level {:.2e} (Bonferroni over {}), named when they \
          predict better by more than a fifth of the noise, with physical values, the simplest \
          within one standard error of the best; dictionary, periodogram and neighbour tests \
          each at level {:.2e} (n = {} rows); held-out data against the model's floor at level \
@@ -545,18 +552,6 @@ pub fn diagnosis_json(d: &ModelDiagnosis) -> serde_json::Result<serde_json::Valu
         v["held_out"]["judge"] = held_out(h).into();
     }
     Ok(v)
-}
-
-/// `value ± sigma` in µm, the value to the digits of σ's two significant ones.
-fn um_with_sigma(value_mm: f64, sigma_mm: f64) -> String {
-    let (v, s) = (value_mm * 1e3, sigma_mm * 1e3);
-    // the decimals that show σ's second significant digit: 1 − ⌊log10 σ⌋, at least 0
-    let digits = if s > 0.0 && s.is_finite() {
-        11usize.saturating_sub(rpkm_core::convert::floor_count(s.log10() + 10.0))
-    } else {
-        1
-    };
-    format!("{v:+.digits$} ± {s:.digits$}")
 }
 
 /// A setup's return to its reset pose, judged: "lt setup 3 moved 9.2 µm during 450 s

@@ -18,11 +18,6 @@ pub fn noise(groups: &[GroupNoise]) -> String {
         .filter(|g| !RATED_BAND.contains(&(g.estimated / g.assumed)))
         .map(|g| {
             let ratio = g.estimated / g.assumed;
-            let how = if ratio > 1.0 {
-                format!("{ratio:.1}x noisier")
-            } else {
-                format!("{:.1}x quieter", 1.0 / ratio)
-            };
             let (_, unit) = display_unit(g.unit);
             let (source, option, per) = rating_of(g.group);
             let source = if g.default_rating {
@@ -30,14 +25,42 @@ pub fn noise(groups: &[GroupNoise]) -> String {
             } else {
                 "as stated with --noise"
             };
-            format!(
-                "{} {how} than stated ({:.2} {unit} estimated against {:.2} {unit}, {source}; \
-                 --noise {option}={per} states another)",
-                g.group, g.estimated, g.assumed
-            )
+            let stated = format!(
+                "{:.2} {unit} {} against {:.2} {unit}, {source}; --noise {option}={per} states \
+                 another",
+                g.estimated,
+                if g.capped { "capped" } else { "estimated" },
+                g.assumed
+            );
+            if g.capped {
+                // a bound of the estimation, not a figure of the campaign
+                return format!(
+                    "{} at the estimation's cap, {ratio:.0}x its stated level ({stated}): the \
+                     residuals ask for {}, so its level is a bound, not an estimate",
+                    g.group,
+                    if ratio > 1.0 { "more" } else { "less" }
+                );
+            }
+            let how = if ratio > 1.0 {
+                format!("{ratio:.1}x noisier")
+            } else {
+                format!("{:.1}x quieter", 1.0 / ratio)
+            };
+            format!("{} {how} than stated ({stated})", g.group)
         })
         .collect();
     off.join(", ")
+}
+
+/// A group's estimated level as a table shows it: "20.000", or "≥20.000" (or "≤") where it
+/// is the estimation's cap, not an estimate.
+pub fn estimated_level(g: &GroupNoise) -> String {
+    let bound = match (g.capped, g.estimated >= g.assumed) {
+        (false, _) => "",
+        (true, true) => "≥",
+        (true, false) => "≤",
+    };
+    format!("{bound}{:.3}", g.estimated)
 }
 
 /// Who stated a group's level, in a table's few words: "the spec", "rpkm (spec: none)" or

@@ -1,0 +1,122 @@
+//! The held-out data in words: the judge's line and sentence, the held-out campaign against
+//! the calibration's ranges, a setup's return judged against the estimated noise.
+
+use super::figures::{follows, p_is, um_with_sigma};
+use rpkm_core::diagnose::coverage::{Coverage, Span};
+use rpkm_core::diagnose::HeldOutCheck;
+use std::fmt::Write as _;
+
+/// The held-out judge's line, one for `rpkm diagnose` and `rpkm calibrate`: whether the
+/// held-out data agree with the model, and why ([`held_out`]): at the floor or not, and
+/// whether the held-out residual's structure fails it where its size does not.
+pub fn held_out_judge(h: &HeldOutCheck) -> String {
+    format!(
+        "held-out judge: {}: {}",
+        if h.agrees() {
+            "the held-out data agree with the model"
+        } else {
+            "the held-out data do NOT agree with the model"
+        },
+        held_out(h)
+    )
+}
+
+/// The held-out judge in words: "held-out RMS 12.7 um (each setup's zero removed) against
+/// the model's floor 5.4 um (...; p = 1.2e-30)", and where the residual is structured, that
+/// and its p-value, then what it follows.
+pub fn held_out(h: &HeldOutCheck) -> String {
+    let mut s = format!(
+        "held-out RMS {:.1} um (each setup's zero removed) against the model's floor {:.1} um \
+         (the noise {:.1} um and the calibration's own uncertainty; {})",
+        h.rms_relative_um,
+        h.floor_relative_um,
+        h.noise_floor_relative_um,
+        p_is(h.p_value)
+    );
+    if h.structured {
+        let _ = write!(
+            s,
+            "; the held-out residual is structured ({}), so the model does not pass",
+            p_is(h.structure_p)
+        );
+    }
+    if let Some(f) = &h.follows {
+        let _ = write!(
+            s,
+            "; {}",
+            follows(f).replacen("residual", "held-out residual", 1)
+        );
+    }
+    s
+}
+
+/// The held-out campaign against the calibration's, where it reaches beyond: "the held-out
+/// data lie OUTSIDE the calibration's range, the judge extrapolates: rate(temp_machine)
+/// 0.012..0.173 K/min against the calibration's 0.000..0.061 K/min (0.11 K/min above, 2.8x
+/// the calibration's largest magnitude)"; None where everything lies within.
+pub fn coverage(c: &Coverage) -> Option<String> {
+    let outside: Vec<String> = c.outside().map(span).collect();
+    if outside.is_empty() {
+        return None;
+    }
+    Some(format!(
+        "the held-out data lie OUTSIDE the calibration's range, the judge extrapolates: {}",
+        outside.join("; ")
+    ))
+}
+
+/// One span in words, with by how much it reaches beyond.
+fn span(s: &Span) -> String {
+    // a thermometer's column (`temp_*`, the spec's temperatures) reads °C, its differences K
+    let temperature = s.name.trim_start_matches("rate(").starts_with("temp");
+    let (unit, by_unit) = match (s.name.starts_with("rate("), temperature) {
+        (true, true) => (" K/min", " K/min"),
+        (true, false) => ("/min", "/min"),
+        (false, true) => (" °C", " K"),
+        (false, false) if s.name == "x" || s.name == "y" => (" mm", " mm"),
+        (false, false) => ("", ""),
+    };
+    let mut by = Vec::new();
+    if s.below > s.tolerance {
+        by.push(format!("{:.2}{by_unit} below", s.below));
+    }
+    if s.above > s.tolerance {
+        by.push(format!("{:.2}{by_unit} above", s.above));
+    }
+    let ratio = s
+        .magnitude_ratio()
+        .filter(|_| s.name.starts_with("rate("))
+        .map_or(String::new(), |r| {
+            format!(", {r:.1}x the calibration's largest magnitude")
+        });
+    format!(
+        "{} {:.3}..{:.3}{unit} against the calibration's {:.3}..{:.3}{unit} ({}{ratio})",
+        s.name,
+        s.held_out.0,
+        s.held_out.1,
+        s.calibration.0,
+        s.calibration.1,
+        by.join(", ")
+    )
+}
+
+/// The same return judged against the noise the campaign shows: "against the estimated
+/// noise: moved, more than its noise (x +11 ± 9.0, y +4.1 ± 6.2 µm; p = 1.2e-3)" or
+/// "against the estimated noise: within it (...)".
+pub fn return_drift_estimated(d: &rpkm_core::returns::ReturnDrift) -> String {
+    let parts: Vec<String> = d
+        .components
+        .iter()
+        .map(|c| format!("{} {}", c.coordinate, um_with_sigma(c.value_mm, c.sigma_mm)))
+        .collect();
+    format!(
+        "against the estimated noise: {} ({} µm; p = {:.2e})",
+        if d.moved() {
+            "moved, more than its noise"
+        } else {
+            "within it"
+        },
+        parts.join(", "),
+        d.p_value
+    )
+}
