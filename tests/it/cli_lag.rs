@@ -5,6 +5,7 @@
 //! fits, lie within 3σ of the simulator's; a written time constant that cannot move where it
 //! starts is said not fitted, with the reason. The truth is the simulator's `truth.json`.
 
+use std::fmt::Write;
 use std::path::Path;
 use std::process::Command;
 
@@ -102,9 +103,10 @@ fn a_written_lag_fits_the_time_constant_or_says_why_not() {
     let file = |alpha0: &str| {
         let mut text = WRITTEN.replace("ALPHA0", alpha0);
         for rod in 1..=5 {
-            text.push_str(&format!(
-                "    dp.l{rod}: \"950e-6 * alpha * (lag(temp_machine, tau) - 20)\"\n"
-            ));
+            let _ = writeln!(
+                text,
+                "    dp.l{rod}: \"950e-6 * alpha * (lag(temp_machine, tau) - 20)\""
+            );
         }
         let path = dir.join(format!("lag-{alpha0}.yaml"));
         std::fs::write(&path, text).expect("write the effects file");

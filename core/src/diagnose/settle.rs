@@ -104,6 +104,9 @@ fn parts_beside(model: &[&dyn Effect], family: &dyn Effect) -> Option<Vec<usize>
         .collect()
 }
 
+/// A part variant of a family, and the same parts of the effect that refines it (if any).
+type Variant = (Box<dyn Effect>, Option<Box<dyn Effect>>);
+
 /// The part combination of the family `current[i]` named whole that the evidence needs (see
 /// [`settle`]); None where the whole family is it, or nothing predicts.
 fn narrow(
@@ -119,7 +122,7 @@ fn narrow(
     let follower = current.iter().position(|e| {
         e.open_family() && e.beside() == Some(crate::effects::family_of(family.name()))
     });
-    let mut variants: Vec<(Box<dyn Effect>, Option<Box<dyn Effect>>)> = Vec::new();
+    let mut variants: Vec<Variant> = Vec::new();
     for mask in 1..(1usize << n) {
         let parts: Vec<usize> = (0..n).filter(|b| mask & (1 << b) != 0).collect();
         if let Some(v) = family.with_parts(&parts) {

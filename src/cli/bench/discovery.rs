@@ -72,15 +72,15 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
     let done = Mutex::new(Vec::new());
     std::thread::scope(|s| {
         for _ in 0..a.threads {
-            s.spawn(|| loop {
-                let Some(&i) = indices.get(next.fetch_add(1, Ordering::Relaxed)) else {
-                    break;
-                };
-                // a diagnosis that fails counts as a wrong answer, with its error
-                let out = machine(a.seed, i, false, None).unwrap_or_else(|e| failed(a.seed, i, &e));
-                if let Ok(mut d) = done.lock() {
-                    d.push(out);
-                    eprint!("\r  {} of {} machines", d.len(), a.machines);
+            s.spawn(|| {
+                while let Some(&i) = indices.get(next.fetch_add(1, Ordering::Relaxed)) {
+                    // a diagnosis that fails counts as a wrong answer, with its error
+                    let out =
+                        machine(a.seed, i, false, None).unwrap_or_else(|e| failed(a.seed, i, &e));
+                    if let Ok(mut d) = done.lock() {
+                        d.push(out);
+                        eprint!("\r  {} of {} machines", d.len(), a.machines);
+                    }
                 }
             });
         }
