@@ -73,6 +73,7 @@ pub fn predicted_rows(
                 theta: &theta0,
                 screen: false,
             }),
+            leverages: false,
             ..Request::new(&rest, &start, copts)
         })
         .ok()?;
