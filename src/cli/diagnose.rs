@@ -12,6 +12,46 @@ use rpkm_core::effects::Effect;
 use rpkm_core::params::Model;
 use std::path::PathBuf;
 
+/// The diagnosis's JSON with its `points` (left empty in `value`) serialised one point at a
+/// time, as `value` would hold them: the same text.
+struct Streamed<'a> {
+    value: &'a serde_json::Value,
+    points: &'a [diagnose::ResidualPoint],
+}
+
+impl serde::Serialize for Streamed<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let serde_json::Value::Object(map) = self.value else {
+            return self.value.serialize(s);
+        };
+        let mut out = s.serialize_map(Some(map.len()))?;
+        for (key, value) in map {
+            if key == "points" {
+                out.serialize_entry(key, &Points(self.points))?;
+            } else {
+                out.serialize_entry(key, value)?;
+            }
+        }
+        out.end()
+    }
+}
+
+/// Residual points serialised each through its JSON value (the keys in the order a value
+/// holds them).
+struct Points<'a>(&'a [diagnose::ResidualPoint]);
+
+impl serde::Serialize for Points<'_> {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::{Error, SerializeSeq};
+        let mut seq = s.serialize_seq(Some(self.0.len()))?;
+        for p in self.0 {
+            seq.serialize_element(&serde_json::to_value(p).map_err(S::Error::custom)?)?;
+        }
+        seq.end()
+    }
+}
+
 /// Find the physical effect the model is missing.
 ///
 /// 1. Calibrates the current model (geometry, plus the effects given with --effects) and tests
@@ -126,14 +166,18 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     let offer = offered(file.as_ref(), &refs);
-    let d = diagnose::diagnose_among(&campaign, validation.as_ref(), &refs, &offer, &opts)
+    let mut d = diagnose::diagnose_among(&campaign, validation.as_ref(), &refs, &offer, &opts)
         .with_context(|| format!("diagnosing {}", args.campaign.display()))?;
     print_summary(&campaign, validation.as_ref(), &d);
     if let Some(f) = &file {
         print_written(f);
     }
     if let Some(path) = &args.json {
+        // the residual points (one per row: 2·10⁵ on 10⁵ poses) are written one at a time,
+        // not held as one JSON tree beside the diagnosis (110 MB there, the process's peak)
+        let points = std::mem::take(&mut d.points);
         let mut json = crate::words::diagnosis_json(&d)?;
+        d.points = points;
         if let Some(f) = &file {
             json["effects_file"] = effects_file::to_json(f);
         }
@@ -148,7 +192,13 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             // the process's own high-water mark so far (`rpkm bench calibration` reads it)
             json["peak_resident_mib"] = serde_json::json!(mib);
         }
-        write_json(path, &json)?;
+        write_json(
+            path,
+            &Streamed {
+                value: &json,
+                points: &d.points,
+            },
+        )?;
         println!("\nwrote {}", path.display());
     }
     if let Some(dir) = &args.report {
@@ -164,4 +214,48 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         println!("report: {}", page.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Streamed;
+    use rpkm_core::diagnose::ResidualPoint;
+
+    /// The JSON with its points streamed is the text of the whole value, to the byte: keys
+    /// before and after `points`, the points' keys in a value's order (not the struct's).
+    #[test]
+    fn streamed_points_write_the_whole_value() {
+        let points: Vec<ResidualPoint> = (0..3)
+            .map(|i| ResidualPoint {
+                pose: i,
+                line: 10 + i,
+                instrument: "self".to_owned(),
+                direction: format!("q{}", i + 2),
+                x: -32.608_867_535_693_66 * i as f64,
+                y: 899.727_930_355_682_1,
+                t: 1e-300,
+                value: -1.308_397_666_207_383_7,
+                sigma: 0.1 + 0.2,
+            })
+            .collect();
+        let mut whole = serde_json::json!({
+            "baseline": {"chi2": 1.5, "dof": 3},
+            "peak_resident_mib": 359.2,
+            "verdict_kind": "nothing_missing",
+            "zz": [1, 2],
+        });
+        let mut holed = whole.clone();
+        whole["points"] = serde_json::to_value(&points).expect("points");
+        holed["points"] = serde_json::json!([]);
+        let streamed = serde_json::to_string_pretty(&Streamed {
+            value: &holed,
+            points: &points,
+        })
+        .expect("streamed");
+        assert_eq!(
+            streamed,
+            serde_json::to_string_pretty(&whole).expect("whole")
+        );
+        assert!(streamed.contains("\"direction\": \"q2\",\n      \"instrument\""));
+    }
 }

@@ -53,9 +53,17 @@ pub fn parse_noise(spec: Option<&str>) -> anyhow::Result<rpkm_core::noise::Noise
 }
 
 /// Write pretty JSON to a file.
-pub fn write_json(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
-    let text = serde_json::to_string_pretty(value)?;
-    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+pub fn write_json(path: &Path, value: &impl serde::Serialize) -> anyhow::Result<()> {
+    use std::io::Write;
+    // written as it is serialised: the text of a 10⁵-pose diagnosis is 52 MB, held whole
+    // it was the process's peak
+    let file =
+        std::fs::File::create(path).with_context(|| format!("writing {}", path.display()))?;
+    let mut out = std::io::BufWriter::new(file);
+    serde_json::to_writer_pretty(&mut out, value)
+        .with_context(|| format!("writing {}", path.display()))?;
+    out.flush()
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// The process's peak resident memory so far, MiB (`VmHWM` of /proc/self/status; None where

@@ -5,7 +5,7 @@ use super::lm::{Final, Keep, Lm};
 use super::plan::{before_table, Plan};
 use super::progress::Observer;
 use super::report;
-use super::request::Request;
+use super::request::{Noise, Request};
 use super::rows::{dependency, reduced_jacobian, Columns, Key, Problem};
 use super::select::auto_select;
 use super::select::{prior_of, scaling_vector};
@@ -39,13 +39,7 @@ pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
     } = *req;
     let theta0 = start_theta(campaign, opts, effects, theta0)?;
     let pb = Problem::new(campaign, *start, effects, opts);
-    let init = State {
-        p: warm.map_or(*start, |w| *w.params),
-        theta: match warm {
-            Some(w) => start_theta(campaign, opts, effects, w.theta)?,
-            None => theta0.clone(),
-        },
-    };
+    let init = start_state(req, &theta0)?;
     // rows shared with other calibrations serve a warm start only (a cold one starts from
     // the plan's)
     let view = shared
@@ -63,7 +57,13 @@ pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
     // the corrections at the fit's θ: only a large campaign's leverages and step 2 read them
     let corr = OnceCell::new();
     let corr = || corr.get_or_init(|| effects.corrections(&fit.state.theta, &fit.state.p));
-    let (rows_final, post) = posterior(&pb, &plan, (&fit.state.p, &corr, &fit.drop), last)?;
+    let leverages = req.leverages || matches!(req.noise, Noise::Estimate { .. });
+    let (rows_final, post) = posterior(
+        &pb,
+        &plan,
+        (&fit.state.p, &corr, &fit.drop),
+        (last, leverages),
+    )?;
     // chi-square of the measurements themselves (not the prior, nor the virtual rows of step 2)
     let chi2: f64 = rows_final.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
     let chi2_per_dof = chi2 / (rows_final.len() as f64 - post.dof_model).max(1.0);
@@ -109,6 +109,21 @@ pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
         covariance,
         covariance_theta: s1.cov_theta,
         covariance_p_theta: s1.cov_p_theta,
+    })
+}
+
+/// Where the LM starts: the warm start where the request gives one, else the start
+/// parameters and θ₀.
+fn start_state(req: &Request, theta0: &[f64]) -> Result<State, CalibrationError> {
+    Ok(match req.warm {
+        Some(w) => State {
+            p: *w.params,
+            theta: start_theta(req.campaign, req.options, req.effects, w.theta)?,
+        },
+        None => State {
+            p: *req.start,
+            theta: theta0.to_vec(),
+        },
     })
 }
 

@@ -372,10 +372,18 @@ impl Lm<'_> {
     /// The rows at a trial point `x`, evaluated up to what deciding on the step reads: the
     /// cost. Where the pieces keep their Jacobians anyway (a small campaign), JᵀJ waits for
     /// the step to be accepted ([`Lm::accepted`]): a refused trial, the last of most fits,
-    /// never forms it.
-    fn trial_at(&self, x: &State) -> Result<Trial, PoseError> {
+    /// never forms it. A screening step (`screening`) that keeps nothing keeps its rows'
+    /// values: where it stands for the fit they are the final rows, which a large campaign
+    /// would otherwise evaluate once more at the same point ([`Lm::final_rows`]: the same
+    /// numbers, a third of a screened candidate's passes over the rows).
+    fn trial_at(&self, x: &State, screening: bool) -> Result<Trial, PoseError> {
         if self.keep != Keep::Jacobians {
-            return Ok(Trial::Done(self.normal_at(x, self.keep)?));
+            let keep = if screening && self.keep == Keep::Nothing {
+                Keep::Values
+            } else {
+                self.keep
+            };
+            return Ok(Trial::Done(self.normal_at(x, keep)?));
         }
         let (total, parts) = self.evaluate(x, (self.keep, true))?;
         // the cost as [`Lm::evaluated`] makes it: scaling leaves it, the prior adds to it
@@ -564,7 +572,7 @@ impl Lm<'_> {
             let candidate = self.apply(&p, &step);
             let cost = nq.cost;
             let predicted = 0.5 * step.dot(&(step.scale(mu) - &nq.g));
-            let trial = self.trial_at(&candidate).ok();
+            let trial = self.trial_at(&candidate, self.screen && it == 0).ok();
             match trial {
                 Some(trial) if trial.cost() < cost && predicted > 0.0 => {
                     let trial = self.accepted(&candidate, trial);

@@ -48,6 +48,12 @@ pub struct Request<'a> {
     pub first_round: Option<&'a Calibration>,
     /// Told of each LM iteration and noise round; it may stop the calibration (`progress`).
     pub progress: Option<Observer<'a>>,
+    /// Whether the rows' leverages are made ([`Calibration::leverage`], which the noise
+    /// rounds read: [`Noise::Estimate`] makes them whatever this says). A campaign above
+    /// `KEEP_JACOBIAN_POSES` poses makes them in a pass of its own over the rows, a fifth
+    /// of a screened candidate's time: the diagnosis's candidates, which never read them,
+    /// ask for none, and their `leverage` is empty.
+    pub leverages: bool,
 }
 
 impl<'a> Request<'a> {
@@ -63,6 +69,7 @@ impl<'a> Request<'a> {
             shared: None,
             first_round: None,
             progress: None,
+            leverages: true,
         }
     }
 }

@@ -301,7 +301,8 @@ pub struct Calibration {
     /// their tolerance, out of how many.
     pub determined: Option<(usize, usize)>,
     /// The final rows of step 1 (the measurements) and their leverages (diagonal of the
-    /// hat matrix), for the noise estimation.
+    /// hat matrix), for the noise estimation; no leverages where the request asked for
+    /// none ([`super::Request::leverages`]).
     pub residuals: Vec<RowValue>,
     pub leverage: Vec<f64>,
     /// Posterior covariance of the 29 parameters (mm, rad, scaled by the variance factor as

@@ -57,14 +57,15 @@ fn block_jacobian(
 }
 
 /// The final rows of step 1 at `p` (their values) and what they tell about the plan's
-/// unknowns: the LM's last evaluation there (`last`: values and information); the leverages
-/// from its kept Jacobians or, for a large campaign, one more pass over the rows (the
-/// effects' corrections at `p` then, from `corr`: made only where needed).
+/// unknowns: the LM's last evaluation there (`last`: values and information); where
+/// `leverages` asks for them, the leverages from its kept Jacobians or, for a large
+/// campaign, one more pass over the rows (the effects' corrections at `p` then, from
+/// `corr`: made only where needed), else none.
 pub(super) fn posterior<'c>(
     pb: &Problem,
     plan: &Plan,
     (p, corr, drop): (&Params, &dyn Fn() -> &'c Corrections, &HashSet<Key>),
-    last: Final,
+    (last, leverages): (Final, bool),
 ) -> Result<(Vec<RowValue>, Posterior), CalibrationError> {
     let (ids, links, free, prior) = (&plan.ids, &pb.opts.links, &plan.free_theta, &plan.prior);
     let n = ids.len();
@@ -78,6 +79,7 @@ pub(super) fn posterior<'c>(
             .collect::<Vec<f64>>()
     };
     let leverage = match last.jacobians {
+        _ if !leverages => Vec::new(),
         Some(pieces) => pieces.iter().flat_map(|jr| leverage_of(jr, &inv)).collect(),
         None => pb
             .map_pieces(Step::Direct, p, &pb.start, corr(), drop, |rows| {

@@ -11,7 +11,7 @@
 use crate::calib::{self, Request, WarmStart};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet, Slot};
-use crate::obs::{self, Form, Step};
+use crate::obs::{Evaluation, Form, Pieces, Step};
 use crate::params::Params;
 
 /// Most folds: a campaign of many small setups is dealt into this many.
@@ -73,23 +73,30 @@ pub fn predicted_rows(
                 theta: &theta0,
                 screen: false,
             }),
+            leverages: false,
             ..Request::new(&rest, &start, copts)
         })
         .ok()?;
         // the fold's machine; a setup's own parameters where the fold had that setup, else
         // the whole fit's
         let theta = by_name(&whole_layout, &layout, &cal.theta, Some(model.theta));
-        let rows = obs::residuals_in(
+        // the fold's setups alone: the rows of the others were read and thrown away (ten
+        // evaluations of the whole campaign on one thread, one per fold)
+        let eval = Evaluation {
             campaign,
-            &cal.params,
-            copts.model,
-            Step::Direct,
-            &start,
-            &whole.corrections(&theta, &cal.params),
-            &copts.noise,
-            Form::Decorrelated,
-        )
-        .ok()?;
+            p: &cal.params,
+            model: copts.model,
+            step: Step::Direct,
+            p_cal: &start,
+            corr: &whole.corrections(&theta, &cal.params),
+            noise: &copts.noise,
+            form: Form::Decorrelated,
+        };
+        let pieces = Pieces::of_setups(campaign, usize::MAX, |k| k % n_folds == fold);
+        let mut rows = Vec::new();
+        for k in 0..pieces.len() {
+            eval.piece_into(&pieces, k, &mut rows).ok()?;
+        }
         out.extend(
             rows.iter()
                 .filter(|r| r.sigma > 0.0)

@@ -272,6 +272,7 @@ impl<'j> Judge<'j> {
                 theta: &theta,
                 screen: false,
             }),
+            leverages: false,
             ..Request::new(self.campaign, &start, self.copts)
         })?;
         finish_with(self.val, &with, &set, cal, self.copts)

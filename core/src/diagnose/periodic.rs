@@ -153,14 +153,21 @@ struct Scan {
 }
 
 impl Scan {
+    /// The four carriers scanned side by side, one thread each (each scan reads its own
+    /// positions and sums its own grid: the same numbers as one after the other; on 10⁵
+    /// poses the scans on one core were a fifth of the diagnosis).
     fn of(s: &Series) -> Scan {
-        let mut tests = 0;
-        let best = std::array::from_fn(|carrier| {
-            let (found, n) = scan(s, carrier)?;
-            tests += n;
-            Some(found)
+        let found: [Option<(Periodic, usize)>; 4] = std::thread::scope(|scope| {
+            let scans: [_; 4] =
+                std::array::from_fn(|carrier| scope.spawn(move || scan(s, carrier)));
+            // a panic in a scan is a bug: it goes on in this thread
+            scans.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
         });
-        Scan { best, tests }
+        let tests = found.iter().flatten().map(|f| f.1).sum();
+        Scan {
+            best: found.map(|f| f.map(|f| f.0)),
+            tests,
+        }
     }
 }
 

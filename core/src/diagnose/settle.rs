@@ -227,6 +227,7 @@ impl<'a> Scored<'a> {
         let set = EffectSet::bind(&with, campaign, &start).ok()?;
         let (cal, _) = calib::calibrate(&Request {
             effects: &set,
+            leverages: false,
             ..Request::new(campaign, &start, copts)
         })
         .ok()?;

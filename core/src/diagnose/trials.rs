@@ -290,6 +290,9 @@ impl Trials<'_> {
             effects: set,
             warm: Some(warm),
             shared: self.shared.as_ref(),
+            // a candidate's leverages are never read (the noise rounds' are the current
+            // model's)
+            leverages: false,
             ..Request::new(campaign, start, copts)
         })
         .map(|(cal, _)| cal)

@@ -140,6 +140,14 @@ pub struct Pieces {
 
 impl Pieces {
     pub fn new(campaign: &Campaign, size: usize) -> Pieces {
+        Self::of_setups(campaign, size, |_| true)
+    }
+
+    /// [`Pieces::new`] of the setups `keep` picks (by their index in [`Campaign::setups`])
+    /// alone: each setup's rows read only its own poses and its reset pose, so they are the
+    /// rows those setups have among the whole campaign's (cross-validation evaluates one
+    /// fold's setups, not the campaign).
+    pub fn of_setups(campaign: &Campaign, size: usize, keep: impl Fn(usize) -> bool) -> Pieces {
         let size = size.max(1);
         let setups: Vec<(Option<usize>, Vec<usize>)> = campaign
             .setups()
@@ -152,7 +160,7 @@ impl Pieces {
             spans: Vec::new(),
             open: None,
         };
-        for (k, (reset, poses)) in setups.iter().enumerate() {
+        for (k, (reset, poses)) in setups.iter().enumerate().filter(|(k, _)| keep(*k)) {
             let shared = !poses
                 .iter()
                 .any(|&i| campaign.poses[i].instrument == Instrument::None);

@@ -12,6 +12,7 @@ mod calibration_currents_observability;
 mod calibration_currents_online;
 mod calibration_currents_online_events;
 mod calibration_instruments;
+mod calibration_leverages;
 mod calibration_pieces;
 mod calibration_preload_among;
 mod calibration_progress;
