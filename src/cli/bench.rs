@@ -65,8 +65,9 @@ pub struct DiscoveryArgs {
     pub machines: usize,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Only the machines of this class, the series' first --machines of it (machine i is the
-    /// same machine as without --class). Example: --class thermometer_lag --machines 20
+    /// Only the machines of this class: the series' first --machines of it (machine i the same
+    /// as without --class), or for thermometer_lag, drawn only on demand, --machines of it.
+    /// Example: --class thermometer_lag --machines 12
     #[arg(long)]
     pub class: Option<machines::Class>,
     /// Worker threads (one machine each at a time).

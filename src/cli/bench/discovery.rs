@@ -56,17 +56,17 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
         ));
     }
     if let Some(i) = a.only {
-        let o = machine(a.seed, i, true, a.write.as_deref())?;
+        let o = machine((a.seed, a.class), i, true, a.write.as_deref())?;
         println!("{}", serde_json::to_string_pretty(&o)?);
         return Ok(());
     }
     // machine i of a seed is the same machine with or without --class
     let indices: Vec<usize> = match a.class {
-        None => (0..a.machines).collect(),
-        Some(class) => (0..)
-            .filter(|&i| machines::draw(a.seed, i).hidden.class == class)
+        Some(class) if !machines::on_demand(class) => (0..)
+            .filter(|&i| machines::draw(a.seed, i, None).hidden.class == class)
             .take(a.machines)
             .collect(),
+        _ => (0..a.machines).collect(),
     };
     let next = AtomicUsize::new(0);
     let done = Mutex::new(Vec::new());
@@ -75,8 +75,8 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
             s.spawn(|| {
                 while let Some(&i) = indices.get(next.fetch_add(1, Ordering::Relaxed)) {
                     // a diagnosis that fails counts as a wrong answer, with its error
-                    let out =
-                        machine(a.seed, i, false, None).unwrap_or_else(|e| failed(a.seed, i, &e));
+                    let out = machine((a.seed, a.class), i, false, None)
+                        .unwrap_or_else(|e| failed((a.seed, a.class), i, &e));
                     if let Ok(mut d) = done.lock() {
                         d.push(out);
                         eprint!("\r  {} of {} machines", d.len(), a.machines);
@@ -140,8 +140,16 @@ impl Loop<'_> {
     }
 }
 
-fn machine(seed: u64, i: usize, verbose: bool, write: Option<&Path>) -> Result<Outcome> {
-    let m = machines::draw(seed, i);
+/// A series: its seed, and the class drawn on demand (`--class`).
+type Series = (u64, Option<Class>);
+
+fn machine(
+    (seed, class): Series,
+    i: usize,
+    verbose: bool,
+    write: Option<&Path>,
+) -> Result<Outcome> {
+    let m = machines::draw(seed, i, class);
     if verbose {
         println!(
             "machine {i}: {:?} {:?}, {:?}, {:?}, {:?}",
@@ -320,8 +328,8 @@ impl Judged<'_> {
 }
 
 /// The outcome of a machine whose loop ended in an error.
-fn failed(seed: u64, i: usize, e: &anyhow::Error) -> Outcome {
-    let m = machines::draw(seed, i);
+fn failed((seed, class): Series, i: usize, e: &anyhow::Error) -> Outcome {
+    let m = machines::draw(seed, i, class);
     Outcome {
         machine: i,
         class: m.hidden.class,

@@ -49,12 +49,17 @@ pub enum Class {
     /// Thermal expansion read by thermometers 2-30 minutes behind the parts (a first-order
     /// lag), measured by a tracker, a grid encoder and self-calibration or by a tracker and
     /// self-calibration only: `thermal` and `thermal_lag` named, `nothing_missing` (a lag
-    /// too short to matter may go unnamed at the floor).
+    /// too short to matter may go unnamed at the floor). Drawn on demand only
+    /// (`--class thermometer_lag`): the series' machines stay the ones earlier figures and
+    /// tests name.
     ThermometerLag,
 }
 
-/// How many kinds of machine the draw knows (k in `0..KINDS`).
-const KINDS: u32 = 37;
+/// How many kinds of machine the series draws (k in `0..KINDS`).
+const KINDS: u32 = 35;
+
+/// The classes drawn only on demand, outside the series.
+const ON_DEMAND: [Class; 1] = [Class::ThermometerLag];
 
 /// What a machine hides: its class and its hidden effects of the twin.
 pub(super) struct Hidden {
@@ -96,7 +101,6 @@ fn hidden_of(k: u32, rng: &mut StdRng) -> Hidden {
         ),
         29..=30 => (Class::Gradient, vec![EffectKind::Thermal]),
         31..=32 => (Class::TrackerDrift, Vec::new()),
-        35..=36 => (Class::ThermometerLag, vec![EffectKind::Thermal]),
         _ => (Class::TwoOutside, vec![EffectKind::LostMotionQ4]),
     };
     Hidden { class, effects }
@@ -110,11 +114,18 @@ pub(super) struct Machine {
     pub instruments: Vec<Instrument>,
 }
 
-/// Machine `i` of the series `seed`: its hidden effects and conventions.
-pub(super) fn draw(seed: u64, i: usize) -> Machine {
+/// Machine `i` of the series `seed`: its hidden effects and conventions; of a class drawn
+/// on demand ([`ON_DEMAND`]) where `class` is one, else the series' own machine.
+pub(super) fn draw(seed: u64, i: usize, class: Option<Class>) -> Machine {
     let mut rng = StdRng::seed_from_u64(seed.wrapping_mul(0x9e37_79b9).wrapping_add(i as u64));
     let k = rng.gen_range(0..KINDS);
-    let hidden = hidden_of(k, &mut rng);
+    let hidden = match class.filter(|c| ON_DEMAND.contains(c)) {
+        Some(class) => Hidden {
+            class,
+            effects: vec![EffectKind::Thermal],
+        },
+        None => hidden_of(k, &mut rng),
+    };
     let noise: [f64; N_GROUPS] = std::array::from_fn(|_| log_uniform(&mut rng, 0.5, 3.0));
     let thermal = thermal_of(&mut rng, hidden.class);
     let (lo, hi) = if hidden.class == Class::SmallAlignment {
@@ -345,4 +356,9 @@ pub(super) fn hidden_names(hidden: &Hidden) -> Vec<String> {
         _ => {}
     }
     out
+}
+
+/// Whether `class` is drawn on demand only ([`ON_DEMAND`]).
+pub(super) fn on_demand(class: Class) -> bool {
+    ON_DEMAND.contains(&class)
 }
