@@ -15,33 +15,9 @@ fn foreign() -> Option<PathBuf> {
     foreign_support::dataset("")
 }
 
-/// The loop: diagnose, add what was named, until nothing is named; (named, last JSON).
+/// The loop from nothing named ([`foreign_support::discovery_loop`]).
 fn discovery_loop(ds: &Path, scratch: &Path) -> (Vec<String>, serde_json::Value) {
-    let out = scratch.join("d.json");
-    let mut named: Vec<String> = Vec::new();
-    loop {
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_rpkm"));
-        cmd.arg("diagnose")
-            .arg(ds.join("cal.csv"))
-            .arg("--validate")
-            .arg(ds.join("val.csv"))
-            .arg("--json")
-            .arg(&out);
-        if !named.is_empty() {
-            cmd.args(["--effects", &named.join(",")]);
-        }
-        let o = cmd.output().expect("run rpkm");
-        assert!(
-            o.status.success(),
-            "{cmd:?}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        let d = json(&out);
-        match d["missing_effect"].as_str() {
-            Some(e) if !named.iter().any(|n| n == e) && named.len() < 3 => named.push(e.to_owned()),
-            _ => return (named, d),
-        }
-    }
+    foreign_support::discovery_loop(ds, scratch, &[])
 }
 
 fn check(name: &str, want: &[&str]) {

@@ -9,7 +9,7 @@ use std::fmt::Write;
 use std::path::Path;
 use std::process::Command;
 
-use crate::foreign_support::{dataset, json, true_floor_um};
+use crate::foreign_support::{dataset, discovery_loop, json, true_floor_um};
 
 /// `rpkm calibrate` of the data set with `args`; (stdout, its JSON).
 fn calibrate(ds: &Path, tag: &str, args: &[&str]) -> (String, serde_json::Value) {
@@ -43,25 +43,7 @@ fn the_loop_names_the_thermometers_lag_and_calibrate_gives_its_time_constant() {
     };
     let scratch = std::env::temp_dir().join(format!("rpkm-lag-{}-loop", std::process::id()));
     std::fs::create_dir_all(&scratch).expect("scratch");
-    let out = scratch.join("d.json");
-    let mut named: Vec<String> = vec!["thermal".to_owned()];
-    let d = loop {
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_rpkm"));
-        cmd.arg("diagnose")
-            .arg(ds.join("cal.csv"))
-            .arg("--validate")
-            .arg(ds.join("val.csv"))
-            .arg("--json")
-            .arg(&out);
-        cmd.args(["--effects", &named.join(",")]);
-        let o = cmd.output().expect("run rpkm");
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let d = json(&out);
-        match d["missing_effect"].as_str() {
-            Some(e) if !named.iter().any(|n| n == e) && named.len() < 3 => named.push(e.to_owned()),
-            _ => break d,
-        }
-    };
+    let (named, d) = discovery_loop(&ds, &scratch, &["thermal"]);
     assert_eq!(named, ["thermal", "thermal_lag"], "{}", d["verdict"]);
     assert_eq!(d["verdict_kind"], "nothing_missing", "{}", d["verdict"]);
     let (val, floor) = (

@@ -4,6 +4,7 @@
 #![allow(dead_code)] // each test file uses a part
 
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 use crate::shared_support;
 
@@ -55,4 +56,38 @@ pub fn true_floor_um(ds: &Path) -> f64 {
         e.push(-s * dx + c * dy - y);
     }
     1e3 * (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt()
+}
+
+/// The loop a user runs: diagnose, add what was named, until nothing new is named, from the
+/// effects `start` (none: from nothing); (named, the last JSON).
+pub fn discovery_loop(
+    ds: &Path,
+    scratch: &Path,
+    start: &[&str],
+) -> (Vec<String>, serde_json::Value) {
+    let out = scratch.join("d.json");
+    let mut named: Vec<String> = start.iter().map(|s| (*s).to_owned()).collect();
+    loop {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_rpkm"));
+        cmd.arg("diagnose")
+            .arg(ds.join("cal.csv"))
+            .arg("--validate")
+            .arg(ds.join("val.csv"))
+            .arg("--json")
+            .arg(&out);
+        if !named.is_empty() {
+            cmd.args(["--effects", &named.join(",")]);
+        }
+        let o = cmd.output().expect("run rpkm");
+        assert!(
+            o.status.success(),
+            "{cmd:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let d = json(&out);
+        match d["missing_effect"].as_str() {
+            Some(e) if !named.iter().any(|n| n == e) && named.len() < 3 => named.push(e.to_owned()),
+            _ => return (named, d),
+        }
+    }
 }
