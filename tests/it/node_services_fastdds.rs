@@ -22,11 +22,14 @@
 //! The client's side of the mapping is checked on its own against the peer's `--serve` mode
 //! (rmw_fastrtps's server, with decoy replies that the client must ignore), so that a failure
 //! of the tests above is the nodes'. The node tests run alone, each in a test process of its
-//! own (`#[ignore]`; `.ci/run` runs each with `--ignored --exact`): beside another test's node
-//! set, or after one in the same process, the Fast DDS client's discovery of the nodes'
-//! services missed its minute on the 2-core machine (not understood yet), where alone it
-//! takes seconds. Every call has 60 s; the peer stops at the first one not
-//! answered and the test names it.
+//! own (`#[ignore]`; `.ci/run` runs each with `--ignored --exact`). The stack tests' clients
+//! start once every node has said its start-up line: a Fast DDS 2.9 participant that is
+//! running while several nodes start may never report some of their first endpoints (its
+//! reader history misorders the RustDDS announcements it gets re-sent; docs/nodes.md, "A Fast
+//! DDS participant running while the nodes start"), which made the plain stack test miss one
+//! node's services in 8 of 28 runs here when the client started with the stack, in none of
+//! 10 since. Every call has 60 s; the peer stops at the first one not answered and the test
+//! names it (with the endpoints it had matched).
 
 use crate::joint_states_support::{campaign, cell, launch_dir, write_script, Observer, Script};
 use crate::node_joint_states_fastdds::{fastdds_peer, peer_output};
@@ -233,8 +236,41 @@ fn play_cell(bin: &Path, dir: &TempDir, domain: &str, enclave: Option<&Path>) ->
     seqs
 }
 
+/// The start-up line of each node of [`NODES`], written once its parameter, lifecycle and
+/// calibration services exist.
+const STARTED: [&str; 4] = [
+    "[ingest] source ",
+    "[tcp_estimator] estimating with ",
+    "[calibrator] calibrating model ",
+    "[preload_monitor] monitoring with ",
+];
+
+/// Waits (30 s at most) until every node of the stack has said its start-up line: a Fast DDS
+/// 2.9 participant that is running while several nodes announce their endpoints may never
+/// report some of them (docs/nodes.md, "A Fast DDS participant running while the nodes
+/// start").
+fn wait_started(stack: &Launch) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let log = stack.log.lock().map(|l| l.join("\n")).unwrap_or_default();
+        let missing: Vec<&str> = STARTED
+            .iter()
+            .copied()
+            .filter(|s| !log.contains(s))
+            .collect();
+        if missing.is_empty() {
+            return;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the stack did not start within 30 s: no {missing:?} in {log}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 #[test]
-#[ignore = "flaky: in about half the runs here the client's discovery misses one node's services (cause not found); not in .ci/run"]
+#[ignore = "needs a test process of its own: .ci/run runs it alone (--ignored --exact)"]
 fn a_fast_dds_client_lists_sets_and_activates_the_nodes_as_rmw_fastrtps_does() {
     let _one = crate::fastdds_support::one_set();
     let (Some(rpc), Some(cell_peer)) = (rpc_peer(), fastdds_peer()) else {
@@ -248,6 +284,7 @@ fn a_fast_dds_client_lists_sets_and_activates_the_nodes_as_rmw_fastrtps_does() {
         &stack_launch(&dir),
         &[("RPKM_IPC_PREFIX", &prefix), ("ROS_DOMAIN_ID", domain)],
     );
+    wait_started(&stack);
     let (lines, ok) = call(&rpc, &dir, (domain, &stack_script()), None);
     check_calls(&lines, ok);
     let seqs = play_cell(&cell_peer, &dir, domain, None);
@@ -378,6 +415,7 @@ fn a_fast_dds_client_in_an_sros2_enclave_activates_the_secured_estimator() {
     envs.push(("ROS_DOMAIN_ID".into(), domain.into()));
     let envs: Vec<(&str, &str)> = envs.iter().map(|(a, b)| (a.as_str(), b.as_str())).collect();
     let mut stack = Launch::start(&stack_launch(&dir), &envs);
+    wait_started(&stack);
     let mut script: Vec<String> = NODES.iter().map(|e| format!("state /rpkm/{e}")).collect();
     script.push("change /rpkm/tcp_estimator 1".into());
     script.push("change /rpkm/tcp_estimator 3".into());
