@@ -170,7 +170,8 @@ fn sigkilled_estimator_is_restarted_and_rejoins_while_the_stream_goes_on() {
     );
 }
 
-/// SIGTERM to `rpkm launch` (its tokio signal stream): SIGTERM to every node, each stops
+/// The launch starts its nodes one at a time, each after the one before said its start-up
+/// line. SIGTERM to `rpkm launch` (its tokio signal stream): SIGTERM to every node, each stops
 /// cleanly (exit 0, not killed: the grace is 5 s), the launch exits 0, and no node process
 /// is left (their pids are gone from /proc).
 #[test]
@@ -198,6 +199,24 @@ fn sigterm_stops_every_node_cleanly_and_the_launch_exits_0() {
         assert!(Instant::now() < up, "the nodes did not start within 60 s");
         std::thread::sleep(Duration::from_millis(20));
     }
+    // One node at a time: preload_monitor starts only after the estimator's start-up line
+    // (docs/nodes.md, "A Fast DDS participant running while the nodes start"), and the
+    // launch says so.
+    let order = {
+        let log = launched.log.lock().expect("log");
+        let at = |needle: &str| log.iter().position(|l| l.contains(needle));
+        (
+            at("[tcp_estimator] estimating with"),
+            at("[launch] started preload_monitor pid "),
+            at("[launch] tcp_estimator said its start-up line after "),
+            at("[launch] starting 2 processes one at a time"),
+        )
+    };
+    assert!(
+        matches!(order, (Some(said), Some(next), Some(_), Some(_)) if said < next),
+        "{order:?} in {:?}",
+        launched.log.lock().expect("log")
+    );
     let pids: Vec<u32> = ["tcp_estimator", "preload_monitor"]
         .iter()
         .flat_map(|n| launched.started(n))

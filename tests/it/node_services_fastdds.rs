@@ -22,14 +22,15 @@
 //! The client's side of the mapping is checked on its own against the peer's `--serve` mode
 //! (rmw_fastrtps's server, with decoy replies that the client must ignore), so that a failure
 //! of the tests above is the nodes'. The node tests run alone, each in a test process of its
-//! own (`#[ignore]`; `.ci/run` runs each with `--ignored --exact`). The stack tests' clients
-//! start once every node has said its start-up line: a Fast DDS 2.9 participant that is
-//! running while several nodes start may never report some of their first endpoints (its
-//! reader history misorders the RustDDS announcements it gets re-sent; docs/nodes.md, "A Fast
-//! DDS participant running while the nodes start"), which made the plain stack test miss one
-//! node's services in 8 of 28 runs here when the client started with the stack, in none of
-//! 10 since. Every call has 60 s; the peer stops at the first one not answered and the test
-//! names it (with the endpoints it had matched).
+//! own (`#[ignore]`; `.ci/run` runs each with `--ignored --exact`). The plain stack test's
+//! client starts 1.5 s before `rpkm launch`: a Fast DDS 2.9 participant that is running while
+//! several nodes start together may never report some of their first endpoints (its reader
+//! history misorders the RustDDS announcements it gets re-sent; docs/nodes.md, "A Fast DDS
+//! participant running while the nodes start"), which made this test miss one node's services
+//! in 8 of 28 runs here (3 of 5 in this order); the launch now starts the nodes one at a time,
+//! each after the one before said its start-up line. The SROS2 stack test's client starts
+//! once every node has said its start-up line. Every call has 60 s; the peer stops at the
+//! first one not answered and the test names it (with the endpoints it had matched).
 
 use crate::joint_states_support::{campaign, cell, launch_dir, write_script, Observer, Script};
 use crate::node_joint_states_fastdds::{fastdds_peer, peer_output};
@@ -44,6 +45,9 @@ use std::time::Duration;
 
 /// The nodes of the stack, by executable.
 const NODES: [&str; 4] = ["ingest", "tcp_estimator", "calibrator", "preload_monitor"];
+/// How long the plain stack test's client runs before `rpkm launch` starts (its participant
+/// is up and has announced itself by then).
+const CLIENT_FIRST: Duration = Duration::from_millis(1500);
 /// Poses the cell plays after the calls.
 const POSES: usize = 40;
 
@@ -73,6 +77,17 @@ fn call_in(
     enclave: Option<&Path>,
     envs: &[(&str, &str)],
 ) -> (Vec<String>, bool) {
+    calls_done(start_calls(bin, dir, (domain, script), enclave, envs))
+}
+
+/// The client started on `script`, its output piped ([`calls_done`] reads it).
+fn start_calls(
+    bin: &Path,
+    dir: &TempDir,
+    (domain, script): (&str, &[String]),
+    enclave: Option<&Path>,
+    envs: &[(&str, &str)],
+) -> std::process::Child {
     let file = dir.path(&unique("rpc.script"));
     std::fs::write(&file, script.join("\n") + "\n").expect("script");
     let mut cmd = Command::new(bin);
@@ -80,11 +95,17 @@ fn call_in(
         .arg(&file)
         .arg("60")
         .envs(envs.iter().copied())
+        .stdout(Stdio::piped())
         .stderr(Stdio::inherit());
     if let Some(e) = enclave {
         cmd.arg(e);
     }
-    let out = cmd.output().expect("run fastdds_rpc_peer");
+    cmd.spawn().expect("start fastdds_rpc_peer")
+}
+
+/// The client's output lines (printed) once it ended, and whether it exited 0.
+fn calls_done(client: std::process::Child) -> (Vec<String>, bool) {
+    let out = client.wait_with_output().expect("run fastdds_rpc_peer");
     let text = String::from_utf8_lossy(&out.stdout).into_owned();
     for line in text.lines() {
         eprintln!("[rpc] {line}");
@@ -280,12 +301,15 @@ fn a_fast_dds_client_lists_sets_and_activates_the_nodes_as_rmw_fastrtps_does() {
     let (dir, _) = launch_dir("svc_fd");
     let prefix = unique("svcfd");
     let mut obs = Observer::new(&prefix, None);
+    // The client runs before the nodes start, as a cell's long-running Fast DDS programs
+    // may: the launch starts the nodes one at a time, so that it discovers every endpoint.
+    let client = start_calls(&rpc, &dir, (domain, &stack_script()), None, &[]);
+    std::thread::sleep(CLIENT_FIRST);
     let mut stack = Launch::start(
         &stack_launch(&dir),
         &[("RPKM_IPC_PREFIX", &prefix), ("ROS_DOMAIN_ID", domain)],
     );
-    wait_started(&stack);
-    let (lines, ok) = call(&rpc, &dir, (domain, &stack_script()), None);
+    let (lines, ok) = calls_done(client);
     check_calls(&lines, ok);
     let seqs = play_cell(&cell_peer, &dir, domain, None);
     obs.until(Duration::from_secs(10), |s| s.states.len() >= POSES);
