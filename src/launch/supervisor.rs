@@ -2,7 +2,7 @@
 //! binary (`rpkm-node <exec> --name <name> --params ...`, see `programs.rs`) and the
 //! commands (`rpkm record`) as processes of this one, and supervises them:
 //! - the nodes start one at a time, each once the one before has said its start-up line (at
-//!   most 10 s; `ready.rs`), and so do nodes whose restarts fall due together;
+//!   most 10 s; `ready.rs`), and so does a node restarted while another waits for its restart;
 //! - a node that dies (non-zero exit or a signal) is restarted when `respawn` is on, after
 //!   `respawn_delay` doubled for every crash within 10 s of its start (at most 5 s); exit
 //!   code 0 (input done) and 2 (bad configuration: restarting cannot help) are final, and
@@ -494,10 +494,11 @@ fn running(child: Child) -> State {
     }
 }
 
-/// Restarts every waiting node whose time has come. Several at once start one at a time, as
-/// at the launch's start ([`start_in_turn`]); one alone is started at once: no other node
-/// announces its endpoints at the same time. The stop signal that came during a wait, if
-/// one did.
+/// Restarts every waiting node whose time has come. One while another node waits for its
+/// restart (due now or later: nodes that crashed together fall due microseconds apart) starts
+/// in turn ([`start_in_turn`]), so that the other starts after its start-up line; one alone
+/// starts at once: no other node announces its endpoints at the same time. The stop signal
+/// that came during a wait, if one did.
 async fn restart_due(
     nodes: &mut [Supervised<'_>],
     programs: &Programs,
@@ -508,10 +509,13 @@ async fn restart_due(
     let due: Vec<usize> = (0..nodes.len())
         .filter(|&i| matches!(nodes[i].state, State::Waiting { until } if until <= now))
         .collect();
-    let in_turn = due.len() > 1;
     for i in due {
+        let others_waiting = nodes
+            .iter()
+            .enumerate()
+            .any(|(j, n)| j != i && matches!(n.state, State::Waiting { .. }));
         let n = &mut nodes[i];
-        if !in_turn {
+        if !others_waiting {
             n.state = running(spawn(programs, n.spec, env, None)?);
             continue;
         }

@@ -262,3 +262,69 @@ fn sigterm_stops_every_node_cleanly_and_the_launch_exits_0() {
         );
     }
 }
+
+/// Two nodes SIGKILLed together restart one at a time: the second only after the first
+/// restarted one said its start-up line (nodes announcing their first DDS endpoints together
+/// are what a running Fast DDS participant may miss: docs/nodes.md).
+#[test]
+fn nodes_killed_together_restart_one_at_a_time() {
+    let _alone = crate::KILLS_A_NODE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let dir = TempDir::new("launch_two");
+    let launch = dir.path("two.launch.yaml");
+    std::fs::write(
+        &launch,
+        "launch:\n  - node: {pkg: rpkm, exec: tcp_estimator, respawn: true, respawn_delay: 0.1}\n  \
+         - node: {pkg: rpkm, exec: preload_monitor, respawn: true, respawn_delay: 0.1}\n",
+    )
+    .expect("launch file");
+    let prefix = unique("two");
+    let mut launched = Launch::start(&launch, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
+    let log = std::sync::Arc::clone(&launched.log);
+    let lines = |needle: &str| {
+        let log = log.lock().expect("log");
+        log.iter()
+            .enumerate()
+            .filter(|(_, l)| l.contains(needle))
+            .map(|(i, _)| i)
+            .collect::<Vec<_>>()
+    };
+    let until = |what: &str, done: &dyn Fn() -> bool| {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while !done() {
+            assert!(Instant::now() < deadline, "{what} not within 60 s");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    until("both start-up lines", &|| {
+        lines("said its start-up line after").len() == 2
+    });
+    let pids: Vec<String> = ["tcp_estimator", "preload_monitor"]
+        .iter()
+        .flat_map(|n| launched.started(n))
+        .map(|p| p.to_string())
+        .collect();
+    assert_eq!(pids.len(), 2, "{pids:?}");
+    let ok = Command::new("kill")
+        .arg("-KILL")
+        .args(&pids)
+        .status()
+        .expect("kill");
+    assert!(ok.success(), "SIGKILL {pids:?}");
+    until("both restarts", &|| lines("[launch] started ").len() == 4);
+    // the first restarted one's start-up line, as the launch waited for it (10 s at most)
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while lines("said its start-up line after").len() < 3 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    launched.stop();
+    let started = lines("[launch] started ");
+    let said = lines("said its start-up line after");
+    // the first restarted node said its line before the second was started
+    assert!(
+        said.len() >= 3 && said[2] < started[3],
+        "said {said:?}, started {started:?} in {:?}",
+        log.lock().expect("log")
+    );
+}
