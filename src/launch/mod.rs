@@ -76,6 +76,8 @@
 //!   (`rpkm node` without it), `rpkm` for a command.
 //! - `supervisor.rs`: The nodes started as processes and supervised: restarts with backoff,
 //!   shutdown on a signal.
+//! - `ready.rs`: The nodes started one at a time: the pipe on which a node says it has
+//!   started, and the bounded wait for it.
 //! - `managed.rs`: The managed nodes brought up in file order through their lifecycle.
 //! - `state_dir.rs`: The folder where the nodes keep the parameter values set at run time
 //!   across their restarts, fresh at every launch.
@@ -90,6 +92,7 @@ mod node_entry;
 mod parse;
 mod place;
 mod programs;
+mod ready;
 mod state_dir;
 pub mod supervisor;
 #[cfg(test)]

@@ -1,6 +1,8 @@
 //! Starts the nodes of a launch description as processes of the node program beside this
 //! binary (`rpkm-node <exec> --name <name> --params ...`, see `programs.rs`) and the
 //! commands (`rpkm record`) as processes of this one, and supervises them:
+//! - the nodes start one at a time, each once the one before has said its start-up line (at
+//!   most 10 s; `ready.rs`), and so does a node restarted while another waits for its restart;
 //! - a node that dies (non-zero exit or a signal) is restarted when `respawn` is on, after
 //!   `respawn_delay` doubled for every crash within 10 s of its start (at most 5 s); exit
 //!   code 0 (input done) and 2 (bad configuration: restarting cannot help) are final, and
@@ -16,8 +18,8 @@
 //! polling), or the next restart time (`tokio::time`). Children are killed on drop, so an
 //! error that ends the launch early leaves no node behind.
 //!
-//! Events go to stderr as `[launch] ...` lines: `started NAME pid PID`, `NAME pid PID
-//! exited ...`, `restarting NAME in S s`.
+//! Events go to stderr as `[launch] ...` lines: `started NAME pid PID`, `NAME said its
+//! start-up line after S s`, `NAME pid PID exited ...`, `restarting NAME in S s`.
 
 use std::future::Future;
 use std::os::unix::process::ExitStatusExt;
@@ -31,8 +33,9 @@ use tokio::process::{Child, Command};
 use tokio::signal::unix::{signal, Signal, SignalKind};
 use tokio::time::Instant;
 
-use super::description::{LaunchDescription, NodeSpec};
+use super::description::{LaunchDescription, LaunchProgram, NodeSpec};
 use super::programs::Programs;
+use super::ready::{NodeStart, ReadyPipe, START_WAIT};
 
 /// A node's crash within this time of its start doubles the next restart delay.
 const QUICK_CRASH: Duration = Duration::from_secs(10);
@@ -187,10 +190,19 @@ fn describe(status: ExitStatus) -> String {
     }
 }
 
-fn spawn(programs: &Programs, spec: &NodeSpec, env: &[(String, String)]) -> anyhow::Result<Child> {
+/// Starts `spec`, handing it `ready` when the launch waits for its start-up line.
+fn spawn(
+    programs: &Programs,
+    spec: &NodeSpec,
+    env: &[(String, String)],
+    ready: Option<&ReadyPipe>,
+) -> anyhow::Result<Child> {
     let (exe, argv) = programs.command(spec);
     let mut cmd = Command::new(exe);
     cmd.args(argv);
+    if let Some(pipe) = ready {
+        pipe.pass_to(&mut cmd);
+    }
     cmd.envs(env.iter().map(|(k, v)| (k, v)));
     // A launch that ends on an error (or a panic) takes its nodes with it.
     cmd.kill_on_drop(true);
@@ -203,6 +215,48 @@ fn spawn(programs: &Programs, spec: &NodeSpec, env: &[(String, String)]) -> anyh
         child.id().unwrap_or_default()
     ));
     Ok(child)
+}
+
+/// What the launch says about a node's start it waited for.
+fn say_start(name: &str, start: &NodeStart) {
+    log(match start {
+        NodeStart::Said(t) => format!(
+            "{name} said its start-up line after {:.2} s",
+            t.as_secs_f64()
+        ),
+        NodeStart::Ended => format!("{name} ended before its start-up line"),
+        NodeStart::TimedOut => format!(
+            "WARN: {name} said no start-up line within {} s: going on without it",
+            START_WAIT.as_secs()
+        ),
+    });
+}
+
+/// Starts `spec` and, for a node, waits until it has said its start-up line (every endpoint
+/// it opens at its start exists), it ended, or [`START_WAIT`] passed, so that no two nodes
+/// announce their first DDS endpoints at the same time (docs/nodes.md, "A Fast DDS
+/// participant running while the nodes start"). A command (`rpkm record`) says no start-up
+/// line: it is not waited for. The state is the node's from its spawn on; with it the stop
+/// signal that came during the wait, if one did.
+async fn start_in_turn(
+    programs: &Programs,
+    spec: &NodeSpec,
+    env: &[(String, String)],
+    signals: &mut StopSignals,
+) -> anyhow::Result<(State, Option<&'static str>)> {
+    if spec.program != LaunchProgram::Node {
+        return Ok((running(spawn(programs, spec, env, None)?), None));
+    }
+    let pipe = ReadyPipe::new().context("making the pipe for a node's start-up signal")?;
+    let state = running(spawn(programs, spec, env, Some(&pipe))?);
+    let stop = tokio::select! {
+        start = pipe.wait() => {
+            say_start(&spec.name, &start);
+            None
+        }
+        name = signals.next() => Some(name),
+    };
+    Ok((state, stop))
 }
 
 /// Removes the iceoryx2 resources of dead processes (a node creation does the same; this
@@ -440,19 +494,38 @@ fn running(child: Child) -> State {
     }
 }
 
-/// Restarts every waiting node whose time has come.
-fn restart_due(
+/// Restarts every waiting node whose time has come. One while another node waits for its
+/// restart (due now or later: nodes that crashed together fall due microseconds apart) starts
+/// in turn ([`start_in_turn`]), so that the other starts after its start-up line; one alone
+/// starts at once: no other node announces its endpoints at the same time. The stop signal
+/// that came during a wait, if one did.
+async fn restart_due(
     nodes: &mut [Supervised<'_>],
     programs: &Programs,
     env: &[(String, String)],
-) -> anyhow::Result<()> {
+    signals: &mut StopSignals,
+) -> anyhow::Result<Option<&'static str>> {
     let now = Instant::now();
-    for n in nodes.iter_mut() {
-        if matches!(n.state, State::Waiting { until } if until <= now) {
-            n.state = running(spawn(programs, n.spec, env)?);
+    let due: Vec<usize> = (0..nodes.len())
+        .filter(|&i| matches!(nodes[i].state, State::Waiting { until } if until <= now))
+        .collect();
+    for i in due {
+        let others_waiting = nodes
+            .iter()
+            .enumerate()
+            .any(|(j, n)| j != i && matches!(n.state, State::Waiting { .. }));
+        let n = &mut nodes[i];
+        if !others_waiting {
+            n.state = running(spawn(programs, n.spec, env, None)?);
+            continue;
+        }
+        let (state, stop) = start_in_turn(programs, n.spec, env, signals).await?;
+        n.state = state;
+        if stop.is_some() {
+            return Ok(stop);
         }
     }
-    Ok(())
+    Ok(None)
 }
 
 /// Runs the description until SIGINT/SIGTERM or until every node is done; an error when a
@@ -474,17 +547,28 @@ async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
     }
     cleanup_dead();
     let reporter = Reporter::open(desc);
+    log(format!(
+        "starting {} processes one at a time: each node once the one before has said its \
+         start-up line (its DDS endpoints exist), at most {} s each",
+        desc.nodes.len(),
+        START_WAIT.as_secs()
+    ));
     let mut nodes: Vec<Supervised<'_>> = Vec::new();
+    let mut failed = Failed::default();
     for spec in &desc.nodes {
-        let child = spawn(&programs, spec, &desc.env)?;
+        let (state, stop) = start_in_turn(&programs, spec, &desc.env, &mut signals).await?;
         nodes.push(Supervised {
             spec,
-            state: running(child),
+            state,
             quick_crashes: 0,
             last_exit: None,
         });
+        if let Some(name) = stop {
+            log(format!("{name} received while starting {}", spec.name));
+            stop_all(&mut nodes).await;
+            return outcome(&failed);
+        }
     }
-    let mut failed = Failed::default();
     let mut report_at = Instant::now();
     // the managed nodes configured and activated in file order, while the loop supervises
     let bring_up = super::managed::bring_up(desc);
@@ -522,7 +606,14 @@ async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
                 reaped(n, status, lived, &mut failed);
                 reporter.report(&nodes);
             }
-            Event::RestartDue => restart_due(&mut nodes, &programs, &desc.env)?,
+            Event::RestartDue => {
+                if let Some(name) =
+                    restart_due(&mut nodes, &programs, &desc.env, &mut signals).await?
+                {
+                    log(format!("{name} received while restarting"));
+                    break;
+                }
+            }
         }
     }
     stop_all(&mut nodes).await;

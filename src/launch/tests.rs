@@ -353,3 +353,34 @@ fn a_parameter_file_of_the_cell_layers_after_the_shipped_one() -> Result<(), Lau
     );
     Ok(())
 }
+
+/// A child that is handed a start-up pipe, running `script` under `sh`: how its start ended
+/// for the launch.
+fn start_of(script: &str) -> ready::NodeStart {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .enable_io()
+        .build()
+        .expect("runtime")
+        .block_on(async {
+            let pipe = ready::ReadyPipe::new().expect("pipe");
+            let mut cmd = tokio::process::Command::new("sh");
+            cmd.args(["-c", script]);
+            pipe.pass_to(&mut cmd);
+            let mut child = cmd.spawn().expect("sh");
+            let start = pipe.wait().await;
+            child.wait().await.expect("wait");
+            start
+        })
+}
+
+#[test]
+fn a_child_that_writes_to_its_start_up_pipe_has_started_one_that_exits_has_not() {
+    // the descriptor is open in the child (not closed on exec) under the number it is told
+    let said = start_of("sleep 0.2; printf x > /proc/self/fd/$RPKM_READY_FD; sleep 0.5");
+    assert!(
+        matches!(said, ready::NodeStart::Said(t) if t >= std::time::Duration::from_millis(200)),
+        "the byte after 0.2 s"
+    );
+    assert!(matches!(start_of("sleep 0.2"), ready::NodeStart::Ended));
+}

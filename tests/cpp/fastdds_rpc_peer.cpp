@@ -31,9 +31,10 @@
 //       -> GOAL accepted|refused, then FEEDBACK PHASE ROUND STEP ITERATION COST per feedback,
 //          STATUS S per status change of the goal, PARAM NAME VALUE per parameter,
 //          RESULT STATUS ITERATIONS NOISE_ROUNDS VAL_RMS VERDICT|- and MESSAGE TEXT
-// A call not answered within CALL_TIMEOUT_S prints NOREPLY CMD NODE (UNAVAILABLE CMD NODE:
-// the service was not matched) and ends the script (the calls after it build on it). Ends with
-// DONE CALLS REPLIES IGNORED (replies on the topics that were not its own). Exit 0 when every
+// A call not answered within CALL_TIMEOUT_S prints NOREPLY CMD NODE (UNAVAILABLE CMD NODE
+// (request writer matched N, reply reader matched M): the service was not matched, N and M the
+// remote endpoints each had matched) and ends the script (the calls after it build on it).
+// Ends with DONE CALLS REPLIES IGNORED (replies on the topics that were not its own). Exit 0 when every
 // call was answered, 2 when not, 3 when the participant cannot be created, 64 on bad usage or
 // a bad script line.
 //
@@ -62,6 +63,8 @@
 
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastdds/dds/log/Log.hpp>
 #include <fastdds/dds/publisher/DataWriter.hpp>
 #include <fastdds/dds/publisher/DataWriterListener.hpp>
 #include <fastdds/dds/publisher/Publisher.hpp>
@@ -301,7 +304,8 @@ struct Peer {
     Client *c = client(service, type);
     auto until = deadline();
     if (!c->wait_available(until)) {
-      std::printf("UNAVAILABLE %s\n", what.c_str());
+      std::printf("UNAVAILABLE %s (request writer matched %d, reply reader matched %d)\n",
+                  what.c_str(), publication_matches(c->writer), subscription_matches(c->reader));
       return false;
     }
     SequenceNumber_t seq = c->send(request);
@@ -640,9 +644,39 @@ int serve(Dds &dds, const std::string &node, double seconds) {
   return 0;
 }
 
+// With FASTDDS_PEER_TRACE set: the participant's discovery as Fast DDS reports it, on stderr
+// (`TRACE SECONDS participant|reader|writer STATUS GUID [TOPIC]`, STATUS as Fast DDS numbers
+// it: 0 discovered), and Fast DDS's own warnings. A service that stays UNAVAILABLE shows there
+// as the remote endpoints Fast DDS never reported (how the missed Fast DDS 2.9 discoveries of
+// docs/nodes.md were found).
+struct Trace : public DomainParticipantListener {
+  Clock::time_point t0 = Clock::now();
+  double t() const { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+  void on_participant_discovery(DomainParticipant *,
+                                eprosima::fastrtps::rtps::ParticipantDiscoveryInfo &&info) override {
+    std::fprintf(stderr, "TRACE %.3f participant %d %s\n", t(), int(info.status),
+                 guid_text(info.info.m_guid).c_str());
+  }
+  void on_subscriber_discovery(DomainParticipant *,
+                               eprosima::fastrtps::rtps::ReaderDiscoveryInfo &&info) override {
+    std::fprintf(stderr, "TRACE %.3f reader %d %s %s\n", t(), int(info.status),
+                 guid_text(info.info.guid()).c_str(), info.info.topicName().c_str());
+  }
+  void on_publisher_discovery(DomainParticipant *,
+                              eprosima::fastrtps::rtps::WriterDiscoveryInfo &&info) override {
+    std::fprintf(stderr, "TRACE %.3f writer %d %s %s\n", t(), int(info.status),
+                 guid_text(info.info.guid()).c_str(), info.info.topicName().c_str());
+  }
+};
+
 bool make_participant(Dds &dds, int domain, const char *enclave) {
+  static Trace trace;
+  bool traced = std::getenv("FASTDDS_PEER_TRACE") != nullptr;
+  if (traced) {
+    eprosima::fastdds::dds::Log::SetVerbosity(eprosima::fastdds::dds::Log::Warning);
+  }
   dds.participant = DomainParticipantFactory::get_instance()->create_participant(
-      domain, participant_qos("fastdds_rpc_peer", enclave));
+      domain, participant_qos("fastdds_rpc_peer", enclave), traced ? &trace : nullptr);
   if (dds.participant == nullptr) return false;
   for (TypeSupport t : {
            TypeSupport(new rcls::ListParameters_Request_PubSubType()),

@@ -170,7 +170,8 @@ fn sigkilled_estimator_is_restarted_and_rejoins_while_the_stream_goes_on() {
     );
 }
 
-/// SIGTERM to `rpkm launch` (its tokio signal stream): SIGTERM to every node, each stops
+/// The launch starts its nodes one at a time, each after the one before said its start-up
+/// line. SIGTERM to `rpkm launch` (its tokio signal stream): SIGTERM to every node, each stops
 /// cleanly (exit 0, not killed: the grace is 5 s), the launch exits 0, and no node process
 /// is left (their pids are gone from /proc).
 #[test]
@@ -198,6 +199,24 @@ fn sigterm_stops_every_node_cleanly_and_the_launch_exits_0() {
         assert!(Instant::now() < up, "the nodes did not start within 60 s");
         std::thread::sleep(Duration::from_millis(20));
     }
+    // One node at a time: preload_monitor starts only after the estimator's start-up line
+    // (docs/nodes.md, "A Fast DDS participant running while the nodes start"), and the
+    // launch says so.
+    let order = {
+        let log = launched.log.lock().expect("log");
+        let at = |needle: &str| log.iter().position(|l| l.contains(needle));
+        (
+            at("[tcp_estimator] estimating with"),
+            at("[launch] started preload_monitor pid "),
+            at("[launch] tcp_estimator said its start-up line after "),
+            at("[launch] starting 2 processes one at a time"),
+        )
+    };
+    assert!(
+        matches!(order, (Some(said), Some(next), Some(_), Some(_)) if said < next),
+        "{order:?} in {:?}",
+        launched.log.lock().expect("log")
+    );
     let pids: Vec<u32> = ["tcp_estimator", "preload_monitor"]
         .iter()
         .flat_map(|n| launched.started(n))
@@ -242,4 +261,70 @@ fn sigterm_stops_every_node_cleanly_and_the_launch_exits_0() {
             "node pid {pid} still exists after the launch ended"
         );
     }
+}
+
+/// Two nodes SIGKILLed together restart one at a time: the second only after the first
+/// restarted one said its start-up line (nodes announcing their first DDS endpoints together
+/// are what a running Fast DDS participant may miss: docs/nodes.md).
+#[test]
+fn nodes_killed_together_restart_one_at_a_time() {
+    let _alone = crate::KILLS_A_NODE
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let dir = TempDir::new("launch_two");
+    let launch = dir.path("two.launch.yaml");
+    std::fs::write(
+        &launch,
+        "launch:\n  - node: {pkg: rpkm, exec: tcp_estimator, respawn: true, respawn_delay: 0.1}\n  \
+         - node: {pkg: rpkm, exec: preload_monitor, respawn: true, respawn_delay: 0.1}\n",
+    )
+    .expect("launch file");
+    let prefix = unique("two");
+    let mut launched = Launch::start(&launch, &[("RPKM_IPC_PREFIX", prefix.as_str())]);
+    let log = std::sync::Arc::clone(&launched.log);
+    let lines = |needle: &str| {
+        let log = log.lock().expect("log");
+        log.iter()
+            .enumerate()
+            .filter(|(_, l)| l.contains(needle))
+            .map(|(i, _)| i)
+            .collect::<Vec<_>>()
+    };
+    let until = |what: &str, done: &dyn Fn() -> bool| {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while !done() {
+            assert!(Instant::now() < deadline, "{what} not within 60 s");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    until("both start-up lines", &|| {
+        lines("said its start-up line after").len() == 2
+    });
+    let pids: Vec<String> = ["tcp_estimator", "preload_monitor"]
+        .iter()
+        .flat_map(|n| launched.started(n))
+        .map(|p| p.to_string())
+        .collect();
+    assert_eq!(pids.len(), 2, "{pids:?}");
+    let ok = Command::new("kill")
+        .arg("-KILL")
+        .args(&pids)
+        .status()
+        .expect("kill");
+    assert!(ok.success(), "SIGKILL {pids:?}");
+    until("both restarts", &|| lines("[launch] started ").len() == 4);
+    // the first restarted one's start-up line, as the launch waited for it (10 s at most)
+    let deadline = Instant::now() + Duration::from_secs(15);
+    while lines("said its start-up line after").len() < 3 && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    launched.stop();
+    let started = lines("[launch] started ");
+    let said = lines("said its start-up line after");
+    // the first restarted node said its line before the second was started
+    assert!(
+        said.len() >= 3 && said[2] < started[3],
+        "said {said:?}, started {started:?} in {:?}",
+        log.lock().expect("log")
+    );
 }

@@ -511,6 +511,14 @@ impl NodeContext {
             .with_context(|| format!("node {}", self.name))
     }
 
+    /// Says the node's start-up line (every endpoint it opens at its start exists) and tells
+    /// the launch that started it, which then starts the next node ([`super::started`]).
+    #[track_caller]
+    pub fn started(&self, msg: impl std::fmt::Display) {
+        self.log(msg);
+        super::started::tell_launch();
+    }
+
     /// Logs one line to stderr, prefixed with the node name (launch output interleaves), and
     /// with DDS on `/rosout` too, at the severity its prefix names (`WARN:`, `ERROR:`; else
     /// info), with the caller's file and line.

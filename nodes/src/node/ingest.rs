@@ -316,7 +316,7 @@ pub fn run(args: &IngestNodeArgs) -> anyhow::Result<()> {
     let live = live::LiveParams::start(&ctx, &service_specs, |p| configure(p).map(|_| ()))?;
     let source = s.source.to_string();
     let mut out = Output::open((&ctx, &args.common), s.limits, &source, (live, views))?;
-    ctx.log(started_line(&ctx, &s)?);
+    ctx.started(started_line(&ctx, &s)?);
     std::thread::sleep(s.start_delay);
     let ended = match (&s.source, s.joints.clone()) {
         (_, Some(joints)) => joint_states::run(&ctx, &mut out, joints).map(|()| false)?,

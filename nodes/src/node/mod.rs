@@ -28,6 +28,7 @@ pub mod params;
 pub mod preload_monitor;
 pub mod realtime;
 pub mod shutdown;
+pub mod started;
 pub mod tcp_estimator;
 pub mod views;
 pub mod yaml;

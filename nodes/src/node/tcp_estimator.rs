@@ -447,7 +447,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
     let services = super::calibration_services::CalibrationServices::open(&ctx)?;
     let mut lifecycle = Lifecycle::open(&ctx, super::lifecycle::start(args))?;
-    ctx.log(format!(
+    ctx.started(format!(
         "estimating with {} ({}), publishing on {:?}, subscribing on {:?}",
         geometry.source, geometry.model, ctx.output, ctx.input
     ));

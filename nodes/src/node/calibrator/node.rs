@@ -529,7 +529,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let services = crate::node::calibration_services::CalibrationServices::open(&ctx)?;
     let action = CalibrateAction::open(&ctx)?;
     let mut lifecycle = Lifecycle::open(&ctx, crate::node::lifecycle::start(args))?;
-    ctx.log(format!(
+    ctx.started(format!(
         "calibrating {} from {}",
         options.start.model, options.start.source
     ));

@@ -591,7 +591,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
     let diagnostics = ctx.publisher(&topic::DIAGNOSTICS)?;
     let services = super::calibration_services::CalibrationServices::open(&ctx)?;
     let mut lifecycle = Lifecycle::open(&ctx, super::lifecycle::start(args))?;
-    ctx.log(format!(
+    ctx.started(format!(
         "monitoring with {}; WARN from {} %, ERROR from {} %",
         geometry.source, thresholds.warn_percent, thresholds.error_percent
     ));
