@@ -57,7 +57,8 @@ impl serde::Serialize for Points<'_> {
 /// 1. Calibrates the current model (geometry, plus the effects given with --effects) and tests
 ///    its residual against the instruments' noise (chi-square).
 /// 2. Tries every effect of the library not yet in the model: parallelogram, preload_elastic,
-///    thermal, encoder_scale, guide_straightness, instrument_alignment; for each, its
+///    thermal, thermal_lag (thermometers that lag the parts, tried where thermal is in the
+///    model), encoder_scale, guide_straightness, instrument_alignment; for each, its
 ///    parameters, a nested F-test, the fraction of the residual above the noise it explains
 ///    and the held-out RMS after adding it. Ranked best first (BIC). A family's parts
 ///    (thermal:rods) and an effect's refinements (preload_elastic:rod3, a rod of another

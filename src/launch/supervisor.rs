@@ -539,6 +539,17 @@ pub fn run(desc: &LaunchDescription) -> anyhow::Result<()> {
         .block_on(supervise(desc))
 }
 
+/// The order the nodes start in: the file's, `ingest` last. It publishes the drive states the
+/// others read, and a cell plays its states as soon as ingest answers it: started first, the
+/// states it took before the estimator had started were never estimated.
+fn start_order(specs: &[NodeSpec]) -> impl Iterator<Item = &NodeSpec> {
+    let source = |s: &&NodeSpec| s.exec == "ingest";
+    specs
+        .iter()
+        .filter(move |s| !source(s))
+        .chain(specs.iter().filter(source))
+}
+
 async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
     let mut signals = StopSignals::new()?;
     let programs = Programs::beside(&std::env::current_exe().context("locating the rpkm binary")?);
@@ -548,14 +559,14 @@ async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
     cleanup_dead();
     let reporter = Reporter::open(desc);
     log(format!(
-        "starting {} processes one at a time: each node once the one before has said its \
-         start-up line (its DDS endpoints exist), at most {} s each",
+        "starting {} processes one at a time, ingest last: each node once the one before has \
+         said its start-up line (its DDS endpoints exist), at most {} s each",
         desc.nodes.len(),
         START_WAIT.as_secs()
     ));
     let mut nodes: Vec<Supervised<'_>> = Vec::new();
     let mut failed = Failed::default();
-    for spec in &desc.nodes {
+    for spec in start_order(&desc.nodes) {
         let (state, stop) = start_in_turn(&programs, spec, &desc.env, &mut signals).await?;
         nodes.push(Supervised {
             spec,
@@ -569,6 +580,8 @@ async fn supervise(desc: &LaunchDescription) -> anyhow::Result<()> {
             return outcome(&failed);
         }
     }
+    // reported and supervised in the file's order, whatever order they started in
+    nodes.sort_by_key(|n| desc.nodes.iter().position(|s| std::ptr::eq(s, n.spec)));
     let mut report_at = Instant::now();
     // the managed nodes configured and activated in file order, while the loop supervises
     let bring_up = super::managed::bring_up(desc);
