@@ -4,9 +4,10 @@
 //! time (`t`), each campaign over its own rows: a held-out campaign is never continued from the
 //! calibration's.
 //!
-//! - [`rate`]: dT/dt at every row, a local quadratic fit over a window in time wide enough
-//!   that the thermometer's noise (estimated from the readings themselves) moves the slope by
-//!   a twentieth of its typical size at most.
+//! - [`rate`]: dT/dt at every row, the slope of a quadratic fitted over a window in time
+//!   around the row. The window's width is the one whose error is least: the thermometer's
+//!   noise (estimated from the readings themselves) through the fit, and the bend the fit
+//!   misses, each width's measured against the next narrower one's.
 //! - [`Lagged`]: `lag(T, τ)`, the temperature of a part whose thermometer `T` follows it with a
 //!   first-order lag of time constant τ (seconds). τ > 0: the thermometer lags the part, whose
 //!   temperature is `T + τ · dT/dt` (the first-order lag undone). τ < 0: the part lags the

@@ -157,10 +157,22 @@ impl Effect for Thermal {
         self.open
     }
     fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
-        let rods = self.strain_column(campaign, "temp_rods")?;
-        let frame = self.strain_column(campaign, "temp_frame")?;
-        let guide1 = self.strain_column(campaign, "temp_guide1")?;
-        let guide2 = self.strain_column(campaign, "temp_guide2")?;
+        // most campaigns have one thermometer for all four: its strain (a rate is a fit over
+        // the whole campaign) made once
+        let mut made: Vec<(&str, Vec<f64>)> = Vec::new();
+        let mut strain = |name: &'static str| -> Result<Vec<f64>, NotApplicable> {
+            let column = Self::column_of(campaign, name);
+            if let Some((_, s)) = made.iter().find(|(c, _)| *c == column) {
+                return Ok(s.clone());
+            }
+            let s = self.strain_column(campaign, column)?;
+            made.push((column, s.clone()));
+            Ok(s)
+        };
+        let rods = strain("temp_rods")?;
+        let frame = strain("temp_frame")?;
+        let guide1 = strain("temp_guide1")?;
+        let guide2 = strain("temp_guide2")?;
         let params = self
             .parts
             .iter()
@@ -192,6 +204,15 @@ impl Effect for Thermal {
 }
 
 impl Thermal {
+    /// The column part `name` reads: its own where the campaign has it, else `temp_machine`.
+    fn column_of<'a>(campaign: &Campaign, name: &'a str) -> &'a str {
+        if campaign.covariate_index(name).is_some() {
+            name
+        } else {
+            COVARIATE
+        }
+    }
+
     /// (T − T_ref) · 1e-6 per pose from column `name`, or `temp_machine` without it: the
     /// strain per ppm/K; for `thermal_lag`, dT/dt · 1e-6, the strain per ppm·s/K.
     fn strain_column(&self, campaign: &Campaign, name: &str) -> Result<Vec<f64>, NotApplicable> {
@@ -216,11 +237,7 @@ impl Thermal {
     /// The temperature part `name` reads at every pose (`temp_machine` where the campaign
     /// has no column `name`), °C.
     fn temperatures(&self, campaign: &Campaign, name: &str) -> Result<Vec<f64>, NotApplicable> {
-        let column = if campaign.covariate_index(name).is_some() {
-            name
-        } else {
-            COVARIATE
-        };
+        let column = Self::column_of(campaign, name);
         let temps = covariate_column(campaign, "thermal", column)?;
         temps
             .iter()
