@@ -57,6 +57,7 @@ pub(crate) fn search<'a>(
     }
     let singles = entries.len();
     judge.add_parts(&mut entries, pool.variants);
+    judge.add_followed(&mut entries, pool.followers);
     judge.add_pairs(&mut entries, candidates, singles);
     judge.add_swaps(&mut entries, pool.swaps, singles);
     for e in &mut entries {

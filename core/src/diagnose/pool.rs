@@ -1,6 +1,6 @@
 //! What a search draws its models from ([`Pool`]) and the models it adds beside the single
-//! candidates: each part of a family that stands out, pairs, and the current model's
-//! families with other parts.
+//! candidates: each part of a family that stands out, each with the effect that refines it
+//! on the same parts, pairs, and the current model's families with other parts.
 
 use super::entry::{Entry, Judge};
 use super::trials::SCREEN_P;
@@ -16,6 +16,9 @@ pub(super) const PAIRED: usize = 3;
 pub(crate) struct Pool<'a> {
     pub tried: &'a [&'a dyn Effect],
     pub variants: &'a [Box<dyn Effect>],
+    /// The effects that refine a tried family ([`Effect::beside`]), whole and by each part
+    /// combination ([`followers`]).
+    pub followers: &'a [Box<dyn Effect>],
     pub swaps: &'a [Box<dyn Effect>],
 }
 
@@ -38,7 +41,7 @@ impl<'j> Judge<'j> {
             .filter(|&k| entries[k].p_value < SCREEN_P)
             .collect();
         for k in families {
-            let family = entries[k].added[0].name().to_owned();
+            let family = effects::family_of(entries[k].added[0].name()).to_owned();
             for v in variants
                 .iter()
                 .filter(|v| effects::family_of(v.name()) == family)
@@ -48,6 +51,34 @@ impl<'j> Judge<'j> {
                     let e = self.entry((vec![v.as_ref()], None), fitted, None);
                     entries.push(e);
                 }
+            }
+        }
+    }
+
+    /// Each family that stands out (whole and by its parts) with the effect that refines it
+    /// on the same parts (`thermal:scales` with `thermal_lag:scales`): where the thermometer
+    /// lags the parts by more than the campaign's warming spans, the expansion alone reads
+    /// the wrong temperature and fits values no material has, and only the two together
+    /// predict. The refinement alone is no candidate (it refines nothing without its family).
+    pub(super) fn add_followed<'a>(
+        &self,
+        entries: &mut Vec<Entry<'a>>,
+        followers: &'a [Box<dyn Effect>],
+    ) {
+        let stands_out: Vec<usize> = (0..entries.len())
+            .filter(|&k| entries[k].added.len() == 1 && entries[k].swap.is_none())
+            .filter(|&k| entries[k].p_value < SCREEN_P)
+            .collect();
+        for k in stands_out {
+            let effect = entries[k].added[0];
+            let Some(follower) = followers.iter().find(|f| follows(f.as_ref(), effect)) else {
+                continue;
+            };
+            let added = vec![effect, follower.as_ref()];
+            let warm = [&entries[k].fitted];
+            if let Ok(fitted) = self.fit((&added, None), &warm) {
+                let e = self.entry((added, None), fitted, None);
+                entries.push(e);
             }
         }
     }
@@ -140,15 +171,45 @@ impl<'j> Judge<'j> {
     }
 }
 
+/// The library's effects that refine a family among `tried` ([`Effect::beside`]) and are
+/// not tried themselves, whole and by each part combination: the partners
+/// [`Judge::add_followed`] gives a family that stands out.
+pub(crate) fn followers(
+    library: &[Box<dyn Effect>],
+    tried: &[&dyn Effect],
+) -> Vec<Box<dyn Effect>> {
+    let names: Vec<&str> = tried.iter().map(|e| e.name()).collect();
+    let mut out = Vec::new();
+    for f in library.iter().filter(|f| !names.contains(&f.name())) {
+        let Some(of) = f.beside() else { continue };
+        if !tried.iter().any(|e| e.name() == of && e.open_family()) {
+            continue;
+        }
+        out.extend(crate::effects::by_name(f.name()).ok());
+        out.extend(part_variants(&[f.as_ref()], false));
+    }
+    out
+}
+
+/// Whether `follower` refines `effect` on the same parts: `thermal_lag` for `thermal`,
+/// `thermal_lag:rods+frame` for `thermal:rods+frame`.
+fn follows(follower: &dyn Effect, effect: &dyn Effect) -> bool {
+    let parts = |name: &str| name.split_once(':').map(|(_, p)| p.to_owned());
+    follower.beside() == Some(effects::family_of(effect.name()))
+        && parts(follower.name()) == parts(effect.name())
+}
+
 /// Every proper part combination of each family among `effects` named whole (thermal: rods,
 /// frame, scales, and the pairs of them), and without `whole` each effect's refinements
-/// ([`Effect::refinements`]): what the search tries where a family stands out; with `whole`,
-/// the whole family too (the variants of a family in the current model, whose refinements
-/// the current model settles itself).
+/// ([`Effect::refinements`]) and each proper part combination of a refinement pinned to its
+/// family's parts (`thermal_lag:frame` of `thermal_lag:frame+scales`): what the search tries
+/// where a family stands out; with `whole`, the whole family too (the variants of a family
+/// in the current model, whose refinements the current model settles itself).
 pub(crate) fn part_variants(effects: &[&dyn Effect], whole: bool) -> Vec<Box<dyn Effect>> {
     let mut out = Vec::new();
     if !whole {
         out.extend(effects.iter().flat_map(|e| e.refinements()));
+        out.extend(effects.iter().flat_map(|e| pinned_parts(*e)));
     }
     for family in effects.iter().filter(|e| e.open_family()) {
         let n = family.parts().len();
@@ -163,4 +224,29 @@ pub(crate) fn part_variants(effects: &[&dyn Effect], whole: bool) -> Vec<Box<dyn
         }
     }
     out
+}
+
+/// Each proper part combination of an effect that refines a family ([`Effect::beside`])
+/// pinned to some of its parts (`thermal_lag:rods+frame`: `thermal_lag:rods`,
+/// `thermal_lag:frame`); none for any other.
+fn pinned_parts(effect: &dyn Effect) -> Vec<Box<dyn Effect>> {
+    let Some((family, names)) = effect.name().split_once(':') else {
+        return Vec::new();
+    };
+    let Some(whole) = effect.beside().and_then(|_| effects::by_name(family).ok()) else {
+        return Vec::new();
+    };
+    let kept: Vec<usize> = names
+        .split('+')
+        .filter_map(|n| whole.parts().iter().position(|p| *p == n))
+        .collect();
+    (1..(1usize << kept.len()) - 1)
+        .filter_map(|mask| {
+            let parts: Vec<usize> = (0..kept.len())
+                .filter(|b| mask & (1 << b) != 0)
+                .map(|b| kept[b])
+                .collect();
+            whole.with_parts(&parts)
+        })
+        .collect()
 }

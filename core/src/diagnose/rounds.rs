@@ -63,8 +63,11 @@ fn rounds(
     opts: &DiagnosisOptions,
 ) -> Result<ModelDiagnosis, DiagnoseError> {
     let library = effects::library();
-    let tried = candidates_of(&library, in_model, offered, opts);
+    let found = candidates_of(&library, in_model, offered, opts);
+    let pinned = pinned_beside(&found, in_model);
+    let tried = with_pinned(&found, &pinned);
     let variants = pool::part_variants(&tried, false);
+    let followers = pool::followers(&library, &tried);
     let swaps = pool::part_variants(in_model, true);
     let level = opts.alpha / tried.len().max(1) as f64;
     let stated = calib_options(opts);
@@ -83,7 +86,12 @@ fn rounds(
     }
     // noise-free (simulated) data: no noise to estimate, the stated weights stay
     if calib::rms(&length_values(&base1.rows)) < NUMERICAL_RMS_MM {
-        return exact(&first, (base1, round1, cal1), (&variants, level), opts);
+        return exact(
+            &first,
+            (base1, round1, cal1),
+            (&variants, &followers, level),
+            opts,
+        );
     }
     let current = Current::of(campaign, validation, in_model, opts, cal1.as_ref())?;
     if opts.stopped() {
@@ -97,8 +105,12 @@ fn rounds(
         (&round1.candidates, &tried),
     )?;
     drop(cal1);
+    let pinned_second = pinned_beside(&tried, &settled);
+    let tried_second = with_pinned(&tried, &pinned_second);
+    let variants_second = pool::part_variants(&tried_second, false);
     let second = Search {
         in_model: &settled,
+        tried: &tried_second,
         ..first
     };
     let (base, mut round) =
@@ -121,8 +133,9 @@ fn rounds(
         &judge,
         (&mut round.candidates, &round.fits),
         &Pool {
-            tried: &tried,
-            variants: &variants,
+            tried: &tried_second,
+            variants: &variants_second,
+            followers: &followers,
             swaps: &swaps,
         },
         &structure,
@@ -142,6 +155,35 @@ fn rounds(
         level,
         tried: tried.len(),
     }))
+}
+
+/// For each candidate, the same effect pinned to the parts its family settled to in the
+/// model, where it refines that family and is named whole ([`Effect::beside`]:
+/// `thermal_lag` lags the parts `thermal` keeps, `thermal_lag:frame+scales`), else None. A
+/// lag of a part the model does not expand is no physics: fitted there, it stands in for
+/// the part's expansion left out (a campaign that cannot tell the rods from the frame).
+fn pinned_beside(tried: &[&dyn Effect], settled: &[&dyn Effect]) -> Vec<Option<Box<dyn Effect>>> {
+    tried
+        .iter()
+        .map(|e| {
+            let parts = super::settle::parts_beside(settled, *e)?;
+            (parts.len() < e.parts().len())
+                .then(|| e.with_parts(&parts))
+                .flatten()
+        })
+        .collect()
+}
+
+/// `tried` with each effect [`pinned_beside`] pinned in its place.
+fn with_pinned<'a>(
+    tried: &[&'a dyn Effect],
+    pinned: &'a [Option<Box<dyn Effect>>],
+) -> Vec<&'a dyn Effect> {
+    tried
+        .iter()
+        .zip(pinned)
+        .map(|(e, p)| p.as_deref().unwrap_or(*e))
+        .collect()
 }
 
 /// Whether two calibrations' options weight the rows alike: the same noise and inflation
@@ -219,7 +261,7 @@ fn comparison_weights(
 fn exact(
     first: &Search,
     (base, mut round, cal): (Fitted, Round, Option<Calibration>),
-    (variants, level): (&[Box<dyn Effect>], f64),
+    (variants, followers, level): (&[Box<dyn Effect>], &[Box<dyn Effect>], f64),
     opts: &DiagnosisOptions,
 ) -> Result<ModelDiagnosis, DiagnoseError> {
     let stated = calib_options(opts);
@@ -249,6 +291,7 @@ fn exact(
         &Pool {
             tried: first.tried,
             variants,
+            followers,
             swaps: &[],
         },
         &structure,

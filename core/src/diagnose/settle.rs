@@ -92,7 +92,7 @@ pub(crate) fn settle(
 /// family is in the model with pinned parts: `thermal_lag` lags the parts `thermal` keeps
 /// (settled on its own, the lag of the frame came out beside the expansion of the scales).
 /// None where it refines nothing, or the family it refines is whole too or absent.
-fn parts_beside(model: &[&dyn Effect], family: &dyn Effect) -> Option<Vec<usize>> {
+pub(super) fn parts_beside(model: &[&dyn Effect], family: &dyn Effect) -> Option<Vec<usize>> {
     let of = family.beside().filter(|_| family.open_family())?;
     let refined = model
         .iter()

@@ -4,10 +4,10 @@
 //! time (`t`), each campaign over its own rows: a held-out campaign is never continued from the
 //! calibration's.
 //!
-//! - [`rate`]: dT/dt at every row, the slope of a quadratic fitted over a window in time
-//!   around the row. The window's width is the one whose error is least: the thermometer's
-//!   noise (estimated from the readings themselves) through the fit, and the bend the fit
-//!   misses, each width's measured against the next narrower one's.
+//! - [`rate`]: dT/dt at every row, the slope of a quadratic or a cubic fitted over a window
+//!   in time around the row. The fit and the window's width are the ones whose error is
+//!   least: the thermometer's noise (estimated from the readings themselves) through the fit,
+//!   and the bend the fit misses, each width's measured against the next narrower one's.
 //! - [`Lagged`]: `lag(T, τ)`, the temperature of a part whose thermometer `T` follows it with a
 //!   first-order lag of time constant τ (seconds). τ > 0: the thermometer lags the part, whose
 //!   temperature is `T + τ · dT/dt` (the first-order lag undone). τ < 0: the part lags the
@@ -70,41 +70,57 @@ impl Timeline {
 }
 
 /// dx/dt at every row (row order) of `x` read at `line`'s times: see the module
-/// documentation. The window's half-width doubles from three rows' steps to half the
-/// campaign; each width's error is its noise (the readings' noise through the fit) and its
-/// bias (a window twice as wide bends four times as much: the change from the narrower
-/// width is three quarters of the wider one's bias), and the width with the least of both
-/// is kept. A lag of τ turns the rate's error into τ times as much temperature.
+/// documentation. For a local quadratic and a local cubic, the window's half-width doubles
+/// from three rows' steps to half the campaign; each width's error is its noise (the
+/// readings' noise through the fit) and its bias (a quadratic's slope bends with the width
+/// squared, a cubic's with its fourth power: the change from the narrower width is 3/4 or
+/// 15/16 of the wider one's bias), and the fit and width with the least of both is kept. A
+/// cubic pays more noise per width but follows a warm-up's turning rate over wider windows:
+/// a quadratic's bias follows the curve's third derivative, and so the time, and a lag of τ
+/// turns the rate's error into τ times as much temperature.
 pub fn rate(line: &Timeline, x: &[f64]) -> Vec<f64> {
     let xs = line.sorted(x);
-    let t = &line.t;
+    let noise = reading_noise(&line.t, &xs);
+    let (quadratic, q_error) = least_error_rate(&line.t, &xs, noise, 2);
+    let (cubic, c_error) = least_error_rate(&line.t, &xs, noise, 3);
+    line.unsorted(if c_error < q_error {
+        &cubic
+    } else {
+        &quadratic
+    })
+}
+
+/// The rate (time order) of a local polynomial of `degree` over the width of least
+/// estimated error, and that error (a variance, (K/s)²).
+fn least_error_rate(t: &[f64], xs: &[f64], noise: f64, degree: usize) -> (Vec<f64>, f64) {
     let span = t[t.len() - 1] - t[0];
     let narrowest = 3.0 * median_step(t);
     let widest = (span / 2.0).max(narrowest);
-    let noise = reading_noise(t, &xs);
+    // a width twice as wide: the slope's bias 2^(degree − 1 rounded up to even) times
+    let growth = if degree <= 2 { 4.0 } else { 16.0 };
+    let unbias = (growth / (growth - 1.0)) * (growth / (growth - 1.0));
     let mut half = narrowest;
-    let (first, spread) = slopes(t, &xs, half);
+    let (first, spread) = slopes(t, xs, half, degree);
     let (mut best, mut best_error) = (first.clone(), (noise * spread).powi(2));
     let (mut previous, mut previous_noise) = (first, noise * spread);
     while half < widest {
         half = (2.0 * half).min(widest);
-        let (slope, spread) = slopes(t, &xs, half);
+        let (slope, spread) = slopes(t, xs, half, degree);
         let change: Vec<f64> = slope.iter().zip(&previous).map(|(a, b)| a - b).collect();
-        let bias2 =
-            (rms(&change).powi(2) - previous_noise.powi(2)).max(0.0) * (4.0 / 3.0_f64).powi(2);
+        let bias2 = (rms(&change).powi(2) - previous_noise.powi(2)).max(0.0) * unbias;
         let error = (noise * spread).powi(2) + bias2;
         if error < best_error {
             (best, best_error) = (slope.clone(), error);
         }
         (previous, previous_noise) = (slope, noise * spread);
     }
-    line.unsorted(&best)
+    (best, best_error)
 }
 
-/// The slope at each time of a quadratic fitted to the readings within `half` of it (at
-/// least the three nearest distinct times), and the RMS over the rows of each slope's
-/// standard deviation per unit of the readings' noise.
-fn slopes(t: &[f64], x: &[f64], half: f64) -> (Vec<f64>, f64) {
+/// The slope at each time of a polynomial of `degree` fitted to the readings within `half`
+/// of it (at least the `degree + 1` nearest distinct times), and the RMS over the rows of
+/// each slope's standard deviation per unit of the readings' noise.
+fn slopes(t: &[f64], x: &[f64], half: f64, degree: usize) -> (Vec<f64>, f64) {
     let n = t.len();
     let (mut lo, mut hi) = (0usize, 0usize);
     let mut spread = 0.0;
@@ -116,8 +132,8 @@ fn slopes(t: &[f64], x: &[f64], half: f64) -> (Vec<f64>, f64) {
             while hi + 1 < n && t[hi + 1] <= t[i] + half {
                 hi += 1;
             }
-            let (a, b) = widened(t, i, (lo, hi));
-            let (s, var) = quadratic_slope(&t[a..=b], &x[a..=b], t[i]);
+            let (a, b) = widened(t, i, (lo, hi), degree + 1);
+            let (s, var) = poly_slope(&t[a..=b], &x[a..=b], t[i], degree);
             spread += var;
             s
         })
@@ -125,10 +141,11 @@ fn slopes(t: &[f64], x: &[f64], half: f64) -> (Vec<f64>, f64) {
     (slope, (spread / n.max(1) as f64).sqrt())
 }
 
-/// The window `lo..=hi` around row `i` grown until it holds three distinct times.
-fn widened(t: &[f64], i: usize, (mut lo, mut hi): (usize, usize)) -> (usize, usize) {
+/// The window `lo..=hi` around row `i` grown until it holds `times` distinct times (or
+/// every row).
+fn widened(t: &[f64], i: usize, (mut lo, mut hi): (usize, usize), times: usize) -> (usize, usize) {
     let distinct = |lo: usize, hi: usize| 1 + t[lo..=hi].windows(2).filter(|w| w[1] > w[0]).count();
-    while distinct(lo, hi) < 3 {
+    while distinct(lo, hi) < times {
         let left = (lo > 0).then(|| t[i] - t[lo - 1]);
         let right = (hi + 1 < t.len()).then(|| t[hi + 1] - t[i]);
         match (left, right) {
@@ -141,40 +158,39 @@ fn widened(t: &[f64], i: usize, (mut lo, mut hi): (usize, usize)) -> (usize, usi
     (lo, hi)
 }
 
-/// The slope at `at` of the least-squares quadratic through (t, x) (a line where the
-/// quadratic is not determined), and its variance per unit variance of the readings.
-fn quadratic_slope(t: &[f64], x: &[f64], at: f64) -> (f64, f64) {
+/// The slope at `at` of the least-squares polynomial of `degree` through (t, x) (of a lower
+/// degree where the window's distinct times do not determine it), and its variance per unit
+/// variance of the readings.
+fn poly_slope(t: &[f64], x: &[f64], at: f64, degree: usize) -> (f64, f64) {
     let scale = t
         .iter()
         .map(|v| (v - at).abs())
         .fold(0.0_f64, f64::max)
         .max(f64::MIN_POSITIVE);
     // the normal equations from the sums of u^k and x·u^k, u the scaled time
-    let (mut su, mut sx) = ([0.0_f64; 5], [0.0_f64; 3]);
+    let (mut su, mut sx) = ([0.0_f64; 7], [0.0_f64; 4]);
     for (tk, xk) in t.iter().zip(x) {
         let u = (tk - at) / scale;
         let mut p = 1.0;
-        for k in 0..5 {
-            su[k] += p;
-            if k < 3 {
+        for (k, s) in su.iter_mut().enumerate() {
+            *s += p;
+            if k < sx.len() {
                 sx[k] += xk * p;
             }
             p *= u;
         }
     }
     let distinct = 1 + t.windows(2).filter(|w| w[1] > w[0]).count();
-    let solved = if distinct >= 3 {
-        let normal = nalgebra::Matrix3::from_fn(|r, c| su[r + c]);
-        normal
-            .try_inverse()
-            .map(|inv| ((inv * nalgebra::Vector3::from(sx))[1], inv[(1, 1)]))
-    } else {
-        let normal = nalgebra::Matrix2::new(su[0], su[1], su[1], su[2]);
-        normal
-            .try_inverse()
-            .map(|inv| ((inv * nalgebra::Vector2::new(sx[0], sx[1]))[1], inv[(1, 1)]))
-    };
-    solved.map_or((0.0, 0.0), |(s, v)| (s / scale, v / (scale * scale)))
+    let mut d = degree.min(distinct.saturating_sub(1)).min(3);
+    while d >= 1 {
+        let normal = nalgebra::DMatrix::from_fn(d + 1, d + 1, |r, c| su[r + c]);
+        if let Some(inv) = normal.try_inverse() {
+            let coef = &inv * nalgebra::DVector::from_column_slice(&sx[..=d]);
+            return (coef[1] / scale, inv[(1, 1)] / (scale * scale));
+        }
+        d -= 1;
+    }
+    (0.0, 0.0)
 }
 
 /// The readings' noise: the robust spread of each reading from the line through its two
