@@ -36,6 +36,7 @@
 //! - [`figures`]: residual tables, maps and error vectors; [`types`]: the vocabulary;
 //!   [`cross`]: prediction without held-out data, cross-validation by setup.
 
+pub mod carried;
 pub mod coverage;
 pub mod cross;
 pub mod current;

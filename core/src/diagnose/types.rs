@@ -481,6 +481,10 @@ pub struct ModelDiagnosis {
     pub structure: sparse::Structure,
     /// The strongest period of the current model's residual in a carrier's position.
     pub periodic: Option<periodic::Periodic>,
+    /// Where the model reads a thermometer's history: the part of the residual its readings'
+    /// noise makes through that history, taken out before the structure tests
+    /// ([`super::carried`]).
+    pub carried: Option<super::carried::Carried>,
     /// The direction whose residuals are most alike along the setups' paths.
     pub neighbours: Option<neighbours::Neighbours>,
     /// The dictionary term that explained the residual as well as the named effect: the

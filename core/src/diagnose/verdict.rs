@@ -5,6 +5,7 @@
 //! the calibration campaign's, or, where the model explains the calibration campaign but not
 //! the held-out data, the held-out data's, by how much and what they follow.
 
+use super::carried;
 use super::current::{structure_level, Current};
 use super::figures::{groups, length_values, noise_map, noisier, points};
 use super::model::Choice;
@@ -56,9 +57,28 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
     } = c.round;
     candidates.sort_by(|a, b| b.bic_gain.total_cmp(&a.bic_gain));
     let level = structure_level(opts);
-    let structure = c.structure.clone();
     let exact = calib::rms(&length_values(&base.rows)) < NUMERICAL_RMS_MM;
-    let shape = Shape::with(campaign, &base.rows, level, structure.clone());
+    let fitted = carried::Fitted {
+        effects: c.model_effects,
+        params: &base.fit.params,
+        theta: &base.fit.theta,
+        model: opts.model,
+        noise: &current.copts.noise,
+    };
+    // the thermometers' noise through a lag is no missing effect: the tests read without it
+    let (carried, structure, shape) = match carried::without_carried(campaign, &fitted, &base.rows)
+    {
+        Some((rows, carried)) => {
+            let structure = sparse::structure(campaign, &rows);
+            let shape = Shape::with(campaign, &rows, level, structure.clone());
+            (Some(carried), structure, shape)
+        }
+        None => {
+            let structure = c.structure.clone();
+            let shape = Shape::with(campaign, &base.rows, level, structure.clone());
+            (None, structure, shape)
+        }
+    };
     let held_out = current.held_out.clone();
     let (verdict_kind, unexplained) = kind_of(
         (campaign, &shape),
@@ -110,6 +130,7 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
         skipped,
         structure,
         periodic: shape.periodic,
+        carried,
         neighbours: shape.neighbours,
         tied_term: c.choice.and_then(|ch| ch.tied_term),
         noisier_than_rated: noisier(&current.est.groups),

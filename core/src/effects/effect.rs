@@ -113,6 +113,13 @@ pub trait Effect: Send + Sync {
     fn beside(&self) -> Option<&'static str> {
         None
     }
+    /// Whether the effect reads a covariate's history along the campaign's time (its rate or
+    /// its lag: `thermal_lag`, a written `rate()` or `lag()`), not only its row's value: the
+    /// diagnosis then reads the residual without what the thermometers' noise makes through
+    /// that history (`diagnose::carried`). False, the default, for most.
+    fn has_memory(&self) -> bool {
+        false
+    }
     /// Bind the effect to a campaign, with parameters `p` for the geometry it needs to read
     /// its covariates (rod directions for forces): per-pose data are computed once here.
     fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable>;

@@ -79,42 +79,68 @@ impl Timeline {
 /// a quadratic's bias follows the curve's third derivative, and so the time, and a lag of τ
 /// turns the rate's error into τ times as much temperature.
 pub fn rate(line: &Timeline, x: &[f64]) -> Vec<f64> {
-    let xs = line.sorted(x);
-    let noise = reading_noise(&line.t, &xs);
-    let (quadratic, q_error) = least_error_rate(&line.t, &xs, noise, 2);
-    let (cubic, c_error) = least_error_rate(&line.t, &xs, noise, 3);
-    line.unsorted(if c_error < q_error {
-        &cubic
-    } else {
-        &quadratic
-    })
+    let (rate, _) = rate_and_window(line, x);
+    rate
 }
 
-/// The rate (time order) of a local polynomial of `degree` over the width of least
-/// estimated error, and that error (a variance, (K/s)²).
-fn least_error_rate(t: &[f64], xs: &[f64], noise: f64, degree: usize) -> (Vec<f64>, f64) {
+/// The half-width (s) of the window [`rate`] fits `x` over.
+pub fn rate_window(line: &Timeline, x: &[f64]) -> f64 {
+    rate_and_window(line, x).1
+}
+
+fn rate_and_window(line: &Timeline, x: &[f64]) -> (Vec<f64>, f64) {
+    let xs = line.sorted(x);
+    let noise = reading_noise(&line.t, &xs);
+    let quadratic = least_error_rate(&line.t, &xs, noise, 2);
+    let cubic = least_error_rate(&line.t, &xs, noise, 3);
+    let best = if cubic.error < quadratic.error {
+        cubic
+    } else {
+        quadratic
+    };
+    (line.unsorted(&best.rate), best.half)
+}
+
+/// A rate (time order) of a local polynomial, its window's half-width and its estimated
+/// error (a variance, (K/s)²).
+struct Fitted {
+    rate: Vec<f64>,
+    half: f64,
+    error: f64,
+}
+
+/// The rate of a local polynomial of `degree` over the width of least estimated error.
+fn least_error_rate(t: &[f64], xs: &[f64], noise: f64, degree: usize) -> Fitted {
     let span = t[t.len() - 1] - t[0];
     let narrowest = 3.0 * median_step(t);
     let widest = (span / 2.0).max(narrowest);
-    // a width twice as wide: the slope's bias 2^(degree − 1 rounded up to even) times
+    // a width twice as wide: the slope's bias 4 (quadratic) or 16 (cubic) times
     let growth = if degree <= 2 { 4.0 } else { 16.0 };
     let unbias = (growth / (growth - 1.0)) * (growth / (growth - 1.0));
     let mut half = narrowest;
     let (first, spread) = slopes(t, xs, half, degree);
-    let (mut best, mut best_error) = (first.clone(), (noise * spread).powi(2));
-    let (mut previous, mut previous_noise) = (first, noise * spread);
+    let (mut previous, mut previous_noise) = (first.clone(), noise * spread);
+    let mut best = Fitted {
+        rate: first,
+        half,
+        error: (noise * spread).powi(2),
+    };
     while half < widest {
         half = (2.0 * half).min(widest);
         let (slope, spread) = slopes(t, xs, half, degree);
         let change: Vec<f64> = slope.iter().zip(&previous).map(|(a, b)| a - b).collect();
         let bias2 = (rms(&change).powi(2) - previous_noise.powi(2)).max(0.0) * unbias;
         let error = (noise * spread).powi(2) + bias2;
-        if error < best_error {
-            (best, best_error) = (slope.clone(), error);
+        if error < best.error {
+            best = Fitted {
+                rate: slope.clone(),
+                half,
+                error,
+            };
         }
         (previous, previous_noise) = (slope, noise * spread);
     }
-    (best, best_error)
+    best
 }
 
 /// The slope at each time of a polynomial of `degree` fitted to the readings within `half`

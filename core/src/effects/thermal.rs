@@ -128,6 +128,9 @@ impl Effect for Thermal {
             }
         }
     }
+    fn has_memory(&self) -> bool {
+        self.reads == Reads::Rate
+    }
     fn beside(&self) -> Option<&'static str> {
         (self.reads == Reads::Rate).then_some(NAME)
     }

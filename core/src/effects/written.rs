@@ -579,6 +579,9 @@ impl Effect for Written {
     fn summary(&self) -> &str {
         &self.spec.summary
     }
+    fn has_memory(&self) -> bool {
+        !self.lags.is_empty() || self.vars.iter().any(|v| v.starts_with("rate("))
+    }
     fn bind(&self, campaign: &Campaign, _: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
         match self.bind_checked(campaign) {
             Ok(b) => Ok(Box::new(b)),

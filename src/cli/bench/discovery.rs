@@ -98,8 +98,9 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
     Ok(())
 }
 
-/// The loop a user runs: diagnose, add the model the diagnosis names (its families by
-/// name, as its words advise), diagnose again, until it names nothing new.
+/// The loop a user runs: diagnose, add the model the diagnosis names (as its words advise:
+/// `--effects thermal:frame,thermal_lag:frame`, a family with the parts it was found with),
+/// diagnose again, until it names no family new.
 struct Loop<'a> {
     measured: &'a Measured,
     file: Option<&'a EffectsFile>,
@@ -110,8 +111,9 @@ impl Loop<'_> {
     /// The diagnoses of the loop, the first without effects, and the effects named.
     fn run(&self) -> Result<(Vec<ModelDiagnosis>, Vec<String>)> {
         let (mut named, mut all): (Vec<String>, Vec<ModelDiagnosis>) = (Vec::new(), Vec::new());
+        let mut added: Vec<String> = Vec::new();
         loop {
-            let boxed = effects_file::parse_list(&named.join(","), self.file)
+            let boxed = effects_file::parse_list(&added.join(","), self.file)
                 .map_err(|e| anyhow::anyhow!(e))?;
             let refs: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
             let offer = offered(self.file, &refs);
@@ -125,17 +127,18 @@ impl Loop<'_> {
             if self.verbose {
                 println!("with {named:?}: {}", crate::words::verdict(&d));
             }
-            let new: Vec<String> = d
+            let new: Vec<&String> = d
                 .missing_effects
                 .iter()
-                .map(|e| effects::family_of(e).to_owned())
-                .filter(|e| !named.contains(e))
+                .filter(|e| !named.iter().any(|n| n == effects::family_of(e)))
                 .collect();
-            all.push(d);
             if new.is_empty() || named.len() >= 4 {
+                all.push(d);
                 return Ok((all, named));
             }
-            named.extend(new);
+            named.extend(new.iter().map(|e| effects::family_of(e).to_owned()));
+            added.extend(new.into_iter().cloned());
+            all.push(d);
         }
     }
 }
