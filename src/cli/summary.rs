@@ -113,7 +113,7 @@ fn print_groups(d: &ModelDiagnosis) {
             g.instrument, g.direction, g.rows, g.rms, g.noise, g.chi2_per_row
         );
     }
-    println!("   (um; urad for psi)\n   worst residuals:");
+    println!("   (µm; µrad for psi)\n   worst residuals:");
     for p in d.points.iter().take(3) {
         println!(
             "     line {:>5} {:<5} {:<10} {:>9.2} ({:.1} sigma) at x {:.0}, y {:.0} mm",
