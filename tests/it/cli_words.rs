@@ -174,7 +174,7 @@ fn the_report_captions_name_the_model_of_their_figures() {
         .iter()
         .find(|g| g["group"] == "encoder")
         .expect("encoder");
-    let shown = format!("{:.3} um", f(&encoder["estimated"]));
+    let shown = format!("{:.3} µm", f(&encoder["estimated"]));
     assert!(page.contains(&shown), "report lacks the text's {shown}");
     let det = &c.json["determined"];
     let said = format!("{} of {} in {model}", det[0], det[1]);

@@ -190,7 +190,7 @@ impl Rows {
 
 /// `setup,instrument,reset,q1..q4 (mm),f1..f4,follower,x,y,r,psi,temp_machine` of a state.
 fn row_after_t(s: &ActuatorState) -> String {
-    let q = s.position.map(rpkm_nodes::units::mm_from_m);
+    let q = rpkm_nodes::units::drive_positions_mm(s);
     let follower: String = (b'1'..=b'4')
         .zip(s.follower)
         .filter_map(|(digit, on)| on.then_some(char::from(digit)))
