@@ -4,8 +4,9 @@
 //! terminal monitor (ratatui), the HTML reports ([`report`]) and their charts ([`plot`],
 //! plotters), and the SROS2 keystore writer ([`security`], OpenSSL's X.509 and S/MIME).
 //!
-//! The node set's modules are re-exported under their old paths (`rpkm::node`,
-//! `rpkm::topics`, ...), so that the command line and the tests name one module one way.
+//! The node set's modules are named where they live (`rpkm_nodes::node`,
+//! `rpkm_nodes::topics`, ...): this crate re-exports none of them, so a path says which crate
+//! holds the code.
 
 pub mod cli;
 pub mod launch;
@@ -13,8 +14,3 @@ pub mod monitor;
 pub mod plot;
 pub mod report;
 pub mod security;
-
-pub use rpkm_nodes::{
-    campaign_bag, effects_file, error, history, input, logging, node, program, stream, topics,
-    units, words,
-};

@@ -46,7 +46,7 @@ enum Command {
     /// preload thresholds, levels, TCP estimates, silent nodes (see `rpkm monitor --help`).
     Monitor(cli::monitor::MonitorArgs),
     /// Run one ROS 2 node: ingest, tcp_estimator, calibrator or preload_monitor.
-    Node(rpkm::node::NodeArgs),
+    Node(rpkm_nodes::node::NodeArgs),
     /// Start and supervise the nodes of a launch description (ROS 2 launch YAML).
     Launch(rpkm::launch::LaunchArgs),
     /// Benchmarks of the product as a user meets it (`rpkm bench discovery --help`).
@@ -85,12 +85,12 @@ fn quiet_broken_pipe() {
 
 fn main() {
     // as `rpkm-node` does: a node runs here as it runs there
-    rpkm::program::keep_freed_memory();
+    rpkm_nodes::program::keep_freed_memory();
     let args = Cli::parse();
     if args.command.writes_reports() {
         quiet_broken_pipe();
     }
-    rpkm::logging::init();
+    rpkm_nodes::logging::init();
     let result = match &args.command {
         Command::Calibrate(a) => cli::calibrate::run(a),
         Command::Diagnose(a) => cli::diagnose::run(a),
@@ -105,7 +105,7 @@ fn main() {
         Command::Bag(a) => cli::bag::run(a),
         Command::Ingest(a) => cli::ingest::run(a),
         Command::Monitor(a) => cli::monitor::run(a),
-        Command::Node(a) => rpkm::node::run(a),
+        Command::Node(a) => rpkm_nodes::node::run(a),
         Command::Launch(a) => rpkm::launch::run(a),
         Command::Bench(a) => cli::bench::run(a),
         Command::Security(a) => cli::security::run(a),

@@ -115,48 +115,82 @@ fn no_subcommand_imports_another() {
     assert!(offences.is_empty(), "{}", offences.join("\n"));
 }
 
-/// The millimetre-per-metre factor between the core and the topics is defined once, in
-/// `nodes/src/units.rs`: no other file of the nodes, the command line or the transport
-/// defines its own.
+/// Whether `code` defines a factor between two units of one quantity (`MM_PER_M`,
+/// `RAD_PER_MRAD`, `MS_PER_S`, ...), not a physical constant such as `N_PER_MM`.
+fn unit_factor_const(code: &str) -> bool {
+    const UNITS: [&str; 11] = [
+        "M", "MM", "UM", "NM", "RAD", "MRAD", "URAD", "S", "MS", "US", "NS",
+    ];
+    let Some(rest) = code.split("const ").nth(1) else {
+        return false;
+    };
+    let name = rest.split(':').next().unwrap_or("").trim();
+    // NAME_PER_OTHER: the unit right before `_PER_` and the one after it
+    match name.split_once("_PER_") {
+        Some((a, b)) => {
+            let a = a.rsplit('_').next().unwrap_or(a);
+            UNITS.contains(&a) && UNITS.contains(&b) && code.contains("f64")
+        }
+        None => false,
+    }
+}
+
+#[test]
+fn a_unit_factor_is_told_from_a_physical_constant() {
+    assert!(unit_factor_const("pub const MM_PER_M: f64 = 1000.0;"));
+    assert!(unit_factor_const("const RAD_PER_MRAD: f64 = 1e-3;"));
+    assert!(!unit_factor_const(
+        "pub const DEFAULT_ROD_STIFFNESS_N_PER_MM: f64 = 97_700.0;"
+    ));
+    assert!(!unit_factor_const(
+        "pub const STEEL_E_N_PER_MM2: f64 = 210_000.0;"
+    ));
+}
+
+/// The unit factors (`MM_PER_M`, `UM_PER_MM`, ...) are defined once, in `core/src/units.rs`:
+/// no other file of any crate or of the benches defines its own.
 #[test]
 fn one_module_defines_the_unit_factor() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = Vec::new();
-    for dir in ["nodes", "src", "benches"] {
+    for dir in CRATE_SOURCES.iter().chain(&["benches", "core/benches"]) {
         file_graph::rust_files(&root.join(dir), &mut files);
     }
     let offences: Vec<String> = files
         .iter()
-        .filter(|f| !f.ends_with("nodes/src/units.rs"))
+        .filter(|f| !f.ends_with("core/src/units.rs"))
         .flat_map(|f| {
             let text = std::fs::read_to_string(f).expect("read source");
             text.lines()
                 .enumerate()
-                .filter(|(_, l)| {
-                    let code = l.split("//").next().unwrap_or("");
-                    code.contains("const ") && code.contains("_PER_M") && code.contains("f64 =")
-                })
+                .filter(|(_, l)| unit_factor_const(l.split("//").next().unwrap_or("")))
                 .map(|(n, l)| format!("{}:{}: {}", f.display(), n + 1, l.trim()))
                 .collect::<Vec<_>>()
         })
         .collect();
-    assert!(files.len() >= 80, "found only {} files", files.len());
+    assert!(files.len() >= 200, "found only {} files", files.len());
     assert!(offences.is_empty(), "{}", offences.join("\n"));
 }
 
-/// Where a topic's or a bag's SI meets the core's mm: the message adapters. `units.rs` holds
-/// the factors and their named conversions, `campaign_bag.rs` turns campaigns into messages and
-/// back, `node/geometry.rs` the Parameters message into the nodes' geometry and back.
+/// The files that ARE the conversion, the only ones where a bare factor is written: `units.rs`
+/// of the core names each factor and each conversion once for the whole workspace (the nodes'
+/// `units.rs` re-exports it).
+const UNIT_CONVERSIONS: [&str; 1] = ["core/src/units.rs"];
+
+/// Where a topic's or a bag's SI meets the core's mm besides the conversions: the message
+/// adapters, which may name `MM_PER_M` itself. `campaign_bag.rs` turns campaigns into
+/// messages and back, `node/geometry.rs` the Parameters message into the nodes' geometry and
+/// back, `nodes/src/units.rs` re-exports the conversions.
 const UNIT_ADAPTERS: [&str; 3] = [
     "nodes/src/units.rs",
     "nodes/src/campaign_bag.rs",
     "nodes/src/node/geometry.rs",
 ];
 
-/// The code that reads or writes topics besides the adapters: the nodes, the streams, the
-/// terminal monitor (the command line's). A length, angle or time factor there is a named conversion of
-/// `units.rs` (`mm_from_m`, `m_from_um`, `seconds_from_ms`, ...), never a bare one.
-const TOPIC_CODE: [&str; 3] = ["nodes/src/node", "nodes/src/stream.rs", "src/monitor"];
+/// A factor that is text, not a conversion: the effects file a benchmark machine hides, the
+/// YAML a user writes (`dx: "-vx * 1e-3 * t / 60"`, µm/min in the effects file's own
+/// expression language), which the checker, reading code, cannot tell from Rust.
+const FACTORS_IN_TEXT: [&str; 1] = ["src/cli/bench/machines.rs"];
 
 /// The code of a Rust file without its tests (a `#[cfg(test)]` module runs to the end of the
 /// file here; a `tests.rs` has none) and without comments, with its line numbers.
@@ -193,40 +227,79 @@ fn the_bare_factor_finder_sees_factors_not_bounds() {
     assert_eq!(bare_factor("(w / 1000.0, 1)").as_deref(), Some("/1000.0"));
     assert_eq!(bare_factor(".bound(Within(1e-3, 3600.0))"), None);
     assert_eq!(bare_factor("x * 1e30"), None);
+    assert_eq!(bare_factor("x * RAD_PER_MRAD"), None);
 }
 
-/// SI <-> mm only in the message adapters: `MM_PER_M` appears in no other file of the nodes
-/// or the command line, and the code that meets topics converts with named functions, no bare factor.
+/// The bare factors of the non-test code of `files` outside the allow-lists, and every
+/// `MM_PER_M` outside the conversions and the message adapters.
+fn unit_offences(root: &Path, files: &[std::path::PathBuf]) -> Vec<String> {
+    let rel = |f: &Path| f.strip_prefix(root).unwrap_or(f).display().to_string();
+    let mut offences = Vec::new();
+    for f in files {
+        let name = rel(f);
+        if UNIT_CONVERSIONS.contains(&name.as_str()) {
+            continue;
+        }
+        let text = std::fs::read_to_string(f).expect("read source");
+        if !UNIT_ADAPTERS.contains(&name.as_str()) {
+            for (n, l) in text.lines().enumerate() {
+                if l.split("//").next().unwrap_or("").contains("MM_PER_M") {
+                    offences.push(format!("{name}:{}: MM_PER_M: {}", n + 1, l.trim()));
+                }
+            }
+        }
+        if FACTORS_IN_TEXT.contains(&name.as_str()) {
+            continue;
+        }
+        for (n, code) in non_test_code(f) {
+            if let Some(factor) = bare_factor(&code) {
+                offences.push(format!("{name}:{n}: bare {factor}: {}", code.trim()));
+            }
+        }
+    }
+    offences
+}
+
+/// Units convert at one boundary: in every crate of the workspace, a length, angle, time or
+/// ppm factor is a named conversion of `core/src/units.rs` (`um_from_mm`, `m_from_mm`,
+/// `rad_from_mrad`, `seconds_from_ms`, ...), never a bare one, and `MM_PER_M` appears only in
+/// the conversions and the message adapters.
 #[test]
 fn lengths_convert_only_in_the_message_adapters() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut files = Vec::new();
-    for dir in ["nodes/src", "src"] {
+    for dir in CRATE_SOURCES {
         file_graph::rust_files(&root.join(dir), &mut files);
     }
-    let rel = |f: &Path| f.strip_prefix(root).unwrap_or(f).display().to_string();
-    let mut offences = Vec::new();
-    for f in &files {
-        let name = rel(f);
-        if UNIT_ADAPTERS.contains(&name.as_str()) {
-            continue;
-        }
-        let text = std::fs::read_to_string(f).expect("read source");
-        for (n, l) in text.lines().enumerate() {
-            if l.split("//").next().unwrap_or("").contains("MM_PER_M") {
-                offences.push(format!("{name}:{}: MM_PER_M: {}", n + 1, l.trim()));
-            }
-        }
-        if TOPIC_CODE.iter().any(|t| name.starts_with(t)) {
-            for (n, code) in non_test_code(f) {
-                if let Some(factor) = bare_factor(&code) {
-                    offences.push(format!("{name}:{n}: bare {factor}: {}", code.trim()));
-                }
-            }
-        }
+    assert!(files.len() >= 200, "found only {} files", files.len());
+    for listed in UNIT_CONVERSIONS
+        .iter()
+        .chain(&UNIT_ADAPTERS)
+        .chain(&FACTORS_IN_TEXT)
+    {
+        assert!(root.join(listed).is_file(), "{listed} is listed but gone");
     }
-    assert!(files.len() >= 80, "found only {} files", files.len());
+    let offences = unit_offences(root, &files);
     assert!(offences.is_empty(), "{}", offences.join("\n"));
+}
+
+/// The check sees a bare factor put back into any crate, the core's included.
+#[test]
+fn the_unit_check_sees_a_bare_factor_in_any_crate() {
+    let dir = std::env::temp_dir().join(format!("rpkm-layers-{}", std::process::id()));
+    for (krate, file) in [
+        ("core/src", "a.rs"),
+        ("twin/src", "b.rs"),
+        ("src/cli", "c.rs"),
+    ] {
+        let path = dir.join(krate).join(file);
+        std::fs::create_dir_all(path.parent().expect("a folder")).expect("temp folder");
+        std::fs::write(&path, "fn f(mm: f64) -> f64 {\n    mm * 1e3\n}\n").expect("write");
+        let offences = unit_offences(&dir, &[path]);
+        assert_eq!(offences.len(), 1, "{krate}: {offences:?}");
+        assert!(offences[0].contains("bare *1e3"), "{}", offences[0]);
+    }
+    std::fs::remove_dir_all(&dir).expect("clean up");
 }
 
 /// The crates' sources: the core, the command line, the nodes, the transport, the messages,

@@ -47,4 +47,5 @@ pub mod params;
 pub mod plan;
 pub mod returns;
 pub mod stats;
+pub mod units;
 pub mod variance;

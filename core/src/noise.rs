@@ -320,7 +320,7 @@ impl NoiseModel {
     }
 
     fn lt_across(&self, distance_mm: f64) -> f64 {
-        self.lt_across_mm + self.lt_across_per_m_mm * distance_mm / 1000.0
+        self.lt_across_mm + crate::units::m_from_mm(self.lt_across_per_m_mm * distance_mm)
     }
 
     /// Distance (mm) from the tracker to `tcp`.

@@ -15,7 +15,7 @@ use rpkm_msgs::ActuatorState;
 use rpkm_twin::{DriveStream, Twin};
 
 use crate::campaign_bag::stamp_from_seconds;
-use crate::units::m_from_mm;
+use crate::units::set_drive_positions_mm;
 
 /// Seconds per turn of the circular stream (314 mm/s on the 100 mm circle).
 pub const CIRCLE_PERIOD_S: f64 = 2.0;
@@ -149,7 +149,7 @@ pub fn run(
         };
         msg.stamp = stamp;
         msg.seq = spec.first_seq + k;
-        msg.position = s.q.map(m_from_mm);
+        set_drive_positions_mm(&mut msg, s.q);
         msg.force = s.force;
         msg.follower = s.follower;
         // One covariate always fits the eight slots.

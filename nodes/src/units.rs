@@ -1,56 +1,42 @@
 //! Units between the core and the topics: the core works in mm, rad, N, s (the thesis's),
-//! the ROS topics in SI (REP 103), a person reads µm, mrad and ms. The factors between them
-//! live here; the message adapters (`campaign_bag`, the Parameters message of
-//! `node::geometry`) and the nodes convert with these named functions, never with a bare
-//! factor (tests/layers.rs holds it).
+//! the ROS topics in SI (REP 103), a person reads µm, mrad and ms. The factors and their
+//! named conversions are the core's ([`rpkm_core::units`], one definition for the whole
+//! workspace), re-exported here.
+//!
+//! Below them, the adapters of the live messages: a node reads an ActuatorState's drive
+//! positions into the core's mm with [`drive_positions_mm`] and writes the mm it computed into
+//! a message with one `set_*_mm` call per message, never field by field (the campaign's
+//! messages are adapted in `campaign_bag`, the Parameters message in `node::geometry`).
 
-/// Millimetres per metre.
-pub const MM_PER_M: f64 = 1000.0;
+pub use rpkm_core::units::*;
 
-/// Micrometres per millimetre: tolerances, noise levels and drifts a person reads in µm.
-pub const UM_PER_MM: f64 = 1000.0;
+use rpkm_msgs::{ActuatorState, PreloadStatus, TcpEstimate};
 
-/// A length in µm (a parameter such as `online_drift_warn_um`) in the core's mm.
-pub fn mm_from_um(um: f64) -> f64 {
-    um / UM_PER_MM
+/// An ActuatorState's drive positions q1..q4 (m on the topic) in the core's mm.
+pub fn drive_positions_mm(state: &ActuatorState) -> [f64; 4] {
+    state.position.map(mm_from_m)
 }
 
-/// A length in the core's mm in µm.
-pub fn um_from_mm(mm: f64) -> f64 {
-    mm * UM_PER_MM
+/// Drive positions q1..q4 in the core's mm into an ActuatorState (m).
+pub fn set_drive_positions_mm(state: &mut ActuatorState, q_mm: [f64; 4]) {
+    state.position = q_mm.map(m_from_mm);
 }
 
-/// A length on a topic (m) in the core's mm.
-pub fn mm_from_m(m: f64) -> f64 {
-    m * MM_PER_M
+/// A TCP position (x, y) and the rods' loop residuals |A_i − B_i| − l_i, all in the core's mm,
+/// into a TcpEstimate (m); ψ is rad on both sides and stays the caller's.
+pub fn set_tcp_position_mm(
+    estimate: &mut TcpEstimate,
+    (x_mm, y_mm): (f64, f64),
+    loops_mm: [f64; 5],
+) {
+    estimate.x = m_from_mm(x_mm);
+    estimate.y = m_from_mm(y_mm);
+    estimate.loop_residuals = loops_mm.map(m_from_mm);
 }
 
-/// A length in the core's mm as a topic carries it (m).
-pub fn m_from_mm(mm: f64) -> f64 {
-    mm / MM_PER_M
-}
-
-/// A length in µm (the diagnosis's RMS, a noise level) as a topic carries it (m).
-pub fn m_from_um(um: f64) -> f64 {
-    um * 1e-6
-}
-
-/// A length on a topic (m) in µm, as a person reads it.
-pub fn um_from_m(m: f64) -> f64 {
-    m * 1e6
-}
-
-/// An angle in rad in mrad, as a person reads it.
-pub fn mrad_from_rad(rad: f64) -> f64 {
-    rad * 1e3
-}
-
-/// A duration in ms (a parameter such as `busy_poll_ms`) in s.
-pub fn seconds_from_ms(ms: f64) -> f64 {
-    ms * 1e-3
-}
-
-/// A duration in s in ms, as a person reads it.
-pub fn ms_from_seconds(s: f64) -> f64 {
-    s * 1e3
+/// The followers' offsets from the rigid model, q2 and q3 in the core's mm, into a
+/// PreloadStatus (m).
+pub fn set_follower_offsets_mm(status: &mut PreloadStatus, [dq2_mm, dq3_mm]: [f64; 2]) {
+    status.dq2 = m_from_mm(dq2_mm);
+    status.dq3 = m_from_mm(dq3_mm);
 }

@@ -128,7 +128,7 @@ fn rows_of(
             path.display()
         )));
     }
-    let c = crate::input::read_campaign(path)?;
+    let c = rpkm_nodes::input::read_campaign(path)?;
     analysis::currents_rows(&c, p).with_context(|| format!("{}", path.display()))
 }
 

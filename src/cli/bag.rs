@@ -152,7 +152,7 @@ fn recover_cmd(src: &Path, out: Option<&Path>) -> Result<()> {
 
 fn campaign(path: &Path, out: &Path) -> Result<()> {
     let bag = open(path)?;
-    let c = crate::campaign_bag::read_campaign(&bag)
+    let c = rpkm_nodes::campaign_bag::read_campaign(&bag)
         .map_err(|e| super::bad_input(format!("{}: {e:#}", path.display())))?;
     std::fs::write(out, c.to_csv()).with_context(|| format!("writing {}", out.display()))?;
     eprintln!(

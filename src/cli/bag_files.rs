@@ -7,7 +7,7 @@ use rpkm_core::campaign::Campaign;
 use rpkm_transport::bag::{BagCompression, BagOpenError, BagReader, BagWriter, BagWriterOptions};
 use std::path::Path;
 
-use crate::campaign_bag::{campaign_messages, write_campaign, CampaignTopics};
+use rpkm_nodes::campaign_bag::{campaign_messages, write_campaign, CampaignTopics};
 
 /// Bag options of the commands that write campaigns: default chunks, optional zstd.
 pub fn bag_options(zstd: bool) -> BagWriterOptions {

@@ -3,13 +3,13 @@
 use super::effect_stages::Stages;
 use super::summary::print_noise_groups;
 use super::{bad_input, read_campaign, write_json};
-use crate::effects_file::EffectsFile;
 use rpkm_core::calib::{self, Calibration, Options, Request, Scaling, Selection};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS};
 use rpkm_core::variance::NoiseEstimate;
+use rpkm_nodes::effects_file::EffectsFile;
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -165,7 +165,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     let set = EffectSet::bind(&refs, &campaign, &start)
         .map_err(|e| bad_input(format!("--effects: {e}")))?;
     let (cal, noise) =
-        // A calibration error is the campaign's (exit 2, crate::error::exit_code).
+        // A calibration error is the campaign's (exit 2, rpkm_nodes::error::exit_code).
         calib::calibrate(&Request {
             effects: &set,
             noise: weighting(args),
@@ -209,7 +209,7 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
         println!("\nreport: {}", page.display());
     }
     if let Some(path) = &args.json {
-        let file = file.as_ref().map(crate::effects_file::to_json);
+        let file = file.as_ref().map(rpkm_nodes::effects_file::to_json);
         let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_ref())?;
         out["returns"] = serde_json::to_value(&returns.0)?;
         out["returns_under_estimated_noise"] = serde_json::to_value(&returns.1)?;
@@ -273,9 +273,9 @@ fn record_history(
     let (Some(db), Some(machine)) = (&args.history, &args.machine) else {
         return Ok(());
     };
-    let at_s =
-        crate::history::time_of(args.at.as_deref()).map_err(|e| bad_input(format!("--at {e}")))?;
-    let record = crate::history::record_of(&crate::history::Made {
+    let at_s = rpkm_nodes::history::time_of(args.at.as_deref())
+        .map_err(|e| bad_input(format!("--at {e}")))?;
+    let record = rpkm_nodes::history::record_of(&rpkm_nodes::history::Made {
         machine,
         at_s,
         source: "rpkm calibrate",
@@ -399,8 +399,8 @@ fn print_returns(
          then against the noise estimated from the campaign):"
     );
     for (d, e) in returns.iter().zip(estimated) {
-        println!("  {}", crate::words::return_drift(d));
-        println!("    {}", crate::words::return_drift_estimated(e));
+        println!("  {}", rpkm_nodes::words::return_drift(d));
+        println!("    {}", rpkm_nodes::words::return_drift_estimated(e));
     }
 }
 
@@ -481,14 +481,14 @@ fn write_report(
     } else {
         after.as_ref().unwrap_or(&before)
     };
-    let verdict = crate::words::verdict(calibrated);
+    let verdict = rpkm_nodes::words::verdict(calibrated);
     let page = super::summary::write_report(
         dir,
         "rpkm calibrate",
         (campaign, validation),
         &before,
         after.as_ref(),
-        (stages, crate::effects_file::expressions(file)),
+        (stages, rpkm_nodes::effects_file::expressions(file)),
     )?;
     Ok((page, verdict))
 }
@@ -610,7 +610,7 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
             id.nominal * s,
             id.value * s,
             id.step,
-            crate::words::with_sigma(id.value - id.nominal, id.sigma, base)
+            rpkm_nodes::words::with_sigma(id.value - id.nominal, id.sigma, base)
         );
     }
     print_effects(&cal.effects);
@@ -618,7 +618,7 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
         println!(
             "{:<24} {}  (lag_{p} / alpha_{p}: positive where the thermometer lags the {p})",
             tau.name,
-            crate::words::with_sigma(tau.value, tau.sigma, "s"),
+            rpkm_nodes::words::with_sigma(tau.value, tau.sigma, "s"),
             p = tau.part
         );
     }
@@ -639,7 +639,7 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
     }
     println!(
         "\ncondition number of the identification: {}",
-        crate::words::condition(cal.condition_number, cal.determined)
+        rpkm_nodes::words::condition(cal.condition_number, cal.determined)
     );
     println!(
         "chi-square per degree of freedom: {:.2} (1 = residual at the instruments' noise)",
@@ -664,7 +664,7 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
             v.values, v.rms_before_um, v.rms_after_um, v.gain
         );
         if let Some(j) = &v.judge {
-            println!("{}", crate::words::held_out_judge(j));
+            println!("{}", rpkm_nodes::words::held_out_judge(j));
         }
     }
 }
@@ -675,7 +675,7 @@ fn print_effects(effects: &[calib::EffectEstimate]) {
         println!(
             "{:<24} {}{}",
             format!("{}.{}", e.effect, e.name),
-            crate::words::with_sigma(e.value, e.sigma, &e.unit),
+            rpkm_nodes::words::with_sigma(e.value, e.sigma, &e.unit),
             e.held
                 .as_ref()
                 .map_or(String::new(), |why| format!("  (not fitted: {why})"))
@@ -721,7 +721,7 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
         "rms": cal.rms,
         // null where infinite; the words say what that means
         "condition_number": cal.condition_number,
-        "condition": crate::words::condition(cal.condition_number, cal.determined),
+        "condition": rpkm_nodes::words::condition(cal.condition_number, cal.determined),
         "chi2_per_dof": cal.chi2_per_dof,
         "iterations": cal.iterations,
         "rows": cal.rows,
@@ -751,7 +751,7 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
         out["gain"] = json!(v.gain);
         if let Some(j) = &v.judge {
             out["held_out"] = json!(j);
-            out["held_out"]["judge"] = crate::words::held_out(j).into();
+            out["held_out"]["judge"] = rpkm_nodes::words::held_out(j).into();
         }
     }
     out

@@ -47,7 +47,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let after = diagnose::diagnose(&campaign, Some(&val), &[effect.as_ref()], &opts)
         .context("diagnosing with the effect added")?;
     println!(
-        "   chi2/dof at the stated noise {:.2} -> {:.2}; held-out RMS {} -> {} um (noise floor {:.1} um)",
+        "   chi2/dof at the stated noise {:.2} -> {:.2}; held-out RMS {} -> {} µm (noise floor {:.1} µm)",
         before.baseline.chi2_per_dof,
         after.baseline.chi2_per_dof,
         um(before.baseline.val_rms_um),
@@ -58,9 +58,9 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         after.baseline.val_rms_relative_um,
         after.baseline.noise_floor_relative_um,
     ) {
-        println!("   with each setup's zero removed: held-out RMS {rms:.1} um, noise floor {floor:.1} um");
+        println!("   with each setup's zero removed: held-out RMS {rms:.1} µm, noise floor {floor:.1} µm");
     }
-    println!("   verdict now: {}", crate::words::verdict(&after));
+    println!("   verdict now: {}", rpkm_nodes::words::verdict(&after));
     let page = write_report(
         &args.out,
         "rpkm demo",

@@ -5,11 +5,12 @@
 use super::effect_stages::{offered, parse_effects, read_effects_file, with_named_effect};
 use super::summary::{print_summary, print_written, write_report};
 use super::{bad_input, read_campaign, write_json};
-use crate::effects_file::{self};
 use anyhow::Context;
 use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_core::effects::Effect;
 use rpkm_core::params::Model;
+use rpkm_core::units::rad_from_mrad;
+use rpkm_nodes::effects_file::{self};
 use std::path::PathBuf;
 
 /// The diagnosis's JSON with its `points` (left empty in `value`) serialised one point at a
@@ -160,7 +161,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         noise: super::parse_noise(args.noise.as_deref())?,
         prior: rpkm_core::calib::Prior {
             length_mm: args.tolerance_mm,
-            angle_rad: args.tolerance_mrad * 1e-3,
+            angle_rad: rad_from_mrad(args.tolerance_mrad),
         },
         threads: args.threads,
         screen: !args.no_screen,
@@ -177,7 +178,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
         // the residual points (one per row: 2·10⁵ on 10⁵ poses) are written one at a time,
         // not held as one JSON tree beside the diagnosis (110 MB there, the process's peak)
         let points = std::mem::take(&mut d.points);
-        let mut json = crate::words::diagnosis_json(&d)?;
+        let mut json = rpkm_nodes::words::diagnosis_json(&d)?;
         d.points = points;
         if let Some(f) = &file {
             json["effects_file"] = effects_file::to_json(f);

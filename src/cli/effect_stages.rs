@@ -3,11 +3,11 @@
 //! table of `rpkm calibrate --effects`, the model with its effects added one by one.
 
 use super::bad_input;
-use crate::effects_file::{self, EffectsFile};
 use anyhow::Context;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis};
 use rpkm_core::effects::{self, Effect};
+use rpkm_nodes::effects_file::{self, EffectsFile};
 use std::path::Path;
 
 /// Effects of a comma-separated list (the library's, or the file's), or a bad-input error
@@ -168,7 +168,7 @@ impl Stages {
         );
         println!(
             "  {:<24} {:>10} {:>10} {:>12} {:>12} {:>13}",
-            "model", "chi2/dof", "at stated", "cal RMS um", "held-out um", "zero removed"
+            "model", "chi2/dof", "at stated", "cal RMS µm", "held-out µm", "zero removed"
         );
         // the bar: the held-out error a model can predict (each setup's zero removed)
         let shown = |s: &Stage| s.val_rms_relative_um.or(s.val_rms_um);
@@ -201,7 +201,7 @@ impl Stages {
                     "  {}.{} = {}",
                     e.effect,
                     e.name,
-                    crate::words::with_sigma(e.value, e.sigma, &e.unit)
+                    rpkm_nodes::words::with_sigma(e.value, e.sigma, &e.unit)
                 );
             }
         }

@@ -27,8 +27,8 @@ use std::path::Path;
 
 // Errors, exit codes and file readers live below the command line, where the nodes use them
 // too; re-exported so that every subcommand names them as `super::…`.
-pub use crate::error::{bad_input, error_chain, exit_code, BadInput};
-pub use crate::input::{read_campaign, read_params};
+pub use rpkm_nodes::error::{bad_input, error_chain, exit_code, BadInput};
+pub use rpkm_nodes::input::{read_campaign, read_params};
 
 /// The noise model of `--noise`: `NAME=VALUE,...` or a YAML file of `NAME: VALUE` lines
 /// (`.yaml`/`.yml`); the spec's figures for what it does not name.

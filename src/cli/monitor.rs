@@ -18,7 +18,7 @@ use rpkm_transport::{topic, IpcMessage, Subscriber, Transport, TransportError};
 
 use super::transport_args::{stop_flag, TransportArgs};
 use crate::monitor::{draw, MonitorThresholds, ThresholdSource, Watch, WatchConfig};
-use crate::node::params::NodeParams;
+use rpkm_nodes::node::params::NodeParams;
 
 /// Watch a running node set: per drive the measured and predicted redundancy current as bars
 /// against preload_monitor's WARN/ERROR thresholds, the level history, Δq2/Δq3 in follower
@@ -124,9 +124,12 @@ fn thresholds_from_params(files: &[PathBuf]) -> Result<MonitorThresholds> {
     if files.is_empty() {
         return Ok(MonitorThresholds::unknown());
     }
-    let p = NodeParams::load("preload_monitor", files, &[]).map_err(crate::node::bad_param)?;
-    let d = crate::node::preload_monitor::Thresholds::default();
-    let read = |key: &str, default: f64| p.positive(key, default).map_err(crate::node::bad_param);
+    let p = NodeParams::load("preload_monitor", files, &[]).map_err(rpkm_nodes::node::bad_param)?;
+    let d = rpkm_nodes::node::preload_monitor::Thresholds::default();
+    let read = |key: &str, default: f64| {
+        p.positive(key, default)
+            .map_err(rpkm_nodes::node::bad_param)
+    };
     let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
     Ok(MonitorThresholds {
         warn_percent: read("warn_percent", d.warn_percent)?,

@@ -3,6 +3,7 @@
 
 use super::bad_input;
 use rpkm_core::calib::Prior;
+use rpkm_core::units::rad_from_mrad;
 
 /// The manufacturing tolerances the calibration holds each parameter near its nominal value
 /// with.
@@ -22,7 +23,7 @@ impl PriorArgs {
     pub fn prior(&self) -> anyhow::Result<Prior> {
         Ok(Prior {
             length_mm: positive("--tolerance-mm", self.tolerance_mm)?,
-            angle_rad: positive("--tolerance-mrad", self.tolerance_mrad)? * 1e-3,
+            angle_rad: rad_from_mrad(positive("--tolerance-mrad", self.tolerance_mrad)?),
         })
     }
 }

@@ -8,7 +8,7 @@ use super::transport_args::{stop_flag, TransportArgs};
 use anyhow::Result;
 use rpkm_transport::bag::{BagWriter, BagWriterOptions};
 
-use crate::topics::{self, RecordPort};
+use rpkm_nodes::topics::{self, RecordPort};
 
 /// Record rpkm topics into a rosbag2 folder (metadata.yaml + one .mcap; profile ros2, CDR,
 /// schemas with their dependencies), readable by `ros2 bag`, Foxglove, mcap_ros2 and rosbags.

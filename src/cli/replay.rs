@@ -8,7 +8,7 @@ use anyhow::Result;
 use rpkm_transport::bag::{BagReadError, BagReader};
 
 use super::transport_args::{stop_flag, TransportArgs};
-use crate::topics::{self, ReplayPort};
+use rpkm_nodes::topics::{self, ReplayPort};
 
 /// Publish the rpkm topics of a bag through the transport, in the bag's log-time order
 /// (ties in file order), with the recorded timing scaled by --rate, or as fast as possible

@@ -1,12 +1,12 @@
 //! What `rpkm diagnose`, `rpkm calibrate` and the demo print and write of a diagnosis: the
 //! summary on the terminal, the noise per group, the HTML report.
 
-use crate::effects_file::EffectsFile;
 use crate::report::{ModelTable, Report};
-use crate::words;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::ModelDiagnosis;
 use rpkm_core::variance;
+use rpkm_nodes::effects_file::EffectsFile;
+use rpkm_nodes::words;
 use std::path::{Path, PathBuf};
 
 /// A µm value to one decimal, `-` when absent (no held-out data).
@@ -33,7 +33,7 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
         println!("   ({why})");
     }
     println!(
-        "\n1. The current model against the measurements\n   calibration RMS {:.1} um, held-out RMS {} um, noise floor {:.1} um",
+        "\n1. The current model against the measurements\n   calibration RMS {:.1} µm, held-out RMS {} µm, noise floor {:.1} µm",
         b.cal_rms_um,
         um(b.val_rms_um),
         b.noise_floor_um
@@ -41,7 +41,7 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
     if let (Some(rms), Some(floor)) = (b.val_rms_relative_um, b.noise_floor_relative_um) {
         println!(
             "   with each setup's zero removed (the one reading all its poses share, which no \
-             model predicts): held-out RMS {rms:.1} um, noise floor {floor:.1} um"
+             model predicts): held-out RMS {rms:.1} µm, noise floor {floor:.1} µm"
         );
     }
     println!(
@@ -113,7 +113,7 @@ fn print_groups(d: &ModelDiagnosis) {
             g.instrument, g.direction, g.rows, g.rms, g.noise, g.chi2_per_row
         );
     }
-    println!("   (um; urad for psi)\n   worst residuals:");
+    println!("   (µm; µrad for psi)\n   worst residuals:");
     for p in d.points.iter().take(3) {
         println!(
             "     line {:>5} {:<5} {:<10} {:>9.2} ({:.1} sigma) at x {:.0}, y {:.0} mm",
@@ -196,10 +196,10 @@ fn held_out_before(d: &ModelDiagnosis, before_um: f64) -> String {
         )
     };
     format!(
-        "(held-out after: the held-out RMS as measured, um, with the effect added; before it, \
-         the current model fitted as the candidates are, under {weighted}: {before_um:.1} um{})",
+        "(held-out after: the held-out RMS as measured, µm, with the effect added; before it, \
+         the current model fitted as the candidates are, under {weighted}: {before_um:.1} µm{})",
         d.baseline.val_rms_um.map_or(String::new(), |own| format!(
-            "; section 1's {own:.1} um is the current model under its own noise estimate"
+            "; section 1's {own:.1} µm is the current model under its own noise estimate"
         ))
     )
 }
@@ -265,7 +265,7 @@ pub fn print_noise_groups(groups: &[variance::GroupNoise], indent: &str) {
             g.assumed,
             words::estimated_level(g),
             g.dof,
-            g.unit,
+            words::unit_label(g.unit),
             words::rated_by(g),
             if g.capped {
                 "  (the estimation's cap: a bound, not an estimate)"

@@ -50,10 +50,10 @@ impl TransportArgs {
             None => std::env::var("RPKM_IPC_PREFIX").unwrap_or_default(),
         };
         let names = rpkm_transport::Names::new(&self.namespace, &[])
-            .map_err(|e| crate::error::bad_input(format!("--namespace: {e}")))?;
+            .map_err(|e| rpkm_nodes::error::bad_input(format!("--namespace: {e}")))?;
         let enclave = self.enclave.as_deref().unwrap_or(default_enclave);
         if let Some(why) = rpkm_transport::security::enclave_name_error(enclave) {
-            return Err(crate::error::bad_input(format!(
+            return Err(rpkm_nodes::error::bad_input(format!(
                 "--enclave {enclave:?}: {why}"
             )));
         }

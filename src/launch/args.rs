@@ -1,6 +1,6 @@
 //! The launcher's command line and its errors.
 
-use crate::node::params::YamlSyntax;
+use rpkm_nodes::node::params::YamlSyntax;
 use std::path::PathBuf;
 
 /// `rpkm launch`.

@@ -2,8 +2,8 @@
 
 use super::description::{LaunchDescription, LaunchProgram, NodeSpec};
 use super::programs::Programs;
-use crate::node::{declared_keys, Geometry, NodeArgs, NodeKind, NodeSetup};
-use crate::program::NODE_PROGRAM;
+use rpkm_nodes::node::{declared_keys, Geometry, NodeArgs, NodeKind, NodeSetup};
+use rpkm_nodes::program::NODE_PROGRAM;
 
 /// `rpkm launch --check`: every node's command line and configuration as it would start,
 /// nothing started. An `executable` entry's command line is checked when it starts.
@@ -22,12 +22,12 @@ pub(super) fn check(desc: &LaunchDescription) -> anyhow::Result<()> {
             .collect();
         if spec.program == LaunchProgram::Node {
             check_node(spec).map_err(|e| {
-                crate::error::bad_input(format!(
+                rpkm_nodes::error::bad_input(format!(
                     "{}:{}: node {}: {}",
                     desc.file,
                     spec.line,
                     spec.name,
-                    crate::error::error_chain(&e)
+                    rpkm_nodes::error::error_chain(&e)
                 ))
             })?;
         }
@@ -69,8 +69,8 @@ fn check_node(spec: &NodeSpec) -> anyhow::Result<()> {
     }
     // the JointState input's settings: read by the three nodes that take drive states
     if !matches!(args.kind, NodeKind::Calibrator(_)) {
-        crate::node::joint_input::JointConfig::from_params(&setup.params)
-            .map_err(crate::node::bad_param)?;
+        rpkm_nodes::node::joint_input::JointConfig::from_params(&setup.params)
+            .map_err(rpkm_nodes::node::bad_param)?;
     }
     Ok(())
 }

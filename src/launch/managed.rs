@@ -21,7 +21,7 @@ const START_TIMEOUT: Duration = Duration::from_secs(60);
 const REPLY_WAIT: Duration = Duration::from_secs(2);
 
 fn log(msg: impl std::fmt::Display) {
-    crate::node::log_line("launch", msg);
+    rpkm_nodes::node::log_line("launch", msg);
 }
 
 fn kind(name: &'static str) -> ServiceType {

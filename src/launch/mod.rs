@@ -106,7 +106,7 @@ use check::check;
 /// Runs `rpkm launch`.
 pub fn run(args: &LaunchArgs) -> anyhow::Result<()> {
     let desc = LaunchDescription::load(&args.file, &args.args)
-        .map_err(|e| crate::error::bad_input(e.to_string()))?;
+        .map_err(|e| rpkm_nodes::error::bad_input(e.to_string()))?;
     if args.check {
         return check(&desc);
     }

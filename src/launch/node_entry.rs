@@ -4,7 +4,7 @@ use super::args::LaunchError;
 use super::description::{LaunchProgram, NodeSpec};
 use super::fields::{flag, get, respawn, PARAM_KEYS, REMAP_KEYS};
 use super::place::Ctx;
-use crate::node::EXECUTABLES;
+use rpkm_nodes::node::EXECUTABLES;
 use serde_yaml::Value;
 use std::path::PathBuf;
 
@@ -32,7 +32,7 @@ pub(super) fn node(ctx: &Ctx<'_>, body: &serde_yaml::Mapping) -> Result<NodeSpec
         ));
     }
     let name = field("name")?.unwrap_or_else(|| exec.clone());
-    if let Some(why) = crate::node::node_name_error(&name) {
+    if let Some(why) = rpkm_nodes::node::node_name_error(&name) {
         return Err(ctx.err_at("name", why));
     }
     let mut param_files = Vec::new();

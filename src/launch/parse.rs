@@ -8,7 +8,7 @@ use super::fields::{
 };
 use super::node_entry::node;
 use super::place::{entry_lines, unlocated_error_line, utf8_error_place, Ctx};
-use crate::node::params::parse_yaml;
+use rpkm_nodes::node::params::parse_yaml;
 use serde_yaml::Value;
 use std::collections::BTreeMap;
 use std::path::Path;

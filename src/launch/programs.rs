@@ -7,7 +7,7 @@ use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
 use super::description::{LaunchProgram, NodeSpec};
-use crate::program::NODE_PROGRAM;
+use rpkm_nodes::program::NODE_PROGRAM;
 
 /// The binaries a launch starts its processes with.
 #[derive(Debug, Clone)]

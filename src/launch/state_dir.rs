@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use crate::node::kept::STATE_DIR_ENV;
+use rpkm_nodes::node::kept::STATE_DIR_ENV;
 
 /// The launch's state folder; removed on drop.
 pub struct StateDir(Option<PathBuf>);
@@ -21,7 +21,7 @@ impl StateDir {
         match std::fs::create_dir_all(&path) {
             Ok(()) => Self(Some(path)),
             Err(e) => {
-                crate::node::log_line(
+                rpkm_nodes::node::log_line(
                     "launch",
                     format!(
                         "WARN: no folder for the values set at run time ({}: {e}): a restarted \

@@ -169,8 +169,8 @@ impl Reporter {
             .count();
         let level = if gone > 0 { 2 } else { 0 };
         let message = format!("{} nodes declared, {gone} gone", values.len());
-        let status = crate::node::status(level, &self.status_name, message, values);
-        if let Err(e) = publisher.publish(&crate::node::diagnostic_array(status)) {
+        let status = rpkm_nodes::node::status(level, &self.status_name, message, values);
+        if let Err(e) = publisher.publish(&rpkm_nodes::node::diagnostic_array(status)) {
             log(format!("launch status not published: {e}"));
         }
     }
@@ -179,7 +179,7 @@ impl Reporter {
 /// One `[launch]` line in one write: the nodes share this stderr, and a line written in
 /// pieces would interleave with theirs.
 fn log(msg: impl std::fmt::Display) {
-    crate::node::log_line("launch", msg);
+    rpkm_nodes::node::log_line("launch", msg);
 }
 
 fn describe(status: ExitStatus) -> String {
@@ -381,7 +381,7 @@ async fn stop_all(nodes: &mut [Supervised<'_>]) {
 /// error (exit 1) when nodes kept crashing at their start.
 fn outcome(failed: &Failed) -> anyhow::Result<()> {
     if !failed.configuration.is_empty() {
-        return Err(crate::error::bad_input(format!(
+        return Err(rpkm_nodes::error::bad_input(format!(
             "{} node(s) failed their configuration (exit 2, not restarted): {}",
             failed.configuration.len(),
             failed.configuration.join(", ")

@@ -2,13 +2,13 @@
 //! state: every frame is a function of the watch, the time and the terminal's size, and a
 //! terminal of any size (down to 0×0) gets a frame without a panic.
 
-use crate::units::{mm_from_m, mrad_from_rad, um_from_m};
 use ratatui::layout::{Constraint, Layout, Rect};
 use ratatui::style::{Color, Modifier, Style};
 use ratatui::text::{Line, Span};
 use ratatui::widgets::{Block, Paragraph, Wrap};
 use ratatui::Frame;
 use rpkm_msgs::PreloadStatus;
+use rpkm_nodes::units::{mm_from_m, mrad_from_rad, um_from_m};
 
 use super::state::{level_name, reason_name, MonitorThresholds, ThresholdSource, Watch};
 
@@ -476,7 +476,7 @@ fn calibrator_lines(w: &Watch) -> Vec<Line<'static>> {
                 } else {
                     p.active_effects.join(", ")
                 };
-                let condition = crate::words::condition_short(p.condition_number);
+                let condition = rpkm_nodes::words::condition_short(p.condition_number);
                 format!(
                 "Parameters (at {t:.1} s): model {}, {} measurements, {identified} identified, \
                  cal RMS {}, val RMS {}, condition {condition}, effects {effects}",

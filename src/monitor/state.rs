@@ -2,7 +2,7 @@
 //! and when each node last spoke. Times are seconds since the monitor started (`now`), passed
 //! in by the caller, so that the struct is a plain value the unit tests drive without clocks.
 
-use crate::units::{m_from_mm, ms_from_seconds};
+use rpkm_nodes::units::{m_from_mm, ms_from_seconds};
 use std::collections::{BTreeMap, VecDeque};
 
 pub use super::rate::RateMeter;
@@ -746,7 +746,7 @@ fn parameters_json(p: &Parameters) -> Value {
         "val_rms_m": num(p.val_rms),
         "max_abs_residual_m": num(p.max_abs_residual),
         "condition_number": num(p.condition_number),
-        "condition": crate::words::condition(p.condition_number, None),
+        "condition": rpkm_nodes::words::condition(p.condition_number, None),
         "active_effects": p.active_effects,
         "identified": p.names.iter().zip(&p.sigmas).filter(|(_, s)| **s > 0.0).count(),
     })

@@ -28,7 +28,7 @@ pub fn section(r: &Report) -> String {
         .before
         .held_out
         .as_ref()
-        .map(crate::words::held_out_judge)
+        .map(rpkm_nodes::words::held_out_judge)
         .unwrap_or_default();
     let mut o = format!(
         "<section id=\"held-out\"><h2>The held-out residual, pose by pose</h2><p>{}</p><div class=\"row\">",

@@ -4,12 +4,12 @@
 //! RMS over time, every calibration and event. The diagnosis report's style and charts.
 
 use super::sections::figure;
-use crate::history::words::{self, change_unit, date};
-use crate::history::{charted, Analysis, ParamTrend};
 use crate::plot::{self, escape, Dated, Line, TimeChart};
 use rpkm_core::history::Seen;
 use rpkm_core::params::{unit, Params, Unit, NAMES};
 use rpkm_history::{CalibrationRecord, EventRecord, Stored};
+use rpkm_nodes::history::words::{self, change_unit, date};
+use rpkm_nodes::history::{charted, Analysis, ParamTrend};
 use std::fmt::Write as _;
 
 const DAY_S: f64 = 86_400.0;

@@ -77,7 +77,7 @@ impl Report<'_> {
         let _ = write!(
             html,
             "<footer><p>{}</p><p>Made by {} from {}; hover over a point for its file line, pose, value and σ.</p></footer></body></html>",
-            escape(&crate::words::test(&self.before.test)),
+            escape(&rpkm_nodes::words::test(&self.before.test)),
             escape(self.command),
             escape(&self.campaign.source)
         );

@@ -43,7 +43,7 @@ fn verdict_box(label: &str, d: &ModelDiagnosis) -> String {
         "<div class=\"verdict{ok}\" title=\"{}\"><b>{}</b>: {}</div>",
         kind(d.verdict_kind),
         escape(label),
-        escape(&crate::words::verdict(d))
+        escape(&rpkm_nodes::words::verdict(d))
     )
 }
 
@@ -153,7 +153,7 @@ fn noise(d: &ModelDiagnosis) -> String {
             "<tr><td>{}</td><td>{:.3} {u}</td><td>{} {u}</td><td>{:.2}{}</td><td>{:.0}</td></tr>",
             g.group,
             g.assumed,
-            escape(&crate::words::estimated_level(g)),
+            escape(&rpkm_nodes::words::estimated_level(g)),
             g.estimated / g.assumed,
             if g.capped {
                 " (the estimation's cap: a bound, not an estimate)"
@@ -163,14 +163,14 @@ fn noise(d: &ModelDiagnosis) -> String {
                 " (not estimated)"
             },
             g.dof,
-            u = g.unit
+            u = rpkm_nodes::words::unit_label(g.unit)
         );
     }
     o.push_str("</table>");
     let cats: Vec<String> = d
         .noise_groups
         .iter()
-        .map(|g| format!("{} ({})", g.group, g.unit))
+        .map(|g| format!("{} ({})", g.group, rpkm_nodes::words::unit_label(g.unit)))
         .collect();
     let chart = plot::bar_chart(
         "Noise per group",
@@ -553,7 +553,7 @@ pub fn against(r: &Report) -> String {
     };
     let mut o = format!(
         "<section id=\"against\"><h2>Against time and against what the residual follows</h2><p>{}</p><div class=\"row\">",
-        escape(&pointer.map_or("The direction with the largest χ² per row.".to_owned(), crate::words::follows))
+        escape(&pointer.map_or("The direction with the largest χ² per row.".to_owned(), rpkm_nodes::words::follows))
     );
     let times: Vec<f64> = r.campaign.poses.iter().map(|p| p.t).collect();
     o.push_str(&against_term(r, &inst, &dir, "t", &times));
@@ -586,7 +586,7 @@ pub fn effects(r: &Report) -> String {
             c.f_statistic,
             c.p_value,
             um(c.val_rms_after_um),
-            escape(&crate::words::evidence(c))
+            escape(&rpkm_nodes::words::evidence(c))
         );
     }
     o.push_str("</table>");

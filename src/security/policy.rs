@@ -12,7 +12,7 @@ use std::fmt::Write as _;
 
 use rpkm_transport::{topic, Names};
 
-use crate::node::joint_input::JOINT_STATES_TOPIC;
+use rpkm_nodes::node::joint_input::JOINT_STATES_TOPIC;
 
 /// rpkm's programs that have a default grant, by the last part of their enclave's name
 /// (`rpkm security enclave --all` makes one enclave for each).
@@ -183,7 +183,7 @@ pub fn grant(program: &str, namespace: &str) -> Result<Grant, PolicyError> {
         grant: Grant::default(),
     };
     participant(&mut b.grant);
-    let every: Vec<&str> = crate::topics::ALL.to_vec();
+    let every: Vec<&str> = rpkm_nodes::topics::ALL.to_vec();
     match program {
         "ingest" => ingest(&mut b),
         "tcp_estimator" => tcp_estimator(&mut b),
@@ -242,8 +242,8 @@ fn ingest(b: &mut Builder) {
     // broadcaster's JointState of its joint_states source (a thermometer's topic is the
     // cell's own: `rpkm security enclave --subscribe TOPIC`)
     b.subscribe(&[
-        crate::node::ingest::ACTUATOR_INPUT,
-        crate::node::ingest::MEASUREMENT_INPUT,
+        rpkm_nodes::node::ingest::ACTUATOR_INPUT,
+        rpkm_nodes::node::ingest::MEASUREMENT_INPUT,
         JOINT_STATES_TOPIC,
     ]);
     b.node("ingest", false);
@@ -544,7 +544,7 @@ mod tests {
     fn the_recorder_reads_and_the_replayer_writes_every_rpkm_topic() {
         let r = grant("record", "/rpkm").expect("record");
         let p = grant("replay", "/rpkm").expect("replay");
-        for t in crate::topics::ALL {
+        for t in rpkm_nodes::topics::ALL {
             let dds = format!("rt{t}");
             assert!(
                 r.subscribe.contains(&dds) && !r.publish.contains(&dds),

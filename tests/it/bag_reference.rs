@@ -21,12 +21,12 @@ use std::path::Path;
 use std::process::Command;
 
 use bag_support::*;
-use rpkm::campaign_bag::{read_campaign, seconds_from_stamp};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::elastic::{self, Stiffness, ALL_ACTIVE, NOMINAL_DRIVE_FORCE_N};
 use rpkm_core::geometry;
 use rpkm_core::params::{self, Model, Params};
 use rpkm_msgs::ActuatorState;
+use rpkm_nodes::campaign_bag::{read_campaign, seconds_from_stamp};
 use rpkm_transport::bag::BagReader;
 use serde_json::Value;
 
@@ -229,7 +229,7 @@ fn our_messages(bag: &Path) -> Vec<(String, String, u64, Value)> {
         .messages()
         .map(|m| {
             let m = m.expect("read");
-            let value = rpkm::topics::decode_json(m.type_name, &m.data)
+            let value = rpkm_nodes::topics::decode_json(m.type_name, &m.data)
                 .unwrap_or_else(|| panic!("type {} unknown to rpkm", m.type_name))
                 .unwrap_or_else(|e| panic!("{}: {e}", m.topic));
             (

@@ -8,10 +8,10 @@
 
 use crate::foreign_support;
 
-use rpkm::node::calibrator::{calibrate_campaign, CalibratorOptions};
-use rpkm::node::Geometry;
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::params::{unit, Model, Params, Unit, NAMES};
+use rpkm_nodes::node::calibrator::{calibrate_campaign, CalibratorOptions};
+use rpkm_nodes::node::Geometry;
 use rpkm_twin::{Twin, TwinConfig};
 use std::path::Path;
 use std::process::Command;
@@ -70,10 +70,10 @@ fn calibrate_diagnose_and_the_calibrator_node_give_the_same_parameters() {
                 model: Model::M29,
                 stiffness: rpkm_core::elastic::Stiffness::default(),
                 source: "nominal".into(),
-                effects: rpkm::node::effects::NodeEffects::default(),
+                effects: rpkm_nodes::node::effects::NodeEffects::default(),
             },
             validation_prefix: String::new(),
-            selection: rpkm::node::calibrator::SelectionRule::Map,
+            selection: rpkm_nodes::node::calibrator::SelectionRule::Map,
             max_condition: 100.0,
             outlier_sigma: 0.0,
             noise: rpkm_core::noise::NoiseModel::default(),

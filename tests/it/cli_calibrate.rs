@@ -275,7 +275,7 @@ fn the_json_carries_the_covariance_the_calibrator_starts_from() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let cov = rpkm::node::calibrator::start_covariance(json.to_str().expect("utf-8"))
+    let cov = rpkm_nodes::node::calibrator::start_covariance(json.to_str().expect("utf-8"))
         .expect("the calibrator reads it");
     let text = std::fs::read_to_string(&json).expect("json");
     let value: serde_json::Value = serde_json::from_str(&text).expect("parses");
@@ -311,7 +311,7 @@ fn the_json_carries_the_covariance_the_calibrator_starts_from() {
     broken["covariance"]["matrix"][1][0] = serde_json::json!(1.0);
     let path = dir.join("broken.json");
     std::fs::write(&path, broken.to_string()).expect("write");
-    let err = rpkm::node::calibrator::start_covariance(path.to_str().expect("utf-8"))
+    let err = rpkm_nodes::node::calibrator::start_covariance(path.to_str().expect("utf-8"))
         .expect_err("refused");
     let msg = format!("{err:#}");
     assert!(
@@ -321,7 +321,7 @@ fn the_json_carries_the_covariance_the_calibrator_starts_from() {
     let mut renamed = value;
     renamed["covariance"]["names"][0] = serde_json::json!("l4");
     std::fs::write(&path, renamed.to_string()).expect("write");
-    let err = rpkm::node::calibrator::start_covariance(path.to_str().expect("utf-8"))
+    let err = rpkm_nodes::node::calibrator::start_covariance(path.to_str().expect("utf-8"))
         .expect_err("refused");
     assert!(format!("{err:#}").contains("names"), "{err:#}");
 }

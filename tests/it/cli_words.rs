@@ -179,7 +179,7 @@ fn the_report_captions_name_the_model_of_their_figures() {
         .iter()
         .find(|g| g["group"] == "encoder")
         .expect("encoder");
-    let shown = format!("{:.3} um", f(&encoder["estimated"]));
+    let shown = format!("{:.3} µm", f(&encoder["estimated"]));
     assert!(page.contains(&shown), "report lacks the text's {shown}");
     let det = &c.json["determined"];
     let said = format!("{} of {} in {model}", det[0], det[1]);
@@ -304,8 +304,8 @@ fn each_held_out_figure_is_named() {
     let note = line_with(&d.text, "(held-out after: the held-out RMS as measured");
     let before = f(&d.json["candidates"][0]["val_rms_before_um"]);
     let own = f(&d.json["baseline"]["val_rms_um"]);
-    assert!(note.contains(&format!(": {before:.1} um;")), "{note}");
-    assert!(note.contains(&format!("section 1's {own:.1} um")), "{note}");
+    assert!(note.contains(&format!(": {before:.1} µm;")), "{note}");
+    assert!(note.contains(&format!("section 1's {own:.1} µm")), "{note}");
     // the walk's unnamed forms of these figures
     for unnamed in [
         "held-out RMS 2.72 ->",

@@ -261,8 +261,11 @@ fn replace_after_errors(
                 .map_or(0, |k| k + 1);
         if !sent && errors >= 20 {
             let sigmas = [0.0; rpkm_core::params::N_PARAMS];
-            let msg =
-                rpkm::node::geometry::parameters_msg(p, rpkm_core::params::Model::M29, &sigmas);
+            let msg = rpkm_nodes::node::geometry::parameters_msg(
+                p,
+                rpkm_core::params::Model::M29,
+                &sigmas,
+            );
             parameters.publish(&msg).expect("publish Parameters");
             sent = true;
         }

@@ -126,7 +126,7 @@ fn segments(path: &str) -> Vec<String> {
 fn check_path(path: &str, types: &Types) -> Result<(), String> {
     let mut segs = segments(path);
     let topic = segs.remove(0);
-    let type_name = rpkm::topics::type_name(&topic)
+    let type_name = rpkm_nodes::topics::type_name(&topic)
         .ok_or_else(|| format!("{path}: topic {topic:?} is not an rpkm topic"))?
         .replace("/msg/", "/");
     let mut ty = type_name;

@@ -57,7 +57,7 @@ pub(crate) fn core_calibration(
     rpkm_core::variance::NoiseEstimate,
     usize,
 ) {
-    let c = rpkm::input::read_campaign(campaign).expect("campaign");
+    let c = rpkm_nodes::input::read_campaign(campaign).expect("campaign");
     let opts = Options {
         outlier_sigma: None,
         ..Options::default()
@@ -181,7 +181,7 @@ fn check_calibrated(g: &Value, text: &str) {
         );
     }
     // the held-out RMS: the core's TCP errors of the validation campaign
-    let val: Campaign = rpkm::input::read_campaign(&demo("campaign.val.csv")).expect("val");
+    let val: Campaign = rpkm_nodes::input::read_campaign(&demo("campaign.val.csv")).expect("val");
     let errors: Vec<f64> = rpkm_core::obs::tcp_errors(&val, &cal.params, cal.model)
         .expect("tcp errors")
         .iter()

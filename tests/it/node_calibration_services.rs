@@ -154,7 +154,7 @@ fn load_calibration_changes_the_next_estimate_to_the_loaded_geometry() {
     let saved = dir.path("saved.json");
     let (ok, message) = call(&py, "save_calibration", &saved);
     assert!(ok, "{message}");
-    let back = rpkm::input::read_params(&saved).expect("the saved file reads back");
+    let back = rpkm_nodes::input::read_params(&saved).expect("the saved file reads back");
     let worst = (0..rpkm_core::params::N_PARAMS)
         .map(|i| (back[i] - loaded[i]).abs())
         .fold(0.0f64, f64::max);

@@ -16,11 +16,11 @@ use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use node_support::{launch_from_params, unique, Launch, TempDir};
-use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::geometry::fgm;
 use rpkm_core::params::{index_of, unit, Model, Params, Unit};
 use rpkm_msgs::{ActuatorState, Parameters, Time};
+use rpkm_nodes::campaign_bag::stamp_from_seconds;
 use rpkm_transport::{topic, Publisher, Subscriber, Transport, TransportConfig};
 use rpkm_twin::{EffectKind, MachineState, Twin, TwinConfig};
 

@@ -14,11 +14,11 @@ use std::f64::consts::PI;
 use std::time::{Duration, Instant};
 
 use node_support::{launch_from_params, unique, Launch, TempDir};
-use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::geometry::fgm;
 use rpkm_core::params::{Model, Params};
 use rpkm_msgs::TcpEstimate;
+use rpkm_nodes::campaign_bag::stamp_from_seconds;
 use rpkm_transport::{topic, Transport, TransportConfig};
 
 const RATE_HZ: f64 = 200.0;

@@ -15,8 +15,8 @@ use std::path::Path;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_msgs::DiagnosticStatus;
+use rpkm_nodes::campaign_bag::stamp_from_seconds;
 
 const DOMAIN: &str = "68";
 
@@ -27,7 +27,7 @@ fn cell_script(dir: &TempDir) -> std::path::PathBuf {
     let mut script = String::new();
     for pose in &twin.campaign.poses {
         let stamp = stamp_from_seconds(pose.t).expect("a stamp");
-        let q = pose.q.map(|q| q / rpkm::units::MM_PER_M);
+        let q = pose.q.map(|q| q / rpkm_nodes::units::MM_PER_M);
         script.push_str(&joint_line(&cell, stamp, q, pose.f));
     }
     write_script(&dir.0, &script)

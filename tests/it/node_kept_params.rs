@@ -18,8 +18,8 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_msgs::PreloadStatus;
+use rpkm_nodes::campaign_bag::stamp_from_seconds;
 
 const DOMAIN: &str = "67";
 /// Poses the cell plays after the restart.
@@ -124,7 +124,7 @@ fn followers_set_at_run_time_survive_a_restart_of_ingest() {
     let mut script = String::from("MATCH 1 /joint_states\n");
     for pose in &twin.campaign.poses {
         let stamp = stamp_from_seconds(pose.t).expect("a stamp");
-        let q = pose.q.map(|q| q / rpkm::units::MM_PER_M);
+        let q = pose.q.map(|q| q / rpkm_nodes::units::MM_PER_M);
         script.push_str(&joint_line(&cell, stamp, q, pose.f));
     }
     let play = write_script(&dir.0, &script);

@@ -17,7 +17,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use node_support::{twin_stream, unique, write_truth_json, Launch, TempDir};
-use rpkm::campaign_bag::stamp_from_seconds;
+use rpkm_nodes::campaign_bag::stamp_from_seconds;
 use rpkm_transport::{topic, Transport, TransportConfig};
 
 const N: usize = 1200;

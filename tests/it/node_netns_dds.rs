@@ -14,7 +14,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use node_support::{rpkm, twin_stream, unique, write_truth_json, Proc, TempDir};
-use rpkm::campaign_bag::stamp_from_seconds;
+use rpkm_nodes::campaign_bag::stamp_from_seconds;
 use rpkm_transport::{topic, Transport, TransportConfig};
 
 const N: usize = 300;

@@ -19,11 +19,11 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use node_support::{launch_from_params, rpkm, unique, Launch, TempDir};
-use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, NOMINAL_DRIVE_FORCE_N};
 use rpkm_core::params::{index_of, Params, NAMES, N_PARAMS};
 use rpkm_msgs::{DiagnosticStatus, Parameters, PreloadStatus, Time};
+use rpkm_nodes::campaign_bag::stamp_from_seconds;
 use rpkm_transport::{topic, Transport, TransportConfig};
 
 const SECONDS: f64 = 40.0;
@@ -322,7 +322,7 @@ fn the_estimator_and_the_monitor_follow_the_online_calibration_through_a_crash()
         "truth rows"
     );
     let geometry = dir.path("start.json");
-    let start = rpkm::input::read_params(&geometry).expect("start calibration");
+    let start = rpkm_nodes::input::read_params(&geometry).expect("start calibration");
     let obs = observe(&launch_files(&dir, &csv, &geometry), &truth);
 
     let l3 = index_of("l3").expect("l3");

@@ -1,11 +1,11 @@
-//! Each node parameter is declared once (`rpkm::node::declare`): the shipped
+//! Each node parameter is declared once (`rpkm_nodes::node::declare`): the shipped
 //! launch_scripts/params.yaml, the descriptors of the parameter services and the defaults are
 //! checked against the declarations here.
 
 use std::path::{Path, PathBuf};
 
-use rpkm::node::declare::{ParamBound, ParamDefault, ParamSpec};
-use rpkm::node::{declarations, NodeParams, COMMON, EXECUTABLES};
+use rpkm_nodes::node::declare::{ParamBound, ParamDefault, ParamSpec};
+use rpkm_nodes::node::{declarations, NodeParams, COMMON, EXECUTABLES};
 use rpkm_transport::dds_params::{ParamRange, ParameterValue};
 
 /// Keys params.yaml sets to something other than the default, on purpose (its comments say
@@ -28,7 +28,7 @@ fn all(exec: &str) -> Vec<ParamSpec> {
 /// Whether `p` gives `spec` its default, read through the declaration's own typed reader (so
 /// the value's type and bound are checked too).
 fn is_default(spec: &ParamSpec, p: &NodeParams) -> Result<bool, String> {
-    let e = |e: rpkm::node::ParamError| e.to_string();
+    let e = |e: rpkm_nodes::node::ParamError| e.to_string();
     Ok(match spec.default {
         ParamDefault::F64(d) => spec.f64(p).map_err(e)?.to_bits() == d.to_bits(),
         ParamDefault::U64(d) => spec.u64(p).map_err(e)? == d,
@@ -71,7 +71,7 @@ fn the_shipped_params_yaml_holds_the_declared_keys_types_and_defaults() {
         "only {set} keys read: is params.yaml the shipped one?"
     );
     let text = std::fs::read_to_string(&file).expect("params.yaml");
-    let doc = rpkm::node::params::parse_yaml(&text, "params.yaml").expect("yaml");
+    let doc = rpkm_nodes::node::params::parse_yaml(&text, "params.yaml").expect("yaml");
     let wildcard = doc
         .get("/**")
         .and_then(|s| s.get("ros__parameters"))
@@ -183,7 +183,7 @@ fn defaults_taken_from_the_core_equal_the_core_s() {
         default_of("online_force_sigma_n").to_bits(),
         core.force_sigma_n.to_bits()
     );
-    let encoder_um = rpkm::units::um_from_mm(core.encoder_sigma_mm);
+    let encoder_um = rpkm_nodes::units::um_from_mm(core.encoder_sigma_mm);
     assert!(
         (default_of("online_encoder_sigma_um") - encoder_um).abs() < 1e-12,
         "{encoder_um} µm"

@@ -14,9 +14,9 @@ use std::time::{Duration, Instant};
 use node_support::{
     launch_from_params, twin_stream, unique, write_truth_json, Launch, Stream, TempDir,
 };
-use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::elastic::{fegm, ALL_ACTIVE, NOMINAL_DRIVE_FORCE_N};
 use rpkm_msgs::{DiagnosticStatus, PreloadStatus};
+use rpkm_nodes::campaign_bag::stamp_from_seconds;
 use rpkm_transport::{topic, Transport, TransportConfig};
 
 const N: usize = 400;

@@ -436,7 +436,7 @@ fn a_cyclone_peer_sets_an_ingest_limit_and_the_next_row_is_judged_by_it() {
         .iter()
         .filter_map(Value::as_str)
         .collect();
-    for key in rpkm::node::ingest::PARAMS
+    for key in rpkm_nodes::node::ingest::PARAMS
         .iter()
         .map(|s| &s.key)
         .chain(&["backend", "input_backend"])

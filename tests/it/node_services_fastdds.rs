@@ -177,13 +177,13 @@ fn check_lists(lines: &[String]) {
         let (node, names) = list.split_once(' ').expect("LIST NODE NAMES");
         assert_eq!(node, format!("/rpkm/{exec}"));
         let names: Vec<&str> = names.split(',').collect();
-        let declared = rpkm::node::declarations(exec).expect("a node of the set");
-        let joint_keys: Vec<&str> = rpkm::node::joint_input::PARAMS
+        let declared = rpkm_nodes::node::declarations(exec).expect("a node of the set");
+        let joint_keys: Vec<&str> = rpkm_nodes::node::joint_input::PARAMS
             .iter()
             .map(|p| p.key)
             .collect();
         let joint_source = *exec == "ingest";
-        for spec in declared.iter().chain(rpkm::node::COMMON.iter()) {
+        for spec in declared.iter().chain(rpkm_nodes::node::COMMON.iter()) {
             let served = joint_source || !joint_keys.contains(&spec.key);
             if served && !spec.key.ends_with('.') {
                 assert!(names.contains(&spec.key), "{exec}: {} not listed", spec.key);

@@ -52,6 +52,7 @@ use rpkm_core::elastic::{self, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::{self};
 use rpkm_core::noise::NoiseModel;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS, RODS};
+use rpkm_core::units::{fraction_from_ppm, rad_from_mrad};
 use std::collections::BTreeMap;
 
 /// Everything the twin hid, for a report or a test (serde: JSON with parameter names).
@@ -312,7 +313,7 @@ impl Twin {
     fn scale(&self, t: f64) -> [f64; 4] {
         let th = self.config.thermal;
         let at = |g: usize| 1.0 + th.scales_per_k * (self.guide_temperature(g, t) - th.reference_c);
-        let g2 = 1.0 + self.magnitude(EffectKind::EncoderScale).unwrap_or(0.0) * 1e-6;
+        let g2 = 1.0 + fraction_from_ppm(self.magnitude(EffectKind::EncoderScale).unwrap_or(0.0));
         [at(1) * g2, at(0), at(0), at(1) * g2]
     }
 
@@ -395,7 +396,7 @@ impl Twin {
         let seed = self.config.seed;
         *self.alignment.entry(setup.to_owned()).or_insert_with(|| {
             let mut r = StdRng::seed_from_u64(seed ^ fnv(setup));
-            m * 1e-3 * gauss(&mut r)
+            rad_from_mrad(m) * gauss(&mut r)
         })
     }
 

@@ -17,6 +17,7 @@ use crate::noise::{Group, NoiseModel, N_GROUPS};
 use crate::obs::RowValue;
 use crate::params::{Model, Params};
 use crate::stats;
+use crate::units::um_from_mm;
 use crate::variance::NoiseEstimate;
 
 /// Calibration options of the diagnosis: the model's links, every parameter under its
@@ -231,13 +232,13 @@ pub(crate) fn baseline(
     opts: &DiagnosisOptions,
 ) -> Baseline {
     let noise_floor_um = match val {
-        Some(v) => calib::rms(&v.sigma) * 1e3,
-        None => calib::rms(&length_sigmas(&base.rows)) * 1e3,
+        Some(v) => um_from_mm(calib::rms(&v.sigma)),
+        None => um_from_mm(calib::rms(&length_sigmas(&base.rows))),
     };
     let relative = val.map(|v| {
         (
-            calib::rms(&base.fit.val_errors) * 1e3,
-            calib::rms(&v.relative_sigma) * 1e3,
+            um_from_mm(calib::rms(&base.fit.val_errors)),
+            um_from_mm(calib::rms(&v.relative_sigma)),
         )
     });
     // the same rows weighted by the rating

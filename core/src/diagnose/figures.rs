@@ -10,6 +10,7 @@ use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};
 use crate::obs::{self, RowValue};
 use crate::params::Model;
+use crate::units::um_from_mm;
 use crate::variance::GroupNoise;
 use std::collections::BTreeMap;
 
@@ -33,8 +34,8 @@ pub(crate) fn error_vectors(
     for e in &errs {
         let slot = xy.entry(e.pose).or_default();
         match e.direction {
-            obs::TcpDirection::X => slot[0] = Some(e.value * 1e3),
-            obs::TcpDirection::Y => slot[1] = Some(e.value * 1e3),
+            obs::TcpDirection::X => slot[0] = Some(um_from_mm(e.value)),
+            obs::TcpDirection::Y => slot[1] = Some(um_from_mm(e.value)),
             obs::TcpDirection::R => {}
         }
     }

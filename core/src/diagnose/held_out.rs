@@ -21,6 +21,7 @@ use crate::noise::{Group, NoiseModel, N_GROUPS};
 use crate::obs::{self, Direction, RowValue};
 use crate::params::{Params, N_PARAMS};
 use crate::stats;
+use crate::units::um_from_mm;
 use crate::variance::GroupNoise;
 use nalgebra::{DMatrix, DVector};
 
@@ -296,11 +297,11 @@ pub(crate) fn judge(
     let dictionary = shape.dictionary.clone();
     let structured = shape.structured();
     Ok(HeldOutCheck {
-        rms_um: calib::rms(&errors) * 1e3,
-        rms_relative_um: calib::rms(&relative) * 1e3,
-        noise_floor_um: calib::rms(&val.sigma) * 1e3,
-        noise_floor_relative_um: calib::rms(&val.relative_sigma) * 1e3,
-        floor_relative_um: (var.iter().sum::<f64>() / n.max(1) as f64).sqrt() * 1e3,
+        rms_um: um_from_mm(calib::rms(&errors)),
+        rms_relative_um: um_from_mm(calib::rms(&relative)),
+        noise_floor_um: um_from_mm(calib::rms(&val.sigma)),
+        noise_floor_relative_um: um_from_mm(calib::rms(&val.relative_sigma)),
+        floor_relative_um: um_from_mm((var.iter().sum::<f64>() / n.max(1) as f64).sqrt()),
         statistic,
         dof,
         noise_dof,
@@ -397,9 +398,9 @@ impl Prediction {
     /// the same order); None without poses.
     pub fn of(before: &[f64], after: &[f64]) -> Option<Prediction> {
         Self::compared(before, after).map(|p| Prediction {
-            rms_before: p.rms_before * 1e3,
-            rms_after: p.rms_after * 1e3,
-            standard_error: p.standard_error * 1e3,
+            rms_before: um_from_mm(p.rms_before),
+            rms_after: um_from_mm(p.rms_after),
+            standard_error: um_from_mm(p.standard_error),
             unit: "um",
             ..p
         })

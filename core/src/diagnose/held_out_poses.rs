@@ -7,6 +7,7 @@ use super::types::HeldOutCheck;
 use crate::campaign::Campaign;
 use crate::obs::{self, PoseError};
 use crate::params::{Model, Params};
+use crate::units::um_from_mm;
 
 /// One held-out TCP reading's residual as the judge judged it.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -44,7 +45,7 @@ pub fn residuals(val: &Campaign, judge: &HeldOutCheck) -> Result<Vec<HeldOutResi
             direction: r.direction.as_str(),
             x_mm: tcp[r.pose].0,
             y_mm: tcp[r.pose].1,
-            residual_um: e * 1e3,
+            residual_um: um_from_mm(*e),
         })
         .collect())
 }

@@ -14,6 +14,7 @@ use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::params::Params;
 use crate::stats;
+use crate::units::um_from_mm;
 
 /// What trying every candidate gave.
 pub(crate) struct Round {
@@ -408,7 +409,7 @@ pub(crate) fn finish_with(
         Some((e, refit)) => (Some(e), refit),
         None => (None, 0),
     };
-    let val_rms_um = val_errors.as_ref().map(|e| calib::rms(e) * 1e3);
+    let val_rms_um = val_errors.as_ref().map(|e| um_from_mm(calib::rms(e)));
     let val_scaled = val.zip(val_errors.as_ref()).map(|(v, e)| v.scaled(e));
     let val_errors = val.zip(val_errors).map(|(v, e)| v.relative(&e));
     // The calibration is spent here: its rows and parameters move into the fit.
@@ -419,7 +420,7 @@ pub(crate) fn finish_with(
         chi2,
         dof,
         chi2_per_dof: chi2 / dof,
-        cal_rms_um: calib::rms(&length_values(&rows)) * 1e3,
+        cal_rms_um: um_from_mm(calib::rms(&length_values(&rows))),
         val_rms_um,
         val_errors: val_errors.unwrap_or_default(),
         val_scaled: val_scaled.unwrap_or_default(),

@@ -6,6 +6,7 @@
 use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::Campaign;
 use crate::params::Params;
+use crate::units::fraction_from_ppm;
 
 /// See the module documentation.
 pub struct EncoderScale;
@@ -47,7 +48,7 @@ impl Bound for BoundScale {
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
         for (k, guide) in GUIDES.iter().enumerate() {
             for &a in guide {
-                let q = self.q[pose][a] * 1e-6;
+                let q = fraction_from_ppm(self.q[pose][a]);
                 value.dq[a] += theta[k] * q;
                 partials[k].dq[a] += q;
             }

@@ -6,6 +6,7 @@
 use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable};
 use crate::campaign::{Campaign, Instrument};
 use crate::params::Params;
+use crate::units::{rad_from_mrad, RAD_PER_MRAD};
 use nalgebra::Vector2;
 
 /// See the module documentation.
@@ -73,12 +74,12 @@ impl Bound for BoundAlign {
     }
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
         let Some(k) = self.setup_of[pose] else { return };
-        let th = theta[k] * 1e-3;
+        let th = rad_from_mrad(theta[k]);
         let m = self.m[pose];
         let (s, c) = th.sin_cos();
         // true = R(−θ) m
         let t = Vector2::new(c * m.x + s * m.y, -s * m.x + c * m.y);
         value.dm += t - m;
-        partials[k].dm += Vector2::new(-s * m.x + c * m.y, -c * m.x - s * m.y) * 1e-3;
+        partials[k].dm += Vector2::new(-s * m.x + c * m.y, -c * m.x - s * m.y) * RAD_PER_MRAD;
     }
 }

@@ -30,6 +30,7 @@ use super::effect::{covariate_column, Bound, Delta, Effect, EffectParam, NotAppl
 use super::memory::{self, Timeline};
 use crate::campaign::Campaign;
 use crate::params::{Params, D1, D2, RODS};
+use crate::units::fraction_from_ppm;
 
 /// The temperature every part falls back to.
 pub const COVARIATE: &str = "temp_machine";
@@ -223,7 +224,7 @@ impl Thermal {
         if self.reads == Reads::Temperature {
             return Ok(temps
                 .iter()
-                .map(|t| (t - self.reference_c) * 1e-6)
+                .map(|t| fraction_from_ppm(t - self.reference_c))
                 .collect());
         }
         let t: Vec<f64> = campaign.poses.iter().map(|p| p.t).collect();
@@ -233,7 +234,7 @@ impl Thermal {
         })?;
         Ok(memory::rate(&line, &temps)
             .iter()
-            .map(|r| r * 1e-6)
+            .map(|r| fraction_from_ppm(*r))
             .collect())
     }
 

@@ -162,8 +162,8 @@ fn check_balance(balance: [f64; 3], eq: &Equilibrium, limits: &Limits) -> Result
     if !within_norm(fx, fy, force_tol) {
         return fail(Reason::ForceBalance, 0, fx.hypot(fy), force_tol);
     }
-    // Moment about the TCP, N·mm: the same tolerance on a 1 m lever.
-    let moment_tol = force_tol * 1000.0;
+    // Moment about the TCP, N·mm: the same tolerance on a 1 m lever (the lever in mm).
+    let moment_tol = force_tol * crate::units::mm_from_m(1.0);
     if !within(mz.abs(), moment_tol) {
         return fail(Reason::ForceBalance, 0, mz.abs(), moment_tol);
     }

@@ -124,11 +124,14 @@ pub fn force_position_gains(
     q: [f64; 4],
     eq: &Equilibrium,
 ) -> Result<Matrix4<f64>, ElasticError> {
+    // The central difference's step of a drive position: 1 µm, small against the preload's
+    // curvature and large against the equilibrium's tolerance.
+    const STEP_MM: f64 = 1e-3;
     let mut gains = Matrix4::zeros();
     for b in 0..4 {
         let at = |sign: f64| -> Result<[f64; 4], ElasticError> {
             let mut qb = q;
-            qb[b] += sign * 1e-3;
+            qb[b] += sign * STEP_MM;
             Ok(fegm_from(p, k, qb, ALL_ACTIVE, eq)?.drive_force)
         };
         let (plus, minus) = (at(1.0)?, at(-1.0)?);

@@ -113,7 +113,7 @@ impl DriftTest {
         let d = self.best.as_ref()?;
         let threshold = match unit(d.param) {
             Unit::Mm => threshold_mm,
-            Unit::Rad => threshold_mm / 1000.0,
+            Unit::Rad => crate::units::m_from_mm(threshold_mm),
         };
         (self.p_value < DRIFT_FALSE_ALARM && d.change.abs() > threshold).then_some(d)
     }
@@ -242,11 +242,11 @@ pub(super) fn project_out(v: &mut SVector<f64, N_PARAMS>, basis: &[SVector<f64, 
 pub(super) fn expansion_directions(p: &Params) -> [SVector<f64, N_PARAMS>; 2] {
     let mut rods = SVector::zeros();
     for r in &crate::params::RODS {
-        rods[r.l] = p[r.l] * 1e-6 / scale()[r.l];
+        rods[r.l] = crate::units::fraction_from_ppm(p[r.l]) / scale()[r.l];
     }
     let mut frame = SVector::zeros();
     for i in [crate::params::D1, crate::params::D2] {
-        frame[i] = p[i] * 1e-6 / scale()[i];
+        frame[i] = crate::units::fraction_from_ppm(p[i]) / scale()[i];
     }
     [rods, frame]
 }

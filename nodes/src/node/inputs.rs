@@ -20,7 +20,7 @@ use super::live::LiveParams;
 use super::params::NodeParams;
 use crate::campaign_bag::seconds_from_stamp;
 use crate::error::bad_input;
-use crate::units::mm_from_m;
+use crate::units::drive_positions_mm;
 
 /// Parameter `source` of a servo-rate node: ingest's ActuatorState (default).
 const ACTUATOR_STATE: &str = "actuator_state";
@@ -178,7 +178,7 @@ impl StreamMotion {
         g: &mut Geometry,
         s: &ActuatorState,
     ) -> Result<(Params, [f64; 4]), UnmeasuredForce> {
-        let q = s.position.map(mm_from_m);
+        let q = drive_positions_mm(s);
         let t = seconds_from_stamp(s.stamp);
         // followed at every state, evaluated or not
         let motion = self.motion.next(q, t);

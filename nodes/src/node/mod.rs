@@ -1,8 +1,9 @@
 //! The ROS 2 node set, one subcommand each: `rpkm node ingest|tcp_estimator|calibrator|
 //! preload_monitor`. Thin: topics, parameters, validation and bookkeeping here; every model
 //! evaluation is a call into `rpkm_core`. Units: SI on topics and in parameter YAML (m, rad,
-//! N, s), mm inside the core; the Parameters message converts in [`geometry`], every other
-//! message with the named conversions of [`crate::units`] (`mm_from_m`, `m_from_mm`, ...).
+//! N, s), mm inside the core; the Parameters message converts in [`geometry`], the live
+//! messages through the adapters of [`crate::units`] (`drive_positions_mm`,
+//! `set_tcp_position_mm`, `set_follower_offsets_mm`, ...), the rest with its named conversions.
 //! Each node's parameters are declared once ([`declare`]).
 //!
 //! Every node reads ROS 2 parameter YAML ([`params`]), publishes on the configured backend

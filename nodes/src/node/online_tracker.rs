@@ -14,7 +14,7 @@ use rpkm_core::online::{
 use rpkm_core::params::{Params, N_PARAMS};
 use rpkm_msgs::ActuatorState;
 
-use crate::units::{m_from_mm, mm_from_m, um_from_mm};
+use crate::units::{drive_positions_mm, m_from_mm, um_from_mm};
 
 /// Settings of the online tracker.
 #[derive(Debug, Clone, Copy)]
@@ -199,7 +199,7 @@ impl OnlineWorker {
         }
         let sample = ForceSample {
             t: f64::from(s.stamp.sec) + f64::from(s.stamp.nanosec) * 1e-9,
-            q: s.position.map(mm_from_m),
+            q: drive_positions_mm(s),
             f: s.force,
         };
         let temp = if s.covariate_count > 0 {

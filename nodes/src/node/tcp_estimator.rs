@@ -40,7 +40,7 @@ use super::lifecycle::Lifecycle;
 use super::params::NodeParams;
 use super::realtime::{BUSY_POLL, PRIORITY};
 use super::views::{self, TcpViews};
-use crate::units::{m_from_mm, seconds_from_ms};
+use crate::units::{seconds_from_ms, set_tcp_position_mm};
 use rpkm_transport::Backend;
 
 /// Parameter `views` of the node.
@@ -190,14 +190,13 @@ impl Estimator {
                 c.consecutive_failures = 0;
                 let eq = s.eq;
                 self.previous = Some(s);
-                est.x = m_from_mm(eq.x);
-                est.y = m_from_mm(eq.y);
                 est.psi = wrap_angle(eq.psi);
                 est.rod_forces = eq.rod_force;
                 est.drive_forces = eq.drive_force;
                 est.iterations = u32::try_from(eq.iterations).unwrap_or(u32::MAX);
                 est.converged = true;
-                est.loop_residuals = loop_residuals((&params, g.model), &q, eq.x, eq.y, eq.psi);
+                let loops = loop_residuals((&params, g.model), &q, eq.x, eq.y, eq.psi);
+                set_tcp_position_mm(&mut est, (eq.x, eq.y), loops);
             }
             Err(e) => return self.rigid_fallback(e, (&params, &q), est),
         }
@@ -231,14 +230,13 @@ impl Estimator {
             self.counts.implausible += 1;
         }
         self.counts.rigid_fallbacks += 1;
-        est.x = m_from_mm(rigid.x());
-        est.y = m_from_mm(rigid.y());
         est.psi = wrap_angle(rigid.psi());
         est.converged = false;
         est.outcome = TcpEstimate::OUTCOME_RIGID_FALLBACK;
         est.reason = self.last_error.as_ref().map_or(0, |e| reason_of(e).code());
         est.iterations = 0;
-        est.loop_residuals = loop_residuals((params, model), q, rigid.x(), rigid.y(), rigid.psi());
+        let loops = loop_residuals((params, model), q, rigid.x(), rigid.y(), rigid.psi());
+        set_tcp_position_mm(&mut est, (rigid.x(), rigid.y()), loops);
         self.counts.estimates += 1;
         Some(est)
     }
@@ -335,7 +333,7 @@ const REJECTION_KEYS: [&str; 6] = [
 ];
 
 /// |A_i − B_i| − l_i of rods 1..5 of parameters `p` at pose (x, y, ψ) (mm) and carrier
-/// positions `q` (mm), in m; rod 5 is 0 for model 24.
+/// positions `q` (mm), in mm; rod 5 is 0 for model 24.
 fn loop_residuals(
     (p, model): (&Params, Model),
     q: &[f64; 4],
@@ -351,7 +349,7 @@ fn loop_residuals(
     for (slot, rod) in out.iter_mut().zip(&RODS[..rods]) {
         let a = platform_joint(p, rod, x, y, psi);
         let b = carrier_joint(p, rod, q[rod.actuator]);
-        *slot = m_from_mm((a - b).norm() - p[rod.l]);
+        *slot = (a - b).norm() - p[rod.l];
     }
     out
 }
@@ -521,7 +519,7 @@ pub fn run(args: &CommonArgs) -> anyhow::Result<()> {
 )]
 mod tests {
     use super::*;
-    use crate::units::mm_from_m;
+    use crate::units::{m_from_mm, mm_from_m};
     use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE, FOLLOWERS_23};
     use rpkm_core::geometry::{fgm, igm};
     use rpkm_core::params::Params;

@@ -1,6 +1,7 @@
 //! A figure with its uncertainty, the one way every text and report prints it, and what a
 //! condition number means where it is no number, a p-value, what a residual follows.
 
+use crate::units::um_from_mm;
 use rpkm_core::diagnose::sparse::Pointer;
 
 /// A value with its standard deviation, the one way every text and report prints them: σ to
@@ -22,6 +23,16 @@ pub fn with_sigma(value: f64, sigma: f64, unit: &str) -> String {
     // no "-0.000": a value that rounds to zero has no sign
     let v = if round(v) == 0.0 { 0.0 } else { round(v) };
     format!("{v:.decimals$} ± {:.decimals$} {unit}", round(s))
+}
+
+/// A unit as a person reads it: the JSON's `um`, `urad` as `µm`, `µrad` (the JSON keeps the
+/// ASCII spelling other tools read); every other unit as it is.
+pub fn unit_label(unit: &str) -> &str {
+    match unit {
+        "um" => "µm",
+        "urad" => "µrad",
+        other => other,
+    }
 }
 
 /// The factor from a quantity's unit to the one it is shown in, and that unit.
@@ -103,7 +114,7 @@ pub fn p_is(p: f64) -> String {
 
 /// `value ± sigma` in µm, the value to the digits of σ's two significant ones.
 pub(super) fn um_with_sigma(value_mm: f64, sigma_mm: f64) -> String {
-    let (v, s) = (value_mm * 1e3, sigma_mm * 1e3);
+    let (v, s) = (um_from_mm(value_mm), um_from_mm(sigma_mm));
     // the decimals that show σ's second significant digit: 1 − ⌊log10 σ⌋, at least 0
     let digits = if s > 0.0 && s.is_finite() {
         11usize.saturating_sub(rpkm_core::convert::floor_count(s.log10() + 10.0))

@@ -21,13 +21,13 @@ pub fn held_out_judge(h: &HeldOutCheck) -> String {
     )
 }
 
-/// The held-out judge in words: "held-out RMS 12.7 um (each setup's zero removed) against
-/// the model's floor 5.4 um (...; p = 1.2e-30)", and where the residual is structured, that
+/// The held-out judge in words: "held-out RMS 12.7 µm (each setup's zero removed) against
+/// the model's floor 5.4 µm (...; p = 1.2e-30)", and where the residual is structured, that
 /// and its p-value, then what it follows.
 pub fn held_out(h: &HeldOutCheck) -> String {
     let mut s = format!(
-        "held-out RMS {:.1} um (each setup's zero removed) against the model's floor {:.1} um \
-         (the noise {:.1} um and the calibration's own uncertainty; {})",
+        "held-out RMS {:.1} µm (each setup's zero removed) against the model's floor {:.1} µm \
+         (the noise {:.1} µm and the calibration's own uncertainty; {})",
         h.rms_relative_um,
         h.floor_relative_um,
         h.noise_floor_relative_um,

@@ -3,6 +3,7 @@
 //! figures (`rpkm_core::diagnose`); the words and their units live here, once, for the
 //! terminal, the HTML report and the JSON's text fields alike.
 
+use crate::units::um_from_mm;
 use rpkm_core::diagnose::neighbours::Neighbours;
 use rpkm_core::diagnose::periodic::Periodic;
 use rpkm_core::diagnose::{
@@ -18,7 +19,7 @@ mod held_out;
 mod noise;
 
 use figures::um_with_sigma;
-pub use figures::{condition, condition_short, follows, p_is, with_sigma};
+pub use figures::{condition, condition_short, follows, p_is, unit_label, with_sigma};
 pub use held_out::{coverage, held_out, held_out_judge, return_drift_estimated};
 pub use noise::{estimated_level, noise, rated_by};
 
@@ -118,7 +119,7 @@ pub fn evidence(c: &Candidate) -> String {
     }
     if c.prediction.is_none() {
         if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
-            let _ = write!(s, "; held-out RMS as measured {b:.1} -> {a:.1} um");
+            let _ = write!(s, "; held-out RMS as measured {b:.1} -> {a:.1} µm");
         }
     }
     let _ = write!(s, "{}", judged(&c.judged));
@@ -150,7 +151,7 @@ pub fn held(params: &[rpkm_core::calib::EffectEstimate]) -> Vec<String> {
         .collect()
 }
 
-/// "held-out RMS 17.98 -> 12.69 um (± 2.11; the errors follow the change, p = 3.2e-8)", or
+/// "held-out RMS 17.98 -> 12.69 µm (± 2.11; the errors follow the change, p = 3.2e-8)", or
 /// "(± 2.11; 1 parameter fitted with them, the fall beyond what that takes from noise p =
 /// 2.0e-9)".
 fn prediction(p: &Prediction) -> String {
@@ -170,7 +171,10 @@ fn prediction(p: &Prediction) -> String {
     };
     format!(
         "{what} {:.2} -> {:.2} {} (± {:.2}; {support})",
-        p.rms_before, p.rms_after, p.unit, p.standard_error
+        p.rms_before,
+        p.rms_after,
+        unit_label(p.unit),
+        p.standard_error
     )
 }
 
@@ -221,7 +225,7 @@ fn evidence_of(e: EvidenceOf) -> &'static str {
 }
 
 /// A model of the search in words: "thermal:rods + preload_elastic: F = 98.0 (p = 1e-40);
-/// alpha_rods = ...; held-out RMS 9.14 -> 4.60 um (± 0.4); evidence ...".
+/// alpha_rods = ...; held-out RMS 9.14 -> 4.60 µm (± 0.4); evidence ...".
 pub fn trial(t: &ModelTrial) -> String {
     let added: Vec<String> = t.added.iter().map(|a| with_parts(a)).collect();
     // the p-value is the larger of the F-test's and the Wald test's: where the Wald test
@@ -575,7 +579,7 @@ pub fn return_drift(d: &rpkm_core::returns::ReturnDrift) -> String {
              instrument drifted after its zero (line {})",
             d.instrument,
             d.setup,
-            d.magnitude_mm * 1e3,
+            um_from_mm(d.magnitude_mm),
             d.seconds,
             d.line
         )
@@ -585,7 +589,7 @@ pub fn return_drift(d: &rpkm_core::returns::ReturnDrift) -> String {
             d.instrument,
             d.setup,
             d.seconds,
-            d.magnitude_mm * 1e3
+            um_from_mm(d.magnitude_mm)
         )
     }
 }

@@ -32,6 +32,7 @@ use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_twin::{Twin, TwinConfig};
 
 use crate::cli::bad_input;
+use rpkm_core::units::{ms_from_seconds, us_from_seconds};
 
 #[derive(clap::Args, Debug)]
 pub struct CalibrationArgs {
@@ -101,7 +102,7 @@ pub fn run(a: &CalibrationArgs) -> Result<()> {
             2 * poses,
             all.iterations,
             all.seconds,
-            all.seconds / poses as f64 * 1e6,
+            us_from_seconds(all.seconds / poses as f64),
             one.seconds / all.seconds,
             all.max_rss_mb
         );
@@ -281,7 +282,7 @@ fn diagnosis(seed: u64) -> Result<()> {
         };
         let t0 = Instant::now();
         let d = diagnose::diagnose(&cal, Some(&val), &[], &opts)?;
-        ms[k] = t0.elapsed().as_secs_f64() * 1e3;
+        ms[k] = ms_from_seconds(t0.elapsed().as_secs_f64());
         kinds.push((d.verdict_kind, d.candidates.len()));
     }
     println!(
@@ -320,7 +321,7 @@ fn diagnosis_at_scale(seed: u64) -> Result<()> {
             .as_ref()
             .map_or(String::new(), |e| format!(", names {e}"))
     );
-    println!("  {}", crate::words::verdict(&d));
+    println!("  {}", rpkm_nodes::words::verdict(&d));
     Ok(())
 }
 
@@ -397,7 +398,7 @@ fn median_of(n: usize, mut f: impl FnMut() -> Result<f64>) -> Result<f64> {
 fn fit_alone(path: &Path) -> Result<FitAlone> {
     use rpkm_core::calib::{self, Options, Prior, Selection};
     let t0 = Instant::now();
-    let campaign = crate::input::read_campaign(path)?;
+    let campaign = rpkm_nodes::input::read_campaign(path)?;
     let read_s = t0.elapsed().as_secs_f64();
     let start = rpkm_core::params::Params::nominal();
     let fit_on = |threads: usize| {

@@ -5,11 +5,12 @@ use super::machines::{self, Class, Hidden, Machine, Measured};
 use super::DiscoveryArgs;
 use crate::cli::bad_input;
 use crate::cli::effect_stages::offered;
-use crate::effects_file::{self, EffectsFile};
 use anyhow::{Context, Result};
 use rpkm_core::calib;
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, Prediction, VerdictKind};
 use rpkm_core::effects::{self, Effect};
+use rpkm_core::units::um_from_mm;
+use rpkm_nodes::effects_file::{self, EffectsFile};
 use rpkm_twin::EffectKind;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -125,7 +126,7 @@ impl Loop<'_> {
             let m = self.measured;
             let d = diagnose::diagnose_among(&m.cal, Some(&m.val), &refs, &offer, &opts)?;
             if self.verbose {
-                println!("with {named:?}: {}", crate::words::verdict(&d));
+                println!("with {named:?}: {}", rpkm_nodes::words::verdict(&d));
             }
             let new: Vec<&String> = d
                 .missing_effects
@@ -195,7 +196,7 @@ fn write_machine(dir: &Path, m: &Machine, measured: &Measured) -> Result<()> {
     put(
         "machine.txt",
         &format!(
-            "hides: {:?}\nheld-out floor: {:.3} um ({:.3} um with each setup's zero removed)\n\n{:#?}\n",
+            "hides: {:?}\nheld-out floor: {:.3} µm ({:.3} µm with each setup's zero removed)\n\n{:#?}\n",
             machines::hidden_names(&m.hidden),
             measured.floor_um,
             measured.floor_relative_um,
@@ -248,7 +249,7 @@ fn outcome(
             .fold(0.0, f64::max),
         held_out_path_um: diagnoses
             .iter()
-            .map(|d| calib::rms(&d.baseline.val_errors) * 1e3)
+            .map(|d| um_from_mm(calib::rms(&d.baseline.val_errors)))
             .collect(),
         final_verdict: serde_json::to_value(kind)
             .ok()

@@ -2,11 +2,11 @@
 //! campaign's composition, the written effects a user of that class would offer, and the
 //! held-out floor the truth gives.
 
-use crate::effects_file::{self, EffectsFile};
 use anyhow::Result;
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::noise::{NoiseModel, N_GROUPS};
+use rpkm_nodes::effects_file::{self, EffectsFile};
 use rpkm_twin::{EffectKind, ThermalPhysics, Twin, TwinConfig, ZeroDrift};
 use std::collections::BTreeMap;
 use std::fmt::Write;

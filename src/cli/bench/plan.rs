@@ -13,6 +13,7 @@ use rpkm_core::noise::NoiseModel;
 use rpkm_core::obs;
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::{self, AccuracyPlanner, Start, TargetForecast, Unknowns};
+use rpkm_core::units::{rad_from_mrad, um_from_mm};
 use rpkm_twin::{Twin, TwinConfig};
 use std::collections::BTreeMap;
 
@@ -191,7 +192,7 @@ fn machine_runs(a: &PlanStudyArgs, noise: &NoiseModel, machine: u64, s: u64) -> 
     })?
     .run(&val_design, "validation")?;
     let prior = Prior {
-        angle_rad: a.tolerance_mrad * 1e-3,
+        angle_rad: rad_from_mrad(a.tolerance_mrad),
         ..Prior::default()
     };
     let (cal, estimated) = calibrate(&base, noise, prior)?;
@@ -225,15 +226,16 @@ fn machine_runs(a: &PlanStudyArgs, noise: &NoiseModel, machine: u64, s: u64) -> 
             machine,
             seed: s,
             budget,
-            now_expected_um: forecast.now_mm * 1e3,
+            now_expected_um: um_from_mm(forecast.now_mm),
             now_measured_um,
-            expected_um: forecast.after_mm * 1e3,
+            expected_um: um_from_mm(forecast.after_mm),
             plan_um: judged[0][0],
             random_um: judged[1][0],
-            expected_true_um: (forecast.after_mm.powi(2) - forecast.floor_mm.powi(2))
-                .max(0.0)
-                .sqrt()
-                * 1e3,
+            expected_true_um: um_from_mm(
+                (forecast.after_mm.powi(2) - forecast.floor_mm.powi(2))
+                    .max(0.0)
+                    .sqrt(),
+            ),
             plan_true_um: judged[0][1],
             random_true_um: judged[1][1],
         });

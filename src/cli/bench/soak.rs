@@ -21,8 +21,8 @@ use rpkm_transport::{topic, Subscriber, Transport, TransportConfig};
 use rpkm_twin::{Twin, TwinConfig};
 
 use crate::cli::bad_input;
-use crate::node::inputs::SeqGaps;
-use crate::stream::{StreamPath, StreamSpec, CIRCLE_PERIOD_S};
+use rpkm_nodes::node::inputs::SeqGaps;
+use rpkm_nodes::stream::{StreamPath, StreamSpec, CIRCLE_PERIOD_S};
 
 #[derive(clap::Args, Debug)]
 pub struct SoakArgs {
@@ -168,7 +168,7 @@ impl Rows {
             first_seq: 1,
         };
         let mut rest = Vec::new();
-        crate::stream::run(&twin, &spec, |_, s| {
+        rpkm_nodes::stream::run(&twin, &spec, |_, s| {
             rest.push(row_after_t(s));
             Ok(())
         })?;
@@ -190,7 +190,7 @@ impl Rows {
 
 /// `setup,instrument,reset,q1..q4 (mm),f1..f4,follower,x,y,r,psi,temp_machine` of a state.
 fn row_after_t(s: &ActuatorState) -> String {
-    let q = s.position.map(crate::units::mm_from_m);
+    let q = rpkm_nodes::units::drive_positions_mm(s);
     let follower: String = (b'1'..=b'4')
         .zip(s.follower)
         .filter_map(|(digit, on)| on.then_some(char::from(digit)))

@@ -1,7 +1,7 @@
 //! The analysis as `rpkm history --json` writes it.
 
-use crate::history::{words, Analysis};
 use rpkm_history::{CalibrationRecord, Stored};
+use rpkm_nodes::history::{words, Analysis};
 
 /// The analysis as JSON (mm, rad; slopes per month; times UTC Unix seconds): what
 /// `rpkm history --json` writes.

@@ -6,10 +6,10 @@ mod csv;
 mod json;
 
 use super::bad_input;
-use crate::history::{analyse, words, Analysis};
 use crate::report::history::HistoryPage;
 use rpkm_core::params::{index_of, unit, Unit, NAMES};
 use rpkm_history::{CalibrationRecord, Store, Stored};
+use rpkm_nodes::history::{analyse, words, Analysis};
 use std::path::PathBuf;
 
 /// Show a machine's history: every calibration kept, what changed since the last one, and

@@ -10,6 +10,7 @@ use rpkm_core::plan::{
     self, AccuracyPlanner, CandidateSetup, DeterminationPlan, Forecast, Start, TargetForecast,
     Unknowns,
 };
+use rpkm_core::units::um_from_mm;
 use serde_json::json;
 
 /// Random designs the plan is compared with (the median of their expected RMS).
@@ -78,19 +79,19 @@ pub fn run(
                 "kind": "tcp",
                 "held_out": where_words,
                 "budget": last.budget,
-                "now_um": f.now_mm * 1e3,
-                "after_um": f.after_mm * 1e3,
-                "random_um": last.random_mm * 1e3,
-                "floor_um": f.floor_mm * 1e3,
-            "own_now_um": own(f.now_mm, f.floor_mm) * 1e3,
-            "own_after_um": own(f.after_mm, f.floor_mm) * 1e3,
-            "own_random_um": own(last.random_mm, f.floor_mm) * 1e3,
+                "now_um": um_from_mm(f.now_mm),
+                "after_um": um_from_mm(f.after_mm),
+                "random_um": um_from_mm(last.random_mm),
+                "floor_um": um_from_mm(f.floor_mm),
+            "own_now_um": um_from_mm(own(f.now_mm, f.floor_mm)),
+            "own_after_um": um_from_mm(own(f.after_mm, f.floor_mm)),
+            "own_random_um": um_from_mm(own(last.random_mm, f.floor_mm)),
             "pays": pays(f.now_mm, f.after_mm, f.floor_mm),
                 "budgets": all.iter().map(|b| json!({
                     "budget": b.budget,
                     "poses": b.plan.design().len(),
-                    "after_um": b.forecast.after_mm * 1e3,
-                    "random_um": b.random_mm * 1e3,
+                    "after_um": um_from_mm(b.forecast.after_mm),
+                    "random_um": um_from_mm(b.random_mm),
                 })).collect::<Vec<_>>(),
                 "before": last.plan.before,
                 "after": last.plan.after(),
@@ -116,9 +117,9 @@ fn print_plan(b: &Budgeted, where_words: &str) {
     let f = b.forecast;
     let line = |what: &str, rms: f64| {
         println!(
-            "  {what:<26} {:>8.2} um {:>13.2} um",
-            rms * 1e3,
-            own(rms, f.floor_mm) * 1e3
+            "  {what:<26} {:>8.2} µm {:>13.2} µm",
+            um_from_mm(rms),
+            um_from_mm(own(rms, f.floor_mm))
         );
     };
     println!("expected held-out RMS ({where_words}, each setup's zero removed):");
@@ -132,9 +133,9 @@ fn print_plan(b: &Budgeted, where_words: &str) {
     line("after the plan", f.after_mm);
     line(&format!("{} random poses instead", b.budget), b.random_mm);
     println!(
-        "  {:<26} {:>8.2} um   (the floor: the tracker's own noise, zero removed)",
+        "  {:<26} {:>8.2} µm   (the floor: the tracker's own noise, zero removed)",
         "noise alone",
-        f.floor_mm * 1e3
+        um_from_mm(f.floor_mm)
     );
     println!(
         "  parameter combinations determined better than their tolerance: {} of {} now, {} after",
@@ -148,19 +149,19 @@ fn print_plan(b: &Budgeted, where_words: &str) {
 /// What the plan buys, in words.
 fn buys_words(b: &Budgeted) -> String {
     let f = b.forecast;
-    let um = |v: f64| own(v, f.floor_mm) * 1e3;
+    let um = |v: f64| um_from_mm(own(v, f.floor_mm));
     let (now, after, random) = (um(f.now_mm), um(f.after_mm), um(b.random_mm));
     if !pays(f.now_mm, f.after_mm, f.floor_mm) {
         return format!(
-            "the plan buys nothing: the TCP's own error would stay at {after:.2} um (now \
-             {now:.2} um, less than {:.0} % lower), under the held-out readings' noise of \
-             {:.2} um",
+            "the plan buys nothing: the TCP's own error would stay at {after:.2} µm (now \
+             {now:.2} µm, less than {:.0} % lower), under the held-out readings' noise of \
+             {:.2} µm",
             WORTH * 100.0,
-            f.floor_mm * 1e3
+            um_from_mm(f.floor_mm)
         );
     }
     let versus = if after <= random {
-        format!("{} random poses: {random:.2} um", b.budget)
+        format!("{} random poses: {random:.2} µm", b.budget)
     } else {
         format!(
             "{} random poses would do better, {random:.2} um: the plan rests on the model",
@@ -168,10 +169,10 @@ fn buys_words(b: &Budgeted) -> String {
         )
     };
     format!(
-        "the plan lowers the TCP's own error from {now:.2} to {after:.2} um ({versus}); the \
-         held-out RMS from {:.2} to {:.2} um",
-        f.now_mm * 1e3,
-        f.after_mm * 1e3
+        "the plan lowers the TCP's own error from {now:.2} to {after:.2} µm ({versus}); the \
+         held-out RMS from {:.2} to {:.2} µm",
+        um_from_mm(f.now_mm),
+        um_from_mm(f.after_mm)
     )
 }
 
@@ -184,12 +185,12 @@ fn print_budgets(all: &[Budgeted]) {
     for b in all {
         let floor = b.forecast.floor_mm;
         println!(
-            "  {:>6} {:>10.2} um ({:>6.2} um) {:>10.2} um ({:>6.2} um)",
+            "  {:>6} {:>10.2} µm ({:>6.2} µm) {:>10.2} µm ({:>6.2} µm)",
             b.budget,
-            b.forecast.after_mm * 1e3,
-            own(b.forecast.after_mm, floor) * 1e3,
-            b.random_mm * 1e3,
-            own(b.random_mm, floor) * 1e3
+            um_from_mm(b.forecast.after_mm),
+            um_from_mm(own(b.forecast.after_mm, floor)),
+            um_from_mm(b.random_mm),
+            um_from_mm(own(b.random_mm, floor))
         );
     }
 }
@@ -228,9 +229,9 @@ fn print_nothing_to_gain(
         .iter()
         .map(|(mm, i)| {
             format!(
-                "--instruments {} (the TCP's own error {:.2} um)",
+                "--instruments {} (the TCP's own error {:.2} µm)",
                 super::output::spelling(*i),
-                mm * 1e3
+                um_from_mm(*mm)
             )
         })
         .collect();
@@ -247,13 +248,13 @@ fn comments(b: &Budgeted, where_words: &str) -> Vec<String> {
     let mut out = vec![
         "rpkm plan: x, y are target TCP positions (mm), nothing measured yet".to_owned(),
         format!(
-            "expected held-out RMS ({where_words}, each setup's zero removed): now {:.2} um, \
-             after the plan {:.2} um, {} random poses {:.2} um, noise floor {:.2} um",
-            f.now_mm * 1e3,
-            f.after_mm * 1e3,
+            "expected held-out RMS ({where_words}, each setup's zero removed): now {:.2} µm, \
+             after the plan {:.2} µm, {} random poses {:.2} µm, noise floor {:.2} µm",
+            um_from_mm(f.now_mm),
+            um_from_mm(f.after_mm),
             b.budget,
-            b.random_mm * 1e3,
-            f.floor_mm * 1e3
+            um_from_mm(b.random_mm),
+            um_from_mm(f.floor_mm)
         ),
     ];
     for s in &b.plan.setups {
@@ -263,11 +264,11 @@ fn comments(b: &Budgeted, where_words: &str) -> Vec<String> {
             ""
         };
         out.push(format!(
-            "setup {} ({}, {} poses{back}): then {:.2} um",
+            "setup {} ({}, {} poses{back}): then {:.2} µm",
             s.setup.id,
             s.setup.instrument.as_str(),
             s.poses,
-            s.expected_mm.unwrap_or(f64::NAN) * 1e3
+            um_from_mm(s.expected_mm.unwrap_or(f64::NAN))
         ));
     }
     out

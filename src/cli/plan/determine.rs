@@ -7,6 +7,7 @@ use rpkm_core::analysis::nominal_campaign;
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::plan::separate::{self, Hypothesis, Pair, SeparationPlan};
 use rpkm_core::plan::{self, DeterminationPlan, Start, Unknowns};
+use rpkm_core::units::um_from_mm;
 use serde_json::json;
 
 /// `--criterion determinant`: the plan that determines most of what the campaign left.
@@ -72,7 +73,7 @@ fn with_plan(start: &Start, poses: &[rpkm_core::design::PlannedPose]) -> anyhow:
 
 pub fn size_words(h: Hypothesis, size: f64) -> String {
     match h {
-        Hypothesis::LostMotion(_) => format!("{h} = {:.1} um", size * 1e3),
+        Hypothesis::LostMotion(_) => format!("{h} = {:.1} µm", um_from_mm(size)),
         Hypothesis::Parameter(_) => format!("{h} at its tolerance {size}"),
     }
 }
@@ -140,7 +141,7 @@ pub fn setups_json(p: &DeterminationPlan) -> serde_json::Value {
         "poses": s.poses,
         "points": s.points.iter().map(|&k| s.setup.points[k]).map(|(x, y)| [x, y]).collect::<Vec<_>>(),
         "after": s.after,
-        "expected_um": s.expected_mm.map(|v| v * 1e3),
+        "expected_um": s.expected_mm.map(um_from_mm),
     })).collect::<Vec<_>>())
 }
 

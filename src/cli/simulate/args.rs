@@ -94,13 +94,13 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 1.0)]
     pub stream_seconds: f64,
     /// Commanded path during the stream.
-    #[arg(long, value_enum, default_value_t = crate::stream::StreamPath::Circle)]
-    pub stream_motion: crate::stream::StreamPath,
+    #[arg(long, value_enum, default_value_t = rpkm_nodes::stream::StreamPath::Circle)]
+    pub stream_motion: rpkm_nodes::stream::StreamPath,
     /// A drive whose carrier drifts from its encoder during the stream, qN=MM, ramped from 0
     /// to MM (e.g. q3=0.8: with preload_elastic the drives then fight, the redundancy
     /// current grows; 0.4 mm on q3 is about 100 %).
     #[arg(long)]
-    pub fault: Option<crate::stream::Fault>,
+    pub fault: Option<rpkm_nodes::stream::Fault>,
     /// A production stream instead of campaigns (issue 15): this many seconds of a
     /// machining-like path (random contour moves at 50 mm/s), all drives active (give
     /// --effect preload_elastic), force noise, a drifting temperature, sampled at --stream-hz

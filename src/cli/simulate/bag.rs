@@ -9,9 +9,9 @@ use rpkm_transport::bag::BagWriter;
 use rpkm_twin::Twin;
 
 use super::args::SimulateArgs;
-use crate::campaign_bag::{campaign_messages, stamp_ns, write_campaign, CampaignTopics};
 use crate::cli::bag_files::{bag_options, write_campaign_bag};
-use crate::stream::{self, StreamSpec};
+use rpkm_nodes::campaign_bag::{campaign_messages, stamp_ns, write_campaign, CampaignTopics};
+use rpkm_nodes::stream::{self, StreamSpec};
 
 /// Seconds between the end of the campaign (or the twin's start) and the stream.
 const STREAM_GAP_S: f64 = 1.0;
@@ -52,7 +52,7 @@ pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
             covariate_names: vec!["temp_machine".into()],
         };
         let t0 = spec.map_or(0, |s| {
-            crate::campaign_bag::stamp_from_seconds(s.start_s)
+            rpkm_nodes::campaign_bag::stamp_from_seconds(s.start_s)
                 .map_or(0, |t| u64::try_from(stamp_ns(t)).unwrap_or(0))
         });
         bag.write(&topics.info, t0, &info)?;
@@ -92,7 +92,7 @@ pub fn run(args: &SimulateArgs, twin: &mut Twin, names: &[&str]) -> Result<()> {
 /// The twin's true parameters on /rpkm/parameters at its clock's start (before the campaign
 /// and the stream), as a calibrator that found them exactly publishes them.
 fn write_parameters(bag: &mut BagWriter, twin: &Twin) -> Result<u64> {
-    let handle = crate::topics::add_bag_topic(bag, &rpkm_transport::topic::PARAMETERS)?;
+    let handle = rpkm_nodes::topics::add_bag_topic(bag, &rpkm_transport::topic::PARAMETERS)?;
     let model = rpkm_core::params::Model::M29;
     let sigmas = [0.0; rpkm_core::params::N_PARAMS];
     let msg = rpkm_msgs::Parameters {
@@ -101,9 +101,9 @@ fn write_parameters(bag: &mut BagWriter, twin: &Twin) -> Result<u64> {
         val_rms: f64::NAN,
         max_abs_residual: f64::NAN,
         condition_number: f64::NAN,
-        ..crate::node::geometry::parameters_msg(twin.true_params(), model, &sigmas)
+        ..rpkm_nodes::node::geometry::parameters_msg(twin.true_params(), model, &sigmas)
     };
-    let t = crate::campaign_bag::stamp_from_seconds(twin.time())
+    let t = rpkm_nodes::campaign_bag::stamp_from_seconds(twin.time())
         .map_or(0, |t| u64::try_from(stamp_ns(t)).unwrap_or(0));
     bag.write(&handle, t, &msg)?;
     Ok(1)

@@ -10,12 +10,12 @@
 )]
 
 use super::*;
-use crate::node::preload_monitor::{Monitor, Thresholds as NodeThresholds};
-use crate::node::Geometry;
 use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::igm;
 use rpkm_core::params::{Model, Params};
 use rpkm_msgs::{DiagnosticStatus, KeyValue};
+use rpkm_nodes::node::preload_monitor::{Monitor, Thresholds as NodeThresholds};
+use rpkm_nodes::node::Geometry;
 
 fn watch() -> Watch {
     Watch::new(WatchConfig::default(), MonitorThresholds::unknown())
@@ -45,7 +45,7 @@ fn node_status(dq3: f64, followers: bool) -> (DiagnosticStatus, PreloadStatus) {
             model: Model::M29,
             stiffness: Stiffness::default(),
             source: "test".into(),
-            effects: crate::node::effects::NodeEffects::default(),
+            effects: rpkm_nodes::node::effects::NodeEffects::default(),
         },
         NodeThresholds {
             warn_percent: 30.0,
@@ -106,7 +106,7 @@ fn thresholds_are_read_from_the_reports_values_before_any_drive_state() {
             model: Model::M29,
             stiffness: Stiffness::default(),
             source: "test".into(),
-            effects: crate::node::effects::NodeEffects::default(),
+            effects: rpkm_nodes::node::effects::NodeEffects::default(),
         },
         NodeThresholds {
             warn_percent: 27.5,

@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use rpkm::campaign_bag::stamp_from_seconds;
 use rpkm_core::campaign::Campaign;
 use rpkm_msgs::{ActuatorState, CampaignInfo, DiagnosticStatus, PreloadStatus, TcpEstimate, Time};
+use rpkm_nodes::campaign_bag::stamp_from_seconds;
 use rpkm_transport::{topic, Subscriber, Transport, TransportConfig};
 
 use crate::node_support::{twin_stream, unique, Launch, TempDir};
@@ -187,7 +187,7 @@ impl Script<'_> {
             if k > 0 && k % TEMPERATURE_EVERY == 0 {
                 out.push_str(&temperature_line(stamp(c, k), temp(k)));
             }
-            let q = pose.q.map(|q| q / rpkm::units::MM_PER_M);
+            let q = pose.q.map(|q| q / rpkm_nodes::units::MM_PER_M);
             out.push_str(&joint_line(self.cell, stamp(c, k), q, pose.f));
         }
         if self.tail {
@@ -199,7 +199,7 @@ impl Script<'_> {
     fn tail_text(&self) -> String {
         let c = self.campaign;
         let last = c.poses.last().expect("poses");
-        let q = last.q.map(|q| q / rpkm::units::MM_PER_M);
+        let q = last.q.map(|q| q / rpkm_nodes::units::MM_PER_M);
         let at = |dt: f64| stamp_from_seconds(last.t + dt).expect("stamp");
         let good = joint_line(self.cell, at(1.0), q, last.f);
         let missing = good.replace(&self.cell.joints[1], "q2_link");

@@ -39,7 +39,7 @@ use super::inputs::{self, DriveInput, ParameterFollower, SeqGaps, StreamMotion, 
 use super::params::NodeParams;
 use super::params::SAMPLE_COUNT;
 use super::realtime::BUSY_POLL;
-use crate::units::{m_from_mm, mm_from_m, seconds_from_ms};
+use crate::units::{mm_from_m, seconds_from_ms, set_follower_offsets_mm};
 
 // > 0 without an upper bound: no descriptor range, the node's check says it.
 const WARN_PERCENT: ParamSpec = ParamSpec::live(
@@ -293,8 +293,7 @@ impl Monitor {
         let mut sample_level = level_by(worst, t.warn_percent, t.error_percent);
         if s.follower[1] && s.follower[2] {
             if let Ok([q2, q3]) = rgm(&params, g.model, q[0], q[3]) {
-                st.dq2 = m_from_mm(q2 - q[1]);
-                st.dq3 = m_from_mm(q3 - q[2]);
+                set_follower_offsets_mm(&mut st, [q2 - q[1], q3 - q[2]]);
                 let dq = st.dq2.abs().max(st.dq3.abs());
                 sample_level = sample_level.max(level_by(dq, t.dq_warn_m, t.dq_error_m));
             }

@@ -1,6 +1,7 @@
 //! The preload monitor's tests: levels, debounce, followers' Δq, forces not measured.
 
 use super::*;
+use crate::units::m_from_mm;
 use rpkm_core::elastic::{fegm, Stiffness, ALL_ACTIVE};
 use rpkm_core::geometry::igm;
 use rpkm_core::params::{Model, Params};
