@@ -12,7 +12,7 @@
 //! [`super::structure`] on the held-out residual, with the time since each setup's zero).
 
 use super::structure::Shape;
-use super::types::{DiagnoseError, Fit, FitError, HeldOutCheck, Prediction};
+use super::types::{DiagnoseError, Fit, FitError, HeldOutCheck, Prediction, RmsUnit};
 use super::validation::{group_sums, Validation};
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
@@ -400,7 +400,7 @@ impl Prediction {
             rms_before: p.rms_before * 1e3,
             rms_after: p.rms_after * 1e3,
             standard_error: p.standard_error * 1e3,
-            unit: "um",
+            unit: RmsUnit::Um,
             ..p
         })
     }
@@ -481,7 +481,7 @@ impl Prediction {
             rms_before: rb,
             rms_after: ra,
             standard_error: se,
-            unit: "sigma",
+            unit: RmsUnit::Sigma,
             support_p: support(before, after),
             refitted: 0,
             better: rb - ra > se,

@@ -64,6 +64,6 @@ pub use trials::SCREEN_P;
 pub use types::{
     Baseline, Candidate, DiagnoseError, DiagnosisOptions, ErrorVector, EvidenceOf, Fit, GroupRms,
     HeldOutCheck, Judged, ModelDiagnosis, ModelTrial, NoiseReport, Noisier, Outcome, Prediction,
-    ResidualPoint, Skipped, Test, VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM,
+    ResidualPoint, RmsUnit, Skipped, Test, VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM,
     RELEVANT_FRACTION,
 };
