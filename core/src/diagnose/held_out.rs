@@ -1,7 +1,8 @@
 //! The held-out judge: a calibrated model's errors on poses it has not seen, the noise they
 //! would have if the model were right, and whether they agree.
 //!
-//! One evaluation for every command and node ([`evaluate_held_out`]): the model's TCP
+//! One evaluation for every command and node (`Model1::errors`, under [`judge_calibration`]
+//! and the diagnosis's `judge`): the model's TCP
 //! errors at the held-out poses with its effects (setup-local effect parameters re-fitted on
 //! the held-out setups), raw and with each setup's zero removed (the reading a relative
 //! setup was zeroed on is in all its readings, and no model predicts it), the floor noise
