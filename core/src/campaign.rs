@@ -60,7 +60,7 @@ use std::str::FromStr;
 pub use error::CampaignError;
 pub use motion::{Motion, MotionCovariates};
 pub use parse::{parse_follower, CampaignReader};
-pub use write::follower_text;
+pub use write::{follower_text, followers_words, NO_FOLLOWERS};
 
 /// The required columns, in the order [`Campaign::to_csv`] writes them.
 pub const REQUIRED_COLUMNS: [&str; 17] = [

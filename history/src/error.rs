@@ -29,6 +29,13 @@ pub enum StoreError {
         id: i64,
         what: String,
     },
+    /// A stored event of a kind this rpkm does not know.
+    #[error("{location}: event {id}: kind {kind:?}, expected step or tie_settled")]
+    UnknownEventKind {
+        location: String,
+        id: i64,
+        kind: String,
+    },
     /// A record that cannot be stored as it is (a name with a NUL, a non-finite value).
     #[error("{location}: cannot record: {what}")]
     BadRecord { location: String, what: String },

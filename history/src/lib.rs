@@ -25,7 +25,7 @@ mod store;
 mod writer;
 
 pub use error::{StoreError, StoreFault};
-pub use record::{CalibrationRecord, CampaignId, EventRecord, NoiseLevel, Stored};
+pub use record::{CalibrationRecord, CampaignId, EventKind, EventRecord, NoiseLevel, Stored};
 pub use store::{is_postgres, Batch, Store};
 pub use writer::{RecordOutcome, Retried, Writer, MAX_RETRY};
 

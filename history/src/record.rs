@@ -78,8 +78,8 @@ pub struct EventRecord {
     pub machine: String,
     pub at_s: i64,
     pub source: String,
-    /// `step`, `tie_settled`, `drift`.
-    pub kind: String,
+    /// What the tracker said (stored as `step`, `tie_settled`).
+    pub kind: EventKind,
     /// The parameter it names, if one.
     pub parameter: Option<String>,
     /// Its change and σ (mm, rad).
@@ -89,6 +89,40 @@ pub struct EventRecord {
     pub stream_t_s: Option<f64>,
     /// In words, as /diagnostics said it.
     pub message: String,
+}
+
+/// What an [`EventRecord`] records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EventKind {
+    /// A parameter stepped (the tracker named its change).
+    Step,
+    /// A tie between two parameters settled by a separating motion.
+    TieSettled,
+}
+
+impl EventKind {
+    /// Every kind, in the order the doc lists them.
+    pub const ALL: [EventKind; 2] = [EventKind::Step, EventKind::TieSettled];
+
+    /// As stored and printed.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            EventKind::Step => "step",
+            EventKind::TieSettled => "tie_settled",
+        }
+    }
+
+    /// The kind stored as `text`; None for a kind this rpkm does not write.
+    pub fn parse(text: &str) -> Option<EventKind> {
+        EventKind::ALL.into_iter().find(|k| k.as_str() == text)
+    }
+}
+
+impl std::fmt::Display for EventKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(self.as_str())
+    }
 }
 
 /// A record read back, with its key in the database.

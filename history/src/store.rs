@@ -5,7 +5,7 @@
 use crate::backend::{Kind, Tx, Value};
 use crate::error::StoreError;
 use crate::pg::Pg;
-use crate::record::{CalibrationRecord, CampaignId, EventRecord, NoiseLevel, Stored};
+use crate::record::{CalibrationRecord, CampaignId, EventKind, EventRecord, NoiseLevel, Stored};
 use crate::schema;
 use crate::sqlite::Sqlite;
 use nalgebra::SMatrix;
@@ -187,7 +187,8 @@ impl Store {
 
     /// A machine's events, oldest first.
     pub fn events(&mut self, machine: &str) -> Result<Vec<Stored<EventRecord>>, StoreError> {
-        self.transaction(|tx| read_events(tx, machine))
+        let location = self.location.clone();
+        self.transaction(|tx| read_events(tx, machine, &location))
     }
 }
 
@@ -201,7 +202,7 @@ impl Batch<'_> {
     /// Records an event in this batch (see [`Store::record_event`]).
     pub fn event(&mut self, event: &EventRecord) -> Result<bool, StoreError> {
         check_text(
-            [&event.machine, &event.source, &event.kind, &event.message],
+            [&event.machine, &event.source, &event.message],
             self.location,
         )?;
         let n = self.tx.execute(
@@ -211,7 +212,7 @@ impl Batch<'_> {
                 text(&event.machine),
                 Value::Int(Some(event.at_s)),
                 text(&event.source),
-                text(&event.kind),
+                text(event.kind.as_str()),
                 Value::Text(event.parameter.clone()),
                 finite(event.change),
                 finite(event.sigma),
@@ -518,7 +519,11 @@ fn read_noise(
     Ok(out)
 }
 
-fn read_events(tx: &mut dyn Tx, machine: &str) -> Result<Vec<Stored<EventRecord>>, StoreError> {
+fn read_events(
+    tx: &mut dyn Tx,
+    machine: &str,
+    location: &str,
+) -> Result<Vec<Stored<EventRecord>>, StoreError> {
     let rows = tx.query(
         "SELECT id, at_s, source, kind, parameter, change, sigma, stream_t_s, message \
          FROM events WHERE machine = ? ORDER BY at_s, id",
@@ -535,21 +540,29 @@ fn read_events(tx: &mut dyn Tx, machine: &str) -> Result<Vec<Stored<EventRecord>
             Kind::Text,
         ],
     )?;
-    Ok(rows
-        .iter()
-        .map(|r| Stored {
-            id: r[0].int().unwrap_or_default(),
-            record: EventRecord {
-                machine: machine.to_owned(),
-                at_s: r[1].int().unwrap_or_default(),
-                source: r[2].text().unwrap_or_default().to_owned(),
-                kind: r[3].text().unwrap_or_default().to_owned(),
-                parameter: r[4].text().map(str::to_owned),
-                change: r[5].real(),
-                sigma: r[6].real(),
-                stream_t_s: r[7].real(),
-                message: r[8].text().unwrap_or_default().to_owned(),
-            },
+    rows.iter()
+        .map(|r| {
+            let id = r[0].int().unwrap_or_default();
+            let stored = r[3].text().unwrap_or_default();
+            let kind = EventKind::parse(stored).ok_or_else(|| StoreError::UnknownEventKind {
+                location: location.to_owned(),
+                id,
+                kind: stored.to_owned(),
+            })?;
+            Ok(Stored {
+                id,
+                record: EventRecord {
+                    machine: machine.to_owned(),
+                    at_s: r[1].int().unwrap_or_default(),
+                    source: r[2].text().unwrap_or_default().to_owned(),
+                    kind,
+                    parameter: r[4].text().map(str::to_owned),
+                    change: r[5].real(),
+                    sigma: r[6].real(),
+                    stream_t_s: r[7].real(),
+                    message: r[8].text().unwrap_or_default().to_owned(),
+                },
+            })
         })
-        .collect())
+        .collect()
 }

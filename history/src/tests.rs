@@ -2,7 +2,7 @@
 //! bit), a retried write records once, events keep their order, and a database of a newer
 //! schema is refused.
 
-use crate::{CalibrationRecord, CampaignId, EventRecord, NoiseLevel, Store, StoreError};
+use crate::{CalibrationRecord, CampaignId, EventKind, EventRecord, NoiseLevel, Store, StoreError};
 use nalgebra::SMatrix;
 use rpkm_core::params::{Model, Params, L3, N_PARAMS};
 
@@ -70,7 +70,7 @@ fn a_calibration_reads_back_as_written_and_records_once() -> Result<(), StoreErr
         machine: "cell-1".into(),
         at_s: 1_772_400_000,
         source: "/rpkm/calibrator".into(),
-        kind: "step".into(),
+        kind: EventKind::Step,
         parameter: Some("l3".into()),
         change: Some(0.1),
         sigma: Some(0.002),
@@ -82,6 +82,42 @@ fn a_calibration_reads_back_as_written_and_records_once() -> Result<(), StoreErr
     let events = store.events("cell-1")?;
     assert_eq!(events.len(), 1);
     assert_eq!(events[0].record, event);
+    Ok(())
+}
+
+/// An event kind this rpkm does not write (`drift`, which the record's doc once listed) is
+/// refused when read back, naming the event: never read as another kind.
+#[test]
+fn an_event_of_an_unknown_kind_is_refused() -> Result<(), StoreError> {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("m.db");
+    let path = path.to_string_lossy();
+    drop(Store::open(&path)?);
+    let sqlite = |source| StoreError::Sqlite {
+        location: path.to_string(),
+        source,
+    };
+    let conn = rusqlite::Connection::open(path.as_ref()).map_err(sqlite)?;
+    conn.execute(
+        "INSERT INTO events (machine, at_s, source, kind, message) \
+         VALUES ('cell-1', 0, 'test', 'drift', 'a drift')",
+        [],
+    )
+    .map_err(sqlite)?;
+    drop(conn);
+    let got = Store::open(&path)?.events("cell-1");
+    let Err(e @ StoreError::UnknownEventKind { .. }) = got else {
+        panic!("expected the unknown kind refused, got {got:?}");
+    };
+    assert!(
+        e.to_string()
+            .ends_with("event 1: kind \"drift\", expected step or tie_settled"),
+        "{e}"
+    );
+    assert_eq!(
+        EventKind::ALL.map(|k| EventKind::parse(k.as_str())),
+        EventKind::ALL.map(Some)
+    );
     Ok(())
 }
 

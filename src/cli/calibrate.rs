@@ -24,6 +24,7 @@ use std::path::PathBuf;
 /// Example:
 ///   rpkm calibrate campaign.csv --model 29 --params auto --validate held_out.csv --json cal.json
 #[derive(clap::Args, Debug)]
+#[command(after_help = super::library_help::library())]
 pub struct CalibrateArgs {
     /// Campaign CSV (spec format: t, setup, instrument, reset, q1..q4, f1..f4, follower, x, y, r, psi, covariates).
     pub campaign: PathBuf,
@@ -80,9 +81,8 @@ pub struct CalibrateArgs {
     /// geometry is calibrated with them (the parameters, σ and covariance printed and in
     /// --json are the model's with the effects, whose own parameters follow), and the output
     /// shows the error falling effect by effect (table; chart with --chart).
-    /// Library: parallelogram, preload_elastic, thermal, thermal_lag (thermometers that lag
-    /// the parts: beside thermal, the time constant τ = lag/α is printed with its σ),
-    /// encoder_scale, guide_straightness, instrument_alignment. A family named whole fits
+    /// The library's effects are listed below (with thermal_lag beside thermal, the time
+    /// constant τ = lag/α is printed with its σ). A family named whole fits
     /// every part (thermal: rods, frame and scales); `thermal:rods` pins one,
     /// `thermal:rods+frame` several (the name the diagnosis advises).
     #[arg(long, default_value = "")]

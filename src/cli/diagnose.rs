@@ -57,11 +57,10 @@ impl serde::Serialize for Points<'_> {
 ///
 /// 1. Calibrates the current model (geometry, plus the effects given with --effects) and tests
 ///    its residual against the instruments' noise (chi-square).
-/// 2. Tries every effect of the library not yet in the model: parallelogram, preload_elastic,
-///    thermal, thermal_lag (thermometers that lag the parts, tried where thermal is in the
-///    model), encoder_scale, guide_straightness, instrument_alignment; for each, its
-///    parameters, a nested F-test, the fraction of the residual above the noise it explains
-///    and the held-out RMS after adding it. Ranked best first (BIC). A family's parts
+/// 2. Tries every effect of the library not yet in the model (listed below; one beside a
+///    family is tried where that family is in the model); for each, its parameters, a
+///    nested F-test, the fraction of the residual above the noise it explains and the
+///    held-out RMS after adding it. Ranked best first (BIC). A family's parts
 ///    (thermal:rods) and an effect's refinements (preload_elastic:rod3, a rod of another
 ///    stiffness with a compliance of its own) are tried where the family or effect stands
 ///    out, and the model is chosen whole.
@@ -75,6 +74,7 @@ impl serde::Serialize for Points<'_> {
 ///   rpkm diagnose campaign.csv --model 24 --validate held_out.csv --report diag/
 ///   rpkm diagnose campaign.csv --effects thermal --validate held_out.csv --json d.json
 #[derive(clap::Args, Debug)]
+#[command(after_help = super::library_help::library())]
 pub struct DiagnoseArgs {
     /// Campaign CSV (spec format); covariates such as temp_machine are used by the effects.
     pub campaign: PathBuf,

@@ -11,6 +11,7 @@ mod effect_stages;
 mod held_out_poses;
 pub mod history;
 pub mod ingest;
+pub mod library_help;
 pub mod monitor;
 pub mod plan;
 pub mod preload;

@@ -237,7 +237,7 @@ impl HistoryPage<'_> {
                 "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
                 escape(&words::date_time(r.at_s)),
                 escape(&r.source),
-                escape(&r.kind),
+                escape(r.kind.as_str()),
                 escape(&r.message)
             );
         }

@@ -114,7 +114,7 @@ fn the_plan_measures_in_the_campaigns_drive_mode_unless_the_model_carries_the_pr
     let preload = ["--effect", "preload_elastic"];
     let loaded = simulated(dir.path(), "loaded.csv", ("lt,self", "4"), &preload);
     let following = simulated(dir.path(), "following.csv", ("lt,self", "4"), &[]);
-    let cases: [(&str, &[&str], &str, &str); 4] = [
+    let cases: [(&str, &[&str], &str, &str); 6] = [
         (&loaded, &[], "", "the model carries no preload"),
         (
             &loaded,
@@ -129,6 +129,14 @@ fn the_plan_measures_in_the_campaigns_drive_mode_unless_the_model_carries_the_pr
             "as 45 of the campaign's 45 external rows",
         ),
         (&loaded, &["--follower", "23"], "23", "as --follower names"),
+        // no follower, in either spelling every reader of followers takes
+        (
+            &following,
+            &["--follower", "none"],
+            "",
+            "as --follower names",
+        ),
+        (&following, &["--follower", ""], "", "as --follower names"),
     ];
     for (k, (campaign, extra, want, why)) in cases.into_iter().enumerate() {
         let plan = path(dir.path(), &format!("plan{k}.csv"));

@@ -7,7 +7,7 @@
 use crate::history_support::postgres::server;
 use nalgebra::SMatrix;
 use rpkm_core::params::{Model, Params, L3, N_PARAMS};
-use rpkm_history::{CalibrationRecord, CampaignId, EventRecord, Store};
+use rpkm_history::{CalibrationRecord, CampaignId, EventKind, EventRecord, Store};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::Duration;
@@ -60,7 +60,7 @@ fn killed_writer() {
             machine: "killed".into(),
             at_s: 1_772_359_200 + 3 * 86_400,
             source: "history_kill".into(),
-            kind: "step".into(),
+            kind: EventKind::Step,
             parameter: Some("l3".into()),
             change: Some(0.1),
             sigma: Some(0.002),

@@ -53,6 +53,7 @@ mod history_twin;
 mod ingest_grammar;
 mod launch_cell;
 mod launch_params_file;
+mod library_described;
 mod monitor_foxglove_layout;
 mod monitor_tmux;
 mod node_calibrate_action;

@@ -2,7 +2,7 @@
 //! ros2_control cell (an independent Eclipse Cyclone DDS peer, tests/python/
 //! joint_states_peer.py) with the docs' cell block (`followers: "23"`). The cell switches its
 //! controllers, every drive holding, and says so through ingest's parameter services
-//! (`followers ''`); then ingest is killed with SIGKILL and the launch restarts it. The
+//! (`followers none`, the spelling the logs write; `''` reads the same); then ingest is killed with SIGKILL and the launch restarts it. The
 //! restarted ingest must carry the value set, not the file's: its start-up line says it is
 //! kept and when it was set, `get_parameters` returns it (tests/python/ros2_params_peer.py),
 //! and every state of the twin's poses under preload the cell plays next carries every drive
@@ -79,7 +79,7 @@ fn followers_set_at_run_time_survive_a_restart_of_ingest() {
     );
     let set = write_script(
         &dir.0,
-        "MATCH 1 /joint_states\nSET /rpkm/ingest followers ''\n",
+        "MATCH 1 /joint_states\nSET /rpkm/ingest followers none\n",
     );
     let said = run_peer(&py, "joint_states_peer.py", &[set.to_str().expect("utf-8")]);
     assert!(said.contains("SET followers ok"), "{said}");
@@ -113,7 +113,8 @@ fn followers_set_at_run_time_survive_a_restart_of_ingest() {
         &[get.to_str().expect("utf-8"), "--node", "/rpkm/ingest"],
     );
     let got: serde_json::Value = serde_json::from_str(got.trim()).expect("one JSON line");
-    assert_eq!(got["get"]["followers"], serde_json::json!([4, ""]));
+    // the value as the cell set it: `none`, which every reader takes as `""`
+    assert_eq!(got["get"]["followers"], serde_json::json!([4, "none"]));
     // the thermometer map, a group, is listed entry by entry
     assert_eq!(
         got["get"]["temperatures.temp_machine"],

@@ -105,6 +105,28 @@ impl EffectKind {
         }
     }
 
+    /// What a user of `rpkm simulate` should know beside the magnitude (its help lists it).
+    pub fn note(self) -> &'static str {
+        match self {
+            EffectKind::Parallelogram => "rod 5 longer than rod 4",
+            EffectKind::PreloadElastic => {
+                "all drives active, the controller's parameter error scaled by it"
+            }
+            EffectKind::Thermal => "temperature swing of rods, frame and scales (temp_machine)",
+            EffectKind::EncoderScale => "scale error of guide 2's encoders (q1, q4)",
+            EffectKind::GuideStraightness => "sagitta of guide 2's bow",
+            EffectKind::InstrumentAlignment => "σ of each setup's instrument rotation",
+            EffectKind::Backlash => {
+                "lost motion of q1, q4, with approach_q1/approach_q4 covariates; not in the \
+                 diagnosis library"
+            }
+            EffectKind::LostMotionQ4 => {
+                "lost motion of carrier 4 alone, nothing recorded beside it; not in the \
+                 diagnosis library"
+            }
+        }
+    }
+
     /// Default magnitude.
     pub fn default_magnitude(self) -> f64 {
         match self {

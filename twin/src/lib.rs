@@ -612,7 +612,7 @@ fn followers_23(plan: &PlannedPose) -> Result<bool, TwinError> {
     }
     Err(TwinError::DriveMode {
         setup: plan.setup.clone(),
-        follower: rpkm_core::campaign::follower_text(plan.follower),
+        follower: rpkm_core::campaign::followers_words(plan.follower),
     })
 }
 

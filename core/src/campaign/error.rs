@@ -123,7 +123,7 @@ pub enum CampaignError {
         text: String,
     },
     /// The `follower` field is not a set of distinct actuator digits 1..4 (e.g. `23`) or empty.
-    #[error("{file}:{line}:{column} (follower): expected distinct actuator digits 1-4 such as \"23\", or nothing, found {text:?}")]
+    #[error("{file}:{line}:{column} (follower): expected distinct actuator digits 1-4 such as \"23\", or none (or nothing), found {text:?}")]
     BadFollower {
         file: String,
         line: usize,
@@ -187,7 +187,7 @@ pub enum CampaignError {
         value: f64,
     },
     /// A self-calibration row without q2 and q3 in follower mode.
-    #[error("{file}:{line}:{column} (follower): instrument self needs q2 and q3 in follower mode, expected \"23\", found {text:?}")]
+    #[error("{file}:{line}:{column} (follower): instrument self needs q2 and q3 in follower mode, expected \"23\", found {text}")]
     SelfNeedsFollowers {
         file: String,
         line: usize,

@@ -5,6 +5,7 @@ use std::collections::HashMap;
 
 use super::error::clip;
 use super::plausible;
+use super::write::NO_FOLLOWERS;
 use super::{Campaign, CampaignError, Instrument, MeasuredPose, REQUIRED_COLUMNS};
 
 // Positions in `REQUIRED_COLUMNS`.
@@ -165,10 +166,15 @@ impl<'a> Row<'a> {
     }
 }
 
-/// `23` → `[false, true, true, false]`; empty → none; `None` for anything else than distinct
-/// digits 1..4.
+/// `23` → `[false, true, true, false]`; `none` and empty both → none (every reader of
+/// followers: a campaign's column, a plan, the node parameter, `rpkm plan --follower`);
+/// `None` for anything else than distinct digits 1..4.
 pub fn parse_follower(text: &str) -> Option<[bool; 4]> {
     let mut follower = [false; 4];
+    let text = text.trim();
+    if text == NO_FOLLOWERS {
+        return Some(follower);
+    }
     for c in text.chars() {
         let k = match c {
             '1' => 0,
@@ -642,7 +648,7 @@ fn check_row(pose: &MeasuredPose, layout: &Layout, file: &str) -> Result<(), Cam
             file: file.to_owned(),
             line: pose.line,
             column: layout.column(FOLLOWER),
-            text: super::write::follower_text(pose.follower),
+            text: super::write::followers_words(pose.follower),
         });
     }
     let m = instrument.measures();

@@ -1,7 +1,7 @@
 //! Unit tests of the helpers; the file-level tests are in `core/tests/it/campaign_*.rs`.
 
 use super::parse::parse_follower;
-use super::write::{follower_text, number};
+use super::write::{follower_text, followers_words, number};
 use super::*;
 
 #[test]
@@ -15,6 +15,12 @@ fn follower_digits_round_trip() {
     assert_eq!(parse_follower("2 3"), None);
     assert_eq!(follower_text([false, true, true, false]), "23");
     assert_eq!(follower_text([false; 4]), "");
+    // none and "" are one value to every reader; people read none
+    assert_eq!(parse_follower("none"), Some([false; 4]));
+    assert_eq!(parse_follower(" none "), Some([false; 4]));
+    assert_eq!(parse_follower("None"), None);
+    assert_eq!(followers_words([false; 4]), "none");
+    assert_eq!(followers_words([false, true, true, false]), "23");
 }
 
 #[test]

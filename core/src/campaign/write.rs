@@ -56,7 +56,22 @@ fn optional(v: Option<f64>) -> String {
     v.map(number).unwrap_or_default()
 }
 
-/// `[false, true, true, false]` → `23`.
+/// How followers are said when no drive follows: in logs, /diagnostics and messages
+/// ([`followers_words`]); [`super::parse_follower`] reads it as it reads `""`.
+pub const NO_FOLLOWERS: &str = "none";
+
+/// `[false, true, true, false]` → `23`, no follower → `none`: the one spelling of every text
+/// for people (a data file's field is [`follower_text`], empty for none).
+pub fn followers_words(follower: [bool; 4]) -> String {
+    if follower.contains(&true) {
+        follower_text(follower)
+    } else {
+        NO_FOLLOWERS.to_owned()
+    }
+}
+
+/// `[false, true, true, false]` → `23`, no follower → empty: the follower field of a
+/// campaign or plan file.
 pub fn follower_text(follower: [bool; 4]) -> String {
     follower
         .iter()

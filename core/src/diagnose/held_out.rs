@@ -1,7 +1,8 @@
 //! The held-out judge: a calibrated model's errors on poses it has not seen, the noise they
 //! would have if the model were right, and whether they agree.
 //!
-//! One evaluation for every command and node ([`evaluate_held_out`]): the model's TCP
+//! One evaluation for every command and node (`Model1::errors`, under [`judge_calibration`]
+//! and the diagnosis's `judge`): the model's TCP
 //! errors at the held-out poses with its effects (setup-local effect parameters re-fitted on
 //! the held-out setups), raw and with each setup's zero removed (the reading a relative
 //! setup was zeroed on is in all its readings, and no model predicts it), the floor noise
@@ -12,7 +13,7 @@
 //! [`super::structure`] on the held-out residual, with the time since each setup's zero).
 
 use super::structure::Shape;
-use super::types::{DiagnoseError, Fit, FitError, HeldOutCheck, Prediction};
+use super::types::{DiagnoseError, Fit, FitError, HeldOutCheck, Prediction, RmsUnit};
 use super::validation::{group_sums, Validation};
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
@@ -401,7 +402,7 @@ impl Prediction {
             rms_before: um_from_mm(p.rms_before),
             rms_after: um_from_mm(p.rms_after),
             standard_error: um_from_mm(p.standard_error),
-            unit: "um",
+            unit: RmsUnit::Um,
             ..p
         })
     }
@@ -482,7 +483,7 @@ impl Prediction {
             rms_before: rb,
             rms_after: ra,
             standard_error: se,
-            unit: "sigma",
+            unit: RmsUnit::Sigma,
             support_p: support(before, after),
             refitted: 0,
             better: rb - ra > se,

@@ -8,7 +8,7 @@
 //!   those that stood out.
 //! - [`current`]: the current model as every command evaluates it: its noise estimated from
 //!   the campaign, a family named whole settled to the parts the data can tell apart, its
-//!   held-out figures ([`evaluate`], which `rpkm calibrate` and the calibrator node use).
+//!   held-out figures ([`evaluate`], which `rpkm calibrate`'s table of stages uses).
 //! - [`trials`]: each effect of the library (and the user's written ones) added and fitted,
 //!   screened by one Gauss-Newton step, compared by the nested F-test
 //!   F = (Δχ²/k) / (χ²₁/ν₁), free of the noise's absolute level.
@@ -65,6 +65,6 @@ pub use trials::SCREEN_P;
 pub use types::{
     Baseline, Candidate, DiagnoseError, DiagnosisOptions, ErrorVector, EvidenceOf, Fit, GroupRms,
     HeldOutCheck, Judged, ModelDiagnosis, ModelTrial, NoiseReport, Noisier, Outcome, Prediction,
-    ResidualPoint, Skipped, Test, VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM,
+    ResidualPoint, RmsUnit, Skipped, Test, VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM,
     RELEVANT_FRACTION,
 };

@@ -368,11 +368,6 @@ pub fn structure(campaign: &Campaign, rows: &[RowValue]) -> Structure {
     }
 }
 
-/// The term of the whole dictionary the residual `rows` follows most.
-pub fn point_at(campaign: &Campaign, rows: &[RowValue]) -> Option<Pointer> {
-    pointer(&scores(campaign, rows, None))
-}
-
 /// The covariate among `names` the residual follows most (None if `names` is empty or none
 /// varies).
 pub fn follows(campaign: &Campaign, rows: &[RowValue], names: &[&str]) -> Option<Pointer> {

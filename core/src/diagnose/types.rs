@@ -220,9 +220,9 @@ pub struct Prediction {
     pub rms_after: f64,
     /// Standard error of the fall, from the paired squared errors.
     pub standard_error: f64,
-    /// `um` (held-out TCP errors) or `sigma` (held-out errors or left-out rows of every
-    /// instrument, each in its own noise).
-    pub unit: &'static str,
+    /// µm (held-out TCP errors) or σ (held-out errors or left-out rows of every instrument,
+    /// each in its own noise).
+    pub unit: RmsUnit,
     /// How strongly the errors before support the change the larger model makes to them,
     /// as a one-sided p-value: the errors regressed on that change (one coefficient), whose
     /// t-value is N(0, 1) where the change is not in the data (it comes from the other
@@ -411,6 +411,25 @@ pub struct ResidualPoint {
     pub sigma: f64,
 }
 
+/// The unit of a [`Prediction`]'s RMS (the JSON's `unit`: `um`, `sigma`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RmsUnit {
+    /// Held-out TCP errors, µm.
+    Um,
+    /// Errors each in its own noise.
+    Sigma,
+}
+
+impl std::fmt::Display for RmsUnit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(match self {
+            RmsUnit::Um => "um",
+            RmsUnit::Sigma => "sigma",
+        })
+    }
+}
+
 /// What the diagnosis concludes (the JSON's `verdict_kind`; other tools rely on the names).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -435,7 +454,9 @@ pub struct NoiseReport {
 /// `noise`, `baseline`, `candidates`).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ModelDiagnosis {
-    pub model: String,
+    /// Written as the thesis names it (`model 24`).
+    #[serde(serialize_with = "as_words")]
+    pub model: Model,
     /// The effects in the model as given (`--effects`).
     pub effects_in_model: Vec<String>,
     /// The same as fitted: a family named whole keeps the parts the data can tell apart
@@ -631,4 +652,9 @@ impl HeldOutCheck {
     pub fn agrees(&self) -> bool {
         self.consistent && !self.structured
     }
+}
+
+/// A value serialised as its words (a model as `model 24`).
+fn as_words<T: std::fmt::Display, S: serde::Serializer>(v: &T, s: S) -> Result<S::Ok, S::Error> {
+    s.collect_str(v)
 }

@@ -101,7 +101,7 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
     };
     let fit = &current.fitted.fit;
     ModelDiagnosis {
-        model: format!("{}", opts.model),
+        model: opts.model,
         effects_in_model: c.in_model.iter().map(|e| e.name().to_owned()).collect(),
         model_effects: c
             .model_effects

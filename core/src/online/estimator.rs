@@ -208,10 +208,6 @@ impl OnlineEstimator {
     pub fn params(&self) -> &Params {
         &self.p
     }
-    /// The stiffness change (the machine's stiffness is the default times 1 + this).
-    pub fn stiffness_change(&self) -> f64 {
-        self.dk
-    }
     /// Covariance of the state (mm, rad, relative stiffness).
     pub fn covariance(&self) -> Covariance {
         let d = scale();

@@ -41,14 +41,6 @@ impl DriftMonitor {
         }
     }
 
-    /// Which parameters a drift is named among (the rod lengths by default, as a step: a
-    /// clamping that slips, a rod that bends as it warms).
-    #[must_use]
-    pub fn with_candidates(mut self, candidates: StepCandidates) -> DriftMonitor {
-        self.candidates = candidates;
-        self
-    }
-
     /// Records the estimate of `est` at time `t` with the temperature `temp` (NaN: none):
     /// once settled (the estimator's change then rebased to now), the drift test of its change
     /// since (None before).

@@ -14,7 +14,7 @@ use crate::history::{record_of, words, Made};
 use rpkm_core::calib::{Calibration, Prior, Selection};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::variance::NoiseEstimate;
-use rpkm_history::{CalibrationRecord, EventRecord, RecordOutcome, Retried, Writer};
+use rpkm_history::{CalibrationRecord, EventKind, EventRecord, RecordOutcome, Retried, Writer};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -256,10 +256,10 @@ impl NodeHistory {
                 Some(other) => format!("{} or {}", state_name(s.param), state_name(other)),
                 None => state_name(s.param).to_owned(),
             };
-            ("step", who, s.change, Some(s.sigma))
+            (EventKind::Step, who, s.change, Some(s.sigma))
         } else if let Some(t) = &r.resolved {
             (
-                "tie_settled",
+                EventKind::TieSettled,
                 state_name(t.param).to_owned(),
                 t.change,
                 None,
@@ -271,7 +271,7 @@ impl NodeHistory {
             machine: self.machine.clone(),
             at_s: rpkm_history::schema::now_s(),
             source: self.source.clone(),
-            kind: kind.to_owned(),
+            kind,
             parameter: Some(parameter),
             change: Some(change),
             sigma,

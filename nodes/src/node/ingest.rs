@@ -422,7 +422,7 @@ mod tests {
         );
         assert_eq!(
             details[3],
-            r#"stdin:6:13 (follower): expected distinct actuator digits 1-4 such as "23", or nothing, found "22""#
+            r#"stdin:6:13 (follower): expected distinct actuator digits 1-4 such as "23", or none (or nothing), found "22""#
         );
     }
 

@@ -428,16 +428,6 @@ impl NodeParams {
         }
     }
 
-    /// A finite double >= 0, or `default`.
-    pub fn non_negative(&self, key: &str, default: f64) -> Result<f64, ParamError> {
-        let v = self.f64(key, default)?;
-        if v >= 0.0 {
-            Ok(v)
-        } else {
-            Err(self.type_err(key, "a number >= 0"))
-        }
-    }
-
     /// A non-negative integer, or `default`.
     pub fn u64(&self, key: &str, default: u64) -> Result<u64, ParamError> {
         match self.values.get(key) {

@@ -7,11 +7,11 @@ use crate::units::um_from_mm;
 use rpkm_core::diagnose::neighbours::Neighbours;
 use rpkm_core::diagnose::periodic::Periodic;
 use rpkm_core::diagnose::{
-    Candidate, EvidenceOf, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, Test,
+    Candidate, EvidenceOf, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, RmsUnit, Test,
     VerdictKind,
 };
 use rpkm_core::online::{Drift, DriftInput, FOLLOWS};
-use rpkm_core::params::{unit, Unit, NAMES};
+use rpkm_core::params::{unit, Model, Unit, NAMES};
 use std::fmt::Write as _;
 
 mod figures;
@@ -166,8 +166,8 @@ fn prediction(p: &Prediction) -> String {
     };
     let what = match (p.by_setup, p.unit) {
         (true, _) => "cross-validated (by setup) RMS, each row in its own noise (sigma),",
-        (false, "sigma") => "held-out RMS, each reading in its own noise (sigma),",
-        (false, _) => "held-out RMS with each setup's zero removed",
+        (false, RmsUnit::Sigma) => "held-out RMS, each reading in its own noise (sigma),",
+        (false, RmsUnit::Um) => "held-out RMS with each setup's zero removed",
     };
     format!(
         "{what} {:.2} -> {:.2} {} (± {:.2}; {support})",
@@ -502,7 +502,7 @@ fn noisier_words(d: &ModelDiagnosis) -> String {
 /// parallel-holder, rod 5's own five parameters, is a candidate tested like any other effect.
 pub fn model_choice(d: &ModelDiagnosis) -> Option<String> {
     let freed = d.effects_in_model.iter().any(|e| e == "parallelogram");
-    (d.model == "model 24" && !freed).then(|| {
+    (d.model == Model::M24 && !freed).then(|| {
         "model 24, where rpkm calibrate, rpkm plan and the nodes default to model 29: the \
          diagnosis holds rod 5 parallel to rod 4 so that the imperfect parallel-holder (rod 5's \
          five parameters, model 29) is tested as a candidate, `parallelogram`, like any other \

@@ -191,11 +191,6 @@ impl Transport {
         self.backend
     }
 
-    /// The iceoryx2 node, if configured.
-    pub fn ipc_node(&self) -> Option<&IpcNode> {
-        self.ipc.as_ref()
-    }
-
     /// The DDS node, if DDS is configured (parameter services, `/rosout`).
     pub fn dds_node(&self) -> Option<&Arc<DdsNode>> {
         self.dds.as_ref()

@@ -60,7 +60,7 @@ pub struct PlanArgs {
     #[arg(long = "where")]
     pub where_: Option<PathBuf>,
     /// The drives in follower mode while the external instruments measure: `23` (q2, q3
-    /// following) or `none` (all four active). Default: as the campaign's external rows,
+    /// following) or `none` (all four active; `""` alike). Default: as the campaign's external rows,
     /// all active where --effects has preload_elastic and the campaign recorded the forces.
     #[arg(long)]
     pub follower: Option<String>,

@@ -81,8 +81,7 @@ fn check(args: &PlanArgs, prior: &Prior) -> anyhow::Result<Checked> {
         .follower
         .as_deref()
         .map(|f| {
-            let text = if f.trim() == "none" { "" } else { f.trim() };
-            parse_follower(text).ok_or_else(|| {
+            parse_follower(f).ok_or_else(|| {
                 bad_input(format!(
                     "--follower {f}: expected drive digits such as 23, or none (all four active)"
                 ))

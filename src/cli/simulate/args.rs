@@ -2,25 +2,11 @@
 
 use std::path::PathBuf;
 
-/// Simulate measurement campaigns on the digital twin (a seeded true machine with hidden
-/// effects) and write them in the campaign CSV format, or as a rosbag2 MCAP bag (--out not
-/// ending in .csv) holding the same messages as `rpkm ingest` and, with --stream-hz, an
-/// ActuatorState stream at the control rate.
-///
-/// Example:
-///   rpkm simulate --campaign lt,self --effect thermal=2,encoder_scale --seed 7 \
-///       --out lt_self.csv --truth truth.json --validation 100
-/// writes lt_self.csv, the held-out validation poses to lt_self.val.csv and the hidden truth
-/// (true parameters, stiffness, effects) to truth.json.
-#[derive(clap::Args, Debug, Clone)]
-#[command(
-    after_help = "Campaigns: lt, kgm, dbb, li_x, li_y, li_psi, self, circle, validation, production (500 poses all drives active, no instrument: the drive forces are the measurements; with --effect preload_elastic).\n\
-Effects (default magnitude, unit): parallelogram (2 mm), preload_elastic (0.3, scale of the \
-controller's parameter error: all drives active), thermal (5 K), encoder_scale (40 ppm), \
-guide_straightness (0.08 mm), instrument_alignment (0.05 mrad), backlash (0.03 mm, with \
-approach_q1/approach_q4 covariates; not in the diagnosis library), lost_motion_q4 (0.01 mm, \
-carrier 4 alone, nothing recorded beside it).\n\n\
-A plan (rpkm plan --out plan.csv):\n  rpkm simulate --plan plan.csv --effect lost_motion_q4 --seed 7 --out planned.csv\n\n\
+/// The campaigns of `rpkm simulate --help`.
+const CAMPAIGNS: &str = "Campaigns: lt, kgm, dbb, li_x, li_y, li_psi, self, circle, validation, production (500 poses all drives active, no instrument: the drive forces are the measurements; with --effect preload_elastic).\n";
+
+/// The examples of `rpkm simulate --help`, after the effects.
+const EXAMPLES: &str = "A plan (rpkm plan --out plan.csv):\n  rpkm simulate --plan plan.csv --effect lost_motion_q4 --seed 7 --out planned.csv\n\n\
 Example:\n  rpkm simulate --campaign lt,self --effect thermal=2,encoder_scale --seed 7 \
 --out lt_self.csv --truth truth.json --validation 100\n\n\
 Bags (--out not ending in .csv; validation poses go to the bag OUT_val):\n  \
@@ -34,8 +20,23 @@ rpkm simulate --production-seconds 600 --production-step l3=0.1@300 --production
 --effect preload_elastic --seed 3 --out prod.csv\n  \
 rpkm simulate --production-seconds 600 --production-step l3=0.1@300 \
 --production-visit=-150,2000;150,1600@307 --production-decimate 100 --effect preload_elastic \
---seed 3 --out prod_motion.csv"
-)]
+--seed 3 --out prod_motion.csv";
+
+/// Simulate measurement campaigns on the digital twin (a seeded true machine with hidden
+/// effects) and write them in the campaign CSV format, or as a rosbag2 MCAP bag (--out not
+/// ending in .csv) holding the same messages as `rpkm ingest` and, with --stream-hz, an
+/// ActuatorState stream at the control rate.
+///
+/// Example:
+///   rpkm simulate --campaign lt,self --effect thermal=2,encoder_scale --seed 7 \
+///       --out lt_self.csv --truth truth.json --validation 100
+/// writes lt_self.csv, the held-out validation poses to lt_self.val.csv and the hidden truth
+/// (true parameters, stiffness, effects) to truth.json.
+#[derive(clap::Args, Debug, Clone)]
+#[command(after_help = format!(
+    "{CAMPAIGNS}{}\n{EXAMPLES}",
+    crate::cli::library_help::twin_effects()
+))]
 pub struct SimulateArgs {
     /// Comma-separated campaigns, measured one after the other into one file (optional for
     /// a bag with --stream-hz).

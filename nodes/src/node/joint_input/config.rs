@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use rpkm_core::campaign::{follower_text, parse_follower};
+use rpkm_core::campaign::{followers_words, parse_follower};
 use rpkm_msgs::actuator_state::MAX_COVARIATES;
 use rpkm_transport::names::absolute_name_error;
 
@@ -41,7 +41,7 @@ const SIGNS: ParamSpec = ParamSpec::fixed(
 const FOLLOWERS: ParamSpec = ParamSpec::live(
     "followers",
     Value::Str(""),
-    "drives in follower mode, e.g. \"23\" (\"\": none); applies from the next state",
+    "drives in follower mode, e.g. \"23\" (none or \"\": no drive follows); applies from the next state",
 );
 const THERMOMETERS: ParamSpec = ParamSpec::group(
     "temperatures.",
@@ -144,12 +144,12 @@ fn effort_sign(p: &NodeParams) -> Result<[f64; 4], ParamError> {
     }
 }
 
-/// Parameter `followers` (`"23"`: q2 and q3 follow; `""`: every drive holds).
+/// Parameter `followers` (`"23"`: q2 and q3 follow; `none` or `""`: every drive holds).
 pub fn followers(p: &NodeParams) -> Result<[bool; 4], ParamError> {
     parse_follower(&FOLLOWERS.string(p)?).ok_or_else(|| {
         p.invalid(
             "followers",
-            "distinct drive digits 1-4 such as \"23\", or \"\" (none)",
+            "distinct drive digits 1-4 such as \"23\", or none (\"\" alike)",
         )
     })
 }
@@ -232,19 +232,9 @@ impl JointConfig {
         )
     }
 
-    /// `followers` as the parameter writes it (`23`; `none` for no drive).
+    /// `followers` as the logs and /diagnostics write them (`23`; `none` for no drive).
     pub fn followers_text(&self) -> String {
-        followers_text(self.followers)
-    }
-}
-
-/// Drives in follower mode as the logs and /diagnostics write them: `23`, or `none`.
-pub fn followers_text(followers: [bool; 4]) -> String {
-    let t = follower_text(followers);
-    if t.is_empty() {
-        "none".into()
-    } else {
-        t
+        followers_words(self.followers)
     }
 }
 
@@ -282,6 +272,14 @@ mod tests {
         ))?;
         assert!(none.thermometers.is_empty());
         assert_eq!(none.followers_text(), "none");
+        // a launch file's `none` and `''` are one value, written `none`
+        for spelling in ["none", "''", "\"\""] {
+            let c = JointConfig::from_params(&params(&format!(
+                "ingest:\n  ros__parameters:\n    followers: {spelling}\n"
+            )))?;
+            assert_eq!(c.followers, [false; 4], "{spelling}");
+            assert_eq!(c.followers_text(), "none");
+        }
         Ok(())
     }
 

@@ -20,13 +20,12 @@ mod thermometers;
 
 use std::time::Instant;
 
+use rpkm_core::campaign::followers_words;
 use rpkm_msgs::{ActuatorState, DiagnosticStatus, JointState, KeyValue, Temperature};
 use rpkm_transport::names::intern;
 use rpkm_transport::{Backend, Qos, Subscriber, Topic};
 
-pub use config::{
-    followers, followers_text, JointConfig, Thermometer, JOINT_NAMES, JOINT_STATES_TOPIC, PARAMS,
-};
+pub use config::{followers, JointConfig, Thermometer, JOINT_NAMES, JOINT_STATES_TOPIC, PARAMS};
 pub use convert::{drive_state, JointReject};
 pub use thermometers::{ThermometerChange, Thermometers};
 
@@ -162,8 +161,8 @@ impl JointInput {
             self.config.followers = new;
             ctx.log(format!(
                 "followers {} -> {} from seq {next_seq} on (set through the parameter services)",
-                followers_text(old),
-                followers_text(new),
+                followers_words(old),
+                followers_words(new),
             ));
         }
         Ok(())
