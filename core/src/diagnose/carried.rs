@@ -165,7 +165,10 @@ fn basis(campaign: &Campaign, c: usize) -> Option<Vec<Vec<f64>>> {
     if span <= 0.0 || half <= 0.0 {
         return None;
     }
-    let n = ((span / half).ceil() as usize + 1).clamp(2, MOST_TERMS);
+    // the windows that fit into the campaign, plus one
+    let n = (2..MOST_TERMS)
+        .find(|&n| f64::from(u32::try_from(n - 1).unwrap_or(u32::MAX)) >= span / half)
+        .unwrap_or(MOST_TERMS);
     let u: Vec<f64> = t.iter().map(|v| 2.0 * (v - lo) / span - 1.0).collect();
     Some(
         (0..n)

@@ -81,22 +81,19 @@ fn rounds(
         screen: opts.screen,
     };
     let (base1, round1, cal1) = first.round(&stated, None, true)?;
-    if opts.stopped() {
-        return Err(DiagnoseError::Cancelled);
-    }
+    not_stopped(opts)?;
     // noise-free (simulated) data: no noise to estimate, the stated weights stay
     if calib::rms(&length_values(&base1.rows)) < NUMERICAL_RMS_MM {
-        return exact(
-            &first,
-            (base1, round1, cal1),
-            (&variants, &followers, level),
-            opts,
-        );
+        let pool = Pool {
+            tried: &tried,
+            variants: &variants,
+            followers: &followers,
+            swaps: &[],
+        };
+        return exact(&first, (base1, round1, cal1), (&pool, level), opts);
     }
     let current = Current::of(campaign, validation, in_model, opts, cal1.as_ref())?;
-    if opts.stopped() {
-        return Err(DiagnoseError::Cancelled);
-    }
+    not_stopped(opts)?;
     let settled = current.settled.effects(in_model);
     let (copts, compared_under, under_current) = comparison_weights(
         (campaign, opts),
@@ -116,18 +113,9 @@ fn rounds(
     let (base, mut round) =
         second.again(&current, (&copts, under_current, &stated), (base1, round1))?;
     let val = validation::held_out(validation, &copts.noise)?;
-    let judge = Judge {
-        campaign,
-        val: val.as_ref(),
-        in_model: &settled,
-        base: &base,
-        copts: &copts,
-        level,
-        structure_level: structure_level(opts),
-        // the noise the comparisons are weighted with: the current model's own may hold what
-        // it misses
-        base_cv: std::cell::OnceCell::new(),
-    };
+    // the noise the comparisons are weighted with: the current model's own may hold what it
+    // misses
+    let judge = judge_of(&second, val.as_ref(), (&base, &copts), opts);
     let structure = sparse::structure(campaign, &base.rows);
     let (trials, choice) = model::search(
         &judge,
@@ -155,6 +143,14 @@ fn rounds(
         level,
         tried: tried.len(),
     }))
+}
+
+/// Cancelled where the diagnosis was stopped: a round's result is not waited for.
+fn not_stopped(opts: &DiagnosisOptions) -> Result<(), DiagnoseError> {
+    if opts.stopped() {
+        return Err(DiagnoseError::Cancelled);
+    }
+    Ok(())
 }
 
 /// For each candidate, the same effect pinned to the parts its family settled to in the
@@ -261,7 +257,7 @@ fn comparison_weights(
 fn exact(
     first: &Search,
     (base, mut round, cal): (Fitted, Round, Option<Calibration>),
-    (variants, followers, level): (&[Box<dyn Effect>], &[Box<dyn Effect>], f64),
+    (pool, level): (&Pool, f64),
     opts: &DiagnosisOptions,
 ) -> Result<ModelDiagnosis, DiagnoseError> {
     let stated = calib_options(opts);
@@ -274,26 +270,12 @@ fn exact(
         &stated,
         opts,
     )?;
-    let judge = Judge {
-        campaign: first.campaign,
-        val: val.as_ref(),
-        in_model: first.in_model,
-        base: &base,
-        copts: &stated,
-        level,
-        structure_level: structure_level(opts),
-        base_cv: std::cell::OnceCell::new(),
-    };
+    let judge = judge_of(first, val.as_ref(), (&base, &stated), opts);
     let structure = sparse::structure(first.campaign, &base.rows);
     let (trials, choice) = model::search(
         &judge,
         (&mut round.candidates, &round.fits),
-        &Pool {
-            tried: first.tried,
-            variants,
-            followers,
-            swaps: &[],
-        },
+        pool,
         &structure,
     );
     Ok(conclude(Concluded {
@@ -311,6 +293,25 @@ fn exact(
         level,
         tried: first.tried.len(),
     }))
+}
+
+/// The judge of `search`'s candidates against its current model `base`, fitted with `copts`.
+fn judge_of<'a>(
+    search: &Search<'a>,
+    val: Option<&'a validation::Validation<'a>>,
+    (base, copts): (&'a Fitted, &'a calib::Options),
+    opts: &DiagnosisOptions,
+) -> Judge<'a> {
+    Judge {
+        campaign: search.campaign,
+        val,
+        in_model: search.in_model,
+        base,
+        copts,
+        level: search.level,
+        structure_level: structure_level(opts),
+        base_cv: std::cell::OnceCell::new(),
+    }
 }
 
 /// The current model's calibration of a round: the one the round made, else made here.

@@ -49,6 +49,8 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
         current,
         ..
     } = c;
+    let level = structure_level(opts);
+    let (carried, structure, shape) = tested(&c, level);
     let Round {
         mut candidates,
         skipped,
@@ -56,29 +58,7 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
         ..
     } = c.round;
     candidates.sort_by(|a, b| b.bic_gain.total_cmp(&a.bic_gain));
-    let level = structure_level(opts);
     let exact = calib::rms(&length_values(&base.rows)) < NUMERICAL_RMS_MM;
-    let fitted = carried::Fitted {
-        effects: c.model_effects,
-        params: &base.fit.params,
-        theta: &base.fit.theta,
-        model: opts.model,
-        noise: &current.copts.noise,
-    };
-    // the thermometers' noise through a lag is no missing effect: the tests read without it
-    let (carried, structure, shape) = match carried::without_carried(campaign, &fitted, &base.rows)
-    {
-        Some((rows, carried)) => {
-            let structure = sparse::structure(campaign, &rows);
-            let shape = Shape::with(campaign, &rows, level, structure.clone());
-            (Some(carried), structure, shape)
-        }
-        None => {
-            let structure = c.structure.clone();
-            let shape = Shape::with(campaign, &base.rows, level, structure.clone());
-            (None, structure, shape)
-        }
-    };
     let held_out = current.held_out.clone();
     let (verdict_kind, unexplained) = kind_of(
         (campaign, &shape),
@@ -141,6 +121,27 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
         error_vectors: vectors.unwrap_or_default(),
         test,
     }
+}
+
+/// The structure tests of the current model's residual (`c.base`'s rows), at `level`: where
+/// the model reads a thermometer's history, without the part its readings' noise makes
+/// through it (a lag's smooth error is no missing effect), and what that took.
+fn tested(c: &Concluded, level: f64) -> (Option<carried::Carried>, sparse::Structure, Shape) {
+    let fitted = carried::Fitted {
+        effects: c.model_effects,
+        params: &c.base.fit.params,
+        theta: &c.base.fit.theta,
+        model: c.opts.model,
+        noise: &c.current.copts.noise,
+    };
+    if let Some((rows, carried)) = carried::without_carried(c.campaign, &fitted, &c.base.rows) {
+        let structure = sparse::structure(c.campaign, &rows);
+        let shape = Shape::with(c.campaign, &rows, level, structure.clone());
+        return (Some(carried), structure, shape);
+    }
+    let structure = c.structure.clone();
+    let shape = Shape::with(c.campaign, &c.base.rows, level, structure.clone());
+    (None, structure, shape)
 }
 
 /// The name `--effects` takes to add an effect: a family by its name, its parts left to the

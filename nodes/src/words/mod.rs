@@ -173,7 +173,10 @@ fn prediction(p: &Prediction) -> String {
         "{what} {:.2} -> {:.2} {} (± {:.2}; {support})",
         p.rms_before,
         p.rms_after,
-        unit_label(p.unit),
+        match p.unit {
+            RmsUnit::Um => "µm",
+            RmsUnit::Sigma => "sigma",
+        },
         p.standard_error
     )
 }
