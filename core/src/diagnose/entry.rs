@@ -5,7 +5,7 @@
 //! whether one model beats another it holds.
 
 use super::cross;
-use super::gain::{relevant, relevant_beyond, wald_beyond, wald_p, Gain, PRACTICAL_SIZE};
+use super::gain::{relevant, relevant_beyond, wald_beyond, wald_p, Gain, Nested, PRACTICAL_SIZE};
 use super::sparse;
 use super::trials::{finish_with, warm_theta_among, SCREEN_P};
 use super::types::{FitError, Fitted, Judged, Outcome, Prediction};
@@ -14,7 +14,6 @@ use crate::calib::{self, EffectEstimate, Request};
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet};
 use crate::params::Params;
-use crate::stats;
 
 /// What every judgement of a search shares: the current model, its fit and its predictions.
 pub(crate) struct Judge<'a> {
@@ -117,21 +116,17 @@ impl<'j> Judge<'j> {
     ) -> Entry<'a> {
         let base = &self.base.fit;
         let k = (base.dof - fitted.fit.dof).max(0.0);
-        let dchi2 = base.chi2 - fitted.fit.chi2;
-        let f_statistic = if k > 0.5 {
-            (dchi2 / k) / (fitted.fit.chi2 / fitted.fit.dof)
-        } else {
-            0.0
-        };
+        let nested = Nested::of((fitted.fit.chi2, fitted.fit.dof), (base.chi2, base.dof));
+        let f_statistic = nested.map_or(0.0, |n| n.f);
         let names: Vec<&str> = added.iter().map(|e| e.name()).collect();
         let wald_p = wald_p(&fitted.fit, &names);
-        let f_p = if k > 0.5 {
-            stats::f_upper_tail(f_statistic, k, fitted.fit.dof)
+        let f_p = nested.map_or(1.0, |n| n.p);
+        // the likelihood ratio, and the added parameters themselves (the Wald test)
+        let p_value = if nested.is_some() {
+            f_p.max(wald_p)
         } else {
             1.0
         };
-        // the likelihood ratio, and the added parameters themselves (the Wald test)
-        let p_value = if k > 0.5 { f_p.max(wald_p) } else { 1.0 };
         let relevant = relevant(
             fitted
                 .fit

@@ -18,6 +18,36 @@ pub const PRACTICAL_SIZE: f64 = 0.2;
 /// its σ makes the model implausible: it absorbs something else.
 pub const PLAUSIBLE_SIGMAS: f64 = 3.0;
 
+/// The nested F-test of a larger model against a smaller one it holds, each (χ², ν): the
+/// effective parameters it adds (k = ν_small − ν_big), the F statistic (Δχ²/k) /
+/// (χ²_big/ν_big) and its upper tail on (k, ν_big). The one test of a candidate
+/// screened, a candidate fitted, a model of the search and a gain.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Nested {
+    pub k: f64,
+    pub f: f64,
+    pub p: f64,
+}
+
+impl Nested {
+    /// The test of `big` against `small`; None where `big` adds half an effective parameter
+    /// or less (no test: a model that adds nothing).
+    pub(super) fn of(big: (f64, f64), small: (f64, f64)) -> Option<Nested> {
+        let k = small.1 - big.1;
+        if !(k > 0.5) {
+            return None;
+        }
+        let dchi2 = small.0 - big.0;
+        let f = (dchi2 / k) / (big.0 / big.1);
+        // a fall of χ² that is none (f ≤ 0) is p = 1
+        Some(Nested {
+            k,
+            f,
+            p: stats::f_upper_tail(f, k, big.1),
+        })
+    }
+}
+
 /// What a larger model gains over a smaller one it holds: the evidence of both campaigns and
 /// its size. One rule for a candidate against the current model, a model against another,
 /// a family's parts against the whole.
@@ -40,15 +70,9 @@ impl Gain {
         rows: usize,
         prediction: Option<Prediction>,
     ) -> Gain {
-        let k = small.1 - big.1;
         let dchi2 = (small.0 - big.0).max(0.0);
-        let p_cal = if k > 0.5 {
-            stats::f_upper_tail((dchi2 / k) / (big.0 / big.1), k, big.1)
-        } else {
-            1.0
-        };
         Gain {
-            p_cal,
+            p_cal: Nested::of(big, small).map_or(1.0, |n| n.p),
             cal_size: (dchi2 / rows.max(1) as f64).sqrt(),
             prediction,
         }

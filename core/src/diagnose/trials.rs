@@ -5,6 +5,7 @@
 //! compared with the current model by the nested F-test ([`compare`]).
 
 use super::figures::length_values;
+use super::gain::Nested;
 use super::held_out::Model1;
 use super::sparse;
 use super::types::{Candidate, ErrorVector, Fit, FitError, Fitted, Judged, Prediction, Skipped};
@@ -13,7 +14,6 @@ use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Request,
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::params::Params;
-use crate::stats;
 use crate::units::um_from_mm;
 
 /// What trying every candidate gave.
@@ -303,13 +303,7 @@ impl Trials<'_> {
 /// The nested F-test's p-value of a screening fit against the current model (1 when the
 /// effect adds no effective parameter or lowers nothing: no contender).
 fn screen_p_value(base: &Fit, screened: &Fit) -> f64 {
-    let k = base.dof - screened.dof;
-    let dchi2 = base.chi2 - screened.chi2;
-    if k < 0.5 || !(dchi2 > 0.0) {
-        return 1.0;
-    }
-    let f = (dchi2 / k) / (screened.chi2 / screened.dof);
-    stats::f_upper_tail(f, k, screened.dof)
+    Nested::of((screened.chi2, screened.dof), (base.chi2, base.dof)).map_or(1.0, |n| n.p)
 }
 
 /// The effect parameters of a fit (`base`) laid out for `set`: each slot takes the value of
@@ -448,13 +442,9 @@ fn compare(
     campaign: &Campaign,
     level: f64,
 ) -> Option<Candidate> {
-    let k = base.fit.dof - full.fit.dof;
-    if k < 0.5 {
-        return None;
-    }
-    let dchi2 = base.fit.chi2 - full.fit.chi2;
-    let f = (dchi2 / k) / (full.fit.chi2 / full.fit.dof);
-    let p_value = stats::f_upper_tail(f, k, full.fit.dof);
+    let Nested {
+        k, f, p: p_value, ..
+    } = Nested::of((full.fit.chi2, full.fit.dof), (base.fit.chi2, base.fit.dof))?;
     let kept_k = (base.fit.dof - kept.fit.dof).max(0.0);
     let kept_dchi2 = base.fit.chi2 - kept.fit.chi2;
     let excess = base.fit.chi2 - base.fit.dof;
