@@ -4,7 +4,7 @@
 //! out as τ = 886 ± 5 s from α = 11.53 ± 0.01 ppm/K and α·τ = 10219 ± 49 ppm·s/K.
 
 use super::types::Calibration;
-use crate::effects;
+use crate::effects::{self, Family};
 
 /// One part's time constant.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -28,8 +28,8 @@ pub fn time_constants(cal: &Calibration) -> Vec<TimeConstant> {
     let mut out = Vec::new();
     for part in ["rods", "frame", "scales"] {
         let (Some(a), Some(l)) = (
-            find("thermal", &format!("alpha_{part}")),
-            find("thermal_lag", &format!("lag_{part}")),
+            find(Family::Thermal.name(), &format!("alpha_{part}")),
+            find(Family::ThermalLag.name(), &format!("lag_{part}")),
         ) else {
             continue;
         };

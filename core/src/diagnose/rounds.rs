@@ -23,7 +23,7 @@ use super::validation;
 use super::verdict::{conclude, Concluded};
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
-use crate::effects::{self, Effect};
+use crate::effects::{self, Effect, Family};
 use crate::params::Model;
 
 /// Diagnose `campaign` with `in_model` effects already in the model; `validation` is held out.
@@ -219,7 +219,9 @@ fn candidates_of<'a>(
         .chain(offered.iter().copied())
         .filter(|e| !in_families.contains(&effects::family_of(e.name())))
         .filter(|e| e.beside().is_none_or(|f| in_families.contains(&f)))
-        .filter(|e| !(e.name() == "parallelogram" && opts.model == Model::M29))
+        .filter(|e| {
+            !(Family::of(e.name()) == Some(Family::Parallelogram) && opts.model == Model::M29)
+        })
         .collect()
 }
 

@@ -24,7 +24,7 @@ pub struct GuideStraightness;
 
 impl Effect for GuideStraightness {
     fn name(&self) -> &'static str {
-        "guide_straightness"
+        super::Family::GuideStraightness.name()
     }
     fn summary(&self) -> &'static str {
         "bowed guides: carrier joints offset across the guide by a parabola of q"

@@ -52,6 +52,55 @@ use crate::params::Params;
 
 pub use crate::params::Row;
 
+/// The effects of [`all`] by identity: what code compares where it means one of them (the
+/// name is what a user writes and a report prints; each effect's file names itself by its
+/// family's [`Family::name`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    Parallelogram,
+    PreloadElastic,
+    Thermal,
+    ThermalLag,
+    EncoderScale,
+    GuideStraightness,
+    InstrumentAlignment,
+    StiffnessFactor,
+}
+
+impl Family {
+    const ALL: [Family; 8] = [
+        Family::Parallelogram,
+        Family::PreloadElastic,
+        Family::Thermal,
+        Family::ThermalLag,
+        Family::EncoderScale,
+        Family::GuideStraightness,
+        Family::InstrumentAlignment,
+        Family::StiffnessFactor,
+    ];
+
+    /// The family's name on the command line and in reports.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Family::Parallelogram => "parallelogram",
+            Family::PreloadElastic => "preload_elastic",
+            Family::Thermal => "thermal",
+            Family::ThermalLag => "thermal_lag",
+            Family::EncoderScale => "encoder_scale",
+            Family::GuideStraightness => "guide_straightness",
+            Family::InstrumentAlignment => "instrument_alignment",
+            Family::StiffnessFactor => "stiffness_factor",
+        }
+    }
+
+    /// The family of effect name `name` (`thermal:rods` is [`Family::Thermal`]); None for a
+    /// written effect.
+    pub fn of(name: &str) -> Option<Family> {
+        let family = family_of(name);
+        Self::ALL.into_iter().find(|f| f.name() == family)
+    }
+}
+
 /// The effects the diagnosis knows, in the order it tries them.
 pub fn library() -> Vec<Box<dyn Effect>> {
     vec![
@@ -580,5 +629,26 @@ impl EffectSet {
             });
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod family_tests {
+    use super::*;
+
+    /// Each effect of the registry is its family's, by the family's name, and each family is
+    /// one of the registry's: the identity code compares is the name a user writes.
+    #[test]
+    fn every_registered_effect_is_one_family() {
+        let registered = all();
+        for e in &registered {
+            let family = Family::of(e.name()).expect("a family");
+            assert_eq!(family.name(), e.name());
+        }
+        for f in Family::ALL {
+            assert!(registered.iter().any(|e| e.name() == f.name()), "{f:?}");
+        }
+        assert_eq!(Family::of("thermal:rods+frame"), Some(Family::Thermal));
+        assert_eq!(Family::of("rods_lagged"), None);
     }
 }

@@ -10,6 +10,7 @@ use rpkm_core::diagnose::{
     Candidate, EvidenceOf, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, RmsUnit, Test,
     VerdictKind,
 };
+use rpkm_core::effects::Family;
 use rpkm_core::online::{Drift, DriftInput, FOLLOWS};
 use rpkm_core::params::{unit, Model, Unit, NAMES};
 use std::fmt::Write as _;
@@ -504,7 +505,10 @@ fn noisier_words(d: &ModelDiagnosis) -> String {
 /// to (model 29), when it is not: model 24 holds rod 5 to rod 4 so that the imperfect
 /// parallel-holder, rod 5's own five parameters, is a candidate tested like any other effect.
 pub fn model_choice(d: &ModelDiagnosis) -> Option<String> {
-    let freed = d.effects_in_model.iter().any(|e| e == "parallelogram");
+    let freed = d
+        .effects_in_model
+        .iter()
+        .any(|e| Family::of(e) == Some(Family::Parallelogram));
     (d.model == Model::M24 && !freed).then(|| {
         "model 24, where rpkm calibrate, rpkm plan and the nodes default to model 29: the \
          diagnosis holds rod 5 parallel to rod 4 so that the imperfect parallel-holder (rod 5's \

@@ -13,7 +13,7 @@ use anyhow::Context;
 use output::Drives;
 use rpkm_core::calib::{self, Options, Prior, Selection};
 use rpkm_core::campaign::{parse_follower, Campaign, Instrument};
-use rpkm_core::effects::{Effect, EffectSet};
+use rpkm_core::effects::{Effect, EffectSet, Family};
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::forecast::targets_of;
 use rpkm_core::plan::separate::{Hypothesis, Pair};
@@ -115,7 +115,9 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     };
     let (cal, noise) = calibrate(&campaign, &opts, &refs)
         .with_context(|| format!("calibrating {}", args.campaign.display()))?;
-    let preload = refs.iter().any(|e| e.name() == "preload_elastic");
+    let preload = refs
+        .iter()
+        .any(|e| Family::of(e.name()) == Some(Family::PreloadElastic));
     let mode = plan::drive_mode(&campaign, preload, checked.follower);
     let drives = Drives {
         words: output::mode_words(&mode, preload),
