@@ -242,6 +242,7 @@ fn a_lagging_thermometer_of_the_twin_is_named_with_its_expansion() {
         .output()
         .expect("run rpkm");
     assert!(d.status.success(), "{}", String::from_utf8_lossy(&d.stderr));
+    let text = String::from_utf8_lossy(&d.stdout).into_owned();
     let d = json(&report);
     assert_eq!(d["verdict_kind"], "nothing_missing", "{}", d["verdict"]);
     let carried = &d["carried"];
@@ -252,4 +253,16 @@ fn a_lagging_thermometer_of_the_twin_is_named_with_its_expansion() {
     );
     let share = carried["share"].as_f64().expect("share");
     assert!(share > 0.0 && share < 1.0, "{carried}");
+    // the verdict says what its tests read without, with the JSON's figures
+    let said = format!(
+        "read without what the thermometer's noise makes through the lag (temp_machine: {} \
+         smooth terms in time, {:.1} % of its chi2)",
+        carried["columns"][0][1],
+        100.0 * share
+    );
+    let verdict = text
+        .lines()
+        .find(|l| l.contains("Verdict"))
+        .expect("the verdict");
+    assert!(verdict.contains(&said), "{verdict}\nlacks: {said}");
 }

@@ -4,6 +4,7 @@
 //! terminal, the HTML report and the JSON's text fields alike.
 
 use crate::units::um_from_mm;
+use rpkm_core::diagnose::carried::Carried;
 use rpkm_core::diagnose::neighbours::Neighbours;
 use rpkm_core::diagnose::periodic::Periodic;
 use rpkm_core::diagnose::{
@@ -406,6 +407,7 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
         format!("; the dictionary term {t} follows the residual as well, but a term cannot predict held-out poses")
     });
     let held = d.held_out.as_ref();
+    let carried = d.carried.as_ref().map_or(String::new(), carried_words);
     match d.verdict_kind {
         VerdictKind::MissingEffect => {
             // what was found, parts and all: `--effects thermal` would fit every part of
@@ -435,7 +437,7 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
             });
             let found = structure_found(d);
             format!(
-                "{model} leaves a structured residual that no effect of the library explains{why}; {}{noise}",
+                "{model} leaves a structured residual that no effect of the library explains{why}; {}{carried}{noise}",
                 if found.is_empty() {
                     "no covariate, force, time or workspace term follows it".to_owned()
                 } else {
@@ -449,11 +451,26 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
             format!(
                 "nothing is missing that the tests can find: {model} explains the measurements \
                  to their noise (no effect, dictionary term, period or neighbour structure is \
-                 significant; chi2/dof {:.2} at the estimated noise){agree}{noise}{doubt}",
+                 significant; chi2/dof {:.2} at the estimated noise){carried}{agree}{noise}{doubt}",
                 d.chi2_per_dof
             )
         }
     }
+}
+
+/// What the structure tests read without: the part of the residual the thermometers' noise
+/// makes through the model's lag.
+fn carried_words(c: &Carried) -> String {
+    let columns: Vec<String> = c
+        .columns
+        .iter()
+        .map(|(name, terms)| format!("{name}: {terms} smooth terms in time"))
+        .collect();
+    format!(
+        "; the residual read without what the thermometer's noise makes through the lag ({},          {:.1} % of its chi2)",
+        columns.join(", "),
+        100.0 * c.share
+    )
 }
 
 /// Whether the calibration campaign's residual itself is structured (the verdict's own
