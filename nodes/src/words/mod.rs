@@ -467,7 +467,7 @@ fn carried_words(c: &Carried) -> String {
         .map(|(name, terms)| format!("{name}: {terms} smooth terms in time"))
         .collect();
     format!(
-        "; the residual read without what the thermometer's noise makes through the lag ({},          {:.1} % of its chi2)",
+        "; the residual read without what the thermometer's noise makes through the lag ({}, {:.1} % of its chi2)",
         columns.join(", "),
         100.0 * c.share
     )
