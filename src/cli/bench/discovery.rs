@@ -99,9 +99,11 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
     Ok(())
 }
 
-/// The loop a user runs: diagnose, add the model the diagnosis names (as its words advise:
-/// `--effects thermal:frame,thermal_lag:frame`, a family with the parts it was found with),
-/// diagnose again, until it names no family new.
+/// The loop a user runs: diagnose, add the families of the model the diagnosis names
+/// (`--effects thermal,thermal_lag` where it found `thermal:frame` with `thermal_lag:frame`:
+/// the next diagnosis settles the parts with what is then in the model, where the parts
+/// found first may have stood in for an effect not yet added), diagnose again, until it
+/// names no family new.
 struct Loop<'a> {
     measured: &'a Measured,
     file: Option<&'a EffectsFile>,
@@ -112,9 +114,8 @@ impl Loop<'_> {
     /// The diagnoses of the loop, the first without effects, and the effects named.
     fn run(&self) -> Result<(Vec<ModelDiagnosis>, Vec<String>)> {
         let (mut named, mut all): (Vec<String>, Vec<ModelDiagnosis>) = (Vec::new(), Vec::new());
-        let mut added: Vec<String> = Vec::new();
         loop {
-            let boxed = effects_file::parse_list(&added.join(","), self.file)
+            let boxed = effects_file::parse_list(&named.join(","), self.file)
                 .map_err(|e| anyhow::anyhow!(e))?;
             let refs: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
             let offer = offered(self.file, &refs);
@@ -138,7 +139,6 @@ impl Loop<'_> {
                 return Ok((all, named));
             }
             named.extend(new.iter().map(|e| effects::family_of(e).to_owned()));
-            added.extend(new.into_iter().cloned());
             all.push(d);
         }
     }
