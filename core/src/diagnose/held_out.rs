@@ -14,12 +14,12 @@
 
 use super::structure::Shape;
 use super::types::{DiagnoseError, Fit, FitError, HeldOutCheck, Prediction, RmsUnit};
-use super::validation::{group_sums, Validation};
+use super::validation::Validation;
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};
 use crate::noise::{Group, NoiseModel, N_GROUPS};
-use crate::obs::{self, Direction, RowValue};
+use crate::obs::{self, group_sums, Direction, RowValue};
 use crate::params::{Params, N_PARAMS};
 use crate::stats;
 use crate::units::um_from_mm;

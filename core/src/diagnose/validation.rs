@@ -37,10 +37,10 @@ impl Validation<'_> {
     ) -> Result<Validation<'a>, PoseError> {
         let errs = obs::tcp_errors(campaign, &Params::nominal(), Model::M29)?;
         let variances = validation_variances(campaign, &errs, noise)?;
-        let zero = zero_groups(campaign, &errs);
+        let zero = obs::zero_groups(campaign, &errs);
         // var(e_i − ē) = σ_i² (1 − 2/n) + Σ σ_j² / n² over the n errors of the group, for
         // each noise group's part alike
-        let count = group_sums(&zero, &vec![1.0; zero.len()]);
+        let count = obs::group_sums(&zero, &vec![1.0; zero.len()]);
         let mut group_parts = vec![[0.0; N_GROUPS]; count.len()];
         for (&g, v) in zero.iter().zip(&variances) {
             for (sum, part) in group_parts[g].iter_mut().zip(&v.reading) {
@@ -53,7 +53,7 @@ impl Validation<'_> {
             .map(|(&g, v)| {
                 let n = count[g].1.max(1) as f64;
                 std::array::from_fn(|k| {
-                    (v.reading[k] * (1.0 - 2.0 / n) + group_parts[g][k] / (n * n)).max(0.0)
+                    obs::zero_removed_variance(v.reading[k], group_parts[g][k], n)
                 })
             })
             .collect();
@@ -80,12 +80,7 @@ impl Validation<'_> {
     /// them (no model predicts the error of the reading a setup was zeroed on, and one that
     /// happens to follow it would beat the truth).
     pub fn relative(&self, errors: &[f64]) -> Vec<f64> {
-        let sum = group_sums(&self.zero, errors);
-        self.zero
-            .iter()
-            .zip(errors)
-            .map(|(&g, e)| e - sum[g].0 / sum[g].1.max(1) as f64)
-            .collect()
+        obs::zero_removed(&self.zero, errors)
     }
 
     /// `errors` relative ([`Validation::relative`]) and each divided by its σ: the held-out
@@ -106,31 +101,6 @@ impl Validation<'_> {
     pub(super) fn n_groups(&self) -> usize {
         self.zero.iter().max().map_or(0, |m| m + 1)
     }
-}
-
-/// Per group of `zero` (an index per value), the sum of `values` and their count.
-pub(crate) fn group_sums(zero: &[usize], values: &[f64]) -> Vec<(f64, usize)> {
-    let n = zero.iter().max().map_or(0, |m| m + 1);
-    let mut sum = vec![(0.0, 0usize); n];
-    for (&g, v) in zero.iter().zip(values) {
-        sum[g].0 += v;
-        sum[g].1 += 1;
-    }
-    sum
-}
-
-/// Each held-out TCP error's (setup, coordinate) as an index, in [`obs::tcp_errors`] order.
-fn zero_groups(val: &Campaign, errs: &[obs::TcpError]) -> Vec<usize> {
-    let mut keys: Vec<(&str, obs::TcpDirection)> = Vec::new();
-    errs.iter()
-        .map(|e| {
-            let key = (val.poses[e.pose].setup.as_str(), e.direction);
-            keys.iter().position(|k| *k == key).unwrap_or_else(|| {
-                keys.push(key);
-                keys.len() - 1
-            })
-        })
-        .collect()
 }
 
 /// The held-out campaign with the noise of each of its TCP errors.

@@ -36,6 +36,8 @@
 //!   self-calibration rows (eq. 4.37).
 //! - `tcp.rs`: Held-out TCP errors of the relative instruments, with their sensitivities to
 //!   the effects.
+//! - `zero.rs`: Each setup's zero removed from the held-out TCP errors, and the variance
+//!   left of their noise.
 
 mod context;
 mod evaluation;
@@ -46,6 +48,7 @@ mod inverse;
 mod reset;
 mod row;
 mod tcp;
+mod zero;
 
 pub use crate::params::Row;
 pub use evaluation::{residuals, residuals_in, residuals_with, Evaluation, Form, Pieces, Step};
@@ -54,3 +57,5 @@ pub use forward_solve::FORWARD_SUBSYSTEMS;
 pub use reset::zero_covariance;
 pub use row::{Direction, ModelError, PoseError, ResetGain, Residual, RowValue};
 pub use tcp::{has_forward_instruments, tcp_errors, tcp_errors_with, TcpDirection, TcpError};
+pub(crate) use zero::group_sums;
+pub use zero::{zero_groups, zero_removed, zero_removed_variance};

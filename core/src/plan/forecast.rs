@@ -140,13 +140,13 @@ pub fn posterior(g: &DMatrix<f64>) -> DMatrix<f64> {
     &eig.eigenvectors * DMatrix::from_diagonal(&inv) * eig.eigenvectors.transpose()
 }
 
-/// Σ var(e_i − ē) over the errors of one setup and coordinate with variances `v`:
-/// σ_i² (1 − 2/n) + Σ σ_j² / n² each (the zero removed takes the mean's own noise with it).
+/// Σ var(e_i − ē) over the errors of one setup and coordinate with variances `v`
+/// ([`crate::obs::zero_removed_variance`] each, as the diagnosis's held-out floor).
 fn relative_variance_sum(v: &[f64]) -> f64 {
     let n = v.len().max(1) as f64;
     let total: f64 = v.iter().sum();
     v.iter()
-        .map(|s| (s * (1.0 - 2.0 / n) + total / (n * n)).max(0.0))
+        .map(|&s| crate::obs::zero_removed_variance(s, total, n))
         .sum()
 }
 

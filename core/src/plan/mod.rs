@@ -21,6 +21,8 @@
 //! - [`separate`]: T-optimal discrimination of two hypotheses (a lost motion `dir_qN`, a
 //!   parameter): the next poses where their predictions, after the geometry has absorbed
 //!   what it can, differ most against the noise.
+//! - [`worth`]: whether a plan for the TCP pays: the TCP's own error above the readings'
+//!   noise, lower by [`WORTH`] of itself.
 //! - [`csv`]: PLAN.csv, the campaign grammar without measured values.
 
 pub mod accuracy;
@@ -31,9 +33,11 @@ pub mod mode;
 pub mod separate;
 mod start;
 mod types;
+pub mod worth;
 
 pub use accuracy::{AccuracyPlanner, Forecast};
 pub use forecast::TargetForecast;
+pub use worth::{own_error, WORTH};
 pub use greedy::{condition_exchange, determine, normalized_condition, Chosen};
 pub use mode::{drive_mode, DriveMode, DriveModeReason};
 pub use start::{design_rows, Start};

@@ -15,7 +15,6 @@ use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::{self, AccuracyPlanner, Start, TargetForecast, Unknowns};
 use rpkm_core::units::{rad_from_mrad, um_from_mm};
 use rpkm_twin::{Twin, TwinConfig};
-use std::collections::BTreeMap;
 
 /// Measure the plan's tracker poses against random ones on twin machines.
 ///
@@ -129,21 +128,8 @@ fn calibrate(
 /// less their mean per setup and coordinate, as the diagnosis's `val_rms_relative_um`.
 fn held_out_um(val: &Campaign, p: &Params) -> Result<f64> {
     let errors = obs::tcp_errors(val, p, MODEL)?;
-    let mut sums: BTreeMap<(&str, obs::TcpDirection), (f64, usize)> = BTreeMap::new();
-    for e in &errors {
-        let s = sums
-            .entry((val.poses[e.pose].setup.as_str(), e.direction))
-            .or_default();
-        s.0 += e.value;
-        s.1 += 1;
-    }
-    let relative: Vec<f64> = errors
-        .iter()
-        .map(|e| {
-            let (sum, n) = sums[&(val.poses[e.pose].setup.as_str(), e.direction)];
-            e.value - sum / n as f64
-        })
-        .collect();
+    let values: Vec<f64> = errors.iter().map(|e| e.value).collect();
+    let relative = obs::zero_removed(&obs::zero_groups(val, &errors), &values);
     Ok(1e3 * calib::rms(&relative))
 }
 
@@ -231,11 +217,7 @@ fn machine_runs(a: &PlanStudyArgs, noise: &NoiseModel, machine: u64, s: u64) -> 
             expected_um: um_from_mm(forecast.after_mm),
             plan_um: judged[0][0],
             random_um: judged[1][0],
-            expected_true_um: um_from_mm(
-                (forecast.after_mm.powi(2) - forecast.floor_mm.powi(2))
-                    .max(0.0)
-                    .sqrt(),
-            ),
+            expected_true_um: um_from_mm(plan::own_error(forecast.after_mm, forecast.floor_mm)),
             plan_true_um: judged[0][1],
             random_true_um: judged[1][1],
         });

@@ -7,8 +7,8 @@ use super::determine::setups_json;
 use super::output::{write_outputs, Drives};
 use rpkm_core::campaign::Instrument;
 use rpkm_core::plan::{
-    self, AccuracyPlanner, CandidateSetup, DeterminationPlan, Forecast, Start, TargetForecast,
-    Unknowns,
+    self, own_error as own, AccuracyPlanner, CandidateSetup, DeterminationPlan, Forecast, Start,
+    TargetForecast, Unknowns, WORTH,
 };
 use rpkm_core::units::um_from_mm;
 use serde_json::json;
@@ -17,9 +17,6 @@ use serde_json::json;
 const RANDOM_DRAWS: usize = 25;
 /// Seed of the random designs: the same comparison every run.
 const RANDOM_SEED: u64 = 0x5eed_0037;
-/// A plan that lowers the TCP's own error (the expected held-out RMS above the readings'
-/// noise) by less than this share of it buys nothing.
-const WORTH: f64 = 0.05;
 /// Instruments a plan may use, in the order they are suggested on a tie.
 const ALL: [Instrument; 5] = [
     Instrument::Lt,
@@ -66,7 +63,7 @@ pub fn run(
         print_budgets(&all);
     }
     let f = last.forecast;
-    if !pays(f.now_mm, f.after_mm, f.floor_mm) {
+    if !f.pays() {
         print_nothing_to_gain(start, unknowns, (instruments, last.budget), evaluation)?;
     }
     let design = plan::measured_in(last.plan.design(), &drives.mode);
@@ -86,7 +83,7 @@ pub fn run(
             "own_now_um": um_from_mm(own(f.now_mm, f.floor_mm)),
             "own_after_um": um_from_mm(own(f.after_mm, f.floor_mm)),
             "own_random_um": um_from_mm(own(last.random_mm, f.floor_mm)),
-            "pays": pays(f.now_mm, f.after_mm, f.floor_mm),
+            "pays": f.pays(),
                 "budgets": all.iter().map(|b| json!({
                     "budget": b.budget,
                     "poses": b.plan.design().len(),
@@ -99,18 +96,6 @@ pub fn run(
             })
         },
     )
-}
-
-/// The TCP's own error in an expected held-out RMS `rms` (mm): what is left above the
-/// held-out readings' noise `floor` (in quadrature).
-fn own(rms: f64, floor: f64) -> f64 {
-    (rms * rms - floor * floor).max(0.0).sqrt()
-}
-
-/// Whether a plan from `now` to `after` (expected held-out RMS, mm, over `floor`) buys
-/// something: the TCP's own error lower by [`WORTH`] of itself.
-fn pays(now: f64, after: f64, floor: f64) -> bool {
-    own(now, floor) - own(after, floor) >= WORTH * own(now, floor)
 }
 
 fn print_plan(b: &Budgeted, where_words: &str) {
@@ -151,7 +136,7 @@ fn buys_words(b: &Budgeted) -> String {
     let f = b.forecast;
     let um = |v: f64| um_from_mm(own(v, f.floor_mm));
     let (now, after, random) = (um(f.now_mm), um(f.after_mm), um(b.random_mm));
-    if !pays(f.now_mm, f.after_mm, f.floor_mm) {
+    if !f.pays() {
         return format!(
             "the plan buys nothing: the TCP's own error would stay at {after:.2} µm (now \
              {now:.2} µm, less than {:.0} % lower), under the held-out readings' noise of \
@@ -212,7 +197,7 @@ fn print_nothing_to_gain(
         let setups: Vec<CandidateSetup> = plan::candidates(&[other])?;
         let planner = AccuracyPlanner::new(start, unknowns, &setups, evaluation)?;
         let (_, f) = planner.plan(budget)?;
-        if pays(f.now_mm, f.after_mm, f.floor_mm) {
+        if f.pays() {
             better.push((own(f.after_mm, f.floor_mm), other));
         }
     }
