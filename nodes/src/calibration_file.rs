@@ -21,7 +21,7 @@ pub struct CalibrationFile {
     pub parameters: BTreeMap<String, f64>,
     /// The posterior with its correlations (absent in a hand-written file).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub covariance: Option<Covariance>,
+    pub covariance: Option<PosteriorCovariance>,
     /// The identified parameters with their σ: the start covariance of a file without
     /// `covariance` (written before it was).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -39,7 +39,7 @@ pub struct CalibrationFile {
 
 /// The `covariance` object: rows and columns in `names` order, mm and rad.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Covariance {
+pub struct PosteriorCovariance {
     pub names: Vec<String>,
     pub matrix: Vec<Vec<f64>>,
 }

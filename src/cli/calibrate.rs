@@ -9,7 +9,7 @@ use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS};
 use rpkm_core::variance::NoiseEstimate;
-use rpkm_nodes::calibration_file::{CalibrationFile, Covariance, EffectValue, IdentifiedEntry};
+use rpkm_nodes::calibration_file::{CalibrationFile, EffectValue, IdentifiedEntry, PosteriorCovariance};
 use rpkm_nodes::effects_file::EffectsFile;
 use serde_json::json;
 use std::path::PathBuf;
@@ -727,7 +727,7 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> anyhow::Result<Ca
             .collect(),
         // the posterior with its correlations, for a tracker that starts from it (the
         // calibrator node's `geometry_file`): rows and columns in `names` order, mm and rad
-        covariance: Some(Covariance {
+        covariance: Some(PosteriorCovariance {
             names: NAMES.iter().map(|n| (*n).to_owned()).collect(),
             matrix: (0..N_PARAMS)
                 .map(|i| (0..N_PARAMS).map(|j| cal.covariance[(i, j)]).collect())

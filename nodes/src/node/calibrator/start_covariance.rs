@@ -1,6 +1,6 @@
 //! The start covariance of the online tracker, read from a geometry file's JSON.
 
-use crate::calibration_file::{CalibrationFile, Covariance};
+use crate::calibration_file::{CalibrationFile, PosteriorCovariance};
 use crate::error::bad_input;
 use std::path::Path;
 use nalgebra::SMatrix;
@@ -43,7 +43,7 @@ pub fn start_covariance(geometry_file: &str) -> anyhow::Result<SMatrix<f64, N_PA
 
 /// The `covariance` object of a geometry file: `names` (the 29 parameters, in the spec's
 /// order) and `matrix` (29 rows of 29 finite numbers, symmetric, no negative variance).
-fn covariance_of(file: &str, v: &Covariance) -> anyhow::Result<SMatrix<f64, N_PARAMS, N_PARAMS>> {
+fn covariance_of(file: &str, v: &PosteriorCovariance) -> anyhow::Result<SMatrix<f64, N_PARAMS, N_PARAMS>> {
     let bad = |what: String| bad_input(format!("{file}: covariance: {what}"));
     if v.names.iter().map(String::as_str).ne(rpkm_core::params::NAMES) {
         return Err(bad(format!(
