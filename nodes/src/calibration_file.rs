@@ -213,8 +213,8 @@ mod tests {
     fn a_written_file_reads_back_to_the_same_text() -> anyhow::Result<()> {
         let text = r#"{"chi2_per_dof":1.25,"covariance":{"matrix":[[1e-6,0.0],[0.0,2.5e-7]],"names":["l1","l4"]},"effects":[{"effect":"warm_q4","identified":true,"name":"a","sigma":null,"unit":"mm","value":0.001}],"effects_file":{"effects":[{"expressions":{"dq4":"a * t"},"name":"warm_q4","summary":"s"}],"file":"e.yaml"},"identified":[{"index":0,"name":"l1","sigma":0.001,"step":1}],"model":29,"parameters":{"l1":100.25,"l4":-0.5}}"#;
         let file = read(text)?;
-        assert_eq!(file.parameters["l1"], 100.25);
-        assert_eq!(file.effects[0].value, 0.001);
+        assert_eq!(file.parameters.get("l1"), Some(&100.25));
+        assert_eq!(file.effects.first().map(|e| e.value), Some(0.001));
         assert_eq!(file.identified.as_ref().and_then(|i| i[0].sigma), Some(0.001));
         assert_eq!(
             file.effects_file.as_ref().map(|f| f.effects[0].expressions["dq4"].as_str()),

@@ -230,7 +230,7 @@ impl NodeEffects {
         applied: &NodeEffects,
     ) -> Result<(), EffectsError> {
         for (name, _) in applied.live.values() {
-            let Some(r) = recorded.effects.iter().find(|r| &r.name == name) else {
+            let Some(r) = recorded.effects.iter().find(|r| r.name == *name) else {
                 continue;
             };
             let w = self.written(name)?;
