@@ -7,6 +7,7 @@ use std::path::Path;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::params::{self, Params};
 
+use crate::calibration_file::CalibrationFile;
 use crate::error::bad_input;
 
 /// Reads and parses a campaign file; errors name the file, line and column (or byte offset
@@ -56,38 +57,19 @@ pub fn check_readings(campaign: &Campaign) -> anyhow::Result<()> {
 }
 
 /// Reads a parameter file: a JSON object mapping spec names to values (mm, rad), or the JSON
-/// written by `rpkm calibrate` (its `parameters` object). Unnamed parameters stay nominal.
+/// written by `rpkm calibrate` (its `parameters` object, [`CalibrationFile`]). Unnamed
+/// parameters stay nominal.
 pub fn read_params(path: &Path) -> anyhow::Result<Params> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| bad_input(format!("{}: cannot read parameters: {e}", path.display())))?;
-    let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
-        bad_input(format!(
-            "{}:{}:{}: not JSON: {e}",
-            path.display(),
-            e.line(),
-            e.column()
-        ))
-    })?;
-    let obj = value
-        .get("parameters")
-        .unwrap_or(&value)
-        .as_object()
-        .ok_or_else(|| {
-            bad_input(format!(
-                "{}: expected a JSON object of parameter names to values",
-                path.display()
-            ))
-        })?;
+    params_of(path, &CalibrationFile::read(path)?)
+}
+
+/// The parameters of `file` (read from `path`): each name a spec name, else bad input.
+pub fn params_of(path: &Path, file: &CalibrationFile) -> anyhow::Result<Params> {
     let mut p = Params::nominal();
-    for (name, v) in obj {
+    for (name, v) in &file.parameters {
         let i = params::index_of(name)
             .ok_or_else(|| bad_input(format!("{}: unknown parameter `{name}`", path.display())))?;
-        p[i] = v.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
-            bad_input(format!(
-                "{}: parameter `{name}`: expected a finite number, found {v}",
-                path.display()
-            ))
-        })?;
+        p[i] = *v;
     }
     Ok(p)
 }

@@ -18,6 +18,7 @@
 //! - [`words`]: figures of the diagnosis and the online tracker in sentences.
 //! - [`error`]: typed errors and exit codes; [`logging`]: warnings to stderr.
 
+pub mod calibration_file;
 pub mod campaign_bag;
 pub mod effects_file;
 pub mod error;

@@ -9,6 +9,7 @@ use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS};
 use rpkm_core::variance::NoiseEstimate;
+use rpkm_nodes::calibration_file::{CalibrationFile, EffectValue, IdentifiedEntry, PosteriorCovariance};
 use rpkm_nodes::effects_file::EffectsFile;
 use serde_json::json;
 use std::path::PathBuf;
@@ -211,12 +212,15 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.json {
         let file = file.as_ref().map(rpkm_nodes::effects_file::to_json);
         let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_ref())?;
-        out["returns"] = serde_json::to_value(&returns.0)?;
-        out["returns_under_estimated_noise"] = serde_json::to_value(&returns.1)?;
+        out.report.insert("returns".into(), serde_json::to_value(&returns.0)?);
+        out.report.insert(
+            "returns_under_estimated_noise".into(),
+            serde_json::to_value(&returns.1)?,
+        );
         if let Some(v) = &validation {
-            held_out_json(&mut out, (&campaign, v), val.as_ref())?;
+            held_out_json(&mut out.report, (&campaign, v), val.as_ref())?;
         }
-        write_json(path, &out)?;
+        write_json(path, &out.to_value()?)?;
         println!("\nwrote {}", path.display());
     }
     record_history(
@@ -250,14 +254,19 @@ fn drift_checks(
 /// The held-out campaign in the JSON: against the calibration's ranges
 /// (`held_out_coverage`), and the judge's residual pose by pose (`held_out_poses`).
 fn held_out_json(
-    out: &mut serde_json::Value,
+    out: &mut serde_json::Map<String, serde_json::Value>,
     (campaign, held_out): (&Campaign, &Campaign),
     val: Option<&Validation>,
 ) -> anyhow::Result<()> {
-    out["held_out_coverage"] =
-        serde_json::to_value(rpkm_core::diagnose::coverage::coverage(campaign, held_out))?;
+    out.insert(
+        "held_out_coverage".into(),
+        serde_json::to_value(rpkm_core::diagnose::coverage::coverage(campaign, held_out))?,
+    );
     if let Some(j) = val.and_then(|v| v.judge.as_ref()) {
-        out["held_out_poses"] = super::held_out_poses::held_out_poses(held_out, j)?;
+        out.insert(
+            "held_out_poses".into(),
+            super::held_out_poses::held_out_poses(held_out, j)?,
+        );
     }
     Ok(())
 }
@@ -366,20 +375,19 @@ fn calibration_json(
     (noise, file): (&NoiseEstimate, Option<serde_json::Value>),
     val: Option<&Validation>,
     stages: Option<&Stages>,
-) -> anyhow::Result<serde_json::Value> {
-    let mut out = report_json(cal, val);
-    out["noise"] = serde_json::to_value(&noise.groups)?;
+) -> anyhow::Result<CalibrationFile> {
+    let mut out = report_json(cal, val)?;
     // the written effects as written: what their parameters in `effects` mean
-    if let Some(f) = file {
-        out["effects_file"] = f;
-    }
-    out["determined"] = serde_json::to_value(cal.determined)?;
+    out.effects_file = file.map(serde_json::from_value).transpose()?;
+    let report = &mut out.report;
+    report.insert("noise".into(), serde_json::to_value(&noise.groups)?);
+    report.insert("determined".into(), serde_json::to_value(cal.determined)?);
     if let Some(st) = stages {
-        out["effect_stages"] = serde_json::to_value(&st.rows)?;
-        out["effect_stages_chi2_under"] = st.chi2_under.clone().into();
+        report.insert("effect_stages".into(), serde_json::to_value(&st.rows)?);
+        report.insert("effect_stages_chi2_under".into(), st.chi2_under.clone().into());
         // the stages' last model as the data settle it, where not as given
         if let Some(fitted) = &st.settled_as {
-            out["effect_stages_settled_as"] = serde_json::to_value(fitted)?;
+            report.insert("effect_stages_settled_as".into(), serde_json::to_value(fitted)?);
         }
     }
     Ok(out)
@@ -707,17 +715,30 @@ fn effects_covariance(cal: &Calibration) -> serde_json::Value {
     })
 }
 
-fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value {
-    let parameters: serde_json::Map<String, serde_json::Value> = cal
-        .model
-        .params()
-        .into_iter()
-        .map(|i| (NAMES[i].to_string(), json!(cal.params[i])))
-        .collect();
+/// The calibration file of `cal`: the fields the readers read typed, the rest of the report
+/// (its statistics, the held-out check) as `report`.
+fn report_json(cal: &Calibration, val: Option<&Validation>) -> anyhow::Result<CalibrationFile> {
+    let mut file = CalibrationFile {
+        parameters: cal
+            .model
+            .params()
+            .into_iter()
+            .map(|i| (NAMES[i].to_string(), cal.params[i]))
+            .collect(),
+        // the posterior with its correlations, for a tracker that starts from it (the
+        // calibrator node's `geometry_file`): rows and columns in `names` order, mm and rad
+        covariance: Some(PosteriorCovariance {
+            names: NAMES.iter().map(|n| (*n).to_owned()).collect(),
+            matrix: (0..N_PARAMS)
+                .map(|i| (0..N_PARAMS).map(|j| cal.covariance[(i, j)]).collect())
+                .collect(),
+        }),
+        identified: Some(cal.identified.iter().map(IdentifiedEntry::of).collect::<anyhow::Result<_>>()?),
+        effects: cal.effects.iter().map(EffectValue::of).collect::<anyhow::Result<_>>()?,
+        ..CalibrationFile::default()
+    };
     let mut out = json!({
         "model": cal.model.number(),
-        "parameters": parameters,
-        "identified": cal.identified,
         "rms": cal.rms,
         // null where infinite; the words say what that means
         "condition_number": cal.condition_number,
@@ -726,17 +747,8 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
         "iterations": cal.iterations,
         "rows": cal.rows,
         "outliers": cal.outliers,
-        // the posterior with its correlations, for a tracker that starts from it (the
-        // calibrator node's `geometry_file`): rows and columns in `names` order, mm and rad
-        "covariance": {
-            "names": NAMES,
-            "matrix": (0..N_PARAMS)
-                .map(|i| (0..N_PARAMS).map(|j| cal.covariance[(i, j)]).collect::<Vec<f64>>())
-                .collect::<Vec<_>>(),
-        },
     });
     if !cal.effects.is_empty() {
-        out["effects"] = json!(cal.effects);
         out["time_constants"] = json!(calib::time_constants(cal));
         out["effects_covariance"] = effects_covariance(cal);
     }
@@ -754,5 +766,8 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> serde_json::Value
             out["held_out"]["judge"] = rpkm_nodes::words::held_out(j).into();
         }
     }
-    out
+    if let serde_json::Value::Object(report) = out {
+        file.report = report;
+    }
+    Ok(file)
 }

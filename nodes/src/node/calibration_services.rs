@@ -9,6 +9,7 @@
 //!   "{path: /cell/cal.json}"
 //! ```
 
+use crate::calibration_file::CalibrationFile;
 use std::path::Path;
 
 use rpkm_core::params::{Model, NAMES};
@@ -82,11 +83,12 @@ fn answer(ctx: &NodeContext, success: bool, message: String) -> Response {
 /// The geometry of `current` with the parameters and the effects of the calibration JSON at
 /// `path` (the node's model, stiffness and effects file stay).
 fn load(current: &Geometry, path: &Path) -> anyhow::Result<Geometry> {
-    let mut params = crate::input::read_params(path)?;
+    let doc = CalibrationFile::read(path)?;
+    let mut params = crate::input::params_of(path, &doc)?;
     if current.model == Model::M24 {
         params = params.with_perfect_parallelogram();
     }
-    let effects = current.effects.read_calibration(path)?;
+    let effects = current.effects.read_calibration(path, &doc)?;
     Ok(Geometry {
         params,
         model: current.model,
@@ -100,20 +102,21 @@ fn load(current: &Geometry, path: &Path) -> anyhow::Result<Geometry> {
 /// applied effects' `effects` and `effects_file` as `rpkm calibrate --json` writes them), the
 /// file [`load`] and `geometry_file` read.
 fn save(g: &Geometry, path: &Path) -> anyhow::Result<String> {
-    let parameters: serde_json::Map<String, serde_json::Value> = NAMES
-        .iter()
-        .enumerate()
-        .map(|(i, name)| ((*name).to_owned(), serde_json::Value::from(g.params[i])))
-        .collect();
-    let mut doc = serde_json::json!({
-        "model": g.model.number(),
-        "source": g.source,
-        "parameters": parameters,
-    });
+    let mut doc = CalibrationFile {
+        parameters: NAMES
+            .iter()
+            .enumerate()
+            .map(|(i, name)| ((*name).to_owned(), g.params[i]))
+            .collect(),
+        ..CalibrationFile::default()
+    };
+    doc.report.insert("model".into(), g.model.number().into());
+    doc.report.insert("source".into(), g.source.clone().into());
     if let Some((effects, file)) = g.effects.to_json() {
-        doc["effects"] = effects;
-        doc["effects_file"] = file;
+        doc.effects = serde_json::from_value(effects)?;
+        doc.effects_file = Some(serde_json::from_value(file)?);
     }
+    let doc = doc.to_value()?;
     let text = serde_json::to_string_pretty(&doc)?;
     std::fs::write(path, text + "\n")
         .map_err(|e| anyhow::anyhow!("{}: cannot write: {e}", path.display()))?;

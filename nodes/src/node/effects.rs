@@ -22,6 +22,7 @@ use rpkm_core::effects::{self, LiveEffects, LiveError, LiveState, Written};
 use rpkm_core::params::Params;
 use rpkm_msgs::Parameters;
 
+use crate::calibration_file::{CalibrationFile, RecordedEffects};
 use crate::effects_file::{si_per_unit, EffectsFile};
 
 /// Why calibrated effects cannot be applied.
@@ -76,8 +77,6 @@ pub enum EffectsError {
     Lengths { names: usize, values: usize },
     #[error(transparent)]
     Live(#[from] LiveError),
-    #[error("{0}")]
-    Json(String),
 }
 
 /// The effects a node knows (its `effects_file`) and those it applies, with their values.
@@ -201,46 +200,23 @@ impl NodeEffects {
         self.applying(by_effect)
     }
 
-    /// The effects of the calibration JSON `doc` (read from `path`), in place of these: its
-    /// `effects` (value in each parameter's unit), its recorded expressions checked against
-    /// the node's. A parameters file without `effects` applies none.
-    pub fn of_calibration(
-        &self,
-        path: &Path,
-        doc: &serde_json::Value,
-    ) -> Result<NodeEffects, EffectsError> {
-        let json = |what: String| EffectsError::Json(format!("{}: {what}", path.display()));
+    /// The effects of the calibration file `doc`, in place of these: its `effects` (value
+    /// in each parameter's unit), its recorded expressions checked against the node's. A
+    /// parameters file without `effects` applies none.
+    pub fn of_calibration(&self, doc: &CalibrationFile) -> Result<NodeEffects, EffectsError> {
         let mut by_effect: Vec<(String, Values)> = Vec::new();
-        let list = match doc.get("effects") {
-            None => &Vec::new(),
-            Some(serde_json::Value::Array(list)) => list,
-            Some(_) => return Err(json("`effects` is not a list".into())),
-        };
-        for (k, e) in list.iter().enumerate() {
-            let field = |key: &str| {
-                e.get(key)
-                    .ok_or_else(|| json(format!("effects[{k}] has no `{key}`")))
-            };
-            let text = |key: &str| {
-                field(key)?
-                    .as_str()
-                    .map(str::to_owned)
-                    .ok_or_else(|| json(format!("effects[{k}].{key}: expected text")))
-            };
-            let (effect, param, unit) = (text("effect")?, text("name")?, text("unit")?);
-            let value = field("value")?
-                .as_f64()
-                .ok_or_else(|| json(format!("effects[{k}].value: expected a number")))?;
-            if let Ok(w) = self.written(&effect) {
-                check_unit(w, &param, &unit)?;
+        for e in &doc.effects {
+            if let Ok(w) = self.written(&e.effect) {
+                check_unit(w, &e.name, &e.unit)?;
             }
-            match by_effect.iter_mut().find(|b| b.0 == effect) {
-                Some(b) => b.1.push((param, value)),
-                None => by_effect.push((effect, vec![(param, value)])),
+            let value = (e.name.clone(), e.value);
+            match by_effect.iter_mut().find(|b| b.0 == e.effect) {
+                Some(b) => b.1.push(value),
+                None => by_effect.push((e.effect.clone(), vec![value])),
             }
         }
         let out = self.applying(by_effect)?;
-        if let Some(recorded) = doc.get("effects_file") {
+        if let Some(recorded) = &doc.effects_file {
             self.check_expressions(recorded, &out)?;
         }
         Ok(out)
@@ -250,44 +226,35 @@ impl NodeEffects {
     /// node's file's.
     fn check_expressions(
         &self,
-        recorded: &serde_json::Value,
+        recorded: &RecordedEffects,
         applied: &NodeEffects,
     ) -> Result<(), EffectsError> {
-        let recorded = recorded
-            .get("effects")
-            .and_then(serde_json::Value::as_array)
-            .map_or(&[][..], Vec::as_slice);
         for (name, _) in applied.live.values() {
-            let Some(r) = recorded.iter().find(|r| r["name"] == name) else {
+            let Some(r) = recorded.effects.iter().find(|r| r.name == *name) else {
                 continue;
             };
             let w = self.written(name)?;
             let ours = &w.spec().targets;
-            let theirs = r["expressions"].as_object();
+            let theirs = &r.expressions;
             let differs = |target: &str, node: &str| EffectsError::Expression {
                 effect: name.to_owned(),
                 target: target.to_owned(),
                 calibrated: theirs
-                    .and_then(|t| t.get(target))
-                    .and_then(serde_json::Value::as_str)
-                    .unwrap_or("(none)")
+                    .get(target)
+                    .map_or("(none)", String::as_str)
                     .to_owned(),
                 node: node.to_owned(),
                 file: self.file.as_ref().map_or(String::new(), |f| f.file.clone()),
             };
             for (target, text) in ours {
-                let same = theirs
-                    .and_then(|t| t.get(target))
-                    .and_then(serde_json::Value::as_str)
-                    == Some(text.as_str());
-                if !same {
+                if theirs.get(target) != Some(text) {
                     return Err(differs(target, text));
                 }
             }
-            if let Some(extra) = theirs.and_then(|t| {
-                t.keys()
-                    .find(|k| !ours.iter().any(|(target, _)| target == *k))
-            }) {
+            if let Some(extra) = theirs
+                .keys()
+                .find(|k| !ours.iter().any(|(target, _)| target == *k))
+            {
                 return Err(differs(extra, "(none)"));
             }
         }
@@ -427,17 +394,11 @@ impl NodeEffects {
             .map_err(|e| crate::error::bad_input(e.to_string()))
     }
 
-    /// The effects of the calibration JSON at `path` ([`NodeEffects::of_calibration`]), a
-    /// mistake told as bad input naming the file.
-    pub fn read_calibration(&self, path: &Path) -> anyhow::Result<NodeEffects> {
-        let bad = |what: String| crate::error::bad_input(format!("{}: {what}", path.display()));
-        let text = std::fs::read_to_string(path).map_err(|e| bad(format!("cannot read: {e}")))?;
-        let doc: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
-        self.of_calibration(path, &doc).map_err(|e| match e {
-            EffectsError::Json(what) => crate::error::bad_input(what),
-            other => bad(other.to_string()),
-        })
+    /// The effects of the calibration file `doc` read from `path`
+    /// ([`NodeEffects::of_calibration`]), a mistake told as bad input naming the file.
+    pub fn read_calibration(&self, path: &Path, doc: &CalibrationFile) -> anyhow::Result<NodeEffects> {
+        self.of_calibration(doc)
+            .map_err(|e| crate::error::bad_input(format!("{}: {e}", path.display())))
     }
 }
 
@@ -580,27 +541,30 @@ mod tests {
     }
 
     #[test]
-    fn a_calibration_json_round_trips_and_other_expressions_are_refused() -> Result<(), EffectsError>
-    {
+    fn a_calibration_json_round_trips_and_other_expressions_are_refused() -> anyhow::Result<()> {
         let k = known(LOST);
         let e = k.of_message(&message(
             &["lost_motion_q4"],
             &["lost_motion_q4.b"],
             &[0.02e-3],
         ))?;
-        let (effects, file) = e.to_json().ok_or(EffectsError::Json("no effects".into()))?;
-        let mut doc = serde_json::json!({"effects": effects, "effects_file": file});
-        let back = k.of_calibration(Path::new("cal.json"), &doc)?;
+        let (effects, file) = e.to_json().ok_or_else(|| anyhow::anyhow!("no effects"))?;
+        let mut doc = serde_json::json!({"parameters": {}, "effects": effects, "effects_file": file});
+        let of = |doc: &serde_json::Value| {
+            let file = CalibrationFile::of_value(Path::new("cal.json"), doc.clone())?;
+            Ok::<_, anyhow::Error>(k.of_calibration(&file))
+        };
+        let back = of(&doc)??;
         assert_eq!(back, e);
         doc["effects_file"]["effects"][0]["expressions"]["dq4"] = "b * dir_q4".into();
-        let err = k.of_calibration(Path::new("cal.json"), &doc);
+        let err = of(&doc)?;
         assert!(
             matches!(&err, Err(EffectsError::Expression { effect, calibrated, .. })
                 if effect == "lost_motion_q4" && calibrated == "b * dir_q4"),
             "{err:?}"
         );
         doc["effects"][0]["unit"] = "um".into();
-        let err = k.of_calibration(Path::new("cal.json"), &doc);
+        let err = of(&doc)?;
         assert!(matches!(&err, Err(EffectsError::Unit { .. })), "{err:?}");
         Ok(())
     }

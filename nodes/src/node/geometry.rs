@@ -133,10 +133,11 @@ impl Geometry {
             (Params::nominal(), "nominal parameters".to_owned(), known)
         } else {
             let path = std::path::Path::new(&file);
+            let doc = crate::calibration_file::CalibrationFile::read(path)?;
             (
-                crate::input::read_params(path)?,
+                crate::input::params_of(path, &doc)?,
                 file.clone(),
-                known.read_calibration(path)?,
+                known.read_calibration(path, &doc)?,
             )
         };
         let overrides = p.group(GEOMETRY_OVERRIDES.key).map_err(bad_param)?;

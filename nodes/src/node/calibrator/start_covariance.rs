@@ -1,6 +1,8 @@
 //! The start covariance of the online tracker, read from a geometry file's JSON.
 
+use crate::calibration_file::{CalibrationFile, PosteriorCovariance};
 use crate::error::bad_input;
+use std::path::Path;
 use nalgebra::SMatrix;
 use rpkm_core::calib;
 use rpkm_core::params::N_PARAMS;
@@ -17,34 +19,21 @@ pub fn start_covariance(geometry_file: &str) -> anyhow::Result<SMatrix<f64, N_PA
     if geometry_file.is_empty() {
         return Ok(tolerance);
     }
-    let text = std::fs::read_to_string(geometry_file)
-        .map_err(|e| bad_input(format!("{geometry_file}: cannot read parameters: {e}")))?;
-    let value: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
-        bad_input(format!(
-            "{geometry_file}:{}:{}: not JSON: {e}",
-            e.line(),
-            e.column()
-        ))
-    })?;
-    if let Some(cov) = value.get("covariance") {
+    let file = CalibrationFile::read(Path::new(geometry_file))?;
+    if let Some(cov) = &file.covariance {
         return covariance_of(geometry_file, cov);
     }
-    let Some(identified) = value.get("identified") else {
+    let Some(identified) = &file.identified else {
         return Ok(tolerance);
     };
-    let entries = identified
-        .as_array()
-        .ok_or_else(|| bad_input(format!("{geometry_file}: `identified`: expected an array")))?;
     let mut cov = tolerance;
-    for (n, e) in entries.iter().enumerate() {
-        let index = e.get("index").and_then(serde_json::Value::as_u64);
-        let s = e.get("sigma").and_then(serde_json::Value::as_f64);
-        match (index.and_then(|i| usize::try_from(i).ok()), s) {
-            (Some(i), Some(s)) if i < N_PARAMS && s.is_finite() && s > 0.0 => cov[(i, i)] = s * s,
-            _ => {
+    for (n, e) in identified.iter().enumerate() {
+        match (e.index, e.sigma) {
+            (i, Some(s)) if i < N_PARAMS && s.is_finite() && s > 0.0 => cov[(i, i)] = s * s,
+            (i, s) => {
                 return Err(bad_input(format!(
                     "{geometry_file}: identified[{n}]: expected an `index` below {N_PARAMS} \
-                     and a positive finite `sigma`, found {e}"
+                     and a positive finite `sigma`, found index {i}, sigma {s:?}"
                 )))
             }
         }
@@ -54,33 +43,23 @@ pub fn start_covariance(geometry_file: &str) -> anyhow::Result<SMatrix<f64, N_PA
 
 /// The `covariance` object of a geometry file: `names` (the 29 parameters, in the spec's
 /// order) and `matrix` (29 rows of 29 finite numbers, symmetric, no negative variance).
-fn covariance_of(
-    file: &str,
-    v: &serde_json::Value,
-) -> anyhow::Result<SMatrix<f64, N_PARAMS, N_PARAMS>> {
+fn covariance_of(file: &str, v: &PosteriorCovariance) -> anyhow::Result<SMatrix<f64, N_PARAMS, N_PARAMS>> {
     let bad = |what: String| bad_input(format!("{file}: covariance: {what}"));
-    let names: Option<Vec<&str>> = v
-        .get("names")
-        .and_then(serde_json::Value::as_array)
-        .map(|a| a.iter().filter_map(serde_json::Value::as_str).collect());
-    if names.as_deref() != Some(&rpkm_core::params::NAMES[..]) {
+    if v.names.iter().map(String::as_str).ne(rpkm_core::params::NAMES) {
         return Err(bad(format!(
             "expected `names` with the {N_PARAMS} parameters in the spec's order (l1, l4, ...)"
         )));
     }
-    let rows = v
-        .get("matrix")
-        .and_then(serde_json::Value::as_array)
+    let rows = Some(&v.matrix)
         .filter(|r| r.len() == N_PARAMS)
         .ok_or_else(|| bad(format!("expected `matrix` with {N_PARAMS} rows")))?;
     let mut cov = SMatrix::<f64, N_PARAMS, N_PARAMS>::zeros();
     for (i, row) in rows.iter().enumerate() {
-        let row = row
-            .as_array()
+        let row = Some(row)
             .filter(|r| r.len() == N_PARAMS)
             .ok_or_else(|| bad(format!("matrix[{i}]: expected {N_PARAMS} numbers")))?;
         for (j, x) in row.iter().enumerate() {
-            cov[(i, j)] = x.as_f64().filter(|x| x.is_finite()).ok_or_else(|| {
+            cov[(i, j)] = Some(*x).filter(|x| x.is_finite()).ok_or_else(|| {
                 bad(format!(
                     "matrix[{i}][{j}]: expected a finite number, found {x}"
                 ))
