@@ -215,9 +215,14 @@ mod tests {
         let file = read(text)?;
         assert_eq!(file.parameters.get("l1"), Some(&100.25));
         assert_eq!(file.effects.first().map(|e| e.value), Some(0.001));
-        assert_eq!(file.identified.as_ref().and_then(|i| i[0].sigma), Some(0.001));
         assert_eq!(
-            file.effects_file.as_ref().map(|f| f.effects[0].expressions["dq4"].as_str()),
+            file.identified.as_ref().and_then(|i| i[0].sigma),
+            Some(0.001)
+        );
+        assert_eq!(
+            file.effects_file
+                .as_ref()
+                .map(|f| f.effects[0].expressions["dq4"].as_str()),
             Some("a * t")
         );
         assert_eq!(file.to_value()?.to_string(), text);
@@ -235,11 +240,26 @@ mod tests {
     #[test]
     fn a_field_of_the_wrong_shape_is_named_with_the_file() {
         for (text, says) in [
-            (r#"{"parameters": {"l1": "x"}}"#, "cal.json: parameter `l1`: expected a finite number, found \"x\""),
-            (r#"{"parameters": [1]}"#, "cal.json: `parameters`: expected a JSON object"),
-            (r#"{"parameters": {}, "covariance": {"names": []}}"#, "cal.json: `covariance`: missing field `matrix`"),
-            (r#"{"parameters": {}, "effects": [{"effect": "e", "name": "a", "unit": "mm"}]}"#, "cal.json: `effects`: missing field `value`"),
-            (r#"{"parameters": {}, "effects": {}}"#, "cal.json: `effects`: invalid type: map"),
+            (
+                r#"{"parameters": {"l1": "x"}}"#,
+                "cal.json: parameter `l1`: expected a finite number, found \"x\"",
+            ),
+            (
+                r#"{"parameters": [1]}"#,
+                "cal.json: `parameters`: expected a JSON object",
+            ),
+            (
+                r#"{"parameters": {}, "covariance": {"names": []}}"#,
+                "cal.json: `covariance`: missing field `matrix`",
+            ),
+            (
+                r#"{"parameters": {}, "effects": [{"effect": "e", "name": "a", "unit": "mm"}]}"#,
+                "cal.json: `effects`: missing field `value`",
+            ),
+            (
+                r#"{"parameters": {}, "effects": {}}"#,
+                "cal.json: `effects`: invalid type: map",
+            ),
             ("[1]", "cal.json: expected a JSON object"),
         ] {
             let err = read(text).map(|_| ()).expect_err(text).to_string();

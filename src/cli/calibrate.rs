@@ -9,7 +9,9 @@ use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS};
 use rpkm_core::variance::NoiseEstimate;
-use rpkm_nodes::calibration_file::{CalibrationFile, EffectValue, IdentifiedEntry, PosteriorCovariance};
+use rpkm_nodes::calibration_file::{
+    CalibrationFile, EffectValue, IdentifiedEntry, PosteriorCovariance,
+};
 use rpkm_nodes::effects_file::EffectsFile;
 use serde_json::json;
 use std::path::PathBuf;
@@ -212,7 +214,8 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     if let Some(path) = &args.json {
         let file = file.as_ref().map(rpkm_nodes::effects_file::to_json);
         let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_ref())?;
-        out.report.insert("returns".into(), serde_json::to_value(&returns.0)?);
+        out.report
+            .insert("returns".into(), serde_json::to_value(&returns.0)?);
         out.report.insert(
             "returns_under_estimated_noise".into(),
             serde_json::to_value(&returns.1)?,
@@ -384,10 +387,16 @@ fn calibration_json(
     report.insert("determined".into(), serde_json::to_value(cal.determined)?);
     if let Some(st) = stages {
         report.insert("effect_stages".into(), serde_json::to_value(&st.rows)?);
-        report.insert("effect_stages_chi2_under".into(), st.chi2_under.clone().into());
+        report.insert(
+            "effect_stages_chi2_under".into(),
+            st.chi2_under.clone().into(),
+        );
         // the stages' last model as the data settle it, where not as given
         if let Some(fitted) = &st.settled_as {
-            report.insert("effect_stages_settled_as".into(), serde_json::to_value(fitted)?);
+            report.insert(
+                "effect_stages_settled_as".into(),
+                serde_json::to_value(fitted)?,
+            );
         }
     }
     Ok(out)
@@ -733,8 +742,17 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> anyhow::Result<Ca
                 .map(|i| (0..N_PARAMS).map(|j| cal.covariance[(i, j)]).collect())
                 .collect(),
         }),
-        identified: Some(cal.identified.iter().map(IdentifiedEntry::of).collect::<anyhow::Result<_>>()?),
-        effects: cal.effects.iter().map(EffectValue::of).collect::<anyhow::Result<_>>()?,
+        identified: Some(
+            cal.identified
+                .iter()
+                .map(IdentifiedEntry::of)
+                .collect::<anyhow::Result<_>>()?,
+        ),
+        effects: cal
+            .effects
+            .iter()
+            .map(EffectValue::of)
+            .collect::<anyhow::Result<_>>()?,
         ..CalibrationFile::default()
     };
     let mut out = json!({

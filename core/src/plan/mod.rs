@@ -37,7 +37,6 @@ pub mod worth;
 
 pub use accuracy::{AccuracyPlanner, Forecast};
 pub use forecast::TargetForecast;
-pub use worth::{own_error, WORTH};
 pub use greedy::{condition_exchange, determine, normalized_condition, Chosen};
 pub use mode::{drive_mode, DriveMode, DriveModeReason};
 pub use start::{design_rows, Start};
@@ -45,6 +44,7 @@ pub use types::{
     returns_to_zero, CandidateSetup, Determination, DeterminationPlan, PlanError, PlannedSetup,
     Unknowns,
 };
+pub use worth::{own_error, WORTH};
 
 use crate::analysis::{self};
 use crate::campaign::Instrument;

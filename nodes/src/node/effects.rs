@@ -396,7 +396,11 @@ impl NodeEffects {
 
     /// The effects of the calibration file `doc` read from `path`
     /// ([`NodeEffects::of_calibration`]), a mistake told as bad input naming the file.
-    pub fn read_calibration(&self, path: &Path, doc: &CalibrationFile) -> anyhow::Result<NodeEffects> {
+    pub fn read_calibration(
+        &self,
+        path: &Path,
+        doc: &CalibrationFile,
+    ) -> anyhow::Result<NodeEffects> {
         self.of_calibration(doc)
             .map_err(|e| crate::error::bad_input(format!("{}: {e}", path.display())))
     }
@@ -549,7 +553,8 @@ mod tests {
             &[0.02e-3],
         ))?;
         let (effects, file) = e.to_json().ok_or_else(|| anyhow::anyhow!("no effects"))?;
-        let mut doc = serde_json::json!({"parameters": {}, "effects": effects, "effects_file": file});
+        let mut doc =
+            serde_json::json!({"parameters": {}, "effects": effects, "effects_file": file});
         let of = |doc: &serde_json::Value| {
             let file = CalibrationFile::of_value(Path::new("cal.json"), doc.clone())?;
             Ok::<_, anyhow::Error>(k.of_calibration(&file))

@@ -2,10 +2,10 @@
 
 use crate::calibration_file::{CalibrationFile, PosteriorCovariance};
 use crate::error::bad_input;
-use std::path::Path;
 use nalgebra::SMatrix;
 use rpkm_core::calib;
 use rpkm_core::params::N_PARAMS;
+use std::path::Path;
 
 /// Covariance of the start geometry (mm, rad) from the geometry file `rpkm calibrate --json`
 /// writes: its `covariance` (29 × 29 in `names` order, the calibration's correlations), else,
@@ -43,9 +43,16 @@ pub fn start_covariance(geometry_file: &str) -> anyhow::Result<SMatrix<f64, N_PA
 
 /// The `covariance` object of a geometry file: `names` (the 29 parameters, in the spec's
 /// order) and `matrix` (29 rows of 29 finite numbers, symmetric, no negative variance).
-fn covariance_of(file: &str, v: &PosteriorCovariance) -> anyhow::Result<SMatrix<f64, N_PARAMS, N_PARAMS>> {
+fn covariance_of(
+    file: &str,
+    v: &PosteriorCovariance,
+) -> anyhow::Result<SMatrix<f64, N_PARAMS, N_PARAMS>> {
     let bad = |what: String| bad_input(format!("{file}: covariance: {what}"));
-    if v.names.iter().map(String::as_str).ne(rpkm_core::params::NAMES) {
+    if v.names
+        .iter()
+        .map(String::as_str)
+        .ne(rpkm_core::params::NAMES)
+    {
         return Err(bad(format!(
             "expected `names` with the {N_PARAMS} parameters in the spec's order (l1, l4, ...)"
         )));
