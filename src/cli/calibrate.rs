@@ -213,18 +213,12 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     }
     if let Some(path) = &args.json {
         let file = file.as_ref().map(rpkm_nodes::effects_file::to_json);
-        let mut out = calibration_json(&cal, (&noise, file), val.as_ref(), stages.as_ref())?;
-        out.report
-            .insert("returns".into(), serde_json::to_value(&returns.0)?);
-        out.report.insert(
-            "returns_under_estimated_noise".into(),
-            serde_json::to_value(&returns.1)?,
-        );
-        if let Some(v) = &validation {
-            held_out_json(&mut out.report, (&campaign, v), val.as_ref())?;
-        }
-        write_json(path, &out.to_value()?)?;
-        println!("\nwrote {}", path.display());
+        write_calibration_json(
+            path,
+            (&cal, &noise, file),
+            (val.as_ref(), stages.as_ref(), &returns),
+            (&campaign, validation.as_ref()),
+        )?;
     }
     record_history(
         args,
@@ -256,6 +250,29 @@ fn drift_checks(
 
 /// The held-out campaign in the JSON: against the calibration's ranges
 /// (`held_out_coverage`), and the judge's residual pose by pose (`held_out_poses`).
+/// `--json`: the calibration's file (what the nodes read) with the report's figures, the
+/// returns under the stated and the estimated noise and the held-out campaign's.
+fn write_calibration_json(
+    path: &std::path::Path,
+    (cal, noise, file): (&Calibration, &NoiseEstimate, Option<serde_json::Value>),
+    (val, stages, returns): (Option<&Validation>, Option<&Stages>, &(Returns, Returns)),
+    (campaign, held_out): (&Campaign, Option<&Campaign>),
+) -> anyhow::Result<()> {
+    let mut out = calibration_json(cal, (noise, file), val, stages)?;
+    out.report
+        .insert("returns".into(), serde_json::to_value(&returns.0)?);
+    out.report.insert(
+        "returns_under_estimated_noise".into(),
+        serde_json::to_value(&returns.1)?,
+    );
+    if let Some(v) = held_out {
+        held_out_json(&mut out.report, (campaign, v), val)?;
+    }
+    write_json(path, &out.to_value()?)?;
+    println!("\nwrote {}", path.display());
+    Ok(())
+}
+
 fn held_out_json(
     out: &mut serde_json::Map<String, serde_json::Value>,
     (campaign, held_out): (&Campaign, &Campaign),
