@@ -248,8 +248,6 @@ fn drift_checks(
     Ok((check(stated)?, check(&estimated.model)?))
 }
 
-/// The held-out campaign in the JSON: against the calibration's ranges
-/// (`held_out_coverage`), and the judge's residual pose by pose (`held_out_poses`).
 /// `--json`: the calibration's file (what the nodes read) with the report's figures, the
 /// returns under the stated and the estimated noise and the held-out campaign's.
 fn write_calibration_json(
@@ -266,28 +264,11 @@ fn write_calibration_json(
         serde_json::to_value(&returns.1)?,
     );
     if let Some(v) = held_out {
-        held_out_json(&mut out.report, (campaign, v), val)?;
+        let judge = val.and_then(|v| v.judge.as_ref());
+        super::held_out_poses::held_out_json(&mut out.report, (campaign, v), judge)?;
     }
     write_json(path, &out.to_value()?)?;
     println!("\nwrote {}", path.display());
-    Ok(())
-}
-
-fn held_out_json(
-    out: &mut serde_json::Map<String, serde_json::Value>,
-    (campaign, held_out): (&Campaign, &Campaign),
-    val: Option<&Validation>,
-) -> anyhow::Result<()> {
-    out.insert(
-        "held_out_coverage".into(),
-        serde_json::to_value(rpkm_core::diagnose::coverage::coverage(campaign, held_out))?,
-    );
-    if let Some(j) = val.and_then(|v| v.judge.as_ref()) {
-        out.insert(
-            "held_out_poses".into(),
-            super::held_out_poses::held_out_poses(held_out, j)?,
-        );
-    }
     Ok(())
 }
 

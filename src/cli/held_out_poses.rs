@@ -32,3 +32,20 @@ pub fn held_out_poses(val: &Campaign, judge: &HeldOutCheck) -> anyhow::Result<se
         .collect();
     Ok(json!(rows))
 }
+
+/// The held-out campaign's figures of a report (`out`): its coverage against the calibration
+/// campaign's covariates, and each pose's residual where the judge (`judge`) kept them.
+pub fn held_out_json(
+    out: &mut serde_json::Map<String, serde_json::Value>,
+    (campaign, held_out): (&Campaign, &Campaign),
+    judge: Option<&HeldOutCheck>,
+) -> anyhow::Result<()> {
+    out.insert(
+        "held_out_coverage".into(),
+        serde_json::to_value(rpkm_core::diagnose::coverage::coverage(campaign, held_out))?,
+    );
+    if let Some(j) = judge {
+        out.insert("held_out_poses".into(), held_out_poses(held_out, j)?);
+    }
+    Ok(())
+}

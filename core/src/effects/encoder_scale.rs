@@ -16,7 +16,7 @@ const GUIDES: [[usize; 2]; 2] = [[1, 2], [0, 3]];
 
 impl Effect for EncoderScale {
     fn name(&self) -> &'static str {
-        super::Family::EncoderScale.name()
+        super::family::Family::EncoderScale.name()
     }
     fn summary(&self) -> &'static str {
         "scale error of each guide's linear encoders"

@@ -24,7 +24,7 @@ pub struct GuideStraightness;
 
 impl Effect for GuideStraightness {
     fn name(&self) -> &'static str {
-        super::Family::GuideStraightness.name()
+        super::family::Family::GuideStraightness.name()
     }
     fn summary(&self) -> &'static str {
         "bowed guides: carrier joints offset across the guide by a parabola of q"

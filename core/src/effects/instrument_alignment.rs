@@ -14,7 +14,7 @@ pub struct InstrumentAlignment;
 
 impl Effect for InstrumentAlignment {
     fn name(&self) -> &'static str {
-        super::Family::InstrumentAlignment.name()
+        super::family::Family::InstrumentAlignment.name()
     }
     fn summary(&self) -> &'static str {
         "rotation about z of each laser-tracker or grid-encoder setup"

@@ -23,6 +23,7 @@
 mod effect;
 mod encoder_scale;
 pub mod expr;
+mod family;
 mod guide_straightness;
 mod instrument_alignment;
 pub mod live;
@@ -36,6 +37,7 @@ pub mod written;
 
 pub use effect::{Bound, Delta, Effect, EffectParam, InputSensitivity, NotApplicable, Slope};
 pub use encoder_scale::EncoderScale;
+pub use family::{family_of, Family};
 pub use guide_straightness::GuideStraightness;
 pub use instrument_alignment::InstrumentAlignment;
 pub use live::{LiveEffects, LiveError, LiveState};
@@ -51,55 +53,6 @@ use crate::campaign::Campaign;
 use crate::params::Params;
 
 pub use crate::params::Row;
-
-/// The effects of [`all`] by identity: what code compares where it means one of them (the
-/// name is what a user writes and a report prints; each effect's file names itself by its
-/// family's [`Family::name`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Family {
-    Parallelogram,
-    PreloadElastic,
-    Thermal,
-    ThermalLag,
-    EncoderScale,
-    GuideStraightness,
-    InstrumentAlignment,
-    StiffnessFactor,
-}
-
-impl Family {
-    const ALL: [Family; 8] = [
-        Family::Parallelogram,
-        Family::PreloadElastic,
-        Family::Thermal,
-        Family::ThermalLag,
-        Family::EncoderScale,
-        Family::GuideStraightness,
-        Family::InstrumentAlignment,
-        Family::StiffnessFactor,
-    ];
-
-    /// The family's name on the command line and in reports.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Family::Parallelogram => "parallelogram",
-            Family::PreloadElastic => "preload_elastic",
-            Family::Thermal => "thermal",
-            Family::ThermalLag => "thermal_lag",
-            Family::EncoderScale => "encoder_scale",
-            Family::GuideStraightness => "guide_straightness",
-            Family::InstrumentAlignment => "instrument_alignment",
-            Family::StiffnessFactor => "stiffness_factor",
-        }
-    }
-
-    /// The family of effect name `name` (`thermal:rods` is [`Family::Thermal`]); None for a
-    /// written effect.
-    pub fn of(name: &str) -> Option<Family> {
-        let family = family_of(name);
-        Self::ALL.into_iter().find(|f| f.name() == family)
-    }
-}
 
 /// The effects the diagnosis knows, in the order it tries them.
 pub fn library() -> Vec<Box<dyn Effect>> {
@@ -172,12 +125,6 @@ pub fn by_name(name: &str) -> Result<Box<dyn Effect>, UnknownEffect> {
     effect
         .with_parts(&indices)
         .ok_or_else(|| unknown(with(&known.join(", "))))
-}
-
-/// The family of an effect name: `thermal` for `thermal:rods` (the name itself where it
-/// pins no part).
-pub fn family_of(name: &str) -> &str {
-    name.split_once(':').map_or(name, |(f, _)| f)
 }
 
 /// A list `a,b,c` of effect names.

@@ -22,7 +22,7 @@ const ROD5: [(usize, &str); 5] = [
 
 impl Effect for Parallelogram {
     fn name(&self) -> &'static str {
-        super::Family::Parallelogram.name()
+        super::family::Family::Parallelogram.name()
     }
     fn summary(&self) -> &'static str {
         "imperfect parallel-holder: rod 5 deviates from rod 4 (model 24 to model 29)"

@@ -33,7 +33,7 @@ pub struct PreloadElastic {
     name: String,
 }
 
-const NAME: &str = super::Family::PreloadElastic.name();
+const NAME: &str = super::family::Family::PreloadElastic.name();
 
 /// A rod with a compliance of its own, by name.
 const PARTS: [&str; 5] = ["rod1", "rod2", "rod3", "rod4", "rod5"];

@@ -23,7 +23,7 @@ pub const PRIOR: f64 = 0.1;
 
 impl Effect for StiffnessFactor {
     fn name(&self) -> &'static str {
-        super::Family::StiffnessFactor.name()
+        super::family::Family::StiffnessFactor.name()
     }
     fn summary(&self) -> &'static str {
         "the machine's stiffness relative to the model's default (drive-force rows only)"

@@ -91,8 +91,8 @@ impl Thermal {
     }
 }
 
-const NAME: &str = super::Family::Thermal.name();
-const LAG_NAME: &str = super::Family::ThermalLag.name();
+const NAME: &str = super::family::Family::Thermal.name();
+const LAG_NAME: &str = super::family::Family::ThermalLag.name();
 
 /// The lag's product α·τ: its scale in the fit (10 ppm/K for ten minutes), and what real
 /// coefficients and lags of minutes to four hours make, either way.
