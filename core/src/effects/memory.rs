@@ -110,7 +110,7 @@ fn least_error_rate(t: &[f64], xs: &[f64], noise: f64) -> Fitted {
     let widest = (span / 2.0).max(narrowest);
     let unbias = (4.0 / 3.0_f64).powi(2);
     let mut half = narrowest;
-    let (first, spread) = slopes(t, xs, half, QUADRATIC);
+    let (first, spread) = slopes(t, xs, half);
     let (mut previous, mut previous_noise) = (first.clone(), noise * spread);
     let mut best = Fitted {
         rate: first,
@@ -119,7 +119,7 @@ fn least_error_rate(t: &[f64], xs: &[f64], noise: f64) -> Fitted {
     };
     while half < widest {
         half = (2.0 * half).min(widest);
-        let (slope, spread) = slopes(t, xs, half, QUADRATIC);
+        let (slope, spread) = slopes(t, xs, half);
         let change: Vec<f64> = slope.iter().zip(&previous).map(|(a, b)| a - b).collect();
         let bias2 = (rms(&change).powi(2) - previous_noise.powi(2)).max(0.0) * unbias;
         let error = (noise * spread).powi(2) + bias2;
@@ -135,13 +135,10 @@ fn least_error_rate(t: &[f64], xs: &[f64], noise: f64) -> Fitted {
     best
 }
 
-/// The degree of the rate's local fit.
-const QUADRATIC: usize = 2;
-
-/// The slope at each time of a polynomial of `degree` fitted to the readings within `half`
-/// of it (at least the `degree + 1` nearest distinct times), and the RMS over the rows of
-/// each slope's standard deviation per unit of the readings' noise.
-fn slopes(t: &[f64], x: &[f64], half: f64, degree: usize) -> (Vec<f64>, f64) {
+/// The slope at each time of a quadratic fitted to the readings within `half` of it (at
+/// least the three nearest distinct times), and the RMS over the rows of each slope's
+/// standard deviation per unit of the readings' noise.
+fn slopes(t: &[f64], x: &[f64], half: f64) -> (Vec<f64>, f64) {
     let n = t.len();
     let (mut lo, mut hi) = (0usize, 0usize);
     let mut spread = 0.0;
@@ -153,8 +150,8 @@ fn slopes(t: &[f64], x: &[f64], half: f64, degree: usize) -> (Vec<f64>, f64) {
             while hi + 1 < n && t[hi + 1] <= t[i] + half {
                 hi += 1;
             }
-            let (a, b) = widened(t, i, (lo, hi), degree + 1);
-            let (s, var) = poly_slope(&t[a..=b], &x[a..=b], t[i], degree);
+            let (a, b) = widened(t, i, (lo, hi));
+            let (s, var) = quadratic_slope(&t[a..=b], &x[a..=b], t[i]);
             spread += var;
             s
         })
@@ -162,11 +159,11 @@ fn slopes(t: &[f64], x: &[f64], half: f64, degree: usize) -> (Vec<f64>, f64) {
     (slope, (spread / n.max(1) as f64).sqrt())
 }
 
-/// The window `lo..=hi` around row `i` grown until it holds `times` distinct times (or
-/// every row).
-fn widened(t: &[f64], i: usize, (mut lo, mut hi): (usize, usize), times: usize) -> (usize, usize) {
+/// The window `lo..=hi` around row `i` grown until it holds three distinct times (or every
+/// row).
+fn widened(t: &[f64], i: usize, (mut lo, mut hi): (usize, usize)) -> (usize, usize) {
     let distinct = |lo: usize, hi: usize| 1 + t[lo..=hi].windows(2).filter(|w| w[1] > w[0]).count();
-    while distinct(lo, hi) < times {
+    while distinct(lo, hi) < 3 {
         let left = (lo > 0).then(|| t[i] - t[lo - 1]);
         let right = (hi + 1 < t.len()).then(|| t[hi + 1] - t[i]);
         match (left, right) {
@@ -179,17 +176,17 @@ fn widened(t: &[f64], i: usize, (mut lo, mut hi): (usize, usize), times: usize) 
     (lo, hi)
 }
 
-/// The slope at `at` of the least-squares polynomial of `degree` through (t, x) (of a lower
-/// degree where the window's distinct times do not determine it), and its variance per unit
-/// variance of the readings.
-fn poly_slope(t: &[f64], x: &[f64], at: f64, degree: usize) -> (f64, f64) {
+/// The slope at `at` of the least-squares quadratic through (t, x) (a line where the
+/// window's distinct times do not determine it), and its variance per unit variance of the
+/// readings.
+fn quadratic_slope(t: &[f64], x: &[f64], at: f64) -> (f64, f64) {
     let scale = t
         .iter()
         .map(|v| (v - at).abs())
         .fold(0.0_f64, f64::max)
         .max(f64::MIN_POSITIVE);
     // the normal equations from the sums of u^k and x·u^k, u the scaled time
-    let (mut su, mut sx) = ([0.0_f64; 7], [0.0_f64; 4]);
+    let (mut su, mut sx) = ([0.0_f64; 5], [0.0_f64; 3]);
     for (tk, xk) in t.iter().zip(x) {
         let u = (tk - at) / scale;
         let mut p = 1.0;
@@ -202,7 +199,7 @@ fn poly_slope(t: &[f64], x: &[f64], at: f64, degree: usize) -> (f64, f64) {
         }
     }
     let distinct = 1 + t.windows(2).filter(|w| w[1] > w[0]).count();
-    let mut d = degree.min(distinct.saturating_sub(1)).min(sx.len() - 1);
+    let mut d = distinct.saturating_sub(1).min(2);
     while d >= 1 {
         let normal = nalgebra::DMatrix::from_fn(d + 1, d + 1, |r, c| su[r + c]);
         if let Some(inv) = normal.try_inverse() {

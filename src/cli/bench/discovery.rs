@@ -129,17 +129,17 @@ impl Loop<'_> {
             if self.verbose {
                 println!("with {named:?}: {}", rpkm_nodes::words::verdict(&d));
             }
-            let new: Vec<&String> = d
+            let new: Vec<String> = d
                 .missing_effects
                 .iter()
-                .filter(|e| !named.iter().any(|n| n == effects::family_of(e)))
+                .map(|e| effects::family_of(e).to_owned())
+                .filter(|e| !named.contains(e))
                 .collect();
+            all.push(d);
             if new.is_empty() || named.len() >= 4 {
-                all.push(d);
                 return Ok((all, named));
             }
-            named.extend(new.iter().map(|e| effects::family_of(e).to_owned()));
-            all.push(d);
+            named.extend(new);
         }
     }
 }
