@@ -230,16 +230,12 @@ pub(crate) fn part_variants(effects: &[&dyn Effect], whole: bool) -> Vec<Box<dyn
 /// pinned to some of its parts (`thermal_lag:rods+frame`: `thermal_lag:rods`,
 /// `thermal_lag:frame`); none for any other.
 fn pinned_parts(effect: &dyn Effect) -> Vec<Box<dyn Effect>> {
-    let Some((family, names)) = effect.name().split_once(':') else {
+    let whole = effect
+        .beside()
+        .and_then(|_| effects::by_name(effects::family_of(effect.name())).ok());
+    let (Some(whole), Some(kept)) = (whole, effects::pinned_parts(effect)) else {
         return Vec::new();
     };
-    let Some(whole) = effect.beside().and_then(|_| effects::by_name(family).ok()) else {
-        return Vec::new();
-    };
-    let kept: Vec<usize> = names
-        .split('+')
-        .filter_map(|n| whole.parts().iter().position(|p| *p == n))
-        .collect();
     (1..(1usize << kept.len()) - 1)
         .filter_map(|mask| {
             let parts: Vec<usize> = (0..kept.len())

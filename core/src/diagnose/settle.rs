@@ -97,11 +97,7 @@ pub(super) fn parts_beside(model: &[&dyn Effect], family: &dyn Effect) -> Option
     let refined = model
         .iter()
         .find(|e| crate::effects::family_of(e.name()) == of)?;
-    let (_, names) = refined.name().split_once(':')?;
-    names
-        .split('+')
-        .map(|n| family.parts().iter().position(|p| *p == n))
-        .collect()
+    crate::effects::pinned_parts(*refined)
 }
 
 /// A part variant of a family, and the same parts of the effect that refines it (if any).

@@ -50,6 +50,17 @@ impl Family {
     }
 }
 
+/// The parts (indices into [`super::Effect::parts`]) an effect pinned to some of its family's
+/// parts holds (`thermal:rods+scales`: 0 and 2); None where its name pins none or names a
+/// part the family does not have.
+pub fn pinned_parts(effect: &dyn super::Effect) -> Option<Vec<usize>> {
+    let (_, names) = effect.name().split_once(':')?;
+    names
+        .split('+')
+        .map(|n| effect.parts().iter().position(|p| *p == n))
+        .collect()
+}
+
 /// The family of an effect name: `thermal` for `thermal:rods` (the name itself where it
 /// pins no part).
 pub fn family_of(name: &str) -> &str {
