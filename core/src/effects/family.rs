@@ -50,10 +50,10 @@ impl Family {
     }
 }
 
-/// The parts (indices into [`super::Effect::parts`]) an effect pinned to some of its family's
+/// The parts (indices into [`super::effect::Effect::parts`]) an effect pinned to some of its family's
 /// parts holds (`thermal:rods+scales`: 0 and 2); None where its name pins none or names a
 /// part the family does not have.
-pub fn pinned_parts(effect: &dyn super::Effect) -> Option<Vec<usize>> {
+pub fn pinned_parts(effect: &dyn super::effect::Effect) -> Option<Vec<usize>> {
     let (_, names) = effect.name().split_once(':')?;
     names
         .split('+')
