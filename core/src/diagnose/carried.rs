@@ -6,9 +6,13 @@
 //! resolves it: with the twin's readings free of noise, the same model leaves no structure.
 //! That structure is the thermometer's, not a missing effect's, and the structure tests read
 //! the residual without it: the part of the residual that a smooth error of the readings
-//! (Legendre polynomials in time, as many as the rate's window fits into the campaign)
-//! makes through the model as fitted is taken out, by least squares in each row's noise,
-//! before the tests.
+//! (Legendre polynomials in time, two per half-width of the rate's window) makes through the
+//! model as fitted is taken out, by least squares in each row's noise, before the tests.
+//! The rate's error wanders on the scale of the window's half-width; a basis follows a
+//! wander of that width with two terms to it (as a signal is sampled at twice its highest
+//! frequency). One per half-width left the wander of a long campaign's rate in the residual:
+//! of the benchmark's lagging thermometers, 5 ended with structure at the floor; with two,
+//! 3 (two of which, their readings made clean, end `nothing_missing`).
 
 use crate::campaign::Campaign;
 use crate::effects::{memory, Effect, EffectSet};
@@ -17,9 +21,9 @@ use crate::obs::{self, Direction, Form, RowValue, Step};
 use crate::params::{Model, Params};
 use std::collections::HashMap;
 
-/// Most terms per thermometer: beyond this the basis would follow more than the rate's own
-/// error wanders (a window of a tenth of the campaign).
-const MOST_TERMS: usize = 10;
+/// Most terms per thermometer: a wander of a fifteenth of the campaign (an hour's campaign
+/// whose rate is fitted over four minutes).
+const MOST_TERMS: usize = 30;
 
 /// The size of the readings' change each term is measured with (K): far below any
 /// thermometer's noise, so that the rate's fit chooses the same window, far above the
@@ -144,8 +148,8 @@ fn probed(campaign: &Campaign, c: usize, phi: &[f64]) -> Campaign {
     moved
 }
 
-/// Legendre polynomials in the campaign's time, as many as the rate's window of column `c`
-/// fits into the campaign (at least 2, at most [`MOST_TERMS`]); None where the column has no
+/// Legendre polynomials in the campaign's time, two per half-width of the rate's window of
+/// column `c` in the campaign, plus one (at least 2, at most [`MOST_TERMS`]); None where the column has no
 /// rate (too few times, a reading missing).
 fn basis(campaign: &Campaign, c: usize) -> Option<Vec<Vec<f64>>> {
     let t: Vec<f64> = campaign.poses.iter().map(|p| p.t).collect();
@@ -165,9 +169,9 @@ fn basis(campaign: &Campaign, c: usize) -> Option<Vec<Vec<f64>>> {
     if span <= 0.0 || half <= 0.0 {
         return None;
     }
-    // the windows that fit into the campaign, plus one
+    // two terms per half-width of the window, plus one
     let n = (2..MOST_TERMS)
-        .find(|&n| f64::from(u32::try_from(n - 1).unwrap_or(u32::MAX)) >= span / half)
+        .find(|&n| f64::from(u32::try_from(n - 1).unwrap_or(u32::MAX)) >= 2.0 * span / half)
         .unwrap_or(MOST_TERMS);
     let u: Vec<f64> = t.iter().map(|v| 2.0 * (v - lo) / span - 1.0).collect();
     Some(
