@@ -266,3 +266,36 @@ fn a_lagging_thermometer_of_the_twin_is_named_with_its_expansion() {
         .expect("the verdict");
     assert!(verdict.contains(&said), "{verdict}\nlacks: {said}");
 }
+
+/// A machine of the twin whose frame alone expands (14.4 ppm/K) under a thermometer 232 s
+/// behind it, measured by a tracker and self-calibration only (seed 1's machine 0 of the lag
+/// class). The first diagnosis names the frame with its lag; with both families in the model
+/// the next settles their parts again, and the rods shrinking (−15.5 ppm/K, outside what any
+/// rod's material allows) stood in for the frame growing: it kept the rods and ended
+/// `unexplained_structure`. A settle keeps only parts whose values are physical: the parts
+/// the twin expands, and `nothing_missing`.
+#[test]
+fn a_settled_family_keeps_no_part_of_unphysical_value() {
+    let dir = std::env::temp_dir().join(format!("rpkm-lag-{}-settle", std::process::id()));
+    let (lines, o) = lag_machine(1, 0, &dir);
+    // the parts the twin expands, from the machine's line
+    let per_k = |part: &str| -> f64 {
+        let key = format!("{part}_per_k: ");
+        lines[lines.find(&key).expect("the twin's parts") + key.len()..]
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .next()
+            .and_then(|w| w.parse().ok())
+            .expect("a rate per K")
+    };
+    let expands: Vec<&str> = ["rods", "frame", "scales"]
+        .into_iter()
+        .filter(|p| per_k(p) != 0.0)
+        .collect();
+    let parts = expands.join("+");
+    assert_eq!(
+        o["fitted_as"],
+        serde_json::json!([format!("thermal:{parts}"), format!("thermal_lag:{parts}")]),
+        "{lines}"
+    );
+    assert_eq!(o["final_verdict"], "nothing_missing", "{lines}");
+}

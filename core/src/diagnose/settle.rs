@@ -141,7 +141,9 @@ fn narrow(
     let whole = scored
         .iter()
         .find(|(k, _)| mask_len(variants[*k].0.name()) == n)?;
-    let adequate = |v: &Scored| !whole.1.needed_over(v, (campaign, copts), level);
+    // a variant that fits values no material has stands in for another part (the rods
+    // shrinking as the frame grows): it is no settle, however well it predicts
+    let adequate = |v: &Scored| v.plausible && !whole.1.needed_over(v, (campaign, copts), level);
     let k = scored
         .iter()
         .filter(|(_, v)| adequate(v))
@@ -205,6 +207,9 @@ struct Scored<'a> {
     dof: f64,
     rows: usize,
     held: Vec<f64>,
+    /// Whether every parameter fitted lies within what the physics allows
+    /// ([`super::gain::implausible`]).
+    plausible: bool,
     left_out: std::cell::OnceCell<Option<Vec<f64>>>,
 }
 
@@ -246,6 +251,7 @@ impl<'a> Scored<'a> {
             }
             None => Vec::new(),
         };
+        let plausible = super::gain::implausible(&cal.effects).is_empty();
         Some(Scored {
             with,
             params: cal.params,
@@ -254,6 +260,7 @@ impl<'a> Scored<'a> {
             dof: (rows as f64 - cal.dof_model).max(1.0),
             rows,
             held,
+            plausible,
             left_out: std::cell::OnceCell::new(),
         })
     }
