@@ -1,17 +1,16 @@
 //! `rpkm bench discovery`: the discovery loop on random machines, judged against what each
 //! hides, and the table of what it named.
 
-use super::machines::{self, Class, Hidden, Machine, Measured};
+use super::machines::{self, Class, Hidden, Machine, Measured, Named};
 use super::DiscoveryArgs;
 use crate::cli::bad_input;
 use crate::cli::effect_stages::offered;
 use anyhow::{Context, Result};
 use rpkm_core::calib;
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, Prediction, VerdictKind};
-use rpkm_core::effects::{self, Effect};
+use rpkm_core::effects::{self, Effect, Family};
 use rpkm_core::units::um_from_mm;
 use rpkm_nodes::effects_file::{self, EffectsFile};
-use rpkm_twin::EffectKind;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -275,19 +274,25 @@ struct Judged<'a> {
     own_rod: bool,
 }
 
-/// See [`Judged::own_rod`].
+/// See [`Judged::own_rod`]: each rod of another stiffness, and each refinement of the
+/// preload in the model as fitted, by the rod it gives a compliance of its own (its place
+/// among the preload's refinements, which go in rod order).
 fn own_rod_right(m: &Machine, fitted_as: &[String]) -> bool {
     let default = rpkm_core::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM;
-    let want: Vec<String> = (m.config.stiffness.rod.iter())
+    let want: Vec<Option<usize>> = (m.config.stiffness.rod.iter())
         .enumerate()
         .filter(|(_, k)| (**k / default - 1.0).abs() > 1e-9)
-        .map(|(r, _)| format!("preload_elastic:rod{}", r + 1))
+        .map(|(r, _)| Some(r))
         .collect();
-    let have: Vec<&String> = fitted_as
+    let refinements = effects::PreloadElastic::default().refinements();
+    let have: Vec<Option<usize>> = fitted_as
         .iter()
-        .filter(|e| e.starts_with("preload_elastic:"))
+        .filter(|e| {
+            Family::of(e) == Some(Family::PreloadElastic) && effects::family_of(e) != e.as_str()
+        })
+        .map(|e| refinements.iter().position(|r| r.name() == e))
         .collect();
-    have.len() == want.len() && want.iter().all(|w| have.contains(&w))
+    have.len() == want.len() && want.iter().all(|w| have.contains(w))
 }
 
 /// A small alignment (or a slow drift) counts as found when the held-out RMS without it is
@@ -302,17 +307,8 @@ impl Judged<'_> {
     /// way, how the frame between them moves being beyond the library; an alignment or a
     /// drift too small to matter may go unnamed at the floor).
     fn correct(&self, hidden: &Hidden) -> bool {
-        let mut named: Vec<&str> = self.named.iter().map(String::as_str).collect();
-        named.sort_unstable();
-        let mut want: Vec<String> = machines::hidden_names(hidden)
-            .into_iter()
-            .filter(|e| {
-                e != EffectKind::Backlash.as_str()
-                    && e != "soft_rod"
-                    && !(hidden.class == Class::Cyclic && e == "cyclic_scale")
-            })
-            .collect();
-        want.sort_unstable();
+        let named: Vec<Named> = self.named.iter().map(|n| Named::of(n)).collect();
+        let want = machines::nameable(hidden);
         let ends = |k: VerdictKind| self.kind == k;
         let at_floor = ends(VerdictKind::NothingMissing) && self.held_over_floor <= SMALL_ENOUGH;
         match hidden.class {
@@ -320,15 +316,21 @@ impl Judged<'_> {
                 named.is_empty() && ends(VerdictKind::UnexplainedStructure)
             }
             Class::Gradient => {
-                named == want
+                same_effects(&named, &want)
                     && (ends(VerdictKind::NothingMissing)
                         || ends(VerdictKind::UnexplainedStructure))
             }
             Class::SmallAlignment | Class::TrackerDrift if named.is_empty() => at_floor,
-            Class::ThermometerLag if named == ["thermal"] => at_floor,
-            _ => named == want && ends(VerdictKind::NothingMissing) && self.own_rod,
+            Class::ThermometerLag if named == [Named::Family(Family::Thermal)] => at_floor,
+            _ => same_effects(&named, &want) && ends(VerdictKind::NothingMissing) && self.own_rod,
         }
     }
+}
+
+/// Whether `a` and `b` hold the same effects as often, in any order.
+fn same_effects(a: &[Named], b: &[Named]) -> bool {
+    let count = |v: &[Named], e: &Named| v.iter().filter(|x| *x == e).count();
+    a.len() == b.len() && a.iter().all(|e| count(a, e) == count(b, e))
 }
 
 /// The outcome of a machine whose loop ended in an error.
