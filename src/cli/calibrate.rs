@@ -301,7 +301,7 @@ fn record_history(
         selection,
         held_out_rms_um: val.map(|v| v.rms_after_um),
         verdict,
-    });
+    })?;
     let mut store = rpkm_history::Store::open(db)?;
     for n in store.notes() {
         eprintln!("warning: {n}");
