@@ -55,8 +55,15 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
             "--machines and --threads: expected at least 1".into(),
         ));
     }
+    let series = Series {
+        seed: a.seed,
+        class: a.class,
+    };
     if let Some(i) = a.only {
-        let o = machine((a.seed, a.class), i, true, a.write.as_deref())?;
+        let shown = Shown::Steps {
+            write: a.write.as_deref(),
+        };
+        let o = machine(series, i, shown)?;
         println!("{}", serde_json::to_string_pretty(&o)?);
         return Ok(());
     }
@@ -75,8 +82,8 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
             s.spawn(|| {
                 while let Some(&i) = indices.get(next.fetch_add(1, Ordering::Relaxed)) {
                     // a diagnosis that fails counts as a wrong answer, with its error
-                    let out = machine((a.seed, a.class), i, false, None)
-                        .unwrap_or_else(|e| failed((a.seed, a.class), i, &e));
+                    let out = machine(series, i, Shown::Outcome)
+                        .unwrap_or_else(|e| failed(series, i, &e));
                     if let Ok(mut d) = done.lock() {
                         d.push(out);
                         eprint!("\r  {} of {} machines", d.len(), a.machines);
@@ -106,7 +113,7 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
 struct Loop<'a> {
     measured: &'a Measured,
     file: Option<&'a EffectsFile>,
-    verbose: bool,
+    shown: Shown<'a>,
 }
 
 impl Loop<'_> {
@@ -125,7 +132,7 @@ impl Loop<'_> {
             };
             let m = self.measured;
             let d = diagnose::diagnose_among(&m.cal, Some(&m.val), &refs, &offer, &opts)?;
-            if self.verbose {
+            if matches!(self.shown, Shown::Steps { .. }) {
                 println!("with {named:?}: {}", rpkm_nodes::words::verdict(&d));
             }
             let new: Vec<String> = d
@@ -143,17 +150,31 @@ impl Loop<'_> {
     }
 }
 
-/// A series: its seed, and the class drawn on demand (`--class`).
-type Series = (u64, Option<Class>);
+/// A series of machines: its seed, and the class drawn on demand (`--class`).
+#[derive(Clone, Copy)]
+struct Series {
+    seed: u64,
+    class: Option<Class>,
+}
 
-fn machine(
-    (seed, class): Series,
-    i: usize,
-    verbose: bool,
-    write: Option<&Path>,
-) -> Result<Outcome> {
-    let m = machines::draw(seed, i, class);
-    if verbose {
+impl Series {
+    /// Its machine `i`.
+    fn machine(self, i: usize) -> Machine {
+        machines::draw(self.seed, i, self.class)
+    }
+}
+
+/// What a machine's run shows beside its outcome: nothing (a series), or (`--only`) the
+/// machine and each step of its loop, its files written under `write` where given.
+#[derive(Clone, Copy)]
+enum Shown<'a> {
+    Outcome,
+    Steps { write: Option<&'a Path> },
+}
+
+fn machine(series: Series, i: usize, shown: Shown) -> Result<Outcome> {
+    let m = series.machine(i);
+    if let Shown::Steps { .. } = shown {
         println!(
             "machine {i}: {:?} {:?}, {:?}, {:?}, {:?}",
             m.hidden.class,
@@ -167,13 +188,13 @@ fn machine(
     let mut columns = measured.cal.covariate_names.clone();
     columns.extend(measured.val.covariate_names.iter().cloned());
     let file = machines::offered(&m, &columns)?;
-    if let Some(dir) = write {
+    if let Shown::Steps { write: Some(dir) } = shown {
         write_machine(dir, &m, &measured)?;
     }
     let (diagnoses, named) = Loop {
         measured: &measured,
         file: file.as_ref(),
-        verbose,
+        shown,
     }
     .run()?;
     Ok(outcome(i, &m, &measured, &diagnoses, named))
@@ -334,8 +355,8 @@ fn same_effects(a: &[Named], b: &[Named]) -> bool {
 }
 
 /// The outcome of a machine whose loop ended in an error.
-fn failed((seed, class): Series, i: usize, e: &anyhow::Error) -> Outcome {
-    let m = machines::draw(seed, i, class);
+fn failed(series: Series, i: usize, e: &anyhow::Error) -> Outcome {
+    let m = series.machine(i);
     Outcome {
         machine: i,
         class: m.hidden.class,
