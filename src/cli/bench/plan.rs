@@ -194,7 +194,7 @@ fn machine_runs(a: &PlanStudyArgs, noise: &NoiseModel, machine: u64, s: u64) -> 
     let evaluation = TargetForecast::grid(&cal.params, (MODEL, &estimated), &unknowns)?;
     let setups = plan::candidates(&[Instrument::Lt])?;
     let planner = AccuracyPlanner::new(&start, &unknowns, &setups, &evaluation)?;
-    let mode = plan::drive_mode(&base, false, None);
+    let mode = plan::drive_mode(&base, plan::Preload::NotModelled, None);
     let now_measured_um = held_out_um(&val, &cal.params)?;
     let mut out = Vec::new();
     for &budget in &a.budgets {
