@@ -107,13 +107,27 @@ pub fn add_bag_topic<T: RosMessage>(
     bag.add_topic::<T>(t.name(), &bag_qos(t.qos()))
 }
 
-/// The topic with every sample delivered: reliable, same depth and durability. iceoryx2
-/// services must be opened alike by every process, so all processes on the topic must use it.
-fn reliable<T>(t: Topic<T>) -> Topic<T> {
-    t.with_qos(Qos {
-        reliability: Reliability::Reliable,
-        ..t.qos()
-    })
+/// How a tool opens a topic: with the QoS its publishers offer, or reliable whatever that is
+/// (`--reliable`: iceoryx2 publishers then wait for the slowest subscriber instead of
+/// overwriting). iceoryx2 services must be opened alike by every process, so all processes
+/// on the topic must open it alike.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Delivery {
+    AsOffered,
+    Reliable,
+}
+
+impl Delivery {
+    /// `t` opened so: reliable keeps its depth and durability.
+    pub fn topic<T>(self, t: Topic<T>) -> Topic<T> {
+        match self {
+            Delivery::AsOffered => t,
+            Delivery::Reliable => t.with_qos(Qos {
+                reliability: Reliability::Reliable,
+                ..t.qos()
+            }),
+        }
+    }
 }
 
 /// Nanoseconds since the Unix epoch (the recorder's log time).
@@ -161,30 +175,30 @@ impl<T: IpcMessage> RecordPort for Recorder<T> {
     }
 }
 
-/// A recorder of topic `name` (one of [`ALL`]): a subscriber on `transport` and the topic in
-/// `bag`. `force_reliable`: see [`publisher`].
+/// A recorder of topic `name` (one of [`ALL`]): a subscriber on `transport`, opened as
+/// `delivery` says, and the topic in `bag`.
 pub fn recorder(
     name: &str,
     transport: &Transport,
     bag: &mut BagWriter,
-    force_reliable: bool,
+    delivery: Delivery,
 ) -> anyhow::Result<Box<dyn RecordPort>> {
     fn make<T: IpcMessage>(
         t: Topic<T>,
         transport: &Transport,
         bag: &mut BagWriter,
-        force_reliable: bool,
+        delivery: Delivery,
     ) -> anyhow::Result<Box<dyn RecordPort>> {
         // The bag stores what the publishers offer, not the override.
         let handle = add_bag_topic(bag, &t)?;
-        let t = if force_reliable { reliable(t) } else { t };
+        let t = delivery.topic(t);
         Ok(Box::new(Recorder {
             subscriber: transport.subscriber(&t)?,
             handle,
             count: 0,
         }))
     }
-    with_topic!(name, t => make(t, transport, bag, force_reliable),
+    with_topic!(name, t => make(t, transport, bag, delivery),
         _ => Err(UnknownTopic { name: name.to_owned() }.into()))
 }
 
@@ -232,25 +246,24 @@ impl<T: IpcMessage> ReplayPort for Replayer<T> {
     }
 }
 
-/// A publisher of topic `name` on `transport`. With `force_reliable` the topic is opened
-/// reliable whatever its QoS: iceoryx2 publishers then wait for the slowest subscriber instead
-/// of overwriting, so a recorder started with the same flag loses nothing even at `--rate max`.
+/// A publisher of topic `name` on `transport`, opened as `delivery` says: reliable, a
+/// recorder opened alike loses nothing even at `--rate max`.
 pub fn publisher(
     name: &str,
     transport: &Transport,
-    force_reliable: bool,
+    delivery: Delivery,
 ) -> anyhow::Result<Box<dyn ReplayPort>> {
     fn make<T: IpcMessage>(
         t: Topic<T>,
         transport: &Transport,
-        force_reliable: bool,
+        delivery: Delivery,
     ) -> anyhow::Result<Box<dyn ReplayPort>> {
-        let t = if force_reliable { reliable(t) } else { t };
+        let t = delivery.topic(t);
         Ok(Box::new(Replayer {
             publisher: transport.publisher(&t)?,
         }))
     }
-    with_topic!(name, t => make(t, transport, force_reliable),
+    with_topic!(name, t => make(t, transport, delivery),
         _ => Err(UnknownTopic { name: name.to_owned() }.into()))
 }
 

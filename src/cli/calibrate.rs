@@ -3,7 +3,10 @@
 use super::effect_stages::Stages;
 use super::summary::print_noise_groups;
 use super::{bad_input, read_campaign, write_json};
-use rpkm_core::calib::{self, Calibration, Options, Request, Scaling, Selection};
+use rpkm_core::calib::{
+    self, Calibration, CommandCalibration, CommandError, CommandRequest, Options, Scaling,
+    Selection,
+};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::{Effect, EffectSet};
 use rpkm_core::obs;
@@ -165,18 +168,21 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     )?;
     let effects = super::effect_stages::parse_effects(&args.effects, file.as_ref())?;
     let refs: Vec<&dyn Effect> = effects.iter().map(AsRef::as_ref).collect();
-    let set = EffectSet::bind(&refs, &campaign, &start)
-        .map_err(|e| bad_input(format!("--effects: {e}")))?;
-    let (cal, noise) =
+    let CommandCalibration {
+        effects: set,
+        calibration: cal,
+        noise,
+    } = calib::calibrate_command(&CommandRequest {
+        noise: weighting(args),
+        ..CommandRequest::new(&campaign, &start, &opts, &refs)
+    })
+    .map_err(|e| match e {
+        CommandError::Effects(e) => bad_input(format!("--effects: {e}")),
         // A calibration error is the campaign's (exit 2, rpkm_nodes::error::exit_code).
-        calib::calibrate(&Request {
-            effects: &set,
-            noise: weighting(args),
-            ..Request::new(&campaign, &start, &opts)
-        })
-        .map_err(|e| {
+        CommandError::Calibration(e) => {
             anyhow::Error::new(e).context(format!("calibrating {}", args.campaign.display()))
-        })?;
+        }
+    })?;
     let val = validation
         .as_ref()
         .map(|v| validate_with(v, &start, &cal, &noise, (&refs, &set)))
@@ -295,7 +301,7 @@ fn record_history(
         selection,
         held_out_rms_um: val.map(|v| v.rms_after_um),
         verdict,
-    });
+    })?;
     let mut store = rpkm_history::Store::open(db)?;
     for n in store.notes() {
         eprintln!("warning: {n}");

@@ -19,6 +19,7 @@ use rpkm_transport::{topic, IpcMessage, Subscriber, Transport, TransportError};
 use super::transport_args::{stop_flag, TransportArgs};
 use crate::monitor::{draw, MonitorThresholds, ThresholdSource, Watch, WatchConfig};
 use rpkm_nodes::node::params::NodeParams;
+use rpkm_nodes::topics::Delivery;
 
 /// Watch a running node set: per drive the measured and predicted redundancy current as bars
 /// against preload_monitor's WARN/ERROR thresholds, the level history, Δq2/Δq3 in follower
@@ -295,20 +296,13 @@ impl Ports {
         fn sub<T: IpcMessage>(
             t: &Transport,
             topic: rpkm_transport::Topic<T>,
-            reliable: bool,
+            delivery: Delivery,
         ) -> Result<Subscriber<T>> {
-            let topic = if reliable {
-                topic.with_qos(rpkm_transport::Qos {
-                    reliability: rpkm_transport::Reliability::Reliable,
-                    ..topic.qos()
-                })
-            } else {
-                topic
-            };
+            let topic = delivery.topic(topic);
             t.subscriber(&topic)
                 .with_context(|| format!("subscribing to {}", topic.name()))
         }
-        let r = args.reliable;
+        let r = args.delivery();
         Ok(Self {
             state: sub(&t, topic::ACTUATOR_STATE, r)?,
             estimate: sub(&t, topic::TCP_ESTIMATE, r)?,

@@ -81,7 +81,7 @@ pub fn run(args: &RecordArgs) -> Result<()> {
             name,
             &transport,
             &mut bag,
-            args.transport.reliable,
+            args.transport.delivery(),
         )?);
     }
     // Tests and scripts wait for this line before they start publishing.

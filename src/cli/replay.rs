@@ -86,7 +86,7 @@ pub fn run(args: &ReplayArgs) -> Result<()> {
         ports.push(topics::publisher(
             name,
             &transport,
-            args.transport.reliable,
+            args.transport.delivery(),
         )?);
     }
     eprintln!(

@@ -44,6 +44,15 @@ pub fn parse_backend(s: &str) -> Result<rpkm_transport::Backend, String> {
 
 impl TransportArgs {
     /// Opens the transport as node `name`, in `--enclave` or else `default_enclave`.
+    /// How the topics are opened: `--reliable`, or as their publishers offer.
+    pub fn delivery(&self) -> rpkm_nodes::topics::Delivery {
+        if self.reliable {
+            rpkm_nodes::topics::Delivery::Reliable
+        } else {
+            rpkm_nodes::topics::Delivery::AsOffered
+        }
+    }
+
     pub fn open(&self, name: &str, default_enclave: &str) -> Result<Transport> {
         let prefix = match &self.ipc_prefix {
             Some(p) => p.clone(),

@@ -66,6 +66,45 @@ fn twelve_calibrations_name_the_crash_and_the_creep() {
     check_report(&std::fs::read_to_string(report.join("history.html")).expect("report"));
 }
 
+/// The effects in the model are recorded as the calibration file writes them: one
+/// calibration with parallelogram, its history record's effects the `effects` of its --json.
+#[test]
+fn the_history_records_the_effects_as_the_calibration_file_writes_them() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (db, json) = (dir.path().join("m.db"), dir.path().join("cal.json"));
+    let out = Command::new(env!("CARGO_BIN_EXE_rpkm"))
+        .arg("calibrate")
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/bags/demo/campaign.csv"
+        ))
+        .args(["--effects", "parallelogram"])
+        .arg("--json")
+        .arg(&json)
+        .arg("--history")
+        .arg(&db)
+        .args(["--machine", "cell-1", "--at", "2026-03-01"])
+        .output()
+        .expect("rpkm calibrate");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("cal.json")).expect("JSON");
+    let mut store = rpkm_history::Store::open(&db.to_string_lossy()).expect("history");
+    let recorded = store.calibrations("cell-1").expect("calibrations");
+    assert_eq!(recorded.len(), 1);
+    let effects = &recorded[0].record.effects;
+    assert_eq!(effects, &file["effects"]);
+    // parallelogram's parameters, each with its value, σ and unit
+    assert!(
+        effects.as_array().is_some_and(|a| !a.is_empty()),
+        "{effects}"
+    );
+}
+
 /// A row per calibration; l1's column is the twin's l1 within 4σ, l3's jumps by the crash.
 fn check_csv(csv: &str) {
     let s = scenario();

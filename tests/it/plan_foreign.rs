@@ -293,7 +293,7 @@ fn poses_planned_for_the_tcp_pay_on_the_foreign_machine() {
     let setups = plan::candidates(&[Instrument::Lt]).expect("lt");
     let planner =
         plan::AccuracyPlanner::new(&start, &unknowns, &setups, &evaluation).expect("rows");
-    let mode = plan::drive_mode(&base, false, None);
+    let mode = plan::drive_mode(&base, plan::Preload::NotModelled, None);
     for budget in [5, 10] {
         let (p, forecast) = planner.plan(budget).expect("a plan");
         let design = plan::measured_in(p.design(), &mode);

@@ -5,7 +5,7 @@ use std::str::FromStr;
 
 // One error for an effect name, whichever list it is looked up in (the model's library here
 // lists the simulator's kinds).
-use rpkm_core::effects::UnknownEffect;
+use rpkm_core::effects::{Family, UnknownEffect};
 
 /// Thermal expansion coefficient of steel, 1/K.
 pub const ALPHA_PER_K: f64 = 11.5e-6;
@@ -74,7 +74,20 @@ impl EffectKind {
     /// Whether the model's library has no effect of this kind (the diagnosis must not name
     /// a library effect for it).
     pub fn outside_library(self) -> bool {
-        matches!(self, EffectKind::Backlash | EffectKind::LostMotionQ4)
+        self.family().is_none()
+    }
+
+    /// The library's effect that models this kind, by identity; None outside the library.
+    pub fn family(self) -> Option<Family> {
+        match self {
+            EffectKind::Parallelogram => Some(Family::Parallelogram),
+            EffectKind::PreloadElastic => Some(Family::PreloadElastic),
+            EffectKind::Thermal => Some(Family::Thermal),
+            EffectKind::EncoderScale => Some(Family::EncoderScale),
+            EffectKind::GuideStraightness => Some(Family::GuideStraightness),
+            EffectKind::InstrumentAlignment => Some(Family::InstrumentAlignment),
+            EffectKind::Backlash | EffectKind::LostMotionQ4 => None,
+        }
     }
 
     /// Spelling on the command line and in truth files.
@@ -165,4 +178,25 @@ impl FromStr for EffectKind {
 pub fn bow(m: f64, q: f64) -> f64 {
     let s = q / BOW_SPAN_MM;
     m * 4.0 * s * (1.0 - s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::EffectKind;
+
+    /// The bench judges a hidden kind named when the diagnosis names its family: each kind
+    /// of the library is its family as the registry spells it, and no other is in the
+    /// registry at all.
+    #[test]
+    fn each_kind_is_its_family_of_the_registry_or_outside_it() {
+        for k in EffectKind::ALL {
+            match k.family() {
+                Some(f) => assert_eq!(k.as_str(), f.name(), "{k:?}"),
+                None => assert!(
+                    rpkm_core::effects::by_name(k.as_str()).is_err(),
+                    "{k:?} is in the registry"
+                ),
+            }
+        }
+    }
 }

@@ -3,6 +3,7 @@
 //! outlier elimination per measurement direction, parameter uncertainties, and the two-step
 //! procedure of the forward instruments.
 
+mod command;
 mod fit;
 mod lags;
 mod lm;
@@ -18,6 +19,7 @@ pub mod tie;
 mod types;
 mod uncertainty;
 
+pub use command::{calibrate_command, CommandCalibration, CommandError, CommandRequest};
 pub use lags::{time_constants, TimeConstant};
 pub use progress::{Flow, Observer, Progress};
 pub use report::{gain, rms};

@@ -1,7 +1,8 @@
 //! The one way into a calibration: [`calibrate`] answers a [`Request`] with the calibration
 //! and the noise its rows were weighted by, making the noise rounds where the request asks
-//! for them. `rpkm calibrate`, the diagnosis and the calibrator node each make one call, so a
-//! change of how rows are weighted is made here once.
+//! for them. The diagnosis makes its calls here, the commands and the calibrator node theirs
+//! through [`super::calibrate_command`], so a change of how rows are weighted is made here
+//! once.
 
 use super::fit::fit_once;
 use super::progress::{Flow, Progress};

@@ -38,7 +38,7 @@ pub mod worth;
 pub use accuracy::{AccuracyPlanner, Forecast};
 pub use forecast::TargetForecast;
 pub use greedy::{condition_exchange, determine, normalized_condition, Chosen};
-pub use mode::{drive_mode, DriveMode, DriveModeReason};
+pub use mode::{drive_mode, DriveMode, DriveModeReason, Preload};
 pub use start::{design_rows, Start};
 pub use types::{
     returns_to_zero, CandidateSetup, Determination, DeterminationPlan, PlanError, PlannedSetup,

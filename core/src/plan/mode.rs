@@ -8,6 +8,30 @@
 
 use crate::campaign::{Campaign, Instrument};
 use crate::design::FOLLOWERS_23;
+use crate::effects::{Effect, Family};
+
+/// Whether the model carries the preload's deflection (`preload_elastic`): where it does
+/// not, a pose with all four drives active carries a deflection the model cannot represent.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preload {
+    Modelled,
+    NotModelled,
+}
+
+impl Preload {
+    /// Of the effects in the model: modelled where one is of the preload's family (whole,
+    /// or a rod of its own).
+    pub fn of(effects: &[&dyn Effect]) -> Preload {
+        if effects
+            .iter()
+            .any(|e| Family::of(e.name()) == Some(Family::PreloadElastic))
+        {
+            Preload::Modelled
+        } else {
+            Preload::NotModelled
+        }
+    }
+}
 
 /// Why the plan's drives are in their mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -50,21 +74,17 @@ fn loaded(campaign: &Campaign) -> bool {
 }
 
 /// The mode of a plan's external poses on `campaign`: `named` where the user named one; all
-/// drives active where the model carries the preload (`preload_modelled`) and the campaign
-/// recorded loaded drive forces; else the mode most of the campaign's external rows were
-/// measured in (the first such mode on a tie); else q2, q3 following.
-pub fn drive_mode(
-    campaign: &Campaign,
-    preload_modelled: bool,
-    named: Option<[bool; 4]>,
-) -> DriveMode {
+/// drives active where the model carries the preload and the campaign recorded loaded
+/// drive forces; else the mode most of the campaign's external rows were measured in (the
+/// first such mode on a tie); else q2, q3 following.
+pub fn drive_mode(campaign: &Campaign, preload: Preload, named: Option<[bool; 4]>) -> DriveMode {
     if let Some(follower) = named {
         return DriveMode {
             follower,
             reason: DriveModeReason::Named,
         };
     }
-    if preload_modelled && loaded(campaign) {
+    if preload == Preload::Modelled && loaded(campaign) {
         return DriveMode {
             follower: [false; 4],
             reason: DriveModeReason::PreloadModelled,
@@ -144,25 +164,45 @@ mod tests {
             pose(Instrument::Lt, FOLLOWERS_23, 0.0),
             pose(Instrument::Kgm, [false; 4], 0.0),
         ]);
-        let m = drive_mode(&follow, false, None);
+        let m = drive_mode(&follow, Preload::NotModelled, None);
         assert_eq!(m.follower, FOLLOWERS_23);
         assert_eq!(m.reason, DriveModeReason::Campaign { rows: 2, of: 3 });
-        assert_eq!(drive_mode(&follow, true, None).follower, FOLLOWERS_23);
+        assert_eq!(
+            drive_mode(&follow, Preload::Modelled, None).follower,
+            FOLLOWERS_23
+        );
         let loaded = campaign(vec![
             pose(Instrument::SelfCal, FOLLOWERS_23, 0.0),
             pose(Instrument::Lt, [false; 4], 800.0),
         ]);
-        let m = drive_mode(&loaded, true, None);
+        let m = drive_mode(&loaded, Preload::Modelled, None);
         assert!(m.all_active());
         assert_eq!(m.reason, DriveModeReason::PreloadModelled);
-        let m = drive_mode(&loaded, false, None);
+        let m = drive_mode(&loaded, Preload::NotModelled, None);
         assert!(m.all_active(), "the campaign's mode: {m:?}");
-        let named = drive_mode(&loaded, true, Some(FOLLOWERS_23));
+        let named = drive_mode(&loaded, Preload::Modelled, Some(FOLLOWERS_23));
         assert_eq!(named.follower, FOLLOWERS_23);
         assert_eq!(named.reason, DriveModeReason::Named);
         let self_only = campaign(vec![pose(Instrument::SelfCal, FOLLOWERS_23, 0.0)]);
-        let m = drive_mode(&self_only, false, None);
+        let m = drive_mode(&self_only, Preload::NotModelled, None);
         assert_eq!(m.follower, FOLLOWERS_23);
         assert_eq!(m.reason, DriveModeReason::NoPreload);
+    }
+
+    /// The preload is modelled by its family whole or by a rod of its own, by no other.
+    #[test]
+    fn the_preload_is_modelled_by_its_family_or_a_refinement() {
+        let of = |names: &[&str]| {
+            let boxed: Vec<_> = names
+                .iter()
+                .map(|n| crate::effects::by_name(n).expect("a library effect"))
+                .collect();
+            let refs: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
+            Preload::of(&refs)
+        };
+        assert_eq!(of(&[]), Preload::NotModelled);
+        assert_eq!(of(&["thermal", "parallelogram"]), Preload::NotModelled);
+        assert_eq!(of(&["thermal", "preload_elastic"]), Preload::Modelled);
+        assert_eq!(of(&["preload_elastic:rod3"]), Preload::Modelled);
     }
 }

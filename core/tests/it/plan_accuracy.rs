@@ -124,7 +124,10 @@ fn the_expected_held_out_rms_is_what_the_machine_gives() {
             "{book} against {}",
             forecast.after_mm
         );
-        let design = plan::measured_in(p.design(), &plan::drive_mode(&base, false, None));
+        let design = plan::measured_in(
+            p.design(),
+            &plan::drive_mode(&base, plan::Preload::NotModelled, None),
+        );
         assert_eq!(design.len(), BUDGET);
         let last = &design[BUDGET - 1];
         assert!(

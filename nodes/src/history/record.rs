@@ -1,6 +1,7 @@
 //! A calibration made into the record the history keeps: its campaign's digest, the
 //! tolerance it was judged against, the noise it showed; and the time it is recorded at.
 
+use crate::calibration_file::EffectValue;
 use rpkm_core::calib::{Calibration, Prior, Selection};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::variance::NoiseEstimate;
@@ -41,14 +42,20 @@ pub fn campaign_digest(c: &Campaign) -> String {
     )
 }
 
-/// The record of a calibration.
-pub fn record_of(m: &Made) -> CalibrationRecord {
+/// The record of a calibration; its effects as the calibration file writes them
+/// ([`EffectValue`]).
+pub fn record_of(m: &Made) -> anyhow::Result<CalibrationRecord> {
     let prior = match m.selection {
         Selection::Prior(p) => *p,
         Selection::Auto { .. } | Selection::List(_) => Prior::default(),
     };
     let cal = m.calibration;
-    CalibrationRecord {
+    let effects = cal
+        .effects
+        .iter()
+        .map(EffectValue::of)
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(CalibrationRecord {
         machine: m.machine.to_owned(),
         at_s: m.at_s,
         source: m.source.to_owned(),
@@ -59,7 +66,7 @@ pub fn record_of(m: &Made) -> CalibrationRecord {
             rows: cal.rows as u64,
         },
         model: cal.model,
-        effects: serde_json::to_value(&cal.effects).unwrap_or_default(),
+        effects: serde_json::to_value(effects)?,
         params: cal.params,
         covariance: cal.covariance,
         tolerance: std::array::from_fn(|i| prior.sigma(i)),
@@ -79,7 +86,7 @@ pub fn record_of(m: &Made) -> CalibrationRecord {
         chi2_per_dof: cal.chi2_per_dof,
         held_out_rms_um: m.held_out_rms_um,
         verdict: m.verdict.clone(),
-    }
+    })
 }
 
 /// The time of `--at`: RFC 3339 (`2026-03-01T10:00:00Z`), or a date (`2026-03-01`, midnight

@@ -202,6 +202,15 @@ impl NodeHistory {
             held_out_rms_um: held_out.is_finite().then_some(held_out),
             verdict: o.verdict.map(str::to_owned),
         });
+        let record = match record {
+            Ok(r) => r,
+            Err(e) => {
+                return Said {
+                    ok: false,
+                    text: format!("not recorded: {e:#}"),
+                }
+            }
+        };
         if let Err(e) = self.read_previous() {
             return Said {
                 ok: false,

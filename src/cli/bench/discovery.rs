@@ -1,17 +1,16 @@
 //! `rpkm bench discovery`: the discovery loop on random machines, judged against what each
 //! hides, and the table of what it named.
 
-use super::machines::{self, Class, Hidden, Machine, Measured};
+use super::machines::{self, Class, Hidden, Machine, Measured, Named};
 use super::DiscoveryArgs;
 use crate::cli::bad_input;
 use crate::cli::effect_stages::offered;
 use anyhow::{Context, Result};
 use rpkm_core::calib;
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, Prediction, VerdictKind};
-use rpkm_core::effects::{self, Effect};
+use rpkm_core::effects::{self, Effect, Family};
 use rpkm_core::units::um_from_mm;
 use rpkm_nodes::effects_file::{self, EffectsFile};
-use rpkm_twin::EffectKind;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -56,8 +55,15 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
             "--machines and --threads: expected at least 1".into(),
         ));
     }
+    let series = Series {
+        seed: a.seed,
+        class: a.class,
+    };
     if let Some(i) = a.only {
-        let o = machine((a.seed, a.class), i, true, a.write.as_deref())?;
+        let shown = Shown::Steps {
+            write: a.write.as_deref(),
+        };
+        let o = machine(series, i, shown)?;
         println!("{}", serde_json::to_string_pretty(&o)?);
         return Ok(());
     }
@@ -76,8 +82,8 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
             s.spawn(|| {
                 while let Some(&i) = indices.get(next.fetch_add(1, Ordering::Relaxed)) {
                     // a diagnosis that fails counts as a wrong answer, with its error
-                    let out = machine((a.seed, a.class), i, false, None)
-                        .unwrap_or_else(|e| failed((a.seed, a.class), i, &e));
+                    let out = machine(series, i, Shown::Outcome)
+                        .unwrap_or_else(|e| failed(series, i, &e));
                     if let Ok(mut d) = done.lock() {
                         d.push(out);
                         eprint!("\r  {} of {} machines", d.len(), a.machines);
@@ -107,7 +113,7 @@ pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
 struct Loop<'a> {
     measured: &'a Measured,
     file: Option<&'a EffectsFile>,
-    verbose: bool,
+    shown: Shown<'a>,
 }
 
 impl Loop<'_> {
@@ -126,7 +132,7 @@ impl Loop<'_> {
             };
             let m = self.measured;
             let d = diagnose::diagnose_among(&m.cal, Some(&m.val), &refs, &offer, &opts)?;
-            if self.verbose {
+            if matches!(self.shown, Shown::Steps { .. }) {
                 println!("with {named:?}: {}", rpkm_nodes::words::verdict(&d));
             }
             let new: Vec<String> = d
@@ -144,17 +150,31 @@ impl Loop<'_> {
     }
 }
 
-/// A series: its seed, and the class drawn on demand (`--class`).
-type Series = (u64, Option<Class>);
+/// A series of machines: its seed, and the class drawn on demand (`--class`).
+#[derive(Clone, Copy)]
+struct Series {
+    seed: u64,
+    class: Option<Class>,
+}
 
-fn machine(
-    (seed, class): Series,
-    i: usize,
-    verbose: bool,
-    write: Option<&Path>,
-) -> Result<Outcome> {
-    let m = machines::draw(seed, i, class);
-    if verbose {
+impl Series {
+    /// Its machine `i`.
+    fn machine(self, i: usize) -> Machine {
+        machines::draw(self.seed, i, self.class)
+    }
+}
+
+/// What a machine's run shows beside its outcome: nothing (a series), or (`--only`) the
+/// machine and each step of its loop, its files written under `write` where given.
+#[derive(Clone, Copy)]
+enum Shown<'a> {
+    Outcome,
+    Steps { write: Option<&'a Path> },
+}
+
+fn machine(series: Series, i: usize, shown: Shown) -> Result<Outcome> {
+    let m = series.machine(i);
+    if let Shown::Steps { .. } = shown {
         println!(
             "machine {i}: {:?} {:?}, {:?}, {:?}, {:?}",
             m.hidden.class,
@@ -168,13 +188,13 @@ fn machine(
     let mut columns = measured.cal.covariate_names.clone();
     columns.extend(measured.val.covariate_names.iter().cloned());
     let file = machines::offered(&m, &columns)?;
-    if let Some(dir) = write {
+    if let Shown::Steps { write: Some(dir) } = shown {
         write_machine(dir, &m, &measured)?;
     }
     let (diagnoses, named) = Loop {
         measured: &measured,
         file: file.as_ref(),
-        verbose,
+        shown,
     }
     .run()?;
     Ok(outcome(i, &m, &measured, &diagnoses, named))
@@ -275,19 +295,25 @@ struct Judged<'a> {
     own_rod: bool,
 }
 
-/// See [`Judged::own_rod`].
+/// See [`Judged::own_rod`]: each rod of another stiffness, and each refinement of the
+/// preload in the model as fitted, by the rod it gives a compliance of its own (its place
+/// among the preload's refinements, which go in rod order).
 fn own_rod_right(m: &Machine, fitted_as: &[String]) -> bool {
     let default = rpkm_core::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM;
-    let want: Vec<String> = (m.config.stiffness.rod.iter())
+    let want: Vec<Option<usize>> = (m.config.stiffness.rod.iter())
         .enumerate()
         .filter(|(_, k)| (**k / default - 1.0).abs() > 1e-9)
-        .map(|(r, _)| format!("preload_elastic:rod{}", r + 1))
+        .map(|(r, _)| Some(r))
         .collect();
-    let have: Vec<&String> = fitted_as
+    let refinements = effects::PreloadElastic::default().refinements();
+    let have: Vec<Option<usize>> = fitted_as
         .iter()
-        .filter(|e| e.starts_with("preload_elastic:"))
+        .filter(|e| {
+            Family::of(e) == Some(Family::PreloadElastic) && effects::family_of(e) != e.as_str()
+        })
+        .map(|e| refinements.iter().position(|r| r.name() == e))
         .collect();
-    have.len() == want.len() && want.iter().all(|w| have.contains(&w))
+    have.len() == want.len() && want.iter().all(|w| have.contains(w))
 }
 
 /// A small alignment (or a slow drift) counts as found when the held-out RMS without it is
@@ -302,17 +328,8 @@ impl Judged<'_> {
     /// way, how the frame between them moves being beyond the library; an alignment or a
     /// drift too small to matter may go unnamed at the floor).
     fn correct(&self, hidden: &Hidden) -> bool {
-        let mut named: Vec<&str> = self.named.iter().map(String::as_str).collect();
-        named.sort_unstable();
-        let mut want: Vec<String> = machines::hidden_names(hidden)
-            .into_iter()
-            .filter(|e| {
-                e != EffectKind::Backlash.as_str()
-                    && e != "soft_rod"
-                    && !(hidden.class == Class::Cyclic && e == "cyclic_scale")
-            })
-            .collect();
-        want.sort_unstable();
+        let named: Vec<Named> = self.named.iter().map(|n| Named::of(n)).collect();
+        let want = machines::nameable(hidden);
         let ends = |k: VerdictKind| self.kind == k;
         let at_floor = ends(VerdictKind::NothingMissing) && self.held_over_floor <= SMALL_ENOUGH;
         match hidden.class {
@@ -320,20 +337,26 @@ impl Judged<'_> {
                 named.is_empty() && ends(VerdictKind::UnexplainedStructure)
             }
             Class::Gradient => {
-                named == want
+                same_effects(&named, &want)
                     && (ends(VerdictKind::NothingMissing)
                         || ends(VerdictKind::UnexplainedStructure))
             }
             Class::SmallAlignment | Class::TrackerDrift if named.is_empty() => at_floor,
-            Class::ThermometerLag if named == ["thermal"] => at_floor,
-            _ => named == want && ends(VerdictKind::NothingMissing) && self.own_rod,
+            Class::ThermometerLag if named == [Named::Family(Family::Thermal)] => at_floor,
+            _ => same_effects(&named, &want) && ends(VerdictKind::NothingMissing) && self.own_rod,
         }
     }
 }
 
+/// Whether `a` and `b` hold the same effects as often, in any order.
+fn same_effects(a: &[Named], b: &[Named]) -> bool {
+    let count = |v: &[Named], e: &Named| v.iter().filter(|x| *x == e).count();
+    a.len() == b.len() && a.iter().all(|e| count(a, e) == count(b, e))
+}
+
 /// The outcome of a machine whose loop ended in an error.
-fn failed((seed, class): Series, i: usize, e: &anyhow::Error) -> Outcome {
-    let m = machines::draw(seed, i, class);
+fn failed(series: Series, i: usize, e: &anyhow::Error) -> Outcome {
+    let m = series.machine(i);
     Outcome {
         machine: i,
         class: m.hidden.class,

@@ -5,6 +5,7 @@
 use anyhow::Result;
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rpkm_core::campaign::{Campaign, Instrument};
+use rpkm_core::effects::{self, Family};
 use rpkm_core::noise::{NoiseModel, N_GROUPS};
 use rpkm_nodes::effects_file::{self, EffectsFile};
 use rpkm_twin::{EffectKind, ThermalPhysics, Twin, TwinConfig, ZeroDrift};
@@ -310,26 +311,31 @@ pub(super) fn offered(m: &Machine, columns: &[String]) -> Result<Option<EffectsF
 pub(super) fn offered_text(m: &Machine) -> Result<String> {
     let mut text = String::new();
     if m.hidden.class == Class::TrackerDrift {
-        text.push_str(
-            "  - name: tracker_drift\n    summary: the tracker's readings creep after its zero\n    \
-             params: {vx: {unit: um/min, prior: 1}, vy: {unit: um/min, prior: 1}}\n    \
+        write!(
+            text,
+            "  - name: {}\n    summary: the tracker's readings creep after its zero\n    \
+             params: {{vx: {{unit: um/min, prior: 1}}, vy: {{unit: um/min, prior: 1}}}}\n    \
              instruments: [lt]\n    dx: \"-vx * 1e-3 * t / 60\"\n    \
              dy: \"-vy * 1e-3 * t / 60\"\n",
-        );
+            Offered::TrackerDrift.name()
+        )?;
     }
     if m.hidden.class == Class::TwoOutside {
-        text.push_str(
-            "  - name: lost_motion_q4\n    summary: carrier 4 lags behind its last move\n    \
-             params: {b: {unit: mm, prior: 0.01}}\n    dq4: \"-b * dir_q4\"\n",
-        );
+        write!(
+            text,
+            "  - name: {}\n    summary: carrier 4 lags behind its last move\n    \
+             params: {{b: {{unit: mm, prior: 0.01}}}}\n    dq4: \"-b * dir_q4\"\n",
+            Offered::LostMotionQ4.name()
+        )?;
     }
     if let (Class::TwoOutside, Some(c)) = (m.hidden.class, &m.config.cyclic) {
         let (q, pitch) = (c.carrier + 1, c.pitch_mm);
         write!(
             text,
-            "  - name: cyclic_scale\n    summary: a periodic error of carrier {q}'s scale\n    \
+            "  - name: {name}\n    summary: a periodic error of carrier {q}'s scale\n    \
              params: {{a: {{unit: mm, prior: 0.005}}, c: {{unit: mm, prior: 0.005}}}}\n    \
-             dq{q}: \"a * sin(2*pi*q{q}/{pitch}) + c * cos(2*pi*q{q}/{pitch})\"\n"
+             dq{q}: \"a * sin(2*pi*q{q}/{pitch}) + c * cos(2*pi*q{q}/{pitch})\"\n",
+            name = Offered::CyclicScale.name()
         )?;
     }
     Ok(if text.is_empty() {
@@ -339,7 +345,7 @@ pub(super) fn offered_text(m: &Machine) -> Result<String> {
     })
 }
 
-/// The hidden effects by name, as the loop should name them: the twin's kinds, and the
+/// The hidden effects by name, as the report lists them: the twin's kinds, and the
 /// conventions outside the library (named by the written effect a user offers, where one
 /// is offered).
 pub(super) fn hidden_names(hidden: &Hidden) -> Vec<String> {
@@ -349,10 +355,81 @@ pub(super) fn hidden_names(hidden: &Hidden) -> Vec<String> {
         .map(|e| e.as_str().to_owned())
         .collect();
     match hidden.class {
-        Class::Cyclic | Class::TwoOutside => out.push("cyclic_scale".to_owned()),
+        Class::Cyclic | Class::TwoOutside => out.push(Offered::CyclicScale.name().to_owned()),
         Class::SoftRod => out.push("soft_rod".to_owned()),
-        Class::TrackerDrift => out.push("tracker_drift".to_owned()),
-        Class::ThermometerLag => out.push("thermal_lag".to_owned()),
+        Class::TrackerDrift => out.push(Offered::TrackerDrift.name().to_owned()),
+        Class::ThermometerLag => out.push(Family::ThermalLag.name().to_owned()),
+        _ => {}
+    }
+    out
+}
+
+/// An effect the bench offers written as data (its effects file, [`offered_text`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Offered {
+    TrackerDrift,
+    LostMotionQ4,
+    CyclicScale,
+}
+
+impl Offered {
+    const ALL: [Offered; 3] = [
+        Offered::TrackerDrift,
+        Offered::LostMotionQ4,
+        Offered::CyclicScale,
+    ];
+
+    /// Its name in the file: the one thing that tells a written effect.
+    pub(super) const fn name(self) -> &'static str {
+        match self {
+            Offered::TrackerDrift => "tracker_drift",
+            Offered::LostMotionQ4 => "lost_motion_q4",
+            Offered::CyclicScale => "cyclic_scale",
+        }
+    }
+}
+
+/// An effect the loop names, by identity: a family of the library (whole), an effect the
+/// bench offers, or any other name (a family pinned to parts, a written effect not offered:
+/// nothing a machine hides).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) enum Named {
+    Family(Family),
+    Offered(Offered),
+    Other(String),
+}
+
+impl Named {
+    /// The effect the loop calls `name`.
+    pub(super) fn of(name: &str) -> Named {
+        let whole = effects::family_of(name) == name;
+        match Family::of(name).filter(|_| whole) {
+            Some(f) => Named::Family(f),
+            None => Offered::ALL
+                .into_iter()
+                .find(|o| o.name() == name)
+                .map_or_else(|| Named::Other(name.to_owned()), Named::Offered),
+        }
+    }
+}
+
+/// The effects the loop should name for what `hidden` hides: each hidden kind of the
+/// library by its family, each convention outside it by the written effect the bench offers
+/// for it (none for lost motion of guide 2 or a periodic scale error alone, which nothing
+/// offered describes, nor for a rod of its own stiffness, the preload's refinement).
+pub(super) fn nameable(hidden: &Hidden) -> Vec<Named> {
+    let mut out: Vec<Named> = hidden
+        .effects
+        .iter()
+        .filter_map(|&k| match k {
+            EffectKind::LostMotionQ4 => Some(Named::Offered(Offered::LostMotionQ4)),
+            k => k.family().map(Named::Family),
+        })
+        .collect();
+    match hidden.class {
+        Class::TwoOutside => out.push(Named::Offered(Offered::CyclicScale)),
+        Class::TrackerDrift => out.push(Named::Offered(Offered::TrackerDrift)),
+        Class::ThermometerLag => out.push(Named::Family(Family::ThermalLag)),
         _ => {}
     }
     out
@@ -361,4 +438,49 @@ pub(super) fn hidden_names(hidden: &Hidden) -> Vec<String> {
 /// Whether `class` is drawn on demand only ([`ON_DEMAND`]).
 pub(super) fn on_demand(class: Class) -> bool {
     ON_DEMAND.contains(&class)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The first machine of series 1 of `class`.
+    fn first_of(class: Class) -> Machine {
+        (0..500)
+            .map(|i| draw(1, i, None))
+            .find(|m| m.hidden.class == class)
+            .unwrap_or_else(|| panic!("no {class:?} machine among the first 500"))
+    }
+
+    /// The judge's identities of the names the loop gives: each library effect whole is its
+    /// family, one pinned to parts is not; an effect the bench offers is the one its file
+    /// names, and the file offers exactly the written effects the judge wants named.
+    #[test]
+    fn the_loop_s_names_are_the_judge_s_effects() {
+        for e in effects::library() {
+            let family = Family::of(e.name()).expect("a library effect has a family");
+            assert_eq!(Named::of(e.name()), Named::Family(family));
+        }
+        assert_eq!(
+            Named::of("thermal:rods"),
+            Named::Other("thermal:rods".to_owned())
+        );
+        for class in [Class::TwoOutside, Class::TrackerDrift] {
+            let m = first_of(class);
+            let columns = ["t", "dir_q4", "q1", "q2", "q3", "q4"].map(str::to_owned);
+            let file = offered(&m, &columns)
+                .expect("the bench's file parses")
+                .expect("a file offered");
+            let mut in_file: Vec<Named> = file.all().iter().map(|e| Named::of(e.name())).collect();
+            let mut wanted: Vec<Named> = nameable(&m.hidden)
+                .into_iter()
+                .filter(|n| matches!(n, Named::Offered(_)))
+                .collect();
+            let key = |n: &Named| format!("{n:?}");
+            in_file.sort_by_key(key);
+            wanted.sort_by_key(key);
+            assert_eq!(in_file, wanted, "{class:?}");
+            assert!(!wanted.is_empty(), "{class:?}");
+        }
+    }
 }

@@ -6,7 +6,7 @@
 
 use anyhow::Result;
 use rand::{rngs::StdRng, Rng, SeedableRng};
-use rpkm_core::calib::{self, Noise, Options, Prior, Request, Selection};
+use rpkm_core::calib::{self, CommandError, CommandRequest, Options, Prior, Selection};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::design::{self, PlannedPose, CENTRE, X_RANGE, Y_RANGE};
 use rpkm_core::noise::NoiseModel;
@@ -117,11 +117,13 @@ fn calibrate(
 ) -> Result<(calib::Calibration, NoiseModel)> {
     let start = Params::nominal();
     let opts = options(noise, prior);
-    let (cal, est) = calib::calibrate(&Request {
-        noise: Noise::ESTIMATE,
-        ..Request::new(c, &start, &opts)
-    })?;
-    Ok((cal, est.model))
+    let done = calib::calibrate_command(&CommandRequest::new(c, &start, &opts, &[])).map_err(
+        |e| match e {
+            CommandError::Effects(e) => crate::cli::bad_input(e.to_string()),
+            CommandError::Calibration(e) => anyhow::Error::new(e),
+        },
+    )?;
+    Ok((done.calibration, done.noise.model))
 }
 
 /// The held-out RMS (µm) of parameters `p` with each setup's zero removed: the TCP errors
@@ -192,7 +194,7 @@ fn machine_runs(a: &PlanStudyArgs, noise: &NoiseModel, machine: u64, s: u64) -> 
     let evaluation = TargetForecast::grid(&cal.params, (MODEL, &estimated), &unknowns)?;
     let setups = plan::candidates(&[Instrument::Lt])?;
     let planner = AccuracyPlanner::new(&start, &unknowns, &setups, &evaluation)?;
-    let mode = plan::drive_mode(&base, false, None);
+    let mode = plan::drive_mode(&base, plan::Preload::NotModelled, None);
     let now_measured_um = held_out_um(&val, &cal.params)?;
     let mut out = Vec::new();
     for &budget in &a.budgets {

@@ -11,13 +11,13 @@ use super::effect_stages::{parse_effects, read_effects_file};
 use super::{bad_input, read_campaign};
 use anyhow::Context;
 use output::Drives;
-use rpkm_core::calib::{self, Options, Prior, Selection};
+use rpkm_core::calib::{self, CommandError, CommandRequest, Options, Prior, Selection};
 use rpkm_core::campaign::{parse_follower, Campaign, Instrument};
-use rpkm_core::effects::{Effect, EffectSet, Family};
+use rpkm_core::effects::Effect;
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::forecast::targets_of;
 use rpkm_core::plan::separate::{Hypothesis, Pair};
-use rpkm_core::plan::{self, csv, Start, TargetForecast, Unknowns};
+use rpkm_core::plan::{self, csv, Preload, Start, TargetForecast, Unknowns};
 use rpkm_core::variance;
 
 /// What a plan is for.
@@ -115,9 +115,7 @@ pub fn run(args: &PlanArgs) -> anyhow::Result<()> {
     };
     let (cal, noise) = calibrate(&campaign, &opts, &refs)
         .with_context(|| format!("calibrating {}", args.campaign.display()))?;
-    let preload = refs
-        .iter()
-        .any(|e| Family::of(e.name()) == Some(Family::PreloadElastic));
+    let preload = Preload::of(&refs);
     let mode = plan::drive_mode(&campaign, preload, checked.follower);
     let drives = Drives {
         words: output::mode_words(&mode, preload),
@@ -193,13 +191,12 @@ fn calibrate(
     effects: &[&dyn Effect],
 ) -> anyhow::Result<(calib::Calibration, variance::NoiseEstimate)> {
     let start = Params::nominal();
-    let set = EffectSet::bind(effects, campaign, &start)
-        .map_err(|e| bad_input(format!("--effects: {e}")))?;
-    Ok(calib::calibrate(&calib::Request {
-        effects: &set,
-        noise: calib::Noise::ESTIMATE,
-        ..calib::Request::new(campaign, &start, opts)
-    })?)
+    let done = calib::calibrate_command(&CommandRequest::new(campaign, &start, opts, effects))
+        .map_err(|e| match e {
+            CommandError::Effects(e) => bad_input(format!("--effects: {e}")),
+            CommandError::Calibration(e) => anyhow::Error::new(e),
+        })?;
+    Ok((done.calibration, done.noise))
 }
 
 fn pair(args: &PlanArgs, prior: &Prior) -> anyhow::Result<Pair> {

@@ -4,7 +4,7 @@ use super::args::PlanArgs;
 use anyhow::Context;
 use rpkm_core::campaign::Instrument;
 use rpkm_core::design::PlannedPose;
-use rpkm_core::plan::{csv, CandidateSetup, DriveMode, DriveModeReason};
+use rpkm_core::plan::{csv, CandidateSetup, DriveMode, DriveModeReason, Preload};
 
 /// The drives' mode of a plan and its sentence.
 pub struct Drives {
@@ -53,8 +53,8 @@ fn follower_words(follower: [bool; 4]) -> String {
 }
 
 /// The drives' mode and why, in a sentence; with a warning where the poses will carry a
-/// preload the model cannot represent (`preload_modelled` false, all drives active).
-pub fn mode_words(mode: &DriveMode, preload_modelled: bool) -> String {
+/// preload the model cannot represent (not modelled, all drives active).
+pub fn mode_words(mode: &DriveMode, preload: Preload) -> String {
     let how = follower_words(mode.follower);
     let why = match mode.reason {
         DriveModeReason::Named => "as --follower names".to_owned(),
@@ -70,7 +70,7 @@ pub fn mode_words(mode: &DriveMode, preload_modelled: bool) -> String {
         }
     };
     let mut s = format!("external instruments measure with {how} ({why})");
-    if mode.all_active() && !preload_modelled {
+    if mode.all_active() && preload == Preload::NotModelled {
         s.push_str(
             "; the model carries no preload: measured so, the poses carry its deflection \
              (--effects preload_elastic with the drive forces recorded, or --follower 23 \

@@ -5,7 +5,9 @@ use super::diagnosis::{diagnose_model, diagnose_until, diagnosis_msg, Diagnosed}
 use super::parameters::parameters_of;
 use crate::error::bad_input;
 use crate::node::geometry::Geometry;
-use rpkm_core::calib::{self, Calibration, Options, Selection};
+use rpkm_core::calib::{
+    self, Calibration, CommandCalibration, CommandError, CommandRequest, Options, Selection,
+};
 use rpkm_core::campaign::Campaign;
 use rpkm_msgs::{Diagnosis, Parameters};
 
@@ -198,17 +200,19 @@ pub fn calibrate_job(job: &Job, o: &CalibratorOptions) -> anyhow::Result<JobOutc
     } else {
         "effects_file"
     };
-    let set = rpkm_core::effects::EffectSet::bind(&effects, &cal_part, &o.start.params)
-        .map_err(|e| bad_input(format!("{named_by}: {e}")))?;
-    // each effect parameter from its own start (zero but where the effect says otherwise)
-    let theta0: Vec<f64> = set.layout().iter().map(|s| s.param.start).collect();
-    // the calibration every command shares: tolerance prior, noise estimated from the data
-    let (cal, noise) = calib::calibrate(&calib::Request {
+    // the calibration every command shares, weighted as the node's settings say
+    let CommandCalibration {
+        effects: set,
+        calibration: cal,
+        noise,
+    } = calib::calibrate_command(&CommandRequest {
         noise: o.weighting,
-        effects: &set,
-        theta0: &theta0,
         progress: job.progress,
-        ..calib::Request::new(&cal_part, &o.start.params, &opts)
+        ..CommandRequest::new(&cal_part, &o.start.params, &opts, &effects)
+    })
+    .map_err(|e| match e {
+        CommandError::Effects(e) => bad_input(format!("{named_by}: {e}")),
+        CommandError::Calibration(e) => anyhow::Error::new(e),
     })?;
     let model = (effects.as_slice(), &set);
     let parameters = parameters_of(&cal, (&cal_part, val_part.as_ref()), model, &noise)?;

@@ -1,6 +1,7 @@
 //! `calibrator`: accumulates TcpMeasurements with the ActuatorState of the same stamp, per
 //! setup, into a campaign (`crate::campaign_bag::CampaignAssembler`, the same mapping as the
-//! bag tools) and runs `rpkm_core::calib::calibrate` when the campaign ends:
+//! bag tools) and runs the calibration every command shares
+//! (`rpkm_core::calib::calibrate_command`) when the campaign ends:
 //! - an end-of-campaign marker (a TcpMeasurement with setup
 //!   [`crate::node::ingest::END_OF_CAMPAIGN`]: ingest sends it at the end of a file; any publisher
 //!   may send it to request a calibration),
