@@ -142,7 +142,7 @@ impl Stages {
                 chi2_per_dof: e.chi2_per_dof_under(&under),
                 chi2_per_dof_stated: e.baseline.chi2_per_dof,
                 cal_rms_um: e.fit.cal_rms_um,
-                val_rms_um: e.fit.val_rms_um,
+                val_rms_um: e.baseline.val_rms_um,
                 val_rms_relative_um: e.baseline.val_rms_relative_um,
                 effect_params: e.fit.effect_params,
             })

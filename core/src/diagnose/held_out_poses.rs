@@ -31,13 +31,13 @@ pub struct HeldOutResidual {
 pub fn residuals(val: &Campaign, judge: &HeldOutCheck) -> Result<Vec<HeldOutResidual>, PoseError> {
     // the same readings in the same order as the judge's errors (only the values differ)
     let readings = obs::tcp_errors(val, &Params::nominal(), Model::M29)?;
-    if readings.len() != judge.errors_relative.len() {
+    if readings.len() != judge.figures.errors.relative.len() {
         return Ok(Vec::new());
     }
     let tcp = nominal_tcp(val);
     Ok(readings
         .iter()
-        .zip(&judge.errors_relative)
+        .zip(&judge.figures.errors.relative)
         .map(|(r, e)| HeldOutResidual {
             pose: r.pose,
             line: val.poses[r.pose].line,

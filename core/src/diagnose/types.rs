@@ -94,23 +94,13 @@ pub struct Fit {
     pub chi2_per_dof: f64,
     /// RMS of the length rows of the calibration (µm).
     pub cal_rms_um: f64,
-    /// RMS of the held-out TCP errors (µm), if there are held-out data.
-    pub val_rms_um: Option<f64>,
-    /// The held-out TCP errors (mm) less the mean of their setup and coordinate (the zero
-    /// reading's error, which no model predicts), to compare two models pose by pose.
+    /// The held-out figures (errors, their RMS, floors), if there are held-out data.
     #[serde(skip)]
-    pub val_errors: Vec<f64>,
-    /// The same errors each in its own noise (σ, [`super::validation::Validation::scaled`]):
-    /// what the predictions of two models are compared on.
-    #[serde(skip)]
-    pub val_scaled: Vec<f64>,
+    pub held_out: Option<super::held_out_figures::HeldOut>,
     /// Effect parameters of each setup (an instrument's alignment in that mounting): on the
     /// held-out campaign they are fitted to its own readings.
     #[serde(skip)]
     pub setup_params: usize,
-    /// Of them, those fitted on the held-out setups (their count there).
-    #[serde(skip)]
-    pub val_refit: usize,
     /// Effect parameters identified.
     pub effect_params: Vec<EffectEstimate>,
     /// Parameter combinations the campaign determined better than their tolerance, of how
@@ -151,10 +141,11 @@ pub struct Baseline {
     /// P(χ²_ν ≥ χ²): small when the residual is more than the rated noise.
     pub p_value: f64,
     pub consistent_with_noise: bool,
-    /// The held-out TCP errors (mm) less their setup's zero mean, as candidates are judged:
-    /// to compare the models of successive diagnoses pose by pose ([`Prediction::of`]).
+    /// The held-out figures the RMS and floors above are of: the errors (mm) with their
+    /// setups' zeros removed compare the models of successive diagnoses pose by pose
+    /// ([`Prediction::of`]).
     #[serde(skip)]
-    pub val_errors: Vec<f64>,
+    pub held_out: Option<super::held_out_figures::HeldOut>,
 }
 
 /// An effect tried as an addition to the model.
@@ -642,9 +633,9 @@ pub struct HeldOutCheck {
     pub structured: bool,
     /// The term the held-out residual follows most, where it follows one.
     pub follows: Option<sparse::Pointer>,
-    /// Held-out errors, each setup's zero removed (mm), for a later comparison.
+    /// The figures judged (the errors, mm; the RMS and floors above are theirs).
     #[serde(skip)]
-    pub errors_relative: Vec<f64>,
+    pub figures: super::held_out_figures::HeldOut,
 }
 
 impl HeldOutCheck {

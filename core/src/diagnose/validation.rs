@@ -83,19 +83,6 @@ impl Validation<'_> {
         obs::zero_removed(&self.zero, errors)
     }
 
-    /// `errors` relative ([`Validation::relative`]) and each divided by its σ: the held-out
-    /// errors in their own noise, how two models' predictions are compared. Weighed alike
-    /// in mm, the tracker's across-beam readings (tens of µm) would drown what its
-    /// along-beam ones (a few µm) or the grid encoder's see: a drift of 1.8 µm/min along the
-    /// beam moved the RMS from 22.88 to 22.80 µm (± 0.03), from 1.23 to 1.13 in σ (± 0.04).
-    pub fn scaled(&self, errors: &[f64]) -> Vec<f64> {
-        self.relative(errors)
-            .iter()
-            .zip(&self.relative_sigma)
-            .map(|(e, s)| e / s.max(f64::MIN_POSITIVE))
-            .collect()
-    }
-
     /// The number of (setup, coordinate) groups: the degrees of freedom the zero removal
     /// takes.
     pub(super) fn n_groups(&self) -> usize {

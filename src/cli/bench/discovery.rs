@@ -6,10 +6,8 @@ use super::DiscoveryArgs;
 use crate::cli::bad_input;
 use crate::cli::effect_stages::offered;
 use anyhow::{Context, Result};
-use rpkm_core::calib;
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, Prediction, VerdictKind};
 use rpkm_core::effects::{self, Effect};
-use rpkm_core::units::um_from_mm;
 use rpkm_nodes::effects_file::{self, EffectsFile};
 use rpkm_twin::EffectKind;
 use std::collections::BTreeMap;
@@ -226,7 +224,13 @@ fn outcome(
     // each step of the loop judged as the diagnosis judges a candidate
     let steps: Vec<Prediction> = diagnoses
         .windows(2)
-        .filter_map(|w| Prediction::of(&w[0].baseline.val_errors, &w[1].baseline.val_errors))
+        .filter_map(|w| {
+            let (before, after) = (
+                w[0].baseline.held_out.as_ref()?,
+                w[1].baseline.held_out.as_ref()?,
+            );
+            Prediction::of(&before.errors.relative, &after.errors.relative)
+        })
         .collect();
     let judged = Judged {
         named: &named,
@@ -249,7 +253,7 @@ fn outcome(
             .fold(0.0, f64::max),
         held_out_path_um: diagnoses
             .iter()
-            .map(|d| um_from_mm(calib::rms(&d.baseline.val_errors)))
+            .map(|d| d.baseline.val_rms_relative_um.unwrap_or(f64::NAN))
             .collect(),
         final_verdict: serde_json::to_value(kind)
             .ok()
