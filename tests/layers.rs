@@ -486,9 +486,8 @@ const HELD_OUT_FIGURES: &str = "core/src/diagnose/held_out_figures.rs";
 /// RMS of errors that are no model's held-out figures, each with the code that takes it:
 /// `Prediction::compared`, its resolution and support compare two models' errors in any
 /// unit (held-out errors in σ, the rows cross-validation leaves out); the settling orders a
-/// family's part sets by their errors in σ; without held-out data the noise floor is the
-/// calibration rows'.
-const OTHER_RMS: [(&str, &str); 5] = [
+/// family's part sets by their errors in σ.
+const OTHER_RMS: [(&str, &str); 4] = [
     (
         "core/src/diagnose/held_out.rs",
         "let (rb, ra) = (calib::rms(before), calib::rms(after));",
@@ -505,10 +504,6 @@ const OTHER_RMS: [(&str, &str); 5] = [
         "core/src/diagnose/settle.rs",
         ".then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))",
     ),
-    (
-        "core/src/diagnose/current.rs",
-        "None => um_from_mm(calib::rms(&length_sigmas(&base.rows))),",
-    ),
 ];
 
 /// Where a model's held-out θ is fitted, and how many times in that file: once per model
@@ -519,11 +514,13 @@ const HELD_OUT_THETA_FITS: [(&str, usize); 2] = [
     ("core/src/diagnose/current.rs", 1),
 ];
 
-/// Whether `code` takes an RMS (`rms(`) of something named as held-out errors, their
-/// zero-removed or scaled form, or their noise.
+/// Whether `code` takes the core's RMS (`calib::rms(`) of something named as held-out
+/// errors, their zero-removed or scaled form, or their noise: a word of its argument (split
+/// at every character that is not a letter or a digit) is one of those names.
 fn held_out_rms(code: &str) -> bool {
-    code.match_indices("rms(").any(|(i, _)| {
-        let arg: String = code[i + 4..]
+    const CALL: &str = "calib::rms(";
+    code.match_indices(CALL).any(|(i, _)| {
+        let arg: String = code[i + CALL.len()..]
             .chars()
             .scan(1_i32, |depth, c| {
                 *depth += match c {
@@ -534,11 +531,12 @@ fn held_out_rms(code: &str) -> bool {
                 (*depth > 0).then_some(c)
             })
             .collect();
-        [
-            "val", "held", "relative", "after", "before", "error", "sigma",
-        ]
-        .iter()
-        .any(|w| arg.contains(w))
+        arg.split(|c: char| !c.is_ascii_alphanumeric()).any(|w| {
+            [
+                "val", "held", "relative", "after", "before", "errors", "sigma", "scaled",
+            ]
+            .contains(&w)
+        })
     })
 }
 
@@ -548,10 +546,12 @@ fn the_held_out_rms_finder_sees_each_spelling() {
     assert!(held_out_rms("um_from_mm(calib::rms(&base.fit.val_errors))"));
     assert!(held_out_rms("Ok(1e3 * calib::rms(&relative))"));
     assert!(held_out_rms("um_from_mm(calib::rms(&v.relative_sigma))"));
-    assert!(held_out_rms("let r = rms(&errors);"));
+    assert!(held_out_rms("let r = calib::rms(&e.held.scaled);"));
     assert!(!held_out_rms(
         "um_from_mm(calib::rms(&length_values(&rows)))"
     ));
+    assert!(!held_out_rms("calib::rms(&length_sigmas(&base.rows))"));
+    assert!(!held_out_rms("rms(&mut before.clone())"));
     assert!(!held_out_rms("rms: cal.rms,"));
 }
 
