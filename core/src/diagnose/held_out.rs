@@ -100,7 +100,7 @@ impl Model1<'_> {
             &refit.set.corrections(&refit.theta, &self.cal.params),
         )?;
         Ok(HeldOut::of(
-            val,
+            &val.noise(),
             errs.iter().map(|e| e.value).collect(),
             refit.set.setup_local_params(),
         ))
@@ -185,7 +185,7 @@ impl Model1<'_> {
         let HeldOutTheta { set, theta } = refit;
         // the corrections at each p: a binding that reads the geometry changes with it
         let at =
-            |p: &Params| obs::tcp_errors_with(val.campaign, p, model, &set.corrections(&theta, p));
+            |p: &Params| obs::tcp_errors_with(val.campaign, p, model, &set.corrections(theta, p));
         let base = at(&cal.params)?;
         let n = base.len();
         let layout = set.layout();

@@ -6,7 +6,6 @@
 //! discovery bench read their held-out figures from here; no other place takes the RMS of
 //! held-out errors (tests/layers.rs holds the callers to it). All lengths in mm.
 
-use super::validation::Validation;
 use crate::calib;
 use crate::campaign::Campaign;
 use crate::obs::{self, PoseError};
@@ -73,23 +72,34 @@ pub struct HeldOut {
     pub noise_floor_relative: f64,
 }
 
+/// The noise of the held-out errors a model's figures are read against (the held-out data's,
+/// [`super::validation::Validation::noise`]), each error's entry in [`obs::tcp_errors`] order.
+pub(crate) struct ErrorNoise<'a> {
+    /// Each error's setup and coordinate (an index): the errors of one share the reading
+    /// their setup was zeroed on.
+    pub zero: &'a [usize],
+    /// σ of each error, and of each less the mean of its setup and coordinate.
+    pub sigma: &'a [f64],
+    pub relative_sigma: &'a [f64],
+}
+
 impl HeldOut {
-    /// The figures of errors `values` (mm) of a model that fitted `refit` parameters on the
-    /// held-out setups of `val`.
-    pub(crate) fn of(val: &Validation, values: Vec<f64>, refit: usize) -> HeldOut {
-        let errors = HeldOutErrors::of(&val.zero, values);
+    /// The figures of errors `values` (mm) in the noise `noise`, of a model that fitted
+    /// `refit` parameters on the held-out setups.
+    pub(crate) fn of(noise: &ErrorNoise, values: Vec<f64>, refit: usize) -> HeldOut {
+        let errors = HeldOutErrors::of(noise.zero, values);
         let scaled = errors
             .relative
             .iter()
-            .zip(&val.relative_sigma)
+            .zip(noise.relative_sigma)
             .map(|(e, s)| e / s.max(f64::MIN_POSITIVE))
             .collect();
         HeldOut {
             errors,
             scaled,
             refit,
-            noise_floor: calib::rms(&val.sigma),
-            noise_floor_relative: calib::rms(&val.relative_sigma),
+            noise_floor: calib::rms(noise.sigma),
+            noise_floor_relative: calib::rms(noise.relative_sigma),
         }
     }
 }

@@ -3,6 +3,7 @@
 //! model predicts it), by noise group, and which errors share a zero. What the held-out judge
 //! ([`super::held_out`]) weighs a model's errors by.
 
+use super::held_out_figures::ErrorNoise;
 use super::types::DiagnoseError;
 use crate::campaign::{Campaign, Instrument};
 use crate::geometry;
@@ -81,6 +82,15 @@ impl Validation<'_> {
     /// happens to follow it would beat the truth).
     pub fn relative(&self, errors: &[f64]) -> Vec<f64> {
         obs::zero_removed(&self.zero, errors)
+    }
+
+    /// The noise a model's held-out figures are read against.
+    pub(super) fn noise(&self) -> ErrorNoise<'_> {
+        ErrorNoise {
+            zero: &self.zero,
+            sigma: &self.sigma,
+            relative_sigma: &self.relative_sigma,
+        }
     }
 
     /// The number of (setup, coordinate) groups: the degrees of freedom the zero removal
