@@ -616,3 +616,53 @@ fn each_held_out_figure_is_made_in_one_place() {
     let offences = held_out_offences(root, &files);
     assert!(offences.is_empty(), "{}", offences.join("\n"));
 }
+
+/// A field of `code` that holds a length in µm (`name_um: f64`, `Option<f64>`, `Vec<f64>`).
+fn um_field(code: &str) -> bool {
+    let code = code.trim_start();
+    let code = code
+        .strip_prefix("pub(crate) ")
+        .or_else(|| code.strip_prefix("pub(super) "))
+        .or_else(|| code.strip_prefix("pub "))
+        .unwrap_or(code);
+    code.split_once(':').is_some_and(|(name, ty)| {
+        let ty = ty.trim_start();
+        name.ends_with("_um")
+            && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            && ["f64", "Option<f64>", "Vec<f64>"]
+                .iter()
+                .any(|t| ty.starts_with(t))
+    })
+}
+
+#[test]
+fn the_um_field_finder_sees_fields_not_values() {
+    assert!(um_field("    pub val_rms_um: Option<f64>,"));
+    assert!(um_field("    rms_um: f64,"));
+    assert!(um_field("    pub(crate) residual_um: Vec<f64>,"));
+    assert!(!um_field("        rms_um: um_from_mm(held.errors.rms),"));
+    assert!(!um_field("    pub val_rms: Option<f64>,"));
+    assert!(!um_field(
+        "    #[serde(rename = \"rms_um\", serialize_with = \"as_um\")]"
+    ));
+}
+
+/// The core reports mm: no field of its code holds µm (a person reads µm, where the command
+/// line, the nodes' words and the JSON writers write them).
+#[test]
+fn no_core_field_holds_micrometres() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    file_graph::rust_files(&root.join("core/src"), &mut files);
+    let offences: Vec<String> = files
+        .iter()
+        .flat_map(|f| {
+            let name = f.strip_prefix(root).unwrap_or(f).display().to_string();
+            non_test_code(f)
+                .into_iter()
+                .filter(|(_, code)| um_field(code))
+                .map(move |(n, code)| format!("{name}:{n}: {}", code.trim()))
+        })
+        .collect();
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
+}

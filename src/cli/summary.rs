@@ -4,6 +4,7 @@
 use crate::report::{ModelTable, Report};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::ModelDiagnosis;
+use rpkm_core::units::um_from_mm;
 use rpkm_core::variance;
 use rpkm_nodes::effects_file::EffectsFile;
 use rpkm_nodes::words;
@@ -34,11 +35,14 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
     }
     println!(
         "\n1. The current model against the measurements\n   calibration RMS {:.1} µm, held-out RMS {} µm, noise floor {:.1} µm",
-        b.cal_rms_um,
-        um(b.val_rms_um),
-        b.noise_floor_um
+        um_from_mm(b.cal_rms),
+        um(b.val_rms.map(um_from_mm)),
+        um_from_mm(b.noise_floor)
     );
-    if let (Some(rms), Some(floor)) = (b.val_rms_relative_um, b.noise_floor_relative_um) {
+    if let (Some(rms), Some(floor)) = (
+        b.val_rms_relative.map(um_from_mm),
+        b.noise_floor_relative.map(um_from_mm),
+    ) {
         println!(
             "   with each setup's zero removed (the one reading all its poses share, which no \
              model predicts): held-out RMS {rms:.1} µm, noise floor {floor:.1} µm"
@@ -151,10 +155,14 @@ fn print_effects(d: &ModelDiagnosis) {
             if c.significant { "yes" } else { "no" },
             100.0 * c.explained_fraction,
             c.chi2_per_dof_after,
-            um(c.val_rms_after_um)
+            um(c.val_rms_after.map(um_from_mm))
         );
     }
-    if let Some(before) = d.candidates.iter().find_map(|c| c.val_rms_before_um) {
+    if let Some(before) = d
+        .candidates
+        .iter()
+        .find_map(|c| c.val_rms_before.map(um_from_mm))
+    {
         println!("   {}", held_out_before(d, before));
     }
     for s in &d.skipped {
@@ -198,9 +206,12 @@ fn held_out_before(d: &ModelDiagnosis, before_um: f64) -> String {
     format!(
         "(held-out after: the held-out RMS as measured, µm, with the effect added; before it, \
          the current model fitted as the candidates are, under {weighted}: {before_um:.1} µm{})",
-        d.baseline.val_rms_um.map_or(String::new(), |own| format!(
-            "; section 1's {own:.1} µm is the current model under its own noise estimate"
-        ))
+        d.baseline
+            .val_rms
+            .map(um_from_mm)
+            .map_or(String::new(), |own| format!(
+                "; section 1's {own:.1} µm is the current model under its own noise estimate"
+            ))
     )
 }
 

@@ -17,7 +17,6 @@ use crate::noise::{Group, NoiseModel, N_GROUPS};
 use crate::obs::RowValue;
 use crate::params::{Model, Params};
 use crate::stats;
-use crate::units::um_from_mm;
 use crate::variance::NoiseEstimate;
 
 /// Calibration options of the diagnosis: the model's links, every parameter under its
@@ -207,19 +206,19 @@ fn judged(
 /// The baseline's figures: its fit, the noise floor, and χ² against the stated noise.
 pub(crate) fn baseline(base: &Fitted, estimated: &NoiseModel, opts: &DiagnosisOptions) -> Baseline {
     let held = base.fit.held_out.as_ref();
-    let noise_floor_um = match held {
-        Some(h) => um_from_mm(h.noise_floor),
-        None => um_from_mm(calib::rms(&length_sigmas(&base.rows))),
+    let noise_floor = match held {
+        Some(h) => h.noise_floor,
+        None => calib::rms(&length_sigmas(&base.rows)),
     };
     // the same rows weighted by the rating
     let scale = chi2_reweighted(&base.rows, estimated, &opts.noise);
     let p_value = stats::chi2_upper_tail(scale, base.fit.dof);
     Baseline {
-        cal_rms_um: base.fit.cal_rms_um,
-        val_rms_um: held.map(|h| um_from_mm(h.errors.rms)),
-        noise_floor_um,
-        val_rms_relative_um: held.map(|h| um_from_mm(h.errors.rms_relative)),
-        noise_floor_relative_um: held.map(|h| um_from_mm(h.noise_floor_relative)),
+        cal_rms: base.fit.cal_rms,
+        val_rms: held.map(|h| h.errors.rms),
+        noise_floor,
+        val_rms_relative: held.map(|h| h.errors.rms_relative),
+        noise_floor_relative: held.map(|h| h.noise_floor_relative),
         chi2: scale,
         dof: base.fit.dof,
         chi2_per_dof: scale / base.fit.dof,

@@ -15,7 +15,6 @@ use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Request,
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::params::Params;
-use crate::units::um_from_mm;
 
 /// What trying every candidate gave.
 pub(crate) struct Round {
@@ -414,7 +413,7 @@ pub(crate) fn finish_held(held_out: Option<HeldOut>, set: &EffectSet, cal: Calib
         chi2,
         dof,
         chi2_per_dof: chi2 / dof,
-        cal_rms_um: um_from_mm(calib::rms(&length_values(&rows))),
+        cal_rms: calib::rms(&length_values(&rows)),
         held_out,
         setup_params: set.setup_local_params(),
         effect_params: cal.effects,
@@ -466,8 +465,8 @@ fn compare(
         significant: p_value < level,
         relevant,
         explained_fraction,
-        val_rms_before_um: base.fit.held_out.as_ref().map(|h| um_from_mm(h.errors.rms)),
-        val_rms_after_um: full.fit.held_out.as_ref().map(|h| um_from_mm(h.errors.rms)),
+        val_rms_before: base.fit.held_out.as_ref().map(|h| h.errors.rms),
+        val_rms_after: full.fit.held_out.as_ref().map(|h| h.errors.rms),
         chi2_per_dof_after: kept.fit.chi2_per_dof,
         f_statistic: f,
         f_dof: (k, full.fit.dof),

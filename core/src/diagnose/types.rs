@@ -92,8 +92,9 @@ pub struct Fit {
     pub chi2: f64,
     pub dof: f64,
     pub chi2_per_dof: f64,
-    /// RMS of the length rows of the calibration (µm).
-    pub cal_rms_um: f64,
+    /// RMS of the length rows of the calibration (mm; µm in the JSON).
+    #[serde(rename = "cal_rms_um", serialize_with = "as_um")]
+    pub cal_rms: f64,
     /// The held-out figures (errors, their RMS, floors), if there are held-out data.
     #[serde(skip)]
     pub held_out: Option<super::held_out_figures::HeldOut>,
@@ -121,18 +122,24 @@ pub struct Fit {
 /// The current model's fit and its test against the stated noise (the JSON's `baseline`).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Baseline {
-    pub cal_rms_um: f64,
-    pub val_rms_um: Option<f64>,
+    #[serde(rename = "cal_rms_um", serialize_with = "as_um")]
+    pub cal_rms: f64,
+    #[serde(rename = "val_rms_um", serialize_with = "as_um_opt")]
+    pub val_rms: Option<f64>,
     /// RMS that noise alone would give on the held-out errors (or, without held-out data, on
-    /// the calibration's length rows), µm, at the estimated noise levels. It counts the
+    /// the calibration's length rows), mm (µm in the JSON), at the estimated noise levels. It counts the
     /// reading each setup was zeroed on at its variance, but all the poses of a setup share
     /// that one draw: with few setups the held-out RMS strays from it by that draw.
-    pub noise_floor_um: f64,
+    #[serde(rename = "noise_floor_um", serialize_with = "as_um")]
+    pub noise_floor: f64,
     /// The held-out RMS with each setup's zero removed (its errors less their mean, per
-    /// coordinate: what a model can predict), µm, and the RMS noise alone would give there:
+    /// coordinate: what a model can predict), mm (µm in the JSON), and the RMS noise alone would
+    /// give there:
     /// the zero reading cancels, so they compare like with like whatever it drew.
-    pub val_rms_relative_um: Option<f64>,
-    pub noise_floor_relative_um: Option<f64>,
+    #[serde(rename = "val_rms_relative_um", serialize_with = "as_um_opt")]
+    pub val_rms_relative: Option<f64>,
+    #[serde(rename = "noise_floor_relative_um", serialize_with = "as_um_opt")]
+    pub noise_floor_relative: Option<f64>,
     /// χ² against the stated (not the estimated) noise, its dof and p-value: how the
     /// residual compares with the instruments' rating. Not used by the verdict.
     pub chi2: f64,
@@ -159,8 +166,10 @@ pub struct Candidate {
     /// Fraction of the calibration's χ² above its degrees of freedom that the effect
     /// removes, 0..1.
     pub explained_fraction: f64,
-    pub val_rms_before_um: Option<f64>,
-    pub val_rms_after_um: Option<f64>,
+    #[serde(rename = "val_rms_before_um", serialize_with = "as_um_opt")]
+    pub val_rms_before: Option<f64>,
+    #[serde(rename = "val_rms_after_um", serialize_with = "as_um_opt")]
+    pub val_rms_after: Option<f64>,
     pub chi2_per_dof_after: f64,
     /// Nested F-test of the whole family: statistic, its degrees of freedom and p-value.
     pub f_statistic: f64,
@@ -586,7 +595,8 @@ pub struct Noisier {
 
 /// The TCP error of one pose of a 2-D relative instrument (laser tracker, grid encoder) as a
 /// vector: the model's TCP displacement from the setup's reset pose minus the instrument's
-/// reading (µm), where the pose and its reset pose are (nominal forward model, mm). The
+/// reading (mm; µm in the JSON), where the pose and its reset pose are (nominal forward
+/// model, mm). The
 /// classic picture of a calibration: an arrow per pose over the workspace.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ErrorVector {
@@ -598,24 +608,32 @@ pub struct ErrorVector {
     pub y: f64,
     pub reset_x: f64,
     pub reset_y: f64,
-    pub dx_um: f64,
-    pub dy_um: f64,
+    #[serde(rename = "dx_um", serialize_with = "as_um")]
+    pub dx: f64,
+    #[serde(rename = "dy_um", serialize_with = "as_um")]
+    pub dy: f64,
 }
 
 /// The figures of one calibrated model on held-out data, and the judge's test of them.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct HeldOutCheck {
-    /// RMS of the held-out TCP errors (µm) as measured, and with each setup's zero removed.
-    pub rms_um: f64,
-    pub rms_relative_um: f64,
-    /// What noise alone gives there (µm): counting each setup's zero reading (which all
+    /// RMS of the held-out TCP errors (mm; µm in the JSON, as every length of this struct)
+    /// as measured, and with each setup's zero removed.
+    #[serde(rename = "rms_um", serialize_with = "as_um")]
+    pub rms: f64,
+    #[serde(rename = "rms_relative_um", serialize_with = "as_um")]
+    pub rms_relative: f64,
+    /// What noise alone gives there: counting each setup's zero reading (which all
     /// its readings share, so with few setups the raw RMS strays from it by that one draw),
     /// and with each setup's zero removed.
-    pub noise_floor_um: f64,
-    pub noise_floor_relative_um: f64,
-    /// The floor of this calibrated model with each setup's zero removed (µm): the noise and
+    #[serde(rename = "noise_floor_um", serialize_with = "as_um")]
+    pub noise_floor: f64,
+    #[serde(rename = "noise_floor_relative_um", serialize_with = "as_um")]
+    pub noise_floor_relative: f64,
+    /// The floor of this calibrated model with each setup's zero removed: the noise and
     /// what the calibration's own uncertainty predicts at these poses.
-    pub floor_relative_um: f64,
+    #[serde(rename = "floor_relative_um", serialize_with = "as_um")]
+    pub floor_relative: f64,
     /// Σ (e/σ)² of the zero-removed errors against that floor (scaled to its degrees of
     /// freedom: the errors less the setups' zeros), and the noise estimate's own degrees of
     /// freedom (the floor is estimated too; infinite where the noise was stated).
@@ -642,6 +660,19 @@ impl HeldOutCheck {
     /// Whether the held-out data agree with the model: at its floor and following nothing.
     pub fn agrees(&self) -> bool {
         self.consistent && !self.structured
+    }
+}
+
+/// A length of the core (mm) written as a person reads it (µm): the JSON's `*_um` keys.
+pub(crate) fn as_um<S: serde::Serializer>(mm: &f64, s: S) -> Result<S::Ok, S::Error> {
+    s.serialize_f64(crate::units::um_from_mm(*mm))
+}
+
+/// [`as_um`] of a length that may be absent (null).
+fn as_um_opt<S: serde::Serializer>(mm: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
+    match mm {
+        Some(mm) => s.serialize_some(&crate::units::um_from_mm(*mm)),
+        None => s.serialize_none(),
     }
 }
 

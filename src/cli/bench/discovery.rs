@@ -8,6 +8,7 @@ use crate::cli::effect_stages::offered;
 use anyhow::{Context, Result};
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, Prediction, VerdictKind};
 use rpkm_core::effects::{self, Effect};
+use rpkm_core::units::um_from_mm;
 use rpkm_nodes::effects_file::{self, EffectsFile};
 use rpkm_twin::EffectKind;
 use std::collections::BTreeMap;
@@ -215,11 +216,11 @@ fn outcome(
 ) -> Outcome {
     let last = &diagnoses[diagnoses.len() - 1];
     let kind = last.verdict_kind;
-    let held_over_floor = last.baseline.val_rms_um.unwrap_or(f64::NAN) / measured.floor_um;
-    let relative = last
-        .held_out
-        .as_ref()
-        .map_or(f64::NAN, |h| h.rms_relative_um / measured.floor_relative_um);
+    let held_over_floor =
+        last.baseline.val_rms.map(um_from_mm).unwrap_or(f64::NAN) / measured.floor_um;
+    let relative = last.held_out.as_ref().map_or(f64::NAN, |h| {
+        um_from_mm(h.rms_relative) / measured.floor_relative_um
+    });
     let se = 1.0 / (2.0 * measured.relative_dof.max(1) as f64).sqrt();
     // each step of the loop judged as the diagnosis judges a candidate
     let steps: Vec<Prediction> = diagnoses
@@ -253,7 +254,12 @@ fn outcome(
             .fold(0.0, f64::max),
         held_out_path_um: diagnoses
             .iter()
-            .map(|d| d.baseline.val_rms_relative_um.unwrap_or(f64::NAN))
+            .map(|d| {
+                d.baseline
+                    .val_rms_relative
+                    .map(um_from_mm)
+                    .unwrap_or(f64::NAN)
+            })
             .collect(),
         final_verdict: serde_json::to_value(kind)
             .ok()
