@@ -39,7 +39,7 @@ fn main() {
                 "{:?}, {} candidates, held-out {:.2} um",
                 d.verdict_kind,
                 d.candidates.len(),
-                d.baseline.val_rms.map(um_from_mm).unwrap_or(f64::NAN)
+                d.baseline.val_rms.map_or(f64::NAN, um_from_mm)
             );
         }
         ms.sort_by(f64::total_cmp);

@@ -40,7 +40,7 @@ fn main() {
                 "| {} | {seed} | {:.1} | {:.1} | {:.1} | {:.2} | {} | {} | {} |",
                 case.map_or("none".to_owned(), |e| e.to_string()),
                 um_from_mm(d.baseline.cal_rms),
-                d.baseline.val_rms.map(um_from_mm).unwrap_or(f64::NAN),
+                d.baseline.val_rms.map_or(f64::NAN, um_from_mm),
                 um_from_mm(d.baseline.noise_floor),
                 d.baseline.chi2_per_dof,
                 d.missing_effect.as_deref().unwrap_or(match d.verdict_kind {

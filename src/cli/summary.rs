@@ -18,7 +18,6 @@ pub fn um(v: Option<f64>) -> String {
 /// The terminal summary; `validation` the held-out campaign, whose covariates and poses are
 /// compared with the calibration's beside the judge.
 pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &ModelDiagnosis) {
-    let b = &d.baseline;
     let with = if d.effects_in_model.is_empty() {
         String::new()
     } else {
@@ -33,25 +32,7 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
     if let Some(why) = words::model_choice(d) {
         println!("   ({why})");
     }
-    println!(
-        "\n1. The current model against the measurements\n   calibration RMS {:.1} µm, held-out RMS {} µm, noise floor {:.1} µm",
-        um_from_mm(b.cal_rms),
-        um(b.val_rms.map(um_from_mm)),
-        um_from_mm(b.noise_floor)
-    );
-    if let (Some(rms), Some(floor)) = (
-        b.val_rms_relative.map(um_from_mm),
-        b.noise_floor_relative.map(um_from_mm),
-    ) {
-        println!(
-            "   with each setup's zero removed (the one reading all its poses share, which no \
-             model predicts): held-out RMS {rms:.1} µm, noise floor {floor:.1} µm"
-        );
-    }
-    println!(
-        "   against the stated noise: chi2/dof {:.2} over {:.0} dof, p = {:.2e} (the verdict does not rest on it)",
-        b.chi2_per_dof, b.dof, b.p_value,
-    );
+    print_baseline(&d.baseline);
     if let Some(h) = &d.held_out {
         println!("   {}", words::held_out_judge(h));
     }
@@ -99,6 +80,30 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
         }
     }
     println!("\n({})", words::test(&d.test));
+}
+
+/// Section 1's figures: the current model's fit, its held-out RMS and the noise floors (µm),
+/// its χ² against the stated noise.
+fn print_baseline(b: &rpkm_core::diagnose::Baseline) {
+    println!(
+        "\n1. The current model against the measurements\n   calibration RMS {:.1} µm, held-out RMS {} µm, noise floor {:.1} µm",
+        um_from_mm(b.cal_rms),
+        um(b.val_rms.map(um_from_mm)),
+        um_from_mm(b.noise_floor)
+    );
+    if let (Some(rms), Some(floor)) = (
+        b.val_rms_relative.map(um_from_mm),
+        b.noise_floor_relative.map(um_from_mm),
+    ) {
+        println!(
+            "   with each setup's zero removed (the one reading all its poses share, which no \
+             model predicts): held-out RMS {rms:.1} µm, noise floor {floor:.1} µm"
+        );
+    }
+    println!(
+        "   against the stated noise: chi2/dof {:.2} over {:.0} dof, p = {:.2e} (the verdict does not rest on it)",
+        b.chi2_per_dof, b.dof, b.p_value,
+    );
 }
 
 /// The noise per group, the residual per instrument and direction, the worst rows.

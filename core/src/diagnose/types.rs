@@ -124,7 +124,7 @@ pub struct Fit {
 pub struct Baseline {
     #[serde(rename = "cal_rms_um", serialize_with = "as_um")]
     pub cal_rms: f64,
-    #[serde(rename = "val_rms_um", serialize_with = "as_um_opt")]
+    #[serde(rename = "val_rms_um", serialize_with = "as_um")]
     pub val_rms: Option<f64>,
     /// RMS that noise alone would give on the held-out errors (or, without held-out data, on
     /// the calibration's length rows), mm (µm in the JSON), at the estimated noise levels. It counts the
@@ -136,9 +136,9 @@ pub struct Baseline {
     /// coordinate: what a model can predict), mm (µm in the JSON), and the RMS noise alone would
     /// give there:
     /// the zero reading cancels, so they compare like with like whatever it drew.
-    #[serde(rename = "val_rms_relative_um", serialize_with = "as_um_opt")]
+    #[serde(rename = "val_rms_relative_um", serialize_with = "as_um")]
     pub val_rms_relative: Option<f64>,
-    #[serde(rename = "noise_floor_relative_um", serialize_with = "as_um_opt")]
+    #[serde(rename = "noise_floor_relative_um", serialize_with = "as_um")]
     pub noise_floor_relative: Option<f64>,
     /// χ² against the stated (not the estimated) noise, its dof and p-value: how the
     /// residual compares with the instruments' rating. Not used by the verdict.
@@ -166,9 +166,9 @@ pub struct Candidate {
     /// Fraction of the calibration's χ² above its degrees of freedom that the effect
     /// removes, 0..1.
     pub explained_fraction: f64,
-    #[serde(rename = "val_rms_before_um", serialize_with = "as_um_opt")]
+    #[serde(rename = "val_rms_before_um", serialize_with = "as_um")]
     pub val_rms_before: Option<f64>,
-    #[serde(rename = "val_rms_after_um", serialize_with = "as_um_opt")]
+    #[serde(rename = "val_rms_after_um", serialize_with = "as_um")]
     pub val_rms_after: Option<f64>,
     pub chi2_per_dof_after: f64,
     /// Nested F-test of the whole family: statistic, its degrees of freedom and p-value.
@@ -663,17 +663,29 @@ impl HeldOutCheck {
     }
 }
 
-/// A length of the core (mm) written as a person reads it (µm): the JSON's `*_um` keys.
-pub(crate) fn as_um<S: serde::Serializer>(mm: &f64, s: S) -> Result<S::Ok, S::Error> {
-    s.serialize_f64(crate::units::um_from_mm(*mm))
+/// A length of the core (mm), or one that may be absent, as the JSON writes it (µm).
+pub(crate) trait WrittenInUm {
+    fn write_um<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error>;
 }
 
-/// [`as_um`] of a length that may be absent (null).
-fn as_um_opt<S: serde::Serializer>(mm: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
-    match mm {
-        Some(mm) => s.serialize_some(&crate::units::um_from_mm(*mm)),
-        None => s.serialize_none(),
+impl WrittenInUm for f64 {
+    fn write_um<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_f64(crate::units::um_from_mm(*self))
     }
+}
+
+impl WrittenInUm for Option<f64> {
+    fn write_um<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Some(mm) => s.serialize_some(&crate::units::um_from_mm(*mm)),
+            None => s.serialize_none(),
+        }
+    }
+}
+
+/// A length of the core (mm) written as a person reads it (µm): the JSON's `*_um` keys.
+pub(crate) fn as_um<L: WrittenInUm, S: serde::Serializer>(mm: &L, s: S) -> Result<S::Ok, S::Error> {
+    mm.write_um(s)
 }
 
 /// A value serialised as its words (a model as `model 24`).

@@ -216,8 +216,7 @@ fn outcome(
 ) -> Outcome {
     let last = &diagnoses[diagnoses.len() - 1];
     let kind = last.verdict_kind;
-    let held_over_floor =
-        last.baseline.val_rms.map(um_from_mm).unwrap_or(f64::NAN) / measured.floor_um;
+    let held_over_floor = last.baseline.val_rms.map_or(f64::NAN, um_from_mm) / measured.floor_um;
     let relative = last.held_out.as_ref().map_or(f64::NAN, |h| {
         um_from_mm(h.rms_relative) / measured.floor_relative_um
     });
@@ -254,12 +253,7 @@ fn outcome(
             .fold(0.0, f64::max),
         held_out_path_um: diagnoses
             .iter()
-            .map(|d| {
-                d.baseline
-                    .val_rms_relative
-                    .map(um_from_mm)
-                    .unwrap_or(f64::NAN)
-            })
+            .map(|d| d.baseline.val_rms_relative.map_or(f64::NAN, um_from_mm))
             .collect(),
         final_verdict: serde_json::to_value(kind)
             .ok()
