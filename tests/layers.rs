@@ -478,3 +478,191 @@ fn the_node_program_links_none_of_the_command_line() {
     eprintln!("rpkm {} bytes, rpkm-node {} bytes", rpkm.len(), node.len());
     assert!(node.len() < rpkm.len(), "{} >= {}", node.len(), rpkm.len());
 }
+
+/// The one place that takes the RMS of held-out errors and removes their setups' zeros: a
+/// model's held-out figures ([`rpkm_core::diagnose::HeldOut`]), made once per model.
+const HELD_OUT_FIGURES: &str = "core/src/diagnose/held_out_figures.rs";
+
+/// RMS of errors that are no model's held-out figures, each with the code that takes it:
+/// `Prediction::compared`, its resolution and support compare two models' errors in any
+/// unit (held-out errors in σ, the rows cross-validation leaves out); the settling orders a
+/// family's part sets by their errors in σ.
+const OTHER_RMS: [(&str, &str); 4] = [
+    (
+        "core/src/diagnose/held_out.rs",
+        "let (rb, ra) = (calib::rms(before), calib::rms(after));",
+    ),
+    (
+        "core/src/diagnose/held_out.rs",
+        "let s = calib::rms(before);",
+    ),
+    (
+        "core/src/diagnose/held_out.rs",
+        "let scale = calib::rms(before) * size.sqrt();",
+    ),
+    (
+        "core/src/diagnose/settle.rs",
+        ".then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))",
+    ),
+];
+
+/// Where a model's held-out θ is fitted, and how many times in that file: once per model
+/// and held-out campaign (`rpkm calibrate`'s and the node's judge, a diagnosis's fit, the
+/// current model whose figures its judge reads), never again for its floor.
+const HELD_OUT_THETA_FITS: [(&str, usize); 2] = [
+    ("core/src/diagnose/held_out.rs", 2),
+    ("core/src/diagnose/current.rs", 1),
+];
+
+/// Whether `code` takes the core's RMS (`calib::rms(`) of something named as held-out
+/// errors, their zero-removed or scaled form, or their noise: a word of its argument (split
+/// at every character that is not a letter or a digit) is one of those names.
+fn held_out_rms(code: &str) -> bool {
+    const CALL: &str = "calib::rms(";
+    code.match_indices(CALL).any(|(i, _)| {
+        let arg: String = code[i + CALL.len()..]
+            .chars()
+            .scan(1_i32, |depth, c| {
+                *depth += match c {
+                    '(' => 1,
+                    ')' => -1,
+                    _ => 0,
+                };
+                (*depth > 0).then_some(c)
+            })
+            .collect();
+        arg.split(|c: char| !c.is_ascii_alphanumeric()).any(|w| {
+            [
+                "val", "held", "relative", "after", "before", "errors", "sigma", "scaled",
+            ]
+            .contains(&w)
+        })
+    })
+}
+
+#[test]
+fn the_held_out_rms_finder_sees_each_spelling() {
+    assert!(held_out_rms("rms_after_um: 1e3 * calib::rms(after),"));
+    assert!(held_out_rms("um_from_mm(calib::rms(&base.fit.val_errors))"));
+    assert!(held_out_rms("Ok(1e3 * calib::rms(&relative))"));
+    assert!(held_out_rms("um_from_mm(calib::rms(&v.relative_sigma))"));
+    assert!(held_out_rms("let r = calib::rms(&e.held.scaled);"));
+    assert!(!held_out_rms(
+        "um_from_mm(calib::rms(&length_values(&rows)))"
+    ));
+    assert!(!held_out_rms("calib::rms(&length_sigmas(&base.rows))"));
+    assert!(!held_out_rms("rms(&mut before.clone())"));
+    assert!(!held_out_rms("rms: cal.rms,"));
+}
+
+/// Every held-out RMS outside [`HELD_OUT_FIGURES`] and [`OTHER_RMS`], every zero removal
+/// outside it (and the definition and the held-out θ's own fit), and every fit of a held-out
+/// θ beyond [`HELD_OUT_THETA_FITS`], in the non-test code of `files`.
+fn held_out_offences(root: &Path, files: &[std::path::PathBuf]) -> Vec<String> {
+    let rel = |f: &Path| f.strip_prefix(root).unwrap_or(f).display().to_string();
+    let zero_removals = [
+        HELD_OUT_FIGURES,
+        "core/src/obs/zero.rs",
+        "core/src/diagnose/validation.rs",
+    ];
+    let mut offences = Vec::new();
+    for f in files {
+        let name = rel(f);
+        if name == HELD_OUT_FIGURES {
+            continue;
+        }
+        let mut fits = 0;
+        for (n, code) in non_test_code(f) {
+            let allowed = OTHER_RMS
+                .iter()
+                .any(|(file, line)| *file == name && code.trim() == *line);
+            if held_out_rms(&code) && !allowed {
+                offences.push(format!("{name}:{n}: held-out RMS: {}", code.trim()));
+            }
+            if code.contains("zero_removed(") && !zero_removals.contains(&name.as_str()) {
+                offences.push(format!("{name}:{n}: zero removal: {}", code.trim()));
+            }
+            if code.contains("held_out_theta(") && !code.contains("fn held_out_theta(") {
+                fits += 1;
+            }
+        }
+        let expected = HELD_OUT_THETA_FITS
+            .iter()
+            .find(|(file, _)| *file == name)
+            .map_or(0, |(_, k)| *k);
+        if fits != expected {
+            offences.push(format!(
+                "{name}: {fits} fits of a held-out θ, {expected} expected"
+            ));
+        }
+    }
+    offences
+}
+
+/// One held-out evaluation: the held-out RMS, the zero removal and the floors are taken in
+/// one file, the held-out θ fitted once per model; every command, node and bench reads its
+/// held-out figures from there.
+#[test]
+fn each_held_out_figure_is_made_in_one_place() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    for dir in CRATE_SOURCES {
+        file_graph::rust_files(&root.join(dir), &mut files);
+    }
+    let listed = OTHER_RMS.iter().map(|(f, _)| *f);
+    for f in listed.chain([HELD_OUT_FIGURES]) {
+        assert!(root.join(f).is_file(), "{f} is listed but gone");
+    }
+    let offences = held_out_offences(root, &files);
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
+}
+
+/// A field of `code` that holds a length in µm (`name_um: f64`, `Option<f64>`, `Vec<f64>`).
+fn um_field(code: &str) -> bool {
+    let code = code.trim_start();
+    let code = code
+        .strip_prefix("pub(crate) ")
+        .or_else(|| code.strip_prefix("pub(super) "))
+        .or_else(|| code.strip_prefix("pub "))
+        .unwrap_or(code);
+    code.split_once(':').is_some_and(|(name, ty)| {
+        let ty = ty.trim_start();
+        name.ends_with("_um")
+            && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+            && ["f64", "Option<f64>", "Vec<f64>"]
+                .iter()
+                .any(|t| ty.starts_with(t))
+    })
+}
+
+#[test]
+fn the_um_field_finder_sees_fields_not_values() {
+    assert!(um_field("    pub val_rms_um: Option<f64>,"));
+    assert!(um_field("    rms_um: f64,"));
+    assert!(um_field("    pub(crate) residual_um: Vec<f64>,"));
+    assert!(!um_field("        rms_um: um_from_mm(held.errors.rms),"));
+    assert!(!um_field("    pub val_rms: Option<f64>,"));
+    assert!(!um_field(
+        "    #[serde(rename = \"rms_um\", serialize_with = \"as_um\")]"
+    ));
+}
+
+/// The core reports mm: no field of its code holds µm (a person reads µm, where the command
+/// line, the nodes' words and the JSON writers write them).
+#[test]
+fn no_core_field_holds_micrometres() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    file_graph::rust_files(&root.join("core/src"), &mut files);
+    let offences: Vec<String> = files
+        .iter()
+        .flat_map(|f| {
+            let name = f.strip_prefix(root).unwrap_or(f).display().to_string();
+            non_test_code(f)
+                .into_iter()
+                .filter(|(_, code)| um_field(code))
+                .map(move |(n, code)| format!("{name}:{n}: {}", code.trim()))
+        })
+        .collect();
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
+}

@@ -7,6 +7,7 @@
 
 use rpkm_core::campaign::Instrument;
 use rpkm_core::diagnose::{self, DiagnosisOptions};
+use rpkm_core::units::um_from_mm;
 use rpkm_twin::{Twin, TwinConfig};
 use std::time::Instant;
 
@@ -38,7 +39,7 @@ fn main() {
                 "{:?}, {} candidates, held-out {:.2} um",
                 d.verdict_kind,
                 d.candidates.len(),
-                d.baseline.val_rms_um.unwrap_or(f64::NAN)
+                d.baseline.val_rms.map_or(f64::NAN, um_from_mm)
             );
         }
         ms.sort_by(f64::total_cmp);

@@ -5,6 +5,7 @@
 //!     cargo run --release -p rpkm-core --example diagnose_twin [SEEDS]
 use rpkm_core::campaign::Instrument;
 use rpkm_core::diagnose::{self, DiagnosisOptions};
+use rpkm_core::units::um_from_mm;
 use rpkm_twin::{EffectKind, Twin, TwinConfig};
 
 fn main() {
@@ -38,9 +39,9 @@ fn main() {
             println!(
                 "| {} | {seed} | {:.1} | {:.1} | {:.1} | {:.2} | {} | {} | {} |",
                 case.map_or("none".to_owned(), |e| e.to_string()),
-                d.baseline.cal_rms_um,
-                d.baseline.val_rms_um.unwrap_or(f64::NAN),
-                d.baseline.noise_floor_um,
+                um_from_mm(d.baseline.cal_rms),
+                d.baseline.val_rms.map_or(f64::NAN, um_from_mm),
+                um_from_mm(d.baseline.noise_floor),
                 d.baseline.chi2_per_dof,
                 d.missing_effect.as_deref().unwrap_or(match d.verdict_kind {
                     diagnose::VerdictKind::UnexplainedStructure => "unexplained structure",
@@ -50,7 +51,7 @@ fn main() {
                     "{} ({:.2}, {})",
                     c.effect, c.explained_fraction, c.significant
                 )),
-                c.and_then(|c| c.val_rms_after_um)
+                c.and_then(|c| c.val_rms_after.map(um_from_mm))
                     .map_or("-".to_owned(), |v| format!("{v:.1}")),
             );
             eprintln!("  {:.1} s", t0.elapsed().as_secs_f64());
@@ -63,7 +64,7 @@ fn main() {
                         c.significant,
                         c.p_value,
                         c.bic_gain,
-                        c.val_rms_after_um,
+                        c.val_rms_after.map(um_from_mm),
                         c.follows.as_ref().map(|f| (&f.feature, f.r))
                     );
                 }

@@ -8,9 +8,10 @@ use rpkm_core::calib::{
     Selection,
 };
 use rpkm_core::campaign::Campaign;
+use rpkm_core::diagnose::HeldOutErrors;
 use rpkm_core::effects::{Effect, EffectSet};
-use rpkm_core::obs;
 use rpkm_core::params::{self, Model, Params, NAMES, N_PARAMS};
+use rpkm_core::units::um_from_mm;
 use rpkm_core::variance::NoiseEstimate;
 use rpkm_nodes::calibration_file::{
     CalibrationFile, EffectValue, IdentifiedEntry, PosteriorCovariance,
@@ -560,43 +561,21 @@ fn validate_with(
         rpkm_core::diagnose::DiagnosisOptions::default().alpha,
     )
     .map_err(|e| bad_input(format!("{}: {e}", val.source)))?;
-    let after = rpkm_core::diagnose::held_out_errors(val, &noise.model, effects, set, cal)
-        .map_err(|e| bad_input(format!("{}: {e}", val.source)))?;
-    Ok(Validation {
-        judge: Some(judge),
-        ..compare(val, start, cal.model, &after)?
-    })
-}
-
-/// The held-out TCP errors (mm) of the parameters `p` in the model without effects.
-fn tcp_errors(val: &Campaign, p: &Params, model: Model) -> anyhow::Result<Vec<f64>> {
-    Ok(obs::tcp_errors(val, p, model)
-        .map_err(|e| bad_input(format!("{e}")))?
-        .iter()
-        .map(|e| e.value)
-        .collect())
-}
-
-/// The held-out errors `after` against those of the starting parameters.
-fn compare(
-    val: &Campaign,
-    start: &Params,
-    model: Model,
-    after: &[f64],
-) -> anyhow::Result<Validation> {
-    let before = tcp_errors(val, start, model)?;
-    if before.is_empty() {
+    let before =
+        HeldOutErrors::of_geometry(val, start, cal.model).map_err(|e| bad_input(format!("{e}")))?;
+    if before.values.is_empty() {
         return Err(bad_input(format!(
             "{}: no held-out TCP measurement (lt, kgm, dbb, li_x, li_y rows)",
             val.source
         )));
     }
+    let after = &judge.figures.errors;
     Ok(Validation {
-        rms_before_um: 1e3 * calib::rms(&before),
-        rms_after_um: 1e3 * calib::rms(after),
-        gain: calib::gain(&before, after),
-        values: before.len(),
-        judge: None,
+        rms_before_um: um_from_mm(before.rms),
+        rms_after_um: um_from_mm(after.rms),
+        gain: calib::gain(&before.values, &after.values),
+        values: before.values.len(),
+        judge: Some(judge),
     })
 }
 

@@ -7,6 +7,7 @@ use anyhow::Context;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::{self, DiagnosisOptions};
 use rpkm_core::effects;
+use rpkm_core::units::um_from_mm;
 use std::path::PathBuf;
 
 /// The embedded campaign: laser tracker + self-calibration on the twin, with a hidden
@@ -50,13 +51,13 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         "   chi2/dof at the stated noise {:.2} -> {:.2}; held-out RMS {} -> {} µm (noise floor {:.1} µm)",
         before.baseline.chi2_per_dof,
         after.baseline.chi2_per_dof,
-        um(before.baseline.val_rms_um),
-        um(after.baseline.val_rms_um),
-        after.baseline.noise_floor_um
+        um(before.baseline.val_rms.map(um_from_mm)),
+        um(after.baseline.val_rms.map(um_from_mm)),
+        um_from_mm(after.baseline.noise_floor)
     );
     if let (Some(rms), Some(floor)) = (
-        after.baseline.val_rms_relative_um,
-        after.baseline.noise_floor_relative_um,
+        after.baseline.val_rms_relative.map(um_from_mm),
+        after.baseline.noise_floor_relative.map(um_from_mm),
     ) {
         println!("   with each setup's zero removed: held-out RMS {rms:.1} µm, noise floor {floor:.1} µm");
     }

@@ -7,6 +7,7 @@ use anyhow::Context;
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis};
 use rpkm_core::effects::{self, Effect};
+use rpkm_core::units::um_from_mm;
 use rpkm_nodes::effects_file::{self, EffectsFile};
 use std::path::Path;
 
@@ -141,9 +142,9 @@ impl Stages {
                 },
                 chi2_per_dof: e.chi2_per_dof_under(&under),
                 chi2_per_dof_stated: e.baseline.chi2_per_dof,
-                cal_rms_um: e.fit.cal_rms_um,
-                val_rms_um: e.fit.val_rms_um,
-                val_rms_relative_um: e.baseline.val_rms_relative_um,
+                cal_rms_um: um_from_mm(e.fit.cal_rms),
+                val_rms_um: e.baseline.val_rms.map(um_from_mm),
+                val_rms_relative_um: e.baseline.val_rms_relative.map(um_from_mm),
                 effect_params: e.fit.effect_params,
             })
             .collect();

@@ -4,6 +4,7 @@
 use crate::report::{ModelTable, Report};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::ModelDiagnosis;
+use rpkm_core::units::um_from_mm;
 use rpkm_core::variance;
 use rpkm_nodes::effects_file::EffectsFile;
 use rpkm_nodes::words;
@@ -17,7 +18,6 @@ pub fn um(v: Option<f64>) -> String {
 /// The terminal summary; `validation` the held-out campaign, whose covariates and poses are
 /// compared with the calibration's beside the judge.
 pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &ModelDiagnosis) {
-    let b = &d.baseline;
     let with = if d.effects_in_model.is_empty() {
         String::new()
     } else {
@@ -32,22 +32,7 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
     if let Some(why) = words::model_choice(d) {
         println!("   ({why})");
     }
-    println!(
-        "\n1. The current model against the measurements\n   calibration RMS {:.1} µm, held-out RMS {} µm, noise floor {:.1} µm",
-        b.cal_rms_um,
-        um(b.val_rms_um),
-        b.noise_floor_um
-    );
-    if let (Some(rms), Some(floor)) = (b.val_rms_relative_um, b.noise_floor_relative_um) {
-        println!(
-            "   with each setup's zero removed (the one reading all its poses share, which no \
-             model predicts): held-out RMS {rms:.1} µm, noise floor {floor:.1} µm"
-        );
-    }
-    println!(
-        "   against the stated noise: chi2/dof {:.2} over {:.0} dof, p = {:.2e} (the verdict does not rest on it)",
-        b.chi2_per_dof, b.dof, b.p_value,
-    );
+    print_baseline(&d.baseline);
     if let Some(h) = &d.held_out {
         println!("   {}", words::held_out_judge(h));
     }
@@ -95,6 +80,30 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
         }
     }
     println!("\n({})", words::test(&d.test));
+}
+
+/// Section 1's figures: the current model's fit, its held-out RMS and the noise floors (µm),
+/// its χ² against the stated noise.
+fn print_baseline(b: &rpkm_core::diagnose::Baseline) {
+    println!(
+        "\n1. The current model against the measurements\n   calibration RMS {:.1} µm, held-out RMS {} µm, noise floor {:.1} µm",
+        um_from_mm(b.cal_rms),
+        um(b.val_rms.map(um_from_mm)),
+        um_from_mm(b.noise_floor)
+    );
+    if let (Some(rms), Some(floor)) = (
+        b.val_rms_relative.map(um_from_mm),
+        b.noise_floor_relative.map(um_from_mm),
+    ) {
+        println!(
+            "   with each setup's zero removed (the one reading all its poses share, which no \
+             model predicts): held-out RMS {rms:.1} µm, noise floor {floor:.1} µm"
+        );
+    }
+    println!(
+        "   against the stated noise: chi2/dof {:.2} over {:.0} dof, p = {:.2e} (the verdict does not rest on it)",
+        b.chi2_per_dof, b.dof, b.p_value,
+    );
 }
 
 /// The noise per group, the residual per instrument and direction, the worst rows.
@@ -151,10 +160,14 @@ fn print_effects(d: &ModelDiagnosis) {
             if c.significant { "yes" } else { "no" },
             100.0 * c.explained_fraction,
             c.chi2_per_dof_after,
-            um(c.val_rms_after_um)
+            um(c.val_rms_after.map(um_from_mm))
         );
     }
-    if let Some(before) = d.candidates.iter().find_map(|c| c.val_rms_before_um) {
+    if let Some(before) = d
+        .candidates
+        .iter()
+        .find_map(|c| c.val_rms_before.map(um_from_mm))
+    {
         println!("   {}", held_out_before(d, before));
     }
     for s in &d.skipped {
@@ -198,9 +211,12 @@ fn held_out_before(d: &ModelDiagnosis, before_um: f64) -> String {
     format!(
         "(held-out after: the held-out RMS as measured, µm, with the effect added; before it, \
          the current model fitted as the candidates are, under {weighted}: {before_um:.1} µm{})",
-        d.baseline.val_rms_um.map_or(String::new(), |own| format!(
-            "; section 1's {own:.1} µm is the current model under its own noise estimate"
-        ))
+        d.baseline
+            .val_rms
+            .map(um_from_mm)
+            .map_or(String::new(), |own| format!(
+                "; section 1's {own:.1} µm is the current model under its own noise estimate"
+            ))
     )
 }
 

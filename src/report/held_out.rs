@@ -7,6 +7,7 @@ use super::sections::figure;
 use crate::plot::{self, Marker, Series};
 use rpkm_core::diagnose::held_out_poses::{residuals, HeldOutResidual};
 use rpkm_core::diagnose::ModelDiagnosis;
+use rpkm_core::units::um_from_mm;
 
 /// The section, empty without a held-out campaign or its judge.
 pub fn section(r: &Report) -> String {
@@ -73,10 +74,14 @@ fn by_direction(
                 .filter(|p| p.direction == *dir)
                 .map(|p| Marker {
                     x: at(p),
-                    y: p.residual_um,
+                    y: um_from_mm(p.residual),
                     hover: format!(
                         "line {}: t {:.0} s, x {:.1}, y {:.1} mm: {:.2} µm",
-                        p.line, p.t, p.x_mm, p.y_mm, p.residual_um
+                        p.line,
+                        p.t,
+                        p.x_mm,
+                        p.y_mm,
+                        um_from_mm(p.residual)
                     ),
                 })
                 .collect();

@@ -20,6 +20,7 @@ pub use contents::{ModelRow, ModelTable, Report};
 use crate::plot::escape;
 use anyhow::Context;
 use rpkm_core::diagnose::ModelDiagnosis;
+use rpkm_core::units::um_from_mm;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -35,8 +36,8 @@ impl Report<'_> {
         };
         ModelRow {
             model: format!("{}{with}", d.model),
-            cal_rms_um: d.baseline.cal_rms_um,
-            val_rms_um: d.baseline.val_rms_um,
+            cal_rms_um: um_from_mm(d.baseline.cal_rms),
+            val_rms_um: d.baseline.val_rms.map(um_from_mm),
             chi2_per_dof: d.baseline.chi2_per_dof,
         }
     }

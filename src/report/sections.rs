@@ -8,6 +8,7 @@ use rpkm_core::campaign::Campaign;
 use rpkm_core::diagnose::sparse::nominal_tcp;
 use rpkm_core::diagnose::{ModelDiagnosis, ResidualPoint, VerdictKind};
 use rpkm_core::params::Params;
+use rpkm_core::units::um_from_mm;
 use std::fmt::Write as _;
 
 /// A µm figure to one decimal, `-` when absent.
@@ -94,7 +95,7 @@ pub fn summary(r: &Report) -> String {
         );
     }
     let last = &r.after.unwrap_or(d).baseline;
-    let floor = last.noise_floor_um;
+    let floor = um_from_mm(last.noise_floor);
     let _ = write!(
         o,
         "<tr><td>noise floor</td><td></td><td>{floor:.1}</td><td>1</td></tr></table>\
@@ -102,8 +103,10 @@ pub fn summary(r: &Report) -> String {
          models compare (under its own estimate each would read about 1).</p>",
         escape(&r.chi2_under)
     );
-    if let (Some(rms), Some(zero_floor)) = (last.val_rms_relative_um, last.noise_floor_relative_um)
-    {
+    if let (Some(rms), Some(zero_floor)) = (
+        last.val_rms_relative.map(um_from_mm),
+        last.noise_floor_relative.map(um_from_mm),
+    ) {
         let _ = write!(
             o,
             "<p>The held-out errors carry the reading each setup was zeroed on: one draw that all \
@@ -383,16 +386,16 @@ fn arrows(d: &ModelDiagnosis, inst: &str) -> Vec<Arrow> {
             Arrow {
                 x: v.x,
                 y: v.y,
-                dx_um: v.dx_um,
-                dy_um: v.dy_um,
+                dx_um: um_from_mm(v.dx),
+                dy_um: um_from_mm(v.dy),
                 hover: format!(
                     "line {}: x {:.1}, y {:.1} mm: error ({:.2}, {:.2}) µm, |e| {:.2} µm (σ {along:.2} along, {across:.2} across), setup {}",
                     v.line,
                     v.x,
                     v.y,
-                    v.dx_um,
-                    v.dy_um,
-                    v.dx_um.hypot(v.dy_um),
+                    um_from_mm(v.dx),
+                    um_from_mm(v.dy),
+                    um_from_mm(v.dx).hypot(um_from_mm(v.dy)),
                     v.setup
                 ),
             }
@@ -585,7 +588,7 @@ pub fn effects(r: &Report) -> String {
             100.0 * c.explained_fraction,
             c.f_statistic,
             c.p_value,
-            um(c.val_rms_after_um),
+            um(c.val_rms_after.map(um_from_mm)),
             escape(&rpkm_nodes::words::evidence(c))
         );
     }

@@ -397,3 +397,83 @@ fn model_24_refuses_an_effect_that_moves_rod_5_on_its_own() {
     let (v, s) = crate::diagnosis_support::effect_value(&out["effects"], "compliance");
     assert!((v - 1.0).abs() <= 3.0 * s, "compliance {v} ± {s}");
 }
+
+/// One model's held-out figures are one figure wherever a user reads them: on the embedded
+/// demo pair, `rpkm diagnose --model 29`'s baseline and judge, `rpkm calibrate`'s held-out
+/// line, its JSON and its judge (the same model: model 29, no effects) give the same RMS, the
+/// same RMS with each setup's zero removed and the same floors, to the bit, and the text
+/// prints them.
+#[test]
+fn the_held_out_figures_of_one_model_agree_in_diagnose_and_calibrate() {
+    let dir = scratch("one-figure");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let (c, v) = (
+        root.join("bags/demo/campaign.csv"),
+        root.join("bags/demo/campaign.val.csv"),
+    );
+    let run = |args: &[&str], json: &Path| -> (String, serde_json::Value) {
+        let o = rpkm()
+            .args(args)
+            .arg(&c)
+            .arg("--validate")
+            .arg(&v)
+            .arg("--json")
+            .arg(json)
+            .output()
+            .expect("run rpkm");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let text = std::fs::read_to_string(json).expect("json");
+        (
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            serde_json::from_str(&text).expect("json"),
+        )
+    };
+    let (d_text, d) = run(&["diagnose", "--model", "29"], &dir.join("d.json"));
+    let (c_text, cal) = run(&["calibrate"], &dir.join("c.json"));
+    let f = |v: &serde_json::Value| v.as_f64().unwrap_or_else(|| panic!("a number: {v}"));
+    let (base, judge, c_judge) = (&d["baseline"], &d["held_out"], &cal["held_out"]);
+    let rms = f(&base["val_rms_um"]);
+    for (place, v) in [
+        ("diagnose's judge", &judge["rms_um"]),
+        ("calibrate's JSON", &cal["val_rms_after_um"]),
+        ("calibrate's judge", &c_judge["rms_um"]),
+    ] {
+        assert_eq!(f(v).to_bits(), rms.to_bits(), "{place}: {v} against {rms}");
+    }
+    let relative = f(&base["val_rms_relative_um"]);
+    let zero_floor = f(&base["noise_floor_relative_um"]);
+    for judged in [judge, c_judge] {
+        assert_eq!(f(&judged["rms_relative_um"]).to_bits(), relative.to_bits());
+        assert_eq!(
+            f(&judged["noise_floor_relative_um"]).to_bits(),
+            zero_floor.to_bits()
+        );
+        assert_eq!(
+            f(&judged["noise_floor_um"]).to_bits(),
+            f(&base["noise_floor_um"]).to_bits()
+        );
+        assert_eq!(
+            f(&judged["floor_relative_um"]).to_bits(),
+            f(&judge["floor_relative_um"]).to_bits()
+        );
+    }
+    eprintln!("demo, model 29: held-out {rms:.2} µm, {relative:.2} µm zero removed");
+    assert!(rms > relative && relative > 0.0, "{rms} {relative}");
+    assert!(
+        d_text.contains(&format!("held-out RMS {rms:.1} µm")),
+        "{d_text}"
+    );
+    assert!(
+        d_text.contains(&format!("held-out RMS {relative:.1} µm")),
+        "{d_text}"
+    );
+    assert!(
+        c_text.contains(&format!("{rms:.2} µm calibrated")),
+        "{c_text}"
+    );
+    assert!(
+        c_text.contains(&format!("held-out RMS {relative:.1} µm")),
+        "{c_text}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

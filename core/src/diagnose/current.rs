@@ -7,7 +7,7 @@
 use super::figures::length_sigmas;
 use super::held_out::{self, Levels, Model1};
 use super::settle::{self, Settled};
-use super::trials::finish_with;
+use super::trials::finish_held;
 use super::types::{Baseline, DiagnoseError, DiagnosisOptions, Fit, Fitted, HeldOutCheck};
 use super::validation::{self, Validation};
 use crate::calib::{self, Calibration, Request};
@@ -17,7 +17,6 @@ use crate::noise::{Group, NoiseModel, N_GROUPS};
 use crate::obs::RowValue;
 use crate::params::{Model, Params};
 use crate::stats;
-use crate::units::um_from_mm;
 use crate::variance::NoiseEstimate;
 
 /// Calibration options of the diagnosis: the model's links, every parameter under its
@@ -91,10 +90,9 @@ pub(crate) struct Current {
     pub held_out: Option<HeldOutCheck>,
 }
 
-/// Level of each structure test: a third of the diagnosis's (three tests, the family's
-/// level stays α).
+/// Level of each structure test ([`Levels::at`]).
 pub(crate) fn structure_level(opts: &DiagnosisOptions) -> f64 {
-    opts.alpha / 3.0
+    Levels::at(opts.alpha).structure
 }
 
 impl Current {
@@ -124,21 +122,9 @@ impl Current {
             (cal, est, copts, val)
         };
         let set = EffectSet::bind(&effects, campaign, &cal.start)?;
-        let (cal, fitted) = fitted_of(val.as_ref(), &effects, &set, cal, &copts)?;
-        let baseline = baseline(&fitted, &est.model, val.as_ref(), opts);
-        let held_out = match &val {
-            Some(v) => Some(held_out::judge(
-                v,
-                &Model1 {
-                    effects: &effects,
-                    cal_set: &set,
-                    cal: &cal,
-                },
-                &est.groups,
-                &levels(opts),
-            )?),
-            None => None,
-        };
+        let model = (effects.as_slice(), &set);
+        let (cal, fitted, held_out) = judged(val.as_ref(), model, cal, &est, opts)?;
+        let baseline = baseline(&fitted, &est.model, opts);
         drop(effects);
         Ok(Current {
             settled,
@@ -164,21 +150,8 @@ impl Current {
     ) -> Result<Current, DiagnoseError> {
         let est = NoiseEstimate::assumed(&opts.noise);
         let set = EffectSet::bind(in_model, campaign, &cal.start)?;
-        let (cal, fitted) = fitted_of(val, in_model, &set, cal, copts)?;
-        let baseline = baseline(&fitted, &est.model, val, opts);
-        let held_out = match val {
-            Some(v) => Some(held_out::judge(
-                v,
-                &Model1 {
-                    effects: in_model,
-                    cal_set: &set,
-                    cal: &cal,
-                },
-                &est.groups,
-                &levels(opts),
-            )?),
-            None => None,
-        };
+        let (cal, fitted, held_out) = judged(val, (in_model, &set), cal, &est, opts)?;
+        let baseline = baseline(&fitted, &est.model, opts);
         Ok(Current {
             settled: Settled::unchanged(in_model),
             cal,
@@ -191,71 +164,67 @@ impl Current {
     }
 }
 
-/// The current model's statistics ([`finish_with`]'s) and its calibration, the calibration's
-/// rows moved into the statistics: held once (2·10⁵ rows are 26 MB, kept through the whole
-/// diagnosis).
-fn fitted_of(
+/// The current model's statistics and its calibration, the calibration's rows moved into
+/// the statistics (held once: 2·10⁵ rows are 26 MB, kept through the whole diagnosis), and
+/// the held-out judge of it: the model's held-out θ fitted once, its figures made once and
+/// read by both. `(effects, set)`: the model and its effects bound to the campaign; `est`:
+/// the noise its floor is made of.
+fn judged(
     val: Option<&Validation>,
-    effects: &[&dyn Effect],
-    set: &EffectSet,
+    (effects, set): (&[&dyn Effect], &EffectSet),
     mut cal: Calibration,
-    copts: &calib::Options,
-) -> Result<(Calibration, Fitted), DiagnoseError> {
+    est: &NoiseEstimate,
+    opts: &DiagnosisOptions,
+) -> Result<(Calibration, Fitted, Option<HeldOutCheck>), DiagnoseError> {
     let rows = std::mem::take(&mut cal.residuals);
-    let fitted = finish_with(
-        val,
+    let model = Model1 {
         effects,
+        cal_set: set,
+        cal: &cal,
+    };
+    let (held, check) = match val {
+        Some(v) => {
+            let refit = model.held_out_theta(v)?;
+            let held = model.held_out(v, &refit)?;
+            let levels = Levels::at(opts.alpha);
+            let check = held_out::judge(v, (&model, &refit), held.clone(), &est.groups, &levels)?;
+            (Some(held), Some(check))
+        }
+        None => (None, None),
+    };
+    let fitted = finish_held(
+        held,
         set,
         Calibration {
             residuals: rows,
             ..cal.clone()
         },
-        copts,
-    )?;
-    Ok((cal, fitted))
-}
-
-/// The levels of the held-out judge: its χ² at the diagnosis's level, each structure test
-/// at a third of it.
-fn levels(opts: &DiagnosisOptions) -> Levels {
-    Levels {
-        variance: opts.alpha,
-        structure: structure_level(opts),
-    }
+    );
+    Ok((cal, fitted, check))
 }
 
 /// The baseline's figures: its fit, the noise floor, and χ² against the stated noise.
-pub(crate) fn baseline(
-    base: &Fitted,
-    estimated: &NoiseModel,
-    val: Option<&Validation>,
-    opts: &DiagnosisOptions,
-) -> Baseline {
-    let noise_floor_um = match val {
-        Some(v) => um_from_mm(calib::rms(&v.sigma)),
-        None => um_from_mm(calib::rms(&length_sigmas(&base.rows))),
+pub(crate) fn baseline(base: &Fitted, estimated: &NoiseModel, opts: &DiagnosisOptions) -> Baseline {
+    let held = base.fit.held_out.as_ref();
+    let noise_floor = match held {
+        Some(h) => h.noise_floor,
+        None => calib::rms(&length_sigmas(&base.rows)),
     };
-    let relative = val.map(|v| {
-        (
-            um_from_mm(calib::rms(&base.fit.val_errors)),
-            um_from_mm(calib::rms(&v.relative_sigma)),
-        )
-    });
     // the same rows weighted by the rating
     let scale = chi2_reweighted(&base.rows, estimated, &opts.noise);
     let p_value = stats::chi2_upper_tail(scale, base.fit.dof);
     Baseline {
-        cal_rms_um: base.fit.cal_rms_um,
-        val_rms_um: base.fit.val_rms_um,
-        noise_floor_um,
-        val_rms_relative_um: relative.map(|r| r.0),
-        noise_floor_relative_um: relative.map(|r| r.1),
+        cal_rms: base.fit.cal_rms,
+        val_rms: held.map(|h| h.errors.rms),
+        noise_floor,
+        val_rms_relative: held.map(|h| h.errors.rms_relative),
+        noise_floor_relative: held.map(|h| h.noise_floor_relative),
         chi2: scale,
         dof: base.fit.dof,
         chi2_per_dof: scale / base.fit.dof,
         p_value,
         consistent_with_noise: p_value > opts.alpha,
-        val_errors: base.fit.val_errors.clone(),
+        held_out: base.fit.held_out.clone(),
     }
 }
 

@@ -164,7 +164,7 @@ impl<'j> Judge<'j> {
             .val
             .and_then(|_| Prediction::scaled(&self.base.fit, &e.fitted.fit));
         if held.is_some() {
-            e.held = Some(e.fitted.fit.val_scaled.clone());
+            e.held = e.fitted.fit.held_out.as_ref().map(|h| h.scaled.clone());
         }
         e.prediction = held;
         if held.is_some_and(|p| p.last_word()) {

@@ -10,7 +10,6 @@ use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};
 use crate::obs::{self, RowValue};
 use crate::params::Model;
-use crate::units::um_from_mm;
 use crate::variance::GroupNoise;
 use std::collections::BTreeMap;
 
@@ -34,8 +33,8 @@ pub(crate) fn error_vectors(
     for e in &errs {
         let slot = xy.entry(e.pose).or_default();
         match e.direction {
-            obs::TcpDirection::X => slot[0] = Some(um_from_mm(e.value)),
-            obs::TcpDirection::Y => slot[1] = Some(um_from_mm(e.value)),
+            obs::TcpDirection::X => slot[0] = Some(e.value),
+            obs::TcpDirection::Y => slot[1] = Some(e.value),
             obs::TcpDirection::R => {}
         }
     }
@@ -45,7 +44,7 @@ pub(crate) fn error_vectors(
         let Some(reset) = setup.reset else { continue };
         for &i in &setup.poses {
             // a tracker or grid-encoder pose gives both coordinates; a single one is no vector
-            let Some([Some(dx_um), Some(dy_um)]) = xy.get(&i).copied() else {
+            let Some([Some(dx), Some(dy)]) = xy.get(&i).copied() else {
                 continue;
             };
             let pose = &campaign.poses[i];
@@ -58,8 +57,8 @@ pub(crate) fn error_vectors(
                 y: tcp[i].1,
                 reset_x: tcp[reset].0,
                 reset_y: tcp[reset].1,
-                dx_um,
-                dy_um,
+                dx,
+                dy,
             });
         }
     }

@@ -1,8 +1,9 @@
 //! The held-out judge: a calibrated model's errors on poses it has not seen, the noise they
 //! would have if the model were right, and whether they agree.
 //!
-//! One evaluation for every command and node (`Model1::errors`, under [`judge_calibration`]
-//! and the diagnosis's `judge`): the model's TCP
+//! One evaluation for every command and node ([`Model1::held_out_theta`], fitted once per model and
+//! held-out campaign, and [`Model1::held_out`], under [`judge_calibration`] and the
+//! diagnosis's `judge`; the figures in [`super::held_out_figures`]): the model's TCP
 //! errors at the held-out poses with its effects (setup-local effect parameters re-fitted on
 //! the held-out setups), raw and with each setup's zero removed (the reading a relative
 //! setup was zeroed on is in all its readings, and no model predicts it), the floor noise
@@ -12,38 +13,20 @@
 //! noise's own degrees of freedom) and when they follow nothing (the structure tests of
 //! [`super::structure`] on the held-out residual, with the time since each setup's zero).
 
+use super::held_out_figures::HeldOut;
 use super::structure::Shape;
 use super::types::{DiagnoseError, Fit, FitError, HeldOutCheck, Prediction, RmsUnit};
 use super::validation::Validation;
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};
-use crate::noise::{Group, NoiseModel, N_GROUPS};
+use crate::noise::{Group, N_GROUPS};
 use crate::obs::{self, group_sums, Direction, RowValue};
 use crate::params::{Params, N_PARAMS};
 use crate::stats;
 use crate::units::um_from_mm;
 use crate::variance::GroupNoise;
 use nalgebra::{DMatrix, DVector};
-
-/// The held-out TCP errors (mm, in [`obs::tcp_errors`] order) of a calibration `cal` of the
-/// model with `effects` (bound to the calibration's campaign as `cal_set`), the held-out
-/// rows weighted by `noise`.
-pub fn held_out_errors(
-    validation: &Campaign,
-    noise: &NoiseModel,
-    effects: &[&dyn Effect],
-    cal_set: &EffectSet,
-    cal: &Calibration,
-) -> Result<Vec<f64>, DiagnoseError> {
-    let val = Validation::new(validation, noise).map_err(DiagnoseError::Validation)?;
-    Ok(Model1 {
-        effects,
-        cal_set,
-        cal,
-    }
-    .errors(&val)?)
-}
 
 /// The held-out judge on a calibration made outside a diagnosis (`rpkm calibrate`, the
 /// calibrator node): the same errors, floors and tests as the diagnosis's baseline, for the
@@ -62,11 +45,21 @@ pub fn judge_calibration(
         cal_set,
         cal,
     };
-    let levels = Levels {
-        variance: alpha,
-        structure: alpha / 3.0,
-    };
-    Ok(judge(&val, &model, &noise.groups, &levels)?)
+    let refit = model.held_out_theta(&val)?;
+    let held = model.held_out(&val, &refit)?;
+    Ok(judge(
+        &val,
+        (&model, &refit),
+        held,
+        &noise.groups,
+        &Levels::at(alpha),
+    )?)
+}
+
+/// The effects of a calibrated model bound to the held-out campaign, and their θ there.
+pub(crate) struct HeldOutTheta {
+    set: EffectSet,
+    theta: Vec<f64>,
 }
 
 /// A calibrated model as the held-out judge reads it.
@@ -96,28 +89,31 @@ impl Model1<'_> {
             .collect()
     }
 
-    /// The held-out TCP errors (mm) with the calibrated model and effects; the effects'
-    /// setup-local parameters are re-fitted on the held-out setups (Gauss-Newton).
-    pub fn errors(&self, val: &Validation) -> Result<Vec<f64>, FitError> {
-        self.errors_refit(val).map(|(errors, _)| errors)
-    }
-
-    /// [`Model1::errors`], and the number of the effects' parameters fitted on the held-out
-    /// setups themselves.
-    pub fn errors_refit(&self, val: &Validation) -> Result<(Vec<f64>, usize), FitError> {
-        let (set, theta) = self.held_out_theta(val)?;
+    /// The model's held-out figures ([`HeldOut`]) with its held-out θ `refit`: the
+    /// calibrated model and effects, the effects' setup-local parameters fitted on the
+    /// held-out setups.
+    pub fn held_out(&self, val: &Validation, refit: &HeldOutTheta) -> Result<HeldOut, FitError> {
         let errs = obs::tcp_errors_with(
             val.campaign,
             &self.cal.params,
             self.cal.model,
-            &set.corrections(&theta, &self.cal.params),
+            &refit.set.corrections(&refit.theta, &self.cal.params),
         )?;
-        let refit = set.setup_local_params();
-        Ok((errs.iter().map(|e| e.value).collect(), refit))
+        Ok(HeldOut::of(
+            &val.noise(),
+            errs.iter().map(|e| e.value).collect(),
+            refit.set.setup_local_params(),
+        ))
     }
 
-    /// The effects bound to the held-out campaign and their θ (setup-local parts fitted).
-    fn held_out_theta(&self, val: &Validation) -> Result<(EffectSet, Vec<f64>), FitError> {
+    /// The model's held-out figures, its held-out θ fitted for them alone.
+    pub fn evaluate(&self, val: &Validation) -> Result<HeldOut, FitError> {
+        self.held_out(val, &self.held_out_theta(val)?)
+    }
+
+    /// The effects bound to the held-out campaign and their θ (setup-local parts fitted):
+    /// fitted once per model and held-out campaign, read by its errors and its floor.
+    pub fn held_out_theta(&self, val: &Validation) -> Result<HeldOutTheta, FitError> {
         let (cal, model) = (self.cal, self.cal.model);
         let set = EffectSet::bind(self.effects, val.campaign, &cal.params)?;
         let mut theta = self.carried_theta(&set);
@@ -164,24 +160,32 @@ impl Model1<'_> {
                 theta[t] -= step[k];
             }
         }
-        Ok((set, theta))
+        Ok(HeldOutTheta { set, theta })
     }
 
     /// The covariance (mm²) the calibration's own uncertainty gives the held-out errors with
     /// their setups' zeros removed, J Σ Jᵀ in full: errors near each other share it.
-    pub fn prediction_covariance(&self, val: &Validation) -> Result<DMatrix<f64>, FitError> {
-        let (rel, cov) = self.sensitivities(val)?;
+    fn prediction_covariance(
+        &self,
+        val: &Validation,
+        refit: &HeldOutTheta,
+    ) -> Result<DMatrix<f64>, FitError> {
+        let (rel, cov) = self.sensitivities(val, refit)?;
         Ok(&rel * cov * rel.transpose())
     }
 
     /// The held-out errors' sensitivities to the calibrated parameters (each less its
     /// setup's mean) and the calibration's covariance of those parameters.
-    fn sensitivities(&self, val: &Validation) -> Result<(DMatrix<f64>, DMatrix<f64>), FitError> {
+    fn sensitivities(
+        &self,
+        val: &Validation,
+        refit: &HeldOutTheta,
+    ) -> Result<(DMatrix<f64>, DMatrix<f64>), FitError> {
         let (cal, model) = (self.cal, self.cal.model);
-        let (set, theta) = self.held_out_theta(val)?;
+        let HeldOutTheta { set, theta } = refit;
         // the corrections at each p: a binding that reads the geometry changes with it
         let at =
-            |p: &Params| obs::tcp_errors_with(val.campaign, p, model, &set.corrections(&theta, p));
+            |p: &Params| obs::tcp_errors_with(val.campaign, p, model, &set.corrections(theta, p));
         let base = at(&cal.params)?;
         let n = base.len();
         let layout = set.layout();
@@ -259,17 +263,29 @@ pub struct Levels {
     pub structure: f64,
 }
 
-/// The held-out judge on a calibrated model: its errors, floors and test; `groups`: the
-/// noise estimate the floor is made of (its degrees of freedom per group).
+impl Levels {
+    /// The levels at the diagnosis's level `alpha`: the χ² at it, each of the three
+    /// structure tests at a third of it (the family's level stays `alpha`). The one rule.
+    pub fn at(alpha: f64) -> Levels {
+        Levels {
+            variance: alpha,
+            structure: alpha / 3.0,
+        }
+    }
+}
+
+/// The held-out judge on a calibrated model with its held-out θ `refit` and its figures
+/// `held`: its floors and test; `groups`: the noise estimate the floor is made of (its
+/// degrees of freedom per group).
 pub(crate) fn judge(
     val: &Validation,
-    model: &Model1,
+    (model, refit): (&Model1, &HeldOutTheta),
+    held: HeldOut,
     groups: &[GroupNoise],
     levels: &Levels,
 ) -> Result<HeldOutCheck, FitError> {
-    let errors = model.errors(val)?;
-    let relative = val.relative(&errors);
-    let pc = model.prediction_covariance(val)?;
+    let relative = &held.errors.relative;
+    let pc = model.prediction_covariance(val, refit)?;
     let pv: Vec<f64> = pc.diagonal().iter().map(|v| v.max(0.0)).collect();
     let n = relative.len();
     let var: Vec<f64> = val
@@ -292,17 +308,17 @@ pub(crate) fn judge(
     } else {
         stats::chi2_upper_tail(statistic, dof)
     };
-    let (own, noise) = beyond_calibration(val, &relative, &pc);
+    let (own, noise) = beyond_calibration(val, relative, &pc);
     let rows = held_out_rows(val, &own, &noise);
     let shape = Shape::of(val.campaign, &rows, levels.structure);
     let dictionary = shape.dictionary.clone();
     let structured = shape.structured();
     Ok(HeldOutCheck {
-        rms_um: um_from_mm(calib::rms(&errors)),
-        rms_relative_um: um_from_mm(calib::rms(&relative)),
-        noise_floor_um: um_from_mm(calib::rms(&val.sigma)),
-        noise_floor_relative_um: um_from_mm(calib::rms(&val.relative_sigma)),
-        floor_relative_um: um_from_mm((var.iter().sum::<f64>() / n.max(1) as f64).sqrt()),
+        rms: held.errors.rms,
+        rms_relative: held.errors.rms_relative,
+        noise_floor: held.noise_floor,
+        noise_floor_relative: held.noise_floor_relative,
+        floor_relative: (var.iter().sum::<f64>() / n.max(1) as f64).sqrt(),
         statistic,
         dof,
         noise_dof,
@@ -311,7 +327,7 @@ pub(crate) fn judge(
         structure_p: shape.smallest_p(),
         structured,
         follows: structured.then(|| dictionary.pointer.clone()).flatten(),
-        errors_relative: relative,
+        figures: held,
     })
 }
 
@@ -412,7 +428,8 @@ impl Prediction {
     /// [`Prediction::scaled`] judges in the errors' own noise. None without held-out data.
     pub(crate) fn held_out(before: &Fit, after: &Fit) -> Option<Prediction> {
         let judged = Self::scaled(before, after)?;
-        Self::of(&before.val_errors, &after.val_errors).map(|p| Prediction {
+        let (b, a) = (before.held_out.as_ref()?, after.held_out.as_ref()?);
+        Self::of(&b.errors.relative, &a.errors.relative).map(|p| Prediction {
             support_p: judged.support_p,
             refitted: judged.refitted,
             ..p
@@ -426,13 +443,14 @@ impl Prediction {
     /// to the left-out setups, which share the calibration's misfit and named it). None
     /// without held-out data.
     pub(crate) fn scaled(before: &Fit, after: &Fit) -> Option<Prediction> {
-        let n = after.val_scaled.len();
-        let read = Self::compared(&before.val_errors, &after.val_errors)?;
-        Self::compared(&before.val_scaled, &after.val_scaled).map(|p| Prediction {
+        let (b, a) = (before.held_out.as_ref()?, after.held_out.as_ref()?);
+        let n = a.scaled.len();
+        let read = Self::compared(&b.errors.relative, &a.errors.relative)?;
+        Self::compared(&b.scaled, &a.scaled).map(|p| Prediction {
             better: read.better,
             worse: read.worse,
             fall_read: read.fall_read,
-            ..p.refit(after.val_refit.saturating_sub(before.val_refit), n)
+            ..p.refit(a.refit.saturating_sub(b.refit), n)
         })
     }
 

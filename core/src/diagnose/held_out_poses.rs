@@ -7,7 +7,6 @@ use super::types::HeldOutCheck;
 use crate::campaign::Campaign;
 use crate::obs::{self, PoseError};
 use crate::params::{Model, Params};
-use crate::units::um_from_mm;
 
 /// One held-out TCP reading's residual as the judge judged it.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -22,8 +21,9 @@ pub struct HeldOutResidual {
     /// The pose's nominal TCP, mm.
     pub x_mm: f64,
     pub y_mm: f64,
-    /// Model − measured, µm, its setup's zero removed.
-    pub residual_um: f64,
+    /// Model − measured, mm (µm in the JSON), its setup's zero removed.
+    #[serde(rename = "residual_um", serialize_with = "super::types::as_um")]
+    pub residual: f64,
 }
 
 /// Each held-out TCP reading of `val` with the `judge`'s residual; empty where the judge
@@ -31,13 +31,13 @@ pub struct HeldOutResidual {
 pub fn residuals(val: &Campaign, judge: &HeldOutCheck) -> Result<Vec<HeldOutResidual>, PoseError> {
     // the same readings in the same order as the judge's errors (only the values differ)
     let readings = obs::tcp_errors(val, &Params::nominal(), Model::M29)?;
-    if readings.len() != judge.errors_relative.len() {
+    if readings.len() != judge.figures.errors.relative.len() {
         return Ok(Vec::new());
     }
     let tcp = nominal_tcp(val);
     Ok(readings
         .iter()
-        .zip(&judge.errors_relative)
+        .zip(&judge.figures.errors.relative)
         .map(|(r, e)| HeldOutResidual {
             pose: r.pose,
             line: val.poses[r.pose].line,
@@ -45,7 +45,7 @@ pub fn residuals(val: &Campaign, judge: &HeldOutCheck) -> Result<Vec<HeldOutResi
             direction: r.direction.as_str(),
             x_mm: tcp[r.pose].0,
             y_mm: tcp[r.pose].1,
-            residual_um: um_from_mm(*e),
+            residual: *e,
         })
         .collect())
 }

@@ -21,6 +21,8 @@
 //!   significant on both campaigns, not contradicted, better by a practical amount, physical
 //!   values). [`settle`]: a family of the current model named whole keeps the parts the
 //!   evidence needs, by the same rule.
+//! - [`held_out_figures`]: one model's held-out figures, made once: its errors, the same
+//!   with each setup's zero removed and in their own noise, their RMS, the noise's floors.
 //! - [`held_out`]: the held-out judge: errors with each setup's zero removed, the model's
 //!   floor (noise and the calibration's own uncertainty), the χ² test against it, the
 //!   structure of the held-out residual; [`validation`]: the held-out data with their noise.
@@ -44,6 +46,7 @@ mod entry;
 mod figures;
 pub mod gain;
 pub mod held_out;
+pub mod held_out_figures;
 pub mod held_out_poses;
 mod model;
 pub mod neighbours;
@@ -59,7 +62,8 @@ mod validation;
 mod verdict;
 
 pub use current::{calib_options, evaluate, Evaluated};
-pub use held_out::{held_out_errors, judge_calibration};
+pub use held_out::judge_calibration;
+pub use held_out_figures::{HeldOut, HeldOutErrors};
 pub use rounds::{diagnose, diagnose_among};
 pub use trials::SCREEN_P;
 pub use types::{

@@ -240,14 +240,14 @@ impl<'a> Scored<'a> {
         let rows = cal.residuals.len();
         let held = match val {
             Some(v) => {
-                let errors = Model1 {
+                Model1 {
                     effects: &with,
                     cal_set: &set,
                     cal: &cal,
                 }
-                .errors(v)
-                .ok()?;
-                v.scaled(&errors)
+                .evaluate(v)
+                .ok()?
+                .scaled
             }
             None => Vec::new(),
         };

@@ -7,6 +7,7 @@
 use super::figures::length_values;
 use super::gain::Nested;
 use super::held_out::Model1;
+use super::held_out_figures::HeldOut;
 use super::sparse;
 use super::types::{Candidate, ErrorVector, Fit, FitError, Fitted, Judged, Prediction, Skipped};
 use super::validation::Validation;
@@ -14,7 +15,6 @@ use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Request,
 use crate::campaign::Campaign;
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::params::Params;
-use crate::units::um_from_mm;
 
 /// What trying every candidate gave.
 pub(crate) struct Round {
@@ -389,23 +389,22 @@ pub(crate) fn finish_with(
     copts: &calib::Options,
 ) -> Result<Fitted, FitError> {
     let _ = copts;
-    let val_errors = val
+    let held_out = val
         .map(|v| {
             Model1 {
                 effects,
                 cal_set: set,
                 cal: &cal,
             }
-            .errors_refit(v)
+            .evaluate(v)
         })
         .transpose()?;
-    let (val_errors, val_refit) = match val_errors {
-        Some((e, refit)) => (Some(e), refit),
-        None => (None, 0),
-    };
-    let val_rms_um = val_errors.as_ref().map(|e| um_from_mm(calib::rms(e)));
-    let val_scaled = val.zip(val_errors.as_ref()).map(|(v, e)| v.scaled(e));
-    let val_errors = val.zip(val_errors).map(|(v, e)| v.relative(&e));
+    Ok(finish_held(held_out, set, cal))
+}
+
+/// The statistics of a calibration `cal` of the effects bound in `set` whose held-out
+/// figures are `held_out`.
+pub(crate) fn finish_held(held_out: Option<HeldOut>, set: &EffectSet, cal: Calibration) -> Fitted {
     // The calibration is spent here: its rows and parameters move into the fit.
     let rows = cal.residuals;
     let chi2: f64 = rows.iter().map(|r| (r.value / r.sigma).powi(2)).sum();
@@ -414,22 +413,19 @@ pub(crate) fn finish_with(
         chi2,
         dof,
         chi2_per_dof: chi2 / dof,
-        cal_rms_um: um_from_mm(calib::rms(&length_values(&rows))),
-        val_rms_um,
-        val_errors: val_errors.unwrap_or_default(),
-        val_scaled: val_scaled.unwrap_or_default(),
+        cal_rms: calib::rms(&length_values(&rows)),
+        held_out,
         setup_params: set.setup_local_params(),
-        val_refit,
         effect_params: cal.effects,
         determined: cal.determined,
         params: cal.params,
         theta: cal.theta,
         covariance_theta: cal.covariance_theta,
     };
-    Ok(Fitted {
+    Fitted {
         rows: std::sync::Arc::new(rows),
         fit,
-    })
+    }
 }
 
 /// The candidate's comparison with the current model (the F-test on the whole family
@@ -469,8 +465,8 @@ fn compare(
         significant: p_value < level,
         relevant,
         explained_fraction,
-        val_rms_before_um: base.fit.val_rms_um,
-        val_rms_after_um: full.fit.val_rms_um,
+        val_rms_before: base.fit.held_out.as_ref().map(|h| h.errors.rms),
+        val_rms_after: full.fit.held_out.as_ref().map(|h| h.errors.rms),
         chi2_per_dof_after: kept.fit.chi2_per_dof,
         f_statistic: f,
         f_dof: (k, full.fit.dof),

@@ -92,25 +92,16 @@ pub struct Fit {
     pub chi2: f64,
     pub dof: f64,
     pub chi2_per_dof: f64,
-    /// RMS of the length rows of the calibration (µm).
-    pub cal_rms_um: f64,
-    /// RMS of the held-out TCP errors (µm), if there are held-out data.
-    pub val_rms_um: Option<f64>,
-    /// The held-out TCP errors (mm) less the mean of their setup and coordinate (the zero
-    /// reading's error, which no model predicts), to compare two models pose by pose.
+    /// RMS of the length rows of the calibration (mm; µm in the JSON).
+    #[serde(rename = "cal_rms_um", serialize_with = "as_um")]
+    pub cal_rms: f64,
+    /// The held-out figures (errors, their RMS, floors), if there are held-out data.
     #[serde(skip)]
-    pub val_errors: Vec<f64>,
-    /// The same errors each in its own noise (σ, [`super::validation::Validation::scaled`]):
-    /// what the predictions of two models are compared on.
-    #[serde(skip)]
-    pub val_scaled: Vec<f64>,
+    pub held_out: Option<super::held_out_figures::HeldOut>,
     /// Effect parameters of each setup (an instrument's alignment in that mounting): on the
     /// held-out campaign they are fitted to its own readings.
     #[serde(skip)]
     pub setup_params: usize,
-    /// Of them, those fitted on the held-out setups (their count there).
-    #[serde(skip)]
-    pub val_refit: usize,
     /// Effect parameters identified.
     pub effect_params: Vec<EffectEstimate>,
     /// Parameter combinations the campaign determined better than their tolerance, of how
@@ -131,18 +122,24 @@ pub struct Fit {
 /// The current model's fit and its test against the stated noise (the JSON's `baseline`).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Baseline {
-    pub cal_rms_um: f64,
-    pub val_rms_um: Option<f64>,
+    #[serde(rename = "cal_rms_um", serialize_with = "as_um")]
+    pub cal_rms: f64,
+    #[serde(rename = "val_rms_um", serialize_with = "as_um")]
+    pub val_rms: Option<f64>,
     /// RMS that noise alone would give on the held-out errors (or, without held-out data, on
-    /// the calibration's length rows), µm, at the estimated noise levels. It counts the
+    /// the calibration's length rows), mm (µm in the JSON), at the estimated noise levels. It counts the
     /// reading each setup was zeroed on at its variance, but all the poses of a setup share
     /// that one draw: with few setups the held-out RMS strays from it by that draw.
-    pub noise_floor_um: f64,
+    #[serde(rename = "noise_floor_um", serialize_with = "as_um")]
+    pub noise_floor: f64,
     /// The held-out RMS with each setup's zero removed (its errors less their mean, per
-    /// coordinate: what a model can predict), µm, and the RMS noise alone would give there:
+    /// coordinate: what a model can predict), mm (µm in the JSON), and the RMS noise alone would
+    /// give there:
     /// the zero reading cancels, so they compare like with like whatever it drew.
-    pub val_rms_relative_um: Option<f64>,
-    pub noise_floor_relative_um: Option<f64>,
+    #[serde(rename = "val_rms_relative_um", serialize_with = "as_um")]
+    pub val_rms_relative: Option<f64>,
+    #[serde(rename = "noise_floor_relative_um", serialize_with = "as_um")]
+    pub noise_floor_relative: Option<f64>,
     /// χ² against the stated (not the estimated) noise, its dof and p-value: how the
     /// residual compares with the instruments' rating. Not used by the verdict.
     pub chi2: f64,
@@ -151,10 +148,11 @@ pub struct Baseline {
     /// P(χ²_ν ≥ χ²): small when the residual is more than the rated noise.
     pub p_value: f64,
     pub consistent_with_noise: bool,
-    /// The held-out TCP errors (mm) less their setup's zero mean, as candidates are judged:
-    /// to compare the models of successive diagnoses pose by pose ([`Prediction::of`]).
+    /// The held-out figures the RMS and floors above are of: the errors (mm) with their
+    /// setups' zeros removed compare the models of successive diagnoses pose by pose
+    /// ([`Prediction::of`]).
     #[serde(skip)]
-    pub val_errors: Vec<f64>,
+    pub held_out: Option<super::held_out_figures::HeldOut>,
 }
 
 /// An effect tried as an addition to the model.
@@ -168,8 +166,10 @@ pub struct Candidate {
     /// Fraction of the calibration's χ² above its degrees of freedom that the effect
     /// removes, 0..1.
     pub explained_fraction: f64,
-    pub val_rms_before_um: Option<f64>,
-    pub val_rms_after_um: Option<f64>,
+    #[serde(rename = "val_rms_before_um", serialize_with = "as_um")]
+    pub val_rms_before: Option<f64>,
+    #[serde(rename = "val_rms_after_um", serialize_with = "as_um")]
+    pub val_rms_after: Option<f64>,
     pub chi2_per_dof_after: f64,
     /// Nested F-test of the whole family: statistic, its degrees of freedom and p-value.
     pub f_statistic: f64,
@@ -595,7 +595,8 @@ pub struct Noisier {
 
 /// The TCP error of one pose of a 2-D relative instrument (laser tracker, grid encoder) as a
 /// vector: the model's TCP displacement from the setup's reset pose minus the instrument's
-/// reading (µm), where the pose and its reset pose are (nominal forward model, mm). The
+/// reading (mm; µm in the JSON), where the pose and its reset pose are (nominal forward
+/// model, mm). The
 /// classic picture of a calibration: an arrow per pose over the workspace.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ErrorVector {
@@ -607,24 +608,32 @@ pub struct ErrorVector {
     pub y: f64,
     pub reset_x: f64,
     pub reset_y: f64,
-    pub dx_um: f64,
-    pub dy_um: f64,
+    #[serde(rename = "dx_um", serialize_with = "as_um")]
+    pub dx: f64,
+    #[serde(rename = "dy_um", serialize_with = "as_um")]
+    pub dy: f64,
 }
 
 /// The figures of one calibrated model on held-out data, and the judge's test of them.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct HeldOutCheck {
-    /// RMS of the held-out TCP errors (µm) as measured, and with each setup's zero removed.
-    pub rms_um: f64,
-    pub rms_relative_um: f64,
-    /// What noise alone gives there (µm): counting each setup's zero reading (which all
+    /// RMS of the held-out TCP errors (mm; µm in the JSON, as every length of this struct)
+    /// as measured, and with each setup's zero removed.
+    #[serde(rename = "rms_um", serialize_with = "as_um")]
+    pub rms: f64,
+    #[serde(rename = "rms_relative_um", serialize_with = "as_um")]
+    pub rms_relative: f64,
+    /// What noise alone gives there: counting each setup's zero reading (which all
     /// its readings share, so with few setups the raw RMS strays from it by that one draw),
     /// and with each setup's zero removed.
-    pub noise_floor_um: f64,
-    pub noise_floor_relative_um: f64,
-    /// The floor of this calibrated model with each setup's zero removed (µm): the noise and
+    #[serde(rename = "noise_floor_um", serialize_with = "as_um")]
+    pub noise_floor: f64,
+    #[serde(rename = "noise_floor_relative_um", serialize_with = "as_um")]
+    pub noise_floor_relative: f64,
+    /// The floor of this calibrated model with each setup's zero removed: the noise and
     /// what the calibration's own uncertainty predicts at these poses.
-    pub floor_relative_um: f64,
+    #[serde(rename = "floor_relative_um", serialize_with = "as_um")]
+    pub floor_relative: f64,
     /// Σ (e/σ)² of the zero-removed errors against that floor (scaled to its degrees of
     /// freedom: the errors less the setups' zeros), and the noise estimate's own degrees of
     /// freedom (the floor is estimated too; infinite where the noise was stated).
@@ -642,9 +651,9 @@ pub struct HeldOutCheck {
     pub structured: bool,
     /// The term the held-out residual follows most, where it follows one.
     pub follows: Option<sparse::Pointer>,
-    /// Held-out errors, each setup's zero removed (mm), for a later comparison.
+    /// The figures judged (the errors, mm; the RMS and floors above are theirs).
     #[serde(skip)]
-    pub errors_relative: Vec<f64>,
+    pub figures: super::held_out_figures::HeldOut,
 }
 
 impl HeldOutCheck {
@@ -652,6 +661,31 @@ impl HeldOutCheck {
     pub fn agrees(&self) -> bool {
         self.consistent && !self.structured
     }
+}
+
+/// A length of the core (mm), or one that may be absent, as the JSON writes it (µm).
+pub(crate) trait WrittenInUm {
+    fn write_um<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error>;
+}
+
+impl WrittenInUm for f64 {
+    fn write_um<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_f64(crate::units::um_from_mm(*self))
+    }
+}
+
+impl WrittenInUm for Option<f64> {
+    fn write_um<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Some(mm) => s.serialize_some(&crate::units::um_from_mm(*mm)),
+            None => s.serialize_none(),
+        }
+    }
+}
+
+/// A length of the core (mm) written as a person reads it (µm): the JSON's `*_um` keys.
+pub(crate) fn as_um<L: WrittenInUm, S: serde::Serializer>(mm: &L, s: S) -> Result<S::Ok, S::Error> {
+    mm.write_um(s)
 }
 
 /// A value serialised as its words (a model as `model 24`).

@@ -3,6 +3,7 @@
 //! model predicts it), by noise group, and which errors share a zero. What the held-out judge
 //! ([`super::held_out`]) weighs a model's errors by.
 
+use super::held_out_figures::ErrorNoise;
 use super::types::DiagnoseError;
 use crate::campaign::{Campaign, Instrument};
 use crate::geometry;
@@ -83,17 +84,13 @@ impl Validation<'_> {
         obs::zero_removed(&self.zero, errors)
     }
 
-    /// `errors` relative ([`Validation::relative`]) and each divided by its σ: the held-out
-    /// errors in their own noise, how two models' predictions are compared. Weighed alike
-    /// in mm, the tracker's across-beam readings (tens of µm) would drown what its
-    /// along-beam ones (a few µm) or the grid encoder's see: a drift of 1.8 µm/min along the
-    /// beam moved the RMS from 22.88 to 22.80 µm (± 0.03), from 1.23 to 1.13 in σ (± 0.04).
-    pub fn scaled(&self, errors: &[f64]) -> Vec<f64> {
-        self.relative(errors)
-            .iter()
-            .zip(&self.relative_sigma)
-            .map(|(e, s)| e / s.max(f64::MIN_POSITIVE))
-            .collect()
+    /// The noise a model's held-out figures are read against.
+    pub(super) fn noise(&self) -> ErrorNoise<'_> {
+        ErrorNoise {
+            zero: &self.zero,
+            sigma: &self.sigma,
+            relative_sigma: &self.relative_sigma,
+        }
     }
 
     /// The number of (setup, coordinate) groups: the degrees of freedom the zero removal

@@ -1,8 +1,8 @@
 //! What a plan buys, in the units the user judges a calibration by: the held-out RMS it
 //! should give, defined as the diagnosis defines its held-out RMS with each setup's zero
 //! removed (`val_rms_relative_um`: every TCP error of a held-out tracker setup, model minus
-//! reading, less the mean of its setup and coordinate; `diagnose::held_out_errors` gives the
-//! errors). Its expectation over the parameters' uncertainty and the readings' noise is
+//! reading, less the mean of its setup and coordinate; `diagnose::HeldOutErrors` gives the
+//! errors and their RMS). Its expectation over the parameters' uncertainty and the readings' noise is
 //!
 //! E[RMS²] = tr(A C) + floor²,
 //!

@@ -13,6 +13,7 @@ use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, VerdictKind};
 use rpkm_core::effects::{self, Effect};
 use rpkm_core::noise::{NoiseModel, N_GROUPS};
+use rpkm_core::units::um_from_mm;
 use rpkm_twin::{EffectKind, ThermalPhysics, Twin, TwinConfig};
 
 /// A twin's conventions that the model must not assume: its noise, every group's level drawn
@@ -72,7 +73,7 @@ fn check_named(effect: EffectKind, seed: u64) {
     let (cal, val, floor) = campaigns(seed, &[effect]);
     let d = run(&cal, &val, &[]);
     let name = effect.as_str();
-    let before = d.baseline.val_rms_um.expect("held-out RMS");
+    let before = d.baseline.val_rms.map(um_from_mm).expect("held-out RMS");
     eprintln!(
         "{name} seed {seed}: held-out {before:.1} um (true floor {floor:.1}), verdict: {}",
         summary(&d)
@@ -95,7 +96,7 @@ fn check_named(effect: EffectKind, seed: u64) {
         .find(|c| c.effect == name)
         .expect("candidate");
     assert!(named.significant);
-    let after = named.val_rms_after_um.expect("held-out after");
+    let after = named.val_rms_after.map(um_from_mm).expect("held-out after");
     // what a model can predict of the held-out errors (less the zero reading's, shared by
     // the held-out setup) falls
     let p = named.prediction.expect("a held-out comparison");
@@ -177,7 +178,7 @@ fn summary(d: &ModelDiagnosis) -> String {
         d.model_effects,
         d.held_out.as_ref().map_or("-".to_owned(), |h| format!(
             "{:.2} vs floor {:.2} p {:.1e} structure p {:.1e}",
-            h.rms_relative_um, h.floor_relative_um, h.p_value, h.structure_p
+            um_from_mm(h.rms_relative), um_from_mm(h.floor_relative), h.p_value, h.structure_p
         )),
         d.chi2_per_dof,
         judged.join("; ")
@@ -223,28 +224,34 @@ fn nothing_missing_on_a_machine_noisier_than_rated() {
                 );
             }
         }
-        let v = d.baseline.val_rms_um.expect("held-out");
+        let v = d.baseline.val_rms.map(um_from_mm).expect("held-out");
         assert!(v <= 1.2 * floor, "seed {seed}: {v} um, true floor {floor}");
         // the floor the diagnosis reports is the estimated one: near the one the twin's noise
         // implies (one held-out setup's realised floor is dominated by the single draw of
         // the reading it was zeroed on, so the expected one is the comparison)
         let expected = expected_floor_um(&val, &twin_noise);
         assert!(
-            (d.baseline.noise_floor_um / expected - 1.0).abs() < 0.25,
+            (um_from_mm(d.baseline.noise_floor) / expected - 1.0).abs() < 0.25,
             "seed {seed}: reported floor {} vs expected {expected}",
-            d.baseline.noise_floor_um
+            um_from_mm(d.baseline.noise_floor)
         );
         // with each setup's zero removed the draw cancels: the held-out RMS stands at the
         // floor the twin's noise implies (2 × 100 errors: its RMS scatters by 5 %)
         let relative = expected_relative_floor_um(&val, &twin_noise);
         let (rms, floor) = (
-            d.baseline.val_rms_relative_um.expect("held-out"),
-            d.baseline.noise_floor_relative_um.expect("held-out"),
+            d.baseline
+                .val_rms_relative
+                .map(um_from_mm)
+                .expect("held-out"),
+            d.baseline
+                .noise_floor_relative
+                .map(um_from_mm)
+                .expect("held-out"),
         );
         eprintln!(
             "  held-out {v:.1} um against a floor of {:.1} um (the twin's {expected:.1}); zero \
              removed {rms:.1} um against {floor:.1} um (the twin's {relative:.1})",
-            d.baseline.noise_floor_um
+            um_from_mm(d.baseline.noise_floor)
         );
         assert!(
             (rms / relative - 1.0).abs() < 0.15,
@@ -437,7 +444,11 @@ fn thermal_variants_keep_the_parts_that_expand() {
                 assert!(p.is_none(), "{label}: {part} kept: {p:?}");
             }
         }
-        let after = next.baseline.val_rms_um.expect("held-out after");
+        let after = next
+            .baseline
+            .val_rms
+            .map(um_from_mm)
+            .expect("held-out after");
         assert!(
             after <= 1.5 * floor,
             "{label}: {after} um, true floor {floor}"
@@ -487,7 +498,7 @@ fn a_thermometers_noise_is_no_missing_effect() {
         "{}",
         summary(&d)
     );
-    let after = d.baseline.val_rms_um.expect("held-out");
+    let after = d.baseline.val_rms.map(um_from_mm).expect("held-out");
     assert!(after <= 1.5 * floor, "{after} um, true floor {floor}");
 }
 
@@ -507,7 +518,7 @@ fn nothing_missing_without_a_hidden_effect() {
         }
         assert!(d.candidates.iter().all(|c| !c.significant), "seed {seed}");
         // and the model then reaches the noise floor on held-out data
-        let v = d.baseline.val_rms_um.expect("held-out");
+        let v = d.baseline.val_rms.map(um_from_mm).expect("held-out");
         assert!(v <= 1.2 * floor, "seed {seed}: {v} um, true floor {floor}");
     }
 }
@@ -547,7 +558,7 @@ fn two_hidden_effects_are_found_one_after_the_other() {
             summary(&d3)
         );
         assert_eq!(d3.missing_effect, None, "{}", summary(&d3));
-        let after = d3.baseline.val_rms_um.expect("held-out");
+        let after = d3.baseline.val_rms.map(um_from_mm).expect("held-out");
         assert!(after <= 1.5 * floor, "{after} um, true floor {floor}");
     }
 }
@@ -628,7 +639,8 @@ fn screened_candidates_change_no_conclusion() {
         assert_eq!(fast.verdict_kind, full.verdict_kind, "{label}");
         assert_eq!(fast.missing_effect, full.missing_effect, "{label}");
         assert_eq!(
-            fast.baseline.val_rms_um, full.baseline.val_rms_um,
+            fast.baseline.val_rms.map(um_from_mm),
+            full.baseline.val_rms.map(um_from_mm),
             "{label}: the current model's held-out RMS"
         );
         assert_eq!(fast.candidates.len(), full.candidates.len(), "{label}");
@@ -641,7 +653,11 @@ fn screened_candidates_change_no_conclusion() {
             assert_eq!(s.significant, c.significant, "{label}: {}", c.effect);
             if c.p_value < diagnose::SCREEN_P {
                 assert_eq!(s.f_statistic, c.f_statistic, "{label}: {}", c.effect);
-                assert_eq!(s.val_rms_after_um, c.val_rms_after_um, "{label}");
+                assert_eq!(
+                    s.val_rms_after.map(um_from_mm),
+                    c.val_rms_after.map(um_from_mm),
+                    "{label}"
+                );
             } else {
                 assert!(
                     s.p_value >= diagnose::SCREEN_P,

@@ -8,6 +8,7 @@ use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, VerdictKind};
 use rpkm_core::effects::written::{Spec, WrittenParam};
 use rpkm_core::effects::{Delta, Effect, EncoderScale, Written};
 use rpkm_core::params::Params;
+use rpkm_core::units::um_from_mm;
 use rpkm_twin::{EffectKind, Twin, TwinConfig};
 
 fn param(name: &str, unit: &str, prior: f64) -> WrittenParam {
@@ -249,14 +250,14 @@ fn summary(d: &ModelDiagnosis) -> String {
         "{:?}, missing {:?}, held-out {:?} um, candidates {:?}",
         d.verdict_kind,
         d.missing_effect,
-        d.baseline.val_rms_um,
+        d.baseline.val_rms.map(um_from_mm),
         d.candidates
             .iter()
             .map(|c| (
                 c.effect.as_str(),
                 c.significant,
                 c.bic_gain.round(),
-                c.val_rms_after_um,
+                c.val_rms_after.map(um_from_mm),
                 c.prediction.map(|p| (p.better, p.worse)),
                 c.cross_validated.map(|p| (p.better, p.worse))
             ))
@@ -305,7 +306,7 @@ fn lost_motion_of_carrier_4_is_found_by_a_written_effect() {
             b.sigma
         );
         let d2 = diagnose::diagnose(&cal, Some(&val), &[&lost], &opts).expect("diagnose with it");
-        let after = d2.baseline.val_rms_um.expect("held-out");
+        let after = d2.baseline.val_rms.map(um_from_mm).expect("held-out");
         eprintln!("seed {seed} after: {} (floor {floor:.2} um)", summary(&d2));
         assert_eq!(d2.missing_effect, None, "seed {seed}: {}", summary(&d2));
         assert_ne!(d2.verdict_kind, VerdictKind::MissingEffect);

@@ -2,6 +2,7 @@
 //! the calibration's ranges, a setup's return judged against the estimated noise.
 
 use super::figures::{follows, p_is, um_with_sigma};
+use crate::units::um_from_mm;
 use rpkm_core::diagnose::coverage::{Coverage, Span};
 use rpkm_core::diagnose::HeldOutCheck;
 use std::fmt::Write as _;
@@ -28,9 +29,9 @@ pub fn held_out(h: &HeldOutCheck) -> String {
     let mut s = format!(
         "held-out RMS {:.1} µm (each setup's zero removed) against the model's floor {:.1} µm \
          (the noise {:.1} µm and the calibration's own uncertainty; {})",
-        h.rms_relative_um,
-        h.floor_relative_um,
-        h.noise_floor_relative_um,
+        um_from_mm(h.rms_relative),
+        um_from_mm(h.floor_relative),
+        um_from_mm(h.noise_floor_relative),
         p_is(h.p_value)
     );
     if h.structured {

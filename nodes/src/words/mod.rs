@@ -120,7 +120,8 @@ pub fn evidence(c: &Candidate) -> String {
         }
     }
     if c.prediction.is_none() {
-        if let (Some(b), Some(a)) = (c.val_rms_before_um, c.val_rms_after_um) {
+        if let (Some(b), Some(a)) = (c.val_rms_before, c.val_rms_after) {
+            let (b, a) = (um_from_mm(b), um_from_mm(a));
             let _ = write!(s, "; held-out RMS as measured {b:.1} -> {a:.1} µm");
         }
     }

@@ -6,7 +6,6 @@ use super::DiscoveryArgs;
 use crate::cli::bad_input;
 use crate::cli::effect_stages::offered;
 use anyhow::{Context, Result};
-use rpkm_core::calib;
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, Prediction, VerdictKind};
 use rpkm_core::effects::{self, Effect, Family};
 use rpkm_core::units::um_from_mm;
@@ -237,16 +236,21 @@ fn outcome(
 ) -> Outcome {
     let last = &diagnoses[diagnoses.len() - 1];
     let kind = last.verdict_kind;
-    let held_over_floor = last.baseline.val_rms_um.unwrap_or(f64::NAN) / measured.floor_um;
-    let relative = last
-        .held_out
-        .as_ref()
-        .map_or(f64::NAN, |h| h.rms_relative_um / measured.floor_relative_um);
+    let held_over_floor = last.baseline.val_rms.map_or(f64::NAN, um_from_mm) / measured.floor_um;
+    let relative = last.held_out.as_ref().map_or(f64::NAN, |h| {
+        um_from_mm(h.rms_relative) / measured.floor_relative_um
+    });
     let se = 1.0 / (2.0 * measured.relative_dof.max(1) as f64).sqrt();
     // each step of the loop judged as the diagnosis judges a candidate
     let steps: Vec<Prediction> = diagnoses
         .windows(2)
-        .filter_map(|w| Prediction::of(&w[0].baseline.val_errors, &w[1].baseline.val_errors))
+        .filter_map(|w| {
+            let (before, after) = (
+                w[0].baseline.held_out.as_ref()?,
+                w[1].baseline.held_out.as_ref()?,
+            );
+            Prediction::of(&before.errors.relative, &after.errors.relative)
+        })
         .collect();
     let judged = Judged {
         named: &named,
@@ -269,7 +273,7 @@ fn outcome(
             .fold(0.0, f64::max),
         held_out_path_um: diagnoses
             .iter()
-            .map(|d| um_from_mm(calib::rms(&d.baseline.val_errors)))
+            .map(|d| d.baseline.val_rms_relative.map_or(f64::NAN, um_from_mm))
             .collect(),
         final_verdict: serde_json::to_value(kind)
             .ok()

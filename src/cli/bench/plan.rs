@@ -9,8 +9,8 @@ use rand::{rngs::StdRng, Rng, SeedableRng};
 use rpkm_core::calib::{self, CommandError, CommandRequest, Options, Prior, Selection};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::design::{self, PlannedPose, CENTRE, X_RANGE, Y_RANGE};
+use rpkm_core::diagnose::HeldOutErrors;
 use rpkm_core::noise::NoiseModel;
-use rpkm_core::obs;
 use rpkm_core::params::{Model, Params};
 use rpkm_core::plan::{self, AccuracyPlanner, Start, TargetForecast, Unknowns};
 use rpkm_core::units::{rad_from_mrad, um_from_mm};
@@ -129,10 +129,9 @@ fn calibrate(
 /// The held-out RMS (µm) of parameters `p` with each setup's zero removed: the TCP errors
 /// less their mean per setup and coordinate, as the diagnosis's `val_rms_relative_um`.
 fn held_out_um(val: &Campaign, p: &Params) -> Result<f64> {
-    let errors = obs::tcp_errors(val, p, MODEL)?;
-    let values: Vec<f64> = errors.iter().map(|e| e.value).collect();
-    let relative = obs::zero_removed(&obs::zero_groups(val, &errors), &values);
-    Ok(1e3 * calib::rms(&relative))
+    Ok(um_from_mm(
+        HeldOutErrors::of_geometry(val, p, MODEL)?.rms_relative,
+    ))
 }
 
 /// `base` with `extra` measured after it, one campaign.

@@ -1,6 +1,6 @@
 //! The diagnosis of the calibrated model and its Diagnosis message.
 
-use crate::units::m_from_um;
+use crate::units::{m_from_um, um_from_mm};
 use rpkm_core::calib::{self, Calibration};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::Effect;
@@ -58,7 +58,8 @@ pub(super) fn diagnose_until(
 
 /// A diagnosis as the Diagnosis message.
 pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::ModelDiagnosis) -> Diagnosis {
-    let m = |um: Option<f64>| um.map_or(f64::NAN, m_from_um);
+    // through µm as the figures were first written (m_from_mm rounds differently)
+    let m = |mm: Option<f64>| mm.map_or(f64::NAN, |mm| m_from_um(um_from_mm(mm)));
     let held = d.held_out.as_ref();
     Diagnosis {
         verdict_kind: serde_json::to_value(d.verdict_kind)
@@ -68,8 +69,8 @@ pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::ModelDiagnosis) -> Diagnosi
         verdict: crate::words::verdict(d),
         missing_effects: d.missing_effects.clone(),
         model_effects: d.model_effects.clone(),
-        baseline_val_rms_relative: m(d.baseline.val_rms_relative_um),
-        floor_relative: m(held.map(|h| h.floor_relative_um)),
+        baseline_val_rms_relative: m(d.baseline.val_rms_relative),
+        floor_relative: m(held.map(|h| h.floor_relative)),
         held_out_agrees: held.is_some_and(rpkm_core::diagnose::HeldOutCheck::agrees),
         missing_effect: d.missing_effect.clone().unwrap_or_default(),
         candidates: d
@@ -79,12 +80,12 @@ pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::ModelDiagnosis) -> Diagnosi
                 effect: c.effect.clone(),
                 significant: c.significant,
                 explained_fraction: c.explained_fraction,
-                val_rms_before: m(c.val_rms_before_um),
-                val_rms_after: m(c.val_rms_after_um),
+                val_rms_before: m(c.val_rms_before),
+                val_rms_after: m(c.val_rms_after),
             })
             .collect(),
-        baseline_cal_rms: m_from_um(d.baseline.cal_rms_um),
-        baseline_val_rms: m(d.baseline.val_rms_um),
-        noise_floor: m_from_um(d.baseline.noise_floor_um),
+        baseline_cal_rms: m(Some(d.baseline.cal_rms)),
+        baseline_val_rms: m(d.baseline.val_rms),
+        noise_floor: m(Some(d.baseline.noise_floor)),
     }
 }
