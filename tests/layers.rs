@@ -481,7 +481,7 @@ fn the_node_program_links_none_of_the_command_line() {
 
 /// The one place that takes the RMS of held-out errors and removes their setups' zeros: a
 /// model's held-out figures ([`rpkm_core::diagnose::HeldOut`]), made once per model.
-const HELD_OUT_FIGURES: &str = "core/src/diagnose/held_out_figures.rs";
+const HELD_OUT_FIGURES: &str = "core/src/diagnose/held_out/figures.rs";
 
 /// RMS of errors that are no model's held-out figures, each with the code that takes it:
 /// `Prediction::compared`, its resolution and support compare two models' errors in any
@@ -489,19 +489,19 @@ const HELD_OUT_FIGURES: &str = "core/src/diagnose/held_out_figures.rs";
 /// family's part sets by their errors in σ.
 const OTHER_RMS: [(&str, &str); 4] = [
     (
-        "core/src/diagnose/held_out.rs",
+        "core/src/diagnose/held_out/mod.rs",
         "let (rb, ra) = (calib::rms(before), calib::rms(after));",
     ),
     (
-        "core/src/diagnose/held_out.rs",
+        "core/src/diagnose/held_out/mod.rs",
         "let s = calib::rms(before);",
     ),
     (
-        "core/src/diagnose/held_out.rs",
+        "core/src/diagnose/held_out/mod.rs",
         "let scale = calib::rms(before) * size.sqrt();",
     ),
     (
-        "core/src/diagnose/settle.rs",
+        "core/src/diagnose/search/settle.rs",
         ".then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))",
     ),
 ];
@@ -510,7 +510,7 @@ const OTHER_RMS: [(&str, &str); 4] = [
 /// and held-out campaign (`rpkm calibrate`'s and the node's judge, a diagnosis's fit, the
 /// current model whose figures its judge reads), never again for its floor.
 const HELD_OUT_THETA_FITS: [(&str, usize); 2] = [
-    ("core/src/diagnose/held_out.rs", 2),
+    ("core/src/diagnose/held_out/mod.rs", 2),
     ("core/src/diagnose/current.rs", 1),
 ];
 
@@ -563,7 +563,7 @@ fn held_out_offences(root: &Path, files: &[std::path::PathBuf]) -> Vec<String> {
     let zero_removals = [
         HELD_OUT_FIGURES,
         "core/src/obs/zero.rs",
-        "core/src/diagnose/validation.rs",
+        "core/src/diagnose/held_out/validation.rs",
     ];
     let mut offences = Vec::new();
     for f in files {

@@ -228,6 +228,13 @@ fn the_file_graph_sees_imports_through_super_and_groups() {
     let code =
         file_graph::code_of("use super::a; // super::b\n#[cfg(test)]\nmod tests { use super::*; }");
     assert_eq!(file_graph::paths(&code, &["super"]).len(), 1);
+    // a visibility restricted to a module imports nothing from it
+    let code = file_graph::code_of("pub(in crate::diagnose) fn f() -> crate::obs::Row {}");
+    let joined: Vec<String> = file_graph::paths(&code, &["crate"])
+        .iter()
+        .map(|s| s.join("::"))
+        .collect();
+    assert_eq!(joined, ["crate::obs::Row"]);
 }
 
 /// No file of the core imports a file that imports it, directly or around a loop (within a

@@ -6,7 +6,7 @@ use super::effect_stages::{offered, parse_effects, read_effects_file, with_named
 use super::summary::{print_summary, print_written, write_report};
 use super::{bad_input, read_campaign, write_json};
 use anyhow::Context;
-use rpkm_core::diagnose::{self, DiagnosisOptions};
+use rpkm_core::diagnose::{self, held_out::coverage, DiagnosisOptions};
 use rpkm_core::effects::Effect;
 use rpkm_core::params::Model;
 use rpkm_core::units::rad_from_mrad;
@@ -184,8 +184,7 @@ pub fn run(args: &DiagnoseArgs) -> anyhow::Result<()> {
             json["effects_file"] = effects_file::to_json(f);
         }
         if let Some(v) = &validation {
-            json["held_out_coverage"] =
-                serde_json::to_value(rpkm_core::diagnose::coverage::coverage(&campaign, v))?;
+            json["held_out_coverage"] = serde_json::to_value(coverage::coverage(&campaign, v))?;
             if let Some(h) = &d.held_out {
                 json["held_out_poses"] = super::held_out_poses::held_out_poses(v, h)?;
             }

@@ -3,7 +3,7 @@
 //! workspace or the campaign's time.
 
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::held_out_poses::residuals;
+use rpkm_core::diagnose::held_out::poses::residuals;
 use rpkm_core::diagnose::HeldOutCheck;
 use serde_json::json;
 
@@ -42,7 +42,9 @@ pub fn held_out_json(
 ) -> anyhow::Result<()> {
     out.insert(
         "held_out_coverage".into(),
-        serde_json::to_value(rpkm_core::diagnose::coverage::coverage(campaign, held_out))?,
+        serde_json::to_value(rpkm_core::diagnose::held_out::coverage::coverage(
+            campaign, held_out,
+        ))?,
     );
     if let Some(j) = judge {
         out.insert("held_out_poses".into(), held_out_poses(held_out, j)?);

@@ -140,7 +140,7 @@ fn print_groups(d: &ModelDiagnosis) {
 /// The held-out campaign against the calibration's (covariates, their rates, poses): where
 /// it reaches outside, by how much, each line starting with `indent`.
 pub fn print_coverage(campaign: &Campaign, validation: &Campaign, indent: &str) {
-    let c = rpkm_core::diagnose::coverage::coverage(campaign, validation);
+    let c = rpkm_core::diagnose::held_out::coverage::coverage(campaign, validation);
     if let Some(said) = words::coverage(&c) {
         println!("{indent}{said}");
     }

@@ -5,7 +5,7 @@
 use super::contents::Report;
 use super::sections::figure;
 use crate::plot::{self, Marker, Series};
-use rpkm_core::diagnose::held_out_poses::{residuals, HeldOutResidual};
+use rpkm_core::diagnose::held_out::poses::{residuals, HeldOutResidual};
 use rpkm_core::diagnose::ModelDiagnosis;
 use rpkm_core::units::um_from_mm;
 

@@ -5,7 +5,7 @@ use crate::plot::machine::Machine;
 use crate::plot::maps::{self, Arrow, MapPoint, View};
 use crate::plot::{self, escape, BarOptions, Marker, Series};
 use rpkm_core::campaign::Campaign;
-use rpkm_core::diagnose::sparse::nominal_tcp;
+use rpkm_core::diagnose::structure::sparse::nominal_tcp;
 use rpkm_core::diagnose::{ModelDiagnosis, ResidualPoint, VerdictKind};
 use rpkm_core::params::Params;
 use rpkm_core::units::um_from_mm;

@@ -59,8 +59,22 @@ fn module_of(src: &Path, file: &Path) -> String {
 pub fn code_of(text: &str) -> String {
     let body = text.split("#[cfg(test)]").next().unwrap_or("");
     body.lines()
-        .map(|l| l.split("//").next().unwrap_or("").to_owned() + "\n")
+        .map(|l| without_visibility_paths(l.split("//").next().unwrap_or("")) + "\n")
         .collect()
+}
+
+/// `line` with each `pub(in path)` read as `pub`: a visibility names the module it opens to,
+/// it imports nothing from it.
+fn without_visibility_paths(line: &str) -> String {
+    let mut out = String::new();
+    let mut rest = line;
+    while let Some(at) = rest.find("pub(in ") {
+        out.push_str(&rest[..at]);
+        out.push_str("pub");
+        rest = rest[at..].find(')').map_or("", |end| &rest[at + end + 1..]);
+    }
+    out.push_str(rest);
+    out
 }
 
 fn ident(s: &str) -> &str {

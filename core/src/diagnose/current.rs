@@ -5,11 +5,11 @@
 //! calibrate` and the calibrator node as their held-out figures ([`evaluate`]).
 
 use super::figures::length_sigmas;
+use super::held_out::validation::{self, Validation};
 use super::held_out::{self, Levels, Model1};
-use super::settle::{self, Settled};
-use super::trials::finish_held;
+use super::search::settle::{self, Settled};
+use super::search::trials::finish_held;
 use super::types::{Baseline, DiagnoseError, DiagnosisOptions, Fit, Fitted, HeldOutCheck};
-use super::validation::{self, Validation};
 use crate::calib::{self, Calibration, Request};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};

@@ -1,7 +1,7 @@
 //! The figures of a diagnosis an engineer looks at: residuals per instrument direction, the
 //! worst residuals located for maps, the TCP error vectors, the noise per group.
 
-use super::sparse;
+use super::structure::sparse;
 use super::types::{
     DiagnoseError, ErrorVector, GroupRms, NoiseReport, Noisier, ResidualPoint, NOISIER_THAN_RATED,
 };

@@ -11,15 +11,15 @@
 //!    problem), and the model chosen as a whole ([`model::search`]).
 
 use super::current::{calib_options, noise_of, structure_level, Current};
-use super::entry::{clone_fitted, Judge};
 use super::figures::{error_vectors, length_values};
-use super::model;
-use super::pool::{self, Pool};
-use super::sparse;
-use super::trials::{candidates, finish, try_all, Round};
+use super::held_out::validation;
+use super::search::entry::{clone_fitted, Judge};
+use super::search::model;
+use super::search::pool::{self, Pool};
+use super::search::trials::{candidates, finish, try_all, Round};
+use super::structure::sparse;
 use super::types::NUMERICAL_RMS_MM;
 use super::types::{Candidate, DiagnoseError, DiagnosisOptions, Fit, Fitted, ModelDiagnosis};
-use super::validation;
 use super::verdict::{conclude, Concluded};
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
@@ -162,7 +162,7 @@ fn pinned_beside(tried: &[&dyn Effect], settled: &[&dyn Effect]) -> Vec<Option<B
     tried
         .iter()
         .map(|e| {
-            let parts = super::settle::parts_beside(settled, *e)?;
+            let parts = super::search::settle::parts_beside(settled, *e)?;
             (parts.len() < e.parts().len())
                 .then(|| e.with_parts(&parts))
                 .flatten()

@@ -1,7 +1,7 @@
 //! The diagnosis's vocabulary: its options, errors and results. Every stage reads this file;
 //! it reads none of them.
 
-use super::{neighbours, periodic, sparse};
+use super::{structure::neighbours, structure::periodic, structure::sparse};
 use crate::calib::{self, CalibrationError, EffectEstimate, Prior};
 use crate::effects::NotApplicable;
 use crate::noise::NoiseModel;
@@ -97,7 +97,7 @@ pub struct Fit {
     pub cal_rms: f64,
     /// The held-out figures (errors, their RMS, floors), if there are held-out data.
     #[serde(skip)]
-    pub held_out: Option<super::held_out_figures::HeldOut>,
+    pub held_out: Option<super::held_out::figures::HeldOut>,
     /// Effect parameters of each setup (an instrument's alignment in that mounting): on the
     /// held-out campaign they are fitted to its own readings.
     #[serde(skip)]
@@ -114,7 +114,7 @@ pub struct Fit {
     #[serde(skip)]
     pub theta: Vec<f64>,
     /// Covariance of `theta` (zero rows and columns where a parameter is not identified):
-    /// the Wald test of the parameters added ([`super::gain`]).
+    /// the Wald test of the parameters added ([`super::search::gain`]).
     #[serde(skip)]
     pub covariance_theta: nalgebra::DMatrix<f64>,
 }
@@ -152,7 +152,7 @@ pub struct Baseline {
     /// setups' zeros removed compare the models of successive diagnoses pose by pose
     /// ([`Prediction::of`]).
     #[serde(skip)]
-    pub held_out: Option<super::held_out_figures::HeldOut>,
+    pub held_out: Option<super::held_out::figures::HeldOut>,
 }
 
 /// An effect tried as an addition to the model.
@@ -269,7 +269,7 @@ pub struct Judged {
     /// noise there (the held-out floor, or 1 for left-out rows in σ); on the calibration's
     /// rows where nothing predicts.
     pub size: Option<f64>,
-    /// Whether it matters: `size` reaches [`super::gain::PRACTICAL_SIZE`].
+    /// Whether it matters: `size` reaches [`super::search::gain::PRACTICAL_SIZE`].
     pub matters: bool,
     /// Effect parameters fitted clearly outside the values the physics allows (more than
     /// 3σ): "alpha_rods = -275 ± 27 ppm/K outside -5..40".
@@ -504,8 +504,8 @@ pub struct ModelDiagnosis {
     pub periodic: Option<periodic::Periodic>,
     /// Where the model reads a thermometer's history: the part of the residual its readings'
     /// noise makes through that history, taken out before the structure tests
-    /// ([`super::carried`]).
-    pub carried: Option<super::carried::Carried>,
+    /// ([`super::structure::carried`]).
+    pub carried: Option<super::structure::carried::Carried>,
     /// The direction whose residuals are most alike along the setups' paths.
     pub neighbours: Option<neighbours::Neighbours>,
     /// The dictionary term that explained the residual as well as the named effect: the
@@ -653,7 +653,7 @@ pub struct HeldOutCheck {
     pub follows: Option<sparse::Pointer>,
     /// The figures judged (the errors, mm; the RMS and floors above are theirs).
     #[serde(skip)]
-    pub figures: super::held_out_figures::HeldOut,
+    pub figures: super::held_out::figures::HeldOut,
 }
 
 impl HeldOutCheck {

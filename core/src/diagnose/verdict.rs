@@ -5,13 +5,13 @@
 //! the calibration campaign's, or, where the model explains the calibration campaign but not
 //! the held-out data, the held-out data's, by how much and what they follow.
 
-use super::carried;
 use super::current::{structure_level, Current};
 use super::figures::{groups, length_values, noise_map, noisier, points};
-use super::model::Choice;
-use super::sparse;
+use super::search::model::Choice;
+use super::search::trials::Round;
+use super::structure::carried;
+use super::structure::sparse;
 use super::structure::Shape;
-use super::trials::Round;
 use super::types::NUMERICAL_RMS_MM;
 use super::types::{DiagnosisOptions, Fitted, ModelDiagnosis, ModelTrial, Test, VerdictKind};
 use crate::calib;

@@ -97,14 +97,14 @@ pub trait Effect: Send + Sync {
     }
     /// Whether the family is named whole (`thermal`) and its parts are left to the data: the
     /// diagnosis and the calibration keep the parts that predict (see
-    /// `diagnose::settle::settle`). False where the parts are pinned (`thermal:rods`) and for
+    /// `diagnose::search::settle::settle`). False where the parts are pinned (`thermal:rods`) and for
     /// an effect of one piece.
     fn open_family(&self) -> bool {
         false
     }
     /// Richer variants of the effect, each a parameter more, that the data may need beyond it
     /// (`preload_elastic:rod2`: a rod with a compliance of its own): the diagnosis keeps one
-    /// only where the data need it (`diagnose::settle`). None, the default, for most.
+    /// only where the data need it (`diagnose::search::settle`). None, the default, for most.
     fn refinements(&self) -> Vec<Box<dyn Effect>> {
         Vec::new()
     }
@@ -116,7 +116,7 @@ pub trait Effect: Send + Sync {
     /// Whether the effect reads a covariate's history along the campaign's time (its rate or
     /// its lag: `thermal_lag`, a written `rate()` or `lag()`), not only its row's value: the
     /// diagnosis then reads the residual without what the thermometers' noise makes through
-    /// that history (`diagnose::carried`). False, the default, for most.
+    /// that history (`diagnose::structure::carried`). False, the default, for most.
     fn has_memory(&self) -> bool {
         false
     }

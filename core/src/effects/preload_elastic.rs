@@ -10,7 +10,7 @@
 //! A rod of another stiffness than the others (its section, a joint's play, a carrier's
 //! guide) stretches by another share: `preload_elastic:rod2` gives rod 2 a compliance of its
 //! own beside the others' common one. These are the effect's refinements: the diagnosis
-//! keeps one only where the data need it (`diagnose::settle`).
+//! keeps one only where the data need it (`diagnose::search::settle`).
 
 use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable, Slope};
 use crate::campaign::Campaign;

@@ -16,7 +16,7 @@ use rpkm_twin::{EffectKind, Twin, TwinConfig};
 const LOST_MM: f64 = 0.01;
 const BUDGET: usize = 60;
 
-fn pointer(c: &Campaign) -> diagnose::sparse::Pointer {
+fn pointer(c: &Campaign) -> diagnose::structure::sparse::Pointer {
     let d = diagnose::diagnose(c, None, &[], &DiagnosisOptions::default())
         .unwrap_or_else(|e| panic!("{}: {e}", c.source));
     d.structure.pointer.expect("a term the residual follows")

@@ -2,7 +2,7 @@
 //! condition number means where it is no number, a p-value, what a residual follows.
 
 use crate::units::um_from_mm;
-use rpkm_core::diagnose::sparse::Pointer;
+use rpkm_core::diagnose::structure::sparse::Pointer;
 
 /// A value with its standard deviation, the one way every text and report prints them: σ to
 /// two significant digits and the value to the same place, in a unit that shows both (mm as

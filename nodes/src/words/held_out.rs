@@ -3,7 +3,7 @@
 
 use super::figures::{follows, p_is, um_with_sigma};
 use crate::units::um_from_mm;
-use rpkm_core::diagnose::coverage::{Coverage, Span};
+use rpkm_core::diagnose::held_out::coverage::{Coverage, Span};
 use rpkm_core::diagnose::HeldOutCheck;
 use std::fmt::Write as _;
 

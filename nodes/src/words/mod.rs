@@ -4,9 +4,9 @@
 //! terminal, the HTML report and the JSON's text fields alike.
 
 use crate::units::um_from_mm;
-use rpkm_core::diagnose::carried::Carried;
-use rpkm_core::diagnose::neighbours::Neighbours;
-use rpkm_core::diagnose::periodic::Periodic;
+use rpkm_core::diagnose::structure::carried::Carried;
+use rpkm_core::diagnose::structure::neighbours::Neighbours;
+use rpkm_core::diagnose::structure::periodic::Periodic;
 use rpkm_core::diagnose::{
     Candidate, EvidenceOf, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, RmsUnit, Test,
     VerdictKind,

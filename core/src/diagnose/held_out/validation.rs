@@ -1,11 +1,11 @@
 //! The held-out data with their noise: each held-out TCP error's σ, raw and with its setup's
 //! zero removed (the reading a relative setup was zeroed on is in all its readings, and no
 //! model predicts it), by noise group, and which errors share a zero. What the held-out judge
-//! ([`super::held_out`]) weighs a model's errors by.
+//! ([`crate::diagnose::held_out`]) weighs a model's errors by.
 
-use super::held_out_figures::ErrorNoise;
-use super::types::DiagnoseError;
+use super::figures::ErrorNoise;
 use crate::campaign::{Campaign, Instrument};
+use crate::diagnose::types::DiagnoseError;
 use crate::geometry;
 use crate::noise::{self, NoiseModel, Parts, XyInstrument, N_GROUPS};
 use crate::obs::{self, PoseError};
@@ -22,12 +22,12 @@ pub(crate) struct Validation<'a> {
     pub relative_sigma: Vec<f64>,
     /// The variance of each relative error by noise group (what the floor's degrees of
     /// freedom come from).
-    pub(super) relative_parts: Vec<Parts>,
+    pub(in crate::diagnose) relative_parts: Vec<Parts>,
     /// Each error's setup and coordinate (an index): the errors of one share the reading
     /// their setup was zeroed on.
-    pub(super) zero: Vec<usize>,
+    pub(in crate::diagnose) zero: Vec<usize>,
     /// Each error's pose and coordinate, in order.
-    pub(super) at: Vec<(usize, &'static str)>,
+    pub(in crate::diagnose) at: Vec<(usize, &'static str)>,
 }
 
 impl Validation<'_> {
@@ -85,7 +85,7 @@ impl Validation<'_> {
     }
 
     /// The noise a model's held-out figures are read against.
-    pub(super) fn noise(&self) -> ErrorNoise<'_> {
+    pub(in crate::diagnose) fn noise(&self) -> ErrorNoise<'_> {
         ErrorNoise {
             zero: &self.zero,
             sigma: &self.sigma,
@@ -95,7 +95,7 @@ impl Validation<'_> {
 
     /// The number of (setup, coordinate) groups: the degrees of freedom the zero removal
     /// takes.
-    pub(super) fn n_groups(&self) -> usize {
+    pub(in crate::diagnose) fn n_groups(&self) -> usize {
         self.zero.iter().max().map_or(0, |m| m + 1)
     }
 }

@@ -4,8 +4,8 @@
 //! held-out campaign that heats faster, runs warmer or reaches poses the calibration never
 //! saw judges an extrapolation, and the judge's words must say so beside its verdict.
 
-use super::sparse::nominal_tcp;
 use crate::campaign::Campaign;
+use crate::diagnose::structure::sparse::nominal_tcp;
 
 /// The window (s) over which a covariate's rate is fitted at each row: a straight line
 /// through the readings within half of it either side, so that a thermometer's reading

@@ -2,9 +2,9 @@
 //! it was measured, for the JSON and the report's map and time plot of what the judge's
 //! "follows" line summarises.
 
-use super::sparse::nominal_tcp;
-use super::types::HeldOutCheck;
 use crate::campaign::Campaign;
+use crate::diagnose::structure::sparse::nominal_tcp;
+use crate::diagnose::types::HeldOutCheck;
 use crate::obs::{self, PoseError};
 use crate::params::{Model, Params};
 
@@ -22,7 +22,10 @@ pub struct HeldOutResidual {
     pub x_mm: f64,
     pub y_mm: f64,
     /// Model − measured, mm (µm in the JSON), its setup's zero removed.
-    #[serde(rename = "residual_um", serialize_with = "super::types::as_um")]
+    #[serde(
+        rename = "residual_um",
+        serialize_with = "crate::diagnose::types::as_um"
+    )]
     pub residual: f64,
 }
 

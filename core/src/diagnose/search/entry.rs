@@ -6,12 +6,12 @@
 
 use super::cross;
 use super::gain::{relevant, relevant_beyond, wald_beyond, wald_p, Gain, Nested, PRACTICAL_SIZE};
-use super::sparse;
 use super::trials::{finish_with, warm_theta_among, SCREEN_P};
-use super::types::{FitError, Fitted, Judged, Outcome, Prediction};
-use super::validation::Validation;
 use crate::calib::{self, EffectEstimate, Request};
 use crate::campaign::Campaign;
+use crate::diagnose::held_out::validation::Validation;
+use crate::diagnose::structure::sparse;
+use crate::diagnose::types::{FitError, Fitted, Judged, Outcome, Prediction};
 use crate::effects::{self, Effect, EffectSet};
 use crate::params::Params;
 
@@ -33,28 +33,28 @@ pub(crate) struct Judge<'a> {
 
 /// One model of the search: the current model with `added`, its fit and how it predicts.
 pub(crate) struct Entry<'a> {
-    pub(super) added: Vec<&'a dyn Effect>,
+    pub(in crate::diagnose) added: Vec<&'a dyn Effect>,
     /// A family of the current model with other parts, in place of the settled one (the
     /// parts a family keeps may change with the effect added).
-    pub(super) swap: Option<&'a dyn Effect>,
-    pub(super) fitted: Fitted,
+    pub(in crate::diagnose) swap: Option<&'a dyn Effect>,
+    pub(in crate::diagnose) fitted: Fitted,
     /// Held-out errors with each setup's zero removed (mm), where there are held-out data.
-    pub(super) held: Option<Vec<f64>>,
+    pub(in crate::diagnose) held: Option<Vec<f64>>,
     /// Left-out rows (σ), where the held-out data do not decide against the current model.
-    pub(super) left_out: Option<Vec<f64>>,
-    pub(super) prediction: Option<Prediction>,
-    pub(super) p_value: f64,
+    pub(in crate::diagnose) left_out: Option<Vec<f64>>,
+    pub(in crate::diagnose) prediction: Option<Prediction>,
+    pub(in crate::diagnose) p_value: f64,
     /// The Wald test of the added parameters alone ([`wald_p`]): part of `p_value`, and of the
     /// calibration's evidence in the judgement.
-    pub(super) wald_p: f64,
+    pub(in crate::diagnose) wald_p: f64,
     /// The nested F-test's own p-value: part of `p_value`.
-    pub(super) f_p: f64,
-    pub(super) f_statistic: f64,
-    pub(super) k: f64,
-    pub(super) judged: Judged,
-    pub(super) relevant: bool,
+    pub(in crate::diagnose) f_p: f64,
+    pub(in crate::diagnose) f_statistic: f64,
+    pub(in crate::diagnose) k: f64,
+    pub(in crate::diagnose) judged: Judged,
+    pub(in crate::diagnose) relevant: bool,
     /// Index of the single candidate this entry is (None: a part subset or a pair).
-    pub(super) candidate: Option<usize>,
+    pub(in crate::diagnose) candidate: Option<usize>,
     /// The dictionary's test of its calibration residual, made once when first needed.
     structure: std::cell::OnceCell<sparse::Structure>,
     /// Left-out rows made for a comparison with another model where `left_out` is None
@@ -63,12 +63,12 @@ pub(crate) struct Entry<'a> {
 }
 
 impl Entry<'_> {
-    pub(super) fn names(&self) -> Vec<String> {
+    pub(in crate::diagnose) fn names(&self) -> Vec<String> {
         self.added.iter().map(|e| e.name().to_owned()).collect()
     }
 
     /// How simple it is: effects added, then parameters.
-    pub(super) fn complexity(&self) -> (usize, usize) {
+    pub(in crate::diagnose) fn complexity(&self) -> (usize, usize) {
         let params = self
             .fitted
             .fit
@@ -80,18 +80,18 @@ impl Entry<'_> {
     }
 
     /// The dictionary's test of its calibration residual.
-    pub(super) fn structure(&self, campaign: &Campaign) -> &sparse::Structure {
+    pub(in crate::diagnose) fn structure(&self, campaign: &Campaign) -> &sparse::Structure {
         self.structure
             .get_or_init(|| sparse::structure(campaign, &self.fitted.rows))
     }
 
     /// Whether it could be named.
-    pub(super) fn eligible(&self) -> bool {
+    pub(in crate::diagnose) fn eligible(&self) -> bool {
         matches!(self.judged.outcome, Outcome::Outpredicted)
     }
 }
 
-pub(super) fn clone_fitted(f: &Fitted) -> Fitted {
+pub(in crate::diagnose) fn clone_fitted(f: &Fitted) -> Fitted {
     Fitted {
         rows: f.rows.clone(),
         fit: f.fit.clone(),
@@ -99,7 +99,10 @@ pub(super) fn clone_fitted(f: &Fitted) -> Fitted {
 }
 
 /// The parameters of the effects `added` among a fit's.
-pub(super) fn added_params(all: &[EffectEstimate], added: &[&dyn Effect]) -> Vec<EffectEstimate> {
+pub(in crate::diagnose) fn added_params(
+    all: &[EffectEstimate],
+    added: &[&dyn Effect],
+) -> Vec<EffectEstimate> {
     all.iter()
         .filter(|p| added.iter().any(|e| e.name() == p.effect))
         .cloned()
@@ -108,7 +111,7 @@ pub(super) fn added_params(all: &[EffectEstimate], added: &[&dyn Effect]) -> Vec
 
 impl<'j> Judge<'j> {
     /// A model's entry: its nested test against the current model and its prediction.
-    pub(super) fn entry<'a>(
+    pub(in crate::diagnose) fn entry<'a>(
         &self,
         (added, swap): (Vec<&'a dyn Effect>, Option<&'a dyn Effect>),
         fitted: Fitted,
@@ -159,7 +162,7 @@ impl<'j> Judge<'j> {
     /// The entry's prediction against the current model's: held-out data where they decide
     /// (better, clearly worse, or a change they resolve and do not follow), else the setups
     /// cross-validation leaves out, for a model that may matter.
-    pub(super) fn predict(&self, e: &mut Entry) {
+    pub(in crate::diagnose) fn predict(&self, e: &mut Entry) {
         let held = self
             .val
             .and_then(|_| Prediction::scaled(&self.base.fit, &e.fitted.fit));
@@ -208,7 +211,7 @@ impl<'j> Judge<'j> {
     }
 
     /// The left-out rows of the model with `added` (cross-validation by setup).
-    pub(super) fn left_out(
+    pub(in crate::diagnose) fn left_out(
         &self,
         (added, swap): (&[&dyn Effect], Option<&dyn Effect>),
         fitted: &Fitted,
@@ -226,7 +229,7 @@ impl<'j> Judge<'j> {
     }
 
     /// The current model with `added`, and `swap` in place of its member of the same family.
-    pub(super) fn model_of<'e>(
+    pub(in crate::diagnose) fn model_of<'e>(
         &self,
         added: &[&'e dyn Effect],
         swap: Option<&'e dyn Effect>,
@@ -248,7 +251,7 @@ impl<'j> Judge<'j> {
 
     /// The current model with `added` (and `swap`), fitted from the current model's minimum
     /// (the added effects' parameters from `warm` where it has them).
-    pub(super) fn fit(
+    pub(in crate::diagnose) fn fit(
         &self,
         (added, swap): (&[&dyn Effect], Option<&dyn Effect>),
         warm: &[&Fitted],
@@ -256,7 +259,7 @@ impl<'j> Judge<'j> {
         let with = self.model_of(added, swap);
         let start = Params::nominal();
         let set = EffectSet::bind(&with, self.campaign, &start)?;
-        let fits: Vec<&super::types::Fit> = std::iter::once(&self.base.fit)
+        let fits: Vec<&crate::diagnose::types::Fit> = std::iter::once(&self.base.fit)
             .chain(warm.iter().map(|w| &w.fit))
             .collect();
         let theta = warm_theta_among(&set, &fits);
@@ -280,7 +283,7 @@ impl<'j> Judge<'j> {
     /// Wald test) and reach a relevant size ([`relevant_beyond`]), as a candidate's must, and
     /// their gain must not be one that a single term
     /// of the dictionary matches while `big` still leaves structure ([`Judge::outdone_by_term`]).
-    pub(super) fn beats(&self, big: &Entry, small: &Entry) -> bool {
+    pub(in crate::diagnose) fn beats(&self, big: &Entry, small: &Entry) -> bool {
         let (b, s) = (&big.fitted.fit, &small.fitted.fit);
         let wald = wald_beyond(b, s);
         let gain = |prediction: Option<Prediction>| {
@@ -329,7 +332,7 @@ impl<'j> Judge<'j> {
     /// and `big` leaves structure behind. The rule a model meets against the current one
     /// (a soft rod's force-following residual is partly a scale difference of the guides; a
     /// term of the forces explains more of it, and the structure stays).
-    pub(super) fn outdone_by_term(&self, big: &Entry, small: &Entry) -> bool {
+    pub(in crate::diagnose) fn outdone_by_term(&self, big: &Entry, small: &Entry) -> bool {
         self.term_rivals(
             &big.fitted.fit,
             &small.fitted.fit,
@@ -340,10 +343,10 @@ impl<'j> Judge<'j> {
     /// Whether the gain (BIC) of the fit `big` over `small` is no more than the best single
     /// dictionary term takes from `small`'s residual (`term`: its structure), in the same
     /// currency: a term's one parameter against the added ones.
-    pub(super) fn term_rivals(
+    pub(in crate::diagnose) fn term_rivals(
         &self,
-        big: &super::types::Fit,
-        small: &super::types::Fit,
+        big: &crate::diagnose::types::Fit,
+        small: &crate::diagnose::types::Fit,
         term: &sparse::Structure,
     ) -> bool {
         let n = self.base.rows.len().max(1) as f64;
@@ -354,11 +357,11 @@ impl<'j> Judge<'j> {
 
 /// The errors models are ranked by: held-out where there are held-out data, else left-out
 /// rows.
-pub(super) fn ranked<'e>(e: &'e Entry) -> Option<&'e [f64]> {
+pub(in crate::diagnose) fn ranked<'e>(e: &'e Entry) -> Option<&'e [f64]> {
     e.held.as_deref().or(e.left_out.as_deref())
 }
 
-pub(super) fn rms_of(e: &Entry) -> f64 {
+pub(in crate::diagnose) fn rms_of(e: &Entry) -> f64 {
     ranked(e).map_or(f64::INFINITY, calib::rms)
 }
 
@@ -371,13 +374,13 @@ fn held_between(a: &Entry, b: &Entry) -> Option<Prediction> {
 }
 
 /// The family variant an entry swaps into the current model, by name.
-pub(super) fn swapped<'e>(e: &'e Entry) -> Option<&'e str> {
+pub(in crate::diagnose) fn swapped<'e>(e: &'e Entry) -> Option<&'e str> {
     e.swap.map(Effect::name)
 }
 
 /// The parts of an effect in a model: those it pins (`thermal:rods`), every part of a family
 /// named whole, none for an effect of one piece.
-pub(super) fn parts_of(e: &dyn Effect) -> Vec<String> {
+pub(in crate::diagnose) fn parts_of(e: &dyn Effect) -> Vec<String> {
     match e.name().split_once(':') {
         Some((_, parts)) => parts.split('+').map(str::to_owned).collect(),
         None => e.parts().iter().map(|p| (*p).to_owned()).collect(),
@@ -386,7 +389,7 @@ pub(super) fn parts_of(e: &dyn Effect) -> Vec<String> {
 
 /// Whether model `big` holds everything of `small` and more: every effect of `small` (or its
 /// family with at least its parts), with the same family swapped in.
-pub(super) fn covers(big: &Entry, small: &Entry) -> bool {
+pub(in crate::diagnose) fn covers(big: &Entry, small: &Entry) -> bool {
     if swapped(big) != swapped(small) {
         return false;
     }

@@ -1,10 +1,15 @@
 //! The three structure tests of a residual, none resting on the noise's level: the
-//! dictionary of smooth terms ([`super::sparse`]), the periodogram of the carriers'
-//! positions ([`super::periodic`]) and neighbours along the setups' paths
-//! ([`super::neighbours`]). The calibration's residual and the held-out residual are tested
-//! alike.
+//! dictionary of smooth terms ([`sparse`]), the periodogram of the carriers'
+//! positions ([`periodic`]) and neighbours along the setups' paths
+//! ([`neighbours`]). The calibration's residual and the held-out residual are tested
+//! alike. Beside them, [`carried`]: what a lagging thermometer's noise leaves in a residual,
+//! read without before the tests.
 
-use super::{neighbours, periodic, sparse};
+pub mod carried;
+pub mod neighbours;
+pub mod periodic;
+pub mod sparse;
+
 use crate::campaign::Campaign;
 use crate::obs::RowValue;
 

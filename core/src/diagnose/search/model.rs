@@ -16,8 +16,8 @@
 use super::entry::{added_params, clone_fitted, covers, ranked, rms_of, swapped, Entry, Judge};
 use super::gain::{implausible, one_standard_error, Gain, PRACTICAL_SIZE};
 use super::pool::Pool;
-use super::sparse;
-use super::types::{Candidate, EvidenceOf, Fitted, Judged, ModelTrial, Outcome};
+use crate::diagnose::structure::sparse;
+use crate::diagnose::types::{Candidate, EvidenceOf, Fitted, Judged, ModelTrial, Outcome};
 use crate::effects;
 
 /// The model the search chose: the effects to add, in the order of their single

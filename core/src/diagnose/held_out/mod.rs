@@ -3,7 +3,7 @@
 //!
 //! One evaluation for every command and node ([`Model1::held_out_theta`], fitted once per model and
 //! held-out campaign, and [`Model1::held_out`], under [`judge_calibration`] and the
-//! diagnosis's `judge`; the figures in [`super::held_out_figures`]): the model's TCP
+//! diagnosis's `judge`; the figures in [`figures`]): the model's TCP
 //! errors at the held-out poses with its effects (setup-local effect parameters re-fitted on
 //! the held-out setups), raw and with each setup's zero removed (the reading a relative
 //! setup was zeroed on is in all its readings, and no model predicts it), the floor noise
@@ -13,10 +13,13 @@
 //! noise's own degrees of freedom) and when they follow nothing (the structure tests of
 //! [`super::structure`] on the held-out residual, with the time since each setup's zero).
 
-use super::held_out_figures::HeldOut;
+pub mod coverage;
+pub mod figures;
+pub mod poses;
+pub(in crate::diagnose) mod validation;
+
 use super::structure::Shape;
 use super::types::{DiagnoseError, Fit, FitError, HeldOutCheck, Prediction, RmsUnit};
-use super::validation::Validation;
 use crate::calib::{self, Calibration};
 use crate::campaign::Campaign;
 use crate::effects::{Effect, EffectSet};
@@ -26,7 +29,9 @@ use crate::params::{Params, N_PARAMS};
 use crate::stats;
 use crate::units::um_from_mm;
 use crate::variance::GroupNoise;
+use figures::HeldOut;
 use nalgebra::{DMatrix, DVector};
+use validation::Validation;
 
 /// The held-out judge on a calibration made outside a diagnosis (`rpkm calibrate`, the
 /// calibrator node): the same errors, floors and tests as the diagnosis's baseline, for the

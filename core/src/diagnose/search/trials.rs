@@ -4,15 +4,17 @@
 //! fitted to convergence only where it may be significant ([`SCREEN_P`]); each is then
 //! compared with the current model by the nested F-test ([`compare`]).
 
-use super::figures::length_values;
 use super::gain::Nested;
-use super::held_out::Model1;
-use super::held_out_figures::HeldOut;
-use super::sparse;
-use super::types::{Candidate, ErrorVector, Fit, FitError, Fitted, Judged, Prediction, Skipped};
-use super::validation::Validation;
 use crate::calib::{self, Calibration, CalibrationError, EffectEstimate, Request, SharedRows};
 use crate::campaign::Campaign;
+use crate::diagnose::figures::length_values;
+use crate::diagnose::held_out::figures::HeldOut;
+use crate::diagnose::held_out::validation::Validation;
+use crate::diagnose::held_out::Model1;
+use crate::diagnose::structure::sparse;
+use crate::diagnose::types::{
+    Candidate, ErrorVector, Fit, FitError, Fitted, Judged, Prediction, Skipped,
+};
 use crate::effects::{self, Effect, EffectSet, NotApplicable};
 use crate::params::Params;
 

@@ -4,11 +4,11 @@
 
 use super::cross;
 use super::gain::Gain;
-use super::held_out::Model1;
-use super::types::Prediction;
-use super::validation::Validation;
 use crate::calib::{self, Request};
 use crate::campaign::Campaign;
+use crate::diagnose::held_out::validation::Validation;
+use crate::diagnose::held_out::Model1;
+use crate::diagnose::types::Prediction;
 use crate::effects::{Effect, EffectSet};
 use crate::params::Params;
 
@@ -92,7 +92,10 @@ pub(crate) fn settle(
 /// family is in the model with pinned parts: `thermal_lag` lags the parts `thermal` keeps
 /// (settled on its own, the lag of the frame came out beside the expansion of the scales).
 /// None where it refines nothing, or the family it refines is whole too or absent.
-pub(super) fn parts_beside(model: &[&dyn Effect], family: &dyn Effect) -> Option<Vec<usize>> {
+pub(in crate::diagnose) fn parts_beside(
+    model: &[&dyn Effect],
+    family: &dyn Effect,
+) -> Option<Vec<usize>> {
     let of = family.beside().filter(|_| family.open_family())?;
     let refined = model
         .iter()

@@ -3,8 +3,8 @@
 //! against the noise, and whether its values are physical. One rule for a candidate against
 //! the current model, a model against another, a family's parts against the whole.
 
-use super::types::Prediction;
 use crate::calib::EffectEstimate;
+use crate::diagnose::types::Prediction;
 use crate::stats;
 
 /// An addition to the model matters when the part of the prediction error it explains,
@@ -23,7 +23,7 @@ pub const PLAUSIBLE_SIGMAS: f64 = 3.0;
 /// (χ²_big/ν_big) and its upper tail on (k, ν_big). The one test of a candidate
 /// screened, a candidate fitted, a model of the search and a gain.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Nested {
+pub(in crate::diagnose) struct Nested {
     pub k: f64,
     pub f: f64,
     pub p: f64,
@@ -32,7 +32,7 @@ pub(super) struct Nested {
 impl Nested {
     /// The test of `big` against `small`; None where `big` adds half an effective parameter
     /// or less (no test: a model that adds nothing).
-    pub(super) fn of(big: (f64, f64), small: (f64, f64)) -> Option<Nested> {
+    pub(in crate::diagnose) fn of(big: (f64, f64), small: (f64, f64)) -> Option<Nested> {
         let k = small.1 - big.1;
         if !(k > 0.5) {
             return None;
@@ -51,7 +51,7 @@ impl Nested {
 /// What a larger model gains over a smaller one it holds: the evidence of both campaigns and
 /// its size. One rule for a candidate against the current model, a model against another,
 /// a family's parts against the whole.
-pub(super) struct Gain {
+pub(in crate::diagnose) struct Gain {
     /// The nested F-test's p-value on the calibration campaign.
     p_cal: f64,
     /// RMS of the calibration rows' fall in their own noise, √(Δχ²/n): the size the
@@ -64,7 +64,7 @@ pub(super) struct Gain {
 impl Gain {
     /// The gain of a model with χ² `big` over one with `small`, each (χ², dof), on `rows`
     /// calibration rows.
-    pub(super) fn of(
+    pub(in crate::diagnose) fn of(
         big: (f64, f64),
         small: (f64, f64),
         rows: usize,
@@ -80,7 +80,7 @@ impl Gain {
 
     /// The same gain where the added parameters' own test (`wald_p`) is weaker than the
     /// likelihood ratio: the calibration's evidence is the weaker of the two.
-    pub(super) fn with_wald(self, wald: f64) -> Gain {
+    pub(in crate::diagnose) fn with_wald(self, wald: f64) -> Gain {
         Gain {
             p_cal: self.p_cal.max(wald),
             ..self
@@ -90,7 +90,7 @@ impl Gain {
     /// Fisher's combination of the F-test and the prediction's: whether the predicted errors
     /// support the change the larger model makes ([`Prediction::support_p`]; that it makes
     /// them smaller is [`Gain::better`]'s).
-    pub(super) fn evidence(&self) -> f64 {
+    pub(in crate::diagnose) fn evidence(&self) -> f64 {
         match self.prediction {
             Some(p) => stats::fisher_combined(&[self.p_cal, p.support_p]),
             None => self.p_cal,
@@ -98,28 +98,28 @@ impl Gain {
     }
 
     /// The larger of the sizes the two campaigns see, each in its noise.
-    pub(super) fn size(&self) -> f64 {
+    pub(in crate::diagnose) fn size(&self) -> f64 {
         let predicted = self.prediction.map_or(0.0, |p| p.explained());
         self.cal_size.max(predicted)
     }
 
-    pub(super) fn better(&self) -> bool {
+    pub(in crate::diagnose) fn better(&self) -> bool {
         self.prediction.is_none_or(|p| p.better)
     }
 
-    pub(super) fn worse(&self) -> bool {
+    pub(in crate::diagnose) fn worse(&self) -> bool {
         self.prediction.is_some_and(|p| p.worse)
     }
 
     /// Whether the larger model is needed: significant on both campaigns together, not
     /// contradicted, better, by a gain that matters.
-    pub(super) fn needed(&self, level: f64) -> bool {
+    pub(in crate::diagnose) fn needed(&self, level: f64) -> bool {
         self.evidence() < level && self.better() && !self.worse() && self.size() >= PRACTICAL_SIZE
     }
 }
 
 /// The parameters fitted clearly outside the values the physics allows.
-pub(super) fn implausible(params: &[EffectEstimate]) -> Vec<String> {
+pub(in crate::diagnose) fn implausible(params: &[EffectEstimate]) -> Vec<String> {
     params
         .iter()
         .filter(|p| p.identified)
@@ -142,7 +142,7 @@ pub(super) fn implausible(params: &[EffectEstimate]) -> Vec<String> {
 }
 
 /// A number with three significant digits (the implausibility notes).
-pub(super) fn sig(v: f64) -> String {
+pub(in crate::diagnose) fn sig(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
         return format!("{v}");
     }
@@ -175,39 +175,47 @@ pub(crate) fn one_standard_error(e: &[f64]) -> f64 {
 /// are themselves indistinguishable from zero is the geometry's refit from another start,
 /// not the effect's: the likelihood ratio alone would name an effect that does nothing.
 /// 1 where no added parameter is identified.
-pub(super) fn wald_p(fit: &super::types::Fit, added: &[&str]) -> f64 {
+pub(in crate::diagnose) fn wald_p(fit: &crate::diagnose::types::Fit, added: &[&str]) -> f64 {
     wald_of(fit, |p| added.contains(&p.effect.as_str()))
 }
 
 /// The Wald test of the parameters `big` has beyond `small` (a model it holds): those whose
 /// family and name `small` lacks. A larger model whose extra parameters are zero within
 /// their σ fits better only by refitting the rest from another start.
-pub(super) fn wald_beyond(big: &super::types::Fit, small: &super::types::Fit) -> f64 {
+pub(in crate::diagnose) fn wald_beyond(
+    big: &crate::diagnose::types::Fit,
+    small: &crate::diagnose::types::Fit,
+) -> f64 {
     let beyond = beyond(small);
     wald_of(big, |p| beyond(p))
 }
 
 /// Whether some parameter `big` has beyond `small` (a model it holds) reaches
-/// [`super::types::RELEVANT_FRACTION`] of its plausible magnitude: what a larger model adds
+/// [`crate::diagnose::types::RELEVANT_FRACTION`] of its plausible magnitude: what a larger model adds
 /// must matter as a candidate's parameters must (a guides' scale difference of 2 ± 1 ppm
 /// beside a soft rod's preload absorbs a residual the library does not have).
-pub(super) fn relevant_beyond(big: &super::types::Fit, small: &super::types::Fit) -> bool {
+pub(in crate::diagnose) fn relevant_beyond(
+    big: &crate::diagnose::types::Fit,
+    small: &crate::diagnose::types::Fit,
+) -> bool {
     let beyond = beyond(small);
     relevant(big.effect_params.iter().filter(|p| beyond(p)))
 }
 
 /// Whether some identified parameter of `params` reaches
-/// [`super::types::RELEVANT_FRACTION`] of its plausible magnitude (its prior): the size a
+/// [`crate::diagnose::types::RELEVANT_FRACTION`] of its plausible magnitude (its prior): the size a
 /// candidate's, a model's additions and what a larger model adds must have to matter.
-pub(super) fn relevant<'a>(params: impl IntoIterator<Item = &'a EffectEstimate>) -> bool {
+pub(in crate::diagnose) fn relevant<'a>(
+    params: impl IntoIterator<Item = &'a EffectEstimate>,
+) -> bool {
     params
         .into_iter()
         .filter(|p| p.identified && p.prior > 0.0)
-        .any(|p| p.value.abs() >= super::types::RELEVANT_FRACTION * p.prior)
+        .any(|p| p.value.abs() >= crate::diagnose::types::RELEVANT_FRACTION * p.prior)
 }
 
 /// Whether an effect parameter is one `small` lacks (by family and name).
-fn beyond(small: &super::types::Fit) -> impl Fn(&EffectEstimate) -> bool {
+fn beyond(small: &crate::diagnose::types::Fit) -> impl Fn(&EffectEstimate) -> bool {
     let key = |p: &EffectEstimate| {
         (
             crate::effects::family_of(&p.effect).to_owned(),
@@ -219,7 +227,7 @@ fn beyond(small: &super::types::Fit) -> impl Fn(&EffectEstimate) -> bool {
 }
 
 /// The Wald test over the identified parameters of `fit` that `pick` selects.
-fn wald_of(fit: &super::types::Fit, pick: impl Fn(&EffectEstimate) -> bool) -> f64 {
+fn wald_of(fit: &crate::diagnose::types::Fit, pick: impl Fn(&EffectEstimate) -> bool) -> f64 {
     let idx: Vec<usize> = fit
         .effect_params
         .iter()

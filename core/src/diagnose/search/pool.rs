@@ -4,12 +4,12 @@
 
 use super::entry::{Entry, Judge};
 use super::trials::SCREEN_P;
-use super::types::Candidate;
+use crate::diagnose::types::Candidate;
 use crate::effects::{self, Effect};
 
 /// The best contenders (by BIC gain) are paired among themselves; the best also with every
 /// other candidate.
-pub(super) const PAIRED: usize = 3;
+pub(in crate::diagnose) const PAIRED: usize = 3;
 
 /// What a search draws its models from: the candidates tried, the part combinations of
 /// their families ([`part_variants`]), and those of the current model's families.
@@ -27,7 +27,7 @@ impl<'j> Judge<'j> {
     /// and each refinement of an effect that stands out (`variants`: [`part_variants`]): the
     /// campaign may separate some parts and not others, and a rod of another stiffness is
     /// what another effect beside the preload would absorb otherwise.
-    pub(super) fn add_parts<'a>(
+    pub(in crate::diagnose) fn add_parts<'a>(
         &self,
         entries: &mut Vec<Entry<'a>>,
         variants: &'a [Box<dyn Effect>],
@@ -60,7 +60,7 @@ impl<'j> Judge<'j> {
     /// lags the parts by more than the campaign's warming spans, the expansion alone reads
     /// the wrong temperature and fits values no material has, and only the two together
     /// predict. The refinement alone is no candidate (it refines nothing without its family).
-    pub(super) fn add_followed<'a>(
+    pub(in crate::diagnose) fn add_followed<'a>(
         &self,
         entries: &mut Vec<Entry<'a>>,
         followers: &'a [Box<dyn Effect>],
@@ -86,7 +86,7 @@ impl<'j> Judge<'j> {
     /// Pairs: the best contenders among themselves, and the best with every other
     /// candidate (an effect that only works with another may not stand out alone). A family
     /// takes part whole and by each of its parts alone.
-    pub(super) fn add_pairs<'a>(
+    pub(in crate::diagnose) fn add_pairs<'a>(
         &self,
         entries: &mut Vec<Entry<'a>>,
         candidates: &[Candidate],
@@ -144,7 +144,7 @@ impl<'j> Judge<'j> {
     /// The best contenders with each other part combination of a family of the current
     /// model (`swaps`: its variants): adding an effect may change the parts a family keeps
     /// (a guide's bow absorbed by the frame's expansion until the bow is in the model).
-    pub(super) fn add_swaps<'a>(
+    pub(in crate::diagnose) fn add_swaps<'a>(
         &self,
         entries: &mut Vec<Entry<'a>>,
         swaps: &'a [Box<dyn Effect>],
