@@ -1,6 +1,6 @@
 //! The diagnosis of the calibrated model and its Diagnosis message.
 
-use crate::units::{m_from_um, um_from_mm};
+use crate::units::m_from_mm;
 use rpkm_core::calib::{self, Calibration};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::Effect;
@@ -58,8 +58,7 @@ pub(super) fn diagnose_until(
 
 /// A diagnosis as the Diagnosis message.
 pub(super) fn diagnosis_msg(d: &rpkm_core::diagnose::ModelDiagnosis) -> Diagnosis {
-    // through µm as the figures were first written (m_from_mm rounds differently)
-    let m = |mm: Option<f64>| mm.map_or(f64::NAN, |mm| m_from_um(um_from_mm(mm)));
+    let m = |mm: Option<f64>| mm.map_or(f64::NAN, m_from_mm);
     let held = d.held_out.as_ref();
     Diagnosis {
         verdict_kind: serde_json::to_value(d.verdict_kind)

@@ -2,7 +2,7 @@
 
 use crate::error::bad_input;
 use crate::node::geometry::parameters_msg;
-use crate::units::{m_from_mm, m_from_um, um_from_mm};
+use crate::units::m_from_mm;
 use rpkm_core::calib::{self, Calibration};
 use rpkm_core::campaign::Campaign;
 use rpkm_core::effects::Effect;
@@ -62,8 +62,7 @@ pub(super) fn parameters_of(
             let judge =
                 rpkm_core::diagnose::judge_calibration(v, noise, (effects, set), cal, alpha)
                     .map_err(|e| bad_input(format!("held-out setups: {e}")))?;
-            // through µm as the figure was first written (m_from_mm rounds differently)
-            m_from_um(um_from_mm(judge.rms))
+            m_from_mm(judge.rms)
         }
         None => f64::NAN,
     };
