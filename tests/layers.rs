@@ -666,3 +666,59 @@ fn no_core_field_holds_micrometres() {
         .collect();
     assert!(offences.is_empty(), "{}", offences.join("\n"));
 }
+
+/// What may calibrate without the calibration every command shares
+/// (`calib::calibrate_command`: the effects bound at the start, the noise estimated or stated):
+/// the benchmark of the raw fit itself. The core's own fits (the diagnosis's candidates, the
+/// settle, the cross-validation) are the core's.
+const RAW_CALIBRATIONS: [&str; 1] = ["src/cli/bench/calibration.rs"];
+
+/// The calls of `calib::calibrate(` in the non-test code of `files` outside the core and
+/// [`RAW_CALIBRATIONS`].
+fn raw_calibrations(root: &Path, files: &[std::path::PathBuf]) -> Vec<String> {
+    let mut offences = Vec::new();
+    for f in files {
+        let rel = f
+            .strip_prefix(root)
+            .unwrap_or(f)
+            .to_string_lossy()
+            .into_owned();
+        if rel.starts_with("core/") || RAW_CALIBRATIONS.contains(&rel.as_str()) {
+            continue;
+        }
+        for (n, line) in non_test_code(f) {
+            if line.contains("calib::calibrate(") {
+                offences.push(format!("{rel}:{n}: {}", line.trim()));
+            }
+        }
+    }
+    offences
+}
+
+/// Every command and node calibrates through the one shared calibration: `rpkm calibrate`,
+/// `rpkm plan`, `rpkm bench plan` and the calibrator node read the same fit of the same
+/// request. The check sees a direct call put back.
+#[test]
+fn every_command_calibrates_through_the_shared_calibration() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut files = Vec::new();
+    for dir in CRATE_SOURCES {
+        file_graph::rust_files(&root.join(dir), &mut files);
+    }
+    for listed in RAW_CALIBRATIONS {
+        assert!(root.join(listed).is_file(), "{listed} is listed but gone");
+    }
+    let offences = raw_calibrations(root, &files);
+    assert!(offences.is_empty(), "{}", offences.join("\n"));
+    let dir = std::env::temp_dir().join(format!("rpkm-raw-cal-{}", std::process::id()));
+    let put_back = dir.join("src/cli/plan/put_back.rs");
+    std::fs::create_dir_all(put_back.parent().expect("a folder")).expect("temp folder");
+    std::fs::write(
+        &put_back,
+        "fn f() {\n    let (cal, _) = calib::calibrate(&calib::Request::new(c, &s, &o))?;\n}\n",
+    )
+    .expect("write");
+    let seen = raw_calibrations(&dir, &[put_back]);
+    std::fs::remove_dir_all(&dir).expect("clean up");
+    assert_eq!(seen.len(), 1, "{seen:?}");
+}
