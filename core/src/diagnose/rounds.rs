@@ -362,7 +362,7 @@ impl Search<'_> {
             let cal = super::current::fit_model(self.campaign, self.in_model, copts)?;
             let vectors = self.vectors(&cal, copts);
             let made = keep.then(|| cal.clone());
-            let base = finish(self.campaign, val.as_ref(), self.in_model, cal, copts)?;
+            let base = finish(self.campaign, val.as_ref(), self.in_model, cal)?;
             (base, vectors, made)
         };
         let tries = try_all(

@@ -273,7 +273,7 @@ impl<'j> Judge<'j> {
             leverages: false,
             ..Request::new(self.campaign, &start, self.copts)
         })?;
-        finish_with(self.val, &with, &set, cal, self.copts)
+        finish_with(self.val, &with, &set, cal)
     }
 
     /// Whether model `big` beats model `small` (which it holds) by the evidence a candidate

@@ -237,12 +237,12 @@ impl Trials<'_> {
     /// the effect, linearised where the current model ended); a candidate that is then far
     /// from significance ([`SCREEN_P`]) keeps that fit, any other is fitted to convergence.
     fn try_effect(&self, effect: &dyn Effect, mut set: EffectSet) -> Tried {
-        let (val, base, copts) = (self.val, self.base, &self.copts);
+        let (val, base) = (self.val, self.base);
         let with = with_effect(self.in_model, effect);
         // the screening step; where the rows did not confirm it, this is the converged fit
         let cal = self.fit(&set, self.screen)?;
         let cal = if cal.screened {
-            let screened = finish_with(val, &with, &set, cal, copts)?;
+            let screened = finish_with(val, &with, &set, cal)?;
             if screen_p_value(base, &screened.fit) > SCREEN_P {
                 let kept = Fitted {
                     rows: screened.rows.clone(),
@@ -263,7 +263,7 @@ impl Trials<'_> {
         } else {
             Vec::new()
         };
-        let full = finish_with(val, &with, &set, cal, copts)?;
+        let full = finish_with(val, &with, &set, cal)?;
         if weak.is_empty() {
             let kept = Fitted {
                 rows: full.rows.clone(),
@@ -275,7 +275,7 @@ impl Trials<'_> {
             set.hold(k);
         }
         let cal = self.fit(&set, false)?;
-        let kept = finish_with(val, &with, &set, cal, copts)?;
+        let kept = finish_with(val, &with, &set, cal)?;
         Ok((full, kept))
     }
 
@@ -376,10 +376,9 @@ pub(crate) fn finish(
     val: Option<&Validation>,
     effects: &[&dyn Effect],
     cal: Calibration,
-    copts: &calib::Options,
 ) -> Result<Fitted, FitError> {
     let set = EffectSet::bind(effects, campaign, &cal.start)?;
-    finish_with(val, effects, &set, cal, copts)
+    finish_with(val, effects, &set, cal)
 }
 
 /// The statistics of a calibration `cal` of the effects bound in `set`.
@@ -388,9 +387,7 @@ pub(crate) fn finish_with(
     effects: &[&dyn Effect],
     set: &EffectSet,
     cal: Calibration,
-    copts: &calib::Options,
 ) -> Result<Fitted, FitError> {
-    let _ = copts;
     let held_out = val
         .map(|v| {
             Model1 {
