@@ -267,10 +267,7 @@ fn unit_offences(root: &Path, files: &[std::path::PathBuf]) -> Vec<String> {
 #[test]
 fn lengths_convert_only_in_the_message_adapters() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut files = Vec::new();
-    for dir in CRATE_SOURCES {
-        file_graph::rust_files(&root.join(dir), &mut files);
-    }
+    let files = crate_files(root);
     assert!(files.len() >= 200, "found only {} files", files.len());
     for listed in UNIT_CONVERSIONS
         .iter()
@@ -313,6 +310,15 @@ const CRATE_SOURCES: [&str; 7] = [
     "history/src",
     "twin/src",
 ];
+
+/// The Rust files of every crate's sources ([`CRATE_SOURCES`]).
+fn crate_files(root: &Path) -> Vec<std::path::PathBuf> {
+    let mut files = Vec::new();
+    for dir in CRATE_SOURCES {
+        file_graph::rust_files(&root.join(dir), &mut files);
+    }
+    files
+}
 
 /// The public type names (`pub struct`, `pub enum`, `pub type`, `pub trait`) a file defines.
 fn public_type_names(text: &str) -> Vec<String> {
@@ -605,10 +611,7 @@ fn held_out_offences(root: &Path, files: &[std::path::PathBuf]) -> Vec<String> {
 #[test]
 fn each_held_out_figure_is_made_in_one_place() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut files = Vec::new();
-    for dir in CRATE_SOURCES {
-        file_graph::rust_files(&root.join(dir), &mut files);
-    }
+    let files = crate_files(root);
     let listed = OTHER_RMS.iter().map(|(f, _)| *f);
     for f in listed.chain([HELD_OUT_FIGURES]) {
         assert!(root.join(f).is_file(), "{f} is listed but gone");
@@ -701,10 +704,7 @@ fn raw_calibrations(root: &Path, files: &[std::path::PathBuf]) -> Vec<String> {
 #[test]
 fn every_command_calibrates_through_the_shared_calibration() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut files = Vec::new();
-    for dir in CRATE_SOURCES {
-        file_graph::rust_files(&root.join(dir), &mut files);
-    }
+    let files = crate_files(root);
     for listed in RAW_CALIBRATIONS {
         assert!(root.join(listed).is_file(), "{listed} is listed but gone");
     }

@@ -110,6 +110,17 @@ pub(in crate::diagnose) fn added_params(
 }
 
 impl<'j> Judge<'j> {
+    /// The model with `added` (and `swap` for a family's part combination) fitted from
+    /// `warm`, as an entry beside the single candidates; None where it cannot be fitted.
+    pub(in crate::diagnose) fn tried<'a>(
+        &self,
+        (added, swap): (Vec<&'a dyn Effect>, Option<&'a dyn Effect>),
+        warm: &[&Fitted],
+    ) -> Option<Entry<'a>> {
+        let fitted = self.fit((&added, swap), warm).ok()?;
+        Some(self.entry((added, swap), fitted, None))
+    }
+
     /// A model's entry: its nested test against the current model and its prediction.
     pub(in crate::diagnose) fn entry<'a>(
         &self,

@@ -46,11 +46,8 @@ impl<'j> Judge<'j> {
                 .iter()
                 .filter(|v| effects::family_of(v.name()) == family)
             {
-                let warm = [&entries[k].fitted];
-                if let Ok(fitted) = self.fit((&[v.as_ref()], None), &warm) {
-                    let e = self.entry((vec![v.as_ref()], None), fitted, None);
-                    entries.push(e);
-                }
+                let tried = self.tried((vec![v.as_ref()], None), &[&entries[k].fitted]);
+                entries.extend(tried);
             }
         }
     }
@@ -75,11 +72,8 @@ impl<'j> Judge<'j> {
                 continue;
             };
             let added = vec![effect, follower.as_ref()];
-            let warm = [&entries[k].fitted];
-            if let Ok(fitted) = self.fit((&added, None), &warm) {
-                let e = self.entry((added, None), fitted, None);
-                entries.push(e);
-            }
+            let tried = self.tried((added, None), &[&entries[k].fitted]);
+            entries.extend(tried);
         }
     }
 
@@ -133,11 +127,8 @@ impl<'j> Judge<'j> {
             .collect();
         for (a, b) in pairs {
             let added = vec![entries[a].added[0], entries[b].added[0]];
-            let warm = [&entries[a].fitted, &entries[b].fitted];
-            if let Ok(fitted) = self.fit((&added, None), &warm) {
-                let e = self.entry((added, None), fitted, None);
-                entries.push(e);
-            }
+            let tried = self.tried((added, None), &[&entries[a].fitted, &entries[b].fitted]);
+            entries.extend(tried);
         }
     }
 
@@ -161,11 +152,8 @@ impl<'j> Judge<'j> {
         for k in contenders {
             for v in swaps.iter().filter(|v| !settled.contains(&v.name())) {
                 let added = vec![entries[k].added[0]];
-                let warm = [&entries[k].fitted];
-                if let Ok(fitted) = self.fit((&added, Some(v.as_ref())), &warm) {
-                    let e = self.entry((added, Some(v.as_ref())), fitted, None);
-                    entries.push(e);
-                }
+                let tried = self.tried((added, Some(v.as_ref())), &[&entries[k].fitted]);
+                entries.extend(tried);
             }
         }
     }
