@@ -10,9 +10,9 @@
 //! model as fitted is taken out, by least squares in each row's noise, before the tests.
 //! The rate's error wanders on the scale of the window's half-width; a basis follows a
 //! wander of that width with two terms to it (as a signal is sampled at twice its highest
-//! frequency). One per half-width left the wander of a long campaign's rate in the residual:
-//! of the benchmark's lagging thermometers, 5 ended with structure at the floor; with two,
-//! 3 (two of which, their readings made clean, end `nothing_missing`).
+//! frequency). With one per half-width, 5 of the benchmark's 36 lagging thermometers ended
+//! `unexplained_structure` (4 within 1.05x the held-out floor); with two, 3 (2 at the floor,
+//! both `nothing_missing` with their readings made clean).
 
 use crate::campaign::Campaign;
 use crate::effects::{memory, Effect, EffectSet};
