@@ -617,19 +617,11 @@ pub struct ErrorVector {
 /// The figures of one calibrated model on held-out data, and the judge's test of them.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct HeldOutCheck {
-    /// RMS of the held-out TCP errors (mm; µm in the JSON, as every length of this struct)
-    /// as measured, and with each setup's zero removed.
-    #[serde(rename = "rms_um", serialize_with = "as_um")]
-    pub rms: f64,
-    #[serde(rename = "rms_relative_um", serialize_with = "as_um")]
-    pub rms_relative: f64,
-    /// What noise alone gives there: counting each setup's zero reading (which all
-    /// its readings share, so with few setups the raw RMS strays from it by that one draw),
-    /// and with each setup's zero removed.
-    #[serde(rename = "noise_floor_um", serialize_with = "as_um")]
-    pub noise_floor: f64,
-    #[serde(rename = "noise_floor_relative_um", serialize_with = "as_um")]
-    pub noise_floor_relative: f64,
+    /// The figures judged: the errors (mm), their RMS as measured and with each setup's zero
+    /// removed, and what noise alone gives there (the JSON's `rms_um`, `rms_relative_um`,
+    /// `noise_floor_um`, `noise_floor_relative_um`, in µm as every length of this struct).
+    #[serde(flatten, serialize_with = "figures_as_um")]
+    pub figures: super::held_out::figures::HeldOut,
     /// The floor of this calibrated model with each setup's zero removed: the noise and
     /// what the calibration's own uncertainty predicts at these poses.
     #[serde(rename = "floor_relative_um", serialize_with = "as_um")]
@@ -651,9 +643,6 @@ pub struct HeldOutCheck {
     pub structured: bool,
     /// The term the held-out residual follows most, where it follows one.
     pub follows: Option<sparse::Pointer>,
-    /// The figures judged (the errors, mm; the RMS and floors above are theirs).
-    #[serde(skip)]
-    pub figures: super::held_out::figures::HeldOut,
 }
 
 impl HeldOutCheck {
@@ -661,6 +650,41 @@ impl HeldOutCheck {
     pub fn agrees(&self) -> bool {
         self.consistent && !self.structured
     }
+
+    /// RMS of the held-out TCP errors (mm) as measured, and with each setup's zero removed.
+    pub fn rms(&self) -> f64 {
+        self.figures.errors.rms
+    }
+
+    pub fn rms_relative(&self) -> f64 {
+        self.figures.errors.rms_relative
+    }
+
+    /// What noise alone gives there (mm): counting each setup's zero reading (which all its
+    /// readings share, so with few setups the raw RMS strays from it by that one draw), and
+    /// with each setup's zero removed.
+    pub fn noise_floor(&self) -> f64 {
+        self.figures.noise_floor
+    }
+
+    pub fn noise_floor_relative(&self) -> f64 {
+        self.figures.noise_floor_relative
+    }
+}
+
+/// A judge's figures as its JSON writes them (µm), beside the judge's own keys.
+fn figures_as_um<S: serde::Serializer>(
+    h: &super::held_out::figures::HeldOut,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeMap;
+    let um = crate::units::um_from_mm;
+    let mut map = s.serialize_map(Some(4))?;
+    map.serialize_entry("rms_um", &um(h.errors.rms))?;
+    map.serialize_entry("rms_relative_um", &um(h.errors.rms_relative))?;
+    map.serialize_entry("noise_floor_um", &um(h.noise_floor))?;
+    map.serialize_entry("noise_floor_relative_um", &um(h.noise_floor_relative))?;
+    map.end()
 }
 
 /// A length of the core (mm), or one that may be absent, as the JSON writes it (µm).

@@ -178,7 +178,7 @@ fn summary(d: &ModelDiagnosis) -> String {
         d.model_effects,
         d.held_out.as_ref().map_or("-".to_owned(), |h| format!(
             "{:.2} vs floor {:.2} p {:.1e} structure p {:.1e}",
-            um_from_mm(h.rms_relative), um_from_mm(h.floor_relative), h.p_value, h.structure_p
+            um_from_mm(h.rms_relative()), um_from_mm(h.floor_relative), h.p_value, h.structure_p
         )),
         d.chi2_per_dof,
         judged.join("; ")

@@ -29,9 +29,9 @@ pub fn held_out(h: &HeldOutCheck) -> String {
     let mut s = format!(
         "held-out RMS {:.1} µm (each setup's zero removed) against the model's floor {:.1} µm \
          (the noise {:.1} µm and the calibration's own uncertainty; {})",
-        um_from_mm(h.rms_relative),
+        um_from_mm(h.rms_relative()),
         um_from_mm(h.floor_relative),
-        um_from_mm(h.noise_floor_relative),
+        um_from_mm(h.noise_floor_relative()),
         p_is(h.p_value)
     );
     if h.structured {

@@ -238,7 +238,7 @@ fn outcome(
     let kind = last.verdict_kind;
     let held_over_floor = last.baseline.val_rms.map_or(f64::NAN, um_from_mm) / measured.floor_um;
     let relative = last.held_out.as_ref().map_or(f64::NAN, |h| {
-        um_from_mm(h.rms_relative) / measured.floor_relative_um
+        um_from_mm(h.rms_relative()) / measured.floor_relative_um
     });
     let se = 1.0 / (2.0 * measured.relative_dof.max(1) as f64).sqrt();
     // each step of the loop judged as the diagnosis judges a candidate

@@ -319,10 +319,6 @@ pub(crate) fn judge(
     let dictionary = shape.dictionary.clone();
     let structured = shape.structured();
     Ok(HeldOutCheck {
-        rms: held.errors.rms,
-        rms_relative: held.errors.rms_relative,
-        noise_floor: held.noise_floor,
-        noise_floor_relative: held.noise_floor_relative,
         floor_relative: (var.iter().sum::<f64>() / n.max(1) as f64).sqrt(),
         statistic,
         dof,

@@ -62,7 +62,7 @@ pub(super) fn parameters_of(
             let judge =
                 rpkm_core::diagnose::judge_calibration(v, noise, (effects, set), cal, alpha)
                     .map_err(|e| bad_input(format!("held-out setups: {e}")))?;
-            m_from_mm(judge.rms)
+            m_from_mm(judge.rms())
         }
         None => f64::NAN,
     };
