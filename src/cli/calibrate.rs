@@ -671,7 +671,10 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
 
 /// The effects' parameters of the calibrated model (--effects), after the geometry's.
 fn print_effects(effects: &[calib::EffectEstimate]) {
-    for e in effects {
+    for line in calib::anchored_summary(effects) {
+        println!("({line})");
+    }
+    for e in effects.iter().filter(|e| e.physical()) {
         println!(
             "{:<24} {}{}",
             format!("{}.{}", e.effect, e.name),
@@ -734,6 +737,7 @@ fn report_json(cal: &Calibration, val: Option<&Validation>) -> anyhow::Result<Ca
         effects: cal
             .effects
             .iter()
+            .filter(|e| e.physical())
             .map(EffectValue::of)
             .collect::<anyhow::Result<_>>()?,
         ..CalibrationFile::default()

@@ -197,7 +197,11 @@ impl Stages {
             );
         }
         if let Some(last) = self.rows.last() {
-            for e in last.effect_params.iter().filter(|e| e.identified) {
+            for e in last
+                .effect_params
+                .iter()
+                .filter(|e| e.identified && e.physical())
+            {
                 println!(
                     "  {}.{} = {}",
                     e.effect,

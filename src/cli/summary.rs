@@ -46,7 +46,10 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
             d.model_effects.join(" + ")
         );
     }
-    for e in &d.effect_values {
+    for line in rpkm_core::calib::anchored_summary(&d.effect_values) {
+        println!("   ({line})");
+    }
+    for e in d.effect_values.iter().filter(|e| e.physical()) {
         match &e.held {
             None => println!(
                 "   {}.{} = {}",

@@ -26,6 +26,27 @@ use std::collections::HashSet;
 /// [`super::Noise::Estimate`] make one each), with the rows at the start and the warm start read
 /// from `req.shared` where they are there.
 pub(super) fn fit_once(req: &Request) -> Result<Calibration, CalibrationError> {
+    // a nuisance that multiplies another parameter (a thermometer's rate error, the lag)
+    // moves nothing while that one is zero: fitted from where the rest is, not together
+    if let Some(held) = req.effects.without_anchored() {
+        let first = fit_plain(&Request {
+            effects: &held,
+            ..*req
+        })?;
+        return fit_plain(&Request {
+            warm: Some(super::types::WarmStart {
+                params: &first.params,
+                theta: &first.theta,
+                screen: false,
+            }),
+            shared: None,
+            ..*req
+        });
+    }
+    fit_plain(req)
+}
+
+fn fit_plain(req: &Request) -> Result<Calibration, CalibrationError> {
     let Request {
         campaign,
         start,
@@ -280,6 +301,7 @@ pub(super) fn step1(
             warm,
             prior: plan.prior.clone(),
             center: pb.start,
+            theta_prior: plan.theta_prior.clone(),
             keep,
             initial: (!warm && first).then(|| plan.normal0.clone()).flatten(),
             // the first run at a warm start reads its start from shared rows, if any
@@ -360,6 +382,7 @@ impl Step1Report {
                     held: plan.why_held[k].clone(),
                     prior: slot.param.prior,
                     allowed: slot.param.allowed(),
+                    anchored: slot.param.anchor.is_some(),
                 }
             })
             .collect();
@@ -460,6 +483,7 @@ pub(super) fn step2<'c>(
         warm: false,
         prior: prior2.clone(),
         center: pb.start,
+        theta_prior: Vec::new(),
         keep: Keep::Nothing,
         initial: None,
         shared: None,

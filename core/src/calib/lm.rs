@@ -75,6 +75,9 @@ pub(super) struct Lm<'a> {
     /// centre.
     pub prior: Vec<(usize, f64)>,
     pub center: Params,
+    /// Per anchored effect parameter: its index among the free ones and its prior's σ
+    /// (centred on zero).
+    pub theta_prior: Vec<(usize, f64)>,
     /// What each evaluation keeps of its rows for after the fit ([`Keep`]).
     pub keep: Keep,
     /// The normal equations at the start in the unscaled unknowns, without the prior, when
@@ -469,6 +472,13 @@ impl Lm<'_> {
             let (r, j) = ((x.p[i] - self.center[i]) / tol, self.h[k] / tol);
             total.a[(k, k)] += j * j;
             total.g[k] += j * r;
+            total.cost += 0.5 * r * r;
+        }
+        let n = self.h.len();
+        for &(f, sigma) in &self.theta_prior {
+            let (r, j) = (x.theta[self.free_theta[f]] / sigma, self.h_theta[f] / sigma);
+            total.a[(n + f, n + f)] += j * j;
+            total.g[n + f] += j * r;
             total.cost += 0.5 * r * r;
         }
     }

@@ -35,6 +35,8 @@ pub(super) struct Plan {
     /// observability.
     pub(super) free_theta: Vec<usize>,
     pub(super) h_theta: DVector<f64>,
+    /// The anchored effect parameters' priors: (index among the free ones, σ).
+    pub(super) theta_prior: Vec<(usize, f64)>,
     pub(super) observability: Vec<f64>,
     /// Why each effect parameter is not fitted (None: it is).
     pub(super) why_held: Vec<Option<String>>,
@@ -79,33 +81,7 @@ impl Plan {
         }
         let layout = pb.effects.layout();
         let observability = effect_observability(&start.columns, &ids, &opts.links, pb.effects);
-        let why_held: Vec<Option<String>> = (0..pb.effects.n_params())
-            .map(|k| {
-                if pb.effects.is_held(k) {
-                    return Some("held at zero: a part the data do not support".to_owned());
-                }
-                let (frac, signal, whole) = observability[k];
-                let param = &layout[k].param;
-                let size = signal * param.prior * opts.noise_inflation.max(1.0);
-                if !(whole > 0.0) {
-                    Some(format!(
-                        "no sensitivity at its start {} {} (give it a start: where it moves \
-                         the model)",
-                        param.start, param.unit
-                    ))
-                } else if frac < MIN_EFFECT_OBSERVABILITY {
-                    Some("the campaign cannot tell it from the geometry".to_owned())
-                } else if size < MIN_EFFECT_SIGNAL {
-                    Some(format!(
-                        "at its prior {} {} it would move the rows by {size:.2} σ beyond what \
-                         the geometry absorbs, less than one",
-                        param.prior, param.unit
-                    ))
-                } else {
-                    None
-                }
-            })
-            .collect();
+        let why_held = why_held(pb, &observability);
         let free_theta: Vec<usize> = (0..pb.effects.n_params())
             .filter(|&k| why_held[k].is_none())
             .collect();
@@ -113,6 +89,11 @@ impl Plan {
             free_theta.len(),
             free_theta.iter().map(|&k| layout[k].param.prior),
         );
+        let theta_prior: Vec<(usize, f64)> = free_theta
+            .iter()
+            .enumerate()
+            .filter_map(|(f, &k)| layout[k].param.anchor.map(|s| (f, s)))
+            .collect();
         let jr0 = start.columns.reduced(&ids, &opts.links);
         let normal0 = start
             .normal
@@ -129,12 +110,52 @@ impl Plan {
             prior,
             free_theta,
             h_theta,
+            theta_prior,
             observability: observability.iter().map(|o| o.0).collect(),
             why_held,
             n_rows0: start.n_rows,
             before: start.before,
         })
     }
+}
+
+/// Why each effect parameter is not fitted (None: it is): held, or moving nothing the
+/// geometry does not absorb at its start. An anchored one is always fitted: its prior
+/// determines it where the rows do not.
+fn why_held(pb: &Problem, observability: &[(f64, f64, f64)]) -> Vec<Option<String>> {
+    let opts = pb.opts;
+    let layout = pb.effects.layout();
+    (0..pb.effects.n_params())
+        .map(|k| {
+            if pb.effects.is_held(k) {
+                return Some("held at zero: a part the data do not support".to_owned());
+            }
+            if layout[k].param.anchor.is_some() {
+                // its prior determines it where the rows do not
+                return None;
+            }
+            let (frac, signal, whole) = observability[k];
+            let param = &layout[k].param;
+            let size = signal * param.prior * opts.noise_inflation.max(1.0);
+            if !(whole > 0.0) {
+                Some(format!(
+                    "no sensitivity at its start {} {} (give it a start: where it moves \
+                     the model)",
+                    param.start, param.unit
+                ))
+            } else if frac < MIN_EFFECT_OBSERVABILITY {
+                Some("the campaign cannot tell it from the geometry".to_owned())
+            } else if size < MIN_EFFECT_SIGNAL {
+                Some(format!(
+                    "at its prior {} {} it would move the rows by {size:.2} σ beyond what \
+                     the geometry absorbs, less than one",
+                    param.prior, param.unit
+                ))
+            } else {
+                None
+            }
+        })
+        .collect()
 }
 
 /// What the plan reads from the rows at the start parameters, piece by piece: how many, and

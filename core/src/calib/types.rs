@@ -266,6 +266,55 @@ pub struct EffectEstimate {
     pub prior: f64,
     /// The values the physics allows ([`crate::effects::EffectParam::allowed`]).
     pub allowed: (f64, f64),
+    /// A nuisance of this campaign held near zero by a prior
+    /// ([`crate::effects::EffectParam::anchor`]: a lagging thermometer's rate error), not a
+    /// property of the machine: no report lists it, no test weighs it, no other campaign
+    /// carries it.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub anchored: bool,
+}
+
+impl EffectEstimate {
+    /// Whether it is a property of the machine (not an anchored nuisance of the campaign).
+    pub fn physical(&self) -> bool {
+        !self.anchored
+    }
+}
+
+/// The anchored parameters of one effect, in a sentence: how many, and how far the fit took
+/// them from zero against their priors (the RMS of value/prior: about 1 where the nuisance
+/// is as large as its prior says).
+pub fn anchored_summary(effects: &[EffectEstimate]) -> Vec<String> {
+    let mut names: Vec<&str> = Vec::new();
+    for e in effects.iter().filter(|e| e.anchored) {
+        if !names.contains(&e.effect.as_str()) {
+            names.push(&e.effect);
+        }
+    }
+    names
+        .iter()
+        .map(|name| {
+            let terms: Vec<&EffectEstimate> = effects
+                .iter()
+                .filter(|e| e.anchored && e.effect == *name)
+                .collect();
+            let ratio = (terms
+                .iter()
+                .map(|e| (e.value / e.prior.max(f64::MIN_POSITIVE)).powi(2))
+                .sum::<f64>()
+                / terms.len() as f64)
+                .sqrt();
+            let first = &terms[0];
+            let stem = first.name.trim_end_matches(|c: char| c.is_ascii_digit());
+            format!(
+                "{name}: {} {stem}* terms of this campaign ({}), each held near zero by its \
+                 prior, fitted at {ratio:.1}x their priors (RMS); not the machine's, not \
+                 listed",
+                terms.len(),
+                first.unit
+            )
+        })
+        .collect()
 }
 
 /// The result of a calibration.

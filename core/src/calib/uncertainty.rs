@@ -70,7 +70,11 @@ pub(super) fn posterior<'c>(
     let (ids, links, free, prior) = (&plan.ids, &pb.opts.links, &plan.free_theta, &plan.prior);
     let n = ids.len();
     let info = last.info;
-    let inv = normal_inverse(&info, ids, prior)?;
+    let mut info_prior = info.clone();
+    for &(f, sigma) in &plan.theta_prior {
+        info_prior[(n + f, n + f)] += 1.0 / (sigma * sigma);
+    }
+    let inv = normal_inverse(&info_prior, ids, prior)?;
     let dof_model = (&inv * &info).trace();
     let leverage_of = |jr: &DMatrix<f64>, inv: &DMatrix<f64>| {
         let ji = jr * inv;

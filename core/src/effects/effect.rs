@@ -31,6 +31,11 @@ pub struct EffectParam {
     pub range: Option<(f64, f64)>,
     /// Where a fit starts, in `unit` (0 for most: no effect).
     pub start: f64,
+    /// A nuisance the effect carries, held near zero in the fit by a prior of this σ (in
+    /// `unit`): not a physical value (a lagging thermometer's rate error, which the
+    /// self-calibration resolves finer than the thermometer gives it). Never carried to
+    /// another campaign. None for every physical parameter.
+    pub anchor: Option<f64>,
 }
 
 impl EffectParam {
@@ -42,6 +47,16 @@ impl EffectParam {
             prior,
             range: None,
             start: 0.0,
+            anchor: None,
+        }
+    }
+
+    /// The same as a nuisance held near zero by a prior of σ `sigma` ([`EffectParam::anchor`]).
+    #[must_use]
+    pub fn anchored(self, sigma: f64) -> EffectParam {
+        EffectParam {
+            anchor: Some(sigma),
+            ..self
         }
     }
 

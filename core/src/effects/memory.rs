@@ -89,10 +89,22 @@ pub fn rate_window(line: &Timeline, x: &[f64]) -> f64 {
 }
 
 fn rate_and_window(line: &Timeline, x: &[f64]) -> (Vec<f64>, f64) {
+    let (rate, half, _) = rate_fit(line, x);
+    (rate, half)
+}
+
+/// [`rate`], the half-width (s) of its window and its estimated error (the RMS over the
+/// rows, K/s for a thermometer: the readings' noise through the fit and the bend it
+/// misses, as the window was chosen by).
+pub fn rate_fit(line: &Timeline, x: &[f64]) -> (Vec<f64>, f64, f64) {
     let xs = line.sorted(x);
     let noise = reading_noise(&line.t, &xs);
     let best = least_error_rate(&line.t, &xs, noise);
-    (line.unsorted(&best.rate), best.half)
+    (
+        line.unsorted(&best.rate),
+        best.half,
+        best.error.max(0.0).sqrt(),
+    )
 }
 
 /// A rate (time order) of a local quadratic, its window's half-width and its estimated

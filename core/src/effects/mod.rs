@@ -447,6 +447,29 @@ impl EffectSet {
         })
     }
 
+    /// The same bindings with the anchored parameters ([`EffectParam::anchor`]) held at
+    /// zero as well; None where there are none free.
+    pub fn without_anchored(&self) -> Option<EffectSet> {
+        let layout = self.layout();
+        let anchored: Vec<usize> = layout
+            .iter()
+            .filter(|s| s.param.anchor.is_some() && !self.is_held(s.index))
+            .map(|s| s.index)
+            .collect();
+        if anchored.is_empty() {
+            return None;
+        }
+        let mut out = EffectSet {
+            bound: self.bound.clone(),
+            n_poses: self.n_poses,
+            held: self.held.clone(),
+        };
+        for k in anchored {
+            out.hold(k);
+        }
+        Some(out)
+    }
+
     /// Hold parameter `k` (θ order) at zero: the calibration does not identify it.
     pub fn hold(&mut self, k: usize) {
         if let Some(h) = self.held.get_mut(k) {

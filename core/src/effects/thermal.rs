@@ -177,7 +177,11 @@ impl Effect for Thermal {
         let frame = strain("temp_frame")?;
         let guide1 = strain("temp_guide1")?;
         let guide2 = strain("temp_guide2")?;
-        let params = self
+        let wander = match self.reads {
+            Reads::Rate => self.wander(campaign)?,
+            Reads::Temperature => Wander::default(),
+        };
+        let mut params: Vec<EffectParam> = self
             .parts
             .iter()
             .map(|&k| match self.reads {
@@ -191,8 +195,18 @@ impl Effect for Thermal {
                 }
             })
             .collect();
+        let first_wander = params.len();
+        params.extend(
+            wander
+                .sigma
+                .iter()
+                .enumerate()
+                .map(|(k, &s)| EffectParam::new(format!("rate_error_{k}"), "K/s", s).anchored(s)),
+        );
         Ok(Box::new(BoundThermal {
             params,
+            first_wander,
+            wander: wander.basis,
             slot: std::array::from_fn(|k| self.parts.iter().position(|&j| j == k)),
             rods,
             frame,
@@ -259,8 +273,77 @@ impl Thermal {
     }
 }
 
+/// A lagging thermometer's rate error as a smooth function of the campaign's time: Legendre
+/// polynomials over the campaign, two per half-width of the rate's window plus one, each
+/// with the σ that spreads the rate's estimated error evenly over them.
+#[derive(Default)]
+struct Wander {
+    /// Per term, its value at each pose.
+    basis: Vec<Vec<f64>>,
+    sigma: Vec<f64>,
+}
+
+/// Most terms of a rate's error.
+const MOST_WANDER_TERMS: usize = 30;
+
+impl Thermal {
+    fn wander(&self, campaign: &Campaign) -> Result<Wander, NotApplicable> {
+        let temps = self.temperatures(campaign, COVARIATE)?;
+        let t: Vec<f64> = campaign.poses.iter().map(|p| p.t).collect();
+        let Ok(line) = Timeline::new(&t) else {
+            return Ok(Wander::default());
+        };
+        let (_, half, error) = memory::rate_fit(&line, &temps);
+        let (lo, hi) = t
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        let span = hi - lo;
+        if !(span > 0.0 && half > 0.0 && error > 0.0) {
+            return Ok(Wander::default());
+        }
+        let n = (2..MOST_WANDER_TERMS)
+            .find(|&n| (n - 1) as f64 >= 2.0 * span / half)
+            .unwrap_or(MOST_WANDER_TERMS);
+        let u: Vec<f64> = t.iter().map(|v| 2.0 * (v - lo) / span - 1.0).collect();
+        Ok(Wander {
+            basis: (0..n)
+                .map(|k| u.iter().map(|&u| legendre(k, u)).collect())
+                .collect(),
+            sigma: {
+                // the rate's error is the readings' noise differentiated: its power grows
+                // with the square of the frequency, a term's with (k + ½)², and the terms
+                // together make the rate's estimated error (a Legendre term's mean square
+                // over the campaign is 1/(2k + 1))
+                let power = |k: usize| (k as f64 + 0.5).powi(2);
+                let total: f64 = (0..n).map(power).sum();
+                (0..n)
+                    .map(|k| error * (power(k) * (2 * k + 1) as f64 / total).sqrt())
+                    .collect()
+            },
+        })
+    }
+}
+
+/// The Legendre polynomial of degree `k` at `u` (Bonnet's recursion).
+fn legendre(k: usize, u: f64) -> f64 {
+    let (mut a, mut b) = (1.0, u);
+    if k == 0 {
+        return a;
+    }
+    for n in 1..k {
+        let n = n as f64;
+        (a, b) = (b, ((2.0 * n + 1.0) * u * b - n * a) / (n + 1.0));
+    }
+    b
+}
+
 struct BoundThermal {
     params: Vec<EffectParam>,
+    /// The index of the first rate-error term in `params`, and each term per pose.
+    first_wander: usize,
+    wander: Vec<Vec<f64>>,
     /// Each part's index in `params` (None: not in the model).
     slot: [Option<usize>; 3],
     /// Strain per ppm/K of each part, per pose.
@@ -279,24 +362,41 @@ impl Bound for BoundThermal {
         &self.params
     }
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
-        let (er, ef) = (self.rods[pose], self.frame[pose]);
+        // the rate's error at this pose (strain per ppm·s/K), and the terms it is made of
+        let terms = self.first_wander..self.first_wander + self.wander.len();
+        let err: f64 = terms
+            .clone()
+            .zip(&self.wander)
+            .map(|(j, b)| theta[j] * b[pose])
+            .sum::<f64>()
+            * 1e-6;
+        let (er, ef) = (self.rods[pose] + err, self.frame[pose] + err);
         if let Some(k) = self.slot[0] {
             for &(i, l) in &self.lengths {
                 value.dp[i] += theta[k] * er * l;
                 partials[k].dp[i] += er * l;
+                for (j, b) in terms.clone().zip(&self.wander) {
+                    partials[j].dp[i] += theta[k] * 1e-6 * b[pose] * l;
+                }
             }
         }
         if let Some(k) = self.slot[1] {
             for &(i, d) in &self.guides {
                 value.dp[i] += theta[k] * ef * d;
                 partials[k].dp[i] += ef * d;
+                for (j, b) in terms.clone().zip(&self.wander) {
+                    partials[j].dp[i] += theta[k] * 1e-6 * b[pose] * d;
+                }
             }
         }
         if let Some(k) = self.slot[2] {
             for a in 0..4 {
-                let e = self.scales[pose][a] * self.q[pose][a];
+                let e = (self.scales[pose][a] + err) * self.q[pose][a];
                 value.dq[a] += theta[k] * e;
                 partials[k].dq[a] += e;
+                for (j, b) in terms.clone().zip(&self.wander) {
+                    partials[j].dq[a] += theta[k] * 1e-6 * b[pose] * self.q[pose][a];
+                }
             }
         }
     }

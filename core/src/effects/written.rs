@@ -480,6 +480,7 @@ impl Written {
                     prior: p.prior,
                     range: p.bounds,
                     start: p.start,
+                    anchor: None,
                 })
                 .collect(),
             lags: self.lagged(campaign).map_err(BindError::Variables)?,

@@ -53,6 +53,7 @@ pub fn record_of(m: &Made) -> anyhow::Result<CalibrationRecord> {
     let effects = cal
         .effects
         .iter()
+        .filter(|e| e.physical())
         .map(EffectValue::of)
         .collect::<anyhow::Result<Vec<_>>>()?;
     Ok(CalibrationRecord {

@@ -134,7 +134,7 @@ pub fn evidence(c: &Candidate) -> String {
 fn values(params: &[rpkm_core::calib::EffectEstimate]) -> String {
     let mut shown: Vec<String> = params
         .iter()
-        .filter(|e| e.identified)
+        .filter(|e| e.identified && e.physical())
         .take(3)
         .map(|e| format!("{} = {}", e.name, with_sigma(e.value, e.sigma, &e.unit)))
         .collect();
@@ -146,6 +146,7 @@ fn values(params: &[rpkm_core::calib::EffectEstimate]) -> String {
 pub fn held(params: &[rpkm_core::calib::EffectEstimate]) -> Vec<String> {
     params
         .iter()
+        .filter(|e| e.physical())
         .filter_map(|e| {
             e.held
                 .as_ref()

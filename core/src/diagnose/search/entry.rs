@@ -74,7 +74,7 @@ impl Entry<'_> {
             .fit
             .effect_params
             .iter()
-            .filter(|p| self.added.iter().any(|e| e.name() == p.effect))
+            .filter(|p| p.physical() && self.added.iter().any(|e| e.name() == p.effect))
             .count();
         (self.added.len(), params)
     }

@@ -122,7 +122,7 @@ impl Gain {
 pub(in crate::diagnose) fn implausible(params: &[EffectEstimate]) -> Vec<String> {
     params
         .iter()
-        .filter(|p| p.identified)
+        .filter(|p| p.identified && p.physical())
         .filter(|p| {
             let (lo, hi) = p.allowed;
             p.value - PLAUSIBLE_SIGMAS * p.sigma > hi || p.value + PLAUSIBLE_SIGMAS * p.sigma < lo
@@ -210,7 +210,7 @@ pub(in crate::diagnose) fn relevant<'a>(
 ) -> bool {
     params
         .into_iter()
-        .filter(|p| p.identified && p.prior > 0.0)
+        .filter(|p| p.identified && p.physical() && p.prior > 0.0)
         .any(|p| p.value.abs() >= crate::diagnose::types::RELEVANT_FRACTION * p.prior)
 }
 
@@ -232,7 +232,7 @@ fn wald_of(fit: &crate::diagnose::types::Fit, pick: impl Fn(&EffectEstimate) -> 
         .effect_params
         .iter()
         .enumerate()
-        .filter(|(_, p)| p.identified && p.sigma > 0.0 && pick(p))
+        .filter(|(_, p)| p.identified && p.physical() && p.sigma > 0.0 && pick(p))
         .map(|(k, _)| k)
         .filter(|&k| k < fit.theta.len() && k < fit.covariance_theta.nrows())
         .collect();

@@ -347,7 +347,7 @@ fn weak_parts(cal: &Calibration, set: &EffectSet, effect: &str) -> Vec<usize> {
         .layout()
         .iter()
         .filter(|slot| slot.effect == effect && !slot.setup_local)
-        .filter(|slot| cal.effects[slot.index].identified)
+        .filter(|slot| cal.effects[slot.index].identified && cal.effects[slot.index].physical())
         .map(|slot| {
             let e = &cal.effects[slot.index];
             (

@@ -74,7 +74,7 @@ pub(super) fn parameters_of(
 /// unit is a length in mm or µm or an angle in mrad or µrad, else in the unit the effect
 /// states.
 fn effect_parameters(msg: &mut Parameters, effects: &[calib::EffectEstimate]) {
-    for e in effects {
+    for e in effects.iter().filter(|e| e.physical()) {
         if !msg.active_effects.contains(&e.effect) {
             msg.active_effects.push(e.effect.clone());
         }
