@@ -25,6 +25,12 @@
 //! ([`super::memory::rate`]). A part that lags its thermometer has a negative τ (to first
 //! order in τ; a written `lag(temp_machine, tau)` is exact both ways, docs/effects.md). It
 //! is a candidate only beside `thermal` ([`Effect::beside`]).
+//!
+//! The rate is a fit over minutes of noisy readings, and the self-calibration resolves a
+//! part's temperature finer than that rate times a lag gives it: `thermal_lag` fits the
+//! rate's error too, as smooth terms in time (`rate_error_k`, K/s, multiplying each part's
+//! lag), each anchored near zero by the rate's own estimated error (`Wander`). Taken as
+//! exact, the rate's error moved the expansion and the lag by up to 12σ on the twin.
 
 use super::effect::{covariate_column, Bound, Delta, Effect, EffectParam, NotApplicable};
 use super::memory::{self, Timeline};
