@@ -18,6 +18,49 @@
 
 use std::sync::{Arc, Mutex};
 
+/// Most smooth terms in time of a thermometer's error ([`smooth_terms`]): a wander of a
+/// fifteenth of the campaign (an hour's campaign whose rate is fitted over four minutes).
+pub const MOST_SMOOTH_TERMS: usize = 30;
+
+/// Legendre polynomials in the campaign's time `t` (each at every row), two per half-width
+/// `half` of a rate's window plus one, at least 2 and at most [`MOST_SMOOTH_TERMS`]: the
+/// smooth error a rate fitted over that window leaves, which wanders on the scale of the
+/// half-width (a basis follows a wander with two terms to it, as a signal is sampled at
+/// twice its highest frequency). None where the times span nothing.
+pub fn smooth_terms(t: &[f64], half: f64) -> Option<Vec<Vec<f64>>> {
+    let (lo, hi) = t
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
+    let span = hi - lo;
+    if !(span > 0.0 && half > 0.0) {
+        return None;
+    }
+    let n = (2..MOST_SMOOTH_TERMS)
+        .find(|&n| f64::from(u32::try_from(n - 1).unwrap_or(u32::MAX)) >= 2.0 * span / half)
+        .unwrap_or(MOST_SMOOTH_TERMS);
+    let u: Vec<f64> = t.iter().map(|v| 2.0 * (v - lo) / span - 1.0).collect();
+    Some(
+        (0..n)
+            .map(|k| u.iter().map(|&u| legendre(k, u)).collect())
+            .collect(),
+    )
+}
+
+/// The Legendre polynomial of degree `k` at `u` (Bonnet's recursion).
+fn legendre(k: usize, u: f64) -> f64 {
+    let (mut a, mut b) = (1.0, u);
+    if k == 0 {
+        return a;
+    }
+    for n in 1..k {
+        let n = n as f64;
+        (a, b) = (b, ((2.0 * n + 1.0) * u * b - n * a) / (n + 1.0));
+    }
+    b
+}
+
 /// Why a rate or lag cannot be made of a column.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum MemoryError {

@@ -289,9 +289,6 @@ struct Wander {
     sigma: Vec<f64>,
 }
 
-/// Most terms of a rate's error.
-const MOST_WANDER_TERMS: usize = 30;
-
 impl Thermal {
     fn wander(&self, campaign: &Campaign) -> Result<Wander, NotApplicable> {
         let temps = self.temperatures(campaign, COVARIATE)?;
@@ -300,23 +297,12 @@ impl Thermal {
             return Ok(Wander::default());
         };
         let (_, half, error) = memory::rate_fit(&line, &temps);
-        let (lo, hi) = t
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(*v), b.max(*v))
-            });
-        let span = hi - lo;
-        if !(span > 0.0 && half > 0.0 && error > 0.0) {
+        let Some(basis) = memory::smooth_terms(&t, half).filter(|_| error > 0.0) else {
             return Ok(Wander::default());
-        }
-        let n = (2..MOST_WANDER_TERMS)
-            .find(|&n| (n - 1) as f64 >= 2.0 * span / half)
-            .unwrap_or(MOST_WANDER_TERMS);
-        let u: Vec<f64> = t.iter().map(|v| 2.0 * (v - lo) / span - 1.0).collect();
+        };
+        let n = basis.len();
         Ok(Wander {
-            basis: (0..n)
-                .map(|k| u.iter().map(|&u| legendre(k, u)).collect())
-                .collect(),
+            basis,
             sigma: {
                 // the rate's error is the readings' noise differentiated: its power grows
                 // with the square of the frequency, a term's with (k + ½)², and the terms
@@ -330,19 +316,6 @@ impl Thermal {
             },
         })
     }
-}
-
-/// The Legendre polynomial of degree `k` at `u` (Bonnet's recursion).
-fn legendre(k: usize, u: f64) -> f64 {
-    let (mut a, mut b) = (1.0, u);
-    if k == 0 {
-        return a;
-    }
-    for n in 1..k {
-        let n = n as f64;
-        (a, b) = (b, ((2.0 * n + 1.0) * u * b - n * a) / (n + 1.0));
-    }
-    b
 }
 
 struct BoundThermal {

@@ -21,10 +21,6 @@ use crate::obs::{self, Direction, Form, RowValue, Step};
 use crate::params::{Model, Params};
 use std::collections::HashMap;
 
-/// Most terms per thermometer: a wander of a fifteenth of the campaign (an hour's campaign
-/// whose rate is fitted over four minutes).
-const MOST_TERMS: usize = 30;
-
 /// The size of the readings' change each term is measured with (K): far below any
 /// thermometer's noise, so that the rate's fit chooses the same window, far above the
 /// rows' round-off.
@@ -148,9 +144,8 @@ fn probed(campaign: &Campaign, c: usize, phi: &[f64]) -> Campaign {
     moved
 }
 
-/// Legendre polynomials in the campaign's time, two per half-width of the rate's window of
-/// column `c` in the campaign, plus one (at least 2, at most [`MOST_TERMS`]); None where the column has no
-/// rate (too few times, a reading missing).
+/// The smooth terms in time of column `c`'s error ([`memory::smooth_terms`] at its rate's
+/// window); None where the column has no rate (too few times, a reading missing).
 fn basis(campaign: &Campaign, c: usize) -> Option<Vec<Vec<f64>>> {
     let t: Vec<f64> = campaign.poses.iter().map(|p| p.t).collect();
     let x: Vec<f64> = campaign
@@ -159,39 +154,7 @@ fn basis(campaign: &Campaign, c: usize) -> Option<Vec<Vec<f64>>> {
         .map(|p| p.covariates.get(c).copied().flatten())
         .collect::<Option<_>>()?;
     let line = memory::Timeline::new(&t).ok()?;
-    let half = memory::rate_window(&line, &x);
-    let (lo, hi) = t
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-            (a.min(*v), b.max(*v))
-        });
-    let span = hi - lo;
-    if span <= 0.0 || half <= 0.0 {
-        return None;
-    }
-    // two terms per half-width of the window, plus one
-    let n = (2..MOST_TERMS)
-        .find(|&n| f64::from(u32::try_from(n - 1).unwrap_or(u32::MAX)) >= 2.0 * span / half)
-        .unwrap_or(MOST_TERMS);
-    let u: Vec<f64> = t.iter().map(|v| 2.0 * (v - lo) / span - 1.0).collect();
-    Some(
-        (0..n)
-            .map(|k| u.iter().map(|&u| legendre(k, u)).collect())
-            .collect(),
-    )
-}
-
-/// The Legendre polynomial of degree `k` at `u` (Bonnet's recursion).
-fn legendre(k: usize, u: f64) -> f64 {
-    let (mut a, mut b) = (1.0, u);
-    if k == 0 {
-        return a;
-    }
-    for n in 1..k {
-        let n = n as f64;
-        (a, b) = (b, ((2.0 * n + 1.0) * u * b - n * a) / (n + 1.0));
-    }
-    b
+    memory::smooth_terms(&t, memory::rate_window(&line, &x))
 }
 
 /// `rows` less their least-squares fit (in each row's noise) by `terms`, and the share of
