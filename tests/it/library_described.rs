@@ -105,11 +105,18 @@ fn every_library_effect_has_a_twin_kind_a_docs_row_and_a_help_line() {
                 .iter()
                 .filter(|s| slot.param.name.ends_with(&format!("_{s}")))
                 .max_by_key(|s| s.len());
+            // an anchored nuisance's terms are written with K for the term's number
             let name = match setup {
                 Some(s) if slot.setup_local => {
                     let stem = slot.param.name.len() - s.len();
                     format!("{}SETUP", &slot.param.name[..stem])
                 }
+                _ if slot.param.anchor.is_some() => format!(
+                    "{}K",
+                    slot.param
+                        .name
+                        .trim_end_matches(|c: char| c.is_ascii_digit())
+                ),
                 _ => slot.param.name.clone(),
             };
             let unit = format!("({})", slot.param.unit);

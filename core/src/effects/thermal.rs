@@ -346,16 +346,15 @@ impl Bound for BoundThermal {
         let err: f64 = terms
             .clone()
             .zip(&self.wander)
-            .map(|(j, b)| theta[j] * b[pose])
-            .sum::<f64>()
-            * 1e-6;
+            .map(|(j, b)| fraction_from_ppm(theta[j] * b[pose]))
+            .sum::<f64>();
         let (er, ef) = (self.rods[pose] + err, self.frame[pose] + err);
         if let Some(k) = self.slot[0] {
             for &(i, l) in &self.lengths {
                 value.dp[i] += theta[k] * er * l;
                 partials[k].dp[i] += er * l;
                 for (j, b) in terms.clone().zip(&self.wander) {
-                    partials[j].dp[i] += theta[k] * 1e-6 * b[pose] * l;
+                    partials[j].dp[i] += fraction_from_ppm(theta[k] * b[pose]) * l;
                 }
             }
         }
@@ -364,7 +363,7 @@ impl Bound for BoundThermal {
                 value.dp[i] += theta[k] * ef * d;
                 partials[k].dp[i] += ef * d;
                 for (j, b) in terms.clone().zip(&self.wander) {
-                    partials[j].dp[i] += theta[k] * 1e-6 * b[pose] * d;
+                    partials[j].dp[i] += fraction_from_ppm(theta[k] * b[pose]) * d;
                 }
             }
         }
@@ -374,7 +373,7 @@ impl Bound for BoundThermal {
                 value.dq[a] += theta[k] * e;
                 partials[k].dq[a] += e;
                 for (j, b) in terms.clone().zip(&self.wander) {
-                    partials[j].dq[a] += theta[k] * 1e-6 * b[pose] * self.q[pose][a];
+                    partials[j].dq[a] += fraction_from_ppm(theta[k] * b[pose]) * self.q[pose][a];
                 }
             }
         }
