@@ -671,8 +671,8 @@ fn print_report(campaign: &Campaign, cal: &Calibration, val: Option<&Validation>
 
 /// The effects' parameters of the calibrated model (--effects), after the geometry's.
 fn print_effects(effects: &[calib::EffectEstimate]) {
-    for line in calib::anchored_summary(effects) {
-        println!("({line})");
+    for a in calib::anchored_terms(effects) {
+        println!("({})", rpkm_nodes::words::anchored(&a));
     }
     for e in effects.iter().filter(|e| e.physical()) {
         println!(

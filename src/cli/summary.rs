@@ -46,8 +46,8 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
             d.model_effects.join(" + ")
         );
     }
-    for line in rpkm_core::calib::anchored_summary(&d.effect_values) {
-        println!("   ({line})");
+    for a in rpkm_core::calib::anchored_terms(&d.effect_values) {
+        println!("   ({})", words::anchored(&a));
     }
     for e in d.effect_values.iter().filter(|e| e.physical()) {
         match &e.held {

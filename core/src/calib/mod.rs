@@ -28,6 +28,6 @@ pub use rounds::calibrate;
 pub use select::{MIN_EFFECT_OBSERVABILITY, MIN_EFFECT_SIGNAL};
 pub use shared::SharedRows;
 pub use types::{
-    anchored_summary, Calibration, CalibrationError, DirectionRms, EffectEstimate, Identified,
-    Link, Options, Outlier, Prior, Scaling, Selection, Stop, WarmStart,
+    anchored_terms, AnchoredTerms, Calibration, CalibrationError, DirectionRms, EffectEstimate,
+    Identified, Link, Options, Outlier, Prior, Scaling, Selection, Stop, WarmStart,
 };

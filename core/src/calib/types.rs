@@ -281,10 +281,22 @@ impl EffectEstimate {
     }
 }
 
-/// The anchored parameters of one effect, in a sentence: how many, and how far the fit took
-/// them from zero against their priors (the RMS of value/prior: about 1 where the nuisance
-/// is as large as its prior says).
-pub fn anchored_summary(effects: &[EffectEstimate]) -> Vec<String> {
+/// The anchored parameters of one effect ([`EffectEstimate::anchored`]): how many, and how
+/// far the fit took them from zero against their priors.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AnchoredTerms {
+    pub effect: String,
+    pub terms: usize,
+    /// Their name without the term's number (`rate_error_`), and their unit.
+    pub stem: String,
+    pub unit: String,
+    /// The RMS of value/prior over the terms: about 1 where the nuisance is as large as its
+    /// prior says.
+    pub over_prior: f64,
+}
+
+/// The anchored parameters of each effect that has some, in the effects' order.
+pub fn anchored_terms(effects: &[EffectEstimate]) -> Vec<AnchoredTerms> {
     let mut names: Vec<&str> = Vec::new();
     for e in effects.iter().filter(|e| e.anchored) {
         if !names.contains(&e.effect.as_str()) {
@@ -293,26 +305,28 @@ pub fn anchored_summary(effects: &[EffectEstimate]) -> Vec<String> {
     }
     names
         .iter()
-        .map(|name| {
+        .filter_map(|name| {
             let terms: Vec<&EffectEstimate> = effects
                 .iter()
                 .filter(|e| e.anchored && e.effect == *name)
                 .collect();
-            let ratio = (terms
+            let first = terms.first()?;
+            let over_prior = (terms
                 .iter()
                 .map(|e| (e.value / e.prior.max(f64::MIN_POSITIVE)).powi(2))
                 .sum::<f64>()
                 / terms.len() as f64)
                 .sqrt();
-            let first = &terms[0];
-            let stem = first.name.trim_end_matches(|c: char| c.is_ascii_digit());
-            format!(
-                "{name}: {} {stem}* terms of this campaign ({}), each held near zero by its \
-                 prior, fitted at {ratio:.1}x their priors (RMS); not the machine's, not \
-                 listed",
-                terms.len(),
-                first.unit
-            )
+            Some(AnchoredTerms {
+                effect: (*name).to_owned(),
+                terms: terms.len(),
+                stem: first
+                    .name
+                    .trim_end_matches(|c: char| c.is_ascii_digit())
+                    .to_owned(),
+                unit: first.unit.clone(),
+                over_prior,
+            })
         })
         .collect()
 }

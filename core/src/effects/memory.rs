@@ -122,18 +122,12 @@ impl Timeline {
 /// but moved the independent simulator's time constant from 886 ± 5 s to 845 ± 4 s against
 /// its 900: the quadratic stays.)
 pub fn rate(line: &Timeline, x: &[f64]) -> Vec<f64> {
-    let (rate, _) = rate_and_window(line, x);
-    rate
+    rate_fit(line, x).0
 }
 
 /// The half-width (s) of the window [`rate`] fits `x` over.
 pub fn rate_window(line: &Timeline, x: &[f64]) -> f64 {
-    rate_and_window(line, x).1
-}
-
-fn rate_and_window(line: &Timeline, x: &[f64]) -> (Vec<f64>, f64) {
-    let (rate, half, _) = rate_fit(line, x);
-    (rate, half)
+    rate_fit(line, x).1
 }
 
 /// [`rate`], the half-width (s) of its window and its estimated error (the RMS over the

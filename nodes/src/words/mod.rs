@@ -142,6 +142,16 @@ fn values(params: &[rpkm_core::calib::EffectEstimate]) -> String {
     shown.join(", ")
 }
 
+/// "thermal_lag:rods: 9 rate_error_* terms of this campaign (K/s), each held near zero by its
+/// prior, fitted at 1.2x their priors (RMS); not the machine's, not listed".
+pub fn anchored(a: &rpkm_core::calib::AnchoredTerms) -> String {
+    format!(
+        "{}: {} {}* terms of this campaign ({}), each held near zero by its prior, fitted at \
+         {:.1}x their priors (RMS); not the machine's, not listed",
+        a.effect, a.terms, a.stem, a.unit, a.over_prior
+    )
+}
+
 /// "tau not fitted: no sensitivity at its start 0 s (...)", per effect parameter not fitted.
 pub fn held(params: &[rpkm_core::calib::EffectEstimate]) -> Vec<String> {
     params
