@@ -303,11 +303,12 @@ fn a_settled_family_keeps_no_part_of_unphysical_value() {
 /// A machine of the twin whose rods expand (9.6 ppm/K) under a thermometer 913 s behind
 /// them (seed 1's machine 7 of the lag class). The self-calibration's encoders resolve the
 /// rods' temperature finer than the thermometer's rate (a fit over minutes, times a lag of a
-/// quarter of an hour) gives it. Before, the fit took that rate's error for the expansion:
-/// α 11.52 ± 0.17 ppm/K and τ 702 ± 17 s, 11σ and 12σ from the twin's. The lag now carries
-/// the rate's error as smooth terms held near zero by its estimated size (α 9.04 ± 0.75,
-/// τ 1000 ± 110 s); the loop names the pair and ends `nothing_missing`, and the terms are
-/// summed up in a line, not listed as the machine's nor written to the calibration file.
+/// quarter of an hour) gives it. Taken as exact, that rate's error was taken for the
+/// expansion: α 11.52 ± 0.17 ppm/K and τ 702 ± 17 s, 11σ and 12σ from the twin's. The
+/// thermometer's fit now carries its error, as modes held near zero by their exact σ (α
+/// 10.45 ± 0.73, τ 812 ± 81 s); the loop names the pair and ends `nothing_missing`, and the
+/// modes are summed up in a line each, not listed as the machine's nor written to the
+/// calibration file.
 #[test]
 fn a_lag_fit_carries_the_thermometers_rate_error() {
     let dir = std::env::temp_dir().join(format!("rpkm-lag-{}-rate-error", std::process::id()));
@@ -383,4 +384,64 @@ fn a_lag_fit_carries_the_thermometers_rate_error() {
         .find(|l| l.contains("rate_error_* terms of this campaign (K/s)"))
         .unwrap_or_else(|| panic!("no line on the rate's error in\n{text}"));
     assert!(summed.contains("held near zero by its prior"), "{summed}");
+    assert!(
+        text.lines().any(|l| l.contains("thermal:rods: ")
+            && l.contains("temp_error_* terms of this campaign (K)")),
+        "no line on the temperature's error in\n{text}"
+    );
+    assert!(!text.contains("temp_error_0 "), "{text}");
+}
+
+/// A machine of the twin whose frame and scales expand (24.9 and 18.9 ppm/K) under a
+/// thermometer 1067 s behind them (seed 7's machine 3 of the lag class). The held-out
+/// campaign's thermometer has its own error, which the lag carries into the prediction there
+/// as in the calibration: the held-out judge's floor now holds it, at the priors of the
+/// held-out campaign's own modes, and says so. Before, the true model fitted to its twin's
+/// values (α 24.91 ± 0.09 and 18.69 ± 0.09 ppm/K) was judged NOT to agree with the held-out
+/// data (25.3 µm against a floor of 24.5, p = 4e-4), and the loop ended
+/// `unexplained_structure`.
+#[test]
+fn the_held_out_floor_holds_the_held_out_thermometers_error() {
+    let dir = std::env::temp_dir().join(format!("rpkm-lag-{}-floor", std::process::id()));
+    let (lines, o) = lag_machine(7, 3, &dir);
+    assert_eq!(
+        o["named"],
+        serde_json::json!(["thermal", "thermal_lag"]),
+        "{lines}"
+    );
+    assert_eq!(o["final_verdict"], "nothing_missing", "{lines}");
+    let d = Command::new(env!("CARGO_BIN_EXE_rpkm"))
+        .arg("diagnose")
+        .arg(dir.join("cal.csv"))
+        .arg("--validate")
+        .arg(dir.join("val.csv"))
+        .args(["--effects", "thermal:frame+scales,thermal_lag:frame+scales"])
+        .output()
+        .expect("run rpkm");
+    assert!(d.status.success(), "{}", String::from_utf8_lossy(&d.stderr));
+    let text = String::from_utf8_lossy(&d.stdout).into_owned();
+    let judge = text
+        .lines()
+        .find(|l| l.contains("held-out judge:"))
+        .unwrap_or_else(|| panic!("no judge in\n{text}"));
+    assert!(
+        judge.contains("the held-out data agree with the model"),
+        "{judge}"
+    );
+    assert!(
+        judge.contains("and the held-out campaign's own thermometer error ("),
+        "{judge}"
+    );
+    // the floor is more than the noise's: "against the model's floor F µm (the noise N µm"
+    let number = |after: &str| -> f64 {
+        judge[judge.find(after).expect(after) + after.len()..]
+            .split_whitespace()
+            .next()
+            .and_then(|w| w.parse().ok())
+            .expect("a figure")
+    };
+    assert!(
+        number("the model's floor ") > number("(the noise "),
+        "{judge}"
+    );
 }

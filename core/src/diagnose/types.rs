@@ -622,8 +622,10 @@ pub struct HeldOutCheck {
     /// `noise_floor_um`, `noise_floor_relative_um`, in µm as every length of this struct).
     #[serde(flatten, serialize_with = "figures_as_um")]
     pub figures: super::held_out::figures::HeldOut,
-    /// The floor of this calibrated model with each setup's zero removed: the noise and
-    /// what the calibration's own uncertainty predicts at these poses.
+    /// The floor of this calibrated model with each setup's zero removed: the noise, what
+    /// the calibration's own uncertainty predicts at these poses, and what the held-out
+    /// campaign's own nuisances do at their priors (`nuisance_terms`: a thermometer's error
+    /// modes there).
     #[serde(rename = "floor_relative_um", serialize_with = "as_um")]
     pub floor_relative: f64,
     /// Σ (e/σ)² of the zero-removed errors against that floor (scaled to its degrees of
@@ -643,6 +645,8 @@ pub struct HeldOutCheck {
     pub structured: bool,
     /// The term the held-out residual follows most, where it follows one.
     pub follows: Option<sparse::Pointer>,
+    /// How many nuisances of the held-out campaign's own (anchored) are in the floor.
+    pub nuisance_terms: usize,
 }
 
 impl HeldOutCheck {

@@ -21,16 +21,24 @@
 //! `T_part − τ · dT/dt`, so the part's strain is `α · (T − T_ref) + α·τ · dT/dt`. Its
 //! parameters are the products `lag_PART` = α·τ (ppm·s/K), linear in the rows like the
 //! coefficients (a time constant of its own would move nothing while α is zero); beside
-//! `thermal`, τ = lag/α. The rate is the thermometer's along the campaign's time
-//! ([`super::memory::rate`]). A part that lags its thermometer has a negative τ (to first
+//! `thermal`, τ = lag/α. The rate is the thermometer's along the campaign's time (below).
+//! A part that lags its thermometer has a negative τ (to first
 //! order in τ; a written `lag(temp_machine, tau)` is exact both ways, docs/effects.md). It
 //! is a candidate only beside `thermal` ([`Effect::beside`]).
 //!
-//! The rate is a fit over minutes of noisy readings, and the self-calibration resolves a
-//! part's temperature finer than that rate times a lag gives it: `thermal_lag` fits the
-//! rate's error too, as smooth terms in time (`rate_error_k`, K/s, multiplying each part's
-//! lag), each anchored near zero by the rate's own estimated error (`Wander`). Taken as
-//! exact, the rate's error moved the expansion and the lag by up to 12σ on the twin.
+//! A thermometer's readings hold its noise. The expansion of each reading puts α times it
+//! into every row, and a fit sheds it by lowering α (on the twin's lag class a lag and an
+//! encoder scale then took the expansion over); a rate fitted over a window misjudges its
+//! own error. Each part reading a column therefore reads the column's least-squares fit in
+//! smooth terms over the campaign's time, and `thermal_lag` its derivative
+//! ([`memory::carried_temperature`], [`memory::carried_rate`]), where that fit holds the
+//! readings to their noise; the fit's error is fitted too, as its modes (`temp_error_k`, K,
+//! multiplying each part's α; `rate_error_k`, K/s, each part's lag), each anchored near zero
+//! by its exact σ. Taken as exact, the rate's error moved the expansion and the lag by up
+//! to 12σ on the twin; with both carried, α was within 3σ of the twin's on all 54 parts of
+//! the lag class's seeds 1-3 (48 before). Where the fit does not hold (a temperature set in
+//! steps, too few times), the reading and [`memory::rate`] are read as they are, with no
+//! modes.
 
 use super::effect::{covariate_column, Bound, Delta, Effect, EffectParam, NotApplicable};
 use super::memory::{self, Timeline};
@@ -167,26 +175,25 @@ impl Effect for Thermal {
         self.open
     }
     fn bind(&self, campaign: &Campaign, p: &Params) -> Result<Box<dyn Bound>, NotApplicable> {
-        // most campaigns have one thermometer for all four: its strain (a rate is a fit over
-        // the whole campaign) made once
-        let mut made: Vec<(&str, Vec<f64>)> = Vec::new();
-        let mut strain = |name: &'static str| -> Result<Vec<f64>, NotApplicable> {
-            let column = Self::column_of(campaign, name);
-            if let Some((_, s)) = made.iter().find(|(c, _)| *c == column) {
-                return Ok(s.clone());
+        // most campaigns have one thermometer for all four: its strain (a temperature and a
+        // rate are fits over the whole campaign) made once
+        let names = ["temp_rods", "temp_frame", "temp_guide1", "temp_guide2"];
+        let mut columns: Vec<&str> = Vec::new();
+        let read = |part: usize| -> &[&'static str] {
+            match part {
+                0 => &names[..1],
+                1 => &names[1..2],
+                _ => &names[2..],
             }
-            let s = self.strain_column(campaign, column)?;
-            made.push((column, s.clone()));
-            Ok(s)
         };
-        let rods = strain("temp_rods")?;
-        let frame = strain("temp_frame")?;
-        let guide1 = strain("temp_guide1")?;
-        let guide2 = strain("temp_guide2")?;
-        let wander = match self.reads {
-            Reads::Rate => self.wander(campaign)?,
-            Reads::Temperature => Wander::default(),
-        };
+        for &part in &self.parts {
+            for name in read(part) {
+                let column = Self::column_of(campaign, name);
+                if !columns.contains(&column) {
+                    columns.push(column);
+                }
+            }
+        }
         let mut params: Vec<EffectParam> = self
             .parts
             .iter()
@@ -201,29 +208,47 @@ impl Effect for Thermal {
                 }
             })
             .collect();
-        let first_wander = params.len();
-        params.extend(
-            wander
-                .sigma
-                .iter()
-                .enumerate()
-                .map(|(k, &s)| EffectParam::new(format!("rate_error_{k}"), "K/s", s).anchored(s)),
-        );
+        let mut strains = Vec::new();
+        let mut carried = Vec::new();
+        for column in &columns {
+            let (strain, modes) = self.strain_column(campaign, column)?;
+            strains.push(strain);
+            let first = params.len();
+            params.extend(modes.sigma.iter().enumerate().map(|(k, &s)| {
+                EffectParam::new(self.error_name(column, k), self.reads.unit(), s).anchored(s)
+            }));
+            carried.push(Errors {
+                first,
+                modes: modes.basis,
+            });
+        }
+        let at = |name: &str| {
+            let column = Self::column_of(campaign, name);
+            columns.iter().position(|c| *c == column)
+        };
+        let [rods, frame, guide1, guide2] = names.map(at);
         Ok(Box::new(BoundThermal {
             params,
-            first_wander,
-            wander: wander.basis,
+            carried,
+            strains,
             slot: std::array::from_fn(|k| self.parts.iter().position(|&j| j == k)),
             rods,
             frame,
             // carriers 2, 3 ride on guide 1; 1, 4 on guide 2 (spec, frames)
-            scales: (0..campaign.poses.len())
-                .map(|i| [guide2[i], guide1[i], guide1[i], guide2[i]])
-                .collect(),
+            scales: [guide2, guide1, guide1, guide2],
             lengths: RODS.iter().map(|r| (r.l, p[r.l])).collect(),
             guides: vec![(D1, p[D1]), (D2, p[D2])],
             q: campaign.poses.iter().map(|p| p.q).collect(),
         }))
+    }
+}
+
+impl Reads {
+    fn unit(self) -> &'static str {
+        match self {
+            Reads::Temperature => "K",
+            Reads::Rate => "K/s",
+        }
     }
 }
 
@@ -237,25 +262,60 @@ impl Thermal {
         }
     }
 
-    /// (T − T_ref) · 1e-6 per pose from column `name`, or `temp_machine` without it: the
-    /// strain per ppm/K; for `thermal_lag`, dT/dt · 1e-6, the strain per ppm·s/K.
-    fn strain_column(&self, campaign: &Campaign, name: &str) -> Result<Vec<f64>, NotApplicable> {
+    /// (T − T_ref) · 1e-6 per pose from column `name`: the strain per ppm/K; for
+    /// `thermal_lag`, dT/dt · 1e-6, the strain per ppm·s/K. Both from the reading's fit over
+    /// the campaign's time where it holds the reading to its noise, with the modes of its
+    /// error the fit carries ([`memory::carried_temperature`], [`memory::carried_rate`]);
+    /// else the reading itself (a temperature) or [`memory::rate`], and no modes.
+    fn strain_column(
+        &self,
+        campaign: &Campaign,
+        name: &str,
+    ) -> Result<(Vec<f64>, Wander), NotApplicable> {
         let temps = self.temperatures(campaign, name)?;
-        if self.reads == Reads::Temperature {
-            return Ok(temps
-                .iter()
-                .map(|t| fraction_from_ppm(t - self.reference_c))
-                .collect());
-        }
         let t: Vec<f64> = campaign.poses.iter().map(|p| p.t).collect();
-        let line = Timeline::new(&t).map_err(|e| NotApplicable {
-            effect: self.name.clone(),
-            reason: format!("the thermometers' rate {e} in {}", campaign.source),
-        })?;
-        Ok(memory::rate(&line, &temps)
-            .iter()
-            .map(|r| fraction_from_ppm(*r))
-            .collect())
+        let line = Timeline::new(&t);
+        let (values, wander) = match (self.reads, line) {
+            (Reads::Temperature, Ok(line)) => match memory::carried_temperature(&line, &temps) {
+                Some(c) => (c.value, Wander::from(c.modes, c.sigma)),
+                None => (temps, Wander::default()),
+            },
+            (Reads::Temperature, Err(_)) => (temps, Wander::default()),
+            (Reads::Rate, Ok(line)) => match memory::carried_rate(&line, &temps) {
+                Some(c) => (c.value, Wander::from(c.modes, c.sigma)),
+                None => (memory::rate(&line, &temps), Wander::default()),
+            },
+            (Reads::Rate, Err(e)) => {
+                return Err(NotApplicable {
+                    effect: self.name.clone(),
+                    reason: format!("the thermometers' rate {e} in {}", campaign.source),
+                })
+            }
+        };
+        let reference = match self.reads {
+            Reads::Temperature => self.reference_c,
+            Reads::Rate => 0.0,
+        };
+        Ok((
+            values
+                .iter()
+                .map(|v| fraction_from_ppm(v - reference))
+                .collect(),
+            wander,
+        ))
+    }
+
+    /// The name of the `k`-th mode of the error of column `column`'s temperature (or rate).
+    fn error_name(&self, column: &str, k: usize) -> String {
+        let what = match self.reads {
+            Reads::Temperature => "temp_error",
+            Reads::Rate => "rate_error",
+        };
+        if column == COVARIATE {
+            format!("{what}_{k}")
+        } else {
+            format!("{column}_{what}_{k}")
+        }
     }
 
     /// The temperature part `name` reads at every pose (`temp_machine` where the campaign
@@ -279,56 +339,40 @@ impl Thermal {
     }
 }
 
-/// A lagging thermometer's rate error as a smooth function of the campaign's time: Legendre
-/// polynomials over the campaign, two per half-width of the rate's window plus one, each
-/// with the σ that spreads the rate's estimated error evenly over them.
+/// The modes of a thermometer's smooth error (its temperature's or rate's) that a fit
+/// carries: each at every pose, and its σ.
 #[derive(Default)]
 struct Wander {
-    /// Per term, its value at each pose.
     basis: Vec<Vec<f64>>,
     sigma: Vec<f64>,
 }
 
-impl Thermal {
-    fn wander(&self, campaign: &Campaign) -> Result<Wander, NotApplicable> {
-        let temps = self.temperatures(campaign, COVARIATE)?;
-        let t: Vec<f64> = campaign.poses.iter().map(|p| p.t).collect();
-        let Ok(line) = Timeline::new(&t) else {
-            return Ok(Wander::default());
-        };
-        let (_, half, error) = memory::rate_fit(&line, &temps);
-        let Some(basis) = memory::smooth_terms(&t, half).filter(|_| error > 0.0) else {
-            return Ok(Wander::default());
-        };
-        let n = basis.len();
-        Ok(Wander {
-            basis,
-            sigma: {
-                // the rate's error is the readings' noise differentiated: its power grows
-                // with the square of the frequency, a term's with (k + ½)², and the terms
-                // together make the rate's estimated error (a Legendre term's mean square
-                // over the campaign is 1/(2k + 1))
-                let power = |k: usize| (k as f64 + 0.5).powi(2);
-                let total: f64 = (0..n).map(power).sum();
-                (0..n)
-                    .map(|k| error * (power(k) * (2 * k + 1) as f64 / total).sqrt())
-                    .collect()
-            },
-        })
+impl Wander {
+    fn from(basis: Vec<Vec<f64>>, sigma: Vec<f64>) -> Wander {
+        Wander { basis, sigma }
     }
+}
+
+/// One thermometer's error modes in a bound effect: the index of the first in the
+/// parameters, and each at every pose.
+struct Errors {
+    first: usize,
+    modes: Vec<Vec<f64>>,
 }
 
 struct BoundThermal {
     params: Vec<EffectParam>,
-    /// The index of the first rate-error term in `params`, and each term per pose.
-    first_wander: usize,
-    wander: Vec<Vec<f64>>,
+    /// Per column read, its strain per unit of the part's parameter at every pose, and its
+    /// error modes.
+    strains: Vec<Vec<f64>>,
+    carried: Vec<Errors>,
     /// Each part's index in `params` (None: not in the model).
     slot: [Option<usize>; 3],
-    /// Strain per ppm/K of each part, per pose.
-    rods: Vec<f64>,
-    frame: Vec<f64>,
-    scales: Vec<[f64; 4]>,
+    /// The column each part reads (an index into `strains`; None: no part of the model
+    /// reads it): the rods, the frame, and the scale of each carrier.
+    rods: Option<usize>,
+    frame: Option<usize>,
+    scales: [Option<usize>; 4],
     /// (parameter index, value) of the rod lengths and guide positions.
     lengths: Vec<(usize, f64)>,
     guides: Vec<(usize, f64)>,
@@ -336,44 +380,68 @@ struct BoundThermal {
     q: Vec<[f64; 4]>,
 }
 
+impl BoundThermal {
+    /// Column `c`'s strain at `pose` with its error modes at `theta`.
+    fn strain(&self, c: usize, pose: usize, theta: &[f64]) -> f64 {
+        let errors = &self.carried[c];
+        self.strains[c][pose]
+            + errors
+                .modes
+                .iter()
+                .enumerate()
+                .map(|(j, m)| fraction_from_ppm(theta[errors.first + j] * m[pose]))
+                .sum::<f64>()
+    }
+
+    /// Adds `scale` · (part parameter `k`'s strain of column `c`) to `value` and its
+    /// partials (by the part's parameter and by the column's modes) through `into`.
+    #[allow(clippy::too_many_arguments)]
+    fn add(
+        &self,
+        (k, c): (usize, usize),
+        pose: usize,
+        theta: &[f64],
+        scale: f64,
+        value: &mut f64,
+        partials: &mut [Delta],
+        into: impl Fn(&mut Delta) -> &mut f64,
+    ) {
+        let e = self.strain(c, pose, theta);
+        *value += theta[k] * e * scale;
+        *into(&mut partials[k]) += e * scale;
+        let errors = &self.carried[c];
+        for (j, m) in errors.modes.iter().enumerate() {
+            *into(&mut partials[errors.first + j]) += fraction_from_ppm(theta[k] * m[pose]) * scale;
+        }
+    }
+}
+
 impl Bound for BoundThermal {
     fn params(&self) -> &[EffectParam] {
         &self.params
     }
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
-        // the rate's error at this pose (strain per ppm·s/K), and the terms it is made of
-        let terms = self.first_wander..self.first_wander + self.wander.len();
-        let err: f64 = terms
-            .clone()
-            .zip(&self.wander)
-            .map(|(j, b)| fraction_from_ppm(theta[j] * b[pose]))
-            .sum::<f64>();
-        let (er, ef) = (self.rods[pose] + err, self.frame[pose] + err);
-        if let Some(k) = self.slot[0] {
+        if let (Some(k), Some(c)) = (self.slot[0], self.rods) {
             for &(i, l) in &self.lengths {
-                value.dp[i] += theta[k] * er * l;
-                partials[k].dp[i] += er * l;
-                for (j, b) in terms.clone().zip(&self.wander) {
-                    partials[j].dp[i] += fraction_from_ppm(theta[k] * b[pose]) * l;
-                }
+                self.add((k, c), pose, theta, l, &mut value.dp[i], partials, |d| {
+                    &mut d.dp[i]
+                });
             }
         }
-        if let Some(k) = self.slot[1] {
+        if let (Some(k), Some(c)) = (self.slot[1], self.frame) {
             for &(i, d) in &self.guides {
-                value.dp[i] += theta[k] * ef * d;
-                partials[k].dp[i] += ef * d;
-                for (j, b) in terms.clone().zip(&self.wander) {
-                    partials[j].dp[i] += fraction_from_ppm(theta[k] * b[pose]) * d;
-                }
+                self.add((k, c), pose, theta, d, &mut value.dp[i], partials, |p| {
+                    &mut p.dp[i]
+                });
             }
         }
         if let Some(k) = self.slot[2] {
             for a in 0..4 {
-                let e = (self.scales[pose][a] + err) * self.q[pose][a];
-                value.dq[a] += theta[k] * e;
-                partials[k].dq[a] += e;
-                for (j, b) in terms.clone().zip(&self.wander) {
-                    partials[j].dq[a] += fraction_from_ppm(theta[k] * b[pose]) * self.q[pose][a];
+                if let Some(c) = self.scales[a] {
+                    let q = self.q[pose][a];
+                    self.add((k, c), pose, theta, q, &mut value.dq[a], partials, |d| {
+                        &mut d.dq[a]
+                    });
                 }
             }
         }

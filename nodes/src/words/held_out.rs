@@ -26,9 +26,16 @@ pub fn held_out_judge(h: &HeldOutCheck) -> String {
 /// the model's floor 5.4 µm (...; p = 1.2e-30)", and where the residual is structured, that
 /// and its p-value, then what it follows.
 pub fn held_out(h: &HeldOutCheck) -> String {
+    let made_of = match h.nuisance_terms {
+        0 => " and the calibration's own uncertainty".to_owned(),
+        k => format!(
+            ", the calibration's own uncertainty and the held-out campaign's own thermometer \
+             error ({k} terms at their priors)"
+        ),
+    };
     let mut s = format!(
         "held-out RMS {:.1} µm (each setup's zero removed) against the model's floor {:.1} µm \
-         (the noise {:.1} µm and the calibration's own uncertainty; {})",
+         (the noise {:.1} µm{made_of}; {})",
         um_from_mm(h.rms_relative()),
         um_from_mm(h.floor_relative),
         um_from_mm(h.noise_floor_relative()),

@@ -180,8 +180,9 @@ impl Model1<'_> {
         Ok(&rel * cov * rel.transpose())
     }
 
-    /// The held-out errors' sensitivities to the calibrated parameters (each less its
-    /// setup's mean) and the calibration's covariance of those parameters.
+    /// The held-out errors' sensitivities to the calibrated parameters and to the held-out
+    /// campaign's own nuisances (each less its setup's mean), and the covariance of those:
+    /// the calibration's, and the nuisances' priors.
     fn sensitivities(
         &self,
         val: &Validation,
@@ -199,7 +200,7 @@ impl Model1<'_> {
         // the held-out θ's places in the calibration's θ (machine parameters only)
         let carried: Vec<(usize, usize)> = layout
             .iter()
-            .filter(|s| !s.setup_local)
+            .filter(|s| !s.setup_local && s.param.anchor.is_none())
             .filter_map(|s| {
                 cal_layout
                     .iter()
@@ -207,7 +208,13 @@ impl Model1<'_> {
                     .map(|c| (s.index, c.index))
             })
             .collect();
-        let m = N_PARAMS + carried.len();
+        // the held-out campaign's own nuisances (a thermometer's error modes there), at zero
+        // in θ: their priors are as much a part of the prediction's uncertainty
+        let own: Vec<(usize, f64)> = layout
+            .iter()
+            .filter_map(|s| s.param.anchor.map(|sigma| (s.index, sigma)))
+            .collect();
+        let m = N_PARAMS + carried.len() + own.len();
         let mut j = DMatrix::zeros(n, m);
         for i in 0..N_PARAMS {
             if cal.covariance[(i, i)] <= 0.0 {
@@ -225,28 +232,13 @@ impl Model1<'_> {
                 j[(r, i)] = (eu[r].value - ed[r].value) / (2.0 * h);
             }
         }
-        for (c, &(k, _)) in carried.iter().enumerate() {
+        let effect_params = carried.iter().map(|c| c.0).chain(own.iter().map(|o| o.0));
+        for (c, k) in effect_params.enumerate() {
             for r in 0..n {
                 j[(r, N_PARAMS + c)] = base[r].d_theta.get(k).copied().unwrap_or(0.0);
             }
         }
-        let mut cov = DMatrix::zeros(m, m);
-        for a in 0..N_PARAMS {
-            for b in 0..N_PARAMS {
-                cov[(a, b)] = cal.covariance[(a, b)];
-            }
-        }
-        for (c, &(_, kc)) in carried.iter().enumerate() {
-            for a in 0..N_PARAMS {
-                let v = cal.covariance_p_theta.get((a, kc)).copied().unwrap_or(0.0);
-                cov[(a, N_PARAMS + c)] = v;
-                cov[(N_PARAMS + c, a)] = v;
-            }
-            for (d, &(_, kd)) in carried.iter().enumerate() {
-                cov[(N_PARAMS + c, N_PARAMS + d)] =
-                    cal.covariance_theta.get((kc, kd)).copied().unwrap_or(0.0);
-            }
-        }
+        let cov = covariance(cal, &carried, &own);
         // each error less its setup's mean, in the sensitivities alike
         let mut rel = j.clone();
         let count = group_sums(&val.zero, &vec![1.0; n]);
@@ -260,6 +252,36 @@ impl Model1<'_> {
         }
         Ok((rel, cov))
     }
+}
+
+/// The covariance of the parameters a held-out prediction reads: the geometry and the
+/// `carried` effect parameters ((held-out index, calibration index)) as the calibration
+/// estimated them, then the held-out campaign's `own` nuisances ((index, σ)) at their priors,
+/// independent of the rest.
+fn covariance(cal: &Calibration, carried: &[(usize, usize)], own: &[(usize, f64)]) -> DMatrix<f64> {
+    let m = N_PARAMS + carried.len() + own.len();
+    let mut cov = DMatrix::zeros(m, m);
+    for a in 0..N_PARAMS {
+        for b in 0..N_PARAMS {
+            cov[(a, b)] = cal.covariance[(a, b)];
+        }
+    }
+    for (c, &(_, kc)) in carried.iter().enumerate() {
+        for a in 0..N_PARAMS {
+            let v = cal.covariance_p_theta.get((a, kc)).copied().unwrap_or(0.0);
+            cov[(a, N_PARAMS + c)] = v;
+            cov[(N_PARAMS + c, a)] = v;
+        }
+        for (d, &(_, kd)) in carried.iter().enumerate() {
+            cov[(N_PARAMS + c, N_PARAMS + d)] =
+                cal.covariance_theta.get((kc, kd)).copied().unwrap_or(0.0);
+        }
+    }
+    for (c, &(_, sigma)) in own.iter().enumerate() {
+        let at = N_PARAMS + carried.len() + c;
+        cov[(at, at)] = sigma * sigma;
+    }
+    cov
 }
 
 /// Levels of the held-out tests: the χ² against the floor (one test, at the diagnosis's
@@ -329,6 +351,12 @@ pub(crate) fn judge(
         structure_p: shape.smallest_p(),
         structured,
         follows: structured.then(|| dictionary.pointer.clone()).flatten(),
+        nuisance_terms: refit
+            .set
+            .layout()
+            .iter()
+            .filter(|s| s.param.anchor.is_some())
+            .count(),
         figures: held,
     })
 }
