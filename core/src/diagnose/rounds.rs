@@ -227,8 +227,8 @@ fn candidates_of<'a>(
 
 /// The weights the candidates are compared with: the noise estimated under the current model
 /// (settled) with round 1's significant candidates (fitted together, else the strongest
-/// alone) and the names of those; the current model's own where none stood out (then
-/// `true`: the current model's calibration is the comparison's).
+/// alone) and the names of those; the current model's own where none stood out or none of
+/// them can be fitted (then `true`: the current model's calibration is the comparison's).
 fn comparison_weights(
     (campaign, opts): (&Campaign, &DiagnosisOptions),
     current: &Current,
@@ -243,9 +243,13 @@ fn comparison_weights(
         (under, copts)
     } else {
         // the significant candidates together cannot be fitted (one absorbs another to a
-        // singular step): the strongest alone
+        // singular step): the strongest alone, else the current model's own (the comparison
+        // is then the current model's, and no fit of a candidate is called the current
+        // model's)
         let one = noise_model(settled, round1, tried, Candidates::Strongest);
-        let (_, _, copts) = noise_of(campaign, &one, opts, None)?;
+        let Ok((_, _, copts)) = noise_of(campaign, &one, opts, None) else {
+            return Ok((current.copts.clone(), Vec::new(), true));
+        };
         (one, copts)
     };
     let names = under[settled.len()..]

@@ -266,7 +266,7 @@ fn quadratic_slope(t: &[f64], x: &[f64], at: f64) -> (f64, f64) {
 
 /// A thermometer's temperature or rate for a fit that carries its smooth error
 /// ([`carried_temperature`], [`carried_rate`]), row order.
-pub struct Carried {
+pub struct CarriedReading {
     /// The temperature (or rate) at every row.
     pub value: Vec<f64>,
     /// The modes of its smooth error: each at every row, and its standard deviation (K, or
@@ -314,6 +314,31 @@ impl Smooth {
         off / (rows.saturating_sub(n).max(1) as f64) <= HELD_TO_NOISE * self.noise.powi(2)
     }
 
+    /// Whether the reading moves beyond its noise over the campaign: the fit's terms but the
+    /// constant, against their covariance, at [`MOVES_LEVEL`]. A temperature that does not
+    /// move holds no expansion to carry, and the modes would let α · mode stand for
+    /// anything (on the series' machines held at 20 °C, α ran to −20000 ± 80000 ppm/K).
+    fn moves(&self) -> bool {
+        let n = self.v.ncols();
+        if n < 2 {
+            return false;
+        }
+        let Some(covariance) = self.covariance() else {
+            return false;
+        };
+        let coef = &self.projection * nalgebra::DVector::from_column_slice(&self.xs);
+        let a = coef.rows(1, n - 1).into_owned();
+        let Some(inverse) = covariance
+            .view((1, 1), (n - 1, n - 1))
+            .into_owned()
+            .try_inverse()
+        else {
+            return false;
+        };
+        let chi2 = (a.transpose() * inverse * &a)[(0, 0)];
+        crate::stats::chi2_upper_tail(chi2, (n - 1) as f64) < MOVES_LEVEL
+    }
+
     /// The covariance of the coefficients of the reading's fit in the terms.
     fn covariance(&self) -> Option<nalgebra::DMatrix<f64>> {
         Some((self.v.transpose() * &self.v).try_inverse()? * self.noise.powi(2))
@@ -340,7 +365,7 @@ impl Smooth {
         line: &Timeline,
         value: &[f64],
         covariance: nalgebra::DMatrix<f64>,
-    ) -> Carried {
+    ) -> CarriedReading {
         let n = covariance.nrows();
         let eigen = nalgebra::SymmetricEigen::new(covariance);
         let mut order: Vec<usize> = (0..n).collect();
@@ -366,7 +391,7 @@ impl Smooth {
             modes.push(line.unsorted(&mode));
             sigma.push(eigen.eigenvalues[j].sqrt());
         }
-        Carried {
+        CarriedReading {
             value: line.unsorted(value),
             modes,
             sigma,
@@ -377,6 +402,10 @@ impl Smooth {
 /// The most a smooth fit's residual may exceed the readings' noise, in mean square, for
 /// [`carried_temperature`] to stand for the reading.
 const HELD_TO_NOISE: f64 = 2.0;
+
+/// The level at which a reading's fit must move for [`carried_temperature`] and
+/// [`carried_rate`] to stand for it ([`Smooth::moves`]).
+const MOVES_LEVEL: f64 = 1e-3;
 
 /// The temperature of `x` for a fit that carries its smooth error, and that error's modes.
 ///
@@ -389,9 +418,9 @@ const HELD_TO_NOISE: f64 = 2.0;
 /// twin's lag class the terms missed the temperature by at most 5e-4 K where its noise was
 /// 0.01 K; each mode's error over its σ had an RMS of 0.4-1.5.) None where the times span
 /// nothing or the readings show no noise.
-pub fn carried_temperature(line: &Timeline, x: &[f64]) -> Option<Carried> {
+pub fn carried_temperature(line: &Timeline, x: &[f64]) -> Option<CarriedReading> {
     let smooth = Smooth::of(line, x)?;
-    if !smooth.holds() {
+    if !smooth.holds() || !smooth.moves() {
         return None;
     }
     let coef = &smooth.projection * nalgebra::DVector::from_column_slice(&smooth.xs);
@@ -407,9 +436,9 @@ pub fn carried_temperature(line: &Timeline, x: &[f64]) -> Option<Carried> {
 /// so: on the twin's lag class its error in the terms was up to 40 times what the
 /// readings' noise made there (the quadratic's bend, misjudged from the width before), a
 /// size no prior knows. None where [`carried_temperature`] is.
-pub fn carried_rate(line: &Timeline, x: &[f64]) -> Option<Carried> {
+pub fn carried_rate(line: &Timeline, x: &[f64]) -> Option<CarriedReading> {
     let smooth = Smooth::of(line, x)?;
-    if !smooth.holds() {
+    if !smooth.holds() || !smooth.moves() {
         return None;
     }
     let derivative = smooth.derivative(line);

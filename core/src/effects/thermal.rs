@@ -393,25 +393,23 @@ impl BoundThermal {
                 .sum::<f64>()
     }
 
-    /// Adds `scale` · (part parameter `k`'s strain of column `c`) to `value` and its
-    /// partials (by the part's parameter and by the column's modes) through `into`.
-    #[allow(clippy::too_many_arguments)]
+    /// Adds `scale` · (part parameter `k`'s strain of column `c`) at `pose` with `theta` to
+    /// the coordinate `at` picks of `value` and of the partials (by the part's parameter and
+    /// by the column's modes).
     fn add(
         &self,
         (k, c): (usize, usize),
-        pose: usize,
-        theta: &[f64],
+        (pose, theta): (usize, &[f64]),
         scale: f64,
-        value: &mut f64,
-        partials: &mut [Delta],
-        into: impl Fn(&mut Delta) -> &mut f64,
+        (value, partials): (&mut Delta, &mut [Delta]),
+        at: impl Fn(&mut Delta) -> &mut f64,
     ) {
         let e = self.strain(c, pose, theta);
-        *value += theta[k] * e * scale;
-        *into(&mut partials[k]) += e * scale;
+        *at(value) += theta[k] * e * scale;
+        *at(&mut partials[k]) += e * scale;
         let errors = &self.carried[c];
         for (j, m) in errors.modes.iter().enumerate() {
-            *into(&mut partials[errors.first + j]) += fraction_from_ppm(theta[k] * m[pose]) * scale;
+            *at(&mut partials[errors.first + j]) += fraction_from_ppm(theta[k] * m[pose]) * scale;
         }
     }
 }
@@ -421,16 +419,17 @@ impl Bound for BoundThermal {
         &self.params
     }
     fn correct(&self, pose: usize, theta: &[f64], value: &mut Delta, partials: &mut [Delta]) {
+        let here = (pose, theta);
         if let (Some(k), Some(c)) = (self.slot[0], self.rods) {
             for &(i, l) in &self.lengths {
-                self.add((k, c), pose, theta, l, &mut value.dp[i], partials, |d| {
+                self.add((k, c), here, l, (&mut *value, &mut *partials), |d| {
                     &mut d.dp[i]
                 });
             }
         }
         if let (Some(k), Some(c)) = (self.slot[1], self.frame) {
             for &(i, d) in &self.guides {
-                self.add((k, c), pose, theta, d, &mut value.dp[i], partials, |p| {
+                self.add((k, c), here, d, (&mut *value, &mut *partials), |p| {
                     &mut p.dp[i]
                 });
             }
@@ -439,7 +438,7 @@ impl Bound for BoundThermal {
             for a in 0..4 {
                 if let Some(c) = self.scales[a] {
                     let q = self.q[pose][a];
-                    self.add((k, c), pose, theta, q, &mut value.dq[a], partials, |d| {
+                    self.add((k, c), here, q, (&mut *value, &mut *partials), |d| {
                         &mut d.dq[a]
                     });
                 }

@@ -617,8 +617,8 @@ fn the_diagnosis_does_not_depend_on_the_thread_count() {
 /// candidate fitted to convergence (the reference), on a twin hiding thermal expansion and on
 /// one hiding nothing: the same verdict and named effect, the same held-out figures, the same
 /// significant candidates; every candidate that may be significant (converged p < SCREEN_P)
-/// carries its converged figures, and no candidate the screen let pass could have been
-/// significant.
+/// carries its converged figures (within the fit's convergence), and no candidate the screen
+/// let pass could have been significant.
 #[test]
 fn screened_candidates_change_no_conclusion() {
     let twins = [
@@ -652,11 +652,22 @@ fn screened_candidates_change_no_conclusion() {
                 .expect("the same candidates");
             assert_eq!(s.significant, c.significant, "{label}: {}", c.effect);
             if c.p_value < diagnose::SCREEN_P {
-                assert_eq!(s.f_statistic, c.f_statistic, "{label}: {}", c.effect);
-                assert_eq!(
-                    s.val_rms_after.map(um_from_mm),
-                    c.val_rms_after.map(um_from_mm),
-                    "{label}"
+                // converged both ways; a candidate with anchored terms (thermal's temperature
+                // modes) reaches the minimum from the screen's point and from the current
+                // model's alike within the fit's convergence, not to the bit
+                let near = |a: f64, b: f64| (a - b).abs() <= 1e-6 * a.abs().max(b.abs());
+                assert!(
+                    near(s.f_statistic, c.f_statistic),
+                    "{label}: {}: F {} screened, {} converged",
+                    c.effect,
+                    s.f_statistic,
+                    c.f_statistic
+                );
+                let (a, b) = (s.val_rms_after, c.val_rms_after);
+                assert!(
+                    a.zip(b).map_or(a == b, |(a, b)| near(a, b)),
+                    "{label}: {}: held-out {a:?} screened, {b:?} converged",
+                    c.effect
                 );
             } else {
                 assert!(
