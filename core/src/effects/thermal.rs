@@ -35,10 +35,10 @@
 //! readings to their noise; the fit's error is fitted too, as its modes (`temp_error_k`, K,
 //! multiplying each part's α; `rate_error_k`, K/s, each part's lag), each anchored near zero
 //! by its exact σ. Taken as exact, the rate's error moved the expansion and the lag by up
-//! to 12σ on the twin; with both carried, α was within 3σ of the twin's on all 54 parts of
-//! the lag class's seeds 1-3 (48 before). Where the fit does not hold (a temperature set in
-//! steps, too few times), the reading and [`memory::rate`] are read as they are, with no
-//! modes.
+//! to 12σ on the twin; with both carried, α was within 3σ of the twin's on all 55 parts of
+//! the lag class's seeds 1-3 (48 of 54 before). Where the fit does not hold (a temperature
+//! set in steps, too few times) or the temperature does not move beyond its noise, the
+//! reading and [`memory::rate`] are read as they are, with no modes.
 
 use super::effect::{covariate_column, Bound, Delta, Effect, EffectParam, NotApplicable};
 use super::memory::{self, Timeline};
