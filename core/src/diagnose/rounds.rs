@@ -100,7 +100,7 @@ fn rounds(
         &current,
         &settled,
         (&round1.candidates, &tried),
-    )?;
+    );
     drop(cal1);
     let pinned_second = pinned_beside(&tried, &settled);
     let tried_second = with_pinned(&tried, &pinned_second);
@@ -234,10 +234,10 @@ fn comparison_weights(
     current: &Current,
     settled: &[&dyn Effect],
     (round1, tried): (&[Candidate], &[&dyn Effect]),
-) -> Result<(calib::Options, Vec<String>, bool), DiagnoseError> {
+) -> (calib::Options, Vec<String>, bool) {
     let under = noise_model(settled, round1, tried, Candidates::Significant);
     if under.len() == settled.len() {
-        return Ok((current.copts.clone(), Vec::new(), true));
+        return (current.copts.clone(), Vec::new(), true);
     }
     let (under, copts) = if let Ok((_, _, copts)) = noise_of(campaign, &under, opts, None) {
         (under, copts)
@@ -248,7 +248,7 @@ fn comparison_weights(
         // model's)
         let one = noise_model(settled, round1, tried, Candidates::Strongest);
         let Ok((_, _, copts)) = noise_of(campaign, &one, opts, None) else {
-            return Ok((current.copts.clone(), Vec::new(), true));
+            return (current.copts.clone(), Vec::new(), true);
         };
         (one, copts)
     };
@@ -256,7 +256,7 @@ fn comparison_weights(
         .iter()
         .map(|e| e.name().to_owned())
         .collect();
-    Ok((copts, names, false))
+    (copts, names, false)
 }
 
 /// The diagnosis of noise-free (simulated) data: the stated weights, no noise estimated.

@@ -3,11 +3,6 @@
 //! hidden effect gives no verdict; two effects are found one after the other; an effect
 //! outside the library (backlash) is reported as unexplained residual pointing at its
 //! covariate. The truth is the twin's: which effect it hid, with which magnitude.
-#![expect(
-    clippy::float_cmp,
-    reason = "exact values: parsed, copied or computed without rounding"
-)]
-
 use rand::{rngs::StdRng, Rng, SeedableRng};
 use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::diagnose::{self, DiagnosisOptions, ModelDiagnosis, VerdictKind};
