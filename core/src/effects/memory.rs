@@ -134,18 +134,12 @@ pub fn rate_window(line: &Timeline, x: &[f64]) -> f64 {
     rate_fit(line, x).1
 }
 
-/// [`rate`], the half-width (s) of its window and its estimated error (the RMS over the
-/// rows, K/s for a thermometer: the readings' noise through the fit and the bend it
-/// misses, as the window was chosen by).
-pub fn rate_fit(line: &Timeline, x: &[f64]) -> (Vec<f64>, f64, f64) {
+/// [`rate`] and the half-width (s) of its window.
+fn rate_fit(line: &Timeline, x: &[f64]) -> (Vec<f64>, f64) {
     let xs = line.sorted(x);
     let noise = reading_noise(&line.t, &xs);
     let best = least_error_rate(&line.t, &xs, noise);
-    (
-        line.unsorted(&best.rate),
-        best.half,
-        best.error.max(0.0).sqrt(),
-    )
+    (line.unsorted(&best.rate), best.half)
 }
 
 /// A rate (time order) of a local quadratic, its window's half-width and its estimated
@@ -269,8 +263,14 @@ fn quadratic_slope(t: &[f64], x: &[f64], at: f64) -> (f64, f64) {
 pub struct CarriedReading {
     /// The temperature (or rate) at every row.
     pub value: Vec<f64>,
-    /// The modes of its smooth error: each at every row, and its standard deviation (K, or
-    /// K/s for a rate), largest first.
+    /// The modes of its smooth error.
+    pub errors: Modes,
+}
+
+/// The modes of a reading's smooth error a fit carries: each at every row (row order), and
+/// its standard deviation (K, or K/s for a rate), largest first.
+#[derive(Clone, Debug, Default)]
+pub struct Modes {
     pub modes: Vec<Vec<f64>>,
     pub sigma: Vec<f64>,
 }
@@ -278,57 +278,59 @@ pub struct CarriedReading {
 /// The smooth terms of a column (time order) at its rate's window, their projection, and
 /// what chose them.
 struct Smooth {
-    xs: Vec<f64>,
     noise: f64,
-    /// rows × terms, and terms × rows (least squares).
+    /// rows × terms: each term at every row (time order).
     v: nalgebra::DMatrix<f64>,
-    projection: nalgebra::DMatrix<f64>,
+    /// The reading's least-squares coefficients in the terms, and their covariance
+    /// σ² (VᵀV)⁻¹.
+    coef: nalgebra::DVector<f64>,
+    covariance: nalgebra::DMatrix<f64>,
 }
 
 impl Smooth {
+    /// The fit of `x` in the smooth terms at its rate's window, where it stands for the
+    /// reading: it holds the readings to their noise ([`HELD_TO_NOISE`]: a temperature set
+    /// in steps it does not) and the reading moves beyond its noise ([`MOVES_LEVEL`]: a
+    /// temperature that does not holds no expansion to carry, and its modes would let
+    /// α · mode stand for anything; on the series' machines held at 20 °C, α ran to
+    /// −20000 ± 80000 ppm/K). None where it does not, the times span nothing or the readings
+    /// show no noise.
     fn of(line: &Timeline, x: &[f64]) -> Option<Smooth> {
         let xs = line.sorted(x);
         let noise = reading_noise(&line.t, &xs);
         let half = least_error_rate(&line.t, &xs, noise).half;
         let basis = smooth_terms(&line.t, half).filter(|_| noise > 0.0)?;
         let v = nalgebra::DMatrix::from_fn(line.t.len(), basis.len(), |i, k| basis[k][i]);
-        let projection = (v.transpose() * &v).try_inverse()? * v.transpose();
-        Some(Smooth {
-            xs,
+        let inverse = (v.transpose() * &v).try_inverse()?;
+        let readings = nalgebra::DVector::from_column_slice(&xs);
+        let coef = &inverse * (v.transpose() * &readings);
+        let smooth = Smooth {
             noise,
+            covariance: inverse * noise.powi(2),
+            coef,
             v,
-            projection,
-        })
+        };
+        (smooth.holds(&readings) && smooth.moves()).then_some(smooth)
     }
 
-    /// Whether the terms hold the reading to its noise (a temperature set in steps, say,
-    /// they do not): the residual's mean square against the noise's, with its dof.
-    fn holds(&self) -> bool {
+    /// Whether the terms hold the readings to their noise: the residual's mean square
+    /// against the noise's, with its dof.
+    fn holds(&self, readings: &nalgebra::DVector<f64>) -> bool {
         let (rows, n) = self.v.shape();
-        let fitted = &self.v * (&self.projection * nalgebra::DVector::from_column_slice(&self.xs));
-        let off: f64 = fitted
-            .iter()
-            .zip(&self.xs)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum();
+        let off = (&self.v * &self.coef - readings).norm_squared();
         off / (rows.saturating_sub(n).max(1) as f64) <= HELD_TO_NOISE * self.noise.powi(2)
     }
 
-    /// Whether the reading moves beyond its noise over the campaign: the fit's terms but the
-    /// constant, against their covariance, at [`MOVES_LEVEL`]. A temperature that does not
-    /// move holds no expansion to carry, and the modes would let α · mode stand for
-    /// anything (on the series' machines held at 20 °C, α ran to −20000 ± 80000 ppm/K).
+    /// Whether the reading moves beyond its noise: the fit's terms but the constant, against
+    /// their covariance, at [`MOVES_LEVEL`].
     fn moves(&self) -> bool {
         let n = self.v.ncols();
         if n < 2 {
             return false;
         }
-        let Some(covariance) = self.covariance() else {
-            return false;
-        };
-        let coef = &self.projection * nalgebra::DVector::from_column_slice(&self.xs);
-        let a = coef.rows(1, n - 1).into_owned();
-        let Some(inverse) = covariance
+        let a = self.coef.rows(1, n - 1).into_owned();
+        let Some(inverse) = self
+            .covariance
             .view((1, 1), (n - 1, n - 1))
             .into_owned()
             .try_inverse()
@@ -337,11 +339,6 @@ impl Smooth {
         };
         let chi2 = (a.transpose() * inverse * &a)[(0, 0)];
         crate::stats::chi2_upper_tail(chi2, (n - 1) as f64) < MOVES_LEVEL
-    }
-
-    /// The covariance of the coefficients of the reading's fit in the terms.
-    fn covariance(&self) -> Option<nalgebra::DMatrix<f64>> {
-        Some((self.v.transpose() * &self.v).try_inverse()? * self.noise.powi(2))
     }
 
     /// The coefficients of a series' derivative in time from its own (terms × terms):
@@ -393,8 +390,7 @@ impl Smooth {
         }
         CarriedReading {
             value: line.unsorted(value),
-            modes,
-            sigma,
+            errors: Modes { modes, sigma },
         }
     }
 }
@@ -415,18 +411,13 @@ const MOVES_LEVEL: f64 = 1e-3;
 /// twin's 11.3). Here the temperature is the reading's least-squares fit in the smooth terms
 /// ([`smooth_terms`] at its rate's window): the noise off the terms is gone, the noise in
 /// them has the covariance σ² (VᵀV)⁻¹ of the fit, whose eigenvectors are the modes. (On the
-/// twin's lag class the terms missed the temperature by at most 5e-4 K where its noise was
-/// 0.01 K; each mode's error over its σ had an RMS of 0.4-1.5.) None where the times span
+/// twin's lag class the terms missed the temperature by at most 5e-4 K RMS where its noise
+/// was 0.01 K; each mode's error over its σ had an RMS of 0.4-1.5.) None where the times span
 /// nothing or the readings show no noise.
 pub fn carried_temperature(line: &Timeline, x: &[f64]) -> Option<CarriedReading> {
     let smooth = Smooth::of(line, x)?;
-    if !smooth.holds() || !smooth.moves() {
-        return None;
-    }
-    let coef = &smooth.projection * nalgebra::DVector::from_column_slice(&smooth.xs);
-    let value: Vec<f64> = (&smooth.v * coef).iter().copied().collect();
-    let covariance = smooth.covariance()?;
-    Some(smooth.carried(line, &value, covariance))
+    let value: Vec<f64> = (&smooth.v * &smooth.coef).iter().copied().collect();
+    Some(smooth.carried(line, &value, smooth.covariance.clone()))
 }
 
 /// The rate of `x` for a fit that carries the rate's smooth error, and that error's modes:
@@ -438,14 +429,12 @@ pub fn carried_temperature(line: &Timeline, x: &[f64]) -> Option<CarriedReading>
 /// size no prior knows. None where [`carried_temperature`] is.
 pub fn carried_rate(line: &Timeline, x: &[f64]) -> Option<CarriedReading> {
     let smooth = Smooth::of(line, x)?;
-    if !smooth.holds() || !smooth.moves() {
-        return None;
-    }
     let derivative = smooth.derivative(line);
-    let coef =
-        &derivative * (&smooth.projection * nalgebra::DVector::from_column_slice(&smooth.xs));
-    let rate: Vec<f64> = (&smooth.v * coef).iter().copied().collect();
-    let covariance = &derivative * smooth.covariance()? * derivative.transpose();
+    let rate: Vec<f64> = (&smooth.v * (&derivative * &smooth.coef))
+        .iter()
+        .copied()
+        .collect();
+    let covariance = &derivative * &smooth.covariance * derivative.transpose();
     Some(smooth.carried(line, &rate, covariance))
 }
 
@@ -696,12 +685,18 @@ mod tests {
             let temp = carried_temperature(&line, &read).expect("a carried temperature");
             let e: Vec<f64> = temp.value.iter().zip(&truth).map(|(a, b)| a - b).collect();
             left.push(rms(&e));
-            for (c, s) in coefficients(&temp.modes, &e).iter().zip(&temp.sigma) {
+            for (c, s) in coefficients(&temp.errors.modes, &e)
+                .iter()
+                .zip(&temp.errors.sigma)
+            {
                 z_temp.push(c / s);
             }
             let rate = carried_rate(&line, &read).expect("a carried rate");
             let e: Vec<f64> = rate.value.iter().zip(&rates).map(|(a, b)| a - b).collect();
-            for (c, s) in coefficients(&rate.modes, &e).iter().zip(&rate.sigma) {
+            for (c, s) in coefficients(&rate.errors.modes, &e)
+                .iter()
+                .zip(&rate.errors.sigma)
+            {
                 z_rate.push(c / s);
             }
         }

@@ -41,7 +41,7 @@
 //! reading and [`memory::rate`] are read as they are, with no modes.
 
 use super::effect::{covariate_column, Bound, Delta, Effect, EffectParam, NotApplicable};
-use super::memory::{self, Timeline};
+use super::memory::{self, Modes, Timeline};
 use crate::campaign::Campaign;
 use crate::params::{Params, D1, D2, RODS};
 use crate::units::fraction_from_ppm;
@@ -219,7 +219,7 @@ impl Effect for Thermal {
             }));
             carried.push(Errors {
                 first,
-                modes: modes.basis,
+                modes: modes.modes,
             });
         }
         let at = |name: &str| {
@@ -271,19 +271,19 @@ impl Thermal {
         &self,
         campaign: &Campaign,
         name: &str,
-    ) -> Result<(Vec<f64>, Wander), NotApplicable> {
+    ) -> Result<(Vec<f64>, Modes), NotApplicable> {
         let temps = self.temperatures(campaign, name)?;
         let t: Vec<f64> = campaign.poses.iter().map(|p| p.t).collect();
         let line = Timeline::new(&t);
-        let (values, wander) = match (self.reads, line) {
+        let (values, modes) = match (self.reads, line) {
             (Reads::Temperature, Ok(line)) => match memory::carried_temperature(&line, &temps) {
-                Some(c) => (c.value, Wander::from(c.modes, c.sigma)),
-                None => (temps, Wander::default()),
+                Some(c) => (c.value, c.errors),
+                None => (temps, Modes::default()),
             },
-            (Reads::Temperature, Err(_)) => (temps, Wander::default()),
+            (Reads::Temperature, Err(_)) => (temps, Modes::default()),
             (Reads::Rate, Ok(line)) => match memory::carried_rate(&line, &temps) {
-                Some(c) => (c.value, Wander::from(c.modes, c.sigma)),
-                None => (memory::rate(&line, &temps), Wander::default()),
+                Some(c) => (c.value, c.errors),
+                None => (memory::rate(&line, &temps), Modes::default()),
             },
             (Reads::Rate, Err(e)) => {
                 return Err(NotApplicable {
@@ -301,7 +301,7 @@ impl Thermal {
                 .iter()
                 .map(|v| fraction_from_ppm(v - reference))
                 .collect(),
-            wander,
+            modes,
         ))
     }
 
@@ -336,20 +336,6 @@ impl Thermal {
                 })
             })
             .collect()
-    }
-}
-
-/// The modes of a thermometer's smooth error (its temperature's or rate's) that a fit
-/// carries: each at every pose, and its σ.
-#[derive(Default)]
-struct Wander {
-    basis: Vec<Vec<f64>>,
-    sigma: Vec<f64>,
-}
-
-impl Wander {
-    fn from(basis: Vec<Vec<f64>>, sigma: Vec<f64>) -> Wander {
-        Wander { basis, sigma }
     }
 }
 
