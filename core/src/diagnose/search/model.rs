@@ -167,7 +167,11 @@ fn each_earns_its_place(judge: &Judge, entries: &mut [Entry]) {
                     && other.len() == rest.len()
                     && rest.iter().all(|r| other.contains(r))
             });
-            without.is_none_or(|w| judge.beats(&entries[k], w))
+            // a member without which the values are unphysical earns its place: the rest
+            // fit it only by absorbing it (a thermometer 16 min behind rods and frame that a
+            // tracker and self-calibration hardly tell apart: the expansion alone at 70 and
+            // 55 ppm/K predicted as well as with its lag at 20 ± 14 and 16 ± 14)
+            without.is_none_or(|w| !w.judged.implausible.is_empty() || judge.beats(&entries[k], w))
         });
         if !earns {
             entries[k].judged.outcome = Outcome::MemberAddsNothing;
@@ -183,8 +187,11 @@ fn nothing_left_out_earns(judge: &Judge, entries: &mut [Entry]) {
         if !entries[k].eligible() {
             continue;
         }
+        // a larger model of unphysical values leaves nothing out that earns a place: it
+        // absorbs something else
         let incomplete = (0..entries.len())
             .filter(|&j| j != k && covers(&entries[j], &entries[k]))
+            .filter(|&j| entries[j].judged.implausible.is_empty())
             .any(|j| judge.beats(&entries[j], &entries[k]));
         if incomplete {
             entries[k].judged.outcome = Outcome::Incomplete;
