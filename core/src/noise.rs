@@ -407,15 +407,6 @@ impl NoiseModel {
         parts
     }
 
-    /// Variance parts of the drive forces' noise entering an instrument's row with gains
-    /// `gains` (mm per N, one per force read: through a correction that reads the forces).
-    pub fn drive_force_parts(&self, gains: &[f64]) -> Parts {
-        let mut parts = [0.0; N_GROUPS];
-        parts[Group::Force.index()] =
-            gains.iter().map(|g| g * g).sum::<f64>() * self.force_n.powi(2);
-        parts
-    }
-
     /// Variance parts of encoder noise entering with total squared gain `gain2`.
     pub fn encoder_parts(&self, gain2: f64) -> Parts {
         let mut parts = [0.0; N_GROUPS];

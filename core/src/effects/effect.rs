@@ -197,13 +197,6 @@ pub trait Bound: Send + Sync {
         let _ = pose;
         0..self.params().len()
     }
-    /// How the correction of pose `pose` moves with the pose's recorded drive forces (per N
-    /// of each of the four), pushed to `out` as the change's geometric input
-    /// (`Delta::dp[param]`) and its four derivatives: what the forces' noise makes of the
-    /// correction, a part of every row it corrects. The default reads no force.
-    fn force_gain(&self, pose: usize, theta: &[f64], out: &mut Vec<ForceGain>) {
-        let _ = (pose, theta, out);
-    }
     /// The effect to bind again at a fit's parameters, where this binding read the geometry
     /// at the parameters it was bound with enough that the fit's change it (see
     /// [`EffectSet::rebound`]); None, the default, where the binding at the start serves (it
@@ -211,15 +204,6 @@ pub trait Bound: Send + Sync {
     fn rebinds_from(&self) -> Option<&dyn Effect> {
         None
     }
-}
-
-/// How one geometric input of a pose's correction (`value.dp[param]`) moves with the pose's
-/// four recorded drive forces ([`Bound::force_gain`]), mm per N.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ForceGain {
-    /// Index into [`Delta::dp`].
-    pub param: usize,
-    pub per_n: [f64; 4],
 }
 
 /// How one geometric input of a pose's correction (`value.dp[param]`) moves with the pose's

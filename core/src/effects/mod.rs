@@ -35,9 +35,7 @@ pub mod stiffness_factor;
 mod thermal;
 pub mod written;
 
-pub use effect::{
-    Bound, Delta, Effect, EffectParam, ForceGain, InputSensitivity, NotApplicable, Slope,
-};
+pub use effect::{Bound, Delta, Effect, EffectParam, InputSensitivity, NotApplicable, Slope};
 pub use encoder_scale::EncoderScale;
 pub use family::{family_of, pinned_parts, Family};
 pub use guide_straightness::GuideStraightness;
@@ -165,20 +163,7 @@ pub struct Corrections {
     /// were made at, per pose where its slopes start in `slopes` (one more entry: the end),
     /// and the slopes ([`Slope`]). None where no change reads it.
     geometry: Option<GeometrySlopes>,
-    /// Where the changes read the recorded drive forces ([`Bound::force_gain`]): per pose
-    /// where its gains start in `gains` (one more entry: the end). None where none reads them.
-    forces: Option<ForceGains>,
 }
-
-#[derive(Clone, Debug)]
-struct ForceGains {
-    starts: Vec<usize>,
-    gains: Vec<ForceGain>,
-}
-
-/// A value's gains on the recorded drive forces (mm per N) of the two poses it reads: the
-/// pose's four, then its setup's reset pose's four (zero where it reads one pose).
-pub type ForceRow = [f64; 8];
 
 /// A partial of a binding that reads no geometry, chained through the slopes of one pose's
 /// bindings that read it: its change of the pose's inputs moves the pose they read.
@@ -266,26 +251,6 @@ impl Corrections {
             if let (Some(&a), Some(&b)) = (g.starts.get(*i), g.starts.get(i + 1)) {
                 for slope in &g.slopes[a..b] {
                     out.axpy(s.dp[slope.param], &slope.dp, 1.0);
-                }
-            }
-        }
-        out
-    }
-
-    /// The gains of a value with input sensitivities `at` (as [`Corrections::theta_row`])
-    /// on the recorded drive forces of its poses, through the changes that read them: what
-    /// the currents' noise makes of the value. Zero where none reads them.
-    pub fn force_row(&self, at: &[(usize, InputSensitivity)]) -> ForceRow {
-        let mut out = [0.0; 8];
-        let Some(f) = &self.forces else {
-            return out;
-        };
-        for ((i, s), slot) in at.iter().zip([0usize, 4]) {
-            if let (Some(&a), Some(&b)) = (f.starts.get(*i), f.starts.get(i + 1)) {
-                for g in &f.gains[a..b] {
-                    for k in 0..4 {
-                        out[slot + k] += s.dp[g.param] * g.per_n[k];
-                    }
                 }
             }
         }
@@ -579,13 +544,8 @@ impl EffectSet {
             partials: packed::Packed::with_capacity(touched),
             n_params: n,
             geometry: None,
-            forces: None,
         };
         out.starts.push(0);
-        let mut forces = ForceGains {
-            starts: vec![0],
-            gains: Vec::new(),
-        };
         let mut slopes = Vec::new();
         let mut slope_starts = vec![0];
         // which bindings read the geometry: they are corrected after the others
@@ -627,16 +587,9 @@ impl EffectSet {
                     out.partials.push(k + j, &d);
                 }
             }
-            for (b, own_theta, _) in self.with_theta(theta) {
-                b.force_gain(i, own_theta, &mut forces.gains);
-            }
-            forces.starts.push(forces.gains.len());
             out.values.push(i, &value);
             out.starts.push(out.partials.len());
             slope_starts.push(slopes.len());
-        }
-        if !forces.gains.is_empty() {
-            out.forces = Some(forces);
         }
         if !slopes.is_empty() {
             out.geometry = Some(GeometrySlopes {

@@ -12,7 +12,7 @@
 //! own beside the others' common one. These are the effect's refinements: the diagnosis
 //! keeps one only where the data need it (`diagnose::search::settle`).
 
-use super::effect::{Bound, Delta, Effect, EffectParam, ForceGain, NotApplicable, Slope};
+use super::effect::{Bound, Delta, Effect, EffectParam, NotApplicable, Slope};
 use crate::campaign::Campaign;
 use crate::elastic::DEFAULT_ROD_STIFFNESS_N_PER_MM;
 use crate::geometry::{self, carrier_joint, guide_frame, platform_joint};
@@ -187,9 +187,6 @@ fn rod_forces(p: &Params, q: &[f64; 4], f: &[f64; 4]) -> Result<[f64; 5], String
 /// balance made again at each displaced point (core/tests/it/effects_jacobian.rs).
 const SLOPE_STEP_MM: f64 = 1e-3;
 const SLOPE_STEP_RAD: f64 = 1e-6;
-/// Step of a drive force's difference, N: the balance is linear in the forces, and the
-/// passes at the deformed pose move with them by a stretch a thousandth of a micrometre.
-const FORCE_STEP_N: f64 = 1.0;
 
 /// One loaded pose as bound: where its forces were balanced, the rods' stretch there and
 /// how it moves with the pose's parameters and carrier positions.
@@ -205,9 +202,6 @@ struct Loaded {
     /// parallelogram rod came out 0.14 % short, and a row's, a difference of rods, 2 %).
     over_p: [Row; 5],
     over_q: [[f64; 4]; 5],
-    /// ... and per N of each recorded drive force (the balance is linear in them): what
-    /// the currents' noise makes of the stretch.
-    over_f: [[f64; 4]; 5],
 }
 
 impl Loaded {
@@ -240,22 +234,12 @@ impl Loaded {
                 g[a] = (s[r] - stretch[r]) / SLOPE_STEP_MM;
             }
         }
-        let mut over_f = [[0.0; 4]; 5];
-        for a in 0..4 {
-            let mut moved = *f;
-            moved[a] += FORCE_STEP_N;
-            let s = stretch_of(rod_forces(p, q, &moved)?);
-            for (r, g) in over_f.iter_mut().enumerate() {
-                g[a] = (s[r] - stretch[r]) / FORCE_STEP_N;
-            }
-        }
         Ok(Loaded {
             p: *p,
             dq,
             stretch,
             over_p,
             over_q,
-            over_f,
         })
     }
 }
@@ -319,21 +303,6 @@ impl Bound for BoundPreload {
             let k = self.of_rod[r];
             value.dp[rod.l] += theta[k] * at.stretch[r];
             partials[k].dp[rod.l] += at.stretch[r];
-        }
-    }
-    /// The stretch's gain on the recorded forces, times each rod's compliance: the twin's
-    /// currents at 12.5 N made 0.58 µm of encoder noise out of 0.11 where the rows left
-    /// them out (a machine with all drives active and its frame expanding).
-    fn force_gain(&self, pose: usize, theta: &[f64], out: &mut Vec<ForceGain>) {
-        let Some(at) = &self.poses[pose] else {
-            return;
-        };
-        for (r, rod) in RODS.iter().enumerate() {
-            let c = theta[self.of_rod[r]];
-            out.push(ForceGain {
-                param: rod.l,
-                per_n: at.over_f[r].map(|g| c * g),
-            });
         }
     }
     /// The stretch at `p` changed by `moved` to first order from where the forces were

@@ -80,13 +80,9 @@ pub(super) fn forward_rows(
             (None, _) => {}
         }
         let at_reset = negated(input_sensitivity(zero, sub, &g));
-        let force = ctx.corr.force_row(&[(i, at_pose), (ri, at_reset)]);
         let parts = noise::add(
-            noise::add(
-                ctx.noise.scalar_parts(inst, 1.0),
-                ctx.noise.encoder_parts(var_enc),
-            ),
-            ctx.noise.drive_force_parts(&force),
+            ctx.noise.scalar_parts(inst, 1.0),
+            ctx.noise.encoder_parts(var_enc),
         );
         out.push(Residual {
             pose: i,

@@ -6,7 +6,7 @@ use super::forward_solve::{forward, input_sensitivity};
 use super::reset::complement;
 use super::row::{reset_gain, Direction, ResetGain, Residual};
 use crate::campaign::MeasuredPose;
-use crate::effects::{ForceRow, InputSensitivity};
+use crate::effects::InputSensitivity;
 use crate::geometry::{self, q_var, GeometryError, Subsystem, X, Y};
 use crate::noise::{self, NoiseModel, Parts, XyInstrument};
 use crate::params::Row;
@@ -37,7 +37,6 @@ pub(super) fn inverse_rows(
     let inv = geometry::solve(&p_i, ctx.model, Subsystem::Tcp, [x, y])?;
     let s = geometry::sensitivity(&p_i, ctx.model, Subsystem::Tcp, &inv)?;
     let first = out.len();
-    let mut forces = [[0.0; 8]; 4];
     for (a, &q_a) in q_i.iter().enumerate() {
         let v = q_var(a);
         let g = Vector2::new(s.dc_dk[(v, 0)], s.dc_dk[(v, 1)]);
@@ -49,13 +48,9 @@ pub(super) fn inverse_rows(
             ..Default::default()
         };
         at_pose.dq[a] = -1.0;
-        forces[a] = ctx.corr.force_row(&[(i, at_pose), (ri, at_reset)]);
         let parts = noise::add(
-            noise::add(
-                ctx.noise.xy_parts(xy, Vector2::new(x, y), g),
-                ctx.noise.encoder_parts(1.0),
-            ),
-            ctx.noise.drive_force_parts(&forces[a]),
+            ctx.noise.xy_parts(xy, Vector2::new(x, y), g),
+            ctx.noise.encoder_parts(1.0),
         );
         out.push(Residual {
             pose: i,
@@ -77,15 +72,7 @@ pub(super) fn inverse_rows(
             XyInstrument::Lt => ctx.noise.beam_frame(tcp),
             XyInstrument::Kgm => (Vector2::x(), Vector2::y()),
         };
-        decorrelate(
-            &mut out[first..],
-            (&g_fixed, &forces),
-            ux,
-            uy,
-            ctx.noise,
-            xy,
-            tcp,
-        );
+        decorrelate(&mut out[first..], &g_fixed, ux, uy, ctx.noise, xy, tcp);
     }
     Ok(())
 }
@@ -124,7 +111,7 @@ fn fixed_gains(
 /// the misfit rows.
 fn decorrelate(
     rows: &mut [Residual],
-    (g, forces): (&[Vector2<f64>; 4], &[ForceRow; 4]),
+    g: &[Vector2<f64>; 4],
     u: Vector2<f64>,
     v: Vector2<f64>,
     noise: &NoiseModel,
@@ -159,15 +146,9 @@ fn decorrelate(
     for (row, (direction, w)) in rows.iter_mut().zip(weights) {
         // wᵀ G is the row's gain on the instrument's (x, y) error; |w|² on the encoders'
         let gain = Vector2::new((w * gm.column(0))[0], (w * gm.column(1))[0]);
-        // the four rows read the same forces: the combination's gain on them is theirs
-        // combined
-        let force: ForceRow = std::array::from_fn(|j| (0..4).map(|k| w[k] * forces[k][j]).sum());
         let parts = noise::add(
-            noise::add(
-                noise.xy_parts(instrument, tcp, gain),
-                noise.encoder_parts(w.norm_squared()),
-            ),
-            noise.drive_force_parts(&force),
+            noise.xy_parts(instrument, tcp, gain),
+            noise.encoder_parts(w.norm_squared()),
         );
         combine_into(row, &old, |k| w[k], (direction, parts));
     }

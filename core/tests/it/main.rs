@@ -23,6 +23,7 @@ mod circular_test;
 mod diagnose_periodic;
 mod diagnose_prediction;
 mod diagnose_twin;
+mod diagnose_twin_found;
 mod effects_jacobian;
 mod elastic_fe;
 mod elastic_plausibility;
