@@ -85,6 +85,12 @@ impl Entry<'_> {
             .get_or_init(|| sparse::structure(campaign, &self.fitted.rows))
     }
 
+    /// Whether a value it fitted lies outside what the physics allows: it absorbs something
+    /// else, and no rule of the choice counts it against another model.
+    pub(in crate::diagnose) fn unphysical(&self) -> bool {
+        !self.judged.implausible.is_empty()
+    }
+
     /// Whether it could be named.
     pub(in crate::diagnose) fn eligible(&self) -> bool {
         matches!(self.judged.outcome, Outcome::Outpredicted)

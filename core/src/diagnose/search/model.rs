@@ -171,7 +171,7 @@ fn each_earns_its_place(judge: &Judge, entries: &mut [Entry]) {
             // fit it only by absorbing it (a thermometer 16 min behind rods and frame that a
             // tracker and self-calibration hardly tell apart: the expansion alone at 70 and
             // 55 ppm/K predicted as well as with its lag at 20 ± 14 and 16 ± 14)
-            without.is_none_or(|w| !w.judged.implausible.is_empty() || judge.beats(&entries[k], w))
+            without.is_none_or(|w| w.unphysical() || judge.beats(&entries[k], w))
         });
         if !earns {
             entries[k].judged.outcome = Outcome::MemberAddsNothing;
@@ -191,7 +191,7 @@ fn nothing_left_out_earns(judge: &Judge, entries: &mut [Entry]) {
         // absorbs something else
         let incomplete = (0..entries.len())
             .filter(|&j| j != k && covers(&entries[j], &entries[k]))
-            .filter(|&j| entries[j].judged.implausible.is_empty())
+            .filter(|&j| !entries[j].unphysical())
             .any(|j| judge.beats(&entries[j], &entries[k]));
         if incomplete {
             entries[k].judged.outcome = Outcome::Incomplete;
