@@ -511,6 +511,10 @@ pub struct ModelDiagnosis {
     /// The dictionary term that explained the residual as well as the named effect: the
     /// effect was preferred because it predicts held-out data, which a term cannot.
     pub tied_term: Option<String>,
+    /// The part combination of a family of the current model that the named model fits in
+    /// place of the one settled (`thermal:frame+scales` where the model has `thermal:scales`):
+    /// the effects named predict only with it; the next diagnosis settles the family again.
+    pub resettled: Option<String>,
     /// The second missing effect, where the model named holds two (alone, each absorbs part
     /// of the other): add both.
     pub together_with: Option<String>,

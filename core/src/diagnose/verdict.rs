@@ -112,6 +112,7 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
         periodic: shape.periodic,
         carried,
         neighbours: shape.neighbours,
+        resettled: c.choice.as_ref().and_then(|ch| ch.resettled.clone()),
         tied_term: c.choice.and_then(|ch| ch.tied_term),
         noisier_than_rated: noisier(&current.est.groups),
         unexplained,

@@ -245,6 +245,13 @@ fn evidence_of(e: EvidenceOf) -> &'static str {
 /// alpha_rods = ...; held-out RMS 9.14 -> 4.60 µm (± 0.4); evidence ...".
 pub fn trial(t: &ModelTrial) -> String {
     let added: Vec<String> = t.added.iter().map(|a| with_parts(a)).collect();
+    // a model that fits a family of the current model with other parts says which
+    let instead = t.instead.as_ref().map_or(String::new(), |v| {
+        format!(
+            ", with the model's {} as {v}",
+            rpkm_core::effects::family_of(v)
+        )
+    });
     // the p-value is the larger of the F-test's and the Wald test's: where the Wald test
     // sets it, a large F beside a large p says the parameters trade off
     let wald = if t.wald_p > t.f_p {
@@ -257,7 +264,7 @@ pub fn trial(t: &ModelTrial) -> String {
         String::new()
     };
     let mut s = format!(
-        "{}: F = {:.1} ({}{wald}); {}",
+        "{}{instead}: F = {:.1} ({}{wald}); {}",
         added.join(" + "),
         t.f_statistic,
         p_is(t.p_value),
@@ -425,8 +432,15 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
             // what was found, parts and all: `--effects thermal` would fit every part of
             // the family in rpkm calibrate, not the ones the search chose
             let add = d.missing_effects.join(",");
+            let resettled = d.resettled.as_ref().map_or(String::new(), |r| {
+                format!(
+                    ", with the model's {} fitted as {r} (the next diagnosis settles its parts \
+                     again)",
+                    rpkm_core::effects::family_of(r)
+                )
+            });
             format!(
-                "missing effect: {} ({}){tied}{remains}; add --effects {add}{noise}",
+                "missing effect: {}{resettled} ({}){tied}{remains}; add --effects {add}{noise}",
                 d.missing_effects.join(" with "),
                 named_evidence(d)
             )
@@ -497,7 +511,8 @@ fn cal_structured(d: &ModelDiagnosis) -> bool {
 /// The evidence of the model named: its candidate's where it is one effect, else the
 /// search's trial of the combination.
 fn named_evidence(d: &ModelDiagnosis) -> String {
-    if let [one] = d.missing_effects.as_slice() {
+    let single = d.resettled.is_none();
+    if let ([one], true) = (d.missing_effects.as_slice(), single) {
         if let Some(c) = d.candidates.iter().find(|c| &c.effect == one) {
             return evidence(c);
         }
@@ -507,6 +522,7 @@ fn named_evidence(d: &ModelDiagnosis) -> String {
         .find(|t| {
             t.added.iter().all(|a| d.missing_effects.contains(a))
                 && t.added.len() == d.missing_effects.len()
+                && t.instead == d.resettled
         })
         .map(trial)
         .unwrap_or_default()
@@ -683,6 +699,46 @@ mod tests {
         assert_eq!(
             drift(&d, "temp_machine"),
             "l3 +19 µm in 2 min (+11.80 ± 0.90 µm/K), follows temp_machine (r = 0.95)"
+        );
+    }
+
+    /// A model of the search that fits a family of the current model with other parts says
+    /// which: two such models of one added effect are no longer the same line.
+    #[test]
+    fn a_model_with_a_family_refitted_says_its_parts() {
+        let trial = |instead: Option<&str>| {
+            trial(&ModelTrial {
+                added: vec!["encoder_scale".to_owned()],
+                instead: instead.map(str::to_owned),
+                k: 2.0,
+                f_statistic: 97.9,
+                p_value: 2.4e-13,
+                wald_p: 2.4e-13,
+                f_p: 2.1e-44,
+                chi2_per_dof_after: 0.9,
+                prediction: None,
+                params: Vec::new(),
+                judged: rpkm_core::diagnose::Judged {
+                    evidence_p: 8.8e-18,
+                    evidence_of: rpkm_core::diagnose::EvidenceOf::FitAlone,
+                    size: Some(0.4),
+                    matters: true,
+                    implausible: Vec::new(),
+                    outcome: rpkm_core::diagnose::Outcome::Outpredicted,
+                },
+            })
+        };
+        assert!(
+            trial(None).starts_with("encoder_scale: F = 97.9"),
+            "{}",
+            trial(None)
+        );
+        let swapped = trial(Some("thermal:frame+scales"));
+        assert!(
+            swapped.starts_with(
+                "encoder_scale, with the model's thermal as thermal:frame+scales: F = 97.9"
+            ),
+            "{swapped}"
         );
     }
 }

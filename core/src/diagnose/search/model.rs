@@ -28,6 +28,9 @@ pub(crate) struct Choice {
     /// A dictionary term that explained the residual as well: the model was preferred
     /// because it predicts, which a term cannot.
     pub tied_term: Option<String>,
+    /// The part combination of a family of the current model the chosen model fits in place
+    /// of the settled one (adding an effect may change the parts a family keeps), if any.
+    pub resettled: Option<String>,
 }
 
 /// The trials of a round: every fitted candidate alone (`candidates`, with `fits` by name),
@@ -86,6 +89,7 @@ pub(crate) fn search<'a>(
             added,
             fitted: clone_fitted(&e.fitted),
             tied_term,
+            resettled: swapped(e).map(str::to_owned),
         }
     });
     let trials = entries

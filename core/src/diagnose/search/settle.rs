@@ -54,9 +54,10 @@ impl Settled {
 }
 
 /// Settle every family of `in_model` named whole ([`Effect::open_family`]): the part
-/// combination with the fewest parts that the whole family does not beat by the evidence a
-/// candidate needs (the calibration's F-test with the prediction, not contradicted, a gain
-/// that matters); and every effect with refinements to the one that evidence needs, if any
+/// combination with the fewest parts that no combination holding its parts and more (the
+/// whole family among them) beats by the evidence a candidate needs (the calibration's
+/// F-test with the prediction, not contradicted, a gain that matters), of physical values
+/// each; and every effect with refinements to the one that evidence needs, if any
 /// ([`refine`]). `level` is that evidence's.
 pub(crate) fn settle(
     campaign: &Campaign,
@@ -141,15 +142,31 @@ fn narrow(
             Scored::of(campaign, val, with, copts).map(|p| (k, p))
         })
         .collect();
-    let whole = scored
+    // nothing to settle against where the whole family cannot be fitted
+    scored
         .iter()
         .find(|(k, _)| mask_len(variants[*k].0.name()) == n)?;
     // a variant that fits values no material has stands in for another part (the rods
     // shrinking as the frame grows): it is no settle, however well it predicts
-    let adequate = |v: &Scored| v.plausible && !whole.1.needed_over(v, (campaign, copts), level);
+    // and no plausible combination that holds its parts and more beats it, the whole
+    // family's not alone: where a campaign hardly separates the three parts, the whole
+    // predicts less certainly than two of them (frame and scales expanding: the whole did
+    // not beat the scales alone at twice their α, the frame with the scales did)
+    let holds = |big: usize, small: usize| {
+        let (b, s) = (variants[big].0.name(), variants[small].0.name());
+        b != s && parts_of(s).iter().all(|p| parts_of(b).contains(p))
+    };
+    let fold = (campaign, copts);
+    let adequate = |(k, v): &(usize, Scored)| {
+        v.plausible
+            && !scored
+                .iter()
+                .filter(|(j, big)| holds(*j, *k) && big.plausible)
+                .any(|(_, big)| big.needed_over(v, fold, level))
+    };
     let k = scored
         .iter()
-        .filter(|(_, v)| adequate(v))
+        .filter(|e| adequate(e))
         .min_by(|a, b| {
             let parts = |k: usize| mask_len(variants[k].0.name());
             parts(a.0)
@@ -191,6 +208,12 @@ fn refine(
         .min_by(|a, b| a.1.chi2.total_cmp(&b.1.chi2))
         .map(|(k, _)| k)?;
     Some(refinements.swap_remove(best))
+}
+
+/// The parts named in a part variant's name (`thermal:rods+frame`: rods, frame).
+fn parts_of(name: &str) -> Vec<&str> {
+    name.split_once(':')
+        .map_or_else(Vec::new, |(_, parts)| parts.split('+').collect())
 }
 
 /// Parts named in a part variant's name (`thermal:rods+frame`: 2).
