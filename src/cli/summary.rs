@@ -46,6 +46,9 @@ pub fn print_summary(campaign: &Campaign, validation: Option<&Campaign>, d: &Mod
             d.model_effects.join(" + ")
         );
     }
+    for u in &d.undecided {
+        println!("   {}", words::undecided(u));
+    }
     for a in rpkm_core::calib::anchored_terms(&d.effect_values) {
         println!("   ({})", words::anchored(&a));
     }

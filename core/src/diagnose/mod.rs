@@ -46,6 +46,6 @@ pub use search::trials::SCREEN_P;
 pub use types::{
     Baseline, Candidate, DiagnoseError, DiagnosisOptions, ErrorVector, EvidenceOf, Fit, GroupRms,
     HeldOutCheck, Judged, ModelDiagnosis, ModelTrial, NoiseReport, Noisier, Outcome, Prediction,
-    ResidualPoint, RmsUnit, Skipped, Test, VerdictKind, NOISIER_THAN_RATED, NUMERICAL_RMS_MM,
-    RELEVANT_FRACTION,
+    ResidualPoint, RmsUnit, Skipped, Test, Undecided, VerdictKind, NOISIER_THAN_RATED,
+    NUMERICAL_RMS_MM, RELEVANT_FRACTION,
 };

@@ -253,6 +253,27 @@ pub struct Prediction {
     pub resolution: f64,
 }
 
+/// A family whose parts the campaigns do not decide: the calibration needs a combination of
+/// more parts than the one settled, and that combination predicts worse (held-out data, or
+/// the setups cross-validation leaves out). The settle keeps the smaller; the user learns that
+/// neither is determined.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Undecided {
+    /// The part combination settled (`thermal:scales`, with `thermal_lag:scales` where the
+    /// lag is in the model: it takes the parts `thermal` is tried with).
+    pub settled: Vec<String>,
+    /// The one of more parts the calibration needs over it, of physical values
+    /// (`thermal:rods+frame+scales`, its lag alike).
+    pub needed: Vec<String>,
+    /// Its calibration χ²'s fall under the settled one's, the parameters it adds, and the
+    /// nested F-test's p-value.
+    pub chi2_fall: f64,
+    pub added: f64,
+    pub p_value: f64,
+    /// The prediction from the settled combination (before) to the needed one (after).
+    pub prediction: Prediction,
+}
+
 /// How an addition to the model fares on both campaigns (a candidate alone, or a
 /// combination the model search tried).
 #[derive(Clone, Debug, serde::Serialize)]
@@ -515,6 +536,9 @@ pub struct ModelDiagnosis {
     /// place of the one settled (`thermal:frame+scales` where the model has `thermal:scales`):
     /// the effects named predict only with it; the next diagnosis settles the family again.
     pub resettled: Option<String>,
+    /// The families of the current model whose parts the campaigns do not decide: the
+    /// calibration needs more parts than were settled, which predict worse.
+    pub undecided: Vec<Undecided>,
     /// The second missing effect, where the model named holds two (alone, each absorbs part
     /// of the other): add both.
     pub together_with: Option<String>,

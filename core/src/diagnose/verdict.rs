@@ -51,6 +51,7 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
     } = c;
     let level = structure_level(opts);
     let (carried, structure, shape) = tested(&c, level);
+    let test = test_of(&c, level);
     let Round {
         mut candidates,
         skipped,
@@ -71,14 +72,6 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
         .as_ref()
         .map(|ch| ch.added.clone())
         .unwrap_or_default();
-    let test = Test {
-        noise_rounds: current.est.rounds,
-        candidate_level: c.level,
-        candidates_tried: c.tried,
-        dictionary_level: level,
-        held_out_level: opts.alpha,
-        rows: base.rows.len(),
-    };
     let fit = &current.fitted.fit;
     ModelDiagnosis {
         model: opts.model,
@@ -113,6 +106,7 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
         carried,
         neighbours: shape.neighbours,
         resettled: c.choice.as_ref().and_then(|ch| ch.resettled.clone()),
+        undecided: current.settled.undecided.clone(),
         tied_term: c.choice.and_then(|ch| ch.tied_term),
         noisier_than_rated: noisier(&current.est.groups),
         unexplained,
@@ -121,6 +115,18 @@ pub(crate) fn conclude(c: Concluded) -> ModelDiagnosis {
         error_vectors_missing: vectors.as_ref().err().cloned(),
         error_vectors: vectors.unwrap_or_default(),
         test,
+    }
+}
+
+/// What the diagnosis tested with, and at which levels (`level`: the structure tests').
+fn test_of(c: &Concluded, level: f64) -> Test {
+    Test {
+        noise_rounds: c.current.est.rounds,
+        candidate_level: c.level,
+        candidates_tried: c.tried,
+        dictionary_level: level,
+        held_out_level: c.opts.alpha,
+        rows: c.base.rows.len(),
     }
 }
 

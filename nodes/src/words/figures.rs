@@ -3,6 +3,7 @@
 
 use crate::units::um_from_mm;
 use rpkm_core::diagnose::structure::sparse::Pointer;
+use rpkm_core::diagnose::{Prediction, RmsUnit};
 
 /// A value with its standard deviation, the one way every text and report prints them: σ to
 /// two significant digits and the value to the same place, in a unit that shows both (mm as
@@ -122,6 +123,36 @@ pub(super) fn um_with_sigma(value_mm: f64, sigma_mm: f64) -> String {
         1
     };
     format!("{v:+.digits$} ± {s:.digits$}")
+}
+
+/// "held-out RMS 17.98 -> 12.69 µm (± 2.11; the errors follow the change, p = 3.2e-8)", or
+/// "(± 2.11; 1 parameter fitted with them, the fall beyond what that takes from noise p =
+/// 2.0e-9)".
+pub(super) fn prediction(p: &Prediction) -> String {
+    let support = match p.refitted {
+        0 => format!("the errors follow the change, p = {:.1e}", p.support_p),
+        k => format!(
+            "{k} parameter{} fitted with them, the fall beyond what that takes from noise \
+             p = {:.1e}",
+            if k == 1 { "" } else { "s" },
+            p.support_p
+        ),
+    };
+    let what = match (p.by_setup, p.unit) {
+        (true, _) => "cross-validated (by setup) RMS, each row in its own noise (sigma),",
+        (false, RmsUnit::Sigma) => "held-out RMS, each reading in its own noise (sigma),",
+        (false, RmsUnit::Um) => "held-out RMS with each setup's zero removed",
+    };
+    format!(
+        "{what} {:.2} -> {:.2} {} (± {:.2}; {support})",
+        p.rms_before,
+        p.rms_after,
+        match p.unit {
+            RmsUnit::Um => "µm",
+            RmsUnit::Sigma => "sigma",
+        },
+        p.standard_error
+    )
 }
 
 #[cfg(test)]

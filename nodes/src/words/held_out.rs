@@ -1,10 +1,10 @@
 //! The held-out data in words: the judge's line and sentence, the held-out campaign against
 //! the calibration's ranges, a setup's return judged against the estimated noise.
 
-use super::figures::{follows, p_is, um_with_sigma};
+use super::figures::{follows, p_is, prediction, um_with_sigma};
 use crate::units::um_from_mm;
 use rpkm_core::diagnose::held_out::coverage::{Coverage, Span};
-use rpkm_core::diagnose::HeldOutCheck;
+use rpkm_core::diagnose::{HeldOutCheck, Undecided};
 use std::fmt::Write as _;
 
 /// The held-out judge's line, one for `rpkm diagnose` and `rpkm calibrate`: whether the
@@ -127,4 +127,105 @@ pub fn return_drift_estimated(d: &rpkm_core::returns::ReturnDrift) -> String {
         parts.join(", "),
         d.p_value
     )
+}
+
+/// A family whose parts the campaigns do not decide, in full: what the calibration needs,
+/// what the prediction says of it, and what is kept. "the campaigns do not decide thermal's
+/// parts: the calibration needs thermal:rods+frame+scales with ... over thermal:scales with
+/// ... (chi2 3229.8 lower with 2.0 effective parameters more, p = 1.0e-204), but it predicts worse (held-out RMS,
+/// ...); thermal:scales is kept, and neither is determined beyond these campaigns: measure
+/// what tells the parts apart".
+pub fn undecided(u: &Undecided) -> String {
+    let p = &u.prediction;
+    let predicts = if p.worse {
+        "predicts worse"
+    } else {
+        "does not predict better"
+    };
+    format!(
+        "the campaigns do not decide {}'s parts: the calibration needs {} over {} (chi2 \
+         {:.1} lower with {:.1} effective parameters more, {}), but it {predicts} ({}); {} is kept, and \
+         neither is determined beyond these campaigns: measure what tells the parts apart",
+        family(u),
+        u.needed.join(" with "),
+        u.settled.join(" with "),
+        u.chi2_fall,
+        u.added,
+        p_is(u.p_value),
+        prediction(p),
+        u.settled.join(" with ")
+    )
+}
+
+/// The same in a clause of the verdict: "the campaigns do not decide thermal's parts (the
+/// calibration needs thermal:rods+frame+scales, which predicts worse than thermal:scales)".
+pub fn undecided_short(u: &Undecided) -> String {
+    let needed = u.needed.first().map_or("", String::as_str);
+    let settled = u.settled.first().map_or("", String::as_str);
+    let predicts = if u.prediction.worse {
+        "predicts worse than"
+    } else {
+        "predicts no better than"
+    };
+    format!(
+        "the campaigns do not decide {}'s parts (the calibration needs {needed}, which \
+         {predicts} {settled})",
+        family(u)
+    )
+}
+
+/// The family an undecided settle is of.
+fn family(u: &Undecided) -> &str {
+    u.needed
+        .first()
+        .map_or("", |n| rpkm_core::effects::family_of(n))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rpkm_core::diagnose::{Prediction, RmsUnit};
+
+    /// The undecided family's words hold the figures as measured, the prediction's unit and
+    /// direction among them, and name what is kept.
+    #[test]
+    fn an_undecided_family_in_words() {
+        let u = Undecided {
+            settled: vec!["thermal:scales".to_owned()],
+            needed: vec!["thermal:rods+frame+scales".to_owned()],
+            chi2_fall: 3229.84,
+            added: 2.04,
+            p_value: 1.0e-204,
+            prediction: Prediction {
+                rms_before: 2.76,
+                rms_after: 7.42,
+                standard_error: 0.58,
+                unit: RmsUnit::Sigma,
+                support_p: 1.0,
+                refitted: 0,
+                better: false,
+                worse: true,
+                fall_read: -4.66,
+                by_setup: true,
+                resolution: 3.0,
+            },
+        };
+        let long = undecided(&u);
+        assert!(
+            long.starts_with(
+                "the campaigns do not decide thermal's parts: the calibration needs \
+                 thermal:rods+frame+scales over thermal:scales (chi2 3229.8 lower with 2.0 \
+                 effective parameters more, p = 1.0e-204), but it predicts worse \
+                 (cross-validated (by setup) RMS, each row in its own noise (sigma), 2.76 -> \
+                 7.42 sigma"
+            ),
+            "{long}"
+        );
+        assert!(long.contains("; thermal:scales is kept"), "{long}");
+        assert_eq!(
+            undecided_short(&u),
+            "the campaigns do not decide thermal's parts (the calibration needs \
+             thermal:rods+frame+scales, which predicts worse than thermal:scales)"
+        );
+    }
 }

@@ -8,8 +8,7 @@ use rpkm_core::diagnose::structure::carried::Carried;
 use rpkm_core::diagnose::structure::neighbours::Neighbours;
 use rpkm_core::diagnose::structure::periodic::Periodic;
 use rpkm_core::diagnose::{
-    Candidate, EvidenceOf, Judged, ModelDiagnosis, ModelTrial, Outcome, Prediction, RmsUnit, Test,
-    VerdictKind,
+    Candidate, EvidenceOf, Judged, ModelDiagnosis, ModelTrial, Outcome, Test, VerdictKind,
 };
 use rpkm_core::effects::Family;
 use rpkm_core::online::{Drift, DriftInput, FOLLOWS};
@@ -20,9 +19,11 @@ mod figures;
 mod held_out;
 mod noise;
 
-use figures::um_with_sigma;
 pub use figures::{condition, condition_short, follows, p_is, unit_label, with_sigma};
-pub use held_out::{coverage, held_out, held_out_judge, return_drift_estimated};
+use figures::{prediction, um_with_sigma};
+pub use held_out::{
+    coverage, held_out, held_out_judge, return_drift_estimated, undecided, undecided_short,
+};
 pub use noise::{estimated_level, noise, rated_by};
 
 /// The drift WARN's words, claiming no more than the path identifies: "l3 +48 µm in 6 min
@@ -163,36 +164,6 @@ pub fn held(params: &[rpkm_core::calib::EffectEstimate]) -> Vec<String> {
                 .map(|why| format!("{} not fitted: {why}", e.name))
         })
         .collect()
-}
-
-/// "held-out RMS 17.98 -> 12.69 µm (± 2.11; the errors follow the change, p = 3.2e-8)", or
-/// "(± 2.11; 1 parameter fitted with them, the fall beyond what that takes from noise p =
-/// 2.0e-9)".
-fn prediction(p: &Prediction) -> String {
-    let support = match p.refitted {
-        0 => format!("the errors follow the change, p = {:.1e}", p.support_p),
-        k => format!(
-            "{k} parameter{} fitted with them, the fall beyond what that takes from noise \
-             p = {:.1e}",
-            if k == 1 { "" } else { "s" },
-            p.support_p
-        ),
-    };
-    let what = match (p.by_setup, p.unit) {
-        (true, _) => "cross-validated (by setup) RMS, each row in its own noise (sigma),",
-        (false, RmsUnit::Sigma) => "held-out RMS, each reading in its own noise (sigma),",
-        (false, RmsUnit::Um) => "held-out RMS with each setup's zero removed",
-    };
-    format!(
-        "{what} {:.2} -> {:.2} {} (± {:.2}; {support})",
-        p.rms_before,
-        p.rms_after,
-        match p.unit {
-            RmsUnit::Um => "µm",
-            RmsUnit::Sigma => "sigma",
-        },
-        p.standard_error
-    )
 }
 
 /// The judgement's words where they add to the figures: the evidence of both campaigns,
@@ -413,10 +384,15 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
         format!("the model with {}", d.model_effects.join(", "))
     };
     let noise_words = noise(&d.noise_groups);
+    // a family the campaigns do not decide, said before the noise in every verdict
+    let undecided = d.undecided.iter().fold(String::new(), |mut s, u| {
+        let _ = write!(s, "; {}", undecided_short(u));
+        s
+    });
     let noise = if noise_words.is_empty() {
-        String::new()
+        undecided
     } else {
-        format!("; noise: {noise_words}")
+        format!("{undecided}; noise: {noise_words}")
     };
     let remains = d
         .unexplained

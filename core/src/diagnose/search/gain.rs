@@ -111,6 +111,20 @@ impl Gain {
         self.prediction.is_some_and(|p| p.worse)
     }
 
+    /// Whether the calibration campaign alone needs the larger model: its F-test at `level`,
+    /// by a gain that matters there.
+    pub(in crate::diagnose) fn calibration_needs(&self, level: f64) -> bool {
+        self.p_cal < level && self.cal_size >= PRACTICAL_SIZE
+    }
+
+    pub(in crate::diagnose) fn p_cal(&self) -> f64 {
+        self.p_cal
+    }
+
+    pub(in crate::diagnose) fn prediction(&self) -> Option<Prediction> {
+        self.prediction
+    }
+
     /// Whether the larger model is needed: significant on both campaigns together, not
     /// contradicted, better, by a gain that matters.
     pub(in crate::diagnose) fn needed(&self, level: f64) -> bool {

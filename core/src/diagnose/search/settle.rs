@@ -8,7 +8,7 @@ use crate::calib::{self, Request};
 use crate::campaign::Campaign;
 use crate::diagnose::held_out::validation::Validation;
 use crate::diagnose::held_out::Model1;
-use crate::diagnose::types::Prediction;
+use crate::diagnose::types::{Prediction, Undecided};
 use crate::effects::{Effect, EffectSet};
 use crate::params::Params;
 
@@ -25,6 +25,8 @@ pub(crate) struct Settled {
     pub own: Vec<Box<dyn Effect>>,
     /// For each effect of the model, whether it is `own[k]` or the caller's.
     order: Vec<Result<usize, usize>>,
+    /// The families whose parts the campaigns do not decide ([`Undecided`]).
+    pub undecided: Vec<Undecided>,
 }
 
 impl Settled {
@@ -44,6 +46,7 @@ impl Settled {
         Settled {
             own: Vec::new(),
             order: (0..in_model.len()).map(Err).collect(),
+            undecided: Vec::new(),
         }
     }
 
@@ -75,7 +78,9 @@ pub(crate) fn settle(
             } else if let Some(parts) = parts_beside(&current.0, *family) {
                 family.with_parts(&parts)
             } else if family.open_family() {
-                narrow(campaign, val, current, *family, (copts, level))
+                let (narrowed, undecided) = narrow(campaign, val, current, *family, (copts, level));
+                settled.undecided.extend(undecided);
+                narrowed
             } else {
                 None
             }
@@ -108,14 +113,16 @@ pub(in crate::diagnose) fn parts_beside(
 type Variant = (Box<dyn Effect>, Option<Box<dyn Effect>>);
 
 /// The part combination of the family `current[i]` named whole that the evidence needs (see
-/// [`settle`]); None where the whole family is it, or nothing predicts.
+/// [`settle`]); None where the whole family is it, or nothing predicts. Beside it, where the
+/// calibration alone needs a combination of more parts that predicts worse, that one
+/// ([`Undecided`]).
 fn narrow(
     campaign: &Campaign,
     val: Option<&Validation>,
     (current, i): (Vec<&dyn Effect>, usize),
     family: &dyn Effect,
     (copts, level): (&calib::Options, f64),
-) -> Option<Box<dyn Effect>> {
+) -> (Option<Box<dyn Effect>>, Option<Undecided>) {
     let n = family.parts().len();
     // an effect of the model that refines this family whole takes each variant's parts with
     // it (`thermal_lag` the parts `thermal` is tried with): apart, each absorbs the other
@@ -143,9 +150,12 @@ fn narrow(
         })
         .collect();
     // nothing to settle against where the whole family cannot be fitted
-    scored
+    if !scored
         .iter()
-        .find(|(k, _)| mask_len(variants[*k].0.name()) == n)?;
+        .any(|(k, _)| mask_len(variants[*k].0.name()) == n)
+    {
+        return (None, None);
+    }
     // a variant that fits values no material has stands in for another part (the rods
     // shrinking as the frame grows): it is no settle, however well it predicts
     // and no plausible combination that holds its parts and more beats it, the whole
@@ -162,24 +172,48 @@ fn narrow(
             && !scored
                 .iter()
                 .filter(|(j, big)| holds(*j, *k) && big.plausible)
-                .any(|(_, big)| big.needed_over(v, fold, level))
+                .any(|(_, big)| big.gain_over(v, fold).needed(level))
     };
-    let k = scored
+    let Some((k, chosen)) = scored.iter().filter(|e| adequate(e)).min_by(|a, b| {
+        let parts = |k: usize| mask_len(variants[k].0.name());
+        parts(a.0)
+            .cmp(&parts(b.0))
+            .then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))
+    }) else {
+        return (None, None);
+    };
+    // the likeliest combination of more parts that the calibration alone needs over it
+    let undecided = scored
         .iter()
-        .filter(|e| adequate(e))
-        .min_by(|a, b| {
-            let parts = |k: usize| mask_len(variants[k].0.name());
-            parts(a.0)
-                .cmp(&parts(b.0))
-                .then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))
-        })
-        .map(|(k, _)| *k)?;
+        .filter(|(j, big)| holds(*j, *k) && big.plausible)
+        .map(|(_, big)| (big, big.gain_over(chosen, fold)))
+        .filter(|(_, gain)| gain.calibration_needs(level))
+        .min_by(|a, b| a.0.chi2.total_cmp(&b.0.chi2))
+        .and_then(|(big, gain)| {
+            let names = |s: &Scored| s.with.iter().map(|e| e.name().to_owned()).collect();
+            let changed = |s: &Scored| -> Vec<String> {
+                let all: Vec<String> = names(s);
+                let given: Vec<&str> = current.iter().map(|e| e.name()).collect();
+                all.into_iter()
+                    .filter(|e| !given.contains(&e.as_str()))
+                    .collect()
+            };
+            Some(Undecided {
+                settled: changed(chosen),
+                needed: changed(big),
+                chi2_fall: chosen.chi2 - big.chi2,
+                added: chosen.dof - big.dof,
+                p_value: gain.p_cal(),
+                prediction: gain.prediction()?,
+            })
+        });
     // the whole family is what the caller has: nothing to own
+    let k = *k;
     if mask_len(variants[k].0.name()) == n {
-        return None;
+        return (None, undecided);
     }
     drop(scored);
-    Some(variants.swap_remove(k).0)
+    (Some(variants.swap_remove(k).0), undecided)
 }
 
 /// The refinement of the model's effect `current[i]` ([`Effect::refinements`]: a rod with a
@@ -204,7 +238,7 @@ fn refine(
             with[i] = r.as_ref();
             Scored::of(campaign, val, with, copts).map(|s| (k, s))
         })
-        .filter(|(_, s)| s.needed_over(&plain, fold, level))
+        .filter(|(_, s)| s.gain_over(&plain, fold).needed(level))
         .min_by(|a, b| a.1.chi2.total_cmp(&b.1.chi2))
         .map(|(k, _)| k)?;
     Some(refinements.swap_remove(best))
@@ -308,15 +342,18 @@ impl<'a> Scored<'a> {
             .as_deref()
     }
 
-    /// Whether this model (the whole family) beats the smaller `v` by the evidence a
-    /// candidate needs: the nested F-test with the prediction (held-out where it decides,
-    /// else the left-out rows, both in σ), not contradicted, a gain that matters.
-    fn needed_over(&self, v: &Scored, fold: Fold, level: f64) -> bool {
+    /// What this model gains over the smaller `v` it holds: the nested F-test with the
+    /// prediction (held-out where it decides, else the left-out rows, both in σ). Needed
+    /// ([`Gain::needed`]) where it beats `v` by the evidence a candidate needs.
+    fn gain_over(&self, v: &Scored, fold: Fold) -> Gain {
         let held = Prediction::compared(&v.held, &self.held);
         let prediction = match held {
             Some(p) if p.last_word() => Some(p),
             _ => match v.left_out(fold).zip(self.left_out(fold)) {
-                Some((a, b)) => Prediction::compared(a, b),
+                Some((a, b)) => Prediction::compared(a, b).map(|p| Prediction {
+                    by_setup: true,
+                    ..p
+                }),
                 None => held,
             },
         };
@@ -326,6 +363,5 @@ impl<'a> Scored<'a> {
             self.rows,
             prediction,
         )
-        .needed(level)
     }
 }
