@@ -124,7 +124,16 @@ impl Judge<'_> {
             e.prediction,
         )
         .with_wald(e.wald_p);
-        let (evidence_p, size) = (gain.evidence(), gain.size());
+        // a model that fits a family of the current model with other parts gains by those
+        // parts too, which its prediction cannot tell from the effect added: the calibration
+        // must need it by itself (an encoder scale of -9 ± 8 ppm, F-test p = 5.4e-3, was
+        // named on the prediction the frame's expansion made beside the scales'; another
+        // whose fit was worse than the current model's, F < 0, on the prediction alone)
+        let evidence_p = match e.swap {
+            Some(_) => gain.evidence().max(gain.p_cal()),
+            None => gain.evidence(),
+        };
+        let size = gain.size();
         let rows = self.base.rows.len().max(1) as f64;
         let implausible = implausible(&added_params(&e.fitted.fit.effect_params, &e.added));
         let better = e.prediction.map_or(e.f_statistic > rows.ln(), |p| p.better);

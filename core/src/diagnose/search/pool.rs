@@ -149,10 +149,17 @@ impl<'j> Judge<'j> {
             .collect();
         contenders.sort_by(|&a, &b| entries[a].p_value.total_cmp(&entries[b].p_value));
         contenders.truncate(PAIRED);
+        // a family's other parts only where what refines it still refines parts it holds
+        let swaps: Vec<&'a dyn Effect> = swaps
+            .iter()
+            .map(AsRef::as_ref)
+            .filter(|v| !settled.contains(&v.name()))
+            .filter(|v| refines_within(&self.model_of(&[], Some(*v))))
+            .collect();
         for k in contenders {
-            for v in swaps.iter().filter(|v| !settled.contains(&v.name())) {
+            for &v in &swaps {
                 let added = vec![entries[k].added[0]];
-                let tried = self.tried((added, Some(v.as_ref())), &[&entries[k].fitted]);
+                let tried = self.tried((added, Some(v)), &[&entries[k].fitted]);
                 entries.extend(tried);
             }
         }
@@ -233,4 +240,54 @@ fn pinned_parts(effect: &dyn Effect) -> Vec<Box<dyn Effect>> {
             whole.with_parts(&parts)
         })
         .collect()
+}
+
+/// Whether every effect of `model` that refines a family of it ([`Effect::beside`]:
+/// `thermal_lag` beside `thermal`) holds only parts that family holds: a lag of a part that
+/// does not expand is no physics (the lag of frame and scales fitted beside the scales'
+/// expansion stood in for an encoder scale of 5 ppm).
+fn refines_within(model: &[&dyn Effect]) -> bool {
+    fn parts(e: &dyn Effect) -> Vec<&str> {
+        match e.name().split_once(':') {
+            Some((_, pinned)) => pinned.split('+').collect(),
+            None => e.parts().to_vec(),
+        }
+    }
+    model.iter().all(|f| {
+        let Some(of) = f.beside() else {
+            return true;
+        };
+        model
+            .iter()
+            .find(|e| effects::family_of(e.name()) == of)
+            .is_none_or(|refined| {
+                let held = parts(*refined);
+                parts(*f).iter().all(|p| held.contains(p))
+            })
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::refines_within;
+    use crate::effects::{by_name, Effect};
+
+    /// A lag keeps to the parts the expansion holds, whole or pinned.
+    #[test]
+    fn a_lag_refines_only_parts_that_expand() {
+        let within = |names: &[&str]| {
+            let boxed: Vec<Box<dyn Effect>> = names
+                .iter()
+                .map(|n| by_name(n).expect("library effect"))
+                .collect();
+            let model: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
+            refines_within(&model)
+        };
+        assert!(within(&["thermal:frame+scales", "thermal_lag:scales"]));
+        assert!(within(&["thermal", "thermal_lag:rods"]));
+        assert!(within(&["thermal:rods", "thermal_lag:rods"]));
+        assert!(within(&["thermal_lag:frame"]));
+        assert!(!within(&["thermal:scales", "thermal_lag:frame+scales"]));
+        assert!(!within(&["thermal:rods", "thermal_lag"]));
+    }
 }
