@@ -61,6 +61,13 @@ pub fn pinned_parts(effect: &dyn super::effect::Effect) -> Option<Vec<usize>> {
         .collect()
 }
 
+/// The names of the parts an effect holds: those its name pins (`thermal:rods+scales`: rods
+/// and scales), else all of its family's.
+pub fn held_parts(effect: &dyn super::effect::Effect) -> Vec<&'static str> {
+    let all = effect.parts();
+    pinned_parts(effect).map_or_else(|| all.to_vec(), |ix| ix.iter().map(|&i| all[i]).collect())
+}
+
 /// The family of an effect name: `thermal` for `thermal:rods` (the name itself where it
 /// pins no part).
 pub fn family_of(name: &str) -> &str {

@@ -37,7 +37,7 @@ pub mod written;
 
 pub use effect::{Bound, Delta, Effect, EffectParam, InputSensitivity, NotApplicable, Slope};
 pub use encoder_scale::EncoderScale;
-pub use family::{family_of, pinned_parts, Family};
+pub use family::{family_of, held_parts, pinned_parts, Family};
 pub use guide_straightness::GuideStraightness;
 pub use instrument_alignment::InstrumentAlignment;
 pub use live::{LiveEffects, LiveError, LiveState};

@@ -3,10 +3,34 @@
 //! each test says which rule and what it said before.
 
 use super::diagnose_twin::{campaigns_of, run, summary};
-use rpkm_core::campaign::Instrument;
+use rpkm_core::campaign::{Campaign, Instrument};
 use rpkm_core::diagnose::VerdictKind;
 use rpkm_core::noise::NoiseModel;
 use rpkm_twin::{EffectKind, ThermalPhysics, TwinConfig};
+
+/// A machine of the lag class measured by a tracker and self-calibration (the class's
+/// composition these machines drew): its twin's seed and thermal swing (K), its geometry's
+/// σ (mm, rad), its noise and thermal physics; the calibration and held-out campaigns.
+fn tracker_and_self(
+    (seed, swing): (u64, f64),
+    (length_sigma_mm, angle_sigma_rad): (f64, f64),
+    noise: NoiseModel,
+    thermal: ThermalPhysics,
+) -> (Campaign, Campaign) {
+    let (cal, val, _) = campaigns_of(
+        TwinConfig {
+            seed,
+            effects: vec![(EffectKind::Thermal, swing)],
+            noise: Some(noise),
+            length_sigma_mm,
+            angle_sigma_rad,
+            thermal,
+            ..Default::default()
+        },
+        &[Instrument::Lt, Instrument::SelfCal],
+    );
+    (cal, val)
+}
 
 /// Rods and frame expanding (10.5 and 6.3 ppm/K) under a thermometer 950 s behind them,
 /// measured by a tracker and self-calibration only (the lag class's seed 3, machine 7): the
@@ -32,23 +56,17 @@ fn a_lag_that_makes_the_expansion_physical_earns_its_place() {
         drive_position_mm: 0.000_208,
     };
     let (rods, frame) = (10.52e-6, 6.284e-6);
-    let (cal, val, _) = campaigns_of(
-        TwinConfig {
-            seed: 7_391_960_166_268_775_616,
-            effects: vec![(EffectKind::Thermal, 2.6715)],
-            noise: Some(noise),
-            length_sigma_mm: 0.0820,
-            angle_sigma_rad: 1.882e-4,
-            thermal: ThermalPhysics {
-                rods_per_k: rods,
-                frame_per_k: frame,
-                scales_per_k: 0.0,
-                thermometer_lag_s: 949.8,
-                ..Default::default()
-            },
+    let (cal, val) = tracker_and_self(
+        (7_391_960_166_268_775_616, 2.6715),
+        (0.0820, 1.882e-4),
+        noise,
+        ThermalPhysics {
+            rods_per_k: rods,
+            frame_per_k: frame,
+            scales_per_k: 0.0,
+            thermometer_lag_s: 949.8,
             ..Default::default()
         },
-        &[Instrument::Lt, Instrument::SelfCal],
     );
     let d = run(&cal, &val, &[]);
     eprintln!("{}", summary(&d));
@@ -104,23 +122,17 @@ fn a_settled_family_keeps_no_part_a_larger_combination_needs() {
         drive_position_mm: 0.000_102_6,
     };
     let (frame, scales) = (7.0779e-6, 10.7106e-6);
-    let (cal, val, _) = campaigns_of(
-        TwinConfig {
-            seed: 17_847_297_630_697_253_753,
-            effects: vec![(EffectKind::Thermal, 10.7554)],
-            noise: Some(noise),
-            length_sigma_mm: 0.0738,
-            angle_sigma_rad: 2.439e-4,
-            thermal: ThermalPhysics {
-                rods_per_k: 0.0,
-                frame_per_k: frame,
-                scales_per_k: scales,
-                thermometer_lag_s: 207.98,
-                ..Default::default()
-            },
+    let (cal, val) = tracker_and_self(
+        (17_847_297_630_697_253_753, 10.7554),
+        (0.0738, 2.439e-4),
+        noise,
+        ThermalPhysics {
+            rods_per_k: 0.0,
+            frame_per_k: frame,
+            scales_per_k: scales,
+            thermometer_lag_s: 207.98,
             ..Default::default()
         },
-        &[Instrument::Lt, Instrument::SelfCal],
     );
     let d = run(&cal, &val, &["thermal", "thermal_lag"]);
     eprintln!("{}", summary(&d));
@@ -174,23 +186,17 @@ fn a_family_the_campaigns_do_not_decide_is_said() {
         force_n: 14.87,
         drive_position_mm: 0.000_539_6,
     };
-    let (cal, val, _) = campaigns_of(
-        TwinConfig {
-            seed: 6_480_251_230_143_537_908,
-            effects: vec![(EffectKind::Thermal, 13.7018)],
-            noise: Some(noise),
-            length_sigma_mm: 0.0850,
-            angle_sigma_rad: 1.051e-4,
-            thermal: ThermalPhysics {
-                rods_per_k: 16.338e-6,
-                frame_per_k: 24.634e-6,
-                scales_per_k: 10.280e-6,
-                thermometer_lag_s: 221.72,
-                ..Default::default()
-            },
+    let (cal, val) = tracker_and_self(
+        (6_480_251_230_143_537_908, 13.7018),
+        (0.0850, 1.051e-4),
+        noise,
+        ThermalPhysics {
+            rods_per_k: 16.338e-6,
+            frame_per_k: 24.634e-6,
+            scales_per_k: 10.280e-6,
+            thermometer_lag_s: 221.72,
             ..Default::default()
         },
-        &[Instrument::Lt, Instrument::SelfCal],
     );
     let d = run(&cal, &val, &["thermal", "thermal_lag"]);
     eprintln!("{}", summary(&d));
@@ -230,23 +236,17 @@ fn a_family_refitted_beside_an_effect_needs_the_calibration_too() {
         force_n: 5.255,
         drive_position_mm: 0.000_372_3,
     };
-    let (cal, val, _) = campaigns_of(
-        TwinConfig {
-            seed: 17_544_144_017_263_781_087,
-            effects: vec![(EffectKind::Thermal, 9.8727)],
-            noise: Some(noise),
-            length_sigma_mm: 0.0923,
-            angle_sigma_rad: 1.402e-4,
-            thermal: ThermalPhysics {
-                rods_per_k: 6.469e-6,
-                frame_per_k: 13.594e-6,
-                scales_per_k: 23.124e-6,
-                thermometer_lag_s: 331.98,
-                ..Default::default()
-            },
+    let (cal, val) = tracker_and_self(
+        (17_544_144_017_263_781_087, 9.8727),
+        (0.0923, 1.402e-4),
+        noise,
+        ThermalPhysics {
+            rods_per_k: 6.469e-6,
+            frame_per_k: 13.594e-6,
+            scales_per_k: 23.124e-6,
+            thermometer_lag_s: 331.98,
             ..Default::default()
         },
-        &[Instrument::Lt, Instrument::SelfCal],
     );
     let d = run(&cal, &val, &["thermal", "thermal_lag"]);
     eprintln!("{}", summary(&d));

@@ -384,12 +384,12 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
         format!("the model with {}", d.model_effects.join(", "))
     };
     let noise_words = noise(&d.noise_groups);
-    // a family the campaigns do not decide, said before the noise in every verdict
+    // what every verdict ends with: a family the campaigns do not decide, then the noise
     let undecided = d.undecided.iter().fold(String::new(), |mut s, u| {
         let _ = write!(s, "; {}", undecided_short(u));
         s
     });
-    let noise = if noise_words.is_empty() {
+    let tail = if noise_words.is_empty() {
         undecided
     } else {
         format!("{undecided}; noise: {noise_words}")
@@ -416,7 +416,7 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
                 )
             });
             format!(
-                "missing effect: {}{resettled} ({}){tied}{remains}; add --effects {add}{noise}",
+                "missing effect: {}{resettled} ({}){tied}{remains}; add --effects {add}{tail}",
                 d.missing_effects.join(" with "),
                 named_evidence(d)
             )
@@ -426,7 +426,7 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
         {
             format!(
                 "{model} explains the calibration campaign but not the held-out data: {}; no \
-                 effect tried predicts them better{noise}",
+                 effect tried predicts them better{tail}",
                 held.map(held_out).unwrap_or_default()
             )
         }
@@ -439,7 +439,7 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
             });
             let found = structure_found(d);
             format!(
-                "{model} leaves a structured residual that no effect of the library explains{why}; {}{carried}{noise}",
+                "{model} leaves a structured residual that no effect of the library explains{why}; {}{carried}{tail}",
                 if found.is_empty() {
                     "no covariate, force, time or workspace term follows it".to_owned()
                 } else {
@@ -453,7 +453,7 @@ pub fn verdict(d: &ModelDiagnosis) -> String {
             format!(
                 "nothing is missing that the tests can find: {model} explains the measurements \
                  to their noise (no effect, dictionary term, period or neighbour structure is \
-                 significant; chi2/dof {:.2} at the estimated noise){carried}{agree}{noise}{doubt}",
+                 significant; chi2/dof {:.2} at the estimated noise){carried}{agree}{tail}{doubt}",
                 d.chi2_per_dof
             )
         }

@@ -247,12 +247,6 @@ fn pinned_parts(effect: &dyn Effect) -> Vec<Box<dyn Effect>> {
 /// does not expand is no physics (the lag of frame and scales fitted beside the scales'
 /// expansion stood in for an encoder scale of 5 ppm).
 fn refines_within(model: &[&dyn Effect]) -> bool {
-    fn parts(e: &dyn Effect) -> Vec<&str> {
-        match e.name().split_once(':') {
-            Some((_, pinned)) => pinned.split('+').collect(),
-            None => e.parts().to_vec(),
-        }
-    }
     model.iter().all(|f| {
         let Some(of) = f.beside() else {
             return true;
@@ -261,8 +255,8 @@ fn refines_within(model: &[&dyn Effect]) -> bool {
             .iter()
             .find(|e| effects::family_of(e.name()) == of)
             .is_none_or(|refined| {
-                let held = parts(*refined);
-                parts(*f).iter().all(|p| held.contains(p))
+                let held = effects::held_parts(*refined);
+                effects::held_parts(*f).iter().all(|p| held.contains(p))
             })
     })
 }

@@ -9,7 +9,7 @@ use crate::campaign::Campaign;
 use crate::diagnose::held_out::validation::Validation;
 use crate::diagnose::held_out::Model1;
 use crate::diagnose::types::{Prediction, Undecided};
-use crate::effects::{Effect, EffectSet};
+use crate::effects::{held_parts, Effect, EffectSet};
 use crate::params::Params;
 
 /// A family's part combinations a settle compares (thermal's three parts: seven), the
@@ -163,8 +163,9 @@ fn narrow(
     // predicts less certainly than two of them (frame and scales expanding: the whole did
     // not beat the scales alone at twice their α, the frame with the scales did)
     let holds = |big: usize, small: usize| {
-        let (b, s) = (variants[big].0.name(), variants[small].0.name());
-        b != s && parts_of(s).iter().all(|p| parts_of(b).contains(p))
+        let (b, s) = (variants[big].0.as_ref(), variants[small].0.as_ref());
+        let held = held_parts(b);
+        big != small && held_parts(s).iter().all(|p| held.contains(p))
     };
     let fold = (campaign, copts);
     let adequate = |(k, v): &(usize, Scored)| {
@@ -190,12 +191,11 @@ fn narrow(
         .filter(|(_, gain)| gain.calibration_needs(level))
         .min_by(|a, b| a.0.chi2.total_cmp(&b.0.chi2))
         .and_then(|(big, gain)| {
-            let names = |s: &Scored| s.with.iter().map(|e| e.name().to_owned()).collect();
+            // the effects a combination fits in place of the model's whole ones
             let changed = |s: &Scored| -> Vec<String> {
-                let all: Vec<String> = names(s);
-                let given: Vec<&str> = current.iter().map(|e| e.name()).collect();
-                all.into_iter()
-                    .filter(|e| !given.contains(&e.as_str()))
+                (s.with.iter())
+                    .filter(|e| !current.iter().any(|c| c.name() == e.name()))
+                    .map(|e| e.name().to_owned())
                     .collect()
             };
             Some(Undecided {
@@ -242,12 +242,6 @@ fn refine(
         .min_by(|a, b| a.1.chi2.total_cmp(&b.1.chi2))
         .map(|(k, _)| k)?;
     Some(refinements.swap_remove(best))
-}
-
-/// The parts named in a part variant's name (`thermal:rods+frame`: rods, frame).
-fn parts_of(name: &str) -> Vec<&str> {
-    name.split_once(':')
-        .map_or_else(Vec::new, |(_, parts)| parts.split('+').collect())
 }
 
 /// Parts named in a part variant's name (`thermal:rods+frame`: 2).
