@@ -46,6 +46,22 @@ struct Outcome {
     /// The last diagnosis's held-out judge: P(the errors this far above the model's floor)
     /// under a right model. Uniform on machines with nothing hidden where the judge is honest.
     held_out_p: f64,
+    /// The hidden effects themselves fitted on the calibration and diagnosed, where the class
+    /// lets them be written as a model ([`machines::truth_model`]).
+    truth: Option<TruthFit>,
+}
+
+/// What a diagnosis says of the hidden effects themselves (the truth's parts pinned, no
+/// settle): whether the campaigns let even the truth end `nothing_missing` at the floor.
+#[derive(Clone, Debug, serde::Serialize)]
+struct TruthFit {
+    fitted_as: Vec<String>,
+    verdict: String,
+    /// Its held-out RMS with each setup's zero removed over the truth's floor of the same.
+    held_out_relative_over_floor: f64,
+    /// That ratio above 1 + 2 SE.
+    above_floor: bool,
+    held_out_p: f64,
 }
 
 pub(super) fn run(a: &DiscoveryArgs) -> Result<()> {
@@ -196,7 +212,52 @@ fn machine(series: Series, i: usize, shown: Shown) -> Result<Outcome> {
         shown,
     }
     .run()?;
-    Ok(outcome(i, &m, &measured, &diagnoses, named))
+    let mut out = outcome(i, &m, &measured, &diagnoses, named);
+    if let Some(names) = machines::truth_model(&m) {
+        out.truth = Some(truth_fit(&measured, &names)?);
+    }
+    Ok(out)
+}
+
+/// The diagnosis of the model `names` (the hidden effects as [`machines::truth_model`]
+/// writes them) on the machine's campaigns.
+fn truth_fit(measured: &Measured, names: &[String]) -> Result<TruthFit> {
+    let boxed = effects_file::parse_list(&names.join(","), None).map_err(|e| anyhow::anyhow!(e))?;
+    let refs: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
+    let opts = DiagnosisOptions {
+        threads: 1,
+        ..DiagnosisOptions::default()
+    };
+    let d = diagnose::diagnose_among(&measured.cal, Some(&measured.val), &refs, &[], &opts)?;
+    let relative = relative_over_floor(measured, &d);
+    Ok(TruthFit {
+        fitted_as: d.model_effects.clone(),
+        verdict: verdict_name(d.verdict_kind),
+        held_out_relative_over_floor: relative,
+        above_floor: relative > 1.0 + 2.0 * floor_se(measured),
+        held_out_p: d.held_out.as_ref().map_or(f64::NAN, |h| h.p_value),
+    })
+}
+
+/// A diagnosis's held-out RMS with each setup's zero removed over the truth's floor of the
+/// same.
+fn relative_over_floor(measured: &Measured, d: &ModelDiagnosis) -> f64 {
+    d.held_out.as_ref().map_or(f64::NAN, |h| {
+        um_from_mm(h.rms_relative()) / measured.floor_relative_um
+    })
+}
+
+/// The standard error of that ratio under noise alone, 1/√(2(n − g)).
+fn floor_se(measured: &Measured) -> f64 {
+    1.0 / (2.0 * measured.relative_dof.max(1) as f64).sqrt()
+}
+
+/// A verdict's name as the JSON writes it (`nothing_missing`).
+fn verdict_name(kind: VerdictKind) -> String {
+    serde_json::to_value(kind)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_default()
 }
 
 /// A machine's campaigns, offered effects and truth as files under `dir` (`--write`).
@@ -237,10 +298,8 @@ fn outcome(
     let last = &diagnoses[diagnoses.len() - 1];
     let kind = last.verdict_kind;
     let held_over_floor = last.baseline.val_rms.map_or(f64::NAN, um_from_mm) / measured.floor_um;
-    let relative = last.held_out.as_ref().map_or(f64::NAN, |h| {
-        um_from_mm(h.rms_relative()) / measured.floor_relative_um
-    });
-    let se = 1.0 / (2.0 * measured.relative_dof.max(1) as f64).sqrt();
+    let relative = relative_over_floor(measured, last);
+    let se = floor_se(measured);
     // each step of the loop judged as the diagnosis judges a candidate
     let steps: Vec<Prediction> = diagnoses
         .windows(2)
@@ -275,10 +334,7 @@ fn outcome(
             .iter()
             .map(|d| d.baseline.val_rms_relative.map_or(f64::NAN, um_from_mm))
             .collect(),
-        final_verdict: serde_json::to_value(kind)
-            .ok()
-            .and_then(|v| v.as_str().map(str::to_owned))
-            .unwrap_or_default(),
+        final_verdict: verdict_name(kind),
         named,
         fitted_as: last.model_effects.clone(),
         held_out_over_floor: held_over_floor,
@@ -286,6 +342,7 @@ fn outcome(
         nothing_missing_above_floor: kind == VerdictKind::NothingMissing
             && relative > 1.0 + 2.0 * se,
         held_out_p: last.held_out.as_ref().map_or(f64::NAN, |h| h.p_value),
+        truth: None,
     }
 }
 
@@ -376,6 +433,7 @@ fn failed(series: Series, i: usize, e: &anyhow::Error) -> Outcome {
         held_out_relative_over_floor: f64::NAN,
         nothing_missing_above_floor: false,
         held_out_p: f64::NAN,
+        truth: None,
     }
 }
 
@@ -479,6 +537,7 @@ fn print_totals(all: &[Outcome]) {
             format!(": machines {}", above.join(", "))
         }
     );
+    print_truth(all);
     print_judge_tails(&nothing);
     if let (Some(m), Some(p90)) = (q(0.5), q(0.9)) {
         println!(
@@ -505,5 +564,50 @@ fn print_judge_tails(nothing: &[&Outcome]) {
         0.05 * n,
         count(&|x| x > 0.95),
         0.05 * n
+    );
+}
+
+/// Where the hidden effects themselves were fitted ([`TruthFit`]): on how many machines the
+/// truth ends `nothing_missing`, and at the floor; and the loop's wrong answers on machines
+/// where even the truth does not.
+fn print_truth(all: &[Outcome]) {
+    let fitted: Vec<(&Outcome, &TruthFit)> = all
+        .iter()
+        .filter_map(|o| o.truth.as_ref().map(|t| (o, t)))
+        .collect();
+    if fitted.is_empty() {
+        return;
+    }
+    let passes = |t: &TruthFit| t.verdict == verdict_name(VerdictKind::NothingMissing);
+    let at_floor = |t: &TruthFit| passes(t) && !t.above_floor;
+    let wrong: Vec<&(&Outcome, &TruthFit)> = fitted.iter().filter(|(o, _)| !o.correct).collect();
+    let list = |v: Vec<String>| {
+        if v.is_empty() {
+            String::new()
+        } else {
+            format!(": machines {}", v.join(", "))
+        }
+    };
+    println!(
+        "the hidden effects themselves, fitted and diagnosed (their parts pinned): \
+         nothing_missing on {} of {}, of those at the floor (within 2 SE) {}",
+        fitted.iter().filter(|(_, t)| passes(t)).count(),
+        fitted.len(),
+        fitted.iter().filter(|(_, t)| at_floor(t)).count(),
+    );
+    println!(
+        "  of the {} the loop got wrong, the truth itself not nothing_missing at the floor on {}{}",
+        wrong.len(),
+        wrong.iter().filter(|(_, t)| !at_floor(t)).count(),
+        list(
+            wrong
+                .iter()
+                .filter(|(_, t)| !at_floor(t))
+                .map(|(o, t)| format!(
+                    "{} ({}, {:.2})",
+                    o.machine, t.verdict, t.held_out_relative_over_floor
+                ))
+                .collect()
+        )
     );
 }

@@ -435,6 +435,31 @@ pub(super) fn nameable(hidden: &Hidden) -> Vec<Named> {
     out
 }
 
+/// The hidden effects as a model of the library holding exactly the twin's parts
+/// (`thermal:rods+frame`, `thermal_lag:rods+frame`), where the class hides nothing else:
+/// what the bench fits beside the loop to learn whether the campaigns let the truth itself
+/// pass. None for the other classes.
+pub(super) fn truth_model(m: &Machine) -> Option<Vec<String>> {
+    if m.hidden.class != Class::ThermometerLag {
+        return None;
+    }
+    let t = &m.config.thermal;
+    let parts: Vec<&str> = [
+        ("rods", t.rods_per_k),
+        ("frame", t.frame_per_k),
+        ("scales", t.scales_per_k),
+    ]
+    .iter()
+    .filter(|(_, rate)| *rate != 0.0)
+    .map(|(part, _)| *part)
+    .collect();
+    let parts = parts.join("+");
+    Some(vec![
+        format!("{}:{parts}", Family::Thermal.name()),
+        format!("{}:{parts}", Family::ThermalLag.name()),
+    ])
+}
+
 /// Whether `class` is drawn on demand only ([`ON_DEMAND`]).
 pub(super) fn on_demand(class: Class) -> bool {
     ON_DEMAND.contains(&class)
@@ -450,6 +475,39 @@ mod tests {
             .map(|i| draw(1, i, None))
             .find(|m| m.hidden.class == class)
             .unwrap_or_else(|| panic!("no {class:?} machine among the first 500"))
+    }
+
+    /// The truth the bench fits beside the loop holds exactly the parts the twin expands,
+    /// in both families, each name one the effects list parses; a class with more than the
+    /// thermal families hidden has none.
+    #[test]
+    fn the_truth_model_holds_the_parts_the_twin_expands() {
+        for i in 0..12 {
+            let m = draw(1, i, Some(Class::ThermometerLag));
+            let t = &m.config.thermal;
+            let expanding: Vec<&str> = [
+                ("rods", t.rods_per_k),
+                ("frame", t.frame_per_k),
+                ("scales", t.scales_per_k),
+            ]
+            .iter()
+            .filter(|(_, rate)| *rate > 0.0)
+            .map(|(part, _)| *part)
+            .collect();
+            let names = truth_model(&m).expect("a lag machine's truth is a model");
+            let model = effects_file::parse_list(&names.join(","), None).expect("its names parse");
+            let families: Vec<&str> = model.iter().map(|e| effects::family_of(e.name())).collect();
+            assert_eq!(families, ["thermal", "thermal_lag"], "machine {i}");
+            for e in &model {
+                assert_eq!(
+                    effects::held_parts(e.as_ref()),
+                    expanding,
+                    "machine {i}: {}",
+                    e.name()
+                );
+            }
+        }
+        assert!(truth_model(&first_of(Class::ThermalPreload)).is_none());
     }
 
     /// The judge's identities of the names the loop gives: each library effect whole is its

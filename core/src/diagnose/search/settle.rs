@@ -3,12 +3,12 @@
 //! with refinements keeps the one the data need, if any.
 
 use super::cross;
-use super::gain::Gain;
+use super::gain::{relevant_beyond, wald_beyond, Gain};
+use super::trials::finish_with;
 use crate::calib::{self, Request};
 use crate::campaign::Campaign;
 use crate::diagnose::held_out::validation::Validation;
-use crate::diagnose::held_out::Model1;
-use crate::diagnose::types::{Prediction, Undecided};
+use crate::diagnose::types::{Fit, Prediction, Undecided};
 use crate::effects::{held_parts, Effect, EffectSet};
 use crate::params::Params;
 
@@ -173,7 +173,8 @@ fn narrow(
             && !scored
                 .iter()
                 .filter(|(j, big)| holds(*j, *k) && big.plausible)
-                .any(|(_, big)| big.gain_over(v, fold).needed(level))
+                .filter_map(|(_, big)| big.parts_over(v, fold))
+                .any(|gain| gain.needed(level))
     };
     let Some((k, chosen)) = scored.iter().filter(|e| adequate(e)).min_by(|a, b| {
         let parts = |k: usize| mask_len(variants[k].0.name());
@@ -187,9 +188,9 @@ fn narrow(
     let undecided = scored
         .iter()
         .filter(|(j, big)| holds(*j, *k) && big.plausible)
-        .map(|(_, big)| (big, big.gain_over(chosen, fold)))
+        .filter_map(|(_, big)| Some((big, big.parts_over(chosen, fold)?)))
         .filter(|(_, gain)| gain.calibration_needs(level))
-        .min_by(|a, b| a.0.chi2.total_cmp(&b.0.chi2))
+        .min_by(|a, b| a.0.fit.chi2.total_cmp(&b.0.fit.chi2))
         .and_then(|(big, gain)| {
             // the effects a combination fits in place of the model's whole ones
             let changed = |s: &Scored| -> Vec<String> {
@@ -201,8 +202,8 @@ fn narrow(
             Some(Undecided {
                 settled: changed(chosen),
                 needed: changed(big),
-                chi2_fall: chosen.chi2 - big.chi2,
-                added: chosen.dof - big.dof,
+                chi2_fall: chosen.fit.chi2 - big.fit.chi2,
+                added: chosen.fit.dof - big.fit.dof,
                 p_value: gain.p_cal(),
                 prediction: gain.prediction()?,
             })
@@ -239,7 +240,7 @@ fn refine(
             Scored::of(campaign, val, with, copts).map(|s| (k, s))
         })
         .filter(|(_, s)| s.gain_over(&plain, fold).needed(level))
-        .min_by(|a, b| a.1.chi2.total_cmp(&b.1.chi2))
+        .min_by(|a, b| a.1.fit.chi2.total_cmp(&b.1.fit.chi2))
         .map(|(k, _)| k)?;
     Some(refinements.swap_remove(best))
 }
@@ -250,15 +251,12 @@ fn mask_len(name: &str) -> usize {
         .map_or(usize::MAX, |(_, parts)| parts.split('+').count())
 }
 
-/// A model of a settle: its calibration χ², and its prediction errors (held-out with each
-/// setup's zero removed, σ; left-out rows, σ, made only where the held-out data cannot tell
-/// or there are none).
+/// A model of a settle: its fit (calibration χ², parameters and their covariance), and its
+/// prediction errors (held-out with each setup's zero removed, σ; left-out rows, σ, made only
+/// where the held-out data cannot tell or there are none).
 struct Scored<'a> {
     with: Vec<&'a dyn Effect>,
-    params: Params,
-    theta: Vec<f64>,
-    chi2: f64,
-    dof: f64,
+    fit: Fit,
     rows: usize,
     held: Vec<f64>,
     /// Whether every parameter fitted lies within what the physics allows
@@ -286,32 +284,16 @@ impl<'a> Scored<'a> {
             ..Request::new(campaign, &start, copts)
         })
         .ok()?;
-        let chi2: f64 = cal
-            .residuals
-            .iter()
-            .map(|r| (r.value / r.sigma).powi(2))
-            .sum();
-        let rows = cal.residuals.len();
-        let held = match val {
-            Some(v) => {
-                Model1 {
-                    effects: &with,
-                    cal_set: &set,
-                    cal: &cal,
-                }
-                .evaluate(v)
-                .ok()?
-                .scaled
-            }
-            None => Vec::new(),
-        };
         let plausible = super::gain::implausible(&cal.effects).is_empty();
+        let rows = cal.residuals.len();
+        let fit = finish_with(val, &with, &set, cal).ok()?.fit;
+        let held = fit
+            .held_out
+            .as_ref()
+            .map_or_else(Vec::new, |h| h.scaled.clone());
         Some(Scored {
             with,
-            params: cal.params,
-            theta: cal.theta,
-            chi2,
-            dof: (rows as f64 - cal.dof_model).max(1.0),
+            fit,
             rows,
             held,
             plausible,
@@ -327,8 +309,8 @@ impl<'a> Scored<'a> {
                     campaign,
                     &cross::Fitted {
                         effects: &self.with,
-                        params: &self.params,
-                        theta: &self.theta,
+                        params: &self.fit.params,
+                        theta: &self.fit.theta,
                     },
                     copts,
                 )
@@ -352,10 +334,21 @@ impl<'a> Scored<'a> {
             },
         };
         Gain::of(
-            (self.chi2, self.dof),
-            (v.chi2, v.dof),
+            (self.fit.chi2, self.fit.dof),
+            (v.fit.chi2, v.fit.dof),
             self.rows,
             prediction,
         )
+    }
+
+    /// [`Scored::gain_over`] where this model holds more of a family's parts than `v`: the
+    /// parameters of the parts it adds must themselves differ from zero (their Wald test) and
+    /// reach a relevant size, as a model's additions must in the search (a frame expanding
+    /// at -0.006 ± 0.022 ppm/K beside the scales fitted better only by refitting the rest).
+    fn parts_over(&self, v: &Scored, fold: Fold) -> Option<Gain> {
+        relevant_beyond(&self.fit, &v.fit).then(|| {
+            self.gain_over(v, fold)
+                .with_wald(wald_beyond(&self.fit, &v.fit))
+        })
     }
 }
