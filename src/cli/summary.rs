@@ -150,6 +150,9 @@ pub fn print_coverage(campaign: &Campaign, validation: &Campaign, indent: &str) 
     if let Some(said) = words::coverage(&c) {
         println!("{indent}{said}");
     }
+    if let Some(said) = words::instrument_coverage(&c) {
+        println!("{indent}{said}");
+    }
 }
 
 /// Every effect tried, best first, and those not tried.

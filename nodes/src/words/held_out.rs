@@ -73,6 +73,27 @@ pub fn coverage(c: &Coverage) -> Option<String> {
     ))
 }
 
+/// The held-out readings of an instrument against the calibration's own readings of it, where
+/// those saw less than the calibration as a whole: "the held-out lt readings lie outside the
+/// calibration's own lt readings, what only lt measures is extrapolated there: temp_machine
+/// 9.250..10.120 °C against the calibration's 8.344..8.390 °C (1.73 K above)"; None where none
+/// does.
+pub fn instrument_coverage(c: &Coverage) -> Option<String> {
+    let said: Vec<String> = c
+        .instruments
+        .iter()
+        .filter_map(|s| {
+            let i = s.instrument.as_deref()?;
+            Some(format!(
+                "the held-out {i} readings lie outside the calibration's own {i} readings, what \
+                 only {i} measures is extrapolated there: {}",
+                span(s)
+            ))
+        })
+        .collect();
+    (!said.is_empty()).then(|| said.join("; "))
+}
+
 /// One span in words, with by how much it reaches beyond.
 fn span(s: &Span) -> String {
     // a thermometer's column (`temp_*`, the spec's temperatures) reads °C, its differences K
@@ -227,5 +248,37 @@ mod tests {
             "the campaigns do not decide thermal's parts (the calibration needs \
              thermal:rods+frame+scales, which predicts worse than thermal:scales)"
         );
+    }
+
+    /// An instrument's held-out readings beyond the calibration's own readings of it are said
+    /// with the instrument and the figures; nothing is said where none is.
+    #[test]
+    fn an_instrument_beyond_its_own_calibration_readings_in_words() {
+        let span = Span {
+            name: "temp_machine".to_owned(),
+            calibration: (10.661, 10.714),
+            held_out: (13.516, 15.419),
+            below: 0.0,
+            above: 4.7051,
+            tolerance: 0.03,
+            instrument: Some("lt".to_owned()),
+        };
+        let mut c = Coverage {
+            covariates: Vec::new(),
+            rates: Vec::new(),
+            poses: Vec::new(),
+            instruments: vec![span],
+        };
+        assert_eq!(coverage(&c), None, "the campaign as a whole is within");
+        assert_eq!(
+            instrument_coverage(&c).as_deref(),
+            Some(
+                "the held-out lt readings lie outside the calibration's own lt readings, what \
+                 only lt measures is extrapolated there: temp_machine 13.516..15.419 °C against \
+                 the calibration's 10.661..10.714 °C (4.71 K above)"
+            )
+        );
+        c.instruments.clear();
+        assert_eq!(instrument_coverage(&c), None);
     }
 }

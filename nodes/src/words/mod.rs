@@ -22,7 +22,8 @@ mod noise;
 pub use figures::{condition, condition_short, follows, p_is, unit_label, with_sigma};
 use figures::{prediction, um_with_sigma};
 pub use held_out::{
-    coverage, held_out, held_out_judge, return_drift_estimated, undecided, undecided_short,
+    coverage, held_out, held_out_judge, instrument_coverage, return_drift_estimated, undecided,
+    undecided_short,
 };
 pub use noise::{estimated_level, noise, rated_by};
 

@@ -4,7 +4,7 @@
 //! held-out campaign that heats faster, runs warmer or reaches poses the calibration never
 //! saw judges an extrapolation, and the judge's words must say so beside its verdict.
 
-use crate::campaign::Campaign;
+use crate::campaign::{Campaign, Instrument};
 use crate::diagnose::structure::sparse::nominal_tcp;
 
 /// The window (s) over which a covariate's rate is fitted at each row: a straight line
@@ -39,6 +39,9 @@ pub struct Span {
     /// How far they may lie beyond and still count as within: [`OUTSIDE_SHARE`] of the
     /// calibration's span, or three σ of the readings' noise where that is larger.
     pub tolerance: f64,
+    /// The instrument whose readings both ranges hold (`lt`); None where every reading is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub instrument: Option<String>,
 }
 
 impl Span {
@@ -51,6 +54,7 @@ impl Span {
             below: (calibration.0 - held_out.0).max(0.0),
             above: (held_out.1 - calibration.1).max(0.0),
             tolerance: (OUTSIDE_SHARE * (calibration.1 - calibration.0)).max(3.0 * noise),
+            instrument: None,
         }
     }
 
@@ -77,6 +81,14 @@ pub struct Coverage {
     pub covariates: Vec<Span>,
     pub rates: Vec<Span>,
     pub poses: Vec<Span>,
+    /// A covariate of the held-out readings of one instrument against the calibration's
+    /// readings of the same instrument, where those saw a narrower range than the calibration
+    /// as a whole and the held-out ones reach beyond it: what that instrument alone measures
+    /// is extrapolated there, however wide the calibration's range. A tracker that measured
+    /// the machine cold while a self-calibration saw it warm is the one instrument that sees
+    /// every part expanding alike, and it saw one temperature (the lag class's tracker and
+    /// self-calibration machines whose three parts expand).
+    pub instruments: Vec<Span>,
 }
 
 impl Coverage {
@@ -119,21 +131,61 @@ pub fn coverage(cal: &Campaign, val: &Campaign) -> Coverage {
             poses.push(Span::of(axis.to_owned(), a, b, 0.0));
         }
     }
+    let instruments = instrument_spans(cal, val, &covariates);
     Coverage {
         covariates,
         rates,
         poses,
+        instruments,
     }
+}
+
+/// See [`Coverage::instruments`]: each covariate of `whole` (the campaigns' spans) read on the
+/// held-out campaign's instruments one by one.
+fn instrument_spans(cal: &Campaign, val: &Campaign, whole: &[Span]) -> Vec<Span> {
+    let mut measured: Vec<Instrument> = Vec::new();
+    for p in &val.poses {
+        if p.instrument != Instrument::None && !measured.contains(&p.instrument) {
+            measured.push(p.instrument);
+        }
+    }
+    let mut out = Vec::new();
+    for w in whole {
+        for &instrument in &measured {
+            let of = |c: &Campaign| readings_of(c, &w.name, Some(instrument));
+            let (a, b) = (of(cal), of(val));
+            let noise = reading_noise(&a).max(reading_noise(&b));
+            let (Some(ra), Some(rb)) = (range(a.iter().map(|r| r.1)), range(b.iter().map(|r| r.1)))
+            else {
+                continue;
+            };
+            let narrower = (w.calibration.1 - w.calibration.0) - (ra.1 - ra.0) > w.tolerance;
+            let span = Span {
+                instrument: Some(instrument.as_str().to_owned()),
+                ..Span::of(w.name.clone(), ra, rb, noise)
+            };
+            if narrower && span.outside() {
+                out.push(span);
+            }
+        }
+    }
+    out
 }
 
 /// A covariate's readings (time s, value) in time order, the empty ones left out.
 fn readings(c: &Campaign, name: &str) -> Vec<(f64, f64)> {
+    readings_of(c, name, None)
+}
+
+/// The same at the poses of `instrument` alone (every pose where None).
+fn readings_of(c: &Campaign, name: &str, instrument: Option<Instrument>) -> Vec<(f64, f64)> {
     let Some(k) = c.covariate_index(name) else {
         return Vec::new();
     };
     let mut out: Vec<(f64, f64)> = c
         .poses
         .iter()
+        .filter(|p| instrument.is_none_or(|i| p.instrument == i))
         .filter_map(|p| p.covariates.get(k).copied().flatten().map(|v| (p.t, v)))
         .filter(|(t, v)| t.is_finite() && v.is_finite())
         .collect();
@@ -237,9 +289,36 @@ mod tests {
         assert!((ratio - 3.0).abs() < 0.05, "{ratio}");
         assert!(c.poses.iter().all(|p| !p.outside()), "{:?}", c.poses);
         assert_eq!(c.outside().count(), 2);
+        assert!(
+            c.instruments.is_empty(),
+            "one instrument: {:?}",
+            c.instruments
+        );
         let near = heating(90, |t| 20.0 + 4.3 * t / 900.0);
         let c = coverage(&cal, &near);
         assert!((c.covariates[0].above - 0.3).abs() < 1e-9);
         assert!(!c.covariates[0].outside(), "0.3 K past a 4 K span");
+    }
+
+    /// A tracker that measured the calibration at 20.0-20.2 °C while the self-calibration
+    /// went on to 24 °C: its held-out readings at 23.5-24.0 °C lie within the calibration's
+    /// range, 3.3 K beyond its own readings' (which are said, with the instrument).
+    #[test]
+    fn an_instrument_that_saw_one_temperature_is_said() {
+        let lt = heating(20, |t| 20.0 + 0.2 * t / 200.0);
+        let mut cal = lt.clone();
+        let mut warm = heating(100, |t| 20.2 + 3.8 * t / 1000.0);
+        for p in &mut warm.poses {
+            p.instrument = Instrument::SelfCal;
+        }
+        cal.poses.extend(warm.poses);
+        let val = heating(50, |t| 23.5 + 0.5 * t / 500.0);
+        let c = coverage(&cal, &val);
+        assert_eq!(c.outside().count(), 0, "{c:?}");
+        assert_eq!(c.instruments.len(), 1, "{:?}", c.instruments);
+        let s = &c.instruments[0];
+        assert_eq!(s.instrument.as_deref(), Some("lt"));
+        assert!((s.calibration.1 - 20.2).abs() < 1e-3, "{s:?}");
+        assert!((s.above - 3.8).abs() < 1e-3, "{s:?}");
     }
 }
