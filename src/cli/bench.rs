@@ -34,7 +34,11 @@ pub enum Bench {
     /// offered written as data). Prints the confusion matrix (hidden vs named), each class's
     /// share right, the machines where a named effect raised the held-out error, the
     /// false-alarm rate on machines with nothing hidden, every `nothing_missing` the held-out
-    /// data contradict, and the held-out RMS after the loop divided by the true floor.
+    /// data contradict, and the held-out RMS after the loop divided by the true floor. On a
+    /// class whose hidden effects can be written as a model (`--class thermometer_lag`: the
+    /// twin's parts of thermal and thermal_lag pinned), it also diagnoses that truth itself on
+    /// the same campaigns and prints how often even the truth ends nothing_missing at the
+    /// floor, and on which of the loop's wrong machines it does not (`truth` in the JSON).
     ///
     /// Example: rpkm bench discovery --machines 200 --seed 1 --threads 2 --json bench.json
     Discovery(DiscoveryArgs),
