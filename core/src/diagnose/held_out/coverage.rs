@@ -84,10 +84,10 @@ pub struct Coverage {
     /// A covariate of the held-out readings of one instrument against the calibration's
     /// readings of the same instrument, where those saw a narrower range than the calibration
     /// as a whole and the held-out ones reach beyond it: what that instrument alone measures
-    /// is extrapolated there, however wide the calibration's range. A tracker that measured
-    /// the machine cold while a self-calibration saw it warm is the one instrument that sees
-    /// every part expanding alike, and it saw one temperature (the lag class's tracker and
-    /// self-calibration machines whose three parts expand).
+    /// is extrapolated there, however wide the calibration's range: a tracker that measured
+    /// the machine cold while a self-calibration saw it warm (on the lag class's machines so
+    /// measured whose three parts expand with their lags, even the twin's own model fails the
+    /// held-out judge).
     pub instruments: Vec<Span>,
 }
 
