@@ -136,17 +136,7 @@ impl Loop<'_> {
     fn run(&self) -> Result<(Vec<ModelDiagnosis>, Vec<String>)> {
         let (mut named, mut all): (Vec<String>, Vec<ModelDiagnosis>) = (Vec::new(), Vec::new());
         loop {
-            let boxed = effects_file::parse_list(&named.join(","), self.file)
-                .map_err(|e| anyhow::anyhow!(e))?;
-            let refs: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
-            let offer = offered(self.file, &refs);
-            // the bench runs machines in parallel (--threads): each diagnosis on one thread
-            let opts = DiagnosisOptions {
-                threads: 1,
-                ..DiagnosisOptions::default()
-            };
-            let m = self.measured;
-            let d = diagnose::diagnose_among(&m.cal, Some(&m.val), &refs, &offer, &opts)?;
+            let d = diagnosis(self.measured, &named, self.file)?;
             if matches!(self.shown, Shown::Steps { .. }) {
                 println!("with {named:?}: {}", rpkm_nodes::words::verdict(&d));
             }
@@ -163,6 +153,30 @@ impl Loop<'_> {
             named.extend(new);
         }
     }
+}
+
+/// The diagnosis of a machine's campaigns with the effects `names` in the model, trying the
+/// library's and those `file` offers: each on one thread (the bench runs machines in
+/// parallel, `--threads`).
+fn diagnosis(
+    measured: &Measured,
+    names: &[String],
+    file: Option<&EffectsFile>,
+) -> Result<ModelDiagnosis> {
+    let boxed = effects_file::parse_list(&names.join(","), file).map_err(|e| anyhow::anyhow!(e))?;
+    let refs: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
+    let opts = DiagnosisOptions {
+        threads: 1,
+        ..DiagnosisOptions::default()
+    };
+    let (cal, val) = (&measured.cal, &measured.val);
+    Ok(diagnose::diagnose_among(
+        cal,
+        Some(val),
+        &refs,
+        &offered(file, &refs),
+        &opts,
+    )?)
 }
 
 /// A series of machines: its seed, and the class drawn on demand (`--class`).
@@ -222,13 +236,7 @@ fn machine(series: Series, i: usize, shown: Shown) -> Result<Outcome> {
 /// The diagnosis of the model `names` (the hidden effects as [`machines::truth_model`]
 /// writes them) on the machine's campaigns.
 fn truth_fit(measured: &Measured, names: &[String]) -> Result<TruthFit> {
-    let boxed = effects_file::parse_list(&names.join(","), None).map_err(|e| anyhow::anyhow!(e))?;
-    let refs: Vec<&dyn Effect> = boxed.iter().map(AsRef::as_ref).collect();
-    let opts = DiagnosisOptions {
-        threads: 1,
-        ..DiagnosisOptions::default()
-    };
-    let d = diagnose::diagnose_among(&measured.cal, Some(&measured.val), &refs, &[], &opts)?;
+    let d = diagnosis(measured, names, None)?;
     let relative = relative_over_floor(measured, &d);
     Ok(TruthFit {
         fitted_as: d.model_effects.clone(),

@@ -169,10 +169,10 @@ fn narrow(
     };
     let fold = (campaign, copts);
     let adequate = |(k, v): &(usize, Scored)| {
-        v.plausible
+        v.plausible()
             && !scored
                 .iter()
-                .filter(|(j, big)| holds(*j, *k) && big.plausible)
+                .filter(|(j, big)| holds(*j, *k) && big.plausible())
                 .filter_map(|(_, big)| big.parts_over(v, fold))
                 .any(|gain| gain.needed(level))
     };
@@ -180,14 +180,14 @@ fn narrow(
         let parts = |k: usize| mask_len(variants[k].0.name());
         parts(a.0)
             .cmp(&parts(b.0))
-            .then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))
+            .then(calib::rms(a.1.held()).total_cmp(&calib::rms(b.1.held())))
     }) else {
         return (None, None);
     };
     // the likeliest combination of more parts that the calibration alone needs over it
     let undecided = scored
         .iter()
-        .filter(|(j, big)| holds(*j, *k) && big.plausible)
+        .filter(|(j, big)| holds(*j, *k) && big.plausible())
         .filter_map(|(_, big)| Some((big, big.parts_over(chosen, fold)?)))
         .filter(|(_, gain)| gain.calibration_needs(level))
         .min_by(|a, b| a.0.fit.chi2.total_cmp(&b.0.fit.chi2))
@@ -258,10 +258,6 @@ struct Scored<'a> {
     with: Vec<&'a dyn Effect>,
     fit: Fit,
     rows: usize,
-    held: Vec<f64>,
-    /// Whether every parameter fitted lies within what the physics allows
-    /// ([`super::gain::implausible`]).
-    plausible: bool,
     left_out: std::cell::OnceCell<Option<Vec<f64>>>,
 }
 
@@ -284,21 +280,26 @@ impl<'a> Scored<'a> {
             ..Request::new(campaign, &start, copts)
         })
         .ok()?;
-        let plausible = super::gain::implausible(&cal.effects).is_empty();
         let rows = cal.residuals.len();
         let fit = finish_with(val, &with, &set, cal).ok()?.fit;
-        let held = fit
-            .held_out
-            .as_ref()
-            .map_or_else(Vec::new, |h| h.scaled.clone());
         Some(Scored {
             with,
             fit,
             rows,
-            held,
-            plausible,
             left_out: std::cell::OnceCell::new(),
         })
+    }
+
+    /// Whether every parameter fitted lies within what the physics allows
+    /// ([`super::gain::implausible`]).
+    fn plausible(&self) -> bool {
+        super::gain::implausible(&self.fit.effect_params).is_empty()
+    }
+
+    /// The held-out errors with each setup's zero removed, each in its own noise (none
+    /// without a held-out campaign).
+    fn held(&self) -> &[f64] {
+        self.fit.held_out.as_ref().map_or(&[], |h| &h.scaled)
     }
 
     /// The left-out rows (cross-validation by setup), made once.
@@ -322,7 +323,7 @@ impl<'a> Scored<'a> {
     /// prediction (held-out where it decides, else the left-out rows, both in σ). Needed
     /// ([`Gain::needed`]) where it beats `v` by the evidence a candidate needs.
     fn gain_over(&self, v: &Scored, fold: Fold) -> Gain {
-        let held = Prediction::compared(&v.held, &self.held);
+        let held = Prediction::compared(v.held(), self.held());
         let prediction = match held {
             Some(p) if p.last_word() => Some(p),
             _ => match v.left_out(fold).zip(self.left_out(fold)) {
