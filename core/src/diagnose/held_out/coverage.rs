@@ -143,12 +143,9 @@ pub fn coverage(cal: &Campaign, val: &Campaign) -> Coverage {
 /// See [`Coverage::instruments`]: each covariate of `whole` (the campaigns' spans) read on the
 /// held-out campaign's instruments one by one.
 fn instrument_spans(cal: &Campaign, val: &Campaign, whole: &[Span]) -> Vec<Span> {
-    let mut measured: Vec<Instrument> = Vec::new();
-    for p in &val.poses {
-        if p.instrument != Instrument::None && !measured.contains(&p.instrument) {
-            measured.push(p.instrument);
-        }
-    }
+    let measured: Vec<Instrument> = (Instrument::ALL.into_iter())
+        .filter(|&i| i != Instrument::None && val.poses_of(i).next().is_some())
+        .collect();
     let mut out = Vec::new();
     for w in whole {
         for &instrument in &measured {
