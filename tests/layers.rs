@@ -508,7 +508,7 @@ const OTHER_RMS: [(&str, &str); 4] = [
     ),
     (
         "core/src/diagnose/search/settle.rs",
-        ".then(calib::rms(&a.1.held).total_cmp(&calib::rms(&b.1.held)))",
+        ".then(calib::rms(a.1.held()).total_cmp(&calib::rms(b.1.held())))",
     ),
 ];
 
