@@ -656,9 +656,11 @@ pub struct HeldOutCheck {
     /// modes there).
     #[serde(rename = "floor_relative_um", serialize_with = "as_um")]
     pub floor_relative: f64,
-    /// Σ (e/σ)² of the zero-removed errors against that floor (scaled to its degrees of
-    /// freedom: the errors less the setups' zeros), and the noise estimate's own degrees of
-    /// freedom (the floor is estimated too; infinite where the noise was stated).
+    /// rᵀ V⁻¹ r of the zero-removed errors r against that floor in full (V: the noise and
+    /// the calibration's uncertainty, which neighbouring poses share, so one error of it
+    /// counts once), scaled to its degrees of freedom (the errors less the setups' zeros),
+    /// and the noise estimate's own degrees of freedom (the floor is estimated too; infinite
+    /// where the noise was stated).
     pub statistic: f64,
     pub dof: f64,
     pub noise_dof: f64,

@@ -76,35 +76,48 @@ pub fn coverage(c: &Coverage) -> Option<String> {
 /// The held-out readings of an instrument against the calibration's own readings of it, where
 /// those saw less than the calibration as a whole: "the held-out lt readings lie outside the
 /// calibration's own lt readings, what only lt measures is extrapolated there: temp_machine
-/// 9.250..10.120 °C against the calibration's 8.344..8.390 °C (1.73 K above)"; None where none
-/// does.
+/// 9.250..10.120 °C against the calibration's 8.344..8.390 °C (1.73 K above); to take it from
+/// the data, measure lt across temp_machine 8.344..10.120 °C" (the one range that holds
+/// both); None where none does.
 pub fn instrument_coverage(c: &Coverage) -> Option<String> {
     let said: Vec<String> = c
         .instruments
         .iter()
         .filter_map(|s| {
             let i = s.instrument.as_deref()?;
+            let unit = units(s).0;
+            let (lo, hi) = (
+                s.calibration.0.min(s.held_out.0),
+                s.calibration.1.max(s.held_out.1),
+            );
             Some(format!(
                 "the held-out {i} readings lie outside the calibration's own {i} readings, what \
-                 only {i} measures is extrapolated there: {}",
-                span(s)
+                 only {i} measures is extrapolated there: {}; to take it from the data, \
+                 measure {i} across {} {lo:.3}..{hi:.3}{unit}",
+                span(s),
+                s.name
             ))
         })
         .collect();
     (!said.is_empty()).then(|| said.join("; "))
 }
 
-/// One span in words, with by how much it reaches beyond.
-fn span(s: &Span) -> String {
-    // a thermometer's column (`temp_*`, the spec's temperatures) reads °C, its differences K
+/// A span's unit, and its differences' (a thermometer's column, `temp_*` as the spec names
+/// the temperatures, reads °C, its differences K).
+fn units(s: &Span) -> (&'static str, &'static str) {
     let temperature = s.name.trim_start_matches("rate(").starts_with("temp");
-    let (unit, by_unit) = match (s.name.starts_with("rate("), temperature) {
+    match (s.name.starts_with("rate("), temperature) {
         (true, true) => (" K/min", " K/min"),
         (true, false) => ("/min", "/min"),
         (false, true) => (" °C", " K"),
         (false, false) if s.name == "x" || s.name == "y" => (" mm", " mm"),
         (false, false) => ("", ""),
-    };
+    }
+}
+
+/// One span in words, with by how much it reaches beyond.
+fn span(s: &Span) -> String {
+    let (unit, by_unit) = units(s);
     let mut by = Vec::new();
     if s.below > s.tolerance {
         by.push(format!("{:.2}{by_unit} below", s.below));
@@ -275,7 +288,8 @@ mod tests {
             Some(
                 "the held-out lt readings lie outside the calibration's own lt readings, what \
                  only lt measures is extrapolated there: temp_machine 13.516..15.419 °C against \
-                 the calibration's 10.661..10.714 °C (4.71 K above)"
+                 the calibration's 10.661..10.714 °C (4.71 K above); to take it from the \
+                 data, measure lt across temp_machine 10.661..15.419 °C"
             )
         );
         c.instruments.clear();

@@ -322,12 +322,19 @@ pub(crate) fn judge(
         .zip(&pv)
         .map(|(s, p)| s * s + p)
         .collect();
-    let chi2: f64 = relative
-        .iter()
-        .zip(&var)
-        .filter(|(_, v)| **v > 0.0)
-        .map(|(e, v)| e * e / v)
-        .sum();
+    let noise: Vec<f64> = val.relative_sigma.iter().map(|s| s * s).collect();
+    let beyond = beyond_calibration(noise, relative, &pc);
+    // the calibration's uncertainty is one error shared by neighbouring poses, not one per
+    // pose: a 2σ error of the tracker-blind expansion put 2σ into every held-out pose, which
+    // the diagonal counted as hundreds of independent 2σ draws (p = 1.7e-10 on the true model)
+    let chi2 = beyond.chi2.unwrap_or_else(|| {
+        relative
+            .iter()
+            .zip(&var)
+            .filter(|(_, v)| **v > 0.0)
+            .map(|(e, v)| e * e / v)
+            .sum()
+    });
     let dof = (n as f64 - val.n_groups() as f64).max(1.0);
     let statistic = chi2 * dof / (n.max(1) as f64);
     let noise_dof = floor_dof(val, &var, groups);
@@ -336,8 +343,7 @@ pub(crate) fn judge(
     } else {
         stats::chi2_upper_tail(statistic, dof)
     };
-    let (own, noise) = beyond_calibration(val, relative, &pc);
-    let rows = held_out_rows(val, &own, &noise);
+    let rows = held_out_rows(val, &beyond.own, &beyond.noise);
     let shape = Shape::of(val.campaign, &rows, levels.structure);
     let dictionary = shape.dictionary.clone();
     let structured = shape.structured();
@@ -390,20 +396,28 @@ fn floor_dof(val: &Validation, var: &[f64], groups: &[GroupNoise]) -> f64 {
     }
 }
 
-/// The held-out errors less what the calibration's own uncertainty most likely put there
-/// (r − P V⁻¹ r, P = J Σ Jᵀ, V = P + the readings' noise), with the noise's variances: a
-/// calibration's parameter error is smooth over the poses and would read as structure (a
-/// self-calibration leaves the tracker's poses a y² its scale cannot fix). Where V cannot be
-/// factored, the errors as they are.
-fn beyond_calibration(
-    val: &Validation,
-    relative: &[f64],
-    pc: &DMatrix<f64>,
-) -> (Vec<f64>, Vec<f64>) {
-    let noise: Vec<f64> = val.relative_sigma.iter().map(|s| s * s).collect();
+/// The held-out errors against the calibration's own uncertainty in full (V = P + the
+/// readings' noise, P = J Σ Jᵀ).
+struct Beyond {
+    /// The errors less what that uncertainty most likely put there (r − P V⁻¹ r), and the
+    /// noise's variances: a calibration's parameter error is smooth over the poses and would
+    /// read as structure (a self-calibration leaves the tracker's poses a y² its scale cannot
+    /// fix).
+    own: Vec<f64>,
+    noise: Vec<f64>,
+    /// rᵀ V⁻¹ r. None where V cannot be factored (`own` then the errors as they are).
+    chi2: Option<f64>,
+}
+
+fn beyond_calibration(noise: Vec<f64>, relative: &[f64], pc: &DMatrix<f64>) -> Beyond {
     let n = relative.len();
+    let as_they_are = |noise| Beyond {
+        own: relative.to_vec(),
+        noise,
+        chi2: None,
+    };
     if pc.nrows() != n || noise.len() != n {
-        return (relative.to_vec(), noise);
+        return as_they_are(noise);
     }
     let mut v = pc.clone();
     for (k, s2) in noise.iter().enumerate() {
@@ -413,9 +427,13 @@ fn beyond_calibration(
     match v.cholesky() {
         Some(c) => {
             let x = c.solve(&r);
-            ((0..n).map(|k| noise[k] * x[k]).collect(), noise)
+            Beyond {
+                own: (0..n).map(|k| noise[k] * x[k]).collect(),
+                chi2: Some(r.dot(&x)),
+                noise,
+            }
         }
-        None => (relative.to_vec(), noise),
+        None => as_they_are(noise),
     }
 }
 
@@ -624,5 +642,45 @@ fn support(before: &[f64], after: &[f64]) -> f64 {
         stats::normal_upper_tail(follow / scale)
     } else {
         1.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A calibration error shared by every held-out pose (P = u uᵀ, one mode) is one draw,
+    /// not one per pose: rᵀ V⁻¹ r against Sherman-Morrison's rᵀR⁻¹r − (uᵀR⁻¹r)²/(1 + uᵀR⁻¹u),
+    /// and the errors less that mode's most likely share, r − P V⁻¹ r. Errors that are 2σ of
+    /// the mode at every pose count about 4 (the one 2σ draw), where the diagonal counted
+    /// hundreds.
+    #[test]
+    fn a_shared_calibration_error_counts_once() {
+        let n = 200;
+        let noise: Vec<f64> = (0..n).map(|k| 1.0 + 0.5 * (k % 3) as f64).collect();
+        let u: Vec<f64> = (0..n).map(|k| 3.0 * (1.0 + k as f64 / n as f64)).collect();
+        let p = DMatrix::from_fn(n, n, |a, b| u[a] * u[b]);
+        let relative: Vec<f64> = (0..n)
+            .map(|k| 2.0 * u[k] + if k % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let beyond = beyond_calibration(noise.clone(), &relative, &p);
+        let rr: f64 = relative.iter().zip(&noise).map(|(r, s)| r * r / s).sum();
+        let ur: f64 = (0..n).map(|k| u[k] * relative[k] / noise[k]).sum();
+        let uu: f64 = (0..n).map(|k| u[k] * u[k] / noise[k]).sum();
+        let want = rr - ur * ur / (1.0 + uu);
+        let chi2 = beyond.chi2.expect("V factors");
+        assert!((chi2 - want).abs() < 1e-9 * want, "{chi2} vs {want}");
+        // the ±1 alternation is the noise: ~n/1.6 of it, plus the mode's one 2σ draw
+        assert!(chi2 < 0.75 * n as f64 + 10.0, "{chi2}");
+        let diagonal: f64 = (0..n)
+            .map(|k| relative[k].powi(2) / (noise[k] + u[k] * u[k]))
+            .sum();
+        assert!(diagonal > 3.0 * n as f64, "the diagonal's {diagonal}");
+        // what is left is the noise's share: P V⁻¹ r = u (uᵀR⁻¹r)/(1 + uᵀR⁻¹u)
+        let share = ur / (1.0 + uu);
+        for k in 0..n {
+            let want = relative[k] - u[k] * share;
+            assert!((beyond.own[k] - want).abs() < 1e-9, "pose {k}");
+        }
     }
 }
