@@ -576,7 +576,8 @@ fn print_judge_tails(nothing: &[&Outcome]) {
 }
 
 /// Where the hidden effects themselves were fitted ([`TruthFit`]): on how many machines the
-/// truth ends `nothing_missing`, and at the floor; and the loop's wrong answers on machines
+/// truth ends `nothing_missing`, and at the floor; how often the loop is right where it
+/// does (what these campaigns let any model reach); and the loop's wrong answers on machines
 /// where even the truth does not.
 fn print_truth(all: &[Outcome]) {
     let fitted: Vec<(&Outcome, &TruthFit)> = all
@@ -602,6 +603,16 @@ fn print_truth(all: &[Outcome]) {
         fitted.iter().filter(|(_, t)| passes(t)).count(),
         fitted.len(),
         fitted.iter().filter(|(_, t)| at_floor(t)).count(),
+    );
+    let reachable: Vec<&&Outcome> = fitted
+        .iter()
+        .filter(|(_, t)| at_floor(t))
+        .map(|(o, _)| o)
+        .collect();
+    println!(
+        "  where the truth itself ends nothing_missing at the floor, the loop is right on {} of {}",
+        reachable.iter().filter(|o| o.correct).count(),
+        reachable.len()
     );
     println!(
         "  of the {} the loop got wrong, the truth itself not nothing_missing at the floor on {}{}",
