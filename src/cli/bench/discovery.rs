@@ -597,22 +597,18 @@ fn print_truth(all: &[Outcome]) {
             format!(": machines {}", v.join(", "))
         }
     };
+    let reachable = || fitted.iter().filter(|(_, t)| at_floor(t));
     println!(
         "the hidden effects themselves, fitted and diagnosed (their parts pinned): \
          nothing_missing on {} of {}, of those at the floor (within 2 SE) {}",
         fitted.iter().filter(|(_, t)| passes(t)).count(),
         fitted.len(),
-        fitted.iter().filter(|(_, t)| at_floor(t)).count(),
+        reachable().count(),
     );
-    let reachable: Vec<&&Outcome> = fitted
-        .iter()
-        .filter(|(_, t)| at_floor(t))
-        .map(|(o, _)| o)
-        .collect();
     println!(
         "  where the truth itself ends nothing_missing at the floor, the loop is right on {} of {}",
-        reachable.iter().filter(|o| o.correct).count(),
-        reachable.len()
+        reachable().filter(|(o, _)| o.correct).count(),
+        reachable().count()
     );
     println!(
         "  of the {} the loop got wrong, the truth itself not nothing_missing at the floor on {}{}",

@@ -86,8 +86,8 @@ pub struct Coverage {
     /// as a whole and the held-out ones reach beyond it: what that instrument alone measures
     /// is extrapolated there, however wide the calibration's range: a tracker that measured
     /// the machine cold while a self-calibration saw it warm (on the lag class's machines so
-    /// measured whose three parts expand with their lags, even the twin's own model fails the
-    /// held-out judge).
+    /// measured whose three parts expand with their lags, even the twin's own model does not
+    /// reach the held-out floor).
     pub instruments: Vec<Span>,
 }
 
